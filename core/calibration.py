@@ -1,0 +1,210 @@
+"""Calibration of the camera (the global model C, by DLT) and of the range finder's turret.
+
+* ``calibrate_dlt``: C from ≥ 6 clicked pixels of known, non-coplanar world points: the
+  Hartley-normalised direct linear transform, then Levenberg–Marquardt on the reprojection
+  error in pixels (the maximum-likelihood estimate under pixel noise).
+* ``calibrate_turret``: ``T_world_turret`` from range-finder measurements (pan, tilt, range)
+  of ≥ 3 known, non-collinear world points: closed form (Kabsch), then refined with each
+  measurement weighted by the sensor's anisotropic noise (range along the beam, angles across).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .camera import Camera, as_uv
+from .geometry import as_points
+from .rangefinder import RangeFinderSpec, beam_direction, beam_point_cov
+from .transforms import exp_so3, make_T
+
+__all__ = ["DLTResult", "calibrate_dlt", "dlt", "TurretCalibration", "calibrate_turret", "kabsch"]
+
+
+class DLTResult(tuple):
+    """``(camera, rms_px)``, unpackable as a pair, with the per-point residuals as attributes.
+
+    camera : Camera. rms_px : float, RMS reprojection distance in pixels.
+    residuals_px : array, shape (N, 2), projected minus clicked pixels.
+    errors_px : array, shape (N,), their norms. linear_rms_px : the RMS of the DLT alone.
+    """
+
+    def __new__(cls, camera: Camera, rms_px: float, residuals_px: np.ndarray, linear_rms_px: float):
+        self = super().__new__(cls, (camera, float(rms_px)))
+        self.camera = camera
+        self.rms_px = float(rms_px)
+        self.residuals_px = residuals_px
+        self.errors_px = np.linalg.norm(residuals_px, axis=1)
+        self.linear_rms_px = float(linear_rms_px)
+        return self
+
+
+def _normaliser(P: np.ndarray) -> np.ndarray:
+    """Hartley similarity: centroid to the origin, mean distance √dim."""
+    dim = P.shape[1]
+    c = P.mean(axis=0)
+    dist = np.linalg.norm(P - c, axis=1).mean()
+    s = np.sqrt(dim) / dist
+    T = np.eye(dim + 1)
+    T[:dim, :dim] *= s
+    T[:dim, dim] = -s * c
+    return T
+
+
+def _check_calibration_points(X: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    X = as_points(X, "X_world")
+    uv = as_uv(uv)
+    if len(X) != len(uv):
+        raise ValueError(f"X_world has {len(X)} points but uv has {len(uv)}: they must pair one to one")
+    if len(X) < 6:
+        raise ValueError(f"calibration needs at least 6 points (11 unknowns in C), got {len(X)}; click more known points")
+    sv = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
+    if sv[1] <= 1e-6 * sv[0]:
+        raise ValueError("the calibration points are collinear: use points spread over a 3D calibration object")
+    if sv[2] <= 1e-6 * sv[0]:
+        raise ValueError(
+            "the calibration points are coplanar: the DLT cannot recover C from one plane; "
+            "add points off that plane (use a 3D calibration object)"
+        )
+    return X, uv
+
+
+def dlt(X_world: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Hartley-normalised direct linear transform: the 3×4 C (unit Frobenius norm) from ≥ 6 pairs."""
+    X, uv = _check_calibration_points(X_world, uv)
+    T3 = _normaliser(X)
+    T2 = _normaliser(uv)
+    Xn = (np.column_stack([X, np.ones(len(X))]) @ T3.T)
+    un = (np.column_stack([uv, np.ones(len(uv))]) @ T2.T)
+    n = len(X)
+    A = np.zeros((2 * n, 12))
+    A[0::2, 0:4] = Xn
+    A[0::2, 8:12] = -un[:, :1] * Xn
+    A[1::2, 4:8] = Xn
+    A[1::2, 8:12] = -un[:, 1:2] * Xn
+    _, sv, Vt = np.linalg.svd(A)
+    if sv[-2] <= 1e-10 * sv[0]:
+        raise ValueError("the DLT system is degenerate (the points are in a critical configuration); add points")
+    Pn = Vt[-1].reshape(3, 4)
+    P = np.linalg.inv(T2) @ Pn @ T3
+    return P / np.linalg.norm(P)
+
+
+def _reprojection(P: np.ndarray, X: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    h = X @ P[:, :3].T + P[:, 3]
+    return h[:, :2] / h[:, 2:3] - uv
+
+
+def calibrate_dlt(
+    X_world: np.ndarray, uv: np.ndarray, width: int, height: int, *, refine: bool = True
+) -> DLTResult:
+    """The camera C from clicked pixels of known world points.
+
+    Parameters
+    ----------
+    X_world : array, shape (N ≥ 6, 3)
+        Known world points, metres, not coplanar.
+    uv : array, shape (N, 2)
+        Their clicked pixels.
+    width, height : int
+        Image size in pixels.
+    refine : bool
+        Refine the DLT by Levenberg–Marquardt on the reprojection error (pixels).
+
+    Returns
+    -------
+    DLTResult
+        ``camera, rms_px = calibrate_dlt(...)``; ``.residuals_px`` (N, 2) per point.
+    """
+    X, uv = _check_calibration_points(X_world, uv)
+    P = dlt(X, uv)
+    linear_rms = float(np.sqrt(np.mean(np.sum(_reprojection(P, X, uv) ** 2, axis=1))))
+    if refine:
+        sol = least_squares(
+            lambda p: _reprojection(p.reshape(3, 4), X, uv).ravel(), P.ravel(), method="lm", xtol=1e-14, ftol=1e-14
+        )
+        P = sol.x.reshape(3, 4)
+    # The calibration points were seen, so they are in front: that fixes C's sign for any camera.
+    camera = Camera(P, width, height, in_front=X)
+    res = _reprojection(camera.C, X, uv)
+    rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+    return DLTResult(camera, rms, res, linear_rms)
+
+
+def kabsch(X_b: np.ndarray, X_a: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """Rigid ``T_a_b`` (4, 4) minimising Σ wᵢ ‖X_aᵢ − T_a_b X_bᵢ‖² (no scale); needs 3 non-collinear points."""
+    X_b = as_points(X_b, "X_b", 3)
+    X_a = as_points(X_a, "X_a", 3)
+    if len(X_a) != len(X_b):
+        raise ValueError(f"point sets differ in size: {len(X_b)} and {len(X_a)}")
+    w = np.ones(len(X_a)) if weights is None else np.asarray(weights, dtype=float)
+    cb = (w[:, None] * X_b).sum(0) / w.sum()
+    ca = (w[:, None] * X_a).sum(0) / w.sum()
+    H = ((X_b - cb) * w[:, None]).T @ (X_a - ca)
+    U, sv, Vt = np.linalg.svd(H)
+    if sv[1] <= 1e-9 * max(sv[0], 1e-300):
+        raise ValueError("the points are collinear: a rigid transform needs 3 non-collinear points")
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return make_T(R, ca - R @ cb)
+
+
+@dataclass(frozen=True)
+class TurretCalibration:
+    """T_world_turret (4, 4); cov (6, 6) of the pose in (rotation vector rad, translation m), the
+    perturbation applied as ``T = T̂ · exp(δ)`` in the turret frame; rms_m and residuals_m
+    (N, 3): measured (mapped to the world) minus known points, metres; linear_rms_m: Kabsch alone."""
+
+    T_world_turret: np.ndarray
+    cov: np.ndarray
+    rms_m: float
+    residuals_m: np.ndarray
+    linear_rms_m: float
+
+
+def calibrate_turret(
+    pan_rad: np.ndarray,
+    tilt_rad: np.ndarray,
+    range_m: np.ndarray,
+    X_world: np.ndarray,
+    spec: RangeFinderSpec = RangeFinderSpec(),
+) -> TurretCalibration:
+    """The turret's pose in the world from measurements of known points.
+
+    pan_rad, tilt_rad, range_m : arrays, shape (N ≥ 3,), the beam that hit each known point.
+    X_world : array, shape (N, 3), the known points, metres, not collinear.
+    The refined estimate minimises the Mahalanobis distances under ``spec``'s noise model.
+    """
+    X_world = as_points(X_world, "X_world", 3)
+    pan, tilt, rho = (np.asarray(a, dtype=float).reshape(-1) for a in (pan_rad, tilt_rad, range_m))
+    if not (len(pan) == len(tilt) == len(rho) == len(X_world)):
+        raise ValueError(
+            f"pan, tilt, range and X_world must pair one to one, got {len(pan)}, {len(tilt)}, {len(rho)}, {len(X_world)}"
+        )
+    if not (np.all(np.isfinite(pan)) and np.all(np.isfinite(tilt)) and np.all(np.isfinite(rho))):
+        raise ValueError("a measurement is NaN or inf (a missed shot?): measure every point")
+    if np.any(rho <= 0):
+        raise ValueError("ranges must be positive")
+    X_turret = rho[:, None] * beam_direction(pan, tilt)
+    T0 = kabsch(X_turret, X_world)
+    lin_res = (X_turret @ T0[:3, :3].T + T0[:3, 3]) - X_world
+    linear_rms = float(np.sqrt(np.mean(np.sum(lin_res**2, axis=1))))
+
+    # Whitening in the turret frame, where each point's covariance does not depend on T.
+    cov_t = beam_point_cov(np.eye(4), pan, tilt, rho, spec)
+    W = np.linalg.inv(np.linalg.cholesky(cov_t))  # (N, 3, 3): Lᵢ⁻¹
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        T = T0 @ make_T(exp_so3(x[:3]), x[3:])
+        X_in_turret = (X_world - T[:3, 3]) @ T[:3, :3]
+        return np.einsum("nij,nj->ni", W, X_in_turret - X_turret).ravel()
+
+    sol = least_squares(residuals, np.zeros(6), method="lm", xtol=1e-15, ftol=1e-15)
+    T = T0 @ make_T(exp_so3(sol.x[:3]), sol.x[3:])
+    J = sol.jac
+    cov = np.linalg.pinv(J.T @ J)
+    res = (X_turret @ T[:3, :3].T + T[:3, 3]) - X_world
+    rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+    return TurretCalibration(T, cov, rms, res, linear_rms)
