@@ -1,0 +1,24 @@
+"""Shared test fixtures: the real data beside the project (../shared/data), skipped cleanly when absent."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+PROJECT_ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = (PROJECT_ROOT / ".." / "shared" / "data").resolve()
+
+
+def shared_data_path(*parts: str) -> Path:
+    """Path of a file or folder of ../shared/data; skips the calling test when it is absent."""
+    path = SHARED_DATA.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"real data not found at {path} (expected ../shared/data beside the project root)")
+    return path
+
+
+@pytest.fixture
+def shared_data():
+    """The function ``shared_data(*parts) -> Path`` (skips the test when the data is absent)."""
+    return shared_data_path
