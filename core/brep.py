@@ -7,6 +7,8 @@ A model lives in its own frame ``obj`` (metres); its pose in the site is ``T_wor
 * ``solids``: analytic solids of revolution (``Revolution``: a cylinder, or a cone/frustum with two
   radii) given by their axis endpoints and radii. Their silhouette lines depend on the view and
   are computed per camera (``Revolution.silhouette``).
+* ``circles``: free circular edges (``Circle``: centre, plane normal, radius), e.g. the ViSP
+  ``.cao`` circles block. They are edges only (no surface) and are always drawn.
 
 Hidden lines: for a convex object an edge is visible when one of its faces faces the camera;
 this is what ``wireframe`` computes (exact for convex objects, back-face culling otherwise).
@@ -22,7 +24,7 @@ import numpy as np
 from .geometry import as_points
 from .transforms import transform_points
 
-__all__ = ["Revolution", "BRep", "Wireframe"]
+__all__ = ["Revolution", "Circle", "BRep", "Wireframe"]
 
 
 @dataclass(frozen=True)
@@ -133,6 +135,47 @@ class Revolution:
 
 
 @dataclass(frozen=True)
+class Circle:
+    """A circular edge in the object frame.
+
+    centre : array, shape (3,), metres. normal : array, shape (3,), unit normal of the circle's
+    plane (normalised on construction). radius : metres, > 0.
+    """
+
+    centre: np.ndarray
+    normal: np.ndarray
+    radius: float
+
+    def __post_init__(self):
+        c = np.asarray(self.centre, dtype=float).reshape(3)
+        n = np.asarray(self.normal, dtype=float).reshape(3)
+        norm = float(np.linalg.norm(n))
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(n))) or norm <= 1e-12:
+            raise ValueError(f"a circle needs a finite centre and a non-zero normal, got {c}, {n}")
+        if not (np.isfinite(self.radius) and self.radius > 0):
+            raise ValueError(f"a circle's radius must be positive, got {self.radius}")
+        object.__setattr__(self, "centre", c)
+        object.__setattr__(self, "normal", n / norm)
+        object.__setattr__(self, "radius", float(self.radius))
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray]:
+        """Two unit vectors (3,), (3,) spanning the circle's plane (e1 × e2 = normal)."""
+        n = self.normal
+        e1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+        e1 /= np.linalg.norm(e1)
+        return e1, np.cross(n, e1)
+
+    def polyline(self, n: int = 48) -> np.ndarray:
+        """Closed polyline (n + 1, 3) on the circle, object frame."""
+        e1, e2 = self.basis()
+        th = np.linspace(0.0, 2.0 * np.pi, n + 1)
+        return self.centre + self.radius * (np.cos(th)[:, None] * e1 + np.sin(th)[:, None] * e2)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"centre": self.centre.tolist(), "normal": self.normal.tolist(), "radius": self.radius}
+
+
+@dataclass(frozen=True)
 class Wireframe:
     """What the overlay draws for one object in one view, in world coordinates.
 
@@ -153,12 +196,14 @@ class BRep:
 
     vertices : array, shape (V, 3). edges : array, shape (E, 2), int. faces : tuple of vertex
     loops (tuples of int), counter-clockwise seen from outside. solids : tuple of Revolution.
+    circles : tuple of Circle (free circular edges).
     """
 
     vertices: np.ndarray
     edges: np.ndarray
     faces: tuple = ()
     solids: tuple = ()
+    circles: tuple = ()
     _edge_faces: tuple = field(default=(), repr=False, compare=False)
 
     def __post_init__(self):
@@ -179,14 +224,18 @@ class BRep:
         solids = tuple(self.solids)
         if not all(isinstance(s, Revolution) for s in solids):
             raise ValueError("solids must be Revolution instances")
-        if len(V) == 0 and not solids:
-            raise ValueError("a model needs vertices or a solid of revolution")
+        circles = tuple(self.circles)
+        if not all(isinstance(c, Circle) for c in circles):
+            raise ValueError("circles must be Circle instances")
+        if len(V) == 0 and not solids and not circles:
+            raise ValueError("a model needs vertices, a solid of revolution or a circle")
         V.setflags(write=False)
         E.setflags(write=False)
         object.__setattr__(self, "vertices", V)
         object.__setattr__(self, "edges", E)
         object.__setattr__(self, "faces", faces)
         object.__setattr__(self, "solids", solids)
+        object.__setattr__(self, "circles", circles)
         # Which faces each edge borders (for hidden-line removal).
         lookup: dict[tuple[int, int], list[int]] = {}
         for k, f in enumerate(faces):
@@ -288,6 +337,7 @@ class BRep:
     def bounds(self) -> np.ndarray:
         """Axis-aligned bounds (2, 3) in the object frame: (min, max)."""
         pts = [self.vertices] + [np.vstack([s.rim(0, 16), s.rim(1, 16)]) for s in self.solids]
+        pts += [c.polyline(16) for c in self.circles]
         P = np.vstack([p for p in pts if len(p)])
         return np.array([P.min(axis=0), P.max(axis=0)])
 
@@ -313,7 +363,9 @@ class BRep:
         """The same model with its vertices mapped by ``T_new_obj`` (e.g. to bake a pose)."""
         R, t = T_new_obj[:3, :3], T_new_obj[:3, 3]
         solids = tuple(Revolution(R @ s.p0 + t, R @ s.p1 + t, s.r0, s.r1) for s in self.solids)
-        return BRep(transform_points(T_new_obj, self.vertices) if len(self.vertices) else self.vertices, self.edges, self.faces, solids)
+        circles = tuple(Circle(R @ c.centre + t, R @ c.normal, c.radius) for c in self.circles)
+        V = transform_points(T_new_obj, self.vertices) if len(self.vertices) else self.vertices
+        return BRep(V, self.edges, self.faces, solids, circles)
 
     def wireframe(self, center_world: np.ndarray, T_world_obj: np.ndarray, n_circle: int = 48) -> Wireframe:
         """Segments to draw from an optical centre (3,), world frame, with their visibility.
@@ -321,6 +373,7 @@ class BRep:
         Polyhedral edges: visible when a bordering face faces the centre (edges with no face
         are always visible). Solids: the two silhouette generators (visible) and the rim
         circles, each piece visible when its cap or the lateral surface next to it faces the centre.
+        Free circles (``circles``) are drawn as "rim" segments, always visible (they bound no face).
         """
         T = np.asarray(T_world_obj, dtype=float)
         c_obj = (np.asarray(center_world, dtype=float) - T[:3, 3]) @ T[:3, :3]
@@ -355,6 +408,12 @@ class BRep:
                 vis += list(cap_facing | (lat_facing[:-1] & lat_facing[1:]))
                 idx += [-1] * len(seg)
                 kind += ["rim"] * len(seg)
+        for c in self.circles:
+            P = c.polyline(n_circle)
+            segs.append(np.stack([P[:-1], P[1:]], axis=1))
+            vis += [True] * n_circle
+            idx += [-1] * n_circle
+            kind += ["rim"] * n_circle
         if not segs:
             return Wireframe(np.zeros((0, 2, 3)), np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, dtype="<U10"))
         S = np.vstack(segs)
@@ -363,24 +422,29 @@ class BRep:
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description (lists of floats and ints)."""
-        return {
+        """JSON-ready description (lists of floats and ints); "circles" only when there are some."""
+        d = {
             "vertices": self.vertices.tolist(),
             "edges": self.edges.tolist(),
             "faces": [list(f) for f in self.faces],
             "solids": [s.to_dict() for s in self.solids],
         }
+        if self.circles:
+            d["circles"] = [c.to_dict() for c in self.circles]
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "BRep":
         """Inverse of ``to_dict``; ValueError naming the field on bad input."""
         try:
             solids = tuple(Revolution(s["p0"], s["p1"], s["r0"], s["r1"]) for s in d.get("solids", []))
+            circles = tuple(Circle(c["centre"], c["normal"], c["radius"]) for c in d.get("circles", []))
             return cls(
                 np.asarray(d.get("vertices", []), dtype=float).reshape(-1, 3),
                 np.asarray(d.get("edges", []), dtype=np.int64).reshape(-1, 2),
                 tuple(tuple(f) for f in d.get("faces", [])),
                 solids,
+                circles,
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"malformed model description: {exc!r}") from exc
@@ -396,6 +460,11 @@ class BRep:
             and all(
                 np.array_equal(a.p0, b.p0) and np.array_equal(a.p1, b.p1) and a.r0 == b.r0 and a.r1 == b.r1
                 for a, b in zip(self.solids, other.solids)
+            )
+            and len(self.circles) == len(other.circles)
+            and all(
+                np.array_equal(a.centre, b.centre) and np.array_equal(a.normal, b.normal) and a.radius == b.radius
+                for a, b in zip(self.circles, other.circles)
             )
         )
 
