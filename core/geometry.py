@@ -320,11 +320,11 @@ def fit_plane_ols(X: np.ndarray, sigma_m: float | None = None) -> PlaneFit:
     X = _check_fit_points(X)
     A = np.column_stack([X[:, 0], X[:, 1], np.ones(len(X))])
     B = -X[:, 2]
-    sol, *_ = np.linalg.lstsq(A, B, rcond=None)
+    sol, _, rank, _ = np.linalg.lstsq(A, B, rcond=None)
     a, b, d = sol
     m = np.array([a, b, 1.0])
     norm = float(np.linalg.norm(m))
-    if norm > 1e6:
+    if rank < 3 or norm > 1e6:
         raise ValueError(
             "the face is (nearly) parallel to the z axis: the paper's form ax + by + z + d = 0 "
             "cannot represent it; use fit_plane_tls"

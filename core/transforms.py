@@ -58,20 +58,22 @@ def log_so3(R: np.ndarray) -> np.ndarray:
     R : array, shape (3, 3)  ->  r : array, shape (3,)
     """
     R = np.asarray(R, dtype=float)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # 2 sin θ · axis
     cos_t = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    theta = float(np.arccos(cos_t))
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    theta = float(np.arctan2(0.5 * np.linalg.norm(w), cos_t))  # accurate at every angle
     if theta < 1e-6:
         return 0.5 * w
-    if np.pi - theta > 1e-4:
+    if np.pi - theta > 1e-3:
         return theta / (2.0 * np.sin(theta)) * w
-    # Near π the antisymmetric part vanishes: read the axis off the symmetric part.
-    B = 0.5 * (R + np.eye(3))
-    k = int(np.argmax(np.diag(B)))
-    axis = B[:, k] / np.sqrt(max(B[k, k], 1e-300))
+    # Near π the antisymmetric part vanishes: read the axis off the symmetric part,
+    # S = cos θ I + (1 − cos θ) a aᵀ, which carries no sin θ contamination.
+    S = 0.5 * (R + R.T)
+    A = (S - cos_t * np.eye(3)) / (1.0 - cos_t)
+    k = int(np.argmax(np.diag(A)))
+    axis = A[:, k] / np.linalg.norm(A[:, k])
     if w @ axis < 0:
         axis = -axis
-    return theta * axis / np.linalg.norm(axis)
+    return theta * axis
 
 
 def make_T(R: np.ndarray, t: np.ndarray) -> np.ndarray:
