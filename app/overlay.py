@@ -1,0 +1,286 @@
+"""What the overlay draws, as pixel geometry: the database's wireframes projected through C,
+clicked points and segments, ghosts of candidate poses, the beam spot — and the "pixel world"
+the interface shows them in. Pure numpy (no viser), so it is tested alone and reused by the
+benchmark.
+
+Projection is done here, in Python, with the camera's 3×4 matrix C (viser's own camera has no
+principal point or skew). Segments are first clipped in 3D to the half-space in front of the
+camera (depth ≥ ``min_depth_m``), then projected and clipped to the image rectangle. Hidden edges
+(``BRep.wireframe``'s visibility: exact for convex objects) are dashed.
+
+The pixel world (DESIGN.md §"The operator interface"): pixel (u, v) ↔ world (u·k, v·k, 0) of the
+viser scene; the video frame is a textured plane on z = 0 and the viewer's camera looks along +z
+with −y up, so the image appears upright. A click's ray meets z = 0 at the exact pixel, whatever
+the zoom or pan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.brep import BRep
+from core.camera import Camera
+
+__all__ = [
+    "PixelWorld",
+    "STATUS_COLORS",
+    "COLORS",
+    "clip_segments_depth",
+    "clip_segments_rect",
+    "dash_segments",
+    "ProjectedWireframe",
+    "project_wireframe",
+    "LineBatch",
+    "cross_markers",
+    "circle_marker",
+    "nearest_segment",
+]
+
+# RGB uint8 colours. Status colours follow the database's statuses; "selected" is per operator.
+STATUS_COLORS: dict[str, tuple[int, int, int]] = {
+    "known": (40, 220, 60),
+    "modelled": (40, 190, 255),
+    "stale": (255, 150, 20),
+    "selected": (255, 240, 0),
+}
+COLORS: dict[str, tuple[int, int, int]] = {
+    "click": (255, 40, 40),
+    "pending": (255, 120, 120),
+    "ghost": (230, 60, 230),
+    "ghost_chosen": (255, 255, 255),
+    "beam": (255, 0, 0),
+    "target": (0, 255, 255),
+    "assigned": (255, 120, 0),
+    "preview": (255, 255, 255),
+    "turret": (255, 80, 80),
+}
+
+
+@dataclass(frozen=True)
+class PixelWorld:
+    """Pixel ↔ viser-world mapping for one image size: (u, v) ↔ (u·k, v·k, z).
+
+    k : world units per pixel. width, height : image size in pixels.
+    """
+
+    width: int
+    height: int
+    k: float = 0.01
+
+    def to_world(self, uv: np.ndarray, z: float = 0.0) -> np.ndarray:
+        """World points (..., 3) of pixels (..., 2) on the plane z."""
+        uv = np.asarray(uv, dtype=float)
+        return np.concatenate([uv * self.k, np.full(uv.shape[:-1] + (1,), float(z))], axis=-1)
+
+    def pixel_from_ray(self, origin: np.ndarray, direction: np.ndarray) -> np.ndarray | None:
+        """The pixel (2,) where a viewer ray meets the image plane z = 0, or None if it does not."""
+        o = np.asarray(origin, dtype=float).reshape(3)
+        d = np.asarray(direction, dtype=float).reshape(3)
+        if abs(d[2]) < 1e-12:
+            return None
+        t = -o[2] / d[2]
+        if t <= 0:
+            return None
+        p = o + t * d
+        return p[:2] / self.k
+
+    @property
+    def image_center(self) -> np.ndarray:
+        """World position (3,) of the image plane's centre (pixel centres span 0..size − 1)."""
+        return np.array([(self.width - 1) / 2.0 * self.k, (self.height - 1) / 2.0 * self.k, 0.0])
+
+    @property
+    def render_size(self) -> tuple[float, float]:
+        """The image plane's size in world units (width, height)."""
+        return self.width * self.k, self.height * self.k
+
+    def fit_camera(self, aspect: float, fov_rad: float, margin: float = 1.02) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Viewer camera (position (3,), look_at (3,), up (3,)) showing the whole image, centred.
+
+        aspect : canvas width / height. fov_rad : the viewer's vertical field of view.
+        """
+        if not (aspect > 0 and 0 < fov_rad < np.pi):
+            raise ValueError(f"aspect must be > 0 and fov in (0, π), got {aspect}, {fov_rad}")
+        half_h = max(self.height / 2.0, self.width / 2.0 / aspect) * self.k * margin
+        distance = half_h / np.tan(fov_rad / 2.0)
+        look_at = self.image_center
+        return look_at + np.array([0.0, 0.0, -distance]), look_at, np.array([0.0, -1.0, 0.0])
+
+
+def clip_segments_depth(camera: Camera, S_world: np.ndarray, min_depth_m: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """Clip world segments (K, 2, 3) to the half-space in front of the camera.
+
+    Returns the clipped segments (M, 2, 3) and the index (M,) of the input segment each came from;
+    segments wholly behind are dropped.
+    """
+    S = np.asarray(S_world, dtype=float).reshape(-1, 2, 3)
+    if len(S) == 0:
+        return S, np.zeros(0, np.int64)
+    s = camera.depth(S.reshape(-1, 3)).reshape(-1, 2) - min_depth_m
+    keep = (s[:, 0] >= 0) | (s[:, 1] >= 0)
+    S, s, idx = S[keep].copy(), s[keep], np.nonzero(keep)[0]
+    cross = (s[:, 0] < 0) | (s[:, 1] < 0)
+    if np.any(cross):
+        a = s[cross, 0] / (s[cross, 0] - s[cross, 1])  # where depth = min_depth on the segment
+        P = S[cross, 0] + a[:, None] * (S[cross, 1] - S[cross, 0])
+        behind0 = s[cross, 0] < 0
+        Sc = S[cross]
+        Sc[behind0, 0] = P[behind0]
+        Sc[~behind0, 1] = P[~behind0]
+        S[cross] = Sc
+    return S, idx
+
+
+def clip_segments_rect(seg_uv: np.ndarray, width: int, height: int, margin_px: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Clip pixel segments (K, 2, 2) to the image rectangle (Liang–Barsky).
+
+    The rectangle is the image's outer border [−margin, size − 1 + margin]. Returns the clipped
+    segments (M, 2, 2) and the index (M,) of each in the input.
+    """
+    P = np.asarray(seg_uv, dtype=float).reshape(-1, 2, 2)
+    if len(P) == 0:
+        return P, np.zeros(0, np.int64)
+    p0, d = P[:, 0], P[:, 1] - P[:, 0]
+    lo = np.array([-margin_px, -margin_px])
+    hi = np.array([width - 1 + margin_px, height - 1 + margin_px])
+    t0 = np.zeros(len(P))
+    t1 = np.ones(len(P))
+    ok = np.ones(len(P), bool)
+    for axis in (0, 1):
+        for q_sign, bound in ((-1.0, lo[axis]), (1.0, hi[axis])):
+            p = q_sign * d[:, axis]
+            q = q_sign * (bound - p0[:, axis]) if q_sign > 0 else (p0[:, axis] - bound)
+            parallel = np.abs(p) < 1e-12
+            ok &= ~(parallel & (q < 0))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = np.where(parallel, 0.0, q / np.where(parallel, 1.0, p))
+            entering = ~parallel & (p < 0)
+            leaving = ~parallel & (p > 0)
+            t0 = np.where(entering, np.maximum(t0, r), t0)
+            t1 = np.where(leaving, np.minimum(t1, r), t1)
+    ok &= t0 <= t1
+    idx = np.nonzero(ok)[0]
+    out = np.stack([p0[ok] + t0[ok, None] * d[ok], p0[ok] + t1[ok, None] * d[ok]], axis=1)
+    return out, idx
+
+
+def dash_segments(seg_uv: np.ndarray, dash_px: float = 6.0, gap_px: float = 4.0) -> tuple[np.ndarray, np.ndarray]:
+    """Cut segments (K, 2, 2) into dashes: returns dashes (M, 2, 2) and the source index (M,)."""
+    P = np.asarray(seg_uv, dtype=float).reshape(-1, 2, 2)
+    if dash_px <= 0 or gap_px < 0:
+        raise ValueError(f"dash_px must be > 0 and gap_px ≥ 0, got {dash_px}, {gap_px}")
+    period = dash_px + gap_px
+    out, idx = [], []
+    for i, (a, b) in enumerate(P):
+        length = float(np.linalg.norm(b - a))
+        if length < 1e-9:
+            continue
+        starts = np.arange(0.0, length, period)
+        ends = np.minimum(starts + dash_px, length)
+        u = (b - a) / length
+        out.append(np.stack([a + starts[:, None] * u, a + ends[:, None] * u], axis=1))
+        idx.append(np.full(len(starts), i))
+    if not out:
+        return np.zeros((0, 2, 2)), np.zeros(0, np.int64)
+    return np.concatenate(out), np.concatenate(idx)
+
+
+@dataclass(frozen=True)
+class ProjectedWireframe:
+    """A model's wireframe in one view, in pixels, clipped to the image.
+
+    seg_uv : (K, 2, 2) pixels. visible : (K,) bool. edge_index : (K,) model edge (−1 for
+    silhouettes and rims). kind : (K,) "edge" / "silhouette" / "rim".
+    """
+
+    seg_uv: np.ndarray
+    visible: np.ndarray
+    edge_index: np.ndarray
+    kind: np.ndarray
+
+
+def project_wireframe(camera: Camera, model: BRep, T_world_obj: np.ndarray, *, n_circle: int = 48,
+                      width: int | None = None, height: int | None = None) -> ProjectedWireframe:
+    """Project a model at a pose through C: hidden-line flags, cylinder silhouettes, clipping.
+
+    width, height : the image to clip to (default: the camera's).
+    """
+    wf = model.wireframe(camera.center, T_world_obj, n_circle=n_circle)
+    S, idx = clip_segments_depth(camera, wf.segments)
+    uv = camera.project(S.reshape(-1, 3)).reshape(-1, 2, 2) if len(S) else np.zeros((0, 2, 2))
+    uv, idx2 = clip_segments_rect(uv, width or camera.width, height or camera.height)
+    src = idx[idx2]
+    return ProjectedWireframe(uv, wf.visible[src], wf.edge_index[src], wf.kind[src])
+
+
+@dataclass
+class LineBatch:
+    """Pixel segments with a colour each, collected for one ``add_line_segments`` call."""
+
+    segments: list = field(default_factory=list)
+    colors: list = field(default_factory=list)
+
+    def add(self, seg_uv: np.ndarray, color: tuple[int, int, int] | np.ndarray) -> None:
+        """Add segments (K, 2, 2) in one colour (3,) or one colour per segment (K, 3)."""
+        seg = np.asarray(seg_uv, dtype=float).reshape(-1, 2, 2)
+        if len(seg) == 0:
+            return
+        c = np.asarray(color, dtype=np.uint8)
+        self.segments.append(seg)
+        self.colors.append(np.broadcast_to(c, (len(seg), 3)) if c.ndim == 1 else c.reshape(len(seg), 3))
+
+    def add_wireframe(self, pw: ProjectedWireframe, color: tuple[int, int, int], hidden: str = "dashed",
+                      dim: float = 0.55) -> None:
+        """Visible segments solid; hidden ones dashed and dimmed ("dashed"), or left out ("removed")."""
+        self.add(pw.seg_uv[pw.visible], color)
+        if hidden == "dashed":
+            dashes, _ = dash_segments(pw.seg_uv[~pw.visible])
+            self.add(dashes, tuple(int(c * dim) for c in color))
+        elif hidden != "removed":
+            raise ValueError(f"hidden must be 'dashed' or 'removed', got {hidden!r}")
+
+    def __len__(self) -> int:
+        return int(sum(len(s) for s in self.segments))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(segments (K, 2, 2) pixels, colours (K, 3) uint8)."""
+        if not self.segments:
+            return np.zeros((0, 2, 2)), np.zeros((0, 3), np.uint8)
+        return np.concatenate(self.segments), np.concatenate(self.colors).astype(np.uint8)
+
+    def world(self, pw: PixelWorld, z: float) -> tuple[np.ndarray, np.ndarray]:
+        """For viser: points (K, 2, 3) in the pixel world on plane z, colours (K, 2, 3) uint8."""
+        seg, col = self.arrays()
+        return pw.to_world(seg, z), np.repeat(col[:, None, :], 2, axis=1)
+
+
+def cross_markers(uv: np.ndarray, size_px: float = 5.0) -> np.ndarray:
+    """Segments (2N, 2, 2) drawing a '+' of half-size ``size_px`` at each pixel (N, 2)."""
+    uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+    h = np.array([size_px, 0.0])
+    v = np.array([0.0, size_px])
+    return np.concatenate([np.stack([uv - h, uv + h], axis=1), np.stack([uv - v, uv + v], axis=1)])
+
+
+def circle_marker(uv: np.ndarray, radius_px: float = 6.0, n: int = 16) -> np.ndarray:
+    """Segments (n, 2, 2) of a circle of ``radius_px`` around a pixel (2,)."""
+    c = np.asarray(uv, dtype=float).reshape(2)
+    th = np.linspace(0, 2 * np.pi, n + 1)
+    P = c + radius_px * np.column_stack([np.cos(th), np.sin(th)])
+    return np.stack([P[:-1], P[1:]], axis=1)
+
+
+def nearest_segment(seg_uv: np.ndarray, uv: np.ndarray) -> tuple[int, float]:
+    """Index of the segment (K, 2, 2) nearest to a pixel (2,) and its distance in pixels; (−1, inf) if none."""
+    P = np.asarray(seg_uv, dtype=float).reshape(-1, 2, 2)
+    if len(P) == 0:
+        return -1, float("inf")
+    p = np.asarray(uv, dtype=float).reshape(2)
+    a, d = P[:, 0], P[:, 1] - P[:, 0]
+    L2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-12)
+    t = np.clip(np.einsum("ij,ij->i", p - a, d) / L2, 0.0, 1.0)
+    dist = np.linalg.norm(a + t[:, None] * d - p, axis=1)
+    i = int(np.argmin(dist))
+    return i, float(dist[i])

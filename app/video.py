@@ -1,0 +1,341 @@
+"""Video sources for the interface: OpenCV captures (camera index, file, stream URL), image-sequence
+folders and still images, read by a background grabber that keeps the latest frame.
+
+Every frame handed out is RGB ``uint8`` of shape (H, W, 3) (grey images are expanded), with its
+index and its time ``t_s`` in seconds. For a prerecorded source (a file, a folder, a still) the
+time is the position in the recording, ``index / fps`` modulo its length: that is the scene time
+the emulated devices and the ground truth use, so a looping video replays the same motion. For a
+live source (a camera or a stream) the time is the wall-clock time since the source was opened.
+
+``open_video(spec)`` understands:
+
+* an integer, or a string of digits: a camera index (``cv2.VideoCapture(0)``);
+* a string with ``://`` (``rtsp://``, ``http://``...): a stream URL;
+* a folder: the images in it (``.png``, ``.jpg``, ``.jpeg``, ``.bmp``, ``.tif``, ``.tiff``, ``.pgm``,
+  ``.ppm``) in name order, played at ``fps`` (default 10) and looped;
+* an image file: a still frame; any other file: a video file, looped at its own frame rate.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+__all__ = [
+    "Frame",
+    "VideoError",
+    "VideoSource",
+    "CaptureSource",
+    "FolderSource",
+    "StillSource",
+    "open_video",
+    "FrameGrabber",
+    "IMAGE_SUFFIXES",
+]
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")
+
+
+class VideoError(ValueError):
+    """A video source cannot be opened or read; the message says which and what to do."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One frame: ``image`` RGB uint8 (H, W, 3); ``index`` since the source was opened (it keeps
+    counting across loops); ``t_s`` the scene time in seconds (see the module docstring)."""
+
+    image: np.ndarray
+    index: int
+    t_s: float
+
+
+def _to_rgb(image: np.ndarray) -> np.ndarray:
+    """BGR/BGRA/grey OpenCV image → contiguous RGB uint8 (H, W, 3)."""
+    import cv2
+
+    if image.dtype != np.uint8:
+        if np.issubdtype(image.dtype, np.integer):
+            image = (image >> (8 * (image.dtype.itemsize - 1))).astype(np.uint8)
+        else:
+            image = np.clip(image * 255.0, 0, 255).astype(np.uint8)
+    if image.ndim == 2:
+        return cv2.cvtColor(image, cv2.COLOR_GRAY2RGB)
+    if image.shape[2] == 4:
+        return cv2.cvtColor(image, cv2.COLOR_BGRA2RGB)
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+class VideoSource:
+    """A source of RGB frames. Subclasses set ``width``, ``height``, ``fps``, ``live``,
+    ``description`` and implement ``_read() -> image | None``."""
+
+    width: int
+    height: int
+    fps: float
+    live: bool = False
+    description: str = ""
+    frame_count: int | None = None
+
+    def __init__(self) -> None:
+        self._index = -1
+        self._position = -1  # frame position in the recording; subclasses reset it to -1 on a loop
+        self._opened_at = time.monotonic()
+
+    def read(self) -> Frame:
+        """The next frame (blocking for live sources); VideoError when the source has failed."""
+        image = self._read()
+        if image is None:
+            raise VideoError(f"{self.description}: no frame could be read (the source ended or failed); check the source")
+        self._index += 1
+        self._position += 1
+        t_s = time.monotonic() - self._opened_at if self.live else self._position / self.fps
+        return Frame(image, self._index, float(t_s))
+
+    def _read(self) -> np.ndarray | None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @property
+    def duration_s(self) -> float | None:
+        """Length of a prerecorded source in seconds (None for live sources)."""
+        if self.live or not self.frame_count:
+            return None
+        return self.frame_count / self.fps
+
+    def close(self) -> None:
+        """Release the device or file."""
+
+    def __enter__(self) -> "VideoSource":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class CaptureSource(VideoSource):
+    """An OpenCV ``VideoCapture``: a camera index, a video file (looped) or a stream URL.
+
+    fps : overrides the frame rate the capture reports (files and streams often lie; a camera
+    reporting 0 gets 30).
+    """
+
+    def __init__(self, target: int | str | Path, fps: float | None = None):
+        super().__init__()
+        import cv2
+
+        self._target = target
+        self.live = not (isinstance(target, (str, Path)) and Path(str(target)).is_file())
+        self._cap = cv2.VideoCapture(int(target) if isinstance(target, int) else str(target))
+        if not self._cap.isOpened():
+            raise VideoError(
+                f"cannot open video {target!r}: OpenCV could not open it (a camera index, a video file "
+                "OpenCV can decode, or a stream URL is expected); check the path or device"
+            )
+        first = self._grab_first()
+        self.height, self.width = first.shape[:2]
+        reported = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        self.fps = float(fps) if fps else (reported if 1.0 <= reported <= 240.0 else 30.0)
+        count = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        self.frame_count = count if (not self.live and count > 0) else None
+        kind = "camera" if isinstance(target, int) else ("file" if not self.live else "stream")
+        self.description = f"{kind} {target}"
+        self._pending: np.ndarray | None = first
+
+    def _grab_first(self) -> np.ndarray:
+        ok, image = self._cap.read()
+        if not ok or image is None:
+            self._cap.release()
+            raise VideoError(f"video {self._target!r} opened but gave no frame; is it empty or still starting?")
+        return _to_rgb(image)
+
+    def _read(self) -> np.ndarray | None:
+        import cv2
+
+        if self._pending is not None:
+            image, self._pending = self._pending, None
+            return image
+        ok, image = self._cap.read()
+        if not ok and not self.live and self._position >= 0:
+            # End of a prerecorded file: loop (the index keeps counting, the position restarts).
+            # The frames actually read are the true length (a container's count may be wrong).
+            self.frame_count = self._position + 1
+            self._cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
+            self._position = -1
+            ok, image = self._cap.read()
+        if not ok or image is None:
+            return None
+        return _to_rgb(image)
+
+    def close(self) -> None:
+        self._cap.release()
+
+
+class FolderSource(VideoSource):
+    """The images of a folder in name order, played at ``fps`` and looped (decoded lazily)."""
+
+    def __init__(self, folder: str | Path, fps: float = 10.0):
+        super().__init__()
+        folder = Path(folder)
+        files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if folder.is_dir() else []
+        if not files:
+            raise VideoError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder")
+        if fps <= 0:
+            raise VideoError(f"fps must be positive, got {fps}")
+        self._files = files
+        self._images: dict[int, np.ndarray] = {}
+        first = self._load(0)
+        self.height, self.width = first.shape[:2]
+        self.fps = float(fps)
+        self.frame_count = len(files)
+        self.description = f"folder {folder} ({len(files)} images)"
+
+    def _load(self, i: int) -> np.ndarray:
+        import cv2
+
+        image = self._images.get(i)
+        if image is None:
+            raw = cv2.imread(str(self._files[i]), cv2.IMREAD_UNCHANGED)
+            if raw is None:
+                raise VideoError(f"{self._files[i]}: not an image OpenCV can read")
+            image = _to_rgb(raw)
+            if len(self._images) < 512:  # keep short sequences in memory; long ones re-decode
+                self._images[i] = image
+        return image
+
+    def _read(self) -> np.ndarray | None:
+        if self._position + 1 >= len(self._files):
+            self._position = -1
+        i = self._position + 1
+        image = self._load(i)
+        if image.shape[:2] != (self.height, self.width):
+            raise VideoError(
+                f"{self.description}: image {i} is "
+                f"{image.shape[1]}×{image.shape[0]}, the first is {self.width}×{self.height}; "
+                "a sequence must keep one size"
+            )
+        return image
+
+
+class StillSource(VideoSource):
+    """One image repeated at ``fps``: an image file, or an array (e.g. a frame rendered from the scene)."""
+
+    def __init__(self, image: np.ndarray | str | Path, fps: float = 10.0, description: str | None = None):
+        super().__init__()
+        if isinstance(image, (str, Path)):
+            import cv2
+
+            raw = cv2.imread(str(image), cv2.IMREAD_UNCHANGED)
+            if raw is None:
+                raise VideoError(f"{image}: not an image OpenCV can read")
+            description = description or f"image {image}"
+            image = _to_rgb(raw)
+        else:
+            image = np.asarray(image)
+            if image.dtype != np.uint8 or image.ndim not in (2, 3):
+                raise VideoError(f"a still frame must be a uint8 (H, W) or (H, W, 3) array, got {image.dtype} {image.shape}")
+            if image.ndim == 2:
+                image = np.repeat(image[:, :, None], 3, axis=2)
+        self._image = np.ascontiguousarray(image)
+        self.height, self.width = self._image.shape[:2]
+        self.fps = float(fps)
+        self.frame_count = 1
+        self.description = description or f"still {self.width}×{self.height}"
+
+    def _read(self) -> np.ndarray | None:
+        self._position = -1
+        return self._image
+
+
+def open_video(spec: int | str | Path, fps: float | None = None) -> VideoSource:
+    """A video source from a command-line style spec (see the module docstring)."""
+    if isinstance(spec, int) or (isinstance(spec, str) and spec.strip().isdigit()):
+        return CaptureSource(int(spec), fps)
+    text = str(spec)
+    if "://" in text:
+        return CaptureSource(text, fps)
+    path = Path(text).expanduser()
+    if path.is_dir():
+        return FolderSource(path, fps or 10.0)
+    if path.is_file():
+        if path.suffix.lower() in IMAGE_SUFFIXES:
+            return StillSource(path, fps or 10.0)
+        return CaptureSource(path, fps)
+    raise VideoError(
+        f"video source {text!r} not found: give a camera index (0), a video file, an image folder, "
+        "an image file or a stream URL (rtsp://...)"
+    )
+
+
+class FrameGrabber:
+    """Reads a source on a background thread and keeps the latest frame.
+
+    Prerecorded sources are paced at their frame rate (real-time playback); live sources are read
+    as fast as they deliver. ``latest()`` never blocks. ``measured_fps`` is the delivered rate over
+    the last second or so. A read error stops the thread and is kept in ``error`` (shown to the
+    operator); ``on_frame`` callbacks run on the grabber thread and must be quick.
+    """
+
+    def __init__(self, source: VideoSource, on_frame: Callable[[Frame], None] | None = None):
+        self.source = source
+        self._on_frame = on_frame
+        self._lock = threading.Lock()
+        self._latest: Frame | None = None
+        self._stop = threading.Event()
+        self._times: list[float] = []
+        self.error: Exception | None = None
+        self._thread = threading.Thread(target=self._run, name="mcit-video", daemon=True)
+
+    def start(self) -> "FrameGrabber":
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        period = 1.0 / self.source.fps
+        next_t = time.monotonic()
+        while not self._stop.is_set():
+            try:
+                frame = self.source.read()
+            except Exception as exc:  # noqa: BLE001 - kept and shown, the thread ends
+                self.error = exc
+                return
+            now = time.monotonic()
+            with self._lock:
+                self._latest = frame
+                self._times.append(now)
+                while self._times and now - self._times[0] > 1.0:
+                    self._times.pop(0)
+            if self._on_frame is not None:
+                self._on_frame(frame)
+            if not self.source.live:
+                next_t += period
+                delay = next_t - time.monotonic()
+                if delay < -period:  # fell behind (a slow decode): do not try to catch up in a burst
+                    next_t = time.monotonic()
+                elif delay > 0:
+                    self._stop.wait(delay)
+
+    def latest(self) -> Frame | None:
+        """The most recent frame, or None before the first."""
+        with self._lock:
+            return self._latest
+
+    @property
+    def measured_fps(self) -> float:
+        """Frames delivered per second over the last second."""
+        with self._lock:
+            if len(self._times) < 2:
+                return 0.0
+            span = self._times[-1] - self._times[0]
+            return (len(self._times) - 1) / span if span > 0 else 0.0
+
+    def stop(self) -> None:
+        """Stop the thread and release the source."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)
+        self.source.close()
