@@ -1,0 +1,62 @@
+"""Model files in and out: ViSP ``.cao`` and meshes (OBJ, STL, PLY, glTF/GLB) ⇄ ``core.brep.BRep``.
+
+``load_model(path)`` and ``save_model(model, path)`` choose the format by the file's suffix.
+Importing this package registers the readers in ``app.scene.MODEL_LOADERS`` (``"cao"`` and
+``"mesh"``), so scene files can reference model files.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from core.brep import BRep
+
+from .cao import CaoError, cao_text, concat_breps, read_cao, write_cao
+from .mesh import MESH_SUFFIXES, MeshError, read_mesh, write_mesh
+
+__all__ = [
+    "CaoError",
+    "MeshError",
+    "MODEL_SUFFIXES",
+    "load_model",
+    "save_model",
+    "read_cao",
+    "write_cao",
+    "cao_text",
+    "read_mesh",
+    "write_mesh",
+    "concat_breps",
+]
+
+MODEL_SUFFIXES = (".cao",) + MESH_SUFFIXES
+
+
+def load_model(path: str | Path, angle_deg: float = 30.0) -> BRep:
+    """Read a model file (``.cao`` or a mesh; ``angle_deg``: meshes' feature-edge threshold)."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".cao":
+        return read_cao(path)
+    if suffix in MESH_SUFFIXES:
+        return read_mesh(path, angle_deg=angle_deg)
+    raise ValueError(f"{path}: unknown model type {suffix!r}; use one of {', '.join(MODEL_SUFFIXES)}")
+
+
+def save_model(model: BRep, path: str | Path, comment: str = "") -> None:
+    """Write a model file (``.cao`` keeps edges and cylinders; meshes keep the surface)."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".cao":
+        write_cao(model, path, comment)
+    elif suffix in MESH_SUFFIXES:
+        write_mesh(model, path)
+    else:
+        raise ValueError(f"{path}: unknown model type {suffix!r}; use one of {', '.join(MODEL_SUFFIXES)}")
+
+
+def _register() -> None:
+    from app.scene import MODEL_LOADERS
+
+    MODEL_LOADERS.setdefault("cao", read_cao)
+    MODEL_LOADERS.setdefault("mesh", read_mesh)
+
+
+_register()
