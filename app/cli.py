@@ -8,7 +8,10 @@ import sys
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="mcit", description="Keep a remote site's 3D model true to its live video.")
-    parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    from app.db_cli import add_db_parser  # argparse only: the database modules load when a db command runs
+
+    add_db_parser(sub)
     return parser
 
 

@@ -1,0 +1,195 @@
+"""``mcit db …``: the site's database from the command line (parsers here, work in app.db).
+
+    mcit db init --scene scenes/workcell        a new database from a scene's known objects
+    mcit db import model.cao [--name N] [--xyz X Y Z] [--rpy-deg R P Y] [--status known]
+    mcit db list | show NAME | history [NAME] | undo CHANGE [--restore]
+    mcit db export NAME out.{cao,obj,stl,ply,gltf,glb} [--world]
+
+Every sub-command takes ``--db PATH`` (default ``~/.local/share/mcit/mcit.sqlite``). Heavy
+modules are imported inside the commands so that ``mcit --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["add_db_parser"]
+
+
+def _when(t: float) -> str:
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t))
+
+
+def _open(args):
+    from app.db import Database
+
+    return Database.open(args.db, client="cli")
+
+
+def _cmd_init(args) -> int:
+    from app.db import seed_from_scene
+    from app.scene import default_scene_path, load_scene
+
+    scene = load_scene(args.scene or default_scene_path())
+    with _open(args) as db:
+        out = seed_from_scene(db, scene, client="cli")
+        print(f"{db.path}: seeded from scene {scene.name!r}: objects {', '.join(out['objects']) or '(none)'}; "
+              f"camera and turret calibrations #{out['calibrations'][0]}, #{out['calibrations'][1]}")
+    return 0
+
+
+def _cmd_import(args) -> int:
+    import numpy as np
+
+    from app.models_io import load_model
+    from core.transforms import make_T, rot_x, rot_y, rot_z
+
+    path = Path(args.file)
+    model = load_model(path, angle_deg=args.angle_deg)  # raises before the database is touched
+    roll, pitch, yaw = np.radians(args.rpy_deg)
+    T = make_T(rot_z(yaw) @ rot_y(pitch) @ rot_x(roll), np.asarray(args.xyz, float))
+    with _open(args) as db:
+        rec = db.add_object(args.name or path.stem, args.kind, model, T, status=args.status, source=str(path.resolve()),
+                            method=f"import {path.suffix.lower().lstrip('.')}", client="cli")
+        print(f"{db.path}: added #{rec.id} {rec.name!r} ({rec.kind}, {rec.status}): {len(model.vertices)} vertices, "
+              f"{len(model.edges)} edges, {len(model.faces)} faces, {len(model.solids)} solids, {len(model.circles)} circles")
+    return 0
+
+
+def _cmd_list(args) -> int:
+    with _open(args) as db:
+        objs = db.objects()
+        if not objs:
+            print(f"{db.path}: no objects")
+            return 0
+        print(f"{'id':>4}  {'name':<20} {'kind':<12} {'status':<9} {'ver':>4}  {'x':>8} {'y':>8} {'z':>8}  updated")
+        for o in objs:
+            x, y, z = o.T_world_obj[:3, 3]
+            print(f"{o.id:>4}  {o.name:<20} {o.kind:<12} {o.status:<9} {o.version:>4}  {x:8.4f} {y:8.4f} {z:8.4f}  {_when(o.updated_at)}")
+    return 0
+
+
+def _cmd_show(args) -> int:
+    import numpy as np
+
+    from app.scene import pose_to_json
+
+    with _open(args) as db:
+        o = db.get(int(args.name) if args.name.isdigit() else args.name)
+        m = o.model
+        rpy = pose_to_json(o.T_world_obj)["rpy_deg"]
+        print(f"#{o.id} {o.name!r}  kind {o.kind}  status {o.status}  version {o.version}")
+        print(f"  model: {len(m.vertices)} vertices, {len(m.edges)} edges, {len(m.faces)} faces, {len(m.solids)} solids, "
+              f"{len(m.circles)} circles (model row {o.model_id}){'  from ' + o.source if o.source else ''}")
+        for k, v in o.dims.items():
+            s = o.sigmas.get(k)
+            print(f"  {k} = {v:.4f} m" + (f" ± {s:.4f} m" if s is not None else ""))
+        print(f"  position (m): {np.array2string(o.T_world_obj[:3, 3], precision=4)}   rpy (deg): "
+              f"{np.array2string(np.array(rpy), precision=2)}")
+        print("  T_world_obj:")
+        for row in o.T_world_obj:
+            print("    " + " ".join(f"{v:10.6f}" for v in row))
+        if o.cov is not None:
+            print(f"  pose σ (sqrt of the covariance's diagonal): {np.array2string(np.sqrt(np.diag(o.cov)), precision=5)}")
+        print(f"  created {_when(o.created_at)}, updated {_when(o.updated_at)}, {len(db.history(o.id))} changes in the history")
+    return 0
+
+
+def _cmd_export(args) -> int:
+    from app.models_io import save_model
+
+    with _open(args) as db:
+        o = db.get(int(args.name) if args.name.isdigit() else args.name)
+        model = o.model.transformed(o.T_world_obj) if args.world else o.model
+        frame = "world" if args.world else "object"
+        save_model(model, args.out, comment=f"mcit object {o.name!r} (version {o.version}), {frame} frame, metres")
+        print(f"wrote {args.out}: {o.name!r} in the {frame} frame")
+    return 0
+
+
+def _cmd_history(args) -> int:
+    with _open(args) as db:
+        name = None if args.name is None else (int(args.name) if args.name.isdigit() else args.name)
+        changes = db.history(name, limit=args.limit)
+        if not changes:
+            print(f"{db.path}: the history is empty")
+            return 0
+        print(f"{'#':>5}  {'when':<19}  {'client':<10} {'action':<14} {'object':<20} {'ver':>4}  method")
+        for c in changes:
+            what = c.object_name or (f"calibration #{c.calibration_id}" if c.calibration_id else "")
+            extra = f" (of #{c.undoes})" if c.undoes else ""
+            print(f"{c.id:>5}  {_when(c.time)}  {c.client:<10} {c.action + extra:<14} {what:<20} {c.version or '':>4}  {c.method}")
+    return 0
+
+
+def _cmd_undo(args) -> int:
+    with _open(args) as db:
+        c = db.restore(args.change) if args.restore else db.undo(args.change)
+        what = c.object_name or f"calibration #{c.calibration_id}"
+        state = "after" if args.restore else "before"
+        print(f"change #{c.id}: {what} is back to its state {state} change #{args.change}")
+    return 0
+
+
+def _run(func):
+    def wrapped(args) -> int:
+        from app.db import ConflictError, DatabaseRefused, NotFoundError
+
+        try:
+            return func(args)
+        except (ValueError, NotFoundError, ConflictError, DatabaseRefused, OSError) as exc:
+            print(f"mcit db {args.db_command}: error: {exc}", file=sys.stderr)
+            return 1
+
+    return wrapped
+
+
+def add_db_parser(subparsers) -> argparse.ArgumentParser:
+    """Add ``db`` and its sub-commands to the ``mcit`` parser's sub-parsers."""
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--db", metavar="PATH", default=None, help="database file (default: ~/.local/share/mcit/mcit.sqlite)")
+    db = subparsers.add_parser("db", help="the site's database: import, list, show, export, history, undo",
+                               description="The site's 3D geometric database (SQLite).")
+    sub = db.add_subparsers(dest="db_command", metavar="DB_COMMAND", required=True)
+
+    p = sub.add_parser("init", parents=[common], help="create a database from a scene's known objects and calibrations")
+    p.add_argument("--scene", metavar="DIR", default=None, help="scene folder (default: the bundled workcell)")
+    p.set_defaults(func=_run(_cmd_init))
+
+    p = sub.add_parser("import", parents=[common], help="add an object from a .cao or mesh file (OBJ, STL, PLY, glTF)")
+    p.add_argument("file", help="model file: .cao, .obj, .stl, .ply, .gltf or .glb")
+    p.add_argument("--name", help="object name (default: the file's stem)")
+    p.add_argument("--kind", default="polyhedron", help="box, cylinder, polyhedron, ... (default polyhedron)")
+    p.add_argument("--status", default="known", choices=("known", "modelled", "stale"))
+    p.add_argument("--xyz", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"), help="position, metres")
+    p.add_argument("--rpy-deg", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("R", "P", "Y"),
+                   help="orientation R = Rz(yaw) Ry(pitch) Rx(roll), degrees")
+    p.add_argument("--angle-deg", type=float, default=30.0, help="meshes: dihedral angle from which an edge is drawn")
+    p.set_defaults(func=_run(_cmd_import))
+
+    p = sub.add_parser("list", parents=[common], help="every object with its status, version and position")
+    p.set_defaults(func=_run(_cmd_list))
+
+    p = sub.add_parser("show", parents=[common], help="one object: model, dimensions ± σ, pose, covariance")
+    p.add_argument("name", help="object name or id")
+    p.set_defaults(func=_run(_cmd_show))
+
+    p = sub.add_parser("export", parents=[common], help="write an object's model as .cao, OBJ, STL, PLY, glTF or GLB")
+    p.add_argument("name", help="object name or id")
+    p.add_argument("out", help="output file; its suffix chooses the format")
+    p.add_argument("--world", action="store_true", help="bake the pose: write the model in the world frame")
+    p.set_defaults(func=_run(_cmd_export))
+
+    p = sub.add_parser("history", parents=[common], help="every change (of one object): when, who, how")
+    p.add_argument("name", nargs="?", help="object name or id (default: all)")
+    p.add_argument("--limit", type=int, default=None, help="only the last N changes")
+    p.set_defaults(func=_run(_cmd_history))
+
+    p = sub.add_parser("undo", parents=[common], help="bring an object back to its state before a change (itself recorded)")
+    p.add_argument("change", type=int, help="the change's number (see `mcit db history`)")
+    p.add_argument("--restore", action="store_true", help="go back to the state just after the change instead")
+    p.set_defaults(func=_run(_cmd_undo))
+    return db
