@@ -12,6 +12,9 @@ def build_parser() -> argparse.ArgumentParser:
     from app.db_cli import add_db_parser  # argparse only: the database modules load when a db command runs
 
     add_db_parser(sub)
+    from app.devices.cli import add_emulate_parser  # argparse only: the emulators load when the command runs
+
+    add_emulate_parser(sub)
     return parser
 
 

@@ -1,0 +1,347 @@
+"""Range acquisition through the drivers: aim at a clicked pixel, profile scans, face patch scans.
+
+The geometry is core/rangefinder.py's (turret convention, ``aim``, ``aim_at_pixel``); this module
+drives the devices with it. Each function
+
+* reports progress through ``progress(Progress)`` (called from the caller's thread),
+* stops at the next point when ``cancel`` (a ``threading.Event``) is set, raising
+  ``AcquisitionCancelled`` whose ``partial`` holds what was measured so far,
+* turns error 255 (no return) into a miss (NaN range) and lets every other device error
+  (timeouts, disconnections, limits) propagate: a scan never hides a device fault.
+
+The turret's angles are whole steps: the beams recorded are the commanded (and, with the
+driver's checks, reached) angles.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+from matplotlib.path import Path as PolygonPath
+
+from core.camera import Camera, as_uv
+from core.geometry import Plane, fit_plane_tls
+from core.rangefinder import AimResult, RangeFinderSpec, RangeScan, aim, aim_at_pixel, beam_point, beam_point_cov
+
+from .errors import NoTargetError
+from .rangefinder import RangeFinder, RangeMeasurement
+from .turret import Turret
+
+__all__ = [
+    "Progress",
+    "AcquisitionCancelled",
+    "PixelMeasurement",
+    "measure_at_pixel",
+    "profile_scan",
+    "face_patch_scan",
+    "grid_in_polygon",
+]
+
+
+@dataclass(frozen=True)
+class Progress:
+    """done of total steps; message says what is being done."""
+
+    done: int
+    total: int
+    message: str
+
+
+class AcquisitionCancelled(Exception):
+    """The operator cancelled; ``partial`` holds the result so far (a RangeScan, or None)."""
+
+    def __init__(self, message: str, partial=None):
+        super().__init__(message)
+        self.partial = partial
+
+
+@dataclass(frozen=True)
+class PixelMeasurement:
+    """The beam put on the surface seen at a clicked pixel, and what it measured there.
+
+    uv : array, shape (2,), the clicked pixel. aim : the AimResult of the parallax iteration.
+    measurement : the n-shot RangeMeasurement at the final angles (None: no return).
+    pan_rad, tilt_rad : final turret angles. range_m : the measured range (NaN: no return).
+    X_world : array, shape (3,), the measured point (NaN: no return).
+    cov_world : array, shape (3, 3), its covariance (m²): σ_ρ along the beam (or the shots'
+    spread when larger), a step's quantisation across it.
+    """
+
+    uv: np.ndarray
+    aim: AimResult
+    measurement: RangeMeasurement | None
+    pan_rad: float
+    tilt_rad: float
+    range_m: float
+    X_world: np.ndarray
+    cov_world: np.ndarray
+
+    @property
+    def hit(self) -> bool:
+        return bool(np.isfinite(self.range_m))
+
+
+def _report(progress: Callable[[Progress], None] | None, done: int, total: int, message: str) -> None:
+    if progress is not None:
+        progress(Progress(done, total, message))
+
+
+def _common_step(turret: Turret) -> float | None:
+    """The turret's step when pan and tilt share it (core's aiming rounds to it), else None."""
+    return turret.pan_step_rad if abs(turret.pan_step_rad - turret.tilt_step_rad) < 1e-12 else None
+
+
+def _shoot(rangefinder: RangeFinder, shots: int) -> RangeMeasurement | None:
+    """n shots (None when every shot misses)."""
+    try:
+        return rangefinder.measure_n(shots)
+    except NoTargetError:
+        return None
+
+
+def measure_at_pixel(
+    camera: Camera,
+    T_world_turret: np.ndarray,
+    uv: np.ndarray,
+    turret: Turret,
+    rangefinder: RangeFinder,
+    *,
+    shots: int = 1,
+    spec: RangeFinderSpec | None = None,
+    depth_guess_m: float = 2.0,
+    tol_px: float = 0.25,
+    max_iter: int = 12,
+    progress: Callable[[Progress], None] | None = None,
+    cancel: threading.Event | None = None,
+) -> PixelMeasurement:
+    """Aim the beam at the surface point seen at pixel uv (parallax iteration), then measure n shots.
+
+    camera : the calibrated Camera (C). T_world_turret : array, shape (4, 4). uv : array, shape (2,).
+    shots : shots at the final angles (their median is the range). spec : the range finder's
+    noise for the covariance (default: RangeFinderSpec with the turret's step). The iteration stops when the point's
+    image is within tol_px of uv or the rounded angles stop changing (see core.rangefinder.aim_at_pixel).
+    TurretLimitError when the point is out of the turret's reach.
+    """
+    uv = as_uv(np.asarray(uv, dtype=float).reshape(1, 2))[0]
+    if not (isinstance(shots, (int, np.integer)) and shots >= 1):
+        raise ValueError(f"shots must be a positive integer, got {shots!r}")
+    spec = spec or RangeFinderSpec(step_rad=turret.pan_step_rad)
+    iteration = [0]
+
+    def measure(pan_rad: float, tilt_rad: float) -> float | None:
+        if cancel is not None and cancel.is_set():
+            raise AcquisitionCancelled("aiming cancelled")
+        iteration[0] += 1
+        _report(progress, iteration[0], max_iter + 1, f"aiming at ({uv[0]:.1f}, {uv[1]:.1f}): iteration {iteration[0]}")
+        turret.move_to(pan_rad, tilt_rad, wait=True)
+        try:
+            return rangefinder.measure()
+        except NoTargetError:
+            return None
+
+    result = aim_at_pixel(
+        camera, T_world_turret, uv, measure, depth_guess_m=depth_guess_m, step_rad=_common_step(turret), tol_px=tol_px, max_iter=max_iter
+    )
+    if cancel is not None and cancel.is_set():
+        raise AcquisitionCancelled("aiming cancelled")
+    measurement = None
+    rho = np.nan
+    if shots == 1:
+        if np.isfinite(result.range_m):
+            rho = float(result.range_m)
+            measurement = RangeMeasurement(rho, 0.0, np.array([rho]), np.array([False]), 1)
+    else:
+        turret.move_to(result.pan_rad, result.tilt_rad, wait=True)
+        _report(progress, max_iter, max_iter + 1, f"measuring {shots} shots")
+        measurement = _shoot(rangefinder, shots)
+        rho = np.nan if measurement is None else measurement.range_m
+    _report(progress, max_iter + 1, max_iter + 1, "done")
+    X = beam_point(T_world_turret, result.pan_rad, result.tilt_rad, rho)
+    if np.isfinite(rho):
+        sigma = max(spec.sigma_range_m, 0.0 if measurement is None else measurement.spread_m)
+        cov = beam_point_cov(T_world_turret, result.pan_rad, result.tilt_rad, rho, replace(spec, sigma_range_m=sigma))[0]
+    else:
+        cov = np.full((3, 3), np.nan)
+    return PixelMeasurement(uv, result, measurement, float(result.pan_rad), float(result.tilt_rad), float(rho), X, cov)
+
+
+def _scan_from(pan, tilt, rng_m, meta) -> RangeScan:
+    return RangeScan(np.asarray(pan, dtype=float), np.asarray(tilt, dtype=float), np.asarray(rng_m, dtype=float), meta)
+
+
+def profile_scan(
+    turret: Turret,
+    rangefinder: RangeFinder,
+    *,
+    tilt_rad: float,
+    pan_start_rad: float,
+    pan_stop_rad: float,
+    pan_step_rad: float | None = None,
+    shots: int = 1,
+    progress: Callable[[Progress], None] | None = None,
+    cancel: threading.Event | None = None,
+) -> RangeScan:
+    """Horizontal profile: sweep pan from start to stop at a fixed tilt, one range per position.
+
+    Angles in radians (core/rangefinder.py convention), rounded to whole turret steps;
+    pan_step_rad defaults to one turret step. Returns a RangeScan (NaN range = no return) whose
+    ``meta`` holds "kind", "pan_steps", "tilt_steps", "spread_m" (per beam) and "duration_s".
+    """
+    if not (isinstance(shots, (int, np.integer)) and shots >= 1):
+        raise ValueError(f"shots must be a positive integer, got {shots!r}")
+    step = turret.pan_step_rad
+    k = 1 if pan_step_rad is None else max(1, int(round(abs(float(pan_step_rad)) / step)))
+    p0, p1 = (int(round(float(a) / step)) for a in (pan_start_rad, pan_stop_rad))
+    direction = 1 if p1 >= p0 else -1
+    pan_steps = np.arange(p0, p1 + direction, direction * k)
+    tilt_steps = int(round(float(tilt_rad) / turret.tilt_step_rad))
+    turret.check_limits(int(pan_steps.min()), tilt_steps)
+    turret.check_limits(int(pan_steps.max()), tilt_steps)
+    n = len(pan_steps)
+    ranges = np.full(n, np.nan)
+    spreads = np.full(n, np.nan)
+    t0 = time.monotonic()
+
+    def partial(count: int) -> RangeScan:
+        meta = {
+            "kind": "profile",
+            "pan_steps": pan_steps[:count].copy(),
+            "tilt_steps": np.full(count, tilt_steps),
+            "spread_m": spreads[:count].copy(),
+            "duration_s": time.monotonic() - t0,
+        }
+        return _scan_from(pan_steps[:count] * step, np.full(count, tilt_steps * turret.tilt_step_rad), ranges[:count], meta)
+
+    for i, p in enumerate(pan_steps):
+        if cancel is not None and cancel.is_set():
+            raise AcquisitionCancelled(f"profile scan cancelled after {i} of {n} beams", partial(i))
+        turret.move_to_steps(int(p), tilt_steps if i == 0 else None, wait=True)
+        m = _shoot(rangefinder, shots)
+        if m is not None:
+            ranges[i], spreads[i] = m.range_m, m.spread_m
+        _report(progress, i + 1, n, f"profile scan: beam {i + 1} of {n}")
+    return partial(n)
+
+
+def grid_in_polygon(polygon_uv: np.ndarray, spacing_px: float) -> np.ndarray:
+    """Pixels (N, 2) of a square grid of pitch spacing_px inside a polygon (K, 2), rows in serpentine order."""
+    poly = as_uv(np.asarray(polygon_uv, dtype=float))
+    if len(poly) < 3:
+        raise ValueError(f"a polygon needs at least 3 vertices, got {len(poly)}")
+    if not spacing_px > 0:
+        raise ValueError(f"spacing_px must be positive, got {spacing_px}")
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    us = np.arange(lo[0] + (hi[0] - lo[0]) % spacing_px / 2, hi[0] + 1e-9, spacing_px)
+    vs = np.arange(lo[1] + (hi[1] - lo[1]) % spacing_px / 2, hi[1] + 1e-9, spacing_px)
+    path = PolygonPath(poly)
+    rows = []
+    for j, v in enumerate(vs):
+        row = np.column_stack([us, np.full(len(us), v)])
+        row = row[path.contains_points(row)]
+        rows.append(row[::-1] if j % 2 else row)
+    return np.vstack(rows) if rows else np.zeros((0, 2))
+
+
+def _plane_if_spread(X: np.ndarray, min_spread_m: float = 0.003) -> Plane | None:
+    """The TLS plane of points that span two dimensions (else None: collinear so far)."""
+    if len(X) < 4:
+        return None
+    s = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
+    if s[1] / np.sqrt(len(X)) < min_spread_m:
+        return None
+    return fit_plane_tls(X).plane
+
+
+def face_patch_scan(
+    camera: Camera,
+    T_world_turret: np.ndarray,
+    turret: Turret,
+    rangefinder: RangeFinder,
+    *,
+    polygon_uv: np.ndarray | None = None,
+    center_uv: np.ndarray | None = None,
+    half_size_px: float = 8.0,
+    spacing_px: float = 4.0,
+    shots: int = 1,
+    depth_guess_m: float = 2.0,
+    progress: Callable[[Progress], None] | None = None,
+    cancel: threading.Event | None = None,
+) -> RangeScan:
+    """Range points on a face: a grid of pixels inside a clicked polygon (or a square around a pixel).
+
+    polygon_uv : array, shape (K, 2), the face's outline as clicked, or center_uv : array,
+    shape (2,), with half_size_px. spacing_px : grid pitch. The beam is first put on the grid's
+    centroid by the parallax iteration; every later grid pixel is aimed at in one move, at the
+    point where its ray meets the plane of the points measured so far (or, until they span a
+    plane, at the centroid's distance). Returns a RangeScan (NaN = no return) whose ``meta``
+    holds "kind", "uv_target" (N, 2), "uv_hit" (N, 2, the measured points' images; NaN for
+    misses), "inside" (N,) bool (the measured point's image lies in the polygon: use those to
+    fit the face), "spread_m" and "duration_s".
+    """
+    if (polygon_uv is None) == (center_uv is None):
+        raise ValueError("give either polygon_uv (the clicked face outline) or center_uv (with half_size_px)")
+    if polygon_uv is None:
+        c = as_uv(np.asarray(center_uv, dtype=float).reshape(1, 2))[0]
+        h = float(half_size_px)
+        if not h > 0:
+            raise ValueError(f"half_size_px must be positive, got {half_size_px}")
+        polygon_uv = c + np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
+    poly = as_uv(np.asarray(polygon_uv, dtype=float))
+    targets = grid_in_polygon(poly, spacing_px)
+    if len(targets) == 0:
+        raise ValueError(f"no grid pixel of pitch {spacing_px} px falls inside the polygon; use a smaller spacing_px")
+    path = PolygonPath(poly)
+    n = len(targets)
+    t0 = time.monotonic()
+    pan = np.full(n, np.nan)
+    tilt = np.full(n, np.nan)
+    ranges = np.full(n, np.nan)
+    spreads = np.full(n, np.nan)
+    uv_hit = np.full((n, 2), np.nan)
+    inside = np.zeros(n, dtype=bool)
+
+    def partial(count: int) -> RangeScan:
+        meta = {
+            "kind": "face_patch",
+            "polygon_uv": poly.copy(),
+            "uv_target": targets[:count].copy(),
+            "uv_hit": uv_hit[:count].copy(),
+            "inside": inside[:count].copy(),
+            "spread_m": spreads[:count].copy(),
+            "duration_s": time.monotonic() - t0,
+        }
+        return _scan_from(pan[:count], tilt[:count], ranges[:count], meta)
+
+    centroid_uv = targets.mean(axis=0)
+    first = measure_at_pixel(camera, T_world_turret, centroid_uv, turret, rangefinder, depth_guess_m=depth_guess_m, cancel=cancel)
+    c = camera.center
+    distance = float(np.linalg.norm(first.X_world - c)) if first.hit else float(depth_guess_m)
+    _, rays = camera.rays(targets)
+    step_p, step_t = turret.pan_step_rad, turret.tilt_step_rad
+    for i in range(n):
+        if cancel is not None and cancel.is_set():
+            raise AcquisitionCancelled(f"face patch scan cancelled after {i} of {n} beams", partial(i))
+        good = np.isfinite(ranges[:i]) & inside[:i]
+        plane = _plane_if_spread(beam_point(T_world_turret, pan[:i][good], tilt[:i][good], ranges[:i][good])) if good.sum() >= 4 else None
+        lam = distance
+        if plane is not None:
+            denom = float(plane.n @ rays[i])
+            lam_plane = -(float(plane.n @ c) + plane.d) / denom if abs(denom) > 1e-6 else -1.0
+            if lam_plane > 0:
+                lam = lam_plane
+        a_pan, a_tilt, _ = aim(T_world_turret, c + lam * rays[i])
+        p_steps, t_steps = int(round(float(a_pan) / step_p)), int(round(float(a_tilt) / step_t))
+        turret.move_to_steps(p_steps, t_steps, wait=True)
+        pan[i], tilt[i] = p_steps * step_p, t_steps * step_t
+        m = _shoot(rangefinder, shots)
+        if m is not None:
+            ranges[i], spreads[i] = m.range_m, m.spread_m
+            X = beam_point(T_world_turret, pan[i], tilt[i], ranges[i])
+            uv_hit[i] = camera.project(X[None])[0]
+            inside[i] = bool(path.contains_points(uv_hit[i][None])[0])
+        _report(progress, i + 1, n, f"face patch scan: beam {i + 1} of {n}")
+    return partial(n)
