@@ -141,7 +141,8 @@ def inspect_file(path: Path, quick_check: bool = True) -> FileState:
         return FileState(True, version)
     except sqlite3.DatabaseError as exc:
         raise DatabaseRefused(
-            f"{path} is not a readable SQLite database ({exc}); mcit will not touch it: choose another file with --db"
+            f"{path} cannot be read as an SQLite database ({exc}): it is not one, or it is corrupt. mcit will not "
+            "touch it: restore a backup or choose another file with --db"
         ) from None
     finally:
         conn.close()
