@@ -209,6 +209,8 @@ class Database:
             conn.execute("PRAGMA synchronous = FULL")
             self._local.conn = conn
             self._local.depth = 0
+            self._local.commits = 0  # this connection's commits (PRAGMA data_version counts the others')
+            self._local.snapshot = None  # (data_version, commits, objects) of the last objects() read
             with self._lock:
                 self._connections.append(conn)
         return conn
@@ -229,6 +231,7 @@ class Database:
         try:
             yield conn
             conn.execute("COMMIT")
+            self._local.commits += 1
         except BaseException:
             if conn.in_transaction:
                 conn.execute("ROLLBACK")
@@ -281,24 +284,40 @@ class Database:
         )
 
     def objects(self) -> list[ObjectRecord]:
-        """Every live object (ordered by id): the overlay's read. Records are shared: do not mutate."""
+        """Every live object (ordered by id): the overlay's read. Records are shared: do not mutate.
+
+        When no connection has committed since this thread's last call (SQLite's data_version and
+        this connection's own commits), the previous list is returned without a query.
+        """
         with self._read() as conn:
-            ids = conn.execute("SELECT id, version FROM objects WHERE removed = 0 ORDER BY id").fetchall()
-            cache = self._records
-            moved = [i for i, v in ids if (r := cache.get(i)) is None or r.version != v]
-            if not moved:
-                return [cache[i] for i, _ in ids]
-            fresh = {}
-            for k in range(0, len(moved), 500):
-                chunk = moved[k : k + 500]
-                q = f"SELECT {_OBJECT_COLUMNS} FROM objects WHERE id IN ({','.join('?' * len(chunk))})"
-                for row in conn.execute(q, chunk):
-                    fresh[row[0]] = self._record(conn, row)
-            if self._local.depth:  # inside a write transaction: may roll back, do not cache
-                return [fresh.get(i) or cache[i] for i, _ in ids]
-            with self._lock:
-                cache.update(fresh)
-                return [cache[i] for i, _ in ids]
+            key = None
+            if not self._local.depth:
+                key = (conn.execute("PRAGMA data_version").fetchone()[0], self._local.commits)
+                snap = self._local.snapshot
+                if snap is not None and snap[0] == key:
+                    return list(snap[1])
+            objs = self._objects(conn)
+            if key is not None:
+                self._local.snapshot = (key, objs)
+            return list(objs)
+
+    def _objects(self, conn: sqlite3.Connection) -> list[ObjectRecord]:
+        ids = conn.execute("SELECT id, version FROM objects WHERE removed = 0 ORDER BY id").fetchall()
+        cache = self._records
+        moved = [i for i, v in ids if (r := cache.get(i)) is None or r.version != v]
+        if not moved:
+            return [cache[i] for i, _ in ids]
+        fresh = {}
+        for k in range(0, len(moved), 500):
+            chunk = moved[k : k + 500]
+            q = f"SELECT {_OBJECT_COLUMNS} FROM objects WHERE id IN ({','.join('?' * len(chunk))})"
+            for row in conn.execute(q, chunk):
+                fresh[row[0]] = self._record(conn, row)
+        if self._local.depth:  # inside a write transaction: may roll back, do not cache
+            return [fresh.get(i) or cache[i] for i, _ in ids]
+        with self._lock:
+            cache.update(fresh)
+            return [cache[i] for i, _ in ids]
 
     def _row(self, conn: sqlite3.Connection, obj: Any, include_removed: bool = False) -> tuple:
         if isinstance(obj, ObjectRecord):
