@@ -1,0 +1,104 @@
+"""``mcit db …`` end to end, and the real models' round trip import → database → export → import."""
+
+import sqlite3
+
+import numpy as np
+import pytest
+
+from app.cli import main
+from app.db import Database
+from app.models_io import load_model, read_cao
+from core.brep import BRep
+
+
+def _mcit(capsys, *argv):
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.mark.parametrize("folder, name", [("visp-teabox", "teabox.cao"), ("visp-cube", "cube_and_cylinder.cao")])
+def test_real_models_round_trip_through_the_database(shared_data, tmp_path, capsys, folder, name):
+    src = shared_data(folder, name)
+    db = str(tmp_path / "site.sqlite")
+    code, out, err = _mcit(capsys, "db", "import", str(src), "--db", db, "--xyz", "0.1", "0.2", "0.0", "--rpy-deg", "0", "0", "30")
+    assert code == 0, err
+    stem = src.stem
+    for suffix in (".cao", ".obj", ".glb"):
+        out_file = tmp_path / f"back{suffix}"
+        code, out, err = _mcit(capsys, "db", "export", stem, str(out_file), "--db", db)
+        assert code == 0, err
+        if suffix == ".cao":
+            assert read_cao(out_file) == read_cao(src)  # identical geometry, bit for bit
+        else:  # surfaces: the polyhedral edges come back through the dihedral-angle reduction
+            back, orig = load_model(out_file), read_cao(src)
+            poly = {tuple(sorted(map(tuple, np.round(s, 6)))) for s in orig.edge_segments()}
+            got = {tuple(sorted(map(tuple, np.round(s, 6)))) for s in back.edge_segments()}
+            assert poly <= got and len(got - poly) == 96 * len(orig.solids)  # + the two 48-gon rims of a cylinder
+    with Database.open(db) as d:
+        rec = d.get(stem)
+        assert rec.model == read_cao(src) and rec.source == str(src.resolve()) and rec.status == "known"
+        assert np.allclose(rec.T_world_obj[:3, 3], [0.1, 0.2, 0.0])
+    # exported in the world frame, the model carries its pose
+    code, _, err = _mcit(capsys, "db", "export", stem, str(tmp_path / "world.cao"), "--world", "--db", db)
+    assert code == 0, err
+    world = read_cao(tmp_path / "world.cao")
+    assert np.allclose(world.vertices, read_cao(src).transformed(rec.T_world_obj).vertices)
+
+
+def test_init_list_show_history_undo(tmp_path, capsys):
+    db = str(tmp_path / "site.sqlite")
+    code, out, _ = _mcit(capsys, "db", "init", "--db", db)
+    assert code == 0 and "parallelepiped" in out
+    code, out, _ = _mcit(capsys, "db", "list", "--db", db)
+    assert code == 0 and "parallelepiped" in out and "table" in out
+    code, out, _ = _mcit(capsys, "db", "show", "parallelepiped", "--db", db)
+    assert code == 0 and "size_x = 0.3500 m" in out and "T_world_obj" in out
+    with Database.open(db) as d:
+        rec = d.get("parallelepiped")
+        T = np.array(rec.T_world_obj)
+        T[:3, 3] += [0.05, 0.0, 0.0]
+        change = d.update_pose(rec, T, np.eye(6) * 1e-6, expected_version=rec.version, method="p3l+refine", client="viser:1")
+    code, out, _ = _mcit(capsys, "db", "history", "parallelepiped", "--db", db)
+    assert code == 0 and "p3l+refine" in out and "viser:1" in out
+    last = Database.open(db).history()[-1].id
+    code, out, _ = _mcit(capsys, "db", "undo", str(last), "--db", db)
+    assert code == 0 and f"before change #{last}" in out
+    with Database.open(db) as d:
+        assert np.array_equal(d.get("parallelepiped").T_world_obj, rec.T_world_obj) and d.get("parallelepiped").version == 3
+    code, out, _ = _mcit(capsys, "db", "undo", str(last), "--restore", "--db", db)
+    with Database.open(db) as d:
+        assert np.array_equal(d.get("parallelepiped").T_world_obj, change.T_world_obj)
+
+
+def test_a_malformed_model_writes_nothing(tmp_path, capsys):
+    db = tmp_path / "site.sqlite"
+    bad = tmp_path / "bad.cao"
+    bad.write_text("V1\n2\n0 0 0\n1 0 0\n1\n0 9\n0\n0\n")
+    code, _, err = _mcit(capsys, "db", "import", str(bad), "--db", str(db))
+    assert code == 1 and f"{bad}:6: point index 9 out of range" in err
+    assert not db.exists()  # the model is read before the database is opened
+    Database.open(db).close()
+    code, _, err = _mcit(capsys, "db", "import", str(bad), "--db", str(db))
+    assert code == 1
+    conn = sqlite3.connect(db)
+    assert conn.execute("SELECT count(*) FROM objects").fetchone()[0] == 0
+    assert conn.execute("SELECT count(*) FROM history").fetchone()[0] == 0
+
+
+def test_cli_errors_are_one_line_and_exit_1(tmp_path, capsys):
+    db = str(tmp_path / "site.sqlite")
+    code, _, err = _mcit(capsys, "db", "show", "ghost", "--db", db)
+    assert code == 1 and "no object 'ghost'" in err
+    code, _, err = _mcit(capsys, "db", "undo", "42", "--db", db)
+    assert code == 1 and "no change #42" in err
+    not_db = tmp_path / "notes.txt"
+    not_db.write_text("hello\n" * 100)
+    code, _, err = _mcit(capsys, "db", "list", "--db", str(not_db))
+    assert code == 1 and "will not touch it" in err and not_db.read_text() == "hello\n" * 100
+    with Database.open(db) as d:
+        d.add_object("cone", "cone", BRep.cone(0.1, 0.05, 0.2), np.eye(4))
+    code, _, err = _mcit(capsys, "db", "export", "cone", str(tmp_path / "cone.cao"), "--db", db)
+    assert code == 1 and "cone" in err and "glTF" in err
+    code, _, err = _mcit(capsys, "db", "export", "cone", str(tmp_path / "cone.glb"), "--db", db)
+    assert code == 0
