@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -77,6 +78,7 @@ def main() -> int:
     ap.add_argument("--reads", type=int, default=300)
     ap.add_argument("--updates", type=int, default=200)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--keep", action="store_true", help="keep the database file (default: deleted at the end)")
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
     tmp = Path(tempfile.mkdtemp(prefix="mcit-bench-db-"))
@@ -164,6 +166,8 @@ def main() -> int:
     print(f"\n# file size after the run: {path.stat().st_size / 1e6:.1f} MB (+ WAL); the machine is shared, so rerun for spread")
     reader.close()
     writer.close()
+    if not args.keep:
+        shutil.rmtree(tmp)
     return 0
 
 

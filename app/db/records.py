@@ -74,9 +74,11 @@ def frozen_array(value: Any, shape: tuple[int, ...]) -> np.ndarray:
     return a
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ObjectRecord:
     """One object of the site, as read (never mutate it: records are shared by every reader).
+
+    Records compare by identity (they hold arrays); compare ``(id, version)`` to see a change.
 
     id : int. name : unique among live objects. kind : "box", "cylinder", "polyhedron", ...
     status : "known", "modelled" or "stale". version : bumped by every change (conflict check).
