@@ -12,7 +12,6 @@ pixels k·u … k·u + k − 1, so a point at u maps to ``k(u + 0.5) − 0.5`` o
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from core.brep import BRep
@@ -20,7 +19,27 @@ from core.camera import Camera
 
 __all__ = ["render_model"]
 
-_SHIFT = 4  # OpenCV's fractional bits for polygon vertices: 1/16 of a fine pixel
+
+
+def _fill_convex(canvas: np.ndarray, P: np.ndarray, value: int) -> None:
+    """Set the fine pixels whose centres lie inside the convex polygon P (n, 2) (either winding).
+
+    Exact point-in-polygon sampling (OpenCV's fillConvexPoly includes its boundary pixels, which
+    would grow every face by half a fine pixel and bias the edges outwards).
+    """
+    h, w = canvas.shape
+    lo = np.maximum(np.floor(P.min(axis=0)).astype(int), 0)
+    hi = np.minimum(np.ceil(P.max(axis=0)).astype(int), [w - 1, h - 1])
+    if np.any(hi < lo):
+        return
+    u = np.arange(lo[0], hi[0] + 1, dtype=float)[None, :]
+    v = np.arange(lo[1], hi[1] + 1, dtype=float)[:, None]
+    area2 = np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1])
+    sign = 1.0 if area2 > 0 else -1.0
+    inside = np.ones((len(v), u.shape[1]), bool)
+    for a, b in zip(P, np.roll(P, -1, axis=0)):
+        inside &= sign * ((b[0] - a[0]) * (v - a[1]) - (b[1] - a[1]) * (u - a[0])) > 0
+    canvas[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1][inside] = value
 
 
 def render_model(
@@ -67,9 +86,8 @@ def render_model(
         if np.any(camera.depth(X @ T[:3, :3].T + T[:3, 3]) <= 0):
             raise ValueError("a visible face crosses the camera's principal plane; move the object in front")
         uv = camera.project_obj(T, X)
-        fine = (k * (uv + 0.5) - 0.5) * (1 << _SHIFT)
         grey = int(round(60 + 150 * (0.5 + 0.5 * float(nrm @ light))))
-        cv2.fillConvexPoly(canvas, np.round(fine).astype(np.int32), grey, lineType=cv2.LINE_8, shift=_SHIFT)
+        _fill_convex(canvas, k * (uv + 0.5) - 0.5, grey)
     img = canvas.reshape(H, k, W, k).mean(axis=(1, 3), dtype=np.float32)  # exact area averages
     if noise_sigma > 0:
         img = img + rng.normal(0.0, noise_sigma, img.shape).astype(np.float32)
