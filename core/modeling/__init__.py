@@ -1,0 +1,33 @@
+"""Modelling unknown objects from clicked image edges and the range finder (source paper §III).
+
+The operator gives the semantics (box, polyhedron, cylinder, cone; vertical or oblique; "lies on
+the table"), the sensors give the numbers:
+
+* ``model_box(camera, faces, support)`` — a box from its visible faces (range points + clicked
+  sides), the paper's plane construction, then a box fitted to the constructed corners;
+* ``model_polyhedron(camera, faces, ...)`` — any polyhedron from a face/edge topology (prisms,
+  pyramids): every vertex is the least-squares point of the planes that meet there;
+* ``model_cylinder(camera, method, ...)`` — cylinders and cones by the paper's "tangential",
+  "bisecting", "rf_tangential" methods or the "fused" maximum-likelihood fit.
+
+Every result is a ``ModelResult``: a B-Rep in its object frame, ``T_world_obj``, the dimensions
+and their standard deviations.
+"""
+
+from .box import BoxFace, model_box
+from .cylinder import METHODS, model_cylinder
+from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs
+from .polyhedron import model_polyhedron
+from .result import ModelResult
+
+__all__ = [
+    "BoxFace",
+    "METHODS",
+    "ModelResult",
+    "PlaneObs",
+    "fit_face_plane",
+    "interpretation_plane_obs",
+    "model_box",
+    "model_cylinder",
+    "model_polyhedron",
+]

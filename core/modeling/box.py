@@ -1,0 +1,339 @@
+"""Model a box ("a box lying on the table") from its visible faces: the paper's §III.1.
+
+Each visible face gives a plane from range-finder points aimed at it (least squares, robust to
+points that miss the face); each clicked image edge gives an interpretation plane; a vertex is
+the least-squares point of every plane that meets there (faces, interpretation planes, the
+support). A box (pose and three sizes) is then fitted to those vertices by generalised least
+squares with their joint covariance, which fills in the hidden vertex and yields the sizes'
+standard deviations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ..brep import BRep
+from ..camera import Camera, as_segment
+from ..geometry import Plane, angle_between_planes
+from ..transforms import exp_so3, make_T, skew
+from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs, support_obs
+from .result import ModelResult
+from .vertices import solve_vertices
+
+__all__ = ["BoxFace", "model_box", "box_corner_signs"]
+
+_AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class BoxFace:
+    """What the operator measured of one visible face of a box.
+
+    points_world : array, shape (N, 3), range-finder points aimed at the face, metres.
+    edges_uv : array, shape (K, 2, 2), clicked image segments of the face's sides (0 ≤ K ≤ 4,
+        any order; an edge shared with another visible face may be clicked in either or both).
+    point_covs : array, shape (N, 3, 3), optional covariance of each point (m²), e.g. from
+        ``core.rangefinder.beam_point_cov``.
+    """
+
+    points_world: np.ndarray
+    edges_uv: np.ndarray
+    point_covs: np.ndarray | None = None
+
+
+def box_corner_signs() -> np.ndarray:
+    """Sign pattern (8, 3) of the box corners, index = (sx > 0) + 2 (sy > 0) + 4 (sz > 0)."""
+    return np.array([[1 if v & 1 else -1, 1 if v & 2 else -1, 1 if v & 4 else -1] for v in range(8)])
+
+
+def _corner_offsets(dims: np.ndarray) -> np.ndarray:
+    """Corners (8, 3) in the box frame (origin at the centre of the bottom face)."""
+    s = box_corner_signs().astype(float)
+    return np.column_stack([0.5 * s[:, 0] * dims[0], 0.5 * s[:, 1] * dims[1], 0.5 * (s[:, 2] + 1) * dims[2]])
+
+
+def _box_axes(face_normals: list[np.ndarray], support: Plane | None) -> np.ndarray:
+    """Box axes (3, 3) as columns, from the outward face normals and the support's upward normal."""
+    normals = list(face_normals)
+    if support is not None:
+        z = support.n
+        others = normals
+    else:
+        if len(normals) < 2:
+            raise ValueError(
+                "a box needs two measured faces, or one face and the support plane it lies on; "
+                f"got {len(normals)} face(s) and no support"
+            )
+        k = int(np.argmax([abs(n[2]) for n in normals]))
+        z = normals[k] * np.sign(normals[k][2] or 1.0)
+        others = normals[:k] + normals[k + 1 :]
+    if not others:
+        raise ValueError("a box needs at least one measured side face besides the support")
+    perp = [n - (n @ z) * z for n in others]
+    k = int(np.argmax([np.linalg.norm(p) for p in perp]))
+    if np.linalg.norm(perp[k]) < 0.5:
+        raise ValueError("the measured faces are (nearly) parallel: they do not fix the box's orientation")
+    x = perp[k] / np.linalg.norm(perp[k])
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def model_box(
+    camera: Camera,
+    faces: Sequence[BoxFace],
+    support: Plane | None = None,
+    *,
+    sigma_px: float = 1.0,
+    sigma_point_m: float | None = None,
+    support_sigma_m: float = 1e-3,
+    plane_fit: str = "tls",
+    robust: bool = True,
+    min_angle_deg: float = 5.0,
+) -> ModelResult:
+    """Build a box from its visible faces (range points + clicked edges) and an optional support.
+
+    Parameters
+    ----------
+    camera : Camera
+        The calibrated camera (global model C) the edges were clicked in.
+    faces : sequence of BoxFace
+        The visible faces (1 to 3), each with its range points and clicked sides.
+    support : Plane, optional
+        The plane the box lies on (the table top, normal pointing up): its bottom face.
+    sigma_px : float
+        Click noise, pixels (each coordinate). sigma_point_m : isotropic range-point noise when a
+        face has no ``point_covs`` (estimated from the residuals when None).
+    support_sigma_m : float
+        Uncertainty of the support plane's offset, metres.
+    plane_fit : "tls" or "ols"
+        Face plane estimator (total least squares, or the paper's ``ax + by + z + d = 0``).
+    robust : bool
+        Drop range points off their face (RANSAC) before fitting.
+    min_angle_deg : float
+        An interpretation plane closer than this to its face plane (the face seen edge-on)
+        raises ValueError: their intersection would be ill-conditioned.
+
+    Returns
+    -------
+    ModelResult
+        kind "box", method "planes", ``model = BRep.box(size_x, size_y, size_z)`` with its frame at
+        the centre of the bottom face, z up; ``vertices_world`` (8, 3) the fitted corners
+        (``details["constructed_vertices"]`` holds the plane-constructed ones, NaN where hidden).
+    """
+    faces = list(faces)
+    if not faces:
+        raise ValueError("model_box needs at least one measured face")
+    c = camera.center
+    fits, normals, centroids = [], [], []
+    for k, f in enumerate(faces):
+        if not isinstance(f, BoxFace):
+            raise ValueError(f"faces[{k}] must be a BoxFace, got {type(f).__name__}")
+        fit = fit_face_plane(
+            f.points_world, covs=f.point_covs, sigma_m=sigma_point_m, method=plane_fit, robust=robust, label=f"face {k}"
+        )
+        cen = np.asarray(f.points_world, dtype=float)[fit.inliers].mean(axis=0)
+        p = fit.obs.plane
+        if p.n @ (c - cen) < 0:  # outward = towards the camera that sees the face
+            # (n, d) → (−n, −d): the covariance is unchanged.
+            fit = type(fit)(PlaneObs(p.flipped(), fit.obs.cov, fit.obs.label), fit.fits, fit.inliers, fit.method)
+        fits.append(fit)
+        normals.append(fit.obs.plane.n)
+        centroids.append(cen)
+    sup = None
+    if support is not None:
+        sup = support_obs(support, support_sigma_m)
+        if sup.plane.n @ c + sup.plane.d < 0:  # normal up: towards the camera's side
+            sup = PlaneObs(sup.plane.flipped(), sup.cov, sup.label)
+    R0 = _box_axes(normals, None if sup is None else sup.plane)
+
+    # Label each face by the box axis and side it faces.
+    planes: list[PlaneObs] = []
+    face_plane: dict[tuple[int, int], list[int]] = {}
+    labels = []
+    for k, fit in enumerate(fits):
+        a = R0.T @ fit.obs.plane.n
+        ax = int(np.argmax(np.abs(a)))
+        if abs(a[ax]) < np.cos(np.radians(20.0)):
+            raise ValueError(
+                f"face {k} is {np.degrees(np.arccos(min(1.0, abs(a[ax])))):.0f}° from every box axis: "
+                "the measured faces are not those of a box (or a face's points are wrong)"
+            )
+        key = (ax, int(np.sign(a[ax])))
+        if key in face_plane:
+            raise ValueError(f"faces {face_plane[key][0]} and {k} are the same side of the box")
+        if key == (2, -1) and sup is not None:
+            raise ValueError(f"face {k} faces down, where the box lies on its support")
+        face_plane[key] = [len(planes)]
+        labels.append(key)
+        planes.append(PlaneObs(fit.obs.plane, fit.obs.cov, f"face {_sgn(key)}"))
+    if sup is not None:
+        face_plane[(2, -1)] = [len(planes)]
+        planes.append(PlaneObs(sup.plane, sup.cov, "support (bottom face)"))
+
+    # Each clicked side: which box edge it is (from its 3D line on the face plane).
+    signs = box_corner_signs()
+    edge_planes: dict[tuple[int, int], list[int]] = {}
+    segments = []
+    min_angle = np.radians(min_angle_deg)
+    for k, f in enumerate(faces):
+        E = np.asarray(f.edges_uv, dtype=float)
+        if E.size == 0:
+            continue
+        if E.ndim != 3 or E.shape[1:] != (2, 2):
+            raise ValueError(f"faces[{k}].edges_uv must have shape (K, 2, 2), got {E.shape}")
+        ax, sg = labels[k]
+        fp = fits[k].obs.plane
+        for j, seg in enumerate(E):
+            seg = as_segment(seg, f"faces[{k}].edges_uv[{j}]")
+            ip = interpretation_plane_obs(camera, seg, sigma_px, f"edge click {k}.{j}")
+            ang = angle_between_planes(ip.plane, fp)
+            if ang < min_angle:
+                raise ValueError(
+                    f"the interpretation plane of faces[{k}].edges_uv[{j}] is {np.degrees(ang):.1f}° from "
+                    f"the face's plane (< {min_angle_deg}°): the camera sees that face edge-on, so the edge "
+                    "cannot be placed on it; model it from another view or another face"
+                )
+            # Which side: compare the clicked direction in the image with the two box axes of
+            # the face, drawn through the segment's midpoint on the face plane (image angles
+            # are robust where a short, foreshortened edge has a poorly known 3D direction).
+            c_ray, r_mid = camera.rays(seg.mean(axis=0, keepdims=True))
+            M = c_ray + (-(fp.n @ c_ray + fp.d) / (fp.n @ r_mid[0])) * r_mid[0]
+            d_img = (seg[1] - seg[0]) / np.linalg.norm(seg[1] - seg[0])
+            cand = [m for m in range(3) if m != ax]
+            offs = []
+            for m in cand:
+                uv = camera.project(np.array([M - 0.01 * R0[:, m], M + 0.01 * R0[:, m]]))
+                e_img = (uv[1] - uv[0]) / max(np.linalg.norm(uv[1] - uv[0]), 1e-12)
+                offs.append(np.degrees(np.arccos(min(1.0, abs(float(d_img @ e_img))))))
+            m = cand[int(np.argmin(offs))]
+            if min(offs) > 30.0:
+                raise ValueError(
+                    f"faces[{k}].edges_uv[{j}] does not run along a side of its face (in the image it is "
+                    f"{min(offs):.0f}° from the nearest side direction)"
+                )
+            q = 3 - ax - m
+            sq = int(np.sign(R0[:, q] @ (M - centroids[k])) or 1)
+            verts = tuple(int(v) for v in np.flatnonzero((signs[:, ax] == sg) & (signs[:, q] == sq)))
+            edge_planes.setdefault(verts, []).append(len(planes))
+            planes.append(ip)
+            segments.append((verts, seg))
+
+    incidence, solvable, names = [], [], []
+    for v in range(8):
+        idx = []
+        for (ax, sg), pl in face_plane.items():
+            if signs[v, ax] == sg:
+                idx += pl
+        for verts, pl in edge_planes.items():
+            if v in verts:
+                idx += pl
+        if len(idx) >= 3:
+            N = np.array([planes[i].plane.n for i in idx])
+            sv = np.linalg.svd(N, compute_uv=False)
+            if sv[-1] >= 0.05 * sv[0]:
+                incidence.append(idx)
+                solvable.append(v)
+                names.append(_corner_name(signs[v]))
+    if len(solvable) < 2:
+        raise ValueError(
+            f"only {len(solvable)} corner(s) of the box are fixed by the measured faces and clicked edges; "
+            "click the edges of the visible faces"
+        )
+    Xv, cov_v, vres = solve_vertices(planes, incidence, names)
+    R, t, dims, cov_p, fit_res = _fit_box(Xv, cov_v, np.array(solvable), R0)
+
+    corners = t + _corner_offsets(dims) @ R.T
+    constructed = np.full((8, 3), np.nan)
+    constructed[solvable] = Xv
+    names_p = ("size_x", "size_y", "size_z", "x", "y", "z", "rot_x", "rot_y", "rot_z")
+    dims_d = {n: float(v) for n, v in zip(names_p[:3], dims)}
+    sig = {n: float(np.sqrt(cov_p[i, i])) for i, n in enumerate(names_p[:3])}
+    sig["position"] = float(np.sqrt(np.trace(cov_p[3:6, 3:6])))
+    click_res = []
+    for verts, seg in segments:
+        uv = camera.project(corners[list(verts)])
+        l = np.cross(np.append(uv[0], 1.0), np.append(uv[1], 1.0))
+        l /= np.linalg.norm(l[:2])
+        click_res += list(np.column_stack([seg, np.ones(2)]) @ l)
+    residuals = {
+        "clicks_px": np.array(click_res),
+        "vertex_fit_m": fit_res,
+        "vertex_planes_m": np.concatenate(vres),
+    }
+    for k, fit in enumerate(fits):
+        residuals[f"face_{_sgn(labels[k])}_points_m"] = fit.fits[fit.method].residuals_m
+    return ModelResult(
+        kind="box",
+        method="planes",
+        model=BRep.box(*dims),
+        T_world_obj=make_T(R, t),
+        dimensions=dims_d,
+        sigmas=sig,
+        cov=cov_p,
+        cov_names=names_p,
+        vertices_world=corners,
+        residuals=residuals,
+        details={
+            "constructed_vertices": constructed,
+            "constructed_cov": cov_v,
+            "face_fits": [f.fits for f in fits],
+            "face_inliers": [f.inliers for f in fits],
+            "face_labels": [_sgn(l) for l in labels],
+            "planes": planes,
+        },
+    )
+
+
+def _sgn(key: tuple[int, int]) -> str:
+    return ("+" if key[1] > 0 else "-") + _AXES[key[0]]
+
+
+def _corner_name(s: np.ndarray) -> str:
+    return "(" + ", ".join(("+" if v > 0 else "-") + a for v, a in zip(s, _AXES)) + ")"
+
+
+def _fit_box(X: np.ndarray, cov: np.ndarray, which: np.ndarray, R0: np.ndarray):
+    """GLS fit of a box (R, t, dims) to constructed corners X (M, 3) with joint covariance (3M, 3M).
+
+    Returns R (3, 3), t (3,) (centre of the bottom face), dims (3,), the covariance (9, 9) of
+    (dims, t, rotation vector in the box frame) and the residuals (M,) (corner distances, m).
+    """
+    s = box_corner_signs()[which].astype(float)
+    S = np.column_stack([0.5 * s[:, 0], 0.5 * s[:, 1], 0.5 * (s[:, 2] + 1)])  # corner = t + R (S ⊙ dims)
+    W = np.linalg.pinv(cov, rcond=1e-12, hermitian=True)
+    M = len(which)
+    # Linear start: with R fixed, X = t + R diag(S_k) dims is linear in (dims, t).
+    A = np.zeros((3 * M, 6))
+    for k in range(M):
+        A[3 * k : 3 * k + 3, :3] = R0 * S[k]
+        A[3 * k : 3 * k + 3, 3:] = np.eye(3)
+    sol, *_ = np.linalg.lstsq(A, X.reshape(-1), rcond=None)
+    dims, t, R = sol[:3], sol[3:], R0
+    for _ in range(20):
+        J = np.zeros((3 * M, 9))
+        r = np.zeros(3 * M)
+        for k in range(M):
+            v = S[k] * dims
+            r[3 * k : 3 * k + 3] = X[k] - (t + R @ v)
+            J[3 * k : 3 * k + 3, :3] = R * S[k]
+            J[3 * k : 3 * k + 3, 3:6] = np.eye(3)
+            J[3 * k : 3 * k + 3, 6:] = -R @ skew(v)  # R exp([δ]×) v ≈ R v − R [v]× δ
+        H = J.T @ W @ J
+        if np.linalg.cond(H) > 1e14:
+            raise ValueError(
+                "the constructed corners do not fix all three sizes and the pose of the box; "
+                "click the edges of every visible face (and measure at least two faces)"
+            )
+        step = np.linalg.solve(H, J.T @ W @ r)
+        dims = dims + step[:3]
+        t = t + step[3:6]
+        R = R @ exp_so3(step[6:])
+        if np.linalg.norm(step) < 1e-12:
+            break
+    if np.any(dims <= 0):
+        raise ValueError(f"the fitted box has a non-positive size {dims}: the clicked edges contradict the faces")
+    cov_p = np.linalg.inv(H)
+    res = np.linalg.norm((X - (t + (S * dims) @ R.T)), axis=1)
+    return R, t, dims, 0.5 * (cov_p + cov_p.T), res

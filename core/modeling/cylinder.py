@@ -1,0 +1,573 @@
+"""Model a cylinder or cone: the paper's three methods (§III.2) and a fused maximum-likelihood fit.
+
+Inputs: the two clicked silhouettes (contour generators, each clicked from its bottom end to its
+top end), horizontal range scans across the solid (misses kept), the operator's hints (axis
+direction, the support it stands on).
+
+* "tangential" (a), camera + range finder: the two silhouette interpretation planes P1, P2 and
+  the front tangent plane P3 of the range profile; in each cross-section the axis is the centre
+  of the circle tangent to the three lines.
+* "bisecting" (b), camera + range finder: the axis is the intersection of the bisecting plane of
+  P1, P2 with the bisecting plane of the range finder's own lateral tangent planes P_RF1, P_RF2
+  (from the last hit / first miss of each scan); the radius is the distance to P_RF1, P_RF2.
+* "rf_tangential" (c), range finder alone: the circle tangent to P_RF1, P_RF2 and P3.
+* "fused" (d): every measurement at once (each scan return, each tangent beam, both silhouettes'
+  clicked ends, the support), weighted by its sensor's noise (core/modeling/fused.py).
+
+Cones (two radii) need the axis direction (the "vertical" hint or the support) and two scans at
+different heights: each cross-section gives a centre and a radius, the radius varies linearly.
+The height comes from the silhouettes' clicked ends (and the support for the base).
+Uncertainties of the paper's methods are propagated to first order from the clicks (σ_px), the
+tangent-beam angles and the front plane's fit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ..brep import BRep, Revolution
+from ..camera import Camera, as_segment
+from ..geometry import Line, Plane, bisecting_planes, make_plane
+from ..rangefinder import RangeFinderSpec, RangeScan
+from ..transforms import check_T, make_T
+from .profile import ProfileFit, axis_basis, fit_profile, front_plane
+from .result import ModelResult
+from .scans import ScanSegment, segment_scan
+
+__all__ = ["METHODS", "model_cylinder", "CylinderData", "reduce_cylinder_data"]
+
+METHODS = ("tangential", "bisecting", "rf_tangential", "fused")
+
+
+@dataclass(frozen=True)
+class CylinderData:
+    """The measurements of a cylinder or cone, reduced once and shared by every method.
+
+    camera, T_world_turret, spec : the sensors. silhouettes_uv : (2, 2, 2) or None.
+    segments : list of ScanSegment (object returns, tangent beams per scan).
+    support : Plane (normal up) or None. axis_hint : unit (3,) or None. cone : bool.
+    inside_uv : a pixel inside the object's image (between the silhouettes) or None.
+    """
+
+    camera: Camera
+    T_world_turret: np.ndarray
+    spec: RangeFinderSpec
+    silhouettes_uv: np.ndarray | None
+    segments: list
+    support: Plane | None
+    axis_hint: np.ndarray | None
+    cone: bool
+
+    @property
+    def hits(self) -> np.ndarray:
+        return np.vstack([s.hits_world for s in self.segments])
+
+    @property
+    def covs(self) -> np.ndarray:
+        return np.concatenate([s.covs for s in self.segments])
+
+    @property
+    def groups(self) -> np.ndarray:
+        return np.concatenate([np.full(len(s.hits_world), k) for k, s in enumerate(self.segments)])
+
+    @property
+    def tangents(self) -> list:
+        return [tb for s in self.segments for tb in s.tangents]
+
+    @property
+    def rf_origin(self) -> np.ndarray:
+        return self.T_world_turret[:3, 3]
+
+
+def _orient_up(a: np.ndarray, support: Plane | None) -> np.ndarray:
+    ref = support.n if support is not None else np.array([0.0, 0.0, 1.0])
+    s = a @ ref
+    if abs(s) < 1e-9:
+        s = a @ np.array([1.0, 1e-3, 1e-6])
+    return a if s > 0 else -a
+
+
+def _silhouette_planes(camera: Camera, sil: np.ndarray) -> tuple[Plane, Plane]:
+    """Interpretation planes of the two silhouettes, positive on the object's side."""
+    inside = sil.reshape(-1, 2).mean(axis=0, keepdims=True)
+    c, r = camera.rays(inside)
+    X_in = c + r[0]
+    out = []
+    for s in sil:
+        p = camera.interpretation_plane(s)
+        out.append(p if p.n @ X_in + p.d > 0 else p.flipped())
+    return out[0], out[1]
+
+
+def reduce_cylinder_data(
+    camera: Camera,
+    *,
+    silhouettes_uv: np.ndarray | None,
+    scans: Sequence[RangeScan],
+    T_world_turret: np.ndarray | None,
+    spec: RangeFinderSpec,
+    support: Plane | None,
+    axis_dir: np.ndarray | None,
+    cone: bool,
+    jump_m: float,
+) -> CylinderData:
+    """Validate the inputs, find the object in each scan and its tangent beams."""
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
+    sil = None
+    if silhouettes_uv is not None:
+        sil = np.asarray(silhouettes_uv, dtype=float)
+        if sil.shape != (2, 2, 2):
+            raise ValueError(f"silhouettes_uv must have shape (2, 2, 2) (two segments of two pixels), got {sil.shape}")
+        for k in range(2):
+            as_segment(sil[k], f"silhouettes_uv[{k}]")
+        p1 = camera.interpretation_plane(sil[0])
+        p2 = camera.interpretation_plane(sil[1])
+        if np.linalg.norm(np.cross(p1.n, p2.n)) < np.sin(np.radians(0.05)):
+            raise ValueError(
+                "the two silhouettes are the same image line: they do not bound a cylinder; "
+                "click the left and the right contour of the object"
+            )
+    if support is not None:
+        if not isinstance(support, Plane):
+            raise ValueError(f"support must be a core.geometry.Plane, got {type(support).__name__}")
+        support = make_plane(support.n, support.d)
+        if support.n @ camera.center + support.d < 0:
+            support = support.flipped()
+    hint = None
+    if axis_dir is not None:
+        hint = np.asarray(axis_dir, dtype=float).reshape(-1)
+        if hint.shape != (3,) or not np.all(np.isfinite(hint)) or np.linalg.norm(hint) < 1e-12:
+            raise ValueError(f"axis_dir must be a non-zero 3-vector, got {axis_dir}")
+        hint = hint / np.linalg.norm(hint)
+    elif support is not None:
+        hint = support.n.copy()
+    if hint is not None:
+        hint = _orient_up(hint, support)
+    scans = list(scans)
+    if not scans:
+        raise ValueError("every method needs at least one range scan across the object")
+    if T_world_turret is None:
+        raise ValueError("range scans need T_world_turret (the turret's calibrated pose)")
+    T = check_T(T_world_turret, "T_world_turret")
+    keep = None
+    if sil is not None:
+        P1, P2 = _silhouette_planes(camera, sil)
+        tol = 0.02  # points up to 2 cm outside the wedge still count (noise, parallax)
+
+        def keep(X):
+            return (X @ P1.n + P1.d > -tol) & (X @ P2.n + P2.d > -tol)
+
+    segs = [segment_scan(s, T, spec, jump_m=jump_m, scan_index=k, keep=keep) for k, s in enumerate(scans)]
+    if cone and hint is None:
+        raise ValueError(
+            "a cone needs its axis direction: say it stands on the support (support=...) or give axis_dir; "
+            "the paper's methods cannot find an oblique cone's axis"
+        )
+    return CylinderData(camera, T, spec, sil, segs, support, hint, cone)
+
+
+# --------------------------------------------------------------------------- the paper's methods
+@dataclass
+class _Ctx:
+    data: CylinderData
+    method: str
+    profile: ProfileFit | None
+    t_sections: np.ndarray  # axial coordinates of the cross-sections, relative to X0 along a0
+    X0: np.ndarray
+    a0: np.ndarray
+    centroid: np.ndarray
+
+
+def _lateral_plane(ctx: _Ctx, beams, angles: np.ndarray, a: np.ndarray | None) -> Plane:
+    """Plane through the range finder's origin containing the tangent beams (and the axis direction)."""
+    T = ctx.data.T_world_turret
+    D = [tb.direction(T, angles[2 * i], angles[2 * i + 1]) for i, tb in enumerate(beams)]
+    if a is not None and not ctx.data.cone:
+        D.append(a)
+    if len(D) < 2:
+        raise ValueError(
+            "a lateral tangent plane of the range finder needs two scans, or one scan and the axis "
+            "direction (a 'vertical' hint or the support)"
+        )
+    _, _, Vt = np.linalg.svd(np.array(D))
+    n = Vt[-1]
+    o = ctx.data.rf_origin
+    p = Plane(n, float(-n @ o))
+    return p if p.n @ ctx.centroid + p.d > 0 else p.flipped()
+
+
+def _section_line(p: Plane, X0, a, e1, e2, t) -> tuple[np.ndarray, float]:
+    u = np.array([p.n @ e1, p.n @ e2])
+    s = np.linalg.norm(u)
+    if s < 1e-6:
+        raise ValueError("a tangent plane is perpendicular to the axis: it does not bound the cross-section")
+    return u / s, float(p.n @ X0 + t * (p.n @ a) + p.d) / s
+
+
+def _incircle(lines) -> tuple[np.ndarray, float]:
+    A = np.array([[u[0], u[1], -1.0] for u, _ in lines])
+    b = -np.array([g for _, g in lines])
+    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    return sol[:2], float(sol[2])
+
+
+def _unpack(z: np.ndarray, ctx: _Ctx):
+    d = ctx.data
+    i = 0
+    sil = None
+    if d.silhouettes_uv is not None:
+        sil = z[:8].reshape(2, 2, 2)
+        i = 8
+    nb = len(d.tangents)
+    angles = z[i : i + 2 * nb]
+    i += 2 * nb
+    p3 = None
+    if ctx.profile is not None:
+        v = z[i : i + 4]
+        p3 = make_plane(v[:3], v[3])
+    return sil, angles, p3
+
+
+def _axis_from_sections(ctx, a, e1, e2, centres, radii):
+    """Axis point at the first section's height, direction a, and radius function r(t) = r_ref + k t."""
+    t = ctx.t_sections
+    y = np.mean(centres, axis=0)
+    if ctx.data.cone:
+        k, r_ref = np.polyfit(t, radii, 1)
+    else:
+        k, r_ref = 0.0, float(np.mean(radii))
+    Xa = ctx.X0 + y[0] * e1 + y[1] * e2
+    return Xa, float(r_ref), float(k)
+
+
+def _generators(camera: Camera, Xa, a, r_ref, k, t_lo, t_hi):
+    """The two contour generators (as lines, point (3,) and direction (3,)) seen by the camera."""
+    r_lo, r_hi = r_ref + k * t_lo, r_ref + k * t_hi
+    if min(r_lo, r_hi) <= 0:
+        raise ValueError("the modelled cone's radius vanishes within the object: the data do not bound a cone")
+    sol = Revolution(Xa + t_lo * a, Xa + t_hi * a, r_lo, r_hi)
+    sil = sol.silhouette(camera.center)
+    if len(sil) != 2:
+        raise ValueError("the camera is inside the modelled solid: the silhouettes do not bound a cylinder")
+    return [(g[0], (g[1] - g[0]) / np.linalg.norm(g[1] - g[0])) for g in sil]
+
+
+def _click_heights(camera, sil_uv, gens, Xa, a):
+    """Axial coordinates (2 silhouettes × (low end, high end)) of the clicked ends on the generators."""
+    c = camera.center
+    out = []
+    for seg in sil_uv:
+        _, rays = camera.rays(seg)
+        # Match the clicked line with the nearer projected generator.
+        best, tt = None, None
+        for P, u in gens:
+            uv = camera.project(np.array([P, P + 0.1 * u]))
+            l = np.cross(np.append(uv[0], 1), np.append(uv[1], 1))
+            l /= np.linalg.norm(l[:2])
+            dist = float(np.abs(np.column_stack([seg, np.ones(2)]) @ l).sum())
+            ts = []
+            for r in rays:
+                # Closest point on the generator to the click's ray.
+                w = P - c
+                b = u @ r
+                den = 1 - b * b
+                s_g = (b * (w @ r) - (w @ u)) / den if den > 1e-12 else 0.0
+                ts.append(float((P + s_g * u - Xa) @ a))
+            if best is None or dist < best:
+                best, tt = dist, sorted(ts)
+        out.append(tt)
+    return np.array(out)
+
+
+def _solve_paper(z: np.ndarray, ctx: _Ctx) -> dict:
+    """The paper's construction from the reduced measurements z; returns the solid."""
+    d = ctx.data
+    sil, angles, p3 = _unpack(z, ctx)
+    cam = d.camera
+    P1 = P2 = None
+    if sil is not None:
+        P1, P2 = _silhouette_planes(cam, sil)
+    beams = d.tangents
+    sides = {}
+    for i, tb in enumerate(beams):
+        sides.setdefault(tb.side, []).append(i)
+    a = d.axis_hint
+    lat = {}
+    if ctx.method in ("bisecting", "rf_tangential"):
+        if set(sides) != {-1, 1}:
+            raise ValueError(
+                "the scans do not pass the object on both sides: the range finder's lateral tangent planes "
+                "need a miss (or background) beyond each edge; widen the scans"
+            )
+        for s, idx in sides.items():
+            ang = np.concatenate([angles[2 * i : 2 * i + 2] for i in idx])
+            lat[s] = _lateral_plane(ctx, [beams[i] for i in idx], ang, a)
+    if a is None:  # an oblique cylinder: the direction from the planes parallel to the axis
+        if ctx.method == "tangential":
+            a = np.cross(P1.n, P2.n)
+        elif ctx.method == "rf_tangential":
+            a = np.cross(lat[-1].n, lat[1].n)
+        else:
+            a = np.cross(bisecting_planes(P1, P2)[0].n, bisecting_planes(lat[-1], lat[1])[0].n)
+        a = _orient_up(a / np.linalg.norm(a), d.support)
+    e1, e2 = axis_basis(a)
+    centres, radii = [], []
+    for t in ctx.t_sections:
+        def L(p):
+            return _section_line(p, ctx.X0, a, e1, e2, t)
+
+        if ctx.method == "tangential":
+            y, r = _incircle([L(P1), L(P2), L(p3)])
+        elif ctx.method == "rf_tangential":
+            y, r = _incircle([L(lat[-1]), L(lat[1]), L(p3)])
+        else:
+            (u1, g1), (u2, g2) = L(bisecting_planes(P1, P2)[0]), L(bisecting_planes(lat[-1], lat[1])[0])
+            A = np.array([u1, u2])
+            if abs(np.linalg.det(A)) < np.sin(np.radians(0.2)):
+                raise ValueError(
+                    "the camera's and the range finder's bisecting planes are parallel: the axis is not "
+                    "fixed (the two sensors see the object from the same direction)"
+                )
+            y = np.linalg.solve(A, -np.array([g1, g2]))
+            r = float(np.mean([u @ y + g for u, g in (L(lat[-1]), L(lat[1]))]))
+        if not r > 0:
+            raise ValueError(
+                f"the tangent planes give a radius of {r * 1000:.1f} mm: the silhouettes and scans do not "
+                "bound a cylinder (check which contours were clicked and that the scans cross the object)"
+            )
+        centres.append(y)
+        radii.append(r)
+    Xa, r_ref, k = _axis_from_sections(ctx, a, e1, e2, centres, radii)
+    return _finish(ctx, sil, Xa, a, r_ref, k)
+
+
+def _finish(ctx: _Ctx, sil, Xa, a, r_ref, k) -> dict:
+    """Base and top along the axis (support, silhouette ends) → the solid's parameters."""
+    d = ctx.data
+    t_lo, t_hi = float(ctx.t_sections.min()), float(ctx.t_sections.max())
+    t_base = t_top = None
+    if sil is not None:
+        span = max(t_hi - t_lo, 0.05)
+        gens = _generators(d.camera, Xa, a, r_ref, k, t_lo - 0.1 * span, t_hi + 0.1 * span)
+        th = _click_heights(d.camera, sil, gens, Xa, a)
+        t_top = float(th[:, 1].mean())
+        t_base = float(th[:, 0].mean())
+    if d.support is not None:
+        den = d.support.n @ a
+        if abs(den) < 1e-6:
+            raise ValueError("the axis is parallel to the support: the solid cannot stand on it")
+        t_base = float(-(d.support.n @ Xa + d.support.d) / den)
+    if t_top is None or t_base is None:
+        raise ValueError(
+            "the height needs the silhouettes clicked from end to end (and the support, or both ends, for the base)"
+        )
+    h = t_top - t_base
+    if not h > 0:
+        raise ValueError(f"the clicked silhouette ends give a height of {h * 1000:.1f} mm: click each contour from its bottom end to its top end")
+    r0, r1 = r_ref + k * t_base, r_ref + k * t_top
+    if min(r0, r1) < 0:
+        raise ValueError("the fitted cone's radius is negative at an end: the data do not bound a cone")
+    return {"p0": Xa + t_base * a, "a": a, "r0": r0, "r1": r1, "h": h}
+
+
+def _solid_vector(s: dict, cone: bool) -> np.ndarray:
+    mid = s["p0"] + 0.5 * s["h"] * s["a"]
+    radii = [s["r0"], s["r1"]] if cone else [0.5 * (s["r0"] + s["r1"])]
+    return np.concatenate([radii, [s["h"]], mid, s["a"]])
+
+
+def model_cylinder(
+    camera: Camera,
+    method: str,
+    *,
+    silhouettes_uv: np.ndarray | None = None,
+    scans: Sequence[RangeScan] = (),
+    T_world_turret: np.ndarray | None = None,
+    spec: RangeFinderSpec = RangeFinderSpec(),
+    support: Plane | None = None,
+    axis_dir: np.ndarray | None = None,
+    cone: bool = False,
+    sigma_px: float = 1.0,
+    jump_m: float = 0.05,
+) -> ModelResult:
+    """Model a cylinder (or, with ``cone=True``, a cone/frustum) by one of ``METHODS``.
+
+    Parameters
+    ----------
+    camera : Camera
+    method : "tangential", "bisecting", "rf_tangential" or "fused"
+    silhouettes_uv : array, shape (2, 2, 2), optional
+        The two contour generators as clicked segments, each from one end of the contour to the
+        other (its ends give the height). Needed by "tangential" and "bisecting".
+    scans : sequence of RangeScan
+        Horizontal scans across the object, in sweep order, misses (NaN) kept; at least one
+        (two for an oblique axis with "bisecting"/"rf_tangential", two heights for a cone).
+    T_world_turret : array, shape (4, 4)
+    spec : RangeFinderSpec (σ_ρ, step, pointing noise)
+    support : Plane, optional
+        The object stands on it: its axis is the support's normal and its base lies on it.
+    axis_dir : array, shape (3,), optional
+        The axis direction when known otherwise ("vertical": (0, 0, 1)); default: from the support,
+        else found from the data (cylinders only).
+    cone : bool
+        Fit two radii (bottom, top).
+    sigma_px : float
+        Click noise, pixels per coordinate.
+    jump_m : float
+        A range jump larger than this between neighbouring beams separates the object from the
+        background in a scan.
+
+    Returns
+    -------
+    ModelResult
+        kind "cylinder" or "cone"; ``model`` = ``BRep.cylinder`` / ``BRep.cone`` in the object frame
+        (base centre, z along the axis); ``axis``; dimensions {"radius", "height"} or
+        {"radius_bottom", "radius_top", "height"} with sigmas, plus sigma "axis_position".
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if method in ("tangential", "bisecting") and silhouettes_uv is None:
+        raise ValueError(f"method {method!r} needs the two silhouettes (silhouettes_uv, shape (2, 2, 2))")
+    if not sigma_px > 0:
+        raise ValueError(f"sigma_px must be positive, got {sigma_px}")
+    data = reduce_cylinder_data(
+        camera, silhouettes_uv=silhouettes_uv, scans=scans, T_world_turret=T_world_turret, spec=spec,
+        support=support, axis_dir=axis_dir, cone=cone, jump_m=jump_m,
+    )
+    if method == "fused":
+        from .fused import fit_fused
+
+        return fit_fused(data, sigma_px=sigma_px)
+    return _model_paper(data, method, sigma_px)
+
+
+def _stage_one(data: CylinderData, method: str) -> _Ctx:
+    """Directions, cross-sections and (for the tangential methods) the profile's front plane."""
+    hits = data.hits
+    centroid = hits.mean(axis=0)
+    a0 = data.axis_hint
+    if a0 is None:
+        if data.silhouettes_uv is not None and method in ("tangential", "bisecting"):
+            P1, P2 = _silhouette_planes(data.camera, data.silhouettes_uv)
+            a0 = np.cross(P1.n, P2.n)
+        else:
+            ctx0 = _Ctx(data, method, None, np.zeros(1), centroid, np.zeros(3), centroid)
+            beams = data.tangents
+            lat = []
+            for s in (-1, 1):
+                idx = [i for i, tb in enumerate(beams) if tb.side == s]
+                ang = np.concatenate([[beams[i].pan_rad, beams[i].tilt_rad] for i in idx]) if idx else np.zeros(0)
+                lat.append(_lateral_plane(ctx0, [beams[i] for i in idx], ang, None))
+            a0 = np.cross(lat[0].n, lat[1].n)
+        a0 = _orient_up(a0 / np.linalg.norm(a0), data.support)
+    profile = None
+    if method in ("tangential", "rf_tangential"):
+        profile = fit_profile(hits, data.covs, a0, cone=data.cone, groups=data.groups)
+    t_sec = np.array(sorted({float(np.median((s.hits_world - centroid) @ a0)) for s in data.segments}))
+    if not data.cone:
+        t_sec = np.array([float(np.mean(t_sec))])
+    return _Ctx(data, method, profile, t_sec, centroid, a0, centroid)
+
+
+def _model_paper(data: CylinderData, method: str, sigma_px: float) -> ModelResult:
+    ctx = _stage_one(data, method)
+    z_parts, var_parts = [], []
+    if data.silhouettes_uv is not None:
+        z_parts.append(data.silhouettes_uv.reshape(-1))
+        var_parts.append(np.full(8, sigma_px**2))
+    for tb in data.tangents:
+        z_parts.append([tb.pan_rad, tb.tilt_rad])
+        var_parts.append([tb.sigma_pan_rad**2, tb.sigma_tilt_rad**2])
+    Sz_blocks = [np.diag(np.concatenate(var_parts))] if var_parts else []
+    if ctx.profile is not None:
+        prof = ctx.profile
+        t_ref = float(np.mean(ctx.t_sections))
+
+        def p3_vec(params):
+            return front_plane(prof, data.rf_origin, t_ref, params).as_vector()
+
+        v0 = p3_vec(prof.params)
+        Jp = np.zeros((4, len(prof.params)))
+        for i in range(len(prof.params)):
+            h = 1e-7
+            e = np.zeros(len(prof.params))
+            e[i] = h
+            Jp[:, i] = (p3_vec(prof.params + e) - p3_vec(prof.params - e)) / (2 * h)
+        z_parts.append(v0)
+        Sz_blocks.append(Jp @ prof.cov @ Jp.T)
+    z = np.concatenate([np.asarray(p, dtype=float).reshape(-1) for p in z_parts])
+    Sz = np.zeros((len(z), len(z)))
+    i = 0
+    for B in Sz_blocks:
+        Sz[i : i + len(B), i : i + len(B)] = B
+        i += len(B)
+    sol = _solve_paper(z, ctx)
+    q0 = _solid_vector(sol, data.cone)
+    J = np.zeros((len(q0), len(z)))
+    scale = np.sqrt(np.maximum(np.diag(Sz), 1e-30))
+    for j in range(len(z)):
+        h = max(1e-3 * scale[j], 1e-9)
+        e = np.zeros(len(z))
+        e[j] = h
+        J[:, j] = (_solid_vector(_solve_paper(z + e, ctx), data.cone) - _solid_vector(_solve_paper(z - e, ctx), data.cone)) / (2 * h)
+    cov_q = J @ Sz @ J.T
+    residuals = {}
+    if ctx.profile is not None:
+        residuals["profile_m"] = ctx.profile.residuals_m
+    details = {"profile": ctx.profile, "sections_t": ctx.t_sections, "segments": data.segments}
+    return build_result(data, method, sol, cov_q, residuals, details)
+
+
+def build_result(data: CylinderData, method: str, sol: dict, cov_q: np.ndarray, residuals: dict, details: dict, notes=()) -> ModelResult:
+    """Assemble the ModelResult from the solid and the covariance of (radii, h, mid-point, a)."""
+    a = sol["a"]
+    cone = data.cone
+    nr = 2 if cone else 1
+    if cone:
+        dims = {"radius_bottom": sol["r0"], "radius_top": sol["r1"], "height": sol["h"]}
+    else:
+        dims = {"radius": 0.5 * (sol["r0"] + sol["r1"]), "height": sol["h"]}
+    sig = {k: float(np.sqrt(max(cov_q[i, i], 0.0))) for i, k in enumerate(dims)}
+    Pp = np.eye(3) - np.outer(a, a)
+    cm = cov_q[nr + 1 : nr + 4, nr + 1 : nr + 4]
+    sig["axis_position"] = float(np.sqrt(max(np.trace(Pp @ cm @ Pp), 0.0)))
+    e1, e2 = axis_basis(a)
+    R = np.column_stack([e1, e2, a])
+    T = make_T(R, sol["p0"])
+    model = BRep.cone(sol["r0"], sol["r1"], sol["h"]) if cone else BRep.cylinder(dims["radius"], sol["h"])
+    names = tuple(dims) + ("mid_x", "mid_y", "mid_z", "axis_x", "axis_y", "axis_z")
+    # Residuals of the silhouette clicks to the model's contours (pixels).
+    if data.silhouettes_uv is not None:
+        sol_w = Revolution(sol["p0"], sol["p0"] + sol["h"] * a, sol["r0"], sol["r1"])
+        gens = sol_w.silhouette(data.camera.center)
+        res = []
+        for seg in data.silhouettes_uv:
+            best = None
+            for g in gens:
+                uv = data.camera.project(g)
+                l = np.cross(np.append(uv[0], 1), np.append(uv[1], 1))
+                l /= np.linalg.norm(l[:2])
+                r = np.column_stack([seg, np.ones(2)]) @ l
+                if best is None or np.abs(r).sum() < np.abs(best).sum():
+                    best = r
+            res.append(best)
+        residuals["silhouettes_px"] = np.concatenate(res) if res else np.zeros(0)
+    return ModelResult(
+        kind="cone" if cone else "cylinder",
+        method=method,
+        model=model,
+        T_world_obj=T,
+        dimensions={k: float(v) for k, v in dims.items()},
+        sigmas=sig,
+        cov=cov_q,
+        cov_names=names,
+        vertices_world=np.array([sol["p0"], sol["p0"] + sol["h"] * a]),
+        axis=Line(sol["p0"].copy(), a.copy()),
+        residuals=residuals,
+        details=details,
+        notes=tuple(notes),
+    )

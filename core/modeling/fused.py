@@ -1,0 +1,198 @@
+"""Fused maximum-likelihood fit of a cylinder or cone: every measurement, each with its noise.
+
+The paper's conclusion proposes "the fusion of multisensor redundant data, in order to reduce the
+uncertainty". Here one least-squares problem holds, each residual divided by its standard
+deviation (so the minimum is the maximum-likelihood estimate under Gaussian noise):
+
+* every scan return on the object: its signed distance to the lateral surface, over the point's
+  σ along the surface normal (range noise along the beam, pointing noise across it);
+* every tangent beam (between the last hit and the first miss of a scan): how far the beam
+  passes from the surface, over (distance × angular σ) — the misses carry information;
+* both silhouettes' clicked ends: pixel offsets from the projected ends of the model's contour
+  generators (σ_px), which fix the silhouettes and the height;
+* the support (the object stands on it): built into the parameters (axis = its normal, base on it).
+
+A Huber loss at 3σ keeps a stray return from pulling the fit. The covariance is the inverse
+Gauss–Newton information at the solution.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..brep import Revolution
+from ..rangefinder import beam_direction
+from .cylinder import CylinderData, _model_paper, build_result
+from .profile import axis_basis
+
+__all__ = ["fit_fused", "surface_distance", "beam_gap"]
+
+
+def surface_distance(X: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, r1: float, h: float) -> np.ndarray:
+    """Signed distance (N,) of points X (N, 3) from the lateral surface (positive outside), metres."""
+    w = X - p0
+    t = w @ a
+    rho = np.linalg.norm(w - t[:, None] * a, axis=1)
+    k = (r1 - r0) / h
+    return (rho - r0 - k * t) / np.sqrt(1.0 + k * k)
+
+
+def beam_gap(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, r1: float, h: float) -> np.ndarray:
+    """Least signed distance (M,) from the lateral surface along each beam line (O, unit D (M, 3)).
+
+    Zero for a beam tangent to the surface, negative when it enters it. For a cylinder this is
+    the distance between the beam and the axis minus the radius.
+    """
+    k = (r1 - r0) / h
+    w = O - p0
+    t0 = w @ a
+    wp = w - t0 * a
+    tau = D @ a
+    Dp = D - tau[:, None] * a
+    A = np.einsum("ij,ij->i", Dp, Dp)
+    B = Dp @ wp
+    Cq = wp @ wp
+    den = np.maximum(A - (k * tau) ** 2, 1e-12)
+    u = np.sign(k * tau) * np.sqrt(np.maximum((k * tau) ** 2 * (A * Cq - B**2) / den, 0.0))
+    s = (u - B) / np.maximum(A, 1e-12)
+    t = t0 + s * tau
+    rho = np.sqrt(np.maximum(A * s * s + 2 * B * s + Cq, 0.0))
+    return (rho - r0 - k * t) / np.sqrt(1.0 + k * k)
+
+
+def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
+    """The fused maximum-likelihood fit (method "fused" of ``model_cylinder``)."""
+    if data.silhouettes_uv is None:
+        raise ValueError("the fused fit needs the two silhouettes (their clicked ends give the height)")
+    init_method = "tangential"
+    try:
+        init = _model_paper(data, "tangential", sigma_px)
+    except ValueError:
+        init = _model_paper(data, "bisecting", sigma_px)
+        init_method = "bisecting"
+    cone = data.cone
+    a0 = init.axis.direction
+    p0_init = init.axis.point
+    e1, e2 = axis_basis(a0)
+    dims = init.dimensions
+    radii0 = [dims["radius_bottom"], dims["radius_top"]] if cone else [dims["radius"]]
+    free_axis = data.axis_hint is None
+    on_support = data.support is not None
+    cam = data.camera
+    c = cam.center
+
+    def unpack(th):
+        i = 0
+        a = a0
+        if free_axis:
+            a = a0 + th[0] * e1 + th[1] * e2
+            a = a / np.linalg.norm(a)
+            i = 2
+        p0 = p0_init + th[i] * e1 + th[i + 1] * e2
+        i += 2
+        if not on_support:
+            p0 = p0 + th[i] * a0
+            i += 1
+        if cone:
+            r0, r1 = th[i], th[i + 1]
+            i += 2
+        else:
+            r0 = r1 = th[i]
+            i += 1
+        h = th[i]
+        return p0, a, r0, r1, h
+
+    th0 = np.concatenate([np.zeros(2) if free_axis else [], np.zeros(2), [] if on_support else [0.0], radii0, [dims["height"]]])
+    hits, covs = data.hits, data.covs
+    beams = data.tangents
+    T = data.T_world_turret
+    O = data.rf_origin
+    Dm = np.array([tb.direction(T) for tb in beams]).reshape(-1, 3)
+
+    # Per-point σ along the surface normal and per-beam σ of the gap, from the initial model.
+    p0i, ai, r0i, r1i, hi = unpack(th0)
+    w = hits - p0i
+    radial = w - (w @ ai)[:, None] * ai
+    radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+    k = (r1i - r0i) / hi
+    nrm = (radial - k * ai) / np.sqrt(1 + k * k)
+    sig_hit = np.sqrt(np.maximum(np.einsum("ni,nij,nj->n", nrm, covs, nrm), 1e-18))
+    sig_gap = np.zeros(len(beams))
+    for j, tb in enumerate(beams):
+        dg = []
+        for dpan, dtilt in ((1e-6, 0.0), (0.0, 1e-6)):
+            Dp = (beam_direction(tb.pan_rad + dpan, tb.tilt_rad + dtilt) @ T[:3, :3].T)[None]
+            dg.append((beam_gap(O, Dp, p0i, ai, r0i, r1i, hi)[0] - beam_gap(O, Dm[j : j + 1], p0i, ai, r0i, r1i, hi)[0]) / 1e-6)
+        sig_gap[j] = np.hypot(dg[0] * tb.sigma_pan_rad, dg[1] * tb.sigma_tilt_rad)
+    sig_gap = np.maximum(sig_gap, 1e-9)
+
+    # Which generator and which end each clicked silhouette end is (fixed from the start).
+    sil = data.silhouettes_uv
+    gens0 = Revolution(p0i, p0i + hi * ai, r0i, r1i).silhouette(c)
+    if len(gens0) != 2:
+        raise ValueError("the camera is inside the modelled solid: the silhouettes do not bound a cylinder")
+    match = []
+    for seg in sil:
+        best = None
+        for g in range(2):
+            uvg = cam.project(gens0[g])
+            for order in ((0, 1), (1, 0)):
+                e = np.linalg.norm(seg - uvg[list(order)], axis=1).sum()
+                if best is None or e < best[0]:
+                    best = (e, g, order)
+        match.append(best[1:])
+    if match[0][0] == match[1][0]:
+        raise ValueError("both silhouettes were matched to the same contour: click the left and the right contour")
+    clicks = np.concatenate([sil[s][list(order)] for s, (_, order) in enumerate(match)])  # (4, 2)
+    gen_idx = [g for g, _ in match]
+
+    def residuals(th):
+        p0, a, r0, r1, h = unpack(th)
+        if h <= 1e-6 or min(r0, r1) < 0 or r0 + r1 <= 1e-6:
+            return np.full(len(hits) + len(beams) + 8, 1e6)
+        out = [surface_distance(hits, p0, a, r0, r1, h) / sig_hit]
+        if len(beams):
+            out.append(beam_gap(O, Dm, p0, a, r0, r1, h) / sig_gap)
+        gens = Revolution(p0, p0 + h * a, r0, r1).silhouette(c)
+        if len(gens) != 2:
+            return np.full(len(hits) + len(beams) + 8, 1e6)
+        pred = np.concatenate([cam.project(gens[g]) for g in gen_idx])
+        out.append(((clicks - pred) / sigma_px).reshape(-1))
+        return np.concatenate(out)
+
+    sol = least_squares(residuals, th0, loss="huber", f_scale=3.0, x_scale="jac", method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    th = sol.x
+    r = residuals(th)
+    J = sol.jac
+    wts = np.where(np.abs(r) <= 3.0, 1.0, 3.0 / np.maximum(np.abs(r), 1e-12))
+    H = J.T @ (wts[:, None] * J)
+    cov_th = np.linalg.pinv(H, rcond=1e-14, hermitian=True)
+    p0, a, r0, r1, h = unpack(th)
+
+    def qvec(t):
+        p, aa, q0, q1, hh = unpack(t)
+        radii = [q0, q1] if cone else [q0]
+        return np.concatenate([radii, [hh], p + 0.5 * hh * aa, aa])
+
+    G = np.zeros((len(qvec(th)), len(th)))
+    for j in range(len(th)):
+        e = np.zeros(len(th))
+        e[j] = 1e-7
+        G[:, j] = (qvec(th + e) - qvec(th - e)) / 2e-7
+    cov_q = G @ cov_th @ G.T
+    n_h = len(hits)
+    resid = {
+        "scan_points_m": r[:n_h] * sig_hit,
+        "tangent_beams_m": r[n_h : n_h + len(beams)] * sig_gap,
+        "silhouette_ends_px": r[n_h + len(beams) :] * sigma_px,
+    }
+    details = {
+        "init_method": init_method,
+        "init": init,
+        "optimizer": {"cost": float(sol.cost), "nfev": int(sol.nfev), "status": int(sol.status)},
+        "outliers": int(np.count_nonzero(np.abs(r) > 3.0)),
+        "segments": data.segments,
+    }
+    solid = {"p0": p0, "a": a, "r0": float(r0), "r1": float(r1), "h": float(h)}
+    return build_result(data, "fused", solid, cov_q, resid, details)

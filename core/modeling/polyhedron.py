@@ -1,0 +1,346 @@
+"""Model any polyhedron from a face/edge topology: the paper's §III.1 construction.
+
+The operator names the shape (its faces as vertex loops: a prism, a pyramid, ...) and measures:
+range points on some faces (each gives a face plane), clicked image edges (each gives an
+interpretation plane), and the support the object lies on (a face plane given outright). Every
+vertex is the least-squares point of all the measured planes through it, so an edge shared by two
+faces is the segment between two such vertices: it comes out once, consistent with both.
+
+Vertices hidden from the sensors are completed from the operator's geometric hints, each face
+plane that no sensor measured being inferred from vertices already fixed:
+
+* ``parallel_faces`` (f, g): f's plane has g's normal and passes through f's fixed vertices;
+* ``vertical_faces``: the face is perpendicular to the support (a right prism's sides) and
+  passes through two fixed vertices;
+* otherwise, a face with three fixed vertices is the plane through them.
+
+The covariance of every vertex (measured or completed) is propagated to first order from the
+face fits, the clicks and the support.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..brep import BRep
+from ..camera import Camera, as_segment
+from ..geometry import Plane, angle_between_planes
+from ..transforms import make_T
+from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs, support_obs
+from .result import ModelResult
+from .vertices import solve_vertices
+
+__all__ = ["model_polyhedron"]
+
+
+def _spans(N: np.ndarray) -> bool:
+    if len(N) < 3:
+        return False
+    sv = np.linalg.svd(np.asarray(N), compute_uv=False)
+    return bool(sv[-1] >= 0.05 * sv[0])
+
+
+def _lsq_point(N: np.ndarray, d: np.ndarray) -> np.ndarray:
+    return np.linalg.lstsq(N, -d, rcond=None)[0]
+
+
+def model_polyhedron(
+    camera: Camera,
+    faces: Sequence[Sequence[int]],
+    *,
+    face_points: Mapping[int, np.ndarray] | None = None,
+    face_point_covs: Mapping[int, np.ndarray] | None = None,
+    edge_segments: Mapping[tuple[int, int], np.ndarray] | None = None,
+    support: Plane | None = None,
+    support_faces: Sequence[int] = (),
+    parallel_faces: Sequence[tuple[int, int]] = (),
+    vertical_faces: Sequence[int] = (),
+    sigma_px: float = 1.0,
+    sigma_point_m: float | None = None,
+    support_sigma_m: float = 1e-3,
+    plane_fit: str = "tls",
+    robust: bool = True,
+    min_angle_deg: float = 5.0,
+) -> ModelResult:
+    """Build a polyhedron from its topology and the measurements of its faces and edges.
+
+    Parameters
+    ----------
+    camera : Camera
+    faces : sequence of vertex loops (counter-clockwise seen from outside), indices 0..V−1.
+    face_points : {face index: array (N, 3)} range points aimed at that face, metres.
+    face_point_covs : {face index: array (N, 3, 3)} their covariances (m²), optional.
+    edge_segments : {(i, j): array (2, 2)} the clicked image segment of the edge joining
+        vertices i and j (either order).
+    support : Plane, optional, with ``support_faces``: the faces lying on it.
+    parallel_faces, vertical_faces : completion hints for hidden vertices (module docstring).
+    sigma_px, sigma_point_m, support_sigma_m, plane_fit, robust, min_angle_deg : as ``model_box``.
+
+    Returns
+    -------
+    ModelResult
+        kind "polyhedron", method "planes"; ``model`` in a frame at the vertices' centroid (on
+        the support, z along its normal, when the object lies on one); dimensions "edge_i_j"
+        (every edge's length) and "height" (above the support) with sigmas; ``cov`` is the
+        joint covariance (3V, 3V) of the world vertices (``cov_names`` "v{k}_x", ...).
+    """
+    loops = [tuple(int(i) for i in f) for f in faces]
+    if not loops:
+        raise ValueError("model_polyhedron needs the faces of the shape (vertex loops)")
+    V = max(max(f) for f in loops) + 1
+    topo = BRep.from_faces(np.zeros((V, 3)), loops)
+    edge_set = {(min(a, b), max(a, b)) for a, b in topo.edges}
+    face_points = dict(face_points or {})
+    face_point_covs = dict(face_point_covs or {})
+    edge_segments = dict(edge_segments or {})
+    for f in list(face_points) + list(support_faces) + [g for pr in parallel_faces for g in pr] + list(vertical_faces):
+        if not 0 <= int(f) < len(loops):
+            raise ValueError(f"face index {f} is out of range 0..{len(loops) - 1}")
+    if support_faces and support is None:
+        raise ValueError("support_faces given without the support plane")
+    if vertical_faces and support is None:
+        raise ValueError("vertical_faces are perpendicular to the support: give the support plane")
+
+    planes: list[PlaneObs] = []
+    face_refs: dict[int, list[int]] = {}
+    fits = {}
+    for f, X in face_points.items():
+        fit = fit_face_plane(
+            X, covs=face_point_covs.get(f), sigma_m=sigma_point_m, method=plane_fit, robust=robust, label=f"face {f}"
+        )
+        fits[f] = fit
+        face_refs.setdefault(int(f), []).append(len(planes))
+        planes.append(fit.obs)
+    sup = None
+    if support is not None:
+        sup = support_obs(support, support_sigma_m)
+        for f in support_faces:
+            face_refs.setdefault(int(f), []).append(len(planes))
+            planes.append(PlaneObs(sup.plane, sup.cov, f"support (face {f})"))
+    edge_refs: dict[tuple[int, int], list[int]] = {}
+    min_angle = np.radians(min_angle_deg)
+    segs = {}
+    for key, seg in edge_segments.items():
+        i, j = int(key[0]), int(key[1])
+        e = (min(i, j), max(i, j))
+        if e not in edge_set:
+            raise ValueError(f"edge_segments has ({i}, {j}), which is not an edge of the given faces")
+        seg = as_segment(seg, f"edge_segments[{key}]")
+        ip = interpretation_plane_obs(camera, seg, sigma_px, f"edge {e}")
+        for f, loop in enumerate(loops):
+            if i in loop and j in loop:
+                for pi in face_refs.get(f, []):
+                    ang = angle_between_planes(ip.plane, planes[pi].plane)
+                    if ang < min_angle:
+                        raise ValueError(
+                            f"the interpretation plane of edge {e} is {np.degrees(ang):.1f}° from the plane of "
+                            f"face {f} (< {min_angle_deg}°): the camera sees that face edge-on, so the edge cannot "
+                            "be placed on it"
+                        )
+        edge_refs.setdefault(e, []).append(len(planes))
+        planes.append(ip)
+        segs[e] = seg
+
+    def vertex_refs(v: int, frefs: Mapping[int, list]) -> list:
+        refs = []
+        for f, loop in enumerate(loops):
+            if v in loop:
+                refs += [("m", i) if isinstance(i, int) else i for i in frefs.get(f, [])]
+        for e, idx in edge_refs.items():
+            if v in e:
+                refs += [("m", i) for i in idx]
+        return refs
+
+    # Round 1: vertices fixed by measured planes alone.
+    measured, incidence = [], []
+    for v in range(V):
+        refs = [i for _, i in vertex_refs(v, face_refs)]
+        if _spans(np.array([planes[i].plane.n for i in refs]).reshape(-1, 3)):
+            measured.append(v)
+            incidence.append(refs)
+    if not measured:
+        raise ValueError("no vertex is fixed by the measurements: each needs 3 measured planes crossing there")
+    X1, _, vres, J1 = solve_vertices(planes, incidence, [str(v) for v in measured], return_jacobian=True)
+
+    # Plan the completion of hidden vertices from the hints, then replay it as a function.
+    pvec0 = np.array([p.plane.as_vector() for p in planes])
+    known = {v: X1[k] for k, v in enumerate(measured)}
+    frefs: dict[int, list] = {f: [("m", i) for i in idx] for f, idx in face_refs.items()}
+    recipe: list[tuple] = []
+    derived_planes: dict[int, np.ndarray] = {}
+    parallel = {}
+    for f, g in parallel_faces:
+        parallel.setdefault(int(f), []).append(int(g))
+        parallel.setdefault(int(g), []).append(int(f))
+
+    def plane_vec(ref, pvec, dplanes):
+        return pvec[ref[1]] if ref[0] == "m" else dplanes[ref[1]]
+
+    def infer_plane(rule, f, args, Xk, pvec, dplanes):
+        pts = np.array([Xk[v] for v in args[0]])
+        if rule == "parallel":
+            n = plane_vec(args[1], pvec, dplanes)[:3]
+            return np.append(n, -float(np.mean(pts @ n)))
+        if rule == "vertical":
+            s_n = pvec[args[1]][:3]
+            P = pts - pts.mean(axis=0)
+            P = P - np.outer(P @ s_n, s_n)
+            u = np.linalg.svd(P)[2][0]
+            n = np.cross(s_n, u)
+            n /= np.linalg.norm(n)
+            return np.append(n, -float(np.mean(pts @ n)))
+        c = pts.mean(axis=0)
+        n = np.linalg.svd(pts - c)[2][-1]
+        return np.append(n, -float(n @ c))
+
+    sup_ref = None
+    if sup is not None:
+        sup_ref = len(planes)
+        pvec0 = np.vstack([pvec0, sup.plane.as_vector()])
+    progress = True
+    while progress and len(known) < V:
+        progress = False
+        for f, loop in enumerate(loops):
+            if frefs.get(f):
+                continue
+            D = [v for v in loop if v in known]
+            rule = None
+            for g in parallel.get(f, []):
+                if frefs.get(g) and len(D) >= 1:
+                    rule, args = "parallel", (D, frefs[g][0])
+                    break
+            if rule is None and f in vertical_faces and len(D) >= 2:
+                rule, args = "vertical", (D, sup_ref)
+            if rule is None and len(D) >= 3:
+                P = np.array([known[v] for v in D])
+                if np.linalg.svd(P - P.mean(axis=0), compute_uv=False)[1] > 1e-6:
+                    rule, args = "through", (D,)
+            if rule is not None:
+                derived_planes[f] = infer_plane(rule, f, args, known, pvec0, derived_planes)
+                recipe.append(("plane", f, rule, args))
+                frefs[f] = [("d", f)]
+                progress = True
+        for v in range(V):
+            if v in known:
+                continue
+            refs = vertex_refs(v, frefs)
+            Nd = np.array([plane_vec(r, pvec0, derived_planes) for r in refs]).reshape(-1, 4)
+            if _spans(Nd[:, :3]):
+                known[v] = _lsq_point(Nd[:, :3], Nd[:, 3])
+                recipe.append(("vertex", v, refs))
+                progress = True
+    missing = [v for v in range(V) if v not in known]
+    if missing:
+        raise ValueError(
+            f"vertices {missing} are not fixed: no 3 measured or inferred planes cross there; measure or "
+            "click more of their faces and edges, or give the hints (parallel_faces, vertical_faces, support)"
+        )
+    derived = [v for v in range(V) if v not in measured]
+
+    def replay(x1: np.ndarray, pvec: np.ndarray) -> np.ndarray:
+        Xk = {v: x1[3 * k : 3 * k + 3] for k, v in enumerate(measured)}
+        dpl: dict[int, np.ndarray] = {}
+        for step in recipe:
+            if step[0] == "plane":
+                _, f, rule, args = step
+                dpl[f] = infer_plane(rule, f, args, Xk, pvec, dpl)
+            else:
+                _, v, refs = step
+                Nd = np.array([plane_vec(r, pvec, dpl) for r in refs])
+                Xk[v] = _lsq_point(Nd[:, :3], Nd[:, 3])
+        return np.concatenate([Xk[v] for v in derived]) if derived else np.zeros(0)
+
+    P = len(planes)
+    S = np.zeros((4 * P, 4 * P))
+    for i, p in enumerate(planes):
+        S[4 * i : 4 * i + 4, 4 * i : 4 * i + 4] = p.cov
+    J_all = np.zeros((3 * V, 4 * P))
+    for k, v in enumerate(measured):
+        J_all[3 * v : 3 * v + 3] = J1[3 * k : 3 * k + 3]
+    if derived:
+        x1 = X1.reshape(-1)
+        h = 1e-7
+        Jx = np.zeros((3 * len(derived), len(x1)))
+        for j in range(len(x1)):
+            e = np.zeros(len(x1))
+            e[j] = h
+            Jx[:, j] = (replay(x1 + e, pvec0) - replay(x1 - e, pvec0)) / (2 * h)
+        Jp = np.zeros((3 * len(derived), 4 * P))
+        for j in range(4 * P):
+            e = np.zeros(pvec0.size)
+            e[j] = h
+            E = e.reshape(pvec0.shape)
+            Jp[:, j] = (replay(x1, pvec0 + E) - replay(x1, pvec0 - E)) / (2 * h)
+        Jd = Jx @ J1 + Jp
+        for k, v in enumerate(derived):
+            J_all[3 * v : 3 * v + 3] = Jd[3 * k : 3 * k + 3]
+    cov = J_all @ S @ J_all.T
+    cov = 0.5 * (cov + cov.T)
+    Xw = np.array([known[v] for v in range(V)])
+
+    # Object frame.
+    if sup is not None:
+        z = sup.plane.n if sup.plane.n @ camera.center + sup.plane.d > 0 else -sup.plane.n
+        base = sorted({v for f in support_faces for v in loops[f]}) or list(range(V))
+        origin = Xw[base].mean(axis=0)
+        x = np.array([1.0, 0.0, 0.0]) - z[0] * z
+        if np.linalg.norm(x) < 1e-6:
+            x = np.array([0.0, 1.0, 0.0]) - z[1] * z
+        x /= np.linalg.norm(x)
+        R = np.column_stack([x, np.cross(z, x), z])
+    else:
+        origin, R = Xw.mean(axis=0), np.eye(3)
+    T = make_T(R, origin)
+    model = BRep(((Xw - origin) @ R), topo.edges, topo.faces)
+    dims, sig = {}, {}
+    for a, b in topo.edges:
+        d = Xw[b] - Xw[a]
+        L = float(np.linalg.norm(d))
+        g = np.zeros(3 * V)
+        g[3 * b : 3 * b + 3] = d / L
+        g[3 * a : 3 * a + 3] = -d / L
+        name = f"edge_{min(a, b)}_{max(a, b)}"
+        dims[name] = L
+        sig[name] = float(np.sqrt(max(g @ cov @ g, 0.0)))
+    if sup is not None:
+        hts = Xw @ z + (sup.plane.d if sup.plane.n @ z > 0 else -sup.plane.d)
+        top = int(np.argmax(hts))
+        dims["height"] = float(hts[top])
+        g = np.zeros(3 * V)
+        g[3 * top : 3 * top + 3] = z
+        sig["height"] = float(np.sqrt(max(g @ cov @ g + support_sigma_m**2, 0.0)))
+    sel = np.zeros((3, 3 * V))
+    for v in range(V):
+        sel[:, 3 * v : 3 * v + 3] = np.eye(3) / V
+    sig["position"] = float(np.sqrt(np.trace(sel @ cov @ sel.T)))
+    click_res = []
+    for (a, b), seg in segs.items():
+        uv = camera.project(Xw[[a, b]])
+        l = np.cross(np.append(uv[0], 1.0), np.append(uv[1], 1.0))
+        l /= np.linalg.norm(l[:2])
+        click_res += list(np.column_stack([seg, np.ones(2)]) @ l)
+    residuals = {"clicks_px": np.array(click_res), "vertex_planes_m": np.concatenate(vres)}
+    for f, fit in fits.items():
+        residuals[f"face_{f}_points_m"] = fit.fits[fit.method].residuals_m
+    names = tuple(f"v{v}_{c}" for v in range(V) for c in "xyz")
+    return ModelResult(
+        kind="polyhedron",
+        method="planes",
+        model=model,
+        T_world_obj=T,
+        dimensions=dims,
+        sigmas=sig,
+        cov=cov,
+        cov_names=names,
+        vertices_world=Xw,
+        residuals=residuals,
+        details={
+            "measured_vertices": measured,
+            "completed_vertices": derived,
+            "completion": [(s[0], s[1]) + ((s[2],) if s[0] == "plane" else ()) for s in recipe],
+            "face_fits": {f: fit.fits for f, fit in fits.items()},
+            "planes": planes,
+        },
+    )
