@@ -54,15 +54,20 @@ class LineEmulator:
     faults : the FaultInjector applied to replies (one is made when None).
     terminators : bytes that end a command. eol : what ends a reply.
     echo : echo every received byte back (the turret does so until told ``ED``).
+    boot_time_s : time from the port appearing (serve, replug) to the device's power-up; input
+    before it is lost, as on a device still booting.
     """
 
     name = "device"
     terminators = b"\r\n"
     eol = b"\r\n"
 
-    def __init__(self, *, baudrate: int | None, faults: FaultInjector | None = None):
+    def __init__(self, *, baudrate: int | None, faults: FaultInjector | None = None, boot_time_s: float = 0.0):
         if baudrate is not None and baudrate < 0:
             raise ValueError(f"baudrate must be >= 0, got {baudrate}")
+        if boot_time_s < 0:
+            raise ValueError(f"boot_time_s must be >= 0, got {boot_time_s}")
+        self.boot_time_s = float(boot_time_s)
         self.baudrate = int(baudrate or 0)
         self.faults = faults if faults is not None else FaultInjector()
         self.echo = False
@@ -90,15 +95,19 @@ class LineEmulator:
         self._need_no_port()
         name = name or f"{self.name}-{os.getpid()}-{id(self):x}"
         self._port = InProcessPort(name, self.receive)
-        self.call_later(0.0, self._power_up)
+        self._boot()
         return self._port.url
 
     def serve_pty(self, link_path: str | os.PathLike | None = None) -> str:
         """Listen on a new pseudo-terminal (with a stable symlink when given); returns the path to open."""
         self._need_no_port()
         self._port = PtyPort(self.receive, link_path)
-        self.call_later(0.0, self._power_up)
+        self._boot()
         return self._port.path
+
+    def _boot(self) -> None:
+        self._powered = False
+        self.call_later(self.boot_time_s, self._power_up)
 
     def _need_no_port(self) -> None:
         if self._port is not None:
@@ -143,7 +152,7 @@ class LineEmulator:
             return
         log.info("%s emulator: replugged", self.name)
         self._port.replug()
-        self._power_up()
+        self._boot()
 
     def _power_up(self) -> None:
         self._powered = True

@@ -98,6 +98,7 @@ class Turret(LineDriver):
         self._speed_set: tuple[int, int] | None = None
         self._speed_known: tuple[int, int] | None = None
         self._target: tuple[int, int] | None = None
+        self._maybe_moving = True  # until an ``A`` confirms that both axes stopped
         self.limit_events: list[tuple[float, str]] = []
         if connect:
             self.connect()
@@ -206,6 +207,7 @@ class Turret(LineDriver):
             self._ask(f"TS{self._speed_set[1]}", "ack", deadline)
         self._speed_known = None
         self._target = None
+        self._maybe_moving = True  # a unit powering up homes itself
 
     def _resync(self, deadline: float) -> None:
         """Discard every reply up to the answer of a ``PR`` whose value is known."""
@@ -242,12 +244,27 @@ class Turret(LineDriver):
             pos.append(v)
         return pos[0], pos[1]
 
-    def _read_position(self, deadline: float) -> tuple[int, int]:
-        return self._read_axes(deadline)
+    def _read_position(self, deadline: float, tries: int = 4) -> tuple[int, int]:
+        """Read (pan, tilt) until two reads in a row agree within what the axes can travel between them.
+
+        A reply cut short but still terminated (``* 1234`` → ``* 12``) or a garbled digit parses
+        as a valid position; a second read exposes it. While moving, two reads may differ by
+        speed × the time between them (plus a step); once a wait (``A``) has confirmed the motion
+        end and no move was sent since, they must be equal.
+        """
+        speeds = (self._speed_known or self._speed_set or (0, 0)) if self._maybe_moving else (0, 0)
+        prev, t_prev = self._read_axes(deadline), time.monotonic()
+        for _ in range(tries - 1):
+            cur, t = self._read_axes(deadline), time.monotonic()
+            if all(abs(c - p) <= (v * (t - t_prev + 0.005) + 1 if v else 0) for c, p, v in zip(cur, prev, speeds)):
+                return cur
+            prev, t_prev = cur, t
+        raise ProtocolError(f"turret: {tries} position reads never agreed (last {prev})", device=self.device, command="PP")
 
     def position_steps(self, timeout_s: float | None = None) -> tuple[int, int]:
-        """Current (pan, tilt) in steps (while moving: where the axes are now)."""
+        """Current (pan, tilt) in steps (while moving: where the axes are now); read twice to be sure."""
         self._need_connected()
+        self._ensure_speed_known()
         return self._transact(self._read_position, what="position query", idempotent=True, deadline=self._deadline(timeout_s))
 
     def position_rad(self, timeout_s: float | None = None) -> tuple[float, float]:
@@ -340,6 +357,7 @@ class Turret(LineDriver):
             idempotent=True,
             deadline=time.monotonic() + (self.retries + 1) * budget + self.reconnect_timeout_s,
         )
+        self._maybe_moving = False
 
     def move_to_steps(self, pan: int | None = None, tilt: int | None = None, *, wait: bool = True, timeout_s: float | None = None) -> tuple[int, int]:
         """Absolute move (steps); None leaves an axis alone (and comes back None). Returns the targets.
@@ -360,6 +378,7 @@ class Turret(LineDriver):
 
         def move(_deadline: float) -> tuple[int, int]:
             deadline = time.monotonic() + budget
+            self._maybe_moving = True
             if pan is not None:
                 self._ask(f"PP{pan}", "ack", deadline)
             if tilt is not None:
@@ -367,6 +386,7 @@ class Turret(LineDriver):
             if not wait:
                 return (pan, tilt)
             self._ask("A", "ack", deadline)
+            self._maybe_moving = False
             want = (pan, tilt)
             got = self._read_axes(deadline, pan is not None, tilt is not None)
             if got != want:  # a garbled digit, or the unit really stopped elsewhere: read again
@@ -418,6 +438,7 @@ class Turret(LineDriver):
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
 
         def send(dl: float) -> None:
+            self._maybe_moving = True
             if pan:
                 self._ask(f"PO{int(pan)}", "ack", dl)
             if tilt:
@@ -458,6 +479,7 @@ class Turret(LineDriver):
             deadline=self._deadline(timeout_s) or time.monotonic() + (self.retries + 1) * budget,
         )
         self._target = (0, 0)
+        self._maybe_moving = False
 
 
 def _finite(v: float, name: str) -> float:
