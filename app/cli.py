@@ -15,6 +15,9 @@ def build_parser() -> argparse.ArgumentParser:
     from app.devices.cli import add_emulate_parser  # argparse only: the emulators load when the command runs
 
     add_emulate_parser(sub)
+    from app.ui.serve import add_serve_parser  # argparse only: viser loads when the command runs
+
+    add_serve_parser(sub)
     return parser
 
 

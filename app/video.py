@@ -291,7 +291,9 @@ class FrameGrabber:
         self._thread = threading.Thread(target=self._run, name="mcit-video", daemon=True)
 
     def start(self) -> "FrameGrabber":
-        self._thread.start()
+        """Start reading (once; later calls do nothing)."""
+        if self._thread.ident is None:
+            self._thread.start()
         return self
 
     def _run(self) -> None:

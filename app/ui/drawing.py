@@ -1,0 +1,87 @@
+"""The overlay's content for one view, as pixel line batches and labels (no viser here).
+
+``draw_database`` draws every database object through C, coloured by status, hidden edges
+dashed; ``draw_marks`` draws one operator's workflow marks (selection, clicks, assigned edges,
+candidate ghosts, residuals, targets, the beam spot). The interface sends the batches to viser;
+the benchmark times them.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable
+
+import numpy as np
+
+from app.overlay import COLORS, STATUS_COLORS, LineBatch, circle_marker, cross_markers, project_wireframe
+from app.workflows.base import Marks
+from app.workflows.site import SiteObject
+from core.camera import Camera
+
+__all__ = ["label_anchor", "draw_database", "draw_marks"]
+
+
+def label_anchor(camera: Camera, obj: SiteObject) -> np.ndarray | None:
+    """Pixel (2,) where an object's label goes (above the top of its model), or None if not in view."""
+    lo, hi = obj.model.bounds()
+    top = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2]])
+    X = obj.T_world_obj[:3, :3] @ top + obj.T_world_obj[:3, 3]
+    if camera.depth(X) <= 0:
+        return None
+    uv = camera.project(X)
+    if not camera.in_image(uv.reshape(1, 2), margin_px=-40)[0]:
+        return None
+    return uv - np.array([0.0, 12.0])
+
+
+def draw_database(camera: Camera, objects: Iterable[SiteObject], width: int, height: int,
+                  hidden: str = "dashed") -> tuple[LineBatch, list[tuple[str, np.ndarray, str]]]:
+    """Every object's wireframe at its database pose, colour by status.
+
+    Returns the batch and labels (name, uv (2,), text).
+    """
+    batch = LineBatch()
+    labels = []
+    for obj in objects:
+        color = STATUS_COLORS.get(obj.status, STATUS_COLORS["known"])
+        pw = project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height)
+        batch.add_wireframe(pw, color, hidden=hidden)
+        anchor = label_anchor(camera, obj)
+        if anchor is not None:
+            text = obj.name if obj.status == "known" else f"{obj.name} ({obj.status})"
+            labels.append((obj.name, anchor, text))
+    return batch, labels
+
+
+def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], width: int, height: int,
+               selected: str | None = None) -> tuple[LineBatch, list[tuple[np.ndarray, str]]]:
+    """One operator's marks: the selected object, assigned edges, ghosts, clicks, residuals,
+    targets and the beam spot. Returns the batch and labels (uv (2,), text)."""
+    batch = LineBatch()
+    name = marks.selected or selected
+    if name in objects:
+        obj = objects[name]
+        batch.add_wireframe(project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height),
+                            STATUS_COLORS["selected"])
+    for ghost in marks.ghosts:
+        pw = project_wireframe(camera, ghost.model, ghost.T_world_obj, width=width, height=height)
+        batch.add_wireframe(pw, COLORS["ghost_chosen"] if ghost.chosen else COLORS["ghost"],
+                            hidden="dashed" if ghost.chosen else "removed")
+    for obj_name, k in marks.highlight:
+        obj = objects.get(obj_name)
+        if obj is None or not 0 <= k < len(obj.model.edges):
+            continue
+        E = obj.model.edge_segments(obj.T_world_obj)[k]
+        if np.all(camera.depth(E) > 0):
+            batch.add(camera.project(E).reshape(1, 2, 2), COLORS["assigned"])
+    batch.add(marks.segments, COLORS["click"])
+    batch.add(cross_markers(marks.points, 5.0), COLORS["click"])
+    batch.add(cross_markers(marks.pending, 7.0), COLORS["pending"])
+    batch.add(marks.residuals, COLORS["assigned"])
+    for uv in np.asarray(marks.targets).reshape(-1, 2):
+        batch.add(circle_marker(uv, 7.0), COLORS["target"])
+        batch.add(cross_markers(uv.reshape(1, 2), 10.0), COLORS["target"])
+    if marks.beam_uv is not None and np.all(np.isfinite(marks.beam_uv)):
+        batch.add(circle_marker(marks.beam_uv, 5.0), COLORS["beam"])
+        batch.add(circle_marker(marks.beam_uv, 2.0, n=8), COLORS["beam"])
+    labels = [(np.asarray(uv, float), str(text)) for uv, text in marks.labels]
+    return batch, labels

@@ -1,0 +1,121 @@
+"""``mcit serve``: the operator interface on a scene, a video, a database and the devices.
+
+With no arguments: the bundled scene, its prerecorded video (looped), emulated devices in-process
+and the database at the default location (seeded from the scene when new), on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import threading
+from pathlib import Path
+
+__all__ = ["add_serve_parser", "run_serve", "build_interface"]
+
+log = logging.getLogger("mcit.serve")
+
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
+def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "serve",
+        help="open the operator interface in a browser (viser)",
+        description="Serve the operator interface: the live video with the database overlaid, and the workflows. "
+        "Listens on 127.0.0.1 by default; viser has no authentication, so expose it (--host) only behind a "
+        "reverse proxy that authenticates.",
+    )
+    p.add_argument("--scene", type=Path, default=None, help="scene folder (default: the bundled workcell)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0 exposes it: no authentication!)")
+    p.add_argument("--port", type=int, default=8080, help="port (default 8080; the next free one if taken)")
+    p.add_argument("--video", default=None,
+                   help="video source: camera index (0), video file, image folder, image file or stream URL "
+                   "(default: the scene's video)")
+    p.add_argument("--fps", type=float, default=None, help="frame rate for image folders and stills, or to override a file's")
+    p.add_argument("--db", type=Path, default=None, help="database file (default: ~/.local/share/mcit/mcit.sqlite)")
+    p.add_argument("--rangefinder", default=None, help="range finder device path or URL (with --turret); default: emulated")
+    p.add_argument("--turret", default=None, help="turret device path or URL (with --rangefinder); default: emulated")
+    p.add_argument("--no-devices", action="store_true", help="run without range finder and turret")
+    p.add_argument("--jpeg-quality", type=int, default=80, help="JPEG quality of the frames sent to browsers (default 80)")
+    p.set_defaults(func=run_serve)
+    return p
+
+
+def _video_source(spec, scene, fps):
+    from app.video import StillSource, open_video
+
+    if spec is not None:
+        return open_video(spec, fps)
+    if scene.video_path is not None and Path(scene.video_path).is_file():
+        return open_video(str(scene.video_path), fps)
+    # No recording yet: one frame rendered from the scene's truth at t = 0 (a still).
+    from app.render.renderer import render_frame
+
+    log.warning("scene %s has no video file: showing a frame rendered from the scene", scene.name)
+    return StillSource(render_frame(scene, 0.0), fps or 10.0, description=f"rendered still of {scene.name}")
+
+
+def build_interface(args: argparse.Namespace):
+    """Open everything ``mcit serve`` needs; returns (InterfaceServer, closers)."""
+    from app.db import Database, default_db_path, seed_from_scene
+    from app.scene import default_scene_path, load_scene
+    from app.ui.server import InterfaceServer
+    from app.video import FrameGrabber
+    from app.workflows import Site
+
+    scene = load_scene(args.scene or default_scene_path())
+    grabber = FrameGrabber(_video_source(args.video, scene, args.fps)).start()
+    closers = [grabber.stop]
+
+    def clock() -> float:
+        frame = grabber.latest()
+        return 0.0 if frame is None else frame.t_s
+
+    db_path = args.db or default_db_path()
+    db_path.parent.mkdir(parents=True, exist_ok=True)
+    db = Database.open(db_path, client="mcit-serve")
+    closers.append(db.close)
+    if not db.objects() and not db.calibrations():
+        seed_from_scene(db, scene)
+        log.info("new database %s seeded from scene %s", db_path, scene.name)
+    devices = None
+    if not args.no_devices:
+        from app.devices import open_devices
+
+        try:
+            devices = open_devices(scene, args.rangefinder, args.turret, clock=clock)
+            closers.insert(0, devices.close)
+        except Exception as exc:  # noqa: BLE001 - the interface works without devices; say so
+            if args.rangefinder is not None:
+                raise
+            log.error("emulated devices failed to start (%s): continuing without range finder and turret", exc)
+    site = Site(scene, db, devices=devices, clock=clock)
+    server = InterfaceServer(site, grabber, host=args.host, port=args.port, jpeg_quality=args.jpeg_quality)
+    return server, closers
+
+
+def run_serve(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    server, closers = build_interface(args)
+    server.start()
+    if args.host not in LOOPBACK:
+        print(f"WARNING: listening on {args.host}: viser has no authentication. Anyone who can reach this port "
+              "can change the site's database. Put a reverse proxy with authentication in front.", flush=True)
+    print(f"mcit: open {server.url} in a browser (Ctrl-C to stop)", flush=True)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        while not stop.wait(0.5):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
+        for close in closers:
+            try:
+                close()
+            except Exception:  # noqa: BLE001 - best effort at exit
+                log.debug("close failed", exc_info=True)
+    return 0

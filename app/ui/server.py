@@ -1,0 +1,259 @@
+"""The operator interface's server: viser, the video plane, the shared overlay and the redraw loop.
+
+Layout of the viser scene (DESIGN.md §"The operator interface"):
+
+* ``/video``: the frame as a textured plane in the pixel world (pixel (u, v) ↔ (u·k, v·k, 0));
+* ``/overlay/db`` and ``/overlay/labels/*``: every database object projected through C (shared by
+  all clients); ``/overlay/beam``: the range finder's last spot;
+* ``/overlay/marks`` and ``/overlay/marks_labels/*``: one client's workflow marks (client-scoped);
+* ``/world3d/...``: the virtual world in metres (objects, camera frustum, turret, beam), placed
+  away from the image plane; a client's "3D world" view orbits it.
+
+Threads: viser runs callbacks on its pool (they only change state); one loop thread redraws at
+the video's frame rate, or at once when woken by a callback, inside ``server.atomic()``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any
+
+import numpy as np
+import viser
+
+from app.overlay import COLORS, LineBatch, PixelWorld, circle_marker
+from app.video import FrameGrabber
+from app.workflows.site import Site
+
+from .client import ClientPanel
+from .drawing import draw_database
+from .world3d import World3D
+
+__all__ = ["InterfaceServer"]
+
+log = logging.getLogger("mcit.ui")
+
+Z_DB = -0.001  # overlay planes just in front of the image (world units; the viewer looks along +z)
+Z_MARKS = -0.002
+LINE_PX = 2.0
+
+
+class InterfaceServer:
+    """The operator interface on one site and one video source.
+
+    Parameters
+    ----------
+    site : Site
+    grabber : FrameGrabber (started or not; started here)
+    host, port : where to listen (127.0.0.1 by default: viser has no authentication)
+    k : world units per video pixel.
+    jpeg_quality : quality of the video frames sent to the browsers.
+    """
+
+    def __init__(self, site: Site, grabber: FrameGrabber, *, host: str = "127.0.0.1", port: int = 8080,
+                 k: float = 0.01, jpeg_quality: int = 80, verbose: bool = False):
+        self.site = site
+        self.grabber = grabber
+        src = grabber.source
+        self.pixel_world = PixelWorld(src.width, src.height, k)
+        self.jpeg_quality = int(jpeg_quality)
+        self.server = viser.ViserServer(host=host, port=port, label="mcit", verbose=verbose)
+        self.host = host
+        self.clients: dict[int, ClientPanel] = {}
+        self.clients_lock = threading.RLock()
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._db_revision = -1
+        self._beam_key: Any = None
+        self._frame_index = -1
+        self._db_labels: dict[str, Any] = {}
+        self.frames_sent = 0
+        self.redraws = 0
+        self._last_status_t = 0.0
+        self.world3d = World3D(self.server.scene, offset=np.array([-60.0, 0.0, 0.0]))
+        self._setup_scene()
+        self.server.on_client_connect(self._on_connect)
+        self.server.on_client_disconnect(self._on_disconnect)
+        self._thread = threading.Thread(target=self._loop, name="mcit-redraw", daemon=True)
+        if site.camera.width != src.width or site.camera.height != src.height:
+            log.warning("video is %dx%d but the camera is calibrated for %dx%d: calibrate the camera",
+                        src.width, src.height, site.camera.width, site.camera.height)
+
+    # ------------------------------------------------------------------ life cycle
+    @property
+    def port(self) -> int:
+        return int(self.server.get_port())
+
+    @property
+    def url(self) -> str:
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
+        return f"http://{host}:{self.port}"
+
+    def start(self) -> "InterfaceServer":
+        self.grabber.start()
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=3.0)
+        self.grabber.stop()
+        self.server.stop()
+
+    def wake(self) -> None:
+        """Ask the loop to redraw now (called by callbacks after they change state)."""
+        self._wake.set()
+
+    # ------------------------------------------------------------------ clients
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        try:
+            panel = ClientPanel(self, client)
+        except Exception:  # noqa: BLE001
+            log.exception("could not build the panel of client %s", client.client_id)
+            return
+        with self.clients_lock:
+            self.clients[client.client_id] = panel
+        mismatch = self.site.camera.width != self.pixel_world.width or self.site.camera.height != self.pixel_world.height
+        if mismatch:
+            panel.notify("Camera and video differ",
+                         f"The video is {self.pixel_world.width}×{self.pixel_world.height} but the camera is calibrated for "
+                         f"{self.site.camera.width}×{self.site.camera.height}: run Calibrate camera.", "yellow")
+        self.wake()
+
+    def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        with self.clients_lock:
+            panel = self.clients.pop(client.client_id, None)
+        if panel is not None:
+            panel.session.cancel()
+
+    # ------------------------------------------------------------------ scene
+    def _setup_scene(self) -> None:
+        pw = self.pixel_world
+        frame = self.grabber.latest()
+        image = frame.image if frame is not None else np.zeros((pw.height, pw.width, 3), np.uint8)
+        rw, rh = pw.render_size
+        self.video = self.server.scene.add_image("/video", image, rw, rh, format="jpeg", jpeg_quality=self.jpeg_quality,
+                                                 position=tuple(pw.image_center), cast_shadow=False, receive_shadow=False)
+        self.server.scene.world_axes.visible = False
+
+    def _send_lines(self, scene_api, name: str, batch: LineBatch, z: float) -> None:
+        if len(batch) == 0:
+            # Per-vertex colours even when empty: a node first sent with one colour keeps ignoring
+            # the per-vertex colours it gets later (they render white in viser 1.1.1).
+            scene_api.add_line_segments(name, np.zeros((1, 2, 3), np.float32), np.zeros((1, 2, 3), np.uint8),
+                                        thickness=LINE_PX, thickness_units="screen", visible=False)
+            return
+        points, colors = batch.world(self.pixel_world, z)
+        scene_api.add_line_segments(name, points.astype(np.float32), colors, thickness=LINE_PX, thickness_units="screen")
+
+    def send_client_overlay(self, client: viser.ClientHandle, batch: LineBatch, labels: list) -> None:
+        """Draw one client's marks (client-scoped nodes)."""
+        self._send_lines(client.scene, "/overlay/marks", batch, Z_MARKS)
+        panel = self.clients.get(client.client_id)
+        old = getattr(panel, "_label_names", set()) if panel else set()
+        names = set()
+        for i, (uv, text) in enumerate(labels):
+            name = f"/overlay/marks_labels/{i}"
+            names.add(name)
+            client.scene.add_label(name, text, position=tuple(self.pixel_world.to_world(np.asarray(uv) + [6.0, -6.0], Z_MARKS)),
+                                   anchor="bottom-left", font_screen_scale=0.8)
+        for name in old - names:
+            client.scene.remove_by_name(name)
+        if panel is not None:
+            panel._label_names = names
+
+    def _draw_database(self) -> None:
+        site = self.site
+        objects = site.objects()
+        pw = self.pixel_world
+        batch, labels = draw_database(site.camera, objects, pw.width, pw.height)
+        self._send_lines(self.server.scene, "/overlay/db", batch, Z_DB)
+        seen = set()
+        for name, uv, text in labels:
+            seen.add(name)
+            self._db_labels[name] = self.server.scene.add_label(
+                f"/overlay/labels/{name}", text, position=tuple(pw.to_world(uv, Z_DB)), anchor="bottom-center",
+                font_screen_scale=0.9)
+        for name in set(self._db_labels) - seen:
+            self._db_labels.pop(name).remove()
+        self.world3d.draw(site)
+
+    def _draw_beam(self) -> None:
+        X = getattr(self.site, "beam_X_world", None)
+        key = None if X is None else tuple(np.round(X, 6))
+        if key == self._beam_key:
+            return
+        self._beam_key = key
+        batch = LineBatch()
+        cam = self.site.camera
+        if X is not None and np.all(np.isfinite(X)) and cam.depth(X) > 0:
+            uv = cam.project(np.asarray(X, float))
+            batch.add(circle_marker(uv, 6.0), COLORS["beam"])
+            batch.add(circle_marker(uv, 2.5, n=8), COLORS["beam"])
+        self._send_lines(self.server.scene, "/overlay/beam", batch, Z_MARKS)
+        self.world3d.draw_beam(self.site)
+
+    def world3d_view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A viewer pose (position, look_at, up) overlooking the virtual world."""
+        return self.world3d.default_view(self.site)
+
+    # ------------------------------------------------------------------ the loop
+    def _loop(self) -> None:
+        period = 1.0 / max(1.0, min(60.0, self.grabber.source.fps))
+        while not self._stop.is_set():
+            self._wake.wait(period)
+            self._wake.clear()
+            if self._stop.is_set():
+                break
+            try:
+                self.redraw()
+            except Exception:  # noqa: BLE001 - keep serving; the next pass retries
+                log.exception("redraw failed")
+                time.sleep(0.2)
+
+    def redraw(self) -> None:
+        """One pass: new video frame, database overlay if it changed, each client's marks."""
+        now = time.monotonic()
+        if now - self._last_status_t > 1.0:
+            self._last_status_t = now
+            try:
+                self.site.poll()
+            except Exception:  # noqa: BLE001
+                log.exception("database poll failed")
+            self._update_status()
+        frame = self.grabber.latest()
+        site_changed = self.site.revision != self._db_revision
+        with self.clients_lock:
+            panels = list(self.clients.values())
+        with self.server.atomic():
+            if frame is not None and frame.index != self._frame_index:
+                self._frame_index = frame.index
+                self.video.image = frame.image
+                self.frames_sent += 1
+            if site_changed:
+                self._db_revision = self.site.revision
+                self._draw_database()
+            self._draw_beam()
+            for panel in panels:
+                try:
+                    panel.redraw(site_changed)
+                except Exception:  # noqa: BLE001 - one client's failure must not stop the others
+                    log.exception("redraw of client %s failed", panel.client.client_id)
+        self.redraws += 1
+
+    def _update_status(self) -> None:
+        src = self.grabber.source
+        err = self.grabber.error
+        video = f"**Video** {src.description} · {src.width}×{src.height} · {src.fps:.1f} fps (shown {self.grabber.measured_fps:.1f})"
+        if err is not None:
+            video += f"\n\n**Video stopped:** {err}"
+        cam = self.site.camera
+        text = f"{video}\n\nCamera {cam.width}×{cam.height} · {len(self.site.objects())} objects"
+        with self.clients_lock:
+            panels = list(self.clients.values())
+        for panel in panels:
+            panel.set_status(text)

@@ -1,0 +1,33 @@
+"""The headless workflow layer: what the operator does, as explicit calls.
+
+The viser interface (app/ui) and the headless demo drive the same objects:
+``Site`` (shared: scene, camera, database, devices, clock), ``Session`` (one operator: the
+selected object and the workflow under way) and one small state machine per workflow.
+No viser here.
+"""
+
+from .base import Cancelled, Ghost, Marks, Workflow, WorkflowError
+from .calibrate_camera import CalibrateCamera
+from .designate import DesignateTarget, Target
+from .session import WORKFLOWS, Session, register
+from .site import RayHit, Site, SiteObject
+
+for _cls in (CalibrateCamera, DesignateTarget):
+    register(_cls)
+
+__all__ = [
+    "Cancelled",
+    "Ghost",
+    "Marks",
+    "Workflow",
+    "WorkflowError",
+    "CalibrateCamera",
+    "DesignateTarget",
+    "Target",
+    "WORKFLOWS",
+    "Session",
+    "register",
+    "RayHit",
+    "Site",
+    "SiteObject",
+]

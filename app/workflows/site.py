@@ -1,0 +1,251 @@
+"""The site one mcit server (or one headless demo) works on: the scene, the current calibrations,
+the database, the devices and the scene clock, shared by every operator.
+
+Workflows read the site through snapshots (``objects()``, ``camera``) and write only through
+``Site``'s methods, each one database transaction; every write bumps ``revision`` so that
+every client's overlay redraws. ``poll()`` also notices changes made by another process (the
+``mcit db`` command, a second server on the same file).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from app.scene import Scene
+from core.brep import BRep
+from core.camera import Camera
+
+__all__ = ["SiteObject", "RayHit", "Site"]
+
+
+@dataclass(frozen=True)
+class SiteObject:
+    """One database object as the interface sees it (a read-only snapshot).
+
+    T_world_obj : (4, 4). cov : (6, 6) or None. status : "known", "modelled" or "stale".
+    version : the database version, passed back on update (conflict detection).
+    """
+
+    id: Any
+    name: str
+    kind: str
+    status: str
+    model: BRep
+    T_world_obj: np.ndarray
+    version: int
+    cov: np.ndarray | None = None
+    dimensions: dict = field(default_factory=dict)
+    sigmas: dict = field(default_factory=dict)
+
+    def vertices_world(self) -> np.ndarray:
+        """Model vertices in the world, (V, 3)."""
+        V = self.model.vertices
+        return V @ self.T_world_obj[:3, :3].T + self.T_world_obj[:3, 3] if len(V) else np.zeros((0, 3))
+
+
+@dataclass(frozen=True)
+class RayHit:
+    """Where a ray meets the database's surfaces: ``X_world`` (3,), the object's name, the
+    distance along the ray (metres) and the surface normal (3,) in the world."""
+
+    X_world: np.ndarray
+    name: str
+    distance_m: float
+    normal: np.ndarray
+
+
+def _record_to_object(rec: Any) -> SiteObject:
+    """An ``app.db.ObjectRecord`` → SiteObject."""
+    return SiteObject(
+        id=rec.id,
+        name=rec.name,
+        kind=rec.kind,
+        status=rec.status,
+        model=rec.model,
+        T_world_obj=np.asarray(rec.T_world_obj, dtype=float),
+        version=int(rec.version),
+        cov=None if rec.cov is None else np.asarray(rec.cov, dtype=float),
+        dimensions=dict(rec.dims),
+        sigmas=dict(rec.sigmas),
+    )
+
+
+class Site:
+    """Shared world of one server.
+
+    Parameters
+    ----------
+    scene : Scene
+        The site's description (camera and turret at start-up, truth for the emulators).
+    db : app.db.Database
+        The site's database (objects, history, calibrations); its latest camera and turret
+        calibrations are used (the scene's when it has none).
+    devices : object with ``.rangefinder`` and ``.turret``, optional
+        Opened devices (real or emulated); None when running without them.
+    clock : callable returning the scene time in seconds, optional
+        The video's time (a prerecorded video's position); default: time since start.
+    """
+
+    def __init__(self, scene: Scene, db: Any, devices: Any = None, clock: Callable[[], float] | None = None):
+        self.scene = scene
+        self.db = db
+        self.devices = devices
+        self._t0 = time.monotonic()
+        self.clock = clock or (lambda: time.monotonic() - self._t0)
+        self.lock = threading.RLock()
+        self.revision = 0
+        self._objects: tuple[SiteObject, ...] | None = None
+        self._objects_key: Any = None
+        self._meshes: dict[tuple[str, int], Any] = {}
+        self._cal_ids: dict[str, Any] = {}
+        self._camera = scene.camera
+        self._T_world_turret = np.asarray(scene.turret.T_world_turret, float).copy()
+        self.beam_X_world: np.ndarray | None = None  # the range finder's last measured point (shown)
+        self._load_calibrations()
+
+    # ------------------------------------------------------------------ reading
+    @property
+    def camera(self) -> Camera:
+        """The current camera calibration (the global model C)."""
+        with self.lock:
+            return self._camera
+
+    @property
+    def T_world_turret(self) -> np.ndarray:
+        """The current turret calibration, (4, 4)."""
+        with self.lock:
+            return self._T_world_turret.copy()
+
+    def time_s(self) -> float:
+        """The scene time, seconds (the video's position)."""
+        return float(self.clock())
+
+    def objects(self) -> tuple[SiteObject, ...]:
+        """Every object in the database (snapshot, cached until the database changes)."""
+        with self.lock:
+            if self._objects is None:
+                self._objects = tuple(_record_to_object(r) for r in self.db.objects())
+                self._objects_key = self._key(self._objects)
+            return self._objects
+
+    def object(self, name: str) -> SiteObject:
+        """One object by name; WorkflowError-style ValueError naming the known ones if absent."""
+        for o in self.objects():
+            if o.name == name:
+                return o
+        raise KeyError(f"no object named {name!r} in the database; it has {[o.name for o in self.objects()]}")
+
+    @staticmethod
+    def _key(objects: tuple[SiteObject, ...]) -> tuple:
+        return tuple((o.id, o.version, o.status) for o in objects)
+
+    def poll(self) -> bool:
+        """Re-read the database (objects and the latest calibrations); True, and ``revision``
+        bumped, when something changed since (e.g. ``mcit db undo`` from another process)."""
+        fresh = tuple(_record_to_object(r) for r in self.db.objects())
+        key = self._key(fresh)
+        with self.lock:
+            changed = self._load_calibrations()
+            if key != self._objects_key:
+                self._objects, self._objects_key = fresh, key
+                changed = True
+            if changed:
+                self.revision += 1
+            return changed
+
+    def _changed(self) -> None:
+        with self.lock:
+            self._objects = None
+            self.revision += 1
+
+    # ------------------------------------------------------------------ calibrations
+    def _load_calibrations(self) -> bool:
+        """Adopt the database's latest camera and turret calibrations; True if either changed."""
+        changed = False
+        cam = self.db.latest_calibration("camera")
+        if cam is not None and self._cal_ids.get("camera") != cam.id:
+            d = cam.data
+            self._camera = Camera(np.asarray(d["C"], float), int(d.get("width", self.scene.camera.width)),
+                                  int(d.get("height", self.scene.camera.height)))
+            self._cal_ids["camera"] = cam.id
+            changed = True
+        tur = self.db.latest_calibration("turret")
+        if tur is not None and self._cal_ids.get("turret") != tur.id:
+            self._T_world_turret = np.asarray(tur.data["T_world_turret"], float).copy()
+            self._cal_ids["turret"] = tur.id
+            changed = True
+        return changed
+
+    def set_camera(self, camera: Camera, *, rms_px: float, residuals_px: np.ndarray, points: dict, client: str,
+                   method: str = "dlt") -> None:
+        """Store a new camera calibration (one transaction) and use it from now on."""
+        data = {"C": camera.C, "width": camera.width, "height": camera.height, "rms_px": float(rms_px), **points}
+        rec = self.db.add_calibration("camera", data, np.asarray(residuals_px, float), method=method, client=client)
+        with self.lock:
+            self._camera = camera
+            self._cal_ids["camera"] = rec.id
+            self.revision += 1
+
+    def set_turret(self, T_world_turret: np.ndarray, *, rms_m: float, residuals_m: np.ndarray, cov: np.ndarray,
+                   measurements: dict, client: str, method: str = "turret calibration") -> None:
+        """Store a new turret calibration (one transaction) and use it from now on."""
+        data = {"T_world_turret": np.asarray(T_world_turret, float), "rms_m": float(rms_m),
+                "cov": np.asarray(cov, float), **measurements}
+        rec = self.db.add_calibration("turret", data, np.asarray(residuals_m, float), method=method, client=client)
+        with self.lock:
+            self._T_world_turret = np.asarray(T_world_turret, float).copy()
+            self._cal_ids["turret"] = rec.id
+            self.revision += 1
+
+    # ------------------------------------------------------------------ writing objects
+    def write(self, fn: Callable[[Any], Any]) -> Any:
+        """Run one database write ``fn(db)`` (one transaction: the Database's own methods are) and
+        redraw every client. Exceptions pass through; nothing is written when one is raised."""
+        result = fn(self.db)
+        self._changed()
+        return result
+
+    def set_beam(self, X_world: np.ndarray | None) -> None:
+        """Show the range finder's last measured point (None hides it)."""
+        with self.lock:
+            self.beam_X_world = None if X_world is None else np.asarray(X_world, float).copy()
+
+    # ------------------------------------------------------------------ ray casting
+    def _mesh(self, obj: SiteObject):
+        import trimesh
+
+        key = (obj.name, obj.version)
+        mesh = self._meshes.get(key)
+        if mesh is None:
+            V, F = obj.model.triangles()
+            mesh = trimesh.Trimesh(V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3], F, process=False)
+            if len(self._meshes) > 4 * max(1, len(self.objects())):
+                self._meshes.clear()
+            self._meshes[key] = mesh
+        return mesh
+
+    def raycast(self, origin: np.ndarray, direction: np.ndarray, exclude: tuple[str, ...] = ()) -> RayHit | None:
+        """The first database surface a ray (origin (3,), direction (3,), world) meets, or None."""
+        o = np.asarray(origin, float).reshape(1, 3)
+        d = np.asarray(direction, float).reshape(1, 3)
+        d = d / np.linalg.norm(d)
+        best: RayHit | None = None
+        for obj in self.objects():
+            if obj.name in exclude:
+                continue
+            mesh = self._mesh(obj)
+            locs, _, tri = mesh.ray.intersects_location(o, d, multiple_hits=False)
+            if len(locs) == 0:
+                continue
+            dist = (locs - o) @ d[0]
+            i = int(np.argmin(dist))
+            if dist[i] <= 0:
+                continue
+            if best is None or dist[i] < best.distance_m:
+                best = RayHit(locs[i].copy(), obj.name, float(dist[i]), mesh.face_normals[tri[i]].copy())
+        return best

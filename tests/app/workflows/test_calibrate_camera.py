@@ -1,0 +1,103 @@
+"""Calibrate camera: pick model corners in the overlay, click them in the video, DLT, accept."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.workflows import CalibrateCamera, Site, WorkflowError
+from core.camera import Camera
+
+
+def _wrong_camera(true_cam: Camera) -> Camera:
+    """The true C shifted by a few pixels and slightly rescaled: what a stale calibration looks like."""
+    H = np.array([[1.01, 0.0, 6.0], [0.0, 0.99, -4.0], [0.0, 0.0, 1.0]])
+    return Camera(H @ true_cam.C, true_cam.width, true_cam.height)
+
+
+def _calibration_targets(site):
+    """(object name, vertex index) pairs spread in 3D: the box's corners and the table's top corners."""
+    box = site.object("parallelepiped")
+    table = site.object("table")
+    top = np.argsort(table.vertices_world()[:, 2])[-4:]
+    return [("parallelepiped", k) for k in range(8)] + [("table", int(k)) for k in top]
+
+
+def test_click_pairs_solve_accept_updates_every_reader(site, scene, db):
+    true_cam = scene.camera
+    site.set_camera(_wrong_camera(true_cam), rms_px=0.0, residuals_px=np.zeros((0, 2)), points={}, client="test")
+    wf = CalibrateCamera(site, client="alice")
+    rng = np.random.default_rng(0)
+    n_cal = len(db.calibrations("camera"))
+    for name, k in _calibration_targets(site):
+        X = site.object(name).vertices_world()[k]
+        wf.click(site.camera.project(X) + rng.normal(0, 0.5, 2))  # the corner as drawn (wrong C)
+        assert wf.state == "click_image" and name in wf.next_step
+        wf.click(true_cam.project(X) + rng.normal(0, 0.5, 2))  # where it really is
+    assert wf.summary()["pairs"] == 12
+    result = wf.solve()
+    assert result.rms_px < 1.0
+    assert len(wf.summary()["errors_px"]) == 12
+    assert len(db.calibrations("camera")) == n_cal  # nothing written before accept
+    wf.accept()
+    assert wf.accepted and len(db.calibrations("camera")) == n_cal + 1
+    X = site.object("parallelepiped").vertices_world()
+    assert np.max(np.linalg.norm(site.camera.project(X) - true_cam.project(X), axis=1)) < 1.5
+    # another server on the same database starts with the new calibration
+    other = Site(scene, db)
+    assert np.allclose(other.camera.C, site.camera.C)
+
+
+def test_too_few_or_coplanar_points_refuse_and_write_nothing(site, db):
+    wf = CalibrateCamera(site)
+    n_cal = len(db.calibrations())
+    box = site.object("parallelepiped").vertices_world()
+    for k in range(4):  # the bottom face: coplanar
+        wf.choose_vertex("parallelepiped", k)
+        wf.click(site.camera.project(box[k]))
+    with pytest.raises(WorkflowError, match="at least 6"):
+        wf.solve()
+    table = site.object("table").vertices_world()
+    for k in range(4):  # the table's bottom face: on z = -0.05, still two parallel planes... plus one more plane below
+        wf.choose_point(table[k] * [1, 1, 0])  # z = 0: coplanar with the box's bottom
+        wf.click(site.camera.project(table[k] * [1, 1, 0]))
+    with pytest.raises(WorkflowError, match="coplanar"):
+        wf.solve()
+    with pytest.raises(WorkflowError, match="solve first"):
+        wf.accept()
+    assert len(db.calibrations()) == n_cal
+
+
+def test_a_click_far_from_every_corner_is_refused(site):
+    wf = CalibrateCamera(site)
+    with pytest.raises(WorkflowError, match="no model vertex within"):
+        wf.click([2.0, 250.0])
+    assert wf.state == "pick_model" and wf.pending_X is None
+    with pytest.raises(WorkflowError, match="finite"):
+        wf.click([np.nan, 3.0])
+
+
+def test_remove_last_redo_and_marks(site):
+    wf = CalibrateCamera(site)
+    box = site.object("parallelepiped").vertices_world()
+    wf.choose_vertex("parallelepiped", 0)
+    assert wf.marks().pending.shape == (1, 2)
+    wf.click([100.0, 100.0])
+    wf.choose_vertex("parallelepiped", 1)
+    wf.remove_last()  # drops the pending point
+    assert wf.pending_X is None and len(wf.uv) == 1
+    wf.remove_last()  # drops the pair
+    assert len(wf.uv) == 0
+    for k in range(7):
+        wf.choose_vertex("parallelepiped", k if k < 6 else 6)
+        wf.click(site.camera.project(box[k]))
+    wf.solve()
+    m = wf.marks()
+    assert m.points.shape == (7, 2) and m.residuals.shape == (7, 2, 2) and len(m.labels) == 7
+    wf.redo()
+    assert wf.result is None and not wf.uv and wf.state == "pick_model"
+    with pytest.raises(WorkflowError, match="vertices 0..7"):
+        wf.choose_vertex("parallelepiped", 8)
+    wf.cancel()
+    with pytest.raises(WorkflowError, match="cancelled"):
+        wf.click([1.0, 1.0])
