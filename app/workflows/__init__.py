@@ -11,8 +11,9 @@ from .calibrate_camera import CalibrateCamera
 from .designate import DesignateTarget, Target
 from .session import WORKFLOWS, Session, register
 from .site import RayHit, Site, SiteObject
+from .update_pose import UpdatePose
 
-for _cls in (CalibrateCamera, DesignateTarget):
+for _cls in (CalibrateCamera, DesignateTarget, UpdatePose):
     register(_cls)
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     "CalibrateCamera",
     "DesignateTarget",
     "Target",
+    "UpdatePose",
     "WORKFLOWS",
     "Session",
     "register",
