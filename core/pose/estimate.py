@@ -1,0 +1,203 @@
+"""The two-step pose update as the operator uses it (source paper §IV): P3L, then refinement.
+
+The operator clicks N ≥ 3 image edges (and possibly vertices) of a known object and matches each to
+a model edge (point). ``estimate_pose`` runs the geometric three-line solver on the first triple of
+clicked edges that is not degenerate, refines every candidate with all the clicks (and, when the
+database pose is given, also refines from it: the paper's small-motion case), and ranks the refined
+poses by the RMS pixel distance of the clicks to the projected *finite* model segments and points
+(``residuals.pose_distance_cost``: equal to the measurement RMS when the clicks fall on the
+projected edges, larger when a pose slides an edge along its line away from the clicks). Every
+candidate is returned for display; the first is the estimate.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..camera import Camera
+from ..transforms import check_T, pose_error
+from .p3l import p3l
+from .refine import RefineResult, _refine
+from .residuals import as_clicks, pose_distance_cost
+
+__all__ = ["PoseCandidate", "PoseEstimate", "estimate_pose"]
+
+_LOSSES = ("l2", "huber")
+
+
+@dataclass(frozen=True)
+class PoseCandidate:
+    """One candidate pose, before and after refinement.
+
+    source : "p3l" (a solution of the three-line solver) or "prior" (refined from ``T_prior``).
+    T_start : array, shape (4, 4), the P3L solution or the prior.
+    refined : the refinement from T_start with every click, or None when it failed (``error``).
+    score_px : RMS pixel distance of the clicks to the projected finite model features at the
+        refined pose (inf when refinement failed): the ranking key.
+    p3l_rank : the candidate's rank in ``p3l``'s output (0 = best by distance), −1 for the prior.
+    error : why refinement failed (e.g. a clicked edge behind the camera at that candidate), or None.
+    """
+
+    source: str
+    T_start: np.ndarray
+    refined: RefineResult | None
+    score_px: float
+    p3l_rank: int
+    error: str | None = None
+
+    @property
+    def T_world_obj(self) -> np.ndarray:
+        """The refined pose (4, 4), or the start pose when refinement failed."""
+        return self.refined.T_world_obj if self.refined is not None else self.T_start
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """Result of ``estimate_pose``.
+
+    candidates : list of PoseCandidate, best first (refined ones by ``score_px``; distinct poses
+        only: candidates that refine to the same pose are merged into the best ranked).
+    triple : indices (into the clicked segments) of the three edges P3L used, or None when P3L
+        was not run (fewer than 3 segments, refinement from the prior only).
+    skipped_triples : (triple, reason) for the earlier triples P3L could not use.
+    """
+
+    candidates: list[PoseCandidate]
+    triple: tuple[int, int, int] | None
+    skipped_triples: tuple[tuple[tuple[int, int, int], str], ...] = ()
+
+    @property
+    def best(self) -> PoseCandidate:
+        return self.candidates[0]
+
+    @property
+    def result(self) -> RefineResult:
+        """The refinement result of the best candidate (pose, covariance, residuals)."""
+        assert self.candidates[0].refined is not None
+        return self.candidates[0].refined
+
+    @property
+    def T_world_obj(self) -> np.ndarray:
+        """The estimated pose (4, 4)."""
+        return self.result.T_world_obj
+
+    @property
+    def cov(self) -> np.ndarray:
+        return self.result.cov
+
+    @property
+    def rms_px(self) -> float:
+        return self.result.rms_px
+
+
+def estimate_pose(
+    camera: Camera,
+    segs_uv: np.ndarray,
+    edges_obj: np.ndarray,
+    points_uv: np.ndarray | None = None,
+    points_obj: np.ndarray | None = None,
+    *,
+    T_prior: np.ndarray | None = None,
+    loss: str = "l2",
+    huber_px: float = 3.0,
+    sigma_px: float = 1.0,
+    max_triples: int = 50,
+) -> PoseEstimate:
+    """Pose of a known object from N clicked edges (and points): P3L, then refinement with all.
+
+    Parameters
+    ----------
+    camera : Camera
+    segs_uv : array, shape (N, 2, 2), pixels
+        Two clicked points on each image edge, in click order.
+    edges_obj : array, shape (N, 2, 3), metres, object frame
+        The model edge matched to each clicked segment.
+    points_uv : array, shape (P, 2), pixels, optional
+    points_obj : array, shape (P, 3), metres, object frame, optional
+        Clicked vertices and the matched model points.
+    T_prior : array, shape (4, 4), optional
+        The database pose: also refined from, as a candidate (the paper's small-motion step).
+    loss, huber_px, sigma_px : passed to ``refine``.
+    max_triples : int
+        How many triples (in click order: (0, 1, 2), (0, 1, 3), ...) to try for P3L before giving up.
+
+    Returns
+    -------
+    PoseEstimate
+        ``.T_world_obj`` the best refined pose, ``.result`` its RefineResult, ``.candidates`` all.
+
+    Raises
+    ------
+    ValueError
+        Bad input; fewer than 3 segments without ``T_prior``; no triple P3L can use and no prior
+        (the message gives P3L's reason for the first triple); no candidate could be refined.
+    """
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
+    if loss not in _LOSSES:
+        raise ValueError(f"loss must be one of {_LOSSES}, got {loss!r}")
+    if not (huber_px > 0 and sigma_px > 0):
+        raise ValueError(f"huber_px and sigma_px must be positive, got {huber_px}, {sigma_px}")
+    clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
+    prior = None if T_prior is None else check_T(T_prior, "T_prior")
+    S = clicks.n_segments
+    if S < 3 and prior is None:
+        raise ValueError(
+            f"got {S} clicked segment(s): the large-motion solver needs 3 edges; click more edges, "
+            "or give the database pose (T_prior) to refine from"
+        )
+    starts: list[tuple[str, np.ndarray, int]] = []
+    triple = None
+    skipped: list[tuple[tuple[int, int, int], str]] = []
+    if S >= 3:
+        pts = (clicks.points_uv, clicks.points_obj) if clicks.n_points else (None, None)
+        for tri in itertools.islice(itertools.combinations(range(S), 3), max_triples):
+            idx = list(tri)
+            try:
+                sols = p3l(camera, clicks.segs_uv[idx], clicks.edges_obj[idx], *pts)
+            except ValueError as exc:
+                skipped.append((tri, str(exc)))
+                continue
+            triple = tri
+            starts += [("p3l", T, k) for k, T in enumerate(sols)]
+            break
+        if triple is None and prior is None:
+            raise ValueError(f"no triple of clicked edges is usable by the three-line solver: {skipped[0][1]}")
+    if prior is not None:
+        starts.append(("prior", prior, -1))
+    candidates = []
+    for source, T0, rank in starts:
+        try:
+            res = _refine(camera, np.array(T0), clicks, loss, float(huber_px), float(sigma_px), 100)
+        except ValueError as exc:
+            candidates.append(PoseCandidate(source, T0, None, float("inf"), rank, str(exc)))
+            continue
+        score = pose_distance_cost(camera, res.T_world_obj, clicks)
+        candidates.append(PoseCandidate(source, T0, res, score, rank))
+    if not any(c.refined is not None for c in candidates):
+        reasons = "; ".join(sorted({c.error for c in candidates if c.error})) or "P3L found no solution in front of the camera"
+        raise ValueError(f"no candidate pose could be refined: {reasons}")
+    candidates.sort(key=lambda c: (c.score_px, c.p3l_rank if c.p3l_rank >= 0 else np.inf))
+    return PoseEstimate(_merge(candidates, clicks), triple, tuple(skipped))
+
+
+def _merge(candidates: list[PoseCandidate], clicks) -> list[PoseCandidate]:
+    """Drop refined candidates that reached the pose of a better ranked one (1e-6 rad, 1e-6 of
+    the clicked features' extent)."""
+    extent = max(1e-3, float(np.abs(clicks.edges_obj).max()) if clicks.n_segments else 0.0)
+    out: list[PoseCandidate] = []
+    for c in candidates:
+        if c.refined is not None and any(
+            o.refined is not None and _same(o.T_world_obj, c.T_world_obj, extent) for o in out
+        ):
+            continue
+        out.append(c)
+    return out
+
+
+def _same(T1: np.ndarray, T2: np.ndarray, extent: float) -> bool:
+    rot_deg, trans_m = pose_error(T1, T2)
+    return np.radians(rot_deg) < 1e-6 and trans_m < 1e-6 * extent

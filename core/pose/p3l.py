@@ -1,0 +1,515 @@
+"""P3L: the pose of a known object from three clicked image edges (source paper §IV.1 and appendix).
+
+Finds R, T with ``N_i·(R V_i) = 0`` and ``N_i·(T + R M_i − c) = 0`` (paper eqs. 1, 5) for three
+model edges L_i (point M_i, direction V_i, object frame) and the interpretation planes (N_i, world)
+of their clicked images, written on the global camera model C (after Dhome et al. 1989, as the
+paper does, without splitting C into intrinsics and extrinsics).
+
+Rotation. Two intermediate frames reduce R to two angles:
+
+* R_c1 (world): x along the back-projected ray of l1's first clicked pixel (the intersection of
+  the pixel's two planes of eq. 4), y = N_1, z = x × y;
+* R_m1 (object): x along V_1, z along V_1 × V_2, y = z × x;
+
+so that ``R_world_obj = R_world_c1 · R_y(β) R_x(α) · R_obj_m1ᵀ`` satisfies the first edge's
+constraint for every (α, β). The two other edges give ``s1 cos β + s2 sin β = s3`` and
+``s4 cos β + s5 sin β = s6`` with s_k linear in (cos α, sin α, 1) (eq. A3); eliminating β with
+cos²β + sin²β = 1 and substituting t = tan(α/2) gives a polynomial of degree 8 in t, whose roots
+are the eigenvalues of its companion matrix. When its leading coefficient is smaller than its
+constant one (α = π is a root, or nearly) the reversed polynomial in u = cot(α/2) = 1/t is solved
+instead, so α = π is found like any other root. Eigenvalues whose imaginary part is below 1e-4 rad
+(in α) are kept and then checked against the three constraints to 1e-6, so a near-double real root
+that the eigen-solver splits into a complex pair is not lost. cos β, sin β follow from Cramer's
+rule, evaluated homogeneously in the half angle so that no root is near a pole.
+
+Translation. With R known, ``N_i·T = −d_i − N_i·(R M_i)`` (three planes). When the three model
+edges meet in one vertex, their interpretation planes share that vertex's line of sight and the
+depth along it is unobservable from lines: clicked points matched to model points (any vertex
+other than the common one) are then added to the system; without them a ValueError says what to
+click.
+
+Each candidate keeps the clicked model edges in front of the camera; candidates are ranked by the
+RMS pixel distance of the clicked pixels to the projected finite model segments
+(``residuals.segment_distances``: the paper's "test of distances between 2D points").
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from ..camera import Camera
+from .residuals import Clicks, as_clicks, distance_cost, interpretation_planes
+
+__all__ = ["p3l", "p3l_rotations", "ConcurrentEdgesError"]
+
+# Eigenvalues whose imaginary part, mapped to α, is below this are taken as real roots (radians).
+_IMAG_TOL_RAD = 1e-4
+# A candidate rotation is kept when Σ_i |N_i · R V_i| is below this (sines).
+_CONSTRAINT_TOL = 3e-6
+# Two unit directions (or plane normals) are parallel when the sine of their angle is below this.
+_PARALLEL_TOL = 1e-9
+# The β-equations are dependent at a root when |s1 s5 − s2 s4| is below this.
+_DEPENDENT_TOL = 1e-7
+_SUBDIAG = np.eye(8, k=-1)  # companion matrices: ones on the sub-diagonal
+
+
+class ConcurrentEdgesError(ValueError):
+    """The three edges' interpretation planes share a line of sight: the depth along it is unknown."""
+
+
+# ---------------------------------------------------------------------------------------------
+# Component algebra. A vector is a 3-tuple of components, a matrix a 3-tuple of rows; a component
+# is a float (one triple, the fast path of ``p3l``: plain Python arithmetic is ~30× cheaper than a
+# NumPy call on tiny arrays) or an array (many triples at once, ``p3l_batch``). The solver's
+# maths below is written once on components and runs unchanged on both.
+
+
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _unit(a):
+    k = _dot(a, a) ** -0.5
+    return (a[0] * k, a[1] * k, a[2] * k)
+
+
+def _quad_det(a, d, b, c):
+    """a d − b c for four quadratics (ascending coefficient triples): a quartic (5 coefficients)."""
+    return [
+        a[0] * d[0] - b[0] * c[0],
+        a[0] * d[1] + a[1] * d[0] - b[0] * c[1] - b[1] * c[0],
+        a[0] * d[2] + a[1] * d[1] + a[2] * d[0] - b[0] * c[2] - b[1] * c[1] - b[2] * c[0],
+        a[1] * d[2] + a[2] * d[1] - b[1] * c[2] - b[2] * c[1],
+        a[2] * d[2] - b[2] * c[2],
+    ]
+
+
+def _eliminant(nc, ns, nd):
+    """nc² + ns² − nd² for three quartics: the degree-8 polynomial (9 coefficients)."""
+    out = [0.0] * 9
+    for i in range(5):
+        out[2 * i] = out[2 * i] + (nc[i] * nc[i] + ns[i] * ns[i] - nd[i] * nd[i])
+        for j in range(i + 1, 5):
+            out[i + j] = out[i + j] + 2.0 * (nc[i] * nc[j] + ns[i] * ns[j] - nd[i] * nd[j])
+    return out
+
+
+class _Setup:
+    """Everything of one triple (or a batch of triples) that does not depend on α.
+
+    cols_c1 : the columns x, y, z of R_world_c1 (vectors, world).
+    cols_m1 : the columns of R_obj_m1 (vectors, object frame).
+    coef : the 9 coefficients (ascending in t = tan(α/2)) of the degree-8 eliminant.
+    minors : nc, ns, nd times (1 + t²)², quartics (5 coefficients each).
+    E : per edge 2, 3 the half-angle quadratics of (s_c, s_s, s_rhs).
+    """
+
+    __slots__ = ("cols_c1", "cols_m1", "coef", "minors", "E")
+
+    def __init__(self, n, ray, V):
+        # R_c1: x along the ray of l1's first clicked pixel, y = N_1, z = x × y.
+        y = n[0]
+        k = _dot(ray, y)
+        x = _unit((ray[0] - k * y[0], ray[1] - k * y[1], ray[2] - k * y[2]))
+        z = _cross(x, y)
+        self.cols_c1 = (x, y, z)
+        # R_m1: x along L1, z along L1 × L2, y = z × x.
+        v1 = V[0]
+        z_m = _unit(_cross(v1, V[1]))
+        y_m = _cross(z_m, v1)
+        self.cols_m1 = (v1, y_m, z_m)
+        E = []
+        for i in (1, 2):
+            ax, ay, az = _dot(x, n[i]), _dot(y, n[i]), _dot(z, n[i])  # N_i in R_c1
+            bx, by, bz = _dot(v1, V[i]), _dot(y_m, V[i]), _dot(z_m, V[i])  # V_i in R_m1
+            # N·R_y(β) R_x(α) V = s_c cos β + s_s sin β − s_rhs, each s = p cos α + q sin α + r;
+            # as half-angle quadratics s (1 + t²) = (p + r) + 2q t + (r − p) t².
+            pqr = ((az * bz, az * by, ax * bx), (ax * bz, ax * by, -az * bx), (-ay * by, ay * bz, 0.0 * ax))
+            E.append([(p + r, 2.0 * q, r - p) for p, q, r in pqr])
+        (c2, s2, h2), (c3, s3, h3) = E
+        # Cramer on the two β-equations (eq. A3): cos β = nc/nd, sin β = ns/nd.
+        nc = _quad_det(h2, s3, s2, h3)
+        ns = _quad_det(c2, h3, h2, c3)
+        nd = _quad_det(c2, s3, s2, c3)
+        # cos²β + sin²β = 1 (eq. A4): nc² + ns² − nd², degree 8 in t.
+        self.coef = _eliminant(nc, ns, nd)
+        self.minors = (nc, ns, nd)
+        self.E = E
+
+
+def _pose_at_root(st: _Setup, hc, hs, n, V):
+    """R_world_obj (rows) at a root given by its half angle (hc, hs) ∝ (cos α/2, sin α/2).
+
+    Returns (R, err, nd): err = Σ_i |N_i · R V_i| (0 for an exact solution), nd the normalised
+    Cramer denominator (the β-equations are dependent where it is ~0).
+    """
+    hc2, hs2, hcs = hc * hc, hs * hs, hc * hs
+    w = hc2 + hs2
+    # t^k (1 + t²)^-2 = hs^k hc^(4-k) / w²: homogeneous, no pole at α = π.
+    p0, p1, p2, p3, p4 = hc2 * hc2, hc2 * hcs, hc2 * hs2, hcs * hs2, hs2 * hs2
+    (c0, c1, c2, c3, c4), (s0, s1, s2, s3, s4), (d0, d1, d2, d3, d4) = st.minors
+    nc = c0 * p0 + c1 * p1 + c2 * p2 + c3 * p3 + c4 * p4
+    ns = s0 * p0 + s1 * p1 + s2 * p2 + s3 * p3 + s4 * p4
+    nd = (d0 * p0 + d1 * p1 + d2 * p2 + d3 * p3 + d4 * p4) / (w * w)
+    # (cos β, sin β) = (nc, ns) sign(nd) / |(nc, ns)|, written without a branch.
+    cb, sb = nc * nd, ns * nd
+    k = 1.0 / ((cb * cb + sb * sb) ** 0.5 + 1e-300)
+    R, err = _rotation(st, (hc2 - hs2) / w, 2.0 * hcs / w, cb * k, sb * k, n, V)
+    return R, err, nd
+
+
+def _rotation(st: _Setup, ca, sa, cb, sb, n, V):
+    """R_world_obj = R_world_c1 · R_y(β) R_x(α) · R_obj_m1ᵀ (rows) and Σ_i |N_i · R V_i|."""
+    # G = R_y(β) R_x(α) R_obj_m1ᵀ: row j of R_y R_x is (cb, sb sa, sb ca), (0, ca, −sa),
+    # (−sb, cb sa, cb ca); R_obj_m1ᵀ has rows m0, m1, m2 (the columns of R_obj_m1).
+    m0, m1, m2 = st.cols_m1
+    sbsa, sbca, cbsa, cbca = sb * sa, sb * ca, cb * sa, cb * ca
+    g0 = (cb * m0[0] + sbsa * m1[0] + sbca * m2[0], cb * m0[1] + sbsa * m1[1] + sbca * m2[1], cb * m0[2] + sbsa * m1[2] + sbca * m2[2])
+    g1 = (ca * m1[0] - sa * m2[0], ca * m1[1] - sa * m2[1], ca * m1[2] - sa * m2[2])
+    g2 = (-sb * m0[0] + cbsa * m1[0] + cbca * m2[0], -sb * m0[1] + cbsa * m1[1] + cbca * m2[1], -sb * m0[2] + cbsa * m1[2] + cbca * m2[2])
+    x, y, z = st.cols_c1  # R = [x y z] G
+    R = (
+        (x[0] * g0[0] + y[0] * g1[0] + z[0] * g2[0], x[0] * g0[1] + y[0] * g1[1] + z[0] * g2[1], x[0] * g0[2] + y[0] * g1[2] + z[0] * g2[2]),
+        (x[1] * g0[0] + y[1] * g1[0] + z[1] * g2[0], x[1] * g0[1] + y[1] * g1[1] + z[1] * g2[1], x[1] * g0[2] + y[1] * g1[2] + z[1] * g2[2]),
+        (x[2] * g0[0] + y[2] * g1[0] + z[2] * g2[0], x[2] * g0[1] + y[2] * g1[1] + z[2] * g2[1], x[2] * g0[2] + y[2] * g1[2] + z[2] * g2[2]),
+    )
+    err = 0.0
+    for (n0, n1, n2), (v0, v1, v2) in zip(n, V):
+        # N·(R V) = (Rᵀ N)·V
+        err = err + abs(
+            (n0 * R[0][0] + n1 * R[1][0] + n2 * R[2][0]) * v0
+            + (n0 * R[0][1] + n1 * R[1][1] + n2 * R[2][1]) * v1
+            + (n0 * R[0][2] + n1 * R[1][2] + n2 * R[2][2]) * v2
+        )
+    return R, err
+
+
+def _beta_dependent(E, ca: float, sa: float) -> list[tuple[float, float]]:
+    """(cos β, sin β) at one α where the two β-equations are dependent (nd ≈ 0): intersect the
+    better conditioned one, s_c cos β + s_s sin β = s_rhs, with the unit circle; keep the roots
+    that also satisfy the other. E : the setup's half-angle quadratics (floats)."""
+    # s (1 + t²) = e0 + e1 t + e2 t² and 1/(1 + t²) = (1 + cos α)/2, t = sin α/(1 + cos α):
+    # s = e0 (1 + cos α)/2 + e1 sin α/2 + e2 (1 − cos α)/2.
+    eqs = [[(e[0] * (1 + ca) + e[1] * sa + e[2] * (1 - ca)) / 2.0 for e in edge] for edge in E]
+    norms = [float(np.hypot(e[0], e[1])) for e in eqs]
+    k = int(np.argmax(norms))
+    e, other = eqs[k], eqs[1 - k]
+    if norms[k] < 1e-12 or abs(e[2]) > norms[k] * (1.0 + 1e-9):
+        return []
+    phi = np.arctan2(e[1], e[0])
+    delta = np.arccos(np.clip(e[2] / norms[k], -1.0, 1.0))
+    out = []
+    for beta in [phi + delta] if delta < 1e-12 else [phi + delta, phi - delta]:
+        cb, sb = float(np.cos(beta)), float(np.sin(beta))
+        if abs(other[0] * cb + other[1] * sb - other[2]) < 1e-6:
+            out.append((cb, sb))
+    return out
+
+
+def _roots(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Real roots of degree-8 polynomials (B, 9) as half angles (hc, hs) ∝ (cos α/2, sin α/2).
+
+    Companion-matrix eigenvalues of the polynomial in t = tan(α/2), or, when its leading
+    coefficient is the smaller end, of the reversed one in u = cot(α/2) (so α = π is an ordinary
+    root u = 0). Returns hc, hs (B, 8), unnormalised (hc² + hs² > 0), and the mask (B, 8) of
+    real roots: eigenvalues whose imaginary part, mapped to α, is below 1e-4 rad.
+    """
+    B = len(coef)
+    reverse = np.abs(coef[:, 8]) < np.abs(coef[:, 0])
+    c = np.where(reverse[:, None], coef[:, ::-1], coef)
+    lead = c[:, 8]
+    ends_vanish = np.abs(lead) <= 1e-14 * np.max(np.abs(coef), axis=1)
+    comp = np.broadcast_to(_SUBDIAG, (B, 8, 8)).copy()
+    comp[:, :, 7] = -c[:, :8] / np.where(ends_vanish, 1.0, lead)[:, None]
+    lam = np.linalg.eigvals(comp)  # (B, 8)
+    re, im = lam.real, lam.imag
+    real = (2.0 * np.abs(im) < _IMAG_TOL_RAD * (1.0 + re * re + im * im)) & ~ends_vanish[:, None]
+    one = np.ones_like(re)
+    hc = np.where(reverse[:, None], re, one)
+    hs = np.where(reverse[:, None], one, re)
+    for i in np.flatnonzero(ends_vanish):
+        hc[i], hs[i], real[i] = _roots_trimmed(coef[i])
+    return hc, hs, real
+
+
+def _roots_trimmed(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``_roots`` for one polynomial (9,) whose constant and leading coefficients both vanish
+    (α = 0 and α = π are both roots): the vanishing ends are trimmed, np.roots solves the rest."""
+    tol = 1e-14 * np.max(np.abs(coef))
+    nz = np.flatnonzero(np.abs(coef) > tol)
+    hc, hs, real = np.ones(8), np.zeros(8), np.zeros(8, dtype=bool)
+    if len(nz) == 0:
+        return hc, hs, real
+    lo, hi = nz[0], nz[-1]
+    roots = [0.0] * lo + (list(np.roots(coef[lo : hi + 1][::-1])) if hi > lo else [])
+    t = [float(np.real(z)) for z in roots if 2.0 * abs(np.imag(z)) < _IMAG_TOL_RAD * (1.0 + abs(z) ** 2)]
+    pairs = [(1.0, x) for x in t] + ([(0.0, 1.0)] if hi < 8 else [])  # α = π: (hc, hs) = (0, 1)
+    for k, (cc, ss) in enumerate(pairs[:8]):
+        hc[k], hs[k], real[k] = cc, ss, True
+    return hc, hs, real
+
+
+def _roots_one(coef: list) -> list[tuple[float, float]]:
+    """``_roots`` for one polynomial (9 floats), in plain Python around one eigvals call: the
+    real roots as half angles (hc, hs)."""
+    reverse = abs(coef[8]) < abs(coef[0])
+    c = coef[::-1] if reverse else coef
+    if abs(c[8]) <= 1e-14 * max(abs(x) for x in coef):
+        hc, hs, real = _roots_trimmed(np.array(coef, dtype=float))
+        return [(float(a), float(b)) for a, b, r in zip(hc, hs, real) if r]
+    comp = _SUBDIAG.copy()
+    comp[:, 7] = c[:8]
+    comp[:, 7] *= -1.0 / c[8]
+    out = []
+    for z in np.linalg.eigvals(comp).tolist():
+        re, im = z.real, z.imag
+        if 2.0 * abs(im) < _IMAG_TOL_RAD * (1.0 + re * re + im * im):
+            out.append((re, 1.0) if reverse else (1.0, re))
+    return out
+
+
+def _rotations_one(n, ray, V) -> list:
+    """Every rotation (rows, floats) with N_i · R V_i = 0 for one triple (components are floats)."""
+    st = _Setup(n, ray, V)
+    out = []
+    for hc, hs in _roots_one(st.coef):
+        R, err, nd = _pose_at_root(st, hc, hs, n, V)
+        if abs(nd) >= _DEPENDENT_TOL:
+            if err < _CONSTRAINT_TOL:
+                out.append(R)
+            continue
+        w = hc * hc + hs * hs
+        ca, sa = (hc * hc - hs * hs) / w, 2.0 * hc * hs / w
+        for cb, sb in _beta_dependent(st.E, ca, sa):
+            R, err = _rotation(st, ca, sa, cb, sb, n, V)
+            if err < _CONSTRAINT_TOL:
+                out.append(R)
+    return out
+
+
+def p3l_rotations(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every rotation R_world_obj with ``N_i · R V_i = 0`` for three edges, vectorised over triples.
+
+    Parameters
+    ----------
+    n_world : array, shape (B, 3, 3)
+        Unit normals (world) of the three interpretation planes, one triple per row.
+    ray_world : array, shape (B, 3)
+        A direction (world) in the first plane: the paper's ray of l1's first clicked pixel.
+    V_obj : array, shape (B, 3, 3)
+        Unit directions (object frame) of the matched model edges; V_1 must not be parallel to V_2
+        or V_3 (the caller checks; ``p3l`` reorders the edges when needed).
+
+    Returns
+    -------
+    R : array, shape (B, K, 3, 3), K = 8, or 16 when some root has two β (the two β-equations
+        dependent there, a non-generic case)
+        Candidate rotations R_world_obj.
+    valid : array, shape (B, K), bool
+        Which slots hold a solution (real root, constraints met to 3e-6).
+    """
+    # Components of shape (B, 1) broadcast against the roots' (B, 8).
+    n = [[n_world[:, i, j, None] for j in range(3)] for i in range(3)]
+    V = [[V_obj[:, i, j, None] for j in range(3)] for i in range(3)]
+    ray = [ray_world[:, j, None] for j in range(3)]
+    st = _Setup(n, ray, V)
+    hc, hs, real = _roots(np.concatenate(st.coef, axis=1))
+    R, err, nd = _pose_at_root(st, hc, hs, n, V)
+    R = np.stack([np.stack(row, axis=-1) for row in R], axis=-2)  # (B, 8, 3, 3)
+    valid = real & (err < _CONSTRAINT_TOL) & (np.abs(nd) >= _DEPENDENT_TOL)
+    dependent = real & (np.abs(nd) < _DEPENDENT_TOL)
+    if np.any(dependent):
+        R = np.concatenate([R, R], axis=1)
+        valid = np.concatenate([valid, np.zeros_like(valid)], axis=1)
+        for b, k in zip(*np.nonzero(dependent)):
+            n1 = n_world[b].tolist()
+            V1 = V_obj[b].tolist()
+            one = _Setup(n1, ray_world[b].tolist(), V1)
+            w = hc[b, k] ** 2 + hs[b, k] ** 2
+            ca, sa = (hc[b, k] ** 2 - hs[b, k] ** 2) / w, 2.0 * hc[b, k] * hs[b, k] / w
+            for j, (cb, sb) in enumerate(_beta_dependent(one.E, float(ca), float(sa))):
+                Rj, e = _rotation(one, float(ca), float(sa), cb, sb, n1, V1)
+                R[b, k + 8 * j] = Rj
+                valid[b, k + 8 * j] = e < _CONSTRAINT_TOL
+    return R, valid
+
+
+def _det3(M):
+    return _dot(M[0], _cross(M[1], M[2]))
+
+
+def _first_edge_order(V) -> tuple[int, int, int]:
+    """An order of the three edges (unit directions, float components) whose first is parallel to
+    neither other (paper appendix: L2, L3 must not be parallel to L1); ValueError if all are."""
+    for order in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        i = order[0]
+        if all(1.0 - _dot(V[i], V[j]) ** 2 > _PARALLEL_TOL**2 for j in order[1:]):
+            return order
+    raise ValueError(
+        "the three model edges are parallel: the rotation about their common direction is not "
+        "observable from them; click an edge with another direction"
+    )
+
+
+def _common_point(A, V):
+    """The point where three model lines A_i + s V_i meet, or None (floats; V_0 ∦ V_1)."""
+    # L0 and L1 meet iff (A1 − A0)·(V0 × V1) = 0; then X = A0 + s V0 with s from the 2D solve.
+    w = [A[1][j] - A[0][j] for j in range(3)]
+    c = _cross(V[0], V[1])
+    cc = _dot(c, c)
+    scale = max(1.0, max(abs(x) for a in A for x in a))
+    if _dot(w, c) ** 2 > (1e-9 * scale) ** 2 * cc:
+        return None
+    s = _dot(_cross(w, V[1]), c) / cc
+    X = [A[0][j] + s * V[0][j] for j in range(3)]
+    D = [X[j] - A[2][j] for j in range(3)]
+    if _dot(D, D) - _dot(D, V[2]) ** 2 > (1e-9 * scale) ** 2:
+        return None
+    return X
+
+
+def _translations_from_points(camera: Camera, R: np.ndarray, n, d, A, clicks: Clicks, common) -> np.ndarray:
+    """Translations (K, 3) when the three lines do not fix the depth: the three planes plus the
+    pixel planes of the clicked points (eq. 4, normalised to metres), by least squares."""
+    message = (
+        "the three clicked edges meet in one vertex (or their interpretation planes share one line "
+        "of sight), so lines alone do not fix the object's distance along that ray"
+    )
+    if clicks.n_points == 0:
+        raise ConcurrentEdgesError(
+            message + ": click a vertex of the object other than the common one as a point "
+            "(points_uv/points_obj), or use an edge that does not pass through that vertex"
+        )
+    n, d, A = np.array(n), np.array(d), np.array(A)
+    m_u, a_u, m_v, a_v = camera.pixel_planes(clicks.points_uv)
+    rows = np.concatenate([m_u, m_v])
+    norm = np.linalg.norm(rows, axis=1)
+    rows, offs = rows / norm[:, None], np.concatenate([a_u, a_v]) / norm
+    P = np.concatenate([clicks.points_obj, clicks.points_obj])
+    A_all = np.concatenate([n, rows])
+    sv = np.linalg.svd(A_all, compute_uv=False)
+    scale = max(1.0, float(np.abs(A).max()))
+    off_vertex = common is None or bool(np.any(np.linalg.norm(clicks.points_obj - np.array(common), axis=1) > 1e-9 * scale))
+    if not off_vertex or sv[-1] <= 1e-9 * sv[0]:
+        raise ConcurrentEdgesError(
+            message + "; the clicked point(s) do not fix it either (the common vertex lies on that "
+            "ray): click another vertex, or use an edge that does not pass through that vertex"
+        )
+    rhs = np.concatenate(
+        [-d[None] - np.einsum("ki,bij,kj->bk", n, R, A), -offs[None] - np.einsum("ki,bij,kj->bk", rows, R, P)], axis=1
+    )
+    return np.linalg.lstsq(A_all, rhs.T, rcond=None)[0].T
+
+
+def _check_segments(n) -> None:
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        if 1.0 - _dot(n[i], n[j]) ** 2 < _PARALLEL_TOL**2:
+            raise ValueError(
+                f"clicked segments {i} and {j} lie on one image line (same interpretation plane): "
+                "they cannot tell two edges apart; click edges that are distinct in the image"
+            )
+
+
+def p3l(
+    camera: Camera,
+    segs_uv: np.ndarray,
+    edges_obj: np.ndarray,
+    points_uv: np.ndarray | None = None,
+    points_obj: np.ndarray | None = None,
+) -> list[np.ndarray]:
+    """Every pose of a known object that puts three model edges on three clicked image lines.
+
+    Parameters
+    ----------
+    camera : Camera
+        The calibrated global model C (any world frame, any scale and sign of C).
+    segs_uv : array, shape (3, 2, 2), pixels
+        Two clicked points on each of three image edges.
+    edges_obj : array, shape (3, 2, 3), metres, object frame
+        The matched model edges (two endpoints each).
+    points_uv : array, shape (P, 2), pixels, optional
+    points_obj : array, shape (P, 3), metres, object frame, optional
+        Clicked points matched to model points (vertices): they enter the translation only when
+        the three edges meet in one vertex, and the ranking always.
+
+    Returns
+    -------
+    list of array, shape (4, 4)
+        Every real solution ``T_world_obj`` (at most 8 generically) with each clicked model edge
+        in front of the camera (at least one endpoint at positive depth) and each clicked model
+        point in front, best first by the RMS pixel distance of the clicked pixels to the
+        projected finite model segments and points (``segment_distances``). Possibly empty.
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes; all three model edges parallel; two clicked segments on one image line;
+        three edges meeting in one vertex without a clicked point that fixes the depth
+        (``ConcurrentEdgesError``, a ValueError).
+    """
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
+    clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
+    if clicks.n_segments != 3:
+        raise ValueError(f"p3l needs exactly 3 clicked segments and model edges, got {clicks.n_segments}")
+    n_arr, d_arr = interpretation_planes(camera, clicks.segs_uv)
+    n, d = n_arr.tolist(), d_arr.tolist()
+    _check_segments(n)
+    edges = clicks.edges_obj.tolist()
+    A = [e[0] for e in edges]
+    V = [_unit((e[1][0] - e[0][0], e[1][1] - e[0][1], e[1][2] - e[0][2])) for e in edges]
+    order = _first_edge_order(V)
+    # The paper's x axis of R_c1: the ray of l1's first clicked pixel, m_u × m_v (eq. 4).
+    u, v = clicks.segs_uv[order[0], 0].tolist()
+    Cl = camera.C.tolist()
+    m_u = [Cl[0][j] - u * Cl[2][j] for j in range(3)]
+    m_v = [Cl[1][j] - v * Cl[2][j] for j in range(3)]
+    Rs = _rotations_one([n[i] for i in order], _cross(m_u, m_v), [V[i] for i in order])
+    if not Rs:
+        return []
+    Rs = _distinct(Rs)
+    common = _common_point([A[i] for i in order], [V[i] for i in order])
+    det = _det3(n)
+    if common is None and abs(det) > 1e-9:
+        # N_i·T = −d_i − N_i·(R A_i)  (eq. 5), by Cramer's rule: T = adj(N) rhs / det(N).
+        adj = list(zip(_cross(n[1], n[2]), _cross(n[2], n[0]), _cross(n[0], n[1])))
+        t = []
+        for (r0, r1, r2) in Rs:
+            rhs = [
+                -di - ni[0] * _dot(r0, a) - ni[1] * _dot(r1, a) - ni[2] * _dot(r2, a)
+                for ni, di, a in zip(n, d, A)
+            ]
+            t.append([_dot(row, rhs) / det for row in adj])
+    else:
+        t = _translations_from_points(camera, np.array(Rs), n, d, A, clicks, common).tolist()
+    segs = clicks.segs_uv.tolist()
+    scored = []
+    for k, (Rk, tk) in enumerate(zip(Rs, t)):
+        cost = distance_cost(Cl, Rk, tk, edges, segs, clicks.points_obj.tolist(), clicks.points_uv.tolist())
+        if cost is not None:
+            scored.append((cost, k))
+    keep = [k for _, k in sorted(scored)]
+    return [np.array([Rs[k][0] + (t[k][0],), Rs[k][1] + (t[k][1],), Rs[k][2] + (t[k][2],), (0.0, 0.0, 0.0, 1.0)]) for k in keep]
+
+
+def _distinct(Rs: list, tol: float = 1e-6) -> list:
+    """The rotations (rows) not equal to an earlier one within tol in every entry: a near-double
+    root can give two eigenvalues for one solution."""
+    out = []
+    for R in Rs:
+        flat = R[0] + R[1] + R[2]
+        for F in out:
+            for a, b in zip(flat, F):
+                if abs(a - b) > tol:
+                    break
+            else:
+                break  # equal to F
+        else:
+            out.append(flat)
+    return [(f[0:3], f[3:6], f[6:9]) for f in out]

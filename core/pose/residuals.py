@@ -1,0 +1,340 @@
+"""Pixel residuals of the operator's clicks against a posed model, and their Jacobians.
+
+The one residual model shared by the pose solvers (ranking of P3L candidates, refinement, the
+Cramér–Rao bound in ``bench/pose.py``):
+
+* a clicked **segment** (two pixels the operator put on an image edge) matched to a model edge
+  (two 3D endpoints in the object frame) gives two residuals: the signed distances, in pixels, of
+  the two clicked pixels to the infinite image line of the projected model edge. The operator
+  clicks two points *on* an edge, not its endpoints, so only the distance across the line is
+  measured; under isotropic pixel noise this is the maximum-likelihood cost.
+* a clicked **point** matched to a model point gives the 2D reprojection error (u, v), pixels.
+
+The projected model line is ``l = (C Ã) × (C B̃)`` (homogeneous pixels of the posed endpoints A, B
+in the world), scaled so that ``l·(u, v, 1)`` is a signed pixel distance: positive to the right of
+π(A) → π(B) on the screen (u right, v down) when both endpoints are in front of the camera, the
+convention of ``Camera.image_line``. Everything is written on C, never on K, R, t.
+
+Pose perturbation (the convention of every Jacobian and covariance in ``core.pose``): a 6-vector
+``δ = (δt, δr)``, δt a translation of the object's origin in the world frame (metres), δr a rotation
+vector in world axes about the object's origin (radians)::
+
+    R ← exp([δr]×) R,    t ← t + δt,    so a posed point X' = R X + t moves by  δt + δr × (X' − t).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from ..camera import Camera
+
+__all__ = ["Clicks", "as_clicks", "interpretation_planes", "residuals", "perturb", "distance_cost", "pose_distance_cost"]
+
+
+@dataclass(frozen=True)
+class Clicks:
+    """The operator's clicks and the model features they are matched to.
+
+    segs_uv : array, shape (S, 2, 2), pixels: two clicked points on each image edge.
+    edges_obj : array, shape (S, 2, 3), metres, object frame: the matched model edges' endpoints.
+    points_uv : array, shape (P, 2), pixels: clicked points (e.g. vertices).
+    points_obj : array, shape (P, 3), metres, object frame: the matched model points.
+    """
+
+    segs_uv: np.ndarray
+    edges_obj: np.ndarray
+    points_uv: np.ndarray
+    points_obj: np.ndarray
+
+    @cached_property
+    def segs_h(self) -> np.ndarray:
+        """Homogeneous clicked pixels (u, v, 1), shape (S, 2, 3)."""
+        return np.concatenate([self.segs_uv, np.ones(self.segs_uv.shape[:2] + (1,))], axis=-1)
+
+    @property
+    def n_segments(self) -> int:
+        return len(self.segs_uv)
+
+    @property
+    def n_points(self) -> int:
+        return len(self.points_uv)
+
+    @property
+    def n_residuals(self) -> int:
+        """2 per segment (one per clicked pixel) + 2 per point (u, v)."""
+        return 2 * (len(self.segs_uv) + len(self.points_uv))
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """One entry per click, segments first: "segment" or "point"."""
+        return ("segment",) * len(self.segs_uv) + ("point",) * len(self.points_uv)
+
+
+_NO_SEGS, _NO_EDGES, _NO_UV, _NO_X = (np.zeros(shape) for shape in ((0, 2, 2), (0, 2, 3), (0, 2), (0, 3)))
+for _a in (_NO_SEGS, _NO_EDGES, _NO_UV, _NO_X):
+    _a.setflags(write=False)
+
+
+def as_clicks(segs_uv=None, edges_obj=None, points_uv=None, points_obj=None) -> Clicks:
+    """Validate clicks and matched model features; ValueError saying what is wrong.
+
+    Accepts a single segment (2, 2) / edge (2, 3) or a point (2,) / (3,) as a batch of one.
+    """
+    if (segs_uv is None) != (edges_obj is None):
+        raise ValueError("segs_uv and edges_obj go together: give both (one model edge per clicked segment) or neither")
+    if (points_uv is None) != (points_obj is None):
+        raise ValueError("points_uv and points_obj go together: give both (one model point per clicked point) or neither")
+    if segs_uv is None:
+        segs, edges = _NO_SEGS, _NO_EDGES
+    else:
+        segs = np.asarray(segs_uv, dtype=float)
+        edges = np.asarray(edges_obj, dtype=float)
+        if segs.shape == (2, 2):
+            segs = segs[None]
+        if edges.shape == (2, 3):
+            edges = edges[None]
+        if segs.ndim != 3 or segs.shape[1:] != (2, 2):
+            raise ValueError(f"segs_uv must have shape (N, 2, 2) (two clicked pixels per edge), got {segs.shape}")
+        if edges.ndim != 3 or edges.shape[1:] != (2, 3):
+            raise ValueError(f"edges_obj must have shape (N, 2, 3) (two 3D endpoints per edge), got {edges.shape}")
+        if len(segs) != len(edges):
+            raise ValueError(f"got {len(segs)} clicked segments but {len(edges)} model edges: match each segment to one edge")
+        if not (np.isfinite(segs).all() and np.isfinite(edges).all()):
+            raise ValueError("segs_uv or edges_obj contains NaN or inf")
+        d = segs[:, 1] - segs[:, 0]
+        short = (d * d).sum(axis=1) < (1e-9 * max(1.0, float(np.abs(segs).max()))) ** 2
+        if short.any():
+            raise ValueError(
+                f"clicked segment(s) {np.flatnonzero(short).tolist()} have two coinciding pixels and "
+                "define no line; click two distinct points along each edge"
+            )
+        d = edges[:, 1] - edges[:, 0]
+        short = (d * d).sum(axis=1) < (1e-12 * max(1.0, float(np.abs(edges).max()))) ** 2
+        if short.any():
+            raise ValueError(
+                f"model edge(s) {np.flatnonzero(short).tolist()} have coinciding endpoints: an edge "
+                "needs two distinct 3D points"
+            )
+    if points_uv is None:
+        puv, pobj = _NO_UV, _NO_X
+    else:
+        puv = np.asarray(points_uv, dtype=float)
+        pobj = np.asarray(points_obj, dtype=float)
+        if puv.shape == (2,):
+            puv = puv[None]
+        if pobj.shape == (3,):
+            pobj = pobj[None]
+        if puv.ndim != 2 or puv.shape[1] != 2:
+            raise ValueError(f"points_uv must have shape (N, 2), got {puv.shape}")
+        if pobj.ndim != 2 or pobj.shape[1] != 3:
+            raise ValueError(f"points_obj must have shape (N, 3), got {pobj.shape}")
+        if len(puv) != len(pobj):
+            raise ValueError(f"got {len(puv)} clicked points but {len(pobj)} model points: match each click to one point")
+        if not (np.isfinite(puv).all() and np.isfinite(pobj).all()):
+            raise ValueError("points_uv or points_obj contains NaN or inf")
+    return Clicks(segs, edges, puv, pobj)
+
+
+def interpretation_planes(camera: Camera, segs_uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Interpretation planes ``Cᵀ l`` of clicked segments, vectorised ``Camera.interpretation_plane``.
+
+    segs_uv : array, shape (N, 2, 2), pixels (validated by the caller).
+    Returns n : array, shape (N, 3), unit normals (world), and d : array, shape (N,), metres,
+    with ``n·X + d = 0`` for every world point X whose image lies on the segment's line, oriented
+    as ``Camera.interpretation_plane``.
+    """
+    u1, v1, u2, v2 = segs_uv.reshape(-1, 4).T
+    l = np.stack([v1 - v2, u2 - u1, u1 * v2 - u2 * v1], axis=1)  # (u1, v1, 1) × (u2, v2, 1)
+    pi = l @ camera.C
+    pi /= np.sqrt(np.sum(pi[:, :3] * pi[:, :3], axis=1))[:, None]
+    return pi[:, :3], pi[:, 3]
+
+
+def perturb(T_world_obj: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """Apply a perturbation δ = (δt (m), δr (rad)) in the module's convention: ``R ← exp([δr]×) R``,
+    ``t ← t + δt``. T_world_obj (4, 4), delta (6,) → (4, 4)."""
+    T = np.array(T_world_obj, dtype=float)
+    T[:3, :3] = _exp_so3(delta[3:]) @ T[:3, :3]
+    T[:3, 3] += delta[:3]
+    return T
+
+
+def _exp_so3(r: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula in plain Python (``core.transforms.exp_so3`` costs ~4× more per call,
+    and refinement calls it once per step)."""
+    x, y, z = r.tolist()
+    th2 = x * x + y * y + z * z
+    if th2 < 1e-16:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = th2**0.5
+        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    xx, yy, zz, xy, xz, yz = x * x, y * y, z * z, x * y, x * z, y * z
+    return np.array(
+        [
+            [1.0 - b * (yy + zz), b * xy - a * z, b * xz + a * y],
+            [b * xy + a * z, 1.0 - b * (xx + zz), b * yz - a * x],
+            [b * xz - a * y, b * yz + a * x, 1.0 - b * (xx + yy)],
+        ]
+    )
+
+
+_I1, _I2 = [1, 2, 0], [2, 0, 1]
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b over the last axis, broadcasting (np.cross is several times slower on small arrays)."""
+    return a.take(_I1, -1) * b.take(_I2, -1) - a.take(_I2, -1) * b.take(_I1, -1)
+
+
+def residuals(
+    camera: Camera,
+    R_world_obj: np.ndarray,
+    t_world_obj: np.ndarray,
+    clicks: Clicks,
+    jacobian: bool = False,
+) -> tuple[np.ndarray, np.ndarray | None, bool]:
+    """Pixel residuals of the clicks at one pose, and optionally their Jacobian.
+
+    Parameters
+    ----------
+    camera : Camera
+    R_world_obj : array, shape (3, 3)
+    t_world_obj : array, shape (3,), metres
+    clicks : Clicks
+    jacobian : bool
+        Also return d(residuals)/dδ in the module's perturbation convention.
+
+    Returns
+    -------
+    r : array, shape (m,), pixels. Order: for each segment the signed distances of its two
+        clicked pixels to the projected model line, then for each point (u, v) projected minus
+        clicked. m = 2 S + 2 P.
+    J : array, shape (m, 6), pixels per (m, rad), or None.
+    feasible : bool: every clicked model edge has an endpoint in front of the camera (depth > 0)
+        and projects to a line (it does not pass through the optical centre), every clicked model
+        point is in front. Residuals of infeasible features are NaN.
+    """
+    C = camera.C
+    M = C[:, :3]
+    MR = M @ R_world_obj
+    b = M @ t_world_obj + C[:, 3]
+    S, P = clicks.n_segments, clicks.n_points
+    r = np.empty(2 * (S + P))
+    J = np.empty((2 * (S + P), 6)) if jacobian else None
+    feasible = True
+    if S:
+        h = clicks.edges_obj @ MR.T + b  # (S, 2, 3): homogeneous pixels C X̃ of the posed endpoints
+        hA, hB = h[:, 0], h[:, 1]
+        l = _cross(hA, hB)  # (S, 3) projected model line
+        g = np.hypot(l[:, 0], l[:, 1])
+        ok = (g > 1e-12 * np.sqrt((l * l).sum(axis=1))) & ((hA[:, 2] > 0) | (hB[:, 2] > 0))
+        if not ok.all():
+            feasible = False
+            g = np.where(ok, g, np.nan)
+        q = clicks.segs_h  # (S, 2, 3) homogeneous clicked pixels
+        lhat = l / g[:, None]
+        r_seg = (lhat[:, None, :] * q).sum(axis=-1)  # (S, 2) signed distances, pixels
+        r[: 2 * S] = r_seg.reshape(-1)
+        if jacobian:
+            # r = (hA × hB)·q / g with g = |l_xy|: dr/dhA = hB × p, dr/dhB = p × hA, where
+            # p = (q − r l̂_xy) / g; dh/dδ = [M, −M [X − t]×] for X = A, B (posed endpoints).
+            lxy = lhat.copy()
+            lxy[:, 2] = 0.0
+            p = (q - r_seg[..., None] * lxy[:, None, :]) / g[:, None, None]
+            alpha = _cross(hB[:, None, :], p) @ M  # (S, 2, 3) = Mᵀ dr/dhA
+            beta = _cross(p, hA[:, None, :]) @ M
+            X = clicks.edges_obj @ R_world_obj.T  # posed endpoints relative to the object's origin
+            J_seg = J[: 2 * S]
+            J_seg[:, :3] = (alpha + beta).reshape(-1, 3)
+            J_seg[:, 3:] = (_cross(X[:, None, 0], alpha) + _cross(X[:, None, 1], beta)).reshape(-1, 3)
+    if P:
+        h = clicks.points_obj @ MR.T + b  # (P, 3)
+        s = h[:, 2]
+        if not (s > 0).all():
+            feasible = False
+            s = np.where(s > 0, s, np.nan)
+        uv = h[:, :2] / s[:, None]
+        r[2 * S :] = (uv - clicks.points_uv).reshape(-1)
+        if jacobian:
+            # d(u, v)/dh = [[1, 0, −u], [0, 1, −v]] / s; dh/dδ = [M, −M [X − t]×].
+            G = (M[None, :2, :] - uv[:, :, None] * M[None, 2:3, :]) / s[:, None, None]  # (P, 2, 3)
+            X = clicks.points_obj @ R_world_obj.T
+            J_pt = J[2 * S :]
+            J_pt[:, :3] = G.reshape(-1, 3)
+            J_pt[:, 3:] = _cross(X[:, None, :], G).reshape(-1, 3)
+    return r, J, feasible
+
+
+def distance_cost(C, R, t, edges, segs, points_obj, points_uv) -> float | None:
+    """Σ of squared pixel distances of the clicks to the projected *finite* model segments and
+    points at pose (R, t), or None when a clicked model edge (both endpoints) or point is behind
+    the camera. Plain Python on nested lists (C (3, 4), R (3, 3), t (3,), edges (S, 2, 3),
+    segs (S, 2, 2), points_obj (P, 3), points_uv (P, 2)): it ranks P3L candidates in microseconds.
+
+    Unlike the measurement model (distance across the infinite projected line), beyond a
+    segment's ends the distance is to the nearer end: poses that put the edges on the right lines
+    but elsewhere along them (the other P3L solutions) score worse. This is the paper's "test of
+    distances between 2D points of image obtained and initial image" that picks the solution. An
+    edge with one endpoint behind the camera is measured to its infinite image line.
+    """
+    # rows of [C[:, :3] R | C[:, :3] t + C[:, 3]]: h = C (R X + t) for X in the object frame.
+    rows = []
+    for C0, C1, C2, C3 in C:
+        rows.append((
+            C0 * R[0][0] + C1 * R[1][0] + C2 * R[2][0],
+            C0 * R[0][1] + C1 * R[1][1] + C2 * R[2][1],
+            C0 * R[0][2] + C1 * R[1][2] + C2 * R[2][2],
+            C0 * t[0] + C1 * t[1] + C2 * t[2] + C3,
+        ))
+
+    def project(X):
+        x0, x1, x2 = X
+        return [r0 * x0 + r1 * x1 + r2 * x2 + r3 for r0, r1, r2, r3 in rows]
+
+    cost = 0.0
+    for (a, b), ((qu1, qv1), (qu2, qv2)) in zip(edges, segs):
+        ha, hb = project(a), project(b)
+        if ha[2] <= 0.0 and hb[2] <= 0.0:
+            return None
+        if ha[2] > 0.0 and hb[2] > 0.0:
+            au, av = ha[0] / ha[2], ha[1] / ha[2]
+            du, dv = hb[0] / hb[2] - au, hb[1] / hb[2] - av
+            dd = du * du + dv * dv + 1e-300
+            for qu, qv in ((qu1, qv1), (qu2, qv2)):
+                lam = min(max(((qu - au) * du + (qv - av) * dv) / dd, 0.0), 1.0)
+                eu, ev = qu - au - lam * du, qv - av - lam * dv
+                cost += eu * eu + ev * ev
+        else:
+            l0 = ha[1] * hb[2] - ha[2] * hb[1]
+            l1 = ha[2] * hb[0] - ha[0] * hb[2]
+            l2 = ha[0] * hb[1] - ha[1] * hb[0]
+            g2 = l0 * l0 + l1 * l1 + 1e-300
+            cost += ((l0 * qu1 + l1 * qv1 + l2) ** 2 + (l0 * qu2 + l1 * qv2 + l2) ** 2) / g2
+    for X, (qu, qv) in zip(points_obj, points_uv):
+        h = project(X)
+        if h[2] <= 0.0:
+            return None
+        cost += (h[0] / h[2] - qu) ** 2 + (h[1] / h[2] - qv) ** 2
+    return cost
+
+
+def pose_distance_cost(camera: Camera, T_world_obj: np.ndarray, clicks: Clicks) -> float:
+    """RMS pixel distance of the clicks to the projected finite model segments and points at a
+    pose (``distance_cost``), inf when a clicked feature is behind the camera."""
+    T = np.asarray(T_world_obj, dtype=float)
+    cost = distance_cost(
+        camera.C.tolist(),
+        T[:3, :3].tolist(),
+        T[:3, 3].tolist(),
+        clicks.edges_obj.tolist(),
+        clicks.segs_uv.tolist(),
+        clicks.points_obj.tolist(),
+        clicks.points_uv.tolist(),
+    )
+    n = 2 * clicks.n_segments + clicks.n_points
+    return float("inf") if cost is None else float(np.sqrt(cost / max(n, 1)))
