@@ -21,7 +21,6 @@ from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
-from matplotlib.path import Path as PolygonPath
 
 from core.camera import Camera, as_uv
 from core.geometry import Plane, fit_plane_tls
@@ -39,6 +38,7 @@ __all__ = [
     "profile_scan",
     "face_patch_scan",
     "grid_in_polygon",
+    "inside_polygon",
 ]
 
 
@@ -227,21 +227,45 @@ def profile_scan(
     return partial(n)
 
 
+def inside_polygon(polygon_uv: np.ndarray, uv: np.ndarray, margin_px: float = 1e-6) -> np.ndarray:
+    """Mask (N,) of pixels uv (N, 2) strictly inside a polygon (K, 2): even-odd rule, and farther
+    than margin_px from every side (points on the outline are outside)."""
+    P = np.asarray(polygon_uv, dtype=float)
+    Q = np.asarray(uv, dtype=float).reshape(-1, 2)
+    A, B = P, np.roll(P, -1, axis=0)
+    u, v = Q[:, 0:1], Q[:, 1:2]
+    crosses = (A[:, 1] > v) != (B[:, 1] > v)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u_cross = A[:, 0] + (v - A[:, 1]) * (B[:, 0] - A[:, 0]) / (B[:, 1] - A[:, 1])
+    inside = (np.sum(crosses & (u < u_cross), axis=1) % 2) == 1
+    AB = B - A
+    t = np.clip(((Q[:, None, :] - A) * AB).sum(-1) / np.maximum((AB * AB).sum(-1), 1e-300), 0.0, 1.0)
+    gap = np.linalg.norm(Q[:, None, :] - (A + t[..., None] * AB), axis=-1).min(axis=1)
+    return inside & (gap > margin_px)
+
+
 def grid_in_polygon(polygon_uv: np.ndarray, spacing_px: float) -> np.ndarray:
-    """Pixels (N, 2) of a square grid of pitch spacing_px inside a polygon (K, 2), rows in serpentine order."""
+    """Pixels (N, 2) of a square grid of pitch spacing_px inside a polygon (K, 2), rows in serpentine order.
+
+    The grid is centred on the polygon's bounding box, its outer points half a pitch or more
+    inside the box; those inside the polygon are kept.
+    """
     poly = as_uv(np.asarray(polygon_uv, dtype=float))
     if len(poly) < 3:
         raise ValueError(f"a polygon needs at least 3 vertices, got {len(poly)}")
     if not spacing_px > 0:
         raise ValueError(f"spacing_px must be positive, got {spacing_px}")
     lo, hi = poly.min(axis=0), poly.max(axis=0)
-    us = np.arange(lo[0] + (hi[0] - lo[0]) % spacing_px / 2, hi[0] + 1e-9, spacing_px)
-    vs = np.arange(lo[1] + (hi[1] - lo[1]) % spacing_px / 2, hi[1] + 1e-9, spacing_px)
-    path = PolygonPath(poly)
+
+    def centred(a: float, b: float) -> np.ndarray:  # cell centres: half a pitch or more from the box's sides
+        k = max(1, int(np.floor((b - a) / spacing_px)))
+        return a + ((b - a) - (k - 1) * spacing_px) / 2 + spacing_px * np.arange(k)
+
+    us, vs = centred(lo[0], hi[0]), centred(lo[1], hi[1])
     rows = []
     for j, v in enumerate(vs):
         row = np.column_stack([us, np.full(len(us), v)])
-        row = row[path.contains_points(row)]
+        row = row[inside_polygon(poly, row)]
         rows.append(row[::-1] if j % 2 else row)
     return np.vstack(rows) if rows else np.zeros((0, 2))
 
@@ -294,7 +318,6 @@ def face_patch_scan(
     targets = grid_in_polygon(poly, spacing_px)
     if len(targets) == 0:
         raise ValueError(f"no grid pixel of pitch {spacing_px} px falls inside the polygon; use a smaller spacing_px")
-    path = PolygonPath(poly)
     n = len(targets)
     t0 = time.monotonic()
     pan = np.full(n, np.nan)
@@ -342,6 +365,6 @@ def face_patch_scan(
             ranges[i], spreads[i] = m.range_m, m.spread_m
             X = beam_point(T_world_turret, pan[i], tilt[i], ranges[i])
             uv_hit[i] = camera.project(X[None])[0]
-            inside[i] = bool(path.contains_points(uv_hit[i][None])[0])
+            inside[i] = bool(inside_polygon(poly, uv_hit[i])[0])
         _report(progress, i + 1, n, f"face patch scan: beam {i + 1} of {n}")
     return partial(n)

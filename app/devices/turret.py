@@ -374,23 +374,25 @@ class Turret(LineDriver):
         self.check_limits(pan, tilt)
         self._ensure_speed_known()
         motion_s = self._motion_time_s(pan, tilt)
-        budget = self.attempt_timeout_s + (motion_s + self.motion_margin_s if wait else 0.0)
+        budget = 5 * self.attempt_timeout_s + (motion_s + self.motion_margin_s if wait else 0.0)  # one attempt's worst case
 
         def move(_deadline: float) -> tuple[int, int]:
-            deadline = time.monotonic() + budget
+            def soon() -> float:
+                return time.monotonic() + self.attempt_timeout_s
+
             self._maybe_moving = True
             if pan is not None:
-                self._ask(f"PP{pan}", "ack", deadline)
+                self._ask(f"PP{pan}", "ack", soon())
             if tilt is not None:
-                self._ask(f"TP{tilt}", "ack", deadline)
+                self._ask(f"TP{tilt}", "ack", soon())
             if not wait:
                 return (pan, tilt)
-            self._ask("A", "ack", deadline)
+            self._ask("A", "ack", soon() + motion_s + self.motion_margin_s)
             self._maybe_moving = False
             want = (pan, tilt)
-            got = self._read_axes(deadline, pan is not None, tilt is not None)
+            got = self._read_axes(soon(), pan is not None, tilt is not None)
             if got != want:  # a garbled digit, or the unit really stopped elsewhere: read again
-                again = self._read_axes(deadline, pan is not None, tilt is not None)
+                again = self._read_axes(soon(), pan is not None, tilt is not None)
                 if again != want:
                     if again == got:
                         raise TurretError(f"turret stopped at {got} steps instead of {want}", command="A")

@@ -14,7 +14,7 @@ from app.scene import default_scene_path, load_scene
 from core.rangefinder import aim
 
 FAST_SITE = dict(measure_delay_s=0.002, delay_per_m_s=0.0, no_target_delay_s=0.01, rangefinder_baud=0, turret_baud=0, seed=0)
-FAST_DRIVER = dict(attempt_timeout_s=0.25, retries=2, reconnect_timeout_s=1.5)
+FAST_DRIVER = dict(attempt_timeout_s=0.25, retries=2, reconnect_timeout_s=1.0)
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,218 @@
+"""The DLS driver against its emulator: right values, device errors, and every fault of the line.
+
+Each fault either leaves the measured value exact (the emulator is noiseless here, so the right
+value is known to 0.1 mm) or raises a clear error; none returns a wrong value.
+"""
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from app.devices.errors import (
+    AmbiguousMeasurementError,
+    DeviceDisconnected,
+    DeviceTimeout,
+    NoTargetError,
+    ProtocolError,
+    SignalTooStrongError,
+)
+from app.devices.faults import Fault
+from app.devices.rangefinder import RangeFinder
+
+from .conftest import FAST_DRIVER, aim_steps, box_point, facing_face
+
+
+@pytest.fixture
+def bench(workcell, make_site, drivers):
+    """A noiseless site with the beam on the unknown box's facing face: (site, rf, turret, exact range)."""
+    site, rf_url, tu_url = make_site()
+    rf, tu = drivers(rf_url, tu_url)
+    X, _, _ = facing_face(workcell)
+    tu.move_to_steps(*aim_steps(workcell, X))
+    dist, body = site.rangefinder.true_range(time.monotonic())
+    assert body == "unknown_box"
+    return site, rf, tu, round(dist, 4)
+
+
+def test_measure_returns_the_true_range_to_a_tenth_of_a_millimetre(bench):
+    site, rf, tu, expected = bench
+    assert rf.measure() == pytest.approx(expected, abs=1e-9)
+    assert rf.stats["timeouts"] == rf.stats["corrupt"] == rf.stats["resyncs"] == 0
+
+
+RECOVERED = {
+    "drop": Fault("drop", match=b"g0g"),
+    "late": Fault("late", match=b"g0g", delay_s=0.4),
+    "truncated, line left open": Fault("truncate", match=b"g0g"),
+    "truncated, line ended": Fault("truncate", match=b"g0g", at=9, keep_terminator=True),
+    "split": Fault("split", match=b"g0g", delay_s=0.05),
+    "junk prefix": Fault("junk", match=b"g0g"),
+    "junk that looks like a reply": Fault("junk", match=b"g0g", data=b"g0g+9"),
+    "garbled digit to letter": Fault("garble", match=b"g0g", at=7, data=b"Z"),
+    "garbled leading digit (implausible)": Fault("garble", match=b"g0g", at=4, data=b"9"),
+    "garbled tag": Fault("garble", match=b"g0g", at=2, data=b"q"),
+    "garbled sign": Fault("garble", match=b"g0g", at=3, data=b"-"),
+    "unsolicited line": Fault("unsolicited", match=b"g0g"),
+    "unknown error code": Fault("error", match=b"g0g", data=b"g0@E299\r\n"),
+    "unplug and replug": Fault("unplug", match=b"g0g", delay_s=0.2),
+}
+
+
+@pytest.mark.parametrize("fault", list(RECOVERED.values()), ids=list(RECOVERED))
+def test_each_line_fault_still_gives_the_right_value(bench, fault):
+    site, rf, tu, expected = bench
+    site.rangefinder.faults.push(fault)
+    assert rf.measure() == pytest.approx(expected, abs=1e-9)
+    assert [k for k, _ in site.rangefinder.faults.applied] == [fault.kind]  # the fault did hit
+    assert rf.measure() == pytest.approx(expected, abs=1e-9)  # and the line is clean afterwards
+
+
+def test_faults_that_need_no_retry_cost_none(bench):
+    site, rf, tu, expected = bench
+    for kind in ("split", "junk", "unsolicited"):
+        site.rangefinder.faults.push(Fault(kind, match=b"g0g", delay_s=0.02))
+        assert rf.measure() == pytest.approx(expected, abs=1e-9)
+    assert rf.stats["timeouts"] == rf.stats["corrupt"] == rf.stats["resyncs"] == 0
+
+
+def test_faults_that_need_a_retry_resynchronise_first(bench):
+    site, rf, tu, expected = bench
+    site.rangefinder.faults.push(Fault("drop", match=b"g0g"))
+    assert rf.measure() == pytest.approx(expected, abs=1e-9)
+    assert rf.stats["timeouts"] >= 1 and rf.stats["resyncs"] >= 1
+    assert "s0c" in site.rangefinder.commands_seen  # stale replies flushed with sNc before retrying
+
+
+def test_a_late_reply_is_never_taken_for_the_next_measurement(workcell, bench):
+    site, rf, tu, first = bench
+    site.rangefinder.faults.push(Fault("late", match=b"g0g", delay_s=0.5))
+    assert rf.measure() == pytest.approx(first, abs=1e-9)
+    table = workcell.body("table")
+    top_centre = box_point(workcell, "table", table.model.bounds()[1] * [0, 0, 1] + table.model.bounds().mean(axis=0) * [1, 1, 0])
+    tu.move_to_steps(*aim_steps(workcell, top_centre))  # somewhere else: another range
+    second = round(site.rangefinder.true_range(time.monotonic())[0], 4)
+    assert abs(second - first) > 0.05
+    assert rf.measure() == pytest.approx(second, abs=1e-9)
+
+
+def test_device_errors_raise_their_exceptions(workcell, bench):
+    site, rf, tu, expected = bench
+    site.rangefinder.faults.push(Fault("error", match=b"g0g"))  # the emulator's default: 260
+    with pytest.raises(AmbiguousMeasurementError, match="260"):
+        rf.measure()
+    site.rangefinder.faults.push(Fault("error", match=b"g0g", data=b"g0@E256\r\n"))
+    with pytest.raises(SignalTooStrongError) as info:
+        rf.measure()
+    assert info.value.code == 256 and info.value.device == "rangefinder"
+    tu.move_to_steps(0, 600)  # up over the table: nothing to hit
+    with pytest.raises(NoTargetError):
+        rf.measure()
+
+
+def test_the_same_corruption_on_every_attempt_raises_a_protocol_error(bench):
+    site, rf, tu, expected = bench
+    site.rangefinder.faults.push(*[Fault("garble", match=b"g0g", at=6, data=b"?")] * (rf.retries + 1))
+    with pytest.raises(ProtocolError, match="gave up"):
+        rf.measure()
+
+
+def test_plausibility_limits_reject_a_well_formed_distance(bench):
+    site, rf, tu, expected = bench
+    strict = RangeFinder(rf.url, plausible_range_m=(0.05, expected - 0.1), **FAST_DRIVER)
+    try:
+        with pytest.raises(ProtocolError, match="implausible"):
+            strict.measure()
+    finally:
+        strict.close()
+
+
+def test_a_garbled_digit_that_still_parses_is_an_outlier_of_n_shots(bench):
+    site, rf, tu, expected = bench
+    site.rangefinder.faults.push(Fault("garble", match=b"g0g", at=8, data=b"7" if str(int(expected * 1e4)).zfill(8)[4] != "7" else b"3"))
+    m = rf.measure_n(5)
+    assert m.range_m == pytest.approx(expected, abs=1e-9)
+    assert m.outliers.sum() == 1 and m.n_valid == 5 and m.n_kept == 4
+    assert abs(m.shots_m[m.outliers][0] - expected) > 0.05
+    assert m.spread_m == pytest.approx(0.0, abs=1e-9)
+    assert m.shots_m.shape == (5,) and m.outliers.shape == (5,)
+
+
+def test_measure_n_counts_misses_and_reports_spread(workcell, make_site, drivers):
+    site, rf_url, tu_url = make_site(sigma_m=0.005)
+    rf, tu = drivers(rf_url, tu_url)
+    tu.move_to_steps(*aim_steps(workcell, facing_face(workcell)[0]))
+    truth = site.rangefinder.true_range(time.monotonic())[0]
+    site.rangefinder.faults.push(Fault("error", match=b"g0g", data=b"g0@E255\r\n"))
+    m = rf.measure_n(12)
+    assert m.n_valid == 11 and np.isnan(m.shots_m).sum() == 1
+    assert abs(m.range_m - truth) < 0.006 and 0.002 < m.spread_m < 0.009
+    tu.move_to_steps(0, 600)
+    with pytest.raises(NoTargetError, match="none of 3"):
+        rf.measure_n(3)
+    with pytest.raises(ValueError, match="positive integer"):
+        rf.measure_n(0)
+
+
+def test_deadline_is_kept_when_the_device_never_answers(bench):
+    site, rf, tu, expected = bench
+    site.rangefinder.faults.set_rates({"drop": 1.0})
+    t0 = time.monotonic()
+    with pytest.raises(DeviceTimeout, match="no valid reply"):
+        rf.measure(timeout_s=0.6)
+    assert time.monotonic() - t0 < 0.6 + 0.3
+
+
+def test_a_device_that_stays_unplugged_raises_device_disconnected(bench):
+    site, rf, tu, expected = bench
+    site.rangefinder.unplug(math.inf)
+    time.sleep(0.05)
+    t0 = time.monotonic()
+    with pytest.raises(DeviceDisconnected, match="could not be opened"):
+        rf.measure()
+    assert time.monotonic() - t0 < rf.reconnect_timeout_s + 3 * rf.attempt_timeout_s + 0.5
+    site.rangefinder.replug()
+    time.sleep(0.05)
+    assert rf.measure() == pytest.approx(expected, abs=1e-9)  # the next call reconnects
+    assert rf.stats["reconnects"] >= 1
+
+
+def test_other_commands(bench):
+    site, rf, tu, expected = bench
+    assert rf.temperature_c() == pytest.approx(24.0)
+    rf.laser_on()
+    assert site.rangefinder.laser_on
+    rf.laser_off()
+    assert not site.rangefinder.laser_on
+    rf.set_user_offset_m(-0.0125)
+    assert rf.user_offset_m() == pytest.approx(-0.0125)
+    assert rf.measure() == pytest.approx(expected - 0.0125, abs=1e-9)
+    rf.set_user_offset_m(0.0)
+    rf.stop()
+    with pytest.raises(ValueError, match="8-digit"):
+        rf.set_user_offset_m(1e5)
+
+
+def test_bad_arguments_are_refused():
+    with pytest.raises(ValueError, match="device_id"):
+        RangeFinder("mcit://x", device_id=12, connect=False)
+    with pytest.raises(ValueError, match="plausible_range_m"):
+        RangeFinder("mcit://x", plausible_range_m=(5.0, 1.0), connect=False)
+    with pytest.raises(ValueError, match="timeouts"):
+        RangeFinder("mcit://x", attempt_timeout_s=0.0, connect=False)
+
+
+def test_through_a_real_pty_with_faults_and_a_replug(workcell, make_site, drivers, tmp_path):
+    site, rf_path, tu_path = make_site(transport="pty", links=(tmp_path / "rf", tmp_path / "tu"), rangefinder_baud=19200, turret_baud=9600)
+    assert rf_path == str(tmp_path / "rf")
+    rf, tu = drivers(rf_path, tu_path)
+    tu.move_to_steps(*aim_steps(workcell, facing_face(workcell)[0]))
+    expected = round(site.rangefinder.true_range(time.monotonic())[0], 4)
+    assert rf.measure() == pytest.approx(expected, abs=1e-9)
+    site.rangefinder.faults.push(Fault("junk", match=b"g0g"), Fault("unplug", match=b"g0g", delay_s=0.2), Fault("garble", match=b"g0g", at=5, data=b"x"))
+    for _ in range(3):
+        assert rf.measure() == pytest.approx(expected, abs=1e-9)
+    assert rf.stats["reconnects"] >= 1 and (tmp_path / "rf").is_symlink()
+    assert [k for k, _ in site.rangefinder.faults.applied] == ["junk", "unplug", "garble"]
+    assert site.rangefinder.port.device.startswith("/dev/")  # a new pty behind the same link

@@ -1,0 +1,217 @@
+"""The PTU-D46 driver against its emulator: units, moves, limits, and every fault of the line.
+
+Each fault either leaves the turret where it was told to go (read back from the emulator's own
+state, not only from the driver) or raises a clear error; a relative move is never re-sent.
+"""
+
+import math
+import time
+
+import pytest
+
+from app.devices.errors import DeviceDisconnected, DeviceTimeout, MotionUnconfirmedError, ProtocolError, TurretError, TurretLimitError
+from app.devices.faults import Fault
+from app.devices.turret import Turret
+
+from .conftest import FAST_DRIVER
+
+ACK = b"*\r\n"
+
+
+@pytest.fixture
+def bench(make_site, drivers):
+    site, rf_url, tu_url = make_site()
+    rf, tu = drivers(rf_url, tu_url)
+    tu.speed_steps_s()  # known speed: the replies of a move are then PP, TP, A, PP?, TP?
+    return site, tu
+
+
+def emulated_steps(site):
+    """Where the emulated head really is (steps), from the emulator's own state."""
+    return tuple(int(round(v)) for v in site.turret.mount.steps_at())
+
+
+def test_handshake_reads_resolution_and_limits_and_converts_units(workcell, bench):
+    site, tu = bench
+    assert tu.resolution_arcsec == (pytest.approx(185.1428), pytest.approx(185.1428))
+    assert tu.pan_step_rad == pytest.approx(workcell.turret.step_rad, rel=1e-9)
+    assert tu.pan_limits_steps == tuple(workcell.turret.pan_limits_steps)
+    assert tu.tilt_limits_steps == tuple(workcell.turret.tilt_limits_steps)
+    assert tu.steps_to_rad(100, -50) == (pytest.approx(100 * tu.pan_step_rad), pytest.approx(-50 * tu.tilt_step_rad))
+    assert tu.rad_to_steps(*tu.steps_to_rad(123, -45)) == (123, -45)
+    assert tu.pan_limits_rad[1] == pytest.approx(3090 * tu.pan_step_rad)
+    assert site.turret.commands_seen[:2] == ["ED", "FT"]  # echo off, terse feedback first
+
+
+def test_absolute_moves_in_steps_radians_and_degrees(bench):
+    site, tu = bench
+    assert tu.move_to_steps(400, -300) == (400, -300)
+    assert emulated_steps(site) == (400, -300) and tu.position_steps() == (400, -300)
+    pan, tilt = tu.move_to(0.1, -0.05)
+    assert emulated_steps(site) == tu.rad_to_steps(0.1, -0.05)
+    assert pan == pytest.approx(0.1, abs=tu.pan_step_rad / 2) and tilt == pytest.approx(-0.05, abs=tu.tilt_step_rad / 2)
+    assert tu.move_to_deg(10.0, 5.0) == (pytest.approx(10.0, abs=0.03), pytest.approx(5.0, abs=0.03))
+    assert tu.position_deg() == (pytest.approx(10.0, abs=0.03), pytest.approx(5.0, abs=0.03))
+    mount_pan, mount_tilt = site.turret.mount.angles_rad()
+    assert math.degrees(mount_pan) == pytest.approx(10.0, abs=0.03) and math.degrees(mount_tilt) == pytest.approx(5.0, abs=0.03)
+    tu.move_to_steps(tilt=100)  # one axis only
+    assert emulated_steps(site)[1] == 100 and emulated_steps(site)[0] == tu.rad_to_steps(math.radians(10.0), 0)[0]
+
+
+def test_moves_take_the_time_the_speed_says(bench):
+    site, tu = bench
+    tu.set_speed_steps_s(2000)
+    assert tu.speed_steps_s() == (2000, 2000)
+    tu.move_to_steps(0, 0)
+    t0 = time.monotonic()
+    tu.move_to_steps(600, 0)
+    assert time.monotonic() - t0 >= 600 / 2000 - 0.01
+    assert tu.move_to_steps(0, 0, wait=False) == (0, 0)
+    tu.wait()
+    assert emulated_steps(site) == (0, 0)
+
+
+def test_limits_are_refused_before_sending(bench):
+    site, tu = bench
+    sent = len(site.turret.commands_seen)
+    with pytest.raises(TurretLimitError, match="beyond the limits"):
+        tu.move_to_steps(3091, 0)
+    with pytest.raises(ValueError):  # a TurretLimitError is also a ValueError: bad input
+        tu.move_to_deg(0.0, -60.0)
+    with pytest.raises(ValueError, match="whole number"):
+        tu.move_to_steps(1.5, 0)
+    assert len(site.turret.commands_seen) == sent
+
+
+def test_relative_moves(bench):
+    site, tu = bench
+    tu.move_to_steps(100, 100)
+    assert tu.move_by_steps(50, -20) == (150, 80)
+    assert emulated_steps(site) == (150, 80)
+    assert tu.move_by_deg(1.0, 0.0)[0] == pytest.approx(150 * math.degrees(tu.pan_step_rad) + 1.0, abs=0.03)
+    with pytest.raises(TurretLimitError):
+        tu.move_by_steps(5000, 0)
+
+
+def test_a_lost_relative_move_confirmation_is_an_error_and_never_resent(bench):
+    site, tu = bench
+    tu.move_to_steps(0, 0)
+    site.turret.faults.push(Fault("drop", match=ACK))
+    with pytest.raises(MotionUnconfirmedError, match="not retried"):
+        tu.move_by_steps(200, 0)
+    assert site.turret.commands_seen.count("PO200") == 1
+    assert tu.position_steps()[0] in (0, 200)  # the driver asks; here the move did happen
+    assert emulated_steps(site)[0] == 200
+
+
+RECOVERED = {
+    "drop": Fault("drop", match=ACK),
+    "late": Fault("late", match=ACK, delay_s=0.4),
+    "truncated": Fault("truncate", match=ACK),
+    "split": Fault("split", match=ACK, at=1, delay_s=0.05),
+    "junk prefix": Fault("junk", match=ACK),
+    "junk with a star": Fault("junk", match=ACK, data=b"x* 5!"),
+    "garbled ack": Fault("garble", match=ACK, at=0, data=b"#"),
+    "unsolicited limit line": Fault("unsolicited", match=ACK),
+    "unplug and replug": Fault("unplug", match=ACK, delay_s=0.2),
+}
+
+
+@pytest.mark.parametrize("fault", list(RECOVERED.values()), ids=list(RECOVERED))
+def test_each_line_fault_on_an_absolute_move_still_gets_there(bench, fault):
+    site, tu = bench
+    tu.move_to_steps(0, 0)
+    site.turret.faults.push(fault)
+    assert tu.move_to_steps(-700, 250) == (-700, 250)
+    assert emulated_steps(site) == (-700, 250)
+    assert [k for k, _ in site.turret.faults.applied] == [fault.kind]
+
+
+POSITION_FAULTS = {
+    "garbled digit": Fault("garble", match=b"* -7", at=3, data=b"1"),
+    "truncated but terminated": Fault("truncate", match=b"* -7", at=3, keep_terminator=True),
+    "late": Fault("late", match=b"* -7", delay_s=0.4),
+    "junk with digits": Fault("junk", match=b"* -7", data=b"* 12"),
+}
+
+
+@pytest.mark.parametrize("fault", list(POSITION_FAULTS.values()), ids=list(POSITION_FAULTS))
+def test_each_line_fault_on_a_position_query_still_reads_right(bench, fault):
+    site, tu = bench
+    tu.move_to_steps(-777, 0)
+    site.turret.faults.push(fault)
+    assert tu.position_steps() == (-777, 0)
+    assert [k for k, _ in site.turret.faults.applied] == [fault.kind]
+
+
+def test_unsolicited_limit_lines_are_recorded(bench):
+    site, tu = bench
+    site.turret.faults.push(Fault("unsolicited", match=ACK, data=b"!T!P\r\n"))
+    tu.move_to_steps(10, 10)
+    assert [axis for _, axis in tu.limit_events] == ["T", "P"]
+
+
+def test_device_errors_raise_turret_errors(bench):
+    site, tu = bench
+    site.turret.faults.push(Fault("error", match=ACK))
+    with pytest.raises(TurretError, match="Illegal command"):
+        tu.move_to_steps(10, 10)
+    site.turret.faults.push(Fault("error", match=ACK, data=b"! Maximum allowable Pan position exceeded\r\n"))
+    with pytest.raises(TurretLimitError):
+        tu.move_to_steps(20, 10)
+
+
+def test_garbled_handshake_values_are_asked_again(make_site):
+    site, rf_url, tu_url = make_site()
+    site.turret.faults.push(Fault("garble", match=b"185", at=4, data=b"9"))  # * 195.1428 once
+    tu = Turret(tu_url, **FAST_DRIVER)
+    try:
+        assert tu.resolution_arcsec == (pytest.approx(185.1428), pytest.approx(185.1428))
+        assert site.turret.commands_seen.count("PR") >= 3
+    finally:
+        tu.close()
+
+
+def test_the_speed_survives_a_replug(bench):
+    site, tu = bench
+    tu.set_speed_steps_s(3000, 2500)
+    site.turret.unplug(0.2)  # the unit powers up again with its default speed
+    time.sleep(0.3)
+    assert tu.move_to_steps(100, 100) == (100, 100)
+    assert tu.stats["reconnects"] >= 1
+    assert site.turret.speed == {"P": 3000.0, "T": 2500.0}
+
+
+def test_deadlines_and_a_unit_that_stays_away(bench):
+    site, tu = bench
+    site.turret.faults.set_rates({"drop": 1.0})
+    t0 = time.monotonic()
+    with pytest.raises(DeviceTimeout):
+        tu.position_steps(timeout_s=0.5)
+    assert time.monotonic() - t0 < 0.5 + 0.3
+    site.turret.faults.set_rates({})
+    site.turret.unplug(math.inf)
+    time.sleep(0.05)
+    with pytest.raises(DeviceDisconnected):
+        tu.position_steps()
+
+
+def test_home_and_halt(bench):
+    site, tu = bench
+    tu.move_to_steps(300, 300)
+    tu.home()
+    assert emulated_steps(site) == (0, 0) and tu.position_steps() == (0, 0)
+    tu.move_to_steps(2000, 0, wait=False)
+    time.sleep(0.05)
+    tu.halt()
+    stopped = emulated_steps(site)[0]
+    assert 0 < stopped < 2000
+    time.sleep(0.05)
+    assert emulated_steps(site)[0] == stopped
+
+
+def test_the_same_corruption_every_time_is_a_protocol_error(bench):
+    site, tu = bench
+    site.turret.faults.set_rates({"garble": 1.0})
+    with pytest.raises((ProtocolError, DeviceTimeout), match="gave up"):
+        tu.position_steps()
