@@ -18,6 +18,9 @@ def build_parser() -> argparse.ArgumentParser:
     from app.ui.serve import add_serve_parser  # argparse only: viser loads when the command runs
 
     add_serve_parser(sub)
+    from app.scene_cli import add_scene_parsers  # argparse only: the renderer loads when the command runs
+
+    add_scene_parsers(sub)
     return parser
 
 

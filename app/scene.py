@@ -1,7 +1,8 @@
 """Scene files: a site's camera, turret, range finder, table and objects, with their ground truth.
 
 A scene is a folder ``scenes/<name>/`` holding ``scene.json`` and the files it references (a
-video, ``.cao`` models, meshes). The format (``"format": "mcit-scene/1"``)::
+video, ``.cao`` models, meshes, an intrinsics file). The format (``"format": "mcit-scene/1"``;
+docs/scene-format.md is the full reference)::
 
     {
       "format": "mcit-scene/1",
@@ -9,7 +10,8 @@ video, ``.cao`` models, meshes). The format (``"format": "mcit-scene/1"``)::
       "description": "free text",
       "camera": {"width": 512, "height": 256,
                  "C": [[...4], [...4], [...4]]}                   # the global model, or
-                 "K": [[...3] x3], "T_world_cam": <pose>}          # intrinsics + camera pose
+                 "K": [[...3] x3], "T_world_cam": <pose>}          # intrinsics + camera pose, or
+                 "intrinsics_file": "cam.xml", "T_world_cam": <pose>}   # ViSP .xml / OpenCV .yml
       "turret": {"T_world_turret": <pose>, "resolution_arcsec": 185.1428,
                  "pan_limits_steps": [-3090, 3090], "tilt_limits_steps": [-907, 604],
                  "speed_steps_s": 1000},
@@ -17,13 +19,16 @@ video, ``.cao`` models, meshes). The format (``"format": "mcit-scene/1"``)::
       "bodies": [
         {"name": "table", "kind": "table", "status": "known",
          "model": {"box": [1.6, 1.0, 0.05]}, "pose": <pose>},
-        {"name": "box1", "kind": "box", "status": "known" | "unknown",
+        {"name": "box1", "kind": "box", "status": "known" | "unknown" | "scenery",
          "model": {"box": [sx, sy, sz]} | {"cylinder": [r, h]} | {"cone": [r_bottom, r_top, h]}
                 | {"cao": "file.cao"} | {"mesh": "file.stl"} | {"brep": <BRep.to_dict()>},
          "pose": <pose>,
-         "motion": [{"t": 2.0, "pose": <pose>}, ...]}            # optional keyframes, seconds
+         "motion": [{"t": 2.0, "pose": <pose>}, ...],            # optional keyframes, seconds
+         "appearance": {"albedo": 0.7, "texture": 0.03, "texture_scale_m": 0.04}}   # optional
       ],
-      "video": {"file": "video.mp4"}                              # optional, relative to the folder
+      "video": {"file": "video.mp4", "fps": 12, "duration_s": 28},   # optional
+      "render": {"light_dir": [-0.4, -0.5, 1], "ambient": 0.35, "noise_sigma": 2.0,
+                 "blur_sigma_px": 0.5, "seed": 8, "aa_samples": 89, "sky": 0.2}   # optional
     }
 
 A ``<pose>`` is either a 4×4 matrix (rows) or ``{"xyz": [x, y, z], "rpy_deg": [roll, pitch, yaw]}``
@@ -31,10 +36,14 @@ with ``R = Rz(yaw) Ry(pitch) Rx(roll)``. Between motion keyframes a body moves l
 translation and along the geodesic in rotation; before the first keyframe it is at ``pose``
 (time 0), after the last it stays there.
 
-"known" bodies start in the database with their true pose at t = 0; "unknown" ones exist only in
-the truth (the emulated range finder sees them; the operator must model them).
+Status: "known" bodies start in the database with their true pose at t = 0; "unknown" ones exist
+only in the truth (the emulated range finder sees them; the operator must model them);
+"scenery" bodies (floor, walls) are seen by the camera and the range finder but never enter the
+database.
 
-Errors: ``SceneError`` (a ``ValueError``) naming the file and the field that is wrong.
+Every block is checked: a missing or malformed field, or a key the format does not know (a
+typo), raises ``SceneError`` (a ``ValueError``) naming the file and the field. Keys starting with
+``_`` are comments and are ignored.
 """
 
 from __future__ import annotations
@@ -49,22 +58,28 @@ import numpy as np
 from core.brep import BRep
 from core.camera import Camera
 from core.rangefinder import RangeFinderSpec
-from core.transforms import check_T, exp_so3, log_so3, make_T, rot_x, rot_y, rot_z
+from core.transforms import check_T, exp_so3, invert_T, log_so3, make_T, rot_x, rot_y, rot_z
 
 __all__ = [
     "SceneError",
+    "Appearance",
     "Body",
     "TurretSpec",
+    "VideoSpec",
+    "RenderSpec",
     "Scene",
     "load_scene",
+    "scene_from_dict",
     "parse_pose",
     "pose_to_json",
     "scenes_dir",
     "default_scene_path",
     "MODEL_LOADERS",
+    "STATUSES",
 ]
 
 FORMAT = "mcit-scene/1"
+STATUSES = ("known", "unknown", "scenery")
 
 # Readers for file-based models ("cao", "mesh"): name → fn(path: Path) -> BRep. The model-import
 # module registers itself here so this module does not depend on it.
@@ -85,19 +100,67 @@ def default_scene_path() -> Path:
     return scenes_dir() / "workcell"
 
 
+# ---------------------------------------------------------------------- small validators
+def _keys(d: Any, allowed: tuple[str, ...], where: str) -> dict:
+    """``d`` must be an object whose keys are in ``allowed`` (``_comments`` are ignored)."""
+    if not isinstance(d, dict):
+        raise SceneError(f"{where}: expected an object {{...}}, got {type(d).__name__}")
+    unknown = sorted(k for k in d if k not in allowed and not str(k).startswith("_"))
+    if unknown:
+        raise SceneError(f"{where}: unknown field(s) {unknown}; the allowed fields are {list(allowed)}")
+    return d
+
+
+def _need(d: dict, key: str, where: str) -> Any:
+    if not isinstance(d, dict) or key not in d:
+        raise SceneError(f"{where}: missing field '{key}'")
+    return d[key]
+
+
+def _number(value: Any, where: str, *, lo: float | None = None, lo_open: bool = False, hi: float | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{where}: a number expected, got {value!r}")
+    v = float(value)
+    if not np.isfinite(v):
+        raise SceneError(f"{where}: must be finite, got {value!r}")
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        raise SceneError(f"{where}: must be {'>' if lo_open else '≥'} {lo}, got {v}")
+    if hi is not None and v > hi:
+        raise SceneError(f"{where}: must be ≤ {hi}, got {v}")
+    return v
+
+
+def _numbers(value: Any, n: int, where: str, *, positive: bool = False) -> list[float]:
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise SceneError(f"{where}: a list of {n} numbers expected, got {value!r}")
+    return [_number(v, f"{where}[{i}]", lo=0.0 if positive else None, lo_open=positive) for i, v in enumerate(value)]
+
+
+def _int(value: Any, where: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise SceneError(f"{where}: an integer expected, got {value!r}")
+    return int(value)
+
+
+def _matrix(value: Any, shape: tuple[int, int], where: str) -> np.ndarray:
+    try:
+        M = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise SceneError(f"{where}: expected a {shape[0]}×{shape[1]} matrix of numbers") from None
+    if M.shape != shape or not np.all(np.isfinite(M)):
+        raise SceneError(f"{where}: expected a finite {shape[0]}×{shape[1]} matrix, got shape {M.shape}")
+    return M
+
+
+# ---------------------------------------------------------------------- poses
 def parse_pose(value: Any, where: str) -> np.ndarray:
     """A pose from JSON (4×4 rows, or {"xyz", "rpy_deg"}) → T (4, 4); SceneError on bad input."""
     if isinstance(value, dict):
         unknown = set(value) - {"xyz", "rpy_deg"}
         if unknown:
             raise SceneError(f"{where}: unknown pose keys {sorted(unknown)}; use 'xyz' and 'rpy_deg'")
-        try:
-            xyz = np.asarray(value.get("xyz", [0, 0, 0]), dtype=float).reshape(3)
-            roll, pitch, yaw = np.radians(np.asarray(value.get("rpy_deg", [0, 0, 0]), dtype=float).reshape(3))
-        except (TypeError, ValueError) as exc:
-            raise SceneError(f"{where}: 'xyz' and 'rpy_deg' must be lists of 3 numbers ({exc})") from None
-        if not (np.all(np.isfinite(xyz)) and np.all(np.isfinite([roll, pitch, yaw]))):
-            raise SceneError(f"{where}: pose values must be finite")
+        xyz = _numbers(value.get("xyz", [0, 0, 0]), 3, f"{where}.xyz")
+        roll, pitch, yaw = np.radians(_numbers(value.get("rpy_deg", [0, 0, 0]), 3, f"{where}.rpy_deg"))
         return make_T(rot_z(yaw) @ rot_y(pitch) @ rot_x(roll), xyz)
     try:
         T = np.asarray(value, dtype=float)
@@ -122,6 +185,7 @@ def pose_to_json(T: np.ndarray) -> dict[str, list[float]]:
     return {"xyz": [float(v) for v in np.asarray(T)[:3, 3]], "rpy_deg": [float(np.degrees(a)) for a in (roll, pitch, yaw)]}
 
 
+# ---------------------------------------------------------------------- data
 @dataclass(frozen=True)
 class TurretSpec:
     """The pan/tilt unit: its pose, resolution, limits (steps) and speed (steps/s)."""
@@ -137,15 +201,38 @@ class TurretSpec:
         """One step in radians."""
         return float(np.radians(self.resolution_arcsec / 3600.0))
 
+    def within_limits(self, pan_rad: float, tilt_rad: float) -> bool:
+        """True when the angles (radians) are inside the pan and tilt limits."""
+        pan_s, tilt_s = pan_rad / self.step_rad, tilt_rad / self.step_rad
+        return bool(
+            self.pan_limits_steps[0] <= pan_s <= self.pan_limits_steps[1]
+            and self.tilt_limits_steps[0] <= tilt_s <= self.tilt_limits_steps[1]
+        )
+
+
+@dataclass(frozen=True)
+class Appearance:
+    """How the renderer shades a body (no effect on geometry or sensing).
+
+    albedo : reflectance in [0, 1] (grey). texture : amplitude of a smooth value-noise texture
+    fixed to the body (fraction of the albedo). texture_scale_m : the texture's feature size, metres.
+    """
+
+    albedo: float = 0.6
+    texture: float = 0.0
+    texture_scale_m: float = 0.05
+
 
 @dataclass(frozen=True)
 class Body:
     """One object of the site with its ground truth.
 
     name : unique name. kind : "table", "box", "cylinder", "cone", "polyhedron", ... (free).
-    status : "known" (in the initial database) or "unknown" (truth only).
+    status : "known" (in the initial database), "unknown" (truth only) or "scenery" (floor,
+    walls: seen by the sensors, never in the database).
     model : BRep in the object frame. T_world_obj : pose at t = 0.
     motion : tuple of (t_s, T_world_obj) keyframes, sorted by time.
+    appearance : shading parameters for the renderer.
     """
 
     name: str
@@ -154,6 +241,7 @@ class Body:
     model: BRep
     T_world_obj: np.ndarray
     motion: tuple = ()
+    appearance: Appearance = Appearance()
 
     def pose_at(self, t_s: float) -> np.ndarray:
         """True pose ``T_world_obj`` (4, 4) at time t_s (seconds from the start of the video)."""
@@ -171,6 +259,63 @@ class Body:
     def moves(self) -> bool:
         return bool(self.motion)
 
+    def is_static(self, t0_s: float, t1_s: float) -> bool:
+        """True when the body does not move during [t0_s, t1_s] (seconds)."""
+        keys = ((0.0, self.T_world_obj),) + tuple(self.motion)
+        for (ta, Ta), (tb, Tb) in zip(keys, keys[1:]):
+            if tb > t0_s and ta < t1_s and not np.allclose(Ta, Tb, atol=1e-12):
+                return False
+        return True
+
+
+@dataclass(frozen=True)
+class VideoSpec:
+    """The scene's prerecorded video: file (absolute path), frame rate and length."""
+
+    path: Path
+    fps: float = 12.0
+    duration_s: float = 10.0
+
+    @property
+    def frame_count(self) -> int:
+        """Number of frames: ⌊duration × fps⌋ + 1 (frame k shows the scene at t = k / fps)."""
+        return int(np.floor(self.duration_s * self.fps + 1e-9)) + 1
+
+    def frame_time(self, k: int) -> float:
+        """Scene time (s) of frame k."""
+        return k / self.fps
+
+    def frame_index(self, t_s: float) -> int:
+        """The frame showing scene time t_s (nearest, clamped to the video)."""
+        return int(np.clip(np.round(t_s * self.fps), 0, self.frame_count - 1))
+
+
+@dataclass(frozen=True)
+class RenderSpec:
+    """Renderer settings (app.render): light, sensor noise, blur, anti-aliasing.
+
+    light_dir : array, shape (3,), unit vector towards the light, world frame. ambient : share
+    of the light that reaches every surface. gain : grey level of a surface of albedo 1 facing
+    the light. sky : radiance (albedo-like) of rays that hit nothing. noise_sigma : sensor
+    noise, grey levels (Gaussian, seeded by ``seed`` and the frame index). blur_sigma_px : optical
+    blur (Gaussian, pixels; 0 for none). aa_samples : samples per pixel where a pixel straddles
+    an edge (a rank-1 lattice; the rest of the image takes one sample per pixel).
+    """
+
+    light_dir: tuple[float, float, float] = (-0.4, -0.5, 1.0)
+    ambient: float = 0.35
+    gain: float = 235.0
+    sky: float = 0.2
+    noise_sigma: float = 2.0
+    blur_sigma_px: float = 0.5
+    seed: int = 0
+    aa_samples: int = 89
+
+    @property
+    def light(self) -> np.ndarray:
+        v = np.asarray(self.light_dir, dtype=float)
+        return v / np.linalg.norm(v)
+
 
 @dataclass(frozen=True)
 class Scene:
@@ -185,6 +330,8 @@ class Scene:
     video_path: Path | None = None
     description: str = ""
     raw: dict = field(default_factory=dict, repr=False, compare=False)
+    video: VideoSpec | None = None
+    render: RenderSpec = RenderSpec()
 
     def body(self, name: str) -> Body:
         for b in self.bodies:
@@ -200,6 +347,10 @@ class Scene:
     def unknown(self) -> tuple[Body, ...]:
         return tuple(b for b in self.bodies if b.status == "unknown")
 
+    @property
+    def scenery(self) -> tuple[Body, ...]:
+        return tuple(b for b in self.bodies if b.status == "scenery")
+
     def truth_meshes(self, t_s: float = 0.0) -> list[tuple[str, np.ndarray, np.ndarray]]:
         """Every body's triangle mesh in the world at time t_s: (name, vertices (V, 3), triangles (T, 3))."""
         out = []
@@ -210,33 +361,58 @@ class Scene:
         return out
 
 
-def _need(d: dict, key: str, where: str) -> Any:
-    if not isinstance(d, dict) or key not in d:
-        raise SceneError(f"{where}: missing field '{key}'")
-    return d[key]
+# ---------------------------------------------------------------------- blocks
+_CAMERA_KEYS = ("width", "height", "C", "K", "T_world_cam", "intrinsics_file")
+_TURRET_KEYS = ("T_world_turret", "resolution_arcsec", "pan_limits_steps", "tilt_limits_steps", "speed_steps_s")
+_RF_KEYS = ("sigma_range_m", "min_range_m", "max_range_m")
+_BODY_KEYS = ("name", "kind", "status", "model", "pose", "motion", "appearance")
+_APPEARANCE_KEYS = ("albedo", "texture", "texture_scale_m")
+_VIDEO_KEYS = ("file", "fps", "duration_s")
+_RENDER_KEYS = ("light_dir", "ambient", "gain", "sky", "noise_sigma", "blur_sigma_px", "seed", "aa_samples")
+_TOP_KEYS = ("format", "name", "description", "camera", "turret", "rangefinder", "bodies", "video", "render")
+_MODEL_KINDS = ("box", "cylinder", "cone", "brep", "cao", "mesh")
 
 
-def _matrix(value: Any, shape: tuple[int, int], where: str) -> np.ndarray:
+def _camera(d: Any, root: Path, where: str) -> Camera:
+    _keys(d, _CAMERA_KEYS, where)
+    given = [k for k in ("C", "K", "intrinsics_file") if k in d]
+    if len(given) != 1:
+        raise SceneError(
+            f"{where}: give exactly one of 'C' (3×4), 'K' (3×3, with 'T_world_cam') or 'intrinsics_file' "
+            f"(with 'T_world_cam'); got {given or 'none'}"
+        )
+    width = height = None
+    if "width" in d:
+        width = _int(d["width"], f"{where}.width")
+    if "height" in d:
+        height = _int(d["height"], f"{where}.height")
+    if given == ["C"] and "T_world_cam" in d:
+        raise SceneError(f"{where}.T_world_cam: C already holds the camera pose; remove one of them")
     try:
-        M = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise SceneError(f"{where}: expected a {shape[0]}×{shape[1]} matrix of numbers") from None
-    if M.shape != shape or not np.all(np.isfinite(M)):
-        raise SceneError(f"{where}: expected a finite {shape[0]}×{shape[1]} matrix, got shape {M.shape}")
-    return M
+        if given == ["C"]:
+            C = _matrix(d["C"], (3, 4), f"{where}.C")
+            w, h = _size(width, height, where)
+            return Camera(C, w, h)
+        if given == ["K"]:
+            K = _matrix(d["K"], (3, 3), f"{where}.K")
+        else:
+            from app.camera_io import read_intrinsics
 
-
-def _camera(d: dict, where: str) -> Camera:
-    w, h = _need(d, "width", where), _need(d, "height", where)
-    if not (isinstance(w, int) and isinstance(h, int) and w > 0 and h > 0):
-        raise SceneError(f"{where}.width/height: positive integers expected, got {w!r} × {h!r}")
-    try:
-        if "C" in d:
-            return Camera(_matrix(d["C"], (3, 4), f"{where}.C"), w, h)
-        K = _matrix(_need(d, "K", where), (3, 3), f"{where}.K")
+            file = (root / str(d["intrinsics_file"])).resolve()
+            try:
+                intr = read_intrinsics(file)
+            except ValueError as exc:
+                raise SceneError(f"{where}.intrinsics_file: {exc}") from None
+            if intr.has_distortion:
+                raise SceneError(
+                    f"{where}.intrinsics_file: {file} has lens distortion {intr.distortion.tolist()}; mcit's camera "
+                    "model C has none: undistort the video and give its new K"
+                )
+            K = intr.K
+            width = intr.width if width is None else width
+            height = intr.height if height is None else height
         T_world_cam = parse_pose(_need(d, "T_world_cam", where), f"{where}.T_world_cam")
-        from core.transforms import invert_T
-
+        w, h = _size(width, height, where)
         return Camera.from_intrinsics(K, invert_T(T_world_cam), w, h)
     except SceneError:
         raise
@@ -244,33 +420,195 @@ def _camera(d: dict, where: str) -> Camera:
         raise SceneError(f"{where}: {exc}") from None
 
 
+def _size(width: int | None, height: int | None, where: str) -> tuple[int, int]:
+    if width is None or height is None:
+        raise SceneError(f"{where}: missing field '{'width' if width is None else 'height'}' (image size in pixels)")
+    if width <= 0 or height <= 0:
+        raise SceneError(f"{where}.width/height: positive integers expected, got {width} × {height}")
+    return width, height
+
+
+def _turret(t: Any, where: str) -> TurretSpec:
+    _keys(t, _TURRET_KEYS, where)
+    T = parse_pose(_need(t, "T_world_turret", where), f"{where}.T_world_turret")
+    res = _number(t.get("resolution_arcsec", 185.1428), f"{where}.resolution_arcsec", lo=0.0, lo_open=True)
+    limits = []
+    for key, default in (("pan_limits_steps", [-3090, 3090]), ("tilt_limits_steps", [-907, 604])):
+        v = t.get(key, default)
+        if not isinstance(v, (list, tuple)) or len(v) != 2:
+            raise SceneError(f"{where}.{key}: [min, max] in steps expected, got {v!r}")
+        lo, hi = _int(v[0], f"{where}.{key}[0]"), _int(v[1], f"{where}.{key}[1]")
+        if not lo < 0 < hi:
+            raise SceneError(f"{where}.{key}: [min, max] with min < 0 < max expected, got {[lo, hi]}")
+        limits.append((lo, hi))
+    speed = _number(t.get("speed_steps_s", 1000.0), f"{where}.speed_steps_s", lo=0.0, lo_open=True)
+    return TurretSpec(T, res, limits[0], limits[1], speed)
+
+
+def _rangefinder(rf: Any, step_rad: float, where: str) -> RangeFinderSpec:
+    _keys(rf, _RF_KEYS, where)
+    sigma = _number(rf.get("sigma_range_m", 0.005), f"{where}.sigma_range_m", lo=0.0)
+    lo = _number(rf.get("min_range_m", 0.6), f"{where}.min_range_m", lo=0.0)
+    hi = _number(rf.get("max_range_m", 10.0), f"{where}.max_range_m", lo=0.0, lo_open=True)
+    if not lo < hi:
+        raise SceneError(f"{where}: min_range_m ({lo}) must be below max_range_m ({hi})")
+    return RangeFinderSpec(sigma_range_m=sigma, min_range_m=lo, max_range_m=hi, step_rad=step_rad)
+
+
 def _model(d: Any, root: Path, where: str) -> BRep:
     if not isinstance(d, dict) or len(d) != 1:
-        raise SceneError(f"{where}: a model is one of {{'box'|'cylinder'|'cone'|'cao'|'mesh'|'brep': ...}}")
-    (kind, value), = d.items()
+        raise SceneError(f"{where}: a model is one object with one key among {list(_MODEL_KINDS)}, got {d!r}")
+    ((kind, value),) = d.items()
+    if kind not in _MODEL_KINDS:
+        raise SceneError(f"{where}: unknown model kind {kind!r}; use one of {list(_MODEL_KINDS)}")
+    w = f"{where}.{kind}"
     try:
         if kind == "box":
-            return BRep.box(*[float(v) for v in value])
+            return BRep.box(*_numbers(value, 3, f"{w} [size_x, size_y, size_z] (m)", positive=True))
         if kind == "cylinder":
-            r, h = (float(v) for v in value)
-            return BRep.cylinder(r, h)
+            return BRep.cylinder(*_numbers(value, 2, f"{w} [radius, height] (m)", positive=True))
         if kind == "cone":
-            r0, r1, h = (float(v) for v in value)
+            r0, r1, h = _numbers(value, 3, f"{w} [radius_bottom, radius_top, height] (m)")
+            if r0 < 0 or r1 < 0 or r0 + r1 <= 0 or h <= 0:
+                raise SceneError(f"{w}: radii ≥ 0 (not both 0) and a positive height expected, got {value}")
             return BRep.cone(r0, r1, h)
         if kind == "brep":
+            if not isinstance(value, dict):
+                raise SceneError(f"{w}: an object {{vertices, edges, faces, solids}} expected")
             return BRep.from_dict(value)
-        if kind in ("cao", "mesh"):
-            path = (root / str(value)).resolve()
-            if not path.is_file():
-                raise SceneError(f"{where}.{kind}: file not found: {path}")
-            if kind not in MODEL_LOADERS:
+        # "cao" / "mesh": a file beside scene.json
+        if not isinstance(value, str) or not value:
+            raise SceneError(f"{w}: a file name (relative to the scene folder) expected, got {value!r}")
+        path = (root / value).resolve()
+        if not path.is_file():
+            raise SceneError(f"{w}: file not found: {path}")
+        if kind not in MODEL_LOADERS:
+            try:
                 import app.models_io  # noqa: F401  (registers the readers)
-            return MODEL_LOADERS[kind](path)
+            except ImportError:
+                pass
+        if kind not in MODEL_LOADERS:
+            raise SceneError(f"{w}: no reader for {kind!r} models is installed (app.models_io registers them)")
+        return MODEL_LOADERS[kind](path)
     except SceneError:
         raise
-    except (TypeError, ValueError) as exc:
-        raise SceneError(f"{where}.{kind}: {exc}") from None
-    raise SceneError(f"{where}: unknown model kind {kind!r}; use box, cylinder, cone, cao, mesh or brep")
+    except (TypeError, ValueError, KeyError) as exc:
+        raise SceneError(f"{w}: {exc}") from None
+
+
+def _appearance(a: Any, where: str) -> Appearance:
+    _keys(a, _APPEARANCE_KEYS, where)
+    return Appearance(
+        _number(a.get("albedo", 0.6), f"{where}.albedo", lo=0.0, hi=1.0),
+        _number(a.get("texture", 0.0), f"{where}.texture", lo=0.0, hi=1.0),
+        _number(a.get("texture_scale_m", 0.05), f"{where}.texture_scale_m", lo=0.0, lo_open=True),
+    )
+
+
+def _body(b: Any, i: int, root: Path, names: set, where: str) -> Body:
+    bw = f"{where}: bodies[{i}]"
+    if not isinstance(b, dict):
+        raise SceneError(f"{bw}: expected an object {{name, model, pose, ...}}, got {type(b).__name__}")
+    name = _need(b, "name", bw)
+    if not isinstance(name, str) or not name.strip():
+        raise SceneError(f"{bw}.name: a non-empty string expected, got {name!r}")
+    if name in names:
+        raise SceneError(f"{bw}.name: duplicate body name {name!r}; every body needs its own name")
+    names.add(name)
+    bw = f"{where}: bodies[{i}] ({name})"
+    _keys(b, _BODY_KEYS, bw)
+    status = b.get("status", "known")
+    if status not in STATUSES:
+        raise SceneError(f"{bw}.status: one of {list(STATUSES)} expected, got {status!r}")
+    kind = b.get("kind", "object")
+    if not isinstance(kind, str) or not kind:
+        raise SceneError(f"{bw}.kind: a non-empty string expected, got {kind!r}")
+    model = _model(_need(b, "model", bw), root, f"{bw}.model")
+    T0 = parse_pose(_need(b, "pose", bw), f"{bw}.pose")
+    motion = []
+    last_t = 0.0
+    keys = b.get("motion", [])
+    if not isinstance(keys, list):
+        raise SceneError(f"{bw}.motion: a list of {{t, pose}} keyframes expected, got {type(keys).__name__}")
+    for k, key in enumerate(keys):
+        kw = f"{bw}.motion[{k}]"
+        _keys(key, ("t", "pose"), kw)
+        tk = _number(_need(key, "t", kw), f"{kw}.t")
+        if tk <= last_t:
+            raise SceneError(f"{kw}.t: keyframe times must increase and be > 0 (seconds), got {tk} after {last_t}")
+        last_t = tk
+        motion.append((tk, parse_pose(_need(key, "pose", kw), f"{kw}.pose")))
+    appearance = _appearance(b.get("appearance", {}), f"{bw}.appearance")
+    return Body(name, kind, status, model, T0, tuple(motion), appearance)
+
+
+def _video(v: Any, root: Path, bodies: list[Body], where: str) -> VideoSpec:
+    _keys(v, _VIDEO_KEYS, where)
+    file = _need(v, "file", where)
+    if not isinstance(file, str) or not file:
+        raise SceneError(f"{where}.file: a file name (relative to the scene folder) expected, got {file!r}")
+    fps = _number(v.get("fps", 12.0), f"{where}.fps", lo=0.0, lo_open=True)
+    last_key = max((b.motion[-1][0] for b in bodies if b.motion), default=0.0)
+    duration = _number(v.get("duration_s", max(last_key + 2.0, 5.0)), f"{where}.duration_s", lo=0.0, lo_open=True)
+    return VideoSpec((root / file).resolve(), fps, duration)
+
+
+def _render(r: Any, where: str) -> RenderSpec:
+    _keys(r, _RENDER_KEYS, where)
+    base = RenderSpec()
+    light = tuple(_numbers(r.get("light_dir", list(base.light_dir)), 3, f"{where}.light_dir"))
+    if np.linalg.norm(light) <= 0:
+        raise SceneError(f"{where}.light_dir: a non-zero vector expected")
+    aa = _int(r.get("aa_samples", base.aa_samples), f"{where}.aa_samples")
+    if not 1 <= aa <= 1024:
+        raise SceneError(f"{where}.aa_samples: 1 … 1024 samples per edge pixel expected, got {aa}")
+    return RenderSpec(
+        light_dir=light,
+        ambient=_number(r.get("ambient", base.ambient), f"{where}.ambient", lo=0.0, hi=1.0),
+        gain=_number(r.get("gain", base.gain), f"{where}.gain", lo=0.0, lo_open=True, hi=255.0),
+        sky=_number(r.get("sky", base.sky), f"{where}.sky", lo=0.0, hi=1.0),
+        noise_sigma=_number(r.get("noise_sigma", base.noise_sigma), f"{where}.noise_sigma", lo=0.0),
+        blur_sigma_px=_number(r.get("blur_sigma_px", base.blur_sigma_px), f"{where}.blur_sigma_px", lo=0.0),
+        seed=_int(r.get("seed", base.seed), f"{where}.seed"),
+        aa_samples=aa,
+    )
+
+
+def scene_from_dict(d: Any, root: str | Path, where: str = "scene.json") -> Scene:
+    """Validate a scene description (the parsed JSON) whose files live in the folder ``root``."""
+    root = Path(root)
+    if not isinstance(d, dict):
+        raise SceneError(f"{where}: a scene is a JSON object, got {type(d).__name__}")
+    fmt = d.get("format")
+    if fmt != FORMAT:
+        raise SceneError(f"{where}: 'format' must be {FORMAT!r}, got {fmt!r}")
+    _keys(d, _TOP_KEYS, where)
+    camera = _camera(_need(d, "camera", where), root, f"{where}: camera")
+    turret = _turret(_need(d, "turret", where), f"{where}: turret")
+    spec = _rangefinder(d.get("rangefinder", {}), turret.step_rad, f"{where}: rangefinder")
+    raw_bodies = _need(d, "bodies", where)
+    if not isinstance(raw_bodies, list) or not raw_bodies:
+        raise SceneError(f"{where}: bodies: a non-empty list of bodies expected")
+    names: set[str] = set()
+    bodies = [_body(b, i, root, names, where) for i, b in enumerate(raw_bodies)]
+    video = _video(d["video"], root, bodies, f"{where}: video") if "video" in d else None
+    render = _render(d.get("render", {}), f"{where}: render")
+    for key in ("name", "description"):
+        if key in d and not isinstance(d[key], str):
+            raise SceneError(f"{where}: '{key}' must be a string, got {d[key]!r}")
+    return Scene(
+        str(d.get("name", root.name)),
+        root,
+        camera,
+        turret,
+        spec,
+        tuple(bodies),
+        video.path if video else None,
+        str(d.get("description", "")),
+        d,
+        video,
+        render,
+    )
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -283,66 +621,4 @@ def load_scene(path: str | Path) -> Scene:
         d = json.loads(file.read_text())
     except json.JSONDecodeError as exc:
         raise SceneError(f"{file}: not valid JSON: {exc}") from None
-    root = file.parent
-    where = file.name
-    fmt = d.get("format") if isinstance(d, dict) else None
-    if fmt != FORMAT:
-        raise SceneError(f"{file}: 'format' must be {FORMAT!r}, got {fmt!r}")
-    camera = _camera(_need(d, "camera", where), f"{file}: camera")
-    t = _need(d, "turret", where)
-    try:
-        turret = TurretSpec(
-            parse_pose(_need(t, "T_world_turret", f"{file}: turret"), f"{file}: turret.T_world_turret"),
-            float(t.get("resolution_arcsec", 185.1428)),
-            tuple(int(v) for v in t.get("pan_limits_steps", (-3090, 3090))),
-            tuple(int(v) for v in t.get("tilt_limits_steps", (-907, 604))),
-            float(t.get("speed_steps_s", 1000.0)),
-        )
-    except (TypeError, ValueError) as exc:
-        if isinstance(exc, SceneError):
-            raise
-        raise SceneError(f"{file}: turret: {exc}") from None
-    rf = d.get("rangefinder", {})
-    try:
-        spec = RangeFinderSpec(
-            sigma_range_m=float(rf.get("sigma_range_m", 0.005)),
-            min_range_m=float(rf.get("min_range_m", 0.6)),
-            max_range_m=float(rf.get("max_range_m", 10.0)),
-            step_rad=turret.step_rad,
-        )
-    except (TypeError, ValueError, AttributeError) as exc:
-        raise SceneError(f"{file}: rangefinder: {exc}") from None
-    bodies = []
-    names = set()
-    for i, b in enumerate(_need(d, "bodies", where)):
-        bw = f"{file}: bodies[{i}]"
-        name = _need(b, "name", bw)
-        if not isinstance(name, str) or not name:
-            raise SceneError(f"{bw}.name: a non-empty string expected")
-        if name in names:
-            raise SceneError(f"{bw}.name: duplicate body name {name!r}")
-        names.add(name)
-        bw = f"{file}: bodies[{i}] ({name})"
-        status = b.get("status", "known")
-        if status not in ("known", "unknown"):
-            raise SceneError(f"{bw}.status: 'known' or 'unknown' expected, got {status!r}")
-        model = _model(_need(b, "model", bw), root, f"{bw}.model")
-        T0 = parse_pose(_need(b, "pose", bw), f"{bw}.pose")
-        motion = []
-        last_t = 0.0
-        for k, key in enumerate(b.get("motion", [])):
-            kw = f"{bw}.motion[{k}]"
-            try:
-                tk = float(_need(key, "t", kw))
-            except (TypeError, ValueError):
-                raise SceneError(f"{kw}.t: a number of seconds expected") from None
-            if tk <= last_t:
-                raise SceneError(f"{kw}.t: keyframe times must increase and be > 0, got {tk} after {last_t}")
-            last_t = tk
-            motion.append((tk, parse_pose(_need(key, "pose", kw), f"{kw}.pose")))
-        bodies.append(Body(name, str(b.get("kind", "object")), status, model, T0, tuple(motion)))
-    video = None
-    if "video" in d:
-        vf = _need(d["video"], "file", f"{where}: video")
-        video = (root / vf).resolve()
-    return Scene(str(d.get("name", root.name)), root, camera, turret, spec, tuple(bodies), video, str(d.get("description", "")), d)
+    return scene_from_dict(d, file.parent, str(file))
