@@ -40,7 +40,7 @@ def test_minimal_scene_loads_from_a_file(tmp_path):
     assert [b.name for b in s.bodies] == ["table", "box"]
     assert [b.name for b in s.known] == ["table"] and [b.name for b in s.unknown] == ["box"]
     assert s.video.frame_count == 21 and s.video.frame_index(0.96) == 10 and s.video.path == tmp_path / "video.mp4"
-    assert s.camera.width == 64 and s.render.aa_samples == 55
+    assert s.camera.width == 64 and s.render.aa_samples == 89
 
 
 @pytest.mark.parametrize(
