@@ -11,9 +11,10 @@ from .calibrate_camera import CalibrateCamera
 from .designate import DesignateTarget, Target
 from .session import WORKFLOWS, Session, register
 from .site import RayHit, Site, SiteObject
+from .model_object import ModelObject
 from .update_pose import UpdatePose
 
-for _cls in (CalibrateCamera, DesignateTarget, UpdatePose):
+for _cls in (CalibrateCamera, DesignateTarget, UpdatePose, ModelObject):
     register(_cls)
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     "WorkflowError",
     "CalibrateCamera",
     "DesignateTarget",
+    "ModelObject",
     "Target",
     "UpdatePose",
     "WORKFLOWS",

@@ -193,7 +193,8 @@ class UpdatePose(Workflow):
                 try:
                     cands = p3l(self.site.camera, segs[idx], edges[idx], pts_uv if len(pts_uv) else None,
                                 pts_obj if len(pts_obj) else None)
-                except ValueError as exc:
+                except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+                    # a degenerate triple (or a numerical failure in it): try the next triple
                     errors.append(f"edges {[i + 1 for i in idx]}: {exc}")
                     continue
                 if cands:

@@ -25,3 +25,28 @@ def db(tmp_path, scene):
 @pytest.fixture
 def site(scene, db):
     return Site(scene, db, clock=lambda: 0.0)
+
+
+FAST_DEVICES = dict(rangefinder_baud=0, turret_baud=0, measure_delay_s=0.0, delay_per_m_s=0.0, no_target_delay_s=0.0)
+
+
+@pytest.fixture(scope="session")
+def fast_scene(scene):
+    """The scene with a turret that moves (almost) instantly, for quick device tests."""
+    import dataclasses
+
+    return dataclasses.replace(scene, turret=dataclasses.replace(scene.turret, speed_steps_s=1e6))
+
+
+@pytest.fixture
+def devices(fast_scene):
+    from app.devices import open_devices
+
+    devs = open_devices(fast_scene, clock=lambda: 0.0, site_options=FAST_DEVICES)
+    yield devs
+    devs.close()
+
+
+@pytest.fixture
+def device_site(fast_scene, db, devices):
+    return Site(fast_scene, db, devices=devices, clock=lambda: 0.0)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -15,8 +17,14 @@ def _moved(T: np.ndarray, deg: float, dx_m: float, dy_m: float) -> np.ndarray:
 
 
 def _visible_edges(site, model, T):
+    """Visible model edges, a well-conditioned P3L triple first: three directions, no common vertex."""
     wf = model.wireframe(site.camera.center, T)
-    return [int(k) for k, v, kind in zip(wf.edge_index, wf.visible, wf.kind) if v and kind == "edge"]
+    vis = [int(k) for k, v, kind in zip(wf.edge_index, wf.visible, wf.kind) if v and kind == "edge"]
+    d = {k: np.abs(np.diff(model.vertices[model.edges[k]], axis=0)[0]).argmax() for k in vis}
+    for a, b, c in itertools.combinations(vis, 3):
+        if len({d[a], d[b], d[c]}) == 3 and not set(model.edges[a]) & set(model.edges[b]) & set(model.edges[c]):
+            return [a, b, c] + [k for k in vis if k not in (a, b, c)]
+    return vis
 
 
 def _operator_clicks(wf, site, T_true, edges, rng, sigma_px=0.5):

@@ -1,0 +1,439 @@
+"""Model an unknown object from clicked image edges and range measurements (source paper §III).
+
+The operator gives the semantics when starting — the shape ("box", "cylinder", "cone"), whether it
+is vertical, whether it lies on the table — and the sensors give the numbers:
+
+* box: for each visible face (1 to 3) click its sides in the video (two clicks per side), then
+  ``measure()``: the turret scans a patch of range points inside the clicked outline; ``next_face()``
+  goes on to the next face. ``solve()`` builds the box (``core.modeling.model_box``: face planes ∩
+  interpretation planes, the table as the bottom face).
+* cylinder / cone: click the two silhouette lines, each from its bottom end to its top end, then
+  ``scan()``: two horizontal range profiles across the object (misses kept); ``solve(method=...)``
+  fits it (``core.modeling.model_cylinder``; "fused" by default, or the paper's "tangential",
+  "bisecting", "rf_tangential").
+
+``measure()``/``scan()`` drive the devices (aiming, progress in ``progress`` 0..1, ``cancel()`` stops
+them at the next beam). The preview is drawn as a ghost with its dimensions ± σ; ``accept()`` adds
+the object (status "modelled") with its clicks and measurements in one transaction.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from core.geometry import Plane
+from core.rangefinder import RangeFinderSpec, RangeScan, aim, beam_point_cov
+
+from .base import Cancelled, Ghost, Marks, Workflow, WorkflowError, as_pixel
+
+__all__ = ["ModelObject", "SHAPES", "table_support"]
+
+SHAPES = ("box", "cylinder", "cone")
+MIN_SEGMENT_PX = 3.0
+
+
+def table_support(site) -> Plane | None:
+    """The top plane of the database's table (normal up), or None when there is no table."""
+    for obj in site.objects():
+        if obj.kind == "table":
+            lo, hi = obj.model.bounds()
+            T = obj.T_world_obj
+            n = T[:3, 2]
+            X = T[:3, :3] @ np.array([0.0, 0.0, hi[2]]) + T[:3, 3]
+            return Plane(n, float(-n @ X))
+    return None
+
+
+class ModelObject(Workflow):
+    name = "model_object"
+    title = "Model object"
+    actions = ("click", "add_segment", "remove_last", "measure", "scan", "next_face", "solve", "accept", "cancel")
+
+    def __init__(self, site, client: str = "operator", shape: str = "box", vertical: bool = True, on_table: bool = True,
+                 name: str | None = None, method: str = "fused", spacing_px: float | None = None, beams: int = 40):
+        super().__init__(site, client)
+        if shape not in SHAPES:
+            raise WorkflowError(f"shape must be one of {', '.join(SHAPES)}, got {shape!r}")
+        self.shape = shape
+        self.vertical = bool(vertical)
+        self.on_table = bool(on_table)
+        self.method = method
+        self.spacing_px = spacing_px
+        self.beams = int(beams)
+        self.support = table_support(site) if on_table else None
+        if on_table and self.support is None:
+            raise WorkflowError("'lies on the table' needs a table in the database; untick it or add the table")
+        taken = {o.name for o in site.objects()}
+        if name is None:
+            i = 1
+            while f"{shape}_{i}" in taken:
+                i += 1
+            name = f"{shape}_{i}"
+        elif name in taken:
+            raise WorkflowError(f"an object named {name!r} already exists; choose another name")
+        self.object_name = name
+        # box: one entry per face {"segs": [...], "points": (N, 3), "covs": (N, 3, 3), "scan": RangeScan}
+        self.faces: list[dict[str, Any]] = [{"segs": [], "points": None, "covs": None, "scan": None}]
+        self.silhouettes: list[np.ndarray] = []
+        self.scans: list[RangeScan] = []
+        self.pending: np.ndarray | None = None
+        self.result = None
+        self.progress: float | None = None
+        self.progress_text = ""
+        self.state = "click"
+
+    # ------------------------------------------------------------------ clicks
+    @property
+    def _segments(self) -> list:
+        return self.faces[-1]["segs"] if self.shape == "box" else self.silhouettes
+
+    def click(self, uv) -> None:
+        """First or second end of an image edge (a side of the current face, or a silhouette)."""
+        p = as_pixel(uv)
+        with self.lock:
+            self._check_open()
+            if self.pending is None:
+                if self.shape != "box" and len(self.silhouettes) == 2:
+                    raise WorkflowError("both silhouettes are clicked: Scan profile next (or Remove last)")
+                if self.shape == "box" and len(self._segments) == 4:
+                    raise WorkflowError("a face has at most 4 sides: Measure face next (or Remove last)")
+                self.pending = p
+                return
+            seg = np.array([self.pending, p])
+            if np.linalg.norm(seg[1] - seg[0]) < MIN_SEGMENT_PX:
+                raise WorkflowError(f"the two clicks are {np.linalg.norm(seg[1] - seg[0]):.1f} px apart: click the "
+                                    f"edge's other end, at least {MIN_SEGMENT_PX:.0f} px away")
+            self.pending = None
+            self._segments.append(seg)
+            self.result = None
+
+    def add_segment(self, seg_uv) -> None:
+        """A clicked segment (2, 2) at once (for scripts)."""
+        seg = np.asarray(seg_uv, dtype=float)
+        if seg.shape != (2, 2):
+            raise WorkflowError(f"a segment is two pixels [[u1, v1], [u2, v2]], got {seg_uv!r}")
+        with self.lock:
+            if self.pending is not None:
+                raise WorkflowError("finish the edge under way first (or Remove last)")
+            self.click(seg[0])
+            self.click(seg[1])
+
+    def remove_last(self) -> None:
+        """Undo the last click, measurement or face."""
+        with self.lock:
+            self._check_open()
+            self.result = None
+            if self.pending is not None:
+                self.pending = None
+            elif self.shape == "box":
+                face = self.faces[-1]
+                if face["points"] is not None:
+                    face.update(points=None, covs=None, scan=None)
+                elif face["segs"]:
+                    face["segs"].pop()
+                elif len(self.faces) > 1:
+                    self.faces.pop()
+            elif self.scans:
+                self.scans = []
+            elif self.silhouettes:
+                self.silhouettes.pop()
+
+    def next_face(self) -> None:
+        """Box: the current face is done (sides clicked and measured); go on to the next one."""
+        with self.lock:
+            self._check_open()
+            if self.shape != "box":
+                raise WorkflowError("next face is for boxes")
+            face = self.faces[-1]
+            if face["points"] is None:
+                raise WorkflowError("measure this face first (Measure face)")
+            if len(self.faces) == 3:
+                raise WorkflowError("a box shows at most 3 faces: Solve now")
+            self.faces.append({"segs": [], "points": None, "covs": None, "scan": None})
+
+    # ------------------------------------------------------------------ measurements
+    def _devices(self):
+        devices = self.site.devices
+        if devices is None:
+            raise WorkflowError("no range finder and turret are connected: restart mcit serve with devices "
+                                "(emulated by default) to measure")
+        return devices
+
+    def _report(self, p) -> None:
+        self.progress = p.done / max(p.total, 1)
+        self.progress_text = p.message
+        if self.cancel_event.is_set():
+            raise Cancelled()
+
+    def measure(self):
+        """Box: range points on the current face, inside its clicked outline (face patch scan)."""
+        from app.devices.acquisition import AcquisitionCancelled, face_patch_scan
+        from app.devices.errors import DeviceError
+
+        with self.lock:
+            self._check_open()
+            if self.shape != "box":
+                raise WorkflowError("Measure face is for boxes; for a cylinder use Scan profile")
+            segs = self.faces[-1]["segs"]
+            if len(segs) < 2:
+                raise WorkflowError(f"click at least 2 sides of this face first ({len(segs)} clicked)")
+            devices = self._devices()
+            ends = np.concatenate(segs)
+            centre = ends.mean(axis=0)
+            # The patch: the clicked sides' ends shrunk towards their centre, so that beams stay on the face.
+            poly = centre + 0.6 * (_convex_hull(ends) - centre)
+            q = np.roll(poly, -1, axis=0)
+            area = 0.5 * abs(float(np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])))  # shoelace
+            spacing = self.spacing_px or max(2.0, float(np.sqrt(area / 25.0)))
+            camera, T = self.site.camera, self.site.T_world_turret
+            self.cancel_event.clear()
+            self.progress, self.progress_text = 0.0, "aiming"
+        try:
+            scan = face_patch_scan(camera, T, devices.turret, devices.rangefinder, polygon_uv=poly, spacing_px=spacing,
+                                   depth_guess_m=float(camera.depth(self.support_point(centre))),
+                                   progress=self._report, cancel=self.cancel_event)
+        except (AcquisitionCancelled, Cancelled):
+            self.progress = None
+            raise Cancelled() from None
+        except DeviceError as exc:
+            self.progress = None
+            raise WorkflowError(f"device fault while measuring: {exc}. Check the devices and Measure again") from None
+        except ValueError as exc:
+            self.progress = None
+            raise WorkflowError(f"cannot measure this face: {exc}") from None
+        with self.lock:
+            self.progress = None
+            good = scan.hits & np.asarray(scan.meta.get("inside", scan.hits), bool)
+            if good.sum() < 3:
+                raise WorkflowError(f"only {int(good.sum())} of {len(scan)} beams came back from the face: no range "
+                                    "return; click the face's sides again (larger), or check the range finder")
+            X = scan.points(T)[good]
+            spec = self._spec()
+            covs = beam_point_cov(T, scan.pan_rad[good], scan.tilt_rad[good], scan.range_m[good], spec)
+            self.faces[-1].update(points=X, covs=covs, scan=scan)
+            self.site.set_beam(X[-1])
+            self.result = None
+            self.message = f"face {len(self.faces)}: {len(X)} range points of {len(scan)} beams"
+            return scan
+
+    def support_point(self, uv: np.ndarray) -> np.ndarray:
+        """The table point seen at pixel uv (a depth guess for aiming), else a point 2 m away."""
+        cam = self.site.camera
+        o, d = cam.rays(np.asarray(uv, float).reshape(1, 2))
+        hit = self.site.raycast(o, d[0])
+        return hit.X_world if hit is not None else o + 2.0 * d[0]
+
+    def _spec(self) -> RangeFinderSpec:
+        """The range finder's noise model (the scene's: σ_ρ, limits, the turret's step)."""
+        return self.site.scene.rangefinder
+
+    def scan(self) -> list[RangeScan]:
+        """Cylinder/cone: two horizontal range profiles across the object, at 30 % and 70 % of its height."""
+        from app.devices.acquisition import AcquisitionCancelled, measure_at_pixel, profile_scan
+        from app.devices.errors import DeviceError
+
+        with self.lock:
+            self._check_open()
+            if self.shape == "box":
+                raise WorkflowError("Scan profile is for cylinders and cones; for a box use Measure face")
+            if len(self.silhouettes) < 2:
+                raise WorkflowError(f"click both silhouettes first ({len(self.silhouettes)} clicked)")
+            devices = self._devices()
+            camera, T = self.site.camera, self.site.T_world_turret
+            sil = np.array(self.silhouettes)
+            self.cancel_event.clear()
+            self.progress, self.progress_text = 0.0, "aiming"
+        scans = []
+        try:
+            for k, frac in enumerate((0.3, 0.7)):
+                left, right = sil[0, 0] + frac * (sil[0, 1] - sil[0, 0]), sil[1, 0] + frac * (sil[1, 1] - sil[1, 0])
+                mid = (left + right) / 2
+                m = measure_at_pixel(camera, T, mid, devices.turret, devices.rangefinder,
+                                     depth_guess_m=float(camera.depth(self.support_point(mid))), cancel=self.cancel_event)
+                if not m.hit:
+                    raise WorkflowError(f"no range return at the object's centre ({mid[0]:.0f}, {mid[1]:.0f}): check the "
+                                        "silhouettes and the range finder")
+                depth = float(camera.depth(m.X_world))
+                XL, XR = camera.backproject(np.array([left, right]), depth)
+                pans = aim(T, np.array([XL, XR]))[0]
+                half = abs(pans[1] - pans[0]) / 2
+                lo, hi = min(pans) - 0.8 * half, max(pans) + 0.8 * half
+                step = max(devices.turret.pan_step_rad, (hi - lo) / self.beams)
+
+                def report(p, k=k):
+                    self._report(type(p)(k * p.total + p.done, 2 * p.total, p.message))
+
+                scans.append(profile_scan(devices.turret, devices.rangefinder, tilt_rad=m.tilt_rad, pan_start_rad=lo,
+                                          pan_stop_rad=hi, pan_step_rad=step, progress=report, cancel=self.cancel_event))
+        except (AcquisitionCancelled, Cancelled):
+            self.progress = None
+            raise Cancelled() from None
+        except DeviceError as exc:
+            self.progress = None
+            raise WorkflowError(f"device fault while scanning: {exc}. Check the devices and Scan again") from None
+        with self.lock:
+            self.progress = None
+            self.scans = scans
+            hits = [int(s.hits.sum()) for s in scans]
+            if min(hits) < 3:
+                raise WorkflowError(f"the scans hit the object with {hits} beams: too few; click the silhouettes again")
+            last = scans[-1]
+            self.site.set_beam(last.points(T)[np.nonzero(last.hits)[0][-1]])
+            self.result = None
+            self.message = f"2 profiles: {hits[0]} and {hits[1]} returns of {len(scans[0])} and {len(scans[1])} beams"
+            return scans
+
+    # ------------------------------------------------------------------ solve and accept
+    def solve(self, method: str | None = None):
+        """Build the model; its preview (ghost) and dimensions ± σ are shown."""
+        from core.modeling import BoxFace, model_box, model_cylinder
+
+        with self.lock:
+            self._check_open()
+            cam = self.site.camera
+            try:
+                if self.shape == "box":
+                    faces = [f for f in self.faces if f["points"] is not None]
+                    if not faces:
+                        raise WorkflowError("measure at least one face first (click its sides, then Measure face)")
+                    box_faces = [BoxFace(f["points"], np.array(f["segs"]).reshape(-1, 2, 2), f["covs"]) for f in faces]
+                    self.result = model_box(cam, box_faces, self.support)
+                else:
+                    if len(self.scans) < 2 and (method or self.method) != "tangential":
+                        raise WorkflowError("scan the object first (Scan profile)")
+                    if len(self.silhouettes) < 2:
+                        raise WorkflowError("click both silhouettes first")
+                    self.method = method or self.method
+                    self.result = model_cylinder(
+                        cam, self.method, silhouettes_uv=np.array(self.silhouettes), scans=self.scans,
+                        T_world_turret=self.site.T_world_turret, spec=self._spec(), support=self.support,
+                        axis_dir=np.array([0.0, 0.0, 1.0]) if (self.vertical and self.support is None) else None,
+                        cone=self.shape == "cone")
+            except WorkflowError:
+                raise
+            except ValueError as exc:
+                raise WorkflowError(f"cannot build the {self.shape}: {exc}") from None
+            self.state = "review"
+            self.message = self.result.dimension_text("cm")
+            return self.result
+
+    def accept(self):
+        """Add the modelled object to the database (one transaction, status "modelled")."""
+        with self.lock:
+            self._check_open()
+            if self.result is None:
+                raise WorkflowError("nothing to accept: Solve first")
+            r = self.result
+            if self.shape == "box":
+                clicks = {"faces": [np.array(f["segs"]).reshape(-1, 2, 2) for f in self.faces]}
+                measurements = {"faces": [f["points"] for f in self.faces if f["points"] is not None]}
+            else:
+                clicks = {"silhouettes_uv": np.array(self.silhouettes)}
+                measurements = {"scans": [{"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m}
+                                          for s in self.scans]}
+            try:
+                rec = self.site.write(lambda db: db.add_object(
+                    self.object_name, r.kind, r.model, r.T_world_obj, dims=r.dimensions,
+                    sigmas={k: v for k, v in r.sigmas.items() if np.isfinite(v)}, status="modelled",
+                    method=f"model {r.kind} ({r.method})", client=self.client, clicks=clicks, measurements=measurements,
+                    residuals={k: np.asarray(v) for k, v in r.residuals.items()},
+                    note=f"hints: {'vertical' if self.vertical else 'oblique'}{', on the table' if self.on_table else ''}"))
+            except ValueError as exc:
+                raise WorkflowError(f"the database refused the object: {exc}") from None
+            self.accepted = True
+            self.state = "accepted"
+            self.message = f"{self.object_name} added: {r.dimension_text('cm')}"
+            return rec
+
+    # ------------------------------------------------------------------ display
+    @property
+    def next_step(self) -> str:
+        if self.accepted:
+            return f"Done: {self.object_name} is in the database."
+        if self.cancelled:
+            return "Cancelled: nothing was written."
+        if self.progress is not None:
+            return f"Measuring… {self.progress_text} (Cancel stops it)"
+        if self.result is not None:
+            return f"{self.result.dimension_text('cm')}. Accept, or add measurements and Solve again."
+        if self.pending is not None:
+            return "Click the other end of that edge."
+        if self.shape == "box":
+            face = self.faces[-1]
+            n = len(self.faces)
+            if face["points"] is not None:
+                return f"Face {n} measured. Next face (click its sides) for more accuracy, or Solve."
+            if len(face["segs"]) < 2:
+                return f"Face {n}: click two points on each side of one visible face (side {len(face['segs']) + 1})."
+            return f"Face {n}: click more sides, or Measure face (the turret scans inside them)."
+        if len(self.silhouettes) < 2:
+            which = "left" if not self.silhouettes else "right"
+            return f"Click the {which} silhouette of the {self.shape}: its bottom end, then its top end."
+        if not self.scans:
+            return "Scan profile: the turret sweeps the range finder across the object at two heights."
+        return f"Solve ({self.method})."
+
+    def marks(self) -> Marks:
+        with self.lock:
+            m = Marks()
+            segs = [s for f in self.faces for s in f["segs"]] if self.shape == "box" else list(self.silhouettes)
+            if segs:
+                m.segments = np.array(segs)
+            if self.pending is not None:
+                m.pending = self.pending.reshape(1, 2)
+            cam = self.site.camera
+            pts = [f["points"] for f in self.faces if f.get("points") is not None]
+            T = self.site.T_world_turret
+            pts += [s.points(T)[s.hits] for s in self.scans]
+            if pts:
+                X = np.concatenate(pts)
+                X = X[cam.depth(X) > 0]
+                m.points = cam.project(X) if len(X) else np.zeros((0, 2))
+            if self.result is not None:
+                m.ghosts = [Ghost(self.result.model, self.result.T_world_obj, self.object_name, chosen=True)]
+                lo, hi = self.result.model.bounds()
+                top = self.result.T_world_obj[:3, :3] @ np.array([0, 0, hi[2]]) + self.result.T_world_obj[:3, 3]
+                if cam.depth(top) > 0:
+                    m.labels = [(cam.project(top) - [0, 14], self.result.dimension_text("cm"))]
+            return m
+
+    def summary(self) -> dict[str, Any]:
+        with self.lock:
+            out: dict[str, Any] = {"name": self.object_name, "shape": self.shape,
+                                   "hints": ("vertical" if self.vertical else "oblique") + (", on the table" if self.on_table else "")}
+            if self.shape == "box":
+                out["faces"] = [{"face": i + 1, "sides": len(f["segs"]),
+                                 "points": 0 if f["points"] is None else len(f["points"])} for i, f in enumerate(self.faces)]
+            else:
+                out["silhouettes"] = len(self.silhouettes)
+                out["scans"] = [int(s.hits.sum()) for s in self.scans]
+            if self.result is not None:
+                r = self.result
+                out["method"] = r.method
+                out["dimensions"] = [{"dimension": k, "value_cm": 100 * v, "sigma_cm": 100 * r.sigmas.get(k, float("nan"))}
+                                     for k, v in r.dimensions.items()]
+            return out
+
+
+def _cross2(a: np.ndarray, b: np.ndarray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def _convex_hull(P: np.ndarray) -> np.ndarray:
+    """Convex hull (K, 2) of pixels (N, 2), counter-clockwise (monotone chain)."""
+    pts = sorted(map(tuple, np.asarray(P, float)))
+    if len(pts) <= 2:
+        return np.array(pts)
+
+    def half(points):
+        out: list = []
+        for p in points:
+            while len(out) >= 2 and _cross2(np.subtract(out[-1], out[-2]), np.subtract(p, out[-2])) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(pts), half(list(reversed(pts)))
+    return np.array(lower[:-1] + upper[:-1])
