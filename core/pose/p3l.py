@@ -143,12 +143,9 @@ class _Setup:
         self.E = E
 
 
-def _pose_at_root(st: _Setup, hc, hs, n, V):
-    """R_world_obj (rows) at a root given by its half angle (hc, hs) ∝ (cos α/2, sin α/2).
-
-    Returns (R, err, nd): err = Σ_i |N_i · R V_i| (0 for an exact solution), nd the normalised
-    Cramer denominator (the β-equations are dependent where it is ~0).
-    """
+def _angles_at_root(st: _Setup, hc, hs):
+    """(cos α, sin α, cos β, sin β, nd) at a root given by its half angle (hc, hs) ∝ (cos α/2,
+    sin α/2); nd is the normalised Cramer denominator (the β-equations are dependent where ~0)."""
     hc2, hs2, hcs = hc * hc, hs * hs, hc * hs
     w = hc2 + hs2
     # t^k (1 + t²)^-2 = hs^k hc^(4-k) / w²: homogeneous, no pole at α = π.
@@ -160,8 +157,52 @@ def _pose_at_root(st: _Setup, hc, hs, n, V):
     # (cos β, sin β) = (nc, ns) sign(nd) / |(nc, ns)|, written without a branch.
     cb, sb = nc * nd, ns * nd
     k = 1.0 / ((cb * cb + sb * sb) ** 0.5 + 1e-300)
-    R, err = _rotation(st, (hc2 - hs2) / w, 2.0 * hcs / w, cb * k, sb * k, n, V)
-    return R, err, nd
+    return (hc2 - hs2) / w, 2.0 * hcs / w, cb * k, sb * k, nd
+
+
+def _polish(st: _Setup, ca, sa, cb, sb):
+    """One Newton step on the two β-equations G_2 = G_3 = 0 in (α, β), kept where it lowers
+    |G_2| + |G_3|. The companion eigenvalues are accurate to ~1e-10 rad for simple roots but only
+    to ~1e-6 near a double root; this brings the constraint residuals back to ~1e-15."""
+    G, dGa, dGb = [], [], []
+    for c, s, h in st.E:  # half-angle quadratics of s_c, s_s, s_rhs for edges 2, 3
+        # s (1 + t²) = e0 + e1 t + e2 t²  ⇒  s = (e0 (1 + cos α) + e1 sin α + e2 (1 − cos α)) / 2
+        vc = 0.5 * (c[0] * (1 + ca) + c[1] * sa + c[2] * (1 - ca))
+        vs = 0.5 * (s[0] * (1 + ca) + s[1] * sa + s[2] * (1 - ca))
+        vh = 0.5 * (h[0] * (1 + ca) + h[1] * sa + h[2] * (1 - ca))
+        dc = 0.5 * ((c[2] - c[0]) * sa + c[1] * ca)
+        ds = 0.5 * ((s[2] - s[0]) * sa + s[1] * ca)
+        dh = 0.5 * ((h[2] - h[0]) * sa + h[1] * ca)
+        G.append(vc * cb + vs * sb - vh)
+        dGa.append(dc * cb + ds * sb - dh)
+        dGb.append(vs * cb - vc * sb)
+    det = dGa[0] * dGb[1] - dGa[1] * dGb[0]
+    det = det + (det == 0) * 1e-300
+    da = (G[0] * dGb[1] - G[1] * dGb[0]) / det
+    db = (dGa[0] * G[1] - dGa[1] * G[0]) / det
+    # Rotate (cos, sin) by −da, −db (second-order, renormalised: the steps are tiny).
+    def rotate(c, s, d):
+        cd, sd = 1.0 - 0.5 * d * d, d - d * d * d / 6.0
+        c2, s2 = c * cd + s * sd, s * cd - c * sd
+        k = (c2 * c2 + s2 * s2) ** -0.5
+        return c2 * k, s2 * k
+
+    ca2, sa2 = rotate(ca, sa, da)
+    cb2, sb2 = rotate(cb, sb, db)
+    old = abs(G[0]) + abs(G[1])
+    new = 0.0
+    for c, s, h in st.E:
+        vc = 0.5 * (c[0] * (1 + ca2) + c[1] * sa2 + c[2] * (1 - ca2))
+        vs = 0.5 * (s[0] * (1 + ca2) + s[1] * sa2 + s[2] * (1 - ca2))
+        vh = 0.5 * (h[0] * (1 + ca2) + h[1] * sa2 + h[2] * (1 - ca2))
+        new = new + abs(vc * cb2 + vs * sb2 - vh)
+    keep = new < old  # a bool or a boolean array: blend without a branch
+    return (
+        ca2 * keep + ca * (1 - keep),
+        sa2 * keep + sa * (1 - keep),
+        cb2 * keep + cb * (1 - keep),
+        sb2 * keep + sb * (1 - keep),
+    )
 
 
 def _rotation(st: _Setup, ca, sa, cb, sb, n, V):
@@ -279,8 +320,11 @@ def _rotations_one(n, ray, V) -> list:
     st = _Setup(n, ray, V)
     out = []
     for hc, hs in _roots_one(st.coef):
-        R, err, nd = _pose_at_root(st, hc, hs, n, V)
+        ca, sa, cb, sb, nd = _angles_at_root(st, hc, hs)
         if abs(nd) >= _DEPENDENT_TOL:
+            R, err = _rotation(st, ca, sa, cb, sb, n, V)
+            if err > 1e-12:  # not a simple, well separated root: polish it
+                R, err = _rotation(st, *_polish(st, ca, sa, cb, sb), n, V)
             if err < _CONSTRAINT_TOL:
                 out.append(R)
             continue
@@ -320,7 +364,8 @@ def p3l_rotations(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray)
     ray = [ray_world[:, j, None] for j in range(3)]
     st = _Setup(n, ray, V)
     hc, hs, real = _roots(np.concatenate(st.coef, axis=1))
-    R, err, nd = _pose_at_root(st, hc, hs, n, V)
+    ca, sa, cb, sb, nd = _angles_at_root(st, hc, hs)
+    R, err = _rotation(st, *_polish(st, ca, sa, cb, sb), n, V)
     R = np.stack([np.stack(row, axis=-1) for row in R], axis=-2)  # (B, 8, 3, 3)
     valid = real & (err < _CONSTRAINT_TOL) & (np.abs(nd) >= _DEPENDENT_TOL)
     dependent = real & (np.abs(nd) < _DEPENDENT_TOL)
@@ -349,7 +394,7 @@ def _first_edge_order(V) -> tuple[int, int, int]:
     neither other (paper appendix: L2, L3 must not be parallel to L1); ValueError if all are."""
     for order in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
         i = order[0]
-        if all(1.0 - _dot(V[i], V[j]) ** 2 > _PARALLEL_TOL**2 for j in order[1:]):
+        if all(_dot(c, c) > _PARALLEL_TOL**2 for c in (_cross(V[i], V[j]) for j in order[1:])):
             return order
     raise ValueError(
         "the three model edges are parallel: the rotation about their common direction is not "
@@ -409,7 +454,8 @@ def _translations_from_points(camera: Camera, R: np.ndarray, n, d, A, clicks: Cl
 
 def _check_segments(n) -> None:
     for i, j in ((0, 1), (0, 2), (1, 2)):
-        if 1.0 - _dot(n[i], n[j]) ** 2 < _PARALLEL_TOL**2:
+        c = _cross(n[i], n[j])
+        if _dot(c, c) < _PARALLEL_TOL**2:
             raise ValueError(
                 f"clicked segments {i} and {j} lie on one image line (same interpretation plane): "
                 "they cannot tell two edges apart; click edges that are distinct in the image"
