@@ -15,7 +15,20 @@ from ..brep import BRep
 from ..camera import Camera
 from ..transforms import invert_T, make_T, random_rotation
 
-__all__ = ["LineProblem", "random_camera", "random_pose_in_view", "random_lines_problem", "clicks_on_edges", "box_problem"]
+__all__ = [
+    "LineProblem",
+    "PAPER_BOX_M",
+    "paper_camera",
+    "paper_box_pose",
+    "random_camera",
+    "random_pose_in_view",
+    "random_lines_problem",
+    "clicks_on_edges",
+    "box_problem",
+]
+
+#: The paper's test object (§IV.3): a parallelepiped 35 × 23.1 × 13.2 cm (length, width, height).
+PAPER_BOX_M = (0.35, 0.231, 0.132)
 
 
 @dataclass(frozen=True)
@@ -31,6 +44,24 @@ class LineProblem:
     segs_true_uv: np.ndarray
     sigma_px: float
     edge_index: np.ndarray
+
+
+def paper_camera() -> Camera:
+    """The paper's camera (§II, §IV.3): 512 × 256 px, f = 500 px, principal point at the centre,
+    1.45 m behind and 0.75 m above the table's origin, looking along +y, 25° down (the set-up of
+    ``scenes/workcell``): a box on the table near (0.1, 0.45) is ~2 m away."""
+    K = np.array([[500.0, 0.0, 255.5], [0.0, 500.0, 127.5], [0.0, 0.0, 1.0]])
+    c, s = np.cos(np.radians(25.0)), np.sin(np.radians(25.0))
+    R_world_cam = np.array([[1.0, 0.0, 0.0], [0.0, -s, c], [0.0, -c, -s]])  # x right, y down, z forward
+    return Camera.from_intrinsics(K, invert_T(make_T(R_world_cam, [0.0, -1.45, 0.75])), 512, 256)
+
+
+def paper_box_pose(rng: np.random.Generator) -> np.ndarray:
+    """The box lying on the table (z = 0) with a uniform random yaw, its centre uniform in
+    x ∈ [−0.2, 0.4], y ∈ [0.3, 0.6] m: ~1.9–2.2 m from ``paper_camera``."""
+    yaw = rng.uniform(0.0, 2.0 * np.pi)
+    c, s = np.cos(yaw), np.sin(yaw)
+    return make_T(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), [rng.uniform(-0.2, 0.4), rng.uniform(0.3, 0.6), 0.0])
 
 
 def random_camera(rng: np.random.Generator, width: int = 640, height: int = 480) -> Camera:
