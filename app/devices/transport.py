@@ -244,6 +244,7 @@ class LineDriver:
         self.reconnect_timeout_s = float(reconnect_timeout_s)
         self.stats: Counter = Counter()
         self._lock = threading.RLock()
+        self._call_deadline = float("inf")  # the deadline of the call under way (set by _transact)
 
     # -- life cycle
     @property
@@ -330,49 +331,82 @@ class LineDriver:
             attempts = (self.retries + 1 if idempotent else 1) if attempts is None else attempts
             if deadline is None:
                 deadline = self._default_deadline(attempts)
-            last: DeviceError | None = None
-            for attempt in range(attempts):
-                now = time.monotonic()
-                if now >= deadline:
-                    break
+            outer, self._call_deadline = self._call_deadline, min(self._call_deadline, deadline)
+            try:
+                return self._attempts(op, what, idempotent, deadline, attempts, reopen)
+            finally:
+                self._call_deadline = outer
+
+    def _attempts(self, op, what: str, idempotent: bool, deadline: float, attempts: int, reopen: bool):
+        """The attempts of ``_transact`` (under its lock)."""
+        last: DeviceError | None = None
+        for attempt in range(attempts):
+            now = time.monotonic()
+            if now >= deadline:
+                break
+            try:
+                if reopen and not self._line.is_open:
+                    self._reopen(min(deadline, now + self.reconnect_timeout_s))
+                self.stats["attempts"] += 1
+                return op(min(deadline, time.monotonic() + self.attempt_timeout_s))
+            except DeviceDisconnected as exc:
+                last = exc
+                if not reopen:
+                    raise
                 try:
-                    if reopen and not self._line.is_open:
-                        self._reopen(min(deadline, now + self.reconnect_timeout_s))
-                    self.stats["attempts"] += 1
-                    return op(min(deadline, time.monotonic() + self.attempt_timeout_s))
-                except DeviceDisconnected as exc:
-                    last = exc
-                    if not reopen:
-                        raise
-                    try:
-                        self._reopen(min(deadline, time.monotonic() + self.reconnect_timeout_s))
-                    except DeviceDisconnected:
-                        raise
-                    except (DeviceTimeout, ProtocolError) as hs_exc:
-                        last = hs_exc
-                        self._line.close()  # redo the whole reopen at the next attempt
-                    if not idempotent:
-                        raise MotionUnconfirmedError(
-                            f"{self.device}: the port was lost during {what}; it was reconnected, but whether the "
-                            "command took effect is unknown and it is not retried: query the state first",
-                            device=self.device,
-                        ) from exc
-                except (DeviceTimeout, ProtocolError) as exc:
-                    last = exc
-                    if isinstance(exc, ProtocolError):
-                        self.stats["corrupt"] += 1
-                    if not idempotent:
-                        raise MotionUnconfirmedError(
-                            f"{self.device}: {what} was sent but not confirmed ({exc}); it is not retried "
-                            "because it may already have happened: query the state first",
-                            device=self.device,
-                        ) from exc
-                    if attempt + 1 < attempts:
-                        self._try_resync(deadline)
-            if last is None:
-                raise DeviceTimeout(f"{self.device}: no time left for {what} (deadline already passed)", device=self.device)
-            kind = type(last)
-            raise kind(f"{last} — gave up on {what} after {attempt + 1} attempt(s)", device=self.device, command=last.command) from last
+                    self._reopen(min(deadline, time.monotonic() + self.reconnect_timeout_s))
+                except DeviceDisconnected:
+                    raise
+                except (DeviceTimeout, ProtocolError) as hs_exc:
+                    last = hs_exc
+                    self._line.close()  # redo the whole reopen at the next attempt
+                if not idempotent:
+                    raise MotionUnconfirmedError(
+                        f"{self.device}: the port was lost during {what}; it was reconnected, but whether the "
+                        "command took effect is unknown and it is not retried: query the state first",
+                        device=self.device,
+                    ) from exc
+            except (DeviceTimeout, ProtocolError) as exc:
+                last = exc
+                if isinstance(exc, ProtocolError):
+                    self.stats["corrupt"] += 1
+                if not idempotent:
+                    raise MotionUnconfirmedError(
+                        f"{self.device}: {what} was sent but not confirmed ({exc}); it is not retried "
+                        "because it may already have happened: query the state first",
+                        device=self.device,
+                    ) from exc
+                if attempt + 1 < attempts:
+                    self._try_resync(deadline)
+        if last is None:
+            raise DeviceTimeout(f"{self.device}: no time left for {what} (deadline already passed)", device=self.device)
+        kind = type(last)
+        raise kind(f"{last} — gave up on {what} after {attempt + 1} attempt(s)", device=self.device, command=last.command) from last
+
+    def _step(self, fn: Callable[[float], T], timeout_s: float | None = None) -> T:
+        """One idempotent step of a longer operation (a query, an absolute set-point), retried on its own.
+
+        ``fn(deadline)`` is retried after a timeout or a malformed reply, with a resynchronisation
+        in between, up to ``retries`` times, within the deadline of the call under way; an unplug
+        goes up to ``_transact``, which reconnects and restarts the whole operation.
+        """
+        timeout_s = self.attempt_timeout_s if timeout_s is None else timeout_s
+        last: DeviceError | None = None
+        for attempt in range(self.retries + 1):
+            now = time.monotonic()
+            if now >= self._call_deadline:
+                break
+            try:
+                return fn(min(self._call_deadline, now + timeout_s))
+            except (DeviceTimeout, ProtocolError) as exc:
+                last = exc
+                if isinstance(exc, ProtocolError):
+                    self.stats["corrupt"] += 1
+                if attempt < self.retries:
+                    self._try_resync(self._call_deadline)
+        if last is None:
+            raise DeviceTimeout(f"{self.device}: the call's deadline passed", device=self.device)
+        raise last
 
     def _try_resync(self, deadline: float) -> None:
         self.stats["resyncs"] += 1

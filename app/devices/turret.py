@@ -173,11 +173,15 @@ class Turret(LineDriver):
     def _ask(self, command: str, expect: str, deadline: float):
         return self._request(command, self._parser(expect, command), deadline, EOL)
 
+    def _ask_step(self, command: str, expect: str, timeout_s: float | None = None):
+        """An idempotent command as one step of a longer operation: retried on its own (see LineDriver._step)."""
+        return self._step(lambda dl: self._ask(command, expect, dl), timeout_s)
+
     def _ask_agreed(self, command: str, expect: str, deadline: float, tries: int = 4):
         """Ask until two consecutive answers agree (values that must not be garbled)."""
         last = None
         for _ in range(tries):
-            value = self._ask(command, expect, deadline)
+            value = self._ask_step(command, expect)
             if last is not None and value == last:
                 return value
             last = value
@@ -185,8 +189,8 @@ class Turret(LineDriver):
 
     # ------------------------------------------------------- handshake, resync
     def _handshake(self, deadline: float) -> None:
-        self._ask("ED", "ack", deadline)
-        self._ask("FT", "ack", deadline)
+        self._ask_step("ED", "ack")
+        self._ask_step("FT", "ack")
         res_p = self._ask_agreed("PR", "float", deadline)
         res_t = self._ask_agreed("TR", "float", deadline)
         if not (0.0 < res_p < 3600.0 and 0.0 < res_t < 3600.0):
@@ -203,8 +207,8 @@ class Turret(LineDriver):
         self.pan_limits_steps = (limits[0], limits[1])
         self.tilt_limits_steps = (limits[2], limits[3])
         if self._speed_set is not None:  # a power cycle forgets the speed
-            self._ask(f"PS{self._speed_set[0]}", "ack", deadline)
-            self._ask(f"TS{self._speed_set[1]}", "ack", deadline)
+            self._ask_step(f"PS{self._speed_set[0]}", "ack")
+            self._ask_step(f"TS{self._speed_set[1]}", "ack")
         self._speed_known = None
         self._target = None
         self._maybe_moving = True  # a unit powering up homes itself
@@ -232,13 +236,13 @@ class Turret(LineDriver):
     def _deadline(self, timeout_s: float | None) -> float | None:
         return None if timeout_s is None else time.monotonic() + timeout_s
 
-    def _read_axes(self, deadline: float, pan: bool = True, tilt: bool = True) -> tuple[int | None, int | None]:
+    def _read_axes(self, pan: bool = True, tilt: bool = True) -> tuple[int | None, int | None]:
         pos = []
         for wanted, cmd, (lo, hi) in ((pan, "PP", self.pan_limits_steps), (tilt, "TP", self.tilt_limits_steps)):
             if not wanted:
                 pos.append(None)
                 continue
-            v = self._ask(cmd, "int", deadline)
+            v = self._ask_step(cmd, "int")
             if not lo <= v <= hi:
                 raise ProtocolError(f"turret: position {v} from {cmd!r} is outside the limits {lo}..{hi} (garbled?)", device=self.device, command=cmd)
             pos.append(v)
@@ -253,9 +257,9 @@ class Turret(LineDriver):
         end and no move was sent since, they must be equal.
         """
         speeds = (self._speed_known or self._speed_set or (0, 0)) if self._maybe_moving else (0, 0)
-        prev, t_prev = self._read_axes(deadline), time.monotonic()
+        prev, t_prev = self._read_axes(), time.monotonic()
         for _ in range(tries - 1):
-            cur, t = self._read_axes(deadline), time.monotonic()
+            cur, t = self._read_axes(), time.monotonic()
             if all(abs(c - p) <= (v * (t - t_prev + 0.005) + 1 if v else 0) for c, p, v in zip(cur, prev, speeds)):
                 return cur
             prev, t_prev = cur, t
@@ -294,8 +298,8 @@ class Turret(LineDriver):
                 raise ValueError(f"{name} speed must be a positive whole number of steps/s, got {v!r}")
 
         def send(deadline: float) -> None:
-            self._ask(f"PS{int(pan)}", "ack", deadline)
-            self._ask(f"TS{int(tilt)}", "ack", deadline)
+            self._ask_step(f"PS{int(pan)}", "ack")
+            self._ask_step(f"TS{int(tilt)}", "ack")
 
         self._transact(send, what="speed setting", idempotent=True, deadline=self._deadline(timeout_s))
         self._speed_set = self._speed_known = (int(pan), int(tilt))
@@ -374,25 +378,22 @@ class Turret(LineDriver):
         self.check_limits(pan, tilt)
         self._ensure_speed_known()
         motion_s = self._motion_time_s(pan, tilt)
-        budget = 5 * self.attempt_timeout_s + (motion_s + self.motion_margin_s if wait else 0.0)  # one attempt's worst case
+        budget = 5 * (self.retries + 1) * self.attempt_timeout_s + (motion_s + self.motion_margin_s if wait else 0.0)  # one attempt's worst case
 
         def move(_deadline: float) -> tuple[int, int]:
-            def soon() -> float:
-                return time.monotonic() + self.attempt_timeout_s
-
             self._maybe_moving = True
             if pan is not None:
-                self._ask(f"PP{pan}", "ack", soon())
+                self._ask_step(f"PP{pan}", "ack")
             if tilt is not None:
-                self._ask(f"TP{tilt}", "ack", soon())
+                self._ask_step(f"TP{tilt}", "ack")
             if not wait:
                 return (pan, tilt)
-            self._ask("A", "ack", soon() + motion_s + self.motion_margin_s)
+            self._ask_step("A", "ack", self.attempt_timeout_s + motion_s + self.motion_margin_s)
             self._maybe_moving = False
             want = (pan, tilt)
-            got = self._read_axes(soon(), pan is not None, tilt is not None)
+            got = self._read_axes(pan is not None, tilt is not None)
             if got != want:  # a garbled digit, or the unit really stopped elsewhere: read again
-                again = self._read_axes(soon(), pan is not None, tilt is not None)
+                again = self._read_axes(pan is not None, tilt is not None)
                 if again != want:
                     if again == got:
                         raise TurretError(f"turret stopped at {got} steps instead of {want}", command="A")

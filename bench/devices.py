@@ -1,0 +1,206 @@
+"""Benchmark of the device chain: drivers ↔ emulators, with the serial line's rate modelled.
+
+Run: .venv/bin/python bench/devices.py [--shots 20] [--beams 40] [--seed 0]
+
+Setup: the bundled scene (scenes/workcell), static (t = 0); the turret's beam on the centre of
+the unknown box's face that faces it (~1.46 m). Emulators as shipped: the DLS measures in
+100 ms + 5 ms/m (normal mode; 50 ms for "fast"), range noise σ_ρ = 5 mm; the PTU moves at
+1000 steps/s (0.0514° a step). The line rate is modelled by the emulators: every byte costs
+10 bits / baud each way (start + 7E1 or 8N1 + stop), the measurement delay is added, and a reply
+is delivered when its last byte would have arrived. The "model" column is that arithmetic alone:
+  shot    = delay + 5 ms/m × range + (len("s0g\\r") + len("g0g+dddddddd\\r\\n")) × 10 / baud
+  step    = (len("PPnnnn ") + 3 + len("A ") + 3 + len("PP ") + len("* nnnn\\r\\n")) × 10 / baud + 1 step / speed
+            (absolute move, wait for the end, read the position back: what every scan beam does)
+  beam    = step + shot
+"Measured" is wall-clock time through the driver (median and 90th percentile), on this shared
+machine (load average printed): the difference is the host's own cost (Python, threads, pty);
+the "∞" rows (no line model, no measurement time) show that cost alone.
+Faults: each reply faulty with the given probability, kinds drawn evenly among the line faults
+drop, late (0.3 s), truncate, split, junk, garble, unsolicited (a device error stops a scan by
+design, an unplug costs a reconnection: both are tested, not benchmarked); the scan's points are
+then checked against the true surfaces.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import trimesh  # noqa: E402
+
+from app.devices.acquisition import profile_scan  # noqa: E402
+from app.devices.rangefinder import RangeFinder  # noqa: E402
+from app.devices.site import EmulatedSite  # noqa: E402
+from app.devices.turret import Turret  # noqa: E402
+from app.scene import default_scene_path, load_scene  # noqa: E402
+from core.rangefinder import aim  # noqa: E402
+
+SHOT_CHARS = len("s0g\r") + len("g0g+00014603\r\n")
+
+
+def step_chars(pan: int) -> int:
+    return len(f"PP{pan} ") + 3 + len("A ") + 3 + len("PP ") + len(f"* {pan}\r\n")
+
+
+def face_target(scene):
+    """Centre of the unknown box's face that looks most toward the turret (world (3,))."""
+    b = scene.body("unknown_box")
+    T = b.pose_at(0.0)
+    C = b.model.face_centroids() @ T[:3, :3].T + T[:3, 3]
+    N = b.model.face_normals() @ T[:3, :3].T
+    o = scene.turret.T_world_turret[:3, 3]
+    k = int(np.argmax(np.einsum("ij,ij->i", N, (o - C) / np.linalg.norm(o - C, axis=1)[:, None])))
+    return C[k]
+
+
+class Chain:
+    """An emulated site and its two drivers."""
+
+    def __init__(self, scene, *, rf_baud, tu_baud, delay_s, per_m_s=0.005, transport="pty", rates=None, seed=0, tmp=None):
+        self.site = EmulatedSite(scene, clock=lambda: 0.0, seed=seed, rangefinder_baud=rf_baud, turret_baud=tu_baud,
+                                 measure_delay_s=delay_s, delay_per_m_s=per_m_s, fault_rates=rates)
+        if transport == "pty":
+            urls = self.site.serve_pty(tmp / f"rf-{rf_baud}-{tu_baud}-{delay_s}", tmp / f"tu-{rf_baud}-{tu_baud}-{delay_s}")
+        else:
+            urls = self.site.serve_inprocess()
+        self.rf = RangeFinder(urls[0], baudrate=rf_baud or 19200, attempt_timeout_s=1.0)
+        self.tu = Turret(urls[1], baudrate=tu_baud or 9600, attempt_timeout_s=1.0)
+
+    def close(self):
+        self.rf.close()
+        self.tu.close()
+        self.site.close()
+
+
+def stats_ms(samples):
+    a = np.asarray(samples) * 1e3
+    return float(np.median(a)), float(np.percentile(a, 90))
+
+
+def bench_shots(scene, target, shots, tmp):
+    rows = []
+    configs = (("pty", 19200, 0.1, 0.005), ("pty", 9600, 0.1, 0.005), ("pty", 19200, 0.05, 0.005), ("mcit://", 19200, 0.1, 0.005),
+               ("pty", 0, 0.0, 0.0), ("mcit://", 0, 0.0, 0.0))
+    for transport, rf_baud, delay, per_m in configs:
+        chain = Chain(scene, rf_baud=rf_baud, tu_baud=9600, delay_s=delay, per_m_s=per_m, transport="pty" if transport == "pty" else "inprocess", tmp=tmp)
+        try:
+            pan, tilt, rho = aim(scene.turret.T_world_turret, target)
+            chain.tu.move_to(float(pan), float(tilt))
+            chain.rf.measure()
+            times = []
+            for _ in range(shots):
+                t0 = time.perf_counter()
+                chain.rf.measure()
+                times.append(time.perf_counter() - t0)
+            line = SHOT_CHARS * 10 / rf_baud if rf_baud else 0.0
+            model = delay + per_m * float(rho) + line
+            rows.append((transport, rf_baud or "∞", f"{delay * 1e3:.0f}", model * 1e3, *stats_ms(times)))
+        finally:
+            chain.close()
+    print("\nRange-finder shot round trip (RangeFinder.measure), ms")
+    print(f"{'transport':>9} {'baud':>6} {'delay':>6} {'model':>8} {'median':>8} {'p90':>8} {'host cost':>9}")
+    for t, b, d, model, med, p90 in rows:
+        print(f"{t:>9} {b!s:>6} {d:>6} {model:8.1f} {med:8.1f} {p90:8.1f} {med - model:9.1f}")
+
+
+def bench_steps(scene, target, shots, tmp):
+    rows = []
+    for tu_baud in (9600, 19200, 0):
+        chain = Chain(scene, rf_baud=19200, tu_baud=tu_baud, delay_s=0.1, tmp=tmp)
+        try:
+            pan, tilt, _ = aim(scene.turret.T_world_turret, target)
+            p, t = chain.tu.rad_to_steps(float(pan), float(tilt))
+            chain.tu.move_to_steps(p, t)
+            times = []
+            for i in range(shots):
+                t0 = time.perf_counter()
+                chain.tu.move_to_steps(p + 1 + i, None)
+                times.append(time.perf_counter() - t0)
+            model = (step_chars(p) * 10 / tu_baud if tu_baud else 0.0) + 1 / scene.turret.speed_steps_s
+            rows.append((tu_baud or "∞", model * 1e3, *stats_ms(times)))
+        finally:
+            chain.close()
+    print("\nTurret one-step absolute move with wait and read-back (Turret.move_to_steps), ms")
+    print(f"{'baud':>6} {'model':>8} {'median':>8} {'p90':>8} {'host cost':>9}")
+    for b, model, med, p90 in rows:
+        print(f"{b!s:>6} {model:8.1f} {med:8.1f} {p90:8.1f} {med - model:9.1f}")
+
+
+def surface_distance(scene, X):
+    best = np.full(len(X), np.inf)
+    for b in scene.bodies:
+        V, F = b.model.triangles()
+        T = b.pose_at(0.0)
+        mesh = trimesh.Trimesh(V @ T[:3, :3].T + T[:3, 3], F, process=False)
+        best = np.minimum(best, trimesh.proximity.closest_point(mesh, X)[1])
+    return best
+
+
+def bench_scans(scene, target, beams, tmp, seed):
+    kinds = ["drop", "late", "truncate", "split", "junk", "garble", "unsolicited"]  # line faults; a device error stops a scan by design
+    rows = []
+    for rf_baud, tu_baud, delay, rate in ((19200, 9600, 0.1, 0.0), (19200, 9600, 0.05, 0.0), (9600, 9600, 0.1, 0.0), (0, 0, 0.1, 0.0),
+                                          (19200, 9600, 0.1, 0.02), (19200, 9600, 0.1, 0.10)):
+        rates = {k: rate / len(kinds) for k in kinds} if rate else None
+        chain = Chain(scene, rf_baud=rf_baud, tu_baud=tu_baud, delay_s=delay, rates=rates, seed=seed, tmp=tmp)
+        for emu in (chain.site.rangefinder, chain.site.turret):
+            emu.faults.default_delay_s = 0.3
+        try:
+            pan, tilt, rho = aim(scene.turret.T_world_turret, target)
+            step = chain.tu.pan_step_rad
+            start = float(pan) - beams // 2 * 2 * step
+            chain.tu.move_to(start, float(tilt))
+            t0 = time.perf_counter()
+            scan = profile_scan(chain.tu, chain.rf, tilt_rad=float(tilt), pan_start_rad=start,
+                                pan_stop_rad=start + (beams - 1) * 2 * step, pan_step_rad=2 * step)
+            elapsed = time.perf_counter() - t0
+            X = scan.points(scene.turret.T_world_turret)[scan.hits]
+            worst = float(surface_distance(scene, X).max() / scene.rangefinder.sigma_range_m) if len(X) else np.nan
+            shot = delay + 0.005 * float(rho) + (SHOT_CHARS * 10 / rf_baud if rf_baud else 0.0)
+            move = (step_chars(int(round(float(pan) / step))) * 10 / tu_baud if tu_baud else 0.0) + 2 / scene.turret.speed_steps_s
+            retries = chain.rf.stats["resyncs"] + chain.tu.stats["resyncs"]
+            faults = len(chain.site.rangefinder.faults.applied) + len(chain.site.turret.faults.applied)
+            rows.append((rf_baud or "∞", tu_baud or "∞", f"{delay * 1e3:.0f}", f"{rate:.0%}", 1 / (shot + move), len(scan) / elapsed,
+                         f"{faults}/{retries}", f"{int(scan.hits.sum())}/{len(scan)}", worst))
+        finally:
+            chain.close()
+    print(f"\nProfile scan across the unknown box ({beams} beams, 2 steps = 0.103° apart, 1 shot each), beams/s")
+    print(f"{'RF baud':>7} {'PTU baud':>8} {'delay':>6} {'faults':>6} {'model':>7} {'measured':>8} {'faults/resyncs':>14} {'hits':>7} {'max |d|/σ':>9}")
+    for rb, tb, d, fr, model, meas, fx, hits, worst in rows:
+        print(f"{rb!s:>7} {tb!s:>8} {d:>6} {fr:>6} {model:7.2f} {meas:8.2f} {fx:>14} {hits:>7} {worst:9.2f}")
+    print("max |d|/σ: largest distance of a scanned point to the true surfaces, in σ_ρ (all within the noise if ≲ 4)")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--shots", type=int, default=20)
+    ap.add_argument("--beams", type=int, default=40)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    import tempfile
+
+    scene = load_scene(default_scene_path())
+    scene = replace(scene, turret=replace(scene.turret, speed_steps_s=1000.0))
+    target = face_target(scene)
+    print(__doc__.split("\n\n", 2)[2])
+    print(f"\nmachine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start; σ_ρ = {scene.rangefinder.sigma_range_m * 1e3:.0f} mm; target at {np.linalg.norm(target - scene.turret.T_world_turret[:3, 3]):.3f} m")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        bench_shots(scene, target, args.shots, tmp)
+        bench_steps(scene, target, args.shots, tmp)
+        bench_scans(scene, target, args.beams, tmp, args.seed)
+    print(f"\nload average {os.getloadavg()[0]:.1f} at the end")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
