@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from app.vision.snap import fit_line_robust, snap_segment
-from app.vision.synthetic import render_model
+from app.vision.synthetic import edge_contrast, render_poses
 from core.brep import BRep
 from core.camera import Camera
 from core.transforms import make_T, random_rotation
@@ -25,12 +25,13 @@ def _scene(rng):
             return cam, box, T
 
 
-def _true_lines(cam, box, T, min_len_px=30.0):
-    wf = box.wireframe(cam.center, T)
+def _true_lines(cam, box, T, min_len_px=30.0, min_contrast=10.0):
+    """The projected edges an operator would click: visible, long enough, with contrast."""
+    contrast = edge_contrast(cam, box, T)
     out = []
-    for seg in wf.segments[wf.visible]:
+    for k, seg in enumerate(box.edge_segments(T)):
         uv = cam.project(seg)
-        if np.linalg.norm(uv[1] - uv[0]) >= min_len_px:
+        if contrast[k] >= min_contrast and np.linalg.norm(uv[1] - uv[0]) >= min_len_px:
             out.append(uv)
     return out
 
@@ -44,9 +45,10 @@ def _line_dist(seg_uv, true_uv):
 def test_snapped_segments_lie_on_the_true_edges():
     rng = np.random.default_rng(0)
     errs, raw = [], []
-    for _ in range(4):
-        cam, box, T = _scene(rng)
-        img = render_model(cam, box, T, noise_sigma=2.0, rng=rng, supersample=8)
+    scenes = [_scene(rng) for _ in range(4)]
+    cam, box = scenes[0][:2]
+    frames = render_poses(cam, box, [T for _, _, T in scenes], noise_sigma=2.0)
+    for img, (_, _, T) in zip(frames, scenes):
         for uv in _true_lines(cam, box, T):
             click = uv[0] + np.array([[0.1], [0.9]]) * (uv[1] - uv[0]) + rng.normal(0, 2.0, (2, 2))
             res = snap_segment(img, click)
