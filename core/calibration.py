@@ -20,7 +20,7 @@ from .geometry import as_points
 from .rangefinder import RangeFinderSpec, beam_direction, beam_point_cov
 from .transforms import exp_so3, make_T
 
-__all__ = ["DLTResult", "calibrate_dlt", "dlt", "TurretCalibration", "calibrate_turret", "kabsch"]
+__all__ = ["DLTResult", "calibrate_dlt", "dlt", "TurretCalibration", "calibrate_turret", "calibrate_turret_planes", "kabsch"]
 
 
 class DLTResult(tuple):
@@ -208,3 +208,62 @@ def calibrate_turret(
     res = (X_turret @ T[:3, :3].T + T[:3, 3]) - X_world
     rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
     return TurretCalibration(T, cov, rms, res, linear_rms)
+
+
+def calibrate_turret_planes(
+    pan_rad: np.ndarray,
+    tilt_rad: np.ndarray,
+    range_m: np.ndarray,
+    n_world: np.ndarray,
+    d_world: np.ndarray,
+    T_world_turret0: np.ndarray,
+    spec: RangeFinderSpec = RangeFinderSpec(),
+) -> TurretCalibration:
+    """The turret's pose from measurements that land on known planes (not on known points).
+
+    Minimises Σ (nᵢ·Xᵢ + dᵢ)² / σᵢ² over ``T_world_turret``, where Xᵢ is measurement i mapped to the
+    world and σᵢ the standard deviation of its distance along nᵢ under ``spec``'s noise (range along
+    the beam, a step's quantisation across). Gauss–Newton from ``T_world_turret0`` (the planes are
+    fixed: to re-associate points with planes, call again from the result).
+
+    pan_rad, tilt_rad, range_m : arrays, shape (N,). n_world : array, shape (N, 3), unit normals of
+    the plane each point lies on; d_world : array, shape (N,), their offsets (n·X + d = 0).
+    Needs N ≥ 6 points on planes of at least 3 independent normals (else ValueError).
+    The result's ``residuals_m`` (N, 3) is each point's offset from its plane, along the normal;
+    its ``linear_rms_m`` is the RMS distance at the starting pose.
+    """
+    pan, tilt, rho = (np.asarray(a, dtype=float).reshape(-1) for a in (pan_rad, tilt_rad, range_m))
+    N = np.asarray(n_world, dtype=float).reshape(-1, 3)
+    d = np.asarray(d_world, dtype=float).reshape(-1)
+    if not (len(pan) == len(tilt) == len(rho) == len(N) == len(d)):
+        raise ValueError(f"inputs must pair one to one, got {len(pan)}, {len(tilt)}, {len(rho)}, {len(N)}, {len(d)}")
+    if len(pan) < 6:
+        raise ValueError(f"a pose on planes needs at least 6 measurements, got {len(pan)}")
+    if not (np.all(np.isfinite(rho)) and np.all(rho > 0)):
+        raise ValueError("ranges must be finite and positive (measure every point)")
+    sv = np.linalg.svd(N, compute_uv=False)
+    if sv[2] <= 0.1 * sv[0]:
+        raise ValueError("the planes have fewer than 3 independent normals: the pose is not fixed by them")
+    X_turret = rho[:, None] * beam_direction(pan, tilt)
+    T0 = np.asarray(T_world_turret0, dtype=float)
+    cov_t = beam_point_cov(np.eye(4), pan, tilt, rho, spec)
+
+    def sigma_along(T: np.ndarray) -> np.ndarray:
+        n_t = N @ T[:3, :3]  # the normals in the turret frame
+        return np.sqrt(np.einsum("ni,nij,nj->n", n_t, cov_t, n_t))
+
+    def residuals(x: np.ndarray, T_base: np.ndarray, sig: np.ndarray) -> np.ndarray:
+        T = T_base @ make_T(exp_so3(x[:3]), x[3:])
+        X = X_turret @ T[:3, :3].T + T[:3, 3]
+        return (np.einsum("ni,ni->n", N, X) + d) / sig
+
+    sig = sigma_along(T0)
+    sol = least_squares(residuals, np.zeros(6), args=(T0, sig), method="lm", xtol=1e-15, ftol=1e-15)
+    T = T0 @ make_T(exp_so3(sol.x[:3]), sol.x[3:])
+    J = sol.jac
+    cov = np.linalg.pinv(J.T @ J)
+    X = X_turret @ T[:3, :3].T + T[:3, 3]
+    dist = np.einsum("ni,ni->n", N, X) + d
+    X0 = X_turret @ T0[:3, :3].T + T0[:3, 3]
+    dist0 = np.einsum("ni,ni->n", N, X0) + d
+    return TurretCalibration(T, cov, float(np.sqrt(np.mean(dist**2))), dist[:, None] * N, float(np.sqrt(np.mean(dist0**2))))

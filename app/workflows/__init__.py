@@ -11,10 +11,12 @@ from .calibrate_camera import CalibrateCamera
 from .designate import DesignateTarget, Target
 from .session import WORKFLOWS, Session, register
 from .site import RayHit, Site, SiteObject
+from .calibrate_turret import CalibrateTurret
+from .history import History
 from .model_object import ModelObject
 from .update_pose import UpdatePose
 
-for _cls in (CalibrateCamera, DesignateTarget, UpdatePose, ModelObject):
+for _cls in (CalibrateCamera, CalibrateTurret, DesignateTarget, History, UpdatePose, ModelObject):
     register(_cls)
 
 __all__ = [
@@ -24,6 +26,8 @@ __all__ = [
     "Workflow",
     "WorkflowError",
     "CalibrateCamera",
+    "CalibrateTurret",
+    "History",
     "DesignateTarget",
     "ModelObject",
     "Target",

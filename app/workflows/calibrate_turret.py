@@ -1,0 +1,285 @@
+"""Calibrate the turret (``T_world_turret``) from range measurements on the database's known surfaces.
+
+The operator clicks known points in the overlay — a model vertex or the centre of a face (faces
+are better: the beam lands on a surface, not on an edge) — and the turret aims at each with the
+current calibration and measures. Where the beam really lands is not known exactly (the current
+calibration is what is being corrected), but it lands on a known surface: ``solve()`` finds the
+turret pose that puts every measured point on the database's surfaces (point-to-plane: each
+measured point is associated with the face it is nearest to and ``core.calibration
+.calibrate_turret_planes`` re-estimates the pose; repeated until it stops moving). At least 6
+points on faces of three different orientations are needed (e.g. the table top and two sides of
+a box). ``accept()`` stores
+the calibration (one transaction) and every later aim uses it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from core.calibration import calibrate_turret_planes
+from core.rangefinder import aim, beam_point
+from core.transforms import pose_error
+
+from .base import Cancelled, Marks, Workflow, WorkflowError, as_pixel
+
+__all__ = ["CalibrateTurret"]
+
+PICK_RADIUS_PX = 25.0
+OFF_SURFACE_M = 0.05
+POORLY_DEG, POORLY_M = 0.5, 0.01  # σ beyond which the operator is told to measure more
+
+
+class CalibrateTurret(Workflow):
+    name = "calibrate_turret"
+    title = "Calibrate turret"
+    actions = ("click", "choose_point", "measure", "remove_last", "solve", "accept", "cancel")
+
+    def __init__(self, site, client: str = "operator", shots: int = 3):
+        super().__init__(site, client)
+        self.shots = int(shots)
+        self.pending_X: np.ndarray | None = None
+        self.pending_label = ""
+        self.pan: list[float] = []
+        self.tilt: list[float] = []
+        self.range_m: list[float] = []
+        self.targets: list[np.ndarray] = []
+        self.labels: list[str] = []
+        self.result = None
+        self.progress: float | None = None
+        self.state = "pick"
+
+    # ------------------------------------------------------------------ picking
+    def _candidates(self) -> tuple[np.ndarray, list[str]]:
+        """Known points: every object's vertices and the centres of its faces that face the camera."""
+        cam = self.site.camera
+        X, names = [], []
+        for obj in self.site.objects():
+            T = obj.T_world_obj
+            V = obj.vertices_world()
+            X += list(V)
+            names += [f"{obj.name} vertex {k}" for k in range(len(V))]
+            if obj.model.faces:
+                cents = obj.model.face_centroids() @ T[:3, :3].T + T[:3, 3]
+                normals = obj.model.face_normals() @ T[:3, :3].T
+                for k, (c, n) in enumerate(zip(cents, normals)):
+                    if n @ (cam.center - c) > 0:
+                        X.append(c)
+                        names.append(f"{obj.name} face {k} centre")
+        return (np.array(X) if X else np.zeros((0, 3))), names
+
+    def click(self, uv) -> None:
+        """Pick the known point nearest the click (a vertex or a face centre drawn in the overlay)."""
+        p = as_pixel(uv)
+        with self.lock:
+            self._check_open()
+            X, names = self._candidates()
+            cam = self.site.camera
+            d = np.linalg.norm(cam.project(X) - p, axis=1) if len(X) else np.zeros(0)
+            if len(X):
+                d[cam.depth(X) <= 0] = np.inf
+            if not len(X) or d.min() > PICK_RADIUS_PX:
+                raise WorkflowError(f"no known point within {PICK_RADIUS_PX:.0f} px; click a corner or a face centre "
+                                    "(cyan crosses) of a known object")
+            k = int(np.argmin(d))
+            self.pending_X, self.pending_label = X[k].copy(), names[k]
+            self.state = "measure"
+            self.message = f"target: {names[k]}"
+
+    def choose_point(self, X_world, label: str = "") -> None:
+        """Use the known world point X_world (3,) metres as the next target (for scripts)."""
+        X = np.asarray(X_world, float).reshape(-1)
+        if X.shape != (3,) or not np.all(np.isfinite(X)):
+            raise WorkflowError(f"a known point is (x, y, z) in metres, got {X_world!r}")
+        with self.lock:
+            self._check_open()
+            self.pending_X, self.pending_label = X, label or "point"
+            self.state = "measure"
+
+    # ------------------------------------------------------------------ measuring
+    def measure(self):
+        """Aim at the picked point with the current calibration and measure (median of ``shots``)."""
+        from app.devices.errors import DeviceError, NoTargetError
+
+        with self.lock:
+            self._check_open()
+            if self.pending_X is None:
+                raise WorkflowError("pick a known point first (click a corner or a face centre)")
+            devices = self.site.devices
+            if devices is None:
+                raise WorkflowError("no range finder and turret are connected: restart mcit serve with devices")
+            X = self.pending_X
+            pan, tilt, _ = aim(self.site.T_world_turret, X)
+            self.cancel_event.clear()
+            self.progress = 0.2
+        try:
+            pan_r, tilt_r = devices.turret.move_to(float(pan), float(tilt), wait=True)  # whole steps, as reached
+            if self.cancel_event.is_set():
+                raise Cancelled()
+            self.progress = 0.6
+            m = devices.rangefinder.measure_n(self.shots)
+        except NoTargetError:
+            self.progress = None
+            raise WorkflowError(f"no range return from {self.pending_label}: pick a point on a surface facing the "
+                                "turret, nearer than 10 m") from None
+        except DeviceError as exc:
+            self.progress = None
+            raise WorkflowError(f"device fault while measuring: {exc}. Check the devices and Measure again") from None
+        with self.lock:
+            self.progress = None
+            self.pan.append(float(pan_r))
+            self.tilt.append(float(tilt_r))
+            self.range_m.append(float(m.range_m))
+            self.targets.append(X)
+            self.labels.append(self.pending_label)
+            self.pending_X = None
+            self.result = None
+            self.state = "pick"
+            Xm = beam_point(self.site.T_world_turret, pan_r, tilt_r, m.range_m)
+            self.site.set_beam(Xm)
+            self.message = f"{self.labels[-1]}: {m.range_m:.4f} m ({len(self.pan)} measurements)"
+            return m
+
+    def remove_last(self) -> None:
+        """Drop the picked point, or else the last measurement."""
+        with self.lock:
+            self._check_open()
+            if self.pending_X is not None:
+                self.pending_X = None
+            elif self.pan:
+                for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
+                    lst.pop()
+            self.result = None
+            self.state = "pick"
+
+    # ------------------------------------------------------------------ solving
+    def _surfaces(self):
+        import trimesh
+
+        meshes = []
+        for obj in self.site.objects():
+            V, F = obj.model.triangles()
+            meshes.append(trimesh.Trimesh(V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3], F, process=False))
+        return trimesh.util.concatenate(meshes)
+
+    def solve(self, max_rounds: int = 10):
+        """The turret pose that puts every measured point on the database's surfaces."""
+        with self.lock:
+            self._check_open()
+            n = len(self.pan)
+            if n < 6:
+                raise WorkflowError(f"{n} measurements; measure at least 6 points on faces of 3 orientations")
+            mesh = self._surfaces()
+            pan, tilt, rho = np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
+            T = self.site.T_world_turret
+            cal = None
+            # Beams that landed off every known surface (e.g. on the floor, not in the database) would
+            # drag the fit: only points within OFF_SURFACE_M of a surface at the current estimate count.
+            _, dist0, _ = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
+            used = dist0 <= OFF_SURFACE_M
+            if used.sum() < 6:
+                raise WorkflowError(f"only {int(used.sum())} of {n} measurements landed within {100 * OFF_SURFACE_M:.0f} cm "
+                                    "of a known surface; measure points well inside faces of known objects")
+            for _ in range(max_rounds):
+                # each measured point belongs to the face it is nearest to (re-associated every round)
+                closest, _, tri = mesh.nearest.on_surface(beam_point(T, pan[used], tilt[used], rho[used]))
+                normals = mesh.face_normals[tri]
+                try:
+                    cal = calibrate_turret_planes(pan[used], tilt[used], rho[used], normals,
+                                                  -np.einsum("ij,ij->i", normals, closest), T, self.site.scene.rangefinder)
+                except ValueError as exc:
+                    if "independent normals" in str(exc):
+                        raise WorkflowError("the measured points lie on faces of fewer than 3 orientations: the "
+                                            "turret's pose is not fixed; measure the table top and two sides of a box") from None
+                    raise WorkflowError(f"turret calibration failed: {exc}") from None
+                deg, m = pose_error(cal.T_world_turret, T)
+                T = cal.T_world_turret
+                if deg < 1e-5 and m < 1e-7:
+                    break
+            self.used = used
+            _, dist, _ = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
+            dist = dist[used]
+            self.result = cal
+            self.T_solved = T
+            self.surface_residuals_m = dist
+            deg, m = pose_error(T, self.site.T_world_turret)
+            self.state = "review"
+            dropped = f" ({n - int(used.sum())} off the known surfaces, left out)" if not used.all() else ""
+            self.message = (f"RMS {1000 * np.sqrt(np.mean(dist ** 2)):.1f} mm to the surfaces over {int(used.sum())} "
+                            f"points{dropped}; {deg:.2f}° and {100 * m:.1f} cm from the current calibration")
+            sd_rot_deg, sd_t_m = self._sigmas()
+            if sd_rot_deg.max() > POORLY_DEG or sd_t_m.max() > POORLY_M:
+                self.message += (f". Poorly determined (σ up to {sd_rot_deg.max():.2f}° and {100 * sd_t_m.max():.1f} cm): "
+                                 "measure faces of other objects, at other distances, before accepting")
+            return cal
+
+    def _sigmas(self) -> tuple[np.ndarray, np.ndarray]:
+        """Standard deviations of the solved pose: rotation (3,) degrees, translation (3,) metres (turret axes)."""
+        var = np.diag(self.result.cov)
+        return np.degrees(np.sqrt(var[:3])), np.sqrt(var[3:])
+
+    def accept(self) -> None:
+        """Store the new turret pose (one transaction)."""
+        with self.lock:
+            self._check_open()
+            if self.result is None:
+                raise WorkflowError("nothing to accept: Solve first")
+            rms = float(np.sqrt(np.mean(self.surface_residuals_m ** 2)))
+            self.site.set_turret(self.T_solved, rms_m=rms, residuals_m=self.surface_residuals_m, cov=self.result.cov,
+                                 measurements={"pan_rad": self.pan, "tilt_rad": self.tilt, "range_m": self.range_m,
+                                               "targets": np.array(self.targets), "labels": list(self.labels)},
+                                 client=self.client, method="turret: ranges on known surfaces")
+            self.accepted = True
+            self.state = "accepted"
+            self.message = f"Turret calibrated: RMS {1000 * rms:.1f} mm."
+
+    # ------------------------------------------------------------------ display
+    @property
+    def next_step(self) -> str:
+        if self.accepted:
+            return "Done: the turret is calibrated."
+        if self.cancelled:
+            return "Cancelled: nothing was written."
+        if self.progress is not None:
+            return "Measuring…"
+        if self.pending_X is not None:
+            return f"Measure {self.pending_label} (the turret aims with the current calibration)."
+        if self.result is not None:
+            return f"{self.message}. Accept, or measure more points and Solve again."
+        n = len(self.pan)
+        more = "" if n >= 6 else f" ({6 - n} more at least)"
+        return f"Click a known point — a face centre (cyan) or a corner — then Measure{more}; Solve when done."
+
+    def marks(self) -> Marks:
+        with self.lock:
+            cam = self.site.camera
+            m = Marks()
+            X, names = self._candidates()
+            centres = np.array([x for x, nm in zip(X, names) if nm.endswith("centre")]).reshape(-1, 3)
+            centres = centres[cam.depth(centres) > 0] if len(centres) else centres
+            m.targets = cam.project(centres) if len(centres) else np.zeros((0, 2))
+            if self.pending_X is not None:
+                m.pending = cam.project(self.pending_X.reshape(1, 3))
+            if self.pan:
+                Xm = beam_point(self.site.T_world_turret, np.array(self.pan), np.array(self.tilt), np.array(self.range_m))
+                m.points = cam.project(Xm)
+                m.labels = [(uv, str(i + 1)) for i, uv in enumerate(m.points)]
+            return m
+
+    def summary(self) -> dict[str, Any]:
+        with self.lock:
+            out: dict[str, Any] = {"measurements": len(self.pan)}
+            if self.result is not None:
+                out["rms_mm"] = float(1000 * np.sqrt(np.mean(self.surface_residuals_m ** 2)))
+                sd_rot_deg, sd_t_m = self._sigmas()
+                out["sd_rot_deg"] = [float(v) for v in sd_rot_deg]
+                out["sd_t_mm"] = [float(1000 * v) for v in sd_t_m]
+                deg, m = pose_error(self.T_solved, self.site.T_world_turret)
+                out["change"] = {"deg": float(deg), "cm": float(100 * m)}
+                labels = [lab for lab, u in zip(self.labels, self.used) if u]
+                ranges = [r for r, u in zip(self.range_m, self.used) if u]
+                out["left_out"] = int((~self.used).sum())
+                out["points"] = [{"point": lab, "range_m": r, "to_surface_mm": 1000 * float(d)}
+                                 for lab, r, d in zip(labels, ranges, self.surface_residuals_m)]
+            return out

@@ -1,0 +1,80 @@
+"""History and undo: the database's changes, newest first, and undoing one of them.
+
+``undo(change_id)`` brings the object (or the calibration) back to its state just before that
+change; the undo is itself a recorded change (so it can be undone). Nothing else is written.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from .base import Workflow, WorkflowError
+
+__all__ = ["History"]
+
+
+class History(Workflow):
+    name = "history"
+    title = "History"
+    actions = ("refresh", "undo", "restore", "accept", "cancel")
+
+    def __init__(self, site, client: str = "operator", limit: int = 30, object_name: str | None = None):
+        super().__init__(site, client)
+        self.limit = int(limit)
+        self.object_name = object_name
+        self.entries: list = []
+        self.state = "browse"
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Re-read the last changes (of the selected object, or of all)."""
+        with self.lock:
+            self.entries = list(reversed(self.site.db.history(self.object_name, limit=self.limit)))
+
+    def _revert(self, which: str, change_id: int):
+        from app.db import ConflictError, NotFoundError
+
+        with self.lock:
+            self._check_open()
+            try:
+                rec = self.site.write(lambda db: getattr(db, which)(int(change_id), client=self.client))
+            except NotFoundError as exc:
+                raise WorkflowError(f"{exc}; pick a change number from the list") from None
+            except ConflictError as exc:
+                raise WorkflowError(str(exc)) from None
+            except ValueError as exc:
+                raise WorkflowError(f"cannot {which} change {change_id}: {exc}") from None
+            self.refresh()
+            self.message = f"{which} of change {change_id} recorded as change {rec.id}"
+            return rec
+
+    def undo(self, change_id: int):
+        """Bring the object back to its state before change ``change_id`` (itself recorded)."""
+        return self._revert("undo", change_id)
+
+    def restore(self, change_id: int):
+        """Bring the object back to its state just after change ``change_id`` (an earlier pose)."""
+        return self._revert("restore", change_id)
+
+    def accept(self) -> None:
+        """Close the history."""
+        with self.lock:
+            self._check_open()
+            self.accepted = True
+            self.state = "closed"
+
+    @property
+    def next_step(self) -> str:
+        if self.finished:
+            return "Closed."
+        return "The last changes, newest first. Type a change number and Undo it (the undo is recorded too)."
+
+    def summary(self) -> dict[str, Any]:
+        with self.lock:
+            rows = []
+            for c in self.entries:
+                what = c.object_name or ("calibration" if c.calibration_id is not None else "")
+                rows.append({"#": c.id, "when": time.strftime("%H:%M:%S", time.localtime(c.time)), "who": c.client,
+                             "action": c.action, "what": what, "method": c.method})
+            return {"changes": rows}

@@ -1,0 +1,87 @@
+"""Calibrate turret: aim at known faces with a wrong calibration, measure, fit to the surfaces."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.workflows import CalibrateTurret, WorkflowError
+from core.transforms import exp_so3, make_T, pose_error
+
+
+def _face_targets(site, names):
+    """Points on the faces the camera sees: the centre and two more points of each."""
+    out = []
+    for name in names:
+        obj = site.object(name)
+        T, model = obj.T_world_obj, obj.model
+        normals, cents = model.face_normals(), model.face_centroids()
+        c_obj = (site.camera.center - T[:3, 3]) @ T[:3, :3]
+        for k, f in enumerate(model.faces):
+            if normals[k] @ (c_obj - cents[k]) <= 0:
+                continue
+            V = model.vertices[list(f)]
+            for w in ([0.25, 0.25, 0.25, 0.25], [0.4, 0.3, 0.15, 0.15], [0.15, 0.15, 0.3, 0.4]):
+                out.append(T[:3, :3] @ (np.array(w) @ V) + T[:3, 3])
+    return out
+
+
+def test_wrong_calibration_is_corrected_from_ranges_on_known_faces(device_site, fast_scene, db):
+    site = device_site
+    # Faces far apart make a well-posed problem: add the other box and the back wall as known objects
+    # (the table and one box alone leave yaw and sideways shift nearly confounded: σ of several cm).
+    for name in ("unknown_box", "back_wall"):
+        body = fast_scene.body(name)
+        db.add_object(name, "box", body.model, body.pose_at(0.0), status="known", method="test")
+    T_true = fast_scene.turret.T_world_turret
+    T_wrong = T_true @ make_T(exp_so3(np.radians([0.6, -0.5, 1.2])), [0.02, -0.015, 0.01])
+    site.set_turret(T_wrong, rms_m=0.0, residuals_m=np.zeros(0), cov=np.eye(6), measurements={}, client="test")
+    before = pose_error(site.T_world_turret, T_true)
+    wf = CalibrateTurret(site, client="alice", shots=5)
+    site.poll()
+    targets = _face_targets(site, ("table", "parallelepiped", "unknown_box", "back_wall"))
+    assert len(targets) >= 15
+    wf.click(site.camera.project(targets[0]))  # a click picks the nearest known point (a face centre here)
+    assert "centre" in wf.pending_label
+    wf.measure()
+    for X in targets[1:]:
+        wf.choose_point(X)
+        wf.measure()
+    with pytest.raises(WorkflowError, match="at least 6"):
+        CalibrateTurret(site).solve()
+    cal = wf.solve()
+    after = pose_error(wf.T_solved, T_true)
+    assert after[0] < before[0] / 2 and after[1] < before[1] / 2
+    sd_rot_deg = np.degrees(np.sqrt(np.diag(cal.cov)[:3]))
+    sd_t_m = np.sqrt(np.diag(cal.cov)[3:])
+    assert after[0] < 4 * np.linalg.norm(sd_rot_deg) and after[1] < 4 * np.linalg.norm(sd_t_m)
+    assert wf.summary()["rms_mm"] < 10
+    n = len(db.calibrations("turret"))
+    wf.accept()
+    assert len(db.calibrations("turret")) == n + 1
+    assert np.allclose(site.T_world_turret, wf.T_solved)
+    assert cal is wf.result
+
+
+def test_the_table_and_one_box_leave_the_pose_poorly_determined(device_site, fast_scene):
+    site = device_site
+    wf = CalibrateTurret(site, shots=1)
+    for X in _face_targets(site, ("table", "parallelepiped")):
+        wf.choose_point(X)
+        wf.measure()
+    wf.solve()
+    assert "poorly determined" in wf.message.lower() and wf.summary()["sd_t_mm"][1] > 10
+
+
+def test_one_orientation_is_not_enough(device_site):
+    site = device_site
+    wf = CalibrateTurret(site, shots=1)
+    table = site.object("table")
+    T = table.T_world_obj
+    for x, y in ((-0.3, 0.5), (-0.2, 0.45), (-0.35, 0.3), (0.35, 0.55), (-0.3, -0.4), (0.3, -0.5)):
+        wf.choose_point(T[:3, :3] @ [x, y, 0.04] + T[:3, 3])
+        wf.measure()
+    with pytest.raises(WorkflowError, match="fewer than 3 orientations"):
+        wf.solve()
+    with pytest.raises(WorkflowError, match="Solve first"):
+        wf.accept()

@@ -1,0 +1,30 @@
+"""History and undo through the workflow: undo a pose update, and an unknown change number."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.workflows import History, WorkflowError
+from core.transforms import make_T
+
+
+def test_undo_brings_the_old_pose_back_and_is_recorded(site, db):
+    obj = site.object("parallelepiped")
+    T_new = make_T(np.eye(3), obj.T_world_obj[:3, 3] + [0.05, 0, 0])
+    change = db.update_pose(obj.id, T_new, None, expected_version=obj.version, method="test", client="bob")
+    site.poll()
+    assert np.allclose(site.object("parallelepiped").T_world_obj, T_new)
+    wf = History(site, client="alice")
+    rows = wf.summary()["changes"]
+    assert rows[0]["what"] == "parallelepiped" and rows[0]["method"] == "test"
+    last_id = db.history()[-1].id
+    rev = site.revision
+    rec = wf.undo(last_id)
+    assert rec.action == "undo" and rec.client == "alice"
+    assert np.allclose(site.object("parallelepiped").T_world_obj, obj.T_world_obj)
+    assert site.revision > rev  # every client redraws
+    assert wf.summary()["changes"][0]["action"] == "undo"
+    with pytest.raises(WorkflowError, match="pick a change number"):
+        wf.undo(10_000)
+    assert change.version + 1 == site.object("parallelepiped").version
