@@ -2,24 +2,29 @@
 
 For each workflow the true features are projected through the scene's true camera at the video
 time of the action, and each click gets human-like noise: an isotropic Gaussian of σ
-``click_sigma_px`` (1 px by default, seeded). Clicks on an edge land anywhere along the part of
-the edge that is visible (occlusions by other bodies are ray cast exactly), never at its
+``click_sigma_px`` (1 px by default, seeded). Clicks on a straight edge land anywhere along the
+part of the edge that is visible (occlusions by other bodies are ray cast exactly), never at its
 vertices: the first click in the 10–40 % stretch of the visible run, the second in 60–90 %.
+A cylinder's silhouettes are clicked at their ends (their only cue to the height).
 
-The session it records (docs/operator-script.md):
+The session it records (docs/operator-script.md), in the actions of the workflow layer
+(app/workflows), so that the demo replays it call for call:
 
 1. ``calibrate_camera`` — every visible vertex of the known bodies (the table's and the known
    objects' corners): ``choose_vertex`` then ``click`` on its image; ``solve``; ``accept``.
-2. ``calibrate_turret`` — points on the known bodies' faces that the turret sees square enough
-   (face centres and inset points, spread by farthest-point sampling): ``choose_point``,
-   ``move_turret`` (the steps an operator jogs to, ± ``aim_sigma_steps``), ``measure``.
-3. ``model_object`` — each unknown body: a box (or polyhedron) face by face (``face``, two
-   ``click`` per visible edge, ``aim`` at points inside the face), a cylinder or cone by its two
-   silhouettes, two clicks on the top rim and two horizontal ``scan`` s.
+2. ``calibrate_turret`` — points of the known bodies' faces that the turret sees square enough
+   (face centres; on the table also points half-way to its corners), faces of different
+   orientations first: ``choose_point``, ``measure`` (the turret aims with its current
+   calibration and fires); ``solve``; ``accept``.
+3. ``model_object`` — each unknown body: a box face by face (two ``click`` s per visible side,
+   ``measure`` — the turret scans a patch inside the clicked outline — and ``next_face``), a
+   cylinder or cone by its two silhouettes, each clicked at its ends, bottom first (the height
+   comes from them), and ``scan`` (two horizontal profiles); ``solve``; ``accept``.
 4. ``update_pose`` — after each motion of a known body, once it is still again: two ``click`` s
    and ``assign_edge`` per edge (the first three form a non-degenerate P3L triple: non-parallel,
-   not meeting in one vertex), ``solve`` with ``method`` "large" (beyond the small-motion
-   method's validity, 18° or 5 cm, paper §IV.3) or "small", ``accept``.
+   not meeting in one vertex); after a large motion (beyond the small-motion method's validity,
+   18° or 5 cm, paper §IV.3) ``solve`` (the three-line solver, best candidate pre-selected) then
+   ``refine``; after a small one ``refine`` alone (from the database pose); ``accept``.
 
 Steps 1–3 happen while every known body is still (before the first motion); each update in the
 still window after its motion. Actions are ``dt_s`` apart in video time.
@@ -49,14 +54,10 @@ class ScriptOptions:
 
     seed: int = 8
     click_sigma_px: float = 1.0
-    dt_s: float = 0.1
+    dt_s: float = 0.06
     lead_s: float = 0.3
-    aim_sigma_steps: float = 1.0
-    range_points_per_face: int = 5
-    turret_points: int = 6
-    pose_edges: int = 6
-    scan_heights: tuple[float, float] = (0.35, 0.7)
-    scan_margin_px: float = 15.0
+    turret_points: int = 8
+    pose_edges: int = 9
     min_edge_px: float = 15.0
     max_incidence_deg: float = 75.0
     large_motion_deg: float = 18.0
@@ -130,7 +131,7 @@ class _Generator:
         return (a, b) if length_px >= self.o.min_edge_px else None
 
     def click_edge(self, workflow: str, A: np.ndarray, B: np.ndarray, run: tuple[float, float], truth: dict) -> None:
-        """Two clicks along the visible run of the 3D segment A→B (world)."""
+        """Two clicks along the visible run of the 3D segment A→B (world), in either order."""
         a, b = run
         L = b - a
         fr = [a + L * self.rng.uniform(0.1, 0.4), a + L * self.rng.uniform(0.6, 0.9)]
@@ -168,7 +169,10 @@ class _Generator:
         self.emit(wf, "solve", {"C": np.round(self.cam.C, 9).tolist()})
         self.emit(wf, "accept")
 
-    def _turret_candidates(self, caster: SceneCaster) -> list[tuple[str, np.ndarray]]:
+    def _turret_candidates(self, caster: SceneCaster) -> list[tuple[str, np.ndarray, np.ndarray]]:
+        """Known surface points the camera and the turret both see, the face square enough to the
+        beam, within range and limits: (label, X_world, normal_world). Each face's centre, and on
+        large faces (the table's) points half-way from the centre to each corner."""
         T_wt = self.scene.turret.T_world_turret
         eye_t, eye_c = T_wt[:3, 3], self.cam.center
         spec = self.scene.rangefinder
@@ -182,9 +186,11 @@ class _Generator:
             for f, loop in enumerate(body.model.faces):
                 V = transform_points(T, body.model.vertices[list(loop)])
                 ctr = V.mean(axis=0)
-                for X in [ctr] + [ctr + 0.6 * (v - ctr) for v in V]:
-                    if not (self.facing(normals[f], X, eye_t, self.o.max_incidence_deg) and self.facing(normals[f], X, eye_c)):
-                        continue
+                n = normals[f]
+                if not (self.facing(n, ctr, eye_t, self.o.max_incidence_deg) and self.facing(n, ctr, eye_c)):
+                    continue
+                inset = [ctr + 0.5 * (v - ctr) for v in V] if np.linalg.norm(np.ptp(V, axis=0)) > 0.5 else []
+                for j, X in enumerate([ctr] + inset):
                     if not self.cam.in_image(self.cam.project(X)[None], margin_px=10.0)[0]:
                         continue
                     if caster.occluded(eye_t, X[None], body=bi, tol_m=1e-4)[0] or caster.occluded(eye_c, X[None], body=bi, tol_m=1e-4)[0]:
@@ -194,78 +200,75 @@ class _Generator:
                         continue
                     if not self.scene.turret.within_limits(float(pan), float(tilt)):
                         continue
-                    out.append((f"{body.name} face {f}", X))
+                    out.append((f"{body.name} face {f} " + ("centre" if j == 0 else f"inset {j}"), X, n))
         return out
 
     def calibrate_turret(self) -> None:
         caster = self.caster(self.t)
         cands = self._turret_candidates(caster)
-        if len(cands) < 3:
-            raise ValueError(f"only {len(cands)} known surface points are reachable by the turret; a turret calibration needs 3")
-        P = np.array([X for _, X in cands])
-        chosen = [0]
+        N = np.array([n for _, _, n in cands]).reshape(-1, 3)
+        orientations = len({tuple(np.round(n, 3)) for n in N})
+        if len(cands) < 3 or orientations < 3:
+            raise ValueError(f"the turret reaches {len(cands)} known face centres of {orientations} orientations; "
+                             "its calibration needs faces of 3 orientations")
+        # Faces of the most different orientations first (they fix the pose), then spread in space.
+        P = np.array([X for _, X, _ in cands])
+        chosen = [int(np.argmax(N[:, 2]))]
         while len(chosen) < min(self.o.turret_points, len(cands)):
-            d = np.min(np.linalg.norm(P[:, None, :] - P[chosen][None, :, :], axis=2), axis=1)
-            chosen.append(int(np.argmax(d)))
+            angle = np.min(np.arccos(np.clip(N @ N[chosen].T, -1, 1)), axis=1)
+            dist = np.min(np.linalg.norm(P[:, None, :] - P[chosen][None, :, :], axis=2), axis=1)
+            score = np.where(angle > 0.1, 10.0 + angle, 0.0) + dist
+            score[chosen] = -1.0
+            chosen.append(int(np.argmax(score)))
         wf = "calibrate_turret"
         step = self.scene.turret.step_rad
         T_wt = self.scene.turret.T_world_turret
-        self.emit(wf, "start")
+        self.emit(wf, "start", shots=3)
         for i in chosen:
-            label, X = cands[i]
+            label, X, n = cands[i]
             pan, tilt, rho = aim(T_wt, X)
-            pan_s = float(pan) / step
-            tilt_s = float(tilt) / step
-            jog = np.rint(np.array([pan_s, tilt_s]) + self.rng.normal(0.0, self.o.aim_sigma_steps, 2)).astype(int)
-            truth = {"X_world": _round(X, 6), "pan_steps_exact": round(pan_s, 3), "tilt_steps_exact": round(tilt_s, 3)}
-            self.emit(wf, "choose_point", {"X_world": _round(X, 6)}, X_world=_round(X, 6), label=label)
-            self.emit(wf, "move_turret", truth, pan_steps=int(jog[0]), tilt_steps=int(jog[1]))
-            self.emit(wf, "measure", {"range_m_exact": round(float(rho), 6)}, shots=1)
+            truth = {"X_world": _round(X, 6), "normal_world": _round(n, 9), "pan_steps_exact": round(float(pan) / step, 3),
+                     "tilt_steps_exact": round(float(tilt) / step, 3), "range_m_exact": round(float(rho), 6)}
+            self.emit(wf, "choose_point", truth, X_world=_round(X, 6), label=label)
+            self.emit(wf, "measure", truth)
         self.emit(wf, "solve", {"T_world_turret": np.round(T_wt, 9).tolist()})
         self.emit(wf, "accept")
 
-    def model_polyhedron(self, body: Body) -> None:
+    def _start_model(self, body: Body, shape: str, truth: dict) -> None:
+        self.emit("model_object", "start", truth, object_name=body.name, shape=shape, vertical=True, on_table=True)
+
+    def model_box(self, body: Body) -> None:
         caster = self.caster(self.t)
         bi = self.index[body.name]
         T = body.pose_at(self.t)
         c = self.cam.center
-        eye_t = self.scene.turret.T_world_turret[:3, 3]
         model = body.model
         normals = model.face_normals() @ T[:3, :3].T
         wf = "model_object"
-        shape = "box" if body.kind == "box" else "polyhedron"
         truth = {"model": model.to_dict(), "T_world_obj": np.round(T, 9).tolist()}
-        self.emit(wf, "start", truth, object_name=body.name, shape=shape, hints={"lies_on": "table", "vertical": True})
+        self._start_model(body, "box", truth)
         faces = []
         for f, loop in enumerate(model.faces):
             V = transform_points(T, model.vertices[list(loop)])
             if normals[f][2] < -0.5 or not self.facing(normals[f], V.mean(axis=0), c, 80.0):
                 continue
             faces.append((0 if normals[f][2] > 0.9 else 1, float(self.cam.project(V.mean(axis=0))[0]), f))
-        for _, _, f in sorted(faces):
+        faces.sort()
+        if len(faces) > 3:
+            raise ValueError(f"{body.name}: {len(faces)} faces face the camera; a box shows at most 3")
+        for i, (_, _, f) in enumerate(faces):
             loop = list(model.faces[f])
             V = transform_points(T, model.vertices[loop])
-            label = "top" if normals[f][2] > 0.9 else "side"
-            self.emit(wf, "face", {"face": f}, label=label)
             for a, b in zip(range(len(loop)), list(range(1, len(loop))) + [0]):
                 run = self.visible_run(caster, bi, V[a], V[b])
                 if run is None:
                     continue
                 k = _edge_index(model, loop[a], loop[b])
                 self.click_edge(wf, V[a], V[b], run, {"body": body.name, "face": f, "edge": k})
-            ctr = V.mean(axis=0)
-            points = [ctr] + [ctr + 0.45 * (v - ctr) for v in V]
-            n_done = 0
-            for X in points:
-                if n_done >= self.o.range_points_per_face:
-                    break
-                if not self.facing(normals[f], X, eye_t, self.o.max_incidence_deg):
-                    continue
-                if caster.occluded(eye_t, X[None], body=bi, tol_m=1e-4)[0] or caster.occluded(c, X[None], body=bi, tol_m=1e-4)[0]:
-                    continue
-                uv = self.cam.project(X)
-                self.emit(wf, "aim", {"X_world": _round(X, 6), "uv_true": _round(uv, 4), "face": f}, uv=self.noisy(uv))
-                n_done += 1
+            n = normals[f]
+            self.emit(wf, "measure", {"face": f, "plane": _round(np.append(n, -n @ V[0]), 9)})
+            if i + 1 < len(faces):
+                self.emit(wf, "next_face")
         self.emit(wf, "solve")
         self.emit(wf, "accept", truth)
 
@@ -274,59 +277,34 @@ class _Generator:
         bi = self.index[body.name]
         T = body.pose_at(self.t)
         s = body.model.solids[0]
-        c = self.cam.center
-        c_obj = transform_points(invert_T(T), c[None])[0]
+        c_obj = transform_points(invert_T(T), self.cam.center[None])[0]
         sil = s.silhouette(c_obj)
         if len(sil) != 2:
             raise ValueError(f"{body.name}: the camera sees no silhouette of this solid")
         sil_w = transform_points(T, sil.reshape(-1, 3)).reshape(2, 2, 3)
         order = np.argsort([self.cam.project(seg.mean(axis=0))[0] for seg in sil_w])
-        sil_w = sil_w[order]
         wf = "model_object"
-        shape = "cylinder" if s.is_cylinder else "cone"
         truth = {
             "model": body.model.to_dict(),
             "T_world_obj": np.round(T, 9).tolist(),
             "axis_world": _round(transform_points(T, np.array([s.p0, s.p1])), 6),
             "radius_m": [s.r0, s.r1],
         }
-        self.emit(wf, "start", truth, object_name=body.name, shape=shape, hints={"lies_on": "table", "vertical": True})
-        self.emit(wf, "face", None, label="silhouette")
-        for i, seg in enumerate(sil_w):
-            run = self.visible_run(caster, bi, seg[0], seg[1])
-            if run is None:
-                raise ValueError(f"{body.name}: silhouette {i} is not visible")
-            self.click_edge(wf, seg[0], seg[1], run, {"body": body.name, "silhouette": int(order[i])})
-        # Top rim: two clicks on its front arc (the part nearest the camera).
-        a = s.axis
-        toward = c_obj - s.p1
-        toward -= (toward @ a) * a
-        toward /= np.linalg.norm(toward)
-        side = np.cross(a, toward)
-        self.emit(wf, "face", None, label="top_rim")
-        for ang in np.radians([-35.0, 30.0]) + self.rng.uniform(-0.1, 0.1, 2):
-            X = transform_points(T, (s.p1 + s.r1 * (np.cos(ang) * toward + np.sin(ang) * side))[None])[0]
-            uv = self.cam.project(X)
-            self.emit(wf, "click", {"body": body.name, "rim": 1, "X_world": _round(X, 6), "uv_true": _round(uv, 4)}, uv=self.noisy(uv))
-        # Two horizontal scans: aim at the front of the solid (as the turret sees it), sweep across.
-        eye_t = self.scene.turret.T_world_turret[:3, 3]
-        t_obj = transform_points(invert_T(T), eye_t[None])[0]
-        for frac in self.o.scan_heights:
-            h = frac * s.height
-            axis_pt = s.p0 + h * a
-            r = s.r0 + (s.r1 - s.r0) * frac
-            dt = t_obj - axis_pt
-            dt -= (dt @ a) * a
-            front = axis_pt + r * dt / np.linalg.norm(dt)
-            X = transform_points(T, front[None])[0]
-            sil_h = transform_points(T, np.array([s_[0] + frac * (s_[1] - s_[0]) for s_ in sil[order]]))
-            uv_l, uv_r = self.cam.project(sil_h)
-            d = (uv_r - uv_l) / np.linalg.norm(uv_r - uv_l)
-            uv = self.cam.project(X)
-            truth = {"X_world": _round(X, 6), "uv_true": _round(uv, 4), "height_m": round(float(h), 6),
-                     "silhouettes_uv_true": [_round(uv_l, 4), _round(uv_r, 4)]}
-            self.emit(wf, "scan", truth, uv=self.noisy(uv), uv_from=self.noisy(uv_l - self.o.scan_margin_px * d),
-                      uv_to=self.noisy(uv_r + self.o.scan_margin_px * d), step_steps=1)
+        self._start_model(body, "cylinder" if s.is_cylinder else "cone", truth)
+        for i in order:
+            # A silhouette is clicked at its two ends, the bottom one first: the workflow takes the
+            # solid's height from them (a silhouette has no vertex to click beside).
+            ends = sil_w[i]
+            if self.cam.project(ends[0])[1] < self.cam.project(ends[1])[1]:
+                ends = ends[::-1]
+            visible = ~self.caster(self.t).occluded(self.cam.center, ends, body=bi, tol_m=1e-4)
+            if not visible.all():
+                raise ValueError(f"{body.name}: an end of silhouette {i} is hidden")
+            for X in ends:
+                uv = self.cam.project(X)
+                truth = {"body": body.name, "silhouette": int(i), "X_world": _round(X, 6), "uv_true": _round(uv, 4)}
+                self.emit(wf, "click", truth, uv=self.noisy(uv))
+        self.emit(wf, "scan")
         self.emit(wf, "solve")
         self.emit(wf, "accept", truth)
 
@@ -355,12 +333,14 @@ class _Generator:
         chosen = [e for k in triple for e in edges if e[1] == k] + rest[: max(0, self.o.pose_edges - 3)]
         wf = "update_pose"
         truth = {"T_world_obj": np.round(T, 9).tolist(), "T_before": np.round(T_before, 9).tolist(),
-                 "motion_deg": round(rot_deg, 4), "motion_m": round(trans_m, 6)}
+                 "motion_deg": round(rot_deg, 4), "motion_m": round(trans_m, 6), "motion": method}
         self.emit(wf, "start", truth, object_name=body.name)
         for _, k, A, B, run in chosen:
             self.click_edge(wf, A, B, run, {"body": body.name, "edge": int(k)})
-            self.emit(wf, "assign_edge", {"body": body.name, "edge": int(k)}, index=int(k))
-        self.emit(wf, "solve", truth, method=method)
+            self.emit(wf, "assign_edge", {"body": body.name, "edge": int(k)}, edge=int(k))
+        if method == "large":
+            self.emit(wf, "solve", truth)
+        self.emit(wf, "refine", truth)
         self.emit(wf, "accept", truth)
 
 
@@ -398,12 +378,12 @@ def generate_script(scene: Scene, options: ScriptOptions = ScriptOptions()) -> O
     g.calibrate_camera()
     g.calibrate_turret()
     for body in scene.unknown:
-        if body.model.faces:
-            g.model_polyhedron(body)
+        if body.model.faces and body.kind == "box" and len(body.model.faces) == 6:
+            g.model_box(body)
         elif body.model.solids:
             g.model_revolution(body)
         else:
-            raise ValueError(f"{body.name}: no faces and no solid: nothing an operator could model")
+            raise ValueError(f"{body.name}: the modelling workflow knows boxes, cylinders and cones, not this {body.kind}")
     if g.t > first_move:
         raise ValueError(
             f"the calibration and modelling clicks need {g.t:.1f} s of still video but the first motion starts at "
@@ -422,7 +402,6 @@ def generate_script(scene: Scene, options: ScriptOptions = ScriptOptions()) -> O
             raise ValueError(f"{body.name}: the update after the motion ending at {start:.1f} s needs until {g.t:.1f} s, "
                              f"but the body moves again at {window_end:.1f} s")
     generator = dataclasses.asdict(options)
-    generator["scan_heights"] = list(options.scan_heights)
     generator["tool"] = "mcit script (app/operator/generate.py)"
     description = (
         f"Recorded session on scene {scene.name!r}: calibrate the camera and the turret, model "

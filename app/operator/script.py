@@ -7,9 +7,10 @@ A script (``"format": "mcit-operator-script/1"``, docs/operator-script.md) is a 
 
 * ``t`` — the video time (seconds from the start of the scene's video) at which the operator acts;
   non-decreasing. The demo shows the frame at ``t`` and runs the emulated devices at that time.
-* ``workflow`` — which guided workflow the action belongs to; ``action`` — the workflow's method;
-  the other keys are that method's keyword arguments (pixels ``uv``, model ``index``,
-  ``object_name`` ...), exactly what a browser click or button produces.
+* ``workflow`` — which guided workflow the action belongs to; ``action`` — the workflow's method
+  (app/workflows); the other keys are that method's keyword arguments (pixels ``uv``, a model
+  ``edge`` or vertex ``index``, ``object_name`` ...), exactly what a browser click or button
+  produces. ``start`` begins a workflow with its options.
 * ``truth`` — optional ground truth for tests and the report (the true pixel before click noise,
   the 3D point or model edge meant). The replay must not use it: ``OperatorScript.steps()``
   leaves it out.
@@ -31,8 +32,10 @@ __all__ = ["FORMAT", "WORKFLOWS", "ScriptError", "Action", "Run", "OperatorScrip
 
 FORMAT = "mcit-operator-script/1"
 
-# Argument kinds: "uv" a pixel [u, v]; "xyz" a point [x, y, z] (m); "int"; "str"; "dict"; "float".
-_END = {"solve": ({}, {}), "accept": ({}, {}), "cancel": ({}, {})}
+# Argument kinds: "uv" a pixel [u, v]; "seg" two pixels [[u1, v1], [u2, v2]]; "xyz" a point
+# [x, y, z] (m); "int"; "float"; "bool"; "str"; "dict". The names and arguments are those of the
+# workflow layer's actions (app/workflows: Workflow.perform), so that a replay is a call per action.
+_END = {"remove_last": ({}, {}), "solve": ({}, {}), "accept": ({}, {}), "cancel": ({}, {})}
 WORKFLOWS: dict[str, dict[str, tuple[dict[str, str], dict[str, str]]]] = {
     # action: (required arguments, optional arguments)
     "calibrate_camera": {
@@ -40,34 +43,38 @@ WORKFLOWS: dict[str, dict[str, tuple[dict[str, str], dict[str, str]]]] = {
         "choose_vertex": ({"name": "str", "index": "int"}, {}),
         "choose_point": ({"X_world": "xyz"}, {"label": "str"}),
         "click": ({"uv": "uv"}, {}),
+        "redo": ({}, {}),
         **_END,
     },
     "calibrate_turret": {
-        "start": ({}, {}),
+        "start": ({}, {"shots": "int"}),
+        "click": ({"uv": "uv"}, {}),
         "choose_point": ({"X_world": "xyz"}, {"label": "str"}),
-        "move_turret": ({"pan_steps": "int", "tilt_steps": "int"}, {}),
-        "measure": ({}, {"shots": "int"}),
+        "measure": ({}, {}),
         **_END,
     },
     "model_object": {
-        "start": ({"object_name": "str", "shape": "str"}, {"hints": "dict"}),
-        "face": ({"label": "str"}, {}),
+        "start": ({"object_name": "str", "shape": "str"}, {"vertical": "bool", "on_table": "bool", "method": "str"}),
         "click": ({"uv": "uv"}, {}),
-        "aim": ({"uv": "uv"}, {"shots": "int"}),
-        "scan": ({"uv": "uv", "uv_from": "uv", "uv_to": "uv"}, {"step_steps": "int"}),
+        "add_segment": ({"seg_uv": "seg"}, {}),
+        "measure": ({}, {}),
+        "next_face": ({}, {}),
+        "scan": ({}, {}),
         **_END,
+        "solve": ({}, {"method": "str"}),
     },
     "update_pose": {
         "start": ({"object_name": "str"}, {}),
         "click": ({"uv": "uv"}, {}),
-        "assign_edge": ({"index": "int"}, {}),
-        "solve": ({}, {"method": "str"}),
+        "assign_edge": ({"edge": "int"}, {}),
+        "add_segment": ({"seg_uv": "seg", "edge": "int"}, {}),
+        "start_point": ({}, {}),
+        "add_point": ({"uv": "uv", "vertex": "int"}, {}),
         "choose_candidate": ({"index": "int"}, {}),
-        "accept": ({}, {}),
-        "cancel": ({}, {}),
+        "refine": ({}, {}),
+        **_END,
     },
 }
-_SOLVE_METHODS = ("large", "small")
 
 
 class ScriptError(ValueError):
@@ -108,6 +115,7 @@ class Run:
 
     @property
     def object_name(self) -> str | None:
+        """The object the run is about (``object_name`` of update_pose and model_object)."""
         return self.actions[0].args.get("object_name") if self.actions else None
 
     @property
@@ -161,6 +169,14 @@ class OperatorScript:
 
 # ---------------------------------------------------------------------- validation
 def _check_arg(value: Any, kind: str, where: str) -> Any:
+    if kind == "seg":
+        if not isinstance(value, (list, tuple)) or len(value) != 2:
+            raise ScriptError(f"{where}: two pixels [[u1, v1], [u2, v2]] expected, got {value!r}")
+        return [_check_arg(p, "uv", f"{where}[{i}]") for i, p in enumerate(value)]
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise ScriptError(f"{where}: true or false expected, got {value!r}")
+        return value
     if kind in ("uv", "xyz"):
         n = 2 if kind == "uv" else 3
         if not isinstance(value, (list, tuple)) or len(value) != n:
@@ -219,8 +235,6 @@ def _action(d: Any, i: int, last_t: float) -> Action:
     for key in required:
         if key not in args:
             raise ScriptError(f"{where} ({wf}.{act}): missing argument '{key}'")
-    if wf == "update_pose" and act == "solve" and args.get("method", "large") not in _SOLVE_METHODS:
-        raise ScriptError(f"{where}.method: one of {list(_SOLVE_METHODS)} expected, got {args['method']!r}")
     truth = d.get("truth")
     if truth is not None and not isinstance(truth, dict):
         raise ScriptError(f"{where}.truth: an object expected, got {type(truth).__name__}")

@@ -10,7 +10,6 @@ from app.operator.generate import ScriptOptions, generate_script, still_windows
 from app.operator.script import ScriptError, load_script, save_script, script_from_dict
 from app.render.raycast import SceneCaster
 from app.scene import default_scene_path, load_scene
-from core.rangefinder import beam_point
 from core.transforms import transform_points
 
 SIGMA = 1.0
@@ -41,8 +40,13 @@ def test_script_covers_the_session(script):
     assert kinds[4:] == [("update_pose", "parallelepiped")] * 4
     for r in runs:
         assert r.actions[0].action == "start" and r.actions[-1].action == "accept"
-    methods = [a.args["method"] for a in script.actions if a.workflow == "update_pose" and a.action == "solve"]
-    assert methods == ["large", "small", "small", "small"]
+    ends = [[a.action for a in r.actions if a.action in ("solve", "refine")] for r in runs if r.workflow == "update_pose"]
+    assert ends == [["solve", "refine"], ["refine"], ["refine"], ["refine"]]  # P3L after the large motion only
+    assert [r.actions[0].truth["motion"] for r in runs[4:]] == ["large", "small", "small", "small"]
+    box = [a.action for a in runs[2].actions if a.action not in ("click",)]
+    assert box == ["start", "measure", "next_face", "measure", "next_face", "measure", "solve", "accept"]
+    cyl = [a.action for a in runs[3].actions]
+    assert cyl == ["start"] + ["click"] * 4 + ["scan", "solve", "accept"]
     steps = script.steps()
     assert all("truth" not in s for s in steps) and steps[0] == {"t": 0.3, "workflow": "calibrate_camera", "action": "start"}
 
@@ -58,15 +62,11 @@ def test_edge_clicks_lie_on_the_true_projected_edges_within_the_noise(scene, scr
     across, along_px = [], []
     for a in script.actions:
         tr = a.truth or {}
-        if a.action != "click" or "edge" not in tr and "silhouette" not in tr:
+        if a.action != "click" or "edge" not in tr:
             continue
         body = scene.body(tr["body"])
         T = body.pose_at(a.t)
-        if "edge" in tr:
-            A, B = body.model.edge_segments(T)[tr["edge"]]
-        else:
-            c_obj = transform_points(np.linalg.inv(T), cam.center[None])[0]
-            A, B = transform_points(T, body.model.solids[0].silhouette(c_obj)[tr["silhouette"]])
+        A, B = body.model.edge_segments(T)[tr["edge"]]
         A_uv, B_uv = cam.project(np.array([A, B]))
         d, s = _line_distance(np.array(a.args["uv"]), A_uv, B_uv)
         across.append(d)
@@ -90,13 +90,31 @@ def test_point_clicks_scatter_around_the_true_pixels(scene, script):
     err = []
     for a in script.actions:
         tr = a.truth or {}
-        if a.action in ("click", "aim") and "uv_true" in tr:
+        if a.action == "click" and "uv_true" in tr:
             np.testing.assert_allclose(scene.camera.project(np.array(tr["X_world"])), tr["uv_true"], atol=1e-3)
             err.append(np.subtract(a.args["uv"], tr["uv_true"]))
     err = np.array(err)
     assert len(err) >= 100
     assert 0.85 * SIGMA < err.std(axis=0).mean() < 1.15 * SIGMA
     assert np.all(np.abs(err.mean(axis=0)) < 3 * SIGMA / np.sqrt(len(err)))
+
+
+def test_cylinder_silhouettes_are_clicked_at_their_ends_bottom_first(scene, script):
+    cyl = scene.body("unknown_cylinder")
+    s = cyl.model.solids[0]
+    T = cyl.pose_at(0.0)
+    c_obj = transform_points(np.linalg.inv(T), scene.camera.center[None])[0]
+    sil = transform_points(T, s.silhouette(c_obj).reshape(-1, 3)).reshape(2, 2, 3)
+    clicks = [a for a in script.actions if a.action == "click" and "silhouette" in (a.truth or {})]
+    assert len(clicks) == 4
+    for first, second in (clicks[:2], clicks[2:]):
+        assert first.truth["silhouette"] == second.truth["silhouette"]
+        ends = sil[first.truth["silhouette"]]
+        assert {tuple(np.round(first.truth["X_world"], 5)), tuple(np.round(second.truth["X_world"], 5))} == {
+            tuple(np.round(e, 5)) for e in ends}
+        assert first.truth["uv_true"][1] > second.truth["uv_true"][1]  # the bottom end (lower in the image) first
+    us = [np.mean([c.truth["uv_true"][0] for c in pair]) for pair in (clicks[:2], clicks[2:])]
+    assert us[0] < us[1]  # left silhouette, then right
 
 
 def test_calibration_points_are_visible_known_vertices(scene, script):
@@ -118,41 +136,52 @@ def test_calibration_points_are_visible_known_vertices(scene, script):
     assert np.linalg.svd(X - X.mean(axis=0), compute_uv=False)[2] > 0.01  # not coplanar: the DLT can use them
 
 
-def test_turret_jogs_put_the_beam_near_the_known_points(scene, script):
+def test_turret_targets_are_known_surfaces_the_turret_sees(scene, script):
     T_wt = scene.turret.T_world_turret
-    step = scene.turret.step_rad
-    moves = [a for a in script.actions if a.action == "move_turret"]
-    assert len(moves) >= 3
-    for a in moves:
-        pan, tilt = a.args["pan_steps"] * step, a.args["tilt_steps"] * step
-        assert scene.turret.within_limits(pan, tilt)
-        assert abs(a.args["pan_steps"] - a.truth["pan_steps_exact"]) < 4.5  # ± 1 step of operator error (σ), rounded
-        X = np.array(a.truth["X_world"])
-        rho = np.linalg.norm(X - T_wt[:3, 3])
-        miss = np.linalg.norm(beam_point(T_wt, pan, tilt, rho) - X)
-        assert miss < rho * 5 * step
-    P = np.array([a.truth["X_world"] for a in moves])
-    assert np.linalg.matrix_rank(P - P.mean(axis=0), tol=0.05) >= 2
+    caster = SceneCaster.for_scene(scene, 0.0)
+    names = [b.name for b in scene.bodies]
+    picks = [a for a in script.actions if a.workflow == "calibrate_turret" and a.action == "choose_point"]
+    assert len(picks) >= 6  # the workflow asks for 6 points on faces of 3 orientations
+    normals = set()
+    for a in picks:
+        X = np.array(a.args["X_world"])
+        n = np.array(a.truth["normal_world"])
+        body = scene.body(a.args["label"].split(" face ")[0])
+        assert body.status == "known"
+        # the beam from the turret meets that body first, at the point; its face is within 75° of the beam
+        h = caster.cast(T_wt[:3, 3], (X - T_wt[:3, 3])[None])
+        assert h.body[0] == names.index(body.name) and abs(h.t[0] - 1.0) < 1e-6
+        v = T_wt[:3, 3] - X
+        assert n @ v / np.linalg.norm(v) > np.cos(np.radians(75.0))
+        step = scene.turret.step_rad
+        assert scene.turret.within_limits(a.truth["pan_steps_exact"] * step, a.truth["tilt_steps_exact"] * step)
+        normals.add(tuple(np.round(n, 3)))
+    assert len(normals) >= 3
+    after = [b.action for a, b in zip(script.actions, script.actions[1:]) if a in picks]
+    assert set(after) == {"measure"}
 
 
-def test_range_aims_land_inside_their_face(scene, script):
+def test_box_faces_are_clicked_side_by_side_then_measured(scene, script):
     box = scene.body("unknown_box")
+    run = [r for r in script.runs() if r.object_name == "unknown_box"][0]
+    faces, current = [], []
+    for a in run.actions[1:]:
+        if a.action == "click":
+            current.append(a)
+        elif a.action == "measure":
+            faces.append((a.truth["face"], current))
+            current = []
+    assert len(faces) == 3
     T = box.pose_at(0.0)
-    normals = box.model.face_normals()
-    per_face = {}
-    for a in script.actions:
-        if a.action != "aim":
-            continue
-        X_obj = transform_points(np.linalg.inv(T), np.array([a.truth["X_world"]]))[0]
-        f = a.truth["face"]
-        loop = box.model.vertices[list(box.model.faces[f])]
-        assert abs((X_obj - loop[0]) @ normals[f]) < 1e-6  # on the face's plane (truth rounded to µm)
-        lo, hi = loop.min(axis=0), loop.max(axis=0)
-        margin = 0.2 * (hi - lo)
-        inside = (X_obj >= lo + margin - 1e-12) | (normals[f] != 0)
-        assert np.all(inside & ((X_obj <= hi - margin + 1e-12) | (normals[f] != 0)))
-        per_face[f] = per_face.get(f, 0) + 1
-    assert len(per_face) == 3 and min(per_face.values()) >= 3  # the top and the two visible sides
+    normals = box.model.face_normals() @ T[:3, :3].T
+    assert normals[faces[0][0]][2] > 0.99  # the top first
+    E = box.model.edges
+    for f, clicks in faces:
+        assert len(clicks) == 8  # two clicks on each of the face's four sides
+        assert {c.truth["face"] for c in clicks} == {f}
+        loop = box.model.faces[f]
+        sides = {int(np.flatnonzero(((E == [a, b]) | (E == [b, a])).all(axis=1))[0]) for a, b in zip(loop, loop[1:] + loop[:1])}
+        assert {c.truth["edge"] for c in clicks} == sides
 
 
 def test_updates_happen_while_the_box_is_still_after_each_motion(scene, script):
@@ -164,8 +193,8 @@ def test_updates_happen_while_the_box_is_still_after_each_motion(scene, script):
         assert w[0] <= r.t_start and r.t_end <= w[1]
         assert box.is_static(r.t_start, r.t_end)
         np.testing.assert_allclose(r.actions[-1].truth["T_world_obj"], box.pose_at(r.t_end), atol=1e-8)
-        edges = [a.args["index"] for a in r.actions if a.action == "assign_edge"]
-        assert len(edges) == 6 and len(set(edges)) == 6
+        edges = [a.args["edge"] for a in r.actions if a.action == "assign_edge"]
+        assert len(edges) >= 6 and len(set(edges)) == len(edges)
         E = box.model.edges[edges[:3]]
         D = box.model.vertices[E[:, 1]] - box.model.vertices[E[:, 0]]
         D /= np.linalg.norm(D, axis=1, keepdims=True)
@@ -201,8 +230,9 @@ def _base() -> dict:
         "actions": [
             {"t": 0.0, "workflow": "update_pose", "action": "start", "object_name": "box"},
             {"t": 0.1, "workflow": "update_pose", "action": "click", "uv": [10.0, 20.5]},
-            {"t": 0.2, "workflow": "update_pose", "action": "assign_edge", "index": 3, "truth": {"edge": 3}},
-            {"t": 0.3, "workflow": "update_pose", "action": "solve", "method": "small"},
+            {"t": 0.2, "workflow": "update_pose", "action": "assign_edge", "edge": 3, "truth": {"edge": 3}},
+            {"t": 0.3, "workflow": "update_pose", "action": "add_segment", "seg_uv": [[1, 2], [3, 4.5]], "edge": 4},
+            {"t": 0.4, "workflow": "update_pose", "action": "refine"},
         ],
     }
 
@@ -215,8 +245,10 @@ def _base() -> dict:
         (lambda d: d["actions"][1].pop("uv"), r"actions\[1\] \(update_pose\.click\): missing argument 'uv'"),
         (lambda d: d["actions"][1].update(pixel=[1, 2]), r"unknown argument 'pixel'"),
         (lambda d: d["actions"][2].update(t=0.05), r"actions\[2\]\.t: times must not decrease"),
-        (lambda d: d["actions"][2].update(index=3.5), r"actions\[2\]\.index: an integer"),
-        (lambda d: d["actions"][3].update(method="medium"), r"actions\[3\]\.method"),
+        (lambda d: d["actions"][2].update(edge=3.5), r"actions\[2\]\.edge: an integer"),
+        (lambda d: d["actions"][3].update(seg_uv=[[1, 2]]), r"actions\[3\]\.seg_uv: two pixels"),
+        (lambda d: d["actions"][3].update(seg_uv=[[1, 2], [3]]), r"actions\[3\]\.seg_uv\[1\]: a list of 2 numbers"),
+        (lambda d: d["actions"][3].update(edge=True), r"actions\[3\]\.edge: an integer"),
         (lambda d: d["actions"][1].update(workflow="calibrate_everything"), r"actions\[1\]\.workflow: unknown workflow"),
         (lambda d: d["actions"][1].update(action="teleport"), r"actions\[1\]\.action: update_pose has no action 'teleport'"),
         (lambda d: d["actions"][1].pop("t"), r"actions\[1\]: missing field 't'"),

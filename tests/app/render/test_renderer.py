@@ -4,9 +4,9 @@ import dataclasses
 
 import numpy as np
 import pytest
-from scipy.ndimage import map_coordinates
 
 from app.render import Renderer, lattice_offsets, value_noise
+from app.render.measure import edge_offsets, polygon_coverage, visible_edges
 from app.render.raycast import SceneCaster
 from app.scene import default_scene_path, load_scene, scene_from_dict
 
@@ -61,35 +61,8 @@ def _top_down_scene(yaw_deg: float, x_edge: float) -> dict:
     }
 
 
-def _clip(poly: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Sutherland–Hodgman: a convex polygon (K, 2) clipped to the box [lo, hi]."""
-    for axis in (0, 1):
-        for bound, keep_below in ((hi[axis], True), (lo[axis], False)):
-            out = []
-            for a, b in zip(poly, np.roll(poly, -1, axis=0)):
-                ina = a[axis] <= bound if keep_below else a[axis] >= bound
-                inb = b[axis] <= bound if keep_below else b[axis] >= bound
-                if ina:
-                    out.append(a)
-                if ina != inb:
-                    out.append(a + (bound - a[axis]) / (b[axis] - a[axis]) * (b - a))
-            poly = np.array(out).reshape(-1, 2)
-            if not len(poly):
-                return poly
-    return poly
-
-
-def _area(poly: np.ndarray) -> float:
-    if len(poly) < 3:
-        return 0.0
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
-
-
 @pytest.mark.parametrize("yaw_deg", [0.0, 17.0, 41.0, 58.3])
 def test_edge_pixels_carry_their_exact_area_coverage(yaw_deg):
-    from scipy.spatial import ConvexHull
-
     scene = scene_from_dict(_top_down_scene(yaw_deg, -0.0031), ".")
     img, _ = Renderer(scene).render_float(0.0)
     # Flat shading: the box's image is the convex hull of its projected corners; each pixel's
@@ -97,9 +70,7 @@ def test_edge_pixels_carry_their_exact_area_coverage(yaw_deg):
     body = scene.bodies[0]
     T = body.pose_at(0.0)
     uv = scene.camera.project(body.model.vertices @ T[:3, :3].T + T[:3, 3])
-    hull = uv[ConvexHull(uv).vertices]
-    h, w = img.shape
-    cover = np.array([[_area(_clip(hull, np.array([u - 0.5, v - 0.5]), np.array([u + 0.5, v + 0.5]))) for u in range(w)] for v in range(h)])
+    cover = polygon_coverage(uv, *scene.camera.size)
     expected = 200.0 * (0.1 + (0.8 - 0.1) * cover)
     mixed = (cover > 1e-12) & (cover < 1 - 1e-12)
     assert mixed.sum() >= 20
@@ -113,52 +84,28 @@ def test_edge_pixels_carry_their_exact_area_coverage(yaw_deg):
     assert abs(e.mean()) < 0.005
 
 
-def _edge_offsets(img, seg_uv, half=2.0, step=0.25):
-    """Signed distances (px) from the projected line to the gradient-weighted centroid of the
-    image profile across it, at 9 places along the middle of the segment."""
-    p0, p1 = seg_uv
-    t = (p1 - p0) / np.linalg.norm(p1 - p0)
-    n = np.array([-t[1], t[0]])
-    s = np.arange(-half, half + 1e-9, step)
-    out = []
-    for a in np.linspace(0.25, 0.75, 9):
-        pts = p0 + a * (p1 - p0) + s[:, None] * n
-        prof = map_coordinates(img.astype(float), [pts[:, 1], pts[:, 0]], order=1, mode="nearest")
-        g = np.abs(np.gradient(prof, step))
-        out.append(float(np.sum(g * s) / np.sum(g)))
-    return np.array(out)
-
-
-def _measurable_edges(scene, renderer, t_s, kinds=("edge",), min_px=25.0):
-    caster = renderer.caster(t_s)
-    cam = scene.camera
-    for bi, b in enumerate(scene.bodies):
-        if b.status == "scenery":
-            continue
-        wf = b.model.wireframe(cam.center, b.pose_at(t_s))
-        for k in np.flatnonzero(wf.visible):
-            if wf.kind[k] not in kinds:
-                continue
-            seg = wf.segments[k]
-            uv = cam.project(seg)
-            if np.linalg.norm(uv[1] - uv[0]) < min_px or not cam.in_image(uv, 4.0).all():
-                continue
-            P = seg[0] + np.linspace(0.2, 0.8, 13)[:, None] * (seg[1] - seg[0])
-            if caster.occluded(cam.center, P, body=bi, tol_m=1e-6).any():
-                continue
-            yield b.name, int(k), uv
+def test_measurements_on_a_synthetic_step():
+    img = np.zeros((20, 30))
+    img[:, 11:] = 100.0
+    img[:, 10] = 100.0 * 0.2  # an edge at u = 10.3: pixel 10 is 20 % bright
+    np.testing.assert_allclose(edge_offsets(img, [[10.3, 2.0], [10.3, 18.0]]), 0.0, atol=1e-12)
+    np.testing.assert_allclose(edge_offsets(img, [[10.0, 2.0], [10.0, 18.0]]), -0.3, atol=1e-12)  # edge right of p0→p1 down
+    cover = polygon_coverage([[10.3, -5.0], [40.0, -5.0], [40.0, 40.0], [10.3, 40.0]], 30, 20)
+    np.testing.assert_allclose(cover, img / 100.0, atol=1e-12)
+    tri = polygon_coverage([[0.0, 0.0], [4.0, 0.0], [0.0, 4.0]], 6, 6)
+    assert abs(tri.sum() - 8.0) < 1e-12  # the area of the triangle
 
 
 def test_rendered_edges_lie_where_C_projects_the_true_edges(workcell):
     r = Renderer(workcell)
     clean, _ = r.render_float(16.0)
     frame = r.render(16.0, 192)
-    edges = list(_measurable_edges(workcell, r, 16.0))
+    edges = list(visible_edges(workcell, r, 16.0))
     assert len(edges) >= 15
     worst_clean, worst_frame = 0.0, 0.0
     for name, k, uv in edges:
-        o_clean = _edge_offsets(clean, uv)
-        o_frame = _edge_offsets(frame, uv)
+        o_clean = edge_offsets(clean, uv)
+        o_frame = edge_offsets(frame, uv)
         worst_clean = max(worst_clean, abs(o_clean.mean()))
         worst_frame = max(worst_frame, abs(o_frame.mean()))
     # Noise-free, the edge's image is exact to a few hundredths of a pixel; with the sensor's
@@ -172,10 +119,10 @@ def test_cylinder_silhouettes_lie_where_C_projects_them(workcell):
     # gradient inside the contour (a real camera sees that too).
     flat = Renderer(workcell, spec=dataclasses.replace(workcell.render, ambient=1.0))
     clean, _ = flat.render_float(0.0)
-    sil = [e for e in _measurable_edges(workcell, flat, 0.0, kinds=("silhouette",)) if e[0] == "unknown_cylinder"]
+    sil = [e for e in visible_edges(workcell, flat, 0.0, kinds=("silhouette",)) if e[0] == "unknown_cylinder"]
     assert len(sil) == 2
     for _, _, uv in sil:
-        assert abs(_edge_offsets(clean, uv).mean()) < 0.03
+        assert abs(edge_offsets(clean, uv).mean()) < 0.03
 
 
 def test_labels_and_depth_agree_with_the_caster(workcell):
