@@ -186,7 +186,10 @@ def main() -> int:
     ap.add_argument("--beams", type=int, default=40)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
+    import logging
     import tempfile
+
+    logging.getLogger("mcit.devices").setLevel(logging.ERROR)  # the injected faults' warnings would drown the tables
 
     scene = load_scene(default_scene_path())
     scene = replace(scene, turret=replace(scene.turret, speed_steps_s=1000.0))
