@@ -21,6 +21,9 @@ def build_parser() -> argparse.ArgumentParser:
     from app.scene_cli import add_scene_parsers  # argparse only: the renderer loads when the command runs
 
     add_scene_parsers(sub)
+    from app.vision.track_cli import add_track_parser  # argparse only: the tracker loads when the command runs
+
+    add_track_parser(sub)
     return parser
 
 

@@ -1,0 +1,413 @@
+"""Model-based edge tracking: follow a known object from frame to frame once its pose is known.
+
+Each frame (the "moving edges" tracker of Comport, Marchand et al., 2006, as in ViSP):
+
+1. the model's *visible* edges at the current pose (``BRep.wireframe``: hidden-line removal for
+   convex objects, cylinder silhouettes and rims) are projected through C and sampled every
+   ``sample_step_px`` pixels, keeping ``vertex_margin_px`` away from the vertices;
+2. at each sample the image is searched along the projected edge's normal, ±``search_px``, for
+   the edge nearest the prediction (``profiles.search_along_normals``), with the polarity each
+   model edge had in the previous frame (which side is brighter) when it is known;
+3. the pose is refined by the robust (Tukey) iterated small-motion step on the distances of the
+   found points to their projected edges (``core.point_line_pose.refine_point_to_line``);
+4. steps 1–3 are repeated once at the refined pose with a narrower search (``refine_search_px``).
+
+Per frame, ``confidence`` is the fraction of the samples whose edge was found and kept by the
+robust fit (weight ≥ 0.5). When it falls below ``lost_confidence``, too few samples remain, or the
+solution is unusable, the tracker is *lost*: it keeps the last good pose, stops tracking, and
+waits for the operator to give a pose again (``reset``).
+
+Not modelled: occlusion of one part of the model by another (the hidden-line removal is per face,
+exact for one convex solid) and by other objects; the robust loss absorbs what they spoil.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from core.brep import BRep
+from core.camera import Camera
+from core.point_line_pose import PointLineFit, refine_point_to_line
+from core.transforms import check_T, invert_T
+
+from .profiles import search_along_normals, smooth, to_gray_f32
+
+__all__ = ["TrackResult", "TrackDiagnostics", "EdgeSamples", "EdgeTracker", "sample_visible_edges"]
+
+
+class TrackResult(NamedTuple):
+    """One frame's answer: the pose, how much of the model the image supports, and whether lost."""
+
+    T_world_obj: np.ndarray
+    confidence: float
+    lost: bool
+
+
+@dataclass(frozen=True)
+class EdgeSamples:
+    """Sample points along the projected visible edges of a model at one pose.
+
+    uv : array, shape (N, 2), pixels. normals : array, shape (N, 2), unit image normals (the
+    projected edge direction turned +90° on the screen). X_obj : array, shape (N, 3), metres, the
+    samples on the model (object frame). D_obj : array, shape (N, 3), the edge directions there
+    (object frame). feature : array, shape (N,), int, which wireframe feature each sample is on
+    (stable across frames: model edge k → k; silhouettes, rims and circles numbered after them).
+    """
+
+    uv: np.ndarray
+    normals: np.ndarray
+    X_obj: np.ndarray
+    D_obj: np.ndarray
+    feature: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.uv)
+
+    def subset(self, mask: np.ndarray) -> "EdgeSamples":
+        return EdgeSamples(self.uv[mask], self.normals[mask], self.X_obj[mask], self.D_obj[mask], self.feature[mask])
+
+
+@dataclass(frozen=True)
+class TrackDiagnostics:
+    """What the last ``track`` call saw, for overlays and reports.
+
+    samples : EdgeSamples of the last pass. matched_uv : array, shape (N, 2), the image edge
+    found for each sample (NaN where none). weights : array, shape (N,), robust weights (0 where
+    none was found). rms_px : weighted RMS of the kept samples' distances to their edges at the
+    final pose. n_samples, n_found, n_inliers : counts. reason : why the tracker is lost ("" if not).
+    """
+
+    samples: EdgeSamples
+    matched_uv: np.ndarray
+    weights: np.ndarray
+    rms_px: float
+    n_samples: int
+    n_found: int
+    n_inliers: int
+    reason: str = ""
+
+
+def _feature_ids(model: BRep, kind: np.ndarray, n_circle: int) -> tuple[np.ndarray, np.ndarray]:
+    """Stable ids of the wireframe's segments, and which are rims of solids of revolution.
+
+    The wireframe's order is: edges, then per solid its silhouettes (0 or 2) and rims, then the
+    free circles; silhouettes may be absent, so the solids' blocks are walked.
+    """
+    E = len(model.edges)
+    ids = np.empty(len(kind), np.int64)
+    solid_rim = np.zeros(len(kind), bool)
+    ids[:E] = np.arange(E)
+    pos = E
+    base = E
+    for s in model.solids:
+        j = 0
+        while pos < len(kind) and kind[pos] == "silhouette":
+            ids[pos] = base + j
+            pos += 1
+            j += 1
+        n_rims = (s.r0 > 0) + (s.r1 > 0)
+        ids[pos : pos + n_rims * n_circle] = base + 2 + np.arange(n_rims * n_circle)
+        solid_rim[pos : pos + n_rims * n_circle] = True
+        pos += n_rims * n_circle
+        base += 2 + 2 * n_circle
+    ids[pos:] = base + np.arange(len(kind) - pos)
+    return ids, solid_rim
+
+
+def _edges_on_faces_seen(model: BRep, T_world_obj: np.ndarray, center_world: np.ndarray, max_angle_deg: float) -> np.ndarray:
+    """(E,) bool: the edge borders a face seen at less than max_angle_deg (edges without faces: True)."""
+    c_obj = (np.asarray(center_world) - T_world_obj[:3, 3]) @ T_world_obj[:3, :3]
+    v = c_obj - model.face_centroids()
+    cos = np.einsum("ij,ij->i", model.face_normals(), v) / np.linalg.norm(v, axis=1)
+    seen = cos > np.cos(np.radians(max_angle_deg))
+    return np.array([not fs or bool(seen[list(fs)].any()) for fs in (model.edge_faces(k) for k in range(len(model.edges)))])
+
+
+def sample_visible_edges(
+    camera: Camera,
+    model: BRep,
+    T_world_obj: np.ndarray,
+    *,
+    step_px: float = 6.0,
+    vertex_margin_px: float = 4.0,
+    image_margin_px: float = 2.0,
+    rims: bool = False,
+    max_face_angle_deg: float = 75.0,
+    n_circle: int = 48,
+) -> EdgeSamples:
+    """Samples every ``step_px`` along the model's visible edges, as projected through C.
+
+    Straight edges and silhouettes are sampled between ``vertex_margin_px`` from each end (near a
+    vertex the neighbouring edge spoils the search); rims and circles (polygons of short chords)
+    every ``step_px`` along their chords laid end to end. Only samples in front of the camera and inside the
+    image (by ``image_margin_px``) are kept. Positions along a segment are mapped to the model by
+    perspective-correct interpolation, so each sample's X_obj projects exactly on its pixel.
+
+    rims : also sample the rim circles of solids of revolution. Off by default, as in ViSP, whose
+        ``.cao`` cylinders are tracked by their silhouettes only: a modelled cylinder's caps are
+        often not edges in the image (in the visp-cube video the real cylinder is taller than its
+        model, so the model's top rim lies on the cylinder's side). Free circles (a ``.cao``
+        circles block) are edges and are always sampled.
+    max_face_angle_deg : a polyhedral edge is sampled only when one of its faces is seen at less
+        than this angle from its normal (ViSP's ``angle_disappear``): the far edge of a face seen
+        almost edge-on lies a pixel or two from the near one, and the search would confuse them.
+    """
+    T = np.asarray(T_world_obj, dtype=float)
+    wf = model.wireframe(camera.center, T, n_circle=n_circle)
+    fid, solid_rim = _feature_ids(model, wf.kind, n_circle)
+    keep = wf.visible & (rims | ~solid_rim)
+    if len(model.faces) and max_face_angle_deg < 90.0:
+        keep[: len(model.edges)] &= _edges_on_faces_seen(model, T, camera.center, max_face_angle_deg)
+    S = wf.segments[keep]
+    kinds = wf.kind[keep]
+    fid = fid[keep]
+    empty = EdgeSamples(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64))
+    if len(S) == 0:
+        return empty
+    A, B = S[:, 0], S[:, 1]
+    sa, sb = camera.depth(A), camera.depth(B)
+    front = (sa > 1e-6) & (sb > 1e-6)
+    A, B, sa, sb, kinds, fid = A[front], B[front], sa[front], sb[front], kinds[front], fid[front]
+    if len(A) == 0:
+        return empty
+    a, b = camera.project(A), camera.project(B)
+    d = b - a
+    L = np.linalg.norm(d, axis=1)
+    straight = kinds != "rim"
+    margin = np.where(straight, vertex_margin_px, 0.0)
+    usable = L - 2.0 * margin
+    count = np.where(straight, np.floor(np.maximum(usable, 0.0) / step_px).astype(int) + (usable >= 0), 0)
+    # Rim chords are short: place their samples every step_px along the chords laid end to end.
+    cum_end = np.cumsum(np.where(straight, 0.0, L))
+    cum_start = cum_end - np.where(straight, 0.0, L)
+    count = np.where(straight, count, np.floor(cum_end / step_px).astype(int) - np.floor(cum_start / step_px).astype(int))
+    count = np.where(L > 1e-9, count, 0)
+    seg_idx = np.repeat(np.arange(len(A)), count)
+    if len(seg_idx) == 0:
+        return empty
+    first = np.cumsum(count) - count
+    j = np.arange(len(seg_idx)) - np.repeat(first, count)
+    c = count[seg_idx].astype(float)
+    Ls = L[seg_idx]
+    m = margin[seg_idx]
+    # Image parameter λ in [0, 1] along each segment: evenly spread over the usable length.
+    lam_straight = (m + (Ls - 2.0 * m) * np.where(c > 1, j / np.maximum(c - 1, 1), 0.5)) / Ls
+    first_mark = (np.floor(cum_start / step_px) + 1.0) * step_px  # the first multiple of step_px on the chord
+    lam_rim = (first_mark[seg_idx] + j * step_px - cum_start[seg_idx]) / Ls
+    lam = np.where(straight[seg_idx], lam_straight, lam_rim)
+    sA, sB = sa[seg_idx], sb[seg_idx]
+    mu = lam * sA / ((1.0 - lam) * sB + lam * sA)  # perspective-correct parameter on the 3D segment
+    Xw = A[seg_idx] + mu[:, None] * (B - A)[seg_idx]
+    uv = a[seg_idx] + lam[:, None] * d[seg_idx]
+    dirs = d[seg_idx] / Ls[:, None]
+    normals = np.column_stack([-dirs[:, 1], dirs[:, 0]])
+    inside = camera.in_image(uv, image_margin_px)
+    T_obj_world = invert_T(T)
+    X_obj = Xw @ T_obj_world[:3, :3].T + T_obj_world[:3, 3]
+    D_obj = (B - A)[seg_idx] @ T_obj_world[:3, :3].T
+    return EdgeSamples(uv[inside], normals[inside], X_obj[inside], D_obj[inside], fid[seg_idx][inside])
+
+
+@dataclass(frozen=True)
+class _Pass:
+    """One sample-search-refine pass: samples, found edge points, their strengths and robust weights."""
+
+    samples: EdgeSamples
+    matched: np.ndarray
+    found: np.ndarray
+    strength: np.ndarray
+    weights: np.ndarray
+    fit: PointLineFit | None
+
+    @classmethod
+    def empty(cls) -> "_Pass":
+        s = EdgeSamples(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64))
+        return cls(s, np.zeros((0, 2)), np.zeros(0, bool), np.zeros(0), np.zeros(0), None)
+
+
+class EdgeTracker:
+    """Follows one known object in a video from an initial pose.
+
+    Parameters
+    ----------
+    camera : Camera
+        The calibrated camera (global model C); the object moves, the camera is fixed in the
+        world frame (for a moving camera take the world frame to be the camera's).
+    model : BRep
+        The object's model (object frame, metres).
+    T_world_obj : array, shape (4, 4)
+        The object's pose in the first frame to track (from the pose solver or a file).
+    sample_step_px : spacing of the samples along the projected edges (pixels).
+    search_px : half-width of the first search along the normals (pixels): the largest image
+        motion of an edge between two frames that the tracker follows.
+    refine_search_px : half-width of the second pass's search (pixels).
+    sigma_px : Gaussian smoothing of the frame before differentiation (pixels).
+    min_strength : smallest intensity derivative (grey levels per pixel) taken as an edge.
+    lost_confidence : below this confidence the tracker declares itself lost.
+    min_inliers : fewer kept samples than this and the tracker is lost.
+    loss : robust loss of the pose step ("tukey", "huber" or "l2").
+    rims : also track the rims of cylinders and cones (see ``sample_visible_edges``).
+    max_face_angle_deg : edges of faces seen more obliquely than this are not tracked (see
+        ``sample_visible_edges``).
+    """
+
+    def __init__(
+        self,
+        camera: Camera,
+        model: BRep,
+        T_world_obj: np.ndarray,
+        *,
+        sample_step_px: float = 5.0,
+        search_px: float = 8.0,
+        refine_search_px: float = 3.0,
+        sigma_px: float = 1.0,
+        min_strength: float = 3.0,
+        vertex_margin_px: float = 4.0,
+        lost_confidence: float = 0.3,
+        min_inliers: int = 20,
+        loss: str = "tukey",
+        max_iter: int = 8,
+        rims: bool = False,
+        max_face_angle_deg: float = 75.0,
+    ):
+        if not isinstance(camera, Camera):
+            raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
+        if not isinstance(model, BRep):
+            raise ValueError(f"model must be a core.brep.BRep, got {type(model).__name__}")
+        if not (sample_step_px > 0 and search_px > 0 and refine_search_px > 0):
+            raise ValueError("sample_step_px, search_px and refine_search_px must be positive")
+        if not 0.0 <= lost_confidence < 1.0:
+            raise ValueError(f"lost_confidence must be in [0, 1), got {lost_confidence}")
+        self.camera = camera
+        self.model = model
+        self.sample_step_px = float(sample_step_px)
+        self.search_px = float(search_px)
+        self.refine_search_px = float(refine_search_px)
+        self.sigma_px = float(sigma_px)
+        self.min_strength = float(min_strength)
+        self.vertex_margin_px = float(vertex_margin_px)
+        self.lost_confidence = float(lost_confidence)
+        self.min_inliers = int(min_inliers)
+        self.loss = loss
+        self.max_iter = int(max_iter)
+        self.rims = bool(rims)
+        self.max_face_angle_deg = float(max_face_angle_deg)
+        self.reset(T_world_obj)
+
+    # ------------------------------------------------------------------ state
+    def reset(self, T_world_obj: np.ndarray) -> None:
+        """Start (again) from a pose the operator or a solver gave; forgets the edges' polarities."""
+        self._T = check_T(T_world_obj, "T_world_obj").copy()
+        self._lost = False
+        self._polarity: dict[int, float] = {}
+        self.diagnostics: TrackDiagnostics | None = None
+
+    @property
+    def T_world_obj(self) -> np.ndarray:
+        """The current (last good) pose, shape (4, 4)."""
+        return self._T.copy()
+
+    @property
+    def lost(self) -> bool:
+        """True once the tracker has lost the object (until ``reset``)."""
+        return self._lost
+
+    # ------------------------------------------------------------------ tracking
+    def _pass(self, img: np.ndarray, T: np.ndarray, half_range: float) -> _Pass:
+        """Sample the visible edges at pose T, search the image along their normals, refine T."""
+        samples = sample_visible_edges(
+            self.camera,
+            self.model,
+            T,
+            step_px=self.sample_step_px,
+            vertex_margin_px=self.vertex_margin_px,
+            rims=self.rims,
+            max_face_angle_deg=self.max_face_angle_deg,
+        )
+        n = len(samples)
+        if n == 0:
+            return _Pass(samples, np.zeros((0, 2)), np.zeros(0, bool), np.zeros(0), np.zeros(0), None)
+        pol = np.array([self._polarity.get(int(f), 0.0) for f in samples.feature]) if self._polarity else None
+        hits = search_along_normals(
+            img, samples.uv, samples.normals, half_range, polarity=pol, min_strength=self.min_strength, prior_sigma_px=half_range / 2.0
+        )
+        matched = hits.points(samples.uv, samples.normals)
+        found = hits.found
+        w = np.zeros(n)
+        if found.sum() < max(self.min_inliers, 6):
+            return _Pass(samples, matched, found, hits.strength, w, None)
+        fit = refine_point_to_line(
+            self.camera, T, samples.X_obj[found], samples.D_obj[found], matched[found], loss=self.loss, max_iter=self.max_iter
+        )
+        w[found] = fit.weights
+        return _Pass(samples, matched, found, hits.strength, w, fit)
+
+    def track(self, frame: np.ndarray) -> TrackResult:
+        """Follow the object into the next frame.
+
+        Parameters
+        ----------
+        frame : array, shape (H, W) or (H, W, 3), the video frame (grey or RGB), of the camera's size.
+
+        Returns
+        -------
+        TrackResult
+            (T_world_obj (4, 4), confidence in [0, 1], lost). When lost, T_world_obj is the last
+            good pose and tracking stops until ``reset``; ``diagnostics`` says why.
+        """
+        if self._lost:
+            return TrackResult(self._T.copy(), 0.0, True)
+        gray = to_gray_f32(frame)
+        if gray.shape != (self.camera.height, self.camera.width):
+            raise ValueError(
+                f"frame is {gray.shape[1]}×{gray.shape[0]} px but the camera is {self.camera.width}×{self.camera.height}; "
+                "track frames of the calibrated camera"
+            )
+        img = smooth(gray, self.sigma_px)
+        T = self._T
+        reason = ""
+        p = None
+        try:
+            for half_range in (self.search_px, self.refine_search_px):
+                p = self._pass(img, T, half_range)
+                if p.fit is None:
+                    reason = f"only {int(p.found.sum())} of {len(p.samples)} samples found an edge"
+                    break
+                T = p.fit.T_world_obj
+        except ValueError as exc:  # the pose went behind the camera, or an edge is seen end-on
+            reason = f"the pose step failed: {exc}"
+        if p is None or reason.startswith("the pose step"):
+            p = _Pass.empty()
+        n = len(p.samples)
+        inl = p.weights >= 0.5
+        n_inl = int(inl.sum())
+        confidence = n_inl / n if n else 0.0
+        if not reason:
+            if n_inl < self.min_inliers:
+                reason = f"only {n_inl} samples support the pose (fewer than {self.min_inliers})"
+            elif confidence < self.lost_confidence:
+                reason = f"confidence {confidence:.2f} below {self.lost_confidence}"
+            else:
+                # A jump larger than the search band cannot come from edges found within it.
+                jump = np.linalg.norm(
+                    self.camera.project_obj(T, p.samples.X_obj) - self.camera.project_obj(self._T, p.samples.X_obj), axis=1
+                )
+                if np.median(jump) > 2.0 * self.search_px:
+                    reason = f"the pose jumped {np.median(jump):.1f} px, more than the search band allows"
+        rms = p.fit.rms_px if p.fit is not None else float("nan")
+        matched = np.where(p.found[:, None], p.matched, np.nan)
+        self.diagnostics = TrackDiagnostics(p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason)
+        if reason:
+            self._lost = True
+            return TrackResult(self._T.copy(), float(confidence), True)
+        self._T = T
+        # Remember each feature's polarity (the sign of the derivative along its normal).
+        pol: dict[int, float] = {}
+        for f in np.unique(p.samples.feature[inl]):
+            sel = inl & (p.samples.feature == f)
+            pol[int(f)] = float(np.sign(np.median(p.strength[sel])))
+        self._polarity = pol
+        return TrackResult(T.copy(), float(confidence), False)

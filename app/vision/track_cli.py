@@ -1,0 +1,178 @@
+"""``mcit track``: follow a known object through a recorded video and write the overlay video.
+
+    mcit track FRAMES_OR_VIDEO --model M.cao --intrinsics cam.xml --pose obj.pos --out overlay.mp4
+    mcit track teabox.mp4 --model teabox.cao --intrinsics teabox.xml \\
+        --init-points teabox.init --init-clicks 192,84.5 349.5,205.5 324,376 458.5,351
+    mcit track --scene scenes/workcell --body box1 --out overlay.mp4
+
+The camera is either intrinsics (a ViSP ``.xml`` or OpenCV ``.yml``; the world frame is then the
+camera's, as for a hand-held camera) or a scene's calibrated C (``--scene``). The initial pose
+is a file (ViSP ``.pos``: tx ty tz θux θuy θuz; or JSON: a 4×4 matrix or {"xyz", "rpy_deg"}),
+the pose of ``--body`` in the scene, or computed from clicked model points (``--init-points``, a
+ViSP ``.init`` file, and ``--init-clicks``, the pixels in the same order).
+
+Tracking stops at the first frame where the tracker is lost (exit status 3), and says where to
+restart with a new pose. Parsers here; the work is in app.vision.sequence.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+__all__ = ["add_track_parser"]
+
+
+def _pixel(text: str) -> tuple[float, float]:
+    try:
+        u, v = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a clicked pixel is 'u,v' (e.g. 192,84.5), got {text!r}") from None
+    return u, v
+
+
+def add_track_parser(sub) -> None:
+    p = sub.add_parser(
+        "track",
+        help="track a known object through a recorded video (model-based edge tracking) and write the overlay video",
+        description="Follow a known object through a recorded video (model-based edge tracking from an initial "
+        "pose) and write the overlay video.",
+        epilog="examples:\n" + "\n".join(line for line in __doc__.split("\n\n")[1].splitlines()),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("source", nargs="?", help="a video file or a folder of frames (default: the scene's video with --scene)")
+    p.add_argument("--model", help="the object's model (.cao or a mesh); default: the body's model with --scene")
+    cam = p.add_mutually_exclusive_group()
+    cam.add_argument("--intrinsics", help="camera intrinsics (ViSP .xml or OpenCV .yml); the world frame is the camera's")
+    cam.add_argument("--scene", help="a scene folder: its calibrated camera C (and, with --body, model, pose and video)")
+    p.add_argument("--body", help="with --scene: the body to track")
+    p.add_argument("--pose", help="initial pose file: ViSP .pos (tx ty tz θux θuy θuz) or JSON (4×4 or {xyz, rpy_deg})")
+    p.add_argument("--init-points", help="model points clicked to initialise (a ViSP .init file)")
+    p.add_argument("--init-clicks", nargs="+", type=_pixel, metavar="U,V", help="the clicked pixels of --init-points, in order")
+    p.add_argument("--out", default="tracked.mp4", help="overlay video to write (.mp4 or .avi; default tracked.mp4)")
+    p.add_argument("--csv", help="also write the per-frame poses and figures to this CSV file")
+    p.add_argument("--start", type=int, default=0, help="first frame to track (the initial pose is this frame's)")
+    p.add_argument("--frames", type=int, help="number of frames to track (default: to the end)")
+    p.add_argument("--fps", type=float, default=25.0, help="frame rate of the overlay video")
+    p.add_argument("--search-px", type=float, default=8.0, help="search ±this many pixels along the edges' normals")
+    p.add_argument("--step-px", type=float, default=5.0, help="spacing of the edge samples (pixels)")
+    p.add_argument("--keep-going", action="store_true", help="do not stop at a lost frame (draw the last good pose)")
+    p.set_defaults(func=_cmd_track)
+
+
+def _load_pose(path: Path):
+    import json
+
+    from app.scene import parse_pose
+    from app.vision.sequence import read_visp_pose
+
+    if path.suffix.lower() == ".json":
+        try:
+            return parse_pose(json.loads(path.read_text()), str(path))
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    return read_visp_pose(path)
+
+
+def _setup(args):
+    """(source, camera, model, T_world_obj, K or None) from the arguments; ValueError on bad input."""
+    import numpy as np
+
+    from app.models_io import load_model
+    from app.vision.sequence import iter_frames, pose_from_points, read_init_points
+    from core.camera import Camera
+
+    model = load_model(args.model) if args.model else None
+    T = None
+    K = None
+    source = args.source
+    if args.scene:
+        from app.scene import load_scene
+
+        scene = load_scene(args.scene)
+        camera = scene.camera
+        if args.body:
+            body = scene.body(args.body)
+            model = model or body.model
+            T = body.T_world_obj
+        if source is None:
+            if scene.video_path is None:
+                raise ValueError(f"scene {scene.name!r} has no video: give a video file or frame folder")
+            source = str(scene.video_path)
+    else:
+        if source is None:
+            raise ValueError("give a video file or a folder of frames (or --scene with a video)")
+        if not args.intrinsics:
+            raise ValueError("give the camera: --intrinsics FILE (ViSP .xml / OpenCV .yml) or --scene DIR")
+        from app.camera_io import read_intrinsics
+
+        intr = read_intrinsics(args.intrinsics)
+        if intr.has_distortion:
+            raise ValueError(f"{args.intrinsics}: the camera has lens distortion; mcit's camera has none: undistort the video first")
+        K = intr.K
+        _, first = next(iter_frames(source, args.start, 1))
+        h, w = first.shape[:2]
+        camera = Camera.from_intrinsics(K, np.eye(4), w, h)
+    if model is None:
+        raise ValueError("give the object's model: --model FILE (or --scene with --body)")
+    if args.pose:
+        T = _load_pose(Path(args.pose))
+    elif args.init_points or args.init_clicks:
+        if not (args.init_points and args.init_clicks):
+            raise ValueError("--init-points and --init-clicks go together (the model points and their clicked pixels)")
+        if K is None:
+            K, T_cam_world = camera.decompose()
+            if not np.allclose(T_cam_world, np.eye(4), atol=1e-9):
+                raise ValueError("--init-clicks needs --intrinsics (the camera frame as the world); with --scene give --pose or --body")
+        T = pose_from_points(K, read_init_points(args.init_points), np.array(args.init_clicks))
+    if T is None:
+        raise ValueError("give the initial pose: --pose FILE, --init-points/--init-clicks, or --scene with --body")
+    return source, camera, model, T
+
+
+def _cmd_track(args) -> int:
+    import numpy as np
+
+    from app.vision.sequence import track_sequence
+
+    try:
+        source, camera, model, T = _setup(args)
+        frames = track_sequence(
+            source,
+            camera,
+            model,
+            T,
+            start=args.start,
+            count=args.frames,
+            video_out=args.out,
+            csv_out=args.csv,
+            fps_out=args.fps,
+            stop_when_lost=not args.keep_going,
+            search_px=args.search_px,
+            sample_step_px=args.step_px,
+        )
+    except (ValueError, OSError) as exc:
+        print(f"mcit track: {exc}", file=sys.stderr)
+        return 2
+    if not frames:
+        print(f"mcit track: no frame to track in {source} from frame {args.start}", file=sys.stderr)
+        return 2
+    conf = np.array([f.confidence for f in frames if not f.lost] or [0.0])
+    ms = np.array([f.track_ms for f in frames])
+    lost = [f for f in frames if f.lost]
+    print(
+        f"tracked {len(frames) - len(lost)} frames ({frames[0].index}–{frames[-1].index}) of {source}; "
+        f"confidence min {conf.min():.2f}, mean {conf.mean():.2f}; tracking {np.mean(ms):.1f} ms a frame "
+        f"({1e3 / np.mean(ms):.0f} frames/s)"
+    )
+    print(f"overlay video: {args.out}" + (f"; poses: {args.csv}" if args.csv else ""))
+    if lost:
+        f = lost[0]
+        print(
+            f"LOST at frame {f.index}: {f.reason}. Give the pose of frame {f.index} again and restart with "
+            f"--start {f.index} --pose <file>.",
+            file=sys.stderr,
+        )
+        return 3
+    return 0

@@ -1,0 +1,124 @@
+"""app.vision.sequence and ``mcit track``: pose files, clicked points, frames in and overlay video out."""
+
+import csv
+
+import cv2
+import numpy as np
+import pytest
+
+from app.cli import main
+from app.vision.sequence import iter_frames, pose_from_points, read_init_points, read_visp_pose, track_sequence
+from app.vision.synthetic import render_poses
+from core.brep import BRep
+from core.camera import Camera
+from core.transforms import exp_so3, log_so3, make_T, pose_error
+
+K = np.array([[420.0, 0.0, 159.5], [0.0, 420.0, 119.5], [0.0, 0.0, 1.0]])
+BOX = (0.2, 0.13, 0.08)
+
+
+def _poses(n):
+    R0 = exp_so3([2.2, 0.4, 0.3])
+    return [make_T(exp_so3(np.radians(0.8) * k * np.array([0.0, 1.0, 0.3])) @ R0, [0.003 * k, 0.0, 0.9]) for k in range(n)]
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    """A folder of 5 rendered frames of a moving box, its model (.cao), intrinsics (ViSP .xml), first pose (.pos)."""
+    from app.models_io import write_cao
+
+    d = tmp_path_factory.mktemp("seq")
+    cam = Camera.from_intrinsics(K, np.eye(4), 320, 240)
+    box = BRep.box(*BOX)
+    truth = _poses(5)
+    (d / "frames").mkdir()
+    for k, img in enumerate(render_poses(cam, box, truth, noise_sigma=2.0)):
+        cv2.imwrite(str(d / "frames" / f"image{k:04d}.png"), img)
+    write_cao(box, d / "box.cao")
+    (d / "cam.xml").write_text(
+        "<?xml version='1.0'?><conf><camera><u0>159.5</u0><v0>119.5</v0><px>420</px><py>420</py></camera></conf>"
+    )
+    T0 = truth[0]
+    (d / "box.pos").write_text("\n".join(f"{x:.12f}" for x in np.r_[T0[:3, 3], log_so3(T0[:3, :3])]))
+    return d, cam, box, truth
+
+
+def test_visp_pose_and_init_files(tmp_path):
+    T = make_T(exp_so3([0.3, -1.0, 2.0]), [0.1, -0.2, 0.5])
+    p = tmp_path / "obj.pos"
+    p.write_text(" ".join(str(x) for x in np.r_[T[:3, 3], log_so3(T[:3, :3])]))
+    assert np.allclose(read_visp_pose(p), T)
+    p.write_text("1 2 3")
+    with pytest.raises(ValueError, match="six"):
+        read_visp_pose(p)
+    q = tmp_path / "pts.init"
+    q.write_text("# comment\n3 # points\n0 0 0 # first\n0.1 0 0\n0 0.2 0.3\n")
+    assert np.allclose(read_init_points(q), [[0, 0, 0], [0.1, 0, 0], [0, 0.2, 0.3]])
+    q.write_text("4\n0 0 0\n")
+    with pytest.raises(ValueError, match="announced 4"):
+        read_init_points(q)
+
+
+def test_pose_from_points_recovers_the_pose():
+    rng = np.random.default_rng(0)
+    T = make_T(exp_so3([2.0, 0.5, -0.4]), [0.02, -0.01, 0.6])
+    X = np.array([[0, 0, 0], [0.165, 0, 0], [0.165, 0, -0.08], [0.165, 0.068, -0.08]])
+    cam = Camera.from_intrinsics(K, np.eye(4), 320, 240)
+    uv = cam.project_obj(T, X)
+    assert pose_error(pose_from_points(K, X, uv), T)[0] < 1e-6
+    noisy = pose_from_points(K, X, uv + rng.normal(0, 1.0, uv.shape))
+    assert pose_error(noisy, T)[0] < 5.0
+    with pytest.raises(ValueError, match="at least 4"):
+        pose_from_points(K, X[:3], uv[:3])
+
+
+def test_iter_frames_reads_folders_and_videos_once(rendered, tmp_path):
+    d = rendered[0]
+    frames = list(iter_frames(d / "frames"))
+    assert [i for i, _ in frames] == [0, 1, 2, 3, 4]
+    assert frames[0][1].shape == (240, 320, 3) and frames[0][1].dtype == np.uint8
+    assert [i for i, _ in iter_frames(d / "frames", 2, 2)] == [2, 3]
+    video = tmp_path / "v.avi"
+    w = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (320, 240))
+    for _, f in frames:
+        w.write(f)
+    w.release()
+    assert [i for i, _ in iter_frames(video, 1)] == [1, 2, 3, 4]
+    with pytest.raises(ValueError, match="no such"):
+        list(iter_frames(tmp_path / "missing"))
+
+
+def test_track_sequence_writes_the_overlay_video_and_poses(rendered, tmp_path):
+    d, cam, box, truth = rendered
+    out = track_sequence(d / "frames", cam, box, truth[0], video_out=tmp_path / "o.avi", csv_out=tmp_path / "p.csv")
+    assert [f.index for f in out] == [0, 1, 2, 3, 4] and not any(f.lost for f in out)
+    for f, T in zip(out, truth):
+        assert pose_error(f.T_world_obj, T)[0] < 0.5
+    cap = cv2.VideoCapture(str(tmp_path / "o.avi"))
+    n = 0
+    while cap.read()[0]:
+        n += 1
+    assert n == 5
+    rows = list(csv.DictReader(open(tmp_path / "p.csv")))
+    assert len(rows) == 5 and float(rows[-1]["tx_m"]) == pytest.approx(truth[-1][0, 3], abs=2e-3)
+
+
+def test_mcit_track_command(rendered, tmp_path, capsys):
+    d = rendered[0]
+    args = ["track", str(d / "frames"), "--model", str(d / "box.cao"), "--intrinsics", str(d / "cam.xml")]
+    assert main(args + ["--pose", str(d / "box.pos"), "--out", str(tmp_path / "t.avi"), "--csv", str(tmp_path / "t.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "tracked 5 frames" in out and (tmp_path / "t.avi").stat().st_size > 0
+    # a pose far from the truth: lost on the first frame, exit status 3, and says how to restart
+    (tmp_path / "bad.json").write_text('{"xyz": [0.3, 0.2, 0.9], "rpy_deg": [0, 0, 0]}')
+    assert main(args + ["--pose", str(tmp_path / "bad.json"), "--out", str(tmp_path / "b.avi")]) == 3
+    assert "LOST at frame 0" in capsys.readouterr().err
+    # clicked points initialise the pose
+    cam, box, truth = rendered[1:]
+    X = box.vertices[[4, 5, 6, 7]]
+    (tmp_path / "box.init").write_text("4\n" + "\n".join(" ".join(str(c) for c in x) for x in X))
+    clicks = [f"{u:.2f},{v:.2f}" for u, v in cam.project_obj(truth[0], X) + 0.7]
+    assert main(args + ["--init-points", str(tmp_path / "box.init"), "--init-clicks", *clicks, "--out", str(tmp_path / "c.avi")]) == 0
+    # missing pieces are one-line errors
+    assert main(["track", str(d / "frames"), "--model", str(d / "box.cao"), "--intrinsics", str(d / "cam.xml")]) == 2
+    assert "initial pose" in capsys.readouterr().err
