@@ -122,7 +122,9 @@ def estimate_pose(
         The database pose: also refined from, as a candidate (the paper's small-motion step).
     loss, huber_px, sigma_px : passed to ``refine``.
     max_triples : int
-        How many triples (in click order: (0, 1, 2), (0, 1, 3), ...) to try for P3L before giving up.
+        How many triples (in click order: (0, 1, 2), (0, 1, 3), ...) to try before giving up; a
+        triple is skipped when P3L rejects it (degenerate) or none of its candidates can be
+        refined (e.g. no solution in front of the camera).
 
     Returns
     -------
@@ -132,8 +134,9 @@ def estimate_pose(
     Raises
     ------
     ValueError
-        Bad input; fewer than 3 segments without ``T_prior``; no triple P3L can use and no prior
-        (the message gives P3L's reason for the first triple); no candidate could be refined.
+        Bad input; fewer than 3 segments without ``T_prior``; no triple whose P3L candidates can be
+        refined, and no prior (the message gives the reason for the first triple); the prior
+        alone could not be refined.
     """
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
@@ -141,6 +144,8 @@ def estimate_pose(
         raise ValueError(f"loss must be one of {_LOSSES}, got {loss!r}")
     if not (huber_px > 0 and sigma_px > 0):
         raise ValueError(f"huber_px and sigma_px must be positive, got {huber_px}, {sigma_px}")
+    if int(max_triples) < 1:
+        raise ValueError(f"max_triples must be at least 1, got {max_triples}")
     clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
     prior = None if T_prior is None else check_T(T_prior, "T_prior")
     S = clicks.n_segments
@@ -149,9 +154,10 @@ def estimate_pose(
             f"got {S} clicked segment(s): the large-motion solver needs 3 edges; click more edges, "
             "or give the database pose (T_prior) to refine from"
         )
-    starts: list[tuple[str, np.ndarray, int]] = []
     triple = None
     skipped: list[tuple[tuple[int, int, int], str]] = []
+    candidates: list[PoseCandidate] = []
+    refine_args = (loss, float(huber_px), float(sigma_px), 100)
     if S >= 3:
         pts = (clicks.points_uv, clicks.points_obj) if clicks.n_points else (None, None)
         for tri in itertools.islice(itertools.combinations(range(S), 3), max_triples):
@@ -161,27 +167,32 @@ def estimate_pose(
             except ValueError as exc:
                 skipped.append((tri, str(exc)))
                 continue
+            found = [_refined(camera, clicks, "p3l", T, k, refine_args) for k, T in enumerate(sols)]
+            if not any(c.refined is not None for c in found):
+                reason = "; ".join(sorted({c.error for c in found if c.error})) or "no solution in front of the camera"
+                skipped.append((tri, reason))
+                continue
             triple = tri
-            starts += [("p3l", T, k) for k, T in enumerate(sols)]
+            candidates += found
             break
         if triple is None and prior is None:
-            raise ValueError(f"no triple of clicked edges is usable by the three-line solver: {skipped[0][1]}")
+            raise ValueError(f"no triple of clicked edges gives a pose: {skipped[0][1]}")
     if prior is not None:
-        starts.append(("prior", prior, -1))
-    candidates = []
-    for source, T0, rank in starts:
-        try:
-            res = _refine(camera, np.array(T0), clicks, loss, float(huber_px), float(sigma_px), 100)
-        except ValueError as exc:
-            candidates.append(PoseCandidate(source, T0, None, float("inf"), rank, str(exc)))
-            continue
-        score = pose_distance_cost(camera, res.T_world_obj, clicks)
-        candidates.append(PoseCandidate(source, T0, res, score, rank))
+        candidates.append(_refined(camera, clicks, "prior", prior, -1, refine_args))
     if not any(c.refined is not None for c in candidates):
-        reasons = "; ".join(sorted({c.error for c in candidates if c.error})) or "P3L found no solution in front of the camera"
+        reasons = "; ".join(sorted({c.error for c in candidates if c.error}))
         raise ValueError(f"no candidate pose could be refined: {reasons}")
     candidates.sort(key=lambda c: (c.score_px, c.p3l_rank if c.p3l_rank >= 0 else np.inf))
     return PoseEstimate(_merge(candidates, clicks), triple, tuple(skipped))
+
+
+def _refined(camera, clicks, source: str, T0: np.ndarray, rank: int, refine_args) -> PoseCandidate:
+    """A candidate refined with every click (or with the reason it could not be)."""
+    try:
+        res = _refine(camera, np.array(T0, dtype=float), clicks, *refine_args)
+    except ValueError as exc:
+        return PoseCandidate(source, T0, None, float("inf"), rank, str(exc))
+    return PoseCandidate(source, T0, res, pose_distance_cost(camera, res.T_world_obj, clicks), rank)
 
 
 def _merge(candidates: list[PoseCandidate], clicks) -> list[PoseCandidate]:

@@ -38,6 +38,7 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+from scipy.linalg.lapack import dgeev
 
 from ..camera import Camera
 from .residuals import Clicks, as_clicks, distance_cost, interpretation_planes
@@ -189,14 +190,7 @@ def _polish(st: _Setup, ca, sa, cb, sb):
 
     ca2, sa2 = rotate(ca, sa, da)
     cb2, sb2 = rotate(cb, sb, db)
-    old = abs(G[0]) + abs(G[1])
-    new = 0.0
-    for c, s, h in st.E:
-        vc = 0.5 * (c[0] * (1 + ca2) + c[1] * sa2 + c[2] * (1 - ca2))
-        vs = 0.5 * (s[0] * (1 + ca2) + s[1] * sa2 + s[2] * (1 - ca2))
-        vh = 0.5 * (h[0] * (1 + ca2) + h[1] * sa2 + h[2] * (1 - ca2))
-        new = new + abs(vc * cb2 + vs * sb2 - vh)
-    keep = new < old  # a bool or a boolean array: blend without a branch
+    keep = _constraint_error(st, ca2, sa2, cb2, sb2) < abs(G[0]) + abs(G[1])  # a bool or a boolean array: blend without a branch
     return (
         ca2 * keep + ca * (1 - keep),
         sa2 * keep + sa * (1 - keep),
@@ -205,8 +199,8 @@ def _polish(st: _Setup, ca, sa, cb, sb):
     )
 
 
-def _rotation(st: _Setup, ca, sa, cb, sb, n, V):
-    """R_world_obj = R_world_c1 · R_y(β) R_x(α) · R_obj_m1ᵀ (rows) and Σ_i |N_i · R V_i|."""
+def _rotation(st: _Setup, ca, sa, cb, sb):
+    """R_world_obj = R_world_c1 · R_y(β) R_x(α) · R_obj_m1ᵀ (rows)."""
     # G = R_y(β) R_x(α) R_obj_m1ᵀ: row j of R_y R_x is (cb, sb sa, sb ca), (0, ca, −sa),
     # (−sb, cb sa, cb ca); R_obj_m1ᵀ has rows m0, m1, m2 (the columns of R_obj_m1).
     m0, m1, m2 = st.cols_m1
@@ -215,20 +209,24 @@ def _rotation(st: _Setup, ca, sa, cb, sb, n, V):
     g1 = (ca * m1[0] - sa * m2[0], ca * m1[1] - sa * m2[1], ca * m1[2] - sa * m2[2])
     g2 = (-sb * m0[0] + cbsa * m1[0] + cbca * m2[0], -sb * m0[1] + cbsa * m1[1] + cbca * m2[1], -sb * m0[2] + cbsa * m1[2] + cbca * m2[2])
     x, y, z = st.cols_c1  # R = [x y z] G
-    R = (
+    return (
         (x[0] * g0[0] + y[0] * g1[0] + z[0] * g2[0], x[0] * g0[1] + y[0] * g1[1] + z[0] * g2[1], x[0] * g0[2] + y[0] * g1[2] + z[0] * g2[2]),
         (x[1] * g0[0] + y[1] * g1[0] + z[1] * g2[0], x[1] * g0[1] + y[1] * g1[1] + z[1] * g2[1], x[1] * g0[2] + y[1] * g1[2] + z[1] * g2[2]),
         (x[2] * g0[0] + y[2] * g1[0] + z[2] * g2[0], x[2] * g0[1] + y[2] * g1[1] + z[2] * g2[1], x[2] * g0[2] + y[2] * g1[2] + z[2] * g2[2]),
     )
+
+
+def _constraint_error(st: _Setup, ca, sa, cb, sb):
+    """Σ |N_i · R V_i| over the three edges at (α, β): |G_2| + |G_3| (edge 1's constraint holds by
+    construction of the frames), from the half-angle forms s (1 + t²) = e0 + e1 t + e2 t², i.e.
+    s = (e0 (1 + cos α) + e1 sin α + e2 (1 − cos α)) / 2."""
     err = 0.0
-    for (n0, n1, n2), (v0, v1, v2) in zip(n, V):
-        # N·(R V) = (Rᵀ N)·V
-        err = err + abs(
-            (n0 * R[0][0] + n1 * R[1][0] + n2 * R[2][0]) * v0
-            + (n0 * R[0][1] + n1 * R[1][1] + n2 * R[2][1]) * v1
-            + (n0 * R[0][2] + n1 * R[1][2] + n2 * R[2][2]) * v2
-        )
-    return R, err
+    for c, s, h in st.E:
+        vc = 0.5 * (c[0] * (1 + ca) + c[1] * sa + c[2] * (1 - ca))
+        vs = 0.5 * (s[0] * (1 + ca) + s[1] * sa + s[2] * (1 - ca))
+        vh = 0.5 * (h[0] * (1 + ca) + h[1] * sa + h[2] * (1 - ca))
+        err = err + abs(vc * cb + vs * sb - vh)
+    return err
 
 
 def _beta_dependent(E, ca: float, sa: float) -> list[tuple[float, float]]:
@@ -297,8 +295,8 @@ def _roots_trimmed(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def _roots_one(coef: list) -> list[tuple[float, float]]:
-    """``_roots`` for one polynomial (9 floats), in plain Python around one eigvals call: the
-    real roots as half angles (hc, hs)."""
+    """``_roots`` for one polynomial (9 floats), in plain Python around one LAPACK call (NumPy's
+    eigvals wrapper costs more than the 8 × 8 eigenproblem): the real roots as half angles."""
     reverse = abs(coef[8]) < abs(coef[0])
     c = coef[::-1] if reverse else coef
     if abs(c[8]) <= 1e-14 * max(abs(x) for x in coef):
@@ -307,9 +305,12 @@ def _roots_one(coef: list) -> list[tuple[float, float]]:
     comp = _SUBDIAG.copy()
     comp[:, 7] = c[:8]
     comp[:, 7] *= -1.0 / c[8]
+    wr, wi, _, _, info = dgeev(comp, compute_vl=0, compute_vr=0)
+    if info != 0:  # LAPACK did not converge (never seen): fall back on NumPy's driver
+        lam = np.linalg.eigvals(comp)
+        wr, wi = lam.real, lam.imag
     out = []
-    for z in np.linalg.eigvals(comp).tolist():
-        re, im = z.real, z.imag
+    for re, im in zip(wr.tolist(), wi.tolist()):
         if 2.0 * abs(im) < _IMAG_TOL_RAD * (1.0 + re * re + im * im):
             out.append((re, 1.0) if reverse else (1.0, re))
     return out
@@ -322,18 +323,18 @@ def _rotations_one(n, ray, V) -> list:
     for hc, hs in _roots_one(st.coef):
         ca, sa, cb, sb, nd = _angles_at_root(st, hc, hs)
         if abs(nd) >= _DEPENDENT_TOL:
-            R, err = _rotation(st, ca, sa, cb, sb, n, V)
-            if err > 1e-12:  # not a simple, well separated root: polish it
-                R, err = _rotation(st, *_polish(st, ca, sa, cb, sb), n, V)
+            err = _constraint_error(st, ca, sa, cb, sb)
+            if err > 1e-12:  # polish an inaccurate root (near-double, or a near-real complex pair)
+                ca, sa, cb, sb = _polish(st, ca, sa, cb, sb)
+                err = _constraint_error(st, ca, sa, cb, sb)
             if err < _CONSTRAINT_TOL:
-                out.append(R)
+                out.append(_rotation(st, ca, sa, cb, sb))
             continue
         w = hc * hc + hs * hs
         ca, sa = (hc * hc - hs * hs) / w, 2.0 * hc * hs / w
         for cb, sb in _beta_dependent(st.E, ca, sa):
-            R, err = _rotation(st, ca, sa, cb, sb, n, V)
-            if err < _CONSTRAINT_TOL:
-                out.append(R)
+            if _constraint_error(st, ca, sa, cb, sb) < _CONSTRAINT_TOL:
+                out.append(_rotation(st, ca, sa, cb, sb))
     return out
 
 
@@ -365,7 +366,9 @@ def p3l_rotations(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray)
     st = _Setup(n, ray, V)
     hc, hs, real = _roots(np.concatenate(st.coef, axis=1))
     ca, sa, cb, sb, nd = _angles_at_root(st, hc, hs)
-    R, err = _rotation(st, *_polish(st, ca, sa, cb, sb), n, V)
+    ca, sa, cb, sb = _polish(st, ca, sa, cb, sb)
+    err = _constraint_error(st, ca, sa, cb, sb)
+    R = _rotation(st, ca, sa, cb, sb)
     R = np.stack([np.stack(row, axis=-1) for row in R], axis=-2)  # (B, 8, 3, 3)
     valid = real & (err < _CONSTRAINT_TOL) & (np.abs(nd) >= _DEPENDENT_TOL)
     dependent = real & (np.abs(nd) < _DEPENDENT_TOL)
@@ -373,15 +376,12 @@ def p3l_rotations(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray)
         R = np.concatenate([R, R], axis=1)
         valid = np.concatenate([valid, np.zeros_like(valid)], axis=1)
         for b, k in zip(*np.nonzero(dependent)):
-            n1 = n_world[b].tolist()
-            V1 = V_obj[b].tolist()
-            one = _Setup(n1, ray_world[b].tolist(), V1)
-            w = hc[b, k] ** 2 + hs[b, k] ** 2
-            ca, sa = (hc[b, k] ** 2 - hs[b, k] ** 2) / w, 2.0 * hc[b, k] * hs[b, k] / w
-            for j, (cb, sb) in enumerate(_beta_dependent(one.E, float(ca), float(sa))):
-                Rj, e = _rotation(one, float(ca), float(sa), cb, sb, n1, V1)
-                R[b, k + 8 * j] = Rj
-                valid[b, k + 8 * j] = e < _CONSTRAINT_TOL
+            one = _Setup(n_world[b].tolist(), ray_world[b].tolist(), V_obj[b].tolist())
+            w = float(hc[b, k] ** 2 + hs[b, k] ** 2)
+            ca_k, sa_k = float(hc[b, k] ** 2 - hs[b, k] ** 2) / w, float(2.0 * hc[b, k] * hs[b, k]) / w
+            for j, (cb_j, sb_j) in enumerate(_beta_dependent(one.E, ca_k, sa_k)):
+                R[b, k + 8 * j] = _rotation(one, ca_k, sa_k, cb_j, sb_j)
+                valid[b, k + 8 * j] = _constraint_error(one, ca_k, sa_k, cb_j, sb_j) < _CONSTRAINT_TOL
     return R, valid
 
 
@@ -524,14 +524,18 @@ def p3l(
     det = _det3(n)
     if common is None and abs(det) > 1e-9:
         # N_i·T = −d_i − N_i·(R A_i)  (eq. 5), by Cramer's rule: T = adj(N) rhs / det(N).
-        adj = list(zip(_cross(n[1], n[2]), _cross(n[2], n[0]), _cross(n[0], n[1])))
+        adj = [[x / det for x in row] for row in zip(_cross(n[1], n[2]), _cross(n[2], n[0]), _cross(n[0], n[1]))]
+        nda = list(zip(n, d, A))
         t = []
-        for (r0, r1, r2) in Rs:
+        for (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) in Rs:
             rhs = [
-                -di - ni[0] * _dot(r0, a) - ni[1] * _dot(r1, a) - ni[2] * _dot(r2, a)
-                for ni, di, a in zip(n, d, A)
+                -di
+                - n0 * (r00 * a0 + r01 * a1 + r02 * a2)
+                - n1 * (r10 * a0 + r11 * a1 + r12 * a2)
+                - n2 * (r20 * a0 + r21 * a1 + r22 * a2)
+                for (n0, n1, n2), di, (a0, a1, a2) in nda
             ]
-            t.append([_dot(row, rhs) / det for row in adj])
+            t.append([row[0] * rhs[0] + row[1] * rhs[1] + row[2] * rhs[2] for row in adj])
     else:
         t = _translations_from_points(camera, np.array(Rs), n, d, A, clicks, common).tolist()
     segs = clicks.segs_uv.tolist()
