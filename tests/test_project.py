@@ -51,3 +51,14 @@ def test_core_never_imports_app_or_io_libraries():
 def test_console_script_answers_help():
     out = subprocess.run([sys.executable, "-m", "app.cli", "--help"], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert out.returncode == 0 and "usage: mcit" in out.stdout
+
+
+def test_every_test_folder_is_a_package():
+    """With tests/ and each sub-folder a package, pytest imports tests as ``tests.<path>`` from the
+    project root, so a folder such as tests/core can never shadow the real ``core`` package."""
+    missing = [
+        str(d.relative_to(ROOT))
+        for d in [ROOT / "tests", *(ROOT / "tests").rglob("*")]
+        if d.is_dir() and d.name != "__pycache__" and any(d.glob("*.py")) and not (d / "__init__.py").exists()
+    ]
+    assert not missing, f"add an __init__.py to: {missing}"
