@@ -183,7 +183,7 @@ def _exp_so3(r: np.ndarray) -> np.ndarray:
     )
 
 
-_I1, _I2 = [1, 2, 0], [2, 0, 1]
+_I1, _I2 = np.array([1, 2, 0]), np.array([2, 0, 1])
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -232,8 +232,8 @@ def residuals(
         hA, hB = h[:, 0], h[:, 1]
         l = _cross(hA, hB)  # (S, 3) projected model line
         g = np.hypot(l[:, 0], l[:, 1])
-        ok = (g > 1e-12 * np.sqrt((l * l).sum(axis=1))) & ((hA[:, 2] > 0) | (hB[:, 2] > 0))
-        if not ok.all():
+        if not (np.maximum(hA[:, 2], hB[:, 2]).min() > 0 and g.min() > 1e-12 * np.abs(l).max()):
+            ok = (g > 1e-12 * np.abs(l).max(axis=1)) & ((hA[:, 2] > 0) | (hB[:, 2] > 0))
             feasible = False
             g = np.where(ok, g, np.nan)
         q = clicks.segs_h  # (S, 2, 3) homogeneous clicked pixels
@@ -241,17 +241,18 @@ def residuals(
         r_seg = (lhat[:, None, :] * q).sum(axis=-1)  # (S, 2) signed distances, pixels
         r[: 2 * S] = r_seg.reshape(-1)
         if jacobian:
-            # r = (hA × hB)·q / g with g = |l_xy|: dr/dhA = hB × p, dr/dhB = p × hA, where
-            # p = (q − r l̂_xy) / g; dh/dδ = [M, −M [X − t]×] for X = A, B (posed endpoints).
+            # r = (hA × hB)·q / g with g = |l_xy|: dr/dhA = hB × p, dr/dhB = p × hA = −hA × p, where
+            # p = (q − r l̂_xy) / g; dh/dδ = [M, −M [X − t]×] for the posed endpoints X = A, B, so
+            # dr/dδt = Σ_X a_X and dr/dδr = Σ_X (X − t) × a_X with a_X = Mᵀ dr/dhX.
             lxy = lhat.copy()
             lxy[:, 2] = 0.0
-            p = (q - r_seg[..., None] * lxy[:, None, :]) / g[:, None, None]
-            alpha = _cross(hB[:, None, :], p) @ M  # (S, 2, 3) = Mᵀ dr/dhA
-            beta = _cross(p, hA[:, None, :]) @ M
+            p = (q - r_seg[..., None] * lxy[:, None, :]) / g[:, None, None]  # (S, 2 clicks, 3)
+            h_swap = np.stack([hB, -hA], axis=1)  # (S, 2 endpoints, 3)
+            a = _cross(h_swap[:, None], p[:, :, None]) @ M  # (S, 2 clicks, 2 endpoints, 3)
             X = clicks.edges_obj @ R_world_obj.T  # posed endpoints relative to the object's origin
             J_seg = J[: 2 * S]
-            J_seg[:, :3] = (alpha + beta).reshape(-1, 3)
-            J_seg[:, 3:] = (_cross(X[:, None, 0], alpha) + _cross(X[:, None, 1], beta)).reshape(-1, 3)
+            J_seg[:, :3] = a.sum(axis=2).reshape(-1, 3)
+            J_seg[:, 3:] = _cross(X[:, None], a).sum(axis=2).reshape(-1, 3)
     if P:
         h = clicks.points_obj @ MR.T + b  # (P, 3)
         s = h[:, 2]
