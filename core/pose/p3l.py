@@ -43,7 +43,7 @@ from scipy.linalg.lapack import dgeev
 from ..camera import Camera
 from .residuals import Clicks, as_clicks, distance_cost, interpretation_planes
 
-__all__ = ["p3l", "p3l_rotations", "ConcurrentEdgesError"]
+__all__ = ["p3l", "p3l_batch", "p3l_rotations", "ConcurrentEdgesError"]
 
 # Eigenvalues whose imaginary part, mapped to α, is below this are taken as real roots (radians).
 _IMAG_TOL_RAD = 1e-4
@@ -190,7 +190,8 @@ def _polish(st: _Setup, ca, sa, cb, sb):
 
     ca2, sa2 = rotate(ca, sa, da)
     cb2, sb2 = rotate(cb, sb, db)
-    keep = _constraint_error(st, ca2, sa2, cb2, sb2) < abs(G[0]) + abs(G[1])  # a bool or a boolean array: blend without a branch
+    # A polish moves a root by a tiny step: a large one means no root nearby (keep the old angles).
+    keep = (_constraint_error(st, ca2, sa2, cb2, sb2) < abs(G[0]) + abs(G[1])) & (abs(da) < 0.1) & (abs(db) < 0.1)  # a bool or a boolean array: blend without a branch
     return (
         ca2 * keep + ca * (1 - keep),
         sa2 * keep + sa * (1 - keep),
@@ -359,6 +360,11 @@ def p3l_rotations(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray)
     valid : array, shape (B, K), bool
         Which slots hold a solution (real root, constraints met to 3e-6).
     """
+    with np.errstate(all="ignore"):  # slots of complex roots compute garbage, masked by ``valid``
+        return _rotations_batch(n_world, ray_world, V_obj)
+
+
+def _rotations_batch(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # Components of shape (B, 1) broadcast against the roots' (B, 8).
     n = [[n_world[:, i, j, None] for j in range(3)] for i in range(3)]
     V = [[V_obj[:, i, j, None] for j in range(3)] for i in range(3)]
@@ -563,3 +569,88 @@ def _distinct(Rs: list, tol: float = 1e-6) -> list:
         else:
             out.append(flat)
     return [(f[0:3], f[3:6], f[6:9]) for f in out]
+
+
+def p3l_batch(camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``p3l`` for many triples at once (e.g. every assignment of three clicked edges to model
+    edges), vectorised: the same maths on arrays, without ranking.
+
+    Parameters
+    ----------
+    camera : Camera
+    segs_uv : array, shape (B, 3, 2, 2) or (3, 2, 2), pixels
+        Three clicked segments per triple (the same three for every triple when (3, 2, 2)).
+    edges_obj : array, shape (B, 3, 2, 3), metres, object frame
+        Three model edges per triple.
+
+    Returns
+    -------
+    T_world_obj : array, shape (B, K, 4, 4), K = 8 (16 in the rare case of ``p3l_rotations``)
+    valid : array, shape (B, K), bool
+        The slots holding a solution with every model edge in front of the camera (an endpoint at
+        positive depth). Triples ``p3l`` would reject (all three edges parallel, two segments on
+        one image line, three edges through one vertex, which needs a clicked point: use ``p3l``)
+        have no valid slot. Rank the solutions with ``residuals.distance_cost`` as ``p3l`` does.
+    """
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
+    edges = np.asarray(edges_obj, dtype=float)
+    if edges.ndim != 4 or edges.shape[1:] != (3, 2, 3):
+        raise ValueError(f"edges_obj must have shape (B, 3, 2, 3), got {edges.shape}")
+    B = len(edges)
+    segs = np.asarray(segs_uv, dtype=float)
+    if segs.shape == (3, 2, 2):
+        segs = np.broadcast_to(segs, (B, 3, 2, 2))
+    if segs.shape != (B, 3, 2, 2):
+        raise ValueError(f"segs_uv must have shape (3, 2, 2) or ({B}, 3, 2, 2), got {segs.shape}")
+    for k in range(3):  # validation of each segment and edge (shapes, NaN, coinciding points)
+        as_clicks(segs[:, k], edges[:, k])
+    n, d = interpretation_planes(camera, segs.reshape(-1, 2, 2))
+    n, d = n.reshape(B, 3, 3), d.reshape(B, 3)
+    A = edges[:, :, 0]
+    V = edges[:, :, 1] - A
+    V /= np.linalg.norm(V, axis=-1, keepdims=True)
+    ok = np.ones(B, dtype=bool)
+    for i, j in ((0, 1), (0, 2), (1, 2)):  # two segments on one image line
+        ok &= np.linalg.norm(np.cross(n[:, i], n[:, j]), axis=-1) > _PARALLEL_TOL
+    # First edge parallel to neither other (p3l's reordering), per triple.
+    par = {(i, j): np.linalg.norm(np.cross(V[:, i], V[:, j]), axis=-1) <= _PARALLEL_TOL for i, j in ((0, 1), (0, 2), (1, 2))}
+    orders = ((0, 1, 2), (1, 2, 0), (2, 0, 1))
+    usable = [~(par[(0, 1)] | par[(0, 2)]), ~(par[(0, 1)] | par[(1, 2)]), ~(par[(0, 2)] | par[(1, 2)])]
+    which = np.where(usable[0], 0, np.where(usable[1], 1, 2))
+    ok &= usable[0] | usable[1] | usable[2]
+    perm = np.array(orders)[which]  # (B, 3)
+    rows = np.arange(B)[:, None]
+    n_o, V_o = n[rows, perm], V[rows, perm]
+    first = segs[np.arange(B), perm[:, 0], 0]  # (B, 2): l1's first clicked pixel
+    C = camera.C
+    m_u = C[0, :3] - first[:, :1] * C[2, :3]
+    m_v = C[1, :3] - first[:, 1:] * C[2, :3]
+    # Keep degenerate triples harmless in the arithmetic; they are masked out below.
+    V_o = np.where(ok[:, None, None], V_o, np.eye(3))
+    R, valid = p3l_rotations(n_o, np.cross(m_u, m_v), V_o)
+    R = np.where(valid[..., None, None], R, np.eye(3))
+    valid &= ok[:, None]
+    # Translation from the three planes (eq. 5); no depth when the three lines meet in one point.
+    det = np.linalg.det(n)
+    w = A[:, 1] - A[:, 0]
+    c01 = np.cross(V[:, 0], V[:, 1])
+    cc = np.sum(c01 * c01, axis=-1)
+    scale = np.maximum(1.0, np.abs(A).max(axis=(1, 2)))
+    meet01 = np.abs(np.sum(w * c01, axis=-1)) <= 1e-9 * scale * np.sqrt(cc)
+    s = np.sum(np.cross(w, V[:, 1]) * c01, axis=-1) / np.where(cc > 0, cc, 1.0)
+    D = A[:, 0] + s[:, None] * V[:, 0] - A[:, 2]
+    on2 = np.sum(D * D, axis=-1) - np.sum(D * V[:, 2], axis=-1) ** 2 <= (1e-9 * scale) ** 2
+    concurrent = (meet01 & on2 & (cc > _PARALLEL_TOL**2)) | (np.abs(det) <= 1e-9)
+    valid &= ~concurrent[:, None]
+    n_safe = np.where(concurrent[:, None, None], np.eye(3), n)
+    rhs = -d[:, None] - ((n[:, None] @ R) * A[:, None]).sum(axis=-1)  # (B, K, 3): N_i·(R A_i)
+    t = rhs @ np.swapaxes(np.linalg.inv(n_safe), -1, -2)
+    X = edges.reshape(B, 1, 6, 3) @ np.swapaxes(R, -1, -2) + t[:, :, None]  # (B, K, 6, 3)
+    depth = X @ C[2, :3] + C[2, 3]
+    valid &= (depth.reshape(B, -1, 3, 2).max(axis=-1) > 0).all(axis=-1)
+    T = np.zeros(R.shape[:2] + (4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = t
+    T[..., 3, 3] = 1.0
+    return T, valid

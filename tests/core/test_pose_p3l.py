@@ -280,3 +280,30 @@ def _det_jacobian(pb, alpha, h=1e-6):
     Ja = (G(alpha + h, beta) - G(alpha - h, beta)) / (2 * h)
     Jb = (G(alpha, beta + h) - G(alpha, beta - h)) / (2 * h)
     return float(np.linalg.det(np.column_stack([Ja, Jb])))
+
+
+def test_p3l_batch_gives_the_solutions_of_p3l_for_every_triple():
+    rng = np.random.default_rng(10)
+    camera = random_camera(rng)
+    problems = [random_lines_problem(rng, 3, sigma_px=0.5 * (i % 2), camera=camera) for i in range(200)]
+    segs = np.array([pb.segs_uv for pb in problems])
+    edges = np.array([pb.edges_obj for pb in problems])
+    # Degenerate triples: all parallel (2), a parallel pair (3, solved by reordering), concurrent (4).
+    edges[2, :, 1] = edges[2, :, 0] + (edges[2, 0, 1] - edges[2, 0, 0])
+    edges[3, 1, 1] = edges[3, 1, 0] + 0.5 * (edges[3, 0, 1] - edges[3, 0, 0])
+    edges[4, :, 0] = edges[4, 0, 0]
+    for b in (3, 4):
+        X = edges[b, :, :1] + np.array([0.2, 0.8])[None, :, None] * (edges[b, :, 1:] - edges[b, :, :1])
+        segs[b] = camera.project_obj(problems[b].T_world_obj, X.reshape(-1, 3)).reshape(3, 2, 2)
+    T, valid = p3l_module.p3l_batch(camera, segs, edges)
+    assert T.shape[0] == 200 and T.shape[2:] == (4, 4) and valid.shape == T.shape[:2]
+    assert not valid[2].any() and not valid[4].any()
+    with pytest.raises(ValueError):
+        p3l(camera, segs[4], edges[4])
+    for b in [0, 1, 3] + list(range(5, 200)):
+        single = p3l(camera, segs[b], edges[b])
+        assert valid[b].sum() == len(single), b
+        assert all(np.abs(T[b][valid[b]] - S).max(axis=(1, 2)).min() < 1e-7 for S in single), b
+    # The same three clicked segments against many model-edge triples: segs (3, 2, 2) broadcast.
+    T1, valid1 = p3l_module.p3l_batch(camera, segs[0], edges[:10])
+    assert valid1[0].sum() == valid[0].sum() and np.allclose(T1[0][valid1[0]], T[0][valid[0]])
