@@ -3,16 +3,17 @@
 ``p3l`` (large motion: the paper's geometric three-line solver on the global camera model C),
 ``refine`` (small motion: the paper's linearised least squares, iterated to the pixel
 maximum-likelihood estimate, with covariance and per-click residuals), ``estimate_pose`` (both, as
-the operator uses them). Conventions: DESIGN.md §Frames; perturbations and covariances are
+the operator uses them), ``p3l_batch`` (P3L vectorised over many triples). Conventions: DESIGN.md §Frames; perturbations and covariances are
 (δt, δr) in the world frame about the object's origin (``core.pose.residuals``).
 """
 
 from .estimate import PoseCandidate, PoseEstimate, estimate_pose
-from .p3l import ConcurrentEdgesError, p3l
+from .p3l import ConcurrentEdgesError, p3l, p3l_batch
 from .refine import RefineResult, refine
 
 __all__ = [
     "p3l",
+    "p3l_batch",
     "refine",
     "estimate_pose",
     "RefineResult",
