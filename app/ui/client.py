@@ -101,6 +101,8 @@ class ClientPanel:
         self.gui_fit.on_click(self._guard(lambda _e: self._request_fit()))
         self.gui_object = gui.add_dropdown("Object", (NO_SELECTION,), initial_value=NO_SELECTION)
         self.gui_object.on_update(self._guard(self._on_object))
+        self.gui_stale = gui.add_button("Mark stale", hint="The selected object has moved: flag it until its pose is updated")
+        self.gui_stale.on_click(self._guard(self._on_stale))
         with gui.add_folder("Workflows"):
             for label, name in START_BUTTONS:
                 button = gui.add_button(label)
@@ -189,6 +191,13 @@ class ClientPanel:
     def _on_object(self, _event) -> None:
         value = self.gui_object.value
         self.session.select(None if value == NO_SELECTION else value)
+
+    def _on_stale(self, _event) -> None:
+        name = self.session.selected
+        if name is None:
+            raise WorkflowError("select an object first (click its wireframe, or choose it in the list)")
+        self.app.site.write(lambda db: db.set_status(name, "stale", method="operator", client=self.session.client))
+        self.notify("Marked stale", f"{name} is drawn orange until its pose is updated.", "blue")
 
     def _on_view(self, event) -> None:
         self.view = "3d" if event.target.value == "3D world" else "video"

@@ -1,0 +1,165 @@
+"""The operator interface in a real headless browser: rendering, the pose update by clicks on the
+canvas, two browsers at once, and an error path."""
+
+from __future__ import annotations
+
+import itertools
+import time
+
+import numpy as np
+import pytest
+
+from core.transforms import pose_error
+
+pytestmark = pytest.mark.e2e
+
+
+def _wait(predicate, timeout_s=8.0, what="condition"):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def _is_overlay(rgb, color: str) -> bool:
+    """A screenshot pixel of the overlay: "green" (known objects) or any saturated colour ("any")."""
+    r, g, b = (int(v) for v in rgb)
+    if color == "green":
+        return g > r + 25 and g > b + 25
+    return max(r, g, b) - min(r, g, b) > 35  # the video is grey (JPEG leaves < 10 of colour)
+
+
+def _drawn_along(ui, page, shot, seg_uv, color="green", n=9) -> float:
+    """Fraction of points along a pixel segment where the screenshot shows the overlay (±1 px)."""
+    hits = 0
+    for t in np.linspace(0.15, 0.85, n):
+        x, y = ui.screen_of(page, seg_uv[0] + t * (seg_uv[1] - seg_uv[0]))
+        patch = shot[int(round(y)) - 1:int(round(y)) + 2, int(round(x)) - 1:int(round(x)) + 2].reshape(-1, 3)
+        hits += any(_is_overlay(p, color) for p in patch)
+    return hits / n
+
+
+def _visible_box_edges(site, T):
+    obj = site.object("parallelepiped")
+    wf = obj.model.wireframe(site.camera.center, T)
+    return [int(k) for k, v, kind in zip(wf.edge_index, wf.visible, wf.kind) if v and kind == "edge"]
+
+
+def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interface, frame):
+    ui = interface
+    page = ui.open(browser)
+    shot = ui.screenshot(page)
+    # the video: the shown image correlates with the frame at the pixels the camera maps them to
+    # (local means: the frame's sensor noise and the JPEG transport decorrelate single pixels)
+    import cv2
+
+    smooth = cv2.blur(frame.mean(axis=2).astype(np.float32), (5, 5))
+    rng = np.random.default_rng(0)
+    uv = rng.uniform([8, 8], [503, 247], size=(300, 2))
+    shown = np.array([shot[int(y) - 3:int(y) + 4, int(x) - 3:int(x) + 4].mean() for x, y in (ui.screen_of(page, p) for p in uv)])
+    truth = np.array([smooth[int(round(v)), int(round(u))] for u, v in uv])
+    ui.screenshot(page, "/tmp/mcit-e2e-render.png")
+    assert np.corrcoef(shown, truth)[0, 1] > 0.9
+    # the overlay: the database's table edges are drawn in green where C projects them
+    table = ui.site.object("table")
+    segs = ui.site.camera.project(table.model.edge_segments(table.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
+    wf = table.model.wireframe(ui.site.camera.center, table.T_world_obj)
+    visible = [int(k) for k, v in zip(wf.edge_index, wf.visible) if v and k >= 0]
+    long_edges = [k for k in visible if np.linalg.norm(segs[k, 1] - segs[k, 0]) > 100]
+    assert long_edges
+    assert min(_drawn_along(ui, page, shot, segs[k]) for k in long_edges) >= 0.7
+    # error paths: each shows a notification saying what to do, and nothing is written
+    versions = [(o.name, o.version) for o in ui.db.objects()]
+    n_changes, n_cal = len(ui.db.history()), len(ui.db.calibrations())
+    page.get_by_role("button", name="Update pose").click()  # nothing selected
+    page.get_by_text("select an object first").first.wait_for(timeout=5000)
+    page.get_by_role("button", name="Calibrate camera").click()
+    page.get_by_role("button", name="Solve").click()  # no points paired
+    page.get_by_text("the DLT needs at least 6").first.wait_for(timeout=5000)
+    ui.click_pixel(page, [3.0, 3.0])  # far from every model corner
+    page.get_by_text("no model vertex within").first.wait_for(timeout=5000)
+    assert [(o.name, o.version) for o in ui.db.objects()] == versions
+    assert len(ui.db.history()) == n_changes and len(ui.db.calibrations()) == n_cal
+    assert ui.server._thread.is_alive()  # the server lives on
+    page.close()
+
+
+def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
+    ui = interface
+    page = ui.open(browser)
+    site = ui.site
+    obj = site.object("parallelepiped")
+    T_true = scene.body("parallelepiped").pose_at(ui.frame_t_s)
+    assert pose_error(T_true, obj.T_world_obj)[1] > 0.1  # the database is stale: the box moved
+    cam = site.camera
+    drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
+    true = cam.project(obj.model.edge_segments(T_true).reshape(-1, 3)).reshape(-1, 2, 2)
+    # select the box by clicking its wireframe
+    ui.click_pixel(page, drawn[_visible_box_edges(site, obj.T_world_obj)[0]].mean(axis=0))
+    _wait(lambda: page.panel.session.selected == "parallelepiped", what="the selection")
+    page.get_by_role("button", name="Update pose").click()
+    _wait(lambda: page.panel.session.workflow is not None, what="the workflow")
+    wf = page.panel.session.workflow
+    # three edges of three directions that do not meet in one vertex, then one more
+    vis = [k for k in _visible_box_edges(site, T_true) if k in _visible_box_edges(site, obj.T_world_obj)]
+    V, E = obj.model.vertices, obj.model.edges
+    axis = {k: int(np.abs(V[E[k][1]] - V[E[k][0]]).argmax()) for k in vis}
+    triple = next(t for t in itertools.combinations(vis, 3)
+                  if len({axis[k] for k in t}) == 3 and not set(E[t[0]]) & set(E[t[1]]) & set(E[t[2]]))
+    edges = list(triple) + [k for k in vis if k not in triple][:1]
+    for k in edges:
+        a, b = true[k]
+        ui.click_pixel(page, a + 0.3 * (b - a))
+        ui.click_pixel(page, a + 0.7 * (b - a))
+        ui.click_pixel(page, drawn[k].mean(axis=0))  # "this is model edge k", clicked on the overlay
+        _wait(lambda: len(wf.edge_ids) and wf.edge_ids[-1] == k, what=f"edge {k} assigned")
+    page.get_by_role("button", name="Solve (P3L)").click()
+    _wait(lambda: len(wf.candidates) > 0, what="P3L candidates")
+    best = min(range(len(wf.candidates)), key=lambda i: pose_error(wf.candidates[i], T_true)[0])
+    if best != wf.chosen:
+        page.panel.candidate_dropdown.value = wf.candidate_labels()[best]  # the operator's choice
+    page.get_by_role("button", name="Refine").click()
+    _wait(lambda: wf.refined is not None, what="the refinement")
+    page.get_by_role("button", name="Accept").click()
+    _wait(lambda: wf.accepted, what="the accept")
+    rec = ui.db.get("parallelepiped")
+    assert rec.version == obj.version + 1
+    deg, m = pose_error(rec.T_world_obj, T_true)
+    assert deg < 1.5 and m < 0.015
+    assert ui.db.history("parallelepiped")[-1].client.startswith("browser-")
+    # the overlay (the box is still selected: drawn yellow over green) now lies on the box in the video
+    time.sleep(1.0)
+    shot = ui.screenshot(page, "/tmp/mcit-e2e-pose.png")
+    assert np.mean([_drawn_along(ui, page, shot, true[k], "any") for k in edges]) >= 0.6
+    page.close()
+
+
+def test_two_browsers_share_the_database_and_keep_their_own_state(browser, interface, scene):
+    ui = interface
+    a, b = ui.open(browser), ui.open(browser)
+    assert a.panel is not b.panel
+    obj = ui.site.object("parallelepiped")
+    drawn = ui.site.camera.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
+    ui.click_pixel(a, drawn[_visible_box_edges(ui.site, obj.T_world_obj)[0]].mean(axis=0))
+    _wait(lambda: a.panel.session.selected == "parallelepiped", what="a selection in browser A")
+    assert b.panel.session.selected is None  # B's selection is its own
+    # another writer (here: a second connection, as `mcit db` would be) moves the box in the database
+    from app.db import Database
+
+    other = Database.open(ui.db.path)
+    T_true = scene.body("parallelepiped").pose_at(ui.frame_t_s)
+    rec = other.update_pose(obj.id, T_true, None, expected_version=obj.version, method="test", client="other")
+    other.close()
+    # the server notices (it polls the database every second) and redraws for everyone
+    _wait(lambda: ui.site.object("parallelepiped").version == rec.version and ui.server._db_revision == ui.site.revision,
+          what="the server to see the change")
+    time.sleep(1.0)
+    true = ui.site.camera.project(obj.model.edge_segments(T_true).reshape(-1, 3)).reshape(-1, 2, 2)
+    edges = _visible_box_edges(ui.site, T_true)
+    for page in (a, b):
+        shot = ui.screenshot(page)
+        assert np.mean([_drawn_along(ui, page, shot, true[k], "any") for k in edges]) >= 0.6
+    a.close()
+    b.close()
