@@ -35,7 +35,9 @@ from ..rangefinder import RangeFinderSpec, RangeScan
 from ..transforms import check_T, make_T
 from .profile import ProfileFit, axis_basis, fit_profile, front_plane
 from .result import ModelResult
-from .scans import ScanSegment, segment_scan
+from .returns import Returns
+from .scans import segment_scan
+from .small import image_line, interp_plane
 
 __all__ = ["METHODS", "model_cylinder", "CylinderData", "reduce_cylinder_data"]
 
@@ -70,6 +72,19 @@ class CylinderData:
         return np.concatenate([s.covs for s in self.segments])
 
     @property
+    def dirs(self) -> np.ndarray:
+        return np.vstack([s.dirs_world for s in self.segments])
+
+    @property
+    def returns(self) -> Returns:
+        rs = [s.returns for s in self.segments]
+        return Returns(
+            rs[0].origin, np.vstack([r.dirs for r in rs]), np.concatenate([r.range_m for r in rs]),
+            np.vstack([r.e_pan for r in rs]), np.vstack([r.e_tilt for r in rs]), rs[0].sigma_range_m,
+            np.concatenate([r.sigma_pan_rad for r in rs]), np.concatenate([r.sigma_tilt_rad for r in rs]),
+        )
+
+    @property
     def groups(self) -> np.ndarray:
         return np.concatenate([np.full(len(s.hits_world), k) for k, s in enumerate(self.segments)])
 
@@ -92,13 +107,14 @@ def _orient_up(a: np.ndarray, support: Plane | None) -> np.ndarray:
 
 def _silhouette_planes(camera: Camera, sil: np.ndarray) -> tuple[Plane, Plane]:
     """Interpretation planes of the two silhouettes, positive on the object's side."""
-    inside = sil.reshape(-1, 2).mean(axis=0, keepdims=True)
-    c, r = camera.rays(inside)
-    X_in = c + r[0]
+    inside = sil.reshape(-1, 2).mean(axis=0)
+    X_in = camera.backproject(inside[None], 1.0)[0]
     out = []
     for s in sil:
-        p = camera.interpretation_plane(s)
-        out.append(p if p.n @ X_in + p.d > 0 else p.flipped())
+        v = interp_plane(camera.C, s)
+        if v[:3] @ X_in + v[3] < 0:
+            v = -v
+        out.append(Plane(v[:3], float(v[3])))
     return out[0], out[1]
 
 
@@ -259,27 +275,25 @@ def _generators(camera: Camera, Xa, a, r_ref, k, t_lo, t_hi):
 def _click_heights(camera, sil_uv, gens, Xa, a):
     """Axial coordinates (2 silhouettes × (low end, high end)) of the clicked ends on the generators."""
     c = camera.center
+    Minv = np.linalg.inv(camera.C[:, :3])
+    lines = []
+    for P, u in gens:
+        uv = camera.project(np.array([P, P + 0.1 * u]))
+        lines.append(image_line(uv[0], uv[1]))
     out = []
     for seg in sil_uv:
-        _, rays = camera.rays(seg)
         # Match the clicked line with the nearer projected generator.
-        best, tt = None, None
-        for P, u in gens:
-            uv = camera.project(np.array([P, P + 0.1 * u]))
-            l = np.cross(np.append(uv[0], 1), np.append(uv[1], 1))
-            l /= np.linalg.norm(l[:2])
-            dist = float(np.abs(np.column_stack([seg, np.ones(2)]) @ l).sum())
-            ts = []
-            for r in rays:
-                # Closest point on the generator to the click's ray.
-                w = P - c
-                b = u @ r
-                den = 1 - b * b
-                s_g = (b * (w @ r) - (w @ u)) / den if den > 1e-12 else 0.0
-                ts.append(float((P + s_g * u - Xa) @ a))
-            if best is None or dist < best:
-                best, tt = dist, sorted(ts)
-        out.append(tt)
+        H = np.column_stack([seg, np.ones(2)])
+        g = int(np.argmin([np.abs(H @ l).sum() for l in lines]))
+        P, u = gens[g]
+        rays = H @ Minv.T
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        w = P - c
+        b = rays @ u
+        den = np.maximum(1 - b * b, 1e-12)
+        s_g = (b * (rays @ w) - (w @ u)) / den  # closest point on the generator to each click's ray
+        ts = (P - Xa) @ a + s_g * (u @ a)
+        out.append(np.sort(ts))
     return np.array(out)
 
 
@@ -466,11 +480,24 @@ def _stage_one(data: CylinderData, method: str) -> _Ctx:
         a0 = _orient_up(a0 / np.linalg.norm(a0), data.support)
     profile = None
     if method in ("tangential", "rf_tangential"):
-        profile = fit_profile(hits, data.covs, a0, cone=data.cone, groups=data.groups)
+        profile = fit_profile(data.returns, a0, cone=data.cone, groups=data.groups)
     t_sec = np.array(sorted({float(np.median((s.hits_world - centroid) @ a0)) for s in data.segments}))
     if not data.cone:
         t_sec = np.array([float(np.mean(t_sec))])
     return _Ctx(data, method, profile, t_sec, centroid, a0, centroid)
+
+
+def solve_paper(data: CylinderData, method: str) -> dict:
+    """The paper's construction alone (no covariance): {"p0", "a", "r0", "r1", "h"} in the world."""
+    ctx = _stage_one(data, method)
+    z_parts = []
+    if data.silhouettes_uv is not None:
+        z_parts.append(data.silhouettes_uv.reshape(-1))
+    for tb in data.tangents:
+        z_parts.append([tb.pan_rad, tb.tilt_rad])
+    if ctx.profile is not None:
+        z_parts.append(front_plane(ctx.profile, data.rf_origin, float(np.mean(ctx.t_sections))).as_vector())
+    return _solve_paper(np.concatenate([np.asarray(p, dtype=float).reshape(-1) for p in z_parts]), ctx)
 
 
 def _model_paper(data: CylinderData, method: str, sigma_px: float) -> ModelResult:
@@ -510,14 +537,16 @@ def _model_paper(data: CylinderData, method: str, sigma_px: float) -> ModelResul
     J = np.zeros((len(q0), len(z)))
     scale = np.sqrt(np.maximum(np.diag(Sz), 1e-30))
     for j in range(len(z)):
-        h = max(1e-3 * scale[j], 1e-9)
+        if scale[j] <= 1e-15:
+            continue
+        h = 1e-4 * scale[j]  # forward differences: the map is smooth on the scale of σ
         e = np.zeros(len(z))
         e[j] = h
-        J[:, j] = (_solid_vector(_solve_paper(z + e, ctx), data.cone) - _solid_vector(_solve_paper(z - e, ctx), data.cone)) / (2 * h)
+        J[:, j] = (_solid_vector(_solve_paper(z + e, ctx), data.cone) - q0) / h
     cov_q = J @ Sz @ J.T
     residuals = {}
     if ctx.profile is not None:
-        residuals["profile_m"] = ctx.profile.residuals_m
+        residuals["profile_sigma"] = ctx.profile.residuals
     details = {"profile": ctx.profile, "sections_t": ctx.t_sections, "segments": data.segments}
     return build_result(data, method, sol, cov_q, residuals, details)
 
@@ -549,8 +578,7 @@ def build_result(data: CylinderData, method: str, sol: dict, cov_q: np.ndarray, 
             best = None
             for g in gens:
                 uv = data.camera.project(g)
-                l = np.cross(np.append(uv[0], 1), np.append(uv[1], 1))
-                l /= np.linalg.norm(l[:2])
+                l = image_line(uv[0], uv[1])
                 r = np.column_stack([seg, np.ones(2)]) @ l
                 if best is None or np.abs(r).sum() < np.abs(best).sum():
                     best = r

@@ -4,8 +4,9 @@ The paper's conclusion proposes "the fusion of multisensor redundant data, in or
 uncertainty". Here one least-squares problem holds, each residual divided by its standard
 deviation (so the minimum is the maximum-likelihood estimate under Gaussian noise):
 
-* every scan return on the object: its signed distance to the lateral surface, over the point's
-  σ along the surface normal (range noise along the beam, pointing noise across it);
+* every scan return on the object: its range against the model's range along the same beam,
+  over the range noise and the pointing noise seen through the surface's slope
+  (``returns.range_residuals``: the likelihood of a return is along its beam);
 * every tangent beam (between the last hit and the first miss of a scan): how far the beam
   passes from the surface, over (distance × angular σ) — the misses carry information;
 * both silhouettes' clicked ends: pixel offsets from the projected ends of the model's contour
@@ -23,60 +24,31 @@ from scipy.optimize import least_squares
 
 from ..brep import Revolution
 from ..rangefinder import beam_direction
-from .cylinder import CylinderData, _model_paper, build_result
+from .cylinder import CylinderData, build_result, solve_paper
 from .profile import axis_basis
+from .returns import MIN_INCIDENCE_COS, beam_gap, incidence_cos, range_residuals
 
-__all__ = ["fit_fused", "surface_distance", "beam_gap"]
-
-
-def surface_distance(X: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, r1: float, h: float) -> np.ndarray:
-    """Signed distance (N,) of points X (N, 3) from the lateral surface (positive outside), metres."""
-    w = X - p0
-    t = w @ a
-    rho = np.linalg.norm(w - t[:, None] * a, axis=1)
-    k = (r1 - r0) / h
-    return (rho - r0 - k * t) / np.sqrt(1.0 + k * k)
-
-
-def beam_gap(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, r1: float, h: float) -> np.ndarray:
-    """Least signed distance (M,) from the lateral surface along each beam line (O, unit D (M, 3)).
-
-    Zero for a beam tangent to the surface, negative when it enters it. For a cylinder this is
-    the distance between the beam and the axis minus the radius.
-    """
-    k = (r1 - r0) / h
-    w = O - p0
-    t0 = w @ a
-    wp = w - t0 * a
-    tau = D @ a
-    Dp = D - tau[:, None] * a
-    A = np.einsum("ij,ij->i", Dp, Dp)
-    B = Dp @ wp
-    Cq = wp @ wp
-    den = np.maximum(A - (k * tau) ** 2, 1e-12)
-    u = np.sign(k * tau) * np.sqrt(np.maximum((k * tau) ** 2 * (A * Cq - B**2) / den, 0.0))
-    s = (u - B) / np.maximum(A, 1e-12)
-    t = t0 + s * tau
-    rho = np.sqrt(np.maximum(A * s * s + 2 * B * s + Cq, 0.0))
-    return (rho - r0 - k * t) / np.sqrt(1.0 + k * k)
+__all__ = ["fit_fused"]
 
 
 def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
     """The fused maximum-likelihood fit (method "fused" of ``model_cylinder``)."""
     if data.silhouettes_uv is None:
         raise ValueError("the fused fit needs the two silhouettes (their clicked ends give the height)")
-    init_method = "tangential"
-    try:
-        init = _model_paper(data, "tangential", sigma_px)
-    except ValueError:
-        init = _model_paper(data, "bisecting", sigma_px)
-        init_method = "bisecting"
+    init, errors = None, []
+    for init_method in ("tangential", "bisecting", "rf_tangential"):
+        try:
+            init = solve_paper(data, init_method)
+            break
+        except ValueError as exc:
+            errors.append(f"{init_method}: {exc}")
+    if init is None:
+        raise ValueError("no starting model for the fused fit (" + "; ".join(errors) + ")")
     cone = data.cone
-    a0 = init.axis.direction
-    p0_init = init.axis.point
+    a0 = init["a"]
+    p0_init = init["p0"]
     e1, e2 = axis_basis(a0)
-    dims = init.dimensions
-    radii0 = [dims["radius_bottom"], dims["radius_top"]] if cone else [dims["radius"]]
+    radii0 = [init["r0"], init["r1"]] if cone else [0.5 * (init["r0"] + init["r1"])]
     free_axis = data.axis_hint is None
     on_support = data.support is not None
     cam = data.camera
@@ -103,27 +75,21 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
         h = th[i]
         return p0, a, r0, r1, h
 
-    th0 = np.concatenate([np.zeros(2) if free_axis else [], np.zeros(2), [] if on_support else [0.0], radii0, [dims["height"]]])
-    hits, covs = data.hits, data.covs
+    th0 = np.concatenate([np.zeros(2) if free_axis else [], np.zeros(2), [] if on_support else [0.0], radii0, [init["h"]]])
+    ret_all = data.returns
     beams = data.tangents
     T = data.T_world_turret
     O = data.rf_origin
     Dm = np.array([tb.direction(T) for tb in beams]).reshape(-1, 3)
 
-    # Per-point σ along the surface normal and per-beam σ of the gap, from the initial model.
+    # Returns away from grazing, and per-beam σ of the gap, from the initial model.
     p0i, ai, r0i, r1i, hi = unpack(th0)
-    w = hits - p0i
-    radial = w - (w @ ai)[:, None] * ai
-    radial /= np.linalg.norm(radial, axis=1, keepdims=True)
-    k = (r1i - r0i) / hi
-    nrm = (radial - k * ai) / np.sqrt(1 + k * k)
-    sig_hit = np.sqrt(np.maximum(np.einsum("ni,nij,nj->n", nrm, covs, nrm), 1e-18))
     sig_gap = np.zeros(len(beams))
     for j, tb in enumerate(beams):
         dg = []
         for dpan, dtilt in ((1e-6, 0.0), (0.0, 1e-6)):
             Dp = (beam_direction(tb.pan_rad + dpan, tb.tilt_rad + dtilt) @ T[:3, :3].T)[None]
-            dg.append((beam_gap(O, Dp, p0i, ai, r0i, r1i, hi)[0] - beam_gap(O, Dm[j : j + 1], p0i, ai, r0i, r1i, hi)[0]) / 1e-6)
+            dg.append((beam_gap(O, Dp, p0i, ai, r0i, (r1i - r0i) / hi)[0][0] - beam_gap(O, Dm[j : j + 1], p0i, ai, r0i, (r1i - r0i) / hi)[0][0]) / 1e-6)
         sig_gap[j] = np.hypot(dg[0] * tb.sigma_pan_rad, dg[1] * tb.sigma_tilt_rad)
     sig_gap = np.maximum(sig_gap, 1e-9)
 
@@ -149,20 +115,27 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
 
     def residuals(th):
         p0, a, r0, r1, h = unpack(th)
+        n_res = len(ret) + len(beams) + 8
         if h <= 1e-6 or min(r0, r1) < 0 or r0 + r1 <= 1e-6:
-            return np.full(len(hits) + len(beams) + 8, 1e6)
-        out = [surface_distance(hits, p0, a, r0, r1, h) / sig_hit]
+            return np.full(n_res, 1e6)
+        k = (r1 - r0) / h
+        out = [range_residuals(ret, p0, a, r0, k)]
         if len(beams):
-            out.append(beam_gap(O, Dm, p0, a, r0, r1, h) / sig_gap)
+            out.append(beam_gap(O, Dm, p0, a, r0, k)[0] / sig_gap)
         gens = Revolution(p0, p0 + h * a, r0, r1).silhouette(c)
         if len(gens) != 2:
-            return np.full(len(hits) + len(beams) + 8, 1e6)
+            return np.full(n_res, 1e6)
         pred = np.concatenate([cam.project(gens[g]) for g in gen_idx])
         out.append(((clicks - pred) / sigma_px).reshape(-1))
         return np.concatenate(out)
 
-    sol = least_squares(residuals, th0, loss="huber", f_scale=3.0, x_scale="jac", method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12)
-    th = sol.x
+    # Two passes: the returns used are those away from grazing at the start, then at the first fit.
+    th = th0
+    for _ in range(2):
+        p0c, ac, r0c, r1c, hc = unpack(th)
+        ret = ret_all.subset(incidence_cos(ret_all, p0c, ac, r0c, (r1c - r0c) / hc) >= MIN_INCIDENCE_COS)
+        sol = least_squares(residuals, th, loss="huber", f_scale=3.0, x_scale="jac", method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        th = sol.x
     r = residuals(th)
     J = sol.jac
     wts = np.where(np.abs(r) <= 3.0, 1.0, 3.0 / np.maximum(np.abs(r), 1e-12))
@@ -181,9 +154,9 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
         e[j] = 1e-7
         G[:, j] = (qvec(th + e) - qvec(th - e)) / 2e-7
     cov_q = G @ cov_th @ G.T
-    n_h = len(hits)
+    n_h = len(ret)
     resid = {
-        "scan_points_m": r[:n_h] * sig_hit,
+        "scan_returns_sigma": r[:n_h],
         "tangent_beams_m": r[n_h : n_h + len(beams)] * sig_gap,
         "silhouette_ends_px": r[n_h + len(beams) :] * sigma_px,
     }

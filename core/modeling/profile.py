@@ -2,10 +2,10 @@
 
 The paper's Fig. III.3: a horizontal scan gives the object's profile. With the axis direction
 fixed (the operator's "vertical", or what the silhouettes give), the returns are fitted by a
-surface of revolution: the axis position in the cross-section (2 numbers) and the radius (a
-cylinder) or the radius at a reference height and its slope (a cone), by weighted least squares
-on point-to-surface distances, each weighted by the point's variance along the surface normal.
-The front tangent plane (the paper's P3) follows from the fitted profile.
+surface of revolution — the axis position in the cross-section (2 numbers) and the radius (a
+cylinder) or the radius at a reference height and its slope (a cone) — by maximum likelihood on
+the ranges along their beams (``returns.range_residuals``), with a Huber loss at 3σ against stray
+returns. The front tangent plane (the paper's P3) follows from the fitted profile.
 """
 
 from __future__ import annotations
@@ -13,8 +13,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from ..geometry import Plane
+from .returns import MIN_INCIDENCE_COS, Returns, incidence_cos, range_residuals
 
 __all__ = ["axis_basis", "ProfileFit", "fit_profile", "front_plane"]
 
@@ -33,8 +35,8 @@ class ProfileFit:
 
     a : unit axis (3,). X0 : reference point (3,), metres; e1, e2 : the section basis.
     params : (y1, y2, r) for a cylinder, (y1, y2, r_ref, k) for a cone with r(t) = r_ref + k t,
-    t = (X − X0)·a. cov : covariance of params. residuals_m : (N,) signed distances of the inliers.
-    inliers : (N_all,) bool.
+    t = (X − X0)·a. cov : covariance of params. residuals : normalised residuals of the returns
+    used (those away from grazing). inliers : (N,) bool, returns used and within 3σ.
     """
 
     a: np.ndarray
@@ -43,15 +45,17 @@ class ProfileFit:
     e2: np.ndarray
     params: np.ndarray
     cov: np.ndarray
-    residuals_m: np.ndarray
+    residuals: np.ndarray
     inliers: np.ndarray
     cone: bool
 
     def centre(self, t: float, params: np.ndarray | None = None) -> np.ndarray:
+        """Axis point (3,) at axial coordinate t."""
         p = self.params if params is None else params
         return self.X0 + t * self.a + p[0] * self.e1 + p[1] * self.e2
 
     def radius(self, t: float, params: np.ndarray | None = None) -> float:
+        """Radius (m) at axial coordinate t."""
         p = self.params if params is None else params
         return float(p[2] + (p[3] * t if self.cone else 0.0))
 
@@ -64,33 +68,19 @@ def _kasa(q: np.ndarray) -> tuple[np.ndarray, float]:
     return c, float(np.sqrt(max(c @ c - F, 1e-12)))
 
 
-def _residuals(params, q, t, cone):
-    d = q - params[:2]
-    rho = np.linalg.norm(d, axis=1)
-    if not cone:
-        return rho - params[2], d, rho
-    k = params[3]
-    s = np.sqrt(1.0 + k * k)
-    return (rho - params[2] - k * t) / s, d, rho
+def fit_profile(ret: Returns, a: np.ndarray, *, cone: bool = False, groups: np.ndarray | None = None) -> ProfileFit:
+    """Maximum-likelihood surface of revolution with axis direction a through range returns.
 
-
-def fit_profile(
-    X_world: np.ndarray, covs: np.ndarray, a: np.ndarray, *, cone: bool = False, groups: np.ndarray | None = None,
-    reject_sigma: float = 4.0,
-) -> ProfileFit:
-    """Weighted least-squares surface of revolution with axis direction a through the returns.
-
-    X_world : array, shape (N, 3), metres; covs : array, shape (N, 3, 3), m²; a : unit axis (3,).
-    groups : array, shape (N,), int, the scan of each point (a cone's start needs two scans).
-    Points farther than ``reject_sigma`` σ from the first fit are dropped and the fit repeated.
-    ValueError for too few points, or a cone measured at a single height.
+    ret : Returns (beams, ranges, noise). a : unit axis (3,). groups : array, shape (N,), int,
+    the scan of each return (a cone's starting values need two scans at different heights).
+    ValueError for too few returns, a cone measured at a single height, or no plausible radius.
     """
-    X = np.asarray(X_world, dtype=float)
     n_par = 4 if cone else 3
-    if len(X) < n_par + 1:
-        raise ValueError(f"the profile fit needs at least {n_par + 1} returns on the object, got {len(X)}")
+    if len(ret) < n_par + 1:
+        raise ValueError(f"the profile fit needs at least {n_par + 1} returns on the object, got {len(ret)}")
     a = np.asarray(a, dtype=float) / np.linalg.norm(a)
     e1, e2 = axis_basis(a)
+    X = ret.points()
     X0 = X.mean(axis=0)
     W0 = X - X0
     q = np.column_stack([W0 @ e1, W0 @ e2])
@@ -108,46 +98,39 @@ def fit_profile(
             rs.append(r)
             ts.append(t[m].mean())
         k = float(np.polyfit(ts, rs, 1)[0]) if np.ptp(ts) > 1e-6 else 0.0
-        params = np.array([*np.mean(cs, axis=0), np.mean(rs) - k * np.mean(ts), k])
+        p_init = np.array([*np.mean(cs, axis=0), np.mean(rs) - k * np.mean(ts), k])
     else:
         c, r = _kasa(q)
-        params = np.array([c[0], c[1], r])
-    inl = np.ones(len(X), bool)
-    for rnd in range(2):
-        for _ in range(50):
-            res, d, rho = _residuals(params, q[inl], t[inl], cone)
-            radial = (d / rho[:, None]) @ np.vstack([e1, e2])
-            k = params[3] if cone else 0.0
-            nrm = (radial - k * a) / np.sqrt(1 + k * k)
-            sig = np.sqrt(np.maximum(np.einsum("ni,nij,nj->n", nrm, covs[inl], nrm), 1e-18))
-            J = np.zeros((len(res), n_par))
-            s = np.sqrt(1 + k * k)
-            J[:, :2] = -d / rho[:, None] / s
-            J[:, 2] = -1.0 / s
-            if cone:
-                J[:, 3] = -t[inl] / s - res * k / (1 + k * k)
-            Jw = J / sig[:, None]
-            step, *_ = np.linalg.lstsq(Jw, -res / sig, rcond=None)
-            params = params + step
-            if np.linalg.norm(step) < 1e-13:
-                break
-        if rnd == 0:
-            # Reject by each point's σ along the surface normal.
-            res_all, d, rho = _residuals(params, q, t, cone)
-            radial = (d / rho[:, None]) @ np.vstack([e1, e2])
-            kk = params[3] if cone else 0.0
-            nrm = (radial - kk * a) / np.sqrt(1 + kk * kk)
-            sig_all = np.sqrt(np.maximum(np.einsum("ni,nij,nj->n", nrm, covs, nrm), 1e-18))
-            keep = np.abs(res_all) <= reject_sigma * sig_all
-            if keep.sum() < n_par + 1 or keep.all():
-                break
-            inl = keep
-    H = Jw.T @ Jw
+        p_init = np.array([c[0], c[1], r])
+
+    def model(p):
+        return X0 + p[0] * e1 + p[1] * e2, a, p[2], p[3] if cone else 0.0
+
+    # Two passes: returns away from grazing at the algebraic start, then at the first fit.
+    p = p_init
+    for _ in range(2):
+        used = incidence_cos(ret, *model(p)) >= MIN_INCIDENCE_COS
+        if used.sum() < n_par + 1:
+            raise ValueError("too few range returns meet the profile away from grazing incidence")
+        sub = ret.subset(used)
+
+        def fun(p):
+            if p[2] <= 0:
+                return np.full(len(sub), 1e6)
+            return range_residuals(sub, *model(p))
+
+        sol = least_squares(fun, p, loss="huber", f_scale=3.0, x_scale="jac", xtol=1e-13, ftol=1e-13, gtol=1e-13)
+        p = sol.x
+    res = fun(p)
+    w = np.where(np.abs(res) <= 3.0, 1.0, 3.0 / np.maximum(np.abs(res), 1e-12))
+    J = sol.jac
+    H = J.T @ (w[:, None] * J)
+    if p[2] <= 0 or np.linalg.cond(H) > 1e14:
+        raise ValueError("the range profile does not look like a cylinder or cone (no radius fits it)")
     cov = np.linalg.inv(H)
-    res, _, _ = _residuals(params, q[inl], t[inl], cone)
-    if params[2] <= 0:
-        raise ValueError("the range profile does not look like a cylinder or cone (fitted radius ≤ 0)")
-    return ProfileFit(a, X0, e1, e2, params, 0.5 * (cov + cov.T), res, inl, cone)
+    inl = used.copy()
+    inl[used] = np.abs(res) <= 3.0
+    return ProfileFit(a, X0, e1, e2, p, 0.5 * (cov + cov.T), res, inl, cone)
 
 
 def front_plane(fit: ProfileFit, origin_world: np.ndarray, t: float, params: np.ndarray | None = None) -> Plane:

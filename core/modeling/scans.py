@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..rangefinder import RangeFinderSpec, RangeScan, beam_direction, beam_point, beam_point_cov
+from .returns import Returns, make_returns
 from .robust import object_runs
 
 __all__ = ["TangentBeam", "ScanSegment", "segment_scan"]
@@ -51,12 +52,16 @@ class ScanSegment:
 
     hits_world : array, shape (N, 3), the returns on the object, metres.
     covs : array, shape (N, 3, 3), their covariance (m²).
+    dirs_world : array, shape (N, 3), the unit direction of each return's beam (as commanded).
+    returns : Returns, the same returns with their beams and noise (for likelihood fits).
     tangents : tuple of TangentBeam (0 to 2: an end of the run at an end of the scan gives none).
     run : (start, stop) indices of the run in the scan.
     """
 
     hits_world: np.ndarray
     covs: np.ndarray
+    dirs_world: np.ndarray
+    returns: Returns
     tangents: tuple
     run: tuple
 
@@ -109,7 +114,8 @@ def segment_scan(
                 scan_index,
             )
         )
-    return ScanSegment(X[a:b], covs, tuple(tangents), (a, b))
+    ret = make_returns(T_world_turret, scan.pan_rad[a:b], scan.tilt_rad[a:b], scan.range_m[a:b], spec.sigma_range_m, spec.sigma_angle)
+    return ScanSegment(X[a:b], covs, ret.dirs, ret, tuple(tangents), (a, b))
 
 
 def lateral_point(T_world_turret: np.ndarray, beam: TangentBeam) -> np.ndarray:

@@ -1,0 +1,27 @@
+"""Small-vector helpers for the inner loops of the solvers (numpy's cross has a large overhead)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["cross3", "image_line", "interp_plane"]
+
+
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of two 3-vectors (3,) → (3,)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def image_line(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Homogeneous line (3,) through pixels p, q (2,), scaled so l·(u, v, 1) is a distance in pixels."""
+    l = np.array([p[1] - q[1], q[0] - p[0], p[0] * q[1] - p[1] * q[0]])
+    return l / np.hypot(l[0], l[1])
+
+
+def interp_plane(C: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """Interpretation plane (n, d) as a 4-vector with unit n of a segment (2, 2) under the 3×4 matrix C.
+
+    Same plane and orientation as ``Camera.interpretation_plane`` (without its input checks).
+    """
+    pi = C.T @ image_line(seg[0], seg[1])
+    return pi / np.linalg.norm(pi[:3])
