@@ -507,19 +507,36 @@ def p3l(
     """
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
-    clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
-    if clicks.n_segments != 3:
-        raise ValueError(f"p3l needs exactly 3 clicked segments and model edges, got {clicks.n_segments}")
-    n_arr, d_arr = interpretation_planes(camera, clicks.segs_uv)
-    n, d = n_arr.tolist(), d_arr.tolist()
+    segs_a = np.asarray(segs_uv, dtype=float)
+    edges_a = np.asarray(edges_obj, dtype=float)
+    if points_uv is None and points_obj is None and segs_a.shape == (3, 2, 2) and edges_a.shape == (3, 2, 3):
+        # The common case, validated in plain Python (as_clicks explains any problem it finds).
+        segs, edges = segs_a.tolist(), edges_a.tolist()
+        ok = np.isfinite(segs_a).all() and np.isfinite(edges_a).all()
+        ok = ok and all(abs(a[0] - b[0]) + abs(a[1] - b[1]) > 0.0 for a, b in segs)
+        ok = ok and all(abs(a[0] - b[0]) + abs(a[1] - b[1]) + abs(a[2] - b[2]) > 0.0 for a, b in edges)
+        clicks = None if ok else as_clicks(segs_a, edges_a)
+        pts_obj, pts_uv = [], []
+    else:
+        clicks = as_clicks(segs_a, edges_a, points_uv, points_obj)
+        if clicks.n_segments != 3:
+            raise ValueError(f"p3l needs exactly 3 clicked segments and model edges, got {clicks.n_segments}")
+        segs, edges = clicks.segs_uv.tolist(), clicks.edges_obj.tolist()
+        pts_obj, pts_uv = clicks.points_obj.tolist(), clicks.points_uv.tolist()
+    Cl = camera.C.tolist()
+    n, d = [], []
+    for (u1, v1), (u2, v2) in segs:  # interpretation planes Cᵀ l, l = (u1, v1, 1) × (u2, v2, 1)
+        l0, l1, l2 = v1 - v2, u2 - u1, u1 * v2 - u2 * v1
+        pi = [l0 * Cl[0][j] + l1 * Cl[1][j] + l2 * Cl[2][j] for j in range(4)]
+        k = (pi[0] * pi[0] + pi[1] * pi[1] + pi[2] * pi[2]) ** -0.5
+        n.append((pi[0] * k, pi[1] * k, pi[2] * k))
+        d.append(pi[3] * k)
     _check_segments(n)
-    edges = clicks.edges_obj.tolist()
     A = [e[0] for e in edges]
     V = [_unit((e[1][0] - e[0][0], e[1][1] - e[0][1], e[1][2] - e[0][2])) for e in edges]
     order = _first_edge_order(V)
     # The paper's x axis of R_c1: the ray of l1's first clicked pixel, m_u × m_v (eq. 4).
-    u, v = clicks.segs_uv[order[0], 0].tolist()
-    Cl = camera.C.tolist()
+    u, v = segs[order[0]][0]
     m_u = [Cl[0][j] - u * Cl[2][j] for j in range(3)]
     m_v = [Cl[1][j] - v * Cl[2][j] for j in range(3)]
     Rs = _rotations_one([n[i] for i in order], _cross(m_u, m_v), [V[i] for i in order])
@@ -543,11 +560,11 @@ def p3l(
             ]
             t.append([row[0] * rhs[0] + row[1] * rhs[1] + row[2] * rhs[2] for row in adj])
     else:
+        clicks = clicks if clicks is not None else as_clicks(segs_a, edges_a)
         t = _translations_from_points(camera, np.array(Rs), n, d, A, clicks, common).tolist()
-    segs = clicks.segs_uv.tolist()
     scored = []
     for k, (Rk, tk) in enumerate(zip(Rs, t)):
-        cost = distance_cost(Cl, Rk, tk, edges, segs, clicks.points_obj.tolist(), clicks.points_uv.tolist())
+        cost = distance_cost(Cl, Rk, tk, edges, segs, pts_obj, pts_uv)
         if cost is not None:
             scored.append((cost, k))
     keep = [k for _, k in sorted(scored)]

@@ -138,7 +138,9 @@ def test_near_double_root_is_found():
     pb, alpha, T, segs = found
     assert abs(_det_jacobian(pb, alpha)) < 1e-9
     sols = p3l(pb.camera, segs, pb.edges_obj)
-    assert min(np.abs(S - T).max() for S in sols) < 1e-7
+    # At a double root the solution moves as the square root of any perturbation of the data: its
+    # rounding (1e-16) alone moves it by ~1e-8, so the bound here is looser than elsewhere.
+    assert min(np.abs(S - T).max() for S in sols) < 1e-6
 
 
 def test_parallel_pair_is_solved_by_reordering_and_three_parallel_edges_raise():
