@@ -45,7 +45,7 @@ sys.path.insert(0, str(ROOT))
 
 from core.pose import estimate_pose, p3l, p3l_batch, refine  # noqa: E402
 from core.pose.residuals import as_clicks, distance_cost, perturb, residuals  # noqa: E402
-from core.pose.synthetic import PAPER_BOX_M, box_problem, paper_box_pose, paper_camera  # noqa: E402
+from core.pose.synthetic import paper_camera, paper_problems  # noqa: E402
 from core.transforms import invert_T, make_T, pose_error  # noqa: E402
 
 SIGMAS_PX = (0.0, 0.5, 1.0, 2.0)
@@ -83,18 +83,11 @@ def first_triple(edges_obj: np.ndarray) -> list[int]:
 
 
 def problems(rng: np.random.Generator, n: int, sigma_px: float) -> list:
-    cam = paper_camera()
+    """Paper problems with the clicks in the operator's order: the first triple, then the rest."""
     out = []
-    while len(out) < n:
-        try:
-            pb = box_problem(rng, cam, paper_box_pose(rng), PAPER_BOX_M, sigma_px)
-        except ValueError:
-            continue
-        if len(pb.edges_obj) != 9:
-            continue
+    for pb in paper_problems(rng, n, sigma_px):
         tri = first_triple(pb.edges_obj)
-        order = tri + [k for k in rng.permutation(9) if k not in tri]
-        out.append((pb, order))
+        out.append((pb, tri + [k for k in rng.permutation(9) if k not in tri]))
     return out
 
 

@@ -20,13 +20,10 @@ import numpy as np
 from ..camera import Camera
 from ..transforms import check_T, pose_error
 from .p3l import p3l
-from .refine import RefineResult, _refine
+from .refine import RefineResult, _refine, check_options
 from .residuals import as_clicks, pose_distance_cost
 
 __all__ = ["PoseCandidate", "PoseEstimate", "estimate_pose"]
-
-_LOSSES = ("l2", "huber")
-
 
 @dataclass(frozen=True)
 class PoseCandidate:
@@ -138,12 +135,7 @@ def estimate_pose(
         refined, and no prior (the message gives the reason for the first triple); the prior
         alone could not be refined.
     """
-    if not isinstance(camera, Camera):
-        raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
-    if loss not in _LOSSES:
-        raise ValueError(f"loss must be one of {_LOSSES}, got {loss!r}")
-    if not (huber_px > 0 and sigma_px > 0):
-        raise ValueError(f"huber_px and sigma_px must be positive, got {huber_px}, {sigma_px}")
+    check_options(camera, loss, huber_px, sigma_px)
     if int(max_triples) < 1:
         raise ValueError(f"max_triples must be at least 1, got {max_triples}")
     clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)

@@ -123,6 +123,16 @@ def _robust(r: np.ndarray, n_seg: int, loss: str, huber_px: float) -> tuple[floa
     return float(rho.sum()), w, w_unit
 
 
+def check_options(camera, loss: str, huber_px: float, sigma_px: float) -> None:
+    """ValueError for a camera that is not a Camera, an unknown loss or a non-positive scale."""
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
+    if loss not in _LOSSES:
+        raise ValueError(f"loss must be one of {_LOSSES}, got {loss!r}")
+    if not (huber_px > 0 and sigma_px > 0):
+        raise ValueError(f"huber_px and sigma_px must be positive, got {huber_px}, {sigma_px}")
+
+
 def _solve_spd(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     """x with A x = b for a symmetric positive definite 6 × 6 A (LAPACK's Cholesky driver: a
     quarter of numpy.linalg.solve's cost at this size); a general solve if A is not SPD."""
@@ -197,12 +207,7 @@ def refine(
         Bad shapes; fewer than 6 residuals or clicks that leave a direction of motion free (the
         message names it); a starting pose with a clicked model feature behind the camera.
     """
-    if not isinstance(camera, Camera):
-        raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
-    if loss not in _LOSSES:
-        raise ValueError(f"loss must be one of {_LOSSES}, got {loss!r}")
-    if not (huber_px > 0 and sigma_px > 0):
-        raise ValueError(f"huber_px and sigma_px must be positive, got {huber_px}, {sigma_px}")
+    check_options(camera, loss, huber_px, sigma_px)
     T = check_T(T_world_obj, "T_world_obj").copy()
     clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
     return _refine(camera, T, clicks, loss, float(huber_px), float(sigma_px), int(max_iterations))

@@ -25,6 +25,7 @@ __all__ = [
     "random_lines_problem",
     "clicks_on_edges",
     "box_problem",
+    "paper_problems",
 ]
 
 #: The paper's test object (§IV.3): a parallelepiped 35 × 23.1 × 13.2 cm (length, width, height).
@@ -154,3 +155,18 @@ def box_problem(
         raise ValueError("the box is not whole in the image at this pose")
     segs, true = clicks_on_edges(rng, camera, T_world_obj, edges, sigma_px, fractions)
     return LineProblem(camera, np.asarray(T_world_obj, dtype=float), edges, segs, true, float(sigma_px), idx)
+
+
+def paper_problems(rng: np.random.Generator, n: int, sigma_px: float = 0.0, n_edges: int = 9) -> list[LineProblem]:
+    """``n`` box problems on the paper's set-up (``paper_camera``, the box at ``paper_box_pose``)
+    with exactly ``n_edges`` visible edges (9: three faces seen), each clicked twice."""
+    camera = paper_camera()
+    out: list[LineProblem] = []
+    while len(out) < n:
+        try:
+            pb = box_problem(rng, camera, paper_box_pose(rng), PAPER_BOX_M, sigma_px)
+        except ValueError:  # not whole in the image
+            continue
+        if len(pb.edges_obj) == n_edges:
+            out.append(pb)
+    return out

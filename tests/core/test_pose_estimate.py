@@ -6,20 +6,12 @@ import numpy as np
 import pytest
 
 from core.pose import PoseEstimate, estimate_pose, refine
-from core.pose.synthetic import PAPER_BOX_M, box_problem, paper_box_pose, paper_camera
+from core.pose.synthetic import paper_problems
 from core.transforms import pose_error
 
 
 def paper_problem(seed, sigma_px=0.0):
-    rng = np.random.default_rng(seed)
-    cam = paper_camera()
-    while True:
-        try:
-            pb = box_problem(rng, cam, paper_box_pose(rng), PAPER_BOX_M, sigma_px)
-        except ValueError:
-            continue
-        if len(pb.edges_obj) == 9:
-            return pb
+    return paper_problems(np.random.default_rng(seed), 1, sigma_px)[0]
 
 
 def _ends(edge):

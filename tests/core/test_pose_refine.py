@@ -7,22 +7,8 @@ import pytest
 
 from core.pose import refine
 from core.pose.residuals import perturb
-from core.pose.synthetic import PAPER_BOX_M, box_problem, paper_box_pose, paper_camera, random_lines_problem
+from core.pose.synthetic import paper_problems, random_lines_problem
 from core.transforms import exp_so3, pose_error
-
-
-def paper_problems(rng, n, sigma_px=0.0, n_edges=9):
-    """Box problems on the paper's set-up (9 visible edges clicked twice each)."""
-    cam = paper_camera()
-    out = []
-    while len(out) < n:
-        try:
-            pb = box_problem(rng, cam, paper_box_pose(rng), PAPER_BOX_M, sigma_px)
-        except ValueError:
-            continue
-        if len(pb.edges_obj) == n_edges:
-            out.append(pb)
-    return out
 
 
 def moved(rng, T, rot_deg, trans_m):
