@@ -174,7 +174,9 @@ def estimate_pose(
     if not any(c.refined is not None for c in candidates):
         reasons = "; ".join(sorted({c.error for c in candidates if c.error}))
         raise ValueError(f"no candidate pose could be refined: {reasons}")
-    candidates.sort(key=lambda c: (c.score_px, c.p3l_rank if c.p3l_rank >= 0 else np.inf))
+    # Scores equal to 1e-6 px are a tie (e.g. two starts that refine to one pose): the better P3L
+    # rank first, so a merged candidate keeps the start closest to it.
+    candidates.sort(key=lambda c: (round(c.score_px, 6), c.p3l_rank if c.p3l_rank >= 0 else np.inf))
     return PoseEstimate(_merge(candidates, clicks), triple, tuple(skipped))
 
 

@@ -241,7 +241,7 @@ def _refine(
     iterations = 0
     converged = False
     while iterations < max_iterations:
-        if cost <= 1e-30:
+        if cost <= 1e-20 * m:  # residuals at round-off (RMS ≲ 1e-10 px): exact data, done
             converged = True
             break
         H = J.T @ (w[:, None] * J)
@@ -249,6 +249,9 @@ def _refine(
         diag = np.diag(np.diag(H))
         while True:
             delta = _solve_spd(H + lam * diag, -g)
+            if np.linalg.norm(delta[3:]) + np.linalg.norm(delta[:3]) / extent < 1e-12:
+                lam = np.inf  # the Gauss–Newton step itself is negligible: at the minimum
+                break
             T_new = perturb(T, delta)
             r_new, J_new, feasible = residuals(camera, T_new[:3, :3], T_new[:3, 3], clicks, jacobian=True)
             if feasible:
