@@ -283,44 +283,43 @@ def distance_cost(C, R, t, edges, segs, points_obj, points_uv) -> float | None:
     distances between 2D points of image obtained and initial image" that picks the solution. An
     edge with one endpoint behind the camera is measured to its infinite image line.
     """
-    # rows of [C[:, :3] R | C[:, :3] t + C[:, 3]]: h = C (R X + t) for X in the object frame.
-    rows = []
-    for C0, C1, C2, C3 in C:
-        rows.append((
+    # Rows a of [C[:, :3] R | C[:, :3] t + C[:, 3]]: h = C (R X + t) for X in the object frame.
+    (a00, a01, a02, a03), (a10, a11, a12, a13), (a20, a21, a22, a23) = (
+        (
             C0 * R[0][0] + C1 * R[1][0] + C2 * R[2][0],
             C0 * R[0][1] + C1 * R[1][1] + C2 * R[2][1],
             C0 * R[0][2] + C1 * R[1][2] + C2 * R[2][2],
             C0 * t[0] + C1 * t[1] + C2 * t[2] + C3,
-        ))
-
-    def project(X):
-        x0, x1, x2 = X
-        return [r0 * x0 + r1 * x1 + r2 * x2 + r3 for r0, r1, r2, r3 in rows]
-
+        )
+        for C0, C1, C2, C3 in C
+    )
     cost = 0.0
-    for (a, b), ((qu1, qv1), (qu2, qv2)) in zip(edges, segs):
-        ha, hb = project(a), project(b)
-        if ha[2] <= 0.0 and hb[2] <= 0.0:
+    for ((x0, x1, x2), (y0, y1, y2)), ((qu1, qv1), (qu2, qv2)) in zip(edges, segs):
+        sa = a20 * x0 + a21 * x1 + a22 * x2 + a23  # depths of the two endpoints
+        sb = a20 * y0 + a21 * y1 + a22 * y2 + a23
+        if sa <= 0.0 and sb <= 0.0:
             return None
-        if ha[2] > 0.0 and hb[2] > 0.0:
-            au, av = ha[0] / ha[2], ha[1] / ha[2]
-            du, dv = hb[0] / hb[2] - au, hb[1] / hb[2] - av
+        ha0, ha1 = a00 * x0 + a01 * x1 + a02 * x2 + a03, a10 * x0 + a11 * x1 + a12 * x2 + a13
+        hb0, hb1 = a00 * y0 + a01 * y1 + a02 * y2 + a03, a10 * y0 + a11 * y1 + a12 * y2 + a13
+        if sa > 0.0 and sb > 0.0:
+            au, av = ha0 / sa, ha1 / sa
+            du, dv = hb0 / sb - au, hb1 / sb - av
             dd = du * du + dv * dv + 1e-300
             for qu, qv in ((qu1, qv1), (qu2, qv2)):
                 lam = min(max(((qu - au) * du + (qv - av) * dv) / dd, 0.0), 1.0)
                 eu, ev = qu - au - lam * du, qv - av - lam * dv
                 cost += eu * eu + ev * ev
         else:
-            l0 = ha[1] * hb[2] - ha[2] * hb[1]
-            l1 = ha[2] * hb[0] - ha[0] * hb[2]
-            l2 = ha[0] * hb[1] - ha[1] * hb[0]
+            l0 = ha1 * sb - sa * hb1
+            l1 = sa * hb0 - ha0 * sb
+            l2 = ha0 * hb1 - ha1 * hb0
             g2 = l0 * l0 + l1 * l1 + 1e-300
             cost += ((l0 * qu1 + l1 * qv1 + l2) ** 2 + (l0 * qu2 + l1 * qv2 + l2) ** 2) / g2
-    for X, (qu, qv) in zip(points_obj, points_uv):
-        h = project(X)
-        if h[2] <= 0.0:
+    for (x0, x1, x2), (qu, qv) in zip(points_obj, points_uv):
+        s = a20 * x0 + a21 * x1 + a22 * x2 + a23
+        if s <= 0.0:
             return None
-        cost += (h[0] / h[2] - qu) ** 2 + (h[1] / h[2] - qv) ** 2
+        cost += ((a00 * x0 + a01 * x1 + a02 * x2 + a03) / s - qu) ** 2 + ((a10 * x0 + a11 * x1 + a12 * x2 + a13) / s - qv) ** 2
     return cost
 
 
