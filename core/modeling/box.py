@@ -155,7 +155,7 @@ def model_box(
     for k, fit in enumerate(fits):
         a = R0.T @ fit.obs.plane.n
         ax = int(np.argmax(np.abs(a)))
-        if abs(a[ax]) < np.cos(np.radians(20.0)):
+        if abs(a[ax]) < np.cos(np.radians(30.0)):
             raise ValueError(
                 f"face {k} is {np.degrees(np.arccos(min(1.0, abs(a[ax])))):.0f}° from every box axis: "
                 "the measured faces are not those of a box (or a face's points are wrong)"
@@ -321,7 +321,8 @@ def _fit_box(X: np.ndarray, cov: np.ndarray, which: np.ndarray, R0: np.ndarray):
             J[3 * k : 3 * k + 3, 3:6] = np.eye(3)
             J[3 * k : 3 * k + 3, 6:] = -R @ skew(v)  # R exp([δ]×) v ≈ R v − R [v]× δ
         H = J.T @ W @ J
-        if np.linalg.cond(H) > 1e14:
+        dscale = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))
+        if np.linalg.cond(H * np.outer(dscale, dscale)) > 1e12:
             raise ValueError(
                 "the constructed corners do not fix all three sizes and the pose of the box; "
                 "click the edges of every visible face (and measure at least two faces)"

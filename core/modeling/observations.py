@@ -13,6 +13,7 @@ import numpy as np
 from ..camera import Camera, as_segment
 from ..geometry import Plane, PlaneFit, as_points, fit_plane_ols, fit_plane_tls, make_plane
 from .robust import ransac_plane
+from .small import interp_plane
 
 __all__ = ["PlaneObs", "interpretation_plane_obs", "support_obs", "FaceFit", "fit_face_plane", "plane_var_at"]
 
@@ -48,11 +49,12 @@ def interpretation_plane_obs(camera: Camera, seg_uv: np.ndarray, sigma_px: float
     v0 = p.as_vector()
     J = np.zeros((4, 4))
     h = 1e-3
+    C = camera.C
     for k in range(4):
         e = np.zeros(4)
         e[k] = h
-        vp = camera.interpretation_plane(seg + e.reshape(2, 2)).as_vector()
-        vm = camera.interpretation_plane(seg - e.reshape(2, 2)).as_vector()
+        vp = interp_plane(C, seg + e.reshape(2, 2))
+        vm = interp_plane(C, seg - e.reshape(2, 2))
         if vp @ v0 < 0:
             vp = -vp
         if vm @ v0 < 0:
@@ -107,7 +109,8 @@ def fit_face_plane(
     X_world : array, shape (N ≥ 3, 3), metres. covs : array, shape (N, 3, 3), each point's
     covariance (``core.rangefinder.beam_point_cov``); the TLS fit is then weighted by the
     inverse variance along the normal and its covariance follows from those σ. sigma_m :
-    isotropic point noise when ``covs`` is None (estimated from the residuals when both are None).
+    isotropic point noise when ``covs`` is None (estimated from the residuals when both are None,
+    at least 0.1 mm).
     method : "tls" (any orientation) or "ols" (the paper's ``ax + by + z + d = 0``; fails for
     faces parallel to z). robust : discard points off the face (edge hits, background) by
     RANSAC with ``threshold_m`` (default 3.5 σ along the beam, at least 3 mm).
@@ -149,6 +152,10 @@ def fit_face_plane(
             tls = fit_plane_tls(Xi, sigma_m=1.0, weights=w)
             s_ols = float(np.sqrt(np.mean(1.0 / w)))
         else:
+            if sigma_m is None:
+                # Estimated from the residuals, floored at 0.1 mm (below any range finder's noise)
+                # so that exact data do not claim an exact plane.
+                sigma_m = max(fit_plane_tls(Xi).sigma_m, 1e-4)
             tls = fit_plane_tls(Xi, sigma_m=sigma_m)
             s_ols = sigma_m
     except ValueError as exc:

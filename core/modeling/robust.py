@@ -20,12 +20,14 @@ def ransac_plane(
     iterations: int = 200,
     rng: np.random.Generator | None = None,
 ) -> np.ndarray:
-    """Inlier mask of the plane that the most points lie on (RANSAC).
+    """Inlier mask of the best-supported plane (RANSAC with the MSAC score).
 
     X : array, shape (N ≥ 3, 3), metres. threshold_m : largest point-to-plane distance of an
     inlier, metres (about 3 σ of the range noise). rng : random generator for the minimal
     samples; a fixed seed by default so the result is reproducible.
-    Returns a boolean mask (N,). Ties are broken by the smaller sum of squared inlier distances.
+    Returns a boolean mask (N,). Each candidate plane is scored by Σ min(dᵢ², threshold²) (MSAC),
+    not by its inlier count: on a face small against the threshold, a plane across the face can
+    hold as many points as the face itself, but not as closely.
     ValueError for fewer than 3 points or a non-positive threshold; when every triple is
     collinear the mask is all False (the caller's plane fit then raises its own error).
     """
@@ -37,7 +39,7 @@ def ransac_plane(
     if n <= 12:  # small sets: every triple
         idx = np.array([(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)])
     else:
-        idx = np.array([rng.choice(n, 3, replace=False) for _ in range(iterations)])
+        idx = np.argsort(rng.random((iterations, n)), axis=1)[:, :3]
     A, B, C = X[idx[:, 0]], X[idx[:, 1]], X[idx[:, 2]]
     nrm = np.cross(B - A, C - A)
     size = np.linalg.norm(nrm, axis=1)
@@ -48,11 +50,9 @@ def ransac_plane(
     nrm = nrm[ok] / size[ok, None]
     d = -np.einsum("ij,ij->i", nrm, A[ok])
     dist = np.abs(X @ nrm.T + d)  # (N, M)
-    inl = dist <= threshold_m
-    count = inl.sum(axis=0)
-    sse = np.where(inl, dist**2, 0.0).sum(axis=0)
-    best = np.lexsort((sse, -count))[0]
-    return inl[:, best]
+    score = np.minimum(dist, threshold_m) ** 2
+    best = int(np.argmin(score.sum(axis=0)))
+    return dist[:, best] <= threshold_m
 
 
 def object_runs(range_m: np.ndarray, jump_m: float) -> list[tuple[int, int]]:
