@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from core.pose import estimate_pose, p3l, p3l_batch, refine  # noqa: E402
-from core.pose.residuals import as_clicks, distance_cost, perturb, residuals  # noqa: E402
+from core.pose.residuals import as_clicks, perturb, residuals  # noqa: E402
 from core.pose.synthetic import paper_camera, paper_problems  # noqa: E402
 from core.transforms import invert_T, make_T, pose_error  # noqa: E402
 

@@ -3,8 +3,10 @@
 The operator clicks N ≥ 3 image edges (and possibly vertices) of a known object and matches each to
 a model edge (point). ``estimate_pose`` runs the geometric three-line solver on the first triple of
 clicked edges that is not degenerate, refines every candidate with all the clicks (and, when the
-database pose is given, also refines from it: the paper's small-motion case), and ranks the refined
-poses by the RMS pixel distance of the clicks to the projected *finite* model segments and points
+database pose is given, also refines from it: the paper's small-motion case). When every candidate
+of a triple refines to a poor fit (RMS above 3 σ: local minima, which noisy P3L solutions far from
+the truth can fall into), the next triple's candidates are added. The refined candidates are ranked
+by the RMS pixel distance of the clicks to the projected *finite* model segments and points
 (``residuals.pose_distance_cost``: equal to the measurement RMS when the clicks fall on the
 projected edges, larger when a pose slides an edge along its line away from the clicks). Every
 candidate is returned for display; the first is the estimate.
@@ -36,6 +38,7 @@ class PoseCandidate:
         refined pose (inf when refinement failed): the ranking key.
     p3l_rank : the candidate's rank in ``p3l``'s output (0 = best by distance), −1 for the prior.
     error : why refinement failed (e.g. a clicked edge behind the camera at that candidate), or None.
+    triple : the clicked edges (indices) whose P3L gave this candidate, None for the prior.
     """
 
     source: str
@@ -44,6 +47,7 @@ class PoseCandidate:
     score_px: float
     p3l_rank: int
     error: str | None = None
+    triple: tuple[int, int, int] | None = None
 
     @property
     def T_world_obj(self) -> np.ndarray:
@@ -57,9 +61,10 @@ class PoseEstimate:
 
     candidates : list of PoseCandidate, best first (refined ones by ``score_px``; distinct poses
         only: candidates that refine to the same pose are merged into the best ranked).
-    triple : indices (into the clicked segments) of the three edges P3L used, or None when P3L
-        was not run (fewer than 3 segments, refinement from the prior only).
-    skipped_triples : (triple, reason) for the earlier triples P3L could not use.
+    triple : indices (into the clicked segments) of the first triple whose P3L candidates were
+        refined, or None when P3L was not run (fewer than 3 segments: the prior only).
+    skipped_triples : (triple, reason) for the triples P3L could not use, and for those whose
+        candidates all refined to a poor fit (the next triple's were then added).
     """
 
     candidates: list[PoseCandidate]
@@ -102,6 +107,7 @@ def estimate_pose(
     huber_px: float = 3.0,
     sigma_px: float = 1.0,
     max_triples: int = 50,
+    fit_rms_px: float | None = None,
 ) -> PoseEstimate:
     """Pose of a known object from N clicked edges (and points): P3L, then refinement with all.
 
@@ -119,9 +125,12 @@ def estimate_pose(
         The database pose: also refined from, as a candidate (the paper's small-motion step).
     loss, huber_px, sigma_px : passed to ``refine``.
     max_triples : int
-        How many triples (in click order: (0, 1, 2), (0, 1, 3), ...) to try before giving up; a
-        triple is skipped when P3L rejects it (degenerate) or none of its candidates can be
-        refined (e.g. no solution in front of the camera).
+        How many triples (in click order: (0, 1, 2), (0, 1, 3), ...) to try at most. A triple is
+        skipped when P3L rejects it (degenerate) or none of its candidates can be refined (e.g. no
+        solution in front of the camera); when its candidates all refine to an RMS above
+        ``fit_rms_px`` (local minima), the next triple's candidates are added to them.
+    fit_rms_px : float, optional
+        The RMS (pixels) under which a refined candidate fits the clicks; default 3 × sigma_px.
 
     Returns
     -------
@@ -152,6 +161,7 @@ def estimate_pose(
     refine_args = (loss, float(huber_px), float(sigma_px), 100)
     if S >= 3:
         pts = (clicks.points_uv, clicks.points_obj) if clicks.n_points else (None, None)
+        fit_px = 3.0 * sigma_px if fit_rms_px is None else float(fit_rms_px)
         for tri in itertools.islice(itertools.combinations(range(S), 3), max_triples):
             idx = list(tri)
             try:
@@ -159,14 +169,19 @@ def estimate_pose(
             except ValueError as exc:
                 skipped.append((tri, str(exc)))
                 continue
-            found = [_refined(camera, clicks, "p3l", T, k, refine_args) for k, T in enumerate(sols)]
-            if not any(c.refined is not None for c in found):
+            found = [_refined(camera, clicks, "p3l", T, k, refine_args, tri) for k, T in enumerate(sols)]
+            refined = [c.refined for c in found if c.refined is not None]
+            if not refined:
                 reason = "; ".join(sorted({c.error for c in found if c.error})) or "no solution in front of the camera"
                 skipped.append((tri, reason))
                 continue
-            triple = tri
             candidates += found
-            break
+            triple = triple or tri
+            if min(r.rms_px for r in refined) <= fit_px:
+                break
+            # Every candidate of this triple refined to a poor fit (a local minimum): add the next
+            # triple's candidates too.
+            skipped.append((tri, f"its candidates refine to RMS ≥ {min(r.rms_px for r in refined):.2f} px"))
         if triple is None and prior is None:
             raise ValueError(f"no triple of clicked edges gives a pose: {skipped[0][1]}")
     if prior is not None:
@@ -180,13 +195,13 @@ def estimate_pose(
     return PoseEstimate(_merge(candidates, clicks), triple, tuple(skipped))
 
 
-def _refined(camera, clicks, source: str, T0: np.ndarray, rank: int, refine_args) -> PoseCandidate:
+def _refined(camera, clicks, source: str, T0: np.ndarray, rank: int, refine_args, triple=None) -> PoseCandidate:
     """A candidate refined with every click (or with the reason it could not be)."""
     try:
         res = _refine(camera, np.array(T0, dtype=float), clicks, *refine_args)
     except ValueError as exc:
-        return PoseCandidate(source, T0, None, float("inf"), rank, str(exc))
-    return PoseCandidate(source, T0, res, pose_distance_cost(camera, res.T_world_obj, clicks), rank)
+        return PoseCandidate(source, T0, None, float("inf"), rank, str(exc), triple)
+    return PoseCandidate(source, T0, res, pose_distance_cost(camera, res.T_world_obj, clicks), rank, None, triple)
 
 
 def _merge(candidates: list[PoseCandidate], clicks) -> list[PoseCandidate]:

@@ -17,10 +17,11 @@ constraint for every (α, β). The two other edges give ``s1 cos β + s2 sin β 
 cos²β + sin²β = 1 and substituting t = tan(α/2) gives a polynomial of degree 8 in t, whose roots
 are the eigenvalues of its companion matrix. When its leading coefficient is smaller than its
 constant one (α = π is a root, or nearly) the reversed polynomial in u = cot(α/2) = 1/t is solved
-instead, so α = π is found like any other root. Eigenvalues whose imaginary part is below 1e-4 rad
-(in α) are kept and then checked against the three constraints to 1e-6, so a near-double real root
-that the eigen-solver splits into a complex pair is not lost. cos β, sin β follow from Cramer's
-rule, evaluated homogeneously in the half angle so that no root is near a pole.
+instead, so α = π is found like any other root. cos β, sin β follow from Cramer's rule, evaluated
+homogeneously in the half angle so that no root is near a pole. Eigenvalues whose imaginary part
+is below 1e-4 rad (in α) are kept, so a near-double real root that the eigen-solver splits into a
+complex pair is not lost; every root is then checked against the constraints (|G_2| + |G_3|), one
+whose error exceeds 1e-12 gets a Newton step on (α, β), and only those below 3e-6 are returned.
 
 Translation. With R known, ``N_i·T = −d_i − N_i·(R M_i)`` (three planes). When the three model
 edges meet in one vertex, their interpretation planes share that vertex's line of sight and the
@@ -30,12 +31,10 @@ click.
 
 Each candidate keeps the clicked model edges in front of the camera; candidates are ranked by the
 RMS pixel distance of the clicked pixels to the projected finite model segments
-(``residuals.segment_distances``: the paper's "test of distances between 2D points").
+(``residuals.distance_cost``: the paper's "test of distances between 2D points").
 """
 
 from __future__ import annotations
-
-import itertools
 
 import numpy as np
 from scipy.linalg.lapack import dgeev
@@ -318,7 +317,8 @@ def _roots_one(coef: list) -> list[tuple[float, float]]:
 
 
 def _rotations_one(n, ray, V) -> list:
-    """Every rotation (rows, floats) with N_i · R V_i = 0 for one triple (components are floats)."""
+    """Every rotation (rows, floats) with N_i · R V_i = 0 for one triple (components are floats):
+    the same maths as ``p3l_rotations`` in plain Python."""
     st = _Setup(n, ray, V)
     out = []
     for hc, hs in _roots_one(st.coef):
@@ -365,6 +365,7 @@ def p3l_rotations(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray)
 
 
 def _rotations_batch(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``p3l_rotations`` itself (the component algebra on (B, 1) and (B, 8) arrays)."""
     # Components of shape (B, 1) broadcast against the roots' (B, 8).
     n = [[n_world[:, i, j, None] for j in range(3)] for i in range(3)]
     V = [[V_obj[:, i, j, None] for j in range(3)] for i in range(3)]

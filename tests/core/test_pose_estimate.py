@@ -92,3 +92,16 @@ def test_all_parallel_edges_raise_with_the_solver_reason():
     idx = np.flatnonzero(dirs == 2)  # the vertical edges only
     with pytest.raises(ValueError, match="parallel"):
         estimate_pose(pb.camera, pb.segs_uv[idx], pb.edges_obj[idx])
+
+
+def test_candidates_of_further_triples_are_added_while_none_fits():
+    """A triple whose candidates all refine to a poor fit (a local minimum) brings in the next one."""
+    pb = paper_problem(64, sigma_px=0.5)
+    single = estimate_pose(pb.camera, pb.segs_uv, pb.edges_obj)
+    assert all(c.triple == single.triple for c in single.candidates)
+    # No fit is good enough at 1e-9 px: the candidates of the first three usable triples are pooled.
+    pooled = estimate_pose(pb.camera, pb.segs_uv, pb.edges_obj, fit_rms_px=1e-9, max_triples=3)
+    poor = [tri for tri, reason in pooled.skipped_triples if "refine to RMS" in reason]
+    assert poor == [(0, 1, 2), (0, 1, 3), (0, 1, 4)][: len(poor)] and len(poor) >= 2
+    assert len(pooled.candidates) >= len(single.candidates)  # the same poses (merged) and maybe more
+    assert pose_error(pooled.T_world_obj, single.T_world_obj)[0] < 1e-6  # the same best pose
