@@ -140,18 +140,20 @@ def _solve_spd(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     return x if info == 0 else np.linalg.lstsq(A, b, rcond=None)[0]
 
 
-def _check_observable(J: np.ndarray) -> None:
-    """ValueError naming the unobservable direction when the clicks do not fix 6 DoF."""
-    scale = np.sqrt((J * J).sum(axis=0))
-    if np.any(scale == 0.0):
-        Js = J
-    else:
-        Js = J / scale
-    _, sv, Vt = np.linalg.svd(Js, full_matrices=False)
-    if sv[-1] > 1e-8 * sv[0]:
+def _check_observable(H: np.ndarray, extent_m: float) -> None:
+    """ValueError naming the unobservable motion when the clicks do not fix 6 DoF.
+
+    H = JᵀJ (6, 6); its columns are scaled to unit diagonal, so the test (smallest eigenvalue
+    below 1e-16 of the largest: singular values of J below 1e-8 of the largest) does not depend on
+    the units (m, rad)."""
+    scale = np.sqrt(np.diag(H))
+    scale = np.where(scale > 0.0, scale, 1.0)
+    Hs = H / np.outer(scale, scale)
+    ev = np.linalg.eigvalsh(Hs)
+    if ev[0] > 1e-16 * ev[-1]:
         return
-    v = Vt[-1] / np.where(scale == 0.0, 1.0, scale)
-    part = "translation" if np.linalg.norm(v[:3]) * 1.0 > np.linalg.norm(v[3:]) * 0.1 else "rotation"
+    v = np.linalg.eigh(Hs)[1][:, 0] / scale  # the free motion (δt in m, δr in rad)
+    part = "translation" if np.linalg.norm(v[:3]) > np.linalg.norm(v[3:]) * extent_m else "rotation"
     direction = v[:3] if part == "translation" else v[3:]
     direction = direction / np.linalg.norm(direction)
     raise ValueError(
@@ -159,6 +161,17 @@ def _check_observable(J: np.ndarray) -> None:
         "changes no residual; click more edges with other directions, an edge not through the "
         "common vertex of the others, or a vertex"
     )
+
+
+def _as_pose(T_world_obj) -> np.ndarray:
+    """A float copy of a rigid transform; ``check_T`` judges (and explains) anything that is not
+    plainly one (the fast test accepts a subset of what check_T accepts)."""
+    T = np.array(T_world_obj, dtype=float)
+    if T.shape == (4, 4) and np.isfinite(T).all() and (T[3] == (0.0, 0.0, 0.0, 1.0)).all():
+        R = T[:3, :3]
+        if np.abs(R.T @ R - np.eye(3)).max() < 1e-9 and np.linalg.det(R) > 0:
+            return T
+    return check_T(T, "T_world_obj").copy()
 
 
 def refine(
@@ -208,7 +221,7 @@ def refine(
         message names it); a starting pose with a clicked model feature behind the camera.
     """
     check_options(camera, loss, huber_px, sigma_px)
-    T = check_T(T_world_obj, "T_world_obj").copy()
+    T = _as_pose(T_world_obj)
     clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
     return _refine(camera, T, clicks, loss, float(huber_px), float(sigma_px), int(max_iterations))
 
@@ -229,13 +242,13 @@ def _refine(
             "the starting pose puts a clicked model edge or point behind the camera; start from a "
             "pose that shows the object in the image"
         )
-    _check_observable(J)
     # Scale of the problem for the step test: the clicked features' extent about the origin.
     extent = max(
         1e-3,
         float(np.abs(clicks.edges_obj).max()) if S else 0.0,
         float(np.abs(clicks.points_obj).max()) if clicks.n_points else 0.0,
     )
+    _check_observable(J.T @ J, extent)
     cost, w, _ = _robust(r, S, loss, huber_px)
     lam = 1e-4
     iterations = 0
