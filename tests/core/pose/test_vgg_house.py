@@ -13,7 +13,7 @@ from core.pose import estimate_pose, p3l
 from core.pose.residuals import as_clicks, residuals
 from core.transforms import invert_T, make_T, pose_error, random_rotation, transform_points
 
-from .vgg_house import load_house
+from ..vgg_house import load_house
 
 
 def test_recover_a_random_rigid_motion_of_the_house_in_every_view(shared_data):
