@@ -8,6 +8,7 @@ to do, anything else a red one, logged; the server never dies from a callback.
 
 from __future__ import annotations
 
+import collections
 import functools
 import logging
 import threading
@@ -52,8 +53,8 @@ class ClientPanel:
         self.candidate_dropdown = None
         self.drawn_revision = -1
         self.worker: threading.Thread | None = None
-        self.last_click_t: float | None = None  # monotonic time of the last click (for the benchmark)
-        self.last_sent_t: float | None = None
+        self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
+        self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
         self._build_gui()
         client.scene.on_click()(self._guard(self._on_click))
         self._rect_cb = client.scene.on_rect_select()(self._guard(self._on_rect))
@@ -219,7 +220,13 @@ class ClientPanel:
         self.session.select(name)
 
     def _on_click(self, event) -> None:
-        self.last_click_t = time.monotonic()
+        arrival = time.monotonic()
+        try:
+            self._handle_click(event)
+        finally:
+            self.click_t = arrival  # answered by the first redraw after this callback (for the benchmark)
+
+    def _handle_click(self, event) -> None:
         if self.view != "video":
             raise WorkflowError("clicks work on the video: switch the view to Video")
         uv = self.app.pixel_world.pixel_from_ray(np.array(event.ray_origin), np.array(event.ray_direction))
@@ -348,7 +355,9 @@ class ClientPanel:
         batch, labels = draw_marks(site.camera, marks, objects, pw.width, pw.height, selected=self.session.selected)
         self.app.send_client_overlay(self.client, batch, labels)
         self._update_texts(wf)
-        self.last_sent_t = time.monotonic()
+        if self.click_t is not None:
+            self.click_latencies_s.append(time.monotonic() - self.click_t)
+            self.click_t = None
         return True
 
     def _update_texts(self, wf) -> None:

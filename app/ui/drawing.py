@@ -12,7 +12,8 @@ from typing import Iterable
 
 import numpy as np
 
-from app.overlay import COLORS, STATUS_COLORS, LineBatch, circle_marker, cross_markers, project_wireframe
+from app.overlay import (COLORS, STATUS_COLORS, LineBatch, ProjectedWireframe, circle_marker, cross_markers,
+                         project_wireframe)
 from app.workflows.base import Marks
 from app.workflows.site import SiteObject
 from core.camera import Camera
@@ -20,17 +21,13 @@ from core.camera import Camera
 __all__ = ["label_anchor", "draw_database", "draw_marks"]
 
 
-def label_anchor(camera: Camera, obj: SiteObject) -> np.ndarray | None:
-    """Pixel (2,) where an object's label goes (above the top of its model), or None if not in view."""
-    lo, hi = obj.model.bounds()
-    top = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2]])
-    X = obj.T_world_obj[:3, :3] @ top + obj.T_world_obj[:3, 3]
-    if camera.depth(X) <= 0:
+def label_anchor(pw: ProjectedWireframe) -> np.ndarray | None:
+    """Pixel (2,) where an object's label goes: just above the top of its drawn wireframe, or None."""
+    P = pw.seg_uv[pw.visible].reshape(-1, 2) if pw.visible.any() else pw.seg_uv.reshape(-1, 2)
+    if not len(P):
         return None
-    uv = camera.project(X)
-    if not camera.in_image(uv.reshape(1, 2), margin_px=-40)[0]:
-        return None
-    return uv - np.array([0.0, 12.0])
+    top = P[P[:, 1] <= P[:, 1].min() + 3.0]
+    return np.array([top[:, 0].mean(), P[:, 1].min() - 4.0])
 
 
 def draw_database(camera: Camera, objects: Iterable[SiteObject], width: int, height: int,
@@ -45,7 +42,7 @@ def draw_database(camera: Camera, objects: Iterable[SiteObject], width: int, hei
         color = STATUS_COLORS.get(obj.status, STATUS_COLORS["known"])
         pw = project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height)
         batch.add_wireframe(pw, color, hidden=hidden)
-        anchor = label_anchor(camera, obj)
+        anchor = label_anchor(pw)
         if anchor is not None:
             text = obj.name if obj.status == "known" else f"{obj.name} ({obj.status})"
             labels.append((obj.name, anchor, text))

@@ -181,6 +181,7 @@ class InterfaceServer:
         for name in set(self._db_labels) - seen:
             self._db_labels.pop(name).remove()
         self.world3d.draw(site)
+        site.surfaces()  # build the ray-casting index now, not on the operator's next click
 
     def _draw_beam(self) -> None:
         X = getattr(self.site, "beam_X_world", None)

@@ -154,15 +154,6 @@ class CalibrateTurret(Workflow):
             self.state = "pick"
 
     # ------------------------------------------------------------------ solving
-    def _surfaces(self):
-        import trimesh
-
-        meshes = []
-        for obj in self.site.objects():
-            V, F = obj.model.triangles()
-            meshes.append(trimesh.Trimesh(V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3], F, process=False))
-        return trimesh.util.concatenate(meshes)
-
     def solve(self, max_rounds: int = 10):
         """The turret pose that puts every measured point on the database's surfaces."""
         with self.lock:
@@ -170,7 +161,9 @@ class CalibrateTurret(Workflow):
             n = len(self.pan)
             if n < 6:
                 raise WorkflowError(f"{n} measurements; measure at least 6 points on faces of 3 orientations")
-            mesh = self._surfaces()
+            mesh, _ = self.site.surfaces()
+            if mesh is None:
+                raise WorkflowError("the database has no objects to measure on")
             pan, tilt, rho = np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
             T = self.site.T_world_turret
             cal = None

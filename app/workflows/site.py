@@ -101,7 +101,7 @@ class Site:
         self.revision = 0
         self._objects: tuple[SiteObject, ...] | None = None
         self._objects_key: Any = None
-        self._meshes: dict[tuple[str, int], Any] = {}
+        self._meshes: dict[str, Any] = {}
         self._cal_ids: dict[str, Any] = {}
         self._camera = scene.camera
         self._T_world_turret = np.asarray(scene.turret.T_world_turret, float).copy()
@@ -216,36 +216,42 @@ class Site:
             self.beam_X_world = None if X_world is None else np.asarray(X_world, float).copy()
 
     # ------------------------------------------------------------------ ray casting
-    def _mesh(self, obj: SiteObject):
+    def surfaces(self):
+        """All objects as one triangle mesh (trimesh, its ray index built once) and each
+        triangle's object name; cached until the database changes."""
         import trimesh
 
-        key = (obj.name, obj.version)
-        mesh = self._meshes.get(key)
-        if mesh is None:
+        objects = self.objects()
+        key = self._key(objects)
+        with self.lock:
+            if self._meshes.get("key") == key:
+                return self._meshes["mesh"], self._meshes["owner"]
+        Vs, Fs, owner, offset = [], [], [], 0
+        for obj in objects:
             V, F = obj.model.triangles()
-            mesh = trimesh.Trimesh(V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3], F, process=False)
-            if len(self._meshes) > 4 * max(1, len(self.objects())):
-                self._meshes.clear()
-            self._meshes[key] = mesh
-        return mesh
+            Vs.append(V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3])
+            Fs.append(F + offset)
+            owner += [obj.name] * len(F)
+            offset += len(V)
+        mesh = trimesh.Trimesh(np.vstack(Vs), np.vstack(Fs), process=False) if Vs else None
+        with self.lock:
+            self._meshes = {"key": key, "mesh": mesh, "owner": np.array(owner)}
+        return mesh, np.array(owner)
 
-    def raycast(self, origin: np.ndarray, direction: np.ndarray, exclude: tuple[str, ...] = ()) -> RayHit | None:
+    def raycast(self, origin: np.ndarray, direction: np.ndarray) -> RayHit | None:
         """The first database surface a ray (origin (3,), direction (3,), world) meets, or None."""
+        mesh, owner = self.surfaces()
+        if mesh is None:
+            return None
         o = np.asarray(origin, float).reshape(1, 3)
         d = np.asarray(direction, float).reshape(1, 3)
         d = d / np.linalg.norm(d)
-        best: RayHit | None = None
-        for obj in self.objects():
-            if obj.name in exclude:
-                continue
-            mesh = self._mesh(obj)
-            locs, _, tri = mesh.ray.intersects_location(o, d, multiple_hits=False)
-            if len(locs) == 0:
-                continue
-            dist = (locs - o) @ d[0]
-            i = int(np.argmin(dist))
-            if dist[i] <= 0:
-                continue
-            if best is None or dist[i] < best.distance_m:
-                best = RayHit(locs[i].copy(), obj.name, float(dist[i]), mesh.face_normals[tri[i]].copy())
-        return best
+        locs, _, tri = mesh.ray.intersects_location(o, d, multiple_hits=True)
+        if len(locs) == 0:
+            return None
+        dist = (locs - o) @ d[0]
+        ahead = dist > 0
+        if not np.any(ahead):
+            return None
+        i = int(np.flatnonzero(ahead)[np.argmin(dist[ahead])])
+        return RayHit(locs[i].copy(), str(owner[tri[i]]), float(dist[i]), mesh.face_normals[tri[i]].copy())
