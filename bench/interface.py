@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import argparse
 import os
-import socket
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -30,16 +30,11 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # the browser harness lives with the e2e tests
+
+from tests.e2e.harness import close_webgl_notice, free_port, launch, screen_of, wait_for_panel  # noqa: E402
+
 FRAMES = ROOT / ".." / "shared" / "data" / "visp-cube" / "frames"
-CHROMIUM = os.environ.get("MCIT_CHROMIUM", "/usr/bin/chromium")
-ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync", "--no-first-run"]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def build(n_objects: int, fps: float):
@@ -78,32 +73,10 @@ def open_page(browser, server):
     page = browser.new_page(viewport={"width": 1200, "height": 700})
     before = set(server.clients)
     page.goto(f"http://127.0.0.1:{server.port}/?fixedDpr=1")
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:
-        new = set(server.clients) - before
-        if new and server.clients[next(iter(new))].fitted_aspect is not None:
-            panel = server.clients[next(iter(new))]
-            break
-        time.sleep(0.1)
-    else:
-        raise RuntimeError("the page did not connect")
-    try:
-        page.locator(".mantine-Notification-root", has_text="Software WebGL").locator("button").click(timeout=5000)
-    except Exception:  # noqa: BLE001
-        pass
+    panel = wait_for_panel(server, before, timeout_s=30)
+    close_webgl_notice(page)
     time.sleep(1.0)
     return page, panel
-
-
-def screen_of(server, panel, uv):
-    import viser
-
-    cam = panel.client.camera
-    X = server.pixel_world.to_world(np.asarray(uv, float))
-    R = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix()
-    p = R.T @ (X - np.asarray(cam.position))
-    t = np.tan(cam.fov / 2.0)
-    return ((0.5 + p[0] / p[2] / (2 * t * cam.aspect)) * cam.image_width, (0.5 + p[1] / p[2] / (2 * t)) * cam.image_height)
 
 
 DELIVERED: list[tuple[float, int, int]] = []  # (time, /video updates, JPEG bytes) per message written to a browser
@@ -213,7 +186,7 @@ def main() -> int:
     rng = np.random.default_rng(1)
     try:
         with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+            browser = launch(p)
             page, panel = open_page(browser, server)
             v = measure_video(page, server, args.seconds)
             page.close()

@@ -1,0 +1,115 @@
+"""A running mcit interface for real-browser tests and the documentation's screenshots.
+
+The interface runs in process on a free port with a fresh database seeded from the scene; the
+video is a still frame. Screen coordinates of a video pixel come from the viewer camera the
+browser reports (viser's OpenCV convention), so clicks land on exact pixels whatever the window.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import time
+
+import numpy as np
+
+CHROMIUM = os.environ.get("MCIT_CHROMIUM", "/usr/bin/chromium")
+ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-background-networking",
+        "--disable-component-update", "--disable-sync", "--no-first-run"]
+FRAME_T_S = 16.0  # the known box has moved (12 s → 15 s) and stays there
+VIEWPORT = {"width": 1200, "height": 700}
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def screen_of(server, panel, uv) -> tuple[float, float]:
+    """Canvas position (x, y) of video pixel uv in a client's view, from the camera it reports."""
+    import viser
+
+    cam = panel.client.camera
+    X = server.pixel_world.to_world(np.asarray(uv, float))
+    R = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix()
+    p = R.T @ (X - np.asarray(cam.position))
+    t = np.tan(cam.fov / 2.0)
+    x = (0.5 + p[0] / p[2] / (2 * t * cam.aspect)) * cam.image_width
+    y = (0.5 + p[1] / p[2] / (2 * t)) * cam.image_height
+    return float(x), float(y)
+
+
+def wait_for_panel(server, before: set, timeout_s: float = 20.0):
+    """The panel of the client that connected after ``before`` (a set of client ids), once fitted."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        new = set(server.clients) - before
+        if new:
+            panel = server.clients[new.pop()]
+            if panel.fitted_aspect is not None and not panel.need_fit:
+                return panel
+        time.sleep(0.05)
+    raise AssertionError("the page did not connect and fit its view")
+
+
+def close_webgl_notice(page) -> None:
+    """Close the "software WebGL" notification (it covers the canvas); absent on hardware WebGL."""
+    try:
+        page.locator(".mantine-Notification-root", has_text="Software WebGL").locator("button").click(timeout=5000)
+    except Exception:  # noqa: BLE001
+        pass
+
+
+def launch(playwright):
+    """Debian's chromium in headless mode with the flags that work here (DESIGN.md)."""
+    return playwright.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+
+
+class Interface:
+    """A running interface and helpers to reach it from a page."""
+
+    def __init__(self, scene, frame, db_path, devices=None, frame_t_s: float = FRAME_T_S):
+        from app.db import Database, seed_from_scene
+        from app.ui.server import InterfaceServer
+        from app.video import FrameGrabber, StillSource
+        from app.workflows import Site
+
+        self.db = Database.open(db_path)
+        seed_from_scene(self.db, scene)
+        self.site = Site(scene, self.db, devices=devices, clock=lambda: frame_t_s)
+        self.server = InterfaceServer(self.site, FrameGrabber(StillSource(frame, fps=20)), port=free_port()).start()
+        self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
+        self.frame_t_s = frame_t_s
+
+    def open(self, browser):
+        """A new page on the interface, connected, fitted, with the software-WebGL notice closed."""
+        before = set(self.server.clients)
+        page = browser.new_page(viewport=VIEWPORT)
+        page.goto(self.url)
+        panel = wait_for_panel(self.server, before)
+        close_webgl_notice(page)
+        time.sleep(0.8)  # let the fitted camera and the first overlay arrive
+        page.panel = panel
+        return page
+
+    def screen_of(self, page, uv):
+        """Screen position (x, y) in the canvas of video pixel uv, from the page's viewer camera."""
+        return screen_of(self.server, page.panel, uv)
+
+    def click_pixel(self, page, uv):
+        x, y = self.screen_of(page, uv)
+        page.locator("canvas").nth(1).click(position={"x": x, "y": y})
+        time.sleep(0.25)
+
+    def screenshot(self, page, path=None) -> np.ndarray:
+        import cv2
+
+        png = page.screenshot(path=path)
+        return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
+
+    def close(self):
+        self.server.stop()
+        self.db.close()
+
+
