@@ -1,0 +1,54 @@
+"""What the overlay draws: database wireframes coloured by status, and one operator's marks."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.overlay import COLORS, STATUS_COLORS
+from app.ui.controls import report_markdown
+from app.ui.drawing import draw_database, draw_marks
+from app.workflows import Ghost, Marks
+
+
+def _colors(batch):
+    return {tuple(int(v) for v in c) for c in batch.arrays()[1]}
+
+
+def test_database_colours_by_status_and_labels_above_the_wireframe(site, db):
+    db.set_status("parallelepiped", "stale", method="test")
+    site.poll()
+    batch, labels = draw_database(site.camera, site.objects(), 512, 256)
+    cols = _colors(batch)
+    assert STATUS_COLORS["stale"] in cols and STATUS_COLORS["known"] in cols
+    by_name = {name: (uv, text) for name, uv, text in labels}
+    assert by_name["parallelepiped"][1] == "parallelepiped (stale)"
+    obj = site.object("parallelepiped")
+    top_v = site.camera.project(obj.vertices_world())[:, 1].min()
+    assert by_name["parallelepiped"][0][1] < top_v  # above the drawing
+
+
+def test_marks_draw_selection_ghosts_clicks_targets_beam(site):
+    obj = site.object("parallelepiped")
+    moved = obj.T_world_obj.copy()
+    moved[:3, 3] += [0.05, 0.0, 0.0]
+    m = Marks(points=np.array([[100.0, 100.0]]), pending=np.array([[50.0, 60.0]]),
+              segments=np.array([[[10.0, 10.0], [60.0, 20.0]]]), targets=np.array([[200.0, 150.0]]),
+              ghosts=[Ghost(obj.model, moved, "#1", chosen=True), Ghost(obj.model, obj.T_world_obj, "#2")],
+              highlight=[("parallelepiped", 0)], beam_uv=np.array([300.0, 120.0]), labels=[((5.0, 5.0), "1")])
+    objects = {o.name: o for o in site.objects()}
+    batch, labels = draw_marks(site.camera, m, objects, 512, 256, selected="parallelepiped")
+    cols = _colors(batch)
+    for key in ("ghost_chosen", "ghost", "click", "pending", "target", "beam", "assigned"):
+        assert COLORS[key] in cols, key
+    assert STATUS_COLORS["selected"] in cols
+    assert len(labels) == 1 and labels[0][1] == "1" and np.allclose(labels[0][0], [5.0, 5.0])
+    empty, _ = draw_marks(site.camera, Marks(), objects, 512, 256)
+    assert len(empty) == 0
+
+
+def test_report_markdown_lists_scalars_and_tables():
+    text = report_markdown({"rms_px": 0.51234, "std_t_mm": [1.0, 2.0, 3.0],
+                            "clicks": [{"click": "edge 1", "residual_px": 0.2}, {"click": "edge 2", "residual_px": 0.7}]})
+    assert "**rms_px**: 0.5123" in text and "1, 2, 3" in text
+    assert "| click | residual_px |" in text and "| edge 2 | 0.7 |" in text
+    assert report_markdown({}) == ""
