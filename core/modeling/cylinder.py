@@ -178,6 +178,13 @@ def reduce_cylinder_data(
             return (X @ P1.n + P1.d > -tol) & (X @ P2.n + P2.d > -tol)
 
     segs = [segment_scan(s, T, spec, jump_m=jump_m, scan_index=k, keep=keep) for k, s in enumerate(scans)]
+    if keep is not None:
+        inside = np.concatenate([keep(sg.hits_world) for sg in segs])
+        if inside.mean() < 0.5:
+            raise ValueError(
+                f"only {inside.mean():.0%} of the object's range returns lie between the two silhouettes: "
+                "the clicked contours do not bound the scanned object (click its left and right contours)"
+            )
     if cone and hint is None:
         raise ValueError(
             "a cone needs its axis direction: say it stands on the support (support=...) or give axis_dir; "

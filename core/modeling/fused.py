@@ -20,13 +20,13 @@ Gauss–Newton information at the solution.
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..brep import Revolution
 from ..rangefinder import beam_direction
 from .cylinder import CylinderData, build_result, solve_paper
+from .lm import huber_weights, levenberg_marquardt
 from .profile import axis_basis
-from .returns import MIN_INCIDENCE_COS, beam_gap, incidence_cos, range_residuals
+from .returns import MIN_INCIDENCE_COS, beam_gap, beam_gap_jacobian, incidence_cos, range_residuals
 
 __all__ = ["fit_fused"]
 
@@ -129,17 +129,49 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
         out.append(((clicks - pred) / sigma_px).reshape(-1))
         return np.concatenate(out)
 
+    def silhouette_residuals(th):
+        p0, a, r0, r1, h = unpack(th)
+        gens = Revolution(p0, p0 + h * a, r0, r1).silhouette(c)
+        pred = np.concatenate([cam.project(gens[g]) for g in gen_idx])
+        return ((clicks - pred) / sigma_px).reshape(-1)
+
+    def model8(th):
+        p0, a, r0, r1, h = unpack(th)
+        return np.concatenate([p0, a, [r0, (r1 - r0) / h]])
+
+    def jacobian(th):
+        """Analytic for the returns and tangent beams (through (p0, a, r0, k)), numeric for the clicks."""
+        p0, a, r0, r1, h = unpack(th)
+        k = (r1 - r0) / h
+        n = len(th)
+        M = np.zeros((8, n))
+        S = np.zeros((8, n))
+        m0, s0 = model8(th), silhouette_residuals(th)
+        for j in range(n):
+            e = np.zeros(n)
+            e[j] = 1e-7
+            M[:, j] = (model8(th + e) - m0) / 1e-7
+            S[:, j] = (silhouette_residuals(th + e) - s0) / 1e-7
+        blocks = [range_residuals(ret, p0, a, r0, k, jac=True)[1] @ M]
+        if len(beams):
+            blocks.append((beam_gap_jacobian(O, Dm, p0, a, r0, k) / sig_gap[:, None]) @ M)
+        blocks.append(S)
+        return np.vstack(blocks)
+
     # Two passes: the returns used are those away from grazing at the start, then at the first fit.
     th = th0
+    used = None
     for _ in range(2):
         p0c, ac, r0c, r1c, hc = unpack(th)
-        ret = ret_all.subset(incidence_cos(ret_all, p0c, ac, r0c, (r1c - r0c) / hc) >= MIN_INCIDENCE_COS)
-        sol = least_squares(residuals, th, loss="huber", f_scale=3.0, x_scale="jac", method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12)
-        th = sol.x
+        now = incidence_cos(ret_all, p0c, ac, r0c, (r1c - r0c) / hc) >= MIN_INCIDENCE_COS
+        if used is not None and np.array_equal(now, used):
+            break
+        used = now
+        ret = ret_all.subset(used)
+        th, n_iter = levenberg_marquardt(residuals, jacobian, th)
     r = residuals(th)
-    J = sol.jac
-    wts = np.where(np.abs(r) <= 3.0, 1.0, 3.0 / np.maximum(np.abs(r), 1e-12))
-    H = J.T @ (wts[:, None] * J)
+    J = jacobian(th)
+    H = J.T @ (huber_weights(r, 3.0)[:, None] * J)
     cov_th = np.linalg.pinv(H, rcond=1e-14, hermitian=True)
     p0, a, r0, r1, h = unpack(th)
 
@@ -163,7 +195,7 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
     details = {
         "init_method": init_method,
         "init": init,
-        "optimizer": {"cost": float(sol.cost), "nfev": int(sol.nfev), "status": int(sol.status)},
+        "optimizer": {"cost": float(0.5 * r @ r), "iterations": int(n_iter)},
         "outliers": int(np.count_nonzero(np.abs(r) > 3.0)),
         "segments": data.segments,
     }

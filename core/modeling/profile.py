@@ -13,9 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..geometry import Plane
+from .lm import huber_weights, levenberg_marquardt
 from .returns import MIN_INCIDENCE_COS, Returns, incidence_cos, range_residuals
 
 __all__ = ["axis_basis", "ProfileFit", "fit_profile", "front_plane"]
@@ -108,8 +108,12 @@ def fit_profile(ret: Returns, a: np.ndarray, *, cone: bool = False, groups: np.n
 
     # Two passes: returns away from grazing at the algebraic start, then at the first fit.
     p = p_init
+    used = None
     for _ in range(2):
-        used = incidence_cos(ret, *model(p)) >= MIN_INCIDENCE_COS
+        now = incidence_cos(ret, *model(p)) >= MIN_INCIDENCE_COS
+        if used is not None and np.array_equal(now, used):
+            break
+        used = now
         if used.sum() < n_par + 1:
             raise ValueError("too few range returns meet the profile away from grazing incidence")
         sub = ret.subset(used)
@@ -119,12 +123,15 @@ def fit_profile(ret: Returns, a: np.ndarray, *, cone: bool = False, groups: np.n
                 return np.full(len(sub), 1e6)
             return range_residuals(sub, *model(p))
 
-        sol = least_squares(fun, p, loss="huber", f_scale=3.0, x_scale="jac", xtol=1e-13, ftol=1e-13, gtol=1e-13)
-        p = sol.x
+        def jac(p):
+            _, J8 = range_residuals(sub, *model(p), jac=True)
+            J = np.column_stack([J8[:, :3] @ e1, J8[:, :3] @ e2, J8[:, 6], J8[:, 7]])
+            return J if cone else J[:, :3]
+
+        p, _ = levenberg_marquardt(fun, jac, p)
     res = fun(p)
-    w = np.where(np.abs(res) <= 3.0, 1.0, 3.0 / np.maximum(np.abs(res), 1e-12))
-    J = sol.jac
-    H = J.T @ (w[:, None] * J)
+    J = jac(p)
+    H = J.T @ (huber_weights(res, 3.0)[:, None] * J)
     if p[2] <= 0 or np.linalg.cond(H) > 1e14:
         raise ValueError("the range profile does not look like a cylinder or cone (no radius fits it)")
     cov = np.linalg.inv(H)

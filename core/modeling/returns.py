@@ -19,7 +19,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Returns", "make_returns", "range_residuals", "beam_gap", "incidence_cos", "MIN_INCIDENCE_COS"]
+__all__ = [
+    "Returns",
+    "make_returns",
+    "range_residuals",
+    "beam_gap",
+    "beam_gap_jacobian",
+    "incidence_cos",
+    "surface_gradient",
+    "MIN_INCIDENCE_COS",
+]
 
 # Returns more than ~73° from grazing incidence (at the current model) are used. Closer to grazing the
 # model's range varies as the square root of the radius change: its derivative is unbounded, and
@@ -86,6 +95,36 @@ def _geometry(O, D, p0, a, r0, k):
     return w, t0, wp, tau, Dp, A, B, C
 
 
+def surface_gradient(X: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float) -> tuple[np.ndarray, np.ndarray]:
+    """Derivatives of F(X) = ρ(X) − r0 − k t(X) at points X (N, 3) (ρ: distance to the axis).
+
+    Returns ∇_X F (N, 3) and ∂F/∂(p0, a, r0, k) (N, 8) (a treated as a free 3-vector; the caller
+    keeps it unit through its own parameters).
+    """
+    w = X - p0
+    t = w @ a
+    radial = w - t[:, None] * a
+    e = radial / np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-12)
+    grad_x = e - k * a
+    J = np.empty((len(X), 8))
+    J[:, :3] = -grad_x
+    J[:, 3:6] = -t[:, None] * e - k * w
+    J[:, 6] = -1.0
+    J[:, 7] = -t
+    return grad_x, J
+
+
+def beam_gap_jacobian(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float) -> np.ndarray:
+    """∂(beam_gap)/∂(p0, a, r0, k), shape (M, 8): the gap is F at its minimum along the beam, so
+    (envelope theorem) its derivative is F's at that point, over the same √(1 + k²)."""
+    _, X = beam_gap(O, D, p0, a, r0, k)
+    _, J = surface_gradient(X, p0, a, r0, k)
+    g = (np.linalg.norm((X - p0) - ((X - p0) @ a)[:, None] * a, axis=1) - r0 - k * ((X - p0) @ a))
+    J[:, 7] = J[:, 7] / np.sqrt(1 + k * k) - g * k / (1 + k * k) ** 1.5
+    J[:, :7] /= np.sqrt(1 + k * k)
+    return J
+
+
 def beam_gap(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float) -> tuple[np.ndarray, np.ndarray]:
     """Least signed distance (M,) from the lateral surface along each beam line, and where (M, 3).
 
@@ -118,8 +157,12 @@ def incidence_cos(ret: Returns, p0: np.ndarray, a: np.ndarray, r0: float, k: flo
     return np.where((disc > 0) & (s > 0), np.minimum(np.abs(np.einsum("ij,ij->i", n, D)), 1.0), 0.0)
 
 
-def range_residuals(ret: Returns, p0: np.ndarray, a: np.ndarray, r0: float, k: float) -> np.ndarray:
-    """Normalised residuals (N,) of returns against a surface of revolution (module docstring)."""
+def range_residuals(ret: Returns, p0: np.ndarray, a: np.ndarray, r0: float, k: float, jac: bool = False):
+    """Normalised residuals (N,) of returns against a surface of revolution (module docstring).
+
+    With ``jac``, also their derivatives (N, 8) with respect to (p0, a, r0, k), σ_eff held
+    fixed: the model range s moves by −(∂F/∂θ)/(∇F·d) along the beam (implicit function).
+    """
     O, D = ret.origin, ret.dirs
     w, t0, wp, tau, Dp, A, B, C = _geometry(O, D, p0, a, r0, k)
     disc = B * B - A * C
@@ -134,6 +177,12 @@ def range_residuals(ret: Returns, p0: np.ndarray, a: np.ndarray, r0: float, k: f
     lat2 = (np.einsum("ij,ij->i", n, ret.e_pan) * ret.sigma_pan_rad) ** 2 + (np.einsum("ij,ij->i", n, ret.e_tilt) * ret.sigma_tilt_rad) ** 2
     sig_eff = np.sqrt(ret.sigma_range_m**2 + s * s * lat2 / np.maximum(cos * cos, 1e-12))
     res = (ret.range_m - s) / sig_eff
+    if jac:
+        X = O + s[:, None] * D
+        grad_x, JF = surface_gradient(X, p0, a, r0, k)
+        gd = np.einsum("ij,ij->i", grad_x, D)
+        gd = np.where(np.abs(gd) > 1e-9, gd, np.copysign(1e-9, gd))
+        Jres = JF / (gd * sig_eff)[:, None]
     if not np.all(hit):
         # Select returns with ``incidence_cos`` first; one whose beam still misses the model at
         # some iterate is pulled back by its gap over the pointing noise.
@@ -147,5 +196,8 @@ def range_residuals(ret: Returns, p0: np.ndarray, a: np.ndarray, r0: float, k: f
             + (np.einsum("ij,ij->i", rg, ret.e_tilt[m]) * ret.sigma_tilt_rad[m]) ** 2
         )
         res = res.copy()
-        res[m] = g / np.maximum(lat, 1e-6)
-    return res
+        lat = np.maximum(lat, 1e-6)
+        res[m] = g / lat
+        if jac:
+            Jres[m] = beam_gap_jacobian(O, D[m], p0, a, r0, k) / lat[:, None]
+    return (res, Jres) if jac else res
