@@ -28,7 +28,7 @@ from ..brep import BRep
 from ..camera import Camera, as_segment
 from ..geometry import Plane, angle_between_planes
 from ..transforms import make_T
-from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs, support_obs
+from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs, plane_var_at, support_obs
 from .result import ModelResult
 from .vertices import solve_vertices
 
@@ -42,8 +42,9 @@ def _spans(N: np.ndarray) -> bool:
     return bool(sv[-1] >= 0.05 * sv[0])
 
 
-def _lsq_point(N: np.ndarray, d: np.ndarray) -> np.ndarray:
-    return np.linalg.lstsq(N, -d, rcond=None)[0]
+def _lsq_point(N: np.ndarray, d: np.ndarray, w: np.ndarray) -> np.ndarray:
+    sw = np.sqrt(w)
+    return np.linalg.lstsq(N * sw[:, None], -d * sw, rcond=None)[0]
 
 
 def model_polyhedron(
@@ -162,7 +163,8 @@ def model_polyhedron(
             incidence.append(refs)
     if not measured:
         raise ValueError("no vertex is fixed by the measurements: each needs 3 measured planes crossing there")
-    X1, _, vres, J1 = solve_vertices(planes, incidence, [str(v) for v in measured], return_jacobian=True)
+    X1, cov1, vres, J1 = solve_vertices(planes, incidence, [str(v) for v in measured], return_jacobian=True)
+    block = {v: cov1[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] for k, v in enumerate(measured)}
 
     # Plan the completion of hidden vertices from the hints, then replay it as a function.
     pvec0 = np.array([p.plane.as_vector() for p in planes])
@@ -170,6 +172,7 @@ def model_polyhedron(
     frefs: dict[int, list] = {f: [("m", i) for i in idx] for f, idx in face_refs.items()}
     recipe: list[tuple] = []
     derived_planes: dict[int, np.ndarray] = {}
+    derived_src: dict[int, list] = {}
     parallel = {}
     for f, g in parallel_faces:
         parallel.setdefault(int(f), []).append(int(g))
@@ -219,6 +222,7 @@ def model_polyhedron(
                     rule, args = "through", (D,)
             if rule is not None:
                 derived_planes[f] = infer_plane(rule, f, args, known, pvec0, derived_planes)
+                derived_src[f] = list(args[0])
                 recipe.append(("plane", f, rule, args))
                 frefs[f] = [("d", f)]
                 progress = True
@@ -228,8 +232,19 @@ def model_polyhedron(
             refs = vertex_refs(v, frefs)
             Nd = np.array([plane_vec(r, pvec0, derived_planes) for r in refs]).reshape(-1, 4)
             if _spans(Nd[:, :3]):
-                known[v] = _lsq_point(Nd[:, :3], Nd[:, 3])
-                recipe.append(("vertex", v, refs))
+                # Weights: a measured plane's variance at the vertex; an inferred plane's, the
+                # variance along its normal of the fixed vertices it was drawn through.
+                x_guess = _lsq_point(Nd[:, :3], Nd[:, 3], np.ones(len(Nd)))
+                var = []
+                for ref, row in zip(refs, Nd):
+                    if ref[0] == "m":
+                        var.append(plane_var_at(planes[ref[1]], x_guess))
+                    else:
+                        src = [u for u in derived_src[ref[1]] if u in block]
+                        var.append(np.mean([row[:3] @ block[u] @ row[:3] for u in src]) if src else 1e-6)
+                w = 1.0 / np.maximum(np.array(var), 1e-16)
+                known[v] = _lsq_point(Nd[:, :3], Nd[:, 3], w)
+                recipe.append(("vertex", v, refs, w))
                 progress = True
     missing = [v for v in range(V) if v not in known]
     if missing:
@@ -247,9 +262,9 @@ def model_polyhedron(
                 _, f, rule, args = step
                 dpl[f] = infer_plane(rule, f, args, Xk, pvec, dpl)
             else:
-                _, v, refs = step
+                _, v, refs, w = step
                 Nd = np.array([plane_vec(r, pvec, dpl) for r in refs])
-                Xk[v] = _lsq_point(Nd[:, :3], Nd[:, 3])
+                Xk[v] = _lsq_point(Nd[:, :3], Nd[:, 3], w)
         return np.concatenate([Xk[v] for v in derived]) if derived else np.zeros(0)
 
     P = len(planes)
@@ -268,7 +283,11 @@ def model_polyhedron(
             e[j] = h
             Jx[:, j] = (replay(x1 + e, pvec0) - replay(x1 - e, pvec0)) / (2 * h)
         Jp = np.zeros((3 * len(derived), 4 * P))
-        for j in range(4 * P):
+        used_planes = set()
+        for step in recipe:
+            refs = step[2] if step[0] == "vertex" else ([step[3][1]] if step[2] == "parallel" else [])
+            used_planes |= {r[1] for r in refs if r[0] == "m"}
+        for j in [4 * i + c for i in sorted(used_planes) for c in range(4)]:
             e = np.zeros(pvec0.size)
             e[j] = h
             E = e.reshape(pvec0.shape)
