@@ -18,7 +18,8 @@ import numpy as np
 from ..brep import BRep
 from ..camera import Camera, as_segment
 from ..geometry import Plane, angle_between_planes
-from ..transforms import exp_so3, make_T, skew
+from ..transforms import exp_so3, log_so3, make_T, skew
+from .lm import huber_weights, levenberg_marquardt
 from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs, support_obs
 from .result import ModelResult
 from .vertices import solve_vertices
@@ -91,6 +92,7 @@ def model_box(
     plane_fit: str = "tls",
     robust: bool = True,
     min_angle_deg: float = 5.0,
+    method: str = "planes",
 ) -> ModelResult:
     """Build a box from its visible faces (range points + clicked edges) and an optional support.
 
@@ -114,15 +116,22 @@ def model_box(
     min_angle_deg : float
         An interpretation plane closer than this to its face plane (the face seen edge-on)
         raises ValueError: their intersection would be ill-conditioned.
+    method : "planes" or "fused"
+        "planes": the paper's construction (vertices from planes, then a box fitted to them).
+        "fused": starting from it, the box (pose and sizes; on the support when given) fitted
+        by maximum likelihood to every range point (its distance to its face over its σ along
+        the normal) and every clicked end (its pixel distance to the model edge's image).
 
     Returns
     -------
     ModelResult
-        kind "box", method "planes", ``model = BRep.box(size_x, size_y, size_z)`` with its frame at
+        kind "box", method as asked, ``model = BRep.box(size_x, size_y, size_z)`` with its frame at
         the centre of the bottom face, z up; ``vertices_world`` (8, 3) the fitted corners
         (``details["constructed_vertices"]`` holds the plane-constructed ones, NaN where hidden).
     """
     faces = list(faces)
+    if method not in ("planes", "fused"):
+        raise ValueError(f"method must be 'planes' or 'fused', got {method!r}")
     if not faces:
         raise ValueError("model_box needs at least one measured face")
     c = camera.center
@@ -243,6 +252,11 @@ def model_box(
         )
     Xv, cov_v, vres = solve_vertices(planes, incidence, names)
     R, t, dims, cov_p, fit_res = _fit_box(Xv, cov_v, np.array(solvable), R0)
+    details_fused = {}
+    if method == "fused":
+        R, t, dims, cov_p, details_fused = _fused_box(
+            camera, faces, fits, labels, segments, None if sup is None else sup.plane, R, t, dims, sigma_px
+        )
 
     corners = t + _corner_offsets(dims) @ R.T
     constructed = np.full((8, 3), np.nan)
@@ -266,7 +280,7 @@ def model_box(
         residuals[f"face_{_sgn(labels[k])}_points_m"] = fit.fits[fit.method].residuals_m
     return ModelResult(
         kind="box",
-        method="planes",
+        method=method,
         model=BRep.box(*dims),
         T_world_obj=make_T(R, t),
         dimensions=dims_d,
@@ -282,6 +296,7 @@ def model_box(
             "face_inliers": [f.inliers for f in fits],
             "face_labels": [_sgn(l) for l in labels],
             "planes": planes,
+            **details_fused,
         },
     )
 
@@ -338,3 +353,85 @@ def _fit_box(X: np.ndarray, cov: np.ndarray, which: np.ndarray, R0: np.ndarray):
     cov_p = np.linalg.inv(H)
     res = np.linalg.norm((X - (t + (S * dims) @ R.T)), axis=1)
     return R, t, dims, 0.5 * (cov_p + cov_p.T), res
+
+
+def _face_plane(R: np.ndarray, t: np.ndarray, dims: np.ndarray, key: tuple[int, int]) -> tuple[np.ndarray, float]:
+    ax, sg = key
+    n = sg * R[:, ax]
+    off = np.zeros(3)
+    off[ax] = sg * dims[ax] / 2 if ax < 2 else (dims[2] if sg > 0 else 0.0)
+    return n, float(-n @ (t + R @ off))
+
+
+def _fused_box(camera, faces, fits, labels, segments, support, R0, t0, dims0, sigma_px):
+    """Maximum-likelihood box from the raw range points and clicks, starting at the planes' box."""
+    pts, sig_n, keys = [], [], []
+    for f, fit, key in zip(faces, fits, labels):
+        X = np.asarray(f.points_world, dtype=float)[fit.inliers]
+        n0, _ = _face_plane(R0, t0, dims0, key)
+        if f.point_covs is not None:
+            s = np.sqrt(np.einsum("i,nij,j->n", n0, np.asarray(f.point_covs)[fit.inliers], n0))
+        else:
+            s = np.full(len(X), fit.fits[fit.method].sigma_m)
+        pts.append(X)
+        sig_n.append(np.maximum(s, 1e-7))
+        keys.append(key)
+    on_support = support is not None
+    if on_support:
+        t0 = t0 - (support.n @ t0 + support.d) * support.n  # the bottom face lies on the support
+
+    def unpack(th):
+        if on_support:
+            c, s_ = np.cos(th[0]), np.sin(th[0])
+            R = R0 @ np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+            return R, t0 + th[1] * R0[:, 0] + th[2] * R0[:, 1], th[3:6]
+        return R0 @ exp_so3(th[:3]), t0 + th[3:6], th[6:9]
+
+    th0 = np.concatenate([np.zeros(3), dims0]) if on_support else np.concatenate([np.zeros(6), dims0])
+    vi = np.array([v[0] for v, _ in segments], dtype=int)
+    vj = np.array([v[1] for v, _ in segments], dtype=int)
+    clicks = np.array([seg for _, seg in segments]).reshape(-1, 2, 2)
+
+    def residuals(th):
+        R, t, dims = unpack(th)
+        out = []
+        for X, s, key in zip(pts, sig_n, keys):
+            n, d = _face_plane(R, t, dims, key)
+            out.append((X @ n + d) / s)
+        uv = camera.project(t + _corner_offsets(dims) @ R.T)
+        a, b = uv[vi], uv[vj]  # each clicked edge's model image, (S, 2) ends
+        l = np.column_stack([a[:, 1] - b[:, 1], b[:, 0] - a[:, 0], a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]])
+        l /= np.hypot(l[:, 0], l[:, 1])[:, None]
+        dist = clicks[:, :, 0] * l[:, None, 0] + clicks[:, :, 1] * l[:, None, 1] + l[:, None, 2]
+        out.append(dist.reshape(-1) / sigma_px)
+        return np.concatenate(out)
+
+    def jacobian(th):
+        r0 = residuals(th)
+        J = np.empty((len(r0), len(th)))
+        for k in range(len(th)):
+            e = np.zeros(len(th))
+            e[k] = 1e-7
+            J[:, k] = (residuals(th + e) - r0) / 1e-7
+        return J
+
+    th, it = levenberg_marquardt(residuals, jacobian, th0)
+    r = residuals(th)
+    J = jacobian(th)
+    cov_th = np.linalg.inv(J.T @ (huber_weights(r, 3.0)[:, None] * J))
+    R, t, dims = unpack(th)
+    if np.any(dims <= 0):
+        raise ValueError(f"the fused box fit gives a non-positive size {dims}: the clicks contradict the range points")
+    # Covariance of (dims, t, small rotation in the box frame), the order of the planes' result.
+    def qvec(x):
+        Rx, tx, dx = unpack(x)
+        return np.concatenate([dx, tx, log_so3(R.T @ Rx)])
+
+    G = np.empty((9, len(th)))
+    q0 = qvec(th)
+    for k in range(len(th)):
+        e = np.zeros(len(th))
+        e[k] = 1e-7
+        G[:, k] = (qvec(th + e) - q0) / 1e-7
+    cov = G @ cov_th @ G.T
+    return R, t, dims, 0.5 * (cov + cov.T), {"fused_iterations": it, "fused_residuals_sigma": r}

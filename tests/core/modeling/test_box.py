@@ -15,14 +15,15 @@ def _sizes_in_true_axes(res, T_obj):
     return est, BOX_SIZE[perm], sig
 
 
+@pytest.mark.parametrize("method", ["planes", "fused"])
 @pytest.mark.parametrize("yaw_deg", [20.0, 35.0, 60.0])
 @pytest.mark.parametrize("with_support", [True, False])
-def test_box_noise_free_exact(yaw_deg, with_support):
+def test_box_noise_free_exact(yaw_deg, with_support, method):
     cam, T_wt = look_at_setup(np.array([0.0, 0.0, 0.07]), 1.5)
     T_obj = make_T(rot_z(np.radians(yaw_deg)), [0.01, -0.02, 0.0])
     world = SimWorld(T_wt, boxes=((T_obj, tuple(BOX_SIZE)),))
     faces = simulate_box(cam, world, T_obj, BOX_SIZE, None, step_quantize=False)
-    res = model_box(cam, faces, TABLE if with_support else None)
+    res = model_box(cam, faces, TABLE if with_support else None, method=method)
     est, true, _ = _sizes_in_true_axes(res, T_obj)
     assert np.abs(est - true).max() < 1e-6
     corners_true = np.array(
@@ -30,12 +31,11 @@ def test_box_noise_free_exact(yaw_deg, with_support):
     )
     d = np.linalg.norm(res.vertices_world[:, None] - corners_true[None], axis=2).min(axis=1)
     assert d.max() < 1e-6
-    assert res.kind == "box" and res.method == "planes"
+    assert res.kind == "box" and res.method == method
     assert res.T_world_obj.shape == (4, 4) and res.cov.shape == (9, 9)
     assert res.vertices_world.shape == (8, 3)
     assert res.details["constructed_vertices"].shape == (8, 3)
     assert np.isnan(res.details["constructed_vertices"]).any(axis=1).sum() == 1  # the hidden corner
-    assert np.allclose(res.model_world().vertices, res.vertices_world[[0, 1, 3, 2, 4, 5, 7, 6]], atol=1e-12) or True
     assert abs(res.residuals["clicks_px"]).max() < 1e-6
     if with_support:
         assert res.T_world_obj[2, 2] == pytest.approx(1.0)
@@ -51,18 +51,24 @@ def test_box_model_world_matches_vertices(box_scene):
 
 
 def test_box_sigmas_match_scatter_over_500_trials(box_scene):
+    """Both methods, on the same 500 simulated measurements: predicted σ within 20 % of the RMS."""
     cam, T_wt, T_obj, world = box_scene
     rng = np.random.default_rng(7)
-    errs, sigs = [], []
+    errs = {"planes": [], "fused": []}
+    sigs = {"planes": [], "fused": []}
     for _ in range(500):
         faces = simulate_box(cam, world, T_obj, BOX_SIZE, rng)
-        res = model_box(cam, faces, TABLE, support_sigma_m=1e-6)
-        est, true, sig = _sizes_in_true_axes(res, T_obj)
-        errs.append(est - true)
-        sigs.append(sig)
-    rms = np.sqrt(np.mean(np.square(errs), axis=0))
-    pred = np.sqrt(np.mean(np.square(sigs), axis=0))
-    assert np.all(np.abs(rms / pred - 1) < 0.2), (rms, pred)
+        for m in errs:
+            res = model_box(cam, faces, TABLE, support_sigma_m=1e-6, method=m)
+            est, true, sig = _sizes_in_true_axes(res, T_obj)
+            errs[m].append(est - true)
+            sigs[m].append(sig)
+    for m in errs:
+        rms = np.sqrt(np.mean(np.square(errs[m]), axis=0))
+        pred = np.sqrt(np.mean(np.square(sigs[m]), axis=0))
+        assert np.all(np.abs(rms / pred - 1) < 0.2), (m, rms, pred)
+    # Fusing every measurement does not lose to the construction (in RMS over the three sizes).
+    assert np.sum(np.square(errs["fused"])) < 1.02 * np.sum(np.square(errs["planes"]))
 
 
 def test_box_robust_to_a_range_point_on_the_background(box_scene):
@@ -82,6 +88,8 @@ def test_box_error_paths(box_scene):
     faces = simulate_box(cam, world, T_obj, BOX_SIZE, None, step_quantize=False)
     with pytest.raises(ValueError, match="at least one"):
         model_box(cam, [], TABLE)
+    with pytest.raises(ValueError, match="method must be"):
+        model_box(cam, faces, TABLE, method="ml")
     with pytest.raises(ValueError, match="two measured faces"):
         model_box(cam, faces[:1], None)
     with pytest.raises(ValueError, match="at least 3 range points"):
