@@ -9,6 +9,7 @@ to do, anything else a red one, logged; the server never dies from a callback.
 from __future__ import annotations
 
 import collections
+import concurrent.futures
 import functools
 import logging
 import threading
@@ -56,7 +57,15 @@ class ClientPanel:
         self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
         self._build_gui()
-        client.scene.on_click()(self._guard(self._on_click))
+        # Clicks are handled one at a time, in the order they arrive (viser runs plain callbacks
+        # on a thread pool, where two quick clicks could swap); the event loop is not blocked.
+        self._click_worker = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"mcit-click-{client.client_id}")
+        guarded_click = self._guard(self._on_click)
+
+        async def on_click(event) -> None:
+            self._click_worker.submit(guarded_click, event)
+
+        client.scene.on_click()(on_click)
         self._rect_cb = client.scene.on_rect_select()(self._guard(self._on_rect))
         client.camera.on_update(self._on_camera)
 
@@ -388,6 +397,11 @@ class ClientPanel:
             chosen = getattr(wf, "chosen", None)
             if cands and chosen is not None and self.candidate_dropdown.value != options[chosen]:
                 self.candidate_dropdown.value = options[chosen]
+
+    def close(self) -> None:
+        """The browser left: stop its click worker and cancel its workflow."""
+        self._click_worker.shutdown(wait=False, cancel_futures=True)
+        self.session.cancel()
 
     def set_status(self, text: str) -> None:
         if self.gui_status.content != text:

@@ -128,7 +128,7 @@ class InterfaceServer:
         with self.clients_lock:
             panel = self.clients.pop(client.client_id, None)
         if panel is not None:
-            panel.session.cancel()
+            panel.close()
 
     # ------------------------------------------------------------------ scene
     def _setup_scene(self) -> None:

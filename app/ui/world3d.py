@@ -65,7 +65,7 @@ class World3D:
         K, T_cam_world = cam.decompose()
         T_world_cam = invert_T(T_cam_world)
         fov = 2.0 * np.arctan2(cam.height / 2.0, abs(K[1, 1]))
-        self.scene.add_camera_frustum("/world3d/camera", fov=float(fov), aspect=cam.width / cam.height, scale=0.25,
+        self.scene.add_camera_frustum("/world3d/camera", fov=float(fov), aspect=cam.width / cam.height, scale=0.1,
                                       color=(40, 40, 200), thickness=2.0, thickness_units="screen",
                                       position=tuple(T_world_cam[:3, 3]), wxyz=_wxyz(T_world_cam[:3, :3]))
         T = site.T_world_turret
@@ -87,5 +87,5 @@ class World3D:
         objs = [o for o in site.objects() if o.kind != "table"] or list(site.objects())
         look = np.mean([o.T_world_obj[:3, 3] for o in objs], axis=0) if objs else np.zeros(3)
         c = site.camera.center
-        eye = look + 1.5 * (c - look) + np.array([0.0, 0.0, 0.6])
+        eye = look + 1.1 * (c - look) + np.array([0.6, 0.0, 0.5])
         return self.to_viewer(eye), self.to_viewer(look), np.array([0.0, 0.0, 1.0])

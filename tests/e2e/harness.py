@@ -100,7 +100,7 @@ class Interface:
     def click_pixel(self, page, uv):
         x, y = self.screen_of(page, uv)
         page.locator("canvas").nth(1).click(position={"x": x, "y": y})
-        time.sleep(0.25)
+        time.sleep(0.05)
 
     def screenshot(self, page, path=None) -> np.ndarray:
         import cv2

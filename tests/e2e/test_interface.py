@@ -83,6 +83,20 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     assert [(o.name, o.version) for o in ui.db.objects()] == versions
     assert len(ui.db.history()) == n_changes and len(ui.db.calibrations()) == n_cal
     assert ui.server._thread.is_alive()  # the server lives on
+    # a left drag zooms onto the dragged rectangle (it does not rotate the view); Fit view comes back
+    cam = page.panel.client.camera
+    far = float(np.linalg.norm(cam.position - cam.look_at))
+    (x0, y0), (x1, y1) = ui.screen_of(page, [100, 60]), ui.screen_of(page, [228, 124])
+    page.mouse.move(x0, y0)
+    page.mouse.down()
+    page.mouse.move(x1, y1, steps=8)
+    page.mouse.up()
+    _wait(lambda: np.linalg.norm(cam.position - cam.look_at) < far / 2, what="the zoom")
+    time.sleep(0.5)
+    cx, cy = ui.screen_of(page, [164, 92])
+    assert abs(cx - cam.image_width / 2) < 5 and abs(cy - cam.image_height / 2) < 5
+    page.get_by_role("button", name="Fit view").click()
+    _wait(lambda: abs(np.linalg.norm(cam.position - cam.look_at) - far) < 1e-3 * far, what="the fit")
     page.close()
 
 
