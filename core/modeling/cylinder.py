@@ -35,7 +35,7 @@ from ..rangefinder import RangeFinderSpec, RangeScan
 from ..transforms import check_T, make_T
 from .profile import ProfileFit, axis_basis, fit_profile, front_plane
 from .result import ModelResult
-from .returns import Returns
+from .returns import Returns, concat_returns
 from .scans import segment_scan
 from .small import image_line, interp_plane
 
@@ -77,12 +77,7 @@ class CylinderData:
 
     @property
     def returns(self) -> Returns:
-        rs = [s.returns for s in self.segments]
-        return Returns(
-            rs[0].origin, np.vstack([r.dirs for r in rs]), np.concatenate([r.range_m for r in rs]),
-            np.vstack([r.e_pan for r in rs]), np.vstack([r.e_tilt for r in rs]), rs[0].sigma_range_m,
-            np.concatenate([r.sigma_pan_rad for r in rs]), np.concatenate([r.sigma_tilt_rad for r in rs]),
-        )
+        return concat_returns([s.returns for s in self.segments])
 
     @property
     def groups(self) -> np.ndarray:

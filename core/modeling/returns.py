@@ -22,6 +22,7 @@ import numpy as np
 __all__ = [
     "Returns",
     "make_returns",
+    "concat_returns",
     "range_residuals",
     "beam_gap",
     "beam_gap_jacobian",
@@ -80,6 +81,22 @@ def make_returns(T_world_turret: np.ndarray, pan_rad, tilt_rad, range_m, sigma_r
     et = np.stack([-st * cp, -st * sp, ct], axis=-1) @ R.T
     n = len(p)
     return Returns(T[:3, 3].copy(), d, np.asarray(range_m, dtype=float), ep, et, float(sigma_range_m), np.full(n, sigma_angle_rad), np.full(n, sigma_angle_rad))
+
+
+def concat_returns(parts: list[Returns]) -> Returns:
+    """One Returns from several (same origin), in order."""
+    if not parts:
+        raise ValueError("no returns to join")
+    return Returns(
+        parts[0].origin,
+        np.vstack([r.dirs for r in parts]),
+        np.concatenate([r.range_m for r in parts]),
+        np.vstack([r.e_pan for r in parts]),
+        np.vstack([r.e_tilt for r in parts]),
+        parts[0].sigma_range_m,
+        np.concatenate([r.sigma_pan_rad for r in parts]),
+        np.concatenate([r.sigma_tilt_rad for r in parts]),
+    )
 
 
 def _geometry(O, D, p0, a, r0, k):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..rangefinder import RangeFinderSpec, RangeScan, beam_direction, beam_point, beam_point_cov
+from ..rangefinder import RangeFinderSpec, RangeScan, beam_direction, beam_point_cov
 from .returns import Returns, make_returns
 from .robust import object_runs
 
@@ -116,8 +116,3 @@ def segment_scan(
         )
     ret = make_returns(T_world_turret, scan.pan_rad[a:b], scan.tilt_rad[a:b], scan.range_m[a:b], spec.sigma_range_m, spec.sigma_angle)
     return ScanSegment(X[a:b], covs, ret.dirs, ret, tuple(tangents), (a, b))
-
-
-def lateral_point(T_world_turret: np.ndarray, beam: TangentBeam) -> np.ndarray:
-    """World point (3,) where a tangent beam grazes (at the last hit's range)."""
-    return beam_point(T_world_turret, beam.pan_rad, beam.tilt_rad, beam.distance_m)
