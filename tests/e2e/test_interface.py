@@ -97,6 +97,14 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     assert abs(cx - cam.image_width / 2) < 5 and abs(cy - cam.image_height / 2) < 5
     page.get_by_role("button", name="Fit view").click()
     _wait(lambda: abs(np.linalg.norm(cam.position - cam.look_at) - far) < 1e-3 * far, what="the fit")
+    # a narrower window: the view is fitted again, the whole image inside the canvas
+    aspect = page.panel.fitted_aspect
+    page.set_viewport_size({"width": 900, "height": 700})
+    _wait(lambda: page.panel.fitted_aspect is not None and abs(page.panel.fitted_aspect - aspect) > 0.05, what="the refit")
+    time.sleep(0.5)
+    corners = [ui.screen_of(page, uv) for uv in ([-0.5, -0.5], [511.5, 255.5])]
+    assert all(-1 <= x <= cam.image_width + 1 and -1 <= y <= cam.image_height + 1 for x, y in corners)
+    assert abs(corners[1][0] - corners[0][0]) > 0.9 * cam.image_width  # fitted to the width
     page.close()
 
 
