@@ -277,12 +277,13 @@ class FrameGrabber:
     Prerecorded sources are paced at their frame rate (real-time playback); live sources are read
     as fast as they deliver. ``latest()`` never blocks. ``measured_fps`` is the delivered rate over
     the last second or so. A read error stops the thread and is kept in ``error`` (shown to the
-    operator); ``on_frame`` callbacks run on the grabber thread and must be quick.
+    operator); ``on_frame`` callbacks (and those of ``add_listener``) run on the grabber thread and must
+    be quick.
     """
 
     def __init__(self, source: VideoSource, on_frame: Callable[[Frame], None] | None = None):
         self.source = source
-        self._on_frame = on_frame
+        self._listeners: list[Callable[[Frame], None]] = [on_frame] if on_frame is not None else []
         self._lock = threading.Lock()
         self._latest: Frame | None = None
         self._stop = threading.Event()
@@ -311,8 +312,8 @@ class FrameGrabber:
                 self._times.append(now)
                 while self._times and now - self._times[0] > 1.0:
                     self._times.pop(0)
-            if self._on_frame is not None:
-                self._on_frame(frame)
+            for listener in list(self._listeners):
+                listener(frame)
             if not self.source.live:
                 next_t += period
                 delay = next_t - time.monotonic()
@@ -320,6 +321,10 @@ class FrameGrabber:
                     next_t = time.monotonic()
                 elif delay > 0:
                     self._stop.wait(delay)
+
+    def add_listener(self, on_frame: Callable[[Frame], None]) -> None:
+        """Call ``on_frame(frame)`` (on the grabber thread; keep it quick) for every new frame."""
+        self._listeners.append(on_frame)
 
     def latest(self) -> Frame | None:
         """The most recent frame, or None before the first."""

@@ -9,8 +9,8 @@ Layout of the viser scene (DESIGN.md §"The operator interface"):
 * ``/world3d/...``: the virtual world in metres (objects, camera frustum, turret, beam), placed
   away from the image plane; a client's "3D world" view orbits it.
 
-Threads: viser runs callbacks on its pool (they only change state); one loop thread redraws at
-the video's frame rate, or at once when woken by a callback, inside ``server.atomic()``.
+Threads: viser runs callbacks on its pool (they only change state); one loop thread redraws when
+woken — by each new video frame or by a callback — inside ``server.atomic()``.
 """
 
 from __future__ import annotations
@@ -77,6 +77,7 @@ class InterfaceServer:
         self.server.on_client_connect(self._on_connect)
         self.server.on_client_disconnect(self._on_disconnect)
         self._thread = threading.Thread(target=self._loop, name="mcit-redraw", daemon=True)
+        grabber.add_listener(lambda _frame: self._wake.set())  # a new frame: redraw now
         if site.camera.width != src.width or site.camera.height != src.height:
             log.warning("video is %dx%d but the camera is calibrated for %dx%d: calibrate the camera",
                         src.width, src.height, site.camera.width, site.camera.height)
@@ -151,20 +152,21 @@ class InterfaceServer:
         scene_api.add_line_segments(name, points.astype(np.float32), colors, thickness=LINE_PX, thickness_units="screen")
 
     def send_client_overlay(self, client: viser.ClientHandle, batch: LineBatch, labels: list) -> None:
-        """Draw one client's marks (client-scoped nodes)."""
+        """Draw one client's marks (client-scoped nodes); labels are sent only when they change."""
         self._send_lines(client.scene, "/overlay/marks", batch, Z_MARKS)
         panel = self.clients.get(client.client_id)
-        old = getattr(panel, "_label_names", set()) if panel else set()
-        names = set()
+        old: dict = getattr(panel, "_labels_sent", {}) if panel else {}
+        new: dict = {}
         for i, (uv, text) in enumerate(labels):
             name = f"/overlay/marks_labels/{i}"
-            names.add(name)
-            client.scene.add_label(name, text, position=tuple(self.pixel_world.to_world(np.asarray(uv) + [6.0, -6.0], Z_MARKS)),
-                                   anchor="bottom-left", font_screen_scale=0.8)
-        for name in old - names:
+            position = tuple(float(v) for v in self.pixel_world.to_world(np.asarray(uv, float) + [6.0, -6.0], Z_MARKS))
+            new[name] = (text, position)
+            if old.get(name) != new[name]:
+                client.scene.add_label(name, text, position=position, anchor="bottom-left", font_screen_scale=0.8)
+        for name in set(old) - set(new):
             client.scene.remove_by_name(name)
         if panel is not None:
-            panel._label_names = names
+            panel._labels_sent = new
 
     def _draw_database(self) -> None:
         site = self.site
@@ -204,9 +206,11 @@ class InterfaceServer:
 
     # ------------------------------------------------------------------ the loop
     def _loop(self) -> None:
+        # Woken by each new frame and by every callback; the timeout only keeps a stalled video
+        # from freezing the rest (status, polling the database).
         period = 1.0 / max(1.0, min(60.0, self.grabber.source.fps))
         while not self._stop.is_set():
-            self._wake.wait(period)
+            self._wake.wait(max(period, 0.1))
             self._wake.clear()
             if self._stop.is_set():
                 break
