@@ -1,0 +1,483 @@
+"""Automatic matching: which model edge did the operator click? Every assignment tried at once.
+
+The paper's operator says which model edge each clicked image edge is. Here the operator only
+clicks (four or more edges is best) and ``match_edges`` finds the assignment:
+
+1. triples of the clicked segments are taken as bases, those whose image lines are the farthest
+   from meeting in one point first (three concurrent lines fix no depth);
+2. on each base, every ordered triple of distinct model edges is assigned to the three clicks
+   (E·(E−1)·(E−2) triples, 1,320 for a box, of which one in each family related by a symmetry of
+   the model: 330 for a box) and solved in one batch (``p3l_all_triples``): the rotations by the vectorised P3L of ``core.pose.p3l``
+   (``p3l_rotations``), the translations from the three interpretation planes (a batched 3 × 3
+   solve, the paper's eq. 5); the base edges must come out in front of the camera;
+3. each pose is scored against *all* the clicks: a base click against its own model edge, every
+   other click against the visible model edge not yet taken that fits it best; the cost of a click
+   is the squared distance of its two pixels to the projected *finite* edge (lengthened by a
+   quarter at each end: P3L from noisy clicks slides edges along their lines), so a click must lie
+   along its edge, not only on its line, and an edge hidden at that pose cannot be clicked;
+4. the plausible poses (RMS ≤ ``gate_px``; those drawing the same picture once) are refined with
+   every click (``core.pose.refine``); a refined pose is kept when the clicks lie on their model
+   lines (RMS ≤ 0.5 px + 3 σ) and within their edges (each ≤ 1 px + 3 σ from its edge lengthened
+   by a tenth at each end), and ranked by that RMS; poses drawing the same picture (the model's
+   symmetries) are merged;
+5. with the frame given (``image=``), each candidate is first let settle on the image's edges (one
+   step of the edge tracker, ``track.EdgeTracker``), then scored also by how well *all* its
+   visible edges lie on the image's edges (``evaluate.edge_distance``): this tells apart poses
+   that fit the clicks equally, e.g. a face's outline whose box extends towards or away from the
+   camera, and makes the pose as precise as the image allows.
+
+The candidates come back ranked, best first; the operator confirms one (the solver does not pick).
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from core.brep import BRep
+from core.camera import Camera
+from core.pose import refine
+from core.pose.p3l import p3l_rotations
+from core.pose.residuals import interpretation_planes
+
+from .evaluate import edge_distance, oriented_edges
+from .track import EdgeTracker
+
+__all__ = ["MatchCandidate", "MatchResult", "TriplePoses", "p3l_all_triples", "match_edges", "same_drawing", "edge_symmetries"]
+
+_PARALLEL_SIN = 1e-6
+
+
+@dataclass(frozen=True)
+class MatchCandidate:
+    """One way the clicks fit the model.
+
+    T_world_obj : array, shape (4, 4), refined with every click. edges : array, shape (S,), int: the
+    model edge (index into ``model.edges``) each clicked segment is on, all different. rms_px : RMS
+    distance (pixels) of the clicked pixels to their projected model lines at T_world_obj (the
+    maximum-likelihood cost that ``core.pose.refine`` minimises). image_px : mean distance (pixels)
+    of all the candidate's visible projected edges to the image's edges (NaN without an image).
+    score_px : what ranks the candidates: rms_px, plus image_px when there is an image.
+    """
+
+    T_world_obj: np.ndarray
+    edges: np.ndarray
+    rms_px: float
+    image_px: float
+    score_px: float
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    """Ranked candidates (best first) and what the search cost.
+
+    candidates : list of MatchCandidate. bases : the triples of clicked segments (indices) solved
+    by P3L. n_triples : model-edge triples solved (over all bases). n_poses : P3L poses in front of
+    the camera. p3l_s : time in the batched P3L (rotations and translations), seconds. total_s :
+    the whole call.
+    """
+
+    candidates: list
+    bases: list
+    n_triples: int
+    n_poses: int
+    p3l_s: float
+    total_s: float
+
+
+def _lines(segs_uv: np.ndarray, scale: float) -> np.ndarray:
+    """Homogeneous image lines (S, 3) of segments, ‖l[:2]‖ = 1, offsets in units of ``scale`` pixels."""
+    p1 = np.column_stack([segs_uv[:, 0] / scale, np.ones(len(segs_uv))])
+    p2 = np.column_stack([segs_uv[:, 1] / scale, np.ones(len(segs_uv))])
+    l = np.cross(p1, p2)
+    return l / np.linalg.norm(l[:, :2], axis=1, keepdims=True)
+
+
+def _base_triples(segs_uv: np.ndarray, scale: float, n_bases: int) -> list[tuple[int, int, int]]:
+    """Up to n_bases triples of clicked segments, the farthest from concurrent first (|det| of
+    their normalised image lines); three lines through one point fix no depth."""
+    L = _lines(segs_uv, scale)
+    tris = list(itertools.combinations(range(len(L)), 3))
+    dets = np.array([abs(float(np.linalg.det(L[list(t)]))) for t in tris])
+    order = np.argsort(-dets, kind="stable")
+    good = [tris[i] for i in order if dets[i] >= 1e-3][:n_bases]
+    if not good:
+        raise ValueError(
+            "the clicked edges' image lines all meet in one point (or are parallel): they fix no depth; "
+            "click another edge that does not pass through that point"
+        )
+    return good
+
+
+@dataclass(frozen=True)
+class TriplePoses:
+    """Every P3L pose of every assignment of three clicked segments to model edges.
+
+    R : array, shape (N, 3, 3); t : array, shape (N, 3): T_world_obj's rotation and translation.
+    edges : array, shape (N, 3), int: the model edges of the three clicked segments, in order.
+    n_triples : ordered model-edge triples solved (those with all three edges parallel are not).
+    """
+
+    R: np.ndarray
+    t: np.ndarray
+    edges: np.ndarray
+    n_triples: int
+
+
+def p3l_all_triples(camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray, symmetries: list[np.ndarray] | None = None) -> TriplePoses:
+    """P3L for every ordered triple of distinct model edges on three clicked segments, in one batch.
+
+    Parameters
+    ----------
+    camera : Camera
+    segs_uv : array, shape (3, 2, 2), pixels: three clicked segments (lines not concurrent).
+    edges_obj : array, shape (E, 2, 3), metres, object frame: the model's edges.
+    symmetries : list of arrays (E,), optional
+        The model's symmetries as edge permutations (``edge_symmetries``): triples that one maps
+        onto another give the same pictures, so one triple of each such family is solved (a box:
+        a quarter of them).
+
+    Returns
+    -------
+    TriplePoses
+        Every real solution with the three matched edges in front of the camera. Rotations by
+        ``core.pose.p3l.p3l_rotations`` (vectorised over triples), translations from the three
+        interpretation planes ``N_i·T = −d_i − N_i·(R A_i)`` (paper eq. 5) by a batched 3 × 3 solve.
+    """
+    segs = np.asarray(segs_uv, dtype=float)
+    ends = np.asarray(edges_obj, dtype=float)
+    if segs.shape != (3, 2, 2):
+        raise ValueError(f"segs_uv must have shape (3, 2, 2), got {segs.shape}")
+    if ends.ndim != 3 or ends.shape[1:] != (2, 3) or len(ends) < 3:
+        raise ValueError(f"edges_obj must have shape (E, 2, 3) with E ≥ 3, got {ends.shape}")
+    E = len(ends)
+    A_obj = ends[:, 0]
+    V_obj = ends[:, 1] - ends[:, 0]
+    V_obj = V_obj / np.linalg.norm(V_obj, axis=1, keepdims=True)
+    tri = np.array(list(itertools.permutations(range(E), 3)), dtype=np.int64)  # (B, 3): edges of clicks 0, 1, 2
+    if symmetries is not None and len(symmetries) > 1:
+        code = lambda t: (t[:, 0] * E + t[:, 1]) * E + t[:, 2]  # noqa: E731
+        canonical = np.min([code(np.asarray(p)[tri]) for p in symmetries], axis=0)
+        tri = tri[code(tri) == canonical]
+    # The solver's first edge must be parallel to neither other (paper appendix): roll each triple.
+    par = np.linalg.norm(np.cross(V_obj[:, None], V_obj[None]), axis=2) < _PARALLEL_SIN
+    rolls = np.array([[0, 1, 2], [1, 2, 0], [2, 0, 1]])
+    order = np.full(len(tri), -1)
+    for r in range(3):
+        f, o1, o2 = (tri[:, rolls[r, j]] for j in range(3))
+        order[(order < 0) & ~par[f, o1] & ~par[f, o2]] = r
+    keep = order >= 0
+    tri, perm = tri[keep], rolls[order[keep]]
+    edges_b = np.take_along_axis(tri, perm, axis=1)  # model edges in the solver's order
+    n_all, d_all = interpretation_planes(camera, segs)
+    N = n_all[perm]  # (B, 3, 3)
+    C = camera.C
+    first_px = segs[perm[:, 0], 0]  # the paper's x axis of R_c1: the ray of l1's first clicked pixel
+    ray = np.cross(C[0, :3][None] - first_px[:, :1] * C[2, :3][None], C[1, :3][None] - first_px[:, 1:] * C[2, :3][None])
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    R, valid = p3l_rotations(N, ray, V_obj[edges_b])  # (B, K, 3, 3), (B, K)
+    RA = np.einsum("bkij,bmj->bkmi", R, A_obj[edges_b])  # R A_i, (B, K, 3, 3)
+    rhs = -d_all[perm][:, None, :] - np.einsum("bmi,bkmi->bkm", N, RA)
+    if abs(float(np.linalg.det(n_all))) <= 1e-12:
+        raise ValueError("the three clicked lines meet in one point: their planes fix no depth")
+    t = np.linalg.solve(np.broadcast_to(N[:, None], R.shape), rhs[..., None])[..., 0]
+    b_idx, k_idx = np.nonzero(valid)
+    Rc, tc, edges = R[b_idx, k_idx], t[b_idx, k_idx], tri[b_idx]
+    Xe = np.einsum("nij,nmsj->nmsi", Rc, ends[edges]) + tc[:, None, None, :]
+    front = np.all(Xe @ C[2, :3] + C[2, 3] > 1e-9, axis=(1, 2))
+    return TriplePoses(Rc[front], tc[front], edges[front], len(tri))
+
+
+def _point_segment_d2(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared distances of points q (..., 2) to segments [a, b] (..., 2), broadcast."""
+    d = b - a
+    lam = np.clip(np.sum((q - a) * d, axis=-1) / np.maximum(np.sum(d * d, axis=-1), 1e-300), 0.0, 1.0)
+    e = q - a - lam[..., None] * d
+    return np.sum(e * e, axis=-1)
+
+
+def _click_costs(
+    camera: Camera, model: BRep, R: np.ndarray, t: np.ndarray, segs_uv: np.ndarray, incidence: np.ndarray, extend: float = 0.0
+) -> np.ndarray:
+    """Cost (N, S, E): Σ of the squared pixel distances of each click's two pixels to each projected
+    finite model edge at N poses, the edge lengthened by ``extend`` (a fraction of its length) at
+    each end; +inf where the edge is hidden or behind the camera."""
+    C = camera.C
+    V = model.vertices
+    Xw = np.einsum("nij,vj->nvi", R, V) + t[:, None, :]
+    h = Xw @ C[:, :3].T + C[:, 3]
+    depth = h[..., 2]
+    uv = h[..., :2] / np.where(depth > 1e-9, depth, np.nan)[..., None]
+    a = uv[:, model.edges[:, 0]]  # (N, E, 2)
+    b = uv[:, model.edges[:, 1]]
+    if extend:
+        a, b = a - extend * (b - a), b + extend * (b - a)
+    q = segs_uv.reshape(1, -1, 1, 2)  # the clicked pixels (N, 2S, E, 2) by broadcasting
+    d2 = _point_segment_d2(q, a[:, None], b[:, None]).reshape(len(R), len(segs_uv), 2, -1).sum(axis=2)
+    c_obj = np.einsum("nji,nj->ni", R, camera.center[None, :] - t)  # the optical centre, object frame
+    facing = np.einsum("fk,nfk->nf", model.face_normals(), c_obj[:, None, :] - model.face_centroids()[None]) > 0
+    visible = (facing.astype(float) @ incidence.T) > 0
+    if len(model.faces) == 0:
+        visible[:] = True
+    ok = visible & np.isfinite(a[..., 0]) & np.isfinite(b[..., 0])
+    return np.where(ok[:, None, :], d2, np.inf)
+
+
+def edge_symmetries(model: BRep, tol: float = 1e-9) -> list[np.ndarray]:
+    """The model's proper rigid symmetries as edge permutations: arrays (E,) p with edge k ↦ p[k].
+
+    A rotation (with translation) that maps the vertex set onto itself and edges onto edges leaves
+    the picture unchanged: a box has 4, a cube 24. Found by mapping three vertices of the first
+    face onto every vertex triple with the same pairwise distances. The identity is always first.
+    """
+    V = model.vertices
+    E = model.edges
+    ident = np.arange(len(E))
+    if len(V) < 3 or not model.faces:
+        return [ident]
+    key = (V.tobytes(), E.tobytes())
+    if key in _SYMMETRY_CACHE:
+        return _SYMMETRY_CACHE[key]
+    scale = float(np.abs(V).max()) or 1.0
+    f = list(model.faces[0][:3])
+    D = np.linalg.norm(V[:, None] - V[None], axis=2)
+    edge_id = {tuple(sorted(e)): k for k, e in enumerate(E.tolist())}
+    perms = [ident]
+    for i, j in zip(*np.nonzero(np.abs(D - D[f[0], f[1]]) <= 1e-6 * scale)):
+        for k in np.flatnonzero((np.abs(D[i] - D[f[0], f[2]]) <= 1e-6 * scale) & (np.abs(D[j] - D[f[1], f[2]]) <= 1e-6 * scale)):
+            if len({int(i), int(j), int(k)}) < 3:
+                continue
+            P, Q = V[f], V[[i, j, k]]
+            cp, cq = P.mean(axis=0), Q.mean(axis=0)
+            U, _, Wt = np.linalg.svd((P - cp).T @ (Q - cq))
+            R = (U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Wt))]) @ Wt).T
+            img = (V - cp) @ R.T + cq
+            dist = np.linalg.norm(img[:, None] - V[None], axis=2)
+            vp = np.argmin(dist, axis=1)
+            if dist[np.arange(len(V)), vp].max() > 1e-6 * scale:
+                continue
+            ep = [edge_id.get(tuple(sorted((int(vp[a]), int(vp[b]))))) for a, b in E.tolist()]
+            if None in ep:
+                continue
+            p = np.array(ep)
+            if not any(np.array_equal(p, q) for q in perms):
+                perms.append(p)
+    _SYMMETRY_CACHE[key] = perms
+    return perms
+
+
+_SYMMETRY_CACHE: dict = {}
+
+
+def _within_edges(camera, model, T, segs, edges, incidence, gate_px) -> bool:
+    """Each click within gate_px of its (visible, in front) model edge lengthened by a tenth at each end."""
+    c = _click_costs(camera, model, T[None, :3, :3], T[None, :3, 3], segs, incidence, extend=0.1)[0]
+    return bool(np.all(np.sqrt(c[np.arange(len(segs)), edges] / 2.0) <= gate_px))
+
+
+def _assign(camera, model, T, segs, incidence) -> np.ndarray | None:
+    """Each click's nearest visible model edge at pose T (all different), or None if two want one."""
+    c = _click_costs(camera, model, T[None, :3, :3], T[None, :3, 3], segs, incidence)[0]
+    e = np.argmin(c, axis=1)
+    return e if len(set(e.tolist())) == len(e) and np.all(np.isfinite(c[np.arange(len(e)), e])) else None
+
+
+def _line_d2(camera: Camera, T: np.ndarray, segs: np.ndarray, edges_obj: np.ndarray) -> np.ndarray:
+    """Squared distances (2S,) of the clicked pixels to the projected infinite lines of their edges."""
+    a = camera.project_obj(T, edges_obj[:, 0])
+    b = camera.project_obj(T, edges_obj[:, 1])
+    l = np.cross(np.column_stack([a, np.ones(len(a))]), np.column_stack([b, np.ones(len(b))]))
+    l /= np.linalg.norm(l[:, :2], axis=1, keepdims=True)
+    q = np.concatenate([segs, np.ones(segs.shape[:2] + (1,))], axis=2)  # (S, 2, 3)
+    return (np.einsum("sk,spk->sp", l, q) ** 2).ravel()
+
+
+def _project_vertices(camera: Camera, model: BRep, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Pixels (N, V, 2) of the model's vertices at N poses (R (N, 3, 3), t (N, 3))."""
+    Xw = np.einsum("nij,vj->nvi", R, model.vertices) + t[:, None, :]
+    h = Xw @ camera.C[:, :3].T + camera.C[:, 3]
+    return h[..., :2] / h[..., 2:3]
+
+
+def _same_set(ua: np.ndarray, ub: np.ndarray, tol_px: float) -> bool:
+    D = np.linalg.norm(ua[:, None] - ub[None], axis=2)
+    return bool(D.min(axis=1).max() <= tol_px and D.min(axis=0).max() <= tol_px)
+
+
+def same_drawing(camera: Camera, model: BRep, T_a: np.ndarray, T_b: np.ndarray, tol_px: float) -> bool:
+    """True when the two poses project the model's vertices to the same set of pixels (within tol_px):
+    the operator sees the same picture (a symmetry of the model maps one pose onto the other)."""
+    return _same_set(camera.project_obj(T_a, model.vertices), camera.project_obj(T_b, model.vertices), tol_px)
+
+
+def match_edges(
+    camera: Camera,
+    model: BRep,
+    segs_uv: np.ndarray,
+    *,
+    image: np.ndarray | None = None,
+    sigma_px: float = 1.0,
+    gate_px: float | None = None,
+    n_bases: int = 4,
+    max_refine: int = 24,
+    max_candidates: int = 8,
+) -> MatchResult:
+    """Find which model edge each clicked image edge is, and the poses that follow, ranked.
+
+    Parameters
+    ----------
+    camera : Camera
+        The calibrated global model C.
+    model : BRep
+        The object's model; its straight edges (``model.edges``) are the candidates.
+    segs_uv : array, shape (S, 2, 2), pixels
+        Two clicked points along each of S ≥ 3 image edges (S ≥ 4 makes the answer unique in
+        general; three edges leave up to 8 poses per assignment).
+    image : array, shape (H, W) or (H, W, 3), optional
+        The frame the clicks were made on: ranks the candidates also by how well all their visible
+        edges lie on the image's edges.
+    sigma_px : float
+        The clicks' noise (pixels): scales the gates.
+    gate_px : float, optional
+        RMS distance (pixels) of the clicks to their edges (lengthened by a quarter at each end)
+        above which a P3L pose is dropped before refinement; default 20 px + 6 σ (P3L from three
+        noisy clicks can be far off; refinement converges from there).
+    n_bases : int
+        P3L is solved on up to this many triples of the clicks (the least concurrent first): a
+        triple's P3L poses are only as good as its clicks, so several bases make the search robust.
+    max_refine : int
+        At most this many of the best P3L poses (distinct drawings) are refined.
+    max_candidates : int
+        At most this many candidates are returned.
+
+    Returns
+    -------
+    MatchResult
+        ``candidates`` ranked best first (possibly empty: no assignment fits the clicks).
+    """
+    t_start = time.perf_counter()
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
+    segs = np.asarray(segs_uv, dtype=float)
+    if segs.ndim != 3 or segs.shape[1:] != (2, 2) or len(segs) < 3:
+        raise ValueError(f"segs_uv must have shape (S, 2, 2) with S ≥ 3 clicked segments, got {segs.shape}")
+    if not np.all(np.isfinite(segs)):
+        raise ValueError("segs_uv contains NaN or inf")
+    if np.any(np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1) < 1e-6):
+        raise ValueError("a clicked segment's two points coincide: click two distinct points along each edge")
+    E = len(model.edges)
+    if E < 3:
+        raise ValueError(f"the model has {E} straight edges; matching needs at least 3")
+    gate = 20.0 + 6.0 * sigma_px if gate_px is None else float(gate_px)
+    S = len(segs)
+    bases = _base_triples(segs, float(max(camera.width, camera.height)), n_bases)
+
+    ends = model.vertices[model.edges]  # (E, 2, 3)
+    perms = edge_symmetries(model)
+    poses = [p3l_all_triples(camera, segs[list(b)], ends, perms) for b in bases]
+    p3l_s = time.perf_counter() - t_start
+    n_triples = sum(p.n_triples for p in poses)
+    Rc = np.concatenate([p.R for p in poses])
+    tc = np.concatenate([p.t for p in poses])
+    fixed = np.full((len(Rc), S), -1, np.int64)  # the model edge P3L put each base click on
+    row = 0
+    for b, p in zip(bases, poses):
+        fixed[row : row + len(p.R), list(b)] = p.edges
+        row += len(p.R)
+    n_poses = len(Rc)
+    if n_poses == 0:
+        return MatchResult([], bases, n_triples, 0, p3l_s, time.perf_counter() - t_start)
+
+    # ---- score every pose against all the clicks
+    incidence = np.zeros((E, len(model.faces)))
+    for k in range(E):
+        incidence[k, list(model.edge_faces(k))] = 1.0
+    # A P3L pose from three noisy clicks may slide the edges along their lines: lengthen them by a
+    # quarter at each end for this first test. Each click is on a different edge; the base clicks'
+    # come from P3L, each other click branches on its `branch` best visible edges (a P3L pose a
+    # few degrees off may prefer a neighbour of the right edge).
+    cost = _click_costs(camera, model, Rc, tc, segs, incidence, extend=0.25)  # (N, S, E)
+    n_free = S - 3  # which clicks are free varies per pose (several bases)
+    branch = max(1, min(3, int(np.floor(8 ** (1.0 / max(n_free, 1)))))) if n_free else 1
+    rows = np.arange(len(Rc))
+    used = np.zeros((len(Rc), E), bool)
+    for j in range(S):
+        on = fixed[:, j] >= 0
+        used[rows[on], fixed[on, j]] = True
+    masked = np.where(used[:, None, :], np.inf, cost)
+    best_k = np.argsort(masked, axis=2, kind="stable")[:, :, :branch]  # (N, S, branch)
+    combos = np.array(list(itertools.product(range(branch), repeat=n_free)), dtype=np.int64).reshape(-1, n_free)
+    free_cols = np.argsort(fixed >= 0, axis=1, kind="stable")[:, :n_free]  # each pose's free clicks, in order
+    edges_of = np.repeat(fixed, len(combos), axis=0)
+    pose_of = np.repeat(rows, len(combos))
+    for c_i in range(n_free):
+        cols = np.repeat(free_cols[:, c_i], len(combos))
+        pick_k = np.tile(combos[:, c_i], len(Rc))
+        edges_of[np.arange(len(edges_of)), cols] = best_k[pose_of, cols, pick_k]
+    distinct = np.array([len(set(r)) == S for r in edges_of.tolist()])
+    total = cost[pose_of[:, None], np.arange(S)[None, :], edges_of].sum(axis=1)
+    rms = np.where(distinct, np.sqrt(total / (2 * S)), np.inf)
+    plausible = np.flatnonzero(rms <= gate)
+    plausible = plausible[np.argsort(rms[plausible], kind="stable")]
+    # One refinement per assignment, counted up to the model's symmetries (they give several
+    # equivalent assignments of one drawing): the best P3L pose of each, up to max_refine.
+    seen: set[tuple[int, ...]] = set()
+    kept: list[int] = []
+    for i in plausible:
+        key = min(tuple(p[edges_of[i]].tolist()) for p in perms)
+        if key not in seen:
+            seen.add(key)
+            kept.append(int(i))
+            if len(kept) == max_refine:
+                break
+
+    # ---- refine the plausible ones with every click, rescore, merge equal drawings
+    oe = None
+    if image is not None:
+        oe = oriented_edges(image)
+    refined: list[MatchCandidate] = []
+    line_gate = 0.5 + 3.0 * sigma_px  # RMS distance of the clicks to their model lines (pixels)
+    extent_gate = 1.0 + 3.0 * sigma_px  # and of each click to its edge lengthened by a tenth at each end
+    for i in kept:
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = Rc[pose_of[i]], tc[pose_of[i]]
+        edges = edges_of[i].copy()
+        fit = None
+        for _ in range(3):  # refine, read the assignment again at the refined pose, until it holds
+            try:
+                fit = refine(camera, T, segs_uv=segs, edges_obj=ends[edges], sigma_px=sigma_px)
+            except ValueError:
+                fit = None
+                break
+            T = fit.T_world_obj
+            again = _assign(camera, model, T, segs, incidence)
+            if again is None or np.array_equal(again, edges):
+                break
+            edges = again
+        if fit is None:
+            continue
+        rms_px = fit.rms_px
+        if rms_px > line_gate or not _within_edges(camera, model, T, segs, edges, incidence, extent_gate):
+            continue
+        img_px = float("nan")
+        if oe is not None:
+            # Let the whole model settle on the image's edges (one tracking step from this pose),
+            # then read the assignment and the clicks' fit again there.
+            T_img = EdgeTracker(camera, model, T, search_px=6.0, min_inliers=8, lost_confidence=0.0).track(image).T_world_obj
+            e_img = _assign(camera, model, T_img, segs, incidence)
+            if e_img is not None:
+                r_img = float(np.sqrt(np.mean(_line_d2(camera, T_img, segs, ends[e_img]))))
+                if r_img <= line_gate and _within_edges(camera, model, T_img, segs, e_img, incidence, extent_gate):
+                    T, edges, rms_px = T_img, e_img, r_img
+            img_px = edge_distance(oe, camera, model, T).mean_px
+        score = rms_px + (img_px if oe is not None else 0.0)
+        refined.append(MatchCandidate(T, edges, rms_px, img_px, score))
+    refined.sort(key=lambda m: m.score_px)
+    out: list[MatchCandidate] = []
+    for m in refined:  # poses that draw the same picture (symmetries of the model) count once
+        if not any(same_drawing(camera, model, m.T_world_obj, o.T_world_obj, max(1.0, sigma_px)) for o in out):
+            out.append(m)
+    return MatchResult(out[:max_candidates], bases, n_triples, n_poses, p3l_s, time.perf_counter() - t_start)
