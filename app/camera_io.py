@@ -146,6 +146,18 @@ def read_visp_xml(path: str | Path, camera_name: str | None = None) -> np.ndarra
     return _read_visp(path, camera_name).K
 
 
+def _first_matrix(fs, keys, where: str):
+    """(key, matrix) of the first of ``keys`` present in a FileStorage, or (None, None)."""
+    for k in keys:
+        node = fs.getNode(k)
+        if not node.empty():
+            M = node.mat()
+            if M is None:
+                raise ValueError(f"{where}: '{k}' is not a matrix")
+            return k, M
+    return None, None
+
+
 def _read_opencv(path: Path, key: str | None) -> Intrinsics:
     import cv2  # OpenCV's own FileStorage reads its YAML dialect (%YAML:1.0, !!opencv-matrix)
 
@@ -158,15 +170,7 @@ def _read_opencv(path: Path, key: str | None) -> Intrinsics:
         raise ValueError(f"{where}: OpenCV cannot open it as a FileStorage (.yml, .yaml, .xml, .json)")
     try:
         keys = [key] if key is not None else list(_OPENCV_K_KEYS)
-        K = None
-        for k in keys:
-            node = fs.getNode(k)
-            if not node.empty():
-                K = node.mat()
-                if K is None:
-                    raise ValueError(f"{where}: '{k}' is not a matrix")
-                used = k
-                break
+        used, K = _first_matrix(fs, keys, where)
         if K is None:
             raise ValueError(f"{where}: no camera matrix under {keys}; name it 'camera_matrix' or pass key=")
         K = _check_K(K, f"{where}: {used}")
@@ -178,15 +182,8 @@ def _read_opencv(path: Path, key: str | None) -> Intrinsics:
             size = fs.getNode("image_size")  # a sequence [width, height]
             if size.isSeq() and size.size() == 2:
                 width, height = int(size.at(0).real()), int(size.at(1).real())
-        dist = np.zeros(0)
-        for k in _OPENCV_DIST_KEYS:
-            node = fs.getNode(k)
-            if not node.empty():
-                d = node.mat()
-                if d is None:
-                    raise ValueError(f"{where}: '{k}' is not a matrix")
-                dist = np.asarray(d, dtype=float).ravel()
-                break
+        _, d = _first_matrix(fs, _OPENCV_DIST_KEYS, where)
+        dist = np.zeros(0) if d is None else np.asarray(d, dtype=float).ravel()
     finally:
         fs.release()
     return Intrinsics(K, width, height, dist, where)

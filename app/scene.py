@@ -299,7 +299,8 @@ class RenderSpec:
     the light. sky : radiance (albedo-like) of rays that hit nothing. noise_sigma : sensor
     noise, grey levels (Gaussian, seeded by ``seed`` and the frame index). blur_sigma_px : optical
     blur (Gaussian, pixels; 0 for none). aa_samples : samples per pixel where a pixel straddles
-    an edge (a rank-1 lattice; the rest of the image takes one sample per pixel).
+    an edge (a golden-ratio lattice shifted per pixel; the rest of the image takes one sample per
+    pixel).
     """
 
     light_dir: tuple[float, float, float] = (-0.4, -0.5, 1.0)

@@ -174,6 +174,8 @@ class Renderer:
         """The frame (H, W) uint8 grey at scene time t_s; noise seeded by (spec.seed, frame_index)."""
         import cv2
 
+        if int(frame_index) != frame_index or frame_index < 0:
+            raise ValueError(f"frame_index must be a non-negative integer (it seeds the noise), got {frame_index!r}")
         img, _ = self.render_float(t_s)
         if blur and self.spec.blur_sigma_px > 0:
             img = cv2.GaussianBlur(img, (0, 0), self.spec.blur_sigma_px, borderType=cv2.BORDER_REFLECT)

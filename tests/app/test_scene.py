@@ -175,7 +175,7 @@ def test_workcell_is_the_papers_set_up(workcell):
     baseline = np.linalg.norm(s.turret.T_world_turret[:3, 3] - s.camera.center)
     assert 0.15 <= baseline <= 0.25
     assert {b.name for b in s.scenery} == {"floor", "back_wall"}
-    assert s.video is not None and s.video.path.name == "video.mp4" and 10 <= s.video.fps <= 15 and 20 <= s.video.duration_s <= 30
+    assert s.video is not None and s.video.path.name == "video.avi" and 10 <= s.video.fps <= 15 and 20 <= s.video.duration_s <= 30
 
 
 def test_workcell_distances_view_and_reach(workcell):

@@ -16,6 +16,28 @@ def workcell():
     return load_scene(default_scene_path())
 
 
+@pytest.fixture(scope="module")
+def workcell_t16(workcell):
+    """The workcell's renderer and its noise-free image and labels at t = 16 s (rendered once)."""
+    r = Renderer(workcell)
+    clean, labels = r.render_float(16.0)
+    return r, clean, labels
+
+
+SMALL = {
+    "format": "mcit-scene/1",
+    "camera": {"width": 96, "height": 64, "K": [[80, 0, 47.5], [0, 80, 31.5], [0, 0, 1]],
+               "T_world_cam": {"xyz": [0, -1.2, 0.5], "rpy_deg": [-110, 0, 0]}},
+    "turret": {"T_world_turret": {"xyz": [0.2, -1.2, 0.5], "rpy_deg": [0, 0, 90]}},
+    "bodies": [
+        {"name": "table", "model": {"box": [1.0, 1.0, 0.04]}, "pose": {"xyz": [0, 0, -0.04]}, "appearance": {"albedo": 0.3}},
+        {"name": "box", "model": {"box": [0.2, 0.1, 0.1]}, "pose": {"xyz": [0, 0, 0]}, "appearance": {"albedo": 0.8, "texture": 0.05},
+         "motion": [{"t": 0.5, "pose": {"xyz": [0.1, 0.05, 0], "rpy_deg": [0, 0, 30]}}]},
+        {"name": "can", "model": {"cylinder": [0.04, 0.12]}, "pose": {"xyz": [-0.25, -0.1, 0]}, "appearance": {"albedo": 0.7}},
+    ],
+}
+
+
 def test_lattice_offsets_fill_the_pixel():
     off = lattice_offsets(89)
     assert off.shape == (89, 2) and off.min() >= -0.5 and off.max() < 0.5
@@ -35,17 +57,24 @@ def test_value_noise_is_deterministic_bounded_and_smooth():
     assert not np.array_equal(value_noise(X, 0.05, salt=1), a)
 
 
-def test_frames_are_deterministic(workcell):
-    r = Renderer(workcell)
-    f1 = r.render(3.0, 36)
-    f2 = Renderer(workcell).render(3.0, 36)  # a new renderer: nothing cached
-    assert f1.dtype == np.uint8 and f1.shape == (256, 512)
+def test_frames_are_deterministic(tmp_path):
+    scene = scene_from_dict(SMALL, tmp_path)
+    r = Renderer(scene)
+    f1 = r.render(0.3, 3)
+    f2 = Renderer(scene).render(0.3, 3)  # a new renderer: nothing cached
+    assert f1.dtype == np.uint8 and f1.shape == (64, 96)
     assert np.array_equal(f1, f2)
-    f3 = r.render(3.0, 37)  # the same scene, another frame's sensor noise
+    f3 = r.render(0.3, 4)  # the same scene, another frame's sensor noise
     diff = f3.astype(float) - f1
     assert 1.5 < diff.std() < 4.0  # two independent draws of σ = 2 grey levels: σ√2 ≈ 2.8 before rounding
-    bgr = r.render_bgr(3.0, 36)
-    assert bgr.shape == (256, 512, 3) and np.array_equal(bgr[:, :, 0], f1) and np.array_equal(bgr[:, :, 2], f1)
+    bgr = r.render_bgr(0.3, 3)
+    assert bgr.shape == (64, 96, 3) and np.array_equal(bgr[:, :, 0], f1) and np.array_equal(bgr[:, :, 2], f1)
+    moved = Renderer(scene).render(0.7, 3)  # the box has moved: another image where it was and is, same noise elsewhere
+    changed = moved != f1
+    assert 100 < changed.sum() < 0.5 * changed.size
+    assert np.array_equal(moved[:10], f1[:10])  # the far background is untouched
+    with pytest.raises(ValueError, match="non-negative integer"):
+        r.render(0.3, -1)
 
 
 def _top_down_scene(yaw_deg: float, x_edge: float) -> dict:
@@ -96,9 +125,8 @@ def test_measurements_on_a_synthetic_step():
     assert abs(tri.sum() - 8.0) < 1e-12  # the area of the triangle
 
 
-def test_rendered_edges_lie_where_C_projects_the_true_edges(workcell):
-    r = Renderer(workcell)
-    clean, _ = r.render_float(16.0)
+def test_rendered_edges_lie_where_C_projects_the_true_edges(workcell, workcell_t16):
+    r, clean, _ = workcell_t16
     frame = r.render(16.0, 192)
     edges = list(visible_edges(workcell, r, 16.0))
     assert len(edges) >= 15
@@ -125,11 +153,10 @@ def test_cylinder_silhouettes_lie_where_C_projects_them(workcell):
         assert abs(edge_offsets(clean, uv).mean()) < 0.03
 
 
-def test_labels_and_depth_agree_with_the_caster(workcell):
-    r = Renderer(workcell)
-    _, labels = r.render_float(0.0)
+def test_labels_and_depth_agree_with_the_caster(workcell, workcell_t16):
+    r, _, labels = workcell_t16
     uv = np.array([[300.0, 140.0], [20.0, 20.0], [256.0, 250.0]])
-    h = SceneCaster.for_scene(workcell, 0.0).cast(workcell.camera.center, r.rays(uv))
+    h = SceneCaster.for_scene(workcell, 16.0).cast(workcell.camera.center, r.rays(uv))
     names = [workcell.bodies[b].name for b in h.body]
     assert names[0] == "unknown_cylinder" and names[1] in ("back_wall", "floor")
     for (u, v), b, f in zip(uv.astype(int), h.body, h.face):
