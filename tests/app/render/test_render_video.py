@@ -10,24 +10,8 @@ from app.render.video import read_frame, read_video_info, render_video
 from app.scene import SceneError, default_scene_path, load_scene, scene_from_dict
 
 
-def small_scene(tmp_path) -> dict:
-    return {
-        "format": "mcit-scene/1",
-        "name": "small",
-        "camera": {"width": 96, "height": 64, "K": [[80, 0, 47.5], [0, 80, 31.5], [0, 0, 1]],
-                   "T_world_cam": {"xyz": [0, -1.2, 0.5], "rpy_deg": [-110, 0, 0]}},
-        "turret": {"T_world_turret": {"xyz": [0.2, -1.2, 0.5], "rpy_deg": [0, 0, 90]}},
-        "bodies": [
-            {"name": "table", "model": {"box": [1.0, 1.0, 0.04]}, "pose": {"xyz": [0, 0, -0.04]}, "appearance": {"albedo": 0.3}},
-            {"name": "box", "model": {"box": [0.2, 0.1, 0.1]}, "pose": {"xyz": [0, 0, 0]}, "appearance": {"albedo": 0.8},
-             "motion": [{"t": 0.5, "pose": {"xyz": [0.1, 0.05, 0], "rpy_deg": [0, 0, 30]}}]},
-        ],
-        "video": {"file": "clip.avi", "fps": 10, "duration_s": 0.7},
-    }
-
-
-def test_render_video_is_readable_and_deterministic(tmp_path):
-    scene = scene_from_dict(small_scene(tmp_path), tmp_path)
+def test_render_video_is_readable_and_deterministic(tmp_path, small_scene_dict):
+    scene = scene_from_dict(small_scene_dict, tmp_path)
     seen = []
     info = render_video(scene, progress=lambda done, total: seen.append((done, total)))
     assert info.path == tmp_path / "clip.avi" and info.frame_count == scene.video.frame_count == 8
@@ -51,8 +35,8 @@ def test_render_video_is_readable_and_deterministic(tmp_path):
         read_frame(short.path, 5)
 
 
-def test_render_needs_a_video_block(tmp_path):
-    d = small_scene(tmp_path)
+def test_render_needs_a_video_block(tmp_path, small_scene_dict):
+    d = small_scene_dict
     del d["video"]
     with pytest.raises(SceneError, match="no 'video' block"):
         render_video(scene_from_dict(d, tmp_path))
@@ -60,10 +44,10 @@ def test_render_needs_a_video_block(tmp_path):
         read_video_info(tmp_path / "nothing.avi")
 
 
-def test_mcit_render_command(tmp_path):
+def test_mcit_render_command(tmp_path, small_scene_dict):
     import json
 
-    (tmp_path / "scene.json").write_text(json.dumps(small_scene(tmp_path)))
+    (tmp_path / "scene.json").write_text(json.dumps(small_scene_dict))
     assert main(["render", "--scene", str(tmp_path), "--frames", "2", "--out", str(tmp_path / "x.avi")]) == 0
     assert read_video_info(tmp_path / "x.avi").frame_count == 2
     assert main(["render", "--scene", str(tmp_path), "--frame", "0.5", "--out", str(tmp_path / "f.png")]) == 0

@@ -24,20 +24,6 @@ def workcell_t16(workcell):
     return r, clean, labels
 
 
-SMALL = {
-    "format": "mcit-scene/1",
-    "camera": {"width": 96, "height": 64, "K": [[80, 0, 47.5], [0, 80, 31.5], [0, 0, 1]],
-               "T_world_cam": {"xyz": [0, -1.2, 0.5], "rpy_deg": [-110, 0, 0]}},
-    "turret": {"T_world_turret": {"xyz": [0.2, -1.2, 0.5], "rpy_deg": [0, 0, 90]}},
-    "bodies": [
-        {"name": "table", "model": {"box": [1.0, 1.0, 0.04]}, "pose": {"xyz": [0, 0, -0.04]}, "appearance": {"albedo": 0.3}},
-        {"name": "box", "model": {"box": [0.2, 0.1, 0.1]}, "pose": {"xyz": [0, 0, 0]}, "appearance": {"albedo": 0.8, "texture": 0.05},
-         "motion": [{"t": 0.5, "pose": {"xyz": [0.1, 0.05, 0], "rpy_deg": [0, 0, 30]}}]},
-        {"name": "can", "model": {"cylinder": [0.04, 0.12]}, "pose": {"xyz": [-0.25, -0.1, 0]}, "appearance": {"albedo": 0.7}},
-    ],
-}
-
-
 def test_lattice_offsets_fill_the_pixel():
     off = lattice_offsets(89)
     assert off.shape == (89, 2) and off.min() >= -0.5 and off.max() < 0.5
@@ -57,8 +43,8 @@ def test_value_noise_is_deterministic_bounded_and_smooth():
     assert not np.array_equal(value_noise(X, 0.05, salt=1), a)
 
 
-def test_frames_are_deterministic(tmp_path):
-    scene = scene_from_dict(SMALL, tmp_path)
+def test_frames_are_deterministic(tmp_path, small_scene_dict):
+    scene = scene_from_dict(small_scene_dict, tmp_path)
     r = Renderer(scene)
     f1 = r.render(0.3, 3)
     f2 = Renderer(scene).render(0.3, 3)  # a new renderer: nothing cached
