@@ -130,7 +130,10 @@ def test_buffered_tracking_and_its_errors(workcell, emulator):
     time.sleep(0.06)
     first = ask(line, "s0q")
     assert first.startswith("g0q" + format_distance(rho)) and first[-2:] in ("+1", "+2")
-    assert ask(line, "s0q") in ("g0q" + format_distance(rho) + "+0", "g0q" + format_distance(rho) + "+1")
+    # The status of the next read says how many values came since this one: none (+0), one (+1)
+    # or several, the older overwritten (+2) — which of them depends on the machine's load.
+    second = ask(line, "s0q")
+    assert second.startswith("g0q" + format_distance(rho)) and second[-2:] in ("+0", "+1", "+2")
     assert ask(line, "s0c") == "g0?"
 
 
