@@ -18,7 +18,7 @@ import numpy as np
 from ..brep import BRep
 from ..camera import Camera, as_segment
 from ..geometry import Plane, angle_between_planes
-from ..transforms import exp_so3, log_so3, make_T, skew
+from ..transforms import exp_so3, log_so3, make_T
 from .lm import huber_weights, levenberg_marquardt
 from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs, support_obs
 from .result import ModelResult
@@ -327,14 +327,17 @@ def _fit_box(X: np.ndarray, cov: np.ndarray, which: np.ndarray, R0: np.ndarray):
     sol, *_ = np.linalg.lstsq(A, X.reshape(-1), rcond=None)
     dims, t, R = sol[:3], sol[3:], R0
     for _ in range(20):
-        J = np.zeros((3 * M, 9))
-        r = np.zeros(3 * M)
-        for k in range(M):
-            v = S[k] * dims
-            r[3 * k : 3 * k + 3] = X[k] - (t + R @ v)
-            J[3 * k : 3 * k + 3, :3] = R * S[k]
-            J[3 * k : 3 * k + 3, 3:6] = np.eye(3)
-            J[3 * k : 3 * k + 3, 6:] = -R @ skew(v)  # R exp([δ]×) v ≈ R v − R [v]× δ
+        V = S * dims  # (M, 3) corners in the box frame
+        r = (X - (t + V @ R.T)).reshape(-1)
+        J = np.zeros((M, 3, 9))
+        J[:, :, :3] = R[None] * S[:, None, :]
+        J[:, :, 3:6] = np.eye(3)
+        # R exp([δ]×) v ≈ R v − R [v]× δ
+        Vx = np.zeros((M, 3, 3))
+        Vx[:, 0, 1], Vx[:, 0, 2], Vx[:, 1, 2] = -V[:, 2], V[:, 1], -V[:, 0]
+        Vx[:, 1, 0], Vx[:, 2, 0], Vx[:, 2, 1] = V[:, 2], -V[:, 1], V[:, 0]
+        J[:, :, 6:] = -np.einsum("ij,mjk->mik", R, Vx)
+        J = J.reshape(3 * M, 9)
         H = J.T @ W @ J
         dscale = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))
         if np.linalg.cond(H * np.outer(dscale, dscale)) > 1e12:

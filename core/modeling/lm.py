@@ -32,11 +32,13 @@ def levenberg_marquardt(
     huber: float = 3.0,
     max_iter: int = 100,
     xtol: float = 1e-10,
+    ftol: float = 1e-10,
 ) -> tuple[np.ndarray, int]:
     """Minimise Σ huber(fun(x)) from x0; returns (x, iterations).
 
     fun : x (n,) → residuals (m,), normalised by their σ. jac : x → (m, n).
-    Stops when a step changes x by less than xtol relative (plus xtol absolute).
+    Stops when a step changes x by less than xtol relative (plus xtol absolute), or lowers the
+    cost by less than ftol relative.
     """
     x = np.asarray(x0, dtype=float).copy()
     r = fun(x)
@@ -63,6 +65,7 @@ def levenberg_marquardt(
             r_new = fun(x_new)
             c_new = _cost(r_new, huber)
             if c_new <= cost:
+                converged = cost - c_new <= ftol * cost
                 x, r, cost = x_new, r_new, c_new
                 lam = max(lam / 10.0, 1e-12)
                 accepted = True
