@@ -51,7 +51,6 @@ class CylinderData:
     camera, T_world_turret, spec : the sensors. silhouettes_uv : (2, 2, 2) or None.
     segments : list of ScanSegment (object returns, tangent beams per scan).
     support : Plane (normal up) or None. axis_hint : unit (3,) or None. cone : bool.
-    inside_uv : a pixel inside the object's image (between the silhouettes) or None.
     """
 
     camera: Camera
@@ -65,22 +64,17 @@ class CylinderData:
 
     @property
     def hits(self) -> np.ndarray:
+        """The object's returns of every scan, world points (N, 3)."""
         return np.vstack([s.hits_world for s in self.segments])
 
     @property
-    def covs(self) -> np.ndarray:
-        return np.concatenate([s.covs for s in self.segments])
-
-    @property
-    def dirs(self) -> np.ndarray:
-        return np.vstack([s.dirs_world for s in self.segments])
-
-    @property
     def returns(self) -> Returns:
+        """The same returns with their beams (for the likelihood fits)."""
         return concat_returns([s.returns for s in self.segments])
 
     @property
     def groups(self) -> np.ndarray:
+        """Which scan each return comes from, (N,) int."""
         return np.concatenate([np.full(len(s.hits_world), k) for k, s in enumerate(self.segments)])
 
     @property
@@ -168,9 +162,7 @@ def reduce_cylinder_data(
     if sil is not None:
         P1, P2 = _silhouette_planes(camera, sil)
         tol = 0.02  # points up to 2 cm outside the wedge still count (noise, parallax)
-
-        def keep(X):
-            return (X @ P1.n + P1.d > -tol) & (X @ P2.n + P2.d > -tol)
+        keep = lambda X: (X @ P1.n + P1.d > -tol) & (X @ P2.n + P2.d > -tol)  # noqa: E731
 
     segs = [segment_scan(s, T, spec, jump_m=jump_m, scan_index=k, keep=keep) for k, s in enumerate(scans)]
     if keep is not None:

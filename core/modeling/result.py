@@ -19,7 +19,6 @@ import numpy as np
 
 from ..brep import BRep
 from ..geometry import Line
-from ..transforms import transform_points
 
 __all__ = ["ModelResult"]
 
@@ -89,7 +88,3 @@ class ModelResult:
             s = self.sigmas.get(k, float("nan"))
             parts.append(f"{k} = {v * scale:.2f} ± {s * scale:.2f} {unit}")
         return ", ".join(parts)
-
-    def world_points(self, X_obj: np.ndarray) -> np.ndarray:
-        """Object-frame points (N, 3) in the world."""
-        return transform_points(self.T_world_obj, X_obj)

@@ -4,7 +4,7 @@ import pytest
 from core.geometry import Line, distance_point_line
 from core.modeling import METHODS, model_cylinder
 from core.modeling.simulate import simulate_revolution
-from core.rangefinder import RangeFinderSpec, RangeScan
+from core.rangefinder import RangeScan
 
 from .conftest import TABLE, cylinder_scene
 
