@@ -24,6 +24,9 @@ def build_parser() -> argparse.ArgumentParser:
     from app.vision.track_cli import add_track_parser  # argparse only: the tracker loads when the command runs
 
     add_track_parser(sub)
+    from app.demo.cli import add_demo_parser  # argparse only: the replay, solvers and report load when the command runs
+
+    add_demo_parser(sub)
     return parser
 
 
