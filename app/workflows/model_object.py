@@ -52,7 +52,8 @@ class ModelObject(Workflow):
     actions = ("click", "add_segment", "remove_last", "measure", "scan", "next_face", "solve", "accept", "cancel")
 
     def __init__(self, site, client: str = "operator", shape: str = "box", vertical: bool = True, on_table: bool = True,
-                 name: str | None = None, method: str = "fused", spacing_px: float | None = None, beams: int = 40):
+                 object_name: str | None = None, method: str = "fused", spacing_px: float | None = None,
+                 beams: int = 40):
         super().__init__(site, client)
         if shape not in SHAPES:
             raise WorkflowError(f"shape must be one of {', '.join(SHAPES)}, got {shape!r}")
@@ -66,14 +67,14 @@ class ModelObject(Workflow):
         if on_table and self.support is None:
             raise WorkflowError("'lies on the table' needs a table in the database; untick it or add the table")
         taken = {o.name for o in site.objects()}
-        if name is None:
+        if object_name is None:
             i = 1
             while f"{shape}_{i}" in taken:
                 i += 1
-            name = f"{shape}_{i}"
-        elif name in taken:
-            raise WorkflowError(f"an object named {name!r} already exists; choose another name")
-        self.object_name = name
+            object_name = f"{shape}_{i}"
+        elif object_name in taken:
+            raise WorkflowError(f"an object named {object_name!r} already exists; choose another name")
+        self.object_name = object_name
         # box: one entry per face {"segs": [...], "points": (N, 3), "covs": (N, 3, 3), "scan": RangeScan}
         self.faces: list[dict[str, Any]] = [{"segs": [], "points": None, "covs": None, "scan": None}]
         self.silhouettes: list[np.ndarray] = []

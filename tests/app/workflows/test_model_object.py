@@ -132,4 +132,4 @@ def test_without_devices_or_table_the_operator_is_told(site):
     with pytest.raises(WorkflowError, match="shape must be"):
         ModelObject(site, shape="sphere")
     with pytest.raises(WorkflowError, match="already exists"):
-        ModelObject(site, shape="box", name="parallelepiped")
+        ModelObject(site, shape="box", object_name="parallelepiped")
