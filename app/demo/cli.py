@@ -31,7 +31,7 @@ def add_demo_parser(subparsers) -> None:
     p.add_argument("--no-video", action="store_true", help="do not write the overlay video")
     p.add_argument("--frames", type=int, default=None, metavar="N", help="write only the first N frames of the overlay video")
     p.add_argument("--sim-trials", type=int, default=None, metavar="N",
-                   help="simulated trials per distance for Tables III.1/III.2, and 2N pose problems (default 100, "
+                   help="simulated trials per distance for Tables III.1/III.2, and 5N pose problems (default 100, "
                         "20 with --fast; 0: no simulation)")
     p.add_argument("--seed", type=int, default=0, help="the simulations' seed (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")

@@ -34,14 +34,18 @@ def _pyplot():
     return plt
 
 
-def plot_depth_errors(ours: Mapping[str, tuple[Sequence[float], Sequence[float]]], *, title: str = "Figure III.6 — depth error"):
+def plot_depth_errors(ours: Mapping[str, tuple[Sequence[float], Sequence[float]]], *, title: str = "Figure III.6 — depth error",
+                      label: str = "ours", points: Mapping[str, tuple[Sequence[float], Sequence[float]]] | None = None,
+                      points_label: str = "this run"):
     """Figure III.6, ours beside the paper's.
 
     ours : method → (distances_m (K,), depth errors in cm (K,)); methods named like Table III.2's
     columns (``tangential_vc_rf_cm``, ``bisecting_vc_rf_cm``, ``tangential_rf_cm``) or ``fused_cm``.
+    label : the legend's name for these curves (e.g. "simulation"). points : more results, same
+    form, drawn as stars without lines and named ``points_label`` (e.g. one measured run).
     Returns the matplotlib Figure.
     """
-    unknown = set(ours) - set(METHOD_LABELS)
+    unknown = (set(ours) | set(points or {})) - set(METHOD_LABELS)
     if unknown:
         raise ValueError(f"unknown method(s) {sorted(unknown)}; use {list(METHOD_LABELS)}")
     plt = _pyplot()
@@ -53,7 +57,10 @@ def plot_depth_errors(ours: Mapping[str, tuple[Sequence[float], Sequence[float]]
         d, e = np.asarray(d, dtype=float), np.asarray(e, dtype=float)
         if d.shape != e.shape:
             raise ValueError(f"{m}: {d.shape} distances but {e.shape} errors")
-        ax.plot(d, e, "-s", color=_COLOURS[m], ms=5, label=f"ours {METHOD_LABELS[m][:3]}")
+        ax.plot(d, e, "-s", color=_COLOURS[m], ms=5, label=f"{label} {METHOD_LABELS[m][:3]}")
+    for m, (d, e) in (points or {}).items():
+        ax.plot(np.asarray(d, dtype=float), np.asarray(e, dtype=float), "*", color=_COLOURS[m], ms=12, mec="k", mew=0.5,
+                label=f"{points_label} {METHOD_LABELS[m][:3]}")
     ax.axhline(0.0, color="k", lw=0.6)
     ax.set_xlabel("distance object / sensors (m)")
     ax.set_ylabel("depth error (cm)")

@@ -1,0 +1,178 @@
+"""The demo's overlay video: the scene's recorded frames with what the interface drew over them.
+
+Frame k of the scene's video (decoded, never re-rendered) shows video time t = k / fps; over it go
+the database's wireframes through the camera calibration of that moment (``app.ui.drawing
+.draw_database``: colour by status, hidden edges dashed), the workflow's marks (clicks, assigned
+edges, candidate ghosts, range points: ``draw_marks``), the range finder's last spot, and two
+text lines (the time and the workflow; its next step or last message) — the ``OverlayState`` the
+replay recorded last at or before t. The frame is enlarged ``scale`` times first so that thin
+lines and text stay legible; a pixel centre (u, v) goes to ((u + ½)·scale − ½, (v + ½)·scale − ½).
+"""
+
+from __future__ import annotations
+
+import bisect
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from app.overlay import COLORS, LineBatch, circle_marker
+from app.ui.drawing import draw_database, draw_marks
+
+from .replay import OverlayState
+
+__all__ = ["ascii_text", "draw_overlay", "state_at", "write_overlay_video"]
+
+FONT_SCALE = 0.42
+
+
+def state_at(timeline: Sequence[OverlayState], t_s: float) -> OverlayState:
+    """The last state recorded at or before video time t_s (the first one before any)."""
+    times = [s.t_s for s in timeline]
+    i = bisect.bisect_right(times, t_s + 1e-9) - 1
+    return timeline[max(i, 0)]
+
+
+_ASCII = {"±": "+/-", "°": " deg", "…": "...", "—": "-", "–": "-", "σ": "s", "→": "->", "×": "x", "²": "2", "³": "3", "µ": "u"}
+
+
+def ascii_text(text: str) -> str:
+    """The text in the ASCII that OpenCV's Hershey font draws (±, °, σ, → ... spelt out)."""
+    for a, b in _ASCII.items():
+        text = text.replace(a, b)
+    return text.encode("ascii", "replace").decode("ascii")
+
+
+def _text(img: np.ndarray, text: str, org: tuple[int, int], color=(255, 255, 255), scale: float = FONT_SCALE,
+          centred: bool = False) -> None:
+    """Text at org (its baseline's left end, or its middle when centred) on a darkened box, so it
+    reads over any background. (An outline drawn thicker would not do: OpenCV advances thicker
+    glyphs further.)"""
+    import cv2
+
+    text = ascii_text(text)
+    (w, h), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
+    if centred:
+        org = (org[0] - w // 2, org[1])
+    x0, y0 = max(org[0] - 2, 0), max(org[1] - h - 2, 0)
+    x1, y1 = min(org[0] + w + 2, img.shape[1]), min(org[1] + base + 1, img.shape[0])
+    if x1 > x0 and y1 > y0:
+        img[y0:y1, x0:x1] = (img[y0:y1, x0:x1] * 0.35).astype(img.dtype)
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, color, 1, cv2.LINE_AA)
+
+
+def _fit(text: str, width_px: int, scale: float = FONT_SCALE) -> str:
+    """The text, cut and ended with "..." if it is wider than width_px (OpenCV's font has no "…")."""
+    import cv2
+
+    def wide(s: str) -> bool:
+        return cv2.getTextSize(s, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0] > width_px
+
+    text = ascii_text(text)
+    if not wide(text):
+        return text
+    while text and wide(text + "..."):
+        text = text[:-1]
+    return text + "..."
+
+
+def draw_overlay(frame_gray: np.ndarray, state: OverlayState, t_s: float, scale: int = 2) -> np.ndarray:
+    """One overlay frame: BGR uint8 (H·scale, W·scale, 3) from a grey frame (H, W) and a state."""
+    import cv2
+
+    if frame_gray.ndim != 2:
+        raise ValueError(f"frame_gray must be a grey image (H, W), got shape {frame_gray.shape}")
+    if int(scale) < 1:
+        raise ValueError(f"scale must be a whole number ≥ 1, got {scale}")
+    scale = int(scale)
+    h, w = frame_gray.shape
+    img = cv2.cvtColor(cv2.resize(frame_gray, (w * scale, h * scale), interpolation=cv2.INTER_LINEAR), cv2.COLOR_GRAY2BGR)
+    cam = state.camera
+    batch, db_labels = draw_database(cam, state.objects, w, h)
+    labels = [(uv, text) for _, uv, text in db_labels]
+    if state.marks is not None:
+        marks_batch, mark_labels = draw_marks(cam, state.marks, {o.name: o for o in state.objects}, w, h)
+        labels += mark_labels
+    else:
+        marks_batch = LineBatch()
+    beam = LineBatch()
+    X = state.beam_X_world
+    if X is not None and np.all(np.isfinite(X)) and cam.depth(X) > 0:
+        uv = cam.project(np.asarray(X, float))
+        beam.add(circle_marker(uv, 5.0), COLORS["beam"])
+    to_img = lambda uv: (np.asarray(uv, float) + 0.5) * scale - 0.5  # noqa: E731
+    for b in (batch, marks_batch, beam):
+        segs, cols = b.arrays()
+        P = np.round(to_img(segs) * 16).astype(np.int64)
+        for (a, c), col in zip(P, cols):
+            cv2.line(img, (int(a[0]), int(a[1])), (int(c[0]), int(c[1])), (int(col[2]), int(col[1]), int(col[0])), 1,
+                     cv2.LINE_AA, 4)
+    for uv, text in labels:
+        p = to_img(uv)
+        if np.all(np.isfinite(p)):
+            _text(img, str(text), (int(p[0]), int(p[1])), scale=0.35, centred=True)
+    head = f"t = {t_s:5.2f} s" + (f"   {state.title}" if state.title else "")
+    _text(img, _fit(head, w * scale - 12), (6, 16))
+    if state.text:
+        _text(img, _fit(state.text, w * scale - 12), (6, h * scale - 8), color=(200, 255, 255))
+    return img
+
+
+def write_overlay_video(
+    video_path: str | Path,
+    timeline: Sequence[OverlayState],
+    out_path: str | Path,
+    *,
+    fps: float,
+    frames: int | None = None,
+    scale: int = 2,
+    stills: dict[str, float] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> int:
+    """Write the overlay video (mp4, MPEG-4 part 2) of a replay; returns the frames written.
+
+    video_path : the scene's recorded video (read frame by frame). timeline : the replay's
+    states, in time order. fps : the video's rate (frame k shows t = k / fps). frames : only the
+    first N frames. stills : {file name: t_s} — also save the frame showing t_s as a PNG beside
+    the video. progress : ``progress(done, total)``.
+    """
+    import cv2
+
+    if not timeline:
+        raise ValueError("the timeline is empty: replay a script first")
+    out_path = Path(out_path)
+    cap = cv2.VideoCapture(str(video_path))
+    if not cap.isOpened():
+        raise ValueError(f"{video_path}: OpenCV cannot open this video")
+    total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    if frames is not None:
+        total = min(total, int(frames))
+    want = {int(round(t * fps)): name for name, t in (stills or {}).items()}
+    writer = None
+    written = 0
+    try:
+        for k in range(total):
+            ok, raw = cap.read()
+            if not ok:
+                break
+            t = k / fps
+            img = draw_overlay(cv2.cvtColor(raw, cv2.COLOR_BGR2GRAY), state_at(timeline, t), t, scale)
+            if writer is None:
+                out_path.parent.mkdir(parents=True, exist_ok=True)
+                writer = cv2.VideoWriter(str(out_path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (img.shape[1], img.shape[0]))
+                if not writer.isOpened():
+                    raise RuntimeError(f"OpenCV cannot write an mp4v video to {out_path}")
+            writer.write(img)
+            written += 1
+            if k in want:
+                cv2.imwrite(str(out_path.parent / want[k]), img)
+            if progress:
+                progress(written, total)
+    finally:
+        cap.release()
+        if writer is not None:
+            writer.release()
+    if written == 0:
+        raise ValueError(f"{video_path}: no frame could be read")
+    return written

@@ -1,0 +1,389 @@
+"""The demo's numbers: what the replayed session produced, compared with the scene's truth.
+
+Everything here reads a finished ``Replay`` (its workflow objects and the site's database) and
+the scene's ground truth; nothing writes. The measures are the paper's:
+
+* Table III.1 — the modelled box's width, height, length (the paper's w × h × l = 9 × 14 × 9.4 cm
+  is our size_x × size_z × size_y) and volume, each against the true body;
+* Table III.2 / Figure III.6 — the cylinder's "depth": how far behind its front surface the
+  estimated axis lies along the range finder's horizontal line of sight (5.1 cm for a perfect
+  model), by each of the paper's three methods and our fused fit, all on the measurements the
+  operator's run took (``core.modeling.model_cylinder`` with the same silhouettes and scans);
+* Table V.1 / Figures V.1, V.2 — the pose error (rotation angle, translation distance) of each
+  update against the true pose at that time: P3L alone (the candidate the workflow chose, or, for
+  an update refined from the database pose, P3L on the same clicks) and after refinement; the
+  noise-free P3L on the clicks' true pixels (the script's truth) through the true camera.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from app.scene import Scene
+from core.camera import Camera
+from core.geometry import Line, distance_point_line
+from core.modeling import METHODS, BoxFace, ModelResult, model_box, model_cylinder
+from core.pose import p3l
+from core.transforms import pose_error
+
+from .replay import Replay, RunRecord
+
+__all__ = [
+    "PAPER_BOX_ORDER",
+    "box_dims_paper_order",
+    "cylinder_depth_m",
+    "first_p3l",
+    "CalibrationResults",
+    "BoxResults",
+    "CylinderResults",
+    "PoseUpdate",
+    "DemoResults",
+    "calibration_results",
+    "box_results",
+    "cylinder_results",
+    "pose_results",
+    "demo_results",
+]
+
+# The paper's w × h × l of the box (Table III.1) in our object frame's axes: x, z, y.
+PAPER_BOX_ORDER = (("width", 0), ("height", 2), ("length", 1))
+
+
+def box_dims_paper_order(result: ModelResult, T_world_true: np.ndarray, dims_true_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A modelled box's sizes matched to the true box's axes, in the paper's (width, height,
+    length) order.
+
+    result : the modelled box (``dimensions`` size_x, size_y, size_z and their ``sigmas``).
+    T_world_true : array, shape (4, 4), the true pose. dims_true_m : array, shape (3,), the true
+    sizes along the true box's x, y, z (metres). Returns (estimate (3,), σ (3,), truth (3,)),
+    metres, each ordered width, height, length.
+    """
+    R_est, R_true = result.T_world_obj[:3, :3], np.asarray(T_world_true, float)[:3, :3]
+    match = np.argmax(np.abs(R_est.T @ R_true), axis=0)  # for each true axis, the estimated axis along it
+    if len(set(match.tolist())) != 3:
+        raise ValueError("the modelled box's axes do not match the true box's one to one (more than 45° off)")
+    est = np.array([result.dimensions[k] for k in ("size_x", "size_y", "size_z")])[match]
+    sig = np.array([result.sigmas.get(k, np.nan) for k in ("size_x", "size_y", "size_z")])[match]
+    order = [a for _, a in PAPER_BOX_ORDER]
+    return est[order], sig[order], np.asarray(dims_true_m, float)[order]
+
+
+def cylinder_depth_m(result: ModelResult, origin_world: np.ndarray, front_distance_m: float) -> float:
+    """The paper's "depth" of a modelled cylinder (metres; its radius for a perfect model).
+
+    Horizontal distance from ``origin_world`` (3,) (the range finder) to the estimated axis at
+    mid-height, minus ``front_distance_m``, the true horizontal distance from it to the cylinder's
+    front surface.
+    """
+    mid = result.axis.point + 0.5 * result.dimensions["height"] * result.axis.direction
+    return float(np.linalg.norm((mid - np.asarray(origin_world, float))[:2]) - front_distance_m)
+
+
+def first_p3l(camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray) -> tuple[list[np.ndarray], tuple[int, ...] | None]:
+    """P3L on the first workable triple of clicked edges, in click order (as the Update pose
+    workflow's Solve does). Returns (candidates, best first; the triple's indices), or ([], None)."""
+    for triple in itertools.combinations(range(len(segs_uv)), 3):
+        idx = list(triple)
+        try:
+            cands = p3l(camera, segs_uv[idx], edges_obj[idx])
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            continue
+        if cands:
+            return [np.asarray(T, float) for T in cands], triple
+    return [], None
+
+
+# ---------------------------------------------------------------------- calibrations
+@dataclass(frozen=True)
+class CalibrationResults:
+    """Camera: RMS of the DLT (px) over ``camera_points`` points; the calibrated C against the true
+    one: reprojection difference (px) at every body's corners (RMS, max) and the optical centre's
+    distance (m). Turret: RMS of the measured points to their surfaces (mm) and the pose error
+    (°, m) against the true turret. NaN when the script has no such run."""
+
+    camera_rms_px: float = float("nan")
+    camera_points: int = 0
+    camera_reprojection_rms_px: float = float("nan")
+    camera_reprojection_max_px: float = float("nan")
+    camera_centre_error_m: float = float("nan")
+    turret_rms_mm: float = float("nan")
+    turret_points: int = 0
+    turret_error_deg: float = float("nan")
+    turret_error_m: float = float("nan")
+
+
+def _body_corners(scene: Scene, t_s: float) -> np.ndarray:
+    """Every non-scenery body's corners (or axis ends ± radius for solids) in the world at t_s, (N, 3)."""
+    out = []
+    for b in scene.bodies:
+        if b.status == "scenery":
+            continue
+        T = b.pose_at(t_s)
+        V = b.model.vertices
+        if not len(V):
+            lo, hi = b.model.bounds()
+            V = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        out.append(V @ T[:3, :3].T + T[:3, 3])
+    return np.vstack(out)
+
+
+def calibration_results(replay: Replay, scene: Scene) -> CalibrationResults:
+    """The camera and turret calibrations of the run against the scene's true camera and turret."""
+    out: dict[str, Any] = {}
+    cams = replay.runs_of("calibrate_camera")
+    if cams:
+        run = cams[-1]
+        wf = run.workflow
+        X = _body_corners(scene, run.t_end)
+        X = X[(scene.camera.depth(X) > 0) & (run.camera.depth(X) > 0)]
+        d = np.linalg.norm(run.camera.project(X) - scene.camera.project(X), axis=1)
+        out.update(camera_rms_px=float(wf.result.rms_px), camera_points=len(wf.uv),
+                   camera_reprojection_rms_px=float(np.sqrt(np.mean(d**2))), camera_reprojection_max_px=float(d.max()),
+                   camera_centre_error_m=float(np.linalg.norm(run.camera.center - scene.camera.center)))
+    turrets = replay.runs_of("calibrate_turret")
+    if turrets:
+        run = turrets[-1]
+        s = run.workflow.summary()
+        deg, m = pose_error(run.T_world_turret, scene.turret.T_world_turret)
+        out.update(turret_rms_mm=float(s["rms_mm"]), turret_points=len(s.get("points", [])),
+                   turret_error_deg=float(deg), turret_error_m=float(m))
+    return CalibrationResults(**out)
+
+
+# ---------------------------------------------------------------------- the box (Table III.1)
+@dataclass(frozen=True)
+class BoxResults:
+    """The modelled box against the truth, in the paper's order (width, height, length), metres.
+
+    estimate, sigma, truth : (3,). volume_m3, volume_true_m3. method : the workflow's.
+    distance_turret_m, distance_camera_m : from the range finder / the camera to the box's centre.
+    points : range points per measured face. fused : the same measurements by the fused fit
+    (estimate (3,), sigma (3,)). true_camera : the same clicks and points through the true camera
+    instead of the calibrated one (estimate (3,), sigma (3,)) — a diagnostic of how much of the
+    error the camera calibration causes (an operator never has the true camera).
+    """
+
+    name: str
+    method: str
+    estimate: np.ndarray
+    sigma: np.ndarray
+    truth: np.ndarray
+    volume_m3: float
+    volume_true_m3: float
+    distance_turret_m: float
+    distance_camera_m: float
+    points: tuple[int, ...]
+    fused: tuple[np.ndarray, np.ndarray]
+    true_camera: tuple[np.ndarray, np.ndarray]
+
+    @property
+    def error(self) -> np.ndarray:
+        return self.estimate - self.truth
+
+
+def _box_faces(wf) -> list[BoxFace]:
+    return [BoxFace(f["points"], np.array(f["segs"]).reshape(-1, 2, 2), f["covs"]) for f in wf.faces if f["points"] is not None]
+
+
+def box_results(run: RunRecord, scene: Scene) -> BoxResults:
+    """Table III.1's measures for one accepted ``model_object`` run of a box."""
+    wf = run.workflow
+    body = scene.body(run.object_name)
+    T_true = body.pose_at(run.t_end)
+    lo, hi = body.model.bounds()
+    dims_true = hi - lo
+    r = wf.result
+    est, sig, truth = box_dims_paper_order(r, T_true, dims_true)
+    faces = _box_faces(wf)
+    alt = {}
+    for key, cam, method in (("fused", run.camera, "fused"), ("true_camera", scene.camera, r.method)):
+        res = model_box(cam, faces, wf.support, method=method)
+        e, s, _ = box_dims_paper_order(res, T_true, dims_true)
+        alt[key] = (e, s)
+    centre = T_true[:3, :3] @ ((lo + hi) / 2) + T_true[:3, 3]
+    return BoxResults(
+        run.object_name, r.method, est, sig, truth, float(np.prod(est)), float(np.prod(dims_true)),
+        float(np.linalg.norm(centre - scene.turret.T_world_turret[:3, 3])), float(np.linalg.norm(centre - scene.camera.center)),
+        tuple(len(f.points_world) for f in faces), alt["fused"], alt["true_camera"],
+    )
+
+
+# ---------------------------------------------------------------------- the cylinder (Table III.2)
+@dataclass(frozen=True)
+class CylinderResults:
+    """Every method on the run's measurements (``METHODS`` order), against the truth.
+
+    by_method : method → {"radius", "height", "sigma_radius", "sigma_height", "axis_error",
+    "depth"} (metres; NaN when the method failed) and "error" (the failure's message or "").
+    radius_true, height_true, depth_true (= the radius) : metres. distance_turret_m,
+    distance_camera_m : from the range finder / the camera to the axis at mid-height. method : the
+    one the workflow used.
+    beams, hits : per scan.
+    """
+
+    name: str
+    method: str
+    by_method: dict[str, dict[str, Any]]
+    radius_true: float
+    height_true: float
+    distance_turret_m: float
+    distance_camera_m: float
+    beams: tuple[int, ...]
+    hits: tuple[int, ...]
+
+    @property
+    def depth_true(self) -> float:
+        return self.radius_true
+
+
+def cylinder_results(run: RunRecord, scene: Scene) -> CylinderResults:
+    """Table III.2's measures for one accepted ``model_object`` run of a cylinder: the paper's three
+    methods and the fused fit, on the same silhouettes and scans."""
+    wf = run.workflow
+    body = scene.body(run.object_name)
+    T_true = body.pose_at(run.t_end)
+    solid = body.model.solids[0]
+    p0 = T_true[:3, :3] @ solid.p0 + T_true[:3, 3]
+    axis = T_true[:3, :3] @ solid.axis
+    mid_true = p0 + 0.5 * solid.height * axis
+    O_rf = scene.turret.T_world_turret[:3, 3]
+    front = float(np.linalg.norm((mid_true - O_rf)[:2]) - solid.r0)
+    by_method: dict[str, dict[str, Any]] = {}
+    for m in METHODS:
+        try:
+            res = wf.result if m == wf.result.method else model_cylinder(
+                run.camera, m, silhouettes_uv=np.array(wf.silhouettes), scans=wf.scans, T_world_turret=run.T_world_turret,
+                spec=scene.rangefinder, support=wf.support, cone=wf.shape == "cone")
+        except ValueError as exc:
+            by_method[m] = {k: float("nan") for k in ("radius", "height", "sigma_radius", "sigma_height", "axis_error", "depth")}
+            by_method[m]["error"] = str(exc)
+            continue
+        mid = res.axis.point + 0.5 * res.dimensions["height"] * res.axis.direction
+        by_method[m] = {
+            "radius": res.dimensions["radius"], "height": res.dimensions["height"],
+            "sigma_radius": res.sigmas.get("radius", float("nan")), "sigma_height": res.sigmas.get("height", float("nan")),
+            "axis_error": float(distance_point_line(mid, Line(p0, axis))),
+            "depth": cylinder_depth_m(res, O_rf, front), "error": "",
+        }
+    return CylinderResults(
+        run.object_name, wf.result.method, by_method, float(solid.r0), float(solid.height),
+        float(np.linalg.norm(mid_true - O_rf)), float(np.linalg.norm(mid_true - scene.camera.center)),
+        tuple(len(s) for s in wf.scans), tuple(int(s.hits.sum()) for s in wf.scans),
+    )
+
+
+# ---------------------------------------------------------------------- pose updates (Table V.1)
+@dataclass(frozen=True)
+class PoseUpdate:
+    """One update_pose run against the true pose at its end.
+
+    motion_deg, motion_m : the object's true motion since the previous update (or t = 0).
+    p3l_source : "workflow" (the operator's Solve, the candidate chosen) or "same clicks" (P3L run
+    by the report on the run's clicks: the operator refined from the database pose). p3l_error,
+    refined_error : (degrees, metres), NaN without a P3L solution. noise_free_error : P3L on the
+    clicks' true pixels through the true camera, its first-ranked candidate (degrees, metres), NaN
+    without truth; noise_free_nearest : its candidate nearest the truth.
+    rms_px : the refinement's RMS. std_deg, std_m : its predicted σ of the rotation angle (RSS of
+    the three axes) and of the position. edges : clicked edges. candidates : P3L's count.
+    """
+
+    name: str
+    t_s: float
+    motion: str
+    motion_deg: float
+    motion_m: float
+    p3l_source: str
+    p3l_error: tuple[float, float]
+    refined_error: tuple[float, float]
+    noise_free_error: tuple[float, float]
+    noise_free_nearest: tuple[float, float]
+    rms_px: float
+    std_deg: float
+    std_m: float
+    edges: int
+    candidates: int
+
+
+def _true_segments(run: RunRecord) -> np.ndarray | None:
+    """The run's clicked segments at their true pixels (the script's ``uv_true``), (S, 2, 2), in
+    the order the workflow assigned them; None when the script holds no such truth."""
+    uv = [a.truth.get("uv_true") if a.truth else None for a in run.script_actions if a.action == "click"]
+    if not uv or any(u is None for u in uv) or len(uv) % 2:
+        return None
+    return np.asarray(uv, float).reshape(-1, 2, 2)
+
+
+def pose_update(run: RunRecord, scene: Scene, T_before: np.ndarray, large_deg: float = 18.0, large_m: float = 0.05) -> PoseUpdate:
+    """One accepted update_pose run, compared with the true pose at its end.
+
+    T_before : (4, 4) the true pose before the motion. large_deg, large_m : the paper's limit of
+    the small-motion method (§IV.3): a true motion beyond either is "large".
+    """
+    wf = run.workflow
+    T_true = scene.body(run.object_name).pose_at(run.t_end)
+    motion_deg, motion_m = pose_error(T_before, T_true)
+    model = wf.obj.model
+    pairs = [(s, e) for s, e in zip(wf.segs, wf.edge_ids) if e is not None]
+    segs = np.array([s for s, _ in pairs])
+    edges = np.array([model.vertices[model.edges[e]] for _, e in pairs])
+    nan2 = (float("nan"), float("nan"))
+    if wf.candidates:
+        source, cands = "workflow", wf.candidates
+        T_p3l = cands[wf.chosen if wf.chosen is not None else 0]
+    else:
+        source = "same clicks"
+        cands, _ = first_p3l(run.camera, segs, edges)
+        T_p3l = cands[0] if cands else None
+    p3l_err = pose_error(T_p3l, T_true) if T_p3l is not None else nan2
+    true_segs = _true_segments(run)
+    noise_free = nearest = nan2
+    if true_segs is not None and len(true_segs) == len(wf.segs) and all(e is not None for e in wf.edge_ids):
+        nf, _ = first_p3l(scene.camera, true_segs, edges)
+        if nf:
+            errs = [pose_error(T, T_true) for T in nf]
+            noise_free, nearest = errs[0], min(errs, key=lambda e: e[0])
+    r = wf.refined
+    return PoseUpdate(
+        run.object_name, run.t_end, "large" if (motion_deg > large_deg or motion_m > large_m) else "small",
+        float(motion_deg), float(motion_m), source, tuple(map(float, p3l_err)), tuple(map(float, pose_error(r.T_world_obj, T_true))),
+        tuple(map(float, noise_free)), tuple(map(float, nearest)), float(r.rms_px), float(np.linalg.norm(r.std_r_deg)), float(np.linalg.norm(r.std_t_m)),
+        len(pairs), len(cands),
+    )
+
+
+def pose_results(replay: Replay, scene: Scene) -> list[PoseUpdate]:
+    """Every update_pose run, in order. An update's true motion is the object's, from where it
+    truly was at the previous update of it (or at t = 0) to where it is at this one."""
+    out, last_t = [], {}
+    for run in replay.runs_of("update_pose"):
+        body = scene.body(run.object_name)
+        out.append(pose_update(run, scene, body.pose_at(last_t.get(run.object_name, 0.0))))
+        last_t[run.object_name] = run.t_end
+    return out
+
+
+# ---------------------------------------------------------------------- everything
+@dataclass(frozen=True)
+class DemoResults:
+    """All of the run's numbers (see the module docstring)."""
+
+    calibration: CalibrationResults
+    boxes: list[BoxResults] = field(default_factory=list)
+    cylinders: list[CylinderResults] = field(default_factory=list)
+    poses: list[PoseUpdate] = field(default_factory=list)
+
+
+def demo_results(replay: Replay, scene: Scene) -> DemoResults:
+    """Compute every comparison the report shows from a finished replay."""
+    boxes, cylinders = [], []
+    for run in replay.runs_of("model_object"):
+        shape = run.workflow.shape
+        if shape == "box":
+            boxes.append(box_results(run, scene))
+        elif shape == "cylinder":
+            cylinders.append(cylinder_results(run, scene))
+    return DemoResults(calibration_results(replay, scene), boxes, cylinders, pose_results(replay, scene))

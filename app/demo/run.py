@@ -1,0 +1,189 @@
+"""``run_demo``: the whole headless demo — replay, overlay video, database, simulations, report."""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+import numpy as np
+
+from app.operator.script import OperatorScript, load_script
+from app.scene import Scene, load_scene
+
+from .replay import Replay, replay_script
+from .results import DemoResults, demo_results
+
+__all__ = ["DemoOutcome", "run_demo", "DB_NAME", "VIDEO_NAME", "REPORT_NAME"]
+
+DB_NAME, VIDEO_NAME, REPORT_NAME = "site.sqlite", "overlay.mp4", "report.md"
+BOX_DISTANCES_M = (1.3, 1.4, 1.5, 1.6)  # Table III.1's
+CYLINDER_DISTANCES_M = (1.0, 1.2, 1.4, 1.6)  # Table III.2's
+
+
+@dataclass
+class DemoOutcome:
+    """What ``run_demo`` wrote and measured: out_dir, the report, the database, the video (None
+    without), the replay, the results and the wall time of each phase (seconds)."""
+
+    out_dir: Path
+    report: Path
+    db: Path
+    video: Path | None
+    replay: Replay
+    results: DemoResults
+    wall_s: dict
+
+
+def _bar(stream: TextIO | None, label: str, every_s: float = 0.25):
+    """A progress callback ``show(done, total)`` on stream, redrawn at most every ``every_s``
+    seconds and at the end (None when stream is None)."""
+    if stream is None:
+        return None
+    from app.scene_cli import progress_bar
+
+    show = progress_bar(label, stream)
+    last = [-np.inf]
+
+    def throttled(done: int, total: int) -> None:
+        now = time.monotonic()
+        if done >= total or now - last[0] >= every_s:
+            last[0] = now
+            show(done, total)
+
+    return throttled
+
+
+def _stills(script: OperatorScript) -> list[tuple[str, str, float]]:
+    """Overlay frames for the report: (file name, caption, video time) — the first modelling
+    solve and the first pose refinement of the script, when it has them."""
+    out = []
+    for run in script.runs():
+        for a in run.actions:
+            if run.workflow == "model_object" and a.action == "solve" and not any(s[0] == "overlay_model.png" for s in out):
+                out.append(("overlay_model.png", f"Overlay at t = {a.t:.2f} s: {run.object_name} modelled (preview)", a.t))
+            if run.workflow == "update_pose" and a.action == "refine" and not any(s[0] == "overlay_pose.png" for s in out):
+                out.append(("overlay_pose.png", f"Overlay at t = {a.t:.2f} s: {run.object_name}'s pose refined", a.t))
+    return out
+
+
+def _clear_db(path: Path) -> None:
+    for suffix in ("", "-wal", "-shm"):
+        p = path.with_name(path.name + suffix)
+        if p.exists():
+            p.unlink()
+
+
+def run_demo(
+    scene: Scene | str | Path,
+    script: OperatorScript | str | Path | None = None,
+    out_dir: str | Path = "mcit-demo-out",
+    *,
+    timing: str = "realistic",
+    video: bool = True,
+    frames: int | None = None,
+    sim_trials: int = 100,
+    pose_trials: int | None = None,
+    seed: int = 0,
+    stream: TextIO | None = sys.stderr,
+) -> DemoOutcome:
+    """Replay the scene's operator script and write the demo's outputs in ``out_dir``.
+
+    scene : a Scene or its folder. script : an OperatorScript or its file (default: the scene's
+    ``operator.json``). out_dir : created if needed; its ``site.sqlite`` is replaced. timing :
+    "realistic" or "fast" emulated devices (``app.demo.replay.DEVICE_TIMING``). video : write
+    ``overlay.mp4`` (``frames``: only the first N). sim_trials : simulated trials per distance
+    for Tables III.1/III.2 (0: no simulation); pose_trials : simulated pose problems (default
+    5 × sim_trials). seed : the simulations' seed. stream : where progress goes (None: quiet).
+
+    Raises DemoStepError (app.demo.replay) naming the failing step; ValueError for a scene or
+    script that cannot be used.
+    """
+    from .report import write_report
+
+    wall: dict[str, float] = {}
+    t_all = time.perf_counter()
+    scene = scene if isinstance(scene, Scene) else load_scene(scene)
+    if script is None:
+        script = scene.root / "operator.json"
+    script = script if isinstance(script, OperatorScript) else load_script(script)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    db_path = out / DB_NAME
+    _clear_db(db_path)
+
+    def say(text: str) -> None:
+        if stream is not None:
+            stream.write(f"mcit demo: {text}\n")
+            stream.flush()
+
+    say(f"replaying {len(script.actions)} actions of {script.scene!r} through the workflows ({timing} device timing)")
+    bar = _bar(stream, "actions")
+    t0 = time.perf_counter()
+    replay = replay_script(scene, script, db_path, timing=timing, progress=(lambda d, n, _w: bar(d, n)) if bar else None)
+    wall["replay"] = time.perf_counter() - t0
+    try:
+        t0 = time.perf_counter()
+        results = demo_results(replay, scene)
+        wall["analysis"] = time.perf_counter() - t0
+        stills = _stills(script)
+        video_path = None
+        if video:
+            if scene.video is None or not scene.video.path.is_file():
+                raise ValueError(f"scene {scene.name!r} has no video file to draw over; run with --no-video or render it")
+            say(f"drawing the overlay over {scene.video.path.name}")
+            t0 = time.perf_counter()
+            video_path = out / VIDEO_NAME
+            from .overlay_video import write_overlay_video
+
+            write_overlay_video(scene.video.path, replay.timeline, video_path, fps=scene.video.fps, frames=frames,
+                                stills={name: t for name, _, t in stills}, progress=_bar(stream, "frames"))
+            wall["overlay video"] = time.perf_counter() - t0
+        sims = None
+        if sim_trials > 0:
+            t0 = time.perf_counter()
+            sims = _simulate(scene, script, sim_trials, pose_trials if pose_trials is not None else 5 * sim_trials, seed,
+                             stream, say)
+            wall["simulation"] = time.perf_counter() - t0
+        wall["total"] = time.perf_counter() - t_all
+        shown = [(name, caption) for name, caption, _ in stills if (out / name).is_file() and video_path is not None]
+        report = write_report(out, scene, script, replay, results, sims, wall, shown)
+        say(f"wrote {report}, {db_path}" + (f", {video_path}" if video_path else ""))
+        return DemoOutcome(out, report, db_path, video_path, replay, results, wall)
+    finally:
+        replay.site.db.close()
+
+
+def _simulate(scene: Scene, script: OperatorScript, trials: int, pose_trials: int, seed: int, stream, say):
+    """The simulated sweeps (Simulations) with the script's click noise, for the scene's unknown
+    box and cylinder and the paper's pose problems."""
+    from .report import Simulations
+    from .simulation import box_sweep, cylinder_sweep, pose_sweep, sim_setup
+
+    sigma = float(script.generator.get("click_sigma_px", 1.0))
+    setup = sim_setup(scene, sigma)
+    rng = np.random.default_rng(seed)
+    total = trials * (len(BOX_DISTANCES_M) + len(CYLINDER_DISTANCES_M)) + pose_trials
+    say(f"simulating the paper's sweeps: {trials} trials per distance, {pose_trials} pose problems (seed {seed})")
+    bar = _bar(stream, "trials")
+    done = [0]
+
+    def tick() -> None:
+        done[0] += 1
+        if bar:
+            bar(done[0], total)
+
+    box = cylinder = None
+    for body in scene.unknown:
+        dims = body.model.bounds()[1] - body.model.bounds()[0]
+        if body.kind == "box" and box is None:
+            box = box_sweep(setup, dims, BOX_DISTANCES_M, trials, rng, tick)
+        elif body.kind == "cylinder" and cylinder is None and body.model.solids:
+            s = body.model.solids[0]
+            cylinder = cylinder_sweep(setup, s.r0, s.height, CYLINDER_DISTANCES_M, trials, rng, tick)
+    pose = pose_sweep(pose_trials, sigma, rng, tick) if pose_trials > 0 else None
+    if bar and done[0] < total:
+        bar(total, total)
+    return Simulations(setup, seed, box, cylinder, pose)
