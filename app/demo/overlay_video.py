@@ -22,9 +22,14 @@ from app.ui.drawing import draw_database, draw_marks
 
 from .replay import OverlayState
 
-__all__ = ["ascii_text", "draw_overlay", "state_at", "write_overlay_video"]
+__all__ = ["ascii_text", "draw_overlay", "state_at", "still_frame", "write_overlay_video"]
 
 FONT_SCALE = 0.42
+
+
+def still_frame(t_s: float, fps: float) -> int:
+    """The first frame showing the state of an action at video time t_s (the frame at or after it)."""
+    return int(np.ceil(t_s * fps - 1e-9))
 
 
 def state_at(timeline: Sequence[OverlayState], t_s: float) -> OverlayState:
@@ -134,8 +139,8 @@ def write_overlay_video(
 
     video_path : the scene's recorded video (read frame by frame). timeline : the replay's
     states, in time order. fps : the video's rate (frame k shows t = k / fps). frames : only the
-    first N frames. stills : {file name: t_s} — also save the frame showing t_s as a PNG beside
-    the video. progress : ``progress(done, total)``.
+    first N frames. stills : {file name: t_s} — also save as a PNG beside the video the first
+    frame that shows what was done at t_s (``still_frame``). progress : ``progress(done, total)``.
     """
     import cv2
 
@@ -148,7 +153,7 @@ def write_overlay_video(
     total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
     if frames is not None:
         total = min(total, int(frames))
-    want = {int(round(t * fps)): name for name, t in (stills or {}).items()}
+    want = {still_frame(t, fps): name for name, t in (stills or {}).items()}
     writer = None
     written = 0
     try:

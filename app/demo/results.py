@@ -12,7 +12,7 @@ the scene's ground truth; nothing writes. The measures are the paper's:
 * Table V.1 / Figures V.1, V.2 — the pose error (rotation angle, translation distance) of each
   update against the true pose at that time: P3L alone (the candidate the workflow chose, or, for
   an update refined from the database pose, P3L on the same clicks) and after refinement; the
-  noise-free P3L on the clicks' true pixels (the script's truth) through the true camera.
+  noise-free P3L on the clicks' true positions (the script's truth) through the true camera.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from app.scene import Scene
 from core.camera import Camera
 from core.geometry import Line, distance_point_line
 from core.modeling import METHODS, BoxFace, ModelResult, model_box, model_cylinder
-from core.pose import p3l
+from core.pose import p3l, refine
 from core.transforms import pose_error
 
 from .replay import Replay, RunRecord
@@ -285,9 +285,11 @@ class PoseUpdate:
     p3l_source : "workflow" (the operator's Solve, the candidate chosen) or "same clicks" (P3L run
     by the report on the run's clicks: the operator refined from the database pose). p3l_error,
     refined_error : (degrees, metres), NaN without a P3L solution. noise_free_error : P3L on the
-    clicks' true pixels through the true camera, its first-ranked candidate (degrees, metres), NaN
-    without truth; noise_free_nearest : its candidate nearest the truth.
-    rms_px : the refinement's RMS. std_deg, std_m : its predicted σ of the rotation angle (RSS of
+    clicks without their noise (``_true_segments``) through the true camera, its first-ranked
+    candidate (degrees, metres), NaN without truth; noise_free_nearest : its candidate nearest the
+    truth. refined_true_camera : the same refinement (same start, same clicks) through the true
+    camera instead of the calibrated one (degrees, metres): how much of the error the camera
+    calibration causes. rms_px : the refinement's RMS. std_deg, std_m : its predicted σ of the rotation angle (RSS of
     the three axes) and of the position. edges : clicked edges. candidates : P3L's count.
     """
 
@@ -301,6 +303,7 @@ class PoseUpdate:
     refined_error: tuple[float, float]
     noise_free_error: tuple[float, float]
     noise_free_nearest: tuple[float, float]
+    refined_true_camera: tuple[float, float]
     rms_px: float
     std_deg: float
     std_m: float
@@ -308,13 +311,28 @@ class PoseUpdate:
     candidates: int
 
 
-def _true_segments(run: RunRecord) -> np.ndarray | None:
-    """The run's clicked segments at their true pixels (the script's ``uv_true``), (S, 2, 2), in
-    the order the workflow assigned them; None when the script holds no such truth."""
-    uv = [a.truth.get("uv_true") if a.truth else None for a in run.script_actions if a.action == "click"]
-    if not uv or any(u is None for u in uv) or len(uv) % 2:
+def _true_segments(run: RunRecord, scene: Scene, T_true: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The run's clicks without their noise: each clicked 3D point of the script's truth, moved
+    onto its model edge's line at the true pose and projected through the true camera — exact to
+    round-off, where the script's stored ``uv_true`` is rounded to 1e-4 px. Returns (segments
+    (S, 2, 2) pixels, model edges (S, 2, 3) object frame) in click order, or None without truth."""
+    model = scene.body(run.object_name).model
+    pts, edge_ids = [], []
+    for a in run.script_actions:
+        if a.action != "click":
+            continue
+        t = a.truth or {}
+        if "X_world" not in t or "edge" not in t:
+            return None
+        E = model.vertices[model.edges[int(t["edge"])]] @ T_true[:3, :3].T + T_true[:3, 3]
+        d = (E[1] - E[0]) / np.linalg.norm(E[1] - E[0])
+        X = np.asarray(t["X_world"], float)
+        pts.append(E[0] + ((X - E[0]) @ d) * d)
+        edge_ids.append(int(t["edge"]))
+    if not pts or len(pts) % 2 or edge_ids[0::2] != edge_ids[1::2]:
         return None
-    return np.asarray(uv, float).reshape(-1, 2, 2)
+    segs = scene.camera.project(np.array(pts)).reshape(-1, 2, 2)
+    return segs, np.array([model.vertices[model.edges[e]] for e in edge_ids[0::2]])
 
 
 def pose_update(run: RunRecord, scene: Scene, T_before: np.ndarray, large_deg: float = 18.0, large_m: float = 0.05) -> PoseUpdate:
@@ -339,18 +357,24 @@ def pose_update(run: RunRecord, scene: Scene, T_before: np.ndarray, large_deg: f
         cands, _ = first_p3l(run.camera, segs, edges)
         T_p3l = cands[0] if cands else None
     p3l_err = pose_error(T_p3l, T_true) if T_p3l is not None else nan2
-    true_segs = _true_segments(run)
+    truth = _true_segments(run, scene, T_true)
     noise_free = nearest = nan2
-    if true_segs is not None and len(true_segs) == len(wf.segs) and all(e is not None for e in wf.edge_ids):
-        nf, _ = first_p3l(scene.camera, true_segs, edges)
+    if truth is not None:
+        nf, _ = first_p3l(scene.camera, *truth)
         if nf:
             errs = [pose_error(T, T_true) for T in nf]
             noise_free, nearest = errs[0], min(errs, key=lambda e: e[0])
     r = wf.refined
+    start = wf.candidates[wf.chosen] if wf.chosen is not None else wf.obj.T_world_obj
+    try:
+        diag = refine(scene.camera, start, segs_uv=segs, edges_obj=edges, loss=wf.loss)
+        true_cam = tuple(map(float, pose_error(diag.T_world_obj, T_true)))
+    except ValueError:
+        true_cam = nan2
     return PoseUpdate(
         run.object_name, run.t_end, "large" if (motion_deg > large_deg or motion_m > large_m) else "small",
         float(motion_deg), float(motion_m), source, tuple(map(float, p3l_err)), tuple(map(float, pose_error(r.T_world_obj, T_true))),
-        tuple(map(float, noise_free)), tuple(map(float, nearest)), float(r.rms_px), float(np.linalg.norm(r.std_r_deg)), float(np.linalg.norm(r.std_t_m)),
+        tuple(map(float, noise_free)), tuple(map(float, nearest)), true_cam, float(r.rms_px), float(np.linalg.norm(r.std_r_deg)), float(np.linalg.norm(r.std_t_m)),
         len(pairs), len(cands),
     )
 

@@ -56,17 +56,21 @@ def _bar(stream: TextIO | None, label: str, every_s: float = 0.25):
     return throttled
 
 
-def _stills(script: OperatorScript) -> list[tuple[str, str, float]]:
+def _stills(script: OperatorScript, fps: float) -> list[tuple[str, str, float]]:
     """Overlay frames for the report: (file name, caption, video time) — the first modelling
     solve and the first pose refinement of the script, when it has them."""
-    out = []
+    from .overlay_video import still_frame
+
+    wanted = {("model_object", "solve"): ("overlay_model.png", "{name} modelled (the preview before Accept)"),
+              ("update_pose", "refine"): ("overlay_pose.png", "{name}'s pose refined (before Accept)")}
+    out: dict[str, tuple[str, str, float]] = {}
     for run in script.runs():
         for a in run.actions:
-            if run.workflow == "model_object" and a.action == "solve" and not any(s[0] == "overlay_model.png" for s in out):
-                out.append(("overlay_model.png", f"Overlay at t = {a.t:.2f} s: {run.object_name} modelled (preview)", a.t))
-            if run.workflow == "update_pose" and a.action == "refine" and not any(s[0] == "overlay_pose.png" for s in out):
-                out.append(("overlay_pose.png", f"Overlay at t = {a.t:.2f} s: {run.object_name}'s pose refined", a.t))
-    return out
+            name, caption = wanted.get((run.workflow, a.action), (None, ""))
+            if name is not None and name not in out:
+                t_frame = still_frame(a.t, fps) / fps
+                out[name] = (name, f"The overlay video at t = {t_frame:.2f} s: " + caption.format(name=run.object_name), a.t)
+    return list(out.values())
 
 
 def _clear_db(path: Path) -> None:
@@ -128,7 +132,7 @@ def run_demo(
         t0 = time.perf_counter()
         results = demo_results(replay, scene)
         wall["analysis"] = time.perf_counter() - t0
-        stills = _stills(script)
+        stills = _stills(script, scene.video.fps) if scene.video is not None else []
         video_path = None
         if video:
             if scene.video is None or not scene.video.path.is_file():
