@@ -103,10 +103,12 @@ def summary_table(results: DemoResults) -> str:
                      f"{small[0] * CM:.2f} cm / {small[1]:.2f}° ({n} updates)"])
     cal = results.calibration
     if np.isfinite(cal.camera_rms_px):
-        rows.append(["camera calibration (DLT): RMS; calibrated vs true C at the bodies' corners", "—",
-                     f"{cal.camera_rms_px:.2f} px; {cal.camera_reprojection_rms_px:.2f} px RMS, {cal.camera_reprojection_max_px:.2f} px max"])
+        rows.append([f"camera calibration (DLT, {cal.camera_points} points): RMS; calibrated vs true C at the bodies' corners; "
+                     "optical centre", "—",
+                     f"{cal.camera_rms_px:.2f} px; {cal.camera_reprojection_rms_px:.2f} px RMS, {cal.camera_reprojection_max_px:.2f} px "
+                     f"max; {cal.camera_centre_error_m * CM:.1f} cm off"])
     if np.isfinite(cal.turret_rms_mm):
-        rows.append(["turret calibration: RMS to the surfaces; pose error", "—",
+        rows.append([f"turret calibration ({cal.turret_points} points): RMS to the surfaces; pose error", "—",
                      f"{cal.turret_rms_mm:.1f} mm; {cal.turret_error_deg:.2f}°, {cal.turret_error_m * 1000:.1f} mm"])
     if not rows:
         return "(the script holds no run that the paper's tables measure)\n"
