@@ -9,30 +9,6 @@ ours.
 * ``overlay_video`` — the recorded frames with the interface's overlay;
 * ``report`` — report.md and its figures; ``run`` — ``run_demo``, all of it; ``cli`` — the command.
 
-See docs/demo.md. Names load lazily so that ``mcit --help`` stays fast.
+Import from the submodules (``from app.demo.run import run_demo``): this package imports nothing,
+so that ``mcit --help`` stays fast. See docs/demo.md.
 """
-
-from __future__ import annotations
-
-import importlib
-
-_EXPORTS = {
-    "run_demo": "run",
-    "DemoOutcome": "run",
-    "replay_script": "replay",
-    "Replay": "replay",
-    "DemoStepError": "replay",
-    "demo_results": "results",
-    "DemoResults": "results",
-    "write_overlay_video": "overlay_video",
-    "write_report": "report",
-    "summary_table": "report",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
