@@ -171,7 +171,7 @@ def main() -> int:
     print("  target: snapped segments within 0.3 px")
     print()
     pr, ps = np.asarray(pose_raw), np.asarray(pose_snap)
-    print(f"  pose error from all clicked edges of a frame ({len(pr)} frames with ≥ 4 edges; ML fit of the clicked points to the model lines)")
+    print(f"  pose error from all clicked edges of a frame ({len(pr)} frames with ≥ 4 edges; core.pose.refine from the true pose)")
     print(f"  {'':16s}{'rot mean °':>12s}{'rot med °':>11s}{'trans mean mm':>15s}{'trans med mm':>14s}")
     for name, p in (("raw clicks", pr), ("snapped", ps)):
         print(f"  {name:16s}{p[:, 0].mean():12.3f}{np.median(p[:, 0]):11.3f}{1e3 * p[:, 1].mean():15.2f}{1e3 * np.median(p[:, 1]):14.2f}")

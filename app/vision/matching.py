@@ -322,7 +322,7 @@ def match_edges(
     sigma_px: float = 1.0,
     gate_px: float | None = None,
     n_bases: int = 4,
-    max_refine: int = 24,
+    max_refine: int = 48,
     max_candidates: int = 8,
 ) -> MatchResult:
     """Find which model edge each clicked image edge is, and the poses that follow, ranked.
