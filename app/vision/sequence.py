@@ -154,8 +154,9 @@ def draw_tracking(
     if lost:
         text += "  LOST: give the pose again"
     if text.strip():
-        cv2.putText(img, text.strip(), (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 3, cv2.LINE_AA)
-        cv2.putText(img, text.strip(), (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1, cv2.LINE_AA)
+        (w, h), base = cv2.getTextSize(text.strip(), cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
+        cv2.rectangle(img, (4, 4), (12 + w, 12 + h + base), (0, 0, 0), -1)
+        cv2.putText(img, text.strip(), (8, 8 + h), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
     return img
 
 
