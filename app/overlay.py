@@ -55,6 +55,10 @@ COLORS: dict[str, tuple[int, int, int]] = {
     "assigned": (255, 120, 0),
     "preview": (255, 255, 255),
     "turret": (255, 80, 80),
+    "raw": (170, 140, 255),  # a raw click beside the snapped one in use (dashed)
+    "tracked": (255, 80, 200),  # a tracked pose
+    "edge_found": (0, 255, 255),  # image edge points that support the tracked pose
+    "edge_rejected": (255, 140, 0),  # those the tracker's robust fit rejected
 }
 
 

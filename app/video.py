@@ -326,6 +326,13 @@ class FrameGrabber:
         """Call ``on_frame(frame)`` (on the grabber thread; keep it quick) for every new frame."""
         self._listeners.append(on_frame)
 
+    def remove_listener(self, on_frame: Callable[[Frame], None]) -> None:
+        """Stop calling ``on_frame`` (no error if it was not registered)."""
+        try:
+            self._listeners.remove(on_frame)
+        except ValueError:
+            pass
+
     def latest(self) -> Frame | None:
         """The most recent frame, or None before the first."""
         with self._lock:

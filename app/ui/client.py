@@ -25,6 +25,7 @@ from app.workflows.session import WORKFLOWS
 
 from .controls import CONTROLS, START_BUTTONS, report_markdown
 from .drawing import draw_marks
+from .tracking import TrackFeeder
 
 if TYPE_CHECKING:  # pragma: no cover
     from .server import InterfaceServer
@@ -54,6 +55,7 @@ class ClientPanel:
         self.candidate_dropdown = None
         self.drawn_revision = -1
         self.worker: threading.Thread | None = None
+        self.feeder: TrackFeeder | None = None  # feeds a Track workflow the video
         self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
         self._build_gui()
@@ -121,6 +123,9 @@ class ClientPanel:
                                               hint="Model object: the shape you see")
             self.gui_vertical = gui.add_checkbox("Vertical", True, hint="Model object: its axis/sides are vertical")
             self.gui_on_table = gui.add_checkbox("Lies on the table", True, hint="Model object: it stands on the table")
+            self.gui_snap = gui.add_checkbox("Snap clicks", True, hint="Snap clicked edges and corners to the image "
+                                             "(Refuse snap keeps a click as clicked)")
+            self.gui_snap.on_update(self._guard(lambda _e: self.session.set_snap(bool(self.gui_snap.value))))
         with gui.add_folder("Current"):
             self.gui_title = gui.add_markdown("**No workflow.** Click an object to select it, or start a workflow.")
             self.gui_progress = gui.add_progress_bar(0.0, visible=False)
@@ -164,7 +169,12 @@ class ClientPanel:
                        "on_table": bool(self.gui_on_table.value)}
         if name not in WORKFLOWS:
             raise WorkflowError(f"the {name.replace('_', ' ')} workflow is not available in this build")
-        self.session.start(name, **options)
+        if self.feeder is not None:
+            self.feeder.stop()
+            self.feeder = None
+        wf = self.session.start(name, **options)
+        if name == "track":
+            self.feeder = TrackFeeder(self, wf, self.app.grabber)
 
     def _on_action(self, action: str, kind: str, _event=None) -> None:
         wf = self.session.workflow
@@ -185,7 +195,8 @@ class ClientPanel:
     def _act(self, action: str, **kwargs: Any) -> None:
         result = self.session.perform(action, **kwargs)
         wf = self.session.workflow
-        if wf is not None and wf.message and action in ("solve", "refine", "accept", "undo"):
+        if wf is not None and wf.message and action in ("solve", "refine", "accept", "undo", "confirm_match", "restart",
+                                                        "refuse_snap"):
             self.notify(wf.title, wf.message, "green" if action == "accept" else "blue")
         return result
 
@@ -399,8 +410,10 @@ class ClientPanel:
                 self.candidate_dropdown.value = options[chosen]
 
     def close(self) -> None:
-        """The browser left: stop its click worker and cancel its workflow."""
+        """The browser left: stop its click worker and tracking, and cancel its workflow."""
         self._click_worker.shutdown(wait=False, cancel_futures=True)
+        if self.feeder is not None:
+            self.feeder.stop()
         self.session.cancel()
 
     def set_status(self, text: str) -> None:

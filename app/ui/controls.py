@@ -20,6 +20,7 @@ START_BUTTONS: tuple[tuple[str, str], ...] = (
     ("Update pose", "update_pose"),
     ("Model object", "model_object"),
     ("Designate target", "designate"),
+    ("Track", "track"),
     ("History", "history"),
 )
 
@@ -27,6 +28,7 @@ CONTROLS: dict[str, tuple[tuple[str, str, str], ...]] = {
     "calibrate_camera": (
         ("Solve", "solve", "button"),
         ("Accept", "accept", "button"),
+        ("Refuse snap", "refuse_snap", "button"),
         ("Remove last", "remove_last", "button"),
         ("Redo", "redo", "button"),
         ("Cancel", "cancel", "button"),
@@ -37,8 +39,11 @@ CONTROLS: dict[str, tuple[tuple[str, str, str], ...]] = {
     ),
     "update_pose": (
         ("Solve (P3L)", "solve", "button"),
+        ("Auto match", "auto_match", "long"),
+        ("Confirm match", "confirm_match", "button"),
         ("Refine", "refine", "button"),
         ("Add point", "start_point", "button"),
+        ("Refuse snap", "refuse_snap", "button"),
         ("Remove last", "remove_last", "button"),
         ("Accept", "accept", "button"),
         ("Cancel", "cancel", "button"),
@@ -47,6 +52,16 @@ CONTROLS: dict[str, tuple[tuple[str, str, str], ...]] = {
         ("Measure face", "measure", "long"),
         ("Scan profile", "scan", "long"),
         ("Solve", "solve", "button"),
+        ("Refuse snap", "refuse_snap", "button"),
+        ("Remove last", "remove_last", "button"),
+        ("Accept", "accept", "button"),
+        ("Cancel", "cancel", "button"),
+    ),
+    "track": (
+        ("Pause", "pause", "button"),
+        ("Resume", "resume", "button"),
+        ("Re-initialise", "reinit", "long"),
+        ("Restart", "restart", "button"),
         ("Remove last", "remove_last", "button"),
         ("Accept", "accept", "button"),
         ("Cancel", "cancel", "button"),

@@ -13,7 +13,7 @@ from typing import Iterable
 import numpy as np
 
 from app.overlay import (COLORS, STATUS_COLORS, LineBatch, ProjectedWireframe, circle_marker, cross_markers,
-                         project_wireframe)
+                         dash_segments, project_wireframe)
 from app.workflows.base import Marks
 from app.workflows.site import SiteObject
 from core.camera import Camera
@@ -51,8 +51,9 @@ def draw_database(camera: Camera, objects: Iterable[SiteObject], width: int, hei
 
 def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], width: int, height: int,
                selected: str | None = None) -> tuple[LineBatch, list[tuple[np.ndarray, str]]]:
-    """One operator's marks: the selected object, assigned edges, ghosts, clicks, residuals,
-    targets and the beam spot. Returns the batch and labels (uv (2,), text)."""
+    """One operator's marks: the selected object, assigned edges, ghosts, tracked poses and their
+    edge points, clicks (raw clicks dashed beside the snapped ones in use), residuals, targets and
+    the beam spot. Returns the batch and labels (uv (2,), text)."""
     batch = LineBatch()
     name = marks.selected or selected
     if name in objects:
@@ -63,6 +64,12 @@ def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], wid
         pw = project_wireframe(camera, ghost.model, ghost.T_world_obj, width=width, height=height)
         batch.add_wireframe(pw, COLORS["ghost_chosen"] if ghost.chosen else COLORS["ghost"],
                             hidden="dashed" if ghost.chosen else "removed")
+    for ghost in marks.tracked:
+        pw = project_wireframe(camera, ghost.model, ghost.T_world_obj, width=width, height=height)
+        color = COLORS["tracked"] if ghost.chosen else tuple(int(c * 0.55) for c in COLORS["tracked"])
+        batch.add_wireframe(pw, color, hidden="removed")
+    batch.add(cross_markers(marks.found_points, 1.5), COLORS["edge_found"])
+    batch.add(cross_markers(marks.rejected_points, 1.5), COLORS["edge_rejected"])
     for obj_name, k in marks.highlight:
         obj = objects.get(obj_name)
         if obj is None or not 0 <= k < len(obj.model.edges):
@@ -70,6 +77,9 @@ def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], wid
         E = obj.model.edge_segments(obj.T_world_obj)[k]
         if np.all(camera.depth(E) > 0):
             batch.add(camera.project(E).reshape(1, 2, 2), COLORS["assigned"])
+    batch.add(dash_segments(marks.raw_segments, 3.0, 3.0)[0], COLORS["raw"])
+    batch.add(cross_markers(marks.raw_points, 4.0), COLORS["raw"])
+    batch.add(marks.snap_lines, COLORS["raw"])
     batch.add(marks.segments, COLORS["click"])
     batch.add(cross_markers(marks.points, 5.0), COLORS["click"])
     batch.add(cross_markers(marks.pending, 7.0), COLORS["pending"])

@@ -25,6 +25,7 @@ import viser
 
 from app.overlay import COLORS, LineBatch, PixelWorld, circle_marker
 from app.video import FrameGrabber
+from app.workflows.frames import GrabberFrames
 from app.workflows.site import Site
 
 from .client import ClientPanel
@@ -78,6 +79,8 @@ class InterfaceServer:
         self.server.on_client_disconnect(self._on_disconnect)
         self._thread = threading.Thread(target=self._loop, name="mcit-redraw", daemon=True)
         grabber.add_listener(lambda _frame: self._wake.set())  # a new frame: redraw now
+        # Snapping, matching and tracking work on what the operator sees: the grabber's latest frame.
+        site.set_frames(GrabberFrames(grabber))
         if site.camera.width != src.width or site.camera.height != src.height:
             log.warning("video is %dx%d but the camera is calibrated for %dx%d: calibrate the camera",
                         src.width, src.height, site.camera.width, site.camera.height)

@@ -78,6 +78,8 @@ class TrackDiagnostics:
     found for each sample (NaN where none). weights : array, shape (N,), robust weights (0 where
     none was found). rms_px : weighted RMS of the kept samples' distances to their edges at the
     final pose. n_samples, n_found, n_inliers : counts. reason : why the tracker is lost ("" if not).
+    cov : array, shape (6, 6), covariance of the pose's (δt [m], δr [rad]) from the last pose step
+    (``PointLineFit.cov``), or None when there was none.
     """
 
     samples: EdgeSamples
@@ -88,6 +90,7 @@ class TrackDiagnostics:
     n_found: int
     n_inliers: int
     reason: str = ""
+    cov: np.ndarray | None = None
 
 
 def _feature_ids(model: BRep, kind: np.ndarray, n_circle: int) -> tuple[np.ndarray, np.ndarray]:
@@ -399,7 +402,8 @@ class EdgeTracker:
                     reason = f"the pose jumped {np.median(jump):.1f} px, more than the search band allows"
         rms = p.fit.rms_px if p.fit is not None else float("nan")
         matched = np.where(p.found[:, None], p.matched, np.nan)
-        self.diagnostics = TrackDiagnostics(p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason)
+        cov = None if p.fit is None else p.fit.cov.copy()
+        self.diagnostics = TrackDiagnostics(p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason, cov)
         if reason:
             self._lost = True
             return TrackResult(self._T.copy(), float(confidence), True)

@@ -15,8 +15,10 @@ from .calibrate_turret import CalibrateTurret
 from .history import History
 from .model_object import ModelObject
 from .update_pose import UpdatePose
+from .track import TrackObject
+from .snapping import ClickSnap
 
-for _cls in (CalibrateCamera, CalibrateTurret, DesignateTarget, History, UpdatePose, ModelObject):
+for _cls in (CalibrateCamera, CalibrateTurret, DesignateTarget, History, UpdatePose, ModelObject, TrackObject):
     register(_cls)
 
 __all__ = [
@@ -32,6 +34,8 @@ __all__ = [
     "ModelObject",
     "Target",
     "UpdatePose",
+    "TrackObject",
+    "ClickSnap",
     "WORKFLOWS",
     "Session",
     "register",

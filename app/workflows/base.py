@@ -57,6 +57,11 @@ class Marks:
     residuals : (R, 2, 2) short lines from a clicked point to where the solution puts it.
     beam_uv : (2,) where the range finder's last measurement projects, or None.
     targets : (T, 2) designated targets. selected : the object the workflow is about.
+    raw_segments : (K, 2, 2) / raw_points : (N, 2) the operator's clicks where a snapped click is
+    used instead (drawn beside it in another colour). snap_lines : (M, 2, 2) image edges a snapped
+    corner was found on. tracked : Ghosts of tracked poses (their own colour). found_points :
+    (F, 2) image edge points that support a tracked pose; rejected_points : (R, 2) those the
+    robust fit rejected.
     """
 
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
@@ -69,6 +74,12 @@ class Marks:
     beam_uv: np.ndarray | None = None
     targets: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     selected: str | None = None
+    raw_segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    raw_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    snap_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    tracked: list = field(default_factory=list)
+    found_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    rejected_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 def as_pixel(uv: Any) -> np.ndarray:
@@ -94,6 +105,7 @@ class Workflow:
     name: ClassVar[str] = ""
     title: ClassVar[str] = ""
     actions: ClassVar[tuple[str, ...]] = ("cancel",)
+    snapping: ClassVar[bool] = False  # True: takes a ``snap`` option (clicks snapped to the image)
 
     def __init__(self, site: "Site", client: str = "operator"):
         self.site = site

@@ -5,6 +5,12 @@ corner, a table corner — the nearest projected vertex is taken), then where th
 in the video. ``solve()`` runs ``core.calibration.calibrate_dlt`` and shows the RMS and each
 point's residual; ``accept()`` stores the calibration and every overlay is redrawn through the
 new C; ``redo()`` starts over. A script may give the 3D point directly with ``choose_point``.
+
+Each clicked image point is snapped to the image's corner on the frame the operator clicked on
+(``snapping``: for a model vertex, the intersection of its edges snapped to the image, their
+directions from the object's database pose through the current C; for a bare 3D point, OpenCV's
+``cornerSubPix``). ``refuse_snap()`` keeps the last click as clicked; the calibration stores the
+raw and snapped pixels.
 """
 
 from __future__ import annotations
@@ -16,23 +22,28 @@ import numpy as np
 from core.calibration import calibrate_dlt
 
 from .base import Marks, Workflow, WorkflowError, as_pixel
+from .snapping import SnapMixin, snap_marks
 
 __all__ = ["CalibrateCamera"]
 
 PICK_RADIUS_PX = 25.0
 
 
-class CalibrateCamera(Workflow):
+class CalibrateCamera(SnapMixin, Workflow):
     name = "calibrate_camera"
     title = "Calibrate camera"
-    actions = ("click", "choose_point", "choose_vertex", "remove_last", "solve", "accept", "redo", "cancel")
+    actions = ("click", "choose_point", "choose_vertex", "remove_last", "solve", "accept", "redo", "cancel",
+               "refuse_snap", "set_snap")
 
-    def __init__(self, site, client: str = "operator"):
+    def __init__(self, site, client: str = "operator", snap: bool = True):
         super().__init__(site, client)
+        self._init_snap(snap)
         self.X_world: list[np.ndarray] = []
         self.uv: list[np.ndarray] = []
+        self.snaps: list = []  # beside uv: each click's snap (None: snapping off)
         self.labels: list[str] = []
         self.pending_X: np.ndarray | None = None
+        self.pending_vertex: tuple[str, int] | None = None  # (object, vertex) of the pending point, if a vertex
         self.pending_label = ""
         self.result = None
         self.state = "pick_model"
@@ -50,7 +61,7 @@ class CalibrateCamera(Workflow):
                         f"no model vertex within {PICK_RADIUS_PX:.0f} px of ({p[0]:.0f}, {p[1]:.0f}) (nearest: "
                         f"{name} vertex {k}, {dist:.0f} px away); click on a corner drawn in the overlay"
                     )
-                self._set_pending(X, f"{name}:{k}")
+                self._set_pending(X, f"{name}:{k}", (name, k))
             else:
                 self._add_pair(p)
 
@@ -64,7 +75,7 @@ class CalibrateCamera(Workflow):
                 raise WorkflowError(str(exc.args[0])) from None
             if not 0 <= int(index) < len(V):
                 raise WorkflowError(f"{name} has vertices 0..{len(V) - 1}, not {index}")
-            self._set_pending(V[int(index)], f"{name}:{int(index)}")
+            self._set_pending(V[int(index)], f"{name}:{int(index)}", (name, int(index)))
 
     def choose_point(self, X_world, label: str = "") -> None:
         """Use a known world point X_world (3,) metres as the next known point (then click its image)."""
@@ -84,6 +95,7 @@ class CalibrateCamera(Workflow):
             elif self.X_world:
                 self.X_world.pop()
                 self.uv.pop()
+                self.snaps.pop()
                 self.labels.pop()
             self.result = None
             self.state = "pick_model"
@@ -113,7 +125,9 @@ class CalibrateCamera(Workflow):
                 self.result.camera,
                 rms_px=self.result.rms_px,
                 residuals_px=self.result.residuals_px,
-                points={"X_world": np.array(self.X_world).tolist(), "uv": np.array(self.uv).tolist(), "labels": list(self.labels)},
+                points={"X_world": np.array(self.X_world).tolist(), "uv": np.array(self.uv).tolist(), "labels": list(self.labels),
+                        # raw and snapped pixels of each point above (None: snapping was off)
+                        "snaps": [None if sn is None else sn.record() for sn in self.snaps]},
                 client=self.client,
             )
             self.accepted = True
@@ -124,24 +138,48 @@ class CalibrateCamera(Workflow):
         """Forget every pair and the result; start again."""
         with self.lock:
             self._check_open()
-            self.X_world, self.uv, self.labels = [], [], []
-            self.pending_X, self.result = None, None
+            self.X_world, self.uv, self.labels, self.snaps = [], [], [], []
+            self.pending_X, self.pending_vertex, self.result = None, None, None
             self.state = "pick_model"
             self.message = ""
 
     # ------------------------------------------------------------------ helpers
-    def _set_pending(self, X: np.ndarray, label: str) -> None:
+    def _set_pending(self, X: np.ndarray, label: str, vertex: tuple[str, int] | None = None) -> None:
         self.pending_X = np.asarray(X, float).copy()
         self.pending_label = label
+        self.pending_vertex = vertex
         self.state = "click_image"
 
     def _add_pair(self, p: np.ndarray) -> None:
+        model = T = k = None
+        if self.pending_vertex is not None:
+            name, k = self.pending_vertex
+            try:
+                obj = self.site.object(name)
+                model, T = obj.model, obj.T_world_obj
+            except KeyError:
+                k = None
+        snap = self._snap_corner(p, model, T, k)
         self.X_world.append(self.pending_X)
-        self.uv.append(p)
+        self.uv.append(p if snap is None else snap.used)
+        self.snaps.append(snap)
         self.labels.append(self.pending_label)
+        self.message = self._snap_message(f"Point {len(self.uv)} ({self.pending_label})", snap)
         self.pending_X = None
+        self.pending_vertex = None
         self.result = None
         self.state = "pick_model"
+
+    def _last_snap(self):
+        if not self.uv:
+            return None, None
+        i = len(self.uv) - 1
+        return self.snaps[i], lambda raw: self.uv.__setitem__(i, raw)
+
+    def _after_refuse(self) -> None:
+        self.result = None
+        if self.state == "review":
+            self.state = "pick_model"
 
     def _nearest_vertex(self, p: np.ndarray) -> tuple[str, int, np.ndarray, float]:
         cam = self.site.camera
@@ -182,6 +220,8 @@ class CalibrateCamera(Workflow):
             cam = self.site.camera
             m = Marks(points=np.array(self.uv).reshape(-1, 2))
             m.labels = [(uv, str(i + 1)) for i, uv in enumerate(self.uv)]
+            m.raw_segments, m.raw_points, m.snap_lines, snap_labels = snap_marks(self.snaps)
+            m.labels += snap_labels
             if self.pending_X is not None:
                 m.pending = cam.project(self.pending_X.reshape(1, 3))
             if self.result is not None and self.uv:
@@ -192,6 +232,9 @@ class CalibrateCamera(Workflow):
     def summary(self) -> dict[str, Any]:
         with self.lock:
             out: dict[str, Any] = {"pairs": len(self.uv)}
+            snaps = [sn for sn in self.snaps if sn is not None]
+            if snaps:
+                out["snapped"] = f"{sum(sn.applied for sn in snaps)} of {len(snaps)} points"
             if self.result is not None:
                 out["rms_px"] = self.result.rms_px
                 out["errors_px"] = self.result.errors_px.tolist()

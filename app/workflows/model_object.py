@@ -15,6 +15,11 @@ is vertical, whether it lies on the table — and the sensors give the numbers:
 ``measure()``/``scan()`` drive the devices (aiming, progress in ``progress`` 0..1, ``cancel()`` stops
 them at the next beam). The preview is drawn as a ghost with its dimensions ± σ; ``accept()`` adds
 the object (status "modelled") with its clicks and measurements in one transaction.
+
+Each clicked segment (a face's side, a silhouette) is snapped to the image's edge on the frame the
+operator clicked on (``snapping``: the snapped ends are the clicks moved onto the edge, so a
+silhouette keeps its clicked height); ``refuse_snap()`` keeps the last one as clicked; the history
+records both.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from core.geometry import Plane
 from core.rangefinder import RangeFinderSpec, RangeScan, aim, beam_point_cov
 
 from .base import Cancelled, Ghost, Marks, Workflow, WorkflowError, as_pixel
+from .snapping import SnapMixin, snap_marks
 
 __all__ = ["ModelObject", "SHAPES", "table_support"]
 
@@ -46,15 +52,17 @@ def table_support(site) -> Plane | None:
     return None
 
 
-class ModelObject(Workflow):
+class ModelObject(SnapMixin, Workflow):
     name = "model_object"
     title = "Model object"
-    actions = ("click", "add_segment", "remove_last", "measure", "scan", "next_face", "solve", "accept", "cancel")
+    actions = ("click", "add_segment", "remove_last", "measure", "scan", "next_face", "solve", "accept", "cancel",
+               "refuse_snap", "set_snap")
 
     def __init__(self, site, client: str = "operator", shape: str = "box", vertical: bool = True, on_table: bool = True,
                  object_name: str | None = None, method: str = "fused", spacing_px: float | None = None,
-                 beams: int = 40):
+                 beams: int = 40, snap: bool = True):
         super().__init__(site, client)
+        self._init_snap(snap)
         if shape not in SHAPES:
             raise WorkflowError(f"shape must be one of {', '.join(SHAPES)}, got {shape!r}")
         self.shape = shape
@@ -75,9 +83,10 @@ class ModelObject(Workflow):
         elif object_name in taken:
             raise WorkflowError(f"an object named {object_name!r} already exists; choose another name")
         self.object_name = object_name
-        # box: one entry per face {"segs": [...], "points": (N, 3), "covs": (N, 3, 3), "scan": RangeScan}
-        self.faces: list[dict[str, Any]] = [{"segs": [], "points": None, "covs": None, "scan": None}]
+        # box: one entry per face {"segs": [...], "snaps": [...], "points": (N, 3), "covs": (N, 3, 3), "scan": RangeScan}
+        self.faces: list[dict[str, Any]] = [self._new_face()]
         self.silhouettes: list[np.ndarray] = []
+        self.silhouette_snaps: list = []
         self.scans: list[RangeScan] = []
         self.pending: np.ndarray | None = None
         self.result = None
@@ -86,9 +95,30 @@ class ModelObject(Workflow):
         self.state = "click"
 
     # ------------------------------------------------------------------ clicks
+    @staticmethod
+    def _new_face() -> dict[str, Any]:
+        return {"segs": [], "snaps": [], "points": None, "covs": None, "scan": None}
+
     @property
     def _segments(self) -> list:
         return self.faces[-1]["segs"] if self.shape == "box" else self.silhouettes
+
+    @property
+    def _snaps(self) -> list:
+        """Each clicked segment's snap, beside ``_segments``."""
+        return self.faces[-1]["snaps"] if self.shape == "box" else self.silhouette_snaps
+
+    def _last_snap(self):
+        segs = self._segments
+        if self.shape == "box" and self.faces[-1]["points"] is not None:
+            return None, None  # the face is measured: its sides are fixed (Remove last first)
+        if not segs:
+            return None, None
+        i = len(segs) - 1
+        return self._snaps[i], lambda raw: segs.__setitem__(i, raw)
+
+    def _after_refuse(self) -> None:
+        self.result = None
 
     def click(self, uv) -> None:
         """First or second end of an image edge (a side of the current face, or a silhouette)."""
@@ -107,8 +137,11 @@ class ModelObject(Workflow):
                 raise WorkflowError(f"the two clicks are {np.linalg.norm(seg[1] - seg[0]):.1f} px apart: click the "
                                     f"edge's other end, at least {MIN_SEGMENT_PX:.0f} px away")
             self.pending = None
-            self._segments.append(seg)
+            snap = self._snap_segment(seg)
+            self._segments.append(seg if snap is None else snap.used)
+            self._snaps.append(snap)
             self.result = None
+            self.message = self._snap_message(f"{'Side' if self.shape == 'box' else 'Silhouette'} {len(self._segments)}", snap)
 
     def add_segment(self, seg_uv) -> None:
         """A clicked segment (2, 2) at once (for scripts)."""
@@ -134,12 +167,14 @@ class ModelObject(Workflow):
                     face.update(points=None, covs=None, scan=None)
                 elif face["segs"]:
                     face["segs"].pop()
+                    face["snaps"].pop()
                 elif len(self.faces) > 1:
                     self.faces.pop()
             elif self.scans:
                 self.scans = []
             elif self.silhouettes:
                 self.silhouettes.pop()
+                self.silhouette_snaps.pop()
 
     def next_face(self) -> None:
         """Box: the current face is done (sides clicked and measured); go on to the next one."""
@@ -152,7 +187,7 @@ class ModelObject(Workflow):
                 raise WorkflowError("measure this face first (Measure face)")
             if len(self.faces) == 3:
                 raise WorkflowError("a box shows at most 3 faces: Solve now")
-            self.faces.append({"segs": [], "points": None, "covs": None, "scan": None})
+            self.faces.append(self._new_face())
 
     # ------------------------------------------------------------------ measurements
     def _devices(self):
@@ -328,10 +363,13 @@ class ModelObject(Workflow):
                 raise WorkflowError("nothing to accept: Solve first")
             r = self.result
             if self.shape == "box":
-                clicks = {"faces": [np.array(f["segs"]).reshape(-1, 2, 2) for f in self.faces]}
+                clicks = {"faces": [np.array(f["segs"]).reshape(-1, 2, 2) for f in self.faces],
+                          # raw and snapped pixels of each side (None: snapping was off)
+                          "snaps": [[None if sn is None else sn.record() for sn in f["snaps"]] for f in self.faces]}
                 measurements = {"faces": [f["points"] for f in self.faces if f["points"] is not None]}
             else:
-                clicks = {"silhouettes_uv": np.array(self.silhouettes)}
+                clicks = {"silhouettes_uv": np.array(self.silhouettes),
+                          "snaps": [None if sn is None else sn.record() for sn in self.silhouette_snaps]}
                 measurements = {"scans": [{"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m}
                                           for s in self.scans]}
             try:
@@ -384,6 +422,8 @@ class ModelObject(Workflow):
                 m.segments = np.array(segs)
             if self.pending is not None:
                 m.pending = self.pending.reshape(1, 2)
+            snaps = [sn for f in self.faces for sn in f["snaps"]] if self.shape == "box" else list(self.silhouette_snaps)
+            m.raw_segments, _, _, m.labels = snap_marks(snaps)
             cam = self.site.camera
             pts = [f["points"] for f in self.faces if f.get("points") is not None]
             T = self.site.T_world_turret
@@ -397,7 +437,7 @@ class ModelObject(Workflow):
                 lo, hi = self.result.model.bounds()
                 top = self.result.T_world_obj[:3, :3] @ np.array([0, 0, hi[2]]) + self.result.T_world_obj[:3, 3]
                 if cam.depth(top) > 0:
-                    m.labels = [(cam.project(top) - [0, 14], self.result.dimension_text("cm"))]
+                    m.labels = [(cam.project(top) - [0, 14], self.result.dimension_text("cm"))]  # the result, not the snaps
             return m
 
     def summary(self) -> dict[str, Any]:

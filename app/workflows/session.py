@@ -39,6 +39,7 @@ class Session:
         self.client = client
         self.selected: str | None = None
         self.workflow: Workflow | None = None
+        self.snap = True  # snap clicks to the image (the panel's "Snap clicks"); passed to workflows that snap
         self.lock = threading.RLock()
 
     def select(self, name: str | None) -> None:
@@ -63,11 +64,21 @@ class Session:
                 if self.selected is None:
                     raise WorkflowError(f"{cls.title}: select an object first")
                 options["object_name"] = self.selected
+            if cls.snapping and "snap" not in options:
+                options["snap"] = self.snap
             try:
                 self.workflow = cls(self.site, client=self.client, **options)
             except TypeError as exc:
                 raise WorkflowError(f"{cls.title}: bad options {sorted(options)}: {exc}") from None
             return self.workflow
+
+    def set_snap(self, on: bool) -> None:
+        """Snap clicks to the image (on) or not, from now on: in the workflow under way too."""
+        with self.lock:
+            self.snap = bool(on)
+            wf = self.workflow
+        if wf is not None and not wf.finished and wf.snapping:
+            wf.set_snap(self.snap)
 
     def perform(self, action: str, **kwargs: Any) -> Any:
         """Call an action of the current workflow by name."""

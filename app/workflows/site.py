@@ -12,6 +12,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -89,9 +90,15 @@ class Site:
         Opened devices (real or emulated); None when running without them.
     clock : callable returning the scene time in seconds, optional
         The video's time (a prerecorded video's position); default: time since start.
+    frames : "scene", None or a callable ``frames(t_s) -> image | None``
+        Where the frame the operator clicked on comes from (edge and corner snapping, automatic
+        matching, tracking; ``app.workflows.frames``): "scene" (default) reads the scene's
+        prerecorded video at the scene time, if it has one; None: no frames (clicks are used as
+        clicked); the interface installs its video grabber (``set_frames``).
     """
 
-    def __init__(self, scene: Scene, db: Any, devices: Any = None, clock: Callable[[], float] | None = None):
+    def __init__(self, scene: Scene, db: Any, devices: Any = None, clock: Callable[[], float] | None = None,
+                 frames: Any = "scene"):
         self.scene = scene
         self.db = db
         self.devices = devices
@@ -107,6 +114,41 @@ class Site:
         self._T_world_turret = np.asarray(scene.turret.T_world_turret, float).copy()
         self.beam_X_world: np.ndarray | None = None  # the range finder's last measured point (shown)
         self._load_calibrations()
+        self._frames: Callable[[float], Any] | None = None
+        if isinstance(frames, str):
+            if frames != "scene":
+                raise ValueError(f"frames must be 'scene', None or a callable frames(t_s) -> image, got {frames!r}")
+            video = getattr(scene, "video", None)
+            if video is not None and Path(video.path).is_file():
+                from .frames import SceneVideoFrames
+
+                self._frames = SceneVideoFrames(video)
+        elif frames is not None:
+            if not callable(frames):
+                raise ValueError(f"frames must be 'scene', None or a callable frames(t_s) -> image, got {type(frames).__name__}")
+            self._frames = frames
+
+    # ------------------------------------------------------------------ video frames
+    def set_frames(self, frames: Callable[[float], Any] | None) -> None:
+        """Use another frame provider (the interface's grabber), or None for none."""
+        if frames is not None and not callable(frames):
+            raise ValueError(f"frames must be a callable frames(t_s) -> image, or None; got {type(frames).__name__}")
+        with self.lock:
+            self._frames = frames
+
+    @property
+    def has_frames(self) -> bool:
+        """True when the site can show workflows the frame the operator clicked on."""
+        return self._frames is not None
+
+    def frame_at(self, t_s: float | None = None) -> np.ndarray | None:
+        """The video frame showing scene time ``t_s`` (default: now, ``time_s()``) — RGB or grey
+        uint8, (H, W, 3) or (H, W) — or None when the site has no frames or the source has none."""
+        frames = self._frames
+        if frames is None:
+            return None
+        image = frames(self.time_s() if t_s is None else float(t_s))
+        return None if image is None else np.asarray(image)
 
     # ------------------------------------------------------------------ reading
     @property

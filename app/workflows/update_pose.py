@@ -10,35 +10,121 @@ the iterated small-motion least squares (``core.pose.refine``) from the chosen c
 without a solve, from the database pose (the paper's small motion) — and shows the RMS, each
 click's residual and the pose's standard deviations. ``accept()`` writes the pose and its
 covariance in one transaction (refining first if needed); a version conflict writes nothing.
+
+Beyond the paper (docs/beyond.md):
+
+* every clicked segment is snapped to the image's edge, and every clicked image point of a vertex
+  to the image's corner, on the frame the operator clicked on (``snapping``); ``refuse_snap()``
+  keeps the last click as clicked; ``snap=False`` (or ``set_snap(False)``) turns snapping off;
+* ``auto_match()``: with three or more (four is best) clicked edges not assigned by hand, every
+  assignment to model edges is tried (``app.vision.matching.match_edges`` on the frame) and the
+  plausible ones ranked; the best is shown with its edge labels, the others as ghosts
+  (``choose_candidate``); ``confirm_match()`` adopts the shown assignment, then Refine and Accept
+  as usual. The first ``auto_match()`` with fewer than three edges switches to automatic
+  assignment (``auto_assign()``): clicked edges then wait for the match instead of a model edge;
+* a refined pose is offered only if it is plausible: RMS at most 3 σ_px, the object in front of
+  the camera and its projection in the image; otherwise the next candidate is refined instead
+  (and the operator told), and when none fits the operator is told what to do.
 """
 
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from core.calibration import kabsch
 from core.pose import p3l, refine
-from core.transforms import pose_error
+from core.transforms import invert_T, pose_error
 
 from .base import Ghost, Marks, Workflow, WorkflowError, as_pixel
+from .snapping import ClickSnap, SnapMixin, snap_marks
 
-__all__ = ["UpdatePose"]
+__all__ = ["UpdatePose", "Match", "plausibility", "nearest_twin"]
 
 PICK_RADIUS_PX = 25.0
 MIN_SEGMENT_PX = 3.0
+SNAPPED_SIGMA_PX = 0.3  # the click noise automatic matching assumes when every segment is snapped
 
 
-class UpdatePose(Workflow):
+@dataclass(frozen=True)
+class Match:
+    """One automatic assignment: ``T_world_obj`` (4, 4) refined on the clicks, ``edges`` (S,) the
+    model edge of each clicked segment, ``rms_px`` of the clicks to their edges, ``image_px`` mean
+    distance of the whole projected model to the image's edges (NaN without a frame)."""
+
+    T_world_obj: np.ndarray
+    edges: np.ndarray
+    rms_px: float
+    image_px: float
+
+
+def plausibility(camera, model, T_world_obj: np.ndarray, rms_px: float | None = None, max_rms_px: float = np.inf) -> str:
+    """Why a pose cannot be the answer ("" when it can): RMS above ``max_rms_px``, part of the object
+    behind the camera, or its projection entirely outside the image."""
+    if rms_px is not None and not rms_px <= max_rms_px:
+        return f"RMS {rms_px:.1f} px, more than 3σ ({max_rms_px:.1f} px)"
+    V = model.vertices
+    if not len(V):
+        lo, hi = model.bounds()
+        V = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    X = V @ T_world_obj[:3, :3].T + T_world_obj[:3, 3]
+    if np.any(camera.depth(X) <= 0):
+        return "it puts the object behind the camera"
+    uv = camera.project(X)
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    if hi[0] < -0.5 or hi[1] < -0.5 or lo[0] > camera.width - 0.5 or lo[1] > camera.height - 0.5:
+        return "it puts the object outside the image"
+    return ""
+
+
+def _symmetries(model) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The model's proper symmetries as (edge permutation p (E,), S (4, 4) object → object with
+    S·(edge k) = edge p[k]); the identity first."""
+    from app.vision.matching import edge_symmetries
+
+    mids = model.vertices[model.edges].mean(axis=1)
+    return [(p, kabsch(mids, mids[p])) for p in edge_symmetries(model)]
+
+
+def nearest_twin(model, T_world_obj: np.ndarray, edges: np.ndarray, T_ref: np.ndarray,
+                 hand: dict[int, int] | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+    """Of the poses that draw the same picture as ``T_world_obj`` (the model's symmetries), the one
+    that keeps every hand assignment ``hand`` (clicked segment → model edge) and turns least from
+    ``T_ref``: (T_world_obj (4, 4), edges (S,) of each clicked segment there), or None if none keeps them.
+
+    A symmetric model (a box) cannot tell these poses apart in the image; the database's object
+    frame should not jump by a symmetry, so the one nearest the database pose is taken."""
+    hand = hand or {}
+    best, best_deg = None, np.inf
+    for p, S in _symmetries(model):
+        e2 = p[np.asarray(edges, int)]  # under T S⁻¹, edge p[k] lies where edge k lay under T
+        if any(int(e2[j]) != e for j, e in hand.items()):
+            continue
+        T2 = T_world_obj @ invert_T(S)
+        deg = pose_error(T2, T_ref)[0]
+        if deg < best_deg:
+            best, best_deg = (T2, e2.astype(int)), deg
+    return best
+
+
+class UpdatePose(SnapMixin, Workflow):
     name = "update_pose"
     title = "Update pose"
     options = ("object_name",)
     actions = ("click", "assign_edge", "add_segment", "add_point", "start_point", "remove_last", "solve",
-               "choose_candidate", "refine", "accept", "cancel")
+               "choose_candidate", "refine", "accept", "cancel", "refuse_snap", "set_snap", "auto_assign",
+               "auto_match", "confirm_match")
 
-    def __init__(self, site, client: str = "operator", object_name: str | None = None, loss: str = "l2"):
+    def __init__(self, site, client: str = "operator", object_name: str | None = None, loss: str = "l2",
+                 snap: bool = True, sigma_px: float = 1.0):
         super().__init__(site, client)
+        self._init_snap(snap)
+        if not sigma_px > 0:
+            raise WorkflowError(f"sigma_px (the clicks' noise, pixels) must be positive, got {sigma_px}")
+        self.sigma_px = float(sigma_px)
         if object_name is None:
             raise WorkflowError("Update pose: select the object first")
         try:
@@ -60,7 +146,13 @@ class UpdatePose(Workflow):
         self.candidates: list[np.ndarray] = []
         self.chosen: int | None = None
         self.refined = None
-        self._done: list[str] = []  # "segment", "assign", "point": what remove_last undoes, last first
+        self.seg_snaps: list[ClickSnap | None] = []  # beside segs: each segment's snap (None: snapping off)
+        self.point_snaps: list[ClickSnap | None] = []  # beside points_uv
+        self.auto = False  # automatic assignment: clicked edges wait for auto_match, not for a model edge
+        self.matches: list[Match] | None = None  # automatic assignments awaiting confirm_match
+        self.match_info: dict[str, Any] | None = None  # the confirmed automatic assignment (history)
+        self._match_undo: list[list] = []  # edge_ids before each confirm_match (remove_last restores them)
+        self._done: list[str] = []  # "segment", "assign", "point", "match": what remove_last undoes, last first
         self.state = "click_edge"
 
     # ------------------------------------------------------------------ estimate in use
@@ -75,6 +167,16 @@ class UpdatePose(Workflow):
 
     def _invalidate(self) -> None:
         self.refined = None
+
+    def _clicks_changed(self) -> None:
+        """A click or an assignment changed: the refined pose and any automatic assignments shown go."""
+        self.refined = None
+        if self.matches is not None:
+            self.matches = None
+            self.candidates, self.chosen = [], None
+
+    def _after_refuse(self) -> None:
+        self._clicks_changed()
 
     # ------------------------------------------------------------------ actions
     def click(self, uv) -> None:
@@ -93,7 +195,7 @@ class UpdatePose(Workflow):
                 else:
                     self._add_point(p, self.pending_vertex)
                 return
-            if self.edge_ids and self.edge_ids[-1] is None:
+            if not self.auto and self.edge_ids and self.edge_ids[-1] is None:
                 k, dist = self._nearest_edge(p)
                 if dist > PICK_RADIUS_PX:
                     raise WorkflowError(f"no edge of {self.object_name} within {PICK_RADIUS_PX:.0f} px of the click "
@@ -109,38 +211,53 @@ class UpdatePose(Workflow):
                 raise WorkflowError(f"the two clicks are {np.linalg.norm(seg[1] - seg[0]):.1f} px apart: click two points "
                                     f"at least {MIN_SEGMENT_PX:.0f} px apart along the edge (second click again)")
             self.pending = None
-            self.segs.append(seg)
+            snap = self._snap_segment(seg)
+            self.segs.append(seg if snap is None else snap.used)
+            self.seg_snaps.append(snap)
             self.edge_ids.append(None)
             self._done.append("segment")
-            self._invalidate()
-            self.state = "assign_edge"
+            self._clicks_changed()
+            self.state = "click_edge" if self.auto else "assign_edge"
+            self.message = self._snap_message(f"Edge {len(self.segs)}", snap)
 
     def assign_edge(self, edge: int) -> None:
         """Say which model edge (index into the model's edges) the last clicked segment is."""
         with self.lock:
             self._check_open()
-            if not self.edge_ids or self.edge_ids[-1] is not None:
-                raise WorkflowError("no clicked segment is waiting for its model edge: click two points on an image edge first")
-            self._assign(int(edge))
+            self._assign_last(int(edge))
 
-    def add_segment(self, seg_uv, edge: int) -> None:
-        """A clicked segment (2, 2) and its model edge at once (for scripts)."""
+    def add_segment(self, seg_uv, edge: int | None = None) -> None:
+        """A clicked segment (2, 2) and its model edge at once (for scripts); ``edge=None`` leaves
+        it for ``auto_match`` (and switches to automatic assignment)."""
         seg = np.asarray(seg_uv, dtype=float)
         if seg.shape != (2, 2) or not np.all(np.isfinite(seg)):
             raise WorkflowError(f"a segment is two pixels [[u1, v1], [u2, v2]], got {seg_uv!r}")
         with self.lock:
             self._check_open()
-            if self.pending is not None or (self.edge_ids and self.edge_ids[-1] is None):
+            if self.pending is not None or self._waiting_for_edge():
                 raise WorkflowError("finish the edge under way first (or Remove last)")
+            if edge is None:
+                self.auto = True
             self.click(seg[0])
             self.click(seg[1])
-            self.assign_edge(edge)
+            if edge is not None:
+                self._assign_last(int(edge))
+
+    def _waiting_for_edge(self) -> bool:
+        """The last clicked segment waits for its model edge (hand assignment)."""
+        return not self.auto and bool(self.edge_ids) and self.edge_ids[-1] is None
+
+    def _assign_last(self, k: int) -> None:
+        """Assign model edge k to the last clicked segment (hand assignment, also in automatic mode)."""
+        if not self.edge_ids or self.edge_ids[-1] is not None:
+            raise WorkflowError("no clicked segment is waiting for its model edge: click two points on an image edge first")
+        self._assign(k)
 
     def start_point(self) -> None:
         """Next clicks: a model vertex in the overlay, then where it is in the video."""
         with self.lock:
             self._check_open()
-            if self.pending is not None or (self.edge_ids and self.edge_ids[-1] is None):
+            if self.pending is not None or self._waiting_for_edge():
                 raise WorkflowError("finish the edge under way first (or Remove last)")
             self.mode = "point"
             self.pending_vertex = None
@@ -163,18 +280,26 @@ class UpdatePose(Workflow):
                 self.mode, self.pending_vertex = "edge", None
             elif self.pending is not None:
                 self.pending = None
+            elif self.matches is not None:
+                self.matches = None  # the automatic assignments shown: dropped, the clicks stay
+                self.candidates, self.chosen = [], None
             elif self._done:
                 last = self._done.pop()
                 if last == "assign":
                     self.edge_ids[self._last_assigned()] = None
+                elif last == "match":
+                    self.edge_ids = self._match_undo.pop()
+                    self.match_info = None
                 elif last == "segment":
                     self.segs.pop()
+                    self.seg_snaps.pop()
                     self.edge_ids.pop()
                 else:
                     self.points_uv.pop()
+                    self.point_snaps.pop()
                     self.vertex_ids.pop()
-            self._invalidate()
-            self.state = "assign_edge" if (self.edge_ids and self.edge_ids[-1] is None) else "click_edge"
+            self._clicks_changed()
+            self.state = "assign_edge" if self._waiting_for_edge() else "click_edge"
 
     def _last_assigned(self) -> int:
         return max(i for i, e in enumerate(self.edge_ids) if e is not None)
@@ -200,6 +325,7 @@ class UpdatePose(Workflow):
                 if cands:
                     self.candidates = [np.asarray(T, float) for T in cands]
                     self.chosen = 0
+                    self.matches = None
                     self._invalidate()
                     self.state = "review"
                     self.message = (f"{len(cands)} candidate pose{'s' if len(cands) > 1 else ''} from edges "
@@ -221,27 +347,152 @@ class UpdatePose(Workflow):
             self._invalidate()
 
     def refine(self):
-        """Least squares on every click from the chosen candidate (or the database pose)."""
+        """Least squares on every click from the chosen candidate (or the database pose).
+
+        The refined pose is offered only when plausible (``plausibility``: RMS ≤ 3 σ_px, the object
+        in front of the camera and in the image); otherwise the other candidates are refined in
+        turn and the first plausible one is chosen (the message says so). WorkflowError, nothing
+        changed, when none is.
+        """
         with self.lock:
             self._check_open()
             segs, edges = self._assigned()
             pts_uv, pts_obj = self._points()
-            start = self.candidates[self.chosen] if self.chosen is not None else self.obj.T_world_obj
-            try:
-                result = refine(self.site.camera, start,
-                                segs_uv=segs if len(segs) else None, edges_obj=edges if len(edges) else None,
-                                points_uv=pts_uv if len(pts_uv) else None, points_obj=pts_obj if len(pts_obj) else None,
-                                loss=self.loss)
-            except ValueError as exc:
-                raise WorkflowError(f"refinement failed: {exc}. Click more edges or points") from None
-            if not np.all(np.isfinite(result.T_world_obj)):
-                raise WorkflowError("refinement diverged: choose another candidate or click more edges")
+            if self.matches is not None:
+                raise WorkflowError("confirm the automatic assignment first (Confirm match), or assign the edges by hand")
+            order: list[int | None] = [None]
+            if self.chosen is not None:
+                order = [self.chosen] + [i for i in range(len(self.candidates)) if i != self.chosen]
+            max_rms = 3.0 * self.sigma_px
+            failures = []
+            for i in order:
+                start = self.obj.T_world_obj if i is None else self.candidates[i]
+                what = "from the database pose" if i is None else f"candidate {i + 1}"
+                try:
+                    result = refine(self.site.camera, start,
+                                    segs_uv=segs if len(segs) else None, edges_obj=edges if len(edges) else None,
+                                    points_uv=pts_uv if len(pts_uv) else None,
+                                    points_obj=pts_obj if len(pts_obj) else None, loss=self.loss, sigma_px=self.sigma_px)
+                except ValueError as exc:
+                    failures.append(f"{what}: {exc}")
+                    continue
+                if not np.all(np.isfinite(result.T_world_obj)):
+                    failures.append(f"{what}: the refinement diverged")
+                    continue
+                why = plausibility(self.site.camera, self.obj.model, result.T_world_obj, result.rms_px, max_rms)
+                if why:
+                    failures.append(f"{what}: {why}")
+                    continue
+                break
+            else:
+                advice = ("Check the edge assignments (Remove last and assign again), or add clicks (another edge, a "
+                          "point)")
+                if i is None:
+                    advice += "; for a large motion Solve (P3L) first"
+                raise WorkflowError("no plausible pose: " + "; ".join(failures) + f". {advice}")
+            note = ""
+            if failures:
+                note = f"{'; '.join(failures)} — not offered; candidate {i + 1} refined instead. "
+                self.chosen = i
             self.refined = result
             self.state = "review"
             deg, m = pose_error(result.T_world_obj, self.obj.T_world_obj)
-            self.message = (f"RMS {result.rms_px:.2f} px over {len(result.kinds)} clicks; moved {deg:.2f}° and "
+            self.message = (f"{note}RMS {result.rms_px:.2f} px over {len(result.kinds)} clicks; moved {deg:.2f}° and "
                             f"{100 * m:.1f} cm from the database pose")
             return result
+
+    # ------------------------------------------------------------------ automatic matching
+    def auto_assign(self, on: bool = True) -> None:
+        """Automatic assignment on: clicked edges wait for ``auto_match`` instead of a model edge
+        (off: back to assigning each by hand)."""
+        with self.lock:
+            self._check_open()
+            if not on and sum(e is None for e in self.edge_ids[:-1]):
+                raise WorkflowError("some clicked edges are not assigned: Auto match them, or Remove last, before "
+                                    "assigning by hand")
+            self.auto = bool(on)
+            if self.auto and self.mode == "edge" and self.pending is None:
+                self.state = "click_edge"
+            elif not self.auto:
+                self.state = "assign_edge" if self._waiting_for_edge() else "click_edge"
+            self.message = ("Automatic matching: click 3 or more image edges (4 is best), two points each, without "
+                            "assigning them; then Auto match." if self.auto else "Assign each clicked edge by hand.")
+
+    def _twin(self, T: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        hand = {j: e for j, e in enumerate(self.edge_ids) if e is not None}
+        return nearest_twin(self.obj.model, T, edges, self.obj.T_world_obj, hand)
+
+    def auto_match(self):
+        """Which model edge is each clicked edge? Every assignment is tried on the frame and ranked.
+
+        With fewer than 3 clicked edges: switches to automatic assignment (``auto_assign``) and
+        says what to click. Otherwise ``app.vision.matching.match_edges`` on all clicked edges (hand
+        assignments are kept: only assignments agreeing with them count) and the frame the operator
+        clicked on; the plausible assignments become the candidates, the best shown; the operator
+        confirms one (``confirm_match``). Returns the list of ``Match`` (or None when switching).
+        """
+        from app.vision.matching import match_edges
+
+        with self.lock:
+            self._check_open()
+            if self.pending is not None or self.mode == "point":
+                raise WorkflowError("finish the click under way first (or Remove last)")
+            if len(self.segs) < 3:
+                if not self.auto:
+                    self.auto_assign(True)
+                    return None
+                raise WorkflowError(f"{len(self.segs)} edge{'s' if len(self.segs) != 1 else ''} clicked: automatic "
+                                    "matching needs 3 (4 or more is best); click more image edges")
+            if all(e is not None for e in self.edge_ids):
+                raise WorkflowError("every clicked edge is assigned already: Solve (P3L) or Refine")
+            segs = np.array(self.segs)
+            snapped = all(s is not None and s.applied for s in self.seg_snaps)
+            sigma = SNAPPED_SIGMA_PX if snapped else self.sigma_px
+            image = self._frame()
+            try:
+                res = match_edges(self.site.camera, self.obj.model, segs, image=image, sigma_px=sigma)
+            except ValueError as exc:
+                raise WorkflowError(f"automatic matching failed: {exc}") from None
+            kept: list[Match] = []
+            for c in res.candidates:
+                twin = self._twin(c.T_world_obj, np.asarray(c.edges))
+                if twin is None or plausibility(self.site.camera, self.obj.model, twin[0]):
+                    continue
+                kept.append(Match(twin[0], twin[1], float(c.rms_px), float(c.image_px)))
+            if not kept:
+                raise WorkflowError(f"no assignment of the {len(segs)} clicked edges to {self.object_name}'s edges fits "
+                                    "(with your hand assignments): check the clicks (Remove last), click another edge "
+                                    "(4 or more, not all through one point), or assign them by hand")
+            self.matches = kept
+            self.candidates = [m.T_world_obj for m in kept]
+            self.chosen = 0
+            self._invalidate()
+            self.state = "match"
+            self._match_s = res.total_s
+            self.message = (f"{len(kept)} assignment{'s' if len(kept) > 1 else ''} fit (searched {res.n_triples} "
+                            f"model-edge triples in {res.total_s:.2f} s); the best is shown with its edge labels: "
+                            "Confirm match, or choose another candidate")
+            return kept
+
+    def confirm_match(self) -> None:
+        """Adopt the shown automatic assignment (the chosen candidate's): then Refine and Accept."""
+        with self.lock:
+            self._check_open()
+            if not self.matches:
+                raise WorkflowError("no automatic assignment to confirm: click 3 or more edges and Auto match first")
+            i = self.chosen or 0
+            m = self.matches[i]
+            self._match_undo.append(list(self.edge_ids))
+            self.edge_ids = [int(e) for e in m.edges]
+            self._done.append("match")
+            self.match_info = {"candidate": i + 1, "of": len(self.matches), "rms_px": m.rms_px,
+                               "image_px": None if not np.isfinite(m.image_px) else m.image_px,
+                               "edges": [int(e) for e in m.edges]}
+            self.matches = None
+            self._invalidate()
+            self.state = "review"
+            self.message = (f"Assignment {i + 1} confirmed: segments {', '.join(f'{j + 1}→e{e}' for j, e in enumerate(self.edge_ids))}."
+                            " Refine, then Accept.")
 
     def accept(self):
         """Write the refined pose and covariance (one transaction); ConflictError → nothing written."""
@@ -254,11 +505,18 @@ class UpdatePose(Workflow):
             r = self.refined
             segs, edges = self._assigned()
             pts_uv, _ = self._points()
-            clicks = {"segs_uv": segs, "edge_ids": [e for e in self.edge_ids if e is not None],
+            used = [j for j, e in enumerate(self.edge_ids) if e is not None]
+            clicks = {"segs_uv": segs, "edge_ids": [self.edge_ids[j] for j in used],
                       "points_uv": pts_uv, "vertex_ids": list(self.vertex_ids),
-                      "candidates": len(self.candidates), "chosen": self.chosen}
+                      "candidates": len(self.candidates), "chosen": self.chosen,
+                      # raw and snapped pixels of each segment and point above (None: snapping was off)
+                      "snaps": [None if self.seg_snaps[j] is None else self.seg_snaps[j].record() for j in used],
+                      "point_snaps": [None if s is None else s.record() for s in self.point_snaps],
+                      "assignment": "automatic" if self.match_info is not None else "hand"}
+            if self.match_info is not None:
+                clicks["match"] = self.match_info
             residuals = {"rms_px": r.rms_px, "click_residuals_px": r.click_residuals_px, "kinds": list(r.kinds)}
-            method = "p3l+refine" if self.chosen is not None else "refine"
+            method = "match+refine" if self.match_info is not None else ("p3l+refine" if self.chosen is not None else "refine")
             try:
                 rec = self.site.write(lambda db: db.update_pose(
                     self.obj.id, r.T_world_obj, r.cov, expected_version=self.obj.version, method=method,
@@ -282,18 +540,32 @@ class UpdatePose(Workflow):
                                 "click another model edge")
         self.edge_ids[-1] = k
         self._done.append("assign")
-        self._invalidate()
+        self._clicks_changed()
         self.state = "click_edge"
 
     def _add_point(self, p: np.ndarray, vertex: int) -> None:
         if vertex in self.vertex_ids:
             raise WorkflowError(f"vertex {vertex} already has a clicked point; click another vertex")
-        self.points_uv.append(p)
+        snap = self._snap_corner(p, self.obj.model, self.T_current, vertex)
+        self.points_uv.append(p if snap is None else snap.used)
+        self.point_snaps.append(snap)
         self.vertex_ids.append(vertex)
         self.mode, self.pending_vertex = "edge", None
         self._done.append("point")
-        self._invalidate()
+        self._clicks_changed()
         self.state = "click_edge"
+        self.message = self._snap_message(f"Point v{vertex}", snap)
+
+    def _last_snap(self):
+        """The last clicked segment or image point, and how to put a click back in its place."""
+        for last in reversed(self._done):
+            if last == "segment":
+                i = len(self.segs) - 1
+                return self.seg_snaps[i], lambda raw: self.segs.__setitem__(i, raw)
+            if last == "point":
+                i = len(self.points_uv) - 1
+                return self.point_snaps[i], lambda raw: self.points_uv.__setitem__(i, raw)
+        return None, None
 
     def _assigned(self) -> tuple[np.ndarray, np.ndarray]:
         pairs = [(s, e) for s, e in zip(self.segs, self.edge_ids) if e is not None]
@@ -351,10 +623,19 @@ class UpdatePose(Workflow):
             return f"Now click where vertex {self.pending_vertex} really is in the video."
         if self.pending is not None:
             return f"Click a second point on the same image edge (edge {len(self.segs) + 1})."
-        if self.edge_ids and self.edge_ids[-1] is None:
-            return f"Which model edge is it? Click that edge of {self.object_name} {where}."
+        if self.matches is not None:
+            return (f"Assignment {(self.chosen or 0) + 1} of {len(self.matches)} shown (labels 1→e3: segment 1 is model "
+                    "edge 3): Confirm match, choose another candidate, or Remove last to assign by hand.")
+        if self._waiting_for_edge():
+            return f"Which model edge is it? Click that edge of {self.object_name} {where} (or Auto match later)."
+        if self.auto and n < len(self.segs):
+            k = len(self.segs)
+            if k < 3:
+                return f"Automatic matching: click two points along an edge of {self.object_name} (edge {k + 1}; 3 or more, 4 is best)."
+            return f"{k} edges clicked: Auto match, or click another edge (4 or more is best)."
         if n < 3:
-            return f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3)."
+            return (f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3), or Auto "
+                    "match to skip saying which model edge each is.")
         if not self.candidates and self.refined is None:
             return "Solve (P3L) for a large motion, or Refine from the database pose for a small one; or click more edges."
         if self.refined is None:
@@ -368,17 +649,28 @@ class UpdatePose(Workflow):
     def marks(self) -> Marks:
         with self.lock:
             m = Marks(selected=self.object_name)
+            model = self.obj.model
+            shown = None if self.matches is None else self.matches[self.chosen or 0]  # assignment awaiting confirmation
             if self.segs:
                 m.segments = np.array(self.segs)
-                m.labels = [((s[0] + s[1]) / 2, f"{i + 1}" + (f"→e{e}" if e is not None else "?"))
-                            for i, (s, e) in enumerate(zip(self.segs, self.edge_ids))]
+                ids = self.edge_ids if shown is None else [int(e) for e in shown.edges]
+                m.labels = [((s[0] + s[1]) / 2, f"{i + 1}" + (f"→e{e}" if e is not None else "?") + ("?" if shown is not None else ""))
+                            for i, (s, e) in enumerate(zip(self.segs, ids))]
             if self.pending is not None:
                 m.pending = self.pending.reshape(1, 2)
             if self.points_uv:
                 m.points = np.array(self.points_uv)
                 m.labels += [(p, f"v{k}") for p, k in zip(self.points_uv, self.vertex_ids)]
-            m.highlight = [(self.object_name, e) for e in self.edge_ids if e is not None]
-            model = self.obj.model
+            m.raw_segments, m.raw_points, m.snap_lines, snap_labels = snap_marks(self.seg_snaps + self.point_snaps)
+            m.labels += snap_labels
+            if shown is None:
+                m.highlight = [(self.object_name, e) for e in self.edge_ids if e is not None]
+            else:  # the matched model edges, labelled where the shown candidate draws them
+                cam = self.site.camera
+                S = model.edge_segments(shown.T_world_obj)[shown.edges]
+                front = np.all(cam.depth(S.reshape(-1, 3)).reshape(-1, 2) > 0, axis=1)
+                mids = cam.project(S.reshape(-1, 3)).reshape(-1, 2, 2).mean(axis=1)
+                m.labels += [(mid + [0.0, -10.0], f"e{int(e)}") for mid, e, f in zip(mids, shown.edges, front) if f]
             if self.refined is not None:
                 m.ghosts = [Ghost(model, self.refined.T_world_obj, "refined", chosen=True)]
             else:
@@ -393,9 +685,17 @@ class UpdatePose(Workflow):
         with self.lock:
             out: dict[str, Any] = {"object": self.object_name, "edges": sum(e is not None for e in self.edge_ids),
                                    "points": len(self.points_uv)}
+            if self.auto:
+                out["clicked edges"] = len(self.segs)
+            snaps = [s for s in self.seg_snaps + self.point_snaps if s is not None]
+            if snaps:
+                out["snapped"] = f"{sum(s.applied for s in snaps)} of {len(snaps)} clicks"
             if self.candidates:
                 out["candidates"] = len(self.candidates)
                 out["chosen"] = (self.chosen or 0) + 1
+            if self.matches is not None:
+                out["assignments"] = [{"candidate": i + 1, "edges": " ".join(f"e{int(e)}" for e in mt.edges),
+                                       "rms_px": mt.rms_px, "image_px": mt.image_px} for i, mt in enumerate(self.matches)]
             r = self.refined
             if r is not None:
                 out["rms_px"] = r.rms_px

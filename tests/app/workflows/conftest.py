@@ -24,7 +24,18 @@ def db(tmp_path, scene):
 
 @pytest.fixture
 def site(scene, db):
-    return Site(scene, db, clock=lambda: 0.0)
+    # No video frames: these tests click poses the scene's video does not show (moved by hand),
+    # so the clicks are used as clicked (snapping needs the frame they were made on).
+    return Site(scene, db, clock=lambda: 0.0, frames=None)
+
+
+@pytest.fixture
+def video_site(scene, db):
+    """The site with the scene's video: the frame at the scene clock's time (``video_site.t``)."""
+    clock = {"t": 0.0}
+    s = Site(scene, db, clock=lambda: clock["t"])
+    s.t = clock
+    return s
 
 
 FAST_DEVICES = dict(rangefinder_baud=0, turret_baud=0, measure_delay_s=0.0, delay_per_m_s=0.0, no_target_delay_s=0.0)
@@ -49,4 +60,4 @@ def devices(fast_scene):
 
 @pytest.fixture
 def device_site(fast_scene, db, devices):
-    return Site(fast_scene, db, devices=devices, clock=lambda: 0.0)
+    return Site(fast_scene, db, devices=devices, clock=lambda: 0.0, frames=None)

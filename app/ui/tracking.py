@@ -1,0 +1,83 @@
+"""Feeding a Track workflow the live video, on its own thread (never the redraw loop's).
+
+One ``TrackFeeder`` per tracked object (per Track workflow): woken by each new frame of the
+grabber, it hands the latest frame to ``TrackObject.step`` (frames that arrive while a step runs
+are skipped: the tracker always works on the newest one), marks the client's overlay dirty and
+wakes the redraw loop. It notifies the operator when the track is lost (and once more on an
+unexpected failure, which stops it), and ends when the workflow is accepted or cancelled.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any
+
+from app.workflows import WorkflowError
+
+__all__ = ["TrackFeeder"]
+
+log = logging.getLogger("mcit.ui")
+
+
+class TrackFeeder:
+    """Runs ``wf.step(frame)`` for every new frame of ``grabber`` while the workflow follows.
+
+    panel : the client's panel (``notify``, ``dirty``, ``app.wake``). wf : a TrackObject.
+    grabber : app.video.FrameGrabber.
+    """
+
+    def __init__(self, panel: Any, wf: Any, grabber: Any):
+        self.panel = panel
+        self.wf = wf
+        self.grabber = grabber
+        self.steps = 0
+        self._event = threading.Event()
+        self._stop = threading.Event()
+        grabber.add_listener(self._on_frame)
+        self.thread = threading.Thread(target=self._run, name=f"mcit-track-{wf.object_name}", daemon=True)
+        self.thread.start()
+
+    def _on_frame(self, _frame) -> None:
+        self._event.set()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._event.set()
+
+    @property
+    def alive(self) -> bool:
+        return self.thread.is_alive()
+
+    def _run(self) -> None:
+        wf, last, lost_seen = self.wf, -1, self.wf.lost_count
+        self._event.set()  # the frame on screen now is the first to track
+        try:
+            while not self._stop.is_set() and not wf.finished:
+                self._event.wait(0.5)
+                self._event.clear()
+                frame = self.grabber.latest()
+                if self._stop.is_set() or wf.finished or frame is None or frame.index == last or not wf.following:
+                    continue
+                last = frame.index
+                try:
+                    wf.step(frame=frame.image, t_s=frame.t_s)
+                    self.steps += 1
+                except WorkflowError as exc:
+                    if wf.following:  # a frame it cannot use (size, no video): stop following, say why
+                        try:
+                            wf.pause()
+                        except WorkflowError:
+                            pass
+                        self.panel.notify("Tracking paused", str(exc), "yellow")
+                if wf.lost_count != lost_seen:
+                    lost_seen = wf.lost_count
+                    self.panel.notify("Tracking lost", wf.message, "yellow")
+                self.panel.dirty = True
+                self.panel.app.wake()
+        except Exception as exc:  # noqa: BLE001 - say so, keep the server running
+            log.exception("tracking %s failed", wf.object_name)
+            self.panel.notify("Tracking failed", f"{type(exc).__name__}: {exc}. Nothing was written; Cancel and Track "
+                              "again.", "red")
+        finally:
+            self.grabber.remove_listener(self._on_frame)

@@ -1,0 +1,211 @@
+"""Clicks snapped to the image: what the workflows share.
+
+When the operator finishes a clicked segment (the second click on an image edge) the workflow
+snaps it to the image's edge (``app.vision.snap.snap_segment``) on the frame the operator clicked
+on (``Site.frame_at``); a clicked image point of a known model vertex is snapped to the image's
+corner (``app.vision.corner.snap_corner``: the intersection of the vertex's edges snapped to the
+image, directions from the model at its current estimate; OpenCV's ``cornerSubPix`` when the
+vertex is not known or its edges are not found). Each click keeps a ``ClickSnap``: the raw click,
+the snapped one, how far it moved, or why the snap failed (the raw click is then used). The
+overlay shows both (``snap_marks``); ``refuse_snap`` goes back to the raw click; the history
+records raw and snapped coordinates (``ClickSnap.record``).
+
+``SnapMixin`` gives a workflow the ``snap`` option (on by default), ``set_snap(on)`` and the
+bookkeeping; each workflow says which of its clicks is the last one (``_last_snap``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .base import WorkflowError
+
+__all__ = ["ClickSnap", "SnapMixin", "vertex_edge_directions", "snap_marks"]
+
+
+@dataclass
+class ClickSnap:
+    """One click (a segment (2, 2) or a point (2,), pixels) and its snap.
+
+    raw : the operator's click. snapped : the snapped click, None when the snap failed.
+    kind : "segment" or "corner". method : how it was snapped ("edge", "edges", "subpix").
+    moved_px : largest distance a clicked pixel moved. reason : why it failed ("" if it did not).
+    refused : the operator refused the snap (the raw click is used).
+    lines_uv : (K, 2, 2) the image edges a corner was found on (display).
+    """
+
+    kind: str
+    raw: np.ndarray
+    snapped: np.ndarray | None
+    moved_px: float = 0.0
+    method: str = ""
+    reason: str = ""
+    refused: bool = False
+    lines_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+
+    @property
+    def applied(self) -> bool:
+        """True when the snapped click is the one in use."""
+        return self.snapped is not None and not self.refused
+
+    @property
+    def used(self) -> np.ndarray:
+        """The click in use: snapped, unless the snap failed or was refused."""
+        return (self.snapped if self.applied else self.raw).copy()
+
+    def text(self) -> str:
+        """A short label for the overlay."""
+        if self.applied:
+            return f"snapped {self.moved_px:.1f} px"
+        if self.refused:
+            return "raw (snap refused)"
+        return "raw (no snap)"
+
+    def record(self) -> dict[str, Any]:
+        """JSON-ready history entry: raw and snapped coordinates, whether the snap is used."""
+        return {"kind": self.kind, "raw_uv": np.asarray(self.raw).tolist(),
+                "snapped_uv": None if self.snapped is None else np.asarray(self.snapped).tolist(),
+                "snapped": self.applied, "refused": self.refused, "moved_px": float(self.moved_px),
+                "method": self.method, "reason": self.reason}
+
+
+def vertex_edge_directions(camera: Any, model: Any, T_world_obj: np.ndarray, vertex: int) -> tuple[np.ndarray, np.ndarray]:
+    """Image directions (K, 2) and projected lengths (K,) (pixels) of the model edges that leave
+    ``vertex`` and are visible at ``T_world_obj`` (convex hidden-line removal), through ``camera``."""
+    if not len(model.edges) or not 0 <= int(vertex) < len(model.vertices):
+        return np.zeros((0, 2)), np.zeros(0)
+    wf = model.wireframe(camera.center, T_world_obj)
+    visible = {int(k) for k, v, kind in zip(wf.edge_index, wf.visible, wf.kind) if v and kind == "edge"}
+    D, L = [], []
+    for k, (i, j) in enumerate(np.asarray(model.edges).tolist()):
+        if k not in visible or vertex not in (i, j):
+            continue
+        other = j if i == vertex else i
+        X = model.vertices[[vertex, other]] @ T_world_obj[:3, :3].T + T_world_obj[:3, 3]
+        if np.any(camera.depth(X) <= 0):
+            continue
+        a, b = camera.project(X)
+        if np.linalg.norm(b - a) > 1e-6:
+            D.append(b - a)
+            L.append(float(np.linalg.norm(b - a)))
+    return np.array(D).reshape(-1, 2), np.array(L)
+
+
+def snap_marks(snaps: list[ClickSnap | None]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
+    """What to draw for snapped clicks: raw segments (K, 2, 2) and raw points (N, 2) of the snaps
+    in use (beside the snapped ones the workflow draws), the corners' edge lines (M, 2, 2), and
+    labels (uv, text) saying how far each moved or that a snap failed or was refused."""
+    raw_segs, raw_pts, lines, labels = [], [], [], []
+    for s in snaps:
+        if s is None:
+            continue
+        at = s.used.reshape(-1, 2)
+        anchor = at.mean(axis=0) + ([0.0, 12.0] if s.kind == "segment" else [6.0, 10.0])
+        if s.applied:
+            (raw_segs if s.kind == "segment" else raw_pts).append(s.raw)
+            if len(s.lines_uv):
+                lines.extend(s.lines_uv)
+        labels.append((anchor, s.text()))
+    return (np.array(raw_segs).reshape(-1, 2, 2), np.array(raw_pts).reshape(-1, 2), np.array(lines).reshape(-1, 2, 2),
+            labels)
+
+
+class SnapMixin:
+    """Snapping for a workflow: the ``snap`` option, ``set_snap``, ``refuse_snap`` and the snap calls.
+
+    The workflow calls ``_snap_segment(seg)`` / ``_snap_corner(uv, ...)`` for each finished click
+    and keeps the returned ``ClickSnap`` beside it; it implements ``_last_snap()`` → (ClickSnap or
+    None, a function that puts a click back in place) for ``refuse_snap``.
+    """
+
+    snapping: ClassVar[bool] = True  # Session.start passes its "Snap clicks" setting as snap=
+
+    def _init_snap(self, snap: bool) -> None:
+        self.snap = bool(snap)
+
+    def set_snap(self, on: bool = True) -> None:
+        """Snap the next clicks to the image's edges and corners (on), or use them as clicked (off)."""
+        with self.lock:
+            self.snap = bool(on)
+            self.message = "Clicks will be snapped to the image's edges and corners." if self.snap else \
+                "Clicks will be used as clicked (snapping off)."
+
+    def _frame(self) -> np.ndarray | None:
+        try:
+            return self.site.frame_at()
+        except Exception as exc:  # noqa: BLE001 - a broken video must not stop the click: it is kept raw
+            self._frame_error = f"the video frame could not be read ({exc})"
+            return None
+
+    def _no_frame_reason(self) -> str:
+        return getattr(self, "_frame_error", "") or "no video frame to snap to"
+
+    def _snap_segment(self, seg: np.ndarray) -> ClickSnap | None:
+        """Snap a finished segment (2, 2) on the current frame; None when snapping is off or the
+        site has no video frames."""
+        if not self.snap or not self.site.has_frames:
+            return None
+        from app.vision.snap import snap_segment
+
+        image = self._frame()
+        if image is None:
+            return ClickSnap("segment", seg.copy(), None, reason=self._no_frame_reason())
+        try:
+            res = snap_segment(image, seg)
+        except ValueError as exc:
+            return ClickSnap("segment", seg.copy(), None, reason=str(exc))
+        if not res.ok:
+            return ClickSnap("segment", seg.copy(), None, moved_px=float(res.moved_px), method="edge", reason=res.reason)
+        return ClickSnap("segment", seg.copy(), res.seg_uv.copy(), float(res.moved_px), "edge")
+
+    def _snap_corner(self, uv: np.ndarray, model: Any = None, T_world_obj: np.ndarray | None = None,
+                     vertex: int | None = None) -> ClickSnap | None:
+        """Snap a clicked image point (2,) of a model vertex (if known) to the image's corner; None
+        when snapping is off or the site has no video frames."""
+        if not self.snap or not self.site.has_frames:
+            return None
+        from app.vision.corner import snap_corner
+
+        image = self._frame()
+        if image is None:
+            return ClickSnap("corner", uv.copy(), None, reason=self._no_frame_reason())
+        D = L = None
+        if model is not None and vertex is not None and T_world_obj is not None:
+            D, L = vertex_edge_directions(self.site.camera, model, np.asarray(T_world_obj, float), int(vertex))
+        try:
+            res = snap_corner(image, uv, D, L)
+        except ValueError as exc:
+            return ClickSnap("corner", uv.copy(), None, reason=str(exc))
+        if not res.ok:
+            return ClickSnap("corner", uv.copy(), None, method=res.method, reason=res.reason)
+        return ClickSnap("corner", uv.copy(), res.uv.copy(), float(res.moved_px), res.method, lines_uv=res.lines_uv)
+
+    def _snap_message(self, what: str, s: ClickSnap | None) -> str:
+        if s is None:
+            return ""
+        if s.applied:
+            return f"{what} snapped {s.moved_px:.2f} px to the image's {'edge' if s.kind == 'segment' else 'corner'} (Refuse snap keeps your click)."
+        return f"{what} kept as clicked: {s.reason}."
+
+    def _last_snap(self) -> tuple[ClickSnap | None, Any]:  # pragma: no cover - per workflow
+        raise NotImplementedError
+
+    def refuse_snap(self) -> None:
+        """Use the last click as clicked, not snapped (its raw pixels come back)."""
+        with self.lock:
+            self._check_open()
+            snap, put_back = self._last_snap()
+            if snap is None:
+                raise WorkflowError("the last click was not snapped (snapping is off, or there is no click yet): nothing to refuse")
+            if not snap.applied:
+                raise WorkflowError(f"the last click is already used as clicked ({'refused' if snap.refused else snap.reason})")
+            snap.refused = True
+            put_back(snap.raw.copy())
+            self._after_refuse()
+            self.message = "Snap refused: the last click is used as you clicked it."
+
+    def _after_refuse(self) -> None:
+        """A click changed: drop results that depend on it (the workflow's own invalidation)."""

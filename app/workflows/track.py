@@ -1,0 +1,335 @@
+"""Track a known object in the video and write its tracked pose (beyond the paper: docs/beyond.md).
+
+Started on a known object (``object_name``, default: the selection), the workflow follows it from
+its database pose, frame by frame, on the image's edges (``app.vision.track.EdgeTracker``: the
+"moving edges" tracker with the robust small-motion pose step). Each ``step`` takes the frame at
+the scene time (``Site.frame_at``) or the frame given — the interface feeds it every new video
+frame from a worker thread — and updates the tracked pose, its confidence and the edge points
+that support it (``marks``).
+
+When the tracker is lost (too few edges found, a jump, a failed step) it stops and says so:
+nothing is written while lost. The operator then clicks three or more of the object's image edges
+(two clicks each, snapped to the image) and ``reinit()`` finds the pose from them on the current
+frame (automatic matching, ``app.vision.matching.match_edges``: no need to say which edge is
+which) and tracking resumes; or ``restart()`` resumes from the last good pose. ``pause()`` stops
+following (clicks are then accepted too), ``resume()`` goes on.
+
+``accept()`` writes the tracked pose (one transaction, version check, method "tracking", the
+frames tracked, the last confidence and residual, any re-initialisation's clicks in the history).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from core.transforms import pose_error
+
+from .base import Ghost, Marks, Workflow, WorkflowError, as_pixel
+from .snapping import ClickSnap, SnapMixin, snap_marks
+from .update_pose import MIN_SEGMENT_PX, SNAPPED_SIGMA_PX, nearest_twin, plausibility
+
+__all__ = ["TrackObject"]
+
+
+class TrackObject(SnapMixin, Workflow):
+    name = "track"
+    title = "Track"
+    options = ("object_name",)
+    actions = ("step", "pause", "resume", "restart", "click", "add_segment", "remove_last", "reinit", "accept",
+               "cancel", "refuse_snap", "set_snap")
+
+    def __init__(self, site, client: str = "operator", object_name: str | None = None, snap: bool = True,
+                 sigma_px: float = 1.0, **tracker_options: Any):
+        from app.vision.track import EdgeTracker
+
+        super().__init__(site, client)
+        self._init_snap(snap)
+        if object_name is None:
+            raise WorkflowError("Track: select the object first")
+        try:
+            self.obj = site.object(object_name)
+        except KeyError as exc:
+            raise WorkflowError(str(exc.args[0])) from None
+        self.object_name = object_name
+        self.sigma_px = float(sigma_px)
+        try:
+            self.tracker = EdgeTracker(site.camera, self.obj.model, self.obj.T_world_obj, **tracker_options)
+        except (TypeError, ValueError) as exc:
+            raise WorkflowError(f"Track: cannot track {object_name}: {exc}") from None
+        self.T_world_obj = self.obj.T_world_obj.copy()  # the last good pose
+        self.cov: np.ndarray | None = None
+        self.confidence: float | None = None
+        self.rms_px = float("nan")
+        self.diagnostics = None
+        self.frames = 0
+        self.t_first: float | None = None
+        self.t_last: float | None = None
+        self.lost = False
+        self.lost_count = 0  # how many times it was lost (the interface notifies on each)
+        self.reason = ""
+        self.paused = False
+        self.segs: list[np.ndarray] = []  # re-initialisation clicks
+        self.seg_snaps: list[ClickSnap | None] = []
+        self.pending: np.ndarray | None = None
+        self.reinits: list[dict[str, Any]] = []
+        self.state = "tracking"
+
+    # ------------------------------------------------------------------ tracking
+    @property
+    def following(self) -> bool:
+        """True while frames are followed (not paused, not lost, not finished)."""
+        return not (self.paused or self.lost or self.finished)
+
+    def step(self, frame=None, t_s: float | None = None):
+        """Follow the object into one frame: ``frame`` (an image of the camera's size) or the site's
+        frame at ``t_s`` (default: the scene time now). Returns ``app.vision.track.TrackResult``;
+        when it is lost the result says so (and the message what to do)."""
+        with self.lock:
+            self._check_open()
+            if self.lost:
+                raise WorkflowError(f"tracking is lost ({self.reason}): click three or more edges of {self.object_name} "
+                                    "and Re-initialise, or Restart from the last good pose")
+            if self.paused:
+                raise WorkflowError("tracking is paused: Resume first")
+            t = self.site.time_s() if t_s is None else float(t_s)
+            image = self.site.frame_at(t) if frame is None else np.asarray(frame)
+            if image is None:
+                raise WorkflowError(f"no video frame at t = {t:.2f} s: tracking needs the video")
+            try:
+                res = self.tracker.track(image)
+            except ValueError as exc:
+                raise WorkflowError(f"cannot track on this frame: {exc}") from None
+            self.frames += 1
+            self.t_first = t if self.t_first is None else self.t_first
+            self.t_last = t
+            self.diagnostics = self.tracker.diagnostics
+            self.confidence = float(res.confidence)
+            if res.lost:
+                self.lost = True
+                self.lost_count += 1
+                self.reason = self.diagnostics.reason if self.diagnostics is not None else "lost"
+                self.state = "lost"
+                self.message = (f"Lost at t = {t:.2f} s: {self.reason}. Nothing is written while lost: click three or "
+                                f"more edges of {self.object_name} (two clicks each) and Re-initialise, or Restart "
+                                "from the last good pose.")
+            else:
+                self.T_world_obj = res.T_world_obj.copy()
+                self.cov = None if self.diagnostics.cov is None else self.diagnostics.cov.copy()
+                self.rms_px = float(self.diagnostics.rms_px)
+                self.state = "tracking"
+            return res
+
+    def pause(self) -> None:
+        """Stop following frames (the tracked pose stays; clicks for a re-initialisation are taken)."""
+        with self.lock:
+            self._check_open()
+            self.paused = True
+            self.state = "paused"
+            self.message = "Paused: Resume, Accept the tracked pose, or click edges and Re-initialise."
+
+    def resume(self) -> None:
+        """Follow frames again from the tracked pose."""
+        with self.lock:
+            self._check_open()
+            if self.lost:
+                raise WorkflowError("tracking is lost: Re-initialise (click edges) or Restart")
+            self.paused = False
+            self.state = "tracking"
+            self.message = ""
+
+    def restart(self) -> None:
+        """Resume from the last good pose (e.g. after an occlusion has passed)."""
+        with self.lock:
+            self._check_open()
+            self.tracker.reset(self.T_world_obj)
+            self.lost = self.paused = False
+            self.reason = ""
+            self.state = "tracking"
+            self.message = "Restarted from the last good pose."
+
+    # ------------------------------------------------------------------ re-initialisation
+    def click(self, uv) -> None:
+        """First or second end of an image edge of the object (while lost or paused)."""
+        p = as_pixel(uv)
+        with self.lock:
+            self._check_open()
+            if self.following:
+                raise WorkflowError("clicks re-initialise a lost track: Pause first to click edges")
+            if self.pending is None:
+                self.pending = p
+                return
+            seg = np.array([self.pending, p])
+            if np.linalg.norm(seg[1] - seg[0]) < MIN_SEGMENT_PX:
+                raise WorkflowError(f"the two clicks are {np.linalg.norm(seg[1] - seg[0]):.1f} px apart: click the "
+                                    f"edge's other end, at least {MIN_SEGMENT_PX:.0f} px away")
+            self.pending = None
+            snap = self._snap_segment(seg)
+            self.segs.append(seg if snap is None else snap.used)
+            self.seg_snaps.append(snap)
+            self.message = self._snap_message(f"Edge {len(self.segs)}", snap)
+
+    def add_segment(self, seg_uv) -> None:
+        """A clicked segment (2, 2) at once (for scripts)."""
+        seg = np.asarray(seg_uv, dtype=float)
+        if seg.shape != (2, 2):
+            raise WorkflowError(f"a segment is two pixels [[u1, v1], [u2, v2]], got {seg_uv!r}")
+        with self.lock:
+            if self.pending is not None:
+                raise WorkflowError("finish the edge under way first (or Remove last)")
+            self.click(seg[0])
+            self.click(seg[1])
+
+    def remove_last(self) -> None:
+        """Drop the pending click, or else the last clicked edge."""
+        with self.lock:
+            self._check_open()
+            if self.pending is not None:
+                self.pending = None
+            elif self.segs:
+                self.segs.pop()
+                self.seg_snaps.pop()
+
+    def _last_snap(self):
+        if not self.segs:
+            return None, None
+        i = len(self.segs) - 1
+        return self.seg_snaps[i], lambda raw: self.segs.__setitem__(i, raw)
+
+    def reinit(self):
+        """The pose from the clicked edges on the current frame (every assignment tried), then track on."""
+        from app.vision.matching import match_edges
+
+        with self.lock:
+            self._check_open()
+            if len(self.segs) < 3:
+                raise WorkflowError(f"{len(self.segs)} edges clicked: click three or more edges of {self.object_name} "
+                                    "(4 is best), two clicks each, then Re-initialise")
+            image = self._frame()
+            snapped = all(s is not None and s.applied for s in self.seg_snaps)
+            try:
+                res = match_edges(self.site.camera, self.obj.model, np.array(self.segs), image=image,
+                                  sigma_px=SNAPPED_SIGMA_PX if snapped else self.sigma_px)
+            except ValueError as exc:
+                raise WorkflowError(f"cannot re-initialise: {exc}") from None
+            for c in res.candidates:
+                twin = nearest_twin(self.obj.model, c.T_world_obj, c.edges, self.T_world_obj)
+                if twin is not None and not plausibility(self.site.camera, self.obj.model, twin[0]):
+                    break
+            else:
+                raise WorkflowError(f"no pose of {self.object_name} fits the {len(self.segs)} clicked edges: check them "
+                                    "(Remove last), click another edge (4 or more, not all through one point)")
+            T, edges = twin
+            self.reinits.append({"t_s": self.site.time_s(), "segs_uv": np.array(self.segs).tolist(),
+                                 "edges": [int(e) for e in edges], "rms_px": float(c.rms_px),
+                                 "snaps": [None if s is None else s.record() for s in self.seg_snaps]})
+            self.tracker.reset(T)
+            self.T_world_obj = T.copy()
+            self.segs, self.seg_snaps, self.pending = [], [], None
+            self.lost = self.paused = False
+            self.reason = ""
+            self.state = "tracking"
+            self.message = (f"Re-initialised from {len(edges)} edges (model edges {', '.join(f'e{e}' for e in edges)}, "
+                            f"RMS {c.rms_px:.2f} px): tracking again.")
+            return T
+
+    # ------------------------------------------------------------------ accept
+    def accept(self):
+        """Write the tracked pose (one transaction, method "tracking"); refused while lost."""
+        from app.db import ConflictError
+
+        with self.lock:
+            self._check_open()
+            if self.lost:
+                raise WorkflowError(f"the track is lost ({self.reason}): nothing written. Re-initialise (click edges) "
+                                    "or Restart, or Cancel")
+            if self.frames == 0:
+                raise WorkflowError("no frame has been tracked yet: wait for the video (or step), then Accept")
+            clicks = {"reinit": self.reinits} if self.reinits else None
+            measurements = {"frames": self.frames, "t_first_s": self.t_first, "t_last_s": self.t_last}
+            residuals = {"confidence": self.confidence, "rms_px": self.rms_px}
+            d = self.diagnostics
+            if d is not None:
+                residuals.update(n_samples=int(d.n_samples), n_inliers=int(d.n_inliers))
+            T, cov = self.T_world_obj.copy(), None if self.cov is None else self.cov.copy()
+            try:
+                rec = self.site.write(lambda db: db.update_pose(
+                    self.obj.id, T, cov, expected_version=self.obj.version, method="tracking", client=self.client,
+                    clicks=clicks, measurements=measurements, residuals=residuals))
+            except ConflictError as exc:
+                raise WorkflowError(f"{exc}. Cancel, and Track again from the new pose") from None
+            except ValueError as exc:
+                raise WorkflowError(f"the database refused the pose: {exc}") from None
+            self.accepted = True
+            self.state = "accepted"
+            self.message = (f"{self.object_name} updated from tracking (version {rec.version}): {self.frames} frames, "
+                            f"confidence {100 * (self.confidence or 0):.0f} %")
+            return rec
+
+    # ------------------------------------------------------------------ display
+    @property
+    def next_step(self) -> str:
+        if self.accepted:
+            return f"Done: {self.object_name}'s tracked pose is written."
+        if self.cancelled:
+            return "Cancelled: nothing was written."
+        if self.pending is not None:
+            return "Click the other end of that edge."
+        if self.lost:
+            n = len(self.segs)
+            more = f" ({n} clicked)" if n else ""
+            return (f"Lost: {self.reason}. Click three or more edges of {self.object_name}, two clicks each{more}, then "
+                    "Re-initialise; or Restart from the last good pose.")
+        if self.paused:
+            return "Paused: Resume, Accept the tracked pose, or click edges and Re-initialise."
+        if self.frames == 0:
+            return f"Tracking {self.object_name} from its database pose: waiting for the next frame."
+        return (f"Tracking {self.object_name}: confidence {100 * (self.confidence or 0):.0f} %. Accept writes the tracked "
+                "pose; Pause to stop.")
+
+    def marks(self) -> Marks:
+        with self.lock:
+            m = Marks(selected=self.object_name)
+            label = "LOST" if self.lost else (f"{100 * self.confidence:.0f} %" if self.confidence is not None else "")
+            m.tracked = [Ghost(self.obj.model, self.T_world_obj, f"{self.object_name} {label}".strip(), chosen=not self.lost)]
+            d = self.diagnostics
+            if d is not None and len(d.matched_uv):
+                found = np.all(np.isfinite(d.matched_uv), axis=1)
+                m.found_points = d.matched_uv[found & (d.weights >= 0.5)]
+                m.rejected_points = d.matched_uv[found & (d.weights < 0.5)]
+            cam = self.site.camera
+            X = self.obj.model.vertices @ self.T_world_obj[:3, :3].T + self.T_world_obj[:3, 3] if len(self.obj.model.vertices) \
+                else self.T_world_obj[:3, 3].reshape(1, 3)
+            X = X[cam.depth(X) > 0]
+            if len(X) and label:
+                uv = cam.project(X)
+                m.labels = [(np.array([uv[:, 0].mean(), uv[:, 1].max() + 14.0]), f"tracked {label}")]
+            if self.segs:
+                m.segments = np.array(self.segs)
+                m.labels += [((s[0] + s[1]) / 2, str(i + 1)) for i, s in enumerate(self.segs)]
+            if self.pending is not None:
+                m.pending = self.pending.reshape(1, 2)
+            m.raw_segments, _, _, snap_labels = snap_marks(self.seg_snaps)
+            m.labels += snap_labels
+            return m
+
+    def summary(self) -> dict[str, Any]:
+        with self.lock:
+            out: dict[str, Any] = {"object": self.object_name,
+                                   "state": "lost" if self.lost else ("paused" if self.paused else "tracking"),
+                                   "frames": self.frames}
+            if self.confidence is not None:
+                out["confidence"] = self.confidence
+            if np.isfinite(self.rms_px):
+                out["rms_px"] = self.rms_px
+            d = self.diagnostics
+            if d is not None:
+                out["edge points"] = f"{d.n_inliers} kept of {d.n_samples}"
+            if self.lost:
+                out["reason"] = self.reason
+            deg, m = pose_error(self.T_world_obj, self.obj.T_world_obj)
+            out["change"] = {"deg": float(deg), "cm": float(100 * m)}
+            if self.reinits:
+                out["re-initialised"] = len(self.reinits)
+            return out
