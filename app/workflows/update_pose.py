@@ -47,6 +47,7 @@ __all__ = ["UpdatePose", "Match", "plausibility", "nearest_twin"]
 PICK_RADIUS_PX = 25.0
 MIN_SEGMENT_PX = 3.0
 SNAPPED_SIGMA_PX = 0.3  # the click noise automatic matching assumes when every segment is snapped
+IMAGE_GATE_PX = 3.0  # a matched pose whose edges lie farther than this from the image's (mean) fits the clicks only
 
 
 @dataclass(frozen=True)
@@ -463,6 +464,15 @@ class UpdatePose(SnapMixin, Workflow):
                 raise WorkflowError(f"no assignment of the {len(segs)} clicked edges to {self.object_name}'s edges fits "
                                     "(with your hand assignments): check the clicks (Remove last), click another edge "
                                     "(4 or more, not all through one point), or assign them by hand")
+            # With the frame, poses whose whole drawing misses the image's edges fit the clicks only: drop them,
+            # unless nothing else is left (then they are shown, with a warning).
+            on_image = [mt for mt in kept if mt.image_px <= IMAGE_GATE_PX]
+            warning = ""
+            if image is not None and on_image:
+                kept = on_image
+            elif image is not None:
+                warning = (f" None lies on the image's edges (the best is {min(mt.image_px for mt in kept):.1f} px off on "
+                           "average): check the clicks and any hand assignment.")
             self.matches = kept
             self.candidates = [m.T_world_obj for m in kept]
             self.chosen = 0
@@ -471,7 +481,7 @@ class UpdatePose(SnapMixin, Workflow):
             self._match_s = res.total_s
             self.message = (f"{len(kept)} assignment{'s' if len(kept) > 1 else ''} fit (searched {res.n_triples} "
                             f"model-edge triples in {res.total_s:.2f} s); the best is shown with its edge labels: "
-                            "Confirm match, or choose another candidate")
+                            "Confirm match, or choose another candidate" + warning)
             return kept
 
     def confirm_match(self) -> None:

@@ -141,3 +141,157 @@ def test_session_needs_a_selection_and_replays_script_actions(site):
         session.start("nope")
     with pytest.raises(WorkflowError, match="no object named"):
         session.select("ghost")
+
+
+# ---------------------------------------------------------------------- beyond the paper
+# Automatic matching and the plausibility check, on the workcell's rendered video (known truth).
+
+T_MOVED = 16.0  # the box has moved (12 → 15 s) and stays there: the video shows it, the database does not
+
+
+def _true_segments(site, model, T_true, edges, rng, sigma_px):
+    """Two clicks (σ = sigma_px) on each true image edge, at a third and two thirds of it."""
+    out = []
+    for k in edges:
+        uv = site.camera.project(model.edge_segments(T_true)[k])
+        out.append(np.array([uv[0] + t * (uv[1] - uv[0]) for t in (0.3, 0.7)]) + rng.normal(0, sigma_px, (2, 2)))
+    return out
+
+
+def test_auto_match_finds_the_assignment_on_the_frame_and_writes_it(video_site, scene, db):
+    from app.vision.matching import same_drawing
+
+    site = video_site
+    site.t["t"] = T_MOVED
+    obj = site.object("parallelepiped")
+    T_true = scene.body("parallelepiped").pose_at(T_MOVED)
+    session = Session(site, client="alice")
+    session.select("parallelepiped")
+    wf = session.start("update_pose")
+    assert wf.auto_match() is None and wf.auto  # too few edges: automatic assignment switched on
+    edges = [k for k in _visible_edges(site, obj.model, T_true)
+             if np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[k]), axis=0)) > 20][:4]
+    assert len(edges) == 4
+    for i, seg in enumerate(_true_segments(site, obj.model, T_true, edges, np.random.default_rng(7), 1.0)):
+        wf.click(seg[0])
+        wf.click(seg[1])  # no model edge asked for: the next click starts the next edge
+        assert wf.state == "click_edge" and wf.edge_ids == [None] * (i + 1)
+    matches = wf.auto_match()
+    assert matches and wf.state == "match" and len(wf.candidates) == len(matches) and wf.chosen == 0
+    best = matches[0]
+    assert same_drawing(site.camera, obj.model, best.T_world_obj, T_true, 1.0)  # the right assignment, best first
+    deg, m_err = pose_error(best.T_world_obj, T_true)
+    assert deg < 0.3 and m_err < 0.003  # its pose settled on the frame's edges (all of the box's, not only the clicked)
+    assert [int(e) for e in best.edges] == edges  # and, of the symmetric twins, the one in the database's frame
+    m = wf.marks()
+    assert len(m.ghosts) == len(matches) and sum(g.chosen for g in m.ghosts) == 1
+    labels = [text for _, text in m.labels]
+    assert [f"{j + 1}→e{e}?" for j, e in enumerate(edges)] == labels[:4] and f"e{edges[0]}" in labels
+    with pytest.raises(WorkflowError, match="Confirm match"):
+        wf.refine()
+    wf.confirm_match()
+    assert wf.edge_ids == edges and wf.matches is None
+    r = wf.refine()  # as usual: the clicks alone (four edges fix the pose loosely), within its stated σ
+    deg, m_err = pose_error(r.T_world_obj, T_true)
+    assert deg < 3 * np.linalg.norm(r.std_r_deg) and m_err < 3 * np.linalg.norm(r.std_t_m)
+    wf.accept()
+    last = db.history("parallelepiped")[-1]
+    assert last.method == "match+refine" and last.clicks["assignment"] == "automatic"
+    assert last.clicks["match"]["edges"] == edges and last.client == "alice"
+
+
+def test_auto_match_keeps_hand_assignments_and_remove_last_undoes_a_match(video_site, scene):
+    site = video_site
+    site.t["t"] = T_MOVED
+    obj = site.object("parallelepiped")
+    T_true = scene.body("parallelepiped").pose_at(T_MOVED)
+    wf = UpdatePose(site, object_name="parallelepiped")
+    edges = [k for k in _visible_edges(site, obj.model, T_true)
+             if np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[k]), axis=0)) > 20][:4]
+    segs = _true_segments(site, obj.model, T_true, edges, np.random.default_rng(8), 1.0)
+    wf.add_segment(segs[0], edges[0])  # assigned by hand
+    for seg in segs[1:]:
+        wf.add_segment(seg)  # edge=None: left for the matcher
+    assert wf.auto and wf.edge_ids == [edges[0], None, None, None]
+    matches = wf.auto_match()
+    assert all(int(mt.edges[0]) == edges[0] for mt in matches)
+    wf.confirm_match()
+    assert wf.edge_ids == edges
+    wf.remove_last()  # the match: back to the hand assignment alone
+    assert wf.edge_ids == [edges[0], None, None, None] and wf.match_info is None
+    assert all(mt.image_px <= 3.0 for mt in matches)  # poses that miss the frame's edges are not offered
+    # a hand assignment no right pose can keep (an edge of another length than the true one: no symmetry
+    # of the box maps them onto each other): what still fits the clicks misses the image, and it says so
+    wf2 = UpdatePose(site, object_name="parallelepiped")
+    V, E = obj.model.vertices, obj.model.edges
+    length = lambda k: np.linalg.norm(V[E[k][1]] - V[E[k][0]])  # noqa: E731
+    wrong = next(k for k in range(len(E)) if abs(length(k) - length(edges[0])) > 0.01)
+    wf2.add_segment(segs[0], wrong)
+    for seg in segs[1:]:
+        wf2.add_segment(seg)
+    try:
+        wrong_matches = wf2.auto_match()
+    except WorkflowError as exc:  # nothing fits the clicks at all: said, nothing shown
+        assert "no assignment" in str(exc) and wf2.matches is None and not wf2.candidates
+    else:
+        assert "None lies on the image's edges" in wf2.message
+        assert all(int(mt.edges[0]) == wrong and mt.image_px > 3.0 for mt in wrong_matches)
+
+
+def test_plausibility_rejects_poses_behind_the_camera_or_outside_the_image(site):
+    from app.workflows.update_pose import plausibility
+
+    obj = site.object("parallelepiped")
+    cam = site.camera
+    T = obj.T_world_obj
+    assert plausibility(cam, obj.model, T, 0.5, 3.0) == ""
+    assert "RMS 4.0 px" in plausibility(cam, obj.model, T, 4.0, 3.0)
+    behind = T.copy()
+    behind[:3, 3] = cam.center - 2.0 * (T[:3, 3] - cam.center)  # mirrored through the optical centre
+    assert "behind the camera" in plausibility(cam, obj.model, behind)
+    far_left = T.copy()
+    far_left[:3, 3] += np.array([-40.0, 0.0, 0.0])  # tens of metres to the side: in front, but out of view
+    assert "outside the image" in plausibility(cam, obj.model, far_left)
+
+
+def test_refine_offers_only_plausible_poses_and_tries_the_next_candidate(video_site, scene, db):
+    site = video_site
+    obj = site.object("parallelepiped")
+    T_true = scene.body("parallelepiped").pose_at(T_MOVED)
+    edges = _visible_edges(site, obj.model, T_true)[:6]
+    segs = _true_segments(site, obj.model, T_true, edges, np.random.default_rng(9), 0.5)
+    # from the database pose a 55° motion does not refine to the clicks: not offered, Solve advised
+    wf = UpdatePose(site, object_name="parallelepiped", snap=False)
+    for seg, k in zip(segs, edges):
+        wf.add_segment(seg, k)
+    with pytest.raises(WorkflowError, match="no plausible pose: from the database pose: .*Solve \\(P3L\\) first"):
+        wf.refine()
+    assert wf.refined is None
+    # P3L on the first three edges: a wrong candidate chosen → refined, rejected, the next one taken instead
+    cands = wf.solve()
+    errs = [pose_error(T, T_true)[0] for T in cands]
+    from core.pose import refine as core_refine
+
+    S = np.array([seg for seg in segs])
+    E = np.array([obj.model.vertices[obj.model.edges[k]] for k in edges])
+    bad = [i for i, T in enumerate(cands) if core_refine(site.camera, T, segs_uv=S, edges_obj=E).rms_px > 3.0]
+    assert bad, "this seed must give a P3L candidate that refines to a wrong local minimum"
+    wf.choose_candidate(bad[0])
+    r = wf.refine()
+    assert wf.chosen != bad[0] and f"candidate {bad[0] + 1}:" in wf.message and "refined instead" in wf.message
+    deg, m = pose_error(r.T_world_obj, T_true)
+    assert r.rms_px <= 3.0 and deg < 3 * np.linalg.norm(r.std_r_deg) and m < 3 * np.linalg.norm(r.std_t_m)
+    assert min(errs) < 10.0
+    # edges assigned so that no pose fits: every candidate refused, nothing written, advice given
+    wf3 = UpdatePose(site, object_name="parallelepiped", snap=False)
+    shuffled = [edges[1], edges[2], edges[0], edges[4], edges[5], edges[3]]
+    for seg, k in zip(segs, shuffled):
+        wf3.add_segment(seg, k)
+    try:
+        wf3.solve()
+    except WorkflowError:
+        pass  # no P3L pose at all is also a refusal
+    version = db.get("parallelepiped").version
+    with pytest.raises(WorkflowError, match="no plausible pose.*Check the edge assignments"):
+        wf3.accept()
+    assert db.get("parallelepiped").version == version and not wf3.accepted

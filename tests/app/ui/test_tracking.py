@@ -1,0 +1,73 @@
+"""The interface's track feeder: a Track workflow fed the grabber's frames on its own thread; the
+operator is notified once when the track is lost; the feeder ends with the workflow. The frame
+provider the server installs is the grabber's latest frame."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from app.ui.tracking import TrackFeeder
+from app.video import FrameGrabber, StillSource
+from app.workflows import TrackObject
+from app.workflows.frames import GrabberFrames
+
+
+class _Panel:
+    """What the feeder uses of a client panel: notify, dirty, app.wake."""
+
+    def __init__(self):
+        self.notes: list[tuple[str, str, str]] = []
+        self.dirty = False
+        self.wakes = 0
+        self.app = self
+
+    def notify(self, title, body, color="yellow"):
+        self.notes.append((title, body, color))
+
+    def wake(self):
+        self.wakes += 1
+
+
+def _wait(predicate, timeout_s=10.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def test_feeder_tracks_live_frames_then_notifies_once_when_lost_and_stops_with_the_workflow(video_site):
+    site = video_site
+    site.t["t"] = 2.0
+    frame = site.frame_at()  # the box where the database has it
+    grabber = FrameGrabber(StillSource(np.ascontiguousarray(frame), fps=50)).start()
+    try:
+        assert _wait(lambda: grabber.latest() is not None)
+        assert np.array_equal(GrabberFrames(grabber)(123.0), grabber.latest().image)  # the latest, whatever the time
+        wf = TrackObject(site, object_name="parallelepiped")
+        panel = _Panel()
+        feeder = TrackFeeder(panel, wf, grabber)
+        assert _wait(lambda: wf.frames >= 5) and not wf.lost and panel.wakes >= 5 and panel.dirty
+        assert feeder.steps == wf.frames and not panel.notes
+        assert threading.current_thread() is not feeder.thread
+        # the video goes blank: lost, one notification, no more steps
+        blank = FrameGrabber(StillSource(np.zeros_like(frame), fps=50)).start()
+        feeder.stop()
+        assert _wait(lambda: not feeder.alive)
+        feeder = TrackFeeder(panel, wf, blank)
+        assert _wait(lambda: wf.lost)
+        time.sleep(0.2)
+        assert [n[0] for n in panel.notes] == ["Tracking lost"] and "Re-initialise" in panel.notes[0][1]
+        steps = wf.frames
+        time.sleep(0.2)
+        assert wf.frames == steps  # a lost track is not fed
+        wf.cancel()
+        assert _wait(lambda: not feeder.alive)
+        assert feeder._on_frame not in blank._listeners  # it let go of the grabber
+        blank.stop()
+    finally:
+        grabber.stop()
