@@ -23,6 +23,15 @@ is below 1e-4 rad (in α) are kept, so a near-double real root that the eigen-so
 complex pair is not lost; every root is then checked against the constraints (|G_2| + |G_3|), one
 whose error exceeds 1e-12 gets a Newton step on (α, β), and only those below 3e-6 are returned.
 
+Structured triples (a box's, say: every triple automatic matching solves) change the polynomial:
+when edges 2 and 3 are orthogonal to edge 1 and parallel or orthogonal to each other it is even in
+t (the solutions come in pairs α, −α); when also parallel, its constant and leading coefficients
+vanish (t = 0 and α = π are roots, where the two β-equations are dependent: β then comes from the
+unit circle). Both are deflated: the known roots are taken out, and the batched solver
+(``p3l_rotations``) solves an even polynomial in s = t², with companion matrices of half the size,
+all rows of one kind and size in one eigen-solve; the dependent roots are handled with array code.
+``p3l`` (one triple) solves the same polynomial in t, so its solutions stay what they were to the bit.
+
 Translation. With R known, ``N_i·T = −d_i − N_i·(R M_i)`` (three planes). When the three model
 edges meet in one vertex, their interpretation planes share that vertex's line of sight and the
 depth along it is unobservable from lines: clicked points matched to model points (any vertex
@@ -35,6 +44,9 @@ RMS pixel distance of the clicked pixels to the projected finite model segments
 """
 
 from __future__ import annotations
+
+import cmath
+import math
 
 import numpy as np
 from scipy.linalg.lapack import dgeev
@@ -52,7 +64,8 @@ _CONSTRAINT_TOL = 3e-6
 _PARALLEL_TOL = 1e-9
 # The β-equations are dependent at a root when |s1 s5 − s2 s4| is below this.
 _DEPENDENT_TOL = 1e-7
-_SUBDIAG = np.eye(8, k=-1)  # companion matrices: ones on the sub-diagonal
+# Companion matrices of degree d: ones on the sub-diagonal.
+_SUBDIAGS = {d: np.eye(d, k=-1) for d in range(1, 9)}
 
 
 class ConcurrentEdgesError(ValueError):
@@ -91,13 +104,24 @@ def _quad_det(a, d, b, c):
 
 
 def _eliminant(nc, ns, nd):
-    """nc² + ns² − nd² for three quartics: the degree-8 polynomial (9 coefficients)."""
-    out = [0.0] * 9
-    for i in range(5):
-        out[2 * i] = out[2 * i] + (nc[i] * nc[i] + ns[i] * ns[i] - nd[i] * nd[i])
-        for j in range(i + 1, 5):
-            out[i + j] = out[i + j] + 2.0 * (nc[i] * nc[j] + ns[i] * ns[j] - nd[i] * nd[j])
-    return out
+    """nc² + ns² − nd² for three quartics: the degree-8 polynomial (9 coefficients, ascending).
+
+    The product Σ_{i+j=k} (nc_i nc_j + ns_i ns_j − nd_i nd_j), unrolled (summed in the order of
+    the convolution loop i < j it replaces)."""
+    c0, c1, c2, c3, c4 = nc
+    s0, s1, s2, s3, s4 = ns
+    d0, d1, d2, d3, d4 = nd
+    return [
+        c0 * c0 + s0 * s0 - d0 * d0,
+        2.0 * (c0 * c1 + s0 * s1 - d0 * d1),
+        2.0 * (c0 * c2 + s0 * s2 - d0 * d2) + (c1 * c1 + s1 * s1 - d1 * d1),
+        2.0 * (c0 * c3 + s0 * s3 - d0 * d3) + 2.0 * (c1 * c2 + s1 * s2 - d1 * d2),
+        2.0 * (c0 * c4 + s0 * s4 - d0 * d4) + 2.0 * (c1 * c3 + s1 * s3 - d1 * d3) + (c2 * c2 + s2 * s2 - d2 * d2),
+        2.0 * (c1 * c4 + s1 * s4 - d1 * d4) + 2.0 * (c2 * c3 + s2 * s3 - d2 * d3),
+        2.0 * (c2 * c4 + s2 * s4 - d2 * d4) + (c3 * c3 + s3 * s3 - d3 * d3),
+        2.0 * (c3 * c4 + s3 * s4 - d3 * d4),
+        c4 * c4 + s4 * s4 - d4 * d4,
+    ]
 
 
 class _Setup:
@@ -141,6 +165,20 @@ class _Setup:
         self.coef = _eliminant(nc, ns, nd)
         self.minors = (nc, ns, nd)
         self.E = E
+
+    def rows(self, b: np.ndarray) -> "_Setup":
+        """The setup of the triples b (M,) of a batch (components (B, 1) or (B,) → (M,)),
+        without the polynomial: what ``_rotation``, ``_constraint_error`` and ``_polish`` read."""
+        sub = object.__new__(_Setup)
+        sub.cols_c1, sub.cols_m1, sub.E = _take((self.cols_c1, self.cols_m1, self.E), b)
+        return sub
+
+
+def _take(x, b):
+    """Rows b of every array component, (B, 1) or (B,), in a nested tuple/list structure: (M,)."""
+    if isinstance(x, (tuple, list)):
+        return type(x)(_take(y, b) for y in x)
+    return x[b, 0] if x.ndim == 2 else x[b]
 
 
 def _angles_at_root(st: _Setup, hc, hs):
@@ -220,100 +258,159 @@ def _constraint_error(st: _Setup, ca, sa, cb, sb):
     """Σ |N_i · R V_i| over the three edges at (α, β): |G_2| + |G_3| (edge 1's constraint holds by
     construction of the frames), from the half-angle forms s (1 + t²) = e0 + e1 t + e2 t², i.e.
     s = (e0 (1 + cos α) + e1 sin α + e2 (1 − cos α)) / 2."""
-    err = 0.0
-    for c, s, h in st.E:
-        vc = 0.5 * (c[0] * (1 + ca) + c[1] * sa + c[2] * (1 - ca))
-        vs = 0.5 * (s[0] * (1 + ca) + s[1] * sa + s[2] * (1 - ca))
-        vh = 0.5 * (h[0] * (1 + ca) + h[1] * sa + h[2] * (1 - ca))
-        err = err + abs(vc * cb + vs * sb - vh)
-    return err
+    p, m = 1 + ca, 1 - ca
+    (c, s, h), (c3, s3, h3) = st.E
+    return abs(0.5 * (c[0] * p + c[1] * sa + c[2] * m) * cb + 0.5 * (s[0] * p + s[1] * sa + s[2] * m) * sb - 0.5 * (h[0] * p + h[1] * sa + h[2] * m)) + abs(
+        0.5 * (c3[0] * p + c3[1] * sa + c3[2] * m) * cb + 0.5 * (s3[0] * p + s3[1] * sa + s3[2] * m) * sb - 0.5 * (h3[0] * p + h3[1] * sa + h3[2] * m)
+    )
 
 
-def _beta_dependent(E, ca: float, sa: float) -> list[tuple[float, float]]:
-    """(cos β, sin β) at one α where the two β-equations are dependent (nd ≈ 0): intersect the
-    better conditioned one, s_c cos β + s_s sin β = s_rhs, with the unit circle; keep the roots
-    that also satisfy the other. E : the setup's half-angle quadratics (floats)."""
+def _beta_dependent(E, ca, sa):
+    """Both (cos β, sin β) at roots where the two β-equations are dependent (nd ≈ 0), vectorised.
+
+    Intersects the better conditioned equation, s_c cos β + s_s sin β = s_rhs, with the unit circle
+    and keeps the intersections that also satisfy the other. E : the setup's half-angle quadratics
+    (components (M,) arrays or floats); ca, sa : arrays (M,), cos α and sin α at the roots.
+    Returns ``((cb1, sb1, ok1), (cb2, sb2, ok2))``, arrays (M,): the intersections β = φ ± δ and
+    whether each is a solution (the second never where δ = 0, a tangent: it is the first).
+    """
     # s (1 + t²) = e0 + e1 t + e2 t² and 1/(1 + t²) = (1 + cos α)/2, t = sin α/(1 + cos α):
     # s = e0 (1 + cos α)/2 + e1 sin α/2 + e2 (1 − cos α)/2.
-    eqs = [[(e[0] * (1 + ca) + e[1] * sa + e[2] * (1 - ca)) / 2.0 for e in edge] for edge in E]
-    norms = [float(np.hypot(e[0], e[1])) for e in eqs]
-    k = int(np.argmax(norms))
-    e, other = eqs[k], eqs[1 - k]
-    if norms[k] < 1e-12 or abs(e[2]) > norms[k] * (1.0 + 1e-9):
-        return []
-    phi = np.arctan2(e[1], e[0])
-    delta = np.arccos(np.clip(e[2] / norms[k], -1.0, 1.0))
+    p, m = 1 + ca, 1 - ca
+    (a0, a1, a2), (b0, b1, b2) = [[(e[0] * p + e[1] * sa + e[2] * m) / 2.0 for e in edge] for edge in E]
+    na, nb = np.hypot(a0, a1), np.hypot(b0, b1)
+    first = na >= nb  # the better conditioned equation (the first on a tie)
+    e0, e1, e2, nk = np.where(first, a0, b0), np.where(first, a1, b1), np.where(first, a2, b2), np.where(first, na, nb)
+    o0, o1, o2 = np.where(first, b0, a0), np.where(first, b1, a1), np.where(first, b2, a2)
+    with np.errstate(all="ignore"):
+        possible = (nk >= 1e-12) & (np.abs(e2) <= nk * (1.0 + 1e-9))
+        phi = np.arctan2(e1, e0)
+        delta = np.arccos(np.clip(e2 / nk, -1.0, 1.0))
     out = []
-    for beta in [phi + delta] if delta < 1e-12 else [phi + delta, phi - delta]:
-        cb, sb = float(np.cos(beta)), float(np.sin(beta))
-        if abs(other[0] * cb + other[1] * sb - other[2]) < 1e-6:
-            out.append((cb, sb))
+    for beta in (phi + delta, phi - delta):
+        cb, sb = np.cos(beta), np.sin(beta)
+        out.append((cb, sb, possible & (np.abs(o0 * cb + o1 * sb - o2) < 1e-6)))
+    out[1] = (out[1][0], out[1][1], out[1][2] & (delta >= 1e-12))
     return out
 
 
 def _roots(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Real roots of degree-8 polynomials (B, 9) as half angles (hc, hs) ∝ (cos α/2, sin α/2).
 
-    Companion-matrix eigenvalues of the polynomial in t = tan(α/2), or, when its leading
-    coefficient is the smaller end, of the reversed one in u = cot(α/2) (so α = π is an ordinary
-    root u = 0). Returns hc, hs (B, 8), unnormalised (hc² + hs² > 0), and the mask (B, 8) of
-    real roots: eigenvalues whose imaginary part, mapped to α, is below 1e-4 rad.
+    Companion-matrix eigenvalues, in one batched eigen-solve per kind and size of matrix:
+
+    * coefficients below 1e-14 of a row's largest are zero;
+    * when every odd coefficient vanishes, the polynomial is even (edges 2 and 3 orthogonal to
+      edge 1 and parallel or orthogonal to each other: any three edges of a box) and is solved in
+      s = t², a companion matrix of half the size, t = ±√s; unless its roots s span more than
+      1e8 (|t| more than 1e4, α within ~1° of 0 or π), where the squared range costs accuracy:
+      that row is solved in t as below;
+    * when the constant and leading coefficients both vanish, t = 0 (α = 0) and u = 1/t = 0
+      (α = π) are roots: they are deflated (one slot each) and the polynomial between the first
+      and last non-zero coefficients is solved (by the companion matrix of ``np.roots``);
+    * otherwise, when its leading coefficient is the smaller end, the reversed polynomial in
+      u = cot(α/2) is solved instead, so α = π is found like any other root.
+
+    Returns hc, hs (B, 8), unnormalised (hc² + hs² > 0), and the mask (B, 8) of real roots:
+    eigenvalues whose imaginary part, mapped to α, is below 1e-4 rad.
     """
     B = len(coef)
-    reverse = np.abs(coef[:, 8]) < np.abs(coef[:, 0])
-    c = np.where(reverse[:, None], coef[:, ::-1], coef)
-    lead = c[:, 8]
-    ends_vanish = np.abs(lead) <= 1e-14 * np.max(np.abs(coef), axis=1)
-    comp = np.broadcast_to(_SUBDIAG, (B, 8, 8)).copy()
-    comp[:, :, 7] = -c[:, :8] / np.where(ends_vanish, 1.0, lead)[:, None]
-    lam = np.linalg.eigvals(comp)  # (B, 8)
-    re, im = lam.real, lam.imag
-    real = (2.0 * np.abs(im) < _IMAG_TOL_RAD * (1.0 + re * re + im * im)) & ~ends_vanish[:, None]
-    one = np.ones_like(re)
-    hc = np.where(reverse[:, None], re, one)
-    hs = np.where(reverse[:, None], one, re)
-    for i in np.flatnonzero(ends_vanish):
-        hc[i], hs[i], real[i] = _roots_trimmed(coef[i])
+    a = np.abs(coef)
+    zero = a <= 1e-14 * a.max(axis=1, keepdims=True)
+    nz = ~zero
+    live = nz.any(axis=1)
+    trim = zero[:, 0] & zero[:, 8] & live
+    lo = np.where(trim, nz.argmax(axis=1), 0)
+    hi = np.where(trim, 8 - nz[:, ::-1].argmax(axis=1), 8)
+    rows = np.arange(B)
+    rev = a[rows, hi] < a[rows, lo]
+    hc, hs, real = np.ones((B, 8)), np.zeros((B, 8)), np.zeros((B, 8), dtype=bool)
+    hc[trim, 1], hs[trim, 1] = 0.0, 1.0  # slot 0: t = 0; slot 1: α = π
+    real[trim, :2] = True
+    first = 2 * trim  # the first slot of the eigenvalues' roots
+
+    def put(g, lam, reverse):
+        """Store the roots lam (G, m) of the rows g (G,), in t (or in u where reverse)."""
+        re, im = lam.real, lam.imag
+        cols = first[g, None] + np.arange(lam.shape[1])
+        hc[g[:, None], cols] = np.where(reverse, re, 1.0)
+        hs[g[:, None], cols] = np.where(reverse, 1.0, re)
+        real[g[:, None], cols] = 2.0 * np.abs(im) < _IMAG_TOL_RAD * (1.0 + re * re + im * im)
+
+    t_rows = live & (hi > lo)
+    even = t_rows & zero[:, 1::2].all(axis=1)
+    for d in np.unique((hi - lo)[even] // 2).tolist():
+        g = np.flatnonzero(even & ((hi - lo) == 2 * d))
+        c = coef[g[:, None], lo[g, None] + 2 * np.arange(d + 1)]  # (G, d + 1), ascending in s
+        r = rev[g, None]
+        lam = _companion_eigvals(np.where(r, c[:, ::-1], c))
+        mag = np.abs(lam)
+        ok = mag.min(axis=1) >= 1e-8 * mag.max(axis=1)
+        z = np.sqrt(lam[ok].astype(complex))
+        put(g[ok], np.concatenate([z, -z], axis=1), r[ok])
+        t_rows[g[ok]] = False
+    for d, trimmed in set(zip((hi - lo)[t_rows].tolist(), trim[t_rows].tolist())):
+        g = np.flatnonzero(t_rows & ((hi - lo) == d) & (trim == trimmed))
+        c = coef[g[:, None], lo[g, None] + np.arange(d + 1)]  # (G, d + 1), ascending in t
+        if trimmed:  # np.roots' companion matrix (first row), no reversal
+            comp = np.broadcast_to(_SUBDIAGS[d], (len(g), d, d)).copy()
+            comp[:, 0, :] = -c[:, d - 1 :: -1] / c[:, d:]
+            put(g, np.linalg.eigvals(comp), np.zeros((len(g), 1), dtype=bool))
+        else:
+            r = rev[g, None]
+            put(g, _companion_eigvals(np.where(r, c[:, ::-1], c)), r)
     return hc, hs, real
 
 
-def _roots_trimmed(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``_roots`` for one polynomial (9,) whose constant and leading coefficients both vanish
-    (α = 0 and α = π are both roots): the vanishing ends are trimmed, np.roots solves the rest."""
-    tol = 1e-14 * np.max(np.abs(coef))
-    nz = np.flatnonzero(np.abs(coef) > tol)
-    hc, hs, real = np.ones(8), np.zeros(8), np.zeros(8, dtype=bool)
-    if len(nz) == 0:
-        return hc, hs, real
-    lo, hi = nz[0], nz[-1]
-    roots = [0.0] * lo + (list(np.roots(coef[lo : hi + 1][::-1])) if hi > lo else [])
-    t = [float(np.real(z)) for z in roots if 2.0 * abs(np.imag(z)) < _IMAG_TOL_RAD * (1.0 + abs(z) ** 2)]
-    pairs = [(1.0, x) for x in t] + ([(0.0, 1.0)] if hi < 8 else [])  # α = π: (hc, hs) = (0, 1)
-    for k, (cc, ss) in enumerate(pairs[:8]):
-        hc[k], hs[k], real[k] = cc, ss, True
-    return hc, hs, real
+def _companion_eigvals(c: np.ndarray) -> np.ndarray:
+    """Eigenvalues (G, d) of the companion matrices (last column −c_k / c_d, ones on the
+    sub-diagonal) of polynomials c (G, d + 1), ascending: their roots."""
+    d = c.shape[1] - 1
+    comp = np.broadcast_to(_SUBDIAGS[d], (len(c), d, d)).copy()
+    comp[:, :, d - 1] = -c[:, :d] / c[:, d:]
+    return np.linalg.eigvals(comp)
 
 
 def _roots_one(coef: list) -> list[tuple[float, float]]:
     """``_roots`` for one polynomial (9 floats), in plain Python around one LAPACK call (NumPy's
-    eigvals wrapper costs more than the 8 × 8 eigenproblem): the real roots as half angles."""
-    reverse = abs(coef[8]) < abs(coef[0])
-    c = coef[::-1] if reverse else coef
-    if abs(c[8]) <= 1e-14 * max(abs(x) for x in coef):
-        hc, hs, real = _roots_trimmed(np.array(coef, dtype=float))
-        return [(float(a), float(b)) for a, b, r in zip(hc, hs, real) if r]
-    comp = _SUBDIAG.copy()
-    comp[:, 7] = c[:8]
-    comp[:, 7] *= -1.0 / c[8]
+    eigvals wrapper costs more than the 8 × 8 eigenproblem): the real roots as half angles.
+
+    Without the solve in s = t² of even polynomials: it would save ~4 µs of the 8 × 8 problem
+    but move the roots by rounding, and ``p3l`` keeps its solutions as they were, to the bit."""
+    a = [abs(x) for x in coef]
+    tol = 1e-14 * max(a)
+    if a[0] <= tol and a[8] <= tol:  # t = 0 and α = π are roots: deflate them, np.roots the rest
+        nz = [k for k in range(9) if a[k] > tol]
+        if not nz:
+            return []
+        out = [(1.0, 0.0), (0.0, 1.0)]
+        if nz[-1] > nz[0]:
+            lam = np.roots(coef[nz[0] : nz[-1] + 1][::-1])
+            for re, im in zip(lam.real.tolist(), lam.imag.tolist()):
+                if 2.0 * abs(im) < _IMAG_TOL_RAD * (1.0 + re * re + im * im):
+                    out.append((1.0, re))
+        return out
+    reverse = a[8] < a[0]
+    wr, wi = _companion_dgeev(coef[::-1] if reverse else coef)
+    out = []
+    for re, im in zip(wr, wi):
+        if 2.0 * abs(im) < _IMAG_TOL_RAD * (1.0 + re * re + im * im):
+            out.append((re, 1.0) if reverse else (1.0, re))
+    return out
+
+
+def _companion_dgeev(c: list) -> tuple[list, list]:
+    """Real and imaginary parts of the roots of the polynomial c (d + 1 floats, ascending): the
+    eigenvalues of its companion matrix by LAPACK's dgeev."""
+    d = len(c) - 1
+    comp = _SUBDIAGS[d].copy()
+    comp[:, d - 1] = c[:d]
+    comp[:, d - 1] *= -1.0 / c[d]
     wr, wi, _, _, info = dgeev(comp, compute_vl=0, compute_vr=0)
     if info != 0:  # LAPACK did not converge (never seen): fall back on NumPy's driver
         lam = np.linalg.eigvals(comp)
         wr, wi = lam.real, lam.imag
-    out = []
-    for re, im in zip(wr.tolist(), wi.tolist()):
-        if 2.0 * abs(im) < _IMAG_TOL_RAD * (1.0 + re * re + im * im):
-            out.append((re, 1.0) if reverse else (1.0, re))
-    return out
+    return wr.tolist(), wi.tolist()
 
 
 def _rotations_one(n, ray, V) -> list:
@@ -331,10 +428,9 @@ def _rotations_one(n, ray, V) -> list:
             if err < _CONSTRAINT_TOL:
                 out.append(_rotation(st, ca, sa, cb, sb))
             continue
-        w = hc * hc + hs * hs
-        ca, sa = (hc * hc - hs * hs) / w, 2.0 * hc * hs / w
-        for cb, sb in _beta_dependent(st.E, ca, sa):
-            if _constraint_error(st, ca, sa, cb, sb) < _CONSTRAINT_TOL:
+        for cb_j, sb_j, ok in _beta_dependent(st.E, np.array([ca]), np.array([sa])):
+            cb, sb = float(cb_j[0]), float(sb_j[0])
+            if ok[0] and _constraint_error(st, ca, sa, cb, sb) < _CONSTRAINT_TOL:
                 out.append(_rotation(st, ca, sa, cb, sb))
     return out
 
@@ -364,8 +460,19 @@ def p3l_rotations(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray)
         return _rotations_batch(n_world, ray_world, V_obj)
 
 
+def _rotation_array(st: _Setup, ca, sa, cb, sb) -> np.ndarray:
+    """``_rotation`` on arrays of angles (...): the rotations as one array (..., 3, 3)."""
+    rows = _rotation(st, ca, sa, cb, sb)
+    out = np.empty(np.shape(ca) + (3, 3))
+    for i, row in enumerate(rows):
+        for j, x in enumerate(row):
+            out[..., i, j] = x
+    return out
+
+
 def _rotations_batch(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``p3l_rotations`` itself (the component algebra on (B, 1) and (B, 8) arrays)."""
+    """``p3l_rotations`` itself: the component algebra on (B, 1) and (B, 8) arrays, and on the
+    (M,) slots of the special cases (an inaccurate root to polish, dependent β-equations)."""
     # Components of shape (B, 1) broadcast against the roots' (B, 8).
     n = [[n_world[:, i, j, None] for j in range(3)] for i in range(3)]
     V = [[V_obj[:, i, j, None] for j in range(3)] for i in range(3)]
@@ -373,22 +480,34 @@ def _rotations_batch(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarr
     st = _Setup(n, ray, V)
     hc, hs, real = _roots(np.concatenate(st.coef, axis=1))
     ca, sa, cb, sb, nd = _angles_at_root(st, hc, hs)
-    ca, sa, cb, sb = _polish(st, ca, sa, cb, sb)
-    err = _constraint_error(st, ca, sa, cb, sb)
-    R = _rotation(st, ca, sa, cb, sb)
-    R = np.stack([np.stack(row, axis=-1) for row in R], axis=-2)  # (B, 8, 3, 3)
-    valid = real & (err < _CONSTRAINT_TOL) & (np.abs(nd) >= _DEPENDENT_TOL)
     dependent = real & (np.abs(nd) < _DEPENDENT_TOL)
-    if np.any(dependent):
-        R = np.concatenate([R, R], axis=1)
+    err = _constraint_error(st, ca, sa, cb, sb)
+    b, k = np.nonzero(real & ~dependent & (err > 1e-12))
+    if len(b):  # polish the inaccurate roots (near-double, or a near-real complex pair)
+        sub = st.rows(b)
+        polished = _polish(sub, ca[b, k], sa[b, k], cb[b, k], sb[b, k])
+        ca[b, k], sa[b, k], cb[b, k], sb[b, k] = polished
+        err[b, k] = _constraint_error(sub, *polished)
+    valid = real & ~dependent & (err < _CONSTRAINT_TOL)
+    second = None
+    b, k = np.nonzero(dependent)
+    if len(b):  # each β on the unit circle: the first in the root's slot, a second in slot k + 8
+        sub = st.rows(b)
+        ca_k, sa_k = ca[b, k], sa[b, k]
+        (cb1, sb1, ok1), (cb2, sb2, ok2) = _beta_dependent(sub.E, ca_k, sa_k)
+        ok1 &= _constraint_error(sub, ca_k, sa_k, cb1, sb1) < _CONSTRAINT_TOL
+        ok2 &= _constraint_error(sub, ca_k, sa_k, cb2, sb2) < _CONSTRAINT_TOL
+        cb[b, k], sb[b, k] = np.where(ok1, cb1, cb2), np.where(ok1, sb1, sb2)
+        valid[b, k] = ok1 | ok2
+        both = ok1 & ok2
+        if both.any():
+            second = (b[both], k[both], _rotation_array(sub.rows(np.flatnonzero(both)), ca_k[both], sa_k[both], cb2[both], sb2[both]))
+    R = _rotation_array(st, ca, sa, cb, sb)  # (B, 8, 3, 3)
+    if second is not None:
+        b2, k2, R2 = second
+        R = np.concatenate([R, np.broadcast_to(np.eye(3), R.shape)], axis=1)
         valid = np.concatenate([valid, np.zeros_like(valid)], axis=1)
-        for b, k in zip(*np.nonzero(dependent)):
-            one = _Setup(n_world[b].tolist(), ray_world[b].tolist(), V_obj[b].tolist())
-            w = float(hc[b, k] ** 2 + hs[b, k] ** 2)
-            ca_k, sa_k = float(hc[b, k] ** 2 - hs[b, k] ** 2) / w, float(2.0 * hc[b, k] * hs[b, k]) / w
-            for j, (cb_j, sb_j) in enumerate(_beta_dependent(one.E, ca_k, sa_k)):
-                R[b, k + 8 * j] = _rotation(one, ca_k, sa_k, cb_j, sb_j)
-                valid[b, k + 8 * j] = _constraint_error(one, ca_k, sa_k, cb_j, sb_j) < _CONSTRAINT_TOL
+        R[b2, k2 + 8], valid[b2, k2 + 8] = R2, True
     return R, valid
 
 
@@ -399,10 +518,15 @@ def _det3(M):
 def _first_edge_order(V) -> tuple[int, int, int]:
     """An order of the three edges (unit directions, float components) whose first is parallel to
     neither other (paper appendix: L2, L3 must not be parallel to L1); ValueError if all are."""
-    for order in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
-        i = order[0]
-        if all(_dot(c, c) > _PARALLEL_TOL**2 for c in (_cross(V[i], V[j]) for j in order[1:])):
-            return order
+    c01, c02, c12 = _cross(V[0], V[1]), _cross(V[0], V[2]), _cross(V[1], V[2])
+    tol2 = _PARALLEL_TOL**2
+    p01, p02, p12 = _dot(c01, c01) > tol2, _dot(c02, c02) > tol2, _dot(c12, c12) > tol2
+    if p01 and p02:
+        return (0, 1, 2)
+    if p01 and p12:
+        return (1, 2, 0)
+    if p02 and p12:
+        return (2, 0, 1)
     raise ValueError(
         "the three model edges are parallel: the rotation about their common direction is not "
         "observable from them; click an edge with another direction"
@@ -415,7 +539,7 @@ def _common_point(A, V):
     w = [A[1][j] - A[0][j] for j in range(3)]
     c = _cross(V[0], V[1])
     cc = _dot(c, c)
-    scale = max(1.0, max(abs(x) for a in A for x in a))
+    scale = max(1.0, max(map(abs, A[0] + A[1] + A[2])))
     if _dot(w, c) ** 2 > (1e-9 * scale) ** 2 * cc:
         return None
     s = _dot(_cross(w, V[1]), c) / cc
@@ -511,12 +635,17 @@ def p3l(
     segs_a = np.asarray(segs_uv, dtype=float)
     edges_a = np.asarray(edges_obj, dtype=float)
     if points_uv is None and points_obj is None and segs_a.shape == (3, 2, 2) and edges_a.shape == (3, 2, 3):
-        # The common case, validated in plain Python (as_clicks explains any problem it finds).
+        # The common case, validated in plain Python: every number finite (else their sum is not)
+        # and no two coinciding points; as_clicks explains any problem it finds.
         segs, edges = segs_a.tolist(), edges_a.tolist()
-        ok = np.isfinite(segs_a).all() and np.isfinite(edges_a).all()
-        ok = ok and all(abs(a[0] - b[0]) + abs(a[1] - b[1]) > 0.0 for a, b in segs)
-        ok = ok and all(abs(a[0] - b[0]) + abs(a[1] - b[1]) + abs(a[2] - b[2]) > 0.0 for a, b in edges)
-        clicks = None if ok else as_clicks(segs_a, edges_a)
+        total, ok = 0.0, True
+        for (u1, v1), (u2, v2) in segs:
+            total += u1 + v1 + u2 + v2
+            ok = ok and (u1 != u2 or v1 != v2)
+        for (x1, y1, z1), (x2, y2, z2) in edges:
+            total += x1 + y1 + z1 + x2 + y2 + z2
+            ok = ok and (x1 != x2 or y1 != y2 or z1 != z2)
+        clicks = None if ok and math.isfinite(total) else as_clicks(segs_a, edges_a)
         pts_obj, pts_uv = [], []
     else:
         clicks = as_clicks(segs_a, edges_a, points_uv, points_obj)
@@ -525,51 +654,60 @@ def p3l(
         segs, edges = clicks.segs_uv.tolist(), clicks.edges_obj.tolist()
         pts_obj, pts_uv = clicks.points_obj.tolist(), clicks.points_uv.tolist()
     Cl = camera.C.tolist()
+    (c00, c01, c02, c03), (c10, c11, c12, c13), (c20, c21, c22, c23) = Cl
     n, d = [], []
     for (u1, v1), (u2, v2) in segs:  # interpretation planes Cᵀ l, l = (u1, v1, 1) × (u2, v2, 1)
         l0, l1, l2 = v1 - v2, u2 - u1, u1 * v2 - u2 * v1
-        pi = [l0 * Cl[0][j] + l1 * Cl[1][j] + l2 * Cl[2][j] for j in range(4)]
-        k = (pi[0] * pi[0] + pi[1] * pi[1] + pi[2] * pi[2]) ** -0.5
-        n.append((pi[0] * k, pi[1] * k, pi[2] * k))
-        d.append(pi[3] * k)
+        p0, p1, p2 = l0 * c00 + l1 * c10 + l2 * c20, l0 * c01 + l1 * c11 + l2 * c21, l0 * c02 + l1 * c12 + l2 * c22
+        k = (p0 * p0 + p1 * p1 + p2 * p2) ** -0.5
+        n.append((p0 * k, p1 * k, p2 * k))
+        d.append((l0 * c03 + l1 * c13 + l2 * c23) * k)
     _check_segments(n)
     A = [e[0] for e in edges]
-    V = [_unit((e[1][0] - e[0][0], e[1][1] - e[0][1], e[1][2] - e[0][2])) for e in edges]
-    order = _first_edge_order(V)
+    V = [_unit((b[0] - a[0], b[1] - a[1], b[2] - a[2])) for a, b in edges]
+    i0, i1, i2 = _first_edge_order(V)
     # The paper's x axis of R_c1: the ray of l1's first clicked pixel, m_u × m_v (eq. 4).
-    u, v = segs[order[0]][0]
-    m_u = [Cl[0][j] - u * Cl[2][j] for j in range(3)]
-    m_v = [Cl[1][j] - v * Cl[2][j] for j in range(3)]
-    Rs = _rotations_one([n[i] for i in order], _cross(m_u, m_v), [V[i] for i in order])
+    u, v = segs[i0][0]
+    ray = _cross((c00 - u * c20, c01 - u * c21, c02 - u * c22), (c10 - v * c20, c11 - v * c21, c12 - v * c22))
+    Rs = _rotations_one([n[i0], n[i1], n[i2]], ray, [V[i0], V[i1], V[i2]])
     if not Rs:
         return []
     Rs = _distinct(Rs)
-    common = _common_point([A[i] for i in order], [V[i] for i in order])
+    common = _common_point([A[i0], A[i1], A[i2]], [V[i0], V[i1], V[i2]])
     det = _det3(n)
     if common is None and abs(det) > 1e-9:
         # N_i·T = −d_i − N_i·(R A_i)  (eq. 5), by Cramer's rule: T = adj(N) rhs / det(N).
-        adj = [[x / det for x in row] for row in zip(_cross(n[1], n[2]), _cross(n[2], n[0]), _cross(n[0], n[1]))]
-        nda = list(zip(n, d, A))
+        (j00, j01, j02), (j10, j11, j12), (j20, j21, j22) = [
+            [x / det for x in row] for row in zip(_cross(n[1], n[2]), _cross(n[2], n[0]), _cross(n[0], n[1]))
+        ]
+        (n00, n01, n02), (n10, n11, n12), (n20, n21, n22) = n
+        d0, d1, d2 = d
+        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = A
         t = []
         for (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) in Rs:
-            rhs = [
-                -di
-                - n0 * (r00 * a0 + r01 * a1 + r02 * a2)
-                - n1 * (r10 * a0 + r11 * a1 + r12 * a2)
-                - n2 * (r20 * a0 + r21 * a1 + r22 * a2)
-                for (n0, n1, n2), di, (a0, a1, a2) in nda
-            ]
-            t.append([row[0] * rhs[0] + row[1] * rhs[1] + row[2] * rhs[2] for row in adj])
+            h0 = -d0 - n00 * (r00 * a00 + r01 * a01 + r02 * a02) - n01 * (r10 * a00 + r11 * a01 + r12 * a02) - n02 * (r20 * a00 + r21 * a01 + r22 * a02)
+            h1 = -d1 - n10 * (r00 * a10 + r01 * a11 + r02 * a12) - n11 * (r10 * a10 + r11 * a11 + r12 * a12) - n12 * (r20 * a10 + r21 * a11 + r22 * a12)
+            h2 = -d2 - n20 * (r00 * a20 + r01 * a21 + r02 * a22) - n21 * (r10 * a20 + r11 * a21 + r12 * a22) - n22 * (r20 * a20 + r21 * a21 + r22 * a22)
+            t.append((j00 * h0 + j01 * h1 + j02 * h2, j10 * h0 + j11 * h1 + j12 * h2, j20 * h0 + j21 * h1 + j22 * h2))
     else:
         clicks = clicks if clicks is not None else as_clicks(segs_a, edges_a)
         t = _translations_from_points(camera, np.array(Rs), n, d, A, clicks, common).tolist()
     scored = []
     for k, (Rk, tk) in enumerate(zip(Rs, t)):
-        cost = distance_cost(Cl, Rk, tk, edges, segs, pts_obj, pts_uv)
-        if cost is not None:
-            scored.append((cost, k))
-    keep = [k for _, k in sorted(scored)]
-    return [np.array([Rs[k][0] + (t[k][0],), Rs[k][1] + (t[k][1],), Rs[k][2] + (t[k][2],), (0.0, 0.0, 0.0, 1.0)]) for k in keep]
+        # A clicked edge behind the camera (both endpoints at depth ≤ 0) rejects the candidate:
+        # distance_cost's own test (the same depths), done first as it is ~5× cheaper.
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = Rk
+        a0, a1, a2 = c20 * r00 + c21 * r10 + c22 * r20, c20 * r01 + c21 * r11 + c22 * r21, c20 * r02 + c21 * r12 + c22 * r22
+        a3 = c20 * tk[0] + c21 * tk[1] + c22 * tk[2] + c23
+        for (x0, x1, x2), (y0, y1, y2) in edges:
+            if a0 * x0 + a1 * x1 + a2 * x2 + a3 <= 0.0 and a0 * y0 + a1 * y1 + a2 * y2 + a3 <= 0.0:
+                break
+        else:
+            cost = distance_cost(Cl, Rk, tk, edges, segs, pts_obj, pts_uv)
+            if cost is not None:
+                scored.append((cost, k))
+    scored.sort()
+    return [np.array([Rs[k][0] + (t[k][0],), Rs[k][1] + (t[k][1],), Rs[k][2] + (t[k][2],), (0.0, 0.0, 0.0, 1.0)]) for _, k in scored]
 
 
 def _distinct(Rs: list, tol: float = 1e-6) -> list:
@@ -577,16 +715,16 @@ def _distinct(Rs: list, tol: float = 1e-6) -> list:
     root can give two eigenvalues for one solution."""
     out = []
     for R in Rs:
-        flat = R[0] + R[1] + R[2]
-        for F in out:
-            for a, b in zip(flat, F):
-                if abs(a - b) > tol:
-                    break
-            else:
+        (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = R
+        # A weighted sum of the entries differs by at most 45 tol between equal rotations: a
+        # cheap first test (solutions related by a symmetry of the model share entries up to sign).
+        key = r0 + 2.0 * r1 + 3.0 * r2 + 4.0 * r3 + 5.0 * r4 + 6.0 * r5 + 7.0 * r6 + 8.0 * r7 + 9.0 * r8
+        for F, key_F in out:
+            if abs(key - key_F) <= 45.0 * tol + 1e-12 and all(abs(a - b) <= tol for a, b in zip(R[0] + R[1] + R[2], F[0] + F[1] + F[2])):
                 break  # equal to F
         else:
-            out.append(flat)
-    return [(f[0:3], f[3:6], f[6:9]) for f in out]
+            out.append((R, key))
+    return [R for R, _ in out]
 
 
 def p3l_batch(camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

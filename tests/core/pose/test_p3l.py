@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import itertools
 
@@ -10,7 +11,8 @@ import pytest
 
 from core.pose import ConcurrentEdgesError, p3l
 from core.pose.residuals import as_clicks, pose_distance_cost
-from core.pose.synthetic import box_problem, random_camera, random_lines_problem
+from core.brep import BRep
+from core.pose.synthetic import PAPER_BOX_M, box_problem, paper_problems, random_camera, random_lines_problem
 from core.transforms import make_T, rot_x, rot_y, rot_z
 
 p3l_module = importlib.import_module("core.pose.p3l")  # the name core.pose.p3l is the function
@@ -309,3 +311,155 @@ def test_p3l_batch_gives_the_solutions_of_p3l_for_every_triple():
     # The same three clicked segments against many model-edge triples: segs (3, 2, 2) broadcast.
     T1, valid1 = p3l_module.p3l_batch(camera, segs[0], edges[:10])
     assert valid1[0].sum() == valid[0].sum() and np.allclose(T1[0][valid1[0]], T[0][valid[0]])
+
+
+# ------------------------------------------------------------------ box triples: the special cases
+def _same_set(A, B, tol) -> bool:
+    """Every matrix of A within tol (max entry) of one of B and conversely (duplicates allowed)."""
+    if len(A) == 0 or len(B) == 0:
+        return len(A) == len(B)
+    A, B = np.asarray(A).reshape(len(A), -1), np.asarray(B).reshape(len(B), -1)
+    d = np.abs(A[:, None] - B[None]).max(axis=-1)
+    return bool((d.min(axis=1) < tol).all() and (d.min(axis=0) < tol).all())
+
+
+def _box_triples(edges_obj: np.ndarray) -> np.ndarray:
+    """Every ordered triple of distinct model edges, but three parallel ones: (T, 3) indices."""
+    V = edges_obj[:, 1] - edges_obj[:, 0]
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    par = np.linalg.norm(np.cross(V[:, None], V[None]), axis=-1) < 1e-9
+    tri = np.array(list(itertools.permutations(range(len(edges_obj)), 3)))
+    return tri[~(par[tri[:, 0], tri[:, 1]] & par[tri[:, 0], tri[:, 2]])]
+
+
+def _rotation_inputs(camera, segs, edges):
+    """p3l_rotations' inputs for one triple, in the solver's edge order (first edge parallel to
+    neither other), as p3l builds them: (N (3, 3), ray (3,), V (3, 3))."""
+    n, _ = p3l_module.interpretation_planes(camera, segs)
+    V = edges[:, 1] - edges[:, 0]
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    order = list(p3l_module._first_edge_order(V.tolist()))
+    m_u, _, m_v, _ = camera.pixel_planes(segs[order[0], :1])
+    return n[order], np.cross(m_u[0], m_v[0]), V[order]
+
+
+def test_box_triples_same_solution_set_as_poselib_p3ll():
+    """A box's triples are the structured cases: three orthogonal edges (the eliminant is even in t,
+    solved in t²) or a parallel pair orthogonal to the first edge (t = 0 and α = π are roots,
+    deflated, and the rest is even). PoseLib's p3ll, another method, gives the same solutions."""
+    rng = np.random.default_rng(11)
+    kinds = {0: 0, 1: 0}
+    problems = paper_problems(rng, 4) + paper_problems(rng, 4, sigma_px=0.5)
+    for i, pb in enumerate(problems):
+        for tri in itertools.combinations(range(len(pb.edges_obj)), 3):
+            segs, edges = pb.segs_uv[list(tri)], pb.edges_obj[list(tri)]
+            V = edges[:, 1] - edges[:, 0]
+            n_par = sum(np.linalg.norm(np.cross(V[a], V[b])) < 1e-9 for a, b in ((0, 1), (0, 2), (1, 2)))
+            if n_par == 3 or _concurrent(edges):
+                continue
+            mine = p3l(pb.camera, segs, edges)
+            theirs = [T for T in poselib_solutions(pb.camera, segs, edges) if edges_in_front(pb.camera, T, edges)]
+            assert _same_set(mine, theirs, 1e-6), (i, tri)
+            assert len(p3l_module._distinct([tuple(map(tuple, T[:3, :3])) for T in mine])) == len(mine)
+            kinds[n_par] += 1
+    assert kinds[0] > 50 and kinds[1] > 100
+
+
+def test_batch_gives_the_per_triple_solutions_on_every_box_triple():
+    """All 1,248 triples of a box's 12 edges (as automatic matching solves them) against three
+    clicked edges, at three poses (one with noisy clicks): the batched rotations equal the
+    per-triple ones, and p3l_batch's poses p3l's, triple by triple."""
+    rng = np.random.default_rng(12)
+    box = BRep.box(*PAPER_BOX_M)
+    model = box.edge_segments()
+    tri = _box_triples(model)
+    assert len(tri) == 1248
+    for k in range(3):
+        pb = paper_problems(rng, 1, sigma_px=1.0 if k == 2 else 0.0)[0]
+        camera, segs = pb.camera, pb.segs_uv[[0, 4, 8]]
+        assert abs(np.linalg.det(p3l_module.interpretation_planes(camera, segs)[0])) > 1e-3
+        N, rays, V = map(np.array, zip(*(_rotation_inputs(camera, segs, model[t]) for t in tri)))
+        # The special cases are all there: every eliminant even, 864 with vanishing ends.
+        st = _batch_setup(N, rays, V)
+        coef = np.concatenate(st.coef, axis=1)
+        zero = np.abs(coef) <= 1e-14 * np.abs(coef).max(axis=1, keepdims=True)
+        assert zero[:, 1::2].all() and (zero[:, 0] & zero[:, 8]).sum() == 864
+        R, valid = p3l_module.p3l_rotations(N, rays, V)
+        assert R.shape == (1248, 8, 3, 3)
+        for b in range(len(tri)):
+            single = p3l_module._rotations_one(N[b].tolist(), rays[b].tolist(), V[b].tolist())
+            assert _same_set(R[b][valid[b]], single, 1e-9), b
+        T, valid = p3l_module.p3l_batch(camera, segs, model[tri])
+        n_solved = 0
+        for b, t in enumerate(tri):
+            try:
+                single = p3l(camera, segs, model[t])
+            except ConcurrentEdgesError:
+                assert not valid[b].any()
+                continue
+            assert _same_set(T[b][valid[b]], single, 1e-7), b
+            n_solved += bool(single)
+        assert n_solved > 100
+
+
+def _batch_setup(N, rays, V):
+    return p3l_module._Setup(
+        [[N[:, i, j, None] for j in range(3)] for i in range(3)], [rays[:, j, None] for j in range(3)], [[V[:, i, j, None] for j in range(3)] for i in range(3)]
+    )
+
+
+def test_dependent_beta_equations_give_the_same_solutions_in_both_paths(monkeypatch):
+    """Edges 2 ∥ 3, both orthogonal to edge 1 (a prism's): the Cramer denominator is ∝ sin²α, so
+    at a pose with α = π − 1e-4 the root lies where the two β-equations are dependent (|nd| <
+    1e-7) and β comes from the unit circle (``_beta_dependent``): p3l and p3l_batch find the pose."""
+    rng = np.random.default_rng(13)
+    found = []
+    real_fn = p3l_module._beta_dependent
+
+    def spy(E, ca, sa):
+        out = real_fn(E, ca, sa)
+        found.append(sum(int(ok.sum()) for _, _, ok in out))
+        return out
+
+    monkeypatch.setattr(p3l_module, "_beta_dependent", spy)
+    n_cases = 0
+    for _ in range(40):
+        pb = random_lines_problem(rng, 3)
+        E = pb.edges_obj.copy()
+        V = E[:, 1] - E[:, 0]
+        v0 = V[0] / np.linalg.norm(V[0])
+        V[1] -= (V[1] @ v0) * v0
+        V[2] = -0.7 * V[1]
+        E[:, 1] = E[:, 0] + V
+        pb = dataclasses.replace(pb, edges_obj=E)
+        T, segs = _pose_with_alpha(pb, np.pi - 1e-4)
+        X = E.reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
+        if not np.all(pb.camera.depth(X) > 0):
+            continue
+        found.clear()
+        sols = p3l(pb.camera, segs, E)
+        assert min(np.abs(S - T).max() for S in sols) < 1e-5  # α is not polished on this path
+        n_single = sum(found)
+        Tb, valid = p3l_module.p3l_batch(pb.camera, segs, E[None])
+        assert _same_set(Tb[0][valid[0]], sols, 1e-6)  # some solutions are 100 m away
+        assert sum(found) - n_single == n_single > 0  # the dependent path solved it, in both
+        n_cases += 1
+    assert n_cases >= 10
+
+
+@pytest.mark.parametrize("deflated", [False, True])
+def test_even_eliminant_with_roots_spanning_eight_decades(deflated):
+    """An even polynomial whose roots t span 4e8 (α within 0.006° of 0 and of π): in s = t² they
+    would span 1.6e17, beyond double precision, so both solvers go back to t and keep every root."""
+    roots = [5e-5, 2e4] + ([] if deflated else [0.3, 3.0])
+    p_s = np.polynomial.polynomial.polyfromroots([x * x for x in roots])  # ascending in s = t²
+    coef = np.zeros(9)
+    coef[2 * deflated : 2 * deflated + 2 * len(p_s) : 2] = p_s / np.abs(p_s).max()  # deflated: × t²
+    assert (coef[0] == coef[8] == 0) == deflated
+    expected = np.sort([r for x in roots for r in (x, -x)] + ([0.0] if deflated else []))
+    single = p3l_module._roots_one(coef.tolist())
+    hc, hs, real = p3l_module._roots(coef[None])
+    for pairs in (single, list(zip(hc[0][real[0]], hs[0][real[0]]))):
+        t = np.sort([s / c for c, s in pairs if c != 0])  # α = π (c = 0) is the deflated u = 0
+        assert len(t) == len(expected) and np.allclose(t, expected, rtol=1e-6, atol=1e-12)
+        assert sum(c == 0 for c, _ in pairs) == deflated
