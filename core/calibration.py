@@ -98,7 +98,8 @@ def _reprojection(P: np.ndarray, X: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 def calibrate_dlt(
-    X_world: np.ndarray, uv: np.ndarray, width: int, height: int, *, refine: bool = True
+    X_world: np.ndarray, uv: np.ndarray, width: int, height: int, *, refine: bool = True,
+    sigma_px: np.ndarray | None = None,
 ) -> DLTResult:
     """The camera C from clicked pixels of known world points.
 
@@ -112,6 +113,10 @@ def calibrate_dlt(
         Image size in pixels.
     refine : bool
         Refine the DLT by Levenberg–Marquardt on the reprojection error (pixels).
+    sigma_px : array, shape (N,), optional
+        Each pixel's standard deviation (pixels): the refinement weighs each point's reprojection
+        error by 1/σ (maximum likelihood when the clicks' precision differs, e.g. corners snapped
+        to the image beside raw clicks). Default: all equal.
 
     Returns
     -------
@@ -119,11 +124,18 @@ def calibrate_dlt(
         ``camera, rms_px = calibrate_dlt(...)``; ``.residuals_px`` (N, 2) per point.
     """
     X, uv = _check_calibration_points(X_world, uv)
+    w = np.ones(len(X))
+    if sigma_px is not None:
+        sig = np.asarray(sigma_px, dtype=float).reshape(-1)
+        if sig.shape != (len(X),) or not np.all(np.isfinite(sig)) or np.any(sig <= 0):
+            raise ValueError(f"sigma_px must hold {len(X)} positive finite values (one per point), got {np.shape(sigma_px)}")
+        w = 1.0 / sig
     P = dlt(X, uv)
     linear_rms = float(np.sqrt(np.mean(np.sum(_reprojection(P, X, uv) ** 2, axis=1))))
     if refine:
         sol = least_squares(
-            lambda p: _reprojection(p.reshape(3, 4), X, uv).ravel(), P.ravel(), method="lm", xtol=1e-14, ftol=1e-14
+            lambda p: (_reprojection(p.reshape(3, 4), X, uv) * w[:, None]).ravel(), P.ravel(), method="lm", xtol=1e-14,
+            ftol=1e-14,
         )
         P = sol.x.reshape(3, 4)
     # The calibration points were seen, so they are in front: that fixes C's sign for any camera.

@@ -10,7 +10,8 @@ Each clicked image point is snapped to the image's corner on the frame the opera
 (``snapping``: for a model vertex, the intersection of its edges snapped to the image, their
 directions from the object's database pose through the current C; for a bare 3D point, OpenCV's
 ``cornerSubPix``). ``refuse_snap()`` keeps the last click as clicked; the calibration stores the
-raw and snapped pixels.
+raw and snapped pixels. The DLT weighs each point by its precision (``core.calibration.calibrate_dlt``'s
+``sigma_px``): a snapped corner σ = 0.15 px (measured), a raw click the operator's ``sigma_px``.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 from core.calibration import calibrate_dlt
 
 from .base import Marks, Workflow, WorkflowError, as_pixel
-from .snapping import SnapMixin, snap_marks
+from .snapping import SNAPPED_CORNER_SIGMA_PX, SnapMixin, snap_marks
 
 __all__ = ["CalibrateCamera"]
 
@@ -35,9 +36,12 @@ class CalibrateCamera(SnapMixin, Workflow):
     actions = ("click", "choose_point", "choose_vertex", "remove_last", "solve", "accept", "redo", "cancel",
                "refuse_snap", "set_snap")
 
-    def __init__(self, site, client: str = "operator", snap: bool = True):
+    def __init__(self, site, client: str = "operator", snap: bool = True, sigma_px: float = 1.0):
         super().__init__(site, client)
         self._init_snap(snap)
+        if not sigma_px > 0:
+            raise WorkflowError(f"sigma_px (the clicks' noise, pixels) must be positive, got {sigma_px}")
+        self.sigma_px = float(sigma_px)
         self.X_world: list[np.ndarray] = []
         self.uv: list[np.ndarray] = []
         self.snaps: list = []  # beside uv: each click's snap (None: snapping off)
@@ -108,7 +112,8 @@ class CalibrateCamera(SnapMixin, Workflow):
                 raise WorkflowError(f"{len(self.X_world)} points paired; the DLT needs at least 6 (11 unknowns in C): pair more")
             w, h = self.site.camera.width, self.site.camera.height
             try:
-                self.result = calibrate_dlt(np.array(self.X_world), np.array(self.uv), w, h)
+                sigma = [SNAPPED_CORNER_SIGMA_PX if sn is not None and sn.applied else self.sigma_px for sn in self.snaps]
+                self.result = calibrate_dlt(np.array(self.X_world), np.array(self.uv), w, h, sigma_px=np.array(sigma))
             except ValueError as exc:
                 raise WorkflowError(f"calibration failed: {exc}") from None
             self.state = "review"

@@ -23,7 +23,11 @@ import numpy as np
 
 from .base import WorkflowError
 
-__all__ = ["ClickSnap", "SnapMixin", "vertex_edge_directions", "snap_marks"]
+__all__ = ["ClickSnap", "SnapMixin", "vertex_edge_directions", "snap_marks", "SNAPPED_CORNER_SIGMA_PX"]
+
+# The precision of a corner snapped to the image, pixels: bench/corner_snapping.py measured a mean
+# error of 0.13 px (95 % within 0.29 px) on the workcell's frames; a raw click is the operator's σ.
+SNAPPED_CORNER_SIGMA_PX = 0.15
 
 
 @dataclass
