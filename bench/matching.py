@@ -23,8 +23,10 @@ often the right assignment is among the candidates at all, and the time per call
 Batched P3L: ``p3l_all_triples`` on the ordered triples of a box's edges (the rotations by
 core.pose.p3l.p3l_rotations, translations by a batched 3 × 3 solve; triples of three parallel
 edges are not solvable and left out), with the share of the rotations, and p3l_rotations alone on
-a batch of 1,000 random triples; µs per triple, best of 5, one thread. Target ≤ 15 µs per triple
-in batches of 1,000.
+a batch of 1,000 random triples; µs per triple (CPU time, time.process_time, best of 5 runs), one
+process pinned to one core, one BLAS thread; the load average is printed with the times (the machine is shared).
+Target ≤ 15 µs per triple in batches of 1,000. ``--p3l-only`` runs just this part (on the first
+trial's clicks), e.g. to time it again.
 """
 
 from __future__ import annotations
@@ -87,13 +89,18 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--p3l-only", action="store_true", help="time the batched P3L only (skip the matching trials)")
     args = ap.parse_args()
+    if hasattr(os, "sched_setaffinity"):  # one core, as bench/pose.py
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     rng = np.random.default_rng(args.seed)
     camera = Camera.from_intrinsics(np.array([[F, 0, (W - 1) / 2], [0, F, (H - 1) / 2], [0, 0, 1]]), np.eye(4), W, H)
     box = BRep.box(*BOX)
     sym = edge_symmetries(box)
 
-    trials = [random_trial(rng, camera, box) for _ in range(args.trials)]
+    trials = [random_trial(rng, camera, box) for _ in range(1 if args.p3l_only else args.trials)]
+    if args.p3l_only:
+        return batched_p3l(camera, box, trials[0])
     frames = render_poses(camera, box, [T for T, _, _ in trials], noise_sigma=2.0, blur_sigma_px=0.5, seed=args.seed)
 
     def right(edges, pick):
@@ -133,18 +140,22 @@ def main() -> int:
         print(f"  {m:22s}{100 * st['top'] / n:14.1f} %{100 * st['among'] / n:12.1f} %{st['none']:10d}{np.median(ms):13.0f}{np.percentile(ms, 95):9.0f}")
     print(f"  target: right assignment for ≥ {100 * TARGET:.0f} % of random box poses from 4 clicked edges")
     print()
+    return batched_p3l(camera, box, trials[0])
 
-    # ---- batched P3L speed
+
+def batched_p3l(camera, box, trial) -> int:
+    """Time p3l_all_triples on the box's triples against one trial's exact clicks, and
+    p3l_rotations on random triples; print the table."""
     ends = box.vertices[box.edges]
-    T, pick, exact = trials[0]
+    T, pick, exact = trial
     base = list(_base_triples(exact, float(W), 1)[0])  # three clicked lines not through one point
     rot_s = [0.0]
     solver = matching.p3l_rotations
 
     def timed(*a):  # the share of core.pose's rotations in p3l_all_triples
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         out = solver(*a)
-        rot_s[0] += time.perf_counter() - t0
+        rot_s[0] += time.process_time() - t0
         return out
 
     matching.p3l_rotations = timed
@@ -153,9 +164,9 @@ def main() -> int:
         best = (np.inf, 0.0)
         for _ in range(5):
             rot_s[0] = 0.0
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             out = p3l_all_triples(camera, exact[base], ends, perms)
-            best = min(best, (time.perf_counter() - t0, rot_s[0]))
+            best = min(best, (time.process_time() - t0, rot_s[0]))
         rows.append((name, out.n_triples, best, len(out.R)))
     matching.p3l_rotations = solver
     B = 1000
@@ -168,10 +179,10 @@ def main() -> int:
     V /= np.linalg.norm(V, axis=2, keepdims=True)
     best_rot = np.inf
     for _ in range(5):
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         p3l_rotations(nrm, ray, V)
-        best_rot = min(best_rot, time.perf_counter() - t0)
-    print("  batched P3L (best of 5)")
+        best_rot = min(best_rot, time.process_time() - t0)
+    print(f"  batched P3L (best of 5; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores, pinned to one)")
     print(f"  {'':42s}{'triples':>9s}{'µs/triple':>11s}{'of which rotations':>20s}{'poses':>8s}")
     for name, n_tri, (tot, rot), n_poses in rows:
         print(f"  {name:42s}{n_tri:9d}{1e6 * tot / n_tri:11.1f}{1e6 * rot / n_tri:20.1f}{n_poses:8d}")

@@ -241,16 +241,16 @@ def _rotation(st: _Setup, ca, sa, cb, sb):
     """R_world_obj = R_world_c1 · R_y(β) R_x(α) · R_obj_m1ᵀ (rows)."""
     # G = R_y(β) R_x(α) R_obj_m1ᵀ: row j of R_y R_x is (cb, sb sa, sb ca), (0, ca, −sa),
     # (−sb, cb sa, cb ca); R_obj_m1ᵀ has rows m0, m1, m2 (the columns of R_obj_m1).
-    m0, m1, m2 = st.cols_m1
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = st.cols_m1
     sbsa, sbca, cbsa, cbca = sb * sa, sb * ca, cb * sa, cb * ca
-    g0 = (cb * m0[0] + sbsa * m1[0] + sbca * m2[0], cb * m0[1] + sbsa * m1[1] + sbca * m2[1], cb * m0[2] + sbsa * m1[2] + sbca * m2[2])
-    g1 = (ca * m1[0] - sa * m2[0], ca * m1[1] - sa * m2[1], ca * m1[2] - sa * m2[2])
-    g2 = (-sb * m0[0] + cbsa * m1[0] + cbca * m2[0], -sb * m0[1] + cbsa * m1[1] + cbca * m2[1], -sb * m0[2] + cbsa * m1[2] + cbca * m2[2])
-    x, y, z = st.cols_c1  # R = [x y z] G
+    g00, g01, g02 = cb * m00 + sbsa * m10 + sbca * m20, cb * m01 + sbsa * m11 + sbca * m21, cb * m02 + sbsa * m12 + sbca * m22
+    g10, g11, g12 = ca * m10 - sa * m20, ca * m11 - sa * m21, ca * m12 - sa * m22
+    g20, g21, g22 = -sb * m00 + cbsa * m10 + cbca * m20, -sb * m01 + cbsa * m11 + cbca * m21, -sb * m02 + cbsa * m12 + cbca * m22
+    (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = st.cols_c1  # R = [x y z] G
     return (
-        (x[0] * g0[0] + y[0] * g1[0] + z[0] * g2[0], x[0] * g0[1] + y[0] * g1[1] + z[0] * g2[1], x[0] * g0[2] + y[0] * g1[2] + z[0] * g2[2]),
-        (x[1] * g0[0] + y[1] * g1[0] + z[1] * g2[0], x[1] * g0[1] + y[1] * g1[1] + z[1] * g2[1], x[1] * g0[2] + y[1] * g1[2] + z[1] * g2[2]),
-        (x[2] * g0[0] + y[2] * g1[0] + z[2] * g2[0], x[2] * g0[1] + y[2] * g1[1] + z[2] * g2[1], x[2] * g0[2] + y[2] * g1[2] + z[2] * g2[2]),
+        (x0 * g00 + y0 * g10 + z0 * g20, x0 * g01 + y0 * g11 + z0 * g21, x0 * g02 + y0 * g12 + z0 * g22),
+        (x1 * g00 + y1 * g10 + z1 * g20, x1 * g01 + y1 * g11 + z1 * g21, x1 * g02 + y1 * g12 + z1 * g22),
+        (x2 * g00 + y2 * g10 + z2 * g20, x2 * g01 + y2 * g11 + z2 * g21, x2 * g02 + y2 * g12 + z2 * g22),
     )
 
 
@@ -259,9 +259,9 @@ def _constraint_error(st: _Setup, ca, sa, cb, sb):
     construction of the frames), from the half-angle forms s (1 + t²) = e0 + e1 t + e2 t², i.e.
     s = (e0 (1 + cos α) + e1 sin α + e2 (1 − cos α)) / 2."""
     p, m = 1 + ca, 1 - ca
-    (c, s, h), (c3, s3, h3) = st.E
-    return abs(0.5 * (c[0] * p + c[1] * sa + c[2] * m) * cb + 0.5 * (s[0] * p + s[1] * sa + s[2] * m) * sb - 0.5 * (h[0] * p + h[1] * sa + h[2] * m)) + abs(
-        0.5 * (c3[0] * p + c3[1] * sa + c3[2] * m) * cb + 0.5 * (s3[0] * p + s3[1] * sa + s3[2] * m) * sb - 0.5 * (h3[0] * p + h3[1] * sa + h3[2] * m)
+    ((c0, c1, c2), (s0, s1, s2), (h0, h1, h2)), ((C0, C1, C2), (S0, S1, S2), (H0, H1, H2)) = st.E
+    return abs(0.5 * (c0 * p + c1 * sa + c2 * m) * cb + 0.5 * (s0 * p + s1 * sa + s2 * m) * sb - 0.5 * (h0 * p + h1 * sa + h2 * m)) + abs(
+        0.5 * (C0 * p + C1 * sa + C2 * m) * cb + 0.5 * (S0 * p + S1 * sa + S2 * m) * sb - 0.5 * (H0 * p + H1 * sa + H2 * m)
     )
 
 
@@ -802,8 +802,8 @@ def p3l_batch(camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray) -> tup
     n_safe = np.where(concurrent[:, None, None], np.eye(3), n)
     rhs = -d[:, None] - ((n[:, None] @ R) * A[:, None]).sum(axis=-1)  # (B, K, 3): N_i·(R A_i)
     t = rhs @ np.swapaxes(np.linalg.inv(n_safe), -1, -2)
-    X = edges.reshape(B, 1, 6, 3) @ np.swapaxes(R, -1, -2) + t[:, :, None]  # (B, K, 6, 3)
-    depth = X @ C[2, :3] + C[2, 3]
+    # Depths of the six endpoints: C₂·(R X + t) + C₂₃ = X·(Rᵀ C₂) + C₂·t + C₂₃, (B, K, 6).
+    depth = edges.reshape(B, 1, 6, 3) @ (C[2, :3] @ R)[..., None] + (t @ C[2, :3] + C[2, 3])[..., None, None]
     valid &= (depth.reshape(B, -1, 3, 2).max(axis=-1) > 0).all(axis=-1)
     T = np.zeros(R.shape[:2] + (4, 4))
     T[..., :3, :3] = R
