@@ -1,6 +1,7 @@
 """Take the screenshots of docs/interface.md: each workflow in a real headless browser.
 
 Run from the project root: ``.venv/bin/python docs/img/shoot.py`` (needs /usr/bin/chromium).
+Clicks are snapped to the image (the interface's default); ``snap.png`` is zoomed onto the box.
 The interface runs on the bundled scene at t = 16 s of its motion (the known box has moved),
 with a fresh database and emulated devices. The operator's clicks are computed from the scene's
 truth (as the recorded operator script does), sent through the same workflow calls the browser's
@@ -98,13 +99,39 @@ def main() -> int:
             save(ui, page, "calibrate_camera")
             click(page, "Cancel")
 
-            # Update pose: select the box (click its wireframe), click edges, solve, refine.
+            # Update pose with automatic matching: four edges clicked (snapped to the image, the raw
+            # clicks dashed beside them), no model edge said; Auto match shows the best assignment.
             box = site.object("parallelepiped")
             T_true = scene.body("parallelepiped").pose_at(FRAME_T_S)
             drawn = cam.project(box.model.edge_segments(box.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
             true = cam.project(box.model.edge_segments(T_true).reshape(-1, 3)).reshape(-1, 2, 2)
             ui.click_pixel(page, drawn[1].mean(axis=0))
             click(page, "Update pose")
+            wf = panel.session.workflow
+            click(page, "Auto match")  # fewer than 3 edges: automatic assignment on
+            for k in pose_edges(site, box, T_true)[:4]:
+                a, b = true[k]
+                ui.click_pixel(page, a + 0.3 * (b - a) + rng.normal(0, 2.0, 2))
+                ui.click_pixel(page, a + 0.7 * (b - a) + rng.normal(0, 2.0, 2))
+            lo, hi = true.reshape(-1, 2).min(axis=0) - 12, true.reshape(-1, 2).max(axis=0) + 12
+            panel.zoom_rect = (*lo, *hi)
+            panel.need_fit = True
+            ui.server.wake()
+            save(ui, page, "snap")
+            click(page, "Auto match")
+            deadline = time.monotonic() + 20
+            while wf.matches is None and time.monotonic() < deadline:
+                time.sleep(0.2)
+            save(ui, page, "update_pose_auto_match")
+            click(page, "Fit view")
+            click(page, "Cancel")
+
+            # Update pose by hand: click edges, say which model edge each is, solve, refine.
+            old = wf
+            click(page, "Update pose")
+            deadline = time.monotonic() + 10
+            while panel.session.workflow is old and time.monotonic() < deadline:
+                time.sleep(0.1)
             wf = panel.session.workflow
             for k in pose_edges(site, box, T_true):
                 a, b = true[k]
@@ -118,6 +145,18 @@ def main() -> int:
             click(page, "Refine")
             save(ui, page, "update_pose_refined")
             click(page, "Accept")
+
+            # Track the box from its (now true) database pose: the tracked pose, the edge points found.
+            click(page, "Track")
+            deadline = time.monotonic() + 10
+            while panel.session.workflow.frames < 5 and time.monotonic() < deadline:
+                time.sleep(0.1)
+            panel.zoom_rect = (*(lo - 30), *(hi + 30))
+            panel.need_fit = True
+            ui.server.wake()
+            save(ui, page, "track")
+            click(page, "Accept")
+            click(page, "Fit view")
 
             # Model object: the unknown box, three faces clicked and measured through the emulated devices.
             body = scene.body("unknown_box")
