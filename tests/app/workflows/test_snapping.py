@@ -200,3 +200,24 @@ def test_site_frames_follow_the_scene_clock(video_site, scene, db):
         Site(scene, db, frames="video")
     with pytest.raises(ValueError, match="frames must be"):
         s.set_frames(42)
+
+
+def test_update_pose_point_clicks_snap_to_the_vertex_corner(video_site, scene):
+    site = video_site
+    site.t["t"] = 2.0  # the box where the database has it
+    obj = site.object("parallelepiped")
+    wf = UpdatePose(site, object_name="parallelepiped")
+    V = obj.vertices_world()
+    front = int(np.argmin(site.camera.depth(V)))  # the nearest corner: three visible edges meet there
+    truth = scene.camera.project(V[front])
+    wf.start_point()
+    wf.click(truth + [3.0, -2.0])  # the model vertex, on the overlay (not snapped: it is not an image click)
+    assert wf.pending_vertex == front and not wf.point_snaps
+    raw = truth + np.random.default_rng(2).normal(0, 1.0, 2)
+    wf.click(raw)  # where it is in the video
+    s = wf.point_snaps[-1]
+    assert s.applied and s.kind == "corner" and s.method == "edges"
+    assert np.linalg.norm(wf.points_uv[-1] - truth) < 0.3 < np.linalg.norm(raw - truth)
+    assert len(wf.marks().raw_points) == 1 and "Point v" in wf.message
+    wf.refuse_snap()
+    assert np.array_equal(wf.points_uv[-1], raw) and len(wf.marks().raw_points) == 0
