@@ -132,13 +132,9 @@ class ModelObject(SnapMixin, Workflow):
                     raise WorkflowError("a face has at most 4 sides: Measure face next (or Remove last)")
                 self.pending = p
                 return
-            seg = np.array([self.pending, p])
-            if np.linalg.norm(seg[1] - seg[0]) < MIN_SEGMENT_PX:
-                raise WorkflowError(f"the two clicks are {np.linalg.norm(seg[1] - seg[0]):.1f} px apart: click the "
-                                    f"edge's other end, at least {MIN_SEGMENT_PX:.0f} px away")
+            seg, snap = self._finish_segment(self.pending, p, MIN_SEGMENT_PX)
             self.pending = None
-            snap = self._snap_segment(seg)
-            self._segments.append(seg if snap is None else snap.used)
+            self._segments.append(seg)
             self._snaps.append(snap)
             self.result = None
             self.message = self._snap_message(f"{'Side' if self.shape == 'box' else 'Silhouette'} {len(self._segments)}", snap)

@@ -147,6 +147,17 @@ class SnapMixin:
     def _no_frame_reason(self) -> str:
         return getattr(self, "_frame_error", "") or "no video frame to snap to"
 
+    def _finish_segment(self, first: np.ndarray, second: np.ndarray, min_px: float) -> tuple[np.ndarray, ClickSnap | None]:
+        """The segment of two clicks on an image edge, snapped: (the segment to use (2, 2), its
+        snap or None); WorkflowError when the clicks are closer than ``min_px``."""
+        seg = np.array([first, second], dtype=float)
+        gap = float(np.linalg.norm(seg[1] - seg[0]))
+        if gap < min_px:
+            raise WorkflowError(f"the two clicks are {gap:.1f} px apart: click the edge's other end, at least "
+                                f"{min_px:.0f} px away along it (second click again)")
+        snap = self._snap_segment(seg)
+        return (seg if snap is None else snap.used), snap
+
     def _snap_segment(self, seg: np.ndarray) -> ClickSnap | None:
         """Snap a finished segment (2, 2) on the current frame; None when snapping is off or the
         site has no video frames."""

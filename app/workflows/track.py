@@ -160,13 +160,9 @@ class TrackObject(SnapMixin, Workflow):
             if self.pending is None:
                 self.pending = p
                 return
-            seg = np.array([self.pending, p])
-            if np.linalg.norm(seg[1] - seg[0]) < MIN_SEGMENT_PX:
-                raise WorkflowError(f"the two clicks are {np.linalg.norm(seg[1] - seg[0]):.1f} px apart: click the "
-                                    f"edge's other end, at least {MIN_SEGMENT_PX:.0f} px away")
+            seg, snap = self._finish_segment(self.pending, p, MIN_SEGMENT_PX)
             self.pending = None
-            snap = self._snap_segment(seg)
-            self.segs.append(seg if snap is None else snap.used)
+            self.segs.append(seg)
             self.seg_snaps.append(snap)
             self.message = self._snap_message(f"Edge {len(self.segs)}", snap)
 

@@ -207,13 +207,9 @@ class UpdatePose(SnapMixin, Workflow):
                 self.pending = p
                 self.state = "click_edge_end"
                 return
-            seg = np.array([self.pending, p])
-            if np.linalg.norm(seg[1] - seg[0]) < MIN_SEGMENT_PX:
-                raise WorkflowError(f"the two clicks are {np.linalg.norm(seg[1] - seg[0]):.1f} px apart: click two points "
-                                    f"at least {MIN_SEGMENT_PX:.0f} px apart along the edge (second click again)")
+            seg, snap = self._finish_segment(self.pending, p, MIN_SEGMENT_PX)
             self.pending = None
-            snap = self._snap_segment(seg)
-            self.segs.append(seg if snap is None else snap.used)
+            self.segs.append(seg)
             self.seg_snaps.append(snap)
             self.edge_ids.append(None)
             self._done.append("segment")

@@ -40,6 +40,16 @@ def screen_of(server, panel, uv) -> tuple[float, float]:
     return float(x), float(y)
 
 
+def wait_until(predicate, timeout_s: float = 8.0, what: str = "condition") -> None:
+    """Poll ``predicate()`` until it is true; AssertionError naming ``what`` after timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
 def wait_for_panel(server, before: set, timeout_s: float = 20.0):
     """The panel of the client that connected after ``before`` (a set of client ids), once fitted."""
     deadline = time.monotonic() + timeout_s

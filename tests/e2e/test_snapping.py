@@ -4,21 +4,13 @@ raw click is drawn beside it, and Refuse snap brings the raw click back."""
 from __future__ import annotations
 
 import re
-import time
 
 import numpy as np
 import pytest
 
+from .harness import wait_until as _wait
+
 pytestmark = pytest.mark.e2e
-
-
-def _wait(predicate, timeout_s=8.0, what="condition"):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def test_a_clicked_edge_is_snapped_shown_and_can_be_refused(browser, interface, scene):
