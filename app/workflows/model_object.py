@@ -141,14 +141,7 @@ class ModelObject(SnapMixin, Workflow):
 
     def add_segment(self, seg_uv) -> None:
         """A clicked segment (2, 2) at once (for scripts)."""
-        seg = np.asarray(seg_uv, dtype=float)
-        if seg.shape != (2, 2):
-            raise WorkflowError(f"a segment is two pixels [[u1, v1], [u2, v2]], got {seg_uv!r}")
-        with self.lock:
-            if self.pending is not None:
-                raise WorkflowError("finish the edge under way first (or Remove last)")
-            self.click(seg[0])
-            self.click(seg[1])
+        self._click_segment(seg_uv)
 
     def remove_last(self) -> None:
         """Undo the last click, measurement or face."""

@@ -147,6 +147,17 @@ class SnapMixin:
     def _no_frame_reason(self) -> str:
         return getattr(self, "_frame_error", "") or "no video frame to snap to"
 
+    def _click_segment(self, seg_uv) -> None:
+        """Both clicks of a segment (2, 2) at once (a script's ``add_segment``), through ``click``."""
+        seg = np.asarray(seg_uv, dtype=float)
+        if seg.shape != (2, 2):
+            raise WorkflowError(f"a segment is two pixels [[u1, v1], [u2, v2]], got {seg_uv!r}")
+        with self.lock:
+            if self.pending is not None:
+                raise WorkflowError("finish the edge under way first (or Remove last)")
+            self.click(seg[0])
+            self.click(seg[1])
+
     def _finish_segment(self, first: np.ndarray, second: np.ndarray, min_px: float) -> tuple[np.ndarray, ClickSnap | None]:
         """The segment of two clicks on an image edge, snapped: (the segment to use (2, 2), its
         snap or None); WorkflowError when the clicks are closer than ``min_px``."""
