@@ -225,7 +225,8 @@ class SnapMixin:
             self._check_open()
             snap, put_back = self._last_snap()
             if snap is None:
-                raise WorkflowError("the last click was not snapped (snapping is off, or there is no click yet): nothing to refuse")
+                raise WorkflowError("the last click was not snapped (snapping is off, there is no video frame, or there is "
+                                    "no click to change since the last step): nothing to refuse")
             if not snap.applied:
                 raise WorkflowError(f"the last click is already used as clicked ({'refused' if snap.refused else snap.reason})")
             snap.refused = True
