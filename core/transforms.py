@@ -120,9 +120,15 @@ def rot_z(angle_rad: float) -> np.ndarray:
 
 
 def rotation_angle(R_a: np.ndarray, R_b: np.ndarray) -> float:
-    """Angle in radians of the relative rotation ``R_a.T @ R_b`` (geodesic distance)."""
-    cos_t = (np.trace(np.asarray(R_a).T @ np.asarray(R_b)) - 1.0) / 2.0
-    return float(np.arccos(np.clip(cos_t, -1.0, 1.0)))
+    """Angle in radians of the relative rotation ``R_a.T @ R_b`` (geodesic distance).
+
+    Computed as atan2(sin θ, cos θ) from the relative rotation's antisymmetric part and trace, so
+    it stays accurate for tiny angles (arccos of the trace alone cannot resolve below ~1e-8 rad).
+    """
+    R = np.asarray(R_a).T @ np.asarray(R_b)
+    sin_t = 0.5 * np.sqrt((R[2, 1] - R[1, 2]) ** 2 + (R[0, 2] - R[2, 0]) ** 2 + (R[1, 0] - R[0, 1]) ** 2)
+    cos_t = (np.trace(R) - 1.0) / 2.0
+    return float(np.arctan2(sin_t, cos_t))
 
 
 def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
