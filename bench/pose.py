@@ -44,6 +44,8 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchenv import pin_one_core  # noqa: E402
+
 from core.pose import estimate_pose, p3l, p3l_batch, refine  # noqa: E402
 from core.pose.residuals import as_clicks, perturb, residuals  # noqa: E402
 from core.pose.synthetic import paper_camera, paper_problems  # noqa: E402
@@ -53,14 +55,6 @@ SIGMAS_PX = (0.0, 0.5, 1.0, 2.0)
 # Paper, Table V.1: (mean, std) of the rotation error (°) and the translation error (m).
 PAPER_V1 = {"P3L": ((0.23342, 0.19033), (0.01378, 0.01268)), "refined": ((0.09810, 0.11136), (0.00563, 0.00233))}
 BASIN = ((18, 0.05), (30, 0.10), (45, 0.20), (60, 0.30), (90, 0.40), (120, 0.50), (180, 0.50))
-
-
-def pin_one_core() -> str:
-    if hasattr(os, "sched_setaffinity"):
-        cpu = sorted(os.sched_getaffinity(0))[0]
-        os.sched_setaffinity(0, {cpu})
-        return f"pinned to CPU {cpu}"
-    return "not pinned (no sched_setaffinity)"
 
 
 def cpu_us(f, repeats: int = 3) -> float:

@@ -48,6 +48,8 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchenv import pin_one_core  # noqa: E402
+
 from app.models_io import read_cao  # noqa: E402
 from app.vision.evaluate import edge_distance, oriented_edges  # noqa: E402
 from app.vision.sequence import iter_frames, pose_from_points, read_init_points, read_visp_pose  # noqa: E402
@@ -65,14 +67,6 @@ TEABOX_K = np.array([[839.21470, 0, 325.66776], [0, 839.44555, 243.69727], [0, 0
 TEABOX_CLICKS = np.array([[192.0, 84.5], [349.5, 205.5], [324.0, 376.0], [458.5, 351.0]])
 TARGET_PX = 1.5
 TARGET_FPS = 30.0
-
-
-def pin_one_core() -> str:
-    if hasattr(os, "sched_setaffinity"):
-        cpu = sorted(os.sched_getaffinity(0))[0]
-        os.sched_setaffinity(0, {cpu})
-        return f"pinned to CPU {cpu}"
-    return "not pinned (no sched_setaffinity)"
 
 
 def run(frames: list[np.ndarray], camera: Camera, model: BRep, T0: np.ndarray, repeat: int = 1):
