@@ -15,17 +15,30 @@ __all__ = ["add_scene_parsers", "cli_render", "cli_script", "progress_bar"]
 
 
 def progress_bar(label: str = "frames", stream=sys.stderr) -> Callable[[int, int], None]:
-    """A text progress bar: ``show(done, total)`` redraws one line on ``stream``."""
+    """A text progress bar: ``show(done, total)``.
+
+    On a terminal it redraws one line in place; otherwise (a log file, CI) it writes a plain line
+    at each tenth of the way, so logs stay readable.
+    """
     start = time.monotonic()
+    live = bool(getattr(stream, "isatty", lambda: False)())
+    last_tenth = -1
 
     def show(done: int, total: int) -> None:
+        nonlocal last_tenth
         width = 30
         filled = int(width * done / max(total, 1))
         elapsed = time.monotonic() - start
         eta = elapsed / max(done, 1) * (total - done)
-        stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label}, {elapsed:.0f} s, ~{eta:.0f} s left")
-        if done >= total:
-            stream.write("\n")
+        text = f"[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label}, {elapsed:.0f} s, ~{eta:.0f} s left"
+        if live:
+            stream.write("\r" + text + ("\n" if done >= total else ""))
+        else:
+            tenth = 10 * done // max(total, 1)
+            if tenth == last_tenth:
+                return
+            last_tenth = tenth
+            stream.write(text + "\n")
         stream.flush()
 
     return show
