@@ -40,7 +40,7 @@ from core.pose import p3l, refine
 from core.transforms import invert_T, pose_error
 
 from .base import Ghost, Marks, Workflow, WorkflowError, as_pixel
-from .snapping import ClickSnap, SnapMixin, snap_marks
+from .snapping import SNAPPED_CORNER_SIGMA_PX, SNAPPED_SEGMENT_SIGMA_PX, ClickSnap, SnapMixin, snap_marks
 
 __all__ = ["UpdatePose", "Match", "plausibility", "nearest_twin"]
 
@@ -369,7 +369,8 @@ class UpdatePose(SnapMixin, Workflow):
                     result = refine(self.site.camera, start,
                                     segs_uv=segs if len(segs) else None, edges_obj=edges if len(edges) else None,
                                     points_uv=pts_uv if len(pts_uv) else None,
-                                    points_obj=pts_obj if len(pts_obj) else None, loss=self.loss, sigma_px=self.sigma_px)
+                                    points_obj=pts_obj if len(pts_obj) else None, loss=self.loss,
+                                    sigma_px=self._click_sigmas())
                 except ValueError as exc:
                     failures.append(f"{what}: {exc}")
                     continue
@@ -579,6 +580,15 @@ class UpdatePose(SnapMixin, Workflow):
             return np.zeros((0, 2, 2)), np.zeros((0, 2, 3))
         model = self.obj.model
         return np.array([s for s, _ in pairs]), np.array([model.vertices[model.edges[e]] for _, e in pairs])
+
+    def _click_sigmas(self) -> np.ndarray:
+        """σ of each click in refine's order (assigned segments, then points), pixels: a click snapped
+        to the image has the snap's measured precision, a raw or refused one the operator's σ."""
+        def sigma(snap: ClickSnap | None, snapped_sigma: float) -> float:
+            return snapped_sigma if snap is not None and snap.applied else self.sigma_px
+
+        segs = [sigma(sn, SNAPPED_SEGMENT_SIGMA_PX) for sn, e in zip(self.seg_snaps, self.edge_ids) if e is not None]
+        return np.array(segs + [sigma(sn, SNAPPED_CORNER_SIGMA_PX) for sn in self.point_snaps])
 
     def _points(self) -> tuple[np.ndarray, np.ndarray]:
         if not self.points_uv:

@@ -22,7 +22,7 @@ import numpy as np
 from ..camera import Camera
 from ..transforms import check_T, pose_error
 from .p3l import p3l
-from .refine import RefineResult, _refine, check_options
+from .refine import RefineResult, _refine, check_options, click_sigmas
 from .residuals import as_clicks, pose_distance_cost
 
 __all__ = ["PoseCandidate", "PoseEstimate", "estimate_pose"]
@@ -105,7 +105,7 @@ def estimate_pose(
     T_prior: np.ndarray | None = None,
     loss: str = "l2",
     huber_px: float = 3.0,
-    sigma_px: float = 1.0,
+    sigma_px: float | np.ndarray = 1.0,
     max_triples: int = 50,
     fit_rms_px: float | None = None,
 ) -> PoseEstimate:
@@ -123,14 +123,14 @@ def estimate_pose(
         Clicked vertices and the matched model points.
     T_prior : array, shape (4, 4), optional
         The database pose: also refined from, as a candidate (the paper's small-motion step).
-    loss, huber_px, sigma_px : passed to ``refine``.
+    loss, huber_px, sigma_px : passed to ``refine`` (sigma_px: one σ, or one per click).
     max_triples : int
         How many triples (in click order: (0, 1, 2), (0, 1, 3), ...) to try at most. A triple is
         skipped when P3L rejects it (degenerate) or none of its candidates can be refined (e.g. no
         solution in front of the camera); when its candidates all refine to an RMS above
         ``fit_rms_px`` (local minima), the next triple's candidates are added to them.
     fit_rms_px : float, optional
-        The RMS (pixels) under which a refined candidate fits the clicks; default 3 × sigma_px.
+        The RMS (pixels) under which a refined candidate fits the clicks; default 3 × the RMS of sigma_px.
 
     Returns
     -------
@@ -158,10 +158,11 @@ def estimate_pose(
     triple = None
     skipped: list[tuple[tuple[int, int, int], str]] = []
     candidates: list[PoseCandidate] = []
-    refine_args = (loss, float(huber_px), float(sigma_px), 100)
+    sigma = click_sigmas(sigma_px, clicks)  # one σ per residual row (checks a per-click array's length)
+    refine_args = (loss, float(huber_px), float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, float), 100)
     if S >= 3:
         pts = (clicks.points_uv, clicks.points_obj) if clicks.n_points else (None, None)
-        fit_px = 3.0 * sigma_px if fit_rms_px is None else float(fit_rms_px)
+        fit_px = 3.0 * float(np.sqrt(np.mean(sigma**2))) if fit_rms_px is None else float(fit_rms_px)
         for tri in itertools.islice(itertools.combinations(range(S), 3), max_triples):
             idx = list(tri)
             try:

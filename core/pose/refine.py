@@ -13,6 +13,10 @@ segment gives the signed distances of its two clicked pixels to the projected in
 (the operator clicks two points along an edge, not its endpoints: only the distance across the
 line is measured). Points and segments mix freely; the clicks must fix the 6 degrees of freedom.
 
+Click noise: ``sigma_px`` is one σ for every click, or one per click (segments first, then
+points, as ``kinds``): each residual is weighted by 1/σ² (a click snapped to the image's edge at
+0.15 px counts 44 times as much as a raw click at 1 px), and the covariance is ``(Jᵀ W J)⁻¹``.
+
 Robust loss: ``loss="huber"`` weights each clicked pixel (a segment's two pixels separately, a
 point's 2D distance) by ``min(1, huber_px / distance)`` (iteratively reweighted), so a wrong click
 pulls with a bounded force; the result names the down-weighted clicks.
@@ -33,7 +37,7 @@ from ..camera import Camera
 from ..transforms import check_T
 from .residuals import Clicks, as_clicks, perturb, residuals
 
-__all__ = ["RefineResult", "refine", "huber_weights"]
+__all__ = ["RefineResult", "refine", "huber_weights", "click_sigmas"]
 
 _LOSSES = ("l2", "huber")
 
@@ -44,7 +48,7 @@ class RefineResult:
 
     T_world_obj : array, shape (4, 4), the refined pose.
     cov : array, shape (6, 6), covariance of (δt (m), δr (rad)) at the solution (module
-        docstring), ``sigma_px² (Jᵀ W J)⁻¹``; translation block first.
+        docstring), ``(Jᵀ W J)⁻¹`` with W the 1/σ² and robust weights; translation block first.
     rms_px : RMS of all residuals, pixels (unweighted).
     residuals_px : array, shape (2 S + 2 P,), pixels: for each segment the signed distances of its
         two clicked pixels to the projected model line, then (u, v) of each point.
@@ -56,7 +60,7 @@ class RefineResult:
     weights : array, shape (S + P,), the final robust weight of each click (its smallest pixel
         weight; all 1 with ``loss="l2"``).
     downweighted : tuple of int, indices (into ``kinds``) of clicks with weight < 1.
-    sigma_px : the click noise the covariance assumes (pixels).
+    sigma_px : the click noise the covariance assumes (pixels): a float, or an array (S + P,).
     sigma_est_px : a-posteriori noise estimate sqrt(Σ w r² / (m − 6)), NaN without redundancy.
     loss : "l2" or "huber".
     """
@@ -71,7 +75,7 @@ class RefineResult:
     click_residuals_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
     weights: np.ndarray = field(default_factory=lambda: np.zeros(0))
     downweighted: tuple[int, ...] = ()
-    sigma_px: float = 1.0
+    sigma_px: float | np.ndarray = 1.0
     sigma_est_px: float = float("nan")
     loss: str = "l2"
 
@@ -112,25 +116,48 @@ def huber_weights(dist_px: np.ndarray, huber_px: float) -> np.ndarray:
     return np.minimum(1.0, huber_px / np.maximum(dist_px, 1e-300))
 
 
-def _robust(r: np.ndarray, n_seg: int, loss: str, huber_px: float) -> tuple[float, np.ndarray, np.ndarray]:
-    """(cost, per-residual weights (m,), per-pixel weights (2 S + P,)) of residuals r (m,)."""
+def _robust(
+    r: np.ndarray, n_seg: int, loss: str, huber_px: float, b: np.ndarray | None = None
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """(cost, per-residual weights (m,), per-pixel robust weights (2 S + P,)) of residuals r (m,).
+
+    b : the 1/σ² of each residual row (m,), ones when None; the per-residual weights include it.
+    """
+    b = np.ones(len(r)) if b is None else b
     if loss == "l2":
-        return 0.5 * float(r @ r), np.ones(len(r)), np.ones(2 * n_seg + (len(r) - 2 * n_seg) // 2)
+        return 0.5 * float(b @ (r * r)), b.copy(), np.ones(2 * n_seg + (len(r) - 2 * n_seg) // 2)
     e = _unit_distances(r, n_seg)
     w_unit = huber_weights(e, huber_px)
     rho = np.where(e <= huber_px, 0.5 * e * e, huber_px * e - 0.5 * huber_px * huber_px)
-    w = np.concatenate([w_unit[: 2 * n_seg], np.repeat(w_unit[2 * n_seg :], 2)])
-    return float(rho.sum()), w, w_unit
+    b_unit = np.concatenate([b[: 2 * n_seg], b[2 * n_seg :: 2]])  # a point's two rows share its σ
+    w = np.concatenate([w_unit[: 2 * n_seg], np.repeat(w_unit[2 * n_seg :], 2)]) * b
+    return float(b_unit @ rho), w, w_unit
 
 
-def check_options(camera, loss: str, huber_px: float, sigma_px: float) -> None:
+def check_options(camera, loss: str, huber_px: float, sigma_px) -> None:
     """ValueError for a camera that is not a Camera, an unknown loss or a non-positive scale."""
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
     if loss not in _LOSSES:
         raise ValueError(f"loss must be one of {_LOSSES}, got {loss!r}")
-    if not (huber_px > 0 and sigma_px > 0):
-        raise ValueError(f"huber_px and sigma_px must be positive, got {huber_px}, {sigma_px}")
+    sigma = np.asarray(sigma_px, dtype=float)
+    if not (huber_px > 0 and sigma.ndim <= 1 and sigma.size > 0 and np.all(np.isfinite(sigma)) and np.all(sigma > 0)):
+        raise ValueError(f"huber_px and sigma_px must be positive (sigma_px: one value or one per click), got {huber_px}, {sigma_px}")
+
+
+def click_sigmas(sigma_px, clicks: Clicks) -> np.ndarray:
+    """σ of each residual row (2 S + 2 P,) from one σ or one per click (S + P,); ValueError if
+    the count does not match the clicks."""
+    sigma = np.asarray(sigma_px, dtype=float)
+    n = clicks.n_segments + clicks.n_points
+    if sigma.ndim == 0:
+        return np.full(2 * n, float(sigma))
+    if sigma.shape != (n,):
+        raise ValueError(
+            f"sigma_px has {sigma.size} values for {clicks.n_segments} segment(s) and {clicks.n_points} point(s): "
+            "give one σ, or one per click (segments first, then points)"
+        )
+    return np.repeat(sigma, 2)
 
 
 def _solve_spd(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -206,8 +233,9 @@ def refine(
         with at most ``huber_px``).
     huber_px : float
         Huber threshold in pixels: clicked pixels farther than this from the model are down-weighted.
-    sigma_px : float
-        Click noise (standard deviation, pixels) that scales the covariance.
+    sigma_px : float or array, shape (S + P,)
+        Click noise (standard deviation, pixels): one for every click, or one per click (segments
+        first, then points); weights the residuals by 1/σ² and scales the covariance.
     max_iterations : int
 
     Returns
@@ -223,11 +251,11 @@ def refine(
     check_options(camera, loss, huber_px, sigma_px)
     T = _as_pose(T_world_obj)
     clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
-    return _refine(camera, T, clicks, loss, float(huber_px), float(sigma_px), int(max_iterations))
+    return _refine(camera, T, clicks, loss, float(huber_px), sigma_px, int(max_iterations))
 
 
 def _refine(
-    camera: Camera, T: np.ndarray, clicks: Clicks, loss: str, huber_px: float, sigma_px: float, max_iterations: int
+    camera: Camera, T: np.ndarray, clicks: Clicks, loss: str, huber_px: float, sigma_px, max_iterations: int
 ) -> RefineResult:
     m = clicks.n_residuals
     if m < 6:
@@ -249,7 +277,8 @@ def _refine(
         float(np.abs(clicks.points_obj).max()) if clicks.n_points else 0.0,
     )
     _check_observable(J.T @ J, extent)
-    cost, w, _ = _robust(r, S, loss, huber_px)
+    b = 1.0 / click_sigmas(sigma_px, clicks) ** 2  # ML weight of each residual row
+    cost, w, _ = _robust(r, S, loss, huber_px, b)
     lam = 1e-4
     iterations = 0
     converged = False
@@ -268,7 +297,7 @@ def _refine(
             T_new = perturb(T, delta)
             r_new, J_new, feasible = residuals(camera, T_new[:3, :3], T_new[:3, 3], clicks, jacobian=True)
             if feasible:
-                cost_new, w_new, _ = _robust(r_new, S, loss, huber_px)
+                cost_new, w_new, _ = _robust(r_new, S, loss, huber_px, b)
                 if cost_new <= cost:
                     break
             lam *= 10.0
@@ -286,14 +315,14 @@ def _refine(
         if step < 1e-9 or decrease <= 1e-10 * cost:
             converged = True
             break
-    _, w, w_unit = _robust(r, S, loss, huber_px)
+    _, w, w_unit = _robust(r, S, loss, huber_px, b)
     H = J.T @ (w[:, None] * J)
-    cov = sigma_px**2 * np.linalg.inv(H)
+    cov = np.linalg.inv(H)
     e = _unit_distances(r, S)
     click_res = np.concatenate([np.maximum(e[0 : 2 * S : 2], e[1 : 2 * S : 2]), e[2 * S :]])
     click_w = np.concatenate([np.minimum(w_unit[0 : 2 * S : 2], w_unit[1 : 2 * S : 2]), w_unit[2 * S :]])
     dof = m - 6
-    sigma_est = float(np.sqrt((w * r * r).sum() / dof)) if dof > 0 else float("nan")
+    sigma_est = float(np.sqrt((w / b * r * r).sum() / dof)) if dof > 0 else float("nan")
     return RefineResult(
         T_world_obj=T,
         cov=cov,
@@ -305,7 +334,7 @@ def _refine(
         click_residuals_px=click_res,
         weights=click_w,
         downweighted=tuple(int(i) for i in np.flatnonzero(click_w < 1.0)),
-        sigma_px=sigma_px,
+        sigma_px=float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, dtype=float).copy(),
         sigma_est_px=sigma_est,
         loss=loss,
     )

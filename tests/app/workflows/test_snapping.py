@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from app.workflows import CalibrateCamera, ModelObject, Session, Site, UpdatePose, WorkflowError
+from app.workflows.snapping import SNAPPED_SEGMENT_SIGMA_PX
+from core.transforms import pose_error
 
 T_MOVED = 16.0  # the known box has moved (12 → 15 s) and stays there: the video shows it, the database does not
 
@@ -72,7 +74,12 @@ def test_update_pose_snaps_clicked_edges_shows_raw_refuses_and_records(video_sit
         wf.refuse_snap()
     # the history keeps raw and snapped pixels of every segment, and which one was used
     wf.solve()
-    wf.refine()
+    refined = wf.refine()
+    # refine weighs each click by its precision: snapped ones at the snap's σ, the refused one raw
+    applied = np.array([s.applied for s in wf.seg_snaps])
+    np.testing.assert_allclose(refined.sigma_px, np.where(applied, SNAPPED_SEGMENT_SIGMA_PX, wf.sigma_px))
+    deg, m_err = pose_error(refined.T_world_obj, T_true)
+    assert np.degrees(np.sqrt(refined.cov[3:, 3:].trace())) > deg / 3 and np.sqrt(refined.cov[:3, :3].trace()) > m_err / 3
     rec = wf.accept()
     change = db.history("parallelepiped")[-1]
     assert change.method == "p3l+refine" and change.client == "alice" and rec.version == obj.version + 1

@@ -144,3 +144,42 @@ def _log_rotation(R):
 def test_log_rotation_helper():
     r = np.array([0.01, -0.02, 0.005])
     assert np.allclose(_log_rotation(exp_so3(r)), r, atol=1e-12)
+
+
+def test_per_click_sigma_weights_the_clicks_and_scales_the_covariance():
+    """σ per click: a uniform array equals the scalar; with mixed σ (snapped and raw clicks) the
+    covariance matches the scatter over trials and beats weighting every click alike."""
+    from core.pose.synthetic import paper_problems
+
+    rng = np.random.default_rng(11)
+    pb = paper_problems(rng, 1, 0.0)[0]
+    S = len(pb.segs_true_uv)
+    one = refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_true_uv, edges_obj=pb.edges_obj, sigma_px=0.5)
+    arr = refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_true_uv, edges_obj=pb.edges_obj, sigma_px=np.full(S, 0.5))
+    np.testing.assert_allclose(arr.cov, one.cov, rtol=1e-12)
+    assert arr.sigma_px.shape == (S,) and one.sigma_px == 0.5
+
+    sigma = np.where(np.arange(S) % 3 == 0, 1.0, 0.15)  # a third raw clicks, the rest snapped
+    errs_w, errs_u, covs = [], [], []
+    for _ in range(300):
+        noisy = pb.segs_true_uv + sigma[:, None, None] * rng.normal(size=pb.segs_true_uv.shape)
+        w = refine(pb.camera, pb.T_world_obj, segs_uv=noisy, edges_obj=pb.edges_obj, sigma_px=sigma)
+        u = refine(pb.camera, pb.T_world_obj, segs_uv=noisy, edges_obj=pb.edges_obj, sigma_px=1.0)
+        errs_w.append(w.T_world_obj[:3, 3] - pb.T_world_obj[:3, 3])
+        errs_u.append(u.T_world_obj[:3, 3] - pb.T_world_obj[:3, 3])
+        covs.append(w.cov[:3, :3])
+    errs_w, errs_u = np.array(errs_w), np.array(errs_u)
+    predicted = np.trace(np.mean(covs, axis=0))
+    observed = np.mean(np.sum(errs_w**2, axis=1))
+    assert observed == pytest.approx(predicted, rel=0.2)
+    assert observed < 0.8 * np.mean(np.sum(errs_u**2, axis=1))
+
+
+def test_per_click_sigma_must_match_the_clicks():
+    from core.pose.synthetic import paper_problems
+
+    pb = paper_problems(np.random.default_rng(12), 1, 0.0)[0]
+    with pytest.raises(ValueError, match="one per click"):
+        refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_true_uv, edges_obj=pb.edges_obj, sigma_px=np.ones(2))
+    with pytest.raises(ValueError, match="positive"):
+        refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_true_uv, edges_obj=pb.edges_obj, sigma_px=np.zeros(len(pb.segs_true_uv)))
