@@ -23,7 +23,7 @@ from app.overlay import nearest_segment, project_wireframe
 from app.workflows import Cancelled, Session, WorkflowError
 from app.workflows.session import WORKFLOWS
 
-from .controls import CONTROLS, START_BUTTONS, report_markdown
+from .controls import CONTROLS, START_BUTTONS, operator_help, report_markdown
 from .drawing import draw_marks
 from .tracking import TrackFeeder
 
@@ -132,6 +132,8 @@ class ClientPanel:
             self.gui_controls_folder = gui.add_folder("Actions")
             self.gui_report = gui.add_markdown("")
             self.gui_copy = gui.add_text("Target (m)", "", visible=False, hint="World x y z of the last target: copy it")
+        with gui.add_folder("Help", expand_by_default=False):
+            gui.add_markdown(operator_help())
 
     def _rebuild_controls(self) -> None:
         """Buttons of the current workflow (built by the loop when the workflow changes)."""

@@ -7,11 +7,15 @@ inputs (the candidate chooser, the history's change number) are built by the cli
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["CONTROLS", "START_BUTTONS", "report_markdown"]
+__all__ = ["CONTROLS", "START_BUTTONS", "report_markdown", "operator_help", "HELP_PATH"]
+
+# The operator's quick reference, shown in the panel's Help folder (static/: files the UI shows).
+HELP_PATH = Path(__file__).resolve().parents[2] / "static" / "help.md"
 
 # Buttons that start a workflow: (label, workflow name).
 START_BUTTONS: tuple[tuple[str, str], ...] = (
@@ -84,6 +88,14 @@ def _fmt(v: Any) -> str:
     if isinstance(v, float):
         return f"{v:.4g}"
     return str(v)
+
+
+def operator_help() -> str:
+    """The Help folder's Markdown (static/help.md); a clear note if the file is missing."""
+    try:
+        return HELP_PATH.read_text(encoding="utf-8")
+    except OSError as exc:
+        return f"*Help not found ({HELP_PATH}: {exc.strerror}); see docs/interface.md.*"
 
 
 def report_markdown(summary: dict[str, Any]) -> str:
