@@ -92,19 +92,25 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     page.mouse.move(x1, y1, steps=8)
     page.mouse.up()
     _wait(lambda: np.linalg.norm(cam.position - cam.look_at) < far / 2, what="the zoom")
-    time.sleep(0.5)
-    cx, cy = ui.screen_of(page, [164, 92])
-    assert abs(cx - cam.image_width / 2) < 5 and abs(cy - cam.image_height / 2) < 5
+
+    def centred() -> bool:  # the dragged rectangle's centre ends at the canvas's centre
+        cx, cy = ui.screen_of(page, [164, 92])
+        return abs(cx - cam.image_width / 2) < 5 and abs(cy - cam.image_height / 2) < 5
+
+    _wait(centred, what="the zoomed view to centre on the dragged rectangle")
     page.get_by_role("button", name="Fit view").click()
     _wait(lambda: abs(np.linalg.norm(cam.position - cam.look_at) - far) < 1e-3 * far, what="the fit")
     # a narrower window: the view is fitted again, the whole image inside the canvas
     aspect = page.panel.fitted_aspect
     page.set_viewport_size({"width": 900, "height": 700})
     _wait(lambda: page.panel.fitted_aspect is not None and abs(page.panel.fitted_aspect - aspect) > 0.05, what="the refit")
-    time.sleep(0.5)
-    corners = [ui.screen_of(page, uv) for uv in ([-0.5, -0.5], [511.5, 255.5])]
-    assert all(-1 <= x <= cam.image_width + 1 and -1 <= y <= cam.image_height + 1 for x, y in corners)
-    assert abs(corners[1][0] - corners[0][0]) > 0.9 * cam.image_width  # fitted to the width
+
+    def fitted() -> bool:  # the whole image inside the canvas, fitted to its width
+        corners = [ui.screen_of(page, uv) for uv in ([-0.5, -0.5], [511.5, 255.5])]
+        inside = all(-1 <= x <= cam.image_width + 1 and -1 <= y <= cam.image_height + 1 for x, y in corners)
+        return inside and abs(corners[1][0] - corners[0][0]) > 0.9 * cam.image_width
+
+    _wait(fitted, what="the view to fit the narrower window")
     page.close()
 
 
@@ -152,9 +158,9 @@ def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
     assert deg < 1.5 and m < 0.015
     assert ui.db.history("parallelepiped")[-1].client.startswith("browser-")
     # the overlay (the box is still selected: drawn yellow over green) now lies on the box in the video
-    time.sleep(1.0)
-    shot = ui.screenshot(page, "/tmp/mcit-e2e-pose.png")
-    assert np.mean([_drawn_along(ui, page, shot, true[k], "any") for k in edges]) >= 0.6
+    _wait(lambda: np.mean([_drawn_along(ui, page, ui.screenshot(page), true[k], "any") for k in edges]) >= 0.6,
+          what="the overlay to lie on the box in the video")
+    ui.screenshot(page, "/tmp/mcit-e2e-pose.png")
     page.close()
 
 
@@ -177,11 +183,10 @@ def test_two_browsers_share_the_database_and_keep_their_own_state(browser, inter
     # the server notices (it polls the database every second) and redraws for everyone
     _wait(lambda: ui.site.object("parallelepiped").version == rec.version and ui.server._db_revision == ui.site.revision,
           what="the server to see the change")
-    time.sleep(1.0)
     true = ui.site.camera.project(obj.model.edge_segments(T_true).reshape(-1, 3)).reshape(-1, 2, 2)
     edges = _visible_box_edges(ui.site, T_true)
     for page in (a, b):
-        shot = ui.screenshot(page)
-        assert np.mean([_drawn_along(ui, page, shot, true[k], "any") for k in edges]) >= 0.6
+        _wait(lambda: np.mean([_drawn_along(ui, page, ui.screenshot(page), true[k], "any") for k in edges]) >= 0.6,
+              what="every browser to draw the box where the other writer put it")
     a.close()
     b.close()
