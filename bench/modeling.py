@@ -14,9 +14,15 @@ Table III.1 (box 9 × 9.4 × 14 cm, w × l × h, on the table, turned U(20°, 70
 range points on a 4 × 4 lattice inset 20 % on each visible face, every visible side clicked once
 (at 10 % and 90 % of its length); ``model_box`` by the paper's construction ("planes": face
 planes by TLS — the paper's ax + by + z + d = 0 cannot hold the vertical sides — vertices from
-planes, a box fitted to them) and by our maximum-likelihood fit on the raw data ("fused"), on
-the same measurements. The paper gives one error per distance (a real measurement); we give the
-RMS error over the trials, and the predicted σ (RMS over the trials).
+planes, a box fitted to them), by our maximum-likelihood fit on the raw data ("fused"), and by the
+same fit with two horizontal profile scans added ("fused + scans": pan sweeps at the finest step,
+at the tilts aiming at the box's axis at 50 % and 75 % of its height, from 3 cm beyond its extreme
+corners on one side to 3 cm beyond them on the other, misses kept; each return on the box joins
+its face's points, each last-hit/next-beam transition puts the silhouette's vertical edge on the
+turret's vertical plane at the mid pan), on the same measurements (the scans' noise drawn from a
+second generator, seed + 1, so the first two columns see the same draws with or without them).
+The paper gives one error per distance (a real measurement); we give the RMS error over the
+trials, and the predicted σ (RMS over the trials).
 
 Table III.2 (cylinder r = 5.1 cm, h = 16.6 cm standing on the table): both silhouettes clicked at
 their ends, two horizontal scans at 1/3 and 2/3 of the height at the finest step, 3 cm past each
@@ -44,11 +50,17 @@ sys.path.insert(0, str(ROOT))
 from core.brep import Revolution  # noqa: E402
 from core.geometry import Line, Plane, distance_point_line  # noqa: E402
 from core.modeling import METHODS, model_box, model_cylinder  # noqa: E402
-from core.modeling.simulate import SimWorld, look_at_setup, simulate_box, simulate_revolution  # noqa: E402
+from core.modeling.simulate import (  # noqa: E402
+    SimWorld,
+    look_at_setup,
+    simulate_box,
+    simulate_box_scans,
+    simulate_revolution,
+)
 from core.transforms import make_T, rot_z  # noqa: E402
 
 TABLE = Plane(np.array([0.0, 0.0, 1.0]), 0.0)
-BOX_METHODS = ("planes", "fused")
+BOX_METHODS = ("planes", "fused", "fused + scans")
 BOX = np.array([0.09, 0.094, 0.14])  # width, length, height
 R_CYL, H_CYL = 0.051, 0.166
 
@@ -63,8 +75,8 @@ PAPER_T32 = {
 }
 
 
-def box_trials(distance: float, n: int, rng: np.random.Generator):
-    """Both box methods on the same simulated measurements: errors (n, 4) and σ (n, 3) per method."""
+def box_trials(distance: float, n: int, rng: np.random.Generator, scan_rng: np.random.Generator):
+    """Every box method on the same simulated measurements: errors (n, 4) and σ (n, 3) per method."""
     cam, T_wt = look_at_setup(np.array([0.0, 0.0, BOX[2] / 2]), distance)
     errs = {m: [] for m in BOX_METHODS}
     sigs = {m: [] for m in BOX_METHODS}
@@ -74,9 +86,11 @@ def box_trials(distance: float, n: int, rng: np.random.Generator):
         T_obj = make_T(rot_z(yaw), [*rng.uniform(-0.005, 0.005, 2), 0.0])
         world = SimWorld(T_wt, boxes=((T_obj, tuple(BOX)),))
         faces = simulate_box(cam, world, T_obj, BOX, rng)
+        scans = simulate_box_scans(world, T_obj, BOX, scan_rng)
         for m in BOX_METHODS:
+            extra = dict(scans=scans, T_world_turret=T_wt) if m == "fused + scans" else {}
             t0 = time.perf_counter()
-            res = model_box(cam, faces, TABLE, support_sigma_m=1e-6, method=m)
+            res = model_box(cam, faces, TABLE, support_sigma_m=1e-6, method=m.split()[0], **extra)
             t_ms[m].append(1e3 * (time.perf_counter() - t0))
             perm = np.argmax(np.abs(res.T_world_obj[:3, :3].T @ T_obj[:3, :3]), axis=1)
             est = np.array([res.dimensions[k] for k in ("size_x", "size_y", "size_z")])
@@ -88,17 +102,22 @@ def box_trials(distance: float, n: int, rng: np.random.Generator):
     return {m: np.array(v) for m, v in errs.items()}, {m: np.array(v) for m, v in sigs.items()}, {m: float(np.median(v)) for m, v in t_ms.items()}
 
 
-def box_noise_free() -> float:
-    worst = 0.0
+def box_noise_free() -> dict[str, float]:
+    """Worst size error (m) of each box method without noise (scans with exact edge transitions)."""
+    worst = {m: 0.0 for m in BOX_METHODS}
     for d in (1.3, 1.6):
         cam, T_wt = look_at_setup(np.array([0.0, 0.0, BOX[2] / 2]), d)
         for yaw in (25.0, 45.0, 65.0):
             T_obj = make_T(rot_z(np.radians(yaw)), [0.004, -0.003, 0.0])
             world = SimWorld(T_wt, boxes=((T_obj, tuple(BOX)),))
-            res = model_box(cam, simulate_box(cam, world, T_obj, BOX, None, step_quantize=False), TABLE)
-            perm = np.argmax(np.abs(res.T_world_obj[:3, :3].T @ T_obj[:3, :3]), axis=1)
-            est = np.array([res.dimensions[k] for k in ("size_x", "size_y", "size_z")])
-            worst = max(worst, float(np.abs(est - BOX[perm]).max()))
+            faces = simulate_box(cam, world, T_obj, BOX, None, step_quantize=False)
+            scans = simulate_box_scans(world, T_obj, BOX, None, exact_edges=True)
+            for m in BOX_METHODS:
+                extra = dict(scans=scans, T_world_turret=T_wt) if m == "fused + scans" else {}
+                res = model_box(cam, faces, TABLE, method=m.split()[0], **extra)
+                perm = np.argmax(np.abs(res.T_world_obj[:3, :3].T @ T_obj[:3, :3]), axis=1)
+                est = np.array([res.dimensions[k] for k in ("size_x", "size_y", "size_z")])
+                worst[m] = max(worst[m], float(np.abs(est - BOX[perm]).max()))
     return worst
 
 
@@ -159,24 +178,34 @@ def main(argv=None) -> int:
     print()
 
     print(f"Table III.1 — box 9 × 9.4 × 14 cm (w × l × h) on the table, {args.box_trials} trials per distance")
-    print(f"noise-free: worst size error {box_noise_free():.1e} m (target ≤ 1e-6 m)")
+    print("range points: 4 × 4 per visible face; clicks: every visible side once; fused + scans: also 2 pan sweeps"
+          " at 50 % / 75 % of the height, finest step, 3 cm past the box, misses kept")
+    nf = box_noise_free()
+    print("noise-free: worst size error " + ", ".join(f"{m} {v:.1e} m" for m, v in nf.items()) + " (target ≤ 1e-6 m)")
     print("errors in cm (volume in dm³): the paper's one measurement | ours: RMS over the trials [mean predicted σ]")
     print("dist m | paper: width height length volume | planes (paper's construction): width height length volume"
-          " | fused ML fit: width height length volume [σ w h l] | ≤ 3 mm? planes / fused | ms planes / fused")
+          " | fused ML fit: width height length volume [σ w h l] | fused + scans: width height length volume [σ w h l]")
+    worst_rows = []
+    scan_rng = np.random.default_rng(args.seed + 1)
     for d in (1.3, 1.4, 1.5, 1.6):
-        E, S, t = box_trials(d, args.box_trials, rng)
+        E, S, t = box_trials(d, args.box_trials, rng, scan_rng)
         p = PAPER_T31[d]
         cells, worst = [], []
         for m in BOX_METHODS:
             r = [rms(E[m][:, i]) for i in range(4)]
             worst.append(1000 * max(r[:3]))
-            cells.append(f"{100 * r[0]:5.2f} {100 * r[1]:5.2f} {100 * r[2]:5.2f} {1000 * r[3]:6.3f}")
-        s = np.sqrt(np.mean(S["fused"] ** 2, axis=0))
-        ok = " / ".join(f"{'yes' if w <= 3.0 else 'NO'} ({w:.2f} mm)" for w in worst)
-        print(
-            f"  {d:.1f}  | {p[0]:5.2f} {p[1]:5.2f} {p[2]:5.2f} {p[3]:5.2f}       | {cells[0]}                        "
-            f"| {cells[1]} [{100 * s[0]:4.2f} {100 * s[1]:4.2f} {100 * s[2]:4.2f}] | {ok} | {t['planes']:.0f} / {t['fused']:.0f}"
-        )
+            cell = f"{100 * r[0]:5.2f} {100 * r[1]:5.2f} {100 * r[2]:5.2f} {1000 * r[3]:6.3f}"
+            if m != "planes":
+                s = np.sqrt(np.mean(S[m] ** 2, axis=0))
+                cell += f" [{100 * s[0]:4.2f} {100 * s[1]:4.2f} {100 * s[2]:4.2f}]"
+            cells.append(cell)
+        worst_rows.append((d, worst, t))
+        print(f"  {d:.1f}  | {p[0]:5.2f} {p[1]:5.2f} {p[2]:5.2f} {p[3]:5.2f}       | {cells[0]}                        "
+              f"| {cells[1]} | {cells[2]}")
+    print("worst size RMS (mm), ≤ 3 mm? — planes / fused / fused + scans | median ms per model, same order")
+    for d, worst, t in worst_rows:
+        ok = " / ".join(f"{w:.2f} {'yes' if w <= 3.0 else 'NO'}" for w in worst)
+        print(f"  {d:.1f}  | {ok} | " + " / ".join(f"{t[m]:.0f}" for m in BOX_METHODS))
     print()
 
     print(f"Table III.2 — cylinder r = 5.1 cm, h = 16.6 cm on the table, {args.cyl_trials} trials per distance")

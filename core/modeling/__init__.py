@@ -4,7 +4,8 @@ The operator gives the semantics (box, polyhedron, cylinder, cone; vertical or o
 the table"), the sensors give the numbers:
 
 * ``model_box(camera, faces, support)`` — a box from its visible faces (range points + clicked
-  sides), the paper's plane construction, then a box fitted to the constructed corners;
+  sides), the paper's plane construction, then a box fitted to the constructed corners; with
+  ``method="fused"`` a maximum-likelihood fit of the raw data, profile scans included (``box_scans``);
 * ``model_polyhedron(camera, faces, ...)`` — any polyhedron from a face/edge topology (prisms,
   pyramids): every vertex is the least-squares point of the planes that meet there;
 * ``model_cylinder(camera, method, ...)`` — cylinders and cones by the paper's "tangential",
