@@ -6,7 +6,10 @@ is vertical, whether it lies on the table — and the sensors give the numbers:
 * box: for each visible face (1 to 3) click its sides in the video (two clicks per side), then
   ``measure()``: the turret scans a patch of range points inside the clicked outline; ``next_face()``
   goes on to the next face. ``solve()`` builds the box (``core.modeling.model_box``: face planes ∩
-  interpretation planes, the table as the bottom face).
+  interpretation planes, the table as the bottom face). Optionally ``scan()`` after measuring:
+  two horizontal profiles at the turret's finest step across the box given by the faces (at 50 %
+  and 75 % of its height, 3 cm past it on each side); ``solve()`` then fuses them ("fused" with
+  scans: the profiles' edge transitions pin the far vertical edges the clicks place poorly).
 * cylinder / cone: click the two silhouette lines, each from its bottom end to its top end, then
   ``scan()``: two horizontal range profiles across the object (misses kept); ``solve(method=...)``
   fits it (``core.modeling.model_cylinder``; "fused" by default, or the paper's "tangential",
@@ -24,6 +27,7 @@ records both.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -38,6 +42,11 @@ __all__ = ["ModelObject", "SHAPES", "table_support"]
 
 SHAPES = ("box", "cylinder", "cone")
 MIN_SEGMENT_PX = 3.0
+# A box's profiles: heights (fractions of the box's) and how far past its corners they sweep. Above
+# mid-height the jump from the box's last return to the table behind stays well over 5 cm
+# (docs/modeling.md), so the box's run ends where its edge is.
+BOX_SCAN_FRACTIONS = (0.5, 0.75)
+BOX_SCAN_MARGIN_M = 0.03
 
 
 def table_support(site) -> Plane | None:
@@ -150,6 +159,8 @@ class ModelObject(SnapMixin, Workflow):
             self.result = None
             if self.pending is not None:
                 self.pending = None
+            elif self.shape == "box" and self.scans:
+                self.scans = []
             elif self.shape == "box":
                 face = self.faces[-1]
                 if face["points"] is not None:
@@ -192,10 +203,40 @@ class ModelObject(SnapMixin, Workflow):
         if self.cancel_event.is_set():
             raise Cancelled()
 
+    @contextmanager
+    def _acquiring(self, doing: str, again: str, refused: str):
+        """Around a device acquisition: a cancel → Cancelled, a device fault or a refused request
+        (ValueError) → WorkflowError saying what to do; the progress bar is cleared on failure."""
+        from app.devices.acquisition import AcquisitionCancelled
+        from app.devices.errors import DeviceError
+
+        try:
+            yield
+        except (AcquisitionCancelled, Cancelled):
+            self.progress = None
+            raise Cancelled() from None
+        except DeviceError as exc:
+            self.progress = None
+            raise WorkflowError(f"device fault while {doing}: {exc}. Check the devices and {again}") from None
+        except WorkflowError:
+            self.progress = None
+            raise
+        except ValueError as exc:
+            self.progress = None
+            raise WorkflowError(f"{refused}: {exc}") from None
+
+    def _profile(self, devices, k: int, **sweep) -> RangeScan:
+        """Profile k of 2 (``app.devices.acquisition.profile_scan`` with ``sweep``), progress over both."""
+        from app.devices.acquisition import profile_scan
+
+        def report(p):
+            self._report(type(p)(k * p.total + p.done, 2 * p.total, p.message))
+
+        return profile_scan(devices.turret, devices.rangefinder, progress=report, cancel=self.cancel_event, **sweep)
+
     def measure(self):
         """Box: range points on the current face, inside its clicked outline (face patch scan)."""
-        from app.devices.acquisition import AcquisitionCancelled, face_patch_scan
-        from app.devices.errors import DeviceError
+        from app.devices.acquisition import face_patch_scan
 
         with self.lock:
             self._check_open()
@@ -215,19 +256,10 @@ class ModelObject(SnapMixin, Workflow):
             camera, T = self.site.camera, self.site.T_world_turret
             self.cancel_event.clear()
             self.progress, self.progress_text = 0.0, "aiming"
-        try:
+        with self._acquiring("measuring", "Measure again", "cannot measure this face"):
             scan = face_patch_scan(camera, T, devices.turret, devices.rangefinder, polygon_uv=poly, spacing_px=spacing,
                                    depth_guess_m=float(camera.depth(self.support_point(centre))),
                                    progress=self._report, cancel=self.cancel_event)
-        except (AcquisitionCancelled, Cancelled):
-            self.progress = None
-            raise Cancelled() from None
-        except DeviceError as exc:
-            self.progress = None
-            raise WorkflowError(f"device fault while measuring: {exc}. Check the devices and Measure again") from None
-        except ValueError as exc:
-            self.progress = None
-            raise WorkflowError(f"cannot measure this face: {exc}") from None
         with self.lock:
             self.progress = None
             good = scan.hits & np.asarray(scan.meta.get("inside", scan.hits), bool)
@@ -254,15 +286,57 @@ class ModelObject(SnapMixin, Workflow):
         """The range finder's noise model (the scene's: σ_ρ, limits, the turret's step)."""
         return self.site.scene.rangefinder
 
-    def scan(self) -> list[RangeScan]:
-        """Cylinder/cone: two horizontal range profiles across the object, at 30 % and 70 % of its height."""
-        from app.devices.acquisition import AcquisitionCancelled, measure_at_pixel, profile_scan
-        from app.devices.errors import DeviceError
+    def _box_faces(self) -> list:
+        from core.modeling import BoxFace
+
+        return [BoxFace(f["points"], np.array(f["segs"]).reshape(-1, 2, 2), f["covs"]) for f in self.faces
+                if f["points"] is not None]
+
+    def _scan_box(self) -> list[RangeScan]:
+        """Box: two horizontal profiles across the box that the measured faces give (finest step)."""
+        from core.modeling import model_box
 
         with self.lock:
             self._check_open()
-            if self.shape == "box":
-                raise WorkflowError("Scan profile is for cylinders and cones; for a box use Measure face")
+            faces = self._box_faces()
+            if not faces:
+                raise WorkflowError("measure the box's faces first (click a face's sides, Measure face): the "
+                                    "profiles are placed across the box they give")
+            devices = self._devices()
+            try:
+                box = model_box(self.site.camera, faces, self.support)
+            except ValueError as exc:
+                raise WorkflowError(f"cannot place the profiles: the measured faces give no box yet ({exc})") from None
+            T = self.site.T_world_turret
+            Tb, h = box.T_world_obj, box.dimensions["size_z"]
+            corners = box.vertices_world
+            self.cancel_event.clear()
+            self.progress, self.progress_text = 0.0, "scanning"
+        scans = []
+        with self._acquiring("scanning", "Scan again", "cannot scan across the box"):
+            for k, frac in enumerate(BOX_SCAN_FRACTIONS):
+                pan0, tilt0, rho0 = aim(T, Tb[:3, :3] @ [0.0, 0.0, frac * h] + Tb[:3, 3])
+                rel = (aim(T, corners)[0] - pan0 + np.pi) % (2 * np.pi) - np.pi
+                pad = float(np.arctan(BOX_SCAN_MARGIN_M / rho0))
+                scans.append(self._profile(devices, k, tilt_rad=float(tilt0), pan_start_rad=float(pan0 + rel.min() - pad),
+                                           pan_stop_rad=float(pan0 + rel.max() + pad)))
+        with self.lock:
+            self.progress = None
+            self.scans = scans
+            self.result = None
+            hits = [int(s.hits.sum()) for s in scans]
+            self.message = f"2 profiles across the box: {hits[0]} and {hits[1]} returns of {len(scans[0])} and {len(scans[1])} beams"
+            return scans
+
+    def scan(self) -> list[RangeScan]:
+        """Two horizontal range profiles: cylinder/cone at 30 % and 70 % of its height; box (optional,
+        after Measure face) at 50 % and 75 % of the height of the box its faces give, finest step."""
+        from app.devices.acquisition import measure_at_pixel
+
+        if self.shape == "box":
+            return self._scan_box()
+        with self.lock:
+            self._check_open()
             if len(self.silhouettes) < 2:
                 raise WorkflowError(f"click both silhouettes first ({len(self.silhouettes)} clicked)")
             devices = self._devices()
@@ -271,7 +345,7 @@ class ModelObject(SnapMixin, Workflow):
             self.cancel_event.clear()
             self.progress, self.progress_text = 0.0, "aiming"
         scans = []
-        try:
+        with self._acquiring("scanning", "Scan again", "cannot scan across the object"):
             for k, frac in enumerate((0.3, 0.7)):
                 left, right = sil[0, 0] + frac * (sil[0, 1] - sil[0, 0]), sil[1, 0] + frac * (sil[1, 1] - sil[1, 0])
                 mid = (left + right) / 2
@@ -286,18 +360,8 @@ class ModelObject(SnapMixin, Workflow):
                 half = abs(pans[1] - pans[0]) / 2
                 lo, hi = min(pans) - 0.8 * half, max(pans) + 0.8 * half
                 step = max(devices.turret.pan_step_rad, (hi - lo) / self.beams)
-
-                def report(p, k=k):
-                    self._report(type(p)(k * p.total + p.done, 2 * p.total, p.message))
-
-                scans.append(profile_scan(devices.turret, devices.rangefinder, tilt_rad=m.tilt_rad, pan_start_rad=lo,
-                                          pan_stop_rad=hi, pan_step_rad=step, progress=report, cancel=self.cancel_event))
-        except (AcquisitionCancelled, Cancelled):
-            self.progress = None
-            raise Cancelled() from None
-        except DeviceError as exc:
-            self.progress = None
-            raise WorkflowError(f"device fault while scanning: {exc}. Check the devices and Scan again") from None
+                scans.append(self._profile(devices, k, tilt_rad=m.tilt_rad, pan_start_rad=lo, pan_stop_rad=hi,
+                                           pan_step_rad=step))
         with self.lock:
             self.progress = None
             self.scans = scans
@@ -313,18 +377,21 @@ class ModelObject(SnapMixin, Workflow):
     # ------------------------------------------------------------------ solve and accept
     def solve(self, method: str | None = None):
         """Build the model; its preview (ghost) and dimensions ± σ are shown."""
-        from core.modeling import BoxFace, model_box, model_cylinder
+        from core.modeling import model_box, model_cylinder
 
         with self.lock:
             self._check_open()
             cam = self.site.camera
             try:
                 if self.shape == "box":
-                    faces = [f for f in self.faces if f["points"] is not None]
-                    if not faces:
+                    box_faces = self._box_faces()
+                    if not box_faces:
                         raise WorkflowError("measure at least one face first (click its sides, then Measure face)")
-                    box_faces = [BoxFace(f["points"], np.array(f["segs"]).reshape(-1, 2, 2), f["covs"]) for f in faces]
-                    self.result = model_box(cam, box_faces, self.support)
+                    if self.scans:  # the profiles are fused with the faces and clicks
+                        self.result = model_box(cam, box_faces, self.support, method="fused", scans=self.scans,
+                                                T_world_turret=self.site.T_world_turret, spec=self._spec())
+                    else:
+                        self.result = model_box(cam, box_faces, self.support)
                 else:
                     if len(self.scans) < 2 and (method or self.method) != "tangential":
                         raise WorkflowError("scan the object first (Scan profile)")
@@ -356,6 +423,9 @@ class ModelObject(SnapMixin, Workflow):
                           # raw and snapped pixels of each side (None: snapping was off)
                           "snaps": [[None if sn is None else sn.record() for sn in f["snaps"]] for f in self.faces]}
                 measurements = {"faces": [f["points"] for f in self.faces if f["points"] is not None]}
+                if self.scans:
+                    measurements["scans"] = [{"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m}
+                                             for s in self.scans]
             else:
                 clicks = {"silhouettes_uv": np.array(self.silhouettes),
                           "snaps": [None if sn is None else sn.record() for sn in self.silhouette_snaps]}
@@ -392,7 +462,10 @@ class ModelObject(SnapMixin, Workflow):
             face = self.faces[-1]
             n = len(self.faces)
             if face["points"] is not None:
-                return f"Face {n} measured. Next face (click its sides) for more accuracy, or Solve."
+                if self.scans:
+                    return "Profiles scanned: Solve (fused with the faces and clicks)."
+                return (f"Face {n} measured. Next face (click its sides) for more accuracy, Scan profile for the "
+                        "far edges, or Solve.")
             if len(face["segs"]) < 2:
                 return f"Face {n}: click two points on each side of one visible face (side {len(face['segs']) + 1})."
             return f"Face {n}: click more sides, or Measure face (the turret scans inside them)."
@@ -436,6 +509,8 @@ class ModelObject(SnapMixin, Workflow):
             if self.shape == "box":
                 out["faces"] = [{"face": i + 1, "sides": len(f["segs"]),
                                  "points": 0 if f["points"] is None else len(f["points"])} for i, f in enumerate(self.faces)]
+                if self.scans:
+                    out["scans"] = [int(s.hits.sum()) for s in self.scans]
             else:
                 out["silhouettes"] = len(self.silhouettes)
                 out["scans"] = [int(s.hits.sum()) for s in self.scans]

@@ -59,6 +59,61 @@ def test_box_from_three_faces_is_added_with_sigmas(device_site, fast_scene, db):
     assert db.history("box_1")[-1].measurements["faces"]
 
 
+def test_box_with_profile_scans_is_fused(device_site, fast_scene, db):
+    """Faces measured, then Scan profile: Solve fuses the profiles (the far edges' transitions)."""
+    site = device_site
+    body = fast_scene.body("unknown_box")
+    T = body.pose_at(0.0)
+    wf = ModelObject(site, shape="box")
+    with pytest.raises(WorkflowError, match="measure the box's faces first"):
+        wf.scan()
+    rng = np.random.default_rng(4)
+    faces = _facing_faces(site.camera, body.model, T)
+    for i, k in enumerate(faces[:2]):
+        _click_face(wf, site.camera, body.model, T, k, rng)
+        wf.measure()
+        if i == 0:
+            wf.next_face()
+    assert "Scan profile" in wf.next_step
+    plain = wf.solve()
+    assert plain.method == "planes"
+    scans = wf.scan()
+    assert len(scans) == 2 and all(s.hits.sum() >= 50 for s in scans)
+    assert "Solve" in wf.next_step
+    r = wf.solve()
+    assert r.method == "fused" and len(r.details["scans"]["tangents"]) == 4
+    truth = body.model.bounds()[1] - body.model.bounds()[0]
+    got = np.array([r.dimensions[k] for k in ("size_x", "size_y", "size_z")])
+    sig = np.array([r.sigmas[k] for k in ("size_x", "size_y", "size_z")])
+    assert np.allclose(np.sort(got[:2]), np.sort(truth[:2]), atol=0.005) and abs(got[2] - truth[2]) < 0.005
+    sig_plain = np.array([plain.sigmas[k] for k in ("size_x", "size_y", "size_z")])
+    assert np.all(sig[:2] < sig_plain[:2])  # the profiles pin the footprint
+    assert wf.summary()["scans"] == [int(s.hits.sum()) for s in scans]
+    wf.accept()
+    assert len(db.history("box_1")[-1].measurements["scans"]) == 2
+
+
+def test_box_scan_is_undone_first(device_site, fast_scene):
+    site = device_site
+    body = fast_scene.body("unknown_box")
+    T = body.pose_at(0.0)
+    wf = ModelObject(site, shape="box")
+    faces = _facing_faces(site.camera, body.model, T)
+    top = [k for k in faces if abs((T[:3, :3] @ body.model.face_normals()[k])[2]) > 0.9]
+    rng = np.random.default_rng(5)
+    _click_face(wf, site.camera, body.model, T, top[0], rng)
+    wf.measure()
+    with pytest.raises(WorkflowError, match="give no box yet"):
+        wf.scan()  # the top face alone, on the table: no orientation for the profiles
+    wf.next_face()
+    _click_face(wf, site.camera, body.model, T, [k for k in faces if k not in top][0], rng)
+    wf.measure()
+    wf.scan()
+    wf.remove_last()  # the profiles go, the faces' points stay
+    assert wf.scans == [] and wf.faces[-1]["points"] is not None
+    assert wf.solve().method == "planes"
+
+
 def test_cylinder_from_silhouettes_and_two_profiles(device_site, fast_scene, db):
     site = device_site
     body = fast_scene.body("unknown_cylinder")
