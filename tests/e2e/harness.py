@@ -71,6 +71,22 @@ def close_webgl_notice(page) -> None:
         pass
 
 
+def close_notifications(page, timeout_s: float = 10.0) -> None:
+    """Close every notification and wait until none is left: they stack over the video's top-left
+    corner (below them a click or a drag reaches the notification, not the canvas)."""
+    deadline = time.monotonic() + timeout_s
+    roots = page.locator(".mantine-Notification-root")
+    while roots.count() and time.monotonic() < deadline:
+        for button in roots.locator("button").all():
+            try:
+                button.click(timeout=1000)
+            except Exception:  # noqa: BLE001 - it may close (auto-close) before the click
+                pass
+        time.sleep(0.2)
+    if roots.count():
+        raise AssertionError(f"{roots.count()} notification(s) still open after {timeout_s} s")
+
+
 def launch(playwright):
     """Debian's chromium in headless mode with the flags that work here (DESIGN.md)."""
     return playwright.chromium.launch(executable_path=CHROMIUM, args=ARGS)

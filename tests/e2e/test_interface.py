@@ -11,6 +11,8 @@ import pytest
 
 from core.transforms import pose_error
 
+from .harness import close_notifications
+
 pytestmark = pytest.mark.e2e
 
 
@@ -83,7 +85,9 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     assert [(o.name, o.version) for o in ui.db.objects()] == versions
     assert len(ui.db.history()) == n_changes and len(ui.db.calibrations()) == n_cal
     assert ui.server._thread.is_alive()  # the server lives on
-    # a left drag zooms onto the dragged rectangle (it does not rotate the view); Fit view comes back
+    # a left drag zooms onto the dragged rectangle (it does not rotate the view); Fit view comes back.
+    # The error notifications above cover the video's top-left corner, where the drag starts.
+    close_notifications(page)
     cam = page.panel.client.camera
     far = float(np.linalg.norm(cam.position - cam.look_at))
     (x0, y0), (x1, y1) = ui.screen_of(page, [100, 60]), ui.screen_of(page, [228, 124])
