@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import chi2
 
 from .camera import Camera, as_uv
 from .geometry import as_points
@@ -29,15 +30,24 @@ class DLTResult(tuple):
     camera : Camera. rms_px : float, RMS reprojection distance in pixels.
     residuals_px : array, shape (N, 2), projected minus clicked pixels.
     errors_px : array, shape (N,), their norms. linear_rms_px : the RMS of the DLT alone.
+    cov : array, shape (12, 12), or None (not refined): covariance of ``camera.C.ravel()`` (row
+    major, C as the Camera normalises it), first order, in the gauge orthogonal to C (C's scale
+    is not observable). variance_factor : the weighted
+    residuals' χ² per degree of freedom; the covariance is scaled by it when the χ² test rejects the
+    stated σ (above its 99 % quantile: clicks worse than stated, or a wrong world point), never
+    shrunk below the stated σ.
     """
 
-    def __new__(cls, camera: Camera, rms_px: float, residuals_px: np.ndarray, linear_rms_px: float):
+    def __new__(cls, camera: Camera, rms_px: float, residuals_px: np.ndarray, linear_rms_px: float,
+                cov: np.ndarray | None = None, variance_factor: float = float("nan")):
         self = super().__new__(cls, (camera, float(rms_px)))
         self.camera = camera
         self.rms_px = float(rms_px)
         self.residuals_px = residuals_px
         self.errors_px = np.linalg.norm(residuals_px, axis=1)
         self.linear_rms_px = float(linear_rms_px)
+        self.cov = cov
+        self.variance_factor = float(variance_factor)
         return self
 
 
@@ -142,7 +152,38 @@ def calibrate_dlt(
     camera = Camera(P, width, height, in_front=X)
     res = _reprojection(camera.C, X, uv)
     rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
-    return DLTResult(camera, rms, res, linear_rms)
+    if not refine:
+        return DLTResult(camera, rms, res, linear_rms)
+    cov, factor = _dlt_cov(camera.C, X, res, w)
+    return DLTResult(camera, rms, res, linear_rms, cov, factor)
+
+
+def _dlt_cov(C: np.ndarray, X: np.ndarray, res: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, float]:
+    """First-order covariance of C's 12 entries at the weighted least-squares optimum, gauge ⟂ C.
+
+    Each point's (u, v) = (c₁·X̃, c₂·X̃) / (c₃·X̃); with unit weights 1/σ the inverse of the normal
+    matrix JᵀJ is the covariance (scaled by χ²/dof when χ² is above its 99 % quantile). JᵀJ is singular along C itself
+    (the scale), so the pseudo-inverse gives the minimum-norm gauge, orthogonal to C.
+    """
+    Xh = np.column_stack([X, np.ones(len(X))])
+    s = Xh @ C[2]
+    u = (Xh @ C[0]) / s
+    v = (Xh @ C[1]) / s
+    J = np.zeros((2 * len(X), 12))
+    J[0::2, 0:4] = Xh / s[:, None]
+    J[0::2, 8:12] = -(u / s)[:, None] * Xh
+    J[1::2, 4:8] = Xh / s[:, None]
+    J[1::2, 8:12] = -(v / s)[:, None] * Xh
+    J *= np.repeat(w, 2)[:, None]
+    dof = max(2 * len(X) - 11, 1)
+    factor = float(np.sum((res * w[:, None]) ** 2) / dof)
+    c = C.ravel() / np.linalg.norm(C)
+    Pc = np.eye(12) - np.outer(c, c)
+    cov = Pc @ np.linalg.pinv(J.T @ J, rcond=1e-12) @ Pc
+    cov = 0.5 * (cov + cov.T)
+    if factor * dof > chi2.ppf(0.99, dof):
+        cov = cov * factor
+    return cov, factor
 
 
 def kabsch(X_b: np.ndarray, X_a: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:

@@ -83,6 +83,7 @@ class RunRecord:
     result, clicks and measurements stay readable). camera, T_world_turret (4, 4) : the site's
     calibrations when the run ended. actions : indices into the script. wall_s : seconds taken.
     script_actions : the run's ``app.operator.script.Action`` s (with their truth, for the report).
+    calibration_covs : (camera_cov (12, 12) or None, turret_cov (6, 6) or None) of those calibrations.
     """
 
     name: str
@@ -95,6 +96,7 @@ class RunRecord:
     actions: tuple[int, ...]
     wall_s: float
     script_actions: tuple = ()
+    calibration_covs: tuple = (None, None)
 
     @property
     def accepted(self) -> bool:
@@ -195,7 +197,8 @@ def replay_script(
                 raise DemoStepError(indices[-1], last, f"the {run.workflow} run ended {state}: a run must end with accept "
                                                         f"(or an explicit cancel); last message: {getattr(wf, 'message', '')!r}")
             runs.append(RunRecord(run.workflow, run.object_name, run.t_start, run.t_end, wf, site.camera,
-                                  site.T_world_turret, indices, time.perf_counter() - t_run, run.actions))
+                                  site.T_world_turret, indices, time.perf_counter() - t_run, run.actions,
+                                  site.calibration_covs))
     except BaseException:
         db.close()
         raise

@@ -203,13 +203,30 @@ def _box(w: ReportWriter, results: DemoResults, sims: Simulations | None) -> Non
                 caption=f"{b.name}: {b.distance_turret_m:.2f} m from the range finder, {b.distance_camera_m:.2f} m from the camera; "
                         f"range points per face {list(b.points)}.")
         worst = int(np.argmax(np.abs(b.error) / np.maximum(b.sigma, 1e-12)))
+        if b.sigma_parts:
+            w.table(["σ from", "width (cm)", "height (cm)", "length (cm)"],
+                     [[src, *(v * CM)] for src, v in b.sigma_parts.items()] + [["all (root sum of squares)", *(b.sigma * CM)]],
+                     digits=3, caption=f"{b.name}: what the workflow's σ are made of — the clicks and range noise, and the "
+                                       "camera's and the turret's calibrations, each moved through its covariance "
+                                       "(core.modeling.uncertainty).")
         w.paragraph(
-            "The last column re-runs the same construction on the same clicks and range points through the scene's "
-            "*true* camera instead of the calibrated one (a diagnostic only an emulated site allows): the part of each "
-            "error that it removes comes from the camera calibration, whose uncertainty the modelling σ does not "
-            f"include. Here the largest error relative to σ is the {('width', 'height', 'length')[worst]}: "
+            "The last column of the first table re-runs the same construction on the same clicks and range points through "
+            "the scene's *true* camera instead of the calibrated one (a diagnostic only an emulated site allows): the "
+            "part of each error that it removes comes from the camera calibration"
+            + (", whose share of σ is in the table above" if b.sigma_parts else ", whose uncertainty these σ do not include")
+            + f". Here the largest error relative to σ is the {('width', 'height', 'length')[worst]}: "
             f"{_signed(b.error[worst] * CM)} cm with the calibrated camera, {_signed((b.true_camera[0][worst] - b.truth[worst]) * CM)} cm "
             "with the true one.")
+
+
+def _cylinder_sigma_note(c) -> str:
+    """'; σ include …' naming the calibrations' share of the workflow's axis σ, if any."""
+    parts = c.by_method[c.method].get("sigma_parts") or {}
+    if len(parts) <= 1:
+        return ""
+    axis = {k: v.get("axis_position", float("nan")) * 1000 for k, v in parts.items()}
+    return ("; σ include the calibrations' share — of the workflow's axis position σ: "
+            + ", ".join(f"{k} {v:.1f} mm" for k, v in axis.items()))
 
 
 def _cylinder(w: ReportWriter, results: DemoResults, sims: Simulations | None) -> dict:
@@ -240,13 +257,14 @@ def _cylinder(w: ReportWriter, results: DemoResults, sims: Simulations | None) -
                 rows.append([m, v["error"], "—", "—", "—", "—"])
                 continue
             rows.append([m + (" (the workflow's)" if m == c.method else ""), _pm(v["radius"] * CM, v["sigma_radius"] * CM),
-                         _pm(v["height"] * CM, v["sigma_height"] * CM), v["axis_error"] * 1000,
+                         _pm(v["height"] * CM, v["sigma_height"] * CM),
+                         f"{v['axis_error'] * 1000:.1f} (σ {v['sigma_axis'] * 1000:.1f})",
                          v["depth"] * CM, _signed((v["depth"] - c.depth_true) * CM)])
         w.table(["method", "radius ± σ (cm)", "height ± σ (cm)", "axis position error (mm)", "depth (cm)", "depth error (cm)"], rows,
                 caption=f"{c.name} (true r = {c.radius_true * CM:.1f} cm, h = {c.height_true * CM:.1f} cm), "
                         f"{c.distance_turret_m:.2f} m from the range finder, {c.distance_camera_m:.2f} m from the camera; "
                         f"every method on the run's two clicked silhouettes and its two scans ({list(c.beams)} beams, "
-                        f"{list(c.hits)} returns).")
+                        f"{list(c.hits)} returns)" + _cylinder_sigma_note(c) + ".")
     ours = {}
     if sweep is not None:
         ours = {CYLINDER_COLUMNS[m]: (list(sweep.distances_m), list((sweep.mean_depth(m) - sweep.radius_m) * CM)) for m in methods}

@@ -18,7 +18,7 @@ the scene's ground truth; nothing writes. The measures are the paper's:
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -26,7 +26,8 @@ import numpy as np
 from app.scene import Scene
 from core.camera import Camera
 from core.geometry import Line, distance_point_line
-from core.modeling import METHODS, BoxFace, ModelResult, model_box, model_cylinder
+from core.modeling import METHODS, ModelResult, model_box, model_cylinder
+from core.modeling.uncertainty import with_calibration_uncertainty
 from core.pose import p3l, refine
 from core.transforms import pose_error
 
@@ -165,6 +166,9 @@ class BoxResults:
     (estimate (3,), sigma (3,)). true_camera : the same clicks and points through the true camera
     instead of the calibrated one (estimate (3,), sigma (3,)) — a diagnostic of how much of the
     error the camera calibration causes (an operator never has the true camera).
+    sigma_parts : source → (3,) σ in the paper's order: "measurements" (clicks and range noise),
+    "camera calibration", "turret calibration" (the calibrations' share; absent when the run's
+    site had no calibration covariance).
     """
 
     name: str
@@ -179,14 +183,17 @@ class BoxResults:
     points: tuple[int, ...]
     fused: tuple[np.ndarray, np.ndarray]
     true_camera: tuple[np.ndarray, np.ndarray]
+    sigma_parts: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def error(self) -> np.ndarray:
         return self.estimate - self.truth
 
 
-def _box_faces(wf) -> list[BoxFace]:
-    return [BoxFace(f["points"], np.array(f["segs"]).reshape(-1, 2, 2), f["covs"]) for f in wf.faces if f["points"] is not None]
+def _with_calibrations(run: RunRecord, build) -> ModelResult:
+    """``build(camera, T_world_turret)`` through the run's calibrations, σ with their share."""
+    camera_cov, turret_cov = run.calibration_covs
+    return with_calibration_uncertainty(build, run.camera, run.T_world_turret, camera_cov=camera_cov, turret_cov=turret_cov)
 
 
 def box_results(run: RunRecord, scene: Scene) -> BoxResults:
@@ -198,17 +205,21 @@ def box_results(run: RunRecord, scene: Scene) -> BoxResults:
     dims_true = hi - lo
     r = wf.result
     est, sig, truth = box_dims_paper_order(r, T_true, dims_true)
-    faces = _box_faces(wf)
+    faces = wf.box_faces()
     alt = {}
-    for key, cam, method in (("fused", run.camera, "fused"), ("true_camera", scene.camera, r.method)):
-        res = model_box(cam, faces, wf.support, method=method)
-        e, s, _ = box_dims_paper_order(res, T_true, dims_true)
-        alt[key] = (e, s)
+    fused = _with_calibrations(run, lambda cam, T: model_box(cam, wf.box_faces(T), wf.support, method="fused"))
+    alt["fused"] = box_dims_paper_order(fused, T_true, dims_true)[:2]
+    # The diagnostic through the true camera: the same construction, its measurement σ only.
+    alt["true_camera"] = box_dims_paper_order(model_box(scene.camera, faces, wf.support, method=r.method), T_true, dims_true)[:2]
+    parts = {}
+    for source, sig_d in r.details.get("sigma_parts", {}).items():
+        tmp = replace(r, sigmas={k: sig_d.get(k, float("nan")) for k in ("size_x", "size_y", "size_z")})
+        parts[source] = box_dims_paper_order(tmp, T_true, dims_true)[1]
     centre = T_true[:3, :3] @ ((lo + hi) / 2) + T_true[:3, 3]
     return BoxResults(
         run.object_name, r.method, est, sig, truth, float(np.prod(est)), float(np.prod(dims_true)),
         float(np.linalg.norm(centre - scene.turret.T_world_turret[:3, 3])), float(np.linalg.norm(centre - scene.camera.center)),
-        tuple(len(f.points_world) for f in faces), alt["fused"], alt["true_camera"],
+        tuple(len(f.points_world) for f in faces), alt["fused"], alt["true_camera"], parts,
     )
 
 
@@ -218,7 +229,9 @@ class CylinderResults:
     """Every method on the run's measurements (``METHODS`` order), against the truth.
 
     by_method : method → {"radius", "height", "sigma_radius", "sigma_height", "axis_error",
-    "depth"} (metres; NaN when the method failed) and "error" (the failure's message or "").
+    "sigma_axis", "depth"} (metres; NaN when the method failed) and "error" (the failure's
+    message or ""); every σ includes the calibrations' share when the run's site had their
+    covariances, and "sigma_parts" splits them by source (``ModelResult.details``).
     radius_true, height_true, depth_true (= the radius) : metres. distance_turret_m,
     distance_camera_m : from the range finder / the camera to the axis at mid-height. method : the
     one the workflow used.
@@ -255,11 +268,12 @@ def cylinder_results(run: RunRecord, scene: Scene) -> CylinderResults:
     by_method: dict[str, dict[str, Any]] = {}
     for m in METHODS:
         try:
-            res = wf.result if m == wf.result.method else model_cylinder(
-                run.camera, m, silhouettes_uv=np.array(wf.silhouettes), scans=wf.scans, T_world_turret=run.T_world_turret,
-                spec=scene.rangefinder, support=wf.support, cone=wf.shape == "cone")
+            res = wf.result if m == wf.result.method else _with_calibrations(run, lambda cam, T, m=m: model_cylinder(
+                cam, m, silhouettes_uv=np.array(wf.silhouettes), scans=wf.scans, T_world_turret=T,
+                spec=scene.rangefinder, support=wf.support, cone=wf.shape == "cone"))
         except ValueError as exc:
-            by_method[m] = {k: float("nan") for k in ("radius", "height", "sigma_radius", "sigma_height", "axis_error", "depth")}
+            by_method[m] = {k: float("nan") for k in ("radius", "height", "sigma_radius", "sigma_height", "axis_error",
+                                                      "sigma_axis", "depth")}
             by_method[m]["error"] = str(exc)
             continue
         mid = res.axis.point + 0.5 * res.dimensions["height"] * res.axis.direction
@@ -267,7 +281,9 @@ def cylinder_results(run: RunRecord, scene: Scene) -> CylinderResults:
             "radius": res.dimensions["radius"], "height": res.dimensions["height"],
             "sigma_radius": res.sigmas.get("radius", float("nan")), "sigma_height": res.sigmas.get("height", float("nan")),
             "axis_error": float(distance_point_line(mid, Line(p0, axis))),
+            "sigma_axis": res.sigmas.get("axis_position", float("nan")),
             "depth": cylinder_depth_m(res, O_rf, front), "error": "",
+            "sigma_parts": res.details.get("sigma_parts", {}),
         }
     return CylinderResults(
         run.object_name, wf.result.method, by_method, float(solid.r0), float(solid.height),

@@ -130,6 +130,7 @@ class CalibrateCamera(SnapMixin, Workflow):
                 self.result.camera,
                 rms_px=self.result.rms_px,
                 residuals_px=self.result.residuals_px,
+                cov=self.result.cov,
                 points={"X_world": np.array(self.X_world).tolist(), "uv": np.array(self.uv).tolist(), "labels": list(self.labels),
                         # raw and snapped pixels of each point above (None: snapping was off)
                         "snaps": [None if sn is None else sn.record() for sn in self.snaps]},

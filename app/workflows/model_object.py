@@ -92,7 +92,8 @@ class ModelObject(SnapMixin, Workflow):
         elif object_name in taken:
             raise WorkflowError(f"an object named {object_name!r} already exists; choose another name")
         self.object_name = object_name
-        # box: one entry per face {"segs": [...], "snaps": [...], "points": (N, 3), "covs": (N, 3, 3), "scan": RangeScan}
+        # box: one entry per face {"segs": [...], "snaps": [...], "points": (N, 3), "covs": (N, 3, 3), "scan": RangeScan,
+        # "good": (len(scan),) the beams that gave "points"}
         self.faces: list[dict[str, Any]] = [self._new_face()]
         self.silhouettes: list[np.ndarray] = []
         self.silhouette_snaps: list = []
@@ -106,7 +107,7 @@ class ModelObject(SnapMixin, Workflow):
     # ------------------------------------------------------------------ clicks
     @staticmethod
     def _new_face() -> dict[str, Any]:
-        return {"segs": [], "snaps": [], "points": None, "covs": None, "scan": None}
+        return {"segs": [], "snaps": [], "points": None, "covs": None, "scan": None, "good": None}
 
     @property
     def _segments(self) -> list:
@@ -164,7 +165,7 @@ class ModelObject(SnapMixin, Workflow):
             elif self.shape == "box":
                 face = self.faces[-1]
                 if face["points"] is not None:
-                    face.update(points=None, covs=None, scan=None)
+                    face.update(points=None, covs=None, scan=None, good=None)
                 elif face["segs"]:
                     face["segs"].pop()
                     face["snaps"].pop()
@@ -269,7 +270,7 @@ class ModelObject(SnapMixin, Workflow):
             X = scan.points(T)[good]
             spec = self._spec()
             covs = beam_point_cov(T, scan.pan_rad[good], scan.tilt_rad[good], scan.range_m[good], spec)
-            self.faces[-1].update(points=X, covs=covs, scan=scan)
+            self.faces[-1].update(points=X, covs=covs, scan=scan, good=good)
             self.site.set_beam(X[-1])
             self.result = None
             self.message = f"face {len(self.faces)}: {len(X)} range points of {len(scan)} beams"
@@ -286,11 +287,23 @@ class ModelObject(SnapMixin, Workflow):
         """The range finder's noise model (the scene's: σ_ρ, limits, the turret's step)."""
         return self.site.scene.rangefinder
 
-    def _box_faces(self) -> list:
+    def box_faces(self, T_world_turret: np.ndarray | None = None, faces: list | None = None) -> list:
+        """The measured faces (of ``faces``, default this run's); with ``T_world_turret``, their range
+        points mapped to the world through it from the raw beams (pan, tilt, range) instead of
+        through the turret pose of the measurement."""
         from core.modeling import BoxFace
 
-        return [BoxFace(f["points"], np.array(f["segs"]).reshape(-1, 2, 2), f["covs"]) for f in self.faces
-                if f["points"] is not None]
+        out = []
+        for f in self.faces if faces is None else faces:
+            if f["points"] is None:
+                continue
+            X, covs = f["points"], f["covs"]
+            if T_world_turret is not None and f.get("scan") is not None:
+                scan, good = f["scan"], f["good"]
+                X = scan.points(T_world_turret)[good]
+                covs = beam_point_cov(T_world_turret, scan.pan_rad[good], scan.tilt_rad[good], scan.range_m[good], self._spec())
+            out.append(BoxFace(X, np.array(f["segs"]).reshape(-1, 2, 2), covs))
+        return out
 
     def _scan_box(self) -> list[RangeScan]:
         """Box: two horizontal profiles across the box that the measured faces give (finest step)."""
@@ -298,7 +311,7 @@ class ModelObject(SnapMixin, Workflow):
 
         with self.lock:
             self._check_open()
-            faces = self._box_faces()
+            faces = self.box_faces()
             if not faces:
                 raise WorkflowError("measure the box's faces first (click a face's sides, Measure face): the "
                                     "profiles are placed across the box they give")
@@ -377,39 +390,53 @@ class ModelObject(SnapMixin, Workflow):
     # ------------------------------------------------------------------ solve and accept
     def solve(self, method: str | None = None):
         """Build the model; its preview (ghost) and dimensions ± σ are shown."""
-        from core.modeling import model_box, model_cylinder
+        from core.modeling.uncertainty import with_calibration_uncertainty
 
         with self.lock:
             self._check_open()
-            cam = self.site.camera
-            try:
-                if self.shape == "box":
-                    box_faces = self._box_faces()
-                    if not box_faces:
-                        raise WorkflowError("measure at least one face first (click its sides, then Measure face)")
-                    if self.scans:  # the profiles are fused with the faces and clicks
-                        self.result = model_box(cam, box_faces, self.support, method="fused", scans=self.scans,
-                                                T_world_turret=self.site.T_world_turret, spec=self._spec())
-                    else:
-                        self.result = model_box(cam, box_faces, self.support)
-                else:
-                    if len(self.scans) < 2 and (method or self.method) != "tangential":
-                        raise WorkflowError("scan the object first (Scan profile)")
-                    if len(self.silhouettes) < 2:
-                        raise WorkflowError("click both silhouettes first")
-                    self.method = method or self.method
-                    self.result = model_cylinder(
-                        cam, self.method, silhouettes_uv=np.array(self.silhouettes), scans=self.scans,
-                        T_world_turret=self.site.T_world_turret, spec=self._spec(), support=self.support,
-                        axis_dir=np.array([0.0, 0.0, 1.0]) if (self.vertical and self.support is None) else None,
-                        cone=self.shape == "cone")
-            except WorkflowError:
-                raise
-            except ValueError as exc:
-                raise WorkflowError(f"cannot build the {self.shape}: {exc}") from None
+            cam, T = self.site.camera, self.site.T_world_turret
+            camera_cov, turret_cov = self.site.calibration_covs
+            if self.shape == "box" and not self.box_faces():
+                raise WorkflowError("measure at least one face first (click its sides, then Measure face)")
+            if self.shape != "box":
+                if len(self.scans) < 2 and (method or self.method) != "tangential":
+                    raise WorkflowError("scan the object first (Scan profile)")
+                if len(self.silhouettes) < 2:
+                    raise WorkflowError("click both silhouettes first")
+                self.method = method or self.method
+            build = self._builder()
+        # Outside the lock (the overlay keeps drawing): built from the raw beams, so that the turret's
+        # calibration can be moved through its σ as well as the camera's (core.modeling.uncertainty):
+        # the stated σ include both calibrations' share when they were calibrated in this database.
+        try:
+            result = with_calibration_uncertainty(build, cam, T, camera_cov=camera_cov, turret_cov=turret_cov)
+        except ValueError as exc:
+            raise WorkflowError(f"cannot build the {self.shape}: {exc}") from None
+        with self.lock:
+            self._check_open()
+            self.result = result
             self.state = "review"
-            self.message = self.result.dimension_text("cm")
-            return self.result
+            parts = result.details.get("sigma_parts", {})
+            self.message = result.dimension_text("cm") + (
+                f" (σ include the {' and '.join(k for k in parts if k != 'measurements')})" if parts else "")
+            return result
+
+    def _builder(self):
+        """build(camera, T_world_turret) -> ModelResult from this run's clicks and raw range data."""
+        from core.modeling import model_box, model_cylinder
+
+        spec, support = self._spec(), self.support
+        if self.shape == "box":  # a snapshot: clicks made while it runs do not change it
+            faces = [dict(f, segs=list(f["segs"])) for f in self.faces]
+            scans = list(self.scans)
+            if scans:  # the profiles are fused with the faces and clicks
+                return lambda cam, T: model_box(cam, self.box_faces(T, faces), support, method="fused", scans=scans,
+                                                T_world_turret=T, spec=spec)
+            return lambda cam, T: model_box(cam, self.box_faces(T, faces), support)
+        sil, scans, method, cone = np.array(self.silhouettes), list(self.scans), self.method, self.shape == "cone"
+        axis_dir = np.array([0.0, 0.0, 1.0]) if (self.vertical and support is None) else None
+        return lambda cam, T: model_cylinder(cam, method, silhouettes_uv=sil, scans=scans, T_world_turret=T, spec=spec,
+                                             support=support, axis_dir=axis_dir, cone=cone)
 
     def accept(self):
         """Add the modelled object to the database (one transaction, status "modelled")."""

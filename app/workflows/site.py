@@ -111,6 +111,9 @@ class Site:
         self._meshes: dict[str, Any] = {}
         self._cal_ids: dict[str, Any] = {}
         self._camera = scene.camera
+        # The calibrations' covariances (None for the scene's nominal values, until calibrated here).
+        self._camera_cov: np.ndarray | None = None
+        self._turret_cov: np.ndarray | None = None
         self._T_world_turret = np.asarray(scene.turret.T_world_turret, float).copy()
         self.beam_X_world: np.ndarray | None = None  # the range finder's last measured point (shown)
         self._load_calibrations()
@@ -163,6 +166,13 @@ class Site:
         with self.lock:
             return self._T_world_turret.copy()
 
+    @property
+    def calibration_covs(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """(camera_cov (12, 12), turret_cov (6, 6)) of the current calibrations; None for one that is
+        the scene's nominal value (not calibrated in this database) or was stored without one."""
+        with self.lock:
+            return self._camera_cov, self._turret_cov
+
     def time_s(self) -> float:
         """The scene time, seconds (the video's position)."""
         return float(self.clock())
@@ -214,22 +224,28 @@ class Site:
             d = cam.data
             self._camera = Camera(np.asarray(d["C"], float), int(d.get("width", self.scene.camera.width)),
                                   int(d.get("height", self.scene.camera.height)))
+            self._camera_cov = None if d.get("cov") is None else np.asarray(d["cov"], float)
             self._cal_ids["camera"] = cam.id
             changed = True
         tur = self.db.latest_calibration("turret")
         if tur is not None and self._cal_ids.get("turret") != tur.id:
             self._T_world_turret = np.asarray(tur.data["T_world_turret"], float).copy()
+            self._turret_cov = None if tur.data.get("cov") is None else np.asarray(tur.data["cov"], float)
             self._cal_ids["turret"] = tur.id
             changed = True
         return changed
 
     def set_camera(self, camera: Camera, *, rms_px: float, residuals_px: np.ndarray, points: dict, client: str,
-                   method: str = "dlt") -> None:
-        """Store a new camera calibration (one transaction) and use it from now on."""
+                   method: str = "dlt", cov: np.ndarray | None = None) -> None:
+        """Store a new camera calibration (one transaction) and use it from now on.
+        cov : (12, 12) covariance of ``camera.C.ravel()`` (``calibrate_dlt(...).cov``), or None."""
         data = {"C": camera.C, "width": camera.width, "height": camera.height, "rms_px": float(rms_px), **points}
+        if cov is not None:
+            data["cov"] = np.asarray(cov, float)
         rec = self.db.add_calibration("camera", data, np.asarray(residuals_px, float), method=method, client=client)
         with self.lock:
             self._camera = camera
+            self._camera_cov = None if cov is None else np.asarray(cov, float).copy()
             self._cal_ids["camera"] = rec.id
             self.revision += 1
 
@@ -241,6 +257,7 @@ class Site:
         rec = self.db.add_calibration("turret", data, np.asarray(residuals_m, float), method=method, client=client)
         with self.lock:
             self._T_world_turret = np.asarray(T_world_turret, float).copy()
+            self._turret_cov = np.asarray(cov, float).copy()
             self._cal_ids["turret"] = rec.id
             self.revision += 1
 

@@ -153,7 +153,10 @@ def test_writers_killed_mid_write_leave_a_consistent_database(tmp_path):
         while "ready" not in lines and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.01)
         assert "ready" in lines, proc.stderr.read() if proc.poll() is not None else "writer did not start"
-        time.sleep(rng.uniform(0.05, 0.25))
+        # let it commit at least once (a loaded machine may take a while), then kill it at a random moment
+        while not any(v.isdigit() for v in lines) and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.005)
+        time.sleep(rng.uniform(0.0, 0.2))
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
         reader.join(timeout=10)

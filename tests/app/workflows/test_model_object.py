@@ -188,3 +188,52 @@ def test_without_devices_or_table_the_operator_is_told(site):
         ModelObject(site, shape="sphere")
     with pytest.raises(WorkflowError, match="already exists"):
         ModelObject(site, shape="box", object_name="parallelepiped")
+
+
+def test_calibrated_site_states_the_calibrations_share(device_site, fast_scene, db):
+    """Once the camera and the turret are calibrated in the database, a model's σ include their
+    share (the box rebuilt through calibrations moved along their covariances), the parts are
+    shown, and the box is built from the raw beams through the *current* turret calibration."""
+    from core.calibration import calibrate_dlt
+    from core.transforms import make_T
+
+    site = device_site
+    body = fast_scene.body("unknown_box")
+    T = body.pose_at(0.0)
+    rng = np.random.default_rng(7)
+    wf = ModelObject(site, shape="box")
+    faces = _facing_faces(site.camera, body.model, T)
+    for i, k in enumerate(faces):
+        _click_face(wf, site.camera, body.model, T, k, rng)
+        wf.measure()
+        if i < len(faces) - 1:
+            wf.next_face()
+    plain = wf.solve()
+    assert "sigma_parts" not in plain.details  # the scene's nominal calibrations: no covariance
+    # a camera calibration from 13 known points clicked at 0.5 px, a turret calibration with a 3 mm / 0.3° σ
+    X = np.column_stack([rng.uniform(-0.3, 0.3, 13), rng.uniform(1.0, 1.6, 13), rng.uniform(0.0, 0.3, 13)])
+    cam = site.camera
+    dlt = calibrate_dlt(X, cam.project(X) + rng.normal(0, 0.5, (13, 2)), cam.width, cam.height, sigma_px=np.full(13, 0.5))
+    site.set_camera(cam, rms_px=dlt.rms_px, residuals_px=dlt.residuals_px, points={}, client="test", cov=dlt.cov)
+    turret_cov = np.diag([np.radians(0.3)] * 3 + [0.003] * 3) ** 2
+    site.set_turret(site.T_world_turret, rms_m=0.001, residuals_m=np.zeros((1, 3)), cov=turret_cov, measurements={},
+                    client="test")
+    r = wf.solve()
+    parts = r.details["sigma_parts"]
+    assert set(parts) == {"measurements", "camera calibration", "turret calibration"}
+    for k in ("size_x", "size_y", "size_z", "position"):
+        assert r.sigmas[k] == pytest.approx(np.sqrt(sum(p[k] ** 2 for p in parts.values())))
+        assert parts["measurements"][k] == pytest.approx(plain.sigmas[k])
+    assert parts["turret calibration"]["position"] > parts["measurements"]["position"]  # 3 mm, ~2 m away
+    assert "calibration" in wf.message
+    # a new Site on this database finds both covariances
+    cam_cov, tur_cov = Site(fast_scene, db, clock=lambda: 0.0, frames=None).calibration_covs
+    assert np.allclose(cam_cov, dlt.cov) and np.allclose(tur_cov, turret_cov)
+    # the turret recalibrated 1 cm along its line of sight after the faces were measured: the box follows it
+    T2 = site.T_world_turret @ make_T(np.eye(3), [0.01, 0.0, 0.0])
+    site.set_turret(T2, rms_m=0.001, residuals_m=np.zeros((1, 3)), cov=turret_cov, measurements={}, client="test")
+    moved = wf.solve()
+    shift = moved.T_world_obj[:3, 3] - r.T_world_obj[:3, 3]
+    assert 0.005 < np.linalg.norm(shift) < 0.02, shift
+    wf.accept()
+    assert db.get("box_1").sigmas["position"] == pytest.approx(moved.sigmas["position"])
