@@ -21,7 +21,7 @@ from .geometry import as_points
 from .rangefinder import RangeFinderSpec, beam_direction, beam_point_cov
 from .transforms import exp_so3, make_T
 
-__all__ = ["DLTResult", "calibrate_dlt", "dlt", "TurretCalibration", "calibrate_turret", "calibrate_turret_planes", "kabsch"]
+__all__ = ["DLTResult", "calibrate_dlt", "perturbed_camera", "perturbed_turret", "principal_steps", "dlt", "TurretCalibration", "calibrate_turret", "calibrate_turret_planes", "kabsch"]
 
 
 class DLTResult(tuple):
@@ -320,3 +320,28 @@ def calibrate_turret_planes(
     X0 = X_turret @ T0[:3, :3].T + T0[:3, 3]
     dist0 = np.einsum("ni,ni->n", N, X0) + d
     return TurretCalibration(T, cov, float(np.sqrt(np.mean(dist**2))), dist[:, None] * N, float(np.sqrt(np.mean(dist0**2))))
+
+
+# ---------------------------------------------------------------------- moving a calibration through its σ
+def principal_steps(cov: np.ndarray, floor: float = 1e-9) -> np.ndarray:
+    """±1σ steps along a covariance's principal axes, shape (K, n): row k = √λ_k v_k; axes whose
+    variance is below ``floor`` × the largest (a gauge, such as C's scale) are dropped."""
+    cov = np.asarray(cov, dtype=float)
+    cov = 0.5 * (cov + cov.T)
+    w, V = np.linalg.eigh(cov)
+    keep = w > floor * max(float(w.max()), 0.0)
+    return (V[:, keep] * np.sqrt(w[keep])).T
+
+
+def perturbed_camera(camera: Camera, delta: np.ndarray) -> Camera:
+    """The camera ``C + δ`` (δ: 12 entries, row major, as ``DLTResult.cov``), normalised as usual,
+    with C's sign kept (the points in front stay in front)."""
+    Cp = camera.C + np.asarray(delta, dtype=float).reshape(3, 4)
+    return Camera(Cp, camera.width, camera.height, in_front=camera.center + camera.C[2, :3])
+
+
+def perturbed_turret(T_world_turret: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """``T · exp(δ)``, δ = (rotation vector rad, translation m) in the turret frame — the
+    convention of ``TurretCalibration.cov``."""
+    d = np.asarray(delta, dtype=float).reshape(6)
+    return np.asarray(T_world_turret, dtype=float) @ make_T(exp_so3(d[:3]), d[3:])

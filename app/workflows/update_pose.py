@@ -37,6 +37,7 @@ import numpy as np
 
 from core.calibration import kabsch
 from core.pose import p3l, refine
+from core.pose.uncertainty import with_camera_uncertainty
 from core.transforms import invert_T, pose_error
 
 from .base import Ghost, Marks, Workflow, WorkflowError, as_pixel
@@ -392,11 +393,19 @@ class UpdatePose(SnapMixin, Workflow):
             if failures:
                 note = f"{'; '.join(failures)} — not offered; candidate {i + 1} refined instead. "
                 self.chosen = i
+            camera_cov = self.site.calibration_covs[0]
+            if camera_cov is not None:  # the camera calibrated in this database: its share joins the clicks'
+                result = with_camera_uncertainty(
+                    result, self.site.camera, camera_cov, segs_uv=segs if len(segs) else None,
+                    edges_obj=edges if len(edges) else None, points_uv=pts_uv if len(pts_uv) else None,
+                    points_obj=pts_obj if len(pts_obj) else None)
             self.refined = result
             self.state = "review"
             deg, m = pose_error(result.T_world_obj, self.obj.T_world_obj)
+            sig_deg, sig_m = np.degrees(np.sqrt(np.trace(result.cov[3:, 3:]))), np.sqrt(np.trace(result.cov[:3, :3]))
             self.message = (f"{note}RMS {result.rms_px:.2f} px over {len(result.kinds)} clicks; moved {deg:.2f}° and "
-                            f"{100 * m:.1f} cm from the database pose")
+                            f"{100 * m:.1f} cm from the database pose; σ {sig_deg:.2f}° / {100 * sig_m:.2f} cm"
+                            + (" (camera calibration included)" if result.cov_parts else ""))
             return result
 
     # ------------------------------------------------------------------ automatic matching

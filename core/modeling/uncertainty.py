@@ -22,28 +22,12 @@ from typing import Callable
 
 import numpy as np
 
+from ..calibration import perturbed_camera, perturbed_turret, principal_steps
 from ..camera import Camera
-from ..transforms import exp_so3, log_so3, make_T
+from ..transforms import log_so3
 from .result import ModelResult
 
 __all__ = ["with_calibration_uncertainty", "perturbed_camera", "perturbed_turret", "result_vector"]
-
-# Principal axes whose σ is below this fraction of the largest are skipped (C's scale gauge).
-_RELATIVE_FLOOR = 1e-9
-
-
-def perturbed_camera(camera: Camera, delta: np.ndarray) -> Camera:
-    """The camera ``C + δ`` (δ: 12 entries, row major), normalised as usual, with C's sign kept."""
-    Cp = camera.C + np.asarray(delta, dtype=float).reshape(3, 4)
-    return Camera(Cp, camera.width, camera.height, in_front=camera.center + camera.C[2, :3])
-
-
-def perturbed_turret(T_world_turret: np.ndarray, delta: np.ndarray) -> np.ndarray:
-    """``T · exp(δ)``, δ = (rotation vector rad, translation m) in the turret frame — the
-    convention of ``core.calibration.TurretCalibration.cov``."""
-    d = np.asarray(delta, dtype=float).reshape(6)
-    return np.asarray(T_world_turret, dtype=float) @ make_T(exp_so3(d[:3]), d[3:])
-
 
 def result_vector(result: ModelResult, reference: ModelResult) -> np.ndarray:
     """The quantities of ``reference.cov_names`` read from ``result`` (which must be the same kind
@@ -79,14 +63,6 @@ def result_vector(result: ModelResult, reference: ModelResult) -> np.ndarray:
     if result.kind == "polyhedron":
         return np.asarray(result.vertices_world, dtype=float).reshape(-1)[: len(names)]
     raise ValueError(f"no calibration share for a model of kind {result.kind!r}")
-
-
-def _principal_deltas(cov: np.ndarray) -> np.ndarray:
-    """±1σ steps along the covariance's principal axes, shape (K, n) (negligible axes dropped)."""
-    cov = 0.5 * (cov + cov.T)
-    w, V = np.linalg.eigh(cov)
-    keep = w > _RELATIVE_FLOOR * max(float(w.max()), 0.0)
-    return (V[:, keep] * np.sqrt(w[keep])).T
 
 
 def _sigma_quantities(result: ModelResult, reference: ModelResult) -> dict[str, np.ndarray]:
@@ -150,13 +126,13 @@ def with_calibration_uncertainty(
         if camera_cov.shape != (12, 12) or not np.all(np.isfinite(camera_cov)):
             raise ValueError(f"camera_cov must be a finite (12, 12) covariance of C's entries, got shape {camera_cov.shape}")
         shares["camera calibration"] = _share(
-            lambda d: build(perturbed_camera(camera, d), T_world_turret), _principal_deltas(camera_cov), base)
+            lambda d: build(perturbed_camera(camera, d), T_world_turret), principal_steps(camera_cov), base)
     if turret_cov is not None:
         turret_cov = np.asarray(turret_cov, dtype=float)
         if turret_cov.shape != (6, 6) or not np.all(np.isfinite(turret_cov)):
             raise ValueError(f"turret_cov must be a finite (6, 6) covariance of the turret's pose, got shape {turret_cov.shape}")
         shares["turret calibration"] = _share(
-            lambda d: build(camera, perturbed_turret(T_world_turret, d)), _principal_deltas(turret_cov), base)
+            lambda d: build(camera, perturbed_turret(T_world_turret, d)), principal_steps(turret_cov), base)
     cov = base.cov + sum(c for c, _ in shares.values())
     parts = {"measurements": dict(base.sigmas)}
     var = {k: v**2 for k, v in base.sigmas.items()}

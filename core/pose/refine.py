@@ -63,6 +63,9 @@ class RefineResult:
     sigma_px : the click noise the covariance assumes (pixels): a float, or an array (S + P,).
     sigma_est_px : a-posteriori noise estimate sqrt(Σ w r² / (m − 6)), NaN without redundancy.
     loss : "l2" or "huber".
+    cov_parts : dict, name → (6, 6): what ``cov`` is made of when more than the clicks went in
+        ("clicks", "camera calibration": ``core.pose.uncertainty.with_camera_uncertainty``);
+        empty when ``cov`` is the clicks' alone.
     """
 
     T_world_obj: np.ndarray
@@ -78,6 +81,7 @@ class RefineResult:
     sigma_px: float | np.ndarray = 1.0
     sigma_est_px: float = float("nan")
     loss: str = "l2"
+    cov_parts: dict = field(default_factory=dict)
 
     @property
     def n_segments(self) -> int:

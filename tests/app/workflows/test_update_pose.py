@@ -88,6 +88,31 @@ def test_small_motion_refines_from_the_database_pose(site, db):
     assert db.history("parallelepiped")[-1].method == "refine"
 
 
+def test_a_calibrated_camera_adds_its_share_to_the_pose_covariance(site, db):
+    """After a camera calibration in the database, the refined pose's covariance — shown and
+    written — includes the calibration's share; before, the clicks' alone."""
+    from core.calibration import calibrate_dlt
+
+    obj = site.object("parallelepiped")
+    T_true = _moved(obj.T_world_obj, 3.0, 0.01, -0.005)
+    edges = _visible_edges(site, obj.model, T_true)
+    wf = UpdatePose(site, object_name="parallelepiped")
+    _operator_clicks(wf, site, T_true, edges[:5], np.random.default_rng(2))
+    before = wf.refine()
+    assert before.cov_parts == {} and "camera calibration" not in wf.message
+    rng = np.random.default_rng(3)
+    cam = site.camera
+    X = np.column_stack([rng.uniform(-0.4, 0.4, 13), rng.uniform(1.5, 2.3, 13), rng.uniform(0.0, 0.4, 13)])
+    dlt = calibrate_dlt(X, cam.project(X) + rng.normal(0, 1.0, (13, 2)), cam.width, cam.height, sigma_px=np.ones(13))
+    site.set_camera(cam, rms_px=dlt.rms_px, residuals_px=dlt.residuals_px, points={}, client="test", cov=dlt.cov)
+    r = wf.refine()
+    assert np.allclose(r.T_world_obj, before.T_world_obj)
+    assert np.allclose(r.cov_parts["clicks"], before.cov)
+    assert np.trace(r.cov) > np.trace(before.cov) and "camera calibration included" in wf.message
+    rec = wf.accept()
+    assert np.allclose(rec.cov, r.cov)
+
+
 def test_conflict_writes_nothing_and_says_what_to_do(site, db):
     obj = site.object("parallelepiped")
     T_true = _moved(obj.T_world_obj, 3.0, 0.01, 0.0)
