@@ -544,7 +544,11 @@ class ModelObject(SnapMixin, Workflow):
             if self.result is not None:
                 r = self.result
                 out["method"] = r.method
-                out["dimensions"] = [{"dimension": k, "value_cm": 100 * v, "sigma_cm": 100 * r.sigmas.get(k, float("nan"))}
+                parts = r.details.get("sigma_parts", {})
+                short = {"measurements": "σ clicks+ranges (cm)", "camera calibration": "σ camera (cm)",
+                         "turret calibration": "σ turret (cm)"}
+                out["dimensions"] = [{"dimension": k, "value_cm": 100 * v, "sigma_cm": 100 * r.sigmas.get(k, float("nan")),
+                                      **{short.get(src, src): 100 * p.get(k, float("nan")) for src, p in parts.items()}}
                                      for k, v in r.dimensions.items()]
             return out
 
