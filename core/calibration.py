@@ -21,7 +21,7 @@ from .geometry import as_points
 from .rangefinder import RangeFinderSpec, beam_direction, beam_point_cov
 from .transforms import exp_so3, make_T
 
-__all__ = ["DLTResult", "calibrate_dlt", "perturbed_camera", "perturbed_turret", "principal_steps", "dlt", "TurretCalibration", "calibrate_turret", "calibrate_turret_planes", "kabsch"]
+__all__ = ["DLTResult", "calibrate_dlt", "check_covariance", "perturbed_camera", "perturbed_turret", "principal_steps", "dlt", "TurretCalibration", "calibrate_turret", "calibrate_turret_planes", "kabsch"]
 
 
 class DLTResult(tuple):
@@ -126,7 +126,7 @@ def calibrate_dlt(
     sigma_px : array, shape (N,), optional
         Each pixel's standard deviation (pixels): the refinement weighs each point's reprojection
         error by 1/σ (maximum likelihood when the clicks' precision differs, e.g. corners snapped
-        to the image beside raw clicks). Default: all equal.
+        to the image beside raw clicks), and ``cov`` assumes them. Default: 1 px for every point.
 
     Returns
     -------
@@ -323,6 +323,14 @@ def calibrate_turret_planes(
 
 
 # ---------------------------------------------------------------------- moving a calibration through its σ
+def check_covariance(cov, n: int, what: str) -> np.ndarray:
+    """``cov`` as a finite symmetric (n, n) array; ValueError naming ``what`` otherwise."""
+    cov = np.asarray(cov, dtype=float)
+    if cov.shape != (n, n) or not np.all(np.isfinite(cov)) or not np.allclose(cov, cov.T, rtol=1e-6, atol=0.0):
+        raise ValueError(f"{what} must be a finite symmetric ({n}, {n}) covariance, got shape {cov.shape}")
+    return cov
+
+
 def principal_steps(cov: np.ndarray, floor: float = 1e-9) -> np.ndarray:
     """±1σ steps along a covariance's principal axes, shape (K, n): row k = √λ_k v_k; axes whose
     variance is below ``floor`` × the largest (a gauge, such as C's scale) are dropped."""

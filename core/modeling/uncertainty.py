@@ -11,8 +11,9 @@ covariance:
 
     cov = cov_measurements + Σ_k δ_k δ_kᵀ,   δ_k = (q(+σ_k v_k) − q(−σ_k v_k)) / 2
 
-for the quantities q of the result's ``cov_names``; its σ follow from that covariance. The camera
-and the turret are calibrated from different data, so their shares add.
+for the quantities q of the result's ``cov_names``, and the same spread Σ_k ‖δ_k‖² is added to the
+variance of each stated σ (every dimension, and the position). The camera and the turret are
+calibrated from different data, so their shares add.
 """
 
 from __future__ import annotations
@@ -22,12 +23,13 @@ from typing import Callable
 
 import numpy as np
 
-from ..calibration import perturbed_camera, perturbed_turret, principal_steps
+from ..calibration import check_covariance, perturbed_camera, perturbed_turret, principal_steps
 from ..camera import Camera
 from ..transforms import log_so3
 from .result import ModelResult
 
-__all__ = ["with_calibration_uncertainty", "perturbed_camera", "perturbed_turret", "result_vector"]
+__all__ = ["with_calibration_uncertainty", "result_vector"]
+
 
 def result_vector(result: ModelResult, reference: ModelResult) -> np.ndarray:
     """The quantities of ``reference.cov_names`` read from ``result`` (which must be the same kind
@@ -45,9 +47,7 @@ def result_vector(result: ModelResult, reference: ModelResult) -> np.ndarray:
         if len(set(perm.tolist())) != 3:
             raise ValueError("the moved box's axes do not match the reference's")
         sizes = np.array([result.dimensions[f"size_{'xyz'[j]}"] for j in perm])
-        R_aligned = R[:, perm] * np.sign(M[np.arange(3), perm])
-        if np.linalg.det(R_aligned) < 0:
-            R_aligned[:, 2] *= -1.0
+        R_aligned = R[:, perm] * np.sign(M[np.arange(3), perm])  # each axis signed like the reference's: ≈ Rr
         rot = log_so3(Rr.T @ R_aligned)
         # The box frame's origin is the bottom face's centre: the same point whatever the axes' order.
         q = {"size_x": sizes[0], "size_y": sizes[1], "size_z": sizes[2], "x": result.T_world_obj[0, 3],
@@ -61,7 +61,7 @@ def result_vector(result: ModelResult, reference: ModelResult) -> np.ndarray:
         q.update(mid_x=mid[0], mid_y=mid[1], mid_z=mid[2], axis_x=a[0], axis_y=a[1], axis_z=a[2])
         return np.array([q[n] for n in names], dtype=float)
     if result.kind == "polyhedron":
-        return np.asarray(result.vertices_world, dtype=float).reshape(-1)[: len(names)]
+        return np.asarray(result.vertices_world, dtype=float).reshape(-1)  # v0_x, v0_y, v0_z, v1_x, ...
     raise ValueError(f"no calibration share for a model of kind {result.kind!r}")
 
 
@@ -122,17 +122,13 @@ def with_calibration_uncertainty(
         return base
     shares: dict[str, tuple[np.ndarray, dict[str, float]]] = {}
     if camera_cov is not None:
-        camera_cov = np.asarray(camera_cov, dtype=float)
-        if camera_cov.shape != (12, 12) or not np.all(np.isfinite(camera_cov)):
-            raise ValueError(f"camera_cov must be a finite (12, 12) covariance of C's entries, got shape {camera_cov.shape}")
-        shares["camera calibration"] = _share(
-            lambda d: build(perturbed_camera(camera, d), T_world_turret), principal_steps(camera_cov), base)
+        steps = principal_steps(check_covariance(camera_cov, 12, "camera_cov (of C's entries)"))
+        shares["camera calibration"] = _share(lambda d: build(perturbed_camera(camera, d), T_world_turret), steps, base,
+                                              "the camera")
     if turret_cov is not None:
-        turret_cov = np.asarray(turret_cov, dtype=float)
-        if turret_cov.shape != (6, 6) or not np.all(np.isfinite(turret_cov)):
-            raise ValueError(f"turret_cov must be a finite (6, 6) covariance of the turret's pose, got shape {turret_cov.shape}")
-        shares["turret calibration"] = _share(
-            lambda d: build(camera, perturbed_turret(T_world_turret, d)), principal_steps(turret_cov), base)
+        steps = principal_steps(check_covariance(turret_cov, 6, "turret_cov (of the turret's pose)"))
+        shares["turret calibration"] = _share(lambda d: build(camera, perturbed_turret(T_world_turret, d)), steps, base,
+                                              "the turret")
     cov = base.cov + sum(c for c, _ in shares.values())
     parts = {"measurements": dict(base.sigmas)}
     var = {k: v**2 for k, v in base.sigmas.items()}
@@ -146,17 +142,21 @@ def with_calibration_uncertainty(
     return replace(base, cov=cov, sigmas=sigmas, details=details, notes=notes)
 
 
-def _share(build_at: Callable[[np.ndarray], ModelResult], deltas: np.ndarray, base: ModelResult):
+def _share(build_at: Callable[[np.ndarray], ModelResult], steps: np.ndarray, base: ModelResult, what: str):
     """Σ_k δ_k δ_kᵀ of the ``cov_names`` quantities and Σ_k ‖δ_k‖² of each σ's quantity, over the
-    principal ±1σ steps (central differences)."""
+    principal ±1σ steps (central differences). A rebuild that fails is a ValueError saying so."""
     n = len(base.cov_names)
     share = np.zeros((n, n))
     var = {k: 0.0 for k in _sigma_quantities(base, base)}
-    for d in deltas:
-        plus, minus = build_at(d), build_at(-d)
-        dq = 0.5 * (result_vector(plus, base) - result_vector(minus, base))
+    for d in steps:
+        try:
+            plus, minus = build_at(d), build_at(-d)
+            dq = 0.5 * (result_vector(plus, base) - result_vector(minus, base))
+            qp, qm = _sigma_quantities(plus, base), _sigma_quantities(minus, base)
+        except ValueError as exc:
+            raise ValueError(f"the model cannot be rebuilt with {what}'s calibration moved by 1σ ({exc}): that "
+                             f"calibration is too uncertain for this model; calibrate {what} again") from exc
         share += np.outer(dq, dq)
-        qp, qm = _sigma_quantities(plus, base), _sigma_quantities(minus, base)
         for k in var:
             var[k] += float(np.sum((0.5 * (qp[k] - qm[k])) ** 2))
     return share, var

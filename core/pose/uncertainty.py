@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..calibration import perturbed_camera, principal_steps
+from ..calibration import check_covariance, perturbed_camera, principal_steps
 from ..camera import Camera
 from ..transforms import log_so3
 from .refine import RefineResult, refine
@@ -46,14 +46,12 @@ def with_camera_uncertainty(
     """
     if camera_cov is None:
         return result
-    camera_cov = np.asarray(camera_cov, dtype=float)
-    if camera_cov.shape != (12, 12) or not np.all(np.isfinite(camera_cov)):
-        raise ValueError(f"camera_cov must be a finite (12, 12) covariance of C's entries, got shape {camera_cov.shape}")
+    steps = principal_steps(check_covariance(camera_cov, 12, "camera_cov (of C's entries)"))
     T0 = result.T_world_obj
     kw = dict(segs_uv=segs_uv, edges_obj=edges_obj, points_uv=points_uv, points_obj=points_obj, loss=result.loss,
               huber_px=huber_px, sigma_px=result.sigma_px)
     share = np.zeros((6, 6))
-    for d in principal_steps(camera_cov):
+    for d in steps:
         plus = refine(perturbed_camera(camera, d), T0, **kw).T_world_obj
         minus = refine(perturbed_camera(camera, -d), T0, **kw).T_world_obj
         dq = 0.5 * (pose_delta(plus, T0) - pose_delta(minus, T0))

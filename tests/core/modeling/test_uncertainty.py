@@ -7,10 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.calibration import calibrate_dlt
-from core.modeling import model_box, model_cylinder
-from core.modeling.simulate import simulate_box, simulate_revolution
-from core.modeling.uncertainty import perturbed_camera, perturbed_turret, result_vector, with_calibration_uncertainty
+from core.brep import BRep
+from core.calibration import calibrate_dlt, perturbed_camera, perturbed_turret
+from core.modeling import model_box, model_cylinder, model_polyhedron
+from core.modeling.simulate import SimWorld, look_at_setup, simulate_box, simulate_polyhedron, simulate_revolution
+from core.modeling.uncertainty import result_vector, with_calibration_uncertainty
+from core.transforms import make_T, rot_z
 
 from .conftest import BOX_SIZE, TABLE, cylinder_scene
 
@@ -153,9 +155,51 @@ def test_box_quantities_follow_the_reference_axes(box_scene):
 def test_bad_covariances_are_refused(box_scene):
     cam, T_wt, T_obj, world = box_scene
     faces = simulate_box(cam, world, T_obj, BOX_SIZE, np.random.default_rng(0))
-    with pytest.raises(ValueError, match="turret_cov must be a finite"):
+    with pytest.raises(ValueError, match="turret_cov .* must be a finite symmetric"):
         with_calibration_uncertainty(lambda c, T: model_box(c, faces, TABLE), cam, T_wt, turret_cov=np.eye(3))
-    with pytest.raises(ValueError, match="camera_cov must be a finite"):
+    with pytest.raises(ValueError, match="camera_cov .* must be a finite symmetric"):
         with_calibration_uncertainty(lambda c, T: model_box(c, faces, TABLE), cam, T_wt,
                                      camera_cov=np.full((12, 12), np.nan))
 
+
+
+def test_turret_share_of_a_polyhedron_matches_the_scatter():
+    """A pyramid on the table (vertices from face planes and clicked edges): its edges' and
+    position's turret share against models built through turret poses drawn from the covariance."""
+    rng = np.random.default_rng(8)
+    brep = BRep.pyramid(np.array([[-0.08, -0.08], [0.08, -0.08], [0.08, 0.08], [-0.08, 0.08]]), np.array([0, 0, 0.06]))
+    cam, T_wt = look_at_setup(np.array([0.0, 0.0, 0.05]), 1.2, elevation_deg=35.0)
+    Bw = brep.transformed(make_T(rot_z(0.6), [0.01, 0.02, 0.0]))
+    fp, fc, es = simulate_polyhedron(cam, SimWorld(T_wt, polyhedra=(Bw,)), Bw, None)
+    cov = _turret_cov(rng)
+
+    def build(c, T):  # the range points mapped through T instead of the true turret pose
+        M = T @ np.linalg.inv(T_wt)
+        pts = {f: P @ M[:3, :3].T + M[:3, 3] for f, P in fp.items()}
+        covs = {f: M[:3, :3] @ S @ M[:3, :3].T for f, S in fc.items()}
+        return model_polyhedron(c, brep.faces, face_points=pts, face_point_covs=covs, edge_segments=es, support=TABLE,
+                                support_faces=[0])
+
+    r = with_calibration_uncertainty(build, cam, T_wt, turret_cov=cov)
+    share = r.details["sigma_parts"]["turret calibration"]
+    keys = [k for k in r.dimensions if k.startswith("edge_")][:3] + ["height"]
+    draws = [build(cam, perturbed_turret(T_wt, rng.multivariate_normal(np.zeros(6), cov))) for _ in range(300)]
+    for k in keys:
+        assert np.std([m.dimensions[k] for m in draws]) == pytest.approx(share[k], rel=0.2), k
+    centre = np.array([m.vertices_world.mean(axis=0) for m in draws])
+    assert np.sqrt(centre.var(axis=0).sum()) == pytest.approx(share["position"], rel=0.2)
+
+
+def test_a_model_that_cannot_be_rebuilt_through_a_moved_calibration_says_so(box_scene):
+    cam, T_wt, T_obj, world = box_scene
+    faces = simulate_box(cam, world, T_obj, BOX_SIZE, np.random.default_rng(0))
+    calls = []
+
+    def build(c, T):  # the nominal build works; any other turret pose fails as a degenerate construction would
+        calls.append(1)
+        if len(calls) > 1:
+            raise ValueError("the constructed corners do not fix the box")
+        return model_box(c, faces, TABLE)
+
+    with pytest.raises(ValueError, match="moved by 1σ .*calibrate the turret again"):
+        with_calibration_uncertainty(build, cam, T_wt, turret_cov=np.eye(6) * 1e-6)
