@@ -3,7 +3,9 @@
 The geometry is core/rangefinder.py's (turret convention, ``aim``, ``aim_at_pixel``); this module
 drives the devices with it. Each function
 
-* reports progress through ``progress(Progress)`` (called from the caller's thread),
+* reports progress through ``progress(Progress)`` (called from the caller's thread) after each
+  beam, with that beam's angles and range (``Progress.beam``) so that the caller can show the
+  beam spot and the points measured so far while it runs,
 * stops at the next point when ``cancel`` (a ``threading.Event``) is set, raising
   ``AcquisitionCancelled`` whose ``partial`` holds what was measured so far,
 * turns error 255 (no return) into a miss (NaN range) and lets every other device error
@@ -44,11 +46,14 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Progress:
-    """done of total steps; message says what is being done."""
+    """done of total steps; message says what is being done; beam : (pan_rad, tilt_rad, range_m)
+    of the beam just measured (range NaN: no return), or None when the step measured nothing.
+    The world point is ``core.rangefinder.beam_point(T_world_turret, *beam)``."""
 
     done: int
     total: int
     message: str
+    beam: tuple[float, float, float] | None = None
 
 
 class AcquisitionCancelled(Exception):
@@ -85,9 +90,10 @@ class PixelMeasurement:
         return bool(np.isfinite(self.range_m))
 
 
-def _report(progress: Callable[[Progress], None] | None, done: int, total: int, message: str) -> None:
+def _report(progress: Callable[[Progress], None] | None, done: int, total: int, message: str,
+            beam: tuple[float, float, float] | None = None) -> None:
     if progress is not None:
-        progress(Progress(done, total, message))
+        progress(Progress(done, total, message, None if beam is None else tuple(float(v) for v in beam)))
 
 
 def _common_step(turret: Turret) -> float | None:
@@ -136,12 +142,14 @@ def measure_at_pixel(
         if cancel is not None and cancel.is_set():
             raise AcquisitionCancelled("aiming cancelled")
         iteration[0] += 1
-        _report(progress, iteration[0], max_iter + 1, f"aiming at ({uv[0]:.1f}, {uv[1]:.1f}): iteration {iteration[0]}")
         turret.move_to(pan_rad, tilt_rad, wait=True)
         try:
-            return rangefinder.measure()
+            rho = rangefinder.measure()
         except NoTargetError:
-            return None
+            rho = None
+        _report(progress, iteration[0], max_iter + 1, f"aiming at ({uv[0]:.1f}, {uv[1]:.1f}): iteration {iteration[0]}",
+                (pan_rad, tilt_rad, np.nan if rho is None else rho))
+        return rho
 
     result = aim_at_pixel(
         camera, T_world_turret, uv, measure, depth_guess_m=depth_guess_m, step_rad=_common_step(turret), tol_px=tol_px, max_iter=max_iter
@@ -159,7 +167,7 @@ def measure_at_pixel(
         _report(progress, max_iter, max_iter + 1, f"measuring {shots} shots")
         measurement = _shoot(rangefinder, shots)
         rho = np.nan if measurement is None else measurement.range_m
-    _report(progress, max_iter + 1, max_iter + 1, "done")
+    _report(progress, max_iter + 1, max_iter + 1, "done", (result.pan_rad, result.tilt_rad, rho))
     X = beam_point(T_world_turret, result.pan_rad, result.tilt_rad, rho)
     if np.isfinite(rho):
         sigma = max(spec.sigma_range_m, 0.0 if measurement is None else measurement.spread_m)
@@ -204,6 +212,7 @@ def profile_scan(
     n = len(pan_steps)
     ranges = np.full(n, np.nan)
     spreads = np.full(n, np.nan)
+    tilts_rad = tilt_steps * turret.tilt_step_rad
     t0 = time.monotonic()
 
     def partial(count: int) -> RangeScan:
@@ -223,7 +232,7 @@ def profile_scan(
         m = _shoot(rangefinder, shots)
         if m is not None:
             ranges[i], spreads[i] = m.range_m, m.spread_m
-        _report(progress, i + 1, n, f"profile scan: beam {i + 1} of {n}")
+        _report(progress, i + 1, n, f"profile scan: beam {i + 1} of {n}", (p * step, tilts_rad, ranges[i]))
     return partial(n)
 
 
@@ -340,7 +349,12 @@ def face_patch_scan(
         return _scan_from(pan[:count], tilt[:count], ranges[:count], meta)
 
     centroid_uv = targets.mean(axis=0)
-    first = measure_at_pixel(camera, T_world_turret, centroid_uv, turret, rangefinder, depth_guess_m=depth_guess_m, cancel=cancel)
+
+    def aiming(p: Progress) -> None:  # the centroid's parallax iteration: before the first of n beams
+        _report(progress, 0, n, f"face patch scan: aiming ({p.message})", p.beam)
+
+    first = measure_at_pixel(camera, T_world_turret, centroid_uv, turret, rangefinder, depth_guess_m=depth_guess_m,
+                             progress=aiming, cancel=cancel)
     c = camera.center
     distance = float(np.linalg.norm(first.X_world - c)) if first.hit else float(depth_guess_m)
     _, rays = camera.rays(targets)
@@ -366,5 +380,5 @@ def face_patch_scan(
             X = beam_point(T_world_turret, pan[i], tilt[i], ranges[i])
             uv_hit[i] = camera.project(X[None])[0]
             inside[i] = bool(inside_polygon(poly, uv_hit[i])[0])
-        _report(progress, i + 1, n, f"face patch scan: beam {i + 1} of {n}")
+        _report(progress, i + 1, n, f"face patch scan: beam {i + 1} of {n}", (pan[i], tilt[i], ranges[i]))
     return partial(n)

@@ -58,6 +58,10 @@ def test_profile_scan_of_the_box_lies_on_its_true_faces(workcell, noisy):
                         pan_step_rad=2 * tu.pan_step_rad, progress=progress.append)
     assert len(scan) == len(progress) == progress[-1].total and progress[-1].done == len(scan)
     assert np.all(np.diff(scan.meta["pan_steps"]) == 2) and np.all(scan.tilt_rad == scan.tilt_rad[0])
+    # each report carries the beam just measured: the caller can draw the spot and the points as they come
+    beams = np.array([p.beam for p in progress])
+    assert np.array_equal(beams[:, 0], scan.pan_rad) and np.array_equal(beams[:, 1], scan.tilt_rad)
+    assert np.array_equal(beams[:, 2], scan.range_m, equal_nan=True)
     X = scan.points(workcell.turret.T_world_turret)
     on_box = body_surface_distance(workcell, "unknown_box", X) < 4 * SIGMA
     assert on_box.sum() >= 10  # the box spans a good part of the sweep
@@ -71,7 +75,13 @@ def test_profile_scan_of_the_box_lies_on_its_true_faces(workcell, noisy):
 def test_face_patch_scan_fits_the_true_face_plane(workcell, noisy):
     site, rf, tu = noisy
     poly, C, n = face_polygon_uv(workcell)
-    scan = face_patch_scan(workcell.camera, workcell.turret.T_world_turret, tu, rf, polygon_uv=poly, spacing_px=3.0)
+    progress = []
+    scan = face_patch_scan(workcell.camera, workcell.turret.T_world_turret, tu, rf, polygon_uv=poly, spacing_px=3.0,
+                           progress=progress.append)
+    aiming = [p for p in progress if p.done == 0]
+    assert aiming and all("aiming" in p.message and p.beam is not None for p in aiming)  # the centroid's iteration
+    beams = np.array([p.beam for p in progress if p.done > 0])
+    assert len(beams) == len(scan) and np.array_equal(beams[:, 2], scan.range_m, equal_nan=True)
     inside = scan.meta["inside"] & scan.hits
     assert inside.sum() >= 0.8 * len(scan) and inside.sum() >= 8
     assert scan.meta["uv_target"].shape == (len(scan), 2) and scan.meta["uv_hit"].shape == (len(scan), 2)
@@ -87,7 +97,9 @@ def test_measure_at_a_clicked_pixel_puts_the_beam_there(workcell, noisy):
     site, rf, tu = noisy
     C, n, _ = facing_face(workcell)
     uv = workcell.camera.project(C[None])[0]
-    pm = measure_at_pixel(workcell.camera, workcell.turret.T_world_turret, uv, tu, rf, shots=5)
+    progress = []
+    pm = measure_at_pixel(workcell.camera, workcell.turret.T_world_turret, uv, tu, rf, shots=5, progress=progress.append)
+    assert progress[-1].beam == (pm.pan_rad, pm.tilt_rad, pm.range_m)  # the final beam: the spot to show
     assert pm.hit and pm.aim.converged and pm.measurement.n_valid == 5
     assert np.linalg.norm(pm.X_world - C) < 0.015
     assert pm.X_world.shape == (3,) and pm.cov_world.shape == (3, 3)
