@@ -15,8 +15,10 @@ is vertical, whether it lies on the table — and the sensors give the numbers:
   fits it (``core.modeling.model_cylinder``; "fused" by default, or the paper's "tangential",
   "bisecting", "rf_tangential").
 
-``measure()``/``scan()`` drive the devices (aiming, progress in ``progress`` 0..1, ``cancel()`` stops
-them at the next beam). The preview is drawn as a ghost with its dimensions ± σ; ``accept()`` adds
+``measure()``/``scan()`` drive the devices (aiming, progress in ``progress`` 0..1 and ``progress_text``
+"profile k of 2 · beam i of m" / "face patch · beam i of m", ``cancel()`` stops them at the next
+beam); while they run the beam spot follows each beam (``site.set_beam``) and the points measured so
+far (``live_points_world``) are drawn. The preview is drawn as a ghost with its dimensions ± σ; ``accept()`` adds
 the object (status "modelled") with its clicks and measurements in one transaction.
 
 Each clicked segment (a face's side, a silhouette) is snapped to the image's edge on the frame the
@@ -27,13 +29,14 @@ records both.
 
 from __future__ import annotations
 
+import threading
 from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
 from core.geometry import Plane
-from core.rangefinder import RangeFinderSpec, RangeScan, aim, beam_point_cov
+from core.rangefinder import RangeFinderSpec, RangeScan, aim, beam_point, beam_point_cov
 
 from .base import Cancelled, Ghost, Marks, Workflow, WorkflowError, as_pixel
 from .snapping import SnapMixin, snap_marks
@@ -102,6 +105,10 @@ class ModelObject(SnapMixin, Workflow):
         self.result = None
         self.progress: float | None = None
         self.progress_text = ""
+        # The range points of the acquisition under way (world, metres), one per returned beam, drawn
+        # while it runs; appended from the acquiring thread under their own lock (marks() reads them).
+        self.live_points_world: list[np.ndarray] = []
+        self._live_lock = threading.Lock()
         self.state = "click"
 
     # ------------------------------------------------------------------ clicks
@@ -198,11 +205,41 @@ class ModelObject(SnapMixin, Workflow):
                                 "(emulated by default) to measure")
         return devices
 
-    def _report(self, p) -> None:
-        self.progress = p.done / max(p.total, 1)
-        self.progress_text = p.message
+    def _report(self, fraction: float, text: str, X: np.ndarray | None = None, keep: bool = True) -> None:
+        """One step of an acquisition (called on the acquiring thread): the bar at ``fraction``, the
+        text, the beam spot moved to the point X just measured (None: no return) and, with ``keep``,
+        X added to the live points; Cancelled when the operator cancelled."""
+        self.progress = float(fraction)
+        self.progress_text = text
+        if X is not None and np.all(np.isfinite(X)):
+            self.site.set_beam(X)
+            if keep:
+                with self._live_lock:
+                    self.live_points_world.append(np.asarray(X, float).copy())
         if self.cancel_event.is_set():
             raise Cancelled()
+
+    def _progress(self, T: np.ndarray, label: str, k: int = 0, parts: int = 1, aiming: bool = False):
+        """The ``progress`` callback of acquisition k (from 0) of ``parts``: "label · beam i of m" (a
+        report with done = 0, or any with ``aiming``: "label · aiming", its point not kept)."""
+
+        def report(p) -> None:
+            X = None if p.beam is None else beam_point(T, *p.beam)
+            if aiming or p.done == 0:
+                self._report(k / parts, f"{label} · aiming", X, keep=False)
+            else:
+                self._report((k + p.done / max(p.total, 1)) / parts, f"{label} · beam {p.done} of {p.total}", X)
+
+        return report
+
+    def _clear_live(self) -> None:
+        with self._live_lock:
+            self.live_points_world = []
+
+    def _live_points(self) -> np.ndarray:
+        """The live points so far, (L, 3)."""
+        with self._live_lock:
+            return np.array(self.live_points_world).reshape(-1, 3)
 
     @contextmanager
     def _acquiring(self, doing: str, again: str, refused: str):
@@ -215,25 +252,28 @@ class ModelObject(SnapMixin, Workflow):
             yield
         except (AcquisitionCancelled, Cancelled):
             self.progress = None
+            self._clear_live()
             raise Cancelled() from None
         except DeviceError as exc:
             self.progress = None
+            self._clear_live()
             raise WorkflowError(f"device fault while {doing}: {exc}. Check the devices and {again}") from None
         except WorkflowError:
             self.progress = None
+            self._clear_live()
             raise
         except ValueError as exc:
             self.progress = None
+            self._clear_live()
             raise WorkflowError(f"{refused}: {exc}") from None
 
-    def _profile(self, devices, k: int, **sweep) -> RangeScan:
-        """Profile k of 2 (``app.devices.acquisition.profile_scan`` with ``sweep``), progress over both."""
+    def _profile(self, devices, k: int, T: np.ndarray, **sweep) -> RangeScan:
+        """Profile k + 1 of 2 (``app.devices.acquisition.profile_scan`` with ``sweep``): the bar over
+        both, "profile k + 1 of 2 · beam i of m", each beam's point shown as it comes."""
         from app.devices.acquisition import profile_scan
 
-        def report(p):
-            self._report(type(p)(k * p.total + p.done, 2 * p.total, p.message))
-
-        return profile_scan(devices.turret, devices.rangefinder, progress=report, cancel=self.cancel_event, **sweep)
+        return profile_scan(devices.turret, devices.rangefinder, progress=self._progress(T, f"profile {k + 1} of 2", k, 2),
+                            cancel=self.cancel_event, **sweep)
 
     def measure(self):
         """Box: range points on the current face, inside its clicked outline (face patch scan)."""
@@ -256,13 +296,15 @@ class ModelObject(SnapMixin, Workflow):
             spacing = self.spacing_px or max(2.0, float(np.sqrt(area / 25.0)))
             camera, T = self.site.camera, self.site.T_world_turret
             self.cancel_event.clear()
-            self.progress, self.progress_text = 0.0, "aiming"
+            self._clear_live()
+            self.progress, self.progress_text = 0.0, "face patch · aiming"
         with self._acquiring("measuring", "Measure again", "cannot measure this face"):
             scan = face_patch_scan(camera, T, devices.turret, devices.rangefinder, polygon_uv=poly, spacing_px=spacing,
                                    depth_guess_m=float(camera.depth(self.support_point(centre))),
-                                   progress=self._report, cancel=self.cancel_event)
+                                   progress=self._progress(T, "face patch"), cancel=self.cancel_event)
         with self.lock:
             self.progress = None
+            self._clear_live()  # kept in the face below, or dropped with it
             good = scan.hits & np.asarray(scan.meta.get("inside", scan.hits), bool)
             if good.sum() < 3:
                 raise WorkflowError(f"only {int(good.sum())} of {len(scan)} beams came back from the face: no range "
@@ -324,17 +366,19 @@ class ModelObject(SnapMixin, Workflow):
             Tb, h = box.T_world_obj, box.dimensions["size_z"]
             corners = box.vertices_world
             self.cancel_event.clear()
-            self.progress, self.progress_text = 0.0, "scanning"
+            self._clear_live()
+            self.progress, self.progress_text = 0.0, "profile 1 of 2 · aiming"
         scans = []
         with self._acquiring("scanning", "Scan again", "cannot scan across the box"):
             for k, frac in enumerate(BOX_SCAN_FRACTIONS):
                 pan0, tilt0, rho0 = aim(T, Tb[:3, :3] @ [0.0, 0.0, frac * h] + Tb[:3, 3])
                 rel = (aim(T, corners)[0] - pan0 + np.pi) % (2 * np.pi) - np.pi
                 pad = float(np.arctan(BOX_SCAN_MARGIN_M / rho0))
-                scans.append(self._profile(devices, k, tilt_rad=float(tilt0), pan_start_rad=float(pan0 + rel.min() - pad),
+                scans.append(self._profile(devices, k, T, tilt_rad=float(tilt0), pan_start_rad=float(pan0 + rel.min() - pad),
                                            pan_stop_rad=float(pan0 + rel.max() + pad)))
         with self.lock:
             self.progress = None
+            self._clear_live()  # now in self.scans
             self.scans = scans
             self.result = None
             hits = [int(s.hits.sum()) for s in scans]
@@ -356,14 +400,17 @@ class ModelObject(SnapMixin, Workflow):
             camera, T = self.site.camera, self.site.T_world_turret
             sil = np.array(self.silhouettes)
             self.cancel_event.clear()
-            self.progress, self.progress_text = 0.0, "aiming"
+            self._clear_live()
+            self.progress, self.progress_text = 0.0, "profile 1 of 2 · aiming"
         scans = []
         with self._acquiring("scanning", "Scan again", "cannot scan across the object"):
             for k, frac in enumerate((0.3, 0.7)):
                 left, right = sil[0, 0] + frac * (sil[0, 1] - sil[0, 0]), sil[1, 0] + frac * (sil[1, 1] - sil[1, 0])
                 mid = (left + right) / 2
                 m = measure_at_pixel(camera, T, mid, devices.turret, devices.rangefinder,
-                                     depth_guess_m=float(camera.depth(self.support_point(mid))), cancel=self.cancel_event)
+                                     depth_guess_m=float(camera.depth(self.support_point(mid))),
+                                     progress=self._progress(T, f"profile {k + 1} of 2", k, 2, aiming=True),
+                                     cancel=self.cancel_event)
                 if not m.hit:
                     raise WorkflowError(f"no range return at the object's centre ({mid[0]:.0f}, {mid[1]:.0f}): check the "
                                         "silhouettes and the range finder")
@@ -373,10 +420,11 @@ class ModelObject(SnapMixin, Workflow):
                 half = abs(pans[1] - pans[0]) / 2
                 lo, hi = min(pans) - 0.8 * half, max(pans) + 0.8 * half
                 step = max(devices.turret.pan_step_rad, (hi - lo) / self.beams)
-                scans.append(self._profile(devices, k, tilt_rad=m.tilt_rad, pan_start_rad=lo, pan_stop_rad=hi,
+                scans.append(self._profile(devices, k, T, tilt_rad=m.tilt_rad, pan_start_rad=lo, pan_stop_rad=hi,
                                            pan_step_rad=step))
         with self.lock:
             self.progress = None
+            self._clear_live()  # now in self.scans
             self.scans = scans
             hits = [int(s.hits.sum()) for s in scans]
             if min(hits) < 3:
@@ -521,6 +569,9 @@ class ModelObject(SnapMixin, Workflow):
                 X = np.concatenate(pts)
                 X = X[cam.depth(X) > 0]
                 m.points = cam.project(X) if len(X) else np.zeros((0, 2))
+            live = self._live_points()  # the acquisition under way: its points so far
+            live = live[cam.depth(live) > 0] if len(live) else live
+            m.live_points = cam.project(live) if len(live) else np.zeros((0, 2))
             if self.result is not None:
                 m.ghosts = [Ghost(self.result.model, self.result.T_world_obj, self.object_name, chosen=True)]
                 lo, hi = self.result.model.bounds()

@@ -136,6 +136,68 @@ def test_cylinder_from_silhouettes_and_two_profiles(device_site, fast_scene, db)
     assert db.get("cylinder_1").kind == "cylinder"
 
 
+def _record_progress(wf):
+    """Wrap the workflow's progress hook: after each step, the text, the beam spot and the live points
+    (as the workflow holds them and as marks() draws them, which the interface calls meanwhile)."""
+    seen = []
+    report = wf._report
+
+    def hook(*args, **kwargs):
+        report(*args, **kwargs)
+        beam = wf.site.beam_X_world
+        seen.append((wf.progress, wf.progress_text, None if beam is None else beam.copy(), len(wf.live_points_world),
+                     len(wf.marks().live_points)))
+
+    wf._report = hook
+    return seen
+
+
+def test_scan_progress_says_which_profile_and_shows_the_beam_and_points_live(device_site, fast_scene):
+    site = device_site
+    body = fast_scene.body("unknown_cylinder")
+    T = body.pose_at(0.0)
+    sil = body.model.solids[0].silhouette((site.camera.center - T[:3, 3]) @ T[:3, :3])
+    wf = ModelObject(site, shape="cylinder")
+    for g in sil:
+        wf.add_segment(site.camera.project(g @ T[:3, :3].T + T[:3, 3]))
+    seen = _record_progress(wf)
+    scans = wf.scan()
+    texts = [t for _, t, _, _, _ in seen]
+    m = len(scans[1])
+    assert "profile 1 of 2 · aiming" in texts and "profile 2 of 2 · aiming" in texts
+    assert f"profile 1 of 2 · beam 1 of {len(scans[0])}" in texts and f"profile 2 of 2 · beam {m} of {m}" in texts
+    fractions = [f for f, _, _, _, _ in seen]
+    assert np.all(np.diff(fractions) >= 0) and fractions[-1] == pytest.approx(1.0)  # one bar over both profiles
+    # the beam spot follows the beams: it sits on each returned beam's point as the scan goes
+    Tt = site.T_world_turret
+    spots = np.array([b for _, t, b, _, _ in seen if "beam" in t and b is not None])
+    assert len(np.unique(np.round(spots, 6), axis=0)) >= 0.5 * sum(int(s.hits.sum()) for s in scans)
+    X1 = scans[1].points(Tt)
+    last_hit = X1[np.flatnonzero(scans[1].hits)[-1]]
+    assert np.allclose(site.beam_X_world, last_hit)
+    # the live points grow beam by beam (the returns so far), drawn by marks(), and give way to the scans
+    live = [n for _, t, _, n, _ in seen if "beam" in t]
+    assert live[-1] == sum(int(s.hits.sum()) for s in scans) and np.all(np.diff(live) >= 0) and len(set(live)) > 10
+    assert max(d for *_, d in seen) > 10
+    assert wf.live_points_world == [] and len(wf.marks().live_points) == 0
+    assert len(wf.marks().points) == sum(int(s.hits.sum()) for s in scans)
+
+
+def test_face_patch_progress_and_live_points(device_site, fast_scene):
+    site = device_site
+    body = fast_scene.body("unknown_box")
+    T = body.pose_at(0.0)
+    wf = ModelObject(site, shape="box")
+    _click_face(wf, site.camera, body.model, T, _facing_faces(site.camera, body.model, T)[0], np.random.default_rng(8))
+    seen = _record_progress(wf)
+    scan = wf.measure()
+    texts = [t for _, t, _, _, _ in seen]
+    assert "face patch · aiming" in texts and f"face patch · beam {len(scan)} of {len(scan)}" in texts
+    live = [n for _, t, _, n, _ in seen if "beam" in t]
+    assert live[-1] == int(scan.hits.sum()) and live[0] <= 1
+    assert wf.live_points_world == [] and len(wf.marks().points) == len(wf.faces[-1]["points"])
+
+
 def test_no_range_return_and_device_faults_write_nothing(device_site, devices, fast_scene, db):
     site = device_site
     body = fast_scene.body("unknown_box")
