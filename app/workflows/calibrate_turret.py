@@ -48,6 +48,7 @@ class CalibrateTurret(Workflow):
         self.labels: list[str] = []
         self.result = None
         self.progress: float | None = None
+        self.progress_text = ""  # "point k · aiming" / "point k · measuring n shots" while measuring
         self.state = "pick"
 
     # ------------------------------------------------------------------ picking
@@ -99,7 +100,11 @@ class CalibrateTurret(Workflow):
 
     # ------------------------------------------------------------------ measuring
     def measure(self):
-        """Aim at the picked point with the current calibration and measure (median of ``shots``)."""
+        """Aim at the picked point with the current calibration and measure (median of ``shots``).
+
+        The devices run outside the workflow's lock (the overlay keeps drawing); ``progress`` and
+        ``progress_text`` say which point and which stage; the beam spot shows the measured point.
+        A device fault or a cancel keeps nothing."""
         from app.devices.errors import DeviceError, NoTargetError
 
         with self.lock:
@@ -109,25 +114,34 @@ class CalibrateTurret(Workflow):
             devices = self.site.devices
             if devices is None:
                 raise WorkflowError("no range finder and turret are connected: restart mcit serve with devices")
-            X = self.pending_X
-            pan, tilt, _ = aim(self.site.T_world_turret, X)
+            X, label = self.pending_X, self.pending_label
+            T = self.site.T_world_turret
+            pan, tilt, _ = aim(T, X)
+            k = len(self.pan) + 1
             self.cancel_event.clear()
-            self.progress = 0.2
+            self.progress, self.progress_text = 0.0, f"point {k} · aiming"
         try:
             pan_r, tilt_r = devices.turret.move_to(float(pan), float(tilt), wait=True)  # whole steps, as reached
             if self.cancel_event.is_set():
                 raise Cancelled()
-            self.progress = 0.6
+            self.progress, self.progress_text = 0.5, f"point {k} · measuring {self.shots} shot{'s' if self.shots > 1 else ''}"
             m = devices.rangefinder.measure_n(self.shots)
+            self.site.set_beam(beam_point(T, pan_r, tilt_r, m.range_m))
+            self.progress = 1.0
         except NoTargetError:
             self.progress = None
-            raise WorkflowError(f"no range return from {self.pending_label}: pick a point on a surface facing the "
+            raise WorkflowError(f"no range return from {label}: pick a point on a surface facing the "
                                 "turret, nearer than 10 m") from None
         except DeviceError as exc:
             self.progress = None
             raise WorkflowError(f"device fault while measuring: {exc}. Check the devices and Measure again") from None
+        except Cancelled:
+            self.progress = None
+            raise
         with self.lock:
             self.progress = None
+            if self.cancelled:  # cancelled while the shots were under way: keep nothing
+                raise Cancelled()
             self.pan.append(float(pan_r))
             self.tilt.append(float(tilt_r))
             self.range_m.append(float(m.range_m))

@@ -85,3 +85,39 @@ def test_one_orientation_is_not_enough(device_site):
         wf.solve()
     with pytest.raises(WorkflowError, match="Solve first"):
         wf.accept()
+
+
+def test_measure_says_which_point_and_moves_the_beam_spot(device_site, devices):
+    """The progress text names the point and the stage; the spot lands on the measured point; a
+    device fault keeps nothing."""
+    from app.devices.faults import Fault
+
+    site = device_site
+    wf = CalibrateTurret(site, shots=3)
+    X = _face_targets(site, ("parallelepiped",))[0]
+    texts = []
+    move_to = devices.turret.move_to
+
+    def watch(*args, **kwargs):  # the workflow's state while the turret moves and while it measures
+        texts.append(wf.progress_text)
+        return move_to(*args, **kwargs)
+
+    measure_n = devices.rangefinder.measure_n
+
+    def watch_n(*args, **kwargs):
+        texts.append(wf.progress_text)
+        return measure_n(*args, **kwargs)
+
+    devices.turret.move_to, devices.rangefinder.measure_n = watch, watch_n
+    wf.choose_point(X)
+    wf.measure()
+    wf.choose_point(X)
+    wf.measure()
+    assert texts == ["point 1 · aiming", "point 1 · measuring 3 shots", "point 2 · aiming", "point 2 · measuring 3 shots"]
+    assert wf.progress is None and np.linalg.norm(site.beam_X_world - X) < 0.02
+    devices.site.rangefinder.faults.push(*[Fault("error", data=b"g0@E255\r\n")] * 10)  # no return
+    wf.choose_point(X)
+    with pytest.raises(WorkflowError, match="no range return"):
+        wf.measure()
+    devices.site.rangefinder.faults.clear()
+    assert len(wf.pan) == 2 and wf.progress is None
