@@ -9,6 +9,7 @@ Nothing reaches the database before ``accept()``; ``accept()`` writes in one tra
 
 from __future__ import annotations
 
+import re
 import threading
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -20,7 +21,8 @@ from core.brep import BRep
 if TYPE_CHECKING:  # pragma: no cover
     from .site import Site
 
-__all__ = ["WorkflowError", "Cancelled", "Ghost", "Marks", "Workflow", "as_pixel"]
+__all__ = ["WorkflowError", "Cancelled", "Ghost", "Marks", "Workflow", "as_pixel", "Control", "Step", "FrameRef",
+           "CANCEL", "KEY_TEXT"]
 
 
 class WorkflowError(ValueError):
@@ -61,7 +63,8 @@ class Marks:
     used instead (drawn beside it in another colour). snap_lines : (M, 2, 2) image edges a snapped
     corner was found on. tracked : Ghosts of tracked poses (their own colour). found_points :
     (F, 2) image edge points that support a tracked pose; rejected_points : (R, 2) those the
-    robust fit rejected.
+    robust fit rejected. circles : (C, 2) pixels to circle (the picked model corner). live_points :
+    (L, 2) range points of a scan under way.
     """
 
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
@@ -80,6 +83,96 @@ class Marks:
     tracked: list = field(default_factory=list)
     found_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     rejected_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    circles: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # pixels to circle (a picked corner)
+    live_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # range points measured so far
+
+
+# How a shortcut key reads on a button (viser's hotkey names → what the keyboard shows).
+KEY_TEXT = {"enter": "Enter", "escape": "Esc", "backspace": "Backspace", "delete": "Del", "space": "Space"}
+
+
+@dataclass(frozen=True)
+class Control:
+    """A control a workflow owns: a button (or a chooser) the panel shows while the workflow runs.
+
+    action : the workflow method it calls (also the name a step's prompt uses: ``{solve}``).
+    label : what the button says; the panel adds the shortcut key, e.g. "Solve (R)".
+    key : a viser hotkey ("R", "enter", "escape", "backspace", ...) or None. Keys the viewer uses
+        to move its camera (W A S D Q E, arrows) are not allowed.
+    kind : "button" (runs at once), "long" (a device measurement: runs on a worker, the progress
+        bar and Cancel stay live), "choice" (a dropdown: choosing an option calls ``action(value)``;
+        its options come from ``Workflow.choices(action)``).
+    arg : for a button that acts on one item, the ``choice`` control whose value it takes
+        (e.g. "Delete click" takes the click chosen in the residual table's chooser).
+    color : the button's colour (viser's names), None for the default.
+    confirm : a question asked once more before the action runs (e.g. Redo, which forgets every click).
+    """
+
+    action: str
+    label: str
+    key: str | None = None
+    kind: str = "button"
+    arg: str | None = None
+    color: str | None = None
+    hint: str = ""
+    confirm: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("button", "long", "choice"):
+            raise ValueError(f"a control's kind is button, long or choice, got {self.kind!r}")
+        if self.key is not None and self.key.upper() in set("WASDQE"):
+            raise ValueError(f"key {self.key!r} moves the viewer's camera; choose another for {self.label!r}")
+
+    @property
+    def key_text(self) -> str:
+        return "" if self.key is None else KEY_TEXT.get(self.key, self.key.upper())
+
+    @property
+    def button_label(self) -> str:
+        """The label with its shortcut: "Solve (R)"."""
+        return f"{self.label} ({self.key_text})" if self.key else self.label
+
+
+CANCEL = Control("cancel", "Cancel", "escape", color="red", hint="Abandon this workflow: nothing is written")
+
+_PLACEHOLDER = re.compile(r"\{([a-z_]+)\}")
+
+
+@dataclass(frozen=True)
+class Step:
+    """Where a workflow stands: what the operator is asked to do and which controls apply.
+
+    name : a short state name (tests walk them). prompt : the instruction; ``{action}`` names a
+    control (rendered as its label), and may only name an enabled one. enabled : the actions whose
+    controls are enabled now (others are disabled). clicks : True when clicks on the video are
+    taken now (False: a click selects an object instead, or is refused while measuring).
+    """
+
+    name: str
+    prompt: str
+    enabled: frozenset = frozenset()
+    clicks: bool = True
+
+    def named(self) -> list[str]:
+        """The actions the prompt names."""
+        return _PLACEHOLDER.findall(self.prompt)
+
+
+@dataclass(frozen=True)
+class FrameRef:
+    """The video frame a workflow's clicks, snapping and solving use (frozen when it starts).
+
+    image : (H, W, 3) or (H, W) uint8. t_s : its scene time (seconds). index : its frame number in
+    the source (-1 when unknown). source : where it came from ("live", "scrubbed", "scene video")."""
+
+    image: np.ndarray
+    t_s: float
+    index: int = -1
+    source: str = "live"
+
+    def record(self) -> dict[str, Any]:
+        """JSON-ready: which frame was used (for the history)."""
+        return {"t_s": round(float(self.t_s), 3), "index": int(self.index), "source": self.source}
 
 
 def as_pixel(uv: Any) -> np.ndarray:
@@ -105,6 +198,7 @@ class Workflow:
     name: ClassVar[str] = ""
     title: ClassVar[str] = ""
     actions: ClassVar[tuple[str, ...]] = ("cancel",)
+    controls: ClassVar[tuple[Control, ...]] = (CANCEL,)  # what the panel shows, in order
     snapping: ClassVar[bool] = False  # True: takes a ``snap`` option (clicks snapped to the image)
 
     def __init__(self, site: "Site", client: str = "operator"):
@@ -116,6 +210,7 @@ class Workflow:
         self.message = ""  # the last outcome, shown under next_step
         self.lock = threading.RLock()
         self.cancel_event = threading.Event()
+        self.frame: FrameRef | None = None  # the frozen frame (None: the site's frame at the scene time)
 
     # ------------------------------------------------------------------ common actions
     @property
@@ -134,10 +229,74 @@ class Workflow:
         if self.finished:
             raise WorkflowError(f"the {self.title} workflow is {'accepted' if self.accepted else 'cancelled'}; start a new one")
 
-    # ------------------------------------------------------------------ what to show
+    # ------------------------------------------------------------------ the frame used
+    def use_frame(self, frame: FrameRef | None) -> None:
+        """Work on ``frame`` from now on (the panel freezes one when the workflow starts)."""
+        with self.lock:
+            self.frame = frame
+
+    def frame_record(self) -> dict[str, Any] | None:
+        """Which frame the clicks were made on, for the history (None: the site's frame at the time)."""
+        return None if self.frame is None else self.frame.record()
+
+    # ------------------------------------------------------------------ steps and controls
+    def _step(self) -> Step:
+        """The current step: prompt and enabled controls (each workflow declares its own; use ``current_step``)."""
+        if self.finished:
+            return self._finished_step()
+        return Step("open", "Cancel to close.", frozenset({"cancel"}))
+
+    def _finished_step(self) -> Step:
+        return Step("accepted" if self.accepted else "cancelled",
+                    self.message or ("Done." if self.accepted else "Cancelled: nothing was written."), frozenset(), False)
+
+    def control(self, action: str) -> Control | None:
+        """This workflow's control for ``action``, or None."""
+        return next((c for c in self.controls if c.action == action), None)
+
+    def current_step(self) -> Step:
+        """``_step()`` checked: every enabled action has a control, and the prompt names only enabled
+        controls (an internal invariant: tests walk every state)."""
+        with self.lock:
+            st = self._step()
+        known = {c.action for c in self.controls}
+        assert st.enabled <= known, f"{self.name}/{st.name}: enabled {sorted(st.enabled - known)} have no control"
+        named = set(st.named())
+        assert named <= st.enabled, f"{self.name}/{st.name}: the prompt names {sorted(named - st.enabled)}, not enabled"
+        return st
+
+    def prompt_text(self, markdown: bool = True) -> str:
+        """The current prompt with each named control as its label (bold in Markdown)."""
+        st = self.current_step()
+
+        def label(m: re.Match) -> str:
+            c = self.control(m.group(1))
+            text = c.label if c is not None else m.group(1)
+            return f"**{text}**" if markdown else text
+
+        return _PLACEHOLDER.sub(label, st.prompt)
+
     @property
-    def next_step(self) -> str:  # pragma: no cover - abstract
-        raise NotImplementedError
+    def next_step(self) -> str:
+        """The instruction in plain text (the current step's prompt)."""
+        return self.prompt_text(markdown=False)
+
+    def choices(self, action: str) -> list[tuple[str, Any]]:
+        """Options (text, value) of the ``choice`` control ``action`` (e.g. the clicks that can be
+        deleted, the candidate poses)."""
+        return []
+
+    def choice_value(self, action: str) -> Any:
+        """The value the ``choice`` control ``action`` shows now (None: the operator's last choice)."""
+        return None
+
+    def weaknesses(self) -> list[str]:
+        """Why the result about to be accepted is weak (empty when it is not): σ above a stated
+        threshold, a residual above 3σ, a snap that moved more than 2 px, nothing redundant. The
+        panel shows them and asks once more before Accept."""
+        return []
+
+    # ------------------------------------------------------------------ what to show
 
     def marks(self) -> Marks:
         """What to draw on the video now (pixels of the site's current camera)."""
@@ -147,8 +306,8 @@ class Workflow:
         """Numbers to show the operator (RMS, residuals, σ ...), JSON-ready."""
         return {}
 
-    def perform(self, action: str, **kwargs: Any) -> Any:
-        """Call an action by name (for recorded scripts); WorkflowError for an unknown one."""
+    def perform(self, action: str, *args: Any, **kwargs: Any) -> Any:
+        """Call an action by name (recorded scripts, the panel's controls); WorkflowError for an unknown one."""
         if action not in self.actions:
             raise WorkflowError(f"{self.title} has no action {action!r}; it has {', '.join(self.actions)}")
-        return getattr(self, action)(**kwargs)
+        return getattr(self, action)(*args, **kwargs)

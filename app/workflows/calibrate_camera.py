@@ -22,19 +22,33 @@ import numpy as np
 
 from core.calibration import calibrate_dlt
 
-from .base import Marks, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, Control, Marks, Step, Workflow, WorkflowError, as_pixel
 from .snapping import SNAPPED_CORNER_SIGMA_PX, SnapMixin, snap_marks
 
 __all__ = ["CalibrateCamera"]
 
 PICK_RADIUS_PX = 25.0
+# Weak results (Accept asks once more): fewer pairs than this leave little redundancy in C's 11
+# unknowns; a snap that moved farther than this may have jumped to another corner.
+MIN_REDUNDANT_PAIRS = 8
+MAX_SNAP_MOVE_PX = 2.0
 
 
 class CalibrateCamera(SnapMixin, Workflow):
     name = "calibrate_camera"
     title = "Calibrate camera"
-    actions = ("click", "choose_point", "choose_vertex", "remove_last", "solve", "accept", "redo", "cancel",
-               "refuse_snap", "set_snap")
+    actions = ("click", "choose_point", "choose_vertex", "remove_last", "remove_pair", "solve", "accept", "redo",
+               "cancel", "refuse_snap", "set_snap")
+    controls = (
+        Control("solve", "Solve", "R", color="blue", hint="C from the paired points (DLT)"),
+        Control("accept", "Accept", "enter", color="green", hint="Store the new calibration: every overlay is redrawn through it"),
+        Control("refuse_snap", "Refuse snap", "U", hint="Use the last click as clicked, not moved onto the image's corner"),
+        Control("remove_last", "Remove last", "backspace", hint="Undo the last click"),
+        Control("pair", "Point", kind="choice", hint="A paired point (its residual after Solve)"),
+        Control("remove_pair", "Delete point", arg="pair", hint="Delete the point chosen above"),
+        Control("redo", "Redo", confirm="Forget every paired point and start again?"),
+        CANCEL,
+    )
 
     def __init__(self, site, client: str = "operator", snap: bool = True, sigma_px: float = 1.0):
         super().__init__(site, client)
@@ -61,9 +75,10 @@ class CalibrateCamera(SnapMixin, Workflow):
             if self.pending_X is None:
                 name, k, X, dist = self._nearest_vertex(p)
                 if dist > PICK_RADIUS_PX:
+                    near = f" (the nearest visible one, {name} corner {k}, is {dist:.0f} px away)" if k >= 0 else ""
                     raise WorkflowError(
-                        f"no model vertex within {PICK_RADIUS_PX:.0f} px of ({p[0]:.0f}, {p[1]:.0f}) (nearest: "
-                        f"{name} vertex {k}, {dist:.0f} px away); click on a corner drawn in the overlay"
+                        f"No visible model corner within {PICK_RADIUS_PX:.0f} px of your click{near}: "
+                        "click on a corner drawn in the overlay."
                     )
                 self._set_pending(X, f"{name}:{k}", (name, k))
             else:
@@ -90,17 +105,35 @@ class CalibrateCamera(SnapMixin, Workflow):
             self._check_open()
             self._set_pending(X, label or "point")
 
+    def remove_pair(self, index: int) -> None:
+        """Delete pair ``index`` (0-based; the residual table's row) whatever its place."""
+        with self.lock:
+            self._check_open()
+            i = int(index)
+            if not 0 <= i < len(self.uv):
+                raise WorkflowError(f"there is no point {i + 1}: {len(self.uv)} are paired")
+            for seq in (self.X_world, self.uv, self.snaps, self.labels):
+                seq.pop(i)
+            self.result = None
+            self.state = "click_image" if self.pending_X is not None else "pick_model"
+            self.message = f"Point {i + 1} deleted: {len(self.uv)} left. Solve again."
+
     def remove_last(self) -> None:
         """Drop the pending model point, or else the last pair."""
         with self.lock:
             self._check_open()
+            if self.pending_X is None and not self.X_world:
+                raise WorkflowError("there is no click to remove")
             if self.pending_X is not None:
                 self.pending_X = None
+                self.pending_vertex = None
+                self.message = "The chosen model corner is dropped."
             elif self.X_world:
                 self.X_world.pop()
                 self.uv.pop()
                 self.snaps.pop()
                 self.labels.pop()
+                self.message = f"The last point is removed: {len(self.uv)} left."
             self.result = None
             self.state = "pick_model"
 
@@ -117,7 +150,7 @@ class CalibrateCamera(SnapMixin, Workflow):
             except ValueError as exc:
                 raise WorkflowError(f"calibration failed: {exc}") from None
             self.state = "review"
-            self.message = f"RMS {self.result.rms_px:.2f} px over {len(self.uv)} points"
+            self.message = f"Solved: RMS {self.result.rms_px:.1f} px over {len(self.uv)} points."
             return self.result
 
     def accept(self) -> None:
@@ -138,16 +171,17 @@ class CalibrateCamera(SnapMixin, Workflow):
             )
             self.accepted = True
             self.state = "accepted"
-            self.message = f"Camera calibrated: RMS {self.result.rms_px:.2f} px."
+            self.message = f"Camera calibrated (RMS {self.result.rms_px:.1f} px): every overlay is now drawn through it."
 
     def redo(self) -> None:
         """Forget every pair and the result; start again."""
         with self.lock:
             self._check_open()
+            n = len(self.uv)
             self.X_world, self.uv, self.labels, self.snaps = [], [], [], []
             self.pending_X, self.pending_vertex, self.result = None, None, None
             self.state = "pick_model"
-            self.message = ""
+            self.message = f"Started again: {n} points forgotten."
 
     # ------------------------------------------------------------------ helpers
     def _set_pending(self, X: np.ndarray, label: str, vertex: tuple[str, int] | None = None) -> None:
@@ -188,8 +222,10 @@ class CalibrateCamera(SnapMixin, Workflow):
             self.state = "pick_model"
 
     def _nearest_vertex(self, p: np.ndarray) -> tuple[str, int, np.ndarray, float]:
+        """The nearest model vertex to pixel p that the camera sees: in front of it, on an edge its
+        object shows (convex hidden-line removal) and not behind another database surface."""
         cam = self.site.camera
-        best = ("", -1, np.zeros(3), float("inf"))
+        cands = []
         for obj in self.site.objects():
             V = obj.vertices_world()
             if not len(V):
@@ -197,29 +233,81 @@ class CalibrateCamera(SnapMixin, Workflow):
             front = cam.depth(V) > 0
             if not np.any(front):
                 continue
-            uv = cam.project(V)
-            d = np.linalg.norm(uv - p, axis=1)
-            d[~front] = np.inf
-            k = int(np.argmin(d))
-            if d[k] < best[3]:
-                best = (obj.name, k, V[k], float(d[k]))
-        return best
+            shown = np.zeros(len(V), bool)
+            if len(obj.model.edges):
+                wf = obj.model.wireframe(cam.center, obj.T_world_obj)
+                E = np.asarray(obj.model.edges)
+                vis = [int(k) for k, v, kind in zip(wf.edge_index, wf.visible, wf.kind) if v and kind == "edge"]
+                shown[E[vis].ravel()] = True
+            else:
+                shown[:] = True
+            d = np.linalg.norm(cam.project(V) - p, axis=1)
+            for k in np.flatnonzero(front & shown & (d <= 3 * PICK_RADIUS_PX)):
+                cands.append((float(d[k]), obj.name, int(k), V[k]))
+        for d, name, k, X in sorted(cands, key=lambda c: c[0]):
+            if self._unoccluded(X):
+                return name, k, X, d
+        return "", -1, np.zeros(3), float("inf")
+
+    def _unoccluded(self, X: np.ndarray) -> bool:
+        """True when no database surface lies between the optical centre and X (1 mm tolerance)."""
+        c = self.site.camera.center
+        ray = X - c
+        dist = float(np.linalg.norm(ray))
+        try:
+            hit = self.site.raycast(c, ray / dist)
+        except Exception:  # noqa: BLE001 - no ray casting (no trimesh index): keep the vertex
+            return True
+        return hit is None or hit.distance_m >= dist - 1e-3
 
     # ------------------------------------------------------------------ display
-    @property
-    def next_step(self) -> str:
+    def _step(self) -> Step:
+        if self.finished:
+            return self._finished_step()
         n = len(self.X_world)
-        if self.accepted:
-            return "Done: the camera is calibrated."
-        if self.cancelled:
-            return "Cancelled."
+        has = {"cancel"} | ({"remove_last"} if (n or self.pending_X is not None) else set())
+        if n:
+            has |= {"pair", "remove_pair", "redo"}
+        if self._last_snap()[0] is not None and self._last_snap()[0].applied:
+            has.add("refuse_snap")
         if self.state == "click_image":
-            return f"Now click where {self.pending_label} really is in the video."
+            return Step("click_image", f"Now click where {self.pending_label} (circled) really is in the video; "
+                        "{remove_last} if you picked the wrong corner.", frozenset(has))
+        if n >= 6:
+            has.add("solve")
         if self.state == "review":
-            return f"RMS {self.result.rms_px:.2f} px: Accept, or Redo (or click more points)."
+            return Step("review", f"Solved: RMS {self.result.rms_px:.1f} px. {{accept}} to use it, or delete a point with a "
+                        "large residual ({remove_pair}) and {solve} again.", frozenset(has | {"accept"}))
         more = max(0, 6 - n)
-        tail = f" ({more} more needed)" if more else "; or Solve"
-        return f"Click a model corner in the overlay (pair {n + 1}){tail}."
+        tail = f" ({more} more needed)." if more else ", or {solve}."
+        return Step("pick_model", f"Click a model corner drawn in the overlay (point {n + 1}){tail}", frozenset(has))
+
+    def choices(self, action: str) -> list[tuple[str, Any]]:
+        if action != "pair":
+            return []
+        with self.lock:
+            err = self.result.errors_px if self.result is not None else None
+            return [(f"{i + 1} {lab}" + (f" · {err[i]:.1f} px" if err is not None and i < len(err) else ""), i)
+                    for i, lab in enumerate(self.labels)]
+
+    def weaknesses(self) -> list[str]:
+        with self.lock:
+            out = []
+            if self.result is None:
+                return out
+            n = len(self.uv)
+            if n < MIN_REDUNDANT_PAIRS:
+                out.append(f"only {n} points for C's 11 unknowns: little redundancy to catch a wrong click "
+                           f"({MIN_REDUNDANT_PAIRS} or more is safer)")
+            sig = np.array([SNAPPED_CORNER_SIGMA_PX if sn is not None and sn.applied else self.sigma_px for sn in self.snaps])
+            bad = [i for i, (e, sg) in enumerate(zip(self.result.errors_px, sig)) if e > 3 * max(sg, 0.5)]
+            for i in bad:
+                out.append(f"point {i + 1} ({self.labels[i]}) is {self.result.errors_px[i]:.1f} px from where C puts it "
+                           "(more than 3σ): a wrong corner?")
+            for i, sn in enumerate(self.snaps):
+                if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
+                    out.append(f"point {i + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)")
+            return out
 
     def marks(self) -> Marks:
         with self.lock:
@@ -228,8 +316,10 @@ class CalibrateCamera(SnapMixin, Workflow):
             m.labels = [(uv, str(i + 1)) for i, uv in enumerate(self.uv)]
             m.raw_segments, m.raw_points, m.snap_lines, snap_labels = snap_marks(self.snaps)
             m.labels += snap_labels
-            if self.pending_X is not None:
+            if self.pending_X is not None and cam.depth(self.pending_X.reshape(1, 3))[0] > 0:
                 m.pending = cam.project(self.pending_X.reshape(1, 3))
+                m.circles = m.pending.copy()  # the picked corner, highlighted
+                m.labels.append((m.pending[0] + [8.0, -8.0], self.pending_label))
             if self.result is not None and self.uv:
                 proj = self.result.camera.project(np.array(self.X_world))
                 m.residuals = np.stack([np.array(self.uv), proj], axis=1)

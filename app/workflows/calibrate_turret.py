@@ -22,7 +22,7 @@ from core.calibration import calibrate_turret_planes
 from core.rangefinder import aim, beam_point
 from core.transforms import pose_error
 
-from .base import Cancelled, Marks, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel
 
 __all__ = ["CalibrateTurret"]
 
@@ -34,7 +34,16 @@ POORLY_DEG, POORLY_M = 0.5, 0.01  # σ beyond which the operator is told to meas
 class CalibrateTurret(Workflow):
     name = "calibrate_turret"
     title = "Calibrate turret"
-    actions = ("click", "choose_point", "measure", "remove_last", "solve", "accept", "cancel")
+    actions = ("click", "choose_point", "measure", "remove_last", "remove_measurement", "solve", "accept", "cancel")
+    controls = (
+        Control("measure", "Measure", "M", kind="long", color="blue", hint="Aim at the picked point and measure its range"),
+        Control("solve", "Solve", "R", color="blue", hint="The turret pose that puts every measured point on the known surfaces"),
+        Control("accept", "Accept", "enter", color="green", hint="Store the turret calibration"),
+        Control("remove_last", "Remove last", "backspace", hint="Drop the picked point, or else the last measurement"),
+        Control("measurement", "Measurement", kind="choice", hint="A measured point (its distance to the surfaces after Solve)"),
+        Control("remove_measurement", "Delete measurement", arg="measurement", hint="Delete the measurement chosen above"),
+        CANCEL,
+    )
 
     def __init__(self, site, client: str = "operator", shots: int = 3):
         super().__init__(site, client)
@@ -155,10 +164,25 @@ class CalibrateTurret(Workflow):
             self.message = f"{self.labels[-1]}: {m.range_m:.4f} m ({len(self.pan)} measurements)"
             return m
 
+    def remove_measurement(self, index: int) -> None:
+        """Delete measurement ``index`` (0-based, the residual table's row)."""
+        with self.lock:
+            self._check_open()
+            i = int(index)
+            if not 0 <= i < len(self.pan):
+                raise WorkflowError(f"there is no measurement {i + 1}: {len(self.pan)} were made")
+            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
+                lst.pop(i)
+            self.result = None
+            self.state = "measure" if self.pending_X is not None else "pick"
+            self.message = f"Measurement {i + 1} deleted: {len(self.pan)} left. Solve again."
+
     def remove_last(self) -> None:
         """Drop the picked point, or else the last measurement."""
         with self.lock:
             self._check_open()
+            if self.pending_X is None and not self.pan:
+                raise WorkflowError("there is no picked point or measurement to remove")
             if self.pending_X is not None:
                 self.pending_X = None
             elif self.pan:
@@ -242,21 +266,63 @@ class CalibrateTurret(Workflow):
             self.message = f"Turret calibrated: RMS {1000 * rms:.1f} mm."
 
     # ------------------------------------------------------------------ display
-    @property
-    def next_step(self) -> str:
-        if self.accepted:
-            return "Done: the turret is calibrated."
-        if self.cancelled:
-            return "Cancelled: nothing was written."
+    def _step(self) -> Step:
+        if self.finished:
+            return self._finished_step()
         if self.progress is not None:
-            return "Measuring…"
-        if self.pending_X is not None:
-            return f"Measure {self.pending_label} (the turret aims with the current calibration)."
-        if self.result is not None:
-            return f"{self.message}. Accept, or measure more points and Solve again."
+            text = getattr(self, "progress_text", "") or "aiming and measuring"
+            return Step("measuring", f"Measuring… {text}. " + "{cancel} stops it.", frozenset({"cancel"}), clicks=False)
         n = len(self.pan)
-        more = "" if n >= 6 else f" ({6 - n} more at least)"
-        return f"Click a known point — a face centre (cyan) or a corner — then Measure{more}; Solve when done."
+        base = {"cancel"} | ({"remove_last"} if (n or self.pending_X is not None) else set())
+        if n:
+            base |= {"measurement", "remove_measurement"}
+        if n >= 6:
+            base.add("solve")
+        if self.site.devices is None:
+            return Step("no_devices", "No range finder and turret are connected: restart mcit serve with devices to "
+                        "calibrate the turret.", frozenset(base), clicks=False)
+        if self.pending_X is not None:
+            return Step("measure", "{measure} " + f"{self.pending_label} (the turret aims with the current calibration), or "
+                        "click another known point.", frozenset(base | {"measure"}))
+        if self.result is not None:
+            return Step("review", f"Solved: {self.message}. " + "{accept} to use it, or measure more points and {solve} again.",
+                        frozenset(base | {"accept"}))
+        more = f" ({6 - n} more at least)" if n < 6 else "; {solve} when done"
+        return Step("pick", f"Click a known point — a face centre (cyan) or a corner — then measure it{more}.",
+                    frozenset(base))
+
+    def choices(self, action: str) -> list[tuple[str, Any]]:
+        if action != "measurement":
+            return []
+        with self.lock:
+            res = None
+            if self.result is not None and getattr(self, "used", None) is not None and len(self.used) == len(self.pan):
+                res = iter(1000 * self.surface_residuals_m)
+            out = []
+            for i, lab in enumerate(self.labels):
+                text = f"{i + 1} {lab}"
+                if res is not None:
+                    text += f" · {next(res):.1f} mm" if self.used[i] else " · left out"
+                out.append((text, i))
+            return out
+
+    def weaknesses(self) -> list[str]:
+        with self.lock:
+            if self.result is None:
+                return []
+            out = []
+            sd_rot_deg, sd_t_m = self._sigmas()
+            if sd_rot_deg.max() > POORLY_DEG or sd_t_m.max() > POORLY_M:
+                out.append(f"the turret's pose is poorly determined: σ up to {sd_rot_deg.max():.2f}° and "
+                           f"{1000 * sd_t_m.max():.1f} mm (more than {POORLY_DEG}° or {1000 * POORLY_M:.0f} mm)")
+            sigma = float(self.site.scene.rangefinder.sigma_range_m)
+            if sigma > 0:
+                bad = int(np.sum(self.surface_residuals_m > 3 * sigma))
+                if bad:
+                    out.append(f"{bad} measured point(s) lie more than 3σ ({3000 * sigma:.0f} mm) from the surfaces")
+            if int(np.sum(self.used)) <= 6:
+                out.append("only 6 points: little redundancy to catch a wrong one (8 or more is safer)")
+            return out
 
     def marks(self) -> Marks:
         with self.lock:

@@ -1,32 +1,81 @@
-"""Designate a target: click the video → the 3D point on the database's surfaces, for the robot.
+"""Designate a target: click the video → the 3D point on the database's surfaces, for the robot,
+checked by the range finder.
 
 The pixel's ray (through C) is cast against every database object at its database pose; the
 first surface met is the target, given in world coordinates (metres) with the object's name and
-the surface normal. Nothing is written to the database: the targets are shown and copied.
+the surface normal. When the site has devices, the range finder is then put on the same pixel
+(``app.devices.acquisition.measure_at_pixel``: the parallax iteration aims the turret until the
+measured point's image is the clicked pixel) and its point is compared with the database's along
+the ray:
+
+    Δ = (X_rf − c)·r − λ_db      (r the ray's unit direction from the camera centre c, λ_db the
+                                  database surface's distance along it)
+
+σ_Δ, the model (stated in ``Target.sigma_m``):
+
+* the range finder's point: its covariance from ``measure_at_pixel`` — σ_ρ of the scene's
+  range finder spec along the beam (or the shots' spread when larger; the median of ``shots``
+  shots is used but σ_ρ is kept, a conservative choice), a turret step's quantisation across it —
+  projected on the ray: rᵀ Σ_rf r;
+* the turret calibration, when it was calibrated in this database (``site.calibration_covs``):
+  the measured beam (pan, tilt, ρ) mapped through ``T_world_turret`` moved ±1σ along its
+  covariance's principal axes (``core.calibration.principal_steps``/``perturbed_turret``),
+  each shift of the point projected on the ray and added in quadrature;
+* the camera calibration is left out: its error tilts the ray by a fraction of a pixel, which
+  moves the database's depth along it by well under a millimetre at the workcell's 1–3 m; the
+  database objects' pose σ are left out too (the check is of the database as it stands).
+
+|Δ| > 3σ_Δ is a disagreement: the range finder nearer ("something not in the database is in the
+way") or farther ("the database's surface is not there"); the target keeps the database's point
+and carries the range finder's point and the warning. Where the database has no surface under the
+click but the range finder hits something, the target is the range finder's point, with the same
+warning. Without devices the target is the database's and the summary says "not checked by the
+range finder". The measurement (≈0.1–1 s) runs outside the workflow's lock: the overlay keeps
+drawing, and the beam spot follows the aiming. A device fault raises WorkflowError and keeps
+nothing. Nothing is written to the database: the targets are shown and copied.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from .base import Marks, Workflow, WorkflowError, as_pixel
+from .base import Cancelled, Marks, Workflow, WorkflowError, as_pixel
 
-__all__ = ["Target", "DesignateTarget"]
+__all__ = ["Target", "DesignateTarget", "NOT_CHECKED", "LIMIT_SIGMA"]
+
+NOT_CHECKED = "not checked by the range finder"
+LIMIT_SIGMA = 3.0  # a disagreement beyond this many σ along the ray is a warning
+NOT_IN_DATABASE = "not in the database"
+AIM_OFF_PX = 1.0  # a beam that lands farther than this from the click is said so
 
 
 @dataclass(frozen=True)
 class Target:
     """A designated point: uv (2,) clicked; X_world (3,) metres; object name; range from the
-    camera's centre (metres); outward surface normal (3,)."""
+    camera's centre (metres); outward surface normal (3,) (NaN when the point is the range
+    finder's only).
+
+    The range finder's check: rangefinder_X (3,) its measured point (None: not measured, or no
+    return); disagreement_m its depth along the ray minus the database's (+: the range finder's
+    surface is farther; NaN when there is nothing to compare); sigma_m σ of that difference (see
+    the module's model); check one sentence saying what the check found; warning "" or the
+    sentence the operator must read.
+    """
 
     uv: np.ndarray
     X_world: np.ndarray
     object: str
     range_m: float
     normal: np.ndarray
+    rangefinder_X: np.ndarray | None = None
+    disagreement_m: float = float("nan")
+    sigma_m: float = float("nan")
+    check: str = NOT_CHECKED
+    warning: str = ""
+    details: dict = field(default_factory=dict, compare=False)
 
     def text(self) -> str:
         """Copyable text: ``x y z`` in metres (world frame)."""
@@ -34,33 +83,154 @@ class Target:
         return f"{x:.4f} {y:.4f} {z:.4f}"
 
 
+def _xyz(X: np.ndarray) -> str:
+    return " ".join(f"{v:.4f}" for v in X)
+
+
+def along_ray_sigma(cov_rf: np.ndarray, X_rf: np.ndarray, ray: np.ndarray, T_world_turret: np.ndarray,
+                    turret_cov: np.ndarray | None) -> tuple[float, float, float]:
+    """σ (metres) of the range finder's point along the ray (unit (3,)): total, the range finder's
+    share and the turret calibration's share (0 without a covariance)."""
+    from core.calibration import perturbed_turret, principal_steps
+
+    r = np.asarray(ray, float)
+    var_rf = float(r @ np.asarray(cov_rf, float) @ r)
+    var_T = 0.0
+    if turret_cov is not None:
+        T = np.asarray(T_world_turret, float)
+        x_t = np.linalg.solve(T, np.append(X_rf, 1.0))  # the beam's point in the turret frame (fixed by pan, tilt, ρ)
+        for step in principal_steps(turret_cov):
+            var_T += float(r @ ((perturbed_turret(T, step) @ x_t)[:3] - X_rf)) ** 2
+    return float(np.sqrt(var_rf + var_T)), float(np.sqrt(var_rf)), float(np.sqrt(var_T))
+
+
 class DesignateTarget(Workflow):
     name = "designate"
     title = "Designate target"
     actions = ("click", "clear", "accept", "cancel")
 
-    def __init__(self, site, client: str = "operator"):
+    def __init__(self, site, client: str = "operator", shots: int = 3):
         super().__init__(site, client)
+        if not (isinstance(shots, (int, np.integer)) and shots >= 1):
+            raise WorkflowError(f"shots must be a positive whole number, got {shots!r}")
+        self.shots = int(shots)
         self.targets: list[Target] = []
+        self.progress: float | None = None
+        self.progress_text = ""
         self.state = "click"
 
+    # ------------------------------------------------------------------ the click
     def click(self, uv) -> Target:
-        """Cast the clicked pixel's ray; the first database surface it meets is the target."""
+        """Cast the clicked pixel's ray; the first database surface it meets is the target, checked
+        by the range finder when the site has one (see the module's docstring)."""
         p = as_pixel(uv)
-        with self.lock:
+        with self.lock:  # a snapshot: the measurement below runs without the lock
             self._check_open()
             cam = self.site.camera
+            T = self.site.T_world_turret
+            _, turret_cov = self.site.calibration_covs
+            devices = self.site.devices
             origin, d = cam.rays(p.reshape(1, 2))
-            hit = self.site.raycast(origin, d[0])
-            if hit is None:
+            ray = d[0]
+            hit = self.site.raycast(origin, ray)
+            if hit is None and devices is None:
                 raise WorkflowError(
                     f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object of the database; click on an object or the table"
                 )
+            if devices is not None:
+                self.cancel_event.clear()
+                self.progress, self.progress_text = 0.0, "checking with the range finder · aiming"
+        if devices is None:
             t = Target(p, hit.X_world, hit.name, hit.distance_m, hit.normal)
+            return self._keep(t, f"Target on {hit.name}: {t.text()} m ({NOT_CHECKED}).")
+        pm, reach = self._measure(cam, T, p, devices, hit)
+        with self.lock:
+            self.progress = None
+            self._check_open()
+            t = self._target(p, origin, ray, hit, pm, reach, T, turret_cov)
+            if pm is not None and pm.hit:
+                self.site.set_beam(pm.X_world)
+            lead = f"Target on {t.object}: {t.text()} m" if hit is not None else f"Target (range finder only): {t.text()} m"
+            return self._keep(t, f"{lead}. {t.warning or t.check[0].upper() + t.check[1:]}.")
+
+    def _keep(self, t: Target, message: str) -> Target:
+        with self.lock:
             self.targets.append(t)
-            self.message = f"Target on {hit.name}: {t.text()} m"
+            self.message = message
             return t
 
+    def _measure(self, cam, T, p, devices, hit):
+        """The range finder put on pixel p (outside the lock): (PixelMeasurement, "") or (None, why
+        not) when the turret cannot reach it. A device fault → WorkflowError; a cancel → Cancelled."""
+        from app.devices.acquisition import AcquisitionCancelled, measure_at_pixel
+        from app.devices.errors import DeviceError, TurretLimitError
+        from core.rangefinder import beam_point
+
+        def report(prog) -> None:
+            self.progress = prog.done / max(prog.total, 1)
+            self.progress_text = ("checking with the range finder · aiming" if "aiming" in prog.message
+                                  else "checking with the range finder · measuring")
+            if prog.beam is not None and np.isfinite(prog.beam[2]):
+                self.site.set_beam(beam_point(T, *prog.beam))
+
+        guess = float(cam.depth(hit.X_world)) if hit is not None else 2.0
+        try:
+            pm = measure_at_pixel(cam, T, p, devices.turret, devices.rangefinder, shots=self.shots,
+                                  spec=self.site.scene.rangefinder, depth_guess_m=guess, progress=report,
+                                  cancel=self.cancel_event)
+        except AcquisitionCancelled:
+            self.progress = None
+            raise Cancelled() from None
+        except TurretLimitError as exc:
+            self.progress = None
+            if hit is None:
+                raise WorkflowError(f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object of the database and the range "
+                                    f"finder cannot aim there ({exc}); click on an object or the table") from None
+            return None, f"{NOT_CHECKED}: the turret cannot aim there"
+        except DeviceError as exc:
+            self.progress = None
+            raise WorkflowError(f"device fault while checking the target with the range finder: {exc}. Check the "
+                                "devices and click again") from None
+        return pm, ""
+
+    def _target(self, p, origin, ray, hit, pm, reach: str, T, turret_cov) -> Target:
+        """The target from the database's hit (or None) and the range finder's measurement (or None)."""
+        if pm is None or not pm.hit:
+            if hit is None:
+                raise WorkflowError(f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object of the database and the range "
+                                    "finder got no return there; click on an object or the table")
+            why = reach or f"{NOT_CHECKED}: it got no return there"
+            return Target(p, hit.X_world, hit.name, hit.distance_m, hit.normal, check=why)
+        X_rf = np.asarray(pm.X_world, float)
+        sigma, s_rf, s_T = along_ray_sigma(pm.cov_world, X_rf, ray, T, turret_cov)
+        depth_rf = float((X_rf - origin) @ ray)
+        details = {"sigma_rangefinder_m": s_rf, "sigma_turret_m": s_T, "aim_error_px": float(pm.aim.error_px)}
+        off = (f" (the beam landed {pm.aim.error_px:.1f} px from the click)"
+               if np.isfinite(pm.aim.error_px) and pm.aim.error_px > AIM_OFF_PX else "")
+        limit = LIMIT_SIGMA * sigma
+        if hit is None:
+            warning = (f"Warning: the database has no surface here but the range finder met one {100 * depth_rf:.1f} cm "
+                       f"away at {_xyz(X_rf)} m: something not in the database is in the way{off}")
+            return Target(p, X_rf, NOT_IN_DATABASE, float(np.linalg.norm(X_rf - origin)), np.full(3, np.nan),
+                          rangefinder_X=X_rf, sigma_m=sigma, check="the range finder's point: the database has no surface here",
+                          warning=warning, details=details)
+        delta = depth_rf - hit.distance_m
+        if abs(delta) <= limit:
+            check = (f"the range finder agrees: {1000 * abs(delta):.1f} mm along the line of sight, within "
+                     f"{LIMIT_SIGMA:.0f}σ = {1000 * limit:.1f} mm{off}")
+            warning = ""
+        else:
+            check = f"the range finder disagrees by {100 * delta:+.1f} cm along the line of sight ({LIMIT_SIGMA:.0f}σ = {1000 * limit:.1f} mm){off}"
+            if delta < 0:
+                warning = (f"Warning: the range finder met a surface {100 * -delta:.1f} cm in front of {hit.name}, at "
+                           f"{_xyz(X_rf)} m: something not in the database is in the way{off}")
+            else:
+                warning = (f"Warning: the range finder met no surface at {hit.name} but one {100 * delta:.1f} cm behind "
+                           f"it, at {_xyz(X_rf)} m: {hit.name} is not where the database has it; update its pose{off}")
+        return Target(p, hit.X_world, hit.name, hit.distance_m, hit.normal, rangefinder_X=X_rf,
+                      disagreement_m=float(delta), sigma_m=sigma, check=check, warning=warning, details=details)
+
+    # ------------------------------------------------------------------ other actions
     def clear(self) -> None:
         """Forget the targets designated so far."""
         with self.lock:
@@ -78,8 +248,12 @@ class DesignateTarget(Workflow):
     def next_step(self) -> str:
         if self.finished:
             return "Done."
+        if self.progress is not None:
+            return f"Checking the target with the range finder… {self.progress_text} (Cancel stops it)"
         if self.targets:
-            return f"Target: {self.targets[-1].text()} m on {self.targets[-1].object}. Click another point, or Done."
+            t = self.targets[-1]
+            warn = f" {t.warning}." if t.warning else ""
+            return f"Target: {t.text()} m on {t.object}.{warn} Click another point, or Done."
         return "Click a point on an object or the table in the video."
 
     def marks(self) -> Marks:
@@ -89,9 +263,24 @@ class DesignateTarget(Workflow):
             if self.targets:
                 X = np.array([t.X_world for t in self.targets])
                 m.targets = cam.project(X)
-                m.labels = [(uv, f"T{i + 1}") for i, uv in enumerate(m.targets)]
+                m.labels = [(uv, f"T{i + 1}" + (" ⚠ range finder disagrees" if t.warning else ""))
+                            for i, (uv, t) in enumerate(zip(m.targets, self.targets))]
+                # the range finder's points where they differ from the target (a disagreement or its only point)
+                rf = [(i, t.rangefinder_X) for i, t in enumerate(self.targets) if t.warning and t.rangefinder_X is not None]
+                rf = [(i, X) for i, X in rf if cam.depth(X) > 0]
+                if rf:
+                    m.points = cam.project(np.array([X for _, X in rf]))
+                    m.labels += [(uv + [0.0, 14.0], f"R{i + 1}") for (i, _), uv in zip(rf, m.points)]
             return m
 
     def summary(self) -> dict[str, Any]:
         with self.lock:
-            return {"targets": [{"object": t.object, "X_world": t.X_world.tolist(), "range_m": t.range_m} for t in self.targets]}
+            return {"targets": [{"object": t.object, "X_world": t.X_world.tolist(), "range_m": t.range_m,
+                                 "check": t.check, "warning": t.warning,
+                                 "rangefinder_X": None if t.rangefinder_X is None else t.rangefinder_X.tolist(),
+                                 "disagreement_mm": _mm(t.disagreement_m), "sigma_mm": _mm(t.sigma_m)}
+                                for t in self.targets]}
+
+
+def _mm(v: float) -> float | None:
+    return None if not np.isfinite(v) else 1000 * float(v)

@@ -38,7 +38,7 @@ import numpy as np
 from core.geometry import Plane
 from core.rangefinder import RangeFinderSpec, RangeScan, aim, beam_point, beam_point_cov
 
-from .base import Cancelled, Ghost, Marks, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, Cancelled, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
 from .snapping import SnapMixin, snap_marks
 
 __all__ = ["ModelObject", "SHAPES", "table_support"]
@@ -50,6 +50,13 @@ MIN_SEGMENT_PX = 3.0
 # (docs/modeling.md), so the box's run ends where its edge is.
 BOX_SCAN_FRACTIONS = (0.5, 0.75)
 BOX_SCAN_MARGIN_M = 0.03
+# A model is weak (Accept asks once more) when a dimension's σ exceeds this, or a snap moved a click
+# more than MAX_SNAP_MOVE_PX.
+WEAK_SIGMA_MM = 5.0
+MAX_SNAP_MOVE_PX = 2.0
+CYLINDER_METHODS = {"fused": "fused (all measurements)", "tangential": "tangential planes (camera + range finder)",
+                    "bisecting": "bisecting planes (camera + range finder)",
+                    "rf_tangential": "tangential planes (range finder alone)"}
 
 
 def table_support(site) -> Plane | None:
@@ -68,7 +75,19 @@ class ModelObject(SnapMixin, Workflow):
     name = "model_object"
     title = "Model object"
     actions = ("click", "add_segment", "remove_last", "measure", "scan", "next_face", "solve", "accept", "cancel",
-               "refuse_snap", "set_snap")
+               "refuse_snap", "set_snap", "set_method")
+    controls = (
+        Control("measure", "Measure face", "M", kind="long", color="blue",
+                hint="The turret scans range points inside the face's clicked sides"),
+        Control("scan", "Scan profile", "P", kind="long", color="blue",
+                hint="Two horizontal range profiles across the object"),
+        Control("set_method", "Method", kind="choice", hint="How a cylinder or cone is fitted (the paper's three, or fused)"),
+        Control("solve", "Solve", "R", color="blue", hint="Build the model from the clicks and ranges"),
+        Control("accept", "Accept", "enter", color="green", hint="Add the modelled object to the database"),
+        Control("refuse_snap", "Refuse snap", "U", hint="Use the last side as clicked, not moved onto the image's edge"),
+        Control("remove_last", "Remove last", "backspace", hint="Undo the last click, measurement or face"),
+        CANCEL,
+    )
 
     def __init__(self, site, client: str = "operator", shape: str = "box", vertical: bool = True, on_table: bool = True,
                  object_name: str | None = None, method: str = "fused", spacing_px: float | None = None,
@@ -144,9 +163,15 @@ class ModelObject(SnapMixin, Workflow):
             self._check_open()
             if self.pending is None:
                 if self.shape != "box" and len(self.silhouettes) == 2:
-                    raise WorkflowError("both silhouettes are clicked: Scan profile next (or Remove last)")
+                    raise WorkflowError("Both silhouettes are clicked: Scan profile next, or Remove last to click one again.")
+                if self.shape == "box" and self.faces[-1]["points"] is not None:
+                    if len(self.faces) == 3:
+                        raise WorkflowError("A box shows at most 3 faces and 3 are measured: Solve now.")
+                    self.faces.append(self._new_face())  # the measured face is done: this click starts the next one
+                    self.result = None
+                    self.message = f"Face {len(self.faces)} started: click two points on each of its sides."
                 if self.shape == "box" and len(self._segments) == 4:
-                    raise WorkflowError("a face has at most 4 sides: Measure face next (or Remove last)")
+                    raise WorkflowError("A face has at most 4 sides: Measure face next, or Remove last.")
                 self.pending = p
                 return
             seg, snap = self._finish_segment(self.pending, p, MIN_SEGMENT_PX)
@@ -160,10 +185,25 @@ class ModelObject(SnapMixin, Workflow):
         """A clicked segment (2, 2) at once (for scripts)."""
         self._click_segment(seg_uv)
 
+    def set_method(self, method: str) -> None:
+        """Cylinder or cone: the fitting method (``CYLINDER_METHODS``) Solve uses."""
+        with self.lock:
+            self._check_open()
+            if self.shape == "box":
+                raise WorkflowError("a box has one method; the method is for cylinders and cones")
+            if method not in CYLINDER_METHODS:
+                raise WorkflowError(f"the method is one of {', '.join(CYLINDER_METHODS)}, not {method!r}")
+            if method != self.method:
+                self.method = method
+                self.result = None
+                self.message = f"Method: {CYLINDER_METHODS[method]}. Solve again."
+
     def remove_last(self) -> None:
         """Undo the last click, measurement or face."""
         with self.lock:
             self._check_open()
+            if not self._has_something():
+                raise WorkflowError("there is no click or measurement to remove")
             self.result = None
             if self.pending is not None:
                 self.pending = None
@@ -183,6 +223,13 @@ class ModelObject(SnapMixin, Workflow):
             elif self.silhouettes:
                 self.silhouettes.pop()
                 self.silhouette_snaps.pop()
+
+    def _has_something(self) -> bool:
+        if self.pending is not None or self.scans:
+            return True
+        if self.shape == "box":
+            return len(self.faces) > 1 or bool(self.faces[0]["segs"]) or self.faces[0]["points"] is not None
+        return bool(self.silhouettes)
 
     def next_face(self) -> None:
         """Box: the current face is done (sides clicked and measured); go on to the next one."""
@@ -507,12 +554,12 @@ class ModelObject(SnapMixin, Workflow):
                 measurements = {"scans": [{"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m}
                                           for s in self.scans]}
             try:
-                rec = self.site.write(lambda db: db.add_object(
+                rec = self.site.add_object(
                     self.object_name, r.kind, r.model, r.T_world_obj, dims=r.dimensions,
                     sigmas={k: v for k, v in r.sigmas.items() if np.isfinite(v)}, status="modelled",
                     method=f"model {r.kind} ({r.method})", client=self.client, clicks=clicks, measurements=measurements,
                     residuals={k: np.asarray(v) for k, v in r.residuals.items()},
-                    note=f"hints: {'vertical' if self.vertical else 'oblique'}{', on the table' if self.on_table else ''}"))
+                    note=f"hints: {'vertical' if self.vertical else 'oblique'}{', on the table' if self.on_table else ''}")
             except ValueError as exc:
                 raise WorkflowError(f"the database refused the object: {exc}") from None
             self.accepted = True
@@ -521,35 +568,82 @@ class ModelObject(SnapMixin, Workflow):
             return rec
 
     # ------------------------------------------------------------------ display
-    @property
-    def next_step(self) -> str:
-        if self.accepted:
-            return f"Done: {self.object_name} is in the database."
-        if self.cancelled:
-            return "Cancelled: nothing was written."
+    def _step(self) -> Step:
+        if self.finished:
+            return self._finished_step()
         if self.progress is not None:
-            return f"Measuring… {self.progress_text} (Cancel stops it)"
+            return Step("measuring", f"Measuring… {self.progress_text}. " + "{cancel} stops it.", frozenset({"cancel"}),
+                        clicks=False)
+        base = {"cancel"} | ({"remove_last"} if self._has_something() else set())
+        snap, _ = self._last_snap()
+        if snap is not None and snap.applied and self.pending is None:
+            base.add("refuse_snap")
+        devices = self.site.devices is not None
+        no_dev = "" if devices else " (No range finder and turret are connected: restart mcit serve with devices to measure.)"
+        if self.shape != "box":
+            base.add("set_method")
         if self.result is not None:
-            return f"{self.result.dimension_text('cm')}. Accept, or add measurements and Solve again."
+            again = {"solve"} | ({"scan"} if devices and (self.shape != "box" or self.box_faces()) else set())
+            return Step("review", f"{self.result.dimension_text('cm')}. " + "{accept} to add it, or add measurements and "
+                        "{solve} again.", frozenset(base | again | {"accept"}))
         if self.pending is not None:
-            return "Click the other end of that edge."
+            return Step("click_end", "Click the other end of that edge.", frozenset(base))
         if self.shape == "box":
             face = self.faces[-1]
             n = len(self.faces)
+            measured = any(f["points"] is not None for f in self.faces)
+            solvable = {"solve"} if measured else set()
             if face["points"] is not None:
                 if self.scans:
-                    return "Profiles scanned: Solve (fused with the faces and clicks)."
-                return (f"Face {n} measured. Next face (click its sides) for more accuracy, Scan profile for the "
-                        "far edges, or Solve.")
+                    return Step("scanned", "Profiles scanned: {solve} (fused with the faces and clicks).",
+                                frozenset(base | {"solve", "scan"}))
+                nxt = "" if n == 3 else "Click the sides of another face for more accuracy, "
+                scan = "{scan} for the far edges, or " if devices else ""
+                return Step("face_measured", f"Face {n} measured. {nxt}{scan}" + "{solve}.",
+                            frozenset(base | {"solve"} | ({"scan"} if devices else set())))
+            tail = " Or {solve} with the faces measured." if measured else ""
             if len(face["segs"]) < 2:
-                return f"Face {n}: click two points on each side of one visible face (side {len(face['segs']) + 1})."
-            return f"Face {n}: click more sides, or Measure face (the turret scans inside them)."
+                return Step("click_sides", f"Face {n}: click two points on each side of one visible face "
+                            f"(side {len(face['segs']) + 1}).{tail}", frozenset(base | solvable))
+            if not devices:
+                return Step("sides_clicked", f"Face {n}: {len(face['segs'])} sides clicked.{no_dev}{tail}",
+                            frozenset(base | solvable))
+            return Step("sides_clicked", f"Face {n}: click more sides, or " + "{measure} (the turret scans inside them)."
+                        + tail, frozenset(base | solvable | {"measure"}))
         if len(self.silhouettes) < 2:
             which = "left" if not self.silhouettes else "right"
-            return f"Click the {which} silhouette of the {self.shape}: its bottom end, then its top end."
+            return Step("click_silhouettes", f"Click the {which} silhouette of the {self.shape}: its bottom end, then its "
+                        "top end.", frozenset(base))
+        tangential = {"solve"} if self.method == "tangential" else set()
         if not self.scans:
-            return "Scan profile: the turret sweeps the range finder across the object at two heights."
-        return f"Solve ({self.method})."
+            if not devices:
+                return Step("no_devices", f"Both silhouettes clicked.{no_dev}", frozenset(base | tangential))
+            return Step("scan", "{scan}: the turret sweeps the range finder across the object at two heights.",
+                        frozenset(base | tangential | {"scan"}))
+        return Step("solve", "{solve} " + f"by {CYLINDER_METHODS.get(self.method, self.method)} (or choose another "
+                    "{set_method}).", frozenset(base | {"solve", "scan"}))
+
+    def choice_value(self, action: str) -> Any:
+        return self.method if action == "set_method" else None
+
+    def choices(self, action: str) -> list[tuple[str, Any]]:
+        if action == "set_method" and self.shape != "box":
+            return [(text, key) for key, text in CYLINDER_METHODS.items()]
+        return []
+
+    def weaknesses(self) -> list[str]:
+        with self.lock:
+            r = self.result
+            if r is None:
+                return []
+            out = [f"{k} is uncertain: σ {1000 * v:.1f} mm (more than {WEAK_SIGMA_MM:.0f} mm)"
+                   for k, v in r.sigmas.items() if np.isfinite(v) and 1000 * v > WEAK_SIGMA_MM]
+            snaps = [sn for f in self.faces for sn in f["snaps"]] if self.shape == "box" else list(self.silhouette_snaps)
+            out += [f"a snap moved a click {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
+                    for sn in snaps if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX]
+            if self.shape == "box" and len(self.box_faces()) == 1 and not self.scans:
+                out.append("one face measured: the box's depth rests on the clicks alone (measure a second face, or scan)")
+            return out
 
     def marks(self) -> Marks:
         with self.lock:

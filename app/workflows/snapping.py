@@ -143,6 +143,10 @@ class SnapMixin:
                 "Clicks will be used as clicked (snapping off)."
 
     def _frame(self) -> np.ndarray | None:
+        """The frame the clicks were made on: the workflow's frozen frame, else the site's now."""
+        frame = getattr(self, "frame", None)
+        if frame is not None:
+            return frame.image
         try:
             return self.site.frame_at()
         except Exception as exc:  # noqa: BLE001 - a broken video must not stop the click: it is kept raw
@@ -177,7 +181,7 @@ class SnapMixin:
     def _snap_segment(self, seg: np.ndarray) -> ClickSnap | None:
         """Snap a finished segment (2, 2) on the current frame; None when snapping is off or the
         site has no video frames."""
-        if not self.snap or not self.site.has_frames:
+        if not self.snap or not (self.site.has_frames or getattr(self, "frame", None) is not None):
             return None
         from app.vision.snap import snap_segment
 
@@ -196,7 +200,7 @@ class SnapMixin:
                      vertex: int | None = None) -> ClickSnap | None:
         """Snap a clicked image point (2,) of a model vertex (if known) to the image's corner; None
         when snapping is off or the site has no video frames."""
-        if not self.snap or not self.site.has_frames:
+        if not self.snap or not (self.site.has_frames or getattr(self, "frame", None) is not None):
             return None
         from app.vision.corner import snap_corner
 

@@ -15,12 +15,39 @@ def _wrong_camera(true_cam: Camera) -> Camera:
     return Camera(H @ true_cam.C, true_cam.width, true_cam.height)
 
 
+def _visible_vertices(site, name):
+    """Vertices of ``name`` on an edge the camera sees (convex hidden-line removal)."""
+    obj = site.object(name)
+    wf = obj.model.wireframe(site.camera.center, obj.T_world_obj)
+    E = np.asarray(obj.model.edges)
+    vis = [int(k) for k, v, kind in zip(wf.edge_index, wf.visible, wf.kind) if v and kind == "edge"]
+    return sorted({int(v) for v in E[vis].ravel()})
+
+
 def _calibration_targets(site):
-    """(object name, vertex index) pairs spread in 3D: the box's corners and the table's top corners."""
-    box = site.object("parallelepiped")
+    """(object name, vertex index) pairs spread in 3D: the box's visible corners and the table's top corners."""
     table = site.object("table")
     top = np.argsort(table.vertices_world()[:, 2])[-4:]
-    return [("parallelepiped", k) for k in range(8)] + [("table", int(k)) for k in top]
+    return [("parallelepiped", k) for k in _visible_vertices(site, "parallelepiped")] + [("table", int(k)) for k in top]
+
+
+def test_a_click_picks_only_a_visible_corner(site):
+    """A click nearer a hidden corner than a visible one picks the visible one (the hidden one cannot be seen)."""
+    box = site.object("parallelepiped")
+    V = box.vertices_world()
+    visible = set(_visible_vertices(site, "parallelepiped"))
+    hidden = [k for k in range(len(V)) if k not in visible]
+    assert hidden
+    cam = site.camera
+    uv = cam.project(V)
+    h, near = min(((h, k) for h in hidden for k in visible), key=lambda hk: np.linalg.norm(uv[hk[1]] - uv[hk[0]]))
+    gap = np.linalg.norm(uv[near] - uv[h])
+    assert gap < 40
+    click = uv[h] + 0.4 * (uv[near] - uv[h])  # nearer the hidden corner than the visible one
+    wf = CalibrateCamera(site, client="alice")
+    wf.click(click)
+    assert wf.pending_vertex == ("parallelepiped", near)
+    assert "circled" in wf.next_step
 
 
 def test_click_pairs_solve_accept_updates_every_reader(site, scene, db):
@@ -34,10 +61,11 @@ def test_click_pairs_solve_accept_updates_every_reader(site, scene, db):
         wf.click(site.camera.project(X) + rng.normal(0, 0.5, 2))  # the corner as drawn (wrong C)
         assert wf.state == "click_image" and name in wf.next_step
         wf.click(true_cam.project(X) + rng.normal(0, 0.5, 2))  # where it really is
-    assert wf.summary()["pairs"] == 12
+    n = len(_calibration_targets(site))
+    assert wf.summary()["pairs"] == n
     result = wf.solve()
     assert result.rms_px < 1.0
-    assert len(wf.summary()["errors_px"]) == 12
+    assert len(wf.summary()["errors_px"]) == n
     assert len(db.calibrations("camera")) == n_cal  # nothing written before accept
     wf.accept()
     assert wf.accepted and len(db.calibrations("camera")) == n_cal + 1
@@ -70,7 +98,7 @@ def test_too_few_or_coplanar_points_refuse_and_write_nothing(site, db):
 
 def test_a_click_far_from_every_corner_is_refused(site):
     wf = CalibrateCamera(site)
-    with pytest.raises(WorkflowError, match="no model vertex within"):
+    with pytest.raises(WorkflowError, match="No visible model corner within"):
         wf.click([2.0, 250.0])
     assert wf.state == "pick_model" and wf.pending_X is None
     with pytest.raises(WorkflowError, match="finite"):
