@@ -222,7 +222,8 @@ class DesignateTarget(Workflow):
         else:
             check = f"the range finder disagrees by {100 * delta:+.1f} cm along the line of sight ({LIMIT_SIGMA:.0f}σ = {1000 * limit:.1f} mm){off}"
             if delta < 0:
-                warning = (f"Warning: the range finder met a surface {100 * -delta:.1f} cm in front of {hit.name}, at "
+                warning = (f"Warning: the range finder met a surface {100 * -delta:.1f} cm in front of the database's "
+                           f"{hit.name}, at "
                            f"{_xyz(X_rf)} m: something not in the database is in the way{off}")
             else:
                 warning = (f"Warning: the range finder met no surface at {hit.name} but one {100 * delta:.1f} cm behind "

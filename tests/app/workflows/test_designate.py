@@ -33,3 +33,139 @@ def test_table_then_nothing(site):
     assert len(wf.targets) == 1
     wf.accept()
     assert wf.finished
+
+
+# ---------------------------------------------------------------------- checked by the range finder
+def _true_distance(scene, name, X):
+    """Distance of a world point to a scene body's true surface."""
+    import trimesh
+
+    b = scene.body(name)
+    V, F = b.model.triangles()
+    T = b.pose_at(0.0)
+    mesh = trimesh.Trimesh(V @ T[:3, :3].T + T[:3, 3], F, process=False)
+    return float(trimesh.proximity.closest_point(mesh, np.asarray(X, float).reshape(1, 3))[1][0])
+
+
+def _on_body(scene, cam, name):
+    """The pixel of a body's centre: the camera sees the body there (it is in front of its centre)."""
+    b = scene.body(name)
+    T = b.pose_at(0.0)
+    lo, hi = b.model.bounds()
+    return cam.project(T[:3, :3] @ ((lo + hi) / 2) + T[:3, 3])
+
+
+def test_without_devices_the_target_is_not_checked(site):
+    box = site.object("parallelepiped")
+    X = box.T_world_obj[:3, :3] @ np.array([0.0, 0.0, 0.132]) + box.T_world_obj[:3, 3]
+    wf = DesignateTarget(site)
+    t = wf.click(site.camera.project(X))
+    assert t.rangefinder_X is None and t.warning == "" and "not checked by the range finder" in t.check
+    assert wf.summary()["targets"][0]["check"] == "not checked by the range finder"
+    assert "not checked by the range finder" in wf.message
+
+
+def test_a_known_object_agrees_with_the_range_finder(device_site):
+    site = device_site
+    box = site.object("parallelepiped")
+    X = box.T_world_obj[:3, :3] @ np.array([0.03, -0.02, 0.132]) + box.T_world_obj[:3, 3]  # its top face
+    wf = DesignateTarget(site)
+    t = wf.click(site.camera.project(X))
+    assert t.object == "parallelepiped" and np.allclose(t.X_world, X, atol=1e-6)
+    assert t.warning == "" and "agrees" in t.check, t.check
+    assert t.rangefinder_X is not None and abs(t.disagreement_m) <= 3 * t.sigma_m
+    assert 0.004 < t.sigma_m < 0.01  # about σ_ρ = 5 mm along a line of sight near the beam's
+    assert np.linalg.norm(site.beam_X_world - t.rangefinder_X) < 1e-9  # the spot shows the range finder's point
+    assert wf.progress is None and len(wf.marks().points) == 0  # nothing to flag
+
+
+@pytest.mark.parametrize("name", ["unknown_box", "unknown_cylinder"])
+def test_an_object_not_in_the_database_is_flagged(device_site, fast_scene, name):
+    """The bundled scene's unknown box and cylinder stand on the table but are not in the seeded
+    database: the database target is on what lies behind them, the range finder meets them."""
+    site = device_site
+    assert name not in [o.name for o in site.objects()]
+    wf = DesignateTarget(site)
+    t = wf.click(_on_body(fast_scene, site.camera, name))
+    assert t.object == "table"  # the database sees the table behind it
+    assert t.warning and "something not in the database is in the way" in t.warning
+    assert t.disagreement_m < -3 * t.sigma_m
+    # the range finder's point lies on the body (within a few σ of its true surface)
+    assert _true_distance(fast_scene, name, t.rangefinder_X) < 3 * t.sigma_m
+    assert "Warning" in wf.message and "Warning" in wf.next_step
+    m = wf.marks()
+    assert len(m.targets) == 1 and len(m.points) == 1  # the database target and the range finder's point
+    assert any("R1" == text for _, text in m.labels)
+    row = wf.summary()["targets"][0]
+    assert row["warning"] == t.warning and row["disagreement_mm"] < 0
+
+
+def test_no_database_surface_but_the_range_finder_hits(device_site, fast_scene):
+    site = device_site
+    wall = fast_scene.body("back_wall")
+    T = wall.pose_at(0.0)
+    lo, hi = wall.model.bounds()
+    X = T[:3, :3] @ np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.8 * hi[2] + 0.2 * lo[2]]) + T[:3, 3]
+    uv = site.camera.project(X)
+    o, d = site.camera.rays(uv.reshape(1, 2))
+    assert site.raycast(o, d[0]) is None  # above the table: no database surface
+    wf = DesignateTarget(site)
+    t = wf.click(uv)
+    assert t.object == "not in the database" and t.warning and "something not in the database is in the way" in t.warning
+    assert np.array_equal(t.X_world, t.rangefinder_X)
+    assert min(_true_distance(fast_scene, b.name, t.X_world) for b in fast_scene.bodies) < 3 * t.sigma_m
+
+
+def test_a_device_fault_keeps_nothing(device_site, devices):
+    from app.devices.faults import Fault
+
+    site = device_site
+    box = site.object("parallelepiped")
+    X = box.T_world_obj[:3, :3] @ np.array([0.0, 0.0, 0.132]) + box.T_world_obj[:3, 3]
+    wf = DesignateTarget(site)
+    devices.site.rangefinder.unplug(np.inf)
+    with pytest.raises(WorkflowError, match="device fault"):
+        wf.click(site.camera.project(X))
+    assert wf.targets == [] and wf.progress is None
+
+
+def test_a_database_object_that_is_not_there_is_flagged(device_site, db):
+    """An object in the database where the workcell has none: the range finder sees past it."""
+    site = device_site
+    box = site.object("parallelepiped")
+    T = box.T_world_obj.copy()
+    T[:3, 3] += [-0.35, 0.0, 0.0]  # on a bare part of the table
+    db.add_object("ghost", "box", box.model, T, status="known", method="test")
+    site.poll()
+    X = T[:3, :3] @ np.array([0.0, 0.0, 0.132]) + T[:3, 3]
+    wf = DesignateTarget(site)
+    t = wf.click(site.camera.project(X))
+    assert t.object == "ghost" and t.disagreement_m > 3 * t.sigma_m
+    assert "ghost is not where the database has it" in t.warning
+
+
+def test_the_turret_calibrations_share_of_sigma(device_site):
+    """σ along the ray includes the turret calibration's covariance once there is one; its share
+    matches a Monte Carlo draw of the turret pose."""
+    from app.workflows.designate import along_ray_sigma
+    from core.calibration import perturbed_turret
+
+    site = device_site
+    box = site.object("parallelepiped")
+    uv = site.camera.project(box.T_world_obj[:3, :3] @ np.array([0.0, 0.0, 0.132]) + box.T_world_obj[:3, 3])
+    wf = DesignateTarget(site)
+    plain = wf.click(uv)
+    assert plain.details["sigma_turret_m"] == 0.0
+    cov = np.diag([np.radians(0.3)] * 3 + [0.003] * 3) ** 2
+    site.set_turret(site.T_world_turret, rms_m=0.001, residuals_m=np.zeros((1, 3)), cov=cov, measurements={}, client="test")
+    t = wf.click(uv)
+    assert t.sigma_m > plain.sigma_m and t.details["sigma_turret_m"] > 0.003
+    assert t.sigma_m == pytest.approx(np.hypot(t.details["sigma_rangefinder_m"], t.details["sigma_turret_m"]))
+    T = site.T_world_turret
+    _, d = site.camera.rays(uv.reshape(1, 2))
+    x_t = np.linalg.solve(T, np.append(t.rangefinder_X, 1.0))
+    rng = np.random.default_rng(0)
+    draws = rng.multivariate_normal(np.zeros(6), cov, 4000)
+    along = [float(d[0] @ (perturbed_turret(T, s) @ x_t)[:3]) for s in draws]
+    _, _, s_T = along_ray_sigma(np.zeros((3, 3)), t.rangefinder_X, d[0], T, cov)
+    assert s_T == pytest.approx(np.std(along), rel=0.1)
