@@ -169,3 +169,32 @@ def test_the_turret_calibrations_share_of_sigma(device_site):
     along = [float(d[0] @ (perturbed_turret(T, s) @ x_t)[:3]) for s in draws]
     _, _, s_T = along_ray_sigma(np.zeros((3, 3)), t.rangefinder_X, d[0], T, cov)
     assert s_T == pytest.approx(np.std(along), rel=0.1)
+
+
+def test_the_measurement_runs_outside_the_workflows_lock(device_site, devices):
+    """The redraw loop calls marks(), which takes the lock: it must be free while the devices run."""
+    import threading
+
+    site = device_site
+    box = site.object("parallelepiped")
+    uv = site.camera.project(box.T_world_obj[:3, :3] @ np.array([0.0, 0.0, 0.132]) + box.T_world_obj[:3, 3])
+    wf = DesignateTarget(site)
+    free = []
+    measure = devices.rangefinder.measure
+
+    def watched(*args, **kwargs):
+        def probe():
+            got = wf.lock.acquire(blocking=False)
+            free.append(got)
+            if got:
+                wf.marks()
+                wf.lock.release()
+
+        th = threading.Thread(target=probe)
+        th.start()
+        th.join()
+        return measure(*args, **kwargs)
+
+    devices.rangefinder.measure = watched
+    wf.click(uv)
+    assert free and all(free)
