@@ -573,6 +573,22 @@ class Database:
             rows = conn.execute(q, args).fetchall()
         return [self._change_from_row(r) for r in reversed(rows)]
 
+    def history_since(self, change_id: int, *, limit: int | None = None) -> list[ChangeRecord]:
+        """The changes after change ``change_id`` (every object and calibration), oldest first, at
+        most ``limit`` of them (the oldest). A range on the history's primary key: cheap to ask
+        often (an empty list when nothing happened)."""
+        q = f"{self._HISTORY_SELECT} WHERE h.id > ? ORDER BY h.id"
+        if limit is not None:
+            q += f" LIMIT {max(0, int(limit))}"
+        with self._read() as conn:
+            rows = conn.execute(q, (int(change_id),)).fetchall()
+        return [self._change_from_row(r) for r in rows]
+
+    def last_change_id(self) -> int:
+        """The id of the latest change in the history (0 when it is empty)."""
+        with self._read() as conn:
+            return int(conn.execute("SELECT coalesce(max(id), 0) FROM history").fetchone()[0])
+
     def _revert(self, change_id: int, which: str, expected_version, client, note) -> ChangeRecord:
         with self.transaction() as conn:
             change = self._change_record(conn, change_id)

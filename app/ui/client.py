@@ -219,7 +219,7 @@ class ClientPanel:
         name = self.session.selected
         if name is None:
             raise WorkflowError("select an object first (click its wireframe, or choose it in the list)")
-        self.app.site.write(lambda db: db.set_status(name, "stale", method="operator", client=self.session.client))
+        self.app.site.set_status(name, "stale", method="operator", client=self.session.client)
         self.notify("Marked stale", f"{name} is drawn orange until its pose is updated.", "blue")
 
     def _on_view(self, event) -> None:

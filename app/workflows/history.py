@@ -38,7 +38,7 @@ class History(Workflow):
         with self.lock:
             self._check_open()
             try:
-                rec = self.site.write(lambda db: getattr(db, which)(int(change_id), client=self.client))
+                rec = getattr(self.site, which)(int(change_id), client=self.client)
             except NotFoundError as exc:
                 raise WorkflowError(f"{exc}; pick a change number from the list") from None
             except ConflictError as exc:

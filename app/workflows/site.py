@@ -2,15 +2,21 @@
 the database, the devices and the scene clock, shared by every operator.
 
 Workflows read the site through snapshots (``objects()``, ``camera``) and write only through
-``Site``'s methods, each one database transaction; every write bumps ``revision`` so that
-every client's overlay redraws. ``poll()`` also notices changes made by another process (the
+``Site``'s named methods (``update_pose``, ``add_object``, ``set_status``, ``undo``, ``restore``,
+``set_camera``, ``set_turret``), each one database transaction; every write bumps ``revision`` so
+that every client's overlay redraws. ``poll()`` also notices changes made by another process (the
 ``mcit db`` command, a second server on the same file).
+
+Every change — through this Site by any client, or by another process once ``poll()`` sees it —
+joins the change feed: ``changes_since(seq)`` lists them as ``Change`` (who, what in one sentence,
+which object, when), for the panel to tell each operator what the others did.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -21,7 +27,9 @@ from app.scene import Scene
 from core.brep import BRep
 from core.camera import Camera
 
-__all__ = ["SiteObject", "RayHit", "Site"]
+__all__ = ["SiteObject", "RayHit", "Change", "Site"]
+
+FEED_LENGTH = 500  # the changes the feed keeps (a client further behind gets the last ones)
 
 
 @dataclass(frozen=True)
@@ -58,6 +66,51 @@ class RayHit:
     name: str
     distance_m: float
     normal: np.ndarray
+
+
+@dataclass(frozen=True)
+class Change:
+    """One change of the database, as announced to the operators.
+
+    seq : the history's change number (``mcit db history``, the History workflow), increasing.
+    who : the client that made it. what : one plain sentence ("moved box_1", "added box_2",
+    "marked table stale", "calibrated the camera", "undid change #12"). object_name : the object
+    it concerns, None for a calibration. when : wall time, seconds since the epoch.
+    """
+
+    seq: int
+    who: str
+    what: str
+    object_name: str | None
+    when: float
+
+
+def _change_sentence(rec: Any) -> str:
+    """What an ``app.db.ChangeRecord`` did, in one plain sentence (without who)."""
+    name = rec.object_name or "an object"
+    if rec.action == "calibration":
+        kind = (rec.after or {}).get("kind", "")
+        if rec.undoes is not None:
+            return f"{'undid' if rec.method == 'undo' else 'went back to'} change #{rec.undoes} ({kind} calibration)"
+        return f"calibrated the {kind}" if kind else "stored a calibration"
+    if rec.action == "add":
+        return f"added {name}"
+    if rec.action == "remove":
+        return f"removed {name}"
+    if rec.action == "undo":
+        return f"undid change #{rec.undoes}" + (f" ({name})" if rec.object_name else "")
+    if rec.action == "restore":
+        return f"brought {name} back to change #{rec.undoes}"
+    before, after = rec.before or {}, rec.after or {}
+    differs = lambda k: k in after and not np.array_equal(np.asarray(before.get(k), dtype=object),  # noqa: E731
+                                                           np.asarray(after.get(k), dtype=object))
+    if differs("T_world_obj"):
+        return f"moved {name}"
+    if differs("model_id") or differs("kind") or differs("dims"):
+        return f"remodelled {name}"
+    if differs("status"):
+        return f"marked {name} {after['status']}"
+    return f"updated {name}"
 
 
 def _record_to_object(rec: Any) -> SiteObject:
@@ -116,6 +169,10 @@ class Site:
         self._turret_cov: np.ndarray | None = None
         self._T_world_turret = np.asarray(scene.turret.T_world_turret, float).copy()
         self.beam_X_world: np.ndarray | None = None  # the range finder's last measured point (shown)
+        # The change feed: changes from the history after the one that was last when the site opened.
+        self._feed: deque[Change] = deque(maxlen=FEED_LENGTH)
+        self._feed_seq = int(db.last_change_id())
+        self._feed_lock = threading.Lock()  # one reader of the history at a time (no change read twice)
         self._load_calibrations()
         self._frames: Callable[[float], Any] | None = None
         if isinstance(frames, str):
@@ -198,7 +255,9 @@ class Site:
 
     def poll(self) -> bool:
         """Re-read the database (objects and the latest calibrations); True, and ``revision``
-        bumped, when something changed since (e.g. ``mcit db undo`` from another process)."""
+        bumped, when something changed since (e.g. ``mcit db undo`` from another process).
+        Another process's changes join the change feed here."""
+        self._read_feed()
         fresh = tuple(_record_to_object(r) for r in self.db.objects())
         key = self._key(fresh)
         with self.lock:
@@ -248,6 +307,7 @@ class Site:
             self._camera_cov = None if cov is None else np.asarray(cov, float).copy()
             self._cal_ids["camera"] = rec.id
             self.revision += 1
+        self._read_feed()
 
     def set_turret(self, T_world_turret: np.ndarray, *, rms_m: float, residuals_m: np.ndarray, cov: np.ndarray,
                    measurements: dict, client: str, method: str = "turret calibration") -> None:
@@ -260,14 +320,86 @@ class Site:
             self._turret_cov = np.asarray(cov, float).copy()
             self._cal_ids["turret"] = rec.id
             self.revision += 1
+        self._read_feed()
 
     # ------------------------------------------------------------------ writing objects
-    def write(self, fn: Callable[[Any], Any]) -> Any:
-        """Run one database write ``fn(db)`` (one transaction: the Database's own methods are) and
-        redraw every client. Exceptions pass through; nothing is written when one is raised."""
-        result = fn(self.db)
+    # Each is one database transaction (the Database's own methods are), redraws every client and
+    # joins the change feed. Errors pass through (app.db.ConflictError when the object moved since
+    # it was read, NotFoundError, ValueError for refused values); nothing is written then.
+    def _wrote(self) -> None:
         self._changed()
-        return result
+        self._read_feed()
+
+    def update_pose(self, obj: SiteObject, T_world_obj: np.ndarray, cov: np.ndarray | None, *, method: str,
+                    client: str, clicks: Any = None, measurements: Any = None, residuals: Any = None,
+                    status: str = "known") -> Any:
+        """Write a new pose of ``obj`` (the snapshot the workflow started from: its ``version`` is
+        checked) with its covariance; its status becomes ``status``. T_world_obj : (4, 4). cov :
+        (6, 6) or None. clicks, measurements, residuals : what the estimate used, kept in the
+        history. Returns the new ``app.db.ObjectRecord``."""
+        rec = self.db.update_pose(obj.id, T_world_obj, cov, expected_version=obj.version, method=method, client=client,
+                                  clicks=clicks, measurements=measurements, residuals=residuals, status=status)
+        self._wrote()
+        return rec
+
+    def add_object(self, name: str, kind: str, model: BRep, T_world_obj: np.ndarray, *, method: str, client: str,
+                   cov: np.ndarray | None = None, dims: dict | None = None, sigmas: dict | None = None,
+                   status: str = "modelled", clicks: Any = None, measurements: Any = None, residuals: Any = None,
+                   note: str | None = None) -> Any:
+        """Add a new object (``app.db.Database.add_object``; ValueError if the name is taken).
+        T_world_obj : (4, 4), object → world. dims, sigmas : name → metres. Returns its record."""
+        rec = self.db.add_object(name, kind, model, T_world_obj, cov=cov, dims=dims, sigmas=sigmas, status=status,
+                                 method=method, client=client, clicks=clicks, measurements=measurements,
+                                 residuals=residuals, note=note)
+        self._wrote()
+        return rec
+
+    def set_status(self, name: str, status: str, *, client: str, method: str = "operator") -> Any:
+        """Mark the object ``name`` "known", "modelled" or "stale". Returns its new record."""
+        rec = self.db.set_status(name, status, method=method, client=client)
+        self._wrote()
+        return rec
+
+    def undo(self, change_id: int, *, client: str) -> Any:
+        """Undo change ``change_id`` (the object, or the calibration, as just before it); the undo is
+        itself a change. Returns its ``app.db.ChangeRecord``."""
+        rec = self.db.undo(int(change_id), client=client)
+        self._load_calibration_after_revert(rec)
+        self._wrote()
+        return rec
+
+    def restore(self, change_id: int, *, client: str) -> Any:
+        """Bring the object (or calibration) back to its state just after change ``change_id``."""
+        rec = self.db.restore(int(change_id), client=client)
+        self._load_calibration_after_revert(rec)
+        self._wrote()
+        return rec
+
+    def _load_calibration_after_revert(self, rec: Any) -> None:
+        if rec.calibration_id is not None:  # a calibration undone: use the one now latest
+            with self.lock:
+                self._load_calibrations()
+
+    # ------------------------------------------------------------------ change feed
+    @property
+    def change_seq(self) -> int:
+        """The number of the latest change in the feed (start a client's ``changes_since`` here)."""
+        with self._feed_lock:
+            return self._feed_seq
+
+    def changes_since(self, seq: int) -> list["Change"]:
+        """The changes after ``seq`` (a ``Change.seq`` or ``change_seq``), oldest first: those made
+        through this site, and those of other processes once ``poll()`` has seen them."""
+        with self._feed_lock:
+            return [c for c in self._feed if c.seq > seq]
+
+    def _read_feed(self) -> None:
+        """Add the history's new changes to the feed (a cheap query when there are none)."""
+        with self._feed_lock:
+            for rec in self.db.history_since(self._feed_seq):
+                self._feed.append(Change(int(rec.id), str(rec.client), _change_sentence(rec), rec.object_name,
+                                         float(rec.time)))
+                self._feed_seq = int(rec.id)
 
     def set_beam(self, X_world: np.ndarray | None) -> None:
         """Show the range finder's last measured point (None hides it)."""

@@ -243,9 +243,8 @@ class TrackObject(SnapMixin, Workflow):
                 residuals.update(n_samples=int(d.n_samples), n_inliers=int(d.n_inliers))
             T, cov = self.T_world_obj.copy(), None if self.cov is None else self.cov.copy()
             try:
-                rec = self.site.write(lambda db: db.update_pose(
-                    self.obj.id, T, cov, expected_version=self.obj.version, method="tracking", client=self.client,
-                    clicks=clicks, measurements=measurements, residuals=residuals))
+                rec = self.site.update_pose(self.obj, T, cov, method="tracking", client=self.client, clicks=clicks,
+                                            measurements=measurements, residuals=residuals)
             except ConflictError as exc:
                 raise WorkflowError(f"{exc}. Cancel, and Track again from the new pose") from None
             except ValueError as exc:

@@ -534,9 +534,8 @@ class UpdatePose(SnapMixin, Workflow):
             residuals = {"rms_px": r.rms_px, "click_residuals_px": r.click_residuals_px, "kinds": list(r.kinds)}
             method = "match+refine" if self.match_info is not None else ("p3l+refine" if self.chosen is not None else "refine")
             try:
-                rec = self.site.write(lambda db: db.update_pose(
-                    self.obj.id, r.T_world_obj, r.cov, expected_version=self.obj.version, method=method,
-                    client=self.client, clicks=clicks, residuals=residuals))
+                rec = self.site.update_pose(self.obj, r.T_world_obj, r.cov, method=method, client=self.client,
+                                            clicks=clicks, residuals=residuals)
             except ConflictError as exc:
                 raise WorkflowError(f"{exc}. Cancel, and update the pose again from the new one") from None
             except ValueError as exc:
