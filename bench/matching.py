@@ -16,7 +16,7 @@ the first third and one in the last third of the edge, then:
 
 "+ image" ranks the candidates also by how well all their visible edges lie on the frame's edges.
 Right: the top-ranked candidate's assignment is the true one up to a symmetry of the box (its four
-proper symmetries, app.vision.matching.edge_symmetries, map edges to edges and leave the picture
+proper symmetries, core.pose.edge_symmetries, map edges to edges and leave the picture
 unchanged). Also reported: how
 often the right assignment is among the candidates at all, and the time per call.
 
@@ -48,7 +48,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import app.vision.matching as matching  # noqa: E402
-from app.vision.matching import _base_triples, edge_symmetries, match_edges, p3l_all_triples  # noqa: E402
+from app.vision.matching import _base_triples, match_edges, p3l_all_triples  # noqa: E402
+from core.pose import edge_symmetries  # noqa: E402
 from app.vision.snap import snap_segment  # noqa: E402
 from app.vision.synthetic import edge_contrast, render_poses  # noqa: E402
 from core.brep import BRep  # noqa: E402

@@ -41,6 +41,7 @@ from core.brep import BRep
 from core.camera import Camera
 from core.pose import refine
 from core.pose.p3l import p3l_rotations
+from core.pose.symmetry import edge_symmetries
 from core.pose.residuals import interpretation_planes
 
 from .evaluate import edge_distance, oriented_edges
@@ -224,52 +225,6 @@ def _click_costs(
         visible[:] = True
     ok = visible & np.isfinite(a[..., 0]) & np.isfinite(b[..., 0])
     return np.where(ok[:, None, :], d2, np.inf)
-
-
-def edge_symmetries(model: BRep, tol: float = 1e-9) -> list[np.ndarray]:
-    """The model's proper rigid symmetries as edge permutations: arrays (E,) p with edge k ↦ p[k].
-
-    A rotation (with translation) that maps the vertex set onto itself and edges onto edges leaves
-    the picture unchanged: a box has 4, a cube 24. Found by mapping three vertices of the first
-    face onto every vertex triple with the same pairwise distances. The identity is always first.
-    """
-    V = model.vertices
-    E = model.edges
-    ident = np.arange(len(E))
-    if len(V) < 3 or not model.faces:
-        return [ident]
-    key = (V.tobytes(), E.tobytes())
-    if key in _SYMMETRY_CACHE:
-        return _SYMMETRY_CACHE[key]
-    scale = float(np.abs(V).max()) or 1.0
-    f = list(model.faces[0][:3])
-    D = np.linalg.norm(V[:, None] - V[None], axis=2)
-    edge_id = {tuple(sorted(e)): k for k, e in enumerate(E.tolist())}
-    perms = [ident]
-    for i, j in zip(*np.nonzero(np.abs(D - D[f[0], f[1]]) <= 1e-6 * scale)):
-        for k in np.flatnonzero((np.abs(D[i] - D[f[0], f[2]]) <= 1e-6 * scale) & (np.abs(D[j] - D[f[1], f[2]]) <= 1e-6 * scale)):
-            if len({int(i), int(j), int(k)}) < 3:
-                continue
-            P, Q = V[f], V[[i, j, k]]
-            cp, cq = P.mean(axis=0), Q.mean(axis=0)
-            U, _, Wt = np.linalg.svd((P - cp).T @ (Q - cq))
-            R = (U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Wt))]) @ Wt).T
-            img = (V - cp) @ R.T + cq
-            dist = np.linalg.norm(img[:, None] - V[None], axis=2)
-            vp = np.argmin(dist, axis=1)
-            if dist[np.arange(len(V)), vp].max() > 1e-6 * scale:
-                continue
-            ep = [edge_id.get(tuple(sorted((int(vp[a]), int(vp[b]))))) for a, b in E.tolist()]
-            if None in ep:
-                continue
-            p = np.array(ep)
-            if not any(np.array_equal(p, q) for q in perms):
-                perms.append(p)
-    _SYMMETRY_CACHE[key] = perms
-    return perms
-
-
-_SYMMETRY_CACHE: dict = {}
 
 
 def _within_edges(camera, model, T, segs, edges, incidence, gate_px) -> bool:

@@ -24,11 +24,12 @@ from typing import Any
 
 import numpy as np
 
+from core.pose import nearest_twin, plausibility
 from core.transforms import pose_error
 
 from .base import Ghost, Marks, Workflow, WorkflowError, as_pixel
 from .snapping import ClickSnap, SnapMixin, snap_marks
-from .update_pose import MIN_SEGMENT_PX, SNAPPED_SIGMA_PX, nearest_twin, plausibility
+from .update_pose import MIN_SEGMENT_PX, SNAPPED_SIGMA_PX
 
 __all__ = ["TrackObject"]
 

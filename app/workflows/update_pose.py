@@ -35,10 +35,9 @@ from typing import Any
 
 import numpy as np
 
-from core.calibration import kabsch
-from core.pose import p3l, refine
+from core.pose import nearest_twin, p3l, plausibility, refine
 from core.pose.uncertainty import with_camera_uncertainty
-from core.transforms import invert_T, pose_error
+from core.transforms import pose_error
 
 from .base import Ghost, Marks, Workflow, WorkflowError, as_pixel
 from .snapping import SNAPPED_CORNER_SIGMA_PX, SNAPPED_SEGMENT_SIGMA_PX, ClickSnap, SnapMixin, snap_marks
@@ -61,55 +60,6 @@ class Match:
     edges: np.ndarray
     rms_px: float
     image_px: float
-
-
-def plausibility(camera, model, T_world_obj: np.ndarray, rms_px: float | None = None, max_rms_px: float = np.inf) -> str:
-    """Why a pose cannot be the answer ("" when it can): RMS above ``max_rms_px``, part of the object
-    behind the camera, or its projection entirely outside the image."""
-    if rms_px is not None and not rms_px <= max_rms_px:
-        return f"RMS {rms_px:.1f} px, more than 3σ ({max_rms_px:.1f} px)"
-    V = model.vertices
-    if not len(V):
-        lo, hi = model.bounds()
-        V = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    X = V @ T_world_obj[:3, :3].T + T_world_obj[:3, 3]
-    if np.any(camera.depth(X) <= 0):
-        return "it puts the object behind the camera"
-    uv = camera.project(X)
-    lo, hi = uv.min(axis=0), uv.max(axis=0)
-    if hi[0] < -0.5 or hi[1] < -0.5 or lo[0] > camera.width - 0.5 or lo[1] > camera.height - 0.5:
-        return "it puts the object outside the image"
-    return ""
-
-
-def _symmetries(model) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The model's proper symmetries as (edge permutation p (E,), S (4, 4) object → object with
-    S·(edge k) = edge p[k]); the identity first."""
-    from app.vision.matching import edge_symmetries
-
-    mids = model.vertices[model.edges].mean(axis=1)
-    return [(p, kabsch(mids, mids[p])) for p in edge_symmetries(model)]
-
-
-def nearest_twin(model, T_world_obj: np.ndarray, edges: np.ndarray, T_ref: np.ndarray,
-                 hand: dict[int, int] | None = None) -> tuple[np.ndarray, np.ndarray] | None:
-    """Of the poses that draw the same picture as ``T_world_obj`` (the model's symmetries), the one
-    that keeps every hand assignment ``hand`` (clicked segment → model edge) and turns least from
-    ``T_ref``: (T_world_obj (4, 4), edges (S,) of each clicked segment there), or None if none keeps them.
-
-    A symmetric model (a box) cannot tell these poses apart in the image; the database's object
-    frame should not jump by a symmetry, so the one nearest the database pose is taken."""
-    hand = hand or {}
-    best, best_deg = None, np.inf
-    for p, S in _symmetries(model):
-        e2 = p[np.asarray(edges, int)]  # under T S⁻¹, edge p[k] lies where edge k lay under T
-        if any(int(e2[j]) != e for j, e in hand.items()):
-            continue
-        T2 = T_world_obj @ invert_T(S)
-        deg = pose_error(T2, T_ref)[0]
-        if deg < best_deg:
-            best, best_deg = (T2, e2.astype(int)), deg
-    return best
 
 
 class UpdatePose(SnapMixin, Workflow):
@@ -155,6 +105,9 @@ class UpdatePose(SnapMixin, Workflow):
         self.match_info: dict[str, Any] | None = None  # the confirmed automatic assignment (history)
         self._match_undo: list[list] = []  # edge_ids before each confirm_match (remove_last restores them)
         self._done: list[str] = []  # "segment", "assign", "point", "match": what remove_last undoes, last first
+        # Bumped by every change of what the solvers read (clicks, assignments, the chosen candidate): a
+        # solve that ran outside the lock commits only if it is unchanged (snapshot, compute, commit).
+        self._generation = 0
         self.state = "click_edge"
 
     # ------------------------------------------------------------------ estimate in use
@@ -169,10 +122,12 @@ class UpdatePose(SnapMixin, Workflow):
 
     def _invalidate(self) -> None:
         self.refined = None
+        self._generation += 1
 
     def _clicks_changed(self) -> None:
         """A click or an assignment changed: the refined pose and any automatic assignments shown go."""
         self.refined = None
+        self._generation += 1
         if self.matches is not None:
             self.matches = None
             self.candidates, self.chosen = [], None
@@ -304,34 +259,46 @@ class UpdatePose(SnapMixin, Workflow):
 
     def solve(self) -> list[np.ndarray]:
         """The paper's three-line solver on the first workable triple of assigned edges."""
-        with self.lock:
+        with self.lock:  # snapshot
             self._check_open()
             segs, edges = self._assigned()
             if len(segs) < 3:
                 raise WorkflowError(f"{len(segs)} edges assigned; the three-line solver needs 3 (click more edges)")
             pts_uv, pts_obj = self._points()
-            errors = []
-            for triple in itertools.combinations(range(len(segs)), 3):
-                idx = list(triple)
-                try:
-                    cands = p3l(self.site.camera, segs[idx], edges[idx], pts_uv if len(pts_uv) else None,
-                                pts_obj if len(pts_obj) else None)
-                except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-                    # a degenerate triple (or a numerical failure in it): try the next triple
-                    errors.append(f"edges {[i + 1 for i in idx]}: {exc}")
-                    continue
-                if cands:
-                    self.candidates = [np.asarray(T, float) for T in cands]
-                    self.chosen = 0
-                    self.matches = None
-                    self._invalidate()
-                    self.state = "review"
-                    self.message = (f"{len(cands)} candidate pose{'s' if len(cands) > 1 else ''} from edges "
-                                    f"{[i + 1 for i in idx]}; the best (fewest pixels off) is selected")
-                    return self.candidates
-                errors.append(f"edges {[i + 1 for i in idx]}: no pose puts the object in front of the camera")
+            camera, generation = self.site.camera, self._generation
+        errors = []  # compute, outside the lock: the overlay keeps drawing
+        for triple in itertools.combinations(range(len(segs)), 3):
+            idx = list(triple)
+            try:
+                cands = p3l(camera, segs[idx], edges[idx], pts_uv if len(pts_uv) else None,
+                            pts_obj if len(pts_obj) else None)
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+                # a degenerate triple (or a numerical failure in it): try the next triple
+                errors.append(f"edges {[i + 1 for i in idx]}: {exc}")
+                continue
+            if cands:
+                break
+            errors.append(f"edges {[i + 1 for i in idx]}: no pose puts the object in front of the camera")
+        else:
             raise WorkflowError("no pose fits these edges: " + "; ".join(errors[:3]) +
                                 ". Check the edge assignments (Remove last) or click other edges")
+        with self.lock:  # commit
+            self._unchanged_since(generation, "Solve")
+            self.candidates = [np.asarray(T, float) for T in cands]
+            self.chosen = 0
+            self.matches = None
+            self._invalidate()
+            self.state = "review"
+            self.message = (f"{len(cands)} candidate pose{'s' if len(cands) > 1 else ''} from edges "
+                            f"{[i + 1 for i in idx]}; the best (fewest pixels off) is selected")
+            return self.candidates
+
+    def _unchanged_since(self, generation: int, again: str) -> None:
+        """Before committing a result computed outside the lock (held): WorkflowError, nothing
+        changed, if the workflow closed or its clicks changed meanwhile."""
+        self._check_open()
+        if self._generation != generation:
+            raise WorkflowError(f"the clicks changed while solving: {again} again")
 
     def choose_candidate(self, index: int) -> None:
         """Use candidate ``index`` (0 = best) as the estimate."""
@@ -352,53 +319,49 @@ class UpdatePose(SnapMixin, Workflow):
         turn and the first plausible one is chosen (the message says so). WorkflowError, nothing
         changed, when none is.
         """
-        with self.lock:
+        with self.lock:  # snapshot
             self._check_open()
-            segs, edges = self._assigned()
-            pts_uv, pts_obj = self._points()
             if self.matches is not None:
                 raise WorkflowError("confirm the automatic assignment first (Confirm match), or assign the edges by hand")
-            order: list[int | None] = [None]
+            segs, edges = self._assigned()
+            pts_uv, pts_obj = self._points()
+            starts: list[tuple[int | None, np.ndarray]] = [(None, self.obj.T_world_obj)]
             if self.chosen is not None:
                 order = [self.chosen] + [i for i in range(len(self.candidates)) if i != self.chosen]
-            max_rms = 3.0 * self.sigma_px
-            failures = []
-            for i in order:
-                start = self.obj.T_world_obj if i is None else self.candidates[i]
-                what = "from the database pose" if i is None else f"candidate {i + 1}"
-                try:
-                    result = refine(self.site.camera, start,
-                                    segs_uv=segs if len(segs) else None, edges_obj=edges if len(edges) else None,
-                                    points_uv=pts_uv if len(pts_uv) else None,
-                                    points_obj=pts_obj if len(pts_obj) else None, loss=self.loss,
-                                    sigma_px=self._click_sigmas())
-                except ValueError as exc:
-                    failures.append(f"{what}: {exc}")
-                    continue
-                if not np.all(np.isfinite(result.T_world_obj)):
-                    failures.append(f"{what}: the refinement diverged")
-                    continue
-                why = plausibility(self.site.camera, self.obj.model, result.T_world_obj, result.rms_px, max_rms)
-                if why:
-                    failures.append(f"{what}: {why}")
-                    continue
-                break
-            else:
-                advice = ("Check the edge assignments (Remove last and assign again), or add clicks (another edge, a "
-                          "point)")
-                if i is None:
-                    advice += "; for a large motion Solve (P3L) first"
-                raise WorkflowError("no plausible pose: " + "; ".join(failures) + f". {advice}")
+                starts = [(i, self.candidates[i]) for i in order]
+            camera, camera_cov, sigmas = self.site.camera, self.site.calibration_covs[0], self._click_sigmas()
+            generation = self._generation
+        clicks = dict(segs_uv=segs if len(segs) else None, edges_obj=edges if len(edges) else None,
+                      points_uv=pts_uv if len(pts_uv) else None, points_obj=pts_obj if len(pts_obj) else None)
+        failures = []  # compute, outside the lock: the overlay keeps drawing
+        for i, start in starts:
+            what = "from the database pose" if i is None else f"candidate {i + 1}"
+            try:
+                result = refine(camera, start, **clicks, loss=self.loss, sigma_px=sigmas)
+            except ValueError as exc:
+                failures.append(f"{what}: {exc}")
+                continue
+            if not np.all(np.isfinite(result.T_world_obj)):
+                failures.append(f"{what}: the refinement diverged")
+                continue
+            why = plausibility(camera, self.obj.model, result.T_world_obj, result.rms_px, 3.0 * self.sigma_px)
+            if why:
+                failures.append(f"{what}: {why}")
+                continue
+            break
+        else:
+            advice = "Check the edge assignments (Remove last and assign again), or add clicks (another edge, a point)"
+            if i is None:
+                advice += "; for a large motion Solve (P3L) first"
+            raise WorkflowError("no plausible pose: " + "; ".join(failures) + f". {advice}")
+        if camera_cov is not None:  # the camera calibrated in this database: its share joins the clicks'
+            result = with_camera_uncertainty(result, camera, camera_cov, **clicks)
+        with self.lock:  # commit
+            self._unchanged_since(generation, "Refine")
             note = ""
             if failures:
                 note = f"{'; '.join(failures)} — not offered; candidate {i + 1} refined instead. "
                 self.chosen = i
-            camera_cov = self.site.calibration_covs[0]
-            if camera_cov is not None:  # the camera calibrated in this database: its share joins the clicks'
-                result = with_camera_uncertainty(
-                    result, self.site.camera, camera_cov, segs_uv=segs if len(segs) else None,
-                    edges_obj=edges if len(edges) else None, points_uv=pts_uv if len(pts_uv) else None,
-                    points_obj=pts_obj if len(pts_obj) else None)
             self.refined = result
             self.state = "review"
             deg, m = pose_error(result.T_world_obj, self.obj.T_world_obj)
@@ -424,10 +387,6 @@ class UpdatePose(SnapMixin, Workflow):
                 self.state = "assign_edge" if self._waiting_for_edge() else "click_edge"
             self.message = ("Automatic matching: click 3 or more image edges (4 is best), two points each, without "
                             "assigning them; then Auto match." if self.auto else "Assign each clicked edge by hand.")
-
-    def _twin(self, T: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        hand = {j: e for j, e in enumerate(self.edge_ids) if e is not None}
-        return nearest_twin(self.obj.model, T, edges, self.obj.T_world_obj, hand)
 
     def auto_match(self):
         """Which model edge is each clicked edge? Every assignment is tried on the frame and ranked.
@@ -455,30 +414,34 @@ class UpdatePose(SnapMixin, Workflow):
             segs = np.array(self.segs)
             snapped = all(s is not None and s.applied for s in self.seg_snaps)
             sigma = SNAPPED_SIGMA_PX if snapped else self.sigma_px
-            image = self._frame()
-            try:
-                res = match_edges(self.site.camera, self.obj.model, segs, image=image, sigma_px=sigma)
-            except ValueError as exc:
-                raise WorkflowError(f"automatic matching failed: {exc}") from None
-            kept: list[Match] = []
-            for c in res.candidates:
-                twin = self._twin(c.T_world_obj, np.asarray(c.edges))
-                if twin is None or plausibility(self.site.camera, self.obj.model, twin[0]):
-                    continue
-                kept.append(Match(twin[0], twin[1], float(c.rms_px), float(c.image_px)))
-            if not kept:
-                raise WorkflowError(f"no assignment of the {len(segs)} clicked edges to {self.object_name}'s edges fits "
-                                    "(with your hand assignments): check the clicks (Remove last), click another edge "
-                                    "(4 or more, not all through one point), or assign them by hand")
-            # With the frame, poses whose whole drawing misses the image's edges fit the clicks only: drop them,
-            # unless nothing else is left (then they are shown, with a warning).
-            on_image = [mt for mt in kept if mt.image_px <= IMAGE_GATE_PX]
-            warning = ""
-            if image is not None and on_image:
-                kept = on_image
-            elif image is not None:
-                warning = (f" None lies on the image's edges (the best is {min(mt.image_px for mt in kept):.1f} px off on "
-                           "average): check the clicks and any hand assignment.")
+            hand = {j: e for j, e in enumerate(self.edge_ids) if e is not None}  # kept: only agreeing assignments count
+            camera, model, T_db, generation = self.site.camera, self.obj.model, self.obj.T_world_obj, self._generation
+        image = self._frame()  # compute, outside the lock: the overlay keeps drawing
+        try:
+            res = match_edges(camera, model, segs, image=image, sigma_px=sigma)
+        except ValueError as exc:
+            raise WorkflowError(f"automatic matching failed: {exc}") from None
+        kept: list[Match] = []
+        for c in res.candidates:
+            twin = nearest_twin(model, c.T_world_obj, np.asarray(c.edges), T_db, hand)
+            if twin is None or plausibility(camera, model, twin[0]):
+                continue
+            kept.append(Match(twin[0], twin[1], float(c.rms_px), float(c.image_px)))
+        if not kept:
+            raise WorkflowError(f"no assignment of the {len(segs)} clicked edges to {self.object_name}'s edges fits "
+                                "(with your hand assignments): check the clicks (Remove last), click another edge "
+                                "(4 or more, not all through one point), or assign them by hand")
+        # With the frame, poses whose whole drawing misses the image's edges fit the clicks only: drop them,
+        # unless nothing else is left (then they are shown, with a warning).
+        on_image = [mt for mt in kept if mt.image_px <= IMAGE_GATE_PX]
+        warning = ""
+        if image is not None and on_image:
+            kept = on_image
+        elif image is not None:
+            warning = (f" None lies on the image's edges (the best is {min(mt.image_px for mt in kept):.1f} px off on "
+                       "average): check the clicks and any hand assignment.")
+        with self.lock:  # commit
+            self._unchanged_since(generation, "Auto match")
             self.matches = kept
             self.candidates = [m.T_world_obj for m in kept]
             self.chosen = 0
@@ -516,8 +479,13 @@ class UpdatePose(SnapMixin, Workflow):
 
         with self.lock:
             self._check_open()
+            unrefined = self.refined is None
+        if unrefined:
+            self.refine()  # outside the lock, as Refine is
+        with self.lock:
+            self._check_open()
             if self.refined is None:
-                self.refine()
+                raise WorkflowError("the clicks changed while solving: Accept again")
             r = self.refined
             segs, edges = self._assigned()
             pts_uv, _ = self._points()

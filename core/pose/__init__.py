@@ -3,13 +3,17 @@
 ``p3l`` (large motion: the paper's geometric three-line solver on the global camera model C),
 ``refine`` (small motion: the paper's linearised least squares, iterated to the pixel
 maximum-likelihood estimate, with covariance and per-click residuals), ``estimate_pose`` (both, as
-the operator uses them), ``p3l_batch`` (P3L vectorised over many triples). Conventions: DESIGN.md §Frames; perturbations and covariances are
+the operator uses them), ``p3l_batch`` (P3L vectorised over many triples), ``plausibility`` (can a
+fitted pose be the answer), ``edge_symmetries`` / ``nearest_twin`` (poses that draw the same
+picture, and the one nearest a reference). Conventions: DESIGN.md §Frames; perturbations and covariances are
 (δt, δr) in the world frame about the object's origin (``core.pose.residuals``).
 """
 
 from .estimate import PoseCandidate, PoseEstimate, estimate_pose
 from .p3l import ConcurrentEdgesError, p3l, p3l_batch
+from .plausibility import plausibility
 from .refine import RefineResult, refine
+from .symmetry import edge_symmetries, nearest_twin, symmetry_transforms
 
 __all__ = [
     "p3l",
@@ -20,4 +24,8 @@ __all__ = [
     "PoseCandidate",
     "PoseEstimate",
     "ConcurrentEdgesError",
+    "plausibility",
+    "edge_symmetries",
+    "symmetry_transforms",
+    "nearest_twin",
 ]
