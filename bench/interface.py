@@ -32,7 +32,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the browser harness lives with the e2e tests
 
-from tests.e2e.harness import close_webgl_notice, free_port, launch, screen_of, wait_for_panel  # noqa: E402
+from tests.e2e.harness import close_webgl_notice, free_port, launch, screen_of, wait_for_panel, wait_until  # noqa: E402
 
 FRAMES = ROOT / ".." / "shared" / "data" / "visp-cube" / "frames"
 
@@ -51,15 +51,18 @@ def build(n_objects: int, fps: float):
     seed_from_scene(db, scene)
     rng = np.random.default_rng(0)
     k = 0
-    while len(db.objects()) < n_objects:
-        k += 1
-        xy = rng.uniform([-0.4, -0.6], [0.4, 0.6])
-        if k % 3:
-            model = BRep.box(*rng.uniform(0.03, 0.08, 3))
-        else:
-            model = BRep.cylinder(rng.uniform(0.02, 0.04), rng.uniform(0.05, 0.12))
-        db.add_object(f"extra_{k}", "box" if k % 3 else "cylinder", model,
-                      make_T(rot_z(rng.uniform(0, np.pi)), [xy[0], xy[1], 0.0]), status="known", method="bench")
+    n = len(db.objects())
+    with db.transaction():  # one commit (one fsync) for all the extra objects
+        while n < n_objects:
+            k += 1
+            xy = rng.uniform([-0.4, -0.6], [0.4, 0.6])
+            if k % 3:
+                model = BRep.box(*rng.uniform(0.03, 0.08, 3))
+            else:
+                model = BRep.cylinder(rng.uniform(0.02, 0.04), rng.uniform(0.05, 0.12))
+            db.add_object(f"extra_{k}", "box" if k % 3 else "cylinder", model,
+                          make_T(rot_z(rng.uniform(0, np.pi)), [xy[0], xy[1], 0.0]), status="known", method="bench")
+            n += 1
     if FRAMES.is_dir():
         source, video = FolderSource(FRAMES, fps=fps), f"ViSP cube sequence (218 real frames, 640×480) at {fps:.0f} fps"
     else:
@@ -173,12 +176,136 @@ def measure_clicks(page, server, panel, workflow: str, n: int, rng) -> np.ndarra
     return np.array(panel.click_latencies_s) * 1000.0
 
 
+def ws_client(url: str, out: str) -> None:
+    """A browser-like client: connects to viser's websocket like the page does, reads every message
+    as it arrives (no rendering) and appends the wall-clock arrival time of each /video frame to
+    ``out``, until killed."""
+    import asyncio
+
+    import msgspec
+    import viser
+    from websockets.asyncio.client import connect
+
+    async def run() -> None:
+        async with connect(url, subprotocols=[f"viser-v{viser.__version__}"], max_size=None, compression=None) as ws:
+            # viser counts a client as connected once it reports its camera, as the page does
+            await ws.send(msgspec.msgpack.encode({
+                "type": "ViewerCameraMessage", "wxyz": [1.0, 0.0, 0.0, 0.0], "position": [3.2, 2.4, -5.0], "fov": 0.9,
+                "near": 0.05, "far": 2000.0, "image_height": 700, "image_width": 1200, "look_at": [3.2, 2.4, 0.0],
+                "up_direction": [0.0, -1.0, 0.0]}))
+            with open(out, "a", buffering=1) as f:
+                while True:
+                    k, _ = video_updates(await ws.recv())
+                    t = time.time()
+                    for _ in range(k):
+                        f.write(f"{t:.6f}\n")
+
+    asyncio.run(run())
+
+
+def click_event(server, uv):
+    """What viser gives a scene click callback: a ray that meets the image plane at pixel uv."""
+    from types import SimpleNamespace
+
+    X = server.pixel_world.to_world(np.asarray(uv, float), 0.0)
+    return SimpleNamespace(ray_origin=tuple(X - [0.0, 0.0, 5.0]), ray_direction=(0.0, 0.0, 1.0))
+
+
+def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks: int, rng) -> dict:
+    """Video gaps seen by a browser-like client while the database changes every ``change_every_s``
+    (one object's pose moved 1 cm, written as a workflow's Accept writes it), then selection clicks."""
+    import subprocess
+
+    from core.transforms import make_T
+
+    server, site, db, _ = build(n_objects, fps=30.0)
+    out = tempfile.mktemp(prefix="mcit-bench-frames-", suffix=".txt")
+    before = set(server.clients)
+    client = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--ws-client",
+                               f"ws://127.0.0.1:{server.port}", out])
+    try:
+        panel = wait_for_panel(server, before, timeout_s=120)
+        deadline = time.monotonic() + 300
+        while server._db_revision != site.revision and time.monotonic() < deadline:  # the first full draw
+            time.sleep(0.2)
+        time.sleep(3.0)
+        movable = [o for o in site.objects() if o.kind != "table"]
+        t0 = time.time()
+        changes = 0
+        while time.time() < t0 + seconds:
+            obj = site.object(movable[changes % len(movable)].name)
+            T = obj.T_world_obj @ make_T(np.eye(3), [0.01, 0.0, 0.0])
+            site.write(lambda d, obj=obj, T=T: d.update_pose(obj.id, T, None, expected_version=obj.version,
+                                                              method="bench", client="bench"))
+            changes += 1
+            time.sleep(max(0.0, t0 + changes * change_every_s - time.time()))
+        t1 = time.time()
+        latencies = []
+        if clicks:
+            cam = site.camera
+            run_click = panel._guard(panel._on_click)
+            for _ in range(clicks):
+                obj = site.object(movable[int(rng.integers(len(movable)))].name)
+                E = obj.model.edge_segments(obj.T_world_obj)
+                uv = cam.project(E[int(rng.integers(len(E)))].mean(axis=0))
+                n0 = len(panel.click_latencies_s)
+                panel._click_worker.submit(run_click, click_event(server, uv))
+                wait_until(lambda: len(panel.click_latencies_s) > n0, timeout_s=60, what="the click's redraw")
+                latencies.append(panel.click_latencies_s[-1] * 1000.0)
+                time.sleep(0.1)
+    finally:
+        client.kill()
+        client.wait()
+        server.stop()
+        db.close()
+    times = np.loadtxt(out, ndmin=1) if Path(out).stat().st_size else np.zeros(0)
+    Path(out).unlink()
+    window = np.sort(times[(times >= t0) & (times <= t1)])
+    gaps = np.diff(np.concatenate([[t0], window, [t1]]))
+    return {"objects": n_objects, "gap_ms": 1000.0 * float(gaps.max()), "fps": len(window) / (t1 - t0),
+            "changes": changes, "seconds": t1 - t0, "clicks_ms": np.array(latencies)}
+
+
+def stall_table(sizes, seconds: float, change_every_s: float, clicks: int) -> None:
+    rng = np.random.default_rng(2)
+    rows = []
+    for n in sizes:
+        rows.append(measure_stall(n, seconds, change_every_s, clicks if n == max(sizes) else 0, rng))
+        print(f"  measured {n} objects", file=sys.stderr, flush=True)
+    load = os.getloadavg()[0]
+    print(f"mcit interface stall table — video 30 frames/s (640×480), one browser-like client (a websocket reader, "
+          f"no rendering, its own process); one database change (a pose moved 1 cm, written as Accept writes it) every "
+          f"{change_every_s:.0f} s over {seconds:.0f} s; machine: {os.cpu_count()} cores, load average {load:.1f}")
+    print()
+    print("| objects | database changes | longest video gap (ms) | frames/s delivered | target |")
+    print("|---|---|---|---|---|")
+    for r in rows:
+        target = "gap ≤ 100 ms, ≥ 28 frames/s" if r["objects"] == max(sizes) else "—"
+        print(f"| {r['objects']} | {r['changes']} in {r['seconds']:.1f} s | {r['gap_ms']:.0f} | {r['fps']:.1f} | {target} |")
+    lat = rows[-1]["clicks_ms"]
+    if len(lat):
+        print(f"| click → overlay (select by clicking), {rows[-1]['objects']} objects: p50 / p95 / max (n = {len(lat)}) | | "
+              f"{np.percentile(lat, 50):.1f} / {np.percentile(lat, 95):.1f} / {lat.max():.1f} ms | | p95 ≤ 50 ms |")
+
+
 def main() -> int:
+    if len(sys.argv) == 4 and sys.argv[1] == "--ws-client":
+        ws_client(sys.argv[2], sys.argv[3])
+        return 0
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--clicks", type=int, default=60)
     ap.add_argument("--objects", type=int, default=50)
+    ap.add_argument("--stall", action="store_true", help="only the stall table (no chromium)")
+    ap.add_argument("--stall-sizes", default="50,500,2000")
+    ap.add_argument("--stall-seconds", type=float, default=12.0)
+    ap.add_argument("--change-every", type=float, default=2.0)
+    ap.add_argument("--stall-clicks", type=int, default=30)
     args = ap.parse_args()
+    if args.stall:
+        stall_table([int(n) for n in args.stall_sizes.split(",")], args.stall_seconds, args.change_every,
+                    args.stall_clicks)
+        return 0
     from playwright.sync_api import sync_playwright
 
     count_deliveries()
@@ -212,6 +339,8 @@ def main() -> int:
                   f"{np.percentile(lat, 50):.1f} / {np.percentile(lat, 95):.1f} / {lat.max():.1f} ms | p95 ≤ 100 ms |")
         else:
             print(f"| click → overlay sent, {name} | no click reached the server | p95 ≤ 100 ms |")
+    print()
+    stall_table([int(n) for n in args.stall_sizes.split(",")], args.stall_seconds, args.change_every, args.stall_clicks)
     return 0
 
 
