@@ -1,9 +1,17 @@
-"""One browser tab: its panel, its view (video or 3D world), its session and its marks.
+"""One browser tab: its panel, its view (video or 3D world), its session, its frozen frame and marks.
 
-Callbacks only change state (the session's workflow, flags) and wake the redraw loop; the loop
+The panel renders the workflow under way from what the workflow declares (``Workflow.controls``
+and ``Workflow.current_step()``): its instruction (which names controls by their labels), one
+button or chooser per control — hidden while it does not apply — and a keyboard shortcut per
+button (viser commands). Callbacks only change state and wake the redraw loop; the loop
 (``InterfaceServer.redraw``) calls ``ClientPanel.redraw`` to send this client's marks, texts and
-controls. Every callback is guarded: an operator error becomes a yellow notification saying what
-to do, anything else a red one, logged; the server never dies from a callback.
+controls. Every callback is guarded: an operator error is said in the panel and in a notification,
+anything else in a red notification and the log; the server never dies from a callback.
+
+Clicks, snapping and solving use one frame per workflow: the latest frame is frozen when a workflow
+that takes clicks starts (or by Freeze, or by the scrubber over the recent frames) and shown in
+place of the live video, sharp (nearest-neighbour upscaled PNG) so that zooming shows pixels;
+"Show live" looks at the live video meanwhile.
 """
 
 from __future__ import annotations
@@ -21,9 +29,10 @@ import viser
 
 from app.overlay import nearest_segment, project_wireframe
 from app.workflows import Cancelled, Session, WorkflowError
+from app.workflows.base import FrameRef, Marks
 from app.workflows.session import WORKFLOWS
 
-from .controls import CONTROLS, START_BUTTONS, operator_help, report_markdown
+from .controls import START_BUTTONS, operator_help, report_markdown
 from .drawing import draw_marks
 from .tracking import TrackFeeder
 
@@ -36,6 +45,11 @@ log = logging.getLogger("mcit.ui")
 
 SELECT_RADIUS_PX = 15.0
 NO_SELECTION = "(none)"
+NO_CHOICE = "—"
+Z_FROZEN = -0.0005  # the frozen frame: in front of the live video, behind the overlays
+FROZEN_MAX_SIDE = 2048  # the frozen frame is upscaled (nearest neighbour) up to this many pixels a side
+# Workflows that do not take a frozen frame: tracking follows the live video; history has no clicks.
+LIVE_WORKFLOWS = ("track", "history")
 
 
 class ClientPanel:
@@ -50,14 +64,26 @@ class ClientPanel:
         self.dirty = True
         self.need_fit = True
         self.fitted_aspect: float | None = None
+        self.zoom_rect: tuple | None = None
+        self.marks_scale = 1.0  # marks are drawn this much smaller than at the fitted view (constant on screen)
         self.built_for: Any = None  # the workflow whose controls are on screen
-        self.controls: list[Any] = []
-        self.candidate_dropdown = None
-        self.drawn_revision = -1
+        self.controls: dict[str, Any] = {}  # action → its button or dropdown
+        self.commands: list[Any] = []  # the workflow's keyboard shortcuts (viser commands)
+        self._command_of: dict[str, Any] = {}  # action → its shortcut
+        self.choice_values: dict[str, Any] = {}  # choice control → the value chosen
+        self._choice_options: dict[str, dict[str, Any]] = {}
+        self.confirm_pending: str | None = None  # an action waiting for its second press
+        self.warning = ""  # a weak result's reasons, or a question, shown above the buttons
+        self.error = ""  # the last refused action, said in the panel until the next action
+        self.frozen: FrameRef | None = None
+        self.show_live = False
+        self._frozen_sent: Any = None
+        self._labels_sent: dict = {}
         self.worker: threading.Thread | None = None
         self.feeder: TrackFeeder | None = None  # feeds a Track workflow the video
         self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
+        self.seen_change = app.site.change_seq
         self._build_gui()
         # Clicks are handled one at a time, in the order they arrive (viser runs plain callbacks
         # on a thread pool, where two quick clicks could swap); the event loop is not blocked.
@@ -78,23 +104,25 @@ class ClientPanel:
             try:
                 return fn(*args, **kwargs)
             except WorkflowError as exc:
-                self.notify("Cannot do that", str(exc), "yellow")
+                self.error = _sentence(str(exc))
+                self.notify("Cannot do that", self.error, "yellow")
             except Cancelled:
-                self.notify("Cancelled", "The measurement was stopped; nothing was written.", "blue")
+                self.error = ""
+                self.notify("Stopped", "The measurement was stopped; nothing was kept.", "blue")
             except Exception as exc:  # noqa: BLE001 - the server must survive any callback error
                 log.exception("callback %s failed", getattr(fn, "__name__", fn))
-                self.notify("Internal error", f"{type(exc).__name__}: {exc}. Nothing was written; the error is logged. "
-                            "Cancel the workflow and try again.", "red")
+                self.error = "Something went wrong inside mcit; nothing was written. Cancel the workflow and try again."
+                self.notify("Internal error", f"{self.error} ({type(exc).__name__}: {exc}; the error is logged.)", "red")
             finally:
                 self.dirty = True
                 self.app.wake()
         return wrapper
 
     def notify(self, title: str, body: str, color: str = "yellow") -> None:
-        """A notification on this client (errors stay until closed, others close after 6 s)."""
+        """A notification on this client (errors stay until closed, others close after a few seconds)."""
         try:
             self.client.add_notification(title, body, color=color, with_close_button=True,
-                                         auto_close_seconds=None if color == "red" else 8.0)
+                                         auto_close_seconds=None if color == "red" else 6.0)
         except Exception:  # noqa: BLE001 - the client may have gone
             log.debug("notification to a departed client dropped", exc_info=True)
 
@@ -106,16 +134,13 @@ class ClientPanel:
             gui.main_panel.set_width(340)
         except Exception:  # noqa: BLE001 - layout only
             log.debug("could not dock the panel", exc_info=True)
-        self.gui_status = gui.add_markdown("…")
-        self.gui_view = gui.add_button_group("View", ("Video", "3D world"))
-        self.gui_view.on_click(self._guard(self._on_view))
-        self.gui_fit = gui.add_button("Fit view", icon=viser.Icon.ZOOM_RESET, hint="Show the whole image")
-        self.gui_fit.on_click(self._guard(lambda _e: self._request_fit()))
-        self.gui_object = gui.add_dropdown("Object", (NO_SELECTION,), initial_value=NO_SELECTION)
-        self.gui_object.on_update(self._guard(self._on_object))
-        self.gui_stale = gui.add_button("Mark stale", hint="The selected object has moved: flag it until its pose is updated")
-        self.gui_stale.on_click(self._guard(self._on_stale))
-        with gui.add_folder("Workflows"):
+        # The workflow under way comes first: its instruction and actions are always above the fold.
+        self.gui_title = gui.add_markdown("**No workflow.** Click an object to select it, or start a workflow below.")
+        self.gui_progress = gui.add_progress_bar(0.0, visible=False)
+        self.gui_warning = gui.add_markdown("", visible=False)
+        self.gui_actions = gui.add_folder(None)
+        self.gui_copy = gui.add_text("Target (m)", "", visible=False, hint="World x y z of the last target: copy it")
+        with gui.add_folder("Start a workflow"):
             for label, name in START_BUTTONS:
                 button = gui.add_button(label)
                 button.on_click(self._guard(functools.partial(self._on_start, name)))
@@ -126,40 +151,65 @@ class ClientPanel:
             self.gui_snap = gui.add_checkbox("Snap clicks", True, hint="Snap clicked edges and corners to the image "
                                              "(Refuse snap keeps a click as clicked)")
             self.gui_snap.on_update(self._guard(lambda _e: self.session.set_snap(bool(self.gui_snap.value))))
-        with gui.add_folder("Current"):
-            self.gui_title = gui.add_markdown("**No workflow.** Click an object to select it, or start a workflow.")
-            self.gui_progress = gui.add_progress_bar(0.0, visible=False)
-            self.gui_controls_folder = gui.add_folder("Actions")
+        with gui.add_folder("Frame and view"):
+            self.gui_frame = gui.add_markdown("")
+            self.gui_freeze = gui.add_button("Freeze (F)", hint="Freeze the newest frame: clicks, snapping and solving use it")
+            self.gui_freeze.on_click(self._guard(lambda _e: self._freeze_back(0)))
+            self.gui_live = gui.add_button("Show live (L)", hint="Look at the live video (clicks still go to the frozen frame: "
+                                           "switch back to click)")
+            self.gui_live.on_click(self._guard(lambda _e: self._toggle_live()))
+            n = self.app.recent_frames_max
+            self.gui_scrub = gui.add_slider("Frames back", 0, n - 1, 1, 0,
+                                            hint="Freeze an earlier frame (0 = the newest; the recent seconds are kept)")
+            self.gui_scrub.on_update(self._guard(lambda _e: self._freeze_back(int(self.gui_scrub.value))))
+            self.gui_view = gui.add_button_group("View", ("Video", "3D world"))
+            self.gui_view.on_click(self._guard(self._on_view))
+            self.gui_fit = gui.add_button("Fit view (H)", icon=viser.Icon.ZOOM_RESET,
+                                          hint="Show the whole image (a left drag zooms onto a rectangle)")
+            self.gui_fit.on_click(self._guard(lambda _e: self._request_fit()))
+        with gui.add_folder("Object"):
+            self.gui_object = gui.add_dropdown("Object", (NO_SELECTION,), initial_value=NO_SELECTION)
+            self.gui_object.on_update(self._guard(self._on_object))
+            self.gui_stale = gui.add_button("Mark stale", hint="The selected object has moved: flag it until its pose is updated")
+            self.gui_stale.on_click(self._guard(self._on_stale))
+        with gui.add_folder("Result"):
             self.gui_report = gui.add_markdown("")
-            self.gui_copy = gui.add_text("Target (m)", "", visible=False, hint="World x y z of the last target: copy it")
+        self.gui_status = gui.add_markdown("…")
         with gui.add_folder("Help", expand_by_default=False):
             gui.add_markdown(operator_help())
+        for label, key, fn in (("Freeze", "F", lambda: self._freeze_back(0)), ("Show live / frozen", "L", self._toggle_live),
+                               ("Fit view", "H", self._request_fit)):
+            cmd = gui.add_command(label, hotkey=key)
+            cmd.on_trigger(self._guard(lambda _e, fn=fn: fn()))
 
     def _rebuild_controls(self) -> None:
-        """Buttons of the current workflow (built by the loop when the workflow changes)."""
-        for handle in self.controls:
+        """The current workflow's controls, as it declares them (built by the loop when it changes)."""
+        for handle in list(self.controls.values()) + self.commands:
             handle.remove()
-        self.controls = []
-        self.candidate_dropdown = None
+        self.controls, self.commands, self._command_of = {}, [], {}
+        self.choice_values, self._choice_options = {}, {}
+        self.confirm_pending, self.warning = None, ""
         wf = self.session.workflow
         self.built_for = wf
         if wf is None or wf.finished:
             return
         gui = self.client.gui
-        with self.gui_controls_folder:
-            if wf.name == "update_pose":
-                self.candidate_dropdown = gui.add_dropdown("Candidate", ("—",), initial_value="—")
-                self.candidate_dropdown.on_update(self._guard(self._on_candidate))
-                self.controls.append(self.candidate_dropdown)
-            if wf.name == "history":
-                number = gui.add_number("Change #", 0, step=1)
-                undo = gui.add_button("Undo change #", color="orange")
-                undo.on_click(self._guard(lambda _e: self._act("undo", change_id=int(number.value))))
-                self.controls += [number, undo]
-            for label, action, kind in CONTROLS.get(wf.name, (("Cancel", "cancel", "button"),)):
-                button = gui.add_button(label, color="red" if action == "cancel" else ("green" if action == "accept" else None))
-                button.on_click(self._guard(functools.partial(self._on_action, action, kind)))
-                self.controls.append(button)
+        with self.gui_actions:
+            for c in wf.controls:
+                if c.kind == "choice":
+                    handle = gui.add_dropdown(c.label, (NO_CHOICE,), initial_value=NO_CHOICE, hint=c.hint or None,
+                                              visible=False)
+                    handle.on_update(self._guard(functools.partial(self._on_choice, c.action)))
+                else:
+                    handle = gui.add_button(c.button_label, color=c.color, hint=c.hint or None, visible=False)
+                    handle.on_click(self._guard(functools.partial(self._press_event, c.action)))
+                    if c.key is not None:
+                        cmd = gui.add_command(f"{wf.title}: {c.label}", hotkey=c.key, description=c.hint or None,
+                                              disabled=True)
+                        cmd.on_trigger(self._guard(functools.partial(self._press_event, c.action)))
+                        self.commands.append(cmd)
+                        self._command_of[c.action] = cmd
+                self.controls[c.action] = handle
 
     # ------------------------------------------------------------------ callbacks (state only)
     def _on_start(self, name: str, _event=None) -> None:
@@ -174,42 +224,90 @@ class ClientPanel:
         if self.feeder is not None:
             self.feeder.stop()
             self.feeder = None
+        self.error = ""
         wf = self.session.start(name, **options)
         if name == "track":
             self.feeder = TrackFeeder(self, wf, self.app.grabber)
+        if name not in LIVE_WORKFLOWS:
+            self._freeze(self.app.grabber.latest(), "live")
+        else:
+            self._unfreeze()
 
-    def _on_action(self, action: str, kind: str, _event=None) -> None:
+    def _press_event(self, action: str, _event=None) -> None:
+        self.press(action)
+
+    def press(self, action: str) -> None:
+        """The operator pressed the control of ``action`` (button or shortcut)."""
         wf = self.session.workflow
-        if wf is None:
-            raise WorkflowError("no workflow is under way")
+        if wf is None or wf.finished:
+            raise WorkflowError("no workflow is under way: start one first")
+        c = wf.control(action)
+        if c is None:
+            raise WorkflowError(f"{wf.title} has no such control")
+        step = wf.current_step()
+        if action not in step.enabled:
+            raise WorkflowError(f"{c.label} does not apply now. {wf.prompt_text(markdown=False)}")
         if action == "cancel":
+            self.confirm_pending, self.warning, self.error = None, "", ""
             wf.cancel()  # also stops a running measurement
             return
-        if kind == "long":
-            if self.worker is not None and self.worker.is_alive():
-                raise WorkflowError("a measurement is already running: wait, or Cancel")
-            self.worker = threading.Thread(target=self._guard(lambda: wf.perform(action)), daemon=True,
+        if self.worker is not None and self.worker.is_alive():
+            raise WorkflowError("a measurement is running: wait for it, or Cancel")
+        # A question asked once more: Redo forgets every click; Accept of a weak result.
+        if action != self.confirm_pending:
+            question = c.confirm
+            if action == "accept":
+                weak = wf.weaknesses()
+                if weak:
+                    question = ("**Weak result:** " + "; ".join(weak) + ". Press **Accept** again to write it anyway, or "
+                                "improve it first.")
+            if question:
+                self.confirm_pending, self.warning, self.error = action, question if action == "accept" else \
+                    f"{question} Press **{c.label}** again to confirm.", ""
+                self._relabel(action, "Accept anyway" if action == "accept" else f"{c.label}: confirm")
+                return
+        self.confirm_pending, self.warning, self.error = None, "", ""
+        args: tuple = ()
+        if c.arg is not None:
+            value = self.choice_values.get(c.arg)
+            if value is None:
+                chooser = wf.control(c.arg)
+                raise WorkflowError(f"choose the {chooser.label.lower() if chooser else 'item'} first, then {c.label}")
+            args = (value,)
+        wf.message = ""  # old messages go: the action says what it did
+        if c.kind == "long":
+            self.worker = threading.Thread(target=self._guard(lambda: self._act(wf, c, args)), daemon=True,
                                            name=f"mcit-measure-{self.client.client_id}")
             self.worker.start()
             return
-        self._act(action)
+        self._act(wf, c, args)
 
-    def _act(self, action: str, **kwargs: Any) -> None:
-        result = self.session.perform(action, **kwargs)
-        wf = self.session.workflow
-        if wf is not None and wf.message and action in ("solve", "refine", "accept", "undo", "confirm_match", "restart",
-                                                        "refuse_snap"):
-            self.notify(wf.title, wf.message, "green" if action == "accept" else "blue")
+    def _act(self, wf, c, args: tuple) -> Any:
+        result = wf.perform(c.action, *args)
+        if not wf.message:
+            wf.message = f"{c.label}: done."
+        if c.action in ("accept",) and wf.accepted:
+            self.notify(wf.title, wf.message, "green")
         return result
 
-    def _on_candidate(self, _event) -> None:
+    def _relabel(self, action: str, label: str) -> None:
+        handle = self.controls.get(action)
+        if handle is not None and hasattr(handle, "label"):
+            handle.label = label
+
+    def _on_choice(self, action: str, _event=None) -> None:
+        handle = self.controls.get(action)
         wf = self.session.workflow
-        value = self.candidate_dropdown.value if self.candidate_dropdown is not None else "—"
-        if wf is None or wf.name != "update_pose" or value == "—":
+        if handle is None or wf is None or wf.finished:
             return
-        index = int(value.split()[0].lstrip("#")) - 1
-        if index != getattr(wf, "chosen", None):
-            wf.choose_candidate(index)
+        options = self._choice_options.get(action, {})
+        if handle.value not in options:
+            return
+        value = options[handle.value]
+        self.choice_values[action] = value
+        if action in wf.actions and value != wf.choice_value(action):  # a chooser that acts (candidate, method)
+            wf.message = ""
+            wf.perform(action, value)
 
     def _on_object(self, _event) -> None:
         value = self.gui_object.value
@@ -227,18 +325,87 @@ class ClientPanel:
         self.need_fit = True
 
     def _request_fit(self) -> None:
+        self.zoom_rect = None
         self.need_fit = True
 
+    # ------------------------------------------------------------------ the frozen frame
+    def _freeze(self, frame: Any, source: str) -> None:
+        if frame is None:
+            self.frozen = None
+            return
+        self.frozen = FrameRef(frame.image, float(frame.t_s), int(frame.index), source)
+        self.show_live = False
+        wf = self.session.workflow
+        if wf is not None and not wf.finished:
+            wf.use_frame(self.frozen)
+
+    def _unfreeze(self) -> None:
+        self.frozen = None
+        self.show_live = False
+
+    def _workflow_has_clicks(self) -> bool:
+        wf = self.session.workflow
+        return wf is not None and not wf.finished and "remove_last" in wf.current_step().enabled
+
+    def _freeze_back(self, k: int) -> None:
+        """Freeze the frame k steps before the newest (0: the newest)."""
+        wf = self.session.workflow
+        if wf is not None and wf.name in LIVE_WORKFLOWS and not wf.finished:
+            raise WorkflowError(f"{wf.title} follows the live video: nothing to freeze")
+        if self._workflow_has_clicks():
+            raise WorkflowError("your clicks were made on the frozen frame: every click of a workflow uses one frame. "
+                                "Remove them (Remove last) or Cancel before freezing another frame")
+        frame = self.app.recent.back(k) if k else self.app.grabber.latest()
+        if frame is None:
+            raise WorkflowError("no video frame has arrived yet: check the video source")
+        self._freeze(frame, "scrubbed" if k else "live")
+        self.error = ""
+
+    def _toggle_live(self) -> None:
+        if self.frozen is None:
+            raise WorkflowError("no frame is frozen: the live video is shown")
+        self.show_live = not self.show_live
+
+    def _send_frozen(self) -> None:
+        """Show this client's frozen frame (sharp, upscaled) over the live video, or hide it."""
+        key = None if (self.frozen is None or self.show_live or self.view != "video") else id(self.frozen)
+        if key == self._frozen_sent:
+            return
+        self._frozen_sent = key
+        if key is None:
+            self.client.scene.remove_by_name("/frozen")
+            return
+        import cv2
+
+        pw = self.app.pixel_world
+        image = self.frozen.image
+        if image.ndim == 2:
+            image = np.repeat(image[:, :, None], 3, axis=2)
+        up = max(1, min(4, FROZEN_MAX_SIDE // max(image.shape[:2])))
+        if up > 1:  # nearest neighbour: zoomed in, the operator sees pixels, not blur
+            image = cv2.resize(image, None, fx=up, fy=up, interpolation=cv2.INTER_NEAREST)
+        rw, rh = pw.render_size
+        cx, cy, _ = pw.image_center
+        self.client.scene.add_image("/frozen", image, rw, rh, format="png", position=(float(cx), float(cy), Z_FROZEN),
+                                    cast_shadow=False, receive_shadow=False)
+
+    # ------------------------------------------------------------------ clicks
     def on_pixel_click(self, uv: np.ndarray) -> None:
         """A click at pixel uv of the video: the workflow's, or else select the nearest object."""
         wf = self.session.workflow
         if wf is not None and not wf.finished and "click" in wf.actions:
-            wf.click(uv)
-            return
+            step = wf.current_step()
+            if step.clicks:
+                if self.show_live and self.frozen is not None:
+                    raise WorkflowError("you are looking at the live video: clicks go to the frozen frame. Press Show "
+                                        "live again (L) to see it, then click")
+                self.error, self.confirm_pending, self.warning = "", None, ""
+                wf.message = ""
+                wf.click(uv)
+                return
+            if wf.name != "track":
+                raise WorkflowError(f"clicks are not taken now. {wf.prompt_text(markdown=False)}")
         name = self._object_at(uv)
-        if name is None:
-            self.session.select(None)
-            return
         self.session.select(name)
 
     def _on_click(self, event) -> None:
@@ -253,10 +420,10 @@ class ClientPanel:
             raise WorkflowError("clicks work on the video: switch the view to Video")
         uv = self.app.pixel_world.pixel_from_ray(np.array(event.ray_origin), np.array(event.ray_direction))
         if uv is None:
-            raise WorkflowError("that click missed the image plane; click on the video")
+            raise WorkflowError("that click missed the image: click on the video")
         w, h = self.app.pixel_world.width, self.app.pixel_world.height
         if not (-0.5 <= uv[0] <= w - 0.5 and -0.5 <= uv[1] <= h - 0.5):
-            raise WorkflowError(f"the click ({uv[0]:.0f}, {uv[1]:.0f}) is outside the {w}×{h} image; click on the video")
+            raise WorkflowError(f"that click is outside the {w}×{h} image: click on the video")
         self.on_pixel_click(uv)
 
     def _on_rect(self, event) -> None:
@@ -288,6 +455,23 @@ class ClientPanel:
         if self.fitted_aspect is None or abs(aspect - self.fitted_aspect) > 1e-3:
             self.need_fit = True
             self.app.wake()
+            return
+        scale = self._zoom_scale(cam)
+        if scale is not None and abs(np.log(scale / self.marks_scale)) > 0.1:  # zoomed: marks keep their screen size
+            self.dirty = True
+            self.app.wake()
+
+    def _zoom_scale(self, cam) -> float | None:
+        """Image pixels per screen pixel now, relative to the fitted view (1 at fit, 0.1 at 10× zoom)."""
+        try:
+            dist = abs(float(cam.position[2]))  # the image plane is z = 0 in the pixel world
+            fov, aspect = cam.fov, cam.aspect
+        except (AssertionError, ZeroDivisionError, TypeError):
+            return None
+        pw = self.app.pixel_world
+        fit_pos, _, _ = pw.fit_camera(aspect, fov)
+        fit = abs(float(fit_pos[2]))
+        return float(np.clip(dist / fit, 0.02, 4.0)) if fit > 0 else None
 
     # ------------------------------------------------------------------ helpers
     def _object_at(self, uv: np.ndarray) -> str | None:
@@ -311,7 +495,7 @@ class ClientPanel:
         self.fitted_aspect = aspect
         pw = self.app.pixel_world
         if self.view == "video":
-            rect = getattr(self, "zoom_rect", None)
+            rect = self.zoom_rect
             self.zoom_rect = None
             if rect is not None:
                 u0, v0, u1, v1 = rect
@@ -332,6 +516,7 @@ class ClientPanel:
             cam.look_at = look_at
             cam.position = position
             cam.look_at = look_at
+        self.dirty = True
 
     def _ensure_rect_select(self, on: bool) -> None:
         registered = self._rect_cb is not None
@@ -345,6 +530,7 @@ class ClientPanel:
         """Send this client's marks and texts if anything changed; True if something was sent."""
         if self.need_fit:
             self.fit()
+        self._announce()
         wf = self.session.workflow
         if wf is not self.built_for or (wf is not None and wf.finished and self.controls):
             self._rebuild_controls()
@@ -353,63 +539,119 @@ class ClientPanel:
         self.gui_progress.visible = bool(busy or (progress is not None and 0 < progress < 1))
         if progress is not None:
             self.gui_progress.value = float(np.clip(progress * 100.0, 0, 100))
+        self._send_frozen()
         if not (self.dirty or site_changed or busy):
             return False
         self.dirty = False
         site = self.app.site
         objects = {o.name: o for o in site.objects()}
-        if site_changed or self.drawn_revision != site.revision:
-            options = (NO_SELECTION,) + tuple(objects)
-            if tuple(self.gui_object.options) != options:
-                self.gui_object.options = options
-            self.drawn_revision = site.revision
+        options = (NO_SELECTION,) + tuple(objects)
+        if tuple(self.gui_object.options) != options:
+            self.gui_object.options = options
         if self.session.selected is not None and self.session.selected not in objects:
             self.session.selected = None
         selected = self.session.selected or NO_SELECTION
         if self.gui_object.value != selected:
             self.gui_object.value = selected
-        marks = wf.marks() if wf is not None and not wf.finished else None
-        if marks is None:
-            from app.workflows.base import Marks
-
-            marks = Marks()
+        marks = wf.marks() if wf is not None and not wf.finished else Marks()
+        scale = self._zoom_scale(self.client.camera) if self.view == "video" else None
+        self.marks_scale = 1.0 if scale is None else scale
         pw = self.app.pixel_world
-        batch, labels = draw_marks(site.camera, marks, objects, pw.width, pw.height, selected=self.session.selected)
-        self.app.send_client_overlay(self.client, batch, labels)
+        batch, labels = draw_marks(site.camera, marks, objects, pw.width, pw.height, selected=self.session.selected,
+                                   scale=self.marks_scale)
+        self._labels_sent = self.app.send_client_overlay(self.client, batch, labels, self._labels_sent)
         self._update_texts(wf)
         if self.click_t is not None:
             self.click_latencies_s.append(time.monotonic() - self.click_t)
             self.click_t = None
         return True
 
+    def _announce(self) -> None:
+        """Tell this operator of database changes made by others (who, what, when)."""
+        site = self.app.site
+        if site.change_seq == self.seen_change:
+            return
+        changes = site.changes_since(self.seen_change)
+        self.seen_change = site.change_seq
+        others = [c for c in changes if c.who != self.session.client]
+        for c in others[-3:]:
+            when = time.strftime("%H:%M:%S", time.localtime(c.when))
+            self.notify("Changed by another operator", f"{c.who} {c.what} at {when}.", "blue")
+        if len(others) > 3:
+            self.notify("Changed by other operators", f"{len(others) - 3} more changes: see History.", "blue")
+
     def _update_texts(self, wf) -> None:
         if wf is None:
-            title = "**No workflow.** Click an object to select it, or start a workflow."
+            title = "**No workflow.** Click an object to select it, or start a workflow below (Start a workflow)."
             report = ""
+            step = None
         else:
+            step = wf.current_step()
             state = " (accepted)" if wf.accepted else (" (cancelled)" if wf.cancelled else "")
             subject = getattr(wf, "object_name", None)
             head = f"**{wf.title}{': ' + subject if subject else ''}**{state}"
-            title = f"{head}\n\n{wf.next_step}" + (f"\n\n_{wf.message}_" if wf.message else "")
+            title = f"{head}\n\n{wf.prompt_text()}"
+            if wf.message and not wf.finished:
+                title += f"\n\n_{wf.message}_"
             report = report_markdown(wf.summary())
+        if self.error:
+            title += f"\n\n⚠ {self.error}"
         if self.gui_title.content != title:
             self.gui_title.content = title
         if self.gui_report.content != report:
             self.gui_report.content = report
+        self.gui_warning.visible = bool(self.warning)
+        if self.gui_warning.content != self.warning:
+            self.gui_warning.content = self.warning
+        self._update_controls(wf, step)
         targets = getattr(wf, "targets", None) if wf is not None else None
         self.gui_copy.visible = bool(targets)
         if targets:
             text = targets[-1].text()
             if self.gui_copy.value != text:
                 self.gui_copy.value = text
-        if self.candidate_dropdown is not None and wf is not None:
-            cands = getattr(wf, "candidate_labels", lambda: [])()
-            options = tuple(cands) if cands else ("—",)
-            if tuple(self.candidate_dropdown.options) != options:
-                self.candidate_dropdown.options = options
-            chosen = getattr(wf, "chosen", None)
-            if cands and chosen is not None and self.candidate_dropdown.value != options[chosen]:
-                self.candidate_dropdown.value = options[chosen]
+        frame = "Live video (no frame frozen)." if self.frozen is None else (
+            f"Frozen frame: t = {self.frozen.t_s:.2f} s (frame {self.frozen.index})"
+            + (" — **showing live video**" if self.show_live else ""))
+        if self.gui_frame.content != frame:
+            self.gui_frame.content = frame
+
+    def _update_controls(self, wf, step) -> None:
+        """Show the controls that apply now (the others hidden), the choosers' options, shortcuts on/off."""
+        if wf is None or step is None or wf is not self.built_for:
+            return
+        busy = self.worker is not None and self.worker.is_alive()
+        for c in wf.controls:
+            handle = self.controls.get(c.action)
+            if handle is None:
+                continue
+            on = c.action in step.enabled and not (busy and c.action != "cancel")
+            if handle.visible != on:
+                handle.visible = on
+            cmd = self._command_of.get(c.action)
+            if cmd is not None and cmd.disabled == on:
+                cmd.disabled = not on
+            if c.kind == "choice" and on:
+                opts = wf.choices(c.action)
+                texts = {text: value for text, value in opts}
+                self._choice_options[c.action] = texts
+                options = tuple(texts) if texts else (NO_CHOICE,)
+                if tuple(handle.options) != options:
+                    handle.options = options
+                current = wf.choice_value(c.action)
+                if current is None:
+                    current = self.choice_values.get(c.action)
+                shown = next((t for t, v in texts.items() if v == current), None)
+                if shown is None:
+                    self.choice_values.pop(c.action, None)
+                    shown = options[0]
+                    if texts:
+                        self.choice_values[c.action] = texts[shown]
+                if handle.value != shown:
+                    handle.value = shown
+            if c.kind != "choice" and self.confirm_pending != c.action:
+                if getattr(handle, "label", None) != c.button_label:
+                    handle.label = c.button_label
 
     def close(self) -> None:
         """The browser left: stop its click worker and tracking, and cancel its workflow."""
@@ -421,3 +663,12 @@ class ClientPanel:
     def set_status(self, text: str) -> None:
         if self.gui_status.content != text:
             self.gui_status.content = text
+
+
+def _sentence(text: str) -> str:
+    """An operator message as a sentence: capitalised, ending with a full stop."""
+    text = text.strip()
+    if not text:
+        return text
+    text = text[0].upper() + text[1:]
+    return text if text.endswith((".", "!", "?")) else text + "."

@@ -1,18 +1,19 @@
-"""Which buttons and inputs each workflow shows, and how its results read (Markdown).
+"""What the panel shows besides the workflow's own controls: the buttons that start a workflow,
+how a workflow's results read (Markdown, numbers rounded to what they mean), and the Help.
 
-A control is (label, action, kind): ``kind`` "button" calls the workflow action at once,
-"long" runs it on a worker thread with the progress bar and Cancel live. Workflow-specific
-inputs (the candidate chooser, the history's change number) are built by the client panel.
+Each workflow declares its own controls and steps (``app.workflows.base.Control`` / ``Step``);
+the panel (app/ui/client.py) renders them.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["CONTROLS", "START_BUTTONS", "report_markdown", "operator_help", "HELP_PATH"]
+__all__ = ["START_BUTTONS", "report_markdown", "operator_help", "HELP_PATH", "format_value", "key_label"]
 
 # The operator's quick reference, shown in the panel's Help folder (static/: files the UI shows).
 HELP_PATH = Path(__file__).resolve().parents[2] / "static" / "help.md"
@@ -28,65 +29,40 @@ START_BUTTONS: tuple[tuple[str, str], ...] = (
     ("History", "history"),
 )
 
-CONTROLS: dict[str, tuple[tuple[str, str, str], ...]] = {
-    "calibrate_camera": (
-        ("Solve", "solve", "button"),
-        ("Accept", "accept", "button"),
-        ("Refuse snap", "refuse_snap", "button"),
-        ("Remove last", "remove_last", "button"),
-        ("Redo", "redo", "button"),
-        ("Cancel", "cancel", "button"),
-    ),
-    "designate": (
-        ("Clear", "clear", "button"),
-        ("Done", "accept", "button"),
-    ),
-    "update_pose": (
-        ("Solve (P3L)", "solve", "button"),
-        ("Auto match", "auto_match", "long"),
-        ("Confirm match", "confirm_match", "button"),
-        ("Refine", "refine", "button"),
-        ("Add point", "start_point", "button"),
-        ("Refuse snap", "refuse_snap", "button"),
-        ("Remove last", "remove_last", "button"),
-        ("Accept", "accept", "button"),
-        ("Cancel", "cancel", "button"),
-    ),
-    "model_object": (
-        ("Measure face", "measure", "long"),
-        ("Scan profile", "scan", "long"),
-        ("Solve", "solve", "button"),
-        ("Refuse snap", "refuse_snap", "button"),
-        ("Remove last", "remove_last", "button"),
-        ("Accept", "accept", "button"),
-        ("Cancel", "cancel", "button"),
-    ),
-    "track": (
-        ("Pause", "pause", "button"),
-        ("Resume", "resume", "button"),
-        ("Re-initialise", "reinit", "long"),
-        ("Restart", "restart", "button"),
-        ("Remove last", "remove_last", "button"),
-        ("Accept", "accept", "button"),
-        ("Cancel", "cancel", "button"),
-    ),
-    "calibrate_turret": (
-        ("Measure", "measure", "long"),
-        ("Solve", "solve", "button"),
-        ("Remove last", "remove_last", "button"),
-        ("Accept", "accept", "button"),
-        ("Cancel", "cancel", "button"),
-    ),
-    "history": (
-        ("Refresh", "refresh", "button"),
-        ("Close", "accept", "button"),
-    ),
-}
+# Units a result key ends with → (shown unit, decimals): 0.1 px, 0.1 mm, 0.01°.
+_UNITS = (("_px", "px", 1), ("_mm", "mm", 1), ("_cm", "cm", 2), ("_deg", "°", 2), ("_m", "m", 4), ("_s", "s", 2),
+          ("_pct", "%", 0))
+_WORDS = {"rms": "RMS", "std": "σ", "sigma": "σ", "uv": "pixel", "x_world": "X (world)"}
 
 
-def _fmt(v: Any) -> str:
-    if isinstance(v, float):
-        return f"{v:.4g}"
+def key_label(key: str) -> str:
+    """A result key as the operator reads it: "rms_px" → "RMS (px)", "std_t_mm" → "σ t (mm)"."""
+    unit = ""
+    for suffix, shown, _ in _UNITS:
+        if key.endswith(suffix) and len(key) > len(suffix):
+            key, unit = key[: -len(suffix)], shown
+            break
+    words = [_WORDS.get(w.lower(), w) for w in key.replace("-", "_").split("_") if w]
+    text = " ".join(words)
+    text = text[:1].upper() + text[1:]
+    return f"{text} ({unit})" if unit else text
+
+
+def format_value(key: str, v: Any) -> str:
+    """A number rounded to what it means (by the key's unit); other values as text."""
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        x = float(v)
+        if not math.isfinite(x):
+            return "—"
+        decimals = next((d for suffix, _, d in _UNITS if key.endswith(suffix)), None)
+        if decimals is None:
+            decimals = 2 if abs(x) < 100 else 0
+        text = f"{x:.{decimals}f}"
+        return "0" if float(text) == 0 else text
     return str(v)
 
 
@@ -99,7 +75,8 @@ def operator_help() -> str:
 
 
 def report_markdown(summary: dict[str, Any]) -> str:
-    """A workflow's ``summary()`` as Markdown: scalars as a list, per-item lists as a table."""
+    """A workflow's ``summary()`` as Markdown: scalars as a list, per-item lists as a table, every
+    key in words and every number rounded to what it means."""
     if not summary:
         return ""
     lines = []
@@ -109,17 +86,28 @@ def report_markdown(summary: dict[str, Any]) -> str:
             continue
         if isinstance(value, (list, tuple, np.ndarray)):
             arr = np.asarray(value, dtype=object).ravel()
-            shown = ", ".join(_fmt(x) for x in arr[:12]) + (" …" if len(arr) > 12 else "")
-            lines.append(f"- **{key}**: {shown}")
+            if not len(arr):
+                continue
+            shown = ", ".join(format_value(key, x) for x in arr[:12]) + (" …" if len(arr) > 12 else "")
+            lines.append(f"- **{key_label(key)}**: {shown}")
         elif isinstance(value, dict):
-            lines.append(f"- **{key}**: " + ", ".join(f"{k} {_fmt(v)}" for k, v in value.items()))
+            lines.append(f"- **{key_label(key)}**: " + ", ".join(f"{format_value(k, v)} {k}" for k, v in value.items()))
         else:
-            lines.append(f"- **{key}**: {_fmt(value)}")
+            lines.append(f"- **{key_label(key)}**: {format_value(key, value)}")
     for key, rows in tables.items():
         cols = list(rows[0].keys())
-        lines.append(f"\n**{key}**\n")
-        lines.append("| " + " | ".join(cols) + " |")
+        lines.append(f"\n**{key_label(key)}**\n")
+        lines.append("| " + " | ".join(key_label(c) for c in cols) + " |")
         lines.append("|" + "---|" * len(cols))
         for row in rows[:30]:
-            lines.append("| " + " | ".join(_fmt(row.get(c, "")) for c in cols) + " |")
+            cells = []
+            for c in cols:
+                v = row.get(c, "")
+                if isinstance(v, (list, tuple, np.ndarray)):
+                    cells.append(" ".join(format_value(c, x) for x in np.asarray(v, dtype=object).ravel()))
+                else:
+                    cells.append(format_value(c, v))
+            lines.append("| " + " | ".join(cells) + " |")
+        if len(rows) > 30:
+            lines.append(f"\n… and {len(rows) - 30} more")
     return "\n".join(lines)

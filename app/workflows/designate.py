@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from .base import Cancelled, Marks, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel
 
 __all__ = ["Target", "DesignateTarget", "NOT_CHECKED", "LIMIT_SIGMA"]
 
@@ -108,6 +108,11 @@ class DesignateTarget(Workflow):
     name = "designate"
     title = "Designate target"
     actions = ("click", "clear", "accept", "cancel")
+    controls = (
+        Control("clear", "Clear", "X", hint="Forget the targets designated so far"),
+        Control("accept", "Done", "enter", color="green", hint="Close (nothing is written)"),
+        CANCEL,
+    )
 
     def __init__(self, site, client: str = "operator", shots: int = 3):
         super().__init__(site, client)
@@ -245,17 +250,19 @@ class DesignateTarget(Workflow):
             self.accepted = True
             self.state = "accepted"
 
-    @property
-    def next_step(self) -> str:
+    def _step(self) -> Step:
         if self.finished:
-            return "Done."
+            return self._finished_step()
         if self.progress is not None:
-            return f"Checking the target with the range finder… {self.progress_text} (Cancel stops it)"
+            return Step("checking", f"Checking the target with the range finder… {self.progress_text}. " + "{cancel} stops it.",
+                        frozenset({"cancel"}), clicks=False)
         if self.targets:
             t = self.targets[-1]
-            warn = f" {t.warning}." if t.warning else ""
-            return f"Target: {t.text()} m on {t.object}.{warn} Click another point, or Done."
-        return "Click a point on an object or the table in the video."
+            warn = f" {_sentence(t.warning)}" if t.warning else ""
+            return Step("targets", f"Target {len(self.targets)}: {t.text()} m on {t.object}.{warn} Click another point, or "
+                        "{accept}.", frozenset({"clear", "accept", "cancel"}))
+        return Step("click", "Click a point on an object or the table in the video; " + "{accept} closes.",
+                    frozenset({"accept", "cancel"}))
 
     def marks(self) -> Marks:
         with self.lock:
@@ -285,3 +292,8 @@ class DesignateTarget(Workflow):
 
 def _mm(v: float) -> float | None:
     return None if not np.isfinite(v) else 1000 * float(v)
+
+
+def _sentence(text: str) -> str:
+    text = text.strip()
+    return (text[0].upper() + text[1:] + ("" if text.endswith(".") else ".")) if text else text

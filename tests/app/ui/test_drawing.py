@@ -49,6 +49,8 @@ def test_marks_draw_selection_ghosts_clicks_targets_beam(site):
 def test_report_markdown_lists_scalars_and_tables():
     text = report_markdown({"rms_px": 0.51234, "std_t_mm": [1.0, 2.0, 3.0],
                             "clicks": [{"click": "edge 1", "residual_px": 0.2}, {"click": "edge 2", "residual_px": 0.7}]})
-    assert "**rms_px**: 0.5123" in text and "1, 2, 3" in text
-    assert "| click | residual_px |" in text and "| edge 2 | 0.7 |" in text
+    assert "**RMS (px)**: 0.5" in text and "1.0, 2.0, 3.0" in text  # rounded to what it means: 0.1 px, 0.1 mm
+    assert "| Click | Residual (px) |" in text and "| edge 2 | 0.7 |" in text
     assert report_markdown({}) == ""
+    tiny = report_markdown({"rms_px": 2.332e-14, "std_r_deg": 0.123456, "x_m": 1.234567891})
+    assert "e-14" not in tiny and "**RMS (px)**: 0" in tiny and "0.12" in tiny and "1.2346" in tiny

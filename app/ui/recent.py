@@ -1,0 +1,61 @@
+"""The recent video frames, for freezing one and scrubbing back (the operator's frozen frame).
+
+``RecentFrames`` listens to the grabber and keeps the frames of the last ``seconds`` (at most one
+every ``seconds / max_frames``, so memory stays bounded: 120 frames of 640×480 RGB are 110 MB at
+most, of the workcell's 512×256 video 47 MB). Frames are shared read-only arrays: nothing is copied.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+from typing import Any
+
+__all__ = ["RecentFrames"]
+
+
+class RecentFrames:
+    """A bounded ring of the grabber's recent frames (``app.video.Frame``: image, index, t_s).
+
+    seconds : how far back the scrubber reaches. max_frames : the most frames kept.
+    """
+
+    def __init__(self, grabber: Any, seconds: float = 12.0, max_frames: int = 120):
+        if not (seconds > 0 and max_frames > 1):
+            raise ValueError(f"seconds must be > 0 and max_frames > 1, got {seconds}, {max_frames}")
+        self.seconds = float(seconds)
+        self.min_gap_s = self.seconds / max_frames
+        self._frames: collections.deque = collections.deque(maxlen=int(max_frames))
+        self._lock = threading.Lock()
+        grabber.add_listener(self._on_frame)
+        first = grabber.latest()
+        if first is not None:
+            self._on_frame(first)
+
+    def _on_frame(self, frame: Any) -> None:
+        with self._lock:
+            if self._frames:
+                last = self._frames[-1]
+                if frame.index == last.index:
+                    return
+                # a looped recording restarts its time: keep it (its index still grows)
+                if 0 <= frame.t_s - last.t_s < self.min_gap_s:
+                    return
+            self._frames.append(frame)
+
+    def frames(self) -> list:
+        """The kept frames, oldest first."""
+        with self._lock:
+            return list(self._frames)
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._frames)
+
+    def back(self, k: int) -> Any:
+        """The frame ``k`` steps before the newest (0: the newest), clamped; None when empty."""
+        with self._lock:
+            if not self._frames:
+                return None
+            k = min(max(int(k), 0), len(self._frames) - 1)
+            return self._frames[-1 - k]
