@@ -50,10 +50,17 @@ def draw_database(camera: Camera, objects: Iterable[SiteObject], width: int, hei
 
 
 def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], width: int, height: int,
-               selected: str | None = None) -> tuple[LineBatch, list[tuple[np.ndarray, str]]]:
+               selected: str | None = None, scale: float = 1.0) -> tuple[LineBatch, list[tuple[np.ndarray, str]]]:
     """One operator's marks: the selected object, assigned edges, ghosts, tracked poses and their
     edge points, clicks (raw clicks dashed beside the snapped ones in use), residuals, targets and
-    the beam spot. Returns the batch and labels (uv (2,), text)."""
+    the beam spot. Returns the batch and labels (uv (2,), text).
+
+    scale : image pixels per screen pixel relative to the fitted view (0.1 when zoomed in 10×): the
+    markers' sizes are multiplied by it, so that they keep their size on screen and do not hide
+    what they mark."""
+    s = float(scale)
+    if not (np.isfinite(s) and s > 0):
+        raise ValueError(f"scale must be a positive number, got {scale!r}")
     batch = LineBatch()
     name = marks.selected or selected
     if name in objects:
@@ -68,8 +75,8 @@ def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], wid
         pw = project_wireframe(camera, ghost.model, ghost.T_world_obj, width=width, height=height)
         color = COLORS["tracked"] if ghost.chosen else tuple(int(c * 0.55) for c in COLORS["tracked"])
         batch.add_wireframe(pw, color, hidden="removed")
-    batch.add(cross_markers(marks.found_points, 1.5), COLORS["edge_found"])
-    batch.add(cross_markers(marks.rejected_points, 1.5), COLORS["edge_rejected"])
+    batch.add(cross_markers(marks.found_points, 1.5 * s), COLORS["edge_found"])
+    batch.add(cross_markers(marks.rejected_points, 1.5 * s), COLORS["edge_rejected"])
     for obj_name, k in marks.highlight:
         obj = objects.get(obj_name)
         if obj is None or not 0 <= k < len(obj.model.edges):
@@ -77,18 +84,21 @@ def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], wid
         E = obj.model.edge_segments(obj.T_world_obj)[k]
         if np.all(camera.depth(E) > 0):
             batch.add(camera.project(E).reshape(1, 2, 2), COLORS["assigned"])
-    batch.add(dash_segments(marks.raw_segments, 3.0, 3.0)[0], COLORS["raw"])
-    batch.add(cross_markers(marks.raw_points, 4.0), COLORS["raw"])
+    batch.add(dash_segments(marks.raw_segments, 3.0 * s, 3.0 * s)[0], COLORS["raw"])
+    batch.add(cross_markers(marks.raw_points, 4.0 * s), COLORS["raw"])
     batch.add(marks.snap_lines, COLORS["raw"])
     batch.add(marks.segments, COLORS["click"])
-    batch.add(cross_markers(marks.points, 5.0), COLORS["click"])
-    batch.add(cross_markers(marks.pending, 7.0), COLORS["pending"])
+    batch.add(cross_markers(marks.points, 5.0 * s), COLORS["click"])
+    batch.add(cross_markers(marks.pending, 7.0 * s), COLORS["pending"])
+    for uv in np.asarray(marks.circles).reshape(-1, 2):
+        batch.add(circle_marker(uv, 9.0 * s), COLORS["pending"])
     batch.add(marks.residuals, COLORS["assigned"])
+    batch.add(cross_markers(marks.live_points, 2.5 * s), COLORS["beam"])
     for uv in np.asarray(marks.targets).reshape(-1, 2):
-        batch.add(circle_marker(uv, 7.0), COLORS["target"])
-        batch.add(cross_markers(uv.reshape(1, 2), 10.0), COLORS["target"])
+        batch.add(circle_marker(uv, 7.0 * s), COLORS["target"])
+        batch.add(cross_markers(uv.reshape(1, 2), 10.0 * s), COLORS["target"])
     if marks.beam_uv is not None and np.all(np.isfinite(marks.beam_uv)):
-        batch.add(circle_marker(marks.beam_uv, 5.0), COLORS["beam"])
-        batch.add(circle_marker(marks.beam_uv, 2.0, n=8), COLORS["beam"])
+        batch.add(circle_marker(marks.beam_uv, 5.0 * s), COLORS["beam"])
+        batch.add(circle_marker(marks.beam_uv, 2.0 * s, n=8), COLORS["beam"])
     labels = [(np.asarray(uv, float), str(text)) for uv, text in marks.labels]
     return batch, labels

@@ -30,6 +30,7 @@ from app.workflows.site import Site
 
 from .client import ClientPanel
 from .drawing import draw_database
+from .recent import RecentFrames
 from .world3d import World3D
 
 __all__ = ["InterfaceServer"]
@@ -79,6 +80,9 @@ class InterfaceServer:
         self.server.on_client_disconnect(self._on_disconnect)
         self._thread = threading.Thread(target=self._loop, name="mcit-redraw", daemon=True)
         grabber.add_listener(lambda _frame: self._wake.set())  # a new frame: redraw now
+        # The recent frames, for each operator's frozen frame and its scrubber (app/ui/recent.py).
+        self.recent_frames_max = 120
+        self.recent = RecentFrames(grabber, seconds=12.0, max_frames=self.recent_frames_max)
         # Snapping, matching and tracking work on what the operator sees: the grabber's latest frame.
         site.set_frames(GrabberFrames(grabber))
         if site.camera.width != src.width or site.camera.height != src.height:
@@ -154,22 +158,20 @@ class InterfaceServer:
         points, colors = batch.world(self.pixel_world, z)
         scene_api.add_line_segments(name, points.astype(np.float32), colors, thickness=LINE_PX, thickness_units="screen")
 
-    def send_client_overlay(self, client: viser.ClientHandle, batch: LineBatch, labels: list) -> None:
-        """Draw one client's marks (client-scoped nodes); labels are sent only when they change."""
+    def send_client_overlay(self, client: viser.ClientHandle, batch: LineBatch, labels: list, sent: dict) -> dict:
+        """Draw one client's marks (client-scoped nodes). ``sent`` holds the labels this client was
+        sent last (name → (text, position)); only changed ones are sent again. Returns the new dict."""
         self._send_lines(client.scene, "/overlay/marks", batch, Z_MARKS)
-        panel = self.clients.get(client.client_id)
-        old: dict = getattr(panel, "_labels_sent", {}) if panel else {}
         new: dict = {}
         for i, (uv, text) in enumerate(labels):
             name = f"/overlay/marks_labels/{i}"
             position = tuple(float(v) for v in self.pixel_world.to_world(np.asarray(uv, float) + [6.0, -6.0], Z_MARKS))
             new[name] = (text, position)
-            if old.get(name) != new[name]:
+            if sent.get(name) != new[name]:
                 client.scene.add_label(name, text, position=position, anchor="bottom-left", font_screen_scale=0.8)
-        for name in set(old) - set(new):
+        for name in set(sent) - set(new):
             client.scene.remove_by_name(name)
-        if panel is not None:
-            panel._labels_sent = new
+        return new
 
     def _draw_database(self) -> None:
         site = self.site

@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from .base import Workflow, WorkflowError
+from .base import Control, Step, Workflow, WorkflowError
 
 __all__ = ["History"]
 
@@ -18,6 +18,13 @@ class History(Workflow):
     name = "history"
     title = "History"
     actions = ("refresh", "undo", "restore", "accept", "cancel")
+    controls = (
+        Control("change", "Change", kind="choice", hint="A change of the database (newest first)"),
+        Control("undo", "Undo change", "Z", arg="change", color="orange",
+                hint="Bring the object back to its state before the chosen change (the undo is recorded too)"),
+        Control("refresh", "Refresh", hint="Read the latest changes again"),
+        Control("accept", "Close", "escape", hint="Close the history"),
+    )
 
     def __init__(self, site, client: str = "operator", limit: int = 30, object_name: str | None = None):
         super().__init__(site, client)
@@ -64,11 +71,25 @@ class History(Workflow):
             self.accepted = True
             self.state = "closed"
 
-    @property
-    def next_step(self) -> str:
+    def _step(self) -> Step:
         if self.finished:
-            return "Closed."
-        return "The last changes, newest first. Type a change number and Undo it (the undo is recorded too)."
+            return self._finished_step()
+        if not self.entries:
+            return Step("empty", "No change is recorded yet. {accept} when done.", frozenset({"refresh", "accept"}), False)
+        return Step("browse", "The last changes, newest first: choose one under Change and {undo} (the undo is "
+                    "recorded too and can be undone); {accept} when done.", frozenset({"change", "undo", "refresh", "accept"}),
+                    clicks=False)
+
+    def choices(self, action: str) -> list[tuple[str, Any]]:
+        if action != "change":
+            return []
+        with self.lock:
+            out = []
+            for c in self.entries:
+                what = c.object_name or ("calibration" if c.calibration_id is not None else "")
+                out.append((f"#{c.id} {c.action} {what} ({c.client}, {time.strftime('%H:%M:%S', time.localtime(c.time))})",
+                            int(c.id)))
+            return out
 
     def summary(self) -> dict[str, Any]:
         with self.lock:

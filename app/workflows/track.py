@@ -27,7 +27,7 @@ import numpy as np
 from core.pose import nearest_twin, plausibility
 from core.transforms import pose_error
 
-from .base import Ghost, Marks, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
 from .snapping import ClickSnap, SnapMixin, snap_marks
 from .update_pose import MIN_SEGMENT_PX, SNAPPED_SIGMA_PX
 
@@ -40,6 +40,17 @@ class TrackObject(SnapMixin, Workflow):
     options = ("object_name",)
     actions = ("step", "pause", "resume", "restart", "click", "add_segment", "remove_last", "reinit", "accept",
                "cancel", "refuse_snap", "set_snap")
+    controls = (
+        Control("pause", "Pause", "space", hint="Stop following the video (the tracked pose stays)"),
+        Control("resume", "Resume", "space", hint="Follow the video again"),
+        Control("reinit", "Re-initialise", "I", kind="long", color="blue",
+                hint="Find the pose from the clicked edges on this frame, then track on"),
+        Control("restart", "Restart", "T", hint="Track on from the last good pose"),
+        Control("accept", "Accept", "enter", color="green", hint="Write the tracked pose to the database"),
+        Control("refuse_snap", "Refuse snap", "U", hint="Use the last edge as clicked, not moved onto the image's edge"),
+        Control("remove_last", "Remove last", "backspace", hint="Undo the last click"),
+        CANCEL,
+    )
 
     def __init__(self, site, client: str = "operator", object_name: str | None = None, snap: bool = True,
                  sigma_px: float = 1.0, **tracker_options: Any):
@@ -257,25 +268,32 @@ class TrackObject(SnapMixin, Workflow):
             return rec
 
     # ------------------------------------------------------------------ display
-    @property
-    def next_step(self) -> str:
-        if self.accepted:
-            return f"Done: {self.object_name}'s tracked pose is written."
-        if self.cancelled:
-            return "Cancelled: nothing was written."
+    def _step(self) -> Step:
+        if self.finished:
+            return self._finished_step()
+        base = {"cancel"} | ({"remove_last"} if (self.pending is not None or self.segs) else set())
+        snap, _ = self._last_snap()
+        if snap is not None and snap.applied and self.pending is None:
+            base.add("refuse_snap")
         if self.pending is not None:
-            return "Click the other end of that edge."
+            return Step("click_end", "Click the other end of that edge.", frozenset(base))
+        n = len(self.segs)
+        reinit = {"reinit"} if n >= 3 else set()
+        then = "then {reinit}" if reinit else "then Re-initialise"
         if self.lost:
-            n = len(self.segs)
             more = f" ({n} clicked)" if n else ""
-            return (f"Lost: {self.reason}. Click three or more edges of {self.object_name}, two clicks each{more}, then "
-                    "Re-initialise; or Restart from the last good pose.")
+            return Step("lost", f"Lost: {self.reason}. Click three or more edges of {self.object_name}, two clicks each{more}, "
+                        f"{then}; or " + "{restart} from the last good pose.", frozenset(base | reinit | {"restart"}))
         if self.paused:
-            return "Paused: Resume, Accept the tracked pose, or click edges and Re-initialise."
+            acc = {"accept"} if self.frames else set()
+            return Step("paused", "Paused: {resume}, " + ("{accept} the tracked pose, " if acc else "")
+                        + f"or click three or more edges and {'{reinit}' if reinit else 'Re-initialise'}.",
+                        frozenset(base | acc | reinit | {"resume"}))
         if self.frames == 0:
-            return f"Tracking {self.object_name} from its database pose: waiting for the next frame."
-        return (f"Tracking {self.object_name}: confidence {100 * (self.confidence or 0):.0f} %. Accept writes the tracked "
-                "pose; Pause to stop.")
+            return Step("waiting", f"Tracking {self.object_name} from its database pose: waiting for the next frame "
+                        "({pause} stops).", frozenset(base | {"pause"}), clicks=False)
+        return Step("tracking", f"Tracking {self.object_name}: confidence {100 * (self.confidence or 0):.0f} %. "
+                    "{accept} writes the tracked pose; {pause} to stop.", frozenset(base | {"accept", "pause"}), clicks=False)
 
     def marks(self) -> Marks:
         with self.lock:

@@ -39,7 +39,7 @@ from core.pose import nearest_twin, p3l, plausibility, refine
 from core.pose.uncertainty import with_camera_uncertainty
 from core.transforms import pose_error
 
-from .base import Ghost, Marks, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
 from .snapping import SNAPPED_CORNER_SIGMA_PX, SNAPPED_SEGMENT_SIGMA_PX, ClickSnap, SnapMixin, snap_marks
 
 __all__ = ["UpdatePose", "Match", "plausibility", "nearest_twin"]
@@ -48,6 +48,11 @@ PICK_RADIUS_PX = 25.0
 MIN_SEGMENT_PX = 3.0
 SNAPPED_SIGMA_PX = 0.3  # the click noise automatic matching assumes when every segment is snapped
 IMAGE_GATE_PX = 3.0  # a matched pose whose edges lie farther than this from the image's (mean) fits the clicks only
+# A refined pose is weak (Accept asks once more) when its σ exceed these, a click lies more than 3σ
+# off, a snap moved a click more than MAX_SNAP_MOVE_PX, or the clicks fix the 6 unknowns just barely.
+WEAK_SIGMA_DEG = 1.0
+WEAK_SIGMA_MM = 10.0
+MAX_SNAP_MOVE_PX = 2.0
 
 
 @dataclass(frozen=True)
@@ -66,9 +71,24 @@ class UpdatePose(SnapMixin, Workflow):
     name = "update_pose"
     title = "Update pose"
     options = ("object_name",)
-    actions = ("click", "assign_edge", "add_segment", "add_point", "start_point", "remove_last", "solve",
+    actions = ("click", "assign_edge", "add_segment", "add_point", "start_point", "remove_last", "remove_click", "solve",
                "choose_candidate", "refine", "accept", "cancel", "refuse_snap", "set_snap", "auto_assign",
                "auto_match", "confirm_match")
+    controls = (
+        Control("auto_match", "Auto match", "M", kind="long", color="blue",
+                hint="Find which model edge each clicked image edge is (3 or more edges, 4 is best)"),
+        Control("confirm_match", "Confirm match", "C", color="blue", hint="Adopt the assignment shown"),
+        Control("solve", "Solve (P3L)", "P", color="blue", hint="Large motion: the three-line solver's candidate poses"),
+        Control("choose_candidate", "Candidate", kind="choice", hint="The candidate pose drawn in white"),
+        Control("refine", "Refine", "R", color="blue", hint="Least squares on every click, from the candidate or the database pose"),
+        Control("accept", "Accept", "enter", color="green", hint="Write the refined pose to the database"),
+        Control("start_point", "Add point", "V", hint="Next clicks: a model corner, then where it is in the video"),
+        Control("refuse_snap", "Refuse snap", "U", hint="Use the last click as clicked, not moved onto the image's edge"),
+        Control("remove_last", "Remove last", "backspace", hint="Undo the last click or assignment"),
+        Control("click_row", "Click", kind="choice", hint="A clicked edge or point (its residual after Refine)"),
+        Control("remove_click", "Delete click", arg="click_row", hint="Delete the click chosen above"),
+        CANCEL,
+    )
 
     def __init__(self, site, client: str = "operator", object_name: str | None = None, loss: str = "l2",
                  snap: bool = True, sigma_px: float = 1.0):
@@ -600,39 +620,149 @@ class UpdatePose(SnapMixin, Workflow):
         k = int(np.argmin(d))
         return k, float(d[k])
 
+    def _click_rows(self) -> list[tuple[str, int]]:
+        """Every click that can be deleted, in refine's order: ("segment", j) then ("point", j)."""
+        return [("segment", j) for j in range(len(self.segs))] + [("point", j) for j in range(len(self.points_uv))]
+
+    def remove_click(self, index: int) -> None:
+        """Delete click ``index`` (a row of the residual table: clicked edges, then points)."""
+        with self.lock:
+            self._check_open()
+            rows = self._click_rows()
+            i = int(index)
+            if not 0 <= i < len(rows):
+                raise WorkflowError(f"there is no click {i + 1}: {len(rows)} were made")
+            if self.pending is not None or self.mode == "point":
+                raise WorkflowError("finish the click under way first (or Remove last)")
+            kind, j = rows[i]
+            if kind == "segment":
+                del self.segs[j], self.seg_snaps[j], self.edge_ids[j]
+                what = f"Edge {j + 1}"
+            else:
+                del self.points_uv[j], self.point_snaps[j], self.vertex_ids[j]
+                what = f"Point {j + 1}"
+            # What Remove last undoes, rebuilt in click order (a confirmed match's undo is dropped).
+            self._done = [d for j2, e in enumerate(self.edge_ids) for d in (("segment", "assign") if e is not None else ("segment",))]
+            self._done += ["point"] * len(self.points_uv)
+            self._match_undo = []
+            self._clicks_changed()
+            self.state = "assign_edge" if self._waiting_for_edge() else "click_edge"
+            self.message = f"{what} deleted; {'Refine' if self.refined is None and self.candidates else 'click or Refine'} again."
+
     # ------------------------------------------------------------------ display
-    @property
-    def next_step(self) -> str:
-        if self.accepted:
-            return f"Done: {self.object_name}'s pose is updated."
-        if self.cancelled:
-            return "Cancelled: nothing was written."
+    def _step(self) -> Step:
+        if self.finished:
+            return self._finished_step()
         n = sum(e is not None for e in self.edge_ids)
+        k = len(self.segs)
         where = "on the white ghost" if self.chosen is not None else "on its wireframe"
+        base = {"cancel"}
+        if self.pending is not None or self.mode == "point" or self._done or self.matches is not None:
+            base.add("remove_last")
+        snap, _ = self._last_snap()
+        if snap is not None and snap.applied and self.pending is None and self.mode == "edge":
+            base.add("refuse_snap")
         if self.mode == "point":
             if self.pending_vertex is None:
-                return f"Click a corner of {self.object_name} {where} (the model vertex)."
-            return f"Now click where vertex {self.pending_vertex} really is in the video."
+                return Step("click_point_model", f"Click a corner of {self.object_name} {where} (the model vertex).",
+                            frozenset(base))
+            return Step("click_point_image", f"Now click where vertex {self.pending_vertex} (circled) really is in the video.",
+                        frozenset(base))
         if self.pending is not None:
-            return f"Click a second point on the same image edge (edge {len(self.segs) + 1})."
+            return Step("click_edge_end", f"Click a second point on the same image edge (edge {k + 1}).", frozenset(base))
+        rows = {"click_row", "remove_click"} if self._click_rows() else set()
         if self.matches is not None:
-            return (f"Assignment {(self.chosen or 0) + 1} of {len(self.matches)} shown (labels 1→e3: segment 1 is model "
-                    "edge 3): Confirm match, choose another candidate, or Remove last to assign by hand.")
+            return Step("match", f"Assignment {(self.chosen or 0) + 1} of {len(self.matches)} shown (1→e3: clicked edge 1 is "
+                        "model edge 3): {confirm_match}, choose another {choose_candidate}, or {remove_last} to assign by hand.",
+                        frozenset(base | {"confirm_match", "choose_candidate"}))
+        more = base | rows | {"start_point"}
         if self._waiting_for_edge():
-            return f"Which model edge is it? Click that edge of {self.object_name} {where} (or Auto match later)."
-        if self.auto and n < len(self.segs):
-            k = len(self.segs)
+            return Step("assign_edge", f"Which model edge is it? Click that edge of {self.object_name} {where}.",
+                        frozenset(base | rows))
+        if self.auto and n < k:
             if k < 3:
-                return f"Automatic matching: click two points along an edge of {self.object_name} (edge {k + 1}; 3 or more, 4 is best)."
-            return f"{k} edges clicked: Auto match, or click another edge (4 or more is best)."
-        if n < 3:
-            return (f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3), or Auto "
-                    "match to skip saying which model edge each is.")
-        if not self.candidates and self.refined is None:
-            return "Solve (P3L) for a large motion, or Refine from the database pose for a small one; or click more edges."
+                return Step("auto_click", f"Automatic matching: click two points along an edge of {self.object_name} "
+                            f"(edge {k + 1}; 3 or more, 4 is best).", frozenset(base | rows))
+            return Step("auto_ready", f"{k} edges clicked: " + "{auto_match}, or click another edge (4 or more is best).",
+                        frozenset(base | rows | {"auto_match"}))
+        constraints = 2 * (n + len(self.points_uv))
+        if constraints >= 6:
+            more.add("refine")
+        if n >= 3:
+            more.add("solve")
+        if not self.auto and k < 3:
+            more.add("auto_match")
+        if n < 3 and not self.refined:
+            tail = " Or {refine} from the database pose (a small motion)." if "refine" in more else ""
+            return Step("click_edge", f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3), "
+                        "then click which model edge it is; or {auto_match} to skip saying which is which." + tail
+                        if "auto_match" in more else
+                        f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3)." + tail,
+                        frozenset(more))
+        if self.candidates and self.refined is None:
+            return Step("candidates", f"Candidate {(self.chosen or 0) + 1} of {len(self.candidates)} is drawn in white: pick "
+                        "another {choose_candidate} if it is wrong, add edges, then {refine}.",
+                        frozenset(more | {"choose_candidate"}))
         if self.refined is None:
-            return f"Candidate {self.chosen + 1} of {len(self.candidates)} shown in white: pick another if it is wrong, add edges, then Refine."
-        return f"RMS {self.refined.rms_px:.2f} px: Accept, or add clicks and Refine again."
+            return Step("ready", "{solve} for a large motion, or {refine} from the database pose for a small one; or click "
+                        "more edges.", frozenset(more))
+        extra = {"choose_candidate"} if self.candidates else set()
+        return Step("review", f"Refined: RMS {self.refined.rms_px:.1f} px. " + "{accept} to write it, or add clicks and "
+                    "{refine} again.", frozenset(more | extra | {"accept"}))
+
+    def choices(self, action: str) -> list[tuple[str, Any]]:
+        with self.lock:
+            if action == "choose_candidate":
+                return [(label, i) for i, label in enumerate(self.candidate_labels())]
+            if action != "click_row":
+                return []
+            res = None
+            if self.refined is not None:
+                res = list(self.refined.click_residuals_px)
+            out, r = [], 0
+            for kind, j in self._click_rows():
+                if kind == "segment":
+                    e = self.edge_ids[j]
+                    text = f"edge {j + 1}" + (f" → e{e}" if e is not None else " (unassigned)")
+                    used = e is not None
+                else:
+                    text = f"point {j + 1} (v{self.vertex_ids[j]})"
+                    used = True
+                if res is not None and used and r < len(res):
+                    text += f" · {res[r]:.1f} px"
+                r += used
+                out.append((text, len(out)))
+            return out
+
+    def choice_value(self, action: str) -> Any:
+        return self.chosen if action == "choose_candidate" else None
+
+    def weaknesses(self) -> list[str]:
+        with self.lock:
+            r = self.refined
+            if r is None:
+                return []
+            out = []
+            sd, st = float(np.max(r.std_r_deg)), float(np.max(r.std_t_m)) * 1000
+            if sd > WEAK_SIGMA_DEG or st > WEAK_SIGMA_MM:
+                out.append(f"the pose is uncertain: σ up to {sd:.2f}° and {st:.1f} mm (more than {WEAK_SIGMA_DEG:.0f}° or "
+                           f"{WEAK_SIGMA_MM:.0f} mm); click more edges")
+            sig = self._click_sigmas()
+            names = [f"edge {j + 1}" for j, e in enumerate(self.edge_ids) if e is not None] + \
+                    [f"point {j + 1}" for j in range(len(self.points_uv))]
+            for name, res, sg in zip(names, r.click_residuals_px, sig):
+                if res > 3 * max(sg, 0.3):
+                    out.append(f"{name} is {res:.1f} px from the refined model (more than 3σ): a wrong click or assignment?")
+            for j, sn in enumerate(self.seg_snaps):
+                if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
+                    out.append(f"edge {j + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)")
+            for j, sn in enumerate(self.point_snaps):
+                if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
+                    out.append(f"point {j + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)")
+            if len(r.kinds) * 2 <= 6:
+                out.append("no redundant click: the clicks fix the pose's 6 unknowns exactly, so a wrong one cannot show; "
+                           "click a fourth edge")
+            return out
 
     def candidate_labels(self) -> list[str]:
         """One label per candidate for a chooser: "#1 (best)", "#2", ..."""
