@@ -475,14 +475,7 @@ class ClientPanel:
 
     # ------------------------------------------------------------------ helpers
     def _object_at(self, uv: np.ndarray) -> str | None:
-        cam = self.app.site.camera
-        best, best_d = None, SELECT_RADIUS_PX
-        for obj in self.app.site.objects():
-            pw = project_wireframe(cam, obj.model, obj.T_world_obj)
-            _, d = nearest_segment(pw.seg_uv[pw.visible], uv)
-            if d < best_d:
-                best, best_d = obj.name, d
-        return best
+        return self.app.object_at(uv, SELECT_RADIUS_PX)  # the overlay's own projections: nothing projected here
 
     # ------------------------------------------------------------------ drawing (loop only)
     def fit(self) -> None:

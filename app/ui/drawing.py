@@ -18,7 +18,7 @@ from app.workflows.base import Marks
 from app.workflows.site import SiteObject
 from core.camera import Camera
 
-__all__ = ["label_anchor", "draw_database", "draw_marks"]
+__all__ = ["label_anchor", "draw_database", "draw_object", "draw_marks"]
 
 
 def label_anchor(pw: ProjectedWireframe) -> np.ndarray | None:
@@ -39,14 +39,27 @@ def draw_database(camera: Camera, objects: Iterable[SiteObject], width: int, hei
     batch = LineBatch()
     labels = []
     for obj in objects:
-        color = STATUS_COLORS.get(obj.status, STATUS_COLORS["known"])
-        pw = project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height)
-        batch.add_wireframe(pw, color, hidden=hidden)
-        anchor = label_anchor(pw)
-        if anchor is not None:
-            text = obj.name if obj.status == "known" else f"{obj.name} ({obj.status})"
-            labels.append((obj.name, anchor, text))
+        one, label, _ = draw_object(camera, obj, width, height, hidden)
+        batch.segments += one.segments
+        batch.colors += one.colors
+        if label is not None:
+            labels.append((obj.name, *label))
     return batch, labels
+
+
+def draw_object(camera: Camera, obj: SiteObject, width: int, height: int, hidden: str = "dashed"
+                ) -> tuple[LineBatch, tuple[np.ndarray, str] | None, ProjectedWireframe]:
+    """One object's wireframe at its database pose, colour by status: (batch, label (uv (2,), text)
+    or None, its projection)."""
+    batch = LineBatch()
+    color = STATUS_COLORS.get(obj.status, STATUS_COLORS["known"])
+    pw = project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height)
+    batch.add_wireframe(pw, color, hidden=hidden)
+    anchor = label_anchor(pw)
+    label = None
+    if anchor is not None:
+        label = (anchor, obj.name if obj.status == "known" else f"{obj.name} ({obj.status})")
+    return batch, label, pw
 
 
 def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], width: int, height: int,

@@ -3,14 +3,19 @@
 Layout of the viser scene (DESIGN.md §"The operator interface"):
 
 * ``/video``: the frame as a textured plane in the pixel world (pixel (u, v) ↔ (u·k, v·k, 0));
-* ``/overlay/db`` and ``/overlay/labels/*``: every database object projected through C (shared by
-  all clients); ``/overlay/beam``: the range finder's last spot;
+* ``/overlay/db/<object id>`` and ``/overlay/db_labels/<object id>``: each database object projected
+  through C and its name (shared by all clients; ``app.ui.db_overlay``); ``/overlay/beam``: the
+  range finder's last spot;
 * ``/overlay/marks`` and ``/overlay/marks_labels/*``: one client's workflow marks (client-scoped);
 * ``/world3d/...``: the virtual world in metres (objects, camera frustum, turret, beam), placed
   away from the image plane; a client's "3D world" view orbits it.
 
-Threads: viser runs callbacks on its pool (they only change state); one loop thread redraws when
-woken — by each new video frame or by a callback — inside ``server.atomic()``.
+Threads: viser runs callbacks on its pool (they only change state). The frame loop
+(``mcit-redraw``), woken by each new video frame or by a callback, sends the frame, then each
+client's marks inside ``server.atomic()``. The database thread (``mcit-database``) polls the
+database each second and, when the site changed, redraws only the objects whose version or status
+moved (every object only when C changed), the 3D world likewise, and rebuilds the ray-casting
+index: the video never waits for the database.
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from app.workflows.frames import GrabberFrames
 from app.workflows.site import Site
 
 from .client import ClientPanel
-from .drawing import draw_database
+from .db_overlay import DatabaseOverlay
 from .recent import RecentFrames
 from .world3d import World3D
 
@@ -70,7 +75,10 @@ class InterfaceServer:
         self._db_revision = -1
         self._beam_key: Any = None
         self._frame_index = -1
-        self._db_labels: dict[str, Any] = {}
+        self._panels_revision = -1  # the site revision the clients' panels last saw
+        self.db_overlay = DatabaseOverlay(self.server.scene, self.pixel_world, Z_DB, LINE_PX, atomic=self.server.atomic)
+        self._db_wake = threading.Event()
+        self._db_thread = threading.Thread(target=self._db_loop, name="mcit-database", daemon=True)
         self.frames_sent = 0
         self.redraws = 0
         self._last_status_t = 0.0
@@ -102,19 +110,28 @@ class InterfaceServer:
     def start(self) -> "InterfaceServer":
         self.grabber.start()
         self._thread.start()
+        self._db_thread.start()
         return self
 
     def stop(self) -> None:
         self._stop.set()
         self._wake.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=3.0)
+        self._db_wake.set()
+        for thread in (self._thread, self._db_thread):
+            if thread.is_alive():
+                thread.join(timeout=3.0)
         self.grabber.stop()
         self.server.stop()
 
     def wake(self) -> None:
-        """Ask the loop to redraw now (called by callbacks after they change state)."""
+        """Ask the loops to redraw now (called by callbacks after they change state)."""
         self._wake.set()
+        self._db_wake.set()
+
+    def object_at(self, uv: np.ndarray, radius_px: float) -> str | None:
+        """The object whose drawn wireframe passes nearest to pixel ``uv`` (2,), within ``radius_px``
+        pixels, or None: picked on the projections the database overlay keeps (no projection here)."""
+        return self.db_overlay.object_at(uv, radius_px)
 
     # ------------------------------------------------------------------ clients
     def _on_connect(self, client: viser.ClientHandle) -> None:
@@ -173,22 +190,17 @@ class InterfaceServer:
             client.scene.remove_by_name(name)
         return new
 
-    def _draw_database(self) -> None:
+    def sync_database(self) -> int:
+        """Bring the database overlay and the 3D world up to date (only what changed) and build the
+        ray-casting index; the database thread's work. Returns how many objects were redrawn."""
         site = self.site
+        revision = site.revision
         objects = site.objects()
-        pw = self.pixel_world
-        batch, labels = draw_database(site.camera, objects, pw.width, pw.height)
-        self._send_lines(self.server.scene, "/overlay/db", batch, Z_DB)
-        seen = set()
-        for name, uv, text in labels:
-            seen.add(name)
-            self._db_labels[name] = self.server.scene.add_label(
-                f"/overlay/labels/{name}", text, position=tuple(pw.to_world(uv, Z_DB)), anchor="bottom-center",
-                font_screen_scale=0.9)
-        for name in set(self._db_labels) - seen:
-            self._db_labels.pop(name).remove()
-        self.world3d.draw(site)
+        n = self.db_overlay.sync(site.camera, objects)
+        self.world3d.sync(site, objects)
         site.surfaces()  # build the ray-casting index now, not on the operator's next click
+        self._db_revision = revision
+        return n
 
     def _draw_beam(self) -> None:
         X = getattr(self.site, "beam_X_world", None)
@@ -225,28 +237,44 @@ class InterfaceServer:
                 log.exception("redraw failed")
                 time.sleep(0.2)
 
-    def redraw(self) -> None:
-        """One pass: new video frame, database overlay if it changed, each client's marks."""
-        now = time.monotonic()
-        if now - self._last_status_t > 1.0:
-            self._last_status_t = now
+    def _db_loop(self) -> None:
+        # Woken by callbacks (a write is usually what they did); polls the database each second for
+        # other writers. Never blocks the frame loop: the overlay's nodes are sent in short groups.
+        while not self._stop.is_set():
+            self._db_wake.wait(0.25)
+            self._db_wake.clear()
+            if self._stop.is_set():
+                break
             try:
-                self.site.poll()
-            except Exception:  # noqa: BLE001
-                log.exception("database poll failed")
-            self._update_status()
+                now = time.monotonic()
+                if now - self._last_status_t > 1.0:
+                    self._last_status_t = now
+                    try:
+                        self.site.poll()
+                    except Exception:  # noqa: BLE001
+                        log.exception("database poll failed")
+                    self._update_status()
+                if self.site.revision != self._db_revision:
+                    self.sync_database()
+                    self._wake.set()  # the panels redraw what depends on the objects
+            except Exception:  # noqa: BLE001 - keep serving; the next pass retries
+                log.exception("database overlay redraw failed")
+                time.sleep(0.2)
+
+    def redraw(self) -> None:
+        """One pass of the frame loop: the new video frame (sent at once, on its own), then each
+        client's marks. The database overlay is the database thread's (``sync_database``)."""
         frame = self.grabber.latest()
-        site_changed = self.site.revision != self._db_revision
+        if frame is not None and frame.index != self._frame_index:
+            self._frame_index = frame.index
+            self.video.image = frame.image
+            self.frames_sent += 1
+        revision = self.site.revision
+        site_changed = revision != self._panels_revision
+        self._panels_revision = revision
         with self.clients_lock:
             panels = list(self.clients.values())
         with self.server.atomic():
-            if frame is not None and frame.index != self._frame_index:
-                self._frame_index = frame.index
-                self.video.image = frame.image
-                self.frames_sent += 1
-            if site_changed:
-                self._db_revision = self.site.revision
-                self._draw_database()
             self._draw_beam()
             for panel in panels:
                 try:

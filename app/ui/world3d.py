@@ -26,39 +26,71 @@ def _wxyz(R: np.ndarray) -> np.ndarray:
 
 
 class World3D:
-    """Scene nodes of the virtual world; ``draw(site)`` refreshes them."""
+    """Scene nodes of the virtual world; ``sync(site)`` refreshes what changed.
+
+    Each object is ``/world3d/objects/<object id>`` (its mesh, placed at ``T_world_obj``) with its
+    edges as a child: a pose change moves the node, a status change recolours it, a new model
+    replaces it, a removed object's node goes. The camera and the turret are redrawn only when
+    their calibrations change."""
 
     def __init__(self, scene: viser.SceneApi, offset: np.ndarray):
         self.scene = scene
         self.offset = np.asarray(offset, float)
         self.root = scene.add_frame("/world3d", show_axes=False, position=tuple(self.offset), wxyz=_wxyz(R_VIEWER_WORLD))
         scene.add_grid("/world3d/grid", width=4.0, height=4.0, plane="xy", cell_size=0.1, section_size=0.5)
-        self._objects: dict[str, Any] = {}
+        self._objects: dict[Any, tuple[tuple, Any, Any]] = {}  # id → ((version, status, name), model, handle)
+        self._sensors_key: Any = None
+        self.redrawn: list[Any] = []  # ids the last sync drew or moved
 
     def to_viewer(self, X_world: np.ndarray) -> np.ndarray:
         """Viewer coordinates of site points (..., 3)."""
         return np.asarray(X_world, float) @ R_VIEWER_WORLD.T + self.offset
 
     def draw(self, site: Site) -> None:
+        """Same as ``sync(site)``."""
+        self.sync(site)
+
+    def sync(self, site: Site, objects: Any = None) -> int:
+        """Bring the objects' nodes (and the sensors) up to date; returns how many objects were drawn."""
+        objects = site.objects() if objects is None else objects
         seen = set()
-        for obj in site.objects():
-            seen.add(obj.name)
-            V, F = obj.model.triangles(n_circle=32)
-            Vw = V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3]
+        self.redrawn = []
+        for obj in objects:
+            seen.add(obj.id)
+            key = (int(obj.version), obj.status, obj.name)
+            old = self._objects.get(obj.id)
+            if old is not None and old[0] == key:
+                continue
+            self.redrawn.append(obj.id)
+            T = obj.T_world_obj
             color = STATUS_COLORS.get(obj.status, STATUS_COLORS["known"])
-            name = f"/world3d/objects/{obj.name}"
-            self.scene.add_mesh_simple(name, Vw.astype(np.float32), F.astype(np.uint32), color=color,
-                                       opacity=0.35 if obj.kind == "table" else 0.75, flat_shading=True, side="double")
-            E = obj.model.edge_segments(obj.T_world_obj)
+            if old is not None and old[1] is obj.model and old[0][1] == obj.status:
+                handle = old[2]  # same model and colour: move it
+                handle.position = tuple(T[:3, 3])
+                handle.wxyz = _wxyz(T[:3, :3])
+                self._objects[obj.id] = (key, obj.model, handle)
+                continue
+            name = f"/world3d/objects/{obj.id}"
+            if old is not None:
+                self.scene.remove_by_name(name)
+            V, F = obj.model.triangles(n_circle=32)
+            handle = self.scene.add_mesh_simple(name, V.astype(np.float32), F.astype(np.uint32), color=color,
+                                                opacity=0.35 if obj.kind == "table" else 0.75, flat_shading=True,
+                                                side="double", position=tuple(T[:3, 3]), wxyz=_wxyz(T[:3, :3]))
+            E = obj.model.edge_segments(np.eye(4))
             if len(E):
-                self.scene.add_line_segments(f"{name}_edges", E.astype(np.float32), (20, 20, 20), thickness=1.5,
+                self.scene.add_line_segments(f"{name}/edges", E.astype(np.float32), (20, 20, 20), thickness=1.5,
                                              thickness_units="screen")
-            self._objects[obj.name] = name
+            self._objects[obj.id] = (key, obj.model, handle)
         for gone in set(self._objects) - seen:
-            name = self._objects.pop(gone)
-            self.scene.remove_by_name(name)
-            self.scene.remove_by_name(f"{name}_edges")
-        self._draw_sensors(site)
+            del self._objects[gone]
+            self.scene.remove_by_name(f"/world3d/objects/{gone}")
+        cam = site.camera
+        sensors = (cam.C.tobytes(), cam.width, cam.height, site.T_world_turret.tobytes())
+        if sensors != self._sensors_key:
+            self._sensors_key = sensors
+            self._draw_sensors(site)
+        return len(self.redrawn)
 
     def _draw_sensors(self, site: Site) -> None:
         cam = site.camera

@@ -161,6 +161,9 @@ class Site:
         self.revision = 0
         self._objects: tuple[SiteObject, ...] | None = None
         self._objects_key: Any = None
+        self._by_id: dict[Any, SiteObject] = {}  # snapshots kept across reads, keyed by id (version, status checked)
+        self._polled_change: int | None = None  # the history's last change id when poll() last read the database
+        self._triangles: dict[Any, tuple[tuple, np.ndarray, np.ndarray]] = {}  # id → (key, V_world, F) for surfaces()
         self._meshes: dict[str, Any] = {}
         self._cal_ids: dict[str, Any] = {}
         self._camera = scene.camera
@@ -235,12 +238,27 @@ class Site:
         return float(self.clock())
 
     def objects(self) -> tuple[SiteObject, ...]:
-        """Every object in the database (snapshot, cached until the database changes)."""
+        """Every object in the database (snapshot, cached until the database changes; an object
+        whose version and status did not move keeps its snapshot)."""
         with self.lock:
             if self._objects is None:
-                self._objects = tuple(_record_to_object(r) for r in self.db.objects())
-                self._objects_key = self._key(self._objects)
+                self._read_objects()
             return self._objects
+
+    def _read_objects(self) -> bool:
+        """Re-read the objects (under ``lock``), rebuilding only the snapshots whose version or
+        status moved; True if any did (or one came or went)."""
+        fresh = []
+        for rec in self.db.objects():  # the database re-parses only the rows whose version moved
+            old = self._by_id.get(rec.id)
+            if old is None or old.version != rec.version or old.status != rec.status:
+                old = _record_to_object(rec)
+            fresh.append(old)
+        key = self._key(fresh)
+        changed = key != self._objects_key
+        self._objects, self._objects_key = tuple(fresh), key
+        self._by_id = {o.id: o for o in fresh}
+        return changed
 
     def object(self, name: str) -> SiteObject:
         """One object by name; WorkflowError-style ValueError naming the known ones if absent."""
@@ -258,13 +276,13 @@ class Site:
         bumped, when something changed since (e.g. ``mcit db undo`` from another process).
         Another process's changes join the change feed here."""
         self._read_feed()
-        fresh = tuple(_record_to_object(r) for r in self.db.objects())
-        key = self._key(fresh)
+        last = self.db.last_change_id()  # every change (objects, calibrations) is a history row
         with self.lock:
+            if last == self._polled_change and self._objects is not None:
+                return False  # nothing written since the last look: no object read at all
             changed = self._load_calibrations()
-            if key != self._objects_key:
-                self._objects, self._objects_key = fresh, key
-                changed = True
+            changed = self._read_objects() or changed
+            self._polled_change = last
             if changed:
                 self.revision += 1
             return changed
@@ -418,12 +436,20 @@ class Site:
             if self._meshes.get("key") == key:
                 return self._meshes["mesh"], self._meshes["owner"]
         Vs, Fs, owner, offset = [], [], [], 0
-        for obj in objects:
-            V, F = obj.model.triangles()
-            Vs.append(V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3])
+        cache = {}
+        for obj in objects:  # each object's world triangles are kept until its version moves
+            okey = (obj.version, obj.status)
+            hit = self._triangles.get(obj.id)
+            if hit is None or hit[0] != okey:
+                V, F = obj.model.triangles()
+                hit = (okey, V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3], F)
+            cache[obj.id] = hit
+            _, V, F = hit
+            Vs.append(V)
             Fs.append(F + offset)
             owner += [obj.name] * len(F)
             offset += len(V)
+        self._triangles = cache
         mesh = trimesh.Trimesh(np.vstack(Vs), np.vstack(Fs), process=False) if Vs else None
         with self.lock:
             self._meshes = {"key": key, "mesh": mesh, "owner": np.array(owner)}

@@ -20,6 +20,7 @@ frames tracked, the last confidence and residual, any re-initialisation's clicks
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import numpy as np
@@ -83,6 +84,7 @@ class TrackObject(SnapMixin, Workflow):
         self.reason = ""
         self.paused = False
         self.segs: list[np.ndarray] = []  # re-initialisation clicks
+        self._generation = 0  # moves whenever the tracker's state is set: a step computed meanwhile is dropped
         self.seg_snaps: list[ClickSnap | None] = []
         self.pending: np.ndarray | None = None
         self.reinits: list[dict[str, Any]] = []
@@ -97,22 +99,34 @@ class TrackObject(SnapMixin, Workflow):
     def step(self, frame=None, t_s: float | None = None):
         """Follow the object into one frame: ``frame`` (an image of the camera's size) or the site's
         frame at ``t_s`` (default: the scene time now). Returns ``app.vision.track.TrackResult``;
-        when it is lost the result says so (and the message what to do)."""
-        with self.lock:
+        when it is lost the result says so (and the message what to do).
+
+        The tracking itself runs outside the workflow's lock (on a copy of the tracker), so that
+        the overlay's ``marks()`` never waits for it; its result is kept only if nothing reset the
+        tracker meanwhile (Restart, Re-initialise, Pause, another step, Accept or Cancel), else
+        dropped (the result is returned, nothing is changed)."""
+        with self.lock:  # snapshot
             self._check_open()
             if self.lost:
                 raise WorkflowError(f"tracking is lost ({self.reason}): click three or more edges of {self.object_name} "
                                     "and Re-initialise, or Restart from the last good pose")
             if self.paused:
                 raise WorkflowError("tracking is paused: Resume first")
-            t = self.site.time_s() if t_s is None else float(t_s)
-            image = self.site.frame_at(t) if frame is None else np.asarray(frame)
-            if image is None:
-                raise WorkflowError(f"no video frame at t = {t:.2f} s: tracking needs the video")
-            try:
-                res = self.tracker.track(image)
-            except ValueError as exc:
-                raise WorkflowError(f"cannot track on this frame: {exc}") from None
+            generation = self._generation
+            worker = copy.copy(self.tracker)  # track() replaces its state (pose, polarities), never mutates it
+        t = self.site.time_s() if t_s is None else float(t_s)
+        image = self.site.frame_at(t) if frame is None else np.asarray(frame)
+        if image is None:
+            raise WorkflowError(f"no video frame at t = {t:.2f} s: tracking needs the video")
+        try:  # compute, unlocked
+            res = worker.track(image)
+        except ValueError as exc:
+            raise WorkflowError(f"cannot track on this frame: {exc}") from None
+        with self.lock:  # commit
+            if generation != self._generation or self.finished or self.paused or self.lost:
+                return res
+            self._generation += 1
+            self.tracker = worker
             self.frames += 1
             self.t_first = t if self.t_first is None else self.t_first
             self.t_last = t
@@ -138,6 +152,7 @@ class TrackObject(SnapMixin, Workflow):
         with self.lock:
             self._check_open()
             self.paused = True
+            self._generation += 1
             self.state = "paused"
             self.message = "Paused: Resume, Accept the tracked pose, or click edges and Re-initialise."
 
@@ -156,6 +171,7 @@ class TrackObject(SnapMixin, Workflow):
         with self.lock:
             self._check_open()
             self.tracker.reset(self.T_world_obj)
+            self._generation += 1
             self.lost = self.paused = False
             self.reason = ""
             self.state = "tracking"
@@ -226,6 +242,7 @@ class TrackObject(SnapMixin, Workflow):
                                  "edges": [int(e) for e in edges], "rms_px": float(c.rms_px),
                                  "snaps": [None if s is None else s.record() for s in self.seg_snaps]})
             self.tracker.reset(T)
+            self._generation += 1
             self.T_world_obj = T.copy()
             self.segs, self.seg_snaps, self.pending = [], [], None
             self.lost = self.paused = False
