@@ -614,16 +614,25 @@ class ClientPanel:
         if wf is None or step is None or wf is not self.built_for:
             return
         busy = self.worker is not None and self.worker.is_alive()
+        applies = {c.action for c in wf.controls if c.action in step.enabled and not (busy and c.action != "cancel")}
+        keyed: dict[str, str] = {}  # key → the action its shortcut triggers now
+        for c in wf.controls:
+            if c.key is not None and (c.action in applies or c.key not in keyed):
+                if c.action in applies or not any(o.key == c.key and o.action in applies for o in wf.controls):
+                    keyed.setdefault(c.key, c.action)
         for c in wf.controls:
             handle = self.controls.get(c.action)
             if handle is None:
                 continue
-            on = c.action in step.enabled and not (busy and c.action != "cancel")
+            on = c.action in applies
             if handle.visible != on:
                 handle.visible = on
+            # A shortcut stays live when its control is hidden: pressing it then says why it does not
+            # apply (feedback); of controls sharing a key (Pause/Resume) only the one that applies.
             cmd = self._command_of.get(c.action)
-            if cmd is not None and cmd.disabled == on:
-                cmd.disabled = not on
+            live = keyed.get(c.key) == c.action
+            if cmd is not None and cmd.disabled == live:
+                cmd.disabled = not live
             if c.kind == "choice" and on:
                 opts = wf.choices(c.action)
                 texts = {text: value for text, value in opts}

@@ -48,3 +48,11 @@ def interface(scene, frame, tmp_path):
     ui = Interface(scene, frame, tmp_path / "site.sqlite")
     yield ui
     ui.close()
+
+
+@pytest.fixture
+def device_interface(scene, frame, tmp_path):
+    """The interface with emulated range finder and turret that answer at once."""
+    ui = Interface(scene, frame, tmp_path / "site.sqlite", devices="fast")
+    yield ui
+    ui.close()

@@ -92,8 +92,71 @@ def launch(playwright):
     return playwright.chromium.launch(executable_path=CHROMIUM, args=ARGS)
 
 
+# Emulated devices that answer at once (no baud-rate or measurement delays, an instant turret):
+# the browser tests drive the real serial protocols without waiting for them.
+FAST_DEVICES = dict(rangefinder_baud=0, turret_baud=0, measure_delay_s=0.0, delay_per_m_s=0.0, no_target_delay_s=0.0)
+
+
+def fast_scene(scene):
+    """The scene with a turret that moves (almost) instantly."""
+    import dataclasses
+
+    return dataclasses.replace(scene, turret=dataclasses.replace(scene.turret, speed_steps_s=1e6))
+
+
+def open_fast_devices(scene, frame_t_s: float = FRAME_T_S):
+    """Emulated range finder and turret on ``scene`` at scene time ``frame_t_s``, answering at once."""
+    from app.devices import open_devices
+
+    return open_devices(scene, clock=lambda: frame_t_s, site_options=FAST_DEVICES)
+
+
+def prompt_controls(panel) -> list[str]:
+    """The labels of the controls the workflow's instruction names now ({action} placeholders)."""
+    wf = panel.session.workflow
+    if wf is None or wf.finished:
+        return []
+    step = wf.current_step()
+    return [wf.control(a).label for a in step.named()]
+
+
+def assert_prompt_controls(page, timeout_s: float = 5.0) -> list[str]:
+    """Every control the instruction names is a visible, enabled button (or chooser) on the page.
+
+    Returns the labels checked. The prompt's named controls come from the workflow's declared step;
+    this checks that the page shows them (the panel hides the controls that do not apply)."""
+    labels = prompt_controls(page.panel)
+    for label in labels:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            button = page.get_by_role("button", name=label).first
+            try:
+                if button.is_visible() and button.is_enabled():
+                    break
+            except Exception:  # noqa: BLE001 - not rendered yet
+                pass
+            if page.get_by_text(label, exact=True).first.is_visible():  # a chooser's label
+                break
+            if time.monotonic() > deadline:
+                raise AssertionError(f"the instruction names {label!r} but the page shows no such enabled control")
+            time.sleep(0.1)
+    return labels
+
+
+def press(page, label: str, timeout_ms: int = 5000) -> None:
+    """Click the visible button whose name starts with ``label`` (e.g. "Solve" for "Solve (R)")."""
+    import re
+
+    button = page.get_by_role("button", name=re.compile("^" + re.escape(label))).first
+    button.wait_for(state="visible", timeout=timeout_ms)
+    button.click()
+
+
 class Interface:
-    """A running interface and helpers to reach it from a page."""
+    """A running interface and helpers to reach it from a page.
+
+    devices : None (no range finder and turret), "fast" (emulated, answering at once, closed with
+    the interface) or opened devices."""
 
     def __init__(self, scene, frame, db_path, devices=None, frame_t_s: float = FRAME_T_S):
         from app.db import Database, seed_from_scene
@@ -103,6 +166,11 @@ class Interface:
 
         self.db = Database.open(db_path)
         seed_from_scene(self.db, scene)
+        self._own_devices = None
+        if devices == "fast":
+            scene = fast_scene(scene)
+            devices = self._own_devices = open_fast_devices(scene, frame_t_s)
+        self.scene = scene
         self.site = Site(scene, self.db, devices=devices, clock=lambda: frame_t_s)
         self.server = InterfaceServer(self.site, FrameGrabber(StillSource(frame, fps=20)), port=free_port()).start()
         self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
@@ -136,6 +204,8 @@ class Interface:
 
     def close(self):
         self.server.stop()
+        if self._own_devices is not None:
+            self._own_devices.close()
         self.db.close()
 
 
