@@ -1,0 +1,158 @@
+"""The shared database overlay and the 3D world redraw only what changed: one node per object,
+updated in place when its version or status moves, removed when it goes, all redrawn on a new C;
+picking a clicked object uses the projections already drawn."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.overlay import PixelWorld
+from app.ui.db_overlay import DatabaseOverlay
+from app.ui.world3d import World3D
+from core.camera import Camera
+from core.transforms import make_T
+
+
+class FakeHandle:
+    """A scene node handle that records every property set and its removal."""
+
+    def __init__(self, log, name, **props):
+        object.__setattr__(self, "_log", log)
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "removed", False)
+        for k, v in props.items():
+            object.__setattr__(self, k, v)
+
+    def __setattr__(self, key, value):
+        self._log.append(("set", self.name, key))
+        object.__setattr__(self, key, value)
+
+    def remove(self):
+        self._log.append(("remove", self.name, None))
+        object.__setattr__(self, "removed", True)
+
+
+class FakeScene:
+    """Records what would be sent to viser: node creations, property updates, removals."""
+
+    def __init__(self):
+        self.log: list[tuple[str, str, str | None]] = []
+
+    def _add(self, kind, name, **props):
+        self.log.append(("add", name, kind))
+        return FakeHandle(self.log, name, **props)
+
+    def add_line_segments(self, name, points, colors, **kw):
+        return self._add("lines", name, points=points, colors=colors)
+
+    def add_label(self, name, text, position, **kw):
+        return self._add("label", name, text=text, position=position)
+
+    def add_mesh_simple(self, name, vertices, faces, **kw):
+        return self._add("mesh", name, position=kw.get("position"), wxyz=kw.get("wxyz"))
+
+    def add_frame(self, name, **kw):
+        return self._add("frame", name)
+
+    def add_grid(self, name, **kw):
+        return self._add("grid", name)
+
+    def add_camera_frustum(self, name, **kw):
+        return self._add("frustum", name)
+
+    def remove_by_name(self, name):
+        self.log.append(("remove", name, None))
+
+    def take(self):
+        out, self.log[:] = list(self.log), []
+        return out
+
+
+def _overlay(site):
+    scene = FakeScene()
+    cam = site.camera
+    return scene, DatabaseOverlay(scene, PixelWorld(cam.width, cam.height), z=-0.001, line_px=2.0)
+
+
+def _nudge(site, name, dx=0.01):
+    obj = site.object(name)
+    return site.update_pose(obj, obj.T_world_obj @ make_T(np.eye(3), [dx, 0.0, 0.0]), None, method="test", client="test")
+
+
+def test_a_change_to_one_object_resends_only_that_objects_nodes(site):
+    scene, overlay = _overlay(site)
+    objects = site.objects()
+    assert overlay.sync(site.camera, objects) == len(objects)
+    first = scene.take()
+    assert {n for op, n, _ in first if op == "add"} >= {DatabaseOverlay.node_name(o.id) for o in objects}
+    assert overlay.sync(site.camera, site.objects()) == 0 and scene.take() == []  # nothing changed: nothing sent
+    box = site.object("parallelepiped")
+    lines, label = overlay.handles(box.id)
+    _nudge(site, "parallelepiped")
+    assert overlay.sync(site.camera, site.objects()) == 1
+    sent = scene.take()
+    assert sent and all(op == "set" for op, _, _ in sent)  # updated in place, no node created
+    assert {n for _, n, _ in sent} <= {DatabaseOverlay.node_name(box.id), DatabaseOverlay.label_name(box.id)}
+    assert ("set", DatabaseOverlay.node_name(box.id), "points") in sent
+    assert overlay.handles(box.id) == (lines, label)
+    # a status change recolours it (and relabels it), nothing else
+    site.set_status("table", "stale", client="test")
+    table = site.object("table")
+    assert overlay.sync(site.camera, site.objects()) == 1 and overlay.redrawn == [table.id]
+    sent = scene.take()
+    assert ("set", DatabaseOverlay.node_name(table.id), "colors") in sent
+    assert overlay.handles(table.id)[1].text == "table (stale)"
+
+
+def test_a_removed_objects_nodes_go_and_a_new_camera_redraws_all(site, db):
+    scene, overlay = _overlay(site)
+    overlay.sync(site.camera, site.objects())
+    scene.take()
+    box = site.object("parallelepiped")
+    lines, label = overlay.handles(box.id)
+    db.remove("parallelepiped", method="test", client="other")  # another process, seen by poll
+    assert site.poll()
+    assert overlay.sync(site.camera, site.objects()) == 0
+    assert overlay.removed == [box.id] and box.id not in overlay.drawn_ids
+    assert lines.removed and label.removed
+    assert overlay.object_at(site.camera.project(box.vertices_world()).mean(axis=0), 1e6) != "parallelepiped"
+    cam = site.camera
+    moved = Camera(cam.C * np.array([[1.0], [1.0], [1.0]]) + np.array([[0, 0, 0, 2.0], [0, 0, 0, 0], [0, 0, 0, 0]]),
+                   cam.width, cam.height)
+    assert overlay.sync(moved, site.objects()) == len(site.objects())  # a new C: every object again
+    assert overlay.sync(moved, site.objects()) == 0
+
+
+def test_object_at_picks_on_the_drawn_projections(site):
+    _, overlay = _overlay(site)
+    overlay.sync(site.camera, site.objects())
+    box = site.object("parallelepiped")
+    E = box.model.edge_segments(box.T_world_obj)
+    uv = site.camera.project(E.reshape(-1, 3)).reshape(-1, 2, 2).mean(axis=1)
+    assert any(overlay.object_at(p, 2.0) == "parallelepiped" for p in uv)
+    assert overlay.object_at(np.array([-500.0, -500.0]), 15.0) is None
+    # it answers from what is drawn: moved in the database but not yet redrawn, still picked where drawn
+    p = next(p for p in uv if overlay.object_at(p, 2.0) == "parallelepiped")
+    _nudge(site, "parallelepiped", dx=0.3)
+    assert overlay.object_at(p, 2.0) == "parallelepiped"
+    overlay.sync(site.camera, site.objects())
+    assert overlay.object_at(p, 2.0) != "parallelepiped"
+
+
+def test_world3d_moves_only_the_changed_objects_node(site, db):
+    scene = FakeScene()
+    world = World3D(scene, offset=np.zeros(3))
+    objects = site.objects()
+    assert world.sync(site) == len(objects)
+    scene.take()
+    assert world.sync(site) == 0 and scene.take() == []
+    box = site.object("parallelepiped")
+    _nudge(site, "parallelepiped")
+    assert world.sync(site) == 1
+    sent = scene.take()
+    assert sent and {n for _, n, _ in sent} == {f"/world3d/objects/{box.id}"}
+    assert {op for op, _, _ in sent} == {"set"}  # moved, not re-sent
+    db.remove("parallelepiped", method="test", client="other")
+    site.poll()
+    world.sync(site)
+    assert ("remove", f"/world3d/objects/{box.id}", None) in scene.take()
