@@ -14,11 +14,12 @@ from .site import RayHit, Site, SiteObject
 from .calibrate_turret import CalibrateTurret
 from .history import History
 from .model_object import ModelObject
+from .model_polyhedron import ModelPolyhedron
 from .update_pose import UpdatePose
 from .track import TrackObject
 from .snapping import ClickSnap
 
-for _cls in (CalibrateCamera, CalibrateTurret, DesignateTarget, History, UpdatePose, ModelObject, TrackObject):
+for _cls in (CalibrateCamera, CalibrateTurret, DesignateTarget, History, UpdatePose, ModelObject, ModelPolyhedron, TrackObject):
     register(_cls)
 
 __all__ = [
@@ -32,6 +33,7 @@ __all__ = [
     "History",
     "DesignateTarget",
     "ModelObject",
+    "ModelPolyhedron",
     "Target",
     "UpdatePose",
     "TrackObject",
