@@ -22,6 +22,7 @@ import functools
 import logging
 import threading
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
@@ -50,6 +51,22 @@ Z_FROZEN = -0.0005  # the frozen frame: in front of the live video, behind the o
 FROZEN_MAX_SIDE = 2048  # the frozen frame is upscaled (nearest neighbour) up to this many pixels a side
 # Workflows that do not take a frozen frame: tracking follows the live video; history has no clicks.
 LIVE_WORKFLOWS = ("track", "history")
+WHEEL_FIELD = "mcit-wheel"  # the hidden text field static/wheel.js writes the wheel into
+WHEEL_ZOOM_PER_DELTA = 0.0015  # a wheel notch (deltaY 100) zooms by 14 %
+WHEEL_JS = Path(__file__).resolve().parents[2] / "static" / "wheel.js"
+
+
+def wheel_script() -> str:
+    """The HTML that runs static/wheel.js in the page (an image that fails to load runs it), or ""."""
+    import base64
+
+    try:
+        code = WHEEL_JS.read_text(encoding="utf-8")
+    except OSError:
+        log.warning("%s is missing: the wheel zooms towards the centre of the view", WHEEL_JS)
+        return ""
+    b64 = base64.b64encode(code.encode("utf-8")).decode("ascii")
+    return f'<img src="data:image/gif;base64,AA==" alt="" style="display:none" onerror="eval(atob(\'{b64}\'))">'
 
 
 class ClientPanel:
@@ -144,7 +161,7 @@ class ClientPanel:
             for label, name in START_BUTTONS:
                 button = gui.add_button(label)
                 button.on_click(self._guard(functools.partial(self._on_start, name)))
-            self.gui_shape = gui.add_dropdown("Shape", ("box", "cylinder", "cone"), initial_value="box",
+            self.gui_shape = gui.add_dropdown("Shape", ("box", "cylinder", "cone", "wedge", "pyramid"), initial_value="box",
                                               hint="Model object: the shape you see")
             self.gui_vertical = gui.add_checkbox("Vertical", True, hint="Model object: its axis/sides are vertical")
             self.gui_on_table = gui.add_checkbox("Lies on the table", True, hint="Model object: it stands on the table")
@@ -177,6 +194,13 @@ class ClientPanel:
         self.gui_status = gui.add_markdown("…")
         with gui.add_folder("Help", expand_by_default=False):
             gui.add_markdown(operator_help())
+        # Wheel zoom about the cursor (static/wheel.js): viser's controls zoom towards the view's centre;
+        # the page script sends the cursor and the wheel through this hidden field instead.
+        self.gui_wheel = gui.add_text(WHEEL_FIELD, "")
+        self.gui_wheel.on_update(self._guard(self._on_wheel))
+        script = wheel_script()
+        if script:
+            gui.add_html(script)
         for label, key, fn in (("Freeze", "F", lambda: self._freeze_back(0)), ("Show live / frozen", "L", self._toggle_live),
                                ("Fit view", "H", self._request_fit)):
             cmd = gui.add_command(label, hotkey=key)
@@ -216,7 +240,10 @@ class ClientPanel:
         if self.worker is not None and self.worker.is_alive():
             raise WorkflowError("a measurement is running: wait for it or Cancel it first")
         options: dict[str, Any] = {}
-        if name == "model_object":
+        if name == "model_object" and self.gui_shape.value in ("wedge", "pyramid"):
+            # A polyhedron the operator names: its own workflow (faces identified, sides assigned to edges).
+            name, options = "model_polyhedron", {"shape": self.gui_shape.value, "on_table": bool(self.gui_on_table.value)}
+        elif name == "model_object":
             options = {"shape": self.gui_shape.value, "vertical": bool(self.gui_vertical.value),
                        "on_table": bool(self.gui_on_table.value)}
         if name not in WORKFLOWS:
@@ -446,6 +473,39 @@ class ClientPanel:
         sx, sy = screen_xy
         d_cam = np.array([(2 * sx - 1) * t * cam.aspect, (2 * sy - 1) * t, 1.0])
         return self.app.pixel_world.pixel_from_ray(np.asarray(cam.position), R @ d_cam)
+
+    def _on_wheel(self, _event) -> None:
+        """Zoom about the point under the cursor: "x y deltaY n" from static/wheel.js (x, y in 0..1)."""
+        try:
+            sx, sy, dy = (float(v) for v in str(self.gui_wheel.value).split()[:3])
+        except ValueError:
+            return  # not a wheel message (cleared, or typed): ignore
+        if not (np.isfinite(sx) and np.isfinite(sy) and np.isfinite(dy)):
+            return
+        cam = self.client.camera
+        try:
+            position, look_at = np.asarray(cam.position, float), np.asarray(cam.look_at, float)
+            R = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix()
+            t, aspect = np.tan(cam.fov / 2.0), cam.aspect
+        except (AssertionError, ZeroDivisionError):
+            return
+        ray = R @ np.array([(2 * sx - 1) * t * aspect, (2 * sy - 1) * t, 1.0])
+        if self.view == "video":  # the point of the image plane (z = 0) under the cursor
+            if abs(ray[2]) < 1e-9:
+                return
+            X = position + (-position[2] / ray[2]) * ray
+        else:  # the 3D world: the point under the cursor at the distance of the orbit's centre
+            X = position + np.linalg.norm(look_at - position) * ray / np.linalg.norm(ray)
+        f = float(np.clip(np.exp(dy * WHEEL_ZOOM_PER_DELTA), 0.5, 2.0))
+        if self.view == "video":  # between 200× in and a little beyond the whole image
+            fit = abs(float(self.app.pixel_world.fit_camera(aspect, cam.fov)[0][2]))
+            dist = abs(float(position[2]))
+            f = float(np.clip(f, 0.005 * fit / dist, 2.0 * fit / dist))
+        with self.client.atomic():
+            cam.look_at = X + f * (look_at - X)
+            cam.position = X + f * (position - X)
+            cam.look_at = X + f * (look_at - X)
+        self.dirty = True
 
     def _on_camera(self, cam) -> None:
         try:

@@ -1,0 +1,79 @@
+"""The view in a real browser: the wheel zooms about the cursor, a workflow freezes its frame (shown,
+with its time), Show live looks at the live video and refuses clicks meanwhile, marks keep their
+screen size when zoomed."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from .harness import press, wait_until
+
+pytestmark = pytest.mark.e2e
+
+
+def test_wheel_zooms_about_the_cursor(browser, interface):
+    ui = interface
+    page = ui.open(browser)
+    cam = page.panel.client.camera
+    box = page.locator("canvas").nth(1).bounding_box()
+    for uv in (np.array([150.0, 100.0]), np.array([420.0, 60.0])):
+        x0, y0 = ui.screen_of(page, uv)
+        d0 = abs(float(cam.position[2]))
+        page.mouse.move(box["x"] + x0, box["y"] + y0)
+        for _ in range(4):
+            page.mouse.wheel(0, -100)
+            time.sleep(0.15)
+        wait_until(lambda: abs(float(cam.position[2])) < 0.7 * d0, what="the wheel zoom")
+        time.sleep(0.3)
+        x1, y1 = ui.screen_of(page, uv)
+        assert np.hypot(x1 - x0, y1 - y0) < 3.0, f"the point under the cursor moved from {(x0, y0)} to {(x1, y1)}"
+        page.get_by_role("button", name="Fit view").click()
+        wait_until(lambda: abs(abs(float(cam.position[2])) - d0) < 0.02 * d0, what="the fit")
+    page.close()
+
+
+def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, interface):
+    ui = interface
+    page = ui.open(browser)
+    panel = page.panel
+    page.get_by_role("button", name="Calibrate camera").click()
+    wait_until(lambda: panel.session.workflow is not None and panel.frozen is not None, what="the frozen frame")
+    wf = panel.session.workflow
+    assert wf.frame is panel.frozen  # clicks, snapping and solving use it
+    page.get_by_text("Frozen frame: t =").first.wait_for(timeout=5000)
+    page.keyboard.press("l")  # Show live
+    wait_until(lambda: panel.show_live, what="the live view")
+    page.get_by_text("showing live video").first.wait_for(timeout=5000)
+    table = ui.site.object("table")
+    corner = ui.site.camera.project(table.vertices_world()[np.argmax(table.vertices_world()[:, 2])])
+    ui.click_pixel(page, corner)
+    page.get_by_text("you are looking at the live video", exact=False).first.wait_for(timeout=5000)
+    assert wf.pending_X is None  # the click was refused
+    press(page, "Show live")  # back to the frozen frame
+    wait_until(lambda: not panel.show_live, what="the frozen view")
+    ui.click_pixel(page, corner)
+    wait_until(lambda: wf.pending_X is not None, what="the corner picked on the frozen frame")
+    page.keyboard.press("f")  # another frame cannot be frozen once clicked
+    page.get_by_text("every click of a workflow uses one frame", exact=False).first.wait_for(timeout=5000)
+    page.close()
+
+
+def test_marks_keep_their_screen_size_when_zoomed(browser, interface):
+    ui = interface
+    page = ui.open(browser)
+    panel = page.panel
+    cam = panel.client.camera
+    assert abs(panel.marks_scale - 1.0) < 0.05
+    box = page.locator("canvas").nth(1).bounding_box()
+    x, y = ui.screen_of(page, [256.0, 128.0])
+    page.mouse.move(box["x"] + x, box["y"] + y)
+    d0 = abs(float(cam.position[2]))
+    for _ in range(8):
+        page.mouse.wheel(0, -200)
+        time.sleep(0.1)
+    wait_until(lambda: abs(float(cam.position[2])) < 0.3 * d0, what="the zoom")
+    wait_until(lambda: panel.marks_scale < 0.35, what="the marks redrawn smaller in image pixels")
+    page.close()
