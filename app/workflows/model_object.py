@@ -541,7 +541,7 @@ class ModelObject(SnapMixin, Workflow):
                 raise WorkflowError("nothing to accept: Solve first")
             r = self.result
             if self.shape == "box":
-                clicks = {"faces": [np.array(f["segs"]).reshape(-1, 2, 2) for f in self.faces],
+                clicks = {"frame": self.frame_record(), "faces": [np.array(f["segs"]).reshape(-1, 2, 2) for f in self.faces],
                           # raw and snapped pixels of each side (None: snapping was off)
                           "snaps": [[None if sn is None else sn.record() for sn in f["snaps"]] for f in self.faces]}
                 measurements = {"faces": [f["points"] for f in self.faces if f["points"] is not None]}
@@ -549,7 +549,7 @@ class ModelObject(SnapMixin, Workflow):
                     measurements["scans"] = [{"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m}
                                              for s in self.scans]
             else:
-                clicks = {"silhouettes_uv": np.array(self.silhouettes),
+                clicks = {"frame": self.frame_record(), "silhouettes_uv": np.array(self.silhouettes),
                           "snaps": [None if sn is None else sn.record() for sn in self.silhouette_snaps]}
                 measurements = {"scans": [{"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m}
                                           for s in self.scans]}

@@ -516,7 +516,8 @@ class UpdatePose(SnapMixin, Workflow):
                       # raw and snapped pixels of each segment and point above (None: snapping was off)
                       "snaps": [None if self.seg_snaps[j] is None else self.seg_snaps[j].record() for j in used],
                       "point_snaps": [None if s is None else s.record() for s in self.point_snaps],
-                      "assignment": "automatic" if self.match_info is not None else "hand"}
+                      "assignment": "automatic" if self.match_info is not None else "hand",
+                      "frame": self.frame_record()}  # the frozen frame the edges were clicked on
             if self.match_info is not None:
                 clicks["match"] = self.match_info
             residuals = {"rms_px": r.rms_px, "click_residuals_px": r.click_residuals_px, "kinds": list(r.kinds)}
