@@ -588,7 +588,7 @@ class ClientPanel:
         if wf is not self.built_for or (wf is not None and wf.finished and self.controls):
             self._rebuild_controls()
         busy = self.worker is not None and self.worker.is_alive()
-        progress = getattr(wf, "progress", None) if wf is not None else None
+        progress = wf.progress if wf is not None else None
         self.gui_progress.visible = bool(busy or (progress is not None and 0 < progress < 1))
         if progress is not None:
             self.gui_progress.value = float(np.clip(progress * 100.0, 0, 100))
@@ -641,7 +641,7 @@ class ClientPanel:
         else:
             step = wf.current_step()
             state = " (accepted)" if wf.accepted else (" (cancelled)" if wf.cancelled else "")
-            subject = getattr(wf, "object_name", None)
+            subject = wf.object_name
             head = f"**{wf.title}{': ' + subject if subject else ''}**{state}"
             title = f"{head}\n\n{wf.prompt_text()}"
             if wf.message and not wf.finished:
@@ -657,12 +657,10 @@ class ClientPanel:
         if self.gui_warning.content != self.warning:
             self.gui_warning.content = self.warning
         self._update_controls(wf, step)
-        targets = getattr(wf, "targets", None) if wf is not None else None
-        self.gui_copy.visible = bool(targets)
-        if targets:
-            text = targets[-1].text()
-            if self.gui_copy.value != text:
-                self.gui_copy.value = text
+        text = wf.copy_text() if wf is not None else ""
+        self.gui_copy.visible = bool(text)
+        if text and self.gui_copy.value != text:
+            self.gui_copy.value = text
         frame = "Live video (no frame frozen)." if self.frozen is None else (
             f"Frozen frame: t = {self.frozen.t_s:.2f} s (frame {self.frozen.index})"
             + (" — **showing live video**" if self.show_live else ""))
@@ -712,7 +710,7 @@ class ClientPanel:
                 if handle.value != shown:
                     handle.value = shown
             if c.kind != "choice" and self.confirm_pending != c.action:
-                if getattr(handle, "label", None) != c.button_label:
+                if handle.label != c.button_label:
                     handle.label = c.button_label
 
     def close(self) -> None:

@@ -199,6 +199,9 @@ class Workflow:
     title: ClassVar[str] = ""
     actions: ClassVar[tuple[str, ...]] = ("cancel",)
     controls: ClassVar[tuple[Control, ...]] = (CANCEL,)  # what the panel shows, in order
+    object_name: str | None = None  # the object the workflow is about (shown in its title), if any
+    progress: float | None = None  # a measurement under way: 0..1 (the panel's progress bar), else None
+    progress_text: str = ""
     snapping: ClassVar[bool] = False  # True: takes a ``snap`` option (clicks snapped to the image)
 
     def __init__(self, site: "Site", client: str = "operator"):
@@ -305,6 +308,10 @@ class Workflow:
     def summary(self) -> dict[str, Any]:
         """Numbers to show the operator (RMS, residuals, σ ...), JSON-ready."""
         return {}
+
+    def copy_text(self) -> str:
+        """Text the operator copies from the panel (a designated target's coordinates), or ""."""
+        return ""
 
     def perform(self, action: str, *args: Any, **kwargs: Any) -> Any:
         """Call an action by name (recorded scripts, the panel's controls); WorkflowError for an unknown one."""

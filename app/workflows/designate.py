@@ -250,6 +250,11 @@ class DesignateTarget(Workflow):
             self.accepted = True
             self.state = "accepted"
 
+    def copy_text(self) -> str:
+        """The last target's world coordinates (metres), for the robot."""
+        with self.lock:
+            return self.targets[-1].text() if self.targets else ""
+
     def _step(self) -> Step:
         if self.finished:
             return self._finished_step()
