@@ -14,7 +14,14 @@ DESIGN.md), viewport 1200 × 700.
    the click's arrival (the start of viser's callback) to the end of the redraw that sends that
    client's updated marks (the message queued to the websocket).
 
-Run: ``.venv/bin/python bench/interface.py [--seconds 10] [--clicks 60]``. Targets (issue 7):
+3. Stall table (also alone: ``--stall``, no chromium): a browser-like client (a websocket reader in
+   its own process, reporting its camera as the page does, no rendering) records when each video
+   frame arrives, at 50, 500 and 2,000 objects while one object's pose is written every 2 s (as
+   Accept writes it) over 12 s: the longest gap between frames and the frames/s; then selection
+   clicks at 2,000 objects (click → that client's marks sent). Targets (issue 13): gap ≤ 100 ms and
+   ≥ 28 frames/s at 2,000 objects; click → overlay p95 ≤ 50 ms.
+
+Run: ``.venv/bin/python bench/interface.py [--seconds 10] [--clicks 60] [--stall]``. Targets (issue 7):
 ≥ 25 frames/s; p95 click → overlay ≤ 100 ms.
 """
 
