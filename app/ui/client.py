@@ -28,7 +28,6 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 import viser
 
-from app.overlay import nearest_segment, project_wireframe
 from app.workflows import Cancelled, Session, WorkflowError
 from app.workflows.base import FrameRef, Marks
 from app.workflows.session import WORKFLOWS
