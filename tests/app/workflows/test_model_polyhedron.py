@@ -16,6 +16,7 @@ from core.brep import BRep
 from core.transforms import make_T, rot_z
 
 from .conftest import FAST_DEVICES
+from .test_steps import Walk
 
 WEDGE = (0.18, 0.13, 0.09)  # length (x), depth (y), height (m)
 
@@ -58,14 +59,18 @@ def _facing(cam, model, T):
     return [k for k in range(len(model.faces)) if normals[k] @ (c_obj - cents[k]) > 1e-3 * np.linalg.norm(c_obj - cents[k])]
 
 
-def _click_sides(wf, cam, model, T, k, rng, order=None):
+def _click_sides(wf, cam, model, T, k, rng, order=None, walk=None):
     f = model.faces[k]
     sides = list(zip(f, f[1:] + f[:1]))
     for i in order if order is not None else range(len(sides)):
         a, b = sides[i]
         uv = cam.project(model.vertices[[a, b]] @ T[:3, :3].T + T[:3, 3])
         wf.click(uv[0] + 0.2 * (uv[1] - uv[0]) + rng.normal(0, 0.5, 2))
+        if walk is not None:
+            walk.check(wf)
         wf.click(uv[0] + 0.8 * (uv[1] - uv[0]) + rng.normal(0, 0.5, 2))
+        if walk is not None:
+            walk.check(wf)
 
 
 def _check(r, model, named, tol_m=0.006, sigma_max_m=0.01):
@@ -88,7 +93,8 @@ def test_wedge_from_its_visible_faces_is_added(poly_site):
     cam = site.camera
     wf = ModelPolyhedron(site, client="alice", shape="wedge")
     assert wf.object_name == "wedge_1"
-    st = wf.current_step()
+    walk = Walk()  # every state's instruction names only enabled, existing controls
+    st = walk.check(wf)
     assert st.name == "click_sides" and "solve" not in st.enabled
     with pytest.raises(WorkflowError, match="measure at least one face"):
         wf.solve()
@@ -97,12 +103,13 @@ def test_wedge_from_its_visible_faces_is_added(poly_site):
     rng = np.random.default_rng(0)
     # Sides in scrambled orders: the workflow finds which edge each is.
     for k, order in zip(faces, ([2, 0, 3, 1], [1, 2, 0])):
-        _click_sides(wf, cam, body.model, T, k, rng, order)
-        assert wf.current_step().name == "sides_clicked"
+        _click_sides(wf, cam, body.model, T, k, rng, order, walk)
+        assert walk.check(wf).name == "sides_clicked"
         wf.measure()
         assert wf.faces[-1]["points"].shape[0] >= 10
-        assert wf.current_step().name == "face_measured"
+        assert walk.check(wf).name == "face_measured"
     r = wf.solve()
+    assert walk.check(wf).name == "review"
     assert r.kind == "polyhedron"
     assert [a["face"] for a in wf.assignment] == faces
     true_edges = [[tuple(sorted(s)) for s in zip(f, f[1:] + f[:1])] for f in (body.model.faces[k] for k in faces)]
@@ -112,6 +119,9 @@ def test_wedge_from_its_visible_faces_is_added(poly_site):
     assert "length" in wf.next_step and "±" in wf.next_step and len(wf.marks().ghosts) == 1
     assert "wedge_1" not in [o.name for o in site.db.objects()]  # nothing written before Accept
     rec = wf.accept()
+    walk.check(wf)
+    assert walk.seen["model_polyhedron"] == {"click_sides", "click_end", "sides_clicked", "face_measured", "review",
+                                             "accepted"}
     assert rec.status == "modelled" and rec.kind == "polyhedron"
     got = site.db.get("wedge_1")
     assert got.dims["length"] == pytest.approx(r.dimensions["length"]) and got.sigmas["height"] > 0
