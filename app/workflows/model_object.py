@@ -4,9 +4,9 @@ The operator gives the semantics when starting — the shape ("box", "cylinder",
 is vertical, whether it lies on the table — and the sensors give the numbers:
 
 * box: for each visible face (1 to 3) click its sides in the video (two clicks per side), then
-  ``measure()``: the turret scans a patch of range points inside the clicked outline; ``next_face()``
-  goes on to the next face. ``solve()`` builds the box (``core.modeling.model_box``: face planes ∩
-  interpretation planes, the table as the bottom face). Optionally ``scan()`` after measuring:
+  ``measure()``: the turret scans a patch of range points inside the clicked outline; the next click
+  (or ``next_face()``) starts the next face. ``solve()`` builds the box (``core.modeling.model_box``:
+  face planes ∩ interpretation planes, the table as the bottom face). Optionally ``scan()`` after measuring:
   two horizontal profiles at the turret's finest step across the box given by the faces (at 50 %
   and 75 % of its height, 3 cm past it on each side); ``solve()`` then fuses them ("fused" with
   scans: the profiles' edge transitions pin the far vertical edges the clicks place poorly).
