@@ -88,7 +88,7 @@ class ClientPanel:
         self._command_of: dict[str, Any] = {}  # action → its shortcut
         self.choice_values: dict[str, Any] = {}  # choice control → the value chosen
         self._choice_options: dict[str, dict[str, Any]] = {}
-        self.confirm_pending: str | None = None  # an action waiting for its second press
+        self.confirm_pending: tuple | None = None  # (action, args) waiting for its second press
         self.warning = ""  # a weak result's reasons, or a question, shown above the buttons
         self.error = ""  # the last refused action, said in the panel until the next action
         self.frozen: FrameRef | None = None
@@ -279,20 +279,6 @@ class ClientPanel:
             return
         if self.worker is not None and self.worker.is_alive():
             raise WorkflowError("a measurement is running: wait for it, or Cancel")
-        # A question asked once more: Redo forgets every click; Accept of a weak result.
-        if action != self.confirm_pending:
-            question = c.confirm
-            if action == "accept":
-                weak = wf.weaknesses()
-                if weak:
-                    question = ("**Weak result:** " + "; ".join(weak) + ". Press **Accept** again to write it anyway, or "
-                                "improve it first.")
-            if question:
-                self.confirm_pending, self.warning, self.error = action, question if action == "accept" else \
-                    f"{question} Press **{c.label}** again to confirm.", ""
-                self._relabel(action, "Accept anyway" if action == "accept" else f"{c.label}: confirm")
-                return
-        self.confirm_pending, self.warning, self.error = None, "", ""
         args: tuple = ()
         if c.arg is not None:
             value = self.choice_values.get(c.arg)
@@ -300,6 +286,21 @@ class ClientPanel:
                 chooser = wf.control(c.arg)
                 raise WorkflowError(f"choose the {chooser.label.lower() if chooser else 'item'} first, then {c.label}")
             args = (value,)
+        # A question asked once more: Redo forgets every click; an undo that discards later changes;
+        # Accept of a weak result.
+        if (action, args) != self.confirm_pending:
+            question = wf.question(action, *args)
+            if action == "accept":
+                weak = wf.weaknesses()
+                if weak:
+                    question = ("**Weak result:** " + "; ".join(weak) + ". Press **Accept** again to write it anyway, or "
+                                "improve it first.")
+            if question:
+                again = "" if "Press **" in question else f" Press **{c.label}** again to confirm."
+                self.confirm_pending, self.warning, self.error = (action, args), question + again, ""
+                self._relabel(action, "Accept anyway" if action == "accept" else f"{c.label}: confirm")
+                return
+        self.confirm_pending, self.warning, self.error = None, "", ""
         wf.message = ""  # old messages go: the action says what it did
         if c.kind == "long":
             self.worker = threading.Thread(target=self._guard(lambda: self._act(wf, c, args)), daemon=True,
@@ -708,7 +709,7 @@ class ClientPanel:
                         self.choice_values[c.action] = texts[shown]
                 if handle.value != shown:
                     handle.value = shown
-            if c.kind != "choice" and self.confirm_pending != c.action:
+            if c.kind != "choice" and (self.confirm_pending or (None,))[0] != c.action:
                 if handle.label != c.button_label:
                     handle.label = c.button_label
 

@@ -289,6 +289,12 @@ class Workflow:
         deleted, the candidate poses)."""
         return []
 
+    def question(self, action: str, *args: Any) -> str:
+        """What to ask the operator once more before ``action(*args)`` runs ("" to run at once): the
+        control's fixed question, or one that depends on the state (an undo that discards later changes)."""
+        c = self.control(action)
+        return c.confirm if c is not None else ""
+
     def choice_value(self, action: str) -> Any:
         """The value the ``choice`` control ``action`` shows now (None: the operator's last choice)."""
         return None

@@ -38,14 +38,24 @@ class History(Workflow):
         """Re-read the last changes (of the selected object, or of all)."""
         with self.lock:
             self.entries = list(reversed(self.site.db.history(self.object_name, limit=self.limit)))
+            self._versions = {o.name: o.version for o in self.site.objects()}
+
+    def _seen_version(self, change_id: int) -> int | None:
+        """The version of the change's object when the list was read (None: not an object, or unknown)."""
+        entry = next((c for c in self.entries if c.id == change_id), None)
+        return None if entry is None else self._versions.get(entry.object_name)
 
     def _revert(self, which: str, change_id: int):
         from app.db import ConflictError, NotFoundError
 
         with self.lock:
             self._check_open()
+            seen = self._seen_version(int(change_id))
             try:
-                rec = getattr(self.site, which)(int(change_id), client=self.client)
+                if which == "undo":
+                    rec = self.site.undo(int(change_id), client=self.client, expected_version=seen)
+                else:
+                    rec = self.site.restore(int(change_id), client=self.client)
             except NotFoundError as exc:
                 raise WorkflowError(f"{exc}; pick a change number from the list") from None
             except ConflictError as exc:
@@ -56,8 +66,27 @@ class History(Workflow):
             self.message = f"{which} of change {change_id} recorded as change {rec.id}"
             return rec
 
+    def _later_changes(self, change_id: int) -> list:
+        """Changes of the same object made after ``change_id`` (an undo discards them too)."""
+        entry = next((c for c in self.site.db.history(None, limit=10_000) if c.id == int(change_id)), None)
+        if entry is None or entry.object_name is None:
+            return []
+        return [c for c in self.site.db.history(entry.object_name, limit=10_000) if c.id > int(change_id)]
+
+    def question(self, action: str, *args: Any) -> str:
+        if action == "undo" and args:
+            later = self._later_changes(int(args[0]))
+            if later:
+                last = later[-1]
+                when = time.strftime("%H:%M:%S", time.localtime(last.time))
+                return (f"Undoing change #{int(args[0])} brings {last.object_name} back to before it, and so also discards "
+                        f"the {len(later)} later change{'s' if len(later) > 1 else ''} of it (the last by {last.client} at "
+                        f"{when}). Press **Undo change** again to do it.")
+        return super().question(action, *args)
+
     def undo(self, change_id: int):
-        """Bring the object back to its state before change ``change_id`` (itself recorded)."""
+        """Bring the object back to its state before change ``change_id`` (itself recorded). Refused
+        (nothing written) when the object changed after the list was read."""
         return self._revert("undo", change_id)
 
     def restore(self, change_id: int):

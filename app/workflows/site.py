@@ -378,10 +378,11 @@ class Site:
         self._wrote()
         return rec
 
-    def undo(self, change_id: int, *, client: str) -> Any:
+    def undo(self, change_id: int, *, client: str, expected_version: int | None = None) -> Any:
         """Undo change ``change_id`` (the object, or the calibration, as just before it); the undo is
-        itself a change. Returns its ``app.db.ChangeRecord``."""
-        rec = self.db.undo(int(change_id), client=client)
+        itself a change. ``expected_version``: the object's version the operator saw (ConflictError,
+        nothing written, when it changed since). Returns its ``app.db.ChangeRecord``."""
+        rec = self.db.undo(int(change_id), client=client, expected_version=expected_version)
         self._load_calibration_after_revert(rec)
         self._wrote()
         return rec

@@ -28,3 +28,26 @@ def test_undo_brings_the_old_pose_back_and_is_recorded(site, db):
     with pytest.raises(WorkflowError, match="pick a change number"):
         wf.undo(10_000)
     assert change.version + 1 == site.object("parallelepiped").version
+
+
+def test_undo_asks_when_it_discards_later_changes_and_refuses_a_stale_list(site):
+    from app.workflows import History, WorkflowError
+
+    obj = site.object("parallelepiped")
+    site.set_status("parallelepiped", "stale", client="alice")
+    first = site.db.history("parallelepiped")[-1]
+    h = History(site, client="alice")
+    assert h.question("undo", first.id) == ""  # the object's latest change: nothing else is discarded
+    T = obj.T_world_obj.copy()
+    T[0, 3] += 0.01
+    site.update_pose(site.object("parallelepiped"), T, None, method="test", client="bob", clicks={}, residuals={})
+    h.refresh()
+    q = h.question("undo", first.id)
+    assert "also discards the 1 later change" in q and "bob" in q
+    # bob changes it again after alice's list was read: her undo is refused, nothing written
+    n = len(site.db.history("parallelepiped"))
+    T[1, 3] += 0.01
+    site.update_pose(site.object("parallelepiped"), T, None, method="test", client="bob", clicks={}, residuals={})
+    with pytest.raises(WorkflowError, match="changed"):
+        h.undo(first.id)
+    assert len(site.db.history("parallelepiped")) == n + 1
