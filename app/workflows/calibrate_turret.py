@@ -90,8 +90,16 @@ class CalibrateTurret(Workflow):
             if len(X):
                 d[cam.depth(X) <= 0] = np.inf
             if not len(X) or d.min() > PICK_RADIUS_PX:
-                raise WorkflowError(f"no known point within {PICK_RADIUS_PX:.0f} px; click a corner or a face centre "
-                                    "(cyan crosses) of a known object")
+                # anywhere else on a known surface: the beam lands on it (the fit is point-to-plane)
+                origin, ray = cam.rays(p.reshape(1, 2))
+                hit = self.site.raycast(origin, ray[0])
+                if hit is None:
+                    raise WorkflowError("that click is on no known object: click a face of a known object (a cyan "
+                                        "centre, a corner, or anywhere on it)")
+                self.pending_X, self.pending_label = hit.X_world.copy(), f"a point on {hit.name}"
+                self.state = "measure"
+                self.message = f"Target: a point on {hit.name}."
+                return
             k = int(np.argmin(d))
             self.pending_X, self.pending_label = X[k].copy(), names[k]
             self.state = "measure"
@@ -288,7 +296,8 @@ class CalibrateTurret(Workflow):
             return Step("review", f"Solved: {self.message}. " + "{accept} to use it, or measure more points and {solve} again.",
                         frozenset(base | {"accept"}))
         more = f" ({6 - n} more at least)" if n < 6 else "; {solve} when done"
-        return Step("pick", f"Click a known point — a face centre (cyan) or a corner — then measure it{more}.",
+        return Step("pick", f"Click a known point — a face centre (cyan), a corner, or anywhere on a known face — "
+                    f"then measure it{more}.",
                     frozenset(base))
 
     def choices(self, action: str) -> list[tuple[str, Any]]:
