@@ -680,7 +680,7 @@ class UpdatePose(SnapMixin, Workflow):
         if self._waiting_for_edge():
             return Step("assign_edge", f"Which model edge is it? Click that edge of {self.object_name} {where}.",
                         frozenset(base | rows))
-        if self.auto and n < k:
+        if self.auto and (n < k or not (self.segs or self.points_uv)):  # automatic assignment: say so from the start
             if k < 3:
                 return Step("auto_click", f"Automatic matching: click two points along an edge of {self.object_name} "
                             f"(edge {k + 1}; 3 or more, 4 is best).", frozenset(base | rows))

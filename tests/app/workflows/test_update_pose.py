@@ -194,6 +194,7 @@ def test_auto_match_finds_the_assignment_on_the_frame_and_writes_it(video_site, 
     session.select("parallelepiped")
     wf = session.start("update_pose")
     assert wf.auto_match() is None and wf.auto  # too few edges: automatic assignment switched on
+    assert wf.current_step().name == "auto_click" and wf.next_step.startswith("Automatic matching")  # said at once
     edges = [k for k in _visible_edges(site, obj.model, T_true)
              if np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[k]), axis=0)) > 20][:4]
     assert len(edges) == 4
