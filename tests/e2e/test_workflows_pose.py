@@ -1,7 +1,15 @@
 """Pose workflows completed in a real browser by visible controls, keys and canvas clicks alone
 (no call into the workflow API): Update pose by automatic matching, and Track. Each checks the
 database against the scene's truth at FRAME_T_S (the parallelepiped has moved: its database pose
-is stale) and prints the operator actions and seconds it took (run with -s)."""
+is stale) and prints the operator actions and seconds it took (run with -s).
+
+Measured (2 cores; seconds at load ≈ 3, and ≈ 11 in brackets; a canvas click, a button, a key or a chooser
+pick is one action):
+  Update pose by auto match (1280×720): 15 actions in 4.6 s (12.7 s) — select, Update pose, Auto match, 4 edges ×
+    2 clicks, Auto match, Confirm match, Refine, Accept; written 0.07° / 1.8 mm from the truth.
+  Track (1200×700): 5 actions in 1.4 s (3.0 s) — select, Track, Space (pause), Resume, Accept; from an earlier
+    database pose 9.2° / 43.5 mm off to 0.05° / 0.45 mm written, after about 20 frames.
+"""
 
 from __future__ import annotations
 
