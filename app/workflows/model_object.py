@@ -324,13 +324,23 @@ class ModelObject(SnapMixin, Workflow):
 
     def measure(self):
         """Box: range points on the current face, inside its clicked outline (face patch scan)."""
-        from app.devices.acquisition import face_patch_scan
-
         with self.lock:
             self._check_open()
             if self.shape != "box":
                 raise WorkflowError("Measure face is for boxes; for a cylinder use Scan profile")
+        return self._measure_face()
+
+    def _measure_face(self):
+        """Range points on the current face (``self.faces[-1]``), inside its clicked outline: the turret
+        scans a patch of beams there; the face keeps its points, their covariances, the scan and
+        which beams gave points. Shared by the polyhedra's workflow."""
+        from app.devices.acquisition import face_patch_scan
+
+        with self.lock:
+            self._check_open()
             segs = self.faces[-1]["segs"]
+            if self.faces[-1]["points"] is not None:
+                raise WorkflowError("this face is measured: click the sides of the next face, or Solve")
             if len(segs) < 2:
                 raise WorkflowError(f"click at least 2 sides of this face first ({len(segs)} clicked)")
             devices = self._devices()
@@ -362,7 +372,7 @@ class ModelObject(SnapMixin, Workflow):
             self.faces[-1].update(points=X, covs=covs, scan=scan, good=good)
             self.site.set_beam(X[-1])
             self.result = None
-            self.message = f"face {len(self.faces)}: {len(X)} range points of {len(scan)} beams"
+            self.message = f"Face {len(self.faces)}: {len(X)} range points of {len(scan)} beams."
             return scan
 
     def support_point(self, uv: np.ndarray) -> np.ndarray:

@@ -40,7 +40,7 @@ from core.brep import BRep
 from core.rangefinder import RangeFinderSpec, beam_point_cov
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
-from .model_object import MAX_SNAP_MOVE_PX, MIN_SEGMENT_PX, WEAK_SIGMA_MM, ModelObject, _convex_hull, table_support
+from .model_object import MAX_SNAP_MOVE_PX, MIN_SEGMENT_PX, WEAK_SIGMA_MM, ModelObject, table_support
 from .snapping import SnapMixin, snap_marks
 
 __all__ = ["ModelPolyhedron", "PolyShape", "POLY_SHAPES"]
@@ -168,6 +168,7 @@ class ModelPolyhedron(SnapMixin, Workflow):
     _clear_live = ModelObject._clear_live
     _live_points = ModelObject._live_points
     _acquiring = ModelObject._acquiring
+    _measure_face = ModelObject._measure_face
     support_point = ModelObject.support_point
 
     def __init__(self, site, client: str = "operator", shape: str = "wedge", object_name: str | None = None,
@@ -288,45 +289,7 @@ class ModelPolyhedron(SnapMixin, Workflow):
 
     def measure(self):
         """Range points on the current face, inside its clicked outline (face patch scan)."""
-        from app.devices.acquisition import face_patch_scan
-
-        with self.lock:
-            self._check_open()
-            segs = self.faces[-1]["segs"]
-            if len(segs) < 2:
-                raise WorkflowError(f"click at least 2 sides of this face first ({len(segs)} clicked)")
-            if self.faces[-1]["points"] is not None:
-                raise WorkflowError("this face is measured: click the sides of the next face, or Solve")
-            devices = self._devices()
-            ends = np.concatenate(segs)
-            centre = ends.mean(axis=0)
-            # The patch: the clicked sides' ends shrunk towards their centre, so that beams stay on the face.
-            poly = centre + 0.6 * (_convex_hull(ends) - centre)
-            q = np.roll(poly, -1, axis=0)
-            area = 0.5 * abs(float(np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])))  # shoelace
-            spacing = self.spacing_px or max(2.0, float(np.sqrt(area / 25.0)))
-            camera, T = self.site.camera, self.site.T_world_turret
-            self.cancel_event.clear()
-            self._clear_live()
-            self.progress, self.progress_text = 0.0, "face patch · aiming"
-        with self._acquiring("measuring", "Measure again", "cannot measure this face"):
-            scan = face_patch_scan(camera, T, devices.turret, devices.rangefinder, polygon_uv=poly, spacing_px=spacing,
-                                   depth_guess_m=float(camera.depth(self.support_point(centre))),
-                                   progress=self._progress(T, "face patch"), cancel=self.cancel_event)
-        with self.lock:
-            self.progress = None
-            self._clear_live()
-            good = scan.hits & np.asarray(scan.meta.get("inside", scan.hits), bool)
-            if good.sum() < 3:
-                raise WorkflowError(f"only {int(good.sum())} of {len(scan)} beams came back from the face: no range "
-                                    "return; click the face's sides again (larger), or check the range finder")
-            X = scan.points(T)[good]
-            covs = beam_point_cov(T, scan.pan_rad[good], scan.tilt_rad[good], scan.range_m[good], self._spec())
-            self.faces[-1].update(points=X, covs=covs, scan=scan, good=good)
-            self.site.set_beam(X[-1])
-            self.result = None
-            self.message = f"Face {len(self.faces)}: {len(X)} range points of {len(scan)} beams."
-            return scan
+        return self._measure_face()
 
     def _face_data(self, faces: list, T_world_turret: np.ndarray) -> list[_FaceData]:
         """The measured faces, their range points through ``T_world_turret`` from the raw beams."""
