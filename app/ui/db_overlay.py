@@ -18,7 +18,7 @@ from typing import Any, Callable, ContextManager, Iterable
 
 import numpy as np
 
-from app.overlay import PixelWorld
+from app.overlay import PixelWorld, nearest_segment
 from app.workflows.site import SiteObject
 from core.camera import Camera
 
@@ -162,12 +162,5 @@ class DatabaseOverlay:
         """The name of the object whose drawn (visible) wireframe passes nearest to pixel ``uv`` (2,),
         within ``radius_px``; None if none does. Uses the projections already drawn."""
         segs, owners = self._pick
-        if not len(segs):
-            return None
-        p = np.asarray(uv, dtype=float).reshape(2)
-        a, d = segs[:, 0], segs[:, 1] - segs[:, 0]
-        L2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-12)
-        t = np.clip(np.einsum("ij,ij->i", p - a, d) / L2, 0.0, 1.0)
-        dist = np.linalg.norm(a + t[:, None] * d - p, axis=1)
-        i = int(np.argmin(dist))
-        return str(owners[i]) if dist[i] < radius_px else None
+        i, dist = nearest_segment(segs, uv)
+        return str(owners[i]) if i >= 0 and dist < radius_px else None
