@@ -113,6 +113,11 @@ class ClientPanel:
         self._rect_cb = client.scene.on_rect_select()(self._guard(self._on_rect))
         client.camera.on_update(self._on_camera)
 
+    @property
+    def asking(self) -> str | None:
+        """The action whose button asks once more now (Accept of a weak result, Redo, …), or None."""
+        return None if self.confirm_pending is None else self.confirm_pending[0]
+
     # ------------------------------------------------------------------ guard and notify
     def _guard(self, fn: Callable) -> Callable:
         @functools.wraps(fn)

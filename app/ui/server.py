@@ -190,6 +190,11 @@ class InterfaceServer:
             client.scene.remove_by_name(name)
         return new
 
+    @property
+    def database_drawn(self) -> bool:
+        """True once the overlay shows the database as it is now (the database thread caught up)."""
+        return self._db_revision == self.site.revision
+
     def sync_database(self) -> int:
         """Bring the database overlay and the 3D world up to date (only what changed) and build the
         ray-casting index; the database thread's work. Returns how many objects were redrawn."""

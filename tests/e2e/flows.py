@@ -61,7 +61,7 @@ class Operator:
     def accept(self, wf, timeout_s: float = 10.0) -> None:
         """Accept; if the panel asks about a weak result ("Accept anyway"), press again."""
         self.press("Accept")
-        wait_until(lambda: wf.accepted or self.page.panel.confirm_pending == "accept", timeout_s, "the accept or its question")
+        wait_until(lambda: wf.accepted or self.page.panel.asking == "accept", timeout_s, "the accept or its question")
         if not wf.accepted:
             self.page.get_by_role("button", name=re.compile("^Accept anyway")).wait_for(state="visible", timeout=5000)
             self.check()

@@ -182,6 +182,9 @@ class Interface:
         page = browser.new_page(viewport=VIEWPORT)
         page.goto(self.url)
         panel = wait_for_panel(self.server, before)
+        # the database drawn as it is now (its own thread; slow on a loaded machine): clicks that
+        # select an object pick what is drawn
+        wait_until(lambda: self.server.database_drawn, 20.0, "the database overlay to be drawn")
         close_webgl_notice(page)
         time.sleep(0.8)  # let the fitted camera and the first overlay arrive
         page.panel = panel

@@ -72,7 +72,8 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     visible = [int(k) for k, v in zip(wf.edge_index, wf.visible) if v and k >= 0]
     long_edges = [k for k in visible if np.linalg.norm(segs[k, 1] - segs[k, 0]) > 100]
     assert long_edges
-    assert min(_drawn_along(ui, page, shot, segs[k]) for k in long_edges) >= 0.7
+    _wait(lambda: min(_drawn_along(ui, page, ui.screenshot(page), segs[k]) for k in long_edges) >= 0.7, timeout_s=15,
+          what="the table's edges drawn in green where C projects them")
     # error paths: each shows a notification saying what to do, and nothing is written
     versions = [(o.name, o.version) for o in ui.db.objects()]
     n_changes, n_cal = len(ui.db.history()), len(ui.db.calibrations())

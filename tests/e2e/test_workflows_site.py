@@ -159,7 +159,7 @@ def test_calibrate_camera_by_clicks(browser, interface, scene):
     wait_until(lambda: wf.result is not None, what="the second solution")
     assert_prompt_controls(page)
     op.press("Accept")
-    wait_until(lambda: wf.accepted or page.panel.confirm_pending == "accept", what="the accept or its question")
+    wait_until(lambda: wf.accepted or page.panel.asking == "accept", what="the accept or its question")
     if not wf.accepted:  # a weak result: the panel asks once more
         page.get_by_role("button", name="Accept anyway").wait_for(timeout=5000)
         op.press("Accept anyway")
@@ -234,7 +234,7 @@ def test_calibrate_turret_by_clicks(browser, device_interface, scene):
     assert_prompt_controls(page)
     cal = wf.result
     op.press("Accept")
-    wait_until(lambda: wf.accepted or page.panel.confirm_pending == "accept", what="the accept or its question")
+    wait_until(lambda: wf.accepted or page.panel.asking == "accept", what="the accept or its question")
     if not wf.accepted:
         op.press("Accept anyway")
         wait_until(lambda: wf.accepted, what="the accept")
@@ -391,7 +391,7 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     T_a = ui.db.get("parallelepiped").T_world_obj
     op_b = Operator(ui, b, "B: Accept on a stale snapshot")
     op_b.key("Enter")  # Accept (Enter)
-    if wait_until_either(lambda: page_has(b, "changed since you read it"), lambda: b.panel.confirm_pending == "accept"):
+    if wait_until_either(lambda: page_has(b, "changed since you read it"), lambda: b.panel.asking == "accept"):
         op_b.press("Accept anyway")  # a weak result: asked once more
     b.get_by_text(re.compile("changed since you read it")).first.wait_for(timeout=8000)
     b.get_by_text(re.compile("nothing was written")).first.wait_for(timeout=5000)

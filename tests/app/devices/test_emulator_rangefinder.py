@@ -39,7 +39,7 @@ def emulator(workcell):
         emu.close()
 
 
-def ask(line, command, timeout=1.0):
+def ask(line, command, timeout=3.0):
     line.write(command.encode() + b"\r\n")
     return line.read_line(time.monotonic() + timeout)
 
