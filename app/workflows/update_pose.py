@@ -50,8 +50,8 @@ SNAPPED_SIGMA_PX = 0.3  # the click noise automatic matching assumes when every 
 IMAGE_GATE_PX = 3.0  # a matched pose whose edges lie farther than this from the image's (mean) fits the clicks only
 # A refined pose is weak (Accept asks once more) when its σ exceed these, a click lies more than 3σ
 # off, a snap moved a click more than MAX_SNAP_MOVE_PX, or the clicks fix the 6 unknowns just barely.
-WEAK_SIGMA_DEG = 1.0
-WEAK_SIGMA_MM = 10.0
+WEAK_SIGMA_DEG = 2.0
+WEAK_SIGMA_MM = 20.0
 MAX_SNAP_MOVE_PX = 2.0
 
 
@@ -128,24 +128,32 @@ class UpdatePose(SnapMixin, Workflow):
         # Bumped by every change of what the solvers read (clicks, assignments, the chosen candidate): a
         # solve that ran outside the lock commits only if it is unchanged (snapshot, compute, commit).
         self._generation = 0
+        self.last_refined: np.ndarray | None = None  # the last refined pose, once a click changed it
         self.state = "click_edge"
 
     # ------------------------------------------------------------------ estimate in use
     @property
     def T_current(self) -> np.ndarray:
-        """The pose the overlay assigns against: refined, else the chosen candidate, else the database's."""
+        """The pose the overlay assigns against: refined, else the last refined one (a click added
+        since), else the chosen candidate, else the database's."""
         if self.refined is not None:
             return self.refined.T_world_obj
+        if self.last_refined is not None:
+            return self.last_refined
         if self.chosen is not None:
             return self.candidates[self.chosen]
         return self.obj.T_world_obj
 
     def _invalidate(self) -> None:
         self.refined = None
+        self.last_refined = None  # a new candidate or assignment: the old refinement is no guide
         self._generation += 1
 
     def _clicks_changed(self) -> None:
-        """A click or an assignment changed: the refined pose and any automatic assignments shown go."""
+        """A click or an assignment changed: the refined pose and any automatic assignments shown go;
+        the last refined pose stays the estimate new edges are assigned on (and Refine starts from)."""
+        if self.refined is not None:
+            self.last_refined = self.refined.T_world_obj.copy()
         self.refined = None
         self._generation += 1
         if self.matches is not None:
@@ -349,13 +357,15 @@ class UpdatePose(SnapMixin, Workflow):
             if self.chosen is not None:
                 order = [self.chosen] + [i for i in range(len(self.candidates)) if i != self.chosen]
                 starts = [(i, self.candidates[i]) for i in order]
+            if self.last_refined is not None:  # clicks added since the last Refine: go on from there
+                starts = [(-1, self.last_refined)] + starts
             camera, camera_cov, sigmas = self.site.camera, self.site.calibration_covs[0], self._click_sigmas()
             generation = self._generation
         clicks = dict(segs_uv=segs if len(segs) else None, edges_obj=edges if len(edges) else None,
                       points_uv=pts_uv if len(pts_uv) else None, points_obj=pts_obj if len(pts_obj) else None)
         failures = []  # compute, outside the lock: the overlay keeps drawing
         for i, start in starts:
-            what = "from the database pose" if i is None else f"candidate {i + 1}"
+            what = "from the database pose" if i is None else ("from the last refined pose" if i == -1 else f"candidate {i + 1}")
             try:
                 result = refine(camera, start, **clicks, loss=self.loss, sigma_px=sigmas)
             except ValueError as exc:
@@ -379,15 +389,15 @@ class UpdatePose(SnapMixin, Workflow):
         with self.lock:  # commit
             self._unchanged_since(generation, "Refine")
             note = ""
-            if failures:
+            if failures and i is not None and i >= 0:
                 note = f"{'; '.join(failures)} — not offered; candidate {i + 1} refined instead. "
                 self.chosen = i
             self.refined = result
             self.state = "review"
             deg, m = pose_error(result.T_world_obj, self.obj.T_world_obj)
-            sig_deg, sig_m = np.degrees(np.sqrt(np.trace(result.cov[3:, 3:]))), np.sqrt(np.trace(result.cov[:3, :3]))
-            self.message = (f"{note}RMS {result.rms_px:.2f} px over {len(result.kinds)} clicks; moved {deg:.2f}° and "
-                            f"{100 * m:.1f} cm from the database pose; σ {sig_deg:.2f}° / {100 * sig_m:.2f} cm"
+            sig_deg, sig_mm = float(np.max(result.std_r_deg)), 1000 * float(np.max(result.std_t_m))
+            self.message = (f"{note}RMS {result.rms_px:.1f} px over {len(result.kinds)} clicks; moved {deg:.2f}° and "
+                            f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
                             + (" (camera calibration included)" if result.cov_parts else ""))
             return result
 
@@ -656,7 +666,7 @@ class UpdatePose(SnapMixin, Workflow):
             return self._finished_step()
         n = sum(e is not None for e in self.edge_ids)
         k = len(self.segs)
-        where = "on the white ghost" if self.chosen is not None else "on its wireframe"
+        where = "on the white ghost" if (self.chosen is not None or self.last_refined is not None) else "on its wireframe"
         base = {"cancel"}
         if self.pending is not None or self.mode == "point" or self._done or self.matches is not None:
             base.add("remove_last")
@@ -673,8 +683,10 @@ class UpdatePose(SnapMixin, Workflow):
             return Step("click_edge_end", f"Click a second point on the same image edge (edge {k + 1}).", frozenset(base))
         rows = {"click_row", "remove_click"} if self._click_rows() else set()
         if self.matches is not None:
-            return Step("match", f"Assignment {(self.chosen or 0) + 1} of {len(self.matches)} shown (1→e3: clicked edge 1 is "
-                        "model edge 3): {confirm_match}, choose another {choose_candidate}, or {remove_last} to assign by hand.",
+            e0 = int(self.matches[self.chosen or 0].edges[0])
+            return Step("match", f"Assignment {(self.chosen or 0) + 1} of {len(self.matches)} shown (1→e{e0}: clicked edge 1 is "
+                        f"model edge {e0}): " + "{confirm_match}, choose another {choose_candidate}, or {remove_last} to assign "
+                        "by hand.",
                         frozenset(base | {"confirm_match", "choose_candidate"}))
         more = base | rows | {"start_point"}
         if self._waiting_for_edge():
@@ -702,7 +714,8 @@ class UpdatePose(SnapMixin, Workflow):
                         frozenset(more))
         if self.candidates and self.refined is None:
             return Step("candidates", f"Candidate {(self.chosen or 0) + 1} of {len(self.candidates)} is drawn in white: pick "
-                        "another {choose_candidate} if it is wrong, add edges, then {refine}.",
+                        "another {choose_candidate} if it is clearly wrong, add edges, then {refine} — it uses every click and "
+                        "often corrects a candidate that looks off.",
                         frozenset(more | {"choose_candidate"}))
         if self.refined is None:
             return Step("ready", "{solve} for a large motion, or {refine} from the database pose for a small one; or click "
@@ -796,6 +809,8 @@ class UpdatePose(SnapMixin, Workflow):
                 m.labels += [(mid + [0.0, -10.0], f"e{int(e)}") for mid, e, f in zip(mids, shown.edges, front) if f]
             if self.refined is not None:
                 m.ghosts = [Ghost(model, self.refined.T_world_obj, "refined", chosen=True)]
+            elif self.last_refined is not None:  # clicks added since Refine: the estimate they are assigned on
+                m.ghosts = [Ghost(model, self.last_refined, "last refined", chosen=True)]
             else:
                 m.ghosts = [Ghost(model, T, f"#{i + 1}", chosen=(i == self.chosen)) for i, T in enumerate(self.candidates)]
             if self.mode == "point" and self.pending_vertex is not None:

@@ -321,3 +321,28 @@ def test_refine_offers_only_plausible_poses_and_tries_the_next_candidate(video_s
     with pytest.raises(WorkflowError, match="no plausible pose.*Check the edge assignments"):
         wf3.accept()
     assert db.get("parallelepiped").version == version and not wf3.accepted
+
+
+def test_an_edge_added_after_refine_is_assigned_on_the_refined_pose(site):
+    """Adding an edge after Refine: the white ghost stays the refined pose (not the P3L candidate it
+    started from), the new edge is assigned on it, and Refine goes on from it."""
+    obj = site.object("parallelepiped")
+    T_true = _moved(obj.T_world_obj, 30.0, -0.06, 0.04)
+    wf = UpdatePose(site, client="alice", object_name="parallelepiped", snap=False)
+    edges = _visible_edges(site, obj.model, T_true)
+    rng = np.random.default_rng(4)
+    _operator_clicks(wf, site, T_true, edges[:3], rng, sigma_px=0.2)
+    cands = wf.solve()
+    worst = max(range(len(cands)), key=lambda i: pose_error(cands[i], T_true)[0])
+    best = min(range(len(cands)), key=lambda i: pose_error(cands[i], T_true)[0])
+    wf.choose_candidate(best)
+    _operator_clicks(wf, site, T_true, edges[3:4], rng, sigma_px=0.2)
+    wf.refine()
+    refined = wf.refined.T_world_obj.copy()
+    if worst != best:
+        wf.chosen = worst  # as if the operator had looked at another candidate before: it must not come back
+    _operator_clicks(wf, site, T_true, edges[4:5], rng, sigma_px=0.2)  # assigned on the drawn estimate
+    assert wf.refined is None and np.allclose(wf.T_current, refined)
+    assert [g.label for g in wf.marks().ghosts] == ["last refined"]
+    r = wf.refine()
+    assert pose_error(r.T_world_obj, T_true)[0] < 1.0
