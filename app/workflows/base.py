@@ -232,6 +232,34 @@ class Workflow:
         if self.finished:
             raise WorkflowError(f"the {self.title} workflow is {'accepted' if self.accepted else 'cancelled'}; start a new one")
 
+    # ------------------------------------------------------------------ writing a pose
+    def _write_pose(self, obj: Any, T_world_obj: np.ndarray, cov: Any, *, todo: str, **record: Any) -> tuple[Any, Any]:
+        """``site.update_pose`` from the snapshot ``obj`` the workflow started on. When the object
+        changed meanwhile but not its pose or model (e.g. its status: marked stale, an undo of that),
+        the new pose is as valid as before: it is written over the fresh snapshot. Otherwise nothing
+        is written and WorkflowError says who changed it and ``todo``. Returns (record, snapshot used)."""
+        from app.db import ConflictError
+
+        try:
+            return self.site.update_pose(obj, T_world_obj, cov, client=self.client, **record), obj
+        except ConflictError as exc:
+            try:
+                fresh = self.site.object(obj.name)
+            except KeyError:
+                raise WorkflowError(f"{obj.name} was removed from the database meanwhile: nothing was written") from None
+            same_model = fresh.model is obj.model or np.array_equal(fresh.model.vertices, obj.model.vertices)
+            if same_model and np.allclose(fresh.T_world_obj, obj.T_world_obj, rtol=0.0, atol=1e-12):
+                try:
+                    return self.site.update_pose(fresh, T_world_obj, cov, client=self.client, **record), fresh
+                except ConflictError as again:
+                    exc = again
+            last = self.site.db.history(obj.name, limit=1)
+            who = f" by {last[-1].client}" if last else ""
+            raise WorkflowError(f"{obj.name} was moved{who} since you started (version {exc.expected_version} → "
+                                f"{exc.actual_version}): nothing was written. {todo}") from None
+        except ValueError as exc:
+            raise WorkflowError(f"the database refused the pose: {exc}") from None
+
     # ------------------------------------------------------------------ the frame used
     def use_frame(self, frame: FrameRef | None) -> None:
         """Work on ``frame`` from now on (the panel freezes one when the workflow starts)."""

@@ -255,8 +255,6 @@ class TrackObject(SnapMixin, Workflow):
     # ------------------------------------------------------------------ accept
     def accept(self):
         """Write the tracked pose (one transaction, method "tracking"); refused while lost."""
-        from app.db import ConflictError
-
         with self.lock:
             self._check_open()
             if self.lost:
@@ -271,13 +269,8 @@ class TrackObject(SnapMixin, Workflow):
             if d is not None:
                 residuals.update(n_samples=int(d.n_samples), n_inliers=int(d.n_inliers))
             T, cov = self.T_world_obj.copy(), None if self.cov is None else self.cov.copy()
-            try:
-                rec = self.site.update_pose(self.obj, T, cov, method="tracking", client=self.client, clicks=clicks,
-                                            measurements=measurements, residuals=residuals)
-            except ConflictError as exc:
-                raise WorkflowError(f"{exc}. Cancel, and Track again from the new pose") from None
-            except ValueError as exc:
-                raise WorkflowError(f"the database refused the pose: {exc}") from None
+            rec, self.obj = self._write_pose(self.obj, T, cov, method="tracking", clicks=clicks, measurements=measurements,
+                                             residuals=residuals, todo="Cancel, and Track again from its new pose.")
             self.accepted = True
             self.state = "accepted"
             self.message = (f"{self.object_name} updated from tracking (version {rec.version}): {self.frames} frames, "

@@ -505,7 +505,6 @@ class UpdatePose(SnapMixin, Workflow):
 
     def accept(self):
         """Write the refined pose and covariance (one transaction); ConflictError → nothing written."""
-        from app.db import ConflictError
 
         with self.lock:
             self._check_open()
@@ -532,13 +531,8 @@ class UpdatePose(SnapMixin, Workflow):
                 clicks["match"] = self.match_info
             residuals = {"rms_px": r.rms_px, "click_residuals_px": r.click_residuals_px, "kinds": list(r.kinds)}
             method = "match+refine" if self.match_info is not None else ("p3l+refine" if self.chosen is not None else "refine")
-            try:
-                rec = self.site.update_pose(self.obj, r.T_world_obj, r.cov, method=method, client=self.client,
-                                            clicks=clicks, residuals=residuals)
-            except ConflictError as exc:
-                raise WorkflowError(f"{exc}. Cancel, and update the pose again from the new one") from None
-            except ValueError as exc:
-                raise WorkflowError(f"the database refused the pose: {exc}") from None
+            rec, self.obj = self._write_pose(self.obj, r.T_world_obj, r.cov, method=method, clicks=clicks,
+                                             residuals=residuals, todo="Cancel, and update the pose again from its new one.")
             self.accepted = True
             self.state = "accepted"
             self.message = f"{self.object_name} updated (version {rec.version}): RMS {r.rms_px:.2f} px"

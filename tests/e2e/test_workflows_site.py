@@ -367,8 +367,9 @@ def _update_pose_until_refined(op, ui, scene):
 
 
 def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
-    """B updates the box's pose while A marks it stale: B is told, B's Accept on the old snapshot
-    writes nothing and says so; A undoes the change in History: the undo is recorded, B is told."""
+    """B updates the box's pose while A marks it stale: B is told; A undoes the change in History: the
+    undo is recorded, B is told; another writer then moves the box: B's Accept on its old snapshot
+    writes nothing and says who moved it."""
     ui = interface
     a, b = ui.open(browser), ui.open(browser)
     close_notifications(b)
@@ -386,18 +387,6 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     assert change.client == who_a
     _announced(b, f"{who_a} marked parallelepiped stale")  # B is told who and what
     assert not a.locator(".mantine-Notification-root", has_text="Changed by another operator").count()
-    # B accepts on its old snapshot: nothing written, and the panel says so
-    after_a = _db_state(ui.db)
-    T_a = ui.db.get("parallelepiped").T_world_obj
-    op_b = Operator(ui, b, "B: Accept on a stale snapshot")
-    op_b.key("Enter")  # Accept (Enter)
-    if wait_until_either(lambda: page_has(b, "changed since you read it"), lambda: b.panel.asking == "accept"):
-        op_b.press("Accept anyway")  # a weak result: asked once more
-    b.get_by_text(re.compile("changed since you read it")).first.wait_for(timeout=8000)
-    b.get_by_text(re.compile("nothing was written")).first.wait_for(timeout=5000)
-    op_b.report()
-    assert not wf_b.accepted and _db_state(ui.db) == after_a
-    assert np.array_equal(ui.db.get("parallelepiped").T_world_obj, T_a)
     # A: History, the change chosen in the Change chooser, Undo change
     close_notifications(a)
     op_a = Operator(ui, a, "A: History, choose, Undo change, Close")
@@ -411,7 +400,7 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     wait_until(lambda: ui.db.get("parallelepiped").status == "known", what="the undo")
     undo = ui.db.history("parallelepiped")[-1]
     assert undo.action == "undo" and undo.undoes == change.id and undo.client == who_a
-    assert np.array_equal(ui.db.get("parallelepiped").T_world_obj, T_a)  # the status only: the pose is as it was
+    assert ui.db.get("parallelepiped").status == "known"  # the status only: the pose is as it was
     a.get_by_text(f"undo of change {change.id} recorded", exact=False).first.wait_for(timeout=5000)
     assert_prompt_controls(a)
     assert any(v == undo.id for _, v in wf.choices("change"))  # the undo is listed: it can be undone too
@@ -419,6 +408,28 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     wait_until(lambda: wf.accepted, what="the history closed")
     op_a.report()
     _announced(b, f"{who_a} undid change #{change.id}")
+    # Meanwhile another writer (here a second connection, as `mcit db` would be) moves the box: B's
+    # Accept on its old snapshot writes nothing and says who moved it. (A change of status alone —
+    # A's Mark stale and its undo — leaves B's pose valid: it would have been written over them.)
+    from app.db import Database
+
+    other = Database.open(ui.db.path)
+    T_other = ui.db.get("parallelepiped").T_world_obj.copy()
+    T_other[0, 3] += 0.02
+    cur = ui.db.get("parallelepiped")
+    other.update_pose(cur.id, T_other, None, expected_version=cur.version, method="test", client="other")
+    other.close()
+    after_a = _db_state(ui.db)
+    T_a = ui.db.get("parallelepiped").T_world_obj
+    op_b = Operator(ui, b, "B: Accept on a stale snapshot")
+    op_b.key("Enter")  # Accept (Enter)
+    if wait_until_either(lambda: page_has(b, "nothing was written"), lambda: b.panel.asking == "accept"):
+        op_b.press("Accept anyway")  # a weak result: asked once more
+    b.get_by_text(re.compile("was moved by other since you started")).first.wait_for(timeout=8000)
+    b.get_by_text(re.compile("nothing was written")).first.wait_for(timeout=5000)
+    op_b.report()
+    assert not wf_b.accepted and _db_state(ui.db) == after_a
+    assert np.array_equal(ui.db.get("parallelepiped").T_world_obj, T_a)
     a.close()
     b.close()
 

@@ -120,7 +120,7 @@ def test_conflict_writes_nothing_and_says_what_to_do(site, db):
     _operator_clicks(wf, site, T_true, _visible_edges(site, obj.model, T_true)[:5], np.random.default_rng(3))
     wf.refine()
     other = db.update_pose(obj.id, T_true, None, expected_version=obj.version, method="other", client="bob")
-    with pytest.raises(WorkflowError, match="changed since you read it"):
+    with pytest.raises(WorkflowError, match="moved by bob since you started.*nothing was written"):
         wf.accept()
     assert db.get("parallelepiped").version == other.version
     assert np.allclose(db.get("parallelepiped").T_world_obj, T_true)
@@ -346,3 +346,26 @@ def test_an_edge_added_after_refine_is_assigned_on_the_refined_pose(site):
     assert [g.label for g in wf.marks().ghosts] == ["last refined"]
     r = wf.refine()
     assert pose_error(r.T_world_obj, T_true)[0] < 1.0
+
+
+def test_accept_survives_a_status_change_but_not_a_move(site):
+    """Another operator's Mark stale (the status only) leaves the clicked pose valid: it is written;
+    another operator's move is a conflict: nothing written, who moved it is said."""
+    obj = site.object("parallelepiped")
+    T_true = _moved(obj.T_world_obj, 10.0, 0.02, 0.0)
+    edges = _visible_edges(site, obj.model, T_true)
+    wf = UpdatePose(site, client="alice", object_name="parallelepiped", snap=False)
+    _operator_clicks(wf, site, T_true, edges[:5], np.random.default_rng(5), sigma_px=0.2)
+    wf.refine()
+    site.set_status("parallelepiped", "stale", client="bob")
+    rec = wf.accept()
+    assert rec.status == "known" and pose_error(rec.T_world_obj, T_true)[0] < 1.0
+    wf2 = UpdatePose(site, client="alice", object_name="parallelepiped", snap=False)
+    _operator_clicks(wf2, site, T_true, edges[:5], np.random.default_rng(6), sigma_px=0.2)
+    wf2.refine()
+    cur = site.object("parallelepiped")
+    site.update_pose(cur, _moved(cur.T_world_obj, 1.0, 0.0, 0.0), None, method="test", client="bob")
+    n = len(site.db.history("parallelepiped"))
+    with pytest.raises(WorkflowError, match="moved by bob since you started.*nothing was written"):
+        wf2.accept()
+    assert len(site.db.history("parallelepiped")) == n
