@@ -125,8 +125,9 @@ class ClientPanel:
             try:
                 return fn(*args, **kwargs)
             except WorkflowError as exc:
+                # Said in the panel, at the top (no toast: toasts stack over the video's corner and
+                # close under the cursor, so that a click meant for one lands on the video).
                 self.error = _sentence(str(exc))
-                self.notify("Cannot do that", self.error, "yellow")
             except Cancelled:
                 self.error = ""
                 self.notify("Stopped", "The measurement was stopped; nothing was kept.", "blue")
@@ -350,6 +351,7 @@ class ClientPanel:
         if name is None:
             raise WorkflowError("select an object first (click its wireframe, or choose it in the list)")
         self.app.site.set_status(name, "stale", method="operator", client=self.session.client)
+        self.error = ""
         self.notify("Marked stale", f"{name} is drawn orange until its pose is updated.", "blue")
 
     def _on_view(self, event) -> None:
@@ -382,8 +384,10 @@ class ClientPanel:
     def _freeze_back(self, k: int) -> None:
         """Freeze the frame k steps before the newest (0: the newest)."""
         wf = self.session.workflow
-        if wf is not None and wf.name in LIVE_WORKFLOWS and not wf.finished:
-            raise WorkflowError(f"{wf.title} follows the live video: nothing to freeze")
+        if wf is not None and not wf.finished and (wf.name == "history" or (
+                wf.name == "track" and wf.current_step().name in ("tracking", "waiting"))):
+            raise WorkflowError(f"{wf.title} follows the live video: nothing to freeze"
+                                + (" (Pause it first)" if wf.name == "track" else ""))
         if self._workflow_has_clicks():
             raise WorkflowError("your clicks were made on the frozen frame: every click of a workflow uses one frame. "
                                 "Remove them (Remove last) or Cancel before freezing another frame")
@@ -392,6 +396,26 @@ class ClientPanel:
             raise WorkflowError("no video frame has arrived yet: check the video source")
         self._freeze(frame, "scrubbed" if k else "live")
         self.error = ""
+
+    def _follow_frame(self, wf) -> None:
+        """Which frame to show now: a finished workflow's frozen frame goes (back to the live video);
+        Track freezes the frame where it paused or was lost (its clicks and re-initialisation use
+        it) and lets it go when it follows the video again."""
+        if wf is None or wf.finished:
+            if self.frozen is not None:
+                self._unfreeze()
+                self.dirty = True
+            return
+        if wf.name != "track":
+            return
+        following = wf.current_step().name in ("tracking", "waiting")
+        if following and self.frozen is not None:
+            wf.use_frame(None)
+            self._unfreeze()
+            self.dirty = True
+        elif not following and self.frozen is None:
+            self._freeze(self.app.grabber.latest(), "live")
+            self.dirty = True
 
     def _toggle_live(self) -> None:
         if self.frozen is None:
@@ -439,6 +463,7 @@ class ClientPanel:
                 raise WorkflowError(f"clicks are not taken now. {wf.prompt_text(markdown=False)}")
         name = self._object_at(uv)
         self.session.select(name)
+        self.error = ""
 
     def _on_click(self, event) -> None:
         arrival = time.monotonic()
@@ -597,6 +622,7 @@ class ClientPanel:
         self.gui_progress.visible = bool(busy or (progress is not None and 0 < progress < 1))
         if progress is not None:
             self.gui_progress.value = float(np.clip(progress * 100.0, 0, 100))
+        self._follow_frame(wf)
         self._send_frozen()
         if not (self.dirty or site_changed or busy):
             return False
@@ -612,6 +638,9 @@ class ClientPanel:
         if self.gui_object.value != selected:
             self.gui_object.value = selected
         marks = wf.marks() if wf is not None and not wf.finished else Marks()
+        X = site.beam_X_world  # the range finder's last spot, for everyone
+        if marks.beam_uv is None and X is not None and np.all(np.isfinite(X)) and site.camera.depth(X) > 0:
+            marks.beam_uv = site.camera.project(np.asarray(X, float))
         scale = self._zoom_scale(self.client.camera) if self.view == "video" else None
         self.marks_scale = 1.0 if scale is None else scale
         pw = self.app.pixel_world
@@ -639,8 +668,11 @@ class ClientPanel:
             self.notify("Changed by other operators", f"{len(others) - 3} more changes: see History.", "blue")
 
     def _update_texts(self, wf) -> None:
+        selected = self.session.selected
+        idle = ("Click an object to select it, or start a workflow below." if selected is None else
+                f"**{selected}** is selected: start a workflow below (Update pose, Track, …), or click another object.")
         if wf is None:
-            title = "**No workflow.** Click an object to select it, or start a workflow below (Start a workflow)."
+            title = f"**No workflow.** {idle}"
             report = ""
             step = None
         else:
@@ -648,9 +680,12 @@ class ClientPanel:
             state = " (accepted)" if wf.accepted else (" (cancelled)" if wf.cancelled else "")
             subject = wf.object_name
             head = f"**{wf.title}{': ' + subject if subject else ''}**{state}"
-            title = f"{head}\n\n{wf.prompt_text()}"
-            if wf.message and not wf.finished:
+            prompt = wf.prompt_text()
+            title = f"{head}\n\n{prompt}"
+            if wf.message and not wf.finished and wf.message not in prompt:
                 title += f"\n\n_{wf.message}_"
+            if wf.finished:
+                title += f"\n\n{idle}"
             report = report_markdown(wf.summary())
         if self.error:
             title += f"\n\n⚠ {self.error}"
@@ -667,8 +702,7 @@ class ClientPanel:
         if text and self.gui_copy.value != text:
             self.gui_copy.value = text
         frame = "Live video (no frame frozen)." if self.frozen is None else (
-            f"Frozen frame: t = {self.frozen.t_s:.2f} s (frame {self.frozen.index})"
-            + (" — **showing live video**" if self.show_live else ""))
+            f"Frozen frame: t = {self.frozen.t_s:.2f} s" + (" · **live shown**" if self.show_live else ""))
         if self.gui_frame.content != frame:
             self.gui_frame.content = frame
 

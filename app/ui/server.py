@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import viser
 
-from app.overlay import COLORS, LineBatch, PixelWorld, circle_marker
+from app.overlay import LineBatch, PixelWorld
 from app.video import FrameGrabber
 from app.workflows.frames import GrabberFrames
 from app.workflows.site import Site
@@ -207,19 +207,16 @@ class InterfaceServer:
         self._db_revision = revision
         return n
 
-    def _draw_beam(self) -> None:
-        X = getattr(self.site, "beam_X_world", None)
+    def _draw_beam(self, panels: list) -> None:
+        """The range finder's spot moved: each client draws it among its marks (so that it keeps its
+        size on the screen when zoomed), and the 3D world's beam follows."""
+        X = self.site.beam_X_world
         key = None if X is None else tuple(np.round(X, 6))
         if key == self._beam_key:
             return
         self._beam_key = key
-        batch = LineBatch()
-        cam = self.site.camera
-        if X is not None and np.all(np.isfinite(X)) and cam.depth(X) > 0:
-            uv = cam.project(np.asarray(X, float))
-            batch.add(circle_marker(uv, 6.0), COLORS["beam"])
-            batch.add(circle_marker(uv, 2.5, n=8), COLORS["beam"])
-        self._send_lines(self.server.scene, "/overlay/beam", batch, Z_MARKS)
+        for panel in panels:
+            panel.dirty = True
         self.world3d.draw_beam(self.site)
 
     def world3d_view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -280,7 +277,7 @@ class InterfaceServer:
         with self.clients_lock:
             panels = list(self.clients.values())
         with self.server.atomic():
-            self._draw_beam()
+            self._draw_beam(panels)
             for panel in panels:
                 try:
                     panel.redraw(site_changed)

@@ -269,7 +269,7 @@ class CalibrateCamera(SnapMixin, Workflow):
         n = len(self.X_world)
         has = {"cancel"} | ({"remove_last"} if (n or self.pending_X is not None) else set())
         if n:
-            has |= {"pair", "remove_pair", "redo"}
+            has |= {"pair", "remove_pair"} | ({"redo"} if n >= 2 else set())
         if self._last_snap()[0] is not None and self._last_snap()[0].applied:
             has.add("refuse_snap")
         if self.state == "click_image":

@@ -249,11 +249,24 @@ class DesignateTarget(Workflow):
             self._check_open()
             self.accepted = True
             self.state = "accepted"
+            n = len(self.targets)
+            self.message = f"Closed: {n} target{'s' if n != 1 else ''} designated (nothing is written to the database)."
+
+    @staticmethod
+    def _copy_point(t: Target) -> str:
+        """What the robot should be sent for target t: where the range finder found the surface when
+        it disagrees with the database (the database's point lies behind what is really there), else
+        the database's point."""
+        if t.warning and t.rangefinder_X is not None and np.all(np.isfinite(t.rangefinder_X)):
+            x, y, z = t.rangefinder_X
+            return f"{x:.4f} {y:.4f} {z:.4f}"
+        return t.text()
 
     def copy_text(self) -> str:
-        """The last target's world coordinates (metres), for the robot."""
+        """The last target's world coordinates (metres), for the robot: the range finder's point when
+        it disagrees with the database."""
         with self.lock:
-            return self.targets[-1].text() if self.targets else ""
+            return self._copy_point(self.targets[-1]) if self.targets else ""
 
     def _step(self) -> Step:
         if self.finished:
@@ -288,11 +301,14 @@ class DesignateTarget(Workflow):
 
     def summary(self) -> dict[str, Any]:
         with self.lock:
-            return {"targets": [{"object": t.object, "X_world": t.X_world.tolist(), "range_m": t.range_m,
-                                 "check": t.check, "warning": t.warning,
-                                 "rangefinder_X": None if t.rangefinder_X is None else t.rangefinder_X.tolist(),
-                                 "disagreement_mm": _mm(t.disagreement_m), "sigma_mm": _mm(t.sigma_m)}
-                                for t in self.targets]}
+            rows = []
+            for i, t in enumerate(self.targets):
+                row = {"target": f"T{i + 1}", "on": t.object, "x y z (m)": self._copy_point(t),
+                       "check": "range finder disagrees" if t.warning else t.check}
+                if np.isfinite(t.disagreement_m):
+                    row["disagreement_mm"] = _mm(t.disagreement_m)
+                rows.append(row)
+            return {"targets": rows}
 
 
 def _mm(v: float) -> float | None:

@@ -10,6 +10,7 @@ import time
 from typing import Any
 
 from .base import Control, Step, Workflow, WorkflowError
+from .site import _change_sentence
 
 __all__ = ["History"]
 
@@ -99,6 +100,7 @@ class History(Workflow):
             self._check_open()
             self.accepted = True
             self.state = "closed"
+            self.message = "History closed."
 
     def _step(self) -> Step:
         if self.finished:
@@ -113,18 +115,13 @@ class History(Workflow):
         if action != "change":
             return []
         with self.lock:
-            out = []
-            for c in self.entries:
-                what = c.object_name or ("calibration" if c.calibration_id is not None else "")
-                out.append((f"#{c.id} {c.action} {what} ({c.client}, {time.strftime('%H:%M:%S', time.localtime(c.time))})",
-                            int(c.id)))
-            return out
+            return [(f"#{c.id} {c.client} {_change_sentence(c)} ({time.strftime('%H:%M:%S', time.localtime(c.time))})",
+                     int(c.id)) for c in self.entries]
 
     def summary(self) -> dict[str, Any]:
         with self.lock:
             rows = []
             for c in self.entries:
-                what = c.object_name or ("calibration" if c.calibration_id is not None else "")
                 rows.append({"#": c.id, "when": time.strftime("%H:%M:%S", time.localtime(c.time)), "who": c.client,
-                             "action": c.action, "what": what, "method": c.method})
+                             "what": _change_sentence(c), "method": c.method})
             return {"changes": rows}

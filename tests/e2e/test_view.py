@@ -46,7 +46,7 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     page.get_by_text("Frozen frame: t =").first.wait_for(timeout=5000)
     page.keyboard.press("l")  # Show live
     wait_until(lambda: panel.show_live, what="the live view")
-    page.get_by_text("showing live video").first.wait_for(timeout=5000)
+    page.get_by_text("live shown").first.wait_for(timeout=5000)
     table = ui.site.object("table")
     corner = ui.site.camera.project(table.vertices_world()[np.argmax(table.vertices_world()[:, 2])])
     ui.click_pixel(page, corner)

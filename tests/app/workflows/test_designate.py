@@ -97,7 +97,10 @@ def test_an_object_not_in_the_database_is_flagged(device_site, fast_scene, name)
     assert len(m.targets) == 1 and len(m.points) == 1  # the database target and the range finder's point
     assert any("R1" == text for _, text in m.labels)
     row = wf.summary()["targets"][0]
-    assert row["warning"] == t.warning and row["disagreement_mm"] < 0
+    assert row["check"] == "range finder disagrees" and row["disagreement_mm"] < 0
+    # what the operator copies for the robot is where the range finder found the surface, not the
+    # database's point behind the unmodelled object
+    assert wf.copy_text() == row["x y z (m)"] == " ".join(f"{v:.4f}" for v in t.rangefinder_X)
 
 
 def test_no_database_surface_but_the_range_finder_hits(device_site, fast_scene):
