@@ -165,7 +165,6 @@ class CalibrateCamera(SnapMixin, Workflow):
                 residuals_px=self.result.residuals_px,
                 cov=self.result.cov,
                 points={"X_world": np.array(self.X_world).tolist(), "uv": np.array(self.uv).tolist(), "labels": list(self.labels),
-                        "frame": self.frame_record(),  # the frozen frame the corners were clicked on
                         # raw and snapped pixels of each point above (None: snapping was off)
                         "snaps": [None if sn is None else sn.record() for sn in self.snaps],
                         "frame": self.frame_record()},  # the frozen frame clicked on (None: the site's frame)

@@ -30,7 +30,8 @@ from core.transforms import pose_error
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
 from .snapping import ClickSnap, SnapMixin, snap_marks
-from .update_pose import MIN_SEGMENT_PX, SNAPPED_SIGMA_PX
+from .pose_matching import SNAPPED_SIGMA_PX
+from .update_pose import MIN_SEGMENT_PX
 
 __all__ = ["TrackObject"]
 

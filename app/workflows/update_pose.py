@@ -16,12 +16,8 @@ Beyond the paper (docs/beyond.md):
 * every clicked segment is snapped to the image's edge, and every clicked image point of a vertex
   to the image's corner, on the frame the operator clicked on (``snapping``); ``refuse_snap()``
   keeps the last click as clicked; ``snap=False`` (or ``set_snap(False)``) turns snapping off;
-* ``auto_match()``: with three or more (four is best) clicked edges not assigned by hand, every
-  assignment to model edges is tried (``app.vision.matching.match_edges`` on the frame) and the
-  plausible ones ranked; the best is shown with its edge labels, the others as ghosts
-  (``choose_candidate``); ``confirm_match()`` adopts the shown assignment, then Refine and Accept
-  as usual. The first ``auto_match()`` with fewer than three edges switches to automatic
-  assignment (``auto_assign()``): clicked edges then wait for the match instead of a model edge;
+* ``auto_match()``: which model edge each clicked edge is, found automatically (the mixin in
+  app/workflows/pose_matching.py); then Refine and Accept as usual;
 * a refined pose is offered only if it is plausible: RMS at most 3 σ_px, the object in front of
   the camera and its projection in the image; otherwise the next candidate is refined instead
   (and the operator told), and when none fits the operator is told what to do.
@@ -30,7 +26,6 @@ Beyond the paper (docs/beyond.md):
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -40,14 +35,13 @@ from core.pose.uncertainty import with_camera_uncertainty
 from core.transforms import pose_error
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
+from .pose_matching import AutoMatchMixin, Match
 from .snapping import SNAPPED_CORNER_SIGMA_PX, SNAPPED_SEGMENT_SIGMA_PX, ClickSnap, SnapMixin, snap_marks
 
 __all__ = ["UpdatePose", "Match", "plausibility", "nearest_twin"]
 
 PICK_RADIUS_PX = 25.0
 MIN_SEGMENT_PX = 3.0
-SNAPPED_SIGMA_PX = 0.3  # the click noise automatic matching assumes when every segment is snapped
-IMAGE_GATE_PX = 3.0  # a matched pose whose edges lie farther than this from the image's (mean) fits the clicks only
 # A refined pose is weak (Accept asks once more) when its σ exceed these, a click lies more than 3σ
 # off, a snap moved a click more than MAX_SNAP_MOVE_PX, or the clicks fix the 6 unknowns just barely.
 WEAK_SIGMA_DEG = 2.0
@@ -55,19 +49,7 @@ WEAK_SIGMA_MM = 20.0
 MAX_SNAP_MOVE_PX = 2.0
 
 
-@dataclass(frozen=True)
-class Match:
-    """One automatic assignment: ``T_world_obj`` (4, 4) refined on the clicks, ``edges`` (S,) the
-    model edge of each clicked segment, ``rms_px`` of the clicks to their edges, ``image_px`` mean
-    distance of the whole projected model to the image's edges (NaN without a frame)."""
-
-    T_world_obj: np.ndarray
-    edges: np.ndarray
-    rms_px: float
-    image_px: float
-
-
-class UpdatePose(SnapMixin, Workflow):
+class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
     name = "update_pose"
     title = "Update pose"
     options = ("object_name",)
@@ -400,108 +382,6 @@ class UpdatePose(SnapMixin, Workflow):
                             f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
                             + (" (camera calibration included)" if result.cov_parts else ""))
             return result
-
-    # ------------------------------------------------------------------ automatic matching
-    def auto_assign(self, on: bool = True) -> None:
-        """Automatic assignment on: clicked edges wait for ``auto_match`` instead of a model edge
-        (off: back to assigning each by hand)."""
-        with self.lock:
-            self._check_open()
-            if not on and sum(e is None for e in self.edge_ids[:-1]):
-                raise WorkflowError("some clicked edges are not assigned: Auto match them, or Remove last, before "
-                                    "assigning by hand")
-            self.auto = bool(on)
-            if self.auto and self.mode == "edge" and self.pending is None:
-                self.state = "click_edge"
-            elif not self.auto:
-                self.state = "assign_edge" if self._waiting_for_edge() else "click_edge"
-            self.message = ("Automatic matching: click 3 or more image edges (4 is best), two points each, without "
-                            "assigning them; then Auto match." if self.auto else "Assign each clicked edge by hand.")
-
-    def auto_match(self):
-        """Which model edge is each clicked edge? Every assignment is tried on the frame and ranked.
-
-        With fewer than 3 clicked edges: switches to automatic assignment (``auto_assign``) and
-        says what to click. Otherwise ``app.vision.matching.match_edges`` on all clicked edges (hand
-        assignments are kept: only assignments agreeing with them count) and the frame the operator
-        clicked on; the plausible assignments become the candidates, the best shown; the operator
-        confirms one (``confirm_match``). Returns the list of ``Match`` (or None when switching).
-        """
-        from app.vision.matching import match_edges
-
-        with self.lock:
-            self._check_open()
-            if self.pending is not None or self.mode == "point":
-                raise WorkflowError("finish the click under way first (or Remove last)")
-            if len(self.segs) < 3:
-                if not self.auto:
-                    self.auto_assign(True)
-                    return None
-                raise WorkflowError(f"{len(self.segs)} edge{'s' if len(self.segs) != 1 else ''} clicked: automatic "
-                                    "matching needs 3 (4 or more is best); click more image edges")
-            if all(e is not None for e in self.edge_ids):
-                raise WorkflowError("every clicked edge is assigned already: Solve (P3L) or Refine")
-            segs = np.array(self.segs)
-            snapped = all(s is not None and s.applied for s in self.seg_snaps)
-            sigma = SNAPPED_SIGMA_PX if snapped else self.sigma_px
-            hand = {j: e for j, e in enumerate(self.edge_ids) if e is not None}  # kept: only agreeing assignments count
-            camera, model, T_db, generation = self.site.camera, self.obj.model, self.obj.T_world_obj, self._generation
-        image = self._frame()  # compute, outside the lock: the overlay keeps drawing
-        try:
-            res = match_edges(camera, model, segs, image=image, sigma_px=sigma)
-        except ValueError as exc:
-            raise WorkflowError(f"automatic matching failed: {exc}") from None
-        kept: list[Match] = []
-        for c in res.candidates:
-            twin = nearest_twin(model, c.T_world_obj, np.asarray(c.edges), T_db, hand)
-            if twin is None or plausibility(camera, model, twin[0]):
-                continue
-            kept.append(Match(twin[0], twin[1], float(c.rms_px), float(c.image_px)))
-        if not kept:
-            raise WorkflowError(f"no assignment of the {len(segs)} clicked edges to {self.object_name}'s edges fits "
-                                "(with your hand assignments): check the clicks (Remove last), click another edge "
-                                "(4 or more, not all through one point), or assign them by hand")
-        # With the frame, poses whose whole drawing misses the image's edges fit the clicks only: drop them,
-        # unless nothing else is left (then they are shown, with a warning).
-        on_image = [mt for mt in kept if mt.image_px <= IMAGE_GATE_PX]
-        warning = ""
-        if image is not None and on_image:
-            kept = on_image
-        elif image is not None:
-            warning = (f" None lies on the image's edges (the best is {min(mt.image_px for mt in kept):.1f} px off on "
-                       "average): check the clicks and any hand assignment.")
-        with self.lock:  # commit
-            self._unchanged_since(generation, "Auto match")
-            self.matches = kept
-            self.candidates = [m.T_world_obj for m in kept]
-            self.chosen = 0
-            self._invalidate()
-            self.state = "match"
-            self._match_s = res.total_s
-            self.message = (f"{len(kept)} assignment{'s' if len(kept) > 1 else ''} fit (searched {res.n_triples} "
-                            f"model-edge triples in {res.total_s:.2f} s); the best is shown with its edge labels: "
-                            "Confirm match, or choose another candidate" + warning)
-            return kept
-
-    def confirm_match(self) -> None:
-        """Adopt the shown automatic assignment (the chosen candidate's): then Refine and Accept."""
-        with self.lock:
-            self._check_open()
-            if not self.matches:
-                raise WorkflowError("no automatic assignment to confirm: click 3 or more edges and Auto match first")
-            i = self.chosen or 0
-            m = self.matches[i]
-            self._match_undo.append(list(self.edge_ids))
-            self.edge_ids = [int(e) for e in m.edges]
-            self._done.append("match")
-            self.match_info = {"candidate": i + 1, "of": len(self.matches), "rms_px": m.rms_px,
-                               "image_px": None if not np.isfinite(m.image_px) else m.image_px,
-                               "edges": [int(e) for e in m.edges]}
-            self.matches = None
-            self._invalidate()
-            self.state = "review"
-            self.message = (f"Assignment {i + 1} confirmed: segments {', '.join(f'{j + 1}→e{e}' for j, e in enumerate(self.edge_ids))}."
-                            " Refine, then Accept.")
 
     def accept(self):
         """Write the refined pose and covariance (one transaction); ConflictError → nothing written."""
