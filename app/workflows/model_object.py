@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from core.geometry import Plane
+from core.modeling.result import DIMENSION_WORDS
 from core.rangefinder import RangeFinderSpec, RangeScan, aim, beam_point, beam_point_cov
 
 from .base import CANCEL, Cancelled, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
@@ -702,7 +703,7 @@ class ModelObject(SnapMixin, Workflow):
                 parts = r.details.get("sigma_parts", {})
                 short = {"measurements": "σ clicks+ranges (cm)", "camera calibration": "σ camera (cm)",
                          "turret calibration": "σ turret (cm)"}
-                out["dimensions"] = [{"dimension": k, "value_cm": 100 * v, "sigma_cm": 100 * r.sigmas.get(k, float("nan")),
+                out["dimensions"] = [{"dimension": DIMENSION_WORDS.get(k, k), "value_cm": 100 * v, "sigma_cm": 100 * r.sigmas.get(k, float("nan")),
                                       **{short.get(src, src): 100 * p.get(k, float("nan")) for src, p in parts.items()}}
                                      for k, v in r.dimensions.items()]
             return out

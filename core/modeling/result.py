@@ -23,6 +23,12 @@ from ..geometry import Line
 __all__ = ["ModelResult"]
 
 
+# How the operator reads a dimension's key (a box's sides along its own x and y, its height along z).
+DIMENSION_WORDS = {"size_x": "side x", "size_y": "side y", "size_z": "height", "radius": "radius",
+                   "radius_bottom": "bottom radius", "radius_top": "top radius", "height": "height",
+                   "axis_position": "axis position"}
+
+
 @dataclass(frozen=True)
 class ModelResult:
     """A modelled object.
@@ -81,10 +87,12 @@ class ModelResult:
         return self.model.transformed(self.T_world_obj)
 
     def dimension_text(self, unit: str = "cm") -> str:
-        """One line such as ``size_x = 9.02 ± 0.21 cm, ...`` for the operator."""
+        """One line such as ``side x 9.02 ± 0.21 cm, side y …, height …`` for the operator (the
+        dimensions' names in words: ``DIMENSION_WORDS``; the keys stay in ``dimensions``)."""
         scale = {"m": 1.0, "cm": 100.0, "mm": 1000.0}[unit]
         parts = []
         for k, v in self.dimensions.items():
             s = self.sigmas.get(k, float("nan"))
-            parts.append(f"{k} = {v * scale:.2f} ± {s * scale:.2f} {unit}")
+            name = DIMENSION_WORDS.get(k, k.replace("_", " "))
+            parts.append(f"{name} {v * scale:.2f} ± {s * scale:.2f} {unit}")
         return ", ".join(parts)

@@ -1,4 +1,5 @@
-"""Take the screenshots of docs/interface.md: each workflow in a real headless browser.
+"""Take the screenshots of docs/interface.md and the README: each workflow in a real headless
+browser, a 1280×720 window (the smallest the panel is laid out for).
 
 Run from the project root: ``.venv/bin/python docs/img/shoot.py`` (needs /usr/bin/chromium).
 Clicks are snapped to the image (the interface's default); ``snap.png`` is zoomed onto the box.
@@ -21,9 +22,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
+import tests.e2e.harness as harness  # noqa: E402
 from tests.e2e.harness import FRAME_T_S, Interface, launch  # noqa: E402
 
 OUT = ROOT / "docs" / "img"
+harness.VIEWPORT = {"width": 1280, "height": 720}
 
 
 def save(ui, page, name: str) -> None:
@@ -33,7 +36,6 @@ def save(ui, page, name: str) -> None:
     path = OUT / f"{name}.png"
     page.screenshot(path=str(path))
     img = Image.open(path).convert("RGB")
-    img = img.resize((img.width * 3 // 4, img.height * 3 // 4), Image.LANCZOS)
     img.quantize(colors=256, method=Image.Quantize.FASTOCTREE).save(path, optimize=True)
     print(f"{path.relative_to(ROOT)}: {path.stat().st_size // 1024} KiB")
 
@@ -55,8 +57,22 @@ def pose_edges(site, obj, T_true) -> list[int]:
 
 
 def click(page, name: str) -> None:
-    page.get_by_role("button", name=name, exact=True).click()
-    time.sleep(0.4)
+    """Press the visible button whose label starts with ``name`` ("Solve" for "Solve (R)"); an
+    Accept that asks once more (a weak result) is pressed again."""
+    import re
+
+    button = page.get_by_role("button", name=re.compile("^" + re.escape(name))).first
+    try:
+        button.wait_for(state="visible", timeout=10000)
+    except Exception:
+        wf = page.panel.session.workflow
+        print("no button", name, "|", wf and wf.next_step, "|", page.panel.error, "|", wf and wf.message)
+        raise
+    button.click()
+    time.sleep(0.6)
+    if name == "Accept" and page.get_by_role("button", name="Accept anyway").first.is_visible():
+        page.get_by_role("button", name="Accept anyway").first.click()
+        time.sleep(0.4)
 
 
 def main() -> int:
@@ -133,15 +149,21 @@ def main() -> int:
             while panel.session.workflow is old and time.monotonic() < deadline:
                 time.sleep(0.1)
             wf = panel.session.workflow
-            for k in pose_edges(site, box, T_true):
+            for i, k in enumerate(pose_edges(site, box, T_true)):
                 a, b = true[k]
                 ui.click_pixel(page, a + 0.25 * (b - a) + rng.normal(0, 0.7, 2))
                 ui.click_pixel(page, a + 0.75 * (b - a) + rng.normal(0, 0.7, 2))
+                deadline = time.monotonic() + 10  # the clicks are handled in order, on the panel's worker
+                while len(wf.segs) <= i and time.monotonic() < deadline:
+                    time.sleep(0.05)
                 wf.assign_edge(k)
+            panel.dirty = True  # calls into the workflow (not the panel's) do not mark the panel for a redraw
+            ui.server.wake()
             click(page, "Solve (P3L)")
             save(ui, page, "update_pose_candidates")
             best = min(range(len(wf.candidates)), key=lambda i: np.linalg.norm(wf.candidates[i][:3, 3] - T_true[:3, 3]))
             wf.choose_candidate(best)
+            panel.dirty = True
             click(page, "Refine")
             save(ui, page, "update_pose_refined")
             click(page, "Accept")
@@ -176,6 +198,8 @@ def main() -> int:
                 wf.measure()
                 if i < len(faces) - 1:
                     wf.next_face()
+            panel.dirty = True
+            ui.server.wake()
             click(page, "Solve")
             save(ui, page, "model_object")
             click(page, "Accept")

@@ -49,7 +49,7 @@ def test_box_model_world_matches_vertices(box_scene):
     d = np.linalg.norm(W[:, None] - res.vertices_world[None], axis=2).min(axis=1)
     assert d.max() < 1e-12
     text = res.dimension_text("cm")
-    assert text.startswith(f"size_x = {100 * res.dimensions['size_x']:.2f} ± ") and text.count("±") == 3
+    assert text.startswith(f"side x {100 * res.dimensions['size_x']:.2f} ± ") and text.count("±") == 3 and "height" in text
 
 
 def test_box_sigmas_match_scatter_over_500_trials(box_scene):
