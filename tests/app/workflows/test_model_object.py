@@ -289,7 +289,7 @@ def test_calibrated_site_states_the_calibrations_share(device_site, fast_scene, 
     assert parts["turret calibration"]["position"] > parts["measurements"]["position"]  # 3 mm, ~2 m away
     assert "calibration" in wf.message
     row = wf.summary()["dimensions"][0]  # the panel's table splits each σ by source
-    assert row["σ turret (cm)"] == pytest.approx(100 * parts["turret calibration"][row["dimension"]])
+    assert row["dimension"] == "side x" and row["σ turret (cm)"] == pytest.approx(100 * parts["turret calibration"]["size_x"])
     # a new Site on this database finds both covariances
     cam_cov, tur_cov = Site(fast_scene, db, clock=lambda: 0.0, frames=None).calibration_covs
     assert np.allclose(cam_cov, dlt.cov) and np.allclose(tur_cov, turret_cov)
