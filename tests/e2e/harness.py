@@ -176,10 +176,11 @@ class Interface:
         self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
         self.frame_t_s = frame_t_s
 
-    def open(self, browser):
-        """A new page on the interface, connected, fitted, with the software-WebGL notice closed."""
+    def open(self, browser, viewport: dict | None = None):
+        """A new page on the interface (``viewport``, default VIEWPORT), connected, fitted, with the
+        software-WebGL notice closed."""
         before = set(self.server.clients)
-        page = browser.new_page(viewport=VIEWPORT)
+        page = browser.new_page(viewport=viewport or VIEWPORT)
         page.goto(self.url)
         panel = wait_for_panel(self.server, before)
         # the database drawn as it is now (its own thread; slow on a loaded machine): clicks that

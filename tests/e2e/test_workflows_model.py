@@ -242,11 +242,7 @@ def test_model_a_box_by_clicking_two_faces_and_scanning(browser, device_interfac
 
 def test_model_a_cylinder_by_clicking_its_silhouettes(browser, device_interface, scene):
     ui = device_interface
-    page = ui.open(browser)
-    page.set_viewport_size({"width": 1280, "height": 720})  # the other viewport the docs quote
-    aspect = page.panel.fitted_aspect
-    wait_until(lambda: page.panel.fitted_aspect != aspect and not page.panel.need_fit, what="the refit at 1280×720")
-    time.sleep(0.5)
+    page = ui.open(browser, viewport={"width": 1280, "height": 720})  # the other viewport the docs quote
     cam = ui.site.camera
     body = scene.body("unknown_cylinder")
     T_true = body.pose_at(ui.frame_t_s)

@@ -13,7 +13,6 @@ pick is one action):
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pytest
@@ -43,12 +42,7 @@ def _select(op, page, obj, camera) -> None:
 
 def test_update_pose_by_auto_match(browser, interface, scene):
     ui = interface
-    page = ui.open(browser)
-    aspect = page.panel.fitted_aspect
-    page.set_viewport_size({"width": 1280, "height": 720})  # this flow at 1280×720 (the others at 1200×700)
-    wait_until(lambda: page.panel.fitted_aspect is not None and abs(page.panel.fitted_aspect - aspect) > 1e-3
-               and not page.panel.need_fit, what="the view fitted to 1280×720")
-    time.sleep(0.5)  # the fitted camera reaches the browser
+    page = ui.open(browser, viewport={"width": 1280, "height": 720})  # this flow at 1280×720 (the others at 1200×700)
     op = Operator(ui, page)
     site, cam = ui.site, ui.site.camera
     obj = site.object(BOX)

@@ -261,12 +261,7 @@ def test_designate_known_and_unknown_by_clicks(browser, device_interface, scene)
     site = ui.site
     cam = site.camera
     before = _db_state(ui.db)
-    page = ui.open(browser)
-    aspect = page.panel.fitted_aspect  # this flow at 1280×720 (the others at harness.VIEWPORT)
-    page.set_viewport_size({"width": 1280, "height": 720})
-    wait_until(lambda: page.panel.fitted_aspect is not None and abs(page.panel.fitted_aspect - aspect) > 0.02
-               and not page.panel.need_fit, what="the view fitted to 1280×720")
-    time.sleep(0.5)  # the fitted camera comes back from the browser
+    page = ui.open(browser, viewport={"width": 1280, "height": 720})  # this flow at 1280×720 (the others at VIEWPORT)
     op = Operator(ui, page, "Designate target")
     op.press("Designate target")
     wf = _workflow(page, "designate")
