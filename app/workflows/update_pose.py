@@ -47,6 +47,8 @@ MIN_SEGMENT_PX = 3.0
 WEAK_SIGMA_DEG = 2.0
 WEAK_SIGMA_MM = 20.0
 MAX_SNAP_MOVE_PX = 2.0
+MAX_TRIPLES = 20  # Solve (P3L) tries at most this many triples of the assigned edges (6 edges: all 20)
+MAX_CANDIDATES = 8
 
 
 class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
@@ -268,7 +270,12 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
         return max(i for i, e in enumerate(self.edge_ids) if e is not None)
 
     def solve(self) -> list[np.ndarray]:
-        """The paper's three-line solver on the first workable triple of assigned edges."""
+        """The paper's three-line solver on every workable triple of the assigned edges (at most
+        ``MAX_TRIPLES``), its candidates ranked by how far all the clicks (every edge and point, not
+        only the triple's) lie from the projected model (``core.pose.residuals.pose_distance_cost``),
+        near-duplicates merged, the best ``MAX_CANDIDATES`` kept."""
+        from core.pose.residuals import as_clicks, pose_distance_cost
+
         with self.lock:  # snapshot
             self._check_open()
             segs, edges = self._assigned()
@@ -276,8 +283,8 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
                 raise WorkflowError(f"{len(segs)} edges assigned; the three-line solver needs 3 (click more edges)")
             pts_uv, pts_obj = self._points()
             camera, generation = self.site.camera, self._generation
-        errors = []  # compute, outside the lock: the overlay keeps drawing
-        for triple in itertools.combinations(range(len(segs)), 3):
+        errors, found, triples = [], [], 0  # compute, outside the lock: the overlay keeps drawing
+        for triple in itertools.islice(itertools.combinations(range(len(segs)), 3), MAX_TRIPLES):
             idx = list(triple)
             try:
                 cands = p3l(camera, segs[idx], edges[idx], pts_uv if len(pts_uv) else None,
@@ -286,21 +293,34 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
                 # a degenerate triple (or a numerical failure in it): try the next triple
                 errors.append(f"edges {[i + 1 for i in idx]}: {exc}")
                 continue
-            if cands:
-                break
-            errors.append(f"edges {[i + 1 for i in idx]}: no pose puts the object in front of the camera")
-        else:
+            if not cands:
+                errors.append(f"edges {[i + 1 for i in idx]}: no pose puts the object in front of the camera")
+                continue
+            triples += 1
+            found += [np.asarray(T, float) for T in cands]
+        if not found:
             raise WorkflowError("no pose fits these edges: " + "; ".join(errors[:3]) +
                                 ". Check the edge assignments (Remove last) or click other edges")
+        clicks = as_clicks(segs, edges, pts_uv if len(pts_uv) else None, pts_obj if len(pts_obj) else None)
+        cost = [pose_distance_cost(camera, T, clicks) for T in found]
+        ranked: list[np.ndarray] = []
+        for i in np.argsort(cost, kind="stable"):
+            T = found[int(i)]
+            if all(pose_error(T, U)[0] > 0.5 or pose_error(T, U)[1] > 0.005 for U in ranked):
+                ranked.append(T)
+            if len(ranked) == MAX_CANDIDATES:
+                break
         with self.lock:  # commit
             self._unchanged_since(generation, "Solve")
-            self.candidates = [np.asarray(T, float) for T in cands]
+            self.candidates = ranked
             self.chosen = 0
             self.matches = None
             self._invalidate()
             self.state = "review"
-            self.message = (f"{len(cands)} candidate pose{'s' if len(cands) > 1 else ''} from edges "
-                            f"{[i + 1 for i in idx]}; the best (fewest pixels off) is selected")
+            every = f"all {len(segs)} edges" if len(segs) > 3 else "the 3 edges"
+            self.message = (f"{len(ranked)} candidate pose{'s' if len(ranked) > 1 else ''} from {triples} triple"
+                            f"{'s' if triples > 1 else ''} of edges, ranked by how well each fits {every}; the best "
+                            "is selected")
             return self.candidates
 
     def _unchanged_since(self, generation: int, again: str) -> None:

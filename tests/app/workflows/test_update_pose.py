@@ -293,7 +293,14 @@ def test_refine_offers_only_plausible_poses_and_tries_the_next_candidate(video_s
     with pytest.raises(WorkflowError, match="no plausible pose: from the database pose: .*Solve \\(P3L\\) first"):
         wf.refine()
     assert wf.refined is None
-    # P3L on the first three edges: a wrong candidate chosen → refined, rejected, the next one taken instead
+    # Solve with all six edges: every candidate is ranked on all of them, the best refines right
+    best = wf.solve()[0]
+    assert pose_error(best, T_true)[0] < 10.0
+    # P3L on three edges only: a wrong candidate chosen, the other edges added → refined, rejected,
+    # the next one taken instead
+    wf = UpdatePose(site, object_name="parallelepiped", snap=False)
+    for seg, k in zip(segs[:3], edges[:3]):
+        wf.add_segment(seg, k)
     cands = wf.solve()
     errs = [pose_error(T, T_true)[0] for T in cands]
     from core.pose import refine as core_refine
@@ -303,6 +310,8 @@ def test_refine_offers_only_plausible_poses_and_tries_the_next_candidate(video_s
     bad = [i for i, T in enumerate(cands) if core_refine(site.camera, T, segs_uv=S, edges_obj=E).rms_px > 3.0]
     assert bad, "this seed must give a P3L candidate that refines to a wrong local minimum"
     wf.choose_candidate(bad[0])
+    for seg, k in zip(segs[3:], edges[3:]):
+        wf.add_segment(seg, k)
     r = wf.refine()
     assert wf.chosen != bad[0] and f"candidate {bad[0] + 1}:" in wf.message and "refined instead" in wf.message
     deg, m = pose_error(r.T_world_obj, T_true)
