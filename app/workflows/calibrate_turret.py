@@ -169,8 +169,22 @@ class CalibrateTurret(Workflow):
             self.state = "pick"
             Xm = beam_point(self.site.T_world_turret, pan_r, tilt_r, m.range_m)
             self.site.set_beam(Xm)
-            self.message = f"{self.labels[-1]}: {m.range_m:.4f} m ({len(self.pan)} measurements)"
+            self.message = f"{self.labels[-1]}: {1000 * m.range_m:.1f} mm ({len(self.pan)} measurements)."
+            off = self._off_surface_m(Xm)
+            if off > OFF_SURFACE_M:  # said now, not only when Solve leaves it out
+                self.message += (f" It landed {100 * off:.0f} cm from every known surface: the beam missed the object "
+                                 "(aimed by a turret calibration that far off, or something not in the database is in "
+                                 "the way); Solve will leave it out — Delete measurement and pick a point nearer a "
+                                 "face's middle.")
             return m
+
+    def _off_surface_m(self, X: np.ndarray) -> float:
+        """How far a measured point lies from the database's surfaces (metres; 0 without a mesh)."""
+        mesh, _ = self.site.surfaces()
+        if mesh is None:
+            return 0.0
+        _, dist, _ = mesh.nearest.on_surface(np.asarray(X, float).reshape(1, 3))
+        return float(dist[0])
 
     def remove_measurement(self, index: int) -> None:
         """Delete measurement ``index`` (0-based, the residual table's row)."""
@@ -250,7 +264,8 @@ class CalibrateTurret(Workflow):
             sd_rot_deg, sd_t_m = self._sigmas()
             if sd_rot_deg.max() > POORLY_DEG or sd_t_m.max() > POORLY_M:
                 self.message += (f". Poorly determined (σ up to {sd_rot_deg.max():.2f}° and {100 * sd_t_m.max():.1f} cm): "
-                                 "measure faces of other objects, at other distances, before accepting")
+                                 "measure faces of other objects, at other distances, before accepting (with only "
+                                 "the table and one box known, model another object first: Model object)")
             return cal
 
     def _sigmas(self) -> tuple[np.ndarray, np.ndarray]:

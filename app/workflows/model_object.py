@@ -623,8 +623,9 @@ class ModelObject(SnapMixin, Workflow):
                         + tail, frozenset(base | solvable | {"measure"}))
         if len(self.silhouettes) < 2:
             which = "left" if not self.silhouettes else "right"
-            return Step("click_silhouettes", f"Click the {which} silhouette of the {self.shape}: its bottom end, then its "
-                        "top end.", frozenset(base))
+            return Step("click_silhouettes", f"Click the {which} silhouette of the {self.shape} (its outline's {which} "
+                        "side): its bottom end, where it meets the table, then its top end, where it meets the top rim — "
+                        "the clicked ends give the height.", frozenset(base))
         tangential = {"solve"} if self.method == "tangential" else set()
         if not self.scans:
             if not devices:
