@@ -180,10 +180,10 @@ class ClientPanel:
             self.gui_live = gui.add_button("Show live (L)", hint="Look at the live video (clicks still go to the frozen frame: "
                                            "switch back to click)")
             self.gui_live.on_click(self._guard(lambda _e: self._toggle_live()))
-            n = self.app.recent_frames_max
-            self.gui_scrub = gui.add_slider("Frames back", 0, n - 1, 1, 0,
-                                            hint="Freeze an earlier frame (0 = the newest; the recent seconds are kept)")
-            self.gui_scrub.on_update(self._guard(lambda _e: self._freeze_back(int(self.gui_scrub.value))))
+            self.gui_scrub = gui.add_slider("Seconds back", 0.0, float(self.app.recent.seconds), 0.5, 0.0,
+                                            hint="Freeze the frame shown that many seconds ago (the last "
+                                            f"{self.app.recent.seconds:.0f} s are kept), e.g. where a moving object held still")
+            self.gui_scrub.on_update(self._guard(lambda _e: self._freeze_back(float(self.gui_scrub.value))))
             self.gui_view = gui.add_button_group("View", ("Video", "3D world"))
             self.gui_view.on_click(self._guard(self._on_view))
             self.gui_fit = gui.add_button("Fit view (H)", icon=viser.Icon.ZOOM_RESET,
@@ -381,8 +381,8 @@ class ClientPanel:
         wf = self.session.workflow
         return wf is not None and not wf.finished and "remove_last" in wf.current_step().enabled
 
-    def _freeze_back(self, k: int) -> None:
-        """Freeze the frame k steps before the newest (0: the newest)."""
+    def _freeze_back(self, seconds: float) -> None:
+        """Freeze the frame shown ``seconds`` before the newest (0: the newest)."""
         wf = self.session.workflow
         if wf is not None and not wf.finished and (wf.name == "history" or (
                 wf.name == "track" and wf.current_step().name in ("tracking", "waiting"))):
@@ -391,10 +391,10 @@ class ClientPanel:
         if self._workflow_has_clicks():
             raise WorkflowError("your clicks were made on the frozen frame: every click of a workflow uses one frame. "
                                 "Remove them (Remove last) or Cancel before freezing another frame")
-        frame = self.app.recent.back(k) if k else self.app.grabber.latest()
+        frame = self.app.recent.seconds_back(seconds) if seconds > 0 else self.app.grabber.latest()
         if frame is None:
             raise WorkflowError("no video frame has arrived yet: check the video source")
-        self._freeze(frame, "scrubbed" if k else "live")
+        self._freeze(frame, "scrubbed" if seconds > 0 else "live")
         self.error = ""
 
     def _follow_frame(self, wf) -> None:

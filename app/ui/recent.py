@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import collections
 import threading
+import time
 from typing import Any
 
 __all__ = ["RecentFrames"]
@@ -33,20 +34,28 @@ class RecentFrames:
             self._on_frame(first)
 
     def _on_frame(self, frame: Any) -> None:
+        now = time.monotonic()
         with self._lock:
             if self._frames:
-                last = self._frames[-1]
-                if frame.index == last.index:
+                last, at = self._frames[-1]
+                if frame.index == last.index or now - at < self.min_gap_s:
                     return
-                # a looped recording restarts its time: keep it (its index still grows)
-                if 0 <= frame.t_s - last.t_s < self.min_gap_s:
-                    return
-            self._frames.append(frame)
+            self._frames.append((frame, now))
 
     def frames(self) -> list:
         """The kept frames, oldest first."""
         with self._lock:
-            return list(self._frames)
+            return [f for f, _ in self._frames]
+
+    def seconds_back(self, seconds: float) -> Any:
+        """The kept frame shown ``seconds`` before the newest one (by when they arrived: a looped
+        recording's time restarts), the oldest kept if it goes further back; None when empty."""
+        with self._lock:
+            if not self._frames:
+                return None
+            newest = self._frames[-1][1]
+            best = min(self._frames, key=lambda fa: abs(newest - float(seconds) - fa[1]))
+            return best[0]
 
     def __len__(self) -> int:
         with self._lock:
@@ -58,4 +67,4 @@ class RecentFrames:
             if not self._frames:
                 return None
             k = min(max(int(k), 0), len(self._frames) - 1)
-            return self._frames[-1 - k]
+            return self._frames[-1 - k][0]

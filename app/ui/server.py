@@ -89,8 +89,7 @@ class InterfaceServer:
         self._thread = threading.Thread(target=self._loop, name="mcit-redraw", daemon=True)
         grabber.add_listener(lambda _frame: self._wake.set())  # a new frame: redraw now
         # The recent frames, for each operator's frozen frame and its scrubber (app/ui/recent.py).
-        self.recent_frames_max = 120
-        self.recent = RecentFrames(grabber, seconds=12.0, max_frames=self.recent_frames_max)
+        self.recent = RecentFrames(grabber, seconds=12.0, max_frames=120)
         # Snapping, matching and tracking work on what the operator sees: the grabber's latest frame.
         site.set_frames(GrabberFrames(grabber))
         if site.camera.width != src.width or site.camera.height != src.height:
