@@ -682,7 +682,7 @@ class ClientPanel:
             head = f"**{wf.title}{': ' + subject if subject else ''}**{state}"
             prompt = wf.prompt_text()
             title = f"{head}\n\n{prompt}"
-            if wf.message and not wf.finished and wf.message not in prompt:
+            if wf.message and not wf.finished and wf.message[:40] not in prompt:  # not said twice
                 title += f"\n\n_{wf.message}_"
             if wf.finished:
                 title += f"\n\n{idle}"

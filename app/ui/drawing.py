@@ -90,11 +90,13 @@ def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], wid
         batch.add_wireframe(pw, color, hidden="removed")
     batch.add(cross_markers(marks.found_points, 1.5 * s), COLORS["edge_found"])
     batch.add(cross_markers(marks.rejected_points, 1.5 * s), COLORS["edge_rejected"])
-    for obj_name, k in marks.highlight:
+    for item in marks.highlight:  # (object, edge) at its database pose, or (object, edge, T_world_obj)
+        obj_name, k = item[0], item[1]
         obj = objects.get(obj_name)
         if obj is None or not 0 <= k < len(obj.model.edges):
             continue
-        E = obj.model.edge_segments(obj.T_world_obj)[k]
+        T = obj.T_world_obj if len(item) < 3 else np.asarray(item[2], float)
+        E = obj.model.edge_segments(T)[k]
         if np.all(camera.depth(E) > 0):
             batch.add(camera.project(E).reshape(1, 2, 2), COLORS["assigned"])
     batch.add(dash_segments(marks.raw_segments, 3.0 * s, 3.0 * s)[0], COLORS["raw"])

@@ -55,7 +55,8 @@ class Marks:
     points : (N, 2) accepted clicked points. pending : (M, 2) clicks waiting for their partner
     (the first end of a segment). segments : (K, 2, 2) clicked image segments.
     labels : list of (uv (2,), text). ghosts : candidate poses or a modelled preview.
-    highlight : list of (object name, model edge index) to emphasise (assigned edges).
+    highlight : list of (object name, model edge index[, T_world_obj (4, 4)]) to emphasise (assigned
+    edges), at the object's database pose or at the pose given.
     residuals : (R, 2, 2) short lines from a clicked point to where the solution puts it.
     beam_uv : (2,) where the range finder's last measurement projects, or None.
     targets : (T, 2) designated targets. selected : the object the workflow is about.

@@ -335,7 +335,8 @@ class TrackObject(SnapMixin, Workflow):
     def summary(self) -> dict[str, Any]:
         with self.lock:
             out: dict[str, Any] = {"object": self.object_name,
-                                   "state": "lost" if self.lost else ("paused" if self.paused else "tracking"),
+                                   "state": ("accepted" if self.accepted else "cancelled" if self.cancelled else "lost"
+                                             if self.lost else "paused" if self.paused else "tracking"),
                                    "frames": self.frames}
             if self.confidence is not None:
                 out["confidence"] = self.confidence

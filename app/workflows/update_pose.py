@@ -694,7 +694,8 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
             m.raw_segments, m.raw_points, m.snap_lines, snap_labels = snap_marks(self.seg_snaps + self.point_snaps)
             m.labels += snap_labels
             if shown is None:
-                m.highlight = [(self.object_name, e) for e in self.edge_ids if e is not None]
+                T = self.T_current  # the assigned model edges, orange, where the estimate draws them
+                m.highlight = [(self.object_name, e, T) for e in self.edge_ids if e is not None]
             else:  # the matched model edges, labelled where the shown candidate draws them
                 cam = self.site.camera
                 S = model.edge_segments(shown.T_world_obj)[shown.edges]
