@@ -140,11 +140,12 @@ class ClientPanel:
                 self.app.wake()
         return wrapper
 
-    def notify(self, title: str, body: str, color: str = "yellow") -> None:
-        """A notification on this client (errors stay until closed, others close after a few seconds)."""
+    def notify(self, title: str, body: str, color: str = "yellow", stays: bool = False) -> None:
+        """A notification on this client (errors and ``stays`` ones stay until closed, others close
+        after a few seconds)."""
         try:
             self.client.add_notification(title, body, color=color, with_close_button=True,
-                                         auto_close_seconds=None if color == "red" else 6.0)
+                                         auto_close_seconds=None if (color == "red" or stays) else 6.0)
         except Exception:  # noqa: BLE001 - the client may have gone
             log.debug("notification to a departed client dropped", exc_info=True)
 
@@ -180,10 +181,8 @@ class ClientPanel:
             self.gui_live = gui.add_button("Show live (L)", hint="Look at the live video (clicks still go to the frozen frame: "
                                            "switch back to click)")
             self.gui_live.on_click(self._guard(lambda _e: self._toggle_live()))
-            self.gui_scrub = gui.add_slider("Seconds back", 0.0, float(self.app.recent.seconds), 0.5, 0.0,
-                                            hint="Freeze the frame shown that many seconds ago (the last "
-                                            f"{self.app.recent.seconds:.0f} s are kept), e.g. where a moving object held still")
-            self.gui_scrub.on_update(self._guard(lambda _e: self._freeze_back(float(self.gui_scrub.value))))
+            self.gui_scrub = gui.add_slider("Seconds back", 0.0, float(self.app.recent.seconds), 0.5, 0.0)
+            self.gui_scrub.on_update(self._guard(self._on_scrub))
             self.gui_view = gui.add_button_group("View", ("Video", "3D world"))
             self.gui_view.on_click(self._guard(self._on_view))
             self.gui_fit = gui.add_button("Fit view (H)", icon=viser.Icon.ZOOM_RESET,
@@ -264,6 +263,8 @@ class ClientPanel:
             self._freeze(self.app.grabber.latest(), "live")
         else:
             self._unfreeze()
+        if self.gui_scrub.value != 0.0:  # the newest frame is frozen: the scrubber says 0 s back
+            self.gui_scrub.value = 0.0
 
     def _press_event(self, action: str, _event=None) -> None:
         self.press(action)
@@ -319,8 +320,7 @@ class ClientPanel:
         result = wf.perform(c.action, *args)
         if not wf.message:
             wf.message = f"{c.label}: done."
-        if c.action in ("accept",) and wf.accepted:
-            self.notify(wf.title, wf.message, "green")
+        # (an accepted result is said at the top of the panel: no toast over the video's corner)
         return result
 
     def _relabel(self, action: str, label: str) -> None:
@@ -416,6 +416,11 @@ class ClientPanel:
         elif not following and self.frozen is None:
             self._freeze(self.app.grabber.latest(), "live")
             self.dirty = True
+
+    def _on_scrub(self, event) -> None:
+        if event.client_id is None:  # the panel set it back to 0 itself: nothing to freeze
+            return
+        self._freeze_back(float(self.gui_scrub.value))
 
     def _toggle_live(self) -> None:
         if self.frozen is None:
@@ -701,8 +706,9 @@ class ClientPanel:
         self.gui_copy.visible = bool(text)
         if text and self.gui_copy.value != text:
             self.gui_copy.value = text
-        frame = "Live video (no frame frozen)." if self.frozen is None else (
-            f"Frozen frame: t = {self.frozen.t_s:.2f} s" + (" · **live shown**" if self.show_live else ""))
+        frame = "Live video (no frame frozen). *Seconds back* freezes an earlier frame." if self.frozen is None else (
+            f"Frozen frame: t = {self.frozen.t_s:.2f} s" + (" · **live shown**" if self.show_live else "")
+            + ". *Seconds back*: a frame that long before the live one.")
         if self.gui_frame.content != frame:
             self.gui_frame.content = frame
 

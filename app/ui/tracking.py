@@ -69,10 +69,10 @@ class TrackFeeder:
                             wf.pause()
                         except WorkflowError:
                             pass
-                        self.panel.notify("Tracking paused", str(exc), "yellow")
-                if wf.lost_count != lost_seen:
-                    lost_seen = wf.lost_count
-                    self.panel.notify("Tracking lost", wf.message, "yellow")
+                        self.panel.error = f"Tracking paused: {exc}"  # said in the panel (no toast over the video)
+                if wf.lost_count != lost_seen:  # also at the top of the panel; this one stays until closed
+                    lost_seen = wf.lost_count   # (an auto-closing toast vanished under the cursor aiming at it)
+                    self.panel.notify("Tracking lost", wf.message, "orange", stays=True)
                 self.panel.dirty = True
                 self.panel.app.wake()
         except Exception as exc:  # noqa: BLE001 - say so, keep the server running

@@ -147,7 +147,7 @@ class DesignateTarget(Workflow):
                 self.progress, self.progress_text = 0.0, "checking with the range finder · aiming"
         if devices is None:
             t = Target(p, hit.X_world, hit.name, hit.distance_m, hit.normal)
-            return self._keep(t, f"Target on {hit.name}: {t.text()} m ({NOT_CHECKED}).")
+            return self._keep(t, _sentence(NOT_CHECKED))
         pm, reach = self._measure(cam, T, p, devices, hit)
         with self.lock:
             self.progress = None
@@ -155,8 +155,8 @@ class DesignateTarget(Workflow):
             t = self._target(p, origin, ray, hit, pm, reach, T, turret_cov)
             if pm is not None and pm.hit:
                 self.site.set_beam(pm.X_world)
-            lead = f"Target on {t.object}: {t.text()} m" if hit is not None else f"Target (range finder only): {t.text()} m"
-            return self._keep(t, f"{lead}. {t.warning or t.check[0].upper() + t.check[1:]}.")
+            # the target's coordinates are in the instruction: the message is what the range finder found
+            return self._keep(t, _sentence(t.warning or t.check))
 
     def _keep(self, t: Target, message: str) -> Target:
         with self.lock:
@@ -276,9 +276,13 @@ class DesignateTarget(Workflow):
                         frozenset({"cancel"}), clicks=False)
         if self.targets:
             t = self.targets[-1]
-            warn = f" {_sentence(t.warning)}" if t.warning else ""
-            return Step("targets", f"Target {len(self.targets)}: {t.text()} m on {t.object}.{warn} Click another point, or "
-                        "{accept}.", frozenset({"clear", "accept", "cancel"}))
+            if t.warning:
+                head = (f"Target {len(self.targets)}: {self._copy_point(t)} m, where the range finder met a surface (in "
+                        f"*Target (m)* to copy). {_sentence(t.warning)}")
+            else:
+                head = f"Target {len(self.targets)}: {t.text()} m on {t.object} (in *Target (m)* to copy)."
+            return Step("targets", f"{head} Click another point, or " + "{accept}.",
+                        frozenset({"clear", "accept", "cancel"}))
         return Step("click", "Click a point on an object or the table in the video; " + "{accept} closes.",
                     frozenset({"accept", "cancel"}))
 

@@ -606,6 +606,9 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
                         if "auto_match" in more else
                         f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3)." + tail,
                         frozenset(more))
+        if self.last_refined is not None and self.refined is None:
+            return Step("refine_again", "Clicks changed since Refine (the white ghost is the last refined pose): "
+                        "{refine} again to use them, then Accept.", frozenset(more - {"solve"} | {"refine"}))
         if self.candidates and self.refined is None:
             return Step("candidates", f"Candidate {(self.chosen or 0) + 1} of {len(self.candidates)} is drawn in white: pick "
                         "another {choose_candidate} if it is clearly wrong, add edges, then {refine} — it uses every click and "
@@ -708,6 +711,15 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
                 m.ghosts = [Ghost(model, self.last_refined, "last refined", chosen=True)]
             else:
                 m.ghosts = [Ghost(model, T, f"#{i + 1}", chosen=(i == self.chosen)) for i, T in enumerate(self.candidates)]
+            if self._waiting_for_edge():  # which model edge is it: each visible one labelled where it is drawn
+                cam = self.site.camera
+                T = self.T_current
+                wfm = model.wireframe(cam.center, T)
+                vis = [int(k) for k, v, kind in zip(wfm.edge_index, wfm.visible, wfm.kind) if v and kind == "edge"]
+                S = model.edge_segments(T)
+                for k in vis:
+                    if k not in self.edge_ids and np.all(cam.depth(S[k]) > 0):
+                        m.labels.append((cam.project(S[k]).mean(axis=0) + [0.0, 8.0], f"e{k}"))
             if self.mode == "point" and self.pending_vertex is not None:
                 T = self.T_current
                 X = T[:3, :3] @ model.vertices[self.pending_vertex] + T[:3, 3]

@@ -24,7 +24,7 @@ class _Panel:
         self.wakes = 0
         self.app = self
 
-    def notify(self, title, body, color="yellow"):
+    def notify(self, title, body, color="yellow", stays=False):
         self.notes.append((title, body, color))
 
     def wake(self):
