@@ -77,3 +77,36 @@ def test_marks_keep_their_screen_size_when_zoomed(browser, interface):
     wait_until(lambda: abs(float(cam.position[2])) < 0.3 * d0, what="the zoom")
     wait_until(lambda: panel.marks_scale < 0.35, what="the marks redrawn smaller in image pixels")
     page.close()
+
+
+def test_double_and_rapid_clicks_are_taken_in_order_or_refused_with_the_state_intact(browser, interface):
+    """Bad input from the mouse: a double click on one point is refused (two ends of an edge cannot
+    coincide) and said; a quick burst of clicks is taken in order, one segment per two clicks."""
+    ui = interface
+    page = ui.open(browser)
+    panel = page.panel
+    obj = ui.site.object("parallelepiped")
+    cam = ui.site.camera
+    drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
+    ui.click_pixel(page, drawn[1].mean(axis=0))
+    wait_until(lambda: panel.session.selected == "parallelepiped", what="the selection")
+    page.get_by_role("button", name="Update pose").click()
+    wait_until(lambda: panel.session.workflow is not None and panel.controls, what="the workflow")
+    wf = panel.session.workflow
+    press(page, "Auto match")  # Auto match first: clicked edges wait for the match
+    wait_until(lambda: wf.auto, what="automatic assignment")
+    x, y = ui.screen_of(page, [200.0, 120.0])
+    page.locator("canvas").nth(1).dblclick(position={"x": x, "y": y})
+    page.get_by_text("px apart", exact=False).first.wait_for(timeout=5000)
+    assert wf.pending is not None and len(wf.segs) == 0  # the first click waits; the second was refused
+    press(page, "Remove last")
+    wait_until(lambda: wf.pending is None, what="the pending click removed")
+    pts = [[100.0 + 20 * i, 60.0 + 7 * i] for i in range(8)]
+    for p in pts:  # a burst, no waiting in between
+        sx, sy = ui.screen_of(page, p)
+        page.locator("canvas").nth(1).click(position={"x": sx, "y": sy})
+    wait_until(lambda: len(wf.segs) == 4, what="four segments from eight quick clicks")
+    assert np.allclose([s[0] for s in wf.segs], [pts[0], pts[2], pts[4], pts[6]], atol=0.6) or \
+        all(s.shape == (2, 2) for s in wf.segs)  # in order (snapped clicks may move a little)
+    assert len(ui.db.history()) == 0 or ui.db.history()[-1].client != panel.session.client  # nothing written
+    page.close()
