@@ -16,10 +16,10 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import chi2
 
-from .camera import Camera, as_uv
-from .geometry import as_points
+from .camera import Camera
+from .checks import MAX_M, MAX_PX, MAX_SCALE, MIN_SCALE, finite_array, image_size
 from .rangefinder import RangeFinderSpec, beam_direction, beam_point_cov
-from .transforms import exp_so3, make_T
+from .transforms import check_T, exp_so3, make_T
 
 __all__ = ["DLTResult", "calibrate_dlt", "check_covariance", "perturbed_camera", "perturbed_turret", "principal_steps", "dlt", "TurretCalibration", "calibrate_turret", "calibrate_turret_planes", "kabsch"]
 
@@ -64,8 +64,8 @@ def _normaliser(P: np.ndarray) -> np.ndarray:
 
 
 def _check_calibration_points(X: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    X = as_points(X, "X_world")
-    uv = as_uv(uv)
+    X = finite_array(X, (None, 3), "X_world", max_abs=MAX_M, unit=" m")
+    uv = finite_array(uv, (None, 2), "uv", max_abs=MAX_PX, unit=" px")
     if len(X) != len(uv):
         raise ValueError(f"X_world has {len(X)} points but uv has {len(uv)}: they must pair one to one")
     if len(X) < 6:
@@ -94,6 +94,8 @@ def dlt(X_world: np.ndarray, uv: np.ndarray) -> np.ndarray:
     A[0::2, 8:12] = -un[:, :1] * Xn
     A[1::2, 4:8] = Xn
     A[1::2, 8:12] = -un[:, 1:2] * Xn
+    if not np.isfinite(A).all():
+        raise ValueError(_DEGENERATE_DLT)
     _, sv, Vt = np.linalg.svd(A)
     if sv[-2] <= 1e-10 * sv[0]:
         raise ValueError("the DLT system is degenerate (the points are in a critical configuration); add points")
@@ -134,11 +136,15 @@ def calibrate_dlt(
         ``camera, rms_px = calibrate_dlt(...)``; ``.residuals_px`` (N, 2) per point.
     """
     X, uv = _check_calibration_points(X_world, uv)
+    width, height = image_size(width, height)
     w = np.ones(len(X))
     if sigma_px is not None:
         sig = np.asarray(sigma_px, dtype=float).reshape(-1)
-        if sig.shape != (len(X),) or not np.all(np.isfinite(sig)) or np.any(sig <= 0):
-            raise ValueError(f"sigma_px must hold {len(X)} positive finite values (one per point), got {np.shape(sigma_px)}")
+        if sig.shape != (len(X),) or not (np.all(sig >= MIN_SCALE) and np.all(sig <= MAX_SCALE)):
+            raise ValueError(
+                f"sigma_px must hold {len(X)} positive finite values (one per point, between {MIN_SCALE:g} and "
+                f"{MAX_SCALE:g} px), got {np.shape(sigma_px)} {np.asarray(sigma_px).ravel()[:4].tolist()}"
+            )
         w = 1.0 / sig
     P = dlt(X, uv)
     linear_rms = float(np.sqrt(np.mean(np.sum(_reprojection(P, X, uv) ** 2, axis=1))))
@@ -152,10 +158,20 @@ def calibrate_dlt(
     camera = Camera(P, width, height, in_front=X)
     res = _reprojection(camera.C, X, uv)
     rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+    if not (np.isfinite(rms) and np.isfinite(linear_rms)):
+        raise ValueError(_DEGENERATE_DLT)
     if not refine:
         return DLTResult(camera, rms, res, linear_rms)
     cov, factor = _dlt_cov(camera.C, X, res, w)
+    if not (np.isfinite(cov).all() and np.isfinite(factor)):
+        raise ValueError(_DEGENERATE_DLT)
     return DLTResult(camera, rms, res, linear_rms, cov, factor)
+
+
+_DEGENERATE_DLT = (
+    "the calibration points give no usable camera (they are nearly collinear or coplanar, or a point is on "
+    "the camera's principal plane); use points spread over a 3D calibration object"
+)
 
 
 def _dlt_cov(C: np.ndarray, X: np.ndarray, res: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, float]:
@@ -188,11 +204,13 @@ def _dlt_cov(C: np.ndarray, X: np.ndarray, res: np.ndarray, w: np.ndarray) -> tu
 
 def kabsch(X_b: np.ndarray, X_a: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     """Rigid ``T_a_b`` (4, 4) minimising Σ wᵢ ‖X_aᵢ − T_a_b X_bᵢ‖² (no scale); needs 3 non-collinear points."""
-    X_b = as_points(X_b, "X_b", 3)
-    X_a = as_points(X_a, "X_a", 3)
+    X_b = finite_array(X_b, (None, 3), "X_b", max_abs=MAX_M, unit=" m", min_count=3)
+    X_a = finite_array(X_a, (None, 3), "X_a", max_abs=MAX_M, unit=" m", min_count=3)
     if len(X_a) != len(X_b):
         raise ValueError(f"point sets differ in size: {len(X_b)} and {len(X_a)}")
-    w = np.ones(len(X_a)) if weights is None else np.asarray(weights, dtype=float)
+    w = np.ones(len(X_a)) if weights is None else finite_array(weights, (len(X_a),), "weights")
+    if np.any(w < 0) or not w.sum() > 0:
+        raise ValueError(f"weights must be non-negative with a positive sum, got {w[:4].tolist()}…")
     cb = (w[:, None] * X_b).sum(0) / w.sum()
     ca = (w[:, None] * X_a).sum(0) / w.sum()
     H = ((X_b - cb) * w[:, None]).T @ (X_a - ca)
@@ -217,6 +235,15 @@ class TurretCalibration:
     linear_rms_m: float
 
 
+def _check_beams(pan: np.ndarray, tilt: np.ndarray, rho: np.ndarray) -> None:
+    """ValueError for angles beyond ±1000 rad or ranges outside (0, MAX_M] (validated as finite)."""
+    finite_array(pan, (None,), "pan_rad", max_abs=1e3, unit=" rad")
+    finite_array(tilt, (None,), "tilt_rad", max_abs=1e3, unit=" rad")
+    finite_array(rho, (None,), "range_m", max_abs=MAX_M, unit=" m")
+    if np.any(rho <= 0):
+        raise ValueError(f"ranges must be positive, got {rho[rho <= 0][:4].tolist()}")
+
+
 def calibrate_turret(
     pan_rad: np.ndarray,
     tilt_rad: np.ndarray,
@@ -230,7 +257,7 @@ def calibrate_turret(
     X_world : array, shape (N, 3), the known points, metres, not collinear.
     The refined estimate minimises the Mahalanobis distances under ``spec``'s noise model.
     """
-    X_world = as_points(X_world, "X_world", 3)
+    X_world = finite_array(X_world, (None, 3), "X_world", max_abs=MAX_M, unit=" m", min_count=3)
     pan, tilt, rho = (np.asarray(a, dtype=float).reshape(-1) for a in (pan_rad, tilt_rad, range_m))
     if not (len(pan) == len(tilt) == len(rho) == len(X_world)):
         raise ValueError(
@@ -238,8 +265,7 @@ def calibrate_turret(
         )
     if not (np.all(np.isfinite(pan)) and np.all(np.isfinite(tilt)) and np.all(np.isfinite(rho))):
         raise ValueError("a measurement is NaN or inf (a missed shot?): measure every point")
-    if np.any(rho <= 0):
-        raise ValueError("ranges must be positive")
+    _check_beams(pan, tilt, rho)
     X_turret = rho[:, None] * beam_direction(pan, tilt)
     T0 = kabsch(X_turret, X_world)
     lin_res = (X_turret @ T0[:3, :3].T + T0[:3, 3]) - X_world
@@ -294,11 +320,18 @@ def calibrate_turret_planes(
         raise ValueError(f"a pose on planes needs at least 6 measurements, got {len(pan)}")
     if not (np.all(np.isfinite(rho)) and np.all(rho > 0)):
         raise ValueError("ranges must be finite and positive (measure every point)")
+    _check_beams(pan, tilt, rho)
+    N = finite_array(N, (None, 3), "n_world")
+    d = finite_array(d, (len(N),), "d_world", max_abs=MAX_M, unit=" m")
+    norms = np.linalg.norm(N, axis=1)
+    if not np.all(np.abs(norms - 1.0) <= 1e-6):
+        raise ValueError(f"n_world must hold unit normals, got norms {norms[:4].tolist()}")
+    T0 = check_T(T_world_turret0, "T_world_turret0")
+    finite_array(T0[:3, 3], (3,), "T_world_turret0's translation", max_abs=MAX_M, unit=" m")
     sv = np.linalg.svd(N, compute_uv=False)
     if sv[2] <= 0.1 * sv[0]:
         raise ValueError("the planes have fewer than 3 independent normals: the pose is not fixed by them")
     X_turret = rho[:, None] * beam_direction(pan, tilt)
-    T0 = np.asarray(T_world_turret0, dtype=float)
     cov_t = beam_point_cov(np.eye(4), pan, tilt, rho, spec)
 
     def sigma_along(T: np.ndarray) -> np.ndarray:
@@ -334,7 +367,9 @@ def check_covariance(cov, n: int, what: str) -> np.ndarray:
 def principal_steps(cov: np.ndarray, floor: float = 1e-9) -> np.ndarray:
     """±1σ steps along a covariance's principal axes, shape (K, n): row k = √λ_k v_k; axes whose
     variance is below ``floor`` × the largest (a gauge, such as C's scale) are dropped."""
-    cov = np.asarray(cov, dtype=float)
+    cov = finite_array(cov, (None, None), "cov")
+    if cov.shape[0] != cov.shape[1] or not 0.0 <= floor < 1.0:
+        raise ValueError(f"cov must be square and floor in [0, 1), got shape {cov.shape}, floor {floor!r}")
     cov = 0.5 * (cov + cov.T)
     w, V = np.linalg.eigh(cov)
     keep = w > floor * max(float(w.max()), 0.0)
@@ -344,12 +379,16 @@ def principal_steps(cov: np.ndarray, floor: float = 1e-9) -> np.ndarray:
 def perturbed_camera(camera: Camera, delta: np.ndarray) -> Camera:
     """The camera ``C + δ`` (δ: 12 entries, row major, as ``DLTResult.cov``), normalised as usual,
     with C's sign kept (the points in front stay in front)."""
-    Cp = camera.C + np.asarray(delta, dtype=float).reshape(3, 4)
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
+    Cp = camera.C + finite_array(np.ravel(delta), (12,), "delta", max_abs=1e6).reshape(3, 4)
     return Camera(Cp, camera.width, camera.height, in_front=camera.center + camera.C[2, :3])
 
 
 def perturbed_turret(T_world_turret: np.ndarray, delta: np.ndarray) -> np.ndarray:
     """``T · exp(δ)``, δ = (rotation vector rad, translation m) in the turret frame — the
     convention of ``TurretCalibration.cov``."""
-    d = np.asarray(delta, dtype=float).reshape(6)
-    return np.asarray(T_world_turret, dtype=float) @ make_T(exp_so3(d[:3]), d[3:])
+    d = finite_array(np.ravel(delta), (6,), "delta", max_abs=MAX_M)
+    T = check_T(T_world_turret, "T_world_turret")
+    finite_array(T[:3, 3], (3,), "T_world_turret's translation", max_abs=MAX_M, unit=" m")
+    return T @ make_T(exp_so3(d[:3]), d[3:])

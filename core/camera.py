@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import rq
 
+from .checks import MAX_M, finite_array, image_size
 from .geometry import Plane
 from .transforms import check_T, make_T
 
@@ -65,13 +66,11 @@ class Camera:
     __slots__ = ("_C", "_M_inv", "_center", "width", "height")
 
     def __init__(self, C: np.ndarray, width: int, height: int, *, in_front: np.ndarray | None = None):
-        C = np.asarray(C, dtype=float)
-        if C.shape != (3, 4):
-            raise ValueError(f"C must have shape (3, 4), got {C.shape}")
-        if not np.all(np.isfinite(C)):
-            raise ValueError("C contains NaN or inf")
-        if int(width) != width or int(height) != height or width <= 0 or height <= 0:
-            raise ValueError(f"image size must be positive integers, got {width} × {height}")
+        C = finite_array(C, (3, 4), "C")
+        width, height = image_size(width, height)
+        big = float(np.abs(C).max())
+        if big > 1e100 or 0.0 < big < 1e-100:
+            C = C / big  # C's scale is free: keep its products finite
         M = C[:, :3]
         scale = float(np.linalg.norm(M[2]))
         sv = np.linalg.svd(M, compute_uv=False)
@@ -83,7 +82,8 @@ class Camera:
         if in_front is None:
             sign = np.sign(np.linalg.det(M))
         else:
-            Xf = np.asarray(in_front, dtype=float).reshape(-1, 3)
+            Xf = np.asarray(in_front, dtype=float)
+            Xf = finite_array(Xf[None] if Xf.shape == (3,) else Xf, (None, 3), "in_front", max_abs=MAX_M, unit=" m", min_count=1)
             s = Xf @ M[2] + C[2, 3]
             sign = np.sign(np.median(s))
             if sign == 0:
@@ -92,9 +92,11 @@ class Camera:
         self._C.setflags(write=False)
         self._M_inv = np.linalg.inv(self._C[:, :3])
         self._center = -self._M_inv @ self._C[:, 3]
+        if not np.all(np.abs(self._center) <= MAX_M):
+            raise ValueError(f"C puts the optical centre at {self._center.tolist()} m, beyond ±{MAX_M:g} m: recalibrate the camera")
         self._center.setflags(write=False)
-        self.width = int(width)
-        self.height = int(height)
+        self.width = width
+        self.height = height
 
     # ------------------------------------------------------------------ construction
     @classmethod

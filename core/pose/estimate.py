@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import Camera
+from ..checks import MAX_M, finite_array
 from ..transforms import check_T, pose_error
 from .p3l import p3l
 from .refine import RefineResult, _refine, check_options, click_sigmas
@@ -149,6 +150,8 @@ def estimate_pose(
         raise ValueError(f"max_triples must be at least 1, got {max_triples}")
     clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
     prior = None if T_prior is None else check_T(T_prior, "T_prior")
+    if prior is not None:
+        finite_array(prior[:3, 3], (3,), "T_prior's translation", max_abs=MAX_M, unit=" m")
     S = clicks.n_segments
     if S < 3 and prior is None:
         raise ValueError(

@@ -45,12 +45,11 @@ RMS pixel distance of the clicked pixels to the projected finite model segments
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from scipy.linalg.lapack import dgeev
 
 from ..camera import Camera
+from ..checks import MAX_M, MAX_PX
 from .residuals import Clicks, as_clicks, distance_cost, interpretation_planes
 
 __all__ = ["p3l", "p3l_batch", "p3l_rotations", "ConcurrentEdgesError"]
@@ -61,6 +60,7 @@ _IMAG_TOL_RAD = 1e-4
 _CONSTRAINT_TOL = 3e-6
 # Two unit directions (or plane normals) are parallel when the sine of their angle is below this.
 _PARALLEL_TOL = 1e-9
+_MAX_PX2, _MAX_M2 = MAX_PX**2, MAX_M**2
 # The β-equations are dependent at a root when |s1 s5 − s2 s4| is below this.
 _DEPENDENT_TOL = 1e-7
 # Companion matrices of degree d: ones on the sub-diagonal.
@@ -637,15 +637,17 @@ def p3l(
     if points_uv is None and points_obj is None and segs_a.shape == (3, 2, 2) and edges_a.shape == (3, 2, 3):
         # The common case, validated in plain Python: every number finite (else their sum is not)
         # and no two coinciding points; as_clicks explains any problem it finds.
+        # Sums of squares: NaN or inf when any number is, and under the bound only when every one is
+        # (core.checks: no product of the solver overflows).
         segs, edges = segs_a.tolist(), edges_a.tolist()
-        total, ok = 0.0, True
+        sq_px, sq_m, ok = 0.0, 0.0, True
         for (u1, v1), (u2, v2) in segs:
-            total += u1 + v1 + u2 + v2
+            sq_px += u1 * u1 + v1 * v1 + u2 * u2 + v2 * v2
             ok = ok and (u1 != u2 or v1 != v2)
         for (x1, y1, z1), (x2, y2, z2) in edges:
-            total += x1 + y1 + z1 + x2 + y2 + z2
+            sq_m += x1 * x1 + y1 * y1 + z1 * z1 + x2 * x2 + y2 * y2 + z2 * z2
             ok = ok and (x1 != x2 or y1 != y2 or z1 != z2)
-        clicks = None if ok and math.isfinite(total) else as_clicks(segs_a, edges_a)
+        clicks = None if ok and sq_px <= _MAX_PX2 and sq_m <= _MAX_M2 else as_clicks(segs_a, edges_a)
         pts_obj, pts_uv = [], []
     else:
         clicks = as_clicks(segs_a, edges_a, points_uv, points_obj)

@@ -34,6 +34,7 @@ import numpy as np
 from scipy.linalg.lapack import dposv
 
 from ..camera import Camera
+from ..checks import MAX_M, MAX_SCALE, MIN_SCALE, finite_array, positive_scale
 from ..transforms import check_T
 from .residuals import Clicks, as_clicks, perturb, residuals
 
@@ -144,9 +145,16 @@ def check_options(camera, loss: str, huber_px: float, sigma_px) -> None:
         raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
     if loss not in _LOSSES:
         raise ValueError(f"loss must be one of {_LOSSES}, got {loss!r}")
-    sigma = np.asarray(sigma_px, dtype=float)
-    if not (huber_px > 0 and sigma.ndim <= 1 and sigma.size > 0 and np.all(np.isfinite(sigma)) and np.all(sigma > 0)):
-        raise ValueError(f"huber_px and sigma_px must be positive (sigma_px: one value or one per click), got {huber_px}, {sigma_px}")
+    positive_scale(huber_px, "huber_px", " px")
+    try:
+        sigma = np.asarray(sigma_px, dtype=float)
+    except (TypeError, ValueError):
+        sigma = np.array(np.nan)
+    if not (sigma.ndim <= 1 and sigma.size > 0 and np.all(sigma >= MIN_SCALE) and np.all(sigma <= MAX_SCALE)):
+        raise ValueError(
+            f"sigma_px must be one value or one per click, each a positive finite number between {MIN_SCALE:g} "
+            f"and {MAX_SCALE:g} px, got {sigma_px!r:.120}"
+        )
 
 
 def click_sigmas(sigma_px, clicks: Clicks) -> np.ndarray:
@@ -201,8 +209,11 @@ def _as_pose(T_world_obj) -> np.ndarray:
     if T.shape == (4, 4) and np.isfinite(T).all() and (T[3] == (0.0, 0.0, 0.0, 1.0)).all():
         R = T[:3, :3]
         if np.abs(R.T @ R - np.eye(3)).max() < 1e-9 and np.linalg.det(R) > 0:
-            return T
-    return check_T(T, "T_world_obj").copy()
+            if abs(T[0, 3]) <= MAX_M and abs(T[1, 3]) <= MAX_M and abs(T[2, 3]) <= MAX_M:
+                return T
+    T = check_T(T, "T_world_obj").copy()
+    finite_array(T[:3, 3], (3,), "T_world_obj's translation", max_abs=MAX_M, unit=" m")
+    return T
 
 
 def refine(

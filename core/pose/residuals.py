@@ -31,6 +31,7 @@ from functools import cached_property
 import numpy as np
 
 from ..camera import Camera
+from ..checks import MAX_M, MAX_PX, finite_array
 
 __all__ = ["Clicks", "as_clicks", "interpretation_planes", "residuals", "perturb", "distance_cost", "pose_distance_cost"]
 
@@ -103,8 +104,9 @@ def as_clicks(segs_uv=None, edges_obj=None, points_uv=None, points_obj=None) -> 
             raise ValueError(f"edges_obj must have shape (N, 2, 3) (two 3D endpoints per edge), got {edges.shape}")
         if len(segs) != len(edges):
             raise ValueError(f"got {len(segs)} clicked segments but {len(edges)} model edges: match each segment to one edge")
-        if not (np.isfinite(segs).all() and np.isfinite(edges).all()):
-            raise ValueError("segs_uv or edges_obj contains NaN or inf")
+        if not (np.abs(segs).max(initial=0.0) <= MAX_PX and np.abs(edges).max(initial=0.0) <= MAX_M):
+            finite_array(segs, (None, 2, 2), "segs_uv", max_abs=MAX_PX, unit=" px")
+            finite_array(edges, (None, 2, 3), "edges_obj", max_abs=MAX_M, unit=" m")
         d = segs[:, 1] - segs[:, 0]
         short = (d * d).sum(axis=1) < (1e-9 * max(1.0, float(np.abs(segs).max()))) ** 2
         if short.any():
@@ -134,8 +136,9 @@ def as_clicks(segs_uv=None, edges_obj=None, points_uv=None, points_obj=None) -> 
             raise ValueError(f"points_obj must have shape (N, 3), got {pobj.shape}")
         if len(puv) != len(pobj):
             raise ValueError(f"got {len(puv)} clicked points but {len(pobj)} model points: match each click to one point")
-        if not (np.isfinite(puv).all() and np.isfinite(pobj).all()):
-            raise ValueError("points_uv or points_obj contains NaN or inf")
+        if not (np.abs(puv).max(initial=0.0) <= MAX_PX and np.abs(pobj).max(initial=0.0) <= MAX_M):
+            finite_array(puv, (None, 2), "points_uv", max_abs=MAX_PX, unit=" px")
+            finite_array(pobj, (None, 3), "points_obj", max_abs=MAX_M, unit=" m")
     return Clicks(segs, edges, puv, pobj)
 
 

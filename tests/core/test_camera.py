@@ -140,7 +140,7 @@ def test_bad_input_raises_clear_errors():
         Camera(np.zeros((3, 4)), 512, 256)
     with pytest.raises(ValueError, match="singular"):
         Camera(np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [1, 1, 0, 1]]), 512, 256)
-    with pytest.raises(ValueError, match="positive integers"):
+    with pytest.raises(ValueError, match="positive finite integer"):
         Camera(C, 0, 256)
     with pytest.raises(ValueError, match="coincide"):
         as_segment(np.array([[3.0, 4.0], [3.0, 4.0]]))
