@@ -47,8 +47,9 @@ from core.rangefinder import aim  # noqa: E402
 SHOT_CHARS = len("s0g\r") + len("g0g+00014603\r\n")
 
 
-def step_chars(pan: int) -> int:
-    return len(f"PP{pan} ") + 3 + len("A ") + 3 + len("PP ") + len(f"* {pan}\r\n")
+def step_chars(pan: int, tilt: int) -> int:
+    """Characters on the line for a pan step: PP, A, and the read-back of both axes (PP?, TP?)."""
+    return len(f"PP{pan} ") + 3 + len("A ") + 3 + len("PP ") + len(f"* {pan}\r\n") + len("TP ") + len(f"* {tilt}\r\n")
 
 
 def face_target(scene):
@@ -125,7 +126,7 @@ def bench_steps(scene, target, shots, tmp):
                 t0 = time.perf_counter()
                 chain.tu.move_to_steps(p + 1 + i, None)
                 times.append(time.perf_counter() - t0)
-            model = (step_chars(p) * 10 / tu_baud if tu_baud else 0.0) + 1 / scene.turret.speed_steps_s
+            model = (step_chars(p, t) * 10 / tu_baud if tu_baud else 0.0) + 1 / scene.turret.speed_steps_s
             rows.append((tu_baud or "∞", model * 1e3, *stats_ms(times)))
         finally:
             chain.close()
@@ -166,7 +167,7 @@ def bench_scans(scene, target, beams, tmp, seed):
             X = scan.points(scene.turret.T_world_turret)[scan.hits]
             worst = float(surface_distance(scene, X).max() / scene.rangefinder.sigma_range_m) if len(X) else np.nan
             shot = delay + 0.005 * float(rho) + (SHOT_CHARS * 10 / rf_baud if rf_baud else 0.0)
-            move = (step_chars(int(round(float(pan) / step))) * 10 / tu_baud if tu_baud else 0.0) + 2 / scene.turret.speed_steps_s
+            move = (step_chars(*chain.tu.rad_to_steps(float(pan), float(tilt))) * 10 / tu_baud if tu_baud else 0.0) + 2 / scene.turret.speed_steps_s
             retries = chain.rf.stats["resyncs"] + chain.tu.stats["resyncs"]
             faults = len(chain.site.rangefinder.faults.applied) + len(chain.site.turret.faults.applied)
             rows.append((rf_baud or "∞", tu_baud or "∞", f"{delay * 1e3:.0f}", f"{rate:.0%}", 1 / (shot + move), len(scan) / elapsed,

@@ -11,8 +11,10 @@ drives the devices with it. Each function
 * turns error 255 (no return) into a miss (NaN range) and lets every other device error
   (timeouts, disconnections, limits) propagate: a scan never hides a device fault.
 
-The turret's angles are whole steps: the beams recorded are the commanded (and, with the
-driver's checks, reached) angles.
+The turret's angles are whole steps. Every beam is recorded at the position the head reports
+after its move (``Turret.move_to_steps`` reads both axes back; after a reconnect it first puts
+the homed head back on both axes); a head that is not where the beam was planned raises
+a DeviceError: a scan never reports a beam at a position the head is not at.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from core.camera import Camera, as_uv
 from core.geometry import Plane, fit_plane_tls
 from core.rangefinder import AimResult, RangeFinderSpec, RangeScan, aim, aim_at_pixel, beam_point, beam_point_cov
 
-from .errors import NoTargetError
+from .errors import DeviceError, NoTargetError
 from .rangefinder import RangeFinder, RangeMeasurement
 from .turret import Turret
 
@@ -101,6 +103,18 @@ def _common_step(turret: Turret) -> float | None:
     return turret.pan_step_rad if abs(turret.pan_step_rad - turret.tilt_step_rad) < 1e-12 else None
 
 
+def _move(turret: Turret, pan_steps: int, tilt_steps: int) -> tuple[int, int]:
+    """Move to (pan, tilt) steps and return the position the head reports; DeviceError when it is elsewhere."""
+    got = turret.move_to_steps(int(pan_steps), int(tilt_steps), wait=True)
+    if tuple(got) != (int(pan_steps), int(tilt_steps)):
+        raise DeviceError(
+            f"turret: the head reports {got[0]}, {got[1]} steps instead of {pan_steps}, {tilt_steps}; "
+            "the scan stopped so that no beam is recorded at the wrong place",
+            device="turret",
+        )
+    return int(got[0]), int(got[1])
+
+
 def _shoot(rangefinder: RangeFinder, shots: int) -> RangeMeasurement | None:
     """n shots (None when every shot misses)."""
     try:
@@ -142,7 +156,11 @@ def measure_at_pixel(
         if cancel is not None and cancel.is_set():
             raise AcquisitionCancelled("aiming cancelled")
         iteration[0] += 1
-        turret.move_to(pan_rad, tilt_rad, wait=True)
+        p_steps, t_steps = turret.rad_to_steps(pan_rad, tilt_rad)
+        p_steps, t_steps = _move(turret, p_steps, t_steps)
+        if abs(p_steps * turret.pan_step_rad - pan_rad) > 0.5 * turret.pan_step_rad + 1e-12 or \
+                abs(t_steps * turret.tilt_step_rad - tilt_rad) > 0.5 * turret.tilt_step_rad + 1e-12:
+            raise DeviceError(f"turret: the head is at {p_steps}, {t_steps} steps, not at the aimed angles", device="turret")
         try:
             rho = rangefinder.measure()
         except NoTargetError:
@@ -163,7 +181,7 @@ def measure_at_pixel(
             rho = float(result.range_m)
             measurement = RangeMeasurement(rho, 0.0, np.array([rho]), np.array([False]), 1)
     else:
-        turret.move_to(result.pan_rad, result.tilt_rad, wait=True)
+        _move(turret, *turret.rad_to_steps(result.pan_rad, result.tilt_rad))
         _report(progress, max_iter, max_iter + 1, f"measuring {shots} shots")
         measurement = _shoot(rangefinder, shots)
         rho = np.nan if measurement is None else measurement.range_m
@@ -228,7 +246,7 @@ def profile_scan(
     for i, p in enumerate(pan_steps):
         if cancel is not None and cancel.is_set():
             raise AcquisitionCancelled(f"profile scan cancelled after {i} of {n} beams", partial(i))
-        turret.move_to_steps(int(p), tilt_steps if i == 0 else None, wait=True)
+        _move(turret, int(p), tilt_steps)  # both axes: the driver re-sends the tilt when it is not confirmed
         m = _shoot(rangefinder, shots)
         if m is not None:
             ranges[i], spreads[i] = m.range_m, m.spread_m
@@ -372,7 +390,7 @@ def face_patch_scan(
                 lam = lam_plane
         a_pan, a_tilt, _ = aim(T_world_turret, c + lam * rays[i])
         p_steps, t_steps = int(round(float(a_pan) / step_p)), int(round(float(a_tilt) / step_t))
-        turret.move_to_steps(p_steps, t_steps, wait=True)
+        p_steps, t_steps = _move(turret, p_steps, t_steps)
         pan[i], tilt[i] = p_steps * step_p, t_steps * step_t
         m = _shoot(rangefinder, shots)
         if m is not None:

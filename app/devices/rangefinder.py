@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import RANGEFINDER_ERRORS, NoTargetError, ProtocolError, rangefinder_error
-from .transport import NOISE, LineDriver
+from .transport import NOISE, LineDriver, deadline_after
 
 __all__ = ["RangeFinder", "RangeMeasurement"]
 
@@ -160,7 +160,7 @@ class RangeFinder(LineDriver):
             lambda dl: self._request(command, self._parse_ready(command), dl, EOL),
             what=command,
             idempotent=True,
-            deadline=None if timeout_s is None else time.monotonic() + timeout_s,
+            deadline=deadline_after(timeout_s),
         )
 
     # ---------------------------------------------------------------------- commands
@@ -177,7 +177,7 @@ class RangeFinder(LineDriver):
                 )
             return float(value)
 
-        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        deadline = deadline_after(timeout_s)
         return self._transact(shot, what=command, idempotent=True, deadline=deadline)
 
     def measure_n(self, n: int, *, outlier_m: float = 0.05, timeout_s: float | None = None) -> RangeMeasurement:
@@ -189,9 +189,9 @@ class RangeFinder(LineDriver):
         """
         if not (isinstance(n, (int, np.integer)) and n >= 1):
             raise ValueError(f"n must be a positive integer, got {n!r}")
-        if not outlier_m > 0:
+        if not (outlier_m > 0):  # NaN is refused too
             raise ValueError(f"outlier_m must be positive, got {outlier_m}")
-        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        deadline = deadline_after(timeout_s)
         shots = np.full(int(n), np.nan)
         for i in range(int(n)):
             left = None if deadline is None else max(deadline - time.monotonic(), 1e-3)
@@ -228,7 +228,7 @@ class RangeFinder(LineDriver):
                 raise ProtocolError(f"rangefinder: implausible temperature {value} °C (garbled?)", device=self.device, command=command)
             return float(value)
 
-        return self._transact(ask, what=command, idempotent=True, deadline=None if timeout_s is None else time.monotonic() + timeout_s)
+        return self._transact(ask, what=command, idempotent=True, deadline=deadline_after(timeout_s))
 
     def user_offset_m(self, timeout_s: float | None = None) -> float:
         """The user offset added to every distance (metres)."""
@@ -237,11 +237,14 @@ class RangeFinder(LineDriver):
             lambda dl: float(self._request(command, self._parse_value("uof", command, 1e-4), dl, EOL)),
             what=command,
             idempotent=True,
-            deadline=None if timeout_s is None else time.monotonic() + timeout_s,
+            deadline=deadline_after(timeout_s),
         )
 
     def set_user_offset_m(self, offset_m: float, timeout_s: float | None = None) -> None:
         """Set the user offset (metres, ±9999.9999); an absolute value, so retried safely."""
+        if not np.isfinite(float(offset_m)):
+            raise ValueError(f"offset_m must be a finite number of metres, got {offset_m!r}")
+        deadline = deadline_after(timeout_s)
         units = int(np.round(float(offset_m) * 1e4))
         if abs(units) > 99_999_999:
             raise ValueError(f"offset {offset_m} m does not fit the device's 8-digit field")
@@ -259,5 +262,5 @@ class RangeFinder(LineDriver):
             lambda dl: self._request(command, parse, dl, EOL),
             what=command,
             idempotent=True,
-            deadline=None if timeout_s is None else time.monotonic() + timeout_s,
+            deadline=deadline,
         )

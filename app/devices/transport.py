@@ -36,6 +36,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Callable, TypeVar
 
+import numpy as np
 import serial
 
 from .errors import DeviceDisconnected, DeviceError, DeviceTimeout, MotionUnconfirmedError, ProtocolError
@@ -48,6 +49,7 @@ __all__ = [
     "InProcessPort",
     "PtyPort",
     "inprocess_port",
+    "deadline_after",
 ]
 
 log = logging.getLogger("mcit.devices")
@@ -61,6 +63,18 @@ if _HANDLER_PACKAGE not in serial.protocol_handler_packages:
     serial.protocol_handler_packages.append(_HANDLER_PACKAGE)
 
 T = TypeVar("T")
+
+
+def deadline_after(timeout_s: float | None, name: str = "timeout_s") -> float | None:
+    """The monotonic deadline timeout_s seconds from now (None: none); ValueError for NaN or a negative time."""
+    if timeout_s is None:
+        return None
+    if isinstance(timeout_s, bool) or not isinstance(timeout_s, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a number of seconds or None, got {timeout_s!r}")
+    v = float(timeout_s)
+    if v != v or v < 0:
+        raise ValueError(f"{name} must be a number of seconds >= 0 or None, got {timeout_s!r}")
+    return time.monotonic() + v
 
 
 class _Noise:
@@ -232,7 +246,7 @@ class LineDriver:
         retries: int = 2,
         reconnect_timeout_s: float = 5.0,
     ):
-        if attempt_timeout_s <= 0 or reconnect_timeout_s < 0:
+        if not (attempt_timeout_s > 0 and reconnect_timeout_s >= 0):  # NaN fails too
             raise ValueError(
                 f"timeouts must be positive, got attempt_timeout_s={attempt_timeout_s}, reconnect_timeout_s={reconnect_timeout_s}"
             )

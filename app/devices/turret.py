@@ -23,7 +23,12 @@ Robustness:
 * an absolute move with ``wait=True`` sends ``PP``/``TP``, waits for ``A`` (deadline from the
   distance and the speed) and reads the position back: it must equal the target;
 * after an unplug the port is reopened with back-off, ``ED``/``FT`` re-sent, the speed restored
-  and the whole absolute move re-sent (the unit homes at power-up).
+  and the whole absolute move re-sent (the unit homes at power-up);
+* the driver keeps the absolute position it last commanded on each axis (``_goal``) across
+  reconnects; an axis a move leaves alone (None) is sent again unless the last move's read-back
+  confirmed it and nothing (a reconnect, an error, a relative move, a halt) happened since, so a
+  replugged unit that homed itself is put back on both axes; a move with ``wait`` reads both axes
+  back and returns where the head is: no caller is told a position the head is not at.
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ import time
 import numpy as np
 
 from .errors import DeviceError, ProtocolError, TurretError, TurretLimitError
-from .transport import NOISE, LineDriver
+from .transport import NOISE, LineDriver, deadline_after
 
 __all__ = ["Turret"]
 
@@ -88,7 +93,7 @@ class Turret(LineDriver):
             retries=retries,
             reconnect_timeout_s=reconnect_timeout_s,
         )
-        if motion_margin_s < 0:
+        if not (motion_margin_s >= 0):  # NaN fails too
             raise ValueError(f"motion_margin_s must be >= 0, got {motion_margin_s}")
         self.motion_margin_s = float(motion_margin_s)
         self.resolution_arcsec: tuple[float, float] | None = None  # (pan, tilt)
@@ -98,6 +103,10 @@ class Turret(LineDriver):
         self._speed_set: tuple[int, int] | None = None
         self._speed_known: tuple[int, int] | None = None
         self._target: tuple[int, int] | None = None
+        # the absolute position last commanded per axis (None: unknown), kept across reconnects,
+        # and whether a read-back has confirmed it with no reconnect, error or other motion since
+        self._goal: list[int | None] = [None, None]
+        self._goal_confirmed = False
         self._maybe_moving = True  # until an ``A`` confirms that both axes stopped
         self.limit_events: list[tuple[float, str]] = []
         if connect:
@@ -211,6 +220,7 @@ class Turret(LineDriver):
             self._ask_step(f"TS{self._speed_set[1]}", "ack")
         self._speed_known = None
         self._target = None
+        self._goal_confirmed = False  # a unit powering up homes itself: every axis is sent again
         self._maybe_moving = True  # a unit powering up homes itself
 
     def _resync(self, deadline: float) -> None:
@@ -234,7 +244,7 @@ class Turret(LineDriver):
 
     # ------------------------------------------------------------------ queries
     def _deadline(self, timeout_s: float | None) -> float | None:
-        return None if timeout_s is None else time.monotonic() + timeout_s
+        return deadline_after(timeout_s)  # ValueError for NaN or a negative time
 
     def _read_axes(self, pan: bool = True, tilt: bool = True) -> tuple[int | None, int | None]:
         pos = []
@@ -306,7 +316,8 @@ class Turret(LineDriver):
 
     def set_speed_deg_s(self, pan_deg_s: float, tilt_deg_s: float | None = None, timeout_s: float | None = None) -> None:
         """Set the speeds in degrees/s (rounded to whole steps/s)."""
-        tilt_deg_s = pan_deg_s if tilt_deg_s is None else tilt_deg_s
+        tilt_deg_s = _finite(pan_deg_s if tilt_deg_s is None else tilt_deg_s, "tilt_deg_s")
+        pan_deg_s = _finite(pan_deg_s, "pan_deg_s")
         self.set_speed_steps_s(
             max(1, int(round(math.radians(pan_deg_s) / self.pan_step_rad))),
             max(1, int(round(math.radians(tilt_deg_s) / self.tilt_step_rad))),
@@ -353,6 +364,7 @@ class Turret(LineDriver):
     def wait(self, timeout_s: float | None = None) -> None:
         """Return when both axes have stopped (``A``); its deadline covers a full travel by default."""
         self._need_connected()
+        deadline_after(timeout_s)  # NaN or negative: ValueError
         self._ensure_speed_known()
         budget = self.attempt_timeout_s + self._full_travel_s() + self.motion_margin_s if timeout_s is None else timeout_s
         self._transact(
@@ -364,15 +376,19 @@ class Turret(LineDriver):
         self._maybe_moving = False
 
     def move_to_steps(self, pan: int | None = None, tilt: int | None = None, *, wait: bool = True, timeout_s: float | None = None) -> tuple[int, int]:
-        """Absolute move (steps); None leaves an axis alone (and comes back None). Returns the targets.
+        """Absolute move (steps); None keeps an axis at its last commanded position.
 
+        Returns (pan, tilt): with wait, where the head is (both axes read back, equal to the
+        targets, else an error); without, the targets. An axis left None is sent again whenever
+        its position is not confirmed (first move, after a reconnect — the unit homes at power-up —
+        an error, a halt or a relative move); one never commanded is read first.
         Retried as a whole after a timeout, a malformed reply or an unplug (absolute: safe).
-        With wait, waits for the motion end and checks that the position read back is the target.
         """
         self._need_connected()
         for name, v in (("pan", pan), ("tilt", tilt)):
             if v is not None and not isinstance(v, (int, np.integer)):
                 raise ValueError(f"{name} must be a whole number of steps, got {v!r}")
+        deadline_after(timeout_s)  # NaN or negative: ValueError before anything is sent
         pan = None if pan is None else int(pan)
         tilt = None if tilt is None else int(tilt)
         self.check_limits(pan, tilt)
@@ -381,33 +397,42 @@ class Turret(LineDriver):
         budget = 5 * (self.retries + 1) * self.attempt_timeout_s + (motion_s + self.motion_margin_s if wait else 0.0)  # one attempt's worst case
 
         def move(_deadline: float) -> tuple[int, int]:
+            asked = (pan, tilt)
+            if None in asked and None in [g for a, g in zip(asked, self._goal) if a is None]:
+                # an axis left alone was never commanded: it stays where it is, read it once stopped
+                self._ask_step("A", "ack", self.attempt_timeout_s + self._full_travel_s() + self.motion_margin_s)
+                self._maybe_moving = False
+                here = self._read_axes(pan is None and self._goal[0] is None, tilt is None and self._goal[1] is None)
+                self._goal = [g if h is None else h for g, h in zip(self._goal, here)]
+                self._goal_confirmed = False
+            want = tuple(a if a is not None else g for a, g in zip(asked, self._goal))
+            self.check_limits(*want)
+            confirmed = self._goal_confirmed
+            self._goal_confirmed = False
             self._maybe_moving = True
-            if pan is not None:
-                self._ask_step(f"PP{pan}", "ack")
-            if tilt is not None:
-                self._ask_step(f"TP{tilt}", "ack")
+            for i, cmd in enumerate(("PP", "TP")):
+                if asked[i] is not None or not confirmed:
+                    self._ask_step(f"{cmd}{want[i]}", "ack")
+                    self._goal[i] = want[i]
             if not wait:
-                return (pan, tilt)
-            self._ask_step("A", "ack", self.attempt_timeout_s + motion_s + self.motion_margin_s)
+                return want
+            self._ask_step("A", "ack", self.attempt_timeout_s + self._motion_time_s(*want) + self.motion_margin_s)
             self._maybe_moving = False
-            want = (pan, tilt)
-            got = self._read_axes(pan is not None, tilt is not None)
+            got = self._read_axes()
             if got != want:  # a garbled digit, or the unit really stopped elsewhere: read again
-                again = self._read_axes(pan is not None, tilt is not None)
+                again = self._read_axes()
                 if again != want:
                     if again == got:
                         raise TurretError(f"turret stopped at {got} steps instead of {want}", command="A")
                     raise ProtocolError(f"turret: position reads {got} then {again}, target {want}", device=self.device)
+            self._goal_confirmed = True
             return want
 
         total = None if timeout_s is None else time.monotonic() + timeout_s
-        if total is None:
-            total = time.monotonic() + (self.retries + 1) * budget + self.reconnect_timeout_s
+        if total is None:  # a reconnect re-sends both axes from home: a full travel more at most
+            total = time.monotonic() + (self.retries + 1) * budget + self.reconnect_timeout_s + self._full_travel_s()
         result = self._transact(move, what=f"absolute move to {pan}, {tilt}", idempotent=True, deadline=total)
-        prev = self._target or (None, None)
-        self._target = (pan if pan is not None else prev[0], tilt if tilt is not None else prev[1])
-        if None in self._target:
-            self._target = None
+        self._target = result
         return result
 
     def move_to(self, pan_rad: float | None = None, tilt_rad: float | None = None, *, wait: bool = True, timeout_s: float | None = None) -> tuple[float, float]:
@@ -435,6 +460,7 @@ class Turret(LineDriver):
         for name, v in (("pan", pan), ("tilt", tilt)):
             if not isinstance(v, (int, np.integer)):
                 raise ValueError(f"{name} must be a whole number of steps, got {v!r}")
+        deadline_after(timeout_s)  # NaN or negative: ValueError before anything is sent
         here = self.position_steps(timeout_s)
         target = (here[0] + int(pan), here[1] + int(tilt))
         self.check_limits(*target)
@@ -442,6 +468,7 @@ class Turret(LineDriver):
 
         def send(dl: float) -> None:
             self._maybe_moving = True
+            self._goal, self._goal_confirmed = list(target), False
             if pan:
                 self._ask(f"PO{int(pan)}", "ack", dl)
             if tilt:
@@ -456,6 +483,7 @@ class Turret(LineDriver):
 
     def move_by_deg(self, pan_deg: float = 0.0, tilt_deg: float = 0.0, *, wait: bool = True, timeout_s: float | None = None):
         """Relative move in degrees (rounded to whole steps); returns the new angles in degrees."""
+        pan_deg, tilt_deg = _finite(pan_deg, "pan_deg"), _finite(tilt_deg, "tilt_deg")
         p, t = self.move_by_steps(
             int(np.round(math.radians(pan_deg) / self.pan_step_rad)),
             int(np.round(math.radians(tilt_deg) / self.tilt_step_rad)),
@@ -467,14 +495,18 @@ class Turret(LineDriver):
     def halt(self, timeout_s: float | None = None) -> None:
         """Stop both axes where they are (``H``)."""
         self._need_connected()
-        self._transact(lambda dl: self._ask("H", "ack", dl), what="halt", idempotent=True, deadline=self._deadline(timeout_s))
+        deadline = self._deadline(timeout_s)
+        self._goal, self._goal_confirmed = [None, None], False  # stopped wherever it was
+        self._transact(lambda dl: self._ask("H", "ack", dl), what="halt", idempotent=True, deadline=deadline)
         self._target = None
 
     def home(self, timeout_s: float | None = None) -> None:
         """Reset and home both axes (``R``; answers when done)."""
         self._need_connected()
+        deadline_after(timeout_s)  # NaN or negative: ValueError before anything is sent
         self._ensure_speed_known()
         budget = self.attempt_timeout_s + self._full_travel_s() + self.motion_margin_s
+        self._goal, self._goal_confirmed = [0, 0], False
         self._transact(
             lambda dl: self._ask("R", "ack", time.monotonic() + budget),
             what="reset",

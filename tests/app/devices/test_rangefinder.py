@@ -216,3 +216,27 @@ def test_through_a_real_pty_with_faults_and_a_replug(workcell, make_site, driver
     assert rf.stats["reconnects"] >= 1 and (tmp_path / "rf").is_symlink()
     assert [k for k, _ in site.rangefinder.faults.applied] == ["junk", "unplug", "garble"]
     assert site.rangefinder.port.device.startswith("/dev/")  # a new pty behind the same link
+
+
+def test_nan_and_negative_arguments_are_refused_before_anything_is_sent(bench):
+    site, rf, tu, expected = bench
+    site.rangefinder.commands_seen.clear()
+    nan = float("nan")
+    for call in (
+        lambda: rf.measure(timeout_s=nan),
+        lambda: rf.measure(timeout_s=-0.5),
+        lambda: rf.measure_n(3, timeout_s=nan),
+        lambda: rf.measure_n(3, outlier_m=nan),
+        lambda: rf.stop(timeout_s=nan),
+        lambda: rf.temperature_c(timeout_s=nan),
+        lambda: rf.user_offset_m(timeout_s=nan),
+        lambda: rf.set_user_offset_m(nan),
+        lambda: rf.set_user_offset_m(0.0, timeout_s=nan),
+    ):
+        with pytest.raises(ValueError):
+            call()
+    assert site.rangefinder.commands_seen == []
+    assert rf.measure() == pytest.approx(expected, abs=1e-4)  # and the driver still works
+    for options in ({"attempt_timeout_s": nan}, {"reconnect_timeout_s": nan}):
+        with pytest.raises(ValueError):
+            RangeFinder(rf.url, **(FAST_DRIVER | options))

@@ -215,3 +215,62 @@ def test_the_same_corruption_every_time_is_a_protocol_error(bench):
     site.turret.faults.set_rates({"garble": 1.0})
     with pytest.raises((ProtocolError, DeviceTimeout), match="gave up"):
         tu.position_steps()
+
+
+def test_a_replugged_unit_is_put_back_on_both_axes_before_a_one_axis_move(bench):
+    """The unit homes at power-up: a pan-only move after a replug must send the tilt again."""
+    site, tu = bench
+    assert tu.move_to_steps(100, -300) == (100, -300)
+    site.turret.unplug(0.05)
+    time.sleep(0.15)
+    assert emulated_steps(site) == (0, 0)  # homed
+    assert tu.move_to_steps(200, None) == (200, -300)
+    assert emulated_steps(site) == (200, -300)
+    assert tu.stats["reconnects"] >= 1
+    # confirmed since: a pan-only move sends only the pan, but still reads both axes back
+    site.turret.commands_seen.clear()
+    assert tu.move_to_steps(250) == (250, -300)
+    assert [c for c in site.turret.commands_seen if c.startswith(("PP", "TP")) and len(c) > 2] == ["PP250"]
+    assert {"PP", "TP"} <= set(site.turret.commands_seen)
+
+
+def test_an_unplug_during_a_one_axis_move_restores_the_other_axis(bench):
+    site, tu = bench
+    tu.move_to_steps(-400, 250)
+    site.turret.faults.push(Fault("unplug", match=ACK, delay_s=0.05))  # instead of the PP's '*'
+    assert tu.move_to_steps(-350, None) == (-350, 250)
+    assert emulated_steps(site) == (-350, 250)
+    assert [k for k, _ in site.turret.faults.applied] == ["unplug"]
+
+
+def test_an_axis_never_commanded_stays_where_it_is(bench):
+    site, tu = bench
+    site.mount.place(0.0, 123.0)  # e.g. left there by an earlier session
+    assert tu.move_to_steps(pan=40) == (40, 123)
+    assert emulated_steps(site) == (40, 123)
+
+
+def test_nan_and_negative_times_and_angles_are_refused_before_anything_is_sent(bench):
+    site, tu = bench
+    site.turret.commands_seen.clear()
+    nan = float("nan")
+    for call in (
+        lambda: tu.position_steps(timeout_s=nan),
+        lambda: tu.move_to_steps(10, 10, timeout_s=nan),
+        lambda: tu.move_to_steps(10, 10, timeout_s=-1.0),
+        lambda: tu.move_to(nan, 0.0),
+        lambda: tu.move_to_deg(0.0, nan),
+        lambda: tu.move_by_deg(nan, 0.0),
+        lambda: tu.move_by_steps(1, 0, timeout_s=nan),
+        lambda: tu.wait(timeout_s=nan),
+        lambda: tu.set_speed_deg_s(nan),
+        lambda: tu.speed_steps_s(timeout_s=nan),
+        lambda: tu.halt(timeout_s=nan),
+        lambda: tu.home(timeout_s=nan),
+    ):
+        with pytest.raises(ValueError):
+            call()
+    assert site.turret.commands_seen == []
+    for options in ({"attempt_timeout_s": nan}, {"reconnect_timeout_s": nan}, {"motion_margin_s": nan}):
+        with pytest.raises(ValueError):
+            Turret(tu.url, **(FAST_DRIVER | options))
