@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
+import sys
 import threading
 from pathlib import Path
 
@@ -24,11 +25,20 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         "serve",
         help="open the operator interface in a browser (viser)",
         description="Serve the operator interface: the live video with the database overlaid, and the workflows. "
-        "Listens on 127.0.0.1 by default; viser has no authentication, so expose it (--host) only behind a "
-        "reverse proxy that authenticates.",
+        "Listens on 127.0.0.1 by default and answers only its own pages (other web pages open in the browser "
+        "cannot drive it). With --host other than loopback an access token is generated and printed in the URL; "
+        "see README 'Security'.",
     )
     p.add_argument("--scene", type=Path, default=None, help="scene folder (default: the bundled workcell)")
-    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0 exposes it: no authentication!)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default 127.0.0.1; any other address needs an access token, generated "
+                   "unless --token gives one)")
+    p.add_argument("--allow-origin", action="append", default=[], metavar="URL",
+                   help="also admit pages served from URL (a reverse proxy's public address, e.g. "
+                   "https://mcit.example.org); repeatable")
+    p.add_argument("--token", default=None,
+                   help="access token required to open the interface (open the printed URL, which carries it); "
+                   "default: none on loopback, a generated one otherwise")
     p.add_argument("--port", type=int, default=8080, help="port (default 8080; the next free one if taken)")
     p.add_argument("--video", default=None,
                    help="video source: camera index (0), video file, image folder, image file or stream URL "
@@ -57,6 +67,17 @@ def _video_source(spec, scene, fps):
     return StillSource(render_frame(scene, 0.0), fps or 10.0, description=f"rendered still of {scene.name}")
 
 
+def _access_policy(args: argparse.Namespace):
+    """The AccessPolicy of --host, --allow-origin and --token (a token generated, and kept in ``args.token``,
+    when the interface listens beyond this machine); ValueError on a malformed origin or token."""
+    from app.ui.access import AccessPolicy, generate_token, is_loopback
+
+    if getattr(args, "token", None) is None and not is_loopback(args.host):
+        args.token = generate_token()
+    return AccessPolicy(host=args.host, allow_origins=tuple(getattr(args, "allow_origin", None) or ()),
+                        token=getattr(args, "token", None))
+
+
 def build_interface(args: argparse.Namespace):
     """Open everything ``mcit serve`` needs; returns (InterfaceServer, closers)."""
     from app.db import Database, default_db_path, seed_from_scene
@@ -65,6 +86,7 @@ def build_interface(args: argparse.Namespace):
     from app.video import FrameGrabber
     from app.workflows import Site
 
+    access = _access_policy(args)  # before anything opens: a bad --token or --allow-origin stops here
     scene = load_scene(args.scene or default_scene_path())
     grabber = FrameGrabber(_video_source(args.video, scene, args.fps)).start()
     closers = [grabber.stop]
@@ -92,17 +114,25 @@ def build_interface(args: argparse.Namespace):
                 raise
             log.error("emulated devices failed to start (%s): continuing without range finder and turret", exc)
     site = Site(scene, db, devices=devices, clock=clock)
-    server = InterfaceServer(site, grabber, host=args.host, port=args.port, jpeg_quality=args.jpeg_quality)
+    server = InterfaceServer(site, grabber, host=args.host, port=args.port, jpeg_quality=args.jpeg_quality,
+                             allow_origins=access.allow_origins, token=access.token)
     return server, closers
 
 
 def run_serve(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:
+        _access_policy(args)
+    except ValueError as exc:
+        print(f"mcit serve: {exc}", file=sys.stderr, flush=True)
+        return 2
     server, closers = build_interface(args)
     server.start()
-    if args.host not in LOOPBACK:
-        print(f"WARNING: listening on {args.host}: viser has no authentication. Anyone who can reach this port "
-              "can change the site's database. Put a reverse proxy with authentication in front.", flush=True)
+    from app.ui.access import is_loopback
+
+    if not is_loopback(args.host):
+        print(f"mcit: listening on {args.host}: only browsers given the token in the address below can open the "
+              "interface, over plain HTTP (use a reverse proxy with HTTPS beyond a trusted network).", flush=True)
     print(f"mcit: open {server.url} in a browser (Ctrl-C to stop)", flush=True)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -33,6 +33,7 @@ from app.video import FrameGrabber
 from app.workflows.frames import GrabberFrames
 from app.workflows.site import Site
 
+from .access import AccessPolicy, open_viser_server
 from .client import ClientPanel
 from .db_overlay import DatabaseOverlay
 from .recent import RecentFrames
@@ -54,19 +55,23 @@ class InterfaceServer:
     ----------
     site : Site
     grabber : FrameGrabber (started or not; started here)
-    host, port : where to listen (127.0.0.1 by default: viser has no authentication)
+    host, port : where to listen (127.0.0.1 by default)
+    allow_origins : page origins admitted besides the interface's own (a reverse proxy's public address)
+    token : access token every request must carry (``?token=`` or its cookie), or None (app/ui/access.py)
     k : world units per video pixel.
     jpeg_quality : quality of the video frames sent to the browsers.
     """
 
     def __init__(self, site: Site, grabber: FrameGrabber, *, host: str = "127.0.0.1", port: int = 8080,
-                 k: float = 0.01, jpeg_quality: int = 80, verbose: bool = False):
+                 k: float = 0.01, jpeg_quality: int = 80, verbose: bool = False,
+                 allow_origins: tuple[str, ...] = (), token: str | None = None):
         self.site = site
         self.grabber = grabber
         src = grabber.source
         self.pixel_world = PixelWorld(src.width, src.height, k)
         self.jpeg_quality = int(jpeg_quality)
-        self.server = viser.ViserServer(host=host, port=port, label="mcit", verbose=verbose)
+        self.access = AccessPolicy(host=host, allow_origins=tuple(allow_origins), token=token)
+        self.server = open_viser_server(self.access, host=host, port=port, label="mcit", verbose=verbose)
         self.host = host
         self.clients: dict[int, ClientPanel] = {}
         self.clients_lock = threading.RLock()
@@ -103,8 +108,11 @@ class InterfaceServer:
 
     @property
     def url(self) -> str:
-        host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
-        return f"http://{host}:{self.port}"
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "::", "") else self.host
+        if ":" in host:
+            host = f"[{host}]"
+        token = "" if self.access.token is None else f"/?token={self.access.token}"
+        return f"http://{host}:{self.port}{token}"
 
     def start(self) -> "InterfaceServer":
         self.grabber.start()
