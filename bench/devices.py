@@ -9,7 +9,8 @@ the unknown box's face that faces it (~1.46 m). Emulators as shipped: the DLS me
 10 bits / baud each way (start + 7E1 or 8N1 + stop), the measurement delay is added, and a reply
 is delivered when its last byte would have arrived. The "model" column is that arithmetic alone:
   shot    = delay + 5 ms/m × range + (len("s0g\\r") + len("g0g+dddddddd\\r\\n")) × 10 / baud
-  step    = (len("PPnnnn ") + 3 + len("A ") + 3 + len("PP ") + len("* nnnn\\r\\n")) × 10 / baud + 1 step / speed
+  step    = (len("PPnnnn ") + 3 + len("A ") + 3 + len("PP ") + len("* nnnn\\r\\n") + len("TP ") + len("* nnnn\\r\\n")) × 10 / baud
+            + 1 step / speed
             (absolute move, wait for the end, read the position back: what every scan beam does)
   beam    = step + shot
 "Measured" is wall-clock time through the driver (median and 90th percentile), on this shared
