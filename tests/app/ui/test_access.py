@@ -176,3 +176,15 @@ def test_start_up_fails_loudly_when_viser_bypasses_the_hook(monkeypatch):
     monkeypatch.setattr(access, "_VISER_MODULE", "not.viser")  # as if viser opened its server some other way
     with pytest.raises(RuntimeError, match="refusing to serve"):
         open_viser_server(AccessPolicy(), host="127.0.0.1", port=free_port(), verbose=False)
+
+
+def test_duplicate_host_or_origin_headers_are_refused_not_an_error():
+    from websockets.datastructures import Headers
+
+    policy = AccessPolicy()
+    own = Headers([("Host", "127.0.0.1:8080"), ("Origin", "http://127.0.0.1:8080")])
+    assert policy.check("/", own) == (None, False)
+    for extra in (("Origin", "http://evil.example"), ("Host", "evil.example:8080")):
+        headers = Headers(list(own.raw_items()) + [extra])
+        reason, _ = policy.check("/", headers)
+        assert reason is not None and "more than one" in reason
