@@ -17,13 +17,17 @@ robust fit (weight ≥ 0.5). When it falls below ``lost_confidence``, too few sa
 solution is unusable, the tracker is *lost*: it keeps the last good pose, stops tracking, and
 waits for the operator to give a pose again (``reset``).
 
-``lost_confidence`` = 0.5 is calibrated on data with true poses (``bench/tracking.py``, "wrong but
-tracked"): a pose that converged wrongly (more than 5° or 1 cm off) keeps only the samples that
-happen to lie on some image edge, and on a rendered box tracked from starts 5–20° / 1–4 cm off
-those scored 0.12–0.40 (one at 0.72) against ≥ 0.59 for every right pose; at the former 0.3, 3
-of 14 wrong frames were reported as tracked, at 0.5 one, with no right frame lost. Checked on the
-real visp-cube from perturbed starts (against the tracker's own run from ViSP's pose) and on the
-workcell video (against the scene's truth): no right frame lost there either.
+Is the pose supported by the image? The confidence alone does not say: a pose that converged
+wrongly (a model edge locked on its neighbour, the box shifted by its height) keeps the samples
+that happen to lie on an edge and still scores 0.5–0.8. So at the final pose each sample is
+searched once more, ±``check_search_px`` along its normal, for the nearest edge of either
+polarity (``check_min_strength``), and ``edge_distance_px`` is the mean distance to it (capped at
+the band: none found counts as the band). The frame is lost when the confidence is below
+``lost_confidence`` (0.5) *or* that distance is above ``max_edge_distance_px`` (1.5 px). Both are
+calibrated on a rendered box tracked from starts 5–20° / 1–4 cm off, against its true poses
+(``bench/tracking.py``, "lost or tracked"): right poses score ≤ 1.2 px, wrong ones (more than 5°
+or 1 cm off) ≥ 1.45 px; checked on the workcell video (the scene's truth) and the real visp-cube
+(against the tracker's own run from ViSP's pose), where right poses score ≤ 1.5 px.
 
 Not modelled: occlusion of one part of the model by another (the hidden-line removal is per face,
 exact for one convex solid) and by other objects; the robust loss absorbs what they spoil.
@@ -87,7 +91,8 @@ class TrackDiagnostics:
     none was found). rms_px : weighted RMS of the kept samples' distances to their edges at the
     final pose. n_samples, n_found, n_inliers : counts. reason : why the tracker is lost ("" if not).
     cov : array, shape (6, 6), covariance of the pose's (δt [m], δr [rad]) from the last pose step
-    (``PointLineFit.cov``), or None when there was none.
+    (``PointLineFit.cov``), or None when there was none. edge_distance_px : the support check's mean
+    distance of the samples to the nearest image edge at the final pose (NaN when not reached).
     """
 
     samples: EdgeSamples
@@ -99,6 +104,7 @@ class TrackDiagnostics:
     n_inliers: int
     reason: str = ""
     cov: np.ndarray | None = None
+    edge_distance_px: float = float("nan")
 
 
 def _feature_ids(model: BRep, kind: np.ndarray, n_circle: int) -> tuple[np.ndarray, np.ndarray]:
@@ -259,6 +265,10 @@ class EdgeTracker:
     min_strength : smallest intensity derivative (grey levels per pixel) taken as an edge.
     lost_confidence : below this confidence the tracker declares itself lost (0.5: calibrated so that
         wrongly converged poses are flagged, see above; 0 turns the test off).
+    max_edge_distance_px : above this mean distance of the samples to the nearest image edge, at
+        the final pose, the tracker is lost (the support check, see above; ``inf`` turns it off).
+    check_search_px, check_min_strength : the support check's search band (pixels) and smallest
+        edge (grey levels per pixel).
     min_inliers : fewer kept samples than this and the tracker is lost.
     loss : robust loss of the pose step ("tukey", "huber" or "l2").
     rims : also track the rims of cylinders and cones (see ``sample_visible_edges``).
@@ -284,6 +294,9 @@ class EdgeTracker:
         max_iter: int = 8,
         rims: bool = False,
         max_face_angle_deg: float = 75.0,
+        max_edge_distance_px: float = 1.5,
+        check_search_px: float = 10.0,
+        check_min_strength: float = 2.0,
     ):
         if not isinstance(camera, Camera):
             raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
@@ -293,6 +306,9 @@ class EdgeTracker:
             raise ValueError("sample_step_px, search_px and refine_search_px must be positive")
         if not 0.0 <= lost_confidence < 1.0:
             raise ValueError(f"lost_confidence must be in [0, 1), got {lost_confidence}")
+        if not (max_edge_distance_px > 0 and check_search_px > 0 and check_min_strength > 0):
+            raise ValueError("max_edge_distance_px, check_search_px and check_min_strength must be positive, got "
+                             f"{max_edge_distance_px}, {check_search_px}, {check_min_strength}")
         self.camera = camera
         self.model = model
         self.sample_step_px = float(sample_step_px)
@@ -307,6 +323,9 @@ class EdgeTracker:
         self.max_iter = int(max_iter)
         self.rims = bool(rims)
         self.max_face_angle_deg = float(max_face_angle_deg)
+        self.max_edge_distance_px = float(max_edge_distance_px)
+        self.check_search_px = float(check_search_px)
+        self.check_min_strength = float(check_min_strength)
         self.reset(T_world_obj)
 
     # ------------------------------------------------------------------ state
@@ -356,6 +375,16 @@ class EdgeTracker:
         )
         w[found] = fit.weights
         return _Pass(samples, matched, found, hits.strength, w, fit)
+
+    def _edge_distance(self, img: np.ndarray, T: np.ndarray) -> float:
+        """Mean distance (px) of the samples at pose T to the nearest image edge along their normals."""
+        s = sample_visible_edges(self.camera, self.model, T, step_px=self.sample_step_px, vertex_margin_px=self.vertex_margin_px,
+                                 rims=self.rims, max_face_angle_deg=self.max_face_angle_deg)
+        if len(s) == 0:
+            return float("inf")
+        R = self.check_search_px
+        hits = search_along_normals(img, s.uv, s.normals, R, min_strength=self.check_min_strength, prior_sigma_px=R / 4.0)
+        return float(np.mean(np.where(hits.found, np.minimum(np.abs(hits.offset_px), R), R)))
 
     def track(self, frame: np.ndarray) -> TrackResult:
         """Follow the object into the next frame.
@@ -410,10 +439,16 @@ class EdgeTracker:
                 )
                 if np.median(jump) > 2.0 * self.search_px:
                     reason = f"the pose jumped {np.median(jump):.1f} px, more than the search band allows"
+        edge_px = float("nan")
+        if not reason:
+            edge_px = self._edge_distance(img, T)
+            if edge_px > self.max_edge_distance_px:
+                reason = (f"the model's edges lie {edge_px:.1f} px from the image's edges on average (more than "
+                          f"{self.max_edge_distance_px:.1f} px): the pose is not supported by the image")
         rms = p.fit.rms_px if p.fit is not None else float("nan")
         matched = np.where(p.found[:, None], p.matched, np.nan)
         cov = None if p.fit is None else p.fit.cov.copy()
-        self.diagnostics = TrackDiagnostics(p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason, cov)
+        self.diagnostics = TrackDiagnostics(p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason, cov, edge_px)
         if reason:
             self._lost = True
             return TrackResult(self._T.copy(), float(confidence), True)
