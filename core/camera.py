@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import rq
 
-from .checks import MAX_M, finite_array, image_size
+from .checks import MAX_M, MAX_PX, finite_array, image_size
 from .geometry import Plane
 from .transforms import check_T, make_T
 
@@ -25,28 +25,28 @@ __all__ = ["Camera", "as_uv", "as_segment"]
 
 
 def as_uv(uv: np.ndarray, name: str = "uv") -> np.ndarray:
-    """Validate pixels: array, shape (N, 2), finite; returns float array."""
-    uv = np.asarray(uv, dtype=float)
-    if uv.ndim != 2 or uv.shape[1] != 2:
-        raise ValueError(f"{name} must have shape (N, 2), got {uv.shape}")
-    if not np.all(np.isfinite(uv)):
-        raise ValueError(f"{name} contains NaN or inf")
-    return uv
+    """Validate pixels: array, shape (N, 2), finite, within ±``MAX_PX``; returns float array."""
+    return finite_array(uv, (None, 2), name, max_abs=MAX_PX, unit=" px")
 
 
 def as_segment(seg_uv: np.ndarray, name: str = "seg_uv") -> np.ndarray:
     """Validate an image segment: array, shape (2, 2), two distinct finite pixel endpoints."""
-    seg = np.asarray(seg_uv, dtype=float)
-    if seg.shape != (2, 2):
-        raise ValueError(f"{name} must have shape (2, 2) (two pixel endpoints), got {seg.shape}")
-    if not np.all(np.isfinite(seg)):
-        raise ValueError(f"{name} contains NaN or inf")
+    seg = finite_array(seg_uv, (2, 2), f"{name} (two pixel endpoints)", max_abs=MAX_PX, unit=" px")
     if np.linalg.norm(seg[1] - seg[0]) < 1e-9 * max(1.0, float(np.abs(seg).max())):
         raise ValueError(
             f"{name}: the two pixels {seg[0].tolist()} coincide and do not define a line; "
             "click two distinct points along the edge"
         )
     return seg
+
+
+def _no_pixel(X: np.ndarray, name: str):
+    """ValueError for points whose pixel is not finite: NaN/inf/huge input, or on the principal plane."""
+    finite_array(X, X.shape, name)
+    raise ValueError(
+        f"{name} has a point on the camera's principal plane (depth 0) or too far out "
+        f"(max |value| {float(np.abs(X).max()):.3g} m): it has no pixel"
+    )
 
 
 class Camera:
@@ -156,17 +156,26 @@ class Camera:
         """
         X = np.asarray(X_world, dtype=float)
         h = X @ self._C[:, :3].T + self._C[:, 3]
-        return h[..., :2] / h[..., 2:3]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            uv = h[..., :2] / h[..., 2:3]
+        if not np.isfinite(uv).all():
+            _no_pixel(X, "X_world")
+        return uv
 
     def depth(self, X_world: np.ndarray) -> np.ndarray:
         """Depth s (metres along the optical axis, > 0 in front): (N, 3) → (N,), (3,) → float."""
         X = np.asarray(X_world, dtype=float)
-        s = X @ self._C[2, :3] + self._C[2, 3]
+        with np.errstate(over="ignore", invalid="ignore"):
+            s = X @ self._C[2, :3] + self._C[2, 3]
+        if not np.isfinite(s).all():
+            finite_array(X, X.shape, "X_world")
+            raise ValueError(f"X_world is too large to project (max |value| {float(np.abs(X).max()):.3g} m)")
         return float(s) if X.ndim == 1 else s
 
     def project_obj(self, T_world_obj: np.ndarray, X_obj: np.ndarray) -> np.ndarray:
         """Pixels (N, 2) of object points X_obj (N, 3) when the object is at ``T_world_obj``."""
-        return self.project(np.asarray(X_obj, dtype=float) @ T_world_obj[:3, :3].T + T_world_obj[:3, 3])
+        T = finite_array(T_world_obj, (4, 4), "T_world_obj")
+        return self.project(np.asarray(X_obj, dtype=float) @ T[:3, :3].T + T[:3, 3])
 
     def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Back-projected rays of pixels: (origin (3,), unit directions (N, 3)) pointing forward."""
@@ -178,7 +187,7 @@ class Camera:
     def backproject(self, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
         """World points (N, 3) at depth s (metres, (N,) or scalar) along the rays of pixels uv (N, 2)."""
         uv = as_uv(uv)
-        s = np.broadcast_to(np.asarray(depth, dtype=float), (len(uv),))
+        s = np.broadcast_to(finite_array(depth, np.shape(depth), "depth", max_abs=MAX_M, unit=" m"), (len(uv),))
         h = np.column_stack([uv, np.ones(len(uv))]) * s[:, None]
         return (h - self._C[:, 3]) @ self._M_inv.T
 

@@ -338,7 +338,7 @@ def model_box(
             "planes": planes,
             **details_fused,
         },
-    )
+    ).check_finite()
 
 
 def _sgn(key: tuple[int, int]) -> str:

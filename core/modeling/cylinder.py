@@ -30,6 +30,7 @@ import numpy as np
 
 from ..brep import BRep, Revolution
 from ..camera import Camera, as_segment
+from ..checks import positive_scale
 from ..geometry import Line, Plane, bisecting_planes, make_plane
 from ..rangefinder import RangeFinderSpec, RangeScan
 from ..transforms import check_T, make_T
@@ -440,8 +441,7 @@ def model_cylinder(
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if method in ("tangential", "bisecting") and silhouettes_uv is None:
         raise ValueError(f"method {method!r} needs the two silhouettes (silhouettes_uv, shape (2, 2, 2))")
-    if not sigma_px > 0:
-        raise ValueError(f"sigma_px must be positive, got {sigma_px}")
+    sigma_px = positive_scale(sigma_px, "sigma_px", " px")
     data = reduce_cylinder_data(
         camera, silhouettes_uv=silhouettes_uv, scans=scans, T_world_turret=T_world_turret, spec=spec,
         support=support, axis_dir=axis_dir, cone=cone, jump_m=jump_m,
@@ -449,8 +449,8 @@ def model_cylinder(
     if method == "fused":
         from .fused import fit_fused
 
-        return fit_fused(data, sigma_px=sigma_px)
-    return _model_paper(data, method, sigma_px)
+        return fit_fused(data, sigma_px=sigma_px).check_finite()
+    return _model_paper(data, method, sigma_px).check_finite()
 
 
 def _stage_one(data: CylinderData, method: str) -> _Ctx:

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import Camera, as_segment
-from ..geometry import Plane, PlaneFit, as_points, fit_plane_ols, fit_plane_tls, make_plane
+from ..checks import MAX_M, finite_array, positive_scale
+from ..geometry import Plane, PlaneFit, fit_plane_ols, fit_plane_tls, make_plane
 from .robust import ransac_plane
 from .small import interp_plane
 
@@ -43,8 +44,8 @@ def interpretation_plane_obs(camera: Camera, seg_uv: np.ndarray, sigma_px: float
     (central differences; the map is smooth at the scale of a pixel).
     """
     seg = as_segment(seg_uv)
-    if not sigma_px >= 0:
-        raise ValueError(f"sigma_px must be non-negative, got {sigma_px}")
+    if sigma_px != 0:  # 0: exact clicks (a zero covariance)
+        positive_scale(sigma_px, "sigma_px", " px")
     p = camera.interpretation_plane(seg)
     v0 = p.as_vector()
     J = np.zeros((4, 4))
@@ -67,8 +68,8 @@ def support_obs(support: Plane, sigma_m: float, label: str = "support") -> Plane
     """The support plane (a table top from the database) with offset noise σ (m), normal exact."""
     if not isinstance(support, Plane):
         raise ValueError(f"support must be a core.geometry.Plane, got {type(support).__name__}")
-    if not sigma_m >= 0:
-        raise ValueError(f"support_sigma_m must be non-negative, got {sigma_m}")
+    if sigma_m != 0:
+        positive_scale(sigma_m, "support_sigma_m", " m")
     p = make_plane(support.n, support.d)
     cov = np.zeros((4, 4))
     cov[3, 3] = sigma_m**2
@@ -121,11 +122,16 @@ def fit_face_plane(
         raise ValueError(f"face {label!r}: range points must have shape (N, 3), got {X.shape}")
     if len(X) < 3:
         raise ValueError(f"face {label!r}: a face plane needs at least 3 range points, got {len(X)}; aim the range finder at more points of the face")
-    X = as_points(X, f"face {label!r} range points")
+    X = finite_array(X, (None, 3), f"face {label!r} range points", max_abs=MAX_M, unit=" m")
     if covs is not None:
         covs = np.asarray(covs, dtype=float)
         if covs.shape != (len(X), 3, 3):
             raise ValueError(f"face {label!r}: covs must have shape ({len(X)}, 3, 3), got {covs.shape}")
+        finite_array(covs, (len(X), 3, 3), f"face {label!r}: covs", max_abs=MAX_M)
+    if sigma_m is not None:
+        sigma_m = positive_scale(sigma_m, "sigma_m", " m")
+    if threshold_m is not None:
+        threshold_m = positive_scale(threshold_m, "threshold_m", " m")
     if method not in ("tls", "ols"):
         raise ValueError(f"method must be 'tls' or 'ols', got {method!r}")
     inl = np.ones(len(X), bool)
@@ -143,6 +149,12 @@ def fit_face_plane(
                 "lie on one plane; aim the range finder at points spread over the face"
             )
     Xi = X[inl]
+    sv = np.linalg.svd(Xi - Xi.mean(axis=0), compute_uv=False)
+    if not sv[1] > 1e-6 * sv[0]:
+        raise ValueError(
+            f"face {label!r}: the {len(Xi)} range points lie on a line (or at one place): they fix no plane; "
+            "aim the range finder at points spread over the face"
+        )
     try:
         if covs is not None:
             first = fit_plane_tls(Xi)
@@ -173,4 +185,6 @@ def fit_face_plane(
         chosen: PlaneFit = ols
     else:
         chosen = tls
+    if not np.isfinite(chosen.cov).all():
+        raise ValueError(f"face {label!r}: the range points give no finite plane covariance; aim at points spread over the face")
     return FaceFit(PlaneObs(chosen.plane, chosen.cov, label), {"ols": ols, "tls": tls}, inl, method)

@@ -362,4 +362,4 @@ def model_polyhedron(
             "face_fits": {f: fit.fits for f, fit in fits.items()},
             "planes": planes,
         },
-    )
+    ).check_finite()

@@ -82,6 +82,19 @@ class ModelResult:
     details: dict[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
 
+    def check_finite(self) -> "ModelResult":
+        """The result itself when its pose, dimensions, σ, vertices and covariance are finite; else
+        ValueError (the measurements were too degenerate for a model: nothing NaN leaves the core)."""
+        bad = [k for k, v in {**self.dimensions, **{f"σ {k}": s for k, s in self.sigmas.items()}}.items() if not np.isfinite(v)]
+        bad += [k for k, a in (("pose", self.T_world_obj), ("vertices", self.vertices_world), ("covariance", self.cov))
+                if not np.isfinite(a).all()]
+        if bad:
+            raise ValueError(
+                f"the measurements give no finite {self.kind} (not finite: {', '.join(bad[:4])}); they are too "
+                "degenerate (points on a line, faces seen edge-on, clicks at one place): measure again"
+            )
+        return self
+
     def model_world(self) -> BRep:
         """The model with its pose baked in (world coordinates)."""
         return self.model.transformed(self.T_world_obj)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import Camera
-from ..checks import MAX_M, finite_array
+from ..checks import MAX_M, finite_array, positive_scale
 from ..transforms import check_T, pose_error
 from .p3l import p3l
 from .refine import RefineResult, _refine, check_options, click_sigmas
@@ -146,8 +146,10 @@ def estimate_pose(
         alone could not be refined.
     """
     check_options(camera, loss, huber_px, sigma_px)
-    if int(max_triples) < 1:
-        raise ValueError(f"max_triples must be at least 1, got {max_triples}")
+    if not (isinstance(max_triples, (int, np.integer)) and max_triples >= 1):
+        raise ValueError(f"max_triples must be an integer of at least 1, got {max_triples!r}")
+    if fit_rms_px is not None:
+        fit_rms_px = positive_scale(fit_rms_px, "fit_rms_px", " px")
     clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
     prior = None if T_prior is None else check_T(T_prior, "T_prior")
     if prior is not None:

@@ -638,15 +638,18 @@ def p3l(
         # The common case, validated in plain Python: every number finite (else their sum is not)
         # and no two coinciding points; as_clicks explains any problem it finds.
         # Sums of squares: NaN or inf when any number is, and under the bound only when every one is
-        # (core.checks: no product of the solver overflows).
+        # (core.checks: no product of the solver overflows); clicks ≥ 0.01 px and edges ≥ 1 µm long
+        # pass as_clicks's test of coinciding points for any coordinates within the bounds.
         segs, edges = segs_a.tolist(), edges_a.tolist()
         sq_px, sq_m, ok = 0.0, 0.0, True
         for (u1, v1), (u2, v2) in segs:
             sq_px += u1 * u1 + v1 * v1 + u2 * u2 + v2 * v2
-            ok = ok and (u1 != u2 or v1 != v2)
+            du, dv = u1 - u2, v1 - v2
+            ok = ok and du * du + dv * dv > 1e-4
         for (x1, y1, z1), (x2, y2, z2) in edges:
             sq_m += x1 * x1 + y1 * y1 + z1 * z1 + x2 * x2 + y2 * y2 + z2 * z2
-            ok = ok and (x1 != x2 or y1 != y2 or z1 != z2)
+            dx, dy, dz = x1 - x2, y1 - y2, z1 - z2
+            ok = ok and dx * dx + dy * dy + dz * dz > 1e-12
         clicks = None if ok and sq_px <= _MAX_PX2 and sq_m <= _MAX_M2 else as_clicks(segs_a, edges_a)
         pts_obj, pts_uv = [], []
     else:

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..brep import BRep
 from ..camera import Camera
+from ..checks import finite_array
 
 __all__ = ["plausibility"]
 
@@ -26,6 +27,7 @@ def plausibility(camera: Camera, model: BRep, T_world_obj: np.ndarray, rms_px: f
     that check. Reasons: the RMS above the limit, part of the object behind the camera, or its
     projection entirely outside the image.
     """
+    T_world_obj = finite_array(T_world_obj, (4, 4), "T_world_obj")
     if rms_px is not None and not rms_px <= max_rms_px:
         return f"RMS {rms_px:.1f} px, more than the {max_rms_px:.1f} px allowed"
     V = model.vertices

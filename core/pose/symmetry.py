@@ -15,7 +15,8 @@ import numpy as np
 
 from ..brep import BRep
 from ..calibration import kabsch
-from ..transforms import invert_T, pose_error
+from ..checks import finite_array
+from ..transforms import check_T, invert_T, pose_error
 
 __all__ = ["edge_symmetries", "symmetry_transforms", "nearest_twin"]
 
@@ -86,7 +87,14 @@ def nearest_twin(model: BRep, T_world_obj: np.ndarray, edges: np.ndarray, T_ref:
     symmetric pose keeps the hand assignments.
     """
     hand = hand or {}
-    edges = np.asarray(edges, int)
+    T_world_obj, T_ref = check_T(T_world_obj, "T_world_obj"), check_T(T_ref, "T_ref")
+    e = finite_array(edges, (None,), "edges")
+    E = len(model.edges)
+    if not np.all((e == np.round(e)) & (e >= 0) & (e < E)):
+        raise ValueError(f"edges must be model edge indices in [0, {E}), got {e[:6].tolist()}")
+    edges = e.astype(int)
+    if not all(isinstance(j, (int, np.integer)) and 0 <= j < len(edges) for j in hand):
+        raise ValueError(f"hand must map clicked segment indices in [0, {len(edges)}) to model edges, got {hand!r:.100}")
     best, best_deg = None, np.inf
     for p, S in symmetry_transforms(model):
         e2 = p[edges]  # under T S⁻¹, edge p[k] lies where edge k lay under T
