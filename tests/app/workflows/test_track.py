@@ -112,3 +112,26 @@ def test_pause_resume_restart_and_clicks_only_when_stopped(video_site):
         TrackObject(site, object_name="ghost")
     wf.cancel()
     assert wf.cancelled and "nothing was written" in wf.next_step
+
+
+def test_a_track_on_a_pose_the_image_does_not_support_is_lost_and_writes_nothing(video_site, scene, db):
+    """The tracker has drifted 3 cm along the box's long side (its long edges slide along
+    themselves): 55 % of the samples still find an edge, which the former rule (lost below 0.3)
+    called tracked; the support check (the model's edges 2.4 px from the image's) says lost, and
+    Track keeps its last good pose, says so and refuses Accept."""
+    from core.transforms import make_T
+
+    site = video_site
+    site.t["t"] = 138 / FPS
+    obj = site.object("parallelepiped")
+    n_changes = len(db.history())
+    wf = TrackObject(site, object_name="parallelepiped")
+    drifted = scene.body("parallelepiped").pose_at(138 / FPS) @ make_T(np.eye(3), [0.03, 0.0, 0.0])
+    wf.tracker.reset(drifted)
+    T, confidence, lost = wf.step()
+    assert lost and wf.lost and confidence > 0.3
+    assert "not supported by the image" in wf.message and "Re-initialise" in wf.next_step
+    assert np.allclose(wf.T_world_obj, obj.T_world_obj) and not wf.marks().tracked[0].chosen
+    with pytest.raises(WorkflowError, match="nothing written"):
+        wf.accept()
+    assert len(db.history()) == n_changes and db.get("parallelepiped").version == obj.version
