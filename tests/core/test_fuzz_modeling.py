@@ -10,7 +10,14 @@ from hypothesis import strategies as st
 from core.brep import BRep, Revolution
 from core.geometry import Plane
 from core.modeling import BoxFace, fit_face_plane, interpretation_plane_obs, model_box, model_cylinder, model_polyhedron
-from core.modeling.simulate import SimWorld, look_at_setup, simulate_box, simulate_polyhedron, simulate_revolution
+from core.modeling.simulate import (
+    SimWorld,
+    look_at_setup,
+    simulate_box,
+    simulate_box_scans,
+    simulate_polyhedron,
+    simulate_revolution,
+)
 from core.rangefinder import RangeScan
 from core.transforms import make_T, rot_z
 
@@ -22,6 +29,8 @@ CAM, T_WT = look_at_setup(np.array([0.0, 0.0, 0.07]), 1.4)
 T_BOX = make_T(rot_z(np.radians(35.0)), [0.0, 0.0, 0.0])
 FACES = simulate_box(CAM, SimWorld(T_WT, boxes=((T_BOX, (0.09, 0.094, 0.14)),)), T_BOX, np.array([0.09, 0.094, 0.14]),
                      np.random.default_rng(0), step_quantize=False)
+BOX_SCANS = simulate_box_scans(SimWorld(T_WT, boxes=((T_BOX, (0.09, 0.094, 0.14)),)), T_BOX, (0.09, 0.094, 0.14),
+                               np.random.default_rng(4))
 # A cylinder (conftest.cylinder_scene).
 CAM_C, T_WT_C = look_at_setup(np.array([0.0, 0.0, 0.083]), 1.3)
 SOL = Revolution(np.zeros(3), np.array([0.0, 0.0, 0.166]), 0.051, 0.051)
@@ -49,6 +58,21 @@ def test_model_box(k, points, edges, sup, sigma_px, method):
     faces = list(FACES)
     faces[k] = BoxFace(points, edges, None)
     res = call(model_box, CAM, faces, sup, sigma_px=sigma_px, method=method)
+    if res is not None:
+        _result(res)
+
+
+@FAST
+@given(st.integers(0, len(BOX_SCANS) - 1), mutated(BOX_SCANS[0].range_m), mutated(BOX_SCANS[0].pan_rad), mutated(T_WT),
+       st.booleans())
+def test_model_box_with_scans(k, rho, pan, T_wt, with_support):
+    scans = list(BOX_SCANS)
+    n = min(len(rho), len(pan))
+    scans[k] = call(RangeScan, pan[:n], BOX_SCANS[k].tilt_rad[:n], rho[:n])
+    if scans[k] is None:
+        return
+    sup = Plane(TABLE_N, 0.0) if with_support else None
+    res = call(model_box, CAM, FACES, sup, method="fused", scans=scans, T_world_turret=T_wt)
     if res is not None:
         _result(res)
 
