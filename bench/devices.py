@@ -12,7 +12,9 @@ is delivered when its last byte would have arrived. The "model" column is that a
   step    = (len("PPnnnn ") + 3 + len("A ") + 3 + len("PP ") + len("* nnnn\\r\\n") + len("TP ") + len("* nnnn\\r\\n")) × 10 / baud
             + 1 step / speed
             (absolute move, wait for the end, read the position back: what every scan beam does)
-  beam    = step + shot
+  check   = (len("PP ") + len("* nnnn\\r\\n") + len("TP ") + len("* nnnn\\r\\n")) × 10 / baud
+            (after the shot: is the head still there? a unit that power-cycled has homed)
+  beam    = step + shot + check
 "Measured" is wall-clock time through the driver (median and 90th percentile), on this shared
 machine (load average printed): the difference is the host's own cost (Python, threads, pty);
 the "∞" rows (no line model, no measurement time) show that cost alone.
@@ -51,6 +53,11 @@ SHOT_CHARS = len("s0g\r") + len("g0g+00014603\r\n")
 def step_chars(pan: int, tilt: int) -> int:
     """Characters on the line for a pan step: PP, A, and the read-back of both axes (PP?, TP?)."""
     return len(f"PP{pan} ") + 3 + len("A ") + 3 + len("PP ") + len(f"* {pan}\r\n") + len("TP ") + len(f"* {tilt}\r\n")
+
+
+def check_chars(pan: int, tilt: int) -> int:
+    """Characters on the line for the check after a shot that the head is still there (PP?, TP?)."""
+    return len("PP ") + len(f"* {pan}\r\n") + len("TP ") + len(f"* {tilt}\r\n")
 
 
 def face_target(scene):
@@ -168,7 +175,8 @@ def bench_scans(scene, target, beams, tmp, seed):
             X = scan.points(scene.turret.T_world_turret)[scan.hits]
             worst = float(surface_distance(scene, X).max() / scene.rangefinder.sigma_range_m) if len(X) else np.nan
             shot = delay + 0.005 * float(rho) + (SHOT_CHARS * 10 / rf_baud if rf_baud else 0.0)
-            move = (step_chars(*chain.tu.rad_to_steps(float(pan), float(tilt))) * 10 / tu_baud if tu_baud else 0.0) + 2 / scene.turret.speed_steps_s
+            steps = chain.tu.rad_to_steps(float(pan), float(tilt))
+            move = ((step_chars(*steps) + check_chars(*steps)) * 10 / tu_baud if tu_baud else 0.0) + 2 / scene.turret.speed_steps_s
             retries = chain.rf.stats["resyncs"] + chain.tu.stats["resyncs"]
             faults = len(chain.site.rangefinder.faults.applied) + len(chain.site.turret.faults.applied)
             rows.append((rf_baud or "∞", tu_baud or "∞", f"{delay * 1e3:.0f}", f"{rate:.0%}", 1 / (shot + move), len(scan) / elapsed,

@@ -13,8 +13,10 @@ drives the devices with it. Each function
 
 The turret's angles are whole steps. Every beam is recorded at the position the head reports
 after its move (``Turret.move_to_steps`` reads both axes back; after a reconnect it first puts
-the homed head back on both axes); a head that is not where the beam was planned raises
-a DeviceError: a scan never reports a beam at a position the head is not at.
+the homed head back on both axes) and checked again after the measurement (``Turret.still_at``:
+a unit that power-cycled meanwhile has homed; the beam is then measured again, once); a head
+that is not where the beam was planned raises a DeviceError: a scan never reports a beam at a
+position the head is not at.
 """
 
 from __future__ import annotations
@@ -115,6 +117,24 @@ def _move(turret: Turret, pan_steps: int, tilt_steps: int) -> tuple[int, int]:
     return int(got[0]), int(got[1])
 
 
+def _beam(turret: Turret, rangefinder: RangeFinder, shots: int, pan_steps: int, tilt_steps: int,
+          shoot=None) -> tuple[tuple[int, int], object]:
+    """Move to (pan, tilt) steps, measure, and check that the head is still there (a unit that power-cycled
+    during the measurement has homed): ((pan, tilt) reported, the measurement). Measured again once
+    when the head moved; a DeviceError when it moved again."""
+    shoot = shoot or (lambda: _shoot(rangefinder, shots))
+    for _ in range(2):
+        got = _move(turret, pan_steps, tilt_steps)
+        m = shoot()
+        if turret.still_at(*got):
+            return got, m
+    raise DeviceError(
+        f"turret: the head left {pan_steps}, {tilt_steps} steps during the measurement twice (is its power or cable loose?); "
+        "the scan stopped so that no beam is recorded at the wrong place",
+        device="turret",
+    )
+
+
 def _shoot(rangefinder: RangeFinder, shots: int) -> RangeMeasurement | None:
     """n shots (None when every shot misses)."""
     try:
@@ -157,14 +177,17 @@ def measure_at_pixel(
             raise AcquisitionCancelled("aiming cancelled")
         iteration[0] += 1
         p_steps, t_steps = turret.rad_to_steps(pan_rad, tilt_rad)
-        p_steps, t_steps = _move(turret, p_steps, t_steps)
+
+        def one_shot():
+            try:
+                return rangefinder.measure()
+            except NoTargetError:
+                return None
+
+        (p_steps, t_steps), rho = _beam(turret, rangefinder, 1, p_steps, t_steps, one_shot)
         if abs(p_steps * turret.pan_step_rad - pan_rad) > 0.5 * turret.pan_step_rad + 1e-12 or \
                 abs(t_steps * turret.tilt_step_rad - tilt_rad) > 0.5 * turret.tilt_step_rad + 1e-12:
             raise DeviceError(f"turret: the head is at {p_steps}, {t_steps} steps, not at the aimed angles", device="turret")
-        try:
-            rho = rangefinder.measure()
-        except NoTargetError:
-            rho = None
         _report(progress, iteration[0], max_iter + 1, f"aiming at ({uv[0]:.1f}, {uv[1]:.1f}): iteration {iteration[0]}",
                 (pan_rad, tilt_rad, np.nan if rho is None else rho))
         return rho
@@ -181,9 +204,8 @@ def measure_at_pixel(
             rho = float(result.range_m)
             measurement = RangeMeasurement(rho, 0.0, np.array([rho]), np.array([False]), 1)
     else:
-        _move(turret, *turret.rad_to_steps(result.pan_rad, result.tilt_rad))
         _report(progress, max_iter, max_iter + 1, f"measuring {shots} shots")
-        measurement = _shoot(rangefinder, shots)
+        _, measurement = _beam(turret, rangefinder, shots, *turret.rad_to_steps(result.pan_rad, result.tilt_rad))
         rho = np.nan if measurement is None else measurement.range_m
     _report(progress, max_iter + 1, max_iter + 1, "done", (result.pan_rad, result.tilt_rad, rho))
     X = beam_point(T_world_turret, result.pan_rad, result.tilt_rad, rho)
@@ -246,8 +268,7 @@ def profile_scan(
     for i, p in enumerate(pan_steps):
         if cancel is not None and cancel.is_set():
             raise AcquisitionCancelled(f"profile scan cancelled after {i} of {n} beams", partial(i))
-        _move(turret, int(p), tilt_steps)  # both axes: the driver re-sends the tilt when it is not confirmed
-        m = _shoot(rangefinder, shots)
+        _, m = _beam(turret, rangefinder, shots, int(p), tilt_steps)  # both axes: the tilt is re-sent when not confirmed
         if m is not None:
             ranges[i], spreads[i] = m.range_m, m.spread_m
         _report(progress, i + 1, n, f"profile scan: beam {i + 1} of {n}", (p * step, tilts_rad, ranges[i]))
@@ -390,9 +411,8 @@ def face_patch_scan(
                 lam = lam_plane
         a_pan, a_tilt, _ = aim(T_world_turret, c + lam * rays[i])
         p_steps, t_steps = int(round(float(a_pan) / step_p)), int(round(float(a_tilt) / step_t))
-        p_steps, t_steps = _move(turret, p_steps, t_steps)
+        (p_steps, t_steps), m = _beam(turret, rangefinder, shots, p_steps, t_steps)
         pan[i], tilt[i] = p_steps * step_p, t_steps * step_t
-        m = _shoot(rangefinder, shots)
         if m is not None:
             ranges[i], spreads[i] = m.range_m, m.spread_m
             X = beam_point(T_world_turret, pan[i], tilt[i], ranges[i])

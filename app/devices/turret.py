@@ -281,6 +281,18 @@ class Turret(LineDriver):
         self._ensure_speed_known()
         return self._transact(self._read_position, what="position query", idempotent=True, deadline=self._deadline(timeout_s))
 
+    def still_at(self, pan: int, tilt: int, timeout_s: float | None = None) -> bool:
+        """True when one read of both axes gives (pan, tilt) steps: the head stayed there (e.g. during a
+        measurement). False when it is elsewhere — a unit that powered up in between homed itself —
+        or a read was garbled; the next move then sends both axes again."""
+        self._need_connected()
+        deadline = self._deadline(timeout_s)
+        here = self._transact(lambda dl: self._read_axes(), what="position check", idempotent=True, deadline=deadline)
+        if here != (int(pan), int(tilt)):
+            self._goal_confirmed = False
+            return False
+        return True
+
     def position_rad(self, timeout_s: float | None = None) -> tuple[float, float]:
         """Current (pan_rad, tilt_rad) in the core/rangefinder.py convention."""
         return self.steps_to_rad(*self.position_steps(timeout_s))

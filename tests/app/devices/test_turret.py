@@ -274,3 +274,15 @@ def test_nan_and_negative_times_and_angles_are_refused_before_anything_is_sent(b
     for options in ({"attempt_timeout_s": nan}, {"reconnect_timeout_s": nan}, {"motion_margin_s": nan}):
         with pytest.raises(ValueError):
             Turret(tu.url, **(FAST_DRIVER | options))
+
+
+def test_still_at_sees_a_unit_that_power_cycled_since_the_move(bench):
+    site, tu = bench
+    tu.move_to_steps(300, -200)
+    assert tu.still_at(300, -200)
+    site.turret.unplug(0.0)  # powers up again at once, homed; no reply was lost, the driver was not told
+    time.sleep(0.1)
+    assert not tu.still_at(300, -200)
+    site.turret.commands_seen.clear()
+    assert tu.move_to_steps(310, None) == (310, -200)  # the tilt is sent again
+    assert "TP-200" in site.turret.commands_seen and emulated_steps(site) == (310, -200)
