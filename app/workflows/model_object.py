@@ -564,31 +564,46 @@ class ModelObject(SnapMixin, Workflow):
                           "snaps": [None if sn is None else sn.record() for sn in self.silhouette_snaps]}
                 measurements = {"scans": [{"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m}
                                           for s in self.scans]}
-            try:
-                rec = self.site.add_object(
-                    self.object_name, r.kind, r.model, r.T_world_obj, dims=r.dimensions,
-                    sigmas={k: v for k, v in r.sigmas.items() if np.isfinite(v)}, status="modelled",
-                    method=f"model {r.kind} ({r.method})", client=self.client, clicks=clicks, measurements=measurements,
-                    residuals={k: np.asarray(v) for k, v in r.residuals.items()},
-                    note=f"hints: {'vertical' if self.vertical else 'oblique'}{', on the table' if self.on_table else ''}")
-            except ValueError as exc:
-                raise WorkflowError(f"the database refused the object: {exc}") from None
-            self.accepted = True
-            self.state = "accepted"
-            self.message = f"{self.object_name} added: {r.dimension_text('cm')}"
-            return rec
+            return self._write_model(
+                r, method=f"model {r.kind} ({r.method})", clicks=clicks, measurements=measurements,
+                note=f"hints: {'vertical' if self.vertical else 'oblique'}{', on the table' if self.on_table else ''}",
+                text=r.dimension_text("cm"))
+
+    def _write_model(self, r, *, method: str, clicks: Any, measurements: Any, note: str, text: str):
+        """Add the modelled object ``r`` (a ModelResult; one transaction, status "modelled") and close
+        the workflow (the lock held). Shared by the polyhedra's workflow."""
+        try:
+            rec = self.site.add_object(
+                self.object_name, r.kind, r.model, r.T_world_obj, dims=r.dimensions,
+                sigmas={k: v for k, v in r.sigmas.items() if np.isfinite(v)}, status="modelled", method=method,
+                client=self.client, clicks=clicks, measurements=measurements,
+                residuals={k: np.asarray(v) for k, v in r.residuals.items()}, note=note)
+        except ValueError as exc:
+            raise WorkflowError(f"the database refused the object: {exc}") from None
+        self.accepted = True
+        self.state = "accepted"
+        self.message = f"{self.object_name} added: {text}"
+        return rec
 
     # ------------------------------------------------------------------ display
-    def _step(self) -> Step:
+    def _common_step(self) -> tuple[Step | None, set]:
+        """What every modelling workflow's step shares: the step itself when finished or measuring,
+        else None and the controls enabled in any state (Cancel, Remove last, Refuse snap)."""
         if self.finished:
-            return self._finished_step()
+            return self._finished_step(), set()
         if self.progress is not None:
             return Step("measuring", f"Measuring… {self.progress_text}. " + "{cancel} stops it.", frozenset({"cancel"}),
-                        clicks=False)
+                        clicks=False), set()
         base = {"cancel"} | ({"remove_last"} if self._has_something() else set())
         snap, _ = self._last_snap()
         if snap is not None and snap.applied and self.pending is None:
             base.add("refuse_snap")
+        return None, base
+
+    def _step(self) -> Step:
+        done, base = self._common_step()
+        if done is not None:
+            return done
         devices = self.site.devices is not None
         no_dev = "" if devices else " (No range finder and turret are connected: restart mcit serve with devices to measure.)"
         if self.shape != "box":

@@ -169,6 +169,8 @@ class ModelPolyhedron(SnapMixin, Workflow):
     _live_points = ModelObject._live_points
     _acquiring = ModelObject._acquiring
     _measure_face = ModelObject._measure_face
+    _write_model = ModelObject._write_model
+    _common_step = ModelObject._common_step
     support_point = ModelObject.support_point
 
     def __init__(self, site, client: str = "operator", shape: str = "wedge", object_name: str | None = None,
@@ -514,31 +516,15 @@ class ModelPolyhedron(SnapMixin, Workflow):
                       "snaps": [[None if sn is None else sn.record() for sn in f["snaps"]] for f in measured],
                       "frame": self.frame_record()}
             measurements = {"faces": [f["points"] for f in measured]}
-            try:
-                rec = self.site.add_object(
-                    self.object_name, r.kind, r.model, r.T_world_obj, dims=r.dimensions,
-                    sigmas={k: v for k, v in r.sigmas.items() if np.isfinite(v)}, status="modelled",
-                    method=f"model {self.shape} ({r.method})", client=self.client, clicks=clicks,
-                    measurements=measurements, residuals={k: np.asarray(v) for k, v in r.residuals.items()},
-                    note=f"shape: {self.shape}, on the table")
-            except ValueError as exc:
-                raise WorkflowError(f"the database refused the object: {exc}") from None
-            self.accepted = True
-            self.state = "accepted"
-            self.message = f"{self.object_name} added: {self._dimension_text(r)}"
-            return rec
+            return self._write_model(r, method=f"model {self.shape} ({r.method})", clicks=clicks,
+                                     measurements=measurements, note=f"shape: {self.shape}, on the table",
+                                     text=self._dimension_text(r))
 
     # ------------------------------------------------------------------ display
     def _step(self) -> Step:
-        if self.finished:
-            return self._finished_step()
-        if self.progress is not None:
-            return Step("measuring", f"Measuring… {self.progress_text}. " + "{cancel} stops it.", frozenset({"cancel"}),
-                        clicks=False)
-        base = {"cancel"} | ({"remove_last"} if self._has_something() else set())
-        snap, _ = self._last_snap()
-        if snap is not None and snap.applied and self.pending is None:
-            base.add("refuse_snap")
+        done, base = self._common_step()
+        if done is not None:
+            return done
         if self.result is not None:
             return Step("review", f"{self._dimension_text(self.result)}. " + "{accept} to add it, or add faces and "
                         "{solve} again.", frozenset(base | {"solve", "accept"}))
