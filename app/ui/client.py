@@ -222,6 +222,11 @@ class ClientPanel:
         if wf is None or wf.finished:
             return
         gui = self.client.gui
+        enabled = wf.current_step().enabled  # the shortcuts live from the start (no gap until the next redraw)
+        live_keys: dict[str, str] = {}
+        for c in wf.controls:
+            if c.key is not None and c.action in enabled:
+                live_keys.setdefault(c.key, c.action)
         with self.gui_actions:
             for c in wf.controls:
                 if c.kind == "choice":
@@ -233,7 +238,7 @@ class ClientPanel:
                     handle.on_click(self._guard(functools.partial(self._press_event, c.action)))
                     if c.key is not None:
                         cmd = gui.add_command(f"{wf.title}: {c.label}", hotkey=c.key, description=c.hint or None,
-                                              disabled=True)
+                                              disabled=live_keys.get(c.key) != c.action)
                         cmd.on_trigger(self._guard(functools.partial(self._press_event, c.action)))
                         self.commands.append(cmd)
                         self._command_of[c.action] = cmd
