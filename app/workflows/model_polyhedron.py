@@ -30,17 +30,17 @@ with its clicks, range points and the frame the clicks were made on, in one tran
 from __future__ import annotations
 
 import itertools
-import threading
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from core.brep import BRep
-from core.rangefinder import RangeFinderSpec, beam_point_cov
+from core.rangefinder import beam_point_cov
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
-from .model_object import MAX_SNAP_MOVE_PX, MIN_SEGMENT_PX, WEAK_SIGMA_MM, ModelObject, table_support
+from .model_object import MAX_SNAP_MOVE_PX, MIN_SEGMENT_PX, WEAK_SIGMA_MM, table_support
+from .range_modelling import RangeModelling
 from .snapping import SnapMixin, snap_marks
 
 __all__ = ["ModelPolyhedron", "PolyShape", "POLY_SHAPES"]
@@ -145,7 +145,7 @@ class _FaceData:
     segs: np.ndarray
 
 
-class ModelPolyhedron(SnapMixin, Workflow):
+class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
     name = "model_polyhedron"
     title = "Model polyhedron"
     actions = ("click", "add_segment", "remove_last", "measure", "next_face", "solve", "accept", "cancel",
@@ -159,19 +159,6 @@ class ModelPolyhedron(SnapMixin, Workflow):
         Control("remove_last", "Remove last", "backspace", hint="Undo the last click, measurement or face"),
         CANCEL,
     )
-
-    # The range acquisition is Model object's (progress text and bar, beam spot, live points, device
-    # faults and cancels said to the operator): the same methods, not a copy.
-    _devices = ModelObject._devices
-    _report = ModelObject._report
-    _progress = ModelObject._progress
-    _clear_live = ModelObject._clear_live
-    _live_points = ModelObject._live_points
-    _acquiring = ModelObject._acquiring
-    _measure_face = ModelObject._measure_face
-    _write_model = ModelObject._write_model
-    _common_step = ModelObject._common_step
-    support_point = ModelObject.support_point
 
     def __init__(self, site, client: str = "operator", shape: str = "wedge", object_name: str | None = None,
                  spacing_px: float | None = None, snap: bool = True, on_table: bool = True):
@@ -203,17 +190,10 @@ class ModelPolyhedron(SnapMixin, Workflow):
         self.pending: np.ndarray | None = None
         self.result = None
         self.assignment: list[dict] = []  # per measured face: {"face": topology face, "edges": [(i, j) per side]}
-        self.progress: float | None = None
-        self.progress_text = ""
-        self.live_points_world: list[np.ndarray] = []
-        self._live_lock = threading.Lock()
+        self._init_acquisition()
         self.state = "click"
 
     # ------------------------------------------------------------------ clicks
-    @staticmethod
-    def _new_face() -> dict[str, Any]:
-        return {"segs": [], "snaps": [], "points": None, "covs": None, "scan": None, "good": None}
-
     def _last_snap(self):
         face = self.faces[-1]
         if face["points"] is not None or not face["segs"]:
@@ -286,9 +266,6 @@ class ModelPolyhedron(SnapMixin, Workflow):
             self.faces.append(self._new_face())
 
     # ------------------------------------------------------------------ measurement
-    def _spec(self) -> RangeFinderSpec:
-        return self.site.scene.rangefinder
-
     def measure(self):
         """Range points on the current face, inside its clicked outline (face patch scan)."""
         return self._measure_face()

@@ -1,0 +1,216 @@
+"""What the range-finder modelling workflows share: faces measured by a patch of beams inside their
+clicked sides, the acquisition's progress, beam spot and live points, device faults and cancels said
+to the operator, the model's write, and the steps every modelling workflow has.
+
+``RangeModelling`` is a mixin of ``ModelObject`` (boxes, cylinders, cones) and ``ModelPolyhedron``
+(wedges, pyramids). It uses their ``site``, ``lock``, ``cancel_event``, ``faces`` (one dict per face:
+"segs", "snaps", "points" (N, 3) world metres, "covs" (N, 3, 3) m², "scan", "good"), ``spacing_px``,
+``object_name`` and their ``_has_something()`` / ``_last_snap()``; ``_init_acquisition()`` sets its own state.
+"""
+
+from __future__ import annotations
+
+import threading
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+
+from core.rangefinder import RangeFinderSpec, beam_point, beam_point_cov
+
+from .base import Cancelled, Step, WorkflowError
+
+__all__ = ["RangeModelling"]
+
+
+class RangeModelling:
+    """Range-finder measurements and the model's write for a modelling workflow (module docstring)."""
+
+    def _init_acquisition(self) -> None:
+        """The acquisition's state: progress (0..1 or None), its text, and the range points measured so
+        far (world, metres; one per returned beam, appended from the acquiring thread under their own
+        lock, drawn by ``marks()`` while it runs)."""
+        self.progress: float | None = None
+        self.progress_text = ""
+        self.live_points_world: list[np.ndarray] = []
+        self._live_lock = threading.Lock()
+
+    @staticmethod
+    def _new_face() -> dict[str, Any]:
+        return {"segs": [], "snaps": [], "points": None, "covs": None, "scan": None, "good": None}
+
+    def _devices(self):
+        devices = self.site.devices
+        if devices is None:
+            raise WorkflowError("no range finder and turret are connected: restart mcit serve with devices "
+                                "(emulated by default) to measure")
+        return devices
+
+    def _report(self, fraction: float, text: str, X: np.ndarray | None = None, keep: bool = True) -> None:
+        """One step of an acquisition (called on the acquiring thread): the bar at ``fraction``, the
+        text, the beam spot moved to the point X just measured (None: no return) and, with ``keep``,
+        X added to the live points; Cancelled when the operator cancelled."""
+        self.progress = float(fraction)
+        self.progress_text = text
+        if X is not None and np.all(np.isfinite(X)):
+            self.site.set_beam(X)
+            if keep:
+                with self._live_lock:
+                    self.live_points_world.append(np.asarray(X, float).copy())
+        if self.cancel_event.is_set():
+            raise Cancelled()
+
+    def _progress(self, T: np.ndarray, label: str, k: int = 0, parts: int = 1, aiming: bool = False):
+        """The ``progress`` callback of acquisition k (from 0) of ``parts``: "label · beam i of m" (a
+        report with done = 0, or any with ``aiming``: "label · aiming", its point not kept)."""
+
+        def report(p) -> None:
+            X = None if p.beam is None else beam_point(T, *p.beam)
+            if aiming or p.done == 0:
+                self._report(k / parts, f"{label} · aiming", X, keep=False)
+            else:
+                self._report((k + p.done / max(p.total, 1)) / parts, f"{label} · beam {p.done} of {p.total}", X)
+
+        return report
+
+    def _clear_live(self) -> None:
+        with self._live_lock:
+            self.live_points_world = []
+
+    def _live_points(self) -> np.ndarray:
+        """The live points so far, (L, 3)."""
+        with self._live_lock:
+            return np.array(self.live_points_world).reshape(-1, 3)
+
+    @contextmanager
+    def _acquiring(self, doing: str, again: str, refused: str):
+        """Around a device acquisition: a cancel → Cancelled, a device fault or a refused request
+        (ValueError) → WorkflowError saying what to do; the progress bar is cleared on failure."""
+        from app.devices.acquisition import AcquisitionCancelled
+        from app.devices.errors import DeviceError
+
+        try:
+            yield
+        except (AcquisitionCancelled, Cancelled):
+            self.progress = None
+            self._clear_live()
+            raise Cancelled() from None
+        except DeviceError as exc:
+            self.progress = None
+            self._clear_live()
+            raise WorkflowError(f"device fault while {doing}: {exc}. Check the devices and {again}") from None
+        except WorkflowError:
+            self.progress = None
+            self._clear_live()
+            raise
+        except ValueError as exc:
+            self.progress = None
+            self._clear_live()
+            raise WorkflowError(f"{refused}: {exc}") from None
+
+    def _measure_face(self):
+        """Range points on the current face (``self.faces[-1]``), inside its clicked outline: the turret
+        scans a patch of beams there; the face keeps its points, their covariances, the scan and
+        which beams gave points. Shared by the polyhedra's workflow."""
+        from app.devices.acquisition import face_patch_scan
+
+        with self.lock:
+            self._check_open()
+            segs = self.faces[-1]["segs"]
+            if self.faces[-1]["points"] is not None:
+                raise WorkflowError("this face is measured: click the sides of the next face, or Solve")
+            if len(segs) < 2:
+                raise WorkflowError(f"click at least 2 sides of this face first ({len(segs)} clicked)")
+            devices = self._devices()
+            ends = np.concatenate(segs)
+            centre = ends.mean(axis=0)
+            # The patch: the clicked sides' ends shrunk towards their centre, so that beams stay on the face.
+            poly = centre + 0.6 * (_convex_hull(ends) - centre)
+            q = np.roll(poly, -1, axis=0)
+            area = 0.5 * abs(float(np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])))  # shoelace
+            spacing = self.spacing_px or max(2.0, float(np.sqrt(area / 25.0)))
+            camera, T = self.site.camera, self.site.T_world_turret
+            self.cancel_event.clear()
+            self._clear_live()
+            self.progress, self.progress_text = 0.0, "face patch · aiming"
+        with self._acquiring("measuring", "Measure again", "cannot measure this face"):
+            scan = face_patch_scan(camera, T, devices.turret, devices.rangefinder, polygon_uv=poly, spacing_px=spacing,
+                                   depth_guess_m=float(camera.depth(self.support_point(centre))),
+                                   progress=self._progress(T, "face patch"), cancel=self.cancel_event)
+        with self.lock:
+            self.progress = None
+            self._clear_live()  # kept in the face below, or dropped with it
+            good = scan.hits & np.asarray(scan.meta.get("inside", scan.hits), bool)
+            if good.sum() < 3:
+                raise WorkflowError(f"only {int(good.sum())} of {len(scan)} beams came back from the face: no range "
+                                    "return; click the face's sides again (larger), or check the range finder")
+            X = scan.points(T)[good]
+            spec = self._spec()
+            covs = beam_point_cov(T, scan.pan_rad[good], scan.tilt_rad[good], scan.range_m[good], spec)
+            self.faces[-1].update(points=X, covs=covs, scan=scan, good=good)
+            self.site.set_beam(X[-1])
+            self.result = None
+            self.message = f"Face {len(self.faces)}: {len(X)} range points of {len(scan)} beams."
+            return scan
+
+    def support_point(self, uv: np.ndarray) -> np.ndarray:
+        """The table point seen at pixel uv (a depth guess for aiming), else a point 2 m away."""
+        cam = self.site.camera
+        o, d = cam.rays(np.asarray(uv, float).reshape(1, 2))
+        hit = self.site.raycast(o, d[0])
+        return hit.X_world if hit is not None else o + 2.0 * d[0]
+
+    def _spec(self) -> RangeFinderSpec:
+        """The range finder's noise model (the scene's: σ_ρ, limits, the turret's step)."""
+        return self.site.scene.rangefinder
+
+    def _write_model(self, r, *, method: str, clicks: Any, measurements: Any, note: str, text: str):
+        """Add the modelled object ``r`` (a ModelResult; one transaction, status "modelled") and close
+        the workflow (the lock held). Shared by the polyhedra's workflow."""
+        try:
+            rec = self.site.add_object(
+                self.object_name, r.kind, r.model, r.T_world_obj, dims=r.dimensions,
+                sigmas={k: v for k, v in r.sigmas.items() if np.isfinite(v)}, status="modelled", method=method,
+                client=self.client, clicks=clicks, measurements=measurements,
+                residuals={k: np.asarray(v) for k, v in r.residuals.items()}, note=note)
+        except ValueError as exc:
+            raise WorkflowError(f"the database refused the object: {exc}") from None
+        self.accepted = True
+        self.state = "accepted"
+        self.message = f"{self.object_name} added: {text}"
+        return rec
+
+    def _common_step(self) -> tuple[Step | None, set]:
+        """What every modelling workflow's step shares: the step itself when finished or measuring,
+        else None and the controls enabled in any state (Cancel, Remove last, Refuse snap)."""
+        if self.finished:
+            return self._finished_step(), set()
+        if self.progress is not None:
+            return Step("measuring", f"Measuring… {self.progress_text}. " + "{cancel} stops it.", frozenset({"cancel"}),
+                        clicks=False), set()
+        base = {"cancel"} | ({"remove_last"} if self._has_something() else set())
+        snap, _ = self._last_snap()
+        if snap is not None and snap.applied and self.pending is None:
+            base.add("refuse_snap")
+        return None, base
+
+
+def _cross2(a: np.ndarray, b: np.ndarray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+def _convex_hull(P: np.ndarray) -> np.ndarray:
+    """Convex hull (K, 2) of pixels (N, 2), counter-clockwise (monotone chain)."""
+    pts = sorted(map(tuple, np.asarray(P, float)))
+    if len(pts) <= 2:
+        return np.array(pts)
+
+    def half(points):
+        out: list = []
+        for p in points:
+            while len(out) >= 2 and _cross2(np.subtract(out[-1], out[-2]), np.subtract(p, out[-2])) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(pts), half(list(reversed(pts)))
+    return np.array(lower[:-1] + upper[:-1])
