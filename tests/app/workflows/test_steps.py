@@ -152,18 +152,16 @@ def test_update_pose_states_by_hand_and_by_auto_match(site, walk):
         wf2.click(uv[0] + 0.25 * (uv[1] - uv[0]))
         wf2.click(uv[0] + 0.75 * (uv[1] - uv[0]))
         walk.check(wf2)
-    try:
-        wf2.auto_match()
-    except WorkflowError:
-        pass  # no assignment found (without a frame): the state stays checkable
+    wf2.auto_match()  # four exact edges: the assignments that fit are shown
+    assert walk.check(wf2).name == "match"
+    wf2.confirm_match()
     walk.check(wf2)
-    if wf2.matches is not None:
-        wf2.confirm_match()
-        walk.check(wf2)
+    wf2.refine()
+    assert walk.check(wf2).name == "review"
     wf2.cancel()
     walk.check(wf2)
-    assert {"click_edge", "click_edge_end", "assign_edge", "candidates", "review", "click_point_model", "auto_click",
-            "auto_ready", "accepted", "cancelled"} <= walk.seen["update_pose"]
+    assert {"click_edge", "click_edge_end", "assign_edge", "candidates", "review", "refine_again", "click_point_model",
+            "auto_click", "auto_ready", "match", "accepted", "cancelled"} <= walk.seen["update_pose"]
 
 
 def test_model_object_states_box_and_cylinder(device_site, fast_scene, walk):
