@@ -201,6 +201,7 @@ class Workflow:
     actions: ClassVar[tuple[str, ...]] = ("cancel",)
     controls: ClassVar[tuple[Control, ...]] = (CANCEL,)  # what the panel shows, in order
     object_name: str | None = None  # the object the workflow is about (shown in its title), if any
+    obj: Any = None  # a pose workflow's snapshot of that object (SiteObject) it started from
     progress: float | None = None  # a measurement under way: 0..1 (the panel's progress bar), else None
     progress_text: str = ""
     snapping: ClassVar[bool] = False  # True: takes a ``snap`` option (clicks snapped to the image)
@@ -236,9 +237,10 @@ class Workflow:
     # ------------------------------------------------------------------ writing a pose
     def _write_pose(self, obj: Any, T_world_obj: np.ndarray, cov: Any, *, todo: str, **record: Any) -> tuple[Any, Any]:
         """``site.update_pose`` from the snapshot ``obj`` the workflow started on. When the object
-        changed meanwhile but not its pose or model (e.g. its status: marked stale, an undo of that),
-        the new pose is as valid as before: it is written over the fresh snapshot. Otherwise nothing
-        is written and WorkflowError says who changed it and ``todo``. Returns (record, snapshot used)."""
+        changed meanwhile but not its pose or model (e.g. an undo of a status), the new pose is as
+        valid as before: it is written over the fresh snapshot. Marked stale meanwhile: said, nothing
+        written, and ``self.obj`` becomes the fresh snapshot (a second Accept writes). Moved: nothing
+        is written and WorkflowError says who moved it and ``todo``. Returns (record, snapshot used)."""
         from app.db import ConflictError
 
         try:
@@ -249,13 +251,21 @@ class Workflow:
             except KeyError:
                 raise WorkflowError(f"{obj.name} was removed from the database meanwhile: nothing was written") from None
             same_model = fresh.model is obj.model or np.array_equal(fresh.model.vertices, obj.model.vertices)
-            if same_model and np.allclose(fresh.T_world_obj, obj.T_world_obj, rtol=0.0, atol=1e-12):
+            same_pose = same_model and np.allclose(fresh.T_world_obj, obj.T_world_obj, rtol=0.0, atol=1e-12)
+            last = self.site.db.history(obj.name, limit=1)
+            who = f" by {last[-1].client}" if last else ""
+            if same_pose and fresh.status == "stale" and obj.status != "stale":
+                # Someone saw it move since this workflow started: maybe again, after the frame clicked on.
+                # Said, not written; a second Accept writes over the fresh snapshot (the operator has looked).
+                self.obj = fresh
+                raise WorkflowError(f"{obj.name} was marked stale{who} since you started: it may have moved after the "
+                                    "frame you clicked on. Nothing was written; check the video, then Accept again to "
+                                    f"write your pose, or {todo[0].lower() + todo[1:]}") from None
+            if same_pose:
                 try:
                     return self.site.update_pose(fresh, T_world_obj, cov, client=self.client, **record), fresh
                 except ConflictError as again:
                     exc = again
-            last = self.site.db.history(obj.name, limit=1)
-            who = f" by {last[-1].client}" if last else ""
             raise WorkflowError(f"{obj.name} was moved{who} since you started (version {exc.expected_version} → "
                                 f"{exc.actual_version}): nothing was written. {todo}") from None
         except ValueError as exc:

@@ -404,8 +404,8 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     op_a.report()
     _announced(b, f"{who_a} undid change #{change.id}")
     # Meanwhile another writer (here a second connection, as `mcit db` would be) moves the box: B's
-    # Accept on its old snapshot writes nothing and says who moved it. (A change of status alone —
-    # A's Mark stale and its undo — leaves B's pose valid: it would have been written over them.)
+    # Accept on its old snapshot writes nothing and says who moved it. (A's Mark stale, undone since,
+    # leaves B's pose valid; had it stayed stale, B would be told and asked to Accept again.)
     from app.db import Database
 
     other = Database.open(ui.db.path)

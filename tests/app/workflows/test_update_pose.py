@@ -358,8 +358,8 @@ def test_an_edge_added_after_refine_is_assigned_on_the_refined_pose(site):
 
 
 def test_accept_survives_a_status_change_but_not_a_move(site):
-    """Another operator's Mark stale (the status only) leaves the clicked pose valid: it is written;
-    another operator's move is a conflict: nothing written, who moved it is said."""
+    """Another operator's Mark stale: said (it may have moved again after the clicked frame), nothing
+    written; a second Accept writes over it. Another operator's move: nothing written, who moved it."""
     obj = site.object("parallelepiped")
     T_true = _moved(obj.T_world_obj, 10.0, 0.02, 0.0)
     edges = _visible_edges(site, obj.model, T_true)
@@ -367,7 +367,11 @@ def test_accept_survives_a_status_change_but_not_a_move(site):
     _operator_clicks(wf, site, T_true, edges[:5], np.random.default_rng(5), sigma_px=0.2)
     wf.refine()
     site.set_status("parallelepiped", "stale", client="bob")
-    rec = wf.accept()
+    n = len(site.db.history("parallelepiped"))
+    with pytest.raises(WorkflowError, match="marked stale by bob since you started.*Accept again"):
+        wf.accept()
+    assert len(site.db.history("parallelepiped")) == n and not wf.accepted
+    rec = wf.accept()  # the operator has looked: the second Accept writes
     assert rec.status == "known" and pose_error(rec.T_world_obj, T_true)[0] < 1.0
     wf2 = UpdatePose(site, client="alice", object_name="parallelepiped", snap=False)
     _operator_clicks(wf2, site, T_true, edges[:5], np.random.default_rng(6), sigma_px=0.2)
