@@ -222,11 +222,7 @@ class ClientPanel:
         if wf is None or wf.finished:
             return
         gui = self.client.gui
-        enabled = wf.current_step().enabled  # the shortcuts live from the start (no gap until the next redraw)
-        live_keys: dict[str, str] = {}
-        for c in wf.controls:
-            if c.key is not None and c.action in enabled:
-                live_keys.setdefault(c.key, c.action)
+        live_keys = _live_shortcuts(wf.controls, wf.current_step().enabled)  # live from the start, no gap
         with self.gui_actions:
             for c in wf.controls:
                 if c.kind == "choice":
@@ -723,11 +719,7 @@ class ClientPanel:
             return
         busy = self.worker is not None and self.worker.is_alive()
         applies = {c.action for c in wf.controls if c.action in step.enabled and not (busy and c.action != "cancel")}
-        keyed: dict[str, str] = {}  # key → the action its shortcut triggers now
-        for c in wf.controls:
-            if c.key is not None and (c.action in applies or c.key not in keyed):
-                if c.action in applies or not any(o.key == c.key and o.action in applies for o in wf.controls):
-                    keyed.setdefault(c.key, c.action)
+        keyed = _live_shortcuts(wf.controls, applies)
         for c in wf.controls:
             handle = self.controls.get(c.action)
             if handle is None:
@@ -773,6 +765,20 @@ class ClientPanel:
     def set_status(self, text: str) -> None:
         if self.gui_status.content != text:
             self.gui_status.content = text
+
+
+def _live_shortcuts(controls, applies) -> dict[str, str]:
+    """key → the action its shortcut triggers now: of the controls sharing a key (Pause/Resume), the
+    first that applies; a key whose controls all are hidden stays live on the first of them, so that
+    pressing it says why it does not apply (feedback)."""
+    live: dict[str, str] = {}
+    for c in controls:
+        if c.key is not None and c.action in applies:
+            live.setdefault(c.key, c.action)
+    for c in controls:
+        if c.key is not None:
+            live.setdefault(c.key, c.action)
+    return live
 
 
 def _sentence(text: str) -> str:
