@@ -124,23 +124,29 @@ def assert_prompt_controls(page, timeout_s: float = 5.0) -> list[str]:
     """Every control the instruction names is a visible, enabled button (or chooser) on the page.
 
     Returns the labels checked. The prompt's named controls come from the workflow's declared step;
-    this checks that the page shows them (the panel hides the controls that do not apply)."""
-    labels = prompt_controls(page.panel)
-    for label in labels:
-        deadline = time.monotonic() + timeout_s
-        while True:
-            button = page.get_by_role("button", name=label).first
-            try:
-                if button.is_visible() and button.is_enabled():
-                    break
-            except Exception:  # noqa: BLE001 - not rendered yet
-                pass
-            if page.get_by_text(label, exact=True).first.is_visible():  # a chooser's label
-                break
-            if time.monotonic() > deadline:
-                raise AssertionError(f"the instruction names {label!r} but the page shows no such enabled control")
-            time.sleep(0.1)
-    return labels
+    this checks that the page shows them (the panel hides the controls that do not apply). The step
+    is read again on every try: a click sent just before may not have reached the workflow when the
+    check starts, and the step it leads to names other controls."""
+
+    def shown(label: str) -> bool:
+        button = page.get_by_role("button", name=label).first
+        try:
+            if button.is_visible() and button.is_enabled():
+                return True
+        except Exception:  # noqa: BLE001 - not rendered yet
+            pass
+        return page.get_by_text(label, exact=True).first.is_visible()  # a chooser's label
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        labels = prompt_controls(page.panel)
+        missing = [label for label in labels if not shown(label)]
+        if not missing and prompt_controls(page.panel) == labels:  # the step did not change meanwhile
+            return labels
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the instruction names {missing[0] if missing else labels!r} but the page shows "
+                                 "no such enabled control")
+        time.sleep(0.1)
 
 
 def press(page, label: str, timeout_ms: int = 5000) -> None:
