@@ -21,9 +21,9 @@ from ..brep import BRep
 from ..camera import Camera, as_segment
 from ..geometry import Plane, angle_between_planes
 from ..rangefinder import RangeFinderSpec, RangeScan
-from ..transforms import check_T, exp_so3, log_so3, make_T
+from ..transforms import check_T, exp_so3, make_T, skew
 from .box_scans import BoxScans, assign_returns, associate_tangents, reduce_box_scans, tangent_distances
-from .lm import huber_weights, levenberg_marquardt
+from .lm import huber_weights, levenberg_marquardt, numeric_jacobian
 from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs, support_obs
 from .result import ModelResult
 from .vertices import solve_vertices
@@ -60,6 +60,15 @@ _CORNER_UNIT = box_corner_signs() * [0.5, 0.5, 0.5] + [0.0, 0.0, 0.5]  # corner 
 def _corner_offsets(dims: np.ndarray) -> np.ndarray:
     """Corners (8, 3) in the box frame (origin at the centre of the bottom face)."""
     return _CORNER_UNIT * np.asarray(dims)
+
+
+def _so3_right_jacobian(w: np.ndarray) -> np.ndarray:
+    """J_r(w) (3, 3): exp(w + δ) ≈ exp(w) exp(J_r(w) δ) for a small δ."""
+    th = float(np.linalg.norm(w))
+    K = skew(w)
+    if th < 1e-6:
+        return np.eye(3) - 0.5 * K + K @ K / 6.0
+    return np.eye(3) - (1 - np.cos(th)) / th**2 * K + (th - np.sin(th)) / th**3 * K @ K
 
 
 def _box_axes(face_normals: list[np.ndarray], support: Plane | None) -> np.ndarray:
@@ -496,13 +505,7 @@ def _fused_box(
         return np.concatenate([pts_m / sig, edges_m / pts["sig_t"], click_px / sigma_px])
 
     def jacobian(th):
-        r0 = residuals(th)
-        J = np.empty((len(r0), len(th)))
-        for k in range(len(th)):
-            e = np.zeros(len(th))
-            e[k] = 1e-7
-            J[:, k] = (residuals(th + e) - r0) / 1e-7
-        return J
+        return numeric_jacobian(residuals, th, 1e-7)
 
     th, it, passes = th0, 0, 0
     for passes in range(1, 4):
@@ -522,17 +525,17 @@ def _fused_box(
     R, t, dims = unpack(th)
     if np.any(dims <= 0):
         raise ValueError(f"the fused box fit gives a non-positive size {dims}: the clicks contradict the range points")
-    # Covariance of (dims, t, small rotation in the box frame), the order of the planes' result.
-    def qvec(x):
-        Rx, tx, dx = unpack(x)
-        return np.concatenate([dx, tx, log_so3(R.T @ Rx)])
-
-    G = np.empty((9, len(th)))
-    q0 = qvec(th)
-    for k in range(len(th)):
-        e = np.zeros(len(th))
-        e[k] = 1e-7
-        G[:, k] = (qvec(th + e) - q0) / 1e-7
+    # Covariance of (dims, t, small rotation in the box frame), the order of the planes' result:
+    # their derivatives with respect to θ (analytic). On the support θ = (turn about z, shift along
+    # R0's x and y, dims); else (rotation vector w of R0 exp(w), t, dims), whose small rotation
+    # log(Rᵀ R0 exp(w + δ)) ≈ J_r(w) δ (SO(3)'s right Jacobian).
+    G = np.zeros((9, len(th)))
+    G[0:3, -3:] = np.eye(3)
+    if on_support:
+        G[3:6, 1], G[3:6, 2], G[8, 0] = R0[:, 0], R0[:, 1], 1.0
+    else:
+        G[3:6, 3:6] = np.eye(3)
+        G[6:9, 0:3] = _so3_right_jacobian(th[:3])
     cov = G @ cov_th @ G.T
     details = {"fused_iterations": it, "fused_residuals_sigma": r}
     if scans is not None:

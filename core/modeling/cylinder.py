@@ -34,7 +34,8 @@ from ..checks import positive_scale
 from ..geometry import Line, Plane, bisecting_planes, make_plane
 from ..rangefinder import RangeFinderSpec, RangeScan
 from ..transforms import check_T, make_T
-from .profile import ProfileFit, axis_basis, fit_profile, front_plane
+from .lm import numeric_jacobian
+from .profile import ProfileFit, axis_basis, fit_profile, front_plane, front_plane_jacobian
 from .result import ModelResult
 from .returns import Returns, concat_returns
 from .scans import segment_scan
@@ -508,16 +509,8 @@ def _model_paper(data: CylinderData, method: str, sigma_px: float) -> ModelResul
         prof = ctx.profile
         t_ref = float(np.mean(ctx.t_sections))
 
-        def p3_vec(params):
-            return front_plane(prof, data.rf_origin, t_ref, params).as_vector()
-
-        v0 = p3_vec(prof.params)
-        Jp = np.zeros((4, len(prof.params)))
-        for i in range(len(prof.params)):
-            h = 1e-7
-            e = np.zeros(len(prof.params))
-            e[i] = h
-            Jp[:, i] = (p3_vec(prof.params + e) - p3_vec(prof.params - e)) / (2 * h)
+        v0 = front_plane(prof, data.rf_origin, t_ref).as_vector()
+        Jp = front_plane_jacobian(prof, data.rf_origin, t_ref)
         z_parts.append(v0)
         Sz_blocks.append(Jp @ prof.cov @ Jp.T)
     z = np.concatenate([np.asarray(p, dtype=float).reshape(-1) for p in z_parts])
@@ -528,15 +521,11 @@ def _model_paper(data: CylinderData, method: str, sigma_px: float) -> ModelResul
         i += len(B)
     sol = _solve_paper(z, ctx)
     q0 = _solid_vector(sol, data.cone)
-    J = np.zeros((len(q0), len(z)))
     scale = np.sqrt(np.maximum(np.diag(Sz), 1e-30))
-    for j in range(len(z)):
-        if scale[j] <= 1e-15:
-            continue
-        h = 1e-4 * scale[j]  # forward differences: the map is smooth on the scale of σ
-        e = np.zeros(len(z))
-        e[j] = h
-        J[:, j] = (_solid_vector(_solve_paper(z + e, ctx), data.cone) - q0) / h
+    # Forward differences (the construction has no derivative at hand): the map is smooth on the
+    # scale of σ; an input with no spread gets no column.
+    step = np.where(scale <= 1e-15, 0.0, 1e-4 * scale)
+    J = numeric_jacobian(lambda x: _solid_vector(_solve_paper(x, ctx), data.cone), z, step, f0=q0)
     cov_q = J @ Sz @ J.T
     residuals = {}
     if ctx.profile is not None:

@@ -24,7 +24,7 @@ import numpy as np
 from ..brep import Revolution
 from ..rangefinder import beam_direction
 from .cylinder import CylinderData, build_result, solve_paper
-from .lm import huber_weights, levenberg_marquardt
+from .lm import huber_weights, levenberg_marquardt, numeric_jacobian
 from .profile import axis_basis
 from .returns import MIN_INCIDENCE_COS, beam_gap, beam_gap_jacobian, incidence_cos, range_residuals
 
@@ -75,6 +75,29 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
         h = th[i]
         return p0, a, r0, r1, h
 
+    def unpack_jacobian(th):
+        """Derivatives of (p0 (3, n), a (3, n), r0 (n,), r1 (n,), h (n,)) with respect to th (analytic)."""
+        n = len(th)
+        dp0, da, dr0, dr1, dh = np.zeros((3, n)), np.zeros((3, n)), np.zeros(n), np.zeros(n), np.zeros(n)
+        i = 0
+        if free_axis:
+            a_raw = a0 + th[0] * e1 + th[1] * e2
+            norm = np.linalg.norm(a_raw)
+            a = a_raw / norm
+            P = (np.eye(3) - np.outer(a, a)) / norm
+            da[:, 0], da[:, 1] = P @ e1, P @ e2
+            i = 2
+        dp0[:, i], dp0[:, i + 1] = e1, e2
+        i += 2
+        if not on_support:
+            dp0[:, i] = a0
+            i += 1
+        dr0[i] = 1.0
+        dr1[i + 1 if cone else i] = 1.0
+        i += 2 if cone else 1
+        dh[i] = 1.0
+        return dp0, da, dr0, dr1, dh
+
     th0 = np.concatenate([np.zeros(2) if free_axis else [], np.zeros(2), [] if on_support else [0.0], radii0, [init["h"]]])
     ret_all = data.returns
     beams = data.tangents
@@ -86,10 +109,12 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
     p0i, ai, r0i, r1i, hi = unpack(th0)
     sig_gap = np.zeros(len(beams))
     for j, tb in enumerate(beams):
-        dg = []
-        for dpan, dtilt in ((1e-6, 0.0), (0.0, 1e-6)):
-            Dp = (beam_direction(tb.pan_rad + dpan, tb.tilt_rad + dtilt) @ T[:3, :3].T)[None]
-            dg.append((beam_gap(O, Dp, p0i, ai, r0i, (r1i - r0i) / hi)[0][0] - beam_gap(O, Dm[j : j + 1], p0i, ai, r0i, (r1i - r0i) / hi)[0][0]) / 1e-6)
+        def gap(angles):
+            D = (beam_direction(angles[0], angles[1]) @ T[:3, :3].T)[None]
+            return beam_gap(O, D, p0i, ai, r0i, (r1i - r0i) / hi)[0]
+
+        g0 = beam_gap(O, Dm[j : j + 1], p0i, ai, r0i, (r1i - r0i) / hi)[0]
+        dg = numeric_jacobian(gap, np.array([tb.pan_rad, tb.tilt_rad]), 1e-6, f0=g0)[0]
         sig_gap[j] = np.hypot(dg[0] * tb.sigma_pan_rad, dg[1] * tb.sigma_tilt_rad)
     sig_gap = np.maximum(sig_gap, 1e-9)
 
@@ -135,23 +160,13 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
         pred = np.concatenate([cam.project(gens[g]) for g in gen_idx])
         return ((clicks - pred) / sigma_px).reshape(-1)
 
-    def model8(th):
-        p0, a, r0, r1, h = unpack(th)
-        return np.concatenate([p0, a, [r0, (r1 - r0) / h]])
-
     def jacobian(th):
         """Analytic for the returns and tangent beams (through (p0, a, r0, k)), numeric for the clicks."""
         p0, a, r0, r1, h = unpack(th)
         k = (r1 - r0) / h
-        n = len(th)
-        M = np.zeros((8, n))
-        S = np.zeros((8, n))
-        m0, s0 = model8(th), silhouette_residuals(th)
-        for j in range(n):
-            e = np.zeros(n)
-            e[j] = 1e-7
-            M[:, j] = (model8(th + e) - m0) / 1e-7
-            S[:, j] = (silhouette_residuals(th + e) - s0) / 1e-7
+        dp0, da, dr0, dr1, dh = unpack_jacobian(th)
+        M = np.vstack([dp0, da, dr0, (dr1 - dr0) / h - (r1 - r0) / h**2 * dh])  # d(p0, a, r0, k)/dθ
+        S = numeric_jacobian(silhouette_residuals, th, 1e-7)
         blocks = [range_residuals(ret, p0, a, r0, k, jac=True)[1] @ M]
         if len(beams):
             blocks.append((beam_gap_jacobian(O, Dm, p0, a, r0, k) / sig_gap[:, None]) @ M)
@@ -175,16 +190,9 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
     cov_th = np.linalg.pinv(H, rcond=1e-14, hermitian=True)
     p0, a, r0, r1, h = unpack(th)
 
-    def qvec(t):
-        p, aa, q0, q1, hh = unpack(t)
-        radii = [q0, q1] if cone else [q0]
-        return np.concatenate([radii, [hh], p + 0.5 * hh * aa, aa])
-
-    G = np.zeros((len(qvec(th)), len(th)))
-    for j in range(len(th)):
-        e = np.zeros(len(th))
-        e[j] = 1e-7
-        G[:, j] = (qvec(th + e) - qvec(th - e)) / 2e-7
+    # (radii, h, mid-point p0 + h a / 2, a): their derivatives with respect to θ, analytic.
+    dp0, da, dr0, dr1, dh = unpack_jacobian(th)
+    G = np.vstack([dr0, *([dr1] if cone else []), dh, dp0 + 0.5 * (np.outer(a, dh) + h * da), da])
     cov_q = G @ cov_th @ G.T
     n_h = len(ret)
     resid = {

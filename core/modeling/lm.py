@@ -1,4 +1,5 @@
-"""A small Levenberg–Marquardt solver with a Huber loss (iteratively reweighted), for the fits.
+"""A small Levenberg–Marquardt solver with a Huber loss (iteratively reweighted), for the fits,
+and the one finite-difference Jacobian the modelling code uses where no analytic one is at hand.
 
 The problems here are small (3–8 parameters, a few hundred residuals) and their Jacobians are
 analytic: a plain loop is several times faster than scipy's general ``least_squares`` on them.
@@ -10,13 +11,45 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["huber_weights", "levenberg_marquardt"]
+__all__ = ["huber_weights", "levenberg_marquardt", "numeric_jacobian"]
 
 
 def huber_weights(r: np.ndarray, c: float) -> np.ndarray:
     """IRLS weights (N,) of the Huber loss with threshold c (residuals in σ): 1 inside, c/|r| outside."""
     a = np.abs(r)
     return np.where(a <= c, 1.0, c / np.maximum(a, 1e-300))
+
+
+def numeric_jacobian(
+    fun: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+    step: float | np.ndarray,
+    *,
+    central: bool = False,
+    f0: np.ndarray | None = None,
+) -> np.ndarray:
+    """Finite-difference Jacobian (m, n) of fun: x (n,) → (m,) at x, for maps with no analytic one.
+
+    step : the step of every parameter (a float), or of each (n,); a parameter whose step is 0
+    (no spread, or no influence) gets a zero column without calling fun. Forward differences
+    (fun(x + h e_j) − fun(x)) / h, reusing f0 = fun(x) when given, or with ``central``
+    (fun(x + h e_j) − fun(x − h e_j)) / 2h.
+    """
+    x = np.asarray(x, dtype=float)
+    h = np.broadcast_to(np.asarray(step, dtype=float), x.shape)
+    if not central and f0 is None:
+        f0 = np.asarray(fun(x), dtype=float)
+    J = None
+    for j in np.flatnonzero(h):
+        e = np.zeros_like(x)
+        e[j] = h[j]
+        col = (fun(x + e) - fun(x - e)) / (2 * h[j]) if central else (fun(x + e) - f0) / h[j]
+        if J is None:
+            J = np.zeros((len(col), len(x)))
+        J[:, j] = col
+    if J is None:  # no column to difference: the shape from one call
+        J = np.zeros((len(f0 if f0 is not None else fun(x)), len(x)))
+    return J
 
 
 def _cost(r: np.ndarray, c: float) -> float:

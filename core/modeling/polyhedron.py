@@ -28,6 +28,7 @@ from ..brep import BRep
 from ..camera import Camera, as_segment
 from ..geometry import Plane, angle_between_planes
 from ..transforms import make_T
+from .lm import numeric_jacobian
 from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs, plane_var_at, support_obs
 from .result import ModelResult
 from .vertices import solve_vertices
@@ -276,22 +277,14 @@ def model_polyhedron(
         J_all[3 * v : 3 * v + 3] = J1[3 * k : 3 * k + 3]
     if derived:
         x1 = X1.reshape(-1)
-        h = 1e-7
-        Jx = np.zeros((3 * len(derived), len(x1)))
-        for j in range(len(x1)):
-            e = np.zeros(len(x1))
-            e[j] = h
-            Jx[:, j] = (replay(x1 + e, pvec0) - replay(x1 - e, pvec0)) / (2 * h)
-        Jp = np.zeros((3 * len(derived), 4 * P))
+        Jx = numeric_jacobian(lambda x: replay(x, pvec0), x1, 1e-7, central=True)
         used_planes = set()
         for step in recipe:
             refs = step[2] if step[0] == "vertex" else ([step[3][1]] if step[2] == "parallel" else [])
             used_planes |= {r[1] for r in refs if r[0] == "m"}
-        for j in [4 * i + c for i in sorted(used_planes) for c in range(4)]:
-            e = np.zeros(pvec0.size)
-            e[j] = h
-            E = e.reshape(pvec0.shape)
-            Jp[:, j] = (replay(x1, pvec0 + E) - replay(x1, pvec0 - E)) / (2 * h)
+        h_p = np.zeros(pvec0.size)  # only the planes the recipe reads move the derived vertices
+        h_p[[4 * i + c for i in sorted(used_planes) for c in range(4)]] = 1e-7
+        Jp = numeric_jacobian(lambda p: replay(x1, p.reshape(pvec0.shape)), pvec0.reshape(-1), h_p, central=True)[:, : 4 * P]
         Jd = Jx @ J1 + Jp
         for k, v in enumerate(derived):
             J_all[3 * v : 3 * v + 3] = Jd[3 * k : 3 * k + 3]

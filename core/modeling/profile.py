@@ -18,7 +18,7 @@ from ..geometry import Plane
 from .lm import huber_weights, levenberg_marquardt
 from .returns import MIN_INCIDENCE_COS, Returns, incidence_cos, range_residuals
 
-__all__ = ["axis_basis", "ProfileFit", "fit_profile", "front_plane"]
+__all__ = ["axis_basis", "ProfileFit", "fit_profile", "front_plane", "front_plane_jacobian"]
 
 
 def axis_basis(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -155,3 +155,39 @@ def front_plane(fit: ProfileFit, origin_world: np.ndarray, t: float, params: np.
     n = (u + k * fit.a) / np.sqrt(1 + k * k)
     X_front = C - fit.radius(t, p) * u
     return Plane(n, float(-n @ X_front))
+
+
+def front_plane_jacobian(fit: ProfileFit, origin_world: np.ndarray, t: float, params: np.ndarray | None = None) -> np.ndarray:
+    """Derivative (4, len(params)) of ``front_plane(fit, origin_world, t, params).as_vector()`` — (n, d) —
+    with respect to the profile's parameters (analytic).
+
+    With C the axis point at t, u the unit direction from the sensor to C across the axis, k the
+    cone's slope: n = (u + k a)/√(1 + k²), X = C − r(t) u, d = −n·X. The section offsets (y1, y2)
+    move C along e1, e2 (across the axis), which turns u; r and k move X and n directly.
+    """
+    p = fit.params if params is None else params
+    a = fit.a
+    C = fit.centre(t, p)
+    w = C - np.asarray(origin_world, dtype=float)
+    w_perp = w - (w @ a) * a
+    rho = np.linalg.norm(w_perp)
+    u = w_perp / rho
+    k = p[3] if fit.cone else 0.0
+    s = np.sqrt(1 + k * k)
+    n = (u + k * a) / s
+    r = fit.radius(t, p)
+    X = C - r * u
+    P = (np.eye(3) - np.outer(u, u)) / rho  # du = P dC for dC across the axis
+    J = np.zeros((4, len(p)))
+    for j, dC in enumerate((fit.e1, fit.e2)):
+        du = P @ dC
+        dn = du / s
+        dX = dC - r * du
+        J[:3, j] = dn
+        J[3, j] = -(dn @ X + n @ dX)
+    J[3, 2] = n @ u  # dr: X moves by −u
+    if fit.cone:
+        dn = (a - k * u) / s**3
+        J[:3, 3] = dn
+        J[3, 3] = -(dn @ X) + t * (n @ u)
+    return J

@@ -1,0 +1,74 @@
+"""The modelling code's derivatives: the one finite-difference helper, and the analytic Jacobians
+that replaced difference loops (each checked against central differences of the map itself)."""
+
+import numpy as np
+import pytest
+
+from core.modeling.box import _so3_right_jacobian
+from core.modeling.lm import numeric_jacobian
+from core.modeling.observations import interpretation_plane_obs
+from core.modeling.profile import ProfileFit, axis_basis, front_plane, front_plane_jacobian
+from core.modeling.simulate import look_at_setup
+from core.modeling.small import interp_plane
+from core.transforms import exp_so3, log_so3
+
+
+def _central(f, x, h=1e-6):
+    x = np.asarray(x, float)
+    return np.column_stack([(f(x + h * e) - f(x - h * e)) / (2 * h) for e in np.eye(len(x))])
+
+
+def test_numeric_jacobian_forward_central_and_skipped_columns():
+    def f(x):
+        return np.array([x[0] ** 2 * x[1], np.sin(x[2]), x[0] + 3 * x[2]])
+
+    x = np.array([1.5, -2.0, 0.3])
+    exact = np.array([[2 * x[0] * x[1], x[0] ** 2, 0.0], [0.0, 0.0, np.cos(x[2])], [1.0, 0.0, 3.0]])
+    assert np.allclose(numeric_jacobian(f, x, 1e-7), exact, atol=1e-5)
+    assert np.allclose(numeric_jacobian(f, x, 1e-5, central=True), exact, atol=1e-8)
+    calls = []
+
+    def counted(x):
+        calls.append(x.copy())
+        return f(x)
+
+    J = numeric_jacobian(counted, x, np.array([1e-7, 0.0, 1e-7]), f0=f(x))
+    assert len(calls) == 2  # f0 reused, the zero-step column not evaluated
+    assert np.all(J[:, 1] == 0) and np.allclose(J[:, [0, 2]], exact[:, [0, 2]], atol=1e-5)
+    assert numeric_jacobian(f, x, 0.0).shape == (3, 3)
+
+
+@pytest.mark.parametrize("cone", [False, True])
+def test_front_plane_jacobian_matches_differences(cone):
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=3)
+    a /= np.linalg.norm(a)
+    e1, e2 = axis_basis(a)
+    p = np.array([0.01, -0.02, 0.05, 0.2]) if cone else np.array([0.01, -0.02, 0.05])
+    fit = ProfileFit(a, rng.normal(size=3), e1, e2, p, np.eye(len(p)), np.zeros(0), np.zeros(0, bool), cone)
+    origin = 2.0 * rng.normal(size=3)
+    J = front_plane_jacobian(fit, origin, 0.04)
+    Jn = _central(lambda q: front_plane(fit, origin, 0.04, q).as_vector(), p)
+    assert np.allclose(J, Jn, atol=1e-7)
+    assert np.abs(J).max() > 0.1  # not a trivially zero comparison
+
+
+def test_interpretation_plane_covariance_is_the_derivative_of_the_plane():
+    cam, _ = look_at_setup(np.array([0.0, 0.0, 0.08]), 1.3)
+    seg = np.array([[100.0, 50.0], [300.0, 200.0]])
+    obs = interpretation_plane_obs(cam, seg, 1.5)
+    v0 = obs.plane.as_vector()
+
+    def plane(x):
+        v = interp_plane(cam.C, x.reshape(2, 2))
+        return v if v @ v0 > 0 else -v
+
+    J = _central(plane, seg.reshape(-1), 1e-3)
+    assert np.allclose(obs.cov, 1.5**2 * J @ J.T, rtol=1e-6, atol=1e-14)
+
+
+@pytest.mark.parametrize("w", [np.array([0.3, -0.2, 0.5]), np.array([1e-8, 2e-8, 0.0]), np.zeros(3)])
+def test_so3_right_jacobian(w):
+    R = exp_so3(w)
+    Jn = _central(lambda x: log_so3(R.T @ exp_so3(x)), w, 1e-7)
+    assert np.allclose(_so3_right_jacobian(w), Jn, atol=1e-7)
