@@ -7,7 +7,7 @@ tracking until ``c``), ``f+t`` and ``q`` (buffered tracking every t ms), ``uof``
 errors ``gN@Ezzz`` (203 syntax, 210 not tracking, 212 tracking active, 255 no target). At
 power-up (start, replug) the device sends ``gN?``. Commands for another id are ignored.
 
-The distance is a ray cast of the beam against the scene's true meshes (``SceneRaycaster``) at
+The distance is a ray cast of the beam against the scene's true bodies (``BeamCaster``, exact) at
 the scene time of the ``clock``, from where the turret points when the measurement starts
 (``pointing``, e.g. ``MountState.angles_rad``), plus Gaussian noise σ_ρ from a seeded
 generator, rounded to 0.1 mm. Outside [min_range_m, max_range_m] or with no hit: error 255.
@@ -23,11 +23,11 @@ from typing import Callable
 
 import numpy as np
 
+from app.render.raycast import BeamCaster
 from core.rangefinder import RangeFinderSpec, beam_ray
 
 from .faults import FaultInjector
 from .line_emulator import LineEmulator, Timer
-from .raycast import SceneRaycaster
 
 __all__ = ["RangeFinderEmulator", "format_distance"]
 
@@ -51,7 +51,7 @@ def format_distance(value_m: float) -> str:
 class RangeFinderEmulator(LineEmulator):
     """A DLS range finder on a serial line (see the module docstring).
 
-    raycaster : SceneRaycaster of the true scene. spec : RangeFinderSpec (σ_ρ, range limits).
+    raycaster : BeamCaster (app.render.raycast) of the true scene. spec : RangeFinderSpec (σ_ρ, range limits).
     T_world_turret : array, shape (4, 4), the turret in the world (the beam leaves its origin).
     pointing : f(monotonic_time_s) -> (pan_rad, tilt_rad), where the turret points.
     clock : f() -> scene time (seconds) at which bodies are ray cast (default: 0, a static world).
@@ -63,7 +63,7 @@ class RangeFinderEmulator(LineEmulator):
 
     def __init__(
         self,
-        raycaster: SceneRaycaster,
+        raycaster: BeamCaster,
         spec: RangeFinderSpec,
         T_world_turret: np.ndarray,
         pointing: Callable[[float], tuple[float, float]],

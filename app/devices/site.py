@@ -19,12 +19,12 @@ from typing import Callable
 
 import numpy as np
 
+from app.render.raycast import BeamCaster
 from app.scene import Scene
 
 from .emulator_rangefinder import RangeFinderEmulator
 from .emulator_turret import MountState, TurretEmulator
 from .faults import FaultInjector
-from .raycast import SceneRaycaster
 from .rangefinder import RangeFinder
 from .turret import Turret
 
@@ -95,7 +95,7 @@ class EmulatedSite:
         )
         try:
             self.rangefinder = RangeFinderEmulator(
-                SceneRaycaster(scene),
+                BeamCaster(scene),
                 scene.rangefinder,
                 scene.turret.T_world_turret,
                 self.mount.angles_rad,

@@ -6,7 +6,12 @@ Each body's B-Rep is cast analytically, in its own frame, part by part:
   pyramids) by clipping the ray against its face planes (Kay–Kajiya slabs generalised);
 * a solid of revolution (cylinder, cone, frustum) by the quadric of its lateral surface and the
   discs of its caps, so silhouettes are exact rather than tessellated;
-* any other faced model by its triangles (Möller–Trumbore), face by face.
+* any other faced model by its triangles (Möller–Trumbore), all triangles at once.
+
+A ray from inside a body meets its surface on the way out (the exit face), as a mesh's would.
+This is the one ray caster of mcit: the renderer, the range-finder emulator (``BeamCaster``: one
+beam against a scene's true bodies at their poses of a given time) and designation
+(``app.workflows.Site.raycast``: a ray against the database's objects) all use it.
 
 Rays are ``X = origin + t · d`` with d of any length; ``t`` is returned in those units. With the
 camera's unnormalised ray directions ``d = M⁻¹ (u, v, 1)`` (C = [M | p₄], normalised), t is the
@@ -24,7 +29,7 @@ import numpy as np
 
 from core.brep import BRep, Revolution
 
-__all__ = ["Hits", "BodyCaster", "SceneCaster", "LABEL_SOLID"]
+__all__ = ["Hits", "BodyCaster", "SceneCaster", "BeamCaster", "LABEL_SOLID"]
 
 LABEL_SOLID = 1000
 _EPS = 1e-12
@@ -94,32 +99,52 @@ class BodyCaster:
         t_in_all = np.where(entering, t, -np.inf)
         t_enter = t_in_all.max(axis=1)
         face = t_in_all.argmax(axis=1)
-        t_exit = np.where(exiting, t, np.inf).min(axis=1)
-        ok = (t_enter <= t_exit) & (t_enter > 0) & ~parallel_out.any(axis=1)
-        t_hit = np.where(ok, t_enter, np.inf)
+        t_out_all = np.where(exiting, t, np.inf)
+        t_exit = t_out_all.min(axis=1)
+        ok = (t_enter <= t_exit) & (t_exit > 0) & ~parallel_out.any(axis=1)
+        # from outside the first surface met is the entry face; from inside (t_enter <= 0) the exit face
+        inside = t_enter <= 0
+        face = np.where(inside, t_out_all.argmin(axis=1), face)
+        t_hit = np.where(ok, np.where(inside, t_exit, t_enter), np.inf)
         return t_hit, face, self.planes_n[face]
 
     def _triangles(self, o: np.ndarray, d: np.ndarray):
+        """Möller–Trumbore against every triangle at once (rays from one origin o), in blocks of rays.
+
+        With s = o − A, q = s × e1: det = d·(e2 × e1), u = d·(e2 × s)/det, v = d·q/det, t = (q·e2)/det,
+        so each is one (rays × triangles) product. Ties go to the lower triangle index.
+        """
         n = len(d)
         best = np.full(n, np.inf)
         face = np.full(n, -1, dtype=np.int64)
         normal = np.zeros((n, 3))
-        for (A, B, Cv), k in zip(self.triangles, self.triangle_face):
-            e1, e2 = B - A, Cv - A
-            p = np.cross(d, e2)
-            det = p @ e1
+        A = self.triangles[:, 0]
+        e1 = self.triangles[:, 1] - A
+        e2 = self.triangles[:, 2] - A
+        s = o - A
+        q = np.cross(s, e1)
+        w_det = np.cross(e2, e1)
+        w_u = np.cross(e2, s)
+        t_num = np.einsum("ij,ij->i", q, e2)
+        nk = np.cross(e1, e2)
+        nk = nk / np.maximum(np.linalg.norm(nk, axis=1, keepdims=True), 1e-300)
+        block = max(1, 2_000_000 // max(len(A), 1))
+        for lo in range(0, n, block):
+            dd = d[lo : lo + block]
+            det = dd @ w_det.T  # (m, T)
             ok = np.abs(det) > _EPS
             inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-            s = o - A
-            u = (p @ s) * inv
-            q = np.cross(s, e1)
-            v = (d @ q) * inv
-            t = float(q @ e2) * inv
-            hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & (t < best)
-            best = np.where(hit, t, best)
-            face = np.where(hit, k, face)
-            nk = np.cross(e1, e2)
-            normal[hit] = nk / np.linalg.norm(nk)
+            u = (dd @ w_u.T) * inv
+            v = (dd @ q.T) * inv
+            t = t_num * inv
+            hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+            t = np.where(hit, t, np.inf)
+            k = t.argmin(axis=1)
+            tk = t[np.arange(len(dd)), k]
+            got = np.isfinite(tk)
+            best[lo : lo + block] = tk
+            face[lo : lo + block] = np.where(got, self.triangle_face[k], -1)
+            normal[lo : lo + block] = np.where(got[:, None], nk[k], 0.0)
         return best, face, normal
 
     @staticmethod
@@ -290,3 +315,41 @@ class SceneCaster:
         h = self.cast(o, d, skip=() if body is None else (body,))
         length = np.linalg.norm(d, axis=1)
         return h.t * length < length - tol_m
+
+
+class BeamCaster:
+    """First surface a single beam meets among a scene's bodies, at their true poses at a given time.
+
+    bodies : a scene (anything with ``.bodies``) or a sequence of bodies with ``.name``, ``.model``
+    (BRep), ``.moves`` and ``.pose_at(t_s)`` (app.scene.Body). Each body's caster is built once;
+    static bodies' poses are computed once, moving ones at every cast (no rebuild).
+    """
+
+    def __init__(self, bodies):
+        bodies = tuple(getattr(bodies, "bodies", bodies))
+        if not bodies:
+            raise ValueError("a scene with no bodies has nothing to measure; add at least a table")
+        self.bodies = bodies
+        self.casters = [BodyCaster(b.model) for b in bodies]
+        self._static = [None if b.moves else np.asarray(b.pose_at(0.0), dtype=float) for b in bodies]
+
+    @property
+    def names(self) -> list[str]:
+        return [b.name for b in self.bodies]
+
+    def cast(self, origin_world: np.ndarray, direction_world: np.ndarray, t_s: float = 0.0) -> tuple[float, str | None]:
+        """Distance (metres) along the beam to the first surface, and the name of the body hit.
+
+        origin_world : array, shape (3,), world frame. direction_world : array, shape (3,), any
+        non-zero length (normalised here). t_s : scene time (seconds) for moving bodies.
+        Returns (inf, None) when the beam meets nothing.
+        """
+        o = np.asarray(origin_world, dtype=float).reshape(3)
+        d = np.asarray(direction_world, dtype=float).reshape(3)
+        norm = float(np.linalg.norm(d))
+        if not (np.all(np.isfinite(o)) and np.isfinite(norm) and norm > 0):
+            raise ValueError(f"a beam needs a finite origin and a non-zero direction, got {o}, {d}")
+        poses = [T if T is not None else b.pose_at(t_s) for T, b in zip(self._static, self.bodies)]
+        h = SceneCaster(self.bodies, poses, self.casters).cast(o, (d / norm)[None])
+        k = int(h.body[0])
+        return (float(h.t[0]), self.bodies[k].name) if k >= 0 else (np.inf, None)

@@ -457,19 +457,32 @@ class Site:
         return mesh, np.array(owner)
 
     def raycast(self, origin: np.ndarray, direction: np.ndarray) -> RayHit | None:
-        """The first database surface a ray (origin (3,), direction (3,), world) meets, or None."""
-        mesh, owner = self.surfaces()
-        if mesh is None:
+        """The first database surface a ray (origin (3,), direction (3,), world) meets, or None.
+
+        Cast exactly by mcit's one ray caster (app.render.raycast: planes, quadrics, triangles);
+        each object's caster is kept until its version moves. ValueError for a non-finite origin
+        or a zero direction."""
+        from app.render.raycast import BodyCaster, SceneCaster
+
+        o = np.asarray(origin, float).reshape(3)
+        d = np.asarray(direction, float).reshape(3)
+        norm = float(np.linalg.norm(d))
+        if not (np.all(np.isfinite(o)) and np.isfinite(norm) and norm > 0):
+            raise ValueError(f"a ray needs a finite origin and a non-zero direction, got {o}, {d}")
+        d = d / norm
+        objects = self.objects()
+        if not objects:
             return None
-        o = np.asarray(origin, float).reshape(1, 3)
-        d = np.asarray(direction, float).reshape(1, 3)
-        d = d / np.linalg.norm(d)
-        locs, _, tri = mesh.ray.intersects_location(o, d, multiple_hits=True)
-        if len(locs) == 0:
+        with self.lock:
+            cached = getattr(self, "_ray_casters", {})
+            casters = {}
+            for obj in objects:
+                hit = cached.get(obj.id)
+                casters[obj.id] = hit if hit is not None and hit[0] == obj.version else (obj.version, BodyCaster(obj.model))
+            self._ray_casters = casters
+        h = SceneCaster(objects, [obj.T_world_obj for obj in objects], [casters[obj.id][1] for obj in objects]).cast(o, d[None])
+        k = int(h.body[0])
+        if k < 0:
             return None
-        dist = (locs - o) @ d[0]
-        ahead = dist > 0
-        if not np.any(ahead):
-            return None
-        i = int(np.flatnonzero(ahead)[np.argmin(dist[ahead])])
-        return RayHit(locs[i].copy(), str(owner[tri[i]]), float(dist[i]), mesh.face_normals[tri[i]].copy())
+        t = float(h.t[0])
+        return RayHit(o + t * d, objects[k].name, t, h.normal[0].copy())

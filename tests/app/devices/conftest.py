@@ -74,7 +74,7 @@ def facing_face(scene, body="unknown_box"):
     Derived from the scene's geometry (so the tests follow scene edits): the face whose outward
     normal points most toward the turret and whose centroid is the first hit from the turret.
     """
-    from app.devices.raycast import SceneRaycaster
+    from app.render.raycast import BeamCaster
 
     b = scene.body(body)
     T = b.pose_at(0.0)
@@ -83,7 +83,7 @@ def facing_face(scene, body="unknown_box"):
     N = b.model.face_normals() @ T[:3, :3].T
     to_turret = origin - C
     order = np.argsort(-np.einsum("ij,ij->i", N, to_turret / np.linalg.norm(to_turret, axis=1)[:, None]))
-    rc = SceneRaycaster(scene)
+    rc = BeamCaster(scene)
     for k in order:
         dist, hit = rc.cast(origin, C[k] - origin)
         if hit == body and abs(dist - np.linalg.norm(C[k] - origin)) < 1e-6:

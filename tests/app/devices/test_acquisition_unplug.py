@@ -20,7 +20,7 @@ import pytest
 from app.devices.acquisition import face_patch_scan, measure_at_pixel, profile_scan
 from app.devices.errors import DeviceError
 from app.devices.faults import Fault
-from app.devices.raycast import SceneRaycaster
+from app.render.raycast import BeamCaster
 from core.rangefinder import aim, beam_ray
 
 from .conftest import facing_face
@@ -114,7 +114,7 @@ def run_trial(kind: str, seed: int, workcell, make_site, drivers, timed: bool = 
 @pytest.mark.parametrize("timed", [False, True], ids=["at a reply", "during a shot"])
 @pytest.mark.parametrize("kind", ["profile", "face_patch", "pixel"])
 def test_an_unplug_mid_scan_never_gives_a_wrong_beam(kind, timed, workcell, make_site, drivers):
-    raycaster = SceneRaycaster(workcell)
+    raycaster = BeamCaster(workcell)
     total = unplugged = errors = 0
     wrong: list = []
     for seed in range(TRIALS):

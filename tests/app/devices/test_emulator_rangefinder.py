@@ -8,7 +8,7 @@ import pytest
 
 from app.devices.emulator_rangefinder import RangeFinderEmulator, format_distance
 from app.devices.emulator_turret import MountState
-from app.devices.raycast import SceneRaycaster
+from app.render.raycast import BeamCaster
 from app.devices.transport import SerialLine
 from core.rangefinder import aim
 
@@ -24,7 +24,7 @@ def emulator(workcell):
         mount = MountState(workcell.turret.step_rad)
         spec = replace(workcell.rangefinder, **({"sigma_range_m": 0.0} | (spec or {})))
         emu = RangeFinderEmulator(
-            SceneRaycaster(workcell), spec, workcell.turret.T_world_turret, mount.angles_rad,
+            BeamCaster(workcell), spec, workcell.turret.T_world_turret, mount.angles_rad,
             baudrate=baudrate, measure_delay_s=measure_delay_s, delay_per_m_s=0.0, no_target_delay_s=0.01, rng=0, **options,
         )
         made.append(emu)

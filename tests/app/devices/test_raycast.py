@@ -1,16 +1,16 @@
-"""SceneRaycaster: first hits against the true meshes, at the bodies' poses of the asked time."""
+"""BeamCaster: first hits against the true meshes, at the bodies' poses of the asked time."""
 
 import numpy as np
 import pytest
 
-from app.devices.raycast import SceneRaycaster
+from app.render.raycast import BeamCaster
 from app.scene import Body
 from core.brep import BRep
 from core.transforms import make_T, rot_z
 
 
 def test_first_hit_is_the_nearest_face_at_the_analytic_distance(workcell):
-    rc = SceneRaycaster(workcell)
+    rc = BeamCaster(workcell)
     b = workcell.body("unknown_box")
     T = b.pose_at(0.0)
     normals = b.model.face_normals() @ T[:3, :3].T
@@ -27,13 +27,13 @@ def test_first_hit_is_the_nearest_face_at_the_analytic_distance(workcell):
 
 def test_a_beam_into_the_sky_misses(workcell):
     top = max(float((b.pose_at(0.0) @ np.r_[b.model.bounds()[1], 1.0])[2]) for b in workcell.bodies)
-    assert SceneRaycaster(workcell).cast([0.0, 0.0, top + 1.0], [0.0, 0.0, 1.0]) == (np.inf, None)
+    assert BeamCaster(workcell).cast([0.0, 0.0, top + 1.0], [0.0, 0.0, 1.0]) == (np.inf, None)
 
 
 def test_moving_bodies_are_cast_at_the_asked_time():
     start = make_T(np.eye(3), [0.0, 0.0, 0.0])
     moving = Body("crate", "box", "known", BRep.box(0.2, 0.2, 0.1), start, ((2.0, make_T(rot_z(0.3), [0.5, 0.0, 0.0])),))
-    rc = SceneRaycaster([moving])
+    rc = BeamCaster([moving])
     origin, down = np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])
     assert rc.cast(origin, down, 0.0) == (pytest.approx(0.9, abs=1e-9), "crate")
     assert rc.cast(origin, down, 5.0) == (np.inf, None)  # it has gone from under the beam
@@ -42,8 +42,102 @@ def test_moving_bodies_are_cast_at_the_asked_time():
 
 
 def test_bad_beams_are_refused(workcell):
-    rc = SceneRaycaster(workcell)
+    rc = BeamCaster(workcell)
     with pytest.raises(ValueError, match="non-zero direction"):
         rc.cast([0, 0, 0], [0, 0, 0])
     with pytest.raises(ValueError, match="no bodies"):
-        SceneRaycaster([])
+        BeamCaster([])
+
+
+def _trimesh_first_hit(bodies, origin, direction, t_s):
+    """The ray caster the emulator used before (trimesh, per body, tessellated): the reference."""
+    import trimesh
+
+    from core.transforms import invert_T
+
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    best, hit = np.inf, None
+    for body in bodies:
+        V, F = body.model.triangles()
+        rmi = trimesh.ray.ray_triangle.RayMeshIntersector(trimesh.Trimesh(V, F, process=False))
+        T = invert_T(body.pose_at(t_s))
+        o_obj, d_obj = T[:3, :3] @ origin + T[:3, 3], T[:3, :3] @ d
+        loc, _, _ = rmi.intersects_location(o_obj[None], d_obj[None], multiple_hits=False)
+        if len(loc):
+            dist = float(np.min(np.linalg.norm(loc - o_obj, axis=1)))
+            if dist < best:
+                best, hit = dist, body.name
+    return best, hit
+
+
+def test_same_hits_as_the_trimesh_caster_it_replaces(workcell):
+    """Polyhedra (convex and not, moving, from outside and from inside) hit where the trimesh caster
+    did; the cylinder is now exact, within the old tessellation's error of it."""
+    ell = BRep.prism(np.array([[0, 0], [0.2, 0], [0.2, 0.1], [0.1, 0.1], [0.1, 0.2], [0, 0.2]]), 0.1)
+    bodies = list(workcell.bodies) + [Body("ell", "box", "known", ell, make_T(rot_z(0.4), [0.3, 0.2, 0.9]), ())]
+    rc = BeamCaster(bodies)
+    rng = np.random.default_rng(7)
+    origins = [workcell.turret.T_world_turret[:3, 3], np.array([0.3, 0.2, 1.5]), np.array([0.35, 0.25, 0.95])]
+    origins += [(b.pose_at(0.0) @ np.r_[b.model.bounds().mean(axis=0), 1.0])[:3] for b in workcell.bodies]  # inside each
+    origins.append((bodies[-1].pose_at(0.0) @ np.r_[0.05, 0.05, 0.05, 1.0])[:3])  # inside the L (its box centre is on its notch)
+    hits = same = cylinder = 0
+    for origin in origins:
+        for d in rng.normal(size=(60, 3)):
+            for t_s in (0.0, 3.0):
+                ours, ref = rc.cast(origin, d, t_s), _trimesh_first_hit(bodies, origin, d, t_s)
+                assert np.isinf(ours[0]) == np.isinf(ref[0])
+                if np.isinf(ref[0]):
+                    continue
+                hits += 1
+                if "cylinder" in f"{ours[1]}{ref[1]}":
+                    assert ours[0] == pytest.approx(ref[0], abs=5e-4)  # the old caster's tessellation error
+                    cylinder += 1
+                    continue
+                assert ours[0] == pytest.approx(ref[0], abs=1e-9)  # a tie (a box on the table) may name either
+                same += ours[1] == ref[1]
+    assert hits > 500 and cylinder > 10 and same > 0.95 * (hits - cylinder)
+
+
+def test_designation_casts_with_the_same_caster_and_finds_the_old_hits(workcell, tmp_path):
+    """Site.raycast (designation) hits the database where the merged trimesh index it replaces did
+    (polyhedra to 1e-9 m, the cylinder within the old tessellation's error), with outward normals."""
+    import trimesh
+
+    from app.db import Database, seed_from_scene
+    from app.workflows import Site
+
+    db = Database.open(tmp_path / "site.sqlite")
+    try:
+        seed_from_scene(db, workcell)
+        site = Site(workcell, db, clock=lambda: 0.0, frames=None)
+        objects = site.objects()
+        meshes = []
+        for obj in objects:
+            V, F = obj.model.triangles()
+            meshes.append((obj.name, trimesh.Trimesh(V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3], F, process=False)))
+        rng = np.random.default_rng(3)
+        uv = np.column_stack([rng.uniform(0, workcell.camera.width - 1, 300), rng.uniform(0, workcell.camera.height - 1, 300)])
+        o, D = workcell.camera.rays(uv)
+        hits = 0
+        for d in D:
+            ours = site.raycast(o, d)
+            u = d / np.linalg.norm(d)
+            ref = (np.inf, None)
+            for name, mesh in meshes:
+                loc, _, _ = mesh.ray.intersects_location(o[None], u[None], multiple_hits=True)
+                ahead = (np.reshape(loc, (-1, 3)) - o) @ u
+                if np.any(ahead > 0) and ahead[ahead > 0].min() < ref[0]:
+                    ref = (float(ahead[ahead > 0].min()), name)
+            assert (ours is None) == (ref[1] is None)
+            if ours is None:
+                continue
+            hits += 1
+            tol = 5e-4 if "cylinder" in f"{ours.name}{ref[1]}" else 1e-9
+            assert ours.distance_m == pytest.approx(ref[0], abs=tol)
+            np.testing.assert_allclose(ours.X_world, o + ours.distance_m * u, atol=1e-12)
+            assert ours.normal @ u < 0 and abs(np.linalg.norm(ours.normal) - 1) < 1e-9
+        assert hits > 100
+        with pytest.raises(ValueError, match="non-zero direction"):
+            site.raycast(o, [0.0, 0.0, 0.0])
+    finally:
+        db.close()
