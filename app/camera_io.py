@@ -1,4 +1,4 @@
-"""Read camera intrinsics from the files other tools write: ViSP ``.xml`` and OpenCV ``.yml``.
+"""Read camera intrinsics from the files other tools write: ViSP ``.xml``, OpenCV and ROS ``.yml``/``.yaml``.
 
 mcit works with the global model C (DESIGN.md); a camera given as intrinsics K plus a pose becomes
 ``C = K [R_cam_world | t_cam_world]`` (``core.camera.Camera.from_intrinsics``). This module only
@@ -10,13 +10,25 @@ distortion the file states.
   </type><px/><py/><u0/><v0/></model></camera></root>``) and the model-based tracker's settings
   (``<conf><camera><u0/><v0/><px/><py/></camera>…</conf>``, e.g. ``visp-cube/cube.xml``).
   ViSP's pixel origin is the centre of the top-left pixel, like mcit's, so u0, v0 carry over as they are.
-* OpenCV ``FileStorage`` files (``.yml``/``.yaml``/``.json``/``.xml``) from ``calibrateCamera`` tools:
-  the matrix under ``camera_matrix`` (or ``cameraMatrix``, ``K``, ``intrinsics``), the size under
-  ``image_width``/``image_height`` (or ``image_size``), the distortion under
-  ``distortion_coefficients`` (or ``dist_coeffs``, ``D``).
+  A file may hold several cameras (several names, or one name at several image sizes, as ViSP's
+  own files do): ``camera_name`` and ``image_size`` choose one, as ``vpXmlParserCamera::parse`` does.
+* OpenCV ``FileStorage`` files (``.yml``/``.yaml``/``.json``/``.xml``) from ``calibrateCamera`` tools,
+  keys matched without regard to case (the calibration tutorial writes ``Camera_Matrix``,
+  ``Distortion_Coefficients``, ``image_Width``, ``image_Height``): the matrix under
+  ``camera_matrix`` (or ``cameraMatrix``, ``K``, ``intrinsics``, ``M``), the size under
+  ``image_width``/``image_height`` (or ``width``/``height``, ``image_size``), the distortion under
+  ``distortion_coefficients`` (or ``dist_coeffs``, ``D``; the tutorial's ``fisheye_model: 1`` makes it
+  the equidistant model).
+* ROS ``camera_info`` YAML: the calibrator's ``ost.yaml`` (``camera_name``, ``camera_matrix`` and
+  ``distortion_coefficients`` as ``rows``/``cols``/``data`` maps, ``distortion_model``) and a
+  ``CameraInfo`` message dump (``width``, ``height``, ``K``/``k`` and ``D``/``d`` as flat lists).
+* A YAML file holding several cameras as top-level maps (``cam0: {…}``, ``left: {…}``): ``camera_name``
+  picks the map by its key or its ``camera_name``.
 
-mcit's camera has no lens distortion: callers that build C from K should refuse a file whose
-distortion is not zero (``Intrinsics.has_distortion``) and ask for an undistorted video.
+Every failure is one ValueError line naming the file and what was missing or wrong.
+mcit's camera has no lens distortion yet: callers that build C from K refuse a file whose
+distortion is not zero (``Intrinsics.has_distortion``); ``Intrinsics.distortion`` and
+``distortion_model`` carry the coefficients for the code that undistorts.
 """
 
 from __future__ import annotations
@@ -24,6 +36,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -31,8 +44,12 @@ __all__ = ["Intrinsics", "read_visp_xml", "read_opencv_yml", "read_intrinsics"]
 
 _VISP_NO_DISTORTION = "perspectiveProjWithoutDistortion"
 _VISP_DISTORTION = "perspectiveProjWithDistortion"
+# Keys are matched without regard to case.
 _OPENCV_K_KEYS = ("camera_matrix", "cameraMatrix", "K", "intrinsics", "M")
-_OPENCV_DIST_KEYS = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "D")
+_OPENCV_DIST_KEYS = ("distortion_coefficients", "distortion_coefficents", "dist_coeffs", "distCoeffs", "D")
+_WIDTH_KEYS = ("image_width", "width")
+_HEIGHT_KEYS = ("image_height", "height")
+_OPENCV_DIST_COUNTS = (4, 5, 8, 12, 14)  # OpenCV's distortion models (k1 k2 p1 p2 [k3 [k4 k5 k6 [s1..s4 [τx τy]]]])
 
 
 @dataclass(frozen=True)
@@ -41,7 +58,10 @@ class Intrinsics:
 
     K : array, shape (3, 3), pixels. width, height : image size in pixels, or None when the
     file does not state it. distortion : array, shape (k,), the file's distortion coefficients
-    (ViSP: (kud, kdu); OpenCV: (k1, k2, p1, p2[, k3, ...])), empty when none.
+    (ViSP: (kud, kdu); OpenCV/ROS: (k1, k2, p1, p2[, k3, ...]) or, equidistant, (k1, k2, k3, k4)),
+    empty when none. source : the file. distortion_model : "" (none stated), "visp" (kud, kdu),
+    "opencv" (OpenCV's 4 to 14 coefficients), or the model the file names ("plumb_bob",
+    "rational_polynomial", "equidistant"). name : the camera's name in the file, or None.
     """
 
     K: np.ndarray
@@ -49,6 +69,8 @@ class Intrinsics:
     height: int | None = None
     distortion: np.ndarray = field(default_factory=lambda: np.zeros(0))
     source: str = ""
+    distortion_model: str = ""
+    name: str | None = None
 
     @property
     def has_distortion(self) -> bool:
@@ -69,6 +91,13 @@ def _check_K(K: np.ndarray, where: str) -> np.ndarray:
     if abs(K[2, 2]) <= 0 or abs(K[1, 0]) + abs(K[2, 0]) + abs(K[2, 1]) > 1e-9 * abs(K).max():
         raise ValueError(f"{where}: the camera matrix must be upper triangular with K[2, 2] ≠ 0, got {K.tolist()}")
     return K / K[2, 2]
+
+
+def _check_size(width: int | None, height: int | None, where: str) -> tuple[int | None, int | None]:
+    for what, v in (("width", width), ("height", height)):
+        if v is not None and v <= 0:
+            raise ValueError(f"{where}: the image {what} must be a positive number of pixels, got {v}")
+    return width, height
 
 
 def _float(node: ET.Element | None, tag: str, where: str) -> float:
@@ -94,7 +123,41 @@ def _int_or_none(node: ET.Element, tag: str, where: str) -> int | None:
         raise ValueError(f"{where}: <{tag}> is not an integer: {child.text.strip()!r}") from None
 
 
-def _read_visp(path: Path, camera_name: str | None) -> Intrinsics:
+def _size_text(w: int | None, h: int | None) -> str:
+    return f"{w}×{h}" if w is not None and h is not None else "no size"
+
+
+def _pick_visp(cameras: list[ET.Element], where: str, camera_name: str | None,
+               image_size: tuple[int, int] | None) -> ET.Element:
+    """The one <camera> that ``camera_name`` and ``image_size`` choose (as vpXmlParserCamera::parse)."""
+    def name(c):
+        return (c.findtext("name") or "").strip()
+
+    def size(c):
+        return _int_or_none(c, "image_width", where), _int_or_none(c, "image_height", where)
+
+    listed = "; ".join(f"{name(c) or '(no name)'} {_size_text(*size(c))}" for c in cameras)
+    if camera_name is not None:
+        named = [c for c in cameras if name(c) == camera_name]
+        if not named:
+            raise ValueError(f"{where}: no camera named {camera_name!r}; it has: {listed}")
+        cameras = named
+    among = "in the file"
+    if len(cameras) > 1 and image_size is not None:
+        sized = [c for c in cameras if size(c) == tuple(image_size)]
+        if sized:
+            cameras, among = sized, f"for {image_size[0]}×{image_size[1]} images"
+        elif all(None not in size(c) for c in cameras):
+            raise ValueError(f"{where}: no camera{' named ' + repr(camera_name) if camera_name else ''} for "
+                             f"{image_size[0]}×{image_size[1]} images; it has: {listed}")
+    if len(cameras) > 1:
+        listed = "; ".join(f"{name(c) or '(no name)'} {_size_text(*size(c))}" for c in cameras)
+        raise ValueError(f"{where}: {len(cameras)} cameras {among} ({listed}); choose one with --camera-name "
+                         "(camera_name= in Python)")
+    return cameras[0]
+
+
+def _read_visp(path: Path, camera_name: str | None, image_size: tuple[int, int] | None = None) -> Intrinsics:
     where = str(path)
     try:
         root = ET.parse(path).getroot()
@@ -103,33 +166,26 @@ def _read_visp(path: Path, camera_name: str | None) -> Intrinsics:
     cameras = [root] if root.tag == "camera" else root.findall("camera")
     if not cameras:
         raise ValueError(f"{where}: no <camera> element; expected a ViSP camera file (<root><camera>…) or tracker settings (<conf><camera>…)")
-    if camera_name is not None:
-        cameras = [c for c in cameras if (c.findtext("name") or "").strip() == camera_name]
-        if not cameras:
-            raise ValueError(f"{where}: no <camera> named {camera_name!r}")
-    if len(cameras) > 1:
-        names = [(c.findtext("name") or "").strip() for c in cameras]
-        raise ValueError(f"{where}: {len(cameras)} <camera> elements ({names}); pass camera_name= to choose one")
-    cam = cameras[0]
-    cw = f"{where}: <camera>"
-    width = _int_or_none(cam, "image_width", cw)
-    height = _int_or_none(cam, "image_height", cw)
+    cam = _pick_visp(cameras, where, camera_name, image_size)
+    name = (cam.findtext("name") or "").strip() or None
+    cw = f"{where}: <camera>" if name is None else f"{where}: <camera> {name!r}"
+    width, height = _check_size(_int_or_none(cam, "image_width", cw), _int_or_none(cam, "image_height", cw), cw)
     models = cam.findall("model")
     if not models:  # model-based tracker settings: the parameters sit directly in <camera>
         K = _K(_float(cam, "px", cw), _float(cam, "py", cw), _float(cam, "u0", cw), _float(cam, "v0", cw))
-        return Intrinsics(_check_K(K, cw), width, height, np.zeros(0), where)
+        return Intrinsics(_check_K(K, cw), width, height, np.zeros(0), where, "", name)
     by_type = {(m.findtext("type") or "").strip(): m for m in models}
     if _VISP_NO_DISTORTION in by_type:
         m = by_type[_VISP_NO_DISTORTION]
         mw = f"{cw} <model> {_VISP_NO_DISTORTION}"
         K = _K(_float(m, "px", mw), _float(m, "py", mw), _float(m, "u0", mw), _float(m, "v0", mw))
-        return Intrinsics(_check_K(K, mw), width, height, np.zeros(0), where)
+        return Intrinsics(_check_K(K, mw), width, height, np.zeros(0), where, "", name)
     if _VISP_DISTORTION in by_type:
         m = by_type[_VISP_DISTORTION]
         mw = f"{cw} <model> {_VISP_DISTORTION}"
         K = _K(_float(m, "px", mw), _float(m, "py", mw), _float(m, "u0", mw), _float(m, "v0", mw))
         dist = np.array([_float(m, "kud", mw), _float(m, "kdu", mw)])
-        return Intrinsics(_check_K(K, mw), width, height, dist, where)
+        return Intrinsics(_check_K(K, mw), width, height, dist, where, "visp", name)
     raise ValueError(f"{cw}: no <model> of type {_VISP_NO_DISTORTION} or {_VISP_DISTORTION}; found {sorted(by_type)}")
 
 
@@ -146,54 +202,195 @@ def read_visp_xml(path: str | Path, camera_name: str | None = None) -> np.ndarra
     return _read_visp(path, camera_name).K
 
 
-def _first_matrix(fs, keys, where: str):
-    """(key, matrix) of the first of ``keys`` present in a FileStorage, or (None, None)."""
-    for k in keys:
-        node = fs.getNode(k)
-        if not node.empty():
-            M = node.mat()
-            if M is None:
-                raise ValueError(f"{where}: '{k}' is not a matrix")
-            return k, M
-    return None, None
+# ---------------------------------------------------------------------------- OpenCV / ROS files
+def _node_value(node) -> Any:
+    """A cv2.FileNode as plain Python: dict, list, float/int, str; an ``!!opencv-matrix`` (or any map
+    with rows, cols and data, as ROS writes them untagged) stays a dict for ``_matrix``."""
+    if node.isMap():
+        return {k: _node_value(node.getNode(k)) for k in node.keys()}
+    if node.isSeq():
+        return [_node_value(node.at(i)) for i in range(node.size())]
+    if node.isInt():
+        return int(node.real())
+    if node.isReal():
+        return float(node.real())
+    if node.isString():
+        return node.string()
+    return None
 
 
-def _read_opencv(path: Path, key: str | None) -> Intrinsics:
-    import cv2  # OpenCV's own FileStorage reads its YAML dialect (%YAML:1.0, !!opencv-matrix)
+def _cv_reason(exc: BaseException) -> str:
+    """OpenCV's parse error in a few words: "line 2: Incorrect indentation"."""
+    import re
+
+    cause = exc.__cause__ if isinstance(exc, SystemError) and exc.__cause__ is not None else exc
+    lines = str(cause).strip().splitlines()
+    text = lines[-1] if lines else type(cause).__name__
+    m = re.search(r"\((\d+)\): (.*?)'?\s*$", text)
+    return f"line {m.group(1)}: {m.group(2)}" if m else text.split("error: ", 1)[-1]
+
+
+def _opencv_tree(path: Path) -> dict:
+    """The whole FileStorage file as a dict (OpenCV parses its YAML dialect, XML and JSON)."""
+    import cv2
 
     where = str(path)
+    if not path.read_bytes().strip():
+        raise ValueError(f"{where}: the file is empty; expected a camera matrix and the image size")
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as exc:
-        raise ValueError(f"{where}: OpenCV cannot parse it ({str(exc).strip().splitlines()[-1]})") from None
+    except (cv2.error, SystemError) as exc:
+        raise ValueError(f"{where}: OpenCV cannot parse it ({_cv_reason(exc)})") from None
     if not fs.isOpened():
         raise ValueError(f"{where}: OpenCV cannot open it as a FileStorage (.yml, .yaml, .xml, .json)")
     try:
-        keys = [key] if key is not None else list(_OPENCV_K_KEYS)
-        used, K = _first_matrix(fs, keys, where)
-        if K is None:
-            raise ValueError(f"{where}: no camera matrix under {keys}; name it 'camera_matrix' or pass key=")
-        K = _check_K(K, f"{where}: {used}")
-        width = height = None
-        w_node, h_node = fs.getNode("image_width"), fs.getNode("image_height")
-        if not w_node.empty() and not h_node.empty():
-            width, height = int(w_node.real()), int(h_node.real())
-        else:
-            size = fs.getNode("image_size")  # a sequence [width, height]
-            if size.isSeq() and size.size() == 2:
-                width, height = int(size.at(0).real()), int(size.at(1).real())
-        _, d = _first_matrix(fs, _OPENCV_DIST_KEYS, where)
-        dist = np.zeros(0) if d is None else np.asarray(d, dtype=float).ravel()
+        root = fs.root()
+        tree = _node_value(root) if root.isMap() else None
+    except (cv2.error, SystemError) as exc:
+        raise ValueError(f"{where}: OpenCV cannot read its contents ({str(exc).strip().splitlines()[-1]})") from None
     finally:
         fs.release()
-    return Intrinsics(K, width, height, dist, where)
+    if not isinstance(tree, dict) or not tree:
+        raise ValueError(f"{where}: holds no named values; expected a camera matrix and the image size")
+    return tree
+
+
+def _get(d: dict, keys, want_map: bool = False) -> tuple[str | None, Any]:
+    """(key as written, value) of the first of ``keys`` in ``d`` (case-insensitive), or (None, None)."""
+    lower = {}
+    for k in d:
+        lower.setdefault(str(k).lower(), k)
+    for k in keys:
+        real = lower.get(k.lower())
+        if real is not None and d[real] is not None:
+            return real, d[real]
+    return None, None
+
+
+def _matrix(value: Any, where: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """A matrix from an ``!!opencv-matrix`` / ROS ``{rows, cols, data}`` map, a flat or nested list."""
+    if isinstance(value, dict):
+        _, rows = _get(value, ("rows",))
+        _, cols = _get(value, ("cols",))
+        _, data = _get(value, ("data",))
+        if data is None:
+            raise ValueError(f"{where}: a matrix needs 'data' (with 'rows' and 'cols'); found {sorted(value)}")
+        try:
+            a = np.asarray(data, dtype=float).ravel()
+            if rows is not None and cols is not None:
+                a = a.reshape(int(rows), int(cols))
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}: its data does not fill {rows}×{cols} numbers") from None
+    else:
+        try:
+            a = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}: not a list of numbers: {value!r}") from None
+    if shape is not None and a.shape != shape:
+        if a.size != int(np.prod(shape)):
+            raise ValueError(f"{where}: {int(np.prod(shape))} numbers expected ({'×'.join(map(str, shape))}), got {a.size}")
+        a = a.reshape(shape)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{where}: holds a number that is not finite")
+    return a
+
+
+def _size_value(d: dict, keys, where: str) -> int | None:
+    k, v = _get(d, keys)
+    if k is None or isinstance(v, (dict, list)):
+        return None
+    try:
+        n = float(v)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: '{k}' is not a number of pixels: {v!r}") from None
+    if not n.is_integer():
+        raise ValueError(f"{where}: '{k}' is not a whole number of pixels: {v!r}")
+    return int(n)
+
+
+def _has_K(d: Any) -> bool:
+    return isinstance(d, dict) and _get(d, _OPENCV_K_KEYS)[0] is not None
+
+
+def _pick_map(tree: dict, where: str, camera_name: str | None) -> tuple[dict, str | None, str]:
+    """(the camera's map, its name, where) in a file of one camera or of several (``cam0: {…}``)."""
+    if _has_K(tree):
+        _, name = _get(tree, ("camera_name",))
+        name = None if name is None else str(name)
+        if camera_name is not None and name is not None and name != camera_name:
+            raise ValueError(f"{where}: the camera in it is named {name!r}, not {camera_name!r}")
+        return tree, name, where
+    cams = {str(k): v for k, v in tree.items() if _has_K(v)}
+    if not cams:
+        keys = ", ".join(_OPENCV_K_KEYS)
+        raise ValueError(f"{where}: no camera matrix (looked for {keys}, in any case; found {', '.join(map(str, tree))})")
+
+    def name_of(key, m):
+        n = _get(m, ("camera_name",))[1]
+        return key if n is None else str(n)
+
+    if camera_name is not None:
+        hits = [k for k, m in cams.items() if camera_name in (k, name_of(k, m))]
+        if not hits:
+            raise ValueError(f"{where}: no camera named {camera_name!r}; it has: {', '.join(cams)}")
+        key = hits[0]
+    elif len(cams) == 1:
+        key = next(iter(cams))
+    else:
+        raise ValueError(f"{where}: {len(cams)} cameras in the file ({', '.join(cams)}); choose one with "
+                         "--camera-name (camera_name= in Python)")
+    return cams[key], name_of(key, cams[key]), f"{where}: {key}"
+
+
+def _intrinsics_from_tree(tree: dict, path: Path, key: str | None, camera_name: str | None) -> Intrinsics:
+    where = str(path)
+    if key is not None:
+        used, value = _get(tree, (key,))
+        if used is None:
+            raise ValueError(f"{where}: no camera matrix under {key!r}")
+        d, name, cw = tree, None, where
+    else:
+        d, name, cw = _pick_map(tree, where, camera_name)
+        used, value = _get(d, _OPENCV_K_KEYS)
+    K = _check_K(_matrix(value, f"{cw}: {used}", (3, 3)), f"{cw}: {used}")
+    width, height = _size_value(d, _WIDTH_KEYS, cw), _size_value(d, _HEIGHT_KEYS, cw)
+    if width is None and height is None:
+        k, size = _get(d, ("image_size", "imageSize", "resolution"))
+        if k is not None:
+            s = _matrix(size, f"{cw}: {k}").ravel()
+            if s.size != 2 or not np.all(s == np.round(s)):
+                raise ValueError(f"{cw}: '{k}' must be [width, height] in whole pixels, got {s.tolist()}")
+            width, height = int(s[0]), int(s[1])
+    if (width is None) != (height is None):
+        raise ValueError(f"{cw}: states the image {'width' if width is not None else 'height'} but not the "
+                         f"{'height' if width is not None else 'width'}")
+    width, height = _check_size(width, height, cw)
+    dk, dv = _get(d, _OPENCV_DIST_KEYS)
+    dist = np.zeros(0) if dk is None else _matrix(dv, f"{cw}: {dk}").ravel()
+    _, model = _get(d, ("distortion_model",))
+    model = "" if model is None else str(model).strip()
+    _, fisheye = _get(d, ("fisheye_model",))
+    if not model and fisheye not in (None, 0, "0", "false"):
+        model = "equidistant"
+    if dist.size:
+        if model == "equidistant" and dist.size != 4:
+            raise ValueError(f"{cw}: the equidistant (fisheye) model has 4 distortion coefficients, got {dist.size}")
+        if model != "equidistant" and dist.size not in _OPENCV_DIST_COUNTS:
+            raise ValueError(f"{cw}: '{dk}' holds {dist.size} coefficients; OpenCV's distortion models have "
+                             f"{', '.join(map(str, _OPENCV_DIST_COUNTS))}")
+        model = model or "opencv"
+    return Intrinsics(K, width, height, dist, where, model if dist.size else "", name)
+
+
+def _read_opencv(path: Path, key: str | None, camera_name: str | None = None) -> Intrinsics:
+    return _intrinsics_from_tree(_opencv_tree(path), path, key, camera_name)
 
 
 def read_opencv_yml(path: str | Path, key: str | None = None) -> np.ndarray:
     """K (3, 3), pixels, from an OpenCV FileStorage file (``.yml``, ``.yaml``, ``.xml``, ``.json``).
 
-    The matrix is read under ``key`` or the first of camera_matrix, cameraMatrix, K, intrinsics, M.
-    ValueError naming the file and key on bad input.
+    The matrix is read under ``key`` or the first of camera_matrix, cameraMatrix, K, intrinsics, M
+    (any case). ValueError naming the file and key on bad input.
     """
     path = Path(path)
     if not path.is_file():
@@ -201,10 +398,15 @@ def read_opencv_yml(path: str | Path, key: str | None = None) -> np.ndarray:
     return _read_opencv(path, key).K
 
 
-def read_intrinsics(path: str | Path) -> Intrinsics:
-    """Intrinsics (K, size, distortion) of a ViSP ``.xml`` or an OpenCV ``.yml``/``.yaml``/``.json``.
+def read_intrinsics(path: str | Path, *, camera_name: str | None = None,
+                    image_size: tuple[int, int] | None = None) -> Intrinsics:
+    """Intrinsics (K, size, distortion) of a ViSP ``.xml``, an OpenCV or ROS ``.yml``/``.yaml``/``.json``.
 
     An ``.xml`` is tried as ViSP first, then as an OpenCV FileStorage (``<opencv_storage>``).
+    camera_name : the camera to read in a file of several (ViSP ``<name>``, a YAML file's top-level
+    key or ``camera_name``); a file of one camera with another name is refused.
+    image_size : (width, height) of the images, choosing among ViSP cameras of one name at several
+    sizes. ValueError, one line naming the file and what is missing, on bad input.
     """
     path = Path(path)
     if not path.is_file():
@@ -216,8 +418,8 @@ def read_intrinsics(path: str | Path) -> Intrinsics:
         except ET.ParseError as exc:
             raise ValueError(f"{path}: not well-formed XML ({exc})") from None
         if root_tag == "opencv_storage":
-            return _read_opencv(path, None)
-        return _read_visp(path, None)
+            return _read_opencv(path, None, camera_name)
+        return _read_visp(path, camera_name, image_size)
     if suffix in (".yml", ".yaml", ".json"):
-        return _read_opencv(path, None)
-    raise ValueError(f"{path}: unknown intrinsics format {suffix!r}; use a ViSP .xml or an OpenCV .yml/.yaml/.json")
+        return _read_opencv(path, None, camera_name)
+    raise ValueError(f"{path}: unknown intrinsics format {suffix!r}; use a ViSP .xml, or an OpenCV or ROS .yml/.yaml/.json")

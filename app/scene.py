@@ -363,7 +363,7 @@ class Scene:
 
 
 # ---------------------------------------------------------------------- blocks
-_CAMERA_KEYS = ("width", "height", "C", "K", "T_world_cam", "intrinsics_file")
+_CAMERA_KEYS = ("width", "height", "C", "K", "T_world_cam", "intrinsics_file", "camera_name")
 _TURRET_KEYS = ("T_world_turret", "resolution_arcsec", "pan_limits_steps", "tilt_limits_steps", "speed_steps_s")
 _RF_KEYS = ("sigma_range_m", "min_range_m", "max_range_m")
 _BODY_KEYS = ("name", "kind", "status", "model", "pose", "motion", "appearance")
@@ -387,6 +387,8 @@ def _camera(d: Any, root: Path, where: str) -> Camera:
         width = _int(d["width"], f"{where}.width")
     if "height" in d:
         height = _int(d["height"], f"{where}.height")
+    if "camera_name" in d and given != ["intrinsics_file"]:
+        raise SceneError(f"{where}.camera_name: names a camera in 'intrinsics_file'; remove it or give that file")
     if given == ["C"] and "T_world_cam" in d:
         raise SceneError(f"{where}.T_world_cam: C already holds the camera pose; remove one of them")
     try:
@@ -400,8 +402,12 @@ def _camera(d: Any, root: Path, where: str) -> Camera:
             from app.camera_io import read_intrinsics
 
             file = (root / str(d["intrinsics_file"])).resolve()
+            name = d.get("camera_name")
+            if name is not None and not isinstance(name, str):
+                raise SceneError(f"{where}.camera_name: the name of a camera in the intrinsics file expected, got {name!r}")
             try:
-                intr = read_intrinsics(file)
+                size = (width, height) if width is not None and height is not None else None
+                intr = read_intrinsics(file, camera_name=name, image_size=size)
             except ValueError as exc:
                 raise SceneError(f"{where}.intrinsics_file: {exc}") from None
             if intr.has_distortion:

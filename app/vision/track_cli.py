@@ -46,6 +46,8 @@ def add_track_parser(sub) -> None:
     cam = p.add_mutually_exclusive_group()
     cam.add_argument("--intrinsics", help="camera intrinsics (ViSP .xml or OpenCV .yml); the world frame is the camera's")
     cam.add_argument("--scene", help="a scene folder: its calibrated camera C (and, with --body, model, pose and video)")
+    p.add_argument("--camera-name", help="with --intrinsics: the camera to read in a file that holds several (ViSP <name>, "
+                   "or a YAML file's camera key or camera_name)")
     p.add_argument("--body", help="with --scene: the body to track")
     p.add_argument("--pose", help="initial pose file: ViSP .pos (tx ty tz θux θuy θuz) or JSON (4×4 or {xyz, rpy_deg})")
     p.add_argument("--init-points", help="model points clicked to initialise (a ViSP .init file)")
@@ -87,6 +89,8 @@ def _setup(args):
     T = None
     K = None
     source = args.source
+    if args.camera_name and not args.intrinsics:
+        raise ValueError("--camera-name chooses a camera in the --intrinsics file; give --intrinsics FILE")
     if args.scene:
         from app.scene import load_scene
 
@@ -107,12 +111,15 @@ def _setup(args):
             raise ValueError("give the camera: --intrinsics FILE (ViSP .xml / OpenCV .yml) or --scene DIR")
         from app.camera_io import read_intrinsics
 
-        intr = read_intrinsics(args.intrinsics)
-        if intr.has_distortion:
-            raise ValueError(f"{args.intrinsics}: the camera has lens distortion; mcit's camera has none: undistort the video first")
-        K = intr.K
         _, first = next(iter_frames(source, args.start, 1))
         h, w = first.shape[:2]
+        intr = read_intrinsics(args.intrinsics, camera_name=args.camera_name, image_size=(w, h))
+        if intr.has_distortion:
+            raise ValueError(f"{args.intrinsics}: the camera has lens distortion; mcit's camera has none: undistort the video first")
+        if intr.width is not None and (intr.width, intr.height) != (w, h):
+            raise ValueError(f"{args.intrinsics}: the camera was calibrated on {intr.width}×{intr.height} images but the "
+                             f"video's frames are {w}×{h}; give the intrinsics for this size")
+        K = intr.K
         camera = Camera.from_intrinsics(K, np.eye(4), w, h)
     if model is None:
         raise ValueError("give the object's model: --model FILE (or --scene with --body)")
