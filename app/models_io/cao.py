@@ -23,6 +23,25 @@ define a cylinder's axis or a circle are not vertices); the edges are every face
 every line, each once; faces from lines are chained into vertex loops. Bad input raises
 ``CaoError`` naming the file, the line and the problem.
 
+Limits, so that a careless or hostile file is refused at once, never hangs the reader or
+exhausts memory, and so that whatever loads can also be exported and read back:
+
+* includes nest at most 8 levels deep (``MAX_INCLUDE_DEPTH``); one model reads at most 256 files
+  (``MAX_FILES``; every include counts, a file included twice counts twice) and 64 MB of text in
+  all (``MAX_TOTAL_BYTES``, repeats counted too, so the model itself stays bounded); a cyclic
+  include is refused. A file that includes the next one twice, 16 levels deep, is refused after
+  reading 9 files.
+* every count (points, lines, faces, a face's points, cylinders, circles) is checked against the
+  lines or numbers left in the file before anything is allocated.
+* coordinates, radii and include translations are finite and within ±1e6 m (``MAX_COORD_M``,
+  1000 km; a model placed by its includes too); a line's ends, two points of a face or a
+  cylinder's axis ends closer than 1 nm (``MIN_LENGTH_M``) are refused as coincident; a face
+  whose area is below 1e-9 of its size squared (its points on one line, or folded over itself)
+  is refused.
+
+Error messages say ``file:line`` and what was expected; they never quote the file's text (the
+named file may not be a model at all, e.g. a system file named in a ``load()``).
+
 Writing: every face whose sides are all model edges becomes a face from points, the other
 edges become lines, cylinders and circles get their defining points appended. A cone (two radii)
 has no ``.cao`` form: writing one raises ``ValueError``.
@@ -31,22 +50,49 @@ has no ``.cao`` form: writing one raises ``ValueError``.
 from __future__ import annotations
 
 import re
+import stat
 from pathlib import Path
 from typing import IO
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from core.brep import BRep, Circle, Revolution
 from core.transforms import exp_so3, make_T
 
-__all__ = ["CaoError", "read_cao", "write_cao", "cao_text", "concat_breps"]
+__all__ = [
+    "CaoError",
+    "read_cao",
+    "write_cao",
+    "cao_text",
+    "concat_breps",
+    "MAX_INCLUDE_DEPTH",
+    "MAX_FILES",
+    "MAX_TOTAL_BYTES",
+    "MAX_COORD_M",
+    "MIN_LENGTH_M",
+]
 
 _PARAM = re.compile(r"(name|useLod|minLineLengthThreshold|minPolygonAreaThreshold)=(\"[^\"]*\"|\S+)")
 _MAX_COUNT = 1_000_000
+MAX_INCLUDE_DEPTH = 8  # levels of load() below the file named
+MAX_FILES = 256  # files read for one model, every include counted (repeats too)
+MAX_TOTAL_BYTES = 64 * 1024 * 1024  # text read for one model, repeats counted
+MAX_COORD_M = 1e6  # |coordinate|, radius, include translation (metres)
+MIN_LENGTH_M = 1e-9  # points closer than this are the same point
+_MIN_AREA_RATIO = 1e-9  # a face's area / its size² below this has no area
+_MIN_SINE = 1e-6  # a circle's two points seen from its centre at less than this sine: no plane
 
 
 class CaoError(ValueError):
     """A malformed ``.cao`` file; the message is ``file:line: problem``."""
+
+
+def _limits() -> str:
+    return (
+        f"mcit reads at most {MAX_INCLUDE_DEPTH} levels of includes, {MAX_FILES} files (every include counts) "
+        f"and {MAX_TOTAL_BYTES / 2**20:g} MB in all for one model"
+    )
 
 
 class _Lines:
@@ -55,18 +101,23 @@ class _Lines:
     def __init__(self, path: Path, text: str):
         self.path = path
         self.items: list[tuple[int, str]] = []
+        number = 0
         for number, raw in enumerate(text.splitlines(), start=1):
             line = raw.split("#", 1)[0].strip()
             if line:
                 self.items.append((number, line))
         self.pos = 0
-        self.last_line = len(text.splitlines())
+        self.last_line = number
 
     def error(self, number: int, problem: str) -> CaoError:
         return CaoError(f"{self.path}:{number}: {problem}")
 
     def peek(self) -> tuple[int, str] | None:
         return self.items[self.pos] if self.pos < len(self.items) else None
+
+    def left(self) -> int:
+        """How many meaningful lines are still to be read."""
+        return len(self.items) - self.pos
 
     def next(self, what: str) -> tuple[int, str]:
         item = self.peek()
@@ -77,21 +128,26 @@ class _Lines:
 
 
 def _numbers(lines: _Lines, number: int, line: str, count: int, kinds: str, what: str) -> tuple[list, str]:
-    """The first ``count`` whitespace tokens as numbers (kinds: 'i' int, 'f' float per token) and the rest."""
-    tokens = line.split()
+    """The first ``count`` whitespace tokens as numbers and the rest of the line.
+
+    kinds: 'i' (int) or 'f' (float, finite) per token; the last kind repeats for the tokens beyond.
+    The number of tokens is checked before anything is converted or allocated.
+    """
+    tokens = line.split(None, count)
     if len(tokens) < count:
-        raise lines.error(number, f"{what}: expected {count} numbers, got {len(tokens)} ({line!r})")
+        raise lines.error(number, f"{what}: expected {count} numbers, got {len(tokens)}")
     out = []
-    for k, (tok, kind) in enumerate(zip(tokens[:count], kinds)):
+    for k, tok in enumerate(tokens[:count]):
+        kind = kinds[min(k, len(kinds) - 1)]
         try:
             v = int(tok) if kind == "i" else float(tok)
         except ValueError:
             expected = "an integer" if kind == "i" else "a number"
-            raise lines.error(number, f"{what}: value {k + 1} is {tok!r}, {expected} expected") from None
+            raise lines.error(number, f"{what}: value {k + 1} is not {expected}") from None
         if kind == "f" and not np.isfinite(v):
-            raise lines.error(number, f"{what}: value {k + 1} is not finite ({tok})")
+            raise lines.error(number, f"{what}: value {k + 1} is not finite")
         out.append(v)
-    rest = line.split(None, count)[count] if len(tokens) > count else ""
+    rest = tokens[count] if len(tokens) > count else ""
     return out, rest
 
 
@@ -101,19 +157,24 @@ def _check_params(lines: _Lines, number: int, rest: str) -> None:
         if key == "name" and not value:
             raise lines.error(number, "name= is empty")
         if key == "useLod" and value.lower() not in ("true", "false", "1", "0"):
-            raise lines.error(number, f"useLod={value!r}: true, false, 1 or 0 expected")
+            raise lines.error(number, "useLod= must be true, false, 1 or 0")
         if key.startswith("min"):
             try:
                 float(value)
             except ValueError:
-                raise lines.error(number, f"{key}={value!r}: a number expected") from None
+                raise lines.error(number, f"{key}= must be a number") from None
 
 
 def _count(lines: _Lines, what: str) -> int:
+    """A block's count, refused before anything is allocated when the file cannot hold that many records."""
     number, line = lines.next(f"the number of {what}")
     (n,), _ = _numbers(lines, number, line, 1, "i", f"number of {what}")
-    if n < 0 or n > _MAX_COUNT:
-        raise lines.error(number, f"number of {what} is {n}; expected 0..{_MAX_COUNT}")
+    if n < 0:
+        raise lines.error(number, f"the number of {what} is negative")
+    if n > lines.left():
+        raise lines.error(number, f"the number of {what} is more than the {lines.left()} lines left in the file (one line each)")
+    if n > _MAX_COUNT:
+        raise lines.error(number, f"the number of {what} is more than {_MAX_COUNT:,}, mcit's limit")
     return n
 
 
@@ -123,28 +184,36 @@ def _index(lines: _Lines, number: int, i: int, n: int, what: str) -> int:
     return i
 
 
+def _within(lines: _Lines, number: int, values, what: str) -> None:
+    if not np.all(np.abs(np.asarray(values, dtype=float)) <= MAX_COORD_M):
+        raise lines.error(number, f"{what} is beyond ±{MAX_COORD_M:g} m (coordinates are metres)")
+
+
 def _parse_vector(lines: _Lines, number: int, text: str, key: str, angles: bool) -> np.ndarray:
     parts = [p.strip() for p in text.split(";")]
     if len(parts) != 3:
-        raise lines.error(number, f"load(): {key}=[...] needs 3 values separated by ';', got {text!r}")
+        raise lines.error(number, f"load(): {key}=[...] needs 3 values separated by ';', got {len(parts)}")
     out = []
-    for p in parts:
+    for k, p in enumerate(parts):
         scale = 1.0
         if angles and p.endswith("deg"):
             p, scale = p[:-3], np.pi / 180.0
         elif angles and p.endswith("rad"):
             p = p[:-3]
         try:
-            out.append(float(p) * scale)
+            v = float(p) * scale
         except ValueError:
-            raise lines.error(number, f"load(): {key}=[...] value {p!r} is not a number") from None
+            raise lines.error(number, f"load(): value {k + 1} of {key}=[...] is not a number") from None
+        if not np.isfinite(v) or abs(v) > MAX_COORD_M:
+            raise lines.error(number, f"load(): value {k + 1} of {key}=[...] is not finite or beyond ±{MAX_COORD_M:g}")
+        out.append(v)
     return np.array(out)
 
 
 def _parse_load(lines: _Lines, number: int, line: str) -> tuple[Path, np.ndarray]:
     m = re.fullmatch(r'load\s*\(\s*"([^"]+)"\s*((?:,[^)]*)?)\)\s*', line)
     if not m:
-        raise lines.error(number, f'malformed include; expected load("file.cao", t=[x; y; z], tu=[a; b; c]), got {line!r}')
+        raise lines.error(number, 'malformed include; expected load("file.cao", t=[x; y; z], tu=[a; b; c])')
     target = Path(m.group(1))
     if not target.is_absolute():
         target = lines.path.parent / target
@@ -153,7 +222,7 @@ def _parse_load(lines: _Lines, number: int, line: str) -> tuple[Path, np.ndarray
     for param in (p.strip() for p in m.group(2).split(",")[1:]):
         pm = re.fullmatch(r"(t|tu)\s*=\s*\[([^\]]*)\]", param)
         if not pm:
-            raise lines.error(number, f"load(): unknown parameter {param!r}; use t=[x; y; z] and tu=[a; b; c]")
+            raise lines.error(number, "load(): unknown parameter; use t=[x; y; z] and tu=[a; b; c]")
         if pm.group(1) == "t":
             t = _parse_vector(lines, number, pm.group(2), "t", angles=False)
         else:
@@ -183,6 +252,19 @@ def _chain(lines: _Lines, number: int, segments: list[tuple[int, int]]) -> list[
     return loop
 
 
+def _check_face(lines: _Lines, number: int, k: int, P: np.ndarray, loop: list[int]) -> None:
+    """Refuse a face with two points at the same place or without area (collinear, or folded flat)."""
+    Q = P[loop] - P[loop].mean(axis=0)
+    pairs = cKDTree(Q).query_pairs(MIN_LENGTH_M)
+    if pairs:
+        a, b = min(pairs)
+        raise lines.error(number, f"face {k}: its points {loop[a]} and {loop[b]} are at the same place")
+    twice_area = np.linalg.norm(np.cross(Q, np.roll(Q, -1, axis=0)).sum(axis=0))
+    size = np.linalg.norm(np.ptp(Q, axis=0))
+    if twice_area <= 2 * _MIN_AREA_RATIO * size**2:
+        raise lines.error(number, f"face {k} has no area: its points are on one line, or it folds over itself")
+
+
 def concat_breps(models: list[BRep]) -> BRep:
     """One model holding several (vertex indices shifted); they share one frame."""
     Vs, Es, Fs, solids, circles = [], [], [], [], []
@@ -197,18 +279,70 @@ def concat_breps(models: list[BRep]) -> BRep:
     return BRep(np.vstack(Vs).reshape(-1, 3), np.vstack(Es).reshape(-1, 2), tuple(Fs), tuple(solids), tuple(circles))
 
 
-def _read(path: Path, stack: tuple[Path, ...]) -> BRep | None:
-    try:
-        text = path.read_text()
-    except UnicodeDecodeError:
-        raise CaoError(f"{path}:1: not a text file") from None
-    except OSError as exc:
-        raise CaoError(f"{path}: cannot read: {exc.strerror or exc}") from None
+def _reach_m(model: BRep) -> float:
+    """The largest |coordinate| of a model's points (vertices, axis ends, circle centres and rims)."""
+    values = [np.abs(model.vertices).max(initial=0.0)]
+    values += [max(np.abs(s.p0).max(), np.abs(s.p1).max()) + max(s.r0, s.r1) for s in model.solids]
+    values += [np.abs(c.centre).max() + c.radius for c in model.circles]
+    return float(max(values))
+
+
+class _Reading:
+    """What one ``read_cao`` has read so far: files and bytes (includes counted, repeats too), files parsed.
+
+    A file included again is not parsed again, but it counts again with everything it includes,
+    so that the limits bound the model that is built, not only the reading.
+    """
+
+    def __init__(self):
+        self.files = 0
+        self.bytes = 0
+        self.parsed: dict[Path, tuple[BRep | None, int, int]] = {}  # model, files, bytes
+
+    def read(self, path: Path, where: str, stack: tuple[Path, ...]) -> BRep | None:
+        """Parse ``path`` (``where``: the file, or the ``file:line`` of the load() naming it), within the limits."""
+        if len(stack) > MAX_INCLUDE_DEPTH + 1:
+            raise CaoError(f"{where}: includes are nested more than {MAX_INCLUDE_DEPTH} levels deep; {_limits()}")
+        if path in self.parsed:
+            model, files, size = self.parsed[path]
+            self._add(files, size, where)
+            return model
+        files0, bytes0 = self.files, self.bytes
+        try:
+            st = path.stat()
+            if not stat.S_ISREG(st.st_mode):
+                raise CaoError(f"{where}: {path} is not a regular file")
+            self._add(1, st.st_size, where)
+            with open(path, "rb") as fh:
+                data = fh.read(st.st_size + 1)
+        except OSError as exc:
+            raise CaoError(f"{where}: cannot read {path}: {exc.strerror or type(exc).__name__}") from None
+        if len(data) != st.st_size:
+            raise CaoError(f"{where}: {path} changed while it was read; read it again when it is complete")
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            raise CaoError(f"{path}:1: not a .cao model (not a text file)") from None
+        model = _parse(path, text, stack, self)
+        self.parsed[path] = (model, self.files - files0, self.bytes - bytes0)
+        return model
+
+    def _add(self, files: int, size: int, where: str) -> None:
+        self.files += files
+        self.bytes += size
+        if self.files > MAX_FILES:
+            raise CaoError(f"{where}: the model includes more than {MAX_FILES} files; {_limits()}")
+        if self.bytes > MAX_TOTAL_BYTES:
+            raise CaoError(f"{where}: the model's files hold more than {MAX_TOTAL_BYTES / 2**20:g} MB of text; {_limits()}")
+
+
+def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) -> BRep | None:
     lines = _Lines(path, text)
     number, head = lines.next("the version line 'V1'")
-    m = re.fullmatch(r"V(\d+)(\s.*)?", head)
+    m = re.fullmatch(r"V(\d{1,6})(\s.*)?", head)
     if not m:
-        raise lines.error(number, f"the first line must be the version 'V1' (or V2), got {head!r}")
+        # Not recognised as a .cao: say nothing of what the file holds (it may be any file).
+        raise lines.error(number, "not a .cao model: the first line must be the version 'V1' (or V2)")
     version = int(m.group(1))
     if version not in (1, 2):
         raise lines.error(number, f"unsupported .cao version V{version}; mcit reads V1 and V2")
@@ -218,17 +352,21 @@ def _read(path: Path, stack: tuple[Path, ...]) -> BRep | None:
         target, T = _parse_load(lines, number, line)
         if target in stack:
             raise lines.error(number, f"cyclic include: {target} is already being read")
-        if not target.is_file():
+        if not target.exists():
             raise lines.error(number, f"included file not found: {target}")
-        sub = _read(target, stack + (target,))
+        sub = reading.read(target, f"{path}:{number}", stack + (target,))
         if sub is not None:
-            parts.append(sub.transformed(T))
+            placed = sub.transformed(T)
+            if _reach_m(placed) > MAX_COORD_M:
+                raise lines.error(number, f"the included model, placed by t= and tu=, reaches beyond ±{MAX_COORD_M:g} m")
+            parts.append(placed)
     n_points = _count(lines, "points")
+    n_num = 5 if version == 2 else 3
     P = np.zeros((n_points, 3))
     for k in range(n_points):
         number, line = lines.next(f"point {k} of {n_points}")
-        n_num = 5 if version == 2 else 3
         values, _ = _numbers(lines, number, line, n_num, "fffii"[:n_num], f"point {k}")
+        _within(lines, number, values[:3], f"point {k}")
         P[k] = values[:3]
     n_lines = _count(lines, "lines")
     segs: list[tuple[int, int]] = []
@@ -238,6 +376,8 @@ def _read(path: Path, stack: tuple[Path, ...]) -> BRep | None:
         i, j = _index(lines, number, i, n_points, "point"), _index(lines, number, j, n_points, "point")
         if i == j:
             raise lines.error(number, f"line {k} joins point {i} to itself")
+        if np.linalg.norm(P[i] - P[j]) <= MIN_LENGTH_M:
+            raise lines.error(number, f"line {k}: its points {i} and {j} are at the same place")
         _check_params(lines, number, rest)
         segs.append((i, j))
     loops: list[list[int]] = []
@@ -248,16 +388,17 @@ def _read(path: Path, stack: tuple[Path, ...]) -> BRep | None:
             (n,), _ = _numbers(lines, number, line, 1, "i", f"face {k}")
             if n < 3:
                 raise lines.error(number, f"face {k} has {n} {'lines' if by_lines else 'points'}; a face needs at least 3")
-            values, rest = _numbers(lines, number, line, n + 1, "i" * (n + 1), f"face {k}")
+            values, rest = _numbers(lines, number, line, n + 1, "i", f"face {k}")
             _check_params(lines, number, rest)
             if by_lines:
                 idx = [_index(lines, number, i, n_lines, "line") for i in values[1:]]
-                loops.append(_chain(lines, number, [segs[i] for i in idx]))
+                loop = _chain(lines, number, [segs[i] for i in idx])
             else:
                 loop = [_index(lines, number, i, n_points, "point") for i in values[1:]]
                 if len(set(loop)) != len(loop):
                     raise lines.error(number, f"face {k} lists a point twice")
-                loops.append(loop)
+            _check_face(lines, number, k, P, loop)
+            loops.append(loop)
     solids: list[Revolution] = []
     circles: list[Circle] = []
     if lines.peek() is not None:
@@ -268,22 +409,24 @@ def _read(path: Path, stack: tuple[Path, ...]) -> BRep | None:
             _check_params(lines, number, rest)
             if r <= 0:
                 raise lines.error(number, f"cylinder {k}: radius must be positive, got {r}")
-            try:
-                solids.append(Revolution(P[i], P[j], r, r))
-            except ValueError as exc:
-                raise lines.error(number, f"cylinder {k}: {exc}") from None
+            _within(lines, number, r, f"cylinder {k}: the radius")
+            if np.linalg.norm(P[i] - P[j]) <= MIN_LENGTH_M:
+                raise lines.error(number, f"cylinder {k}: needs two distinct axis endpoints (points {i} and {j} are at the same place)")
+            solids.append(Revolution(P[i], P[j], r, r))
     if lines.peek() is not None:
         for k in range(_count(lines, "circles")):
             number, line = lines.next(f"circle {k}")
             (r, c, i, j), rest = _numbers(lines, number, line, 4, "fiii", f"circle {k}")
             c, i, j = (_index(lines, number, v, n_points, "point") for v in (c, i, j))
             _check_params(lines, number, rest)
-            normal = np.cross(P[i] - P[c], P[j] - P[c])
-            if r <= 0 or np.linalg.norm(normal) <= 1e-12 * max(1.0, float(np.abs(P).max())) ** 2:
+            _within(lines, number, r, f"circle {k}: the radius")
+            u, v = P[i] - P[c], P[j] - P[c]
+            normal = np.cross(u, v)
+            if r <= 0 or np.linalg.norm(normal) <= _MIN_SINE * np.linalg.norm(u) * np.linalg.norm(v) or min(np.linalg.norm(u), np.linalg.norm(v)) <= MIN_LENGTH_M:
                 raise lines.error(number, f"circle {k}: needs a positive radius and a centre and two points not on one line")
             circles.append(Circle(P[c], normal, r))
     if (item := lines.peek()) is not None:
-        raise lines.error(item[0], f"unexpected content after the last block: {item[1]!r}")
+        raise lines.error(item[0], "unexpected content after the last block (circles)")
     used = sorted({v for loop in loops for v in loop} | {v for s in segs for v in s})
     if not used and not solids and not circles and not parts:
         raise CaoError(f"{path}:{lines.last_line}: the model has no lines, faces, cylinders or circles")
@@ -312,10 +455,11 @@ def read_cao(path: str | Path) -> BRep:
 
     Raises
     ------
-    CaoError (a ValueError) naming the file, the line and the problem.
+    CaoError (a ValueError) naming the file, the line and the problem; also for a model beyond
+    the limits in the module docstring (includes, counts, coordinates, degenerate geometry).
     """
     path = Path(path).resolve()
-    model = _read(path, (path,))
+    model = _Reading().read(path, str(path), (path,))
     if model is None:
         raise CaoError(f"{path}: the model is empty")
     return model
