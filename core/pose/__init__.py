@@ -5,20 +5,25 @@
 maximum-likelihood estimate, with covariance and per-click residuals), ``estimate_pose`` (both, as
 the operator uses them), ``p3l_batch`` (P3L vectorised over many triples), ``plausibility`` (can a
 fitted pose be the answer), ``edge_symmetries`` / ``nearest_twin`` (poses that draw the same
-picture, and the one nearest a reference). Conventions: DESIGN.md §Frames; perturbations and covariances are
+picture, and the one nearest a reference), ``refine_many`` (refinement from many starts in one
+call), ``warm_up`` (load the compiled kernels, ``core.pose._kernels``: call it in a background
+thread at start-up). Conventions: DESIGN.md §Frames; perturbations and covariances are
 (δt, δr) in the world frame about the object's origin (``core.pose.residuals``).
 """
 
 from .estimate import PoseCandidate, PoseEstimate, estimate_pose
 from .p3l import ConcurrentEdgesError, p3l, p3l_batch
 from .plausibility import plausibility
-from .refine import RefineResult, refine
+from ._kernels import warm_up
+from .refine import RefineResult, refine, refine_many
 from .symmetry import edge_symmetries, nearest_twin, symmetry_transforms
 
 __all__ = [
     "p3l",
     "p3l_batch",
     "refine",
+    "refine_many",
+    "warm_up",
     "estimate_pose",
     "RefineResult",
     "PoseCandidate",

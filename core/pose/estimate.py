@@ -23,8 +23,8 @@ from ..camera import Camera
 from ..checks import MAX_M, finite_array, positive_scale
 from ..transforms import check_T, pose_error
 from .p3l import p3l
-from .refine import RefineResult, _refine, check_options, click_sigmas
-from .residuals import as_clicks, pose_distance_cost
+from .refine import RefineResult, check_options, click_sigmas, refine_many
+from .residuals import as_clicks
 
 __all__ = ["PoseCandidate", "PoseEstimate", "estimate_pose"]
 
@@ -175,7 +175,7 @@ def estimate_pose(
             except ValueError as exc:
                 skipped.append((tri, str(exc)))
                 continue
-            found = [_refined(camera, clicks, "p3l", T, k, refine_args, tri) for k, T in enumerate(sols)]
+            found = _refined_all(camera, clicks, "p3l", sols, refine_args, tri)
             refined = [c.refined for c in found if c.refined is not None]
             if not refined:
                 reason = "; ".join(sorted({c.error for c in found if c.error})) or "no solution in front of the camera"
@@ -191,7 +191,7 @@ def estimate_pose(
         if triple is None and prior is None:
             raise ValueError(f"no triple of clicked edges gives a pose: {skipped[0][1]}")
     if prior is not None:
-        candidates.append(_refined(camera, clicks, "prior", prior, -1, refine_args))
+        candidates += _refined_all(camera, clicks, "prior", [prior], refine_args)
     if not any(c.refined is not None for c in candidates):
         reasons = "; ".join(sorted({c.error for c in candidates if c.error}))
         raise ValueError(f"no candidate pose could be refined: {reasons}")
@@ -201,13 +201,22 @@ def estimate_pose(
     return PoseEstimate(_merge(candidates, clicks), triple, tuple(skipped))
 
 
-def _refined(camera, clicks, source: str, T0: np.ndarray, rank: int, refine_args, triple=None) -> PoseCandidate:
-    """A candidate refined with every click (or with the reason it could not be)."""
+def _refined_all(camera, clicks, source: str, starts: list, refine_args, triple=None) -> list[PoseCandidate]:
+    """Every start refined with every click (one compiled call), or with the reason it could not be;
+    p3l_rank is the start's index (−1 for the prior)."""
+    T0 = np.array(starts, dtype=float)
     try:
-        res = _refine(camera, np.array(T0, dtype=float), clicks, *refine_args)
-    except ValueError as exc:
-        return PoseCandidate(source, T0, None, float("inf"), rank, str(exc), triple)
-    return PoseCandidate(source, T0, res, pose_distance_cost(camera, res.T_world_obj, clicks), rank, None, triple)
+        results = refine_many(camera, T0, clicks, *refine_args)
+    except ValueError as exc:  # too few clicks for any start
+        results = [(str(exc), float("inf"))] * len(starts)
+    out = []
+    for k, (res, score) in enumerate(results):
+        rank = -1 if source == "prior" else k
+        if isinstance(res, str):
+            out.append(PoseCandidate(source, starts[k], None, float("inf"), rank, res, triple))
+        else:
+            out.append(PoseCandidate(source, starts[k], res, score, rank, None, triple))
+    return out
 
 
 def _merge(candidates: list[PoseCandidate], clicks) -> list[PoseCandidate]:

@@ -31,14 +31,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg.lapack import dposv
-
 from ..camera import Camera
 from ..checks import MAX_M, MAX_SCALE, MIN_SCALE, finite_array, positive_scale
 from ..transforms import check_T
-from .residuals import Clicks, as_clicks, perturb, residuals
+from . import _kernels as _k
+from .residuals import Clicks, as_clicks
 
-__all__ = ["RefineResult", "refine", "huber_weights", "click_sigmas"]
+__all__ = ["RefineResult", "refine", "refine_many", "huber_weights", "click_sigmas"]
 
 _LOSSES = ("l2", "huber")
 
@@ -121,24 +120,6 @@ def huber_weights(dist_px: np.ndarray, huber_px: float) -> np.ndarray:
     return np.minimum(1.0, huber_px / np.maximum(dist_px, 1e-300))
 
 
-def _robust(
-    r: np.ndarray, n_seg: int, loss: str, huber_px: float, b: np.ndarray | None = None
-) -> tuple[float, np.ndarray, np.ndarray]:
-    """(cost, per-residual weights (m,), per-pixel robust weights (2 S + P,)) of residuals r (m,).
-
-    b : the 1/σ² of each residual row (m,), ones when None; the per-residual weights include it.
-    """
-    b = np.ones(len(r)) if b is None else b
-    if loss == "l2":
-        return 0.5 * float(b @ (r * r)), b.copy(), np.ones(2 * n_seg + (len(r) - 2 * n_seg) // 2)
-    e = _unit_distances(r, n_seg)
-    w_unit = huber_weights(e, huber_px)
-    rho = np.where(e <= huber_px, 0.5 * e * e, huber_px * e - 0.5 * huber_px * huber_px)
-    b_unit = np.concatenate([b[: 2 * n_seg], b[2 * n_seg :: 2]])  # a point's two rows share its σ
-    w = np.concatenate([w_unit[: 2 * n_seg], np.repeat(w_unit[2 * n_seg :], 2)]) * b
-    return float(b_unit @ rho), w, w_unit
-
-
 def check_options(camera, loss: str, huber_px: float, sigma_px) -> None:
     """ValueError for a camera that is not a Camera, an unknown loss or a non-positive scale."""
     if not isinstance(camera, Camera):
@@ -146,6 +127,8 @@ def check_options(camera, loss: str, huber_px: float, sigma_px) -> None:
     if loss not in _LOSSES:
         raise ValueError(f"loss must be one of {_LOSSES}, got {loss!r}")
     positive_scale(huber_px, "huber_px", " px")
+    if type(sigma_px) is float and MIN_SCALE <= sigma_px <= MAX_SCALE:
+        return
     try:
         sigma = np.asarray(sigma_px, dtype=float)
     except (TypeError, ValueError):
@@ -172,30 +155,14 @@ def click_sigmas(sigma_px, clicks: Clicks) -> np.ndarray:
     return np.repeat(sigma, 2)
 
 
-def _solve_spd(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """x with A x = b for a symmetric positive definite 6 × 6 A (LAPACK's Cholesky driver: a
-    quarter of numpy.linalg.solve's cost at this size); a general solve if A is not SPD."""
-    _, x, info = dposv(A, b)
-    return x if info == 0 else np.linalg.lstsq(A, b, rcond=None)[0]
-
-
-def _check_observable(H: np.ndarray, extent_m: float) -> None:
-    """ValueError naming the unobservable motion when the clicks do not fix 6 DoF.
-
-    H = JᵀJ (6, 6); its columns are scaled to unit diagonal, so the test (smallest eigenvalue
-    below 1e-16 of the largest: singular values of J below 1e-8 of the largest) does not depend on
-    the units (m, rad)."""
-    scale = np.sqrt(np.diag(H))
-    scale = np.where(scale > 0.0, scale, 1.0)
-    Hs = H / np.outer(scale, scale)
-    ev = np.linalg.eigvalsh(Hs)
-    if ev[0] > 1e-16 * ev[-1]:
-        return
-    v = np.linalg.eigh(Hs)[1][:, 0] / scale  # the free motion (δt in m, δr in rad)
+def _unobservable(v: np.ndarray, extent_m: float) -> str:
+    """The message naming the motion v (δt in m, δr in rad) that the clicks leave free: the
+    eigenvector of JᵀJ (columns scaled to unit diagonal, so the test does not depend on the units)
+    whose eigenvalue is below 1e-16 of the largest (singular values of J below 1e-8)."""
     part = "translation" if np.linalg.norm(v[:3]) > np.linalg.norm(v[3:]) * extent_m else "rotation"
     direction = v[:3] if part == "translation" else v[3:]
     direction = direction / np.linalg.norm(direction)
-    raise ValueError(
+    return (
         f"the clicks do not fix the pose: a {part} along {np.round(direction, 3).tolist()} (world) "
         "changes no residual; click more edges with other directions, an edge not through the "
         "common vertex of the others, or a vertex"
@@ -206,11 +173,8 @@ def _as_pose(T_world_obj) -> np.ndarray:
     """A float copy of a rigid transform; ``check_T`` judges (and explains) anything that is not
     plainly one (the fast test accepts a subset of what check_T accepts)."""
     T = np.array(T_world_obj, dtype=float)
-    if T.shape == (4, 4) and np.isfinite(T).all() and (T[3] == (0.0, 0.0, 0.0, 1.0)).all():
-        R = T[:3, :3]
-        if np.abs(R.T @ R - np.eye(3)).max() < 1e-9 and np.linalg.det(R) > 0:
-            if abs(T[0, 3]) <= MAX_M and abs(T[1, 3]) <= MAX_M and abs(T[2, 3]) <= MAX_M:
-                return T
+    if T.shape == (4, 4) and _k.pose_ok(T, MAX_M):
+        return T
     T = check_T(T, "T_world_obj").copy()
     finite_array(T[:3, 3], (3,), "T_world_obj's translation", max_abs=MAX_M, unit=" m")
     return T
@@ -272,84 +236,85 @@ def refine(
 def _refine(
     camera: Camera, T: np.ndarray, clicks: Clicks, loss: str, huber_px: float, sigma_px, max_iterations: int
 ) -> RefineResult:
+    out = refine_many(camera, T[None], clicks, loss, huber_px, sigma_px, max_iterations)[0][0]
+    if isinstance(out, str):
+        raise ValueError(out)
+    return out
+
+
+def refine_many(
+    camera: Camera,
+    T_starts: np.ndarray,
+    clicks: Clicks,
+    loss: str = "l2",
+    huber_px: float = 3.0,
+    sigma_px=1.0,
+    max_iterations: int = 100,
+    edges_obj: np.ndarray | None = None,
+) -> list[tuple[RefineResult | str, float]]:
+    """``refine`` from many starts at once (one compiled call): the P3L candidates of a triple,
+    or the assignments the matcher tries.
+
+    T_starts (K, 4, 4) rigid transforms (validated by the caller); clicks as ``as_clicks`` made
+    them; edges_obj (K, S, 2, 3): each start's own model edges (default: the clicks' for every
+    start). Returns per start (RefineResult, or the reason it could not be refined, and score):
+    the RMS pixel distance of the clicks to the projected finite model features at the refined
+    pose (``residuals.pose_distance_cost``), inf when refinement failed.
+    """
     m = clicks.n_residuals
     if m < 6:
         raise ValueError(
             f"{clicks.n_segments} segment(s) and {clicks.n_points} point(s) give {m} residuals; "
             "a pose has 6 degrees of freedom: click at least 3 edges (or 2 edges and a vertex)"
         )
-    S = clicks.n_segments
-    r, J, feasible = residuals(camera, T[:3, :3], T[:3, 3], clicks, jacobian=True)
-    if not feasible:
-        raise ValueError(
-            "the starting pose puts a clicked model edge or point behind the camera; start from a "
-            "pose that shows the object in the image"
-        )
+    S, P = clicks.n_segments, clicks.n_points
+    T0 = np.ascontiguousarray(T_starts, dtype=float)
+    K = len(T0)
+    edges = np.ascontiguousarray(np.broadcast_to(clicks.edges_obj, (K, S, 2, 3)) if edges_obj is None else edges_obj, dtype=float)
     # Scale of the problem for the step test: the clicked features' extent about the origin.
     extent = max(
         1e-3,
-        float(np.abs(clicks.edges_obj).max()) if S else 0.0,
-        float(np.abs(clicks.points_obj).max()) if clicks.n_points else 0.0,
+        float(np.abs(edges).max()) if S else 0.0,
+        float(np.abs(clicks.points_obj).max()) if P else 0.0,
     )
-    _check_observable(J.T @ J, extent)
     b = 1.0 / click_sigmas(sigma_px, clicks) ** 2  # ML weight of each residual row
-    cost, w, _ = _robust(r, S, loss, huber_px, b)
-    lam = 1e-4
-    iterations = 0
-    converged = False
-    while iterations < max_iterations:
-        if cost <= 1e-20 * m:  # residuals at round-off (RMS ≲ 1e-10 px): exact data, done
-            converged = True
-            break
-        H = J.T @ (w[:, None] * J)
-        g = J.T @ (w * r)
-        diag = np.diag(np.diag(H))
-        while True:
-            delta = _solve_spd(H + lam * diag, -g)
-            if np.linalg.norm(delta[3:]) + np.linalg.norm(delta[:3]) / extent < 1e-12:
-                lam = np.inf  # the Gauss–Newton step itself is negligible: at the minimum
-                break
-            T_new = perturb(T, delta)
-            r_new, J_new, feasible = residuals(camera, T_new[:3, :3], T_new[:3, 3], clicks, jacobian=True)
-            if feasible:
-                cost_new, w_new, _ = _robust(r_new, S, loss, huber_px, b)
-                if cost_new <= cost:
-                    break
-            lam *= 10.0
-            if lam > 1e12:
-                break
-        if lam > 1e12:
-            # No step lowers the cost: a minimum to machine precision.
-            converged = True
-            break
-        iterations += 1
-        decrease = cost - cost_new
-        T, r, J, cost, w = T_new, r_new, J_new, cost_new, w_new
-        lam = max(lam * 0.1, 1e-12)
-        step = np.linalg.norm(delta[3:]) + np.linalg.norm(delta[:3]) / extent
-        if step < 1e-9 or decrease <= 1e-10 * cost:
-            converged = True
-            break
-    _, w, w_unit = _robust(r, S, loss, huber_px, b)
-    H = J.T @ (w[:, None] * J)
-    cov = np.linalg.inv(H)
-    e = _unit_distances(r, S)
-    click_res = np.concatenate([np.maximum(e[0 : 2 * S : 2], e[1 : 2 * S : 2]), e[2 * S :]])
-    click_w = np.concatenate([np.minimum(w_unit[0 : 2 * S : 2], w_unit[1 : 2 * S : 2]), w_unit[2 * S :]])
-    dof = m - 6
-    sigma_est = float(np.sqrt((w / b * r * r).sum() / dof)) if dof > 0 else float("nan")
-    return RefineResult(
-        T_world_obj=T,
-        cov=cov,
-        rms_px=float(np.sqrt(np.mean(r * r))),
-        residuals_px=r,
-        iterations=iterations,
-        converged=converged,
-        kinds=clicks.kinds,
-        click_residuals_px=click_res,
-        weights=click_w,
-        downweighted=tuple(int(i) for i in np.flatnonzero(click_w < 1.0)),
-        sigma_px=float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, dtype=float).copy(),
-        sigma_est_px=sigma_est,
-        loss=loss,
+    n = S + P
+    T, r, w_unit, cov, free = np.empty((K, 4, 4)), np.empty((K, m)), np.empty((K, 2 * S + P)), np.empty((K, 6, 6)), np.empty((K, 6))
+    status, iterations, converged = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.bool_)
+    score, summary = np.empty(K), np.empty((K, 2 * n + 2))
+    _k.refine_many(
+        camera.C, T0, edges, clicks.segs_uv, clicks.points_obj, clicks.points_uv, b, loss == "huber", float(huber_px),
+        int(max_iterations), extent, T, r, w_unit, cov, free, status, iterations, converged, score, summary,
     )
+    sigma_out = float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, dtype=float).copy()
+    kinds = clicks.kinds
+    out: list[tuple[RefineResult | str, float]] = []
+    for k, st in enumerate(status.tolist()):
+        if st == _k.BEHIND:
+            out.append((
+                "the starting pose puts a clicked model edge or point behind the camera; start from a "
+                "pose that shows the object in the image", np.inf,
+            ))
+            continue
+        if st == _k.UNOBSERVABLE:
+            out.append((_unobservable(free[k], extent), np.inf))
+            continue
+        sk = summary[k]
+        click_w = sk[n : 2 * n]
+        res = RefineResult(
+            T_world_obj=T[k],
+            cov=cov[k],
+            rms_px=float(sk[2 * n]),
+            residuals_px=r[k],
+            iterations=int(iterations[k]),
+            converged=bool(converged[k]),
+            kinds=kinds,
+            click_residuals_px=sk[:n],
+            weights=click_w,
+            downweighted=tuple(i for i, x in enumerate(click_w.tolist()) if x < 1.0),
+            sigma_px=sigma_out,
+            sigma_est_px=float(sk[2 * n + 1]),
+            loss=loss,
+        )
+        out.append((res, float(score[k])))
+    return out

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..checks import MAX_M, MAX_PX, finite_array
+from . import _kernels as _k
 
 __all__ = ["Clicks", "as_clicks", "interpretation_planes", "residuals", "perturb", "distance_cost", "pose_distance_cost"]
 
@@ -85,6 +86,20 @@ def as_clicks(segs_uv=None, edges_obj=None, points_uv=None, points_obj=None) -> 
 
     Accepts a single segment (2, 2) / edge (2, 3) or a point (2,) / (3,) as a batch of one.
     """
+    if segs_uv is not None and edges_obj is not None:  # the common case, checked in one compiled call
+        segs, edges = np.asarray(segs_uv, dtype=float), np.asarray(edges_obj, dtype=float)
+        puv = _NO_UV if points_uv is None else np.asarray(points_uv, dtype=float)
+        pobj = _NO_X if points_obj is None else np.asarray(points_obj, dtype=float)
+        if (
+            (points_uv is None) == (points_obj is None)
+            and segs.ndim == 3 and segs.shape[1:] == (2, 2) and edges.ndim == 3 and edges.shape[1:] == (2, 3)
+            and len(segs) == len(edges) and puv.ndim == 2 and puv.shape[1] == 2 and pobj.ndim == 2
+            and pobj.shape[1] == 3 and len(puv) == len(pobj)
+            and _k.clicks_ok(
+                np.ascontiguousarray(segs), np.ascontiguousarray(edges), np.ascontiguousarray(puv), np.ascontiguousarray(pobj), MAX_PX, MAX_M
+            )
+        ):
+            return Clicks(segs, edges, puv, pobj)
     if (segs_uv is None) != (edges_obj is None):
         raise ValueError("segs_uv and edges_obj go together: give both (one model edge per clicked segment) or neither")
     if (points_uv is None) != (points_obj is None):
