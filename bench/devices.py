@@ -41,9 +41,9 @@ sys.path.insert(0, str(ROOT))
 import trimesh  # noqa: E402
 
 from app.devices.acquisition import profile_scan  # noqa: E402
-from app.devices.rangefinder import RangeFinder  # noqa: E402
+from app.devices.drivers.rangefinder import RangeFinder  # noqa: E402
 from app.devices.site import EmulatedSite  # noqa: E402
-from app.devices.turret import Turret  # noqa: E402
+from app.devices.drivers.turret import Turret  # noqa: E402
 from app.scene import default_scene_path, load_scene  # noqa: E402
 from core.rangefinder import aim  # noqa: E402
 

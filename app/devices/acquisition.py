@@ -32,9 +32,9 @@ from core.camera import Camera, as_uv
 from core.geometry import Plane, fit_plane_tls
 from core.rangefinder import AimResult, RangeFinderSpec, RangeScan, aim, aim_at_pixel, beam_point, beam_point_cov
 
-from .errors import DeviceError, NoTargetError
-from .rangefinder import RangeFinder, RangeMeasurement
-from .turret import Turret
+from .drivers.errors import DeviceError, NoTargetError
+from .drivers.rangefinder import RangeFinder, RangeMeasurement
+from .drivers.turret import Turret
 
 __all__ = [
     "Progress",

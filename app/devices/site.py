@@ -22,11 +22,11 @@ import numpy as np
 from app.render.raycast import BeamCaster
 from app.scene import Scene
 
-from .emulator_rangefinder import RangeFinderEmulator
-from .emulator_turret import MountState, TurretEmulator
+from .drivers.rangefinder import RangeFinder
+from .drivers.turret import Turret
+from .emulators.rangefinder import RangeFinderEmulator
+from .emulators.turret import MountState, TurretEmulator
 from .faults import FaultInjector
-from .rangefinder import RangeFinder
-from .turret import Turret
 
 __all__ = ["EmulatedSite", "Devices", "open_devices", "scene_clock", "video_duration_s"]
 

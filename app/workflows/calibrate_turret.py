@@ -122,7 +122,7 @@ class CalibrateTurret(Workflow):
         The devices run outside the workflow's lock (the overlay keeps drawing); ``progress`` and
         ``progress_text`` say which point and which stage; the beam spot shows the measured point.
         A device fault or a cancel keeps nothing."""
-        from app.devices.errors import DeviceError, NoTargetError
+        from app.devices import DeviceError, NoTargetError
 
         with self.lock:
             self._check_open()

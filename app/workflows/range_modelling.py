@@ -87,7 +87,7 @@ class RangeModelling:
         """Around a device acquisition: a cancel → Cancelled, a device fault or a refused request
         (ValueError) → WorkflowError saying what to do; the progress bar is cleared on failure."""
         from app.devices.acquisition import AcquisitionCancelled
-        from app.devices.errors import DeviceError
+        from app.devices import DeviceError
 
         try:
             yield

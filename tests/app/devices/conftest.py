@@ -7,9 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.devices.rangefinder import RangeFinder
+from app.devices.drivers.rangefinder import RangeFinder
 from app.devices.site import EmulatedSite
-from app.devices.turret import Turret
+from app.devices.drivers.turret import Turret
 from app.scene import default_scene_path, load_scene
 from core.rangefinder import aim
 

@@ -11,7 +11,7 @@ import pytest
 import trimesh
 
 from app.devices.acquisition import AcquisitionCancelled, face_patch_scan, grid_in_polygon, inside_polygon, measure_at_pixel, profile_scan
-from app.devices.errors import DeviceDisconnected
+from app.devices.drivers.errors import DeviceDisconnected
 from core.geometry import fit_plane_tls
 from core.rangefinder import aim
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from app.devices.acquisition import face_patch_scan, measure_at_pixel, profile_scan
-from app.devices.errors import DeviceError
+from app.devices.drivers.errors import DeviceError
 from app.devices.faults import Fault
 from app.render.raycast import BeamCaster
 from core.rangefinder import aim, beam_ray

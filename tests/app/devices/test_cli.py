@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from app.devices.cli import parse_fault_rates
-from app.devices.rangefinder import RangeFinder
-from app.devices.turret import Turret
+from app.devices.drivers.rangefinder import RangeFinder
+from app.devices.drivers.turret import Turret
 
 ROOT = Path(__file__).resolve().parents[3]
 

@@ -6,10 +6,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.devices.emulator_rangefinder import RangeFinderEmulator, format_distance
-from app.devices.emulator_turret import MountState
+from app.devices.emulators.rangefinder import RangeFinderEmulator, format_distance
+from app.devices.emulators.turret import MountState
 from app.render.raycast import BeamCaster
-from app.devices.transport import SerialLine
+from app.devices.drivers.transport import SerialLine
 from core.rangefinder import aim
 
 from .conftest import facing_face

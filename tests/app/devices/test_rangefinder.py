@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from app.devices.errors import (
+from app.devices.drivers.errors import (
     AmbiguousMeasurementError,
     DeviceDisconnected,
     DeviceTimeout,
@@ -19,7 +19,7 @@ from app.devices.errors import (
     SignalTooStrongError,
 )
 from app.devices.faults import Fault
-from app.devices.rangefinder import RangeFinder
+from app.devices.drivers.rangefinder import RangeFinder
 
 from .conftest import FAST_DRIVER, aim_steps, box_point, facing_face
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import serial
 
-from app.devices.errors import NoTargetError
+from app.devices.drivers.errors import NoTargetError
 from app.devices.site import EmulatedSite, open_devices, scene_clock, video_duration_s
 from app.scene import Body
 from core.brep import BRep

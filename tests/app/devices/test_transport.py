@@ -7,8 +7,9 @@ import uuid
 import pytest
 import serial
 
-from app.devices.errors import DeviceDisconnected
-from app.devices.transport import InProcessPort, PtyPort, SerialLine
+from app.devices.drivers.errors import DeviceDisconnected
+from app.devices.drivers.transport import SerialLine
+from app.devices.emulators.ports import InProcessPort, PtyPort
 
 
 def unique(prefix="t"):

@@ -9,9 +9,9 @@ import time
 
 import pytest
 
-from app.devices.errors import DeviceDisconnected, DeviceTimeout, MotionUnconfirmedError, ProtocolError, TurretError, TurretLimitError
+from app.devices.drivers.errors import DeviceDisconnected, DeviceTimeout, MotionUnconfirmedError, ProtocolError, TurretError, TurretLimitError
 from app.devices.faults import Fault
-from app.devices.turret import Turret
+from app.devices.drivers.turret import Turret
 
 from .conftest import FAST_DRIVER
 

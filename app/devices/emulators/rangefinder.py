@@ -26,8 +26,8 @@ import numpy as np
 from app.render.raycast import BeamCaster
 from core.rangefinder import RangeFinderSpec, beam_ray
 
-from .faults import FaultInjector
-from .line_emulator import LineEmulator, Timer
+from ..faults import FaultInjector
+from .line import LineEmulator, Timer
 
 __all__ = ["RangeFinderEmulator", "format_distance"]
 

@@ -28,8 +28,8 @@ import numpy as np
 
 from app.scene import TurretSpec
 
-from .faults import FaultInjector
-from .line_emulator import LineEmulator
+from ..faults import FaultInjector
+from .line import LineEmulator
 
 __all__ = ["MountState", "TurretEmulator"]
 

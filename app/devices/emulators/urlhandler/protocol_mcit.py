@@ -1,7 +1,7 @@
 """pyserial handler for ``mcit://NAME``: a serial port whose other end is an in-process emulator.
 
 ``serial.serial_for_url("mcit://NAME")`` finds this module through
-``serial.protocol_handler_packages`` (``app.devices.transport`` registers the package) and
+``serial.protocol_handler_packages`` (``app.devices.drivers.transport`` registers the package) and
 connects to the ``InProcessPort`` registered under NAME. Line settings are accepted and ignored,
 as on a pseudo-terminal; the emulator models the line's transfer time itself.
 """
@@ -12,7 +12,7 @@ import urllib.parse
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
-from app.devices.transport import URL_SCHEME, inprocess_port
+from app.devices.emulators.ports import URL_SCHEME, inprocess_port
 
 
 class Serial(SerialBase):

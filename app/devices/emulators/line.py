@@ -24,8 +24,8 @@ import threading
 import time
 from typing import Callable
 
-from .faults import FaultInjector
-from .transport import InProcessPort, PtyPort
+from ..faults import FaultInjector
+from .ports import InProcessPort, PtyPort
 
 __all__ = ["LineEmulator", "Timer"]
 
