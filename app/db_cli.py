@@ -4,6 +4,8 @@
     mcit db import model.cao [--name N] [--xyz X Y Z] [--rpy-deg R P Y] [--status known]
     mcit db list | show NAME | history [NAME] | undo CHANGE [--restore]
     mcit db export NAME out.{cao,obj,stl,ply,gltf,glb} [--world]
+    mcit db export-poses out.{json,csv,pos} [--object NAME ...] [--frame world|camera]
+    mcit db feed --socket PATH | --file PATH     the pose changes as JSON lines (app.poses_cli)
 
 Every sub-command takes ``--db PATH`` (default ``~/.local/share/mcit/mcit.sqlite``). Heavy
 modules are imported inside the commands so that ``mcit --help`` stays fast.
@@ -192,4 +194,8 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("change", type=int, help="the change's number (see `mcit db history`)")
     p.add_argument("--restore", action="store_true", help="go back to the state just after the change instead")
     p.set_defaults(func=_run(_cmd_undo))
+
+    from app.poses_cli import add_pose_parsers  # export-poses, feed: the poses out (argparse only)
+
+    add_pose_parsers(sub, common, _run)
     return db

@@ -49,6 +49,11 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument("--turret", default=None, help="turret device path or URL (with --rangefinder); default: emulated")
     p.add_argument("--no-devices", action="store_true", help="run without range finder and turret")
     p.add_argument("--jpeg-quality", type=int, default=80, help="JPEG quality of the frames sent to browsers (default 80)")
+    p.add_argument("--feed-socket", type=Path, default=None, metavar="PATH",
+                   help="publish accepted pose changes and designated targets as JSON lines on this Unix socket, for a "
+                   "robot controller (docs/exchange.md)")
+    p.add_argument("--feed-file", type=Path, default=None, metavar="PATH",
+                   help="append the same JSON lines to this file")
     p.set_defaults(func=run_serve)
     return p
 
@@ -114,18 +119,21 @@ def build_interface(args: argparse.Namespace):
                 raise
             log.error("emulated devices failed to start (%s): continuing without range finder and turret", exc)
     site = Site(scene, db, devices=devices, clock=clock)
+    if getattr(args, "feed_socket", None) or getattr(args, "feed_file", None):
+        from app.feed import FeedPublisher
+
+        try:
+            feed = FeedPublisher(file=args.feed_file, socket_path=args.feed_socket, snapshot=site.feed_snapshot)
+        except ValueError:
+            for close in closers:
+                close()
+            raise
+        site.attach_feed(feed)
+        closers.insert(0, feed.close)
+        log.info("live feed of poses and targets on %s", " and ".join(str(x) for x in (args.feed_socket, args.feed_file) if x))
     server = InterfaceServer(site, grabber, host=args.host, port=args.port, jpeg_quality=args.jpeg_quality,
                              allow_origins=access.allow_origins, token=access.token)
     return server, closers
-
-
-def _warm_pose_kernels() -> None:
-    try:
-        from core.pose import warm_up
-
-        warm_up()
-    except Exception:  # noqa: BLE001 - a first click then compiles them instead
-        log.warning("loading the pose kernels failed", exc_info=True)
 
 
 def run_serve(args: argparse.Namespace) -> int:
@@ -135,10 +143,12 @@ def run_serve(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"mcit serve: {exc}", file=sys.stderr, flush=True)
         return 2
-    server, closers = build_interface(args)
+    try:
+        server, closers = build_interface(args)
+    except ValueError as exc:  # e.g. a feed socket another program publishes on
+        print(f"mcit serve: {exc}", file=sys.stderr, flush=True)
+        return 2
     server.start()
-    # The pose solvers' compiled kernels load (the first time on a machine: compile) while the page opens.
-    threading.Thread(target=_warm_pose_kernels, name="pose-kernels", daemon=True).start()
     from app.ui.access import is_loopback
 
     if not is_loopback(args.host):

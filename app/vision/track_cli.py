@@ -9,7 +9,8 @@ The camera is either intrinsics (a ViSP ``.xml`` or OpenCV ``.yml``; the world f
 camera's, as for a hand-held camera) or a scene's calibrated C (``--scene``). The initial pose
 is a file (ViSP ``.pos``: tx ty tz θux θuy θuz; or JSON: a 4×4 matrix or {"xyz", "rpy_deg"}),
 the pose of ``--body`` in the scene, or computed from clicked model points (``--init-points``, a
-ViSP ``.init`` file, and ``--init-clicks``, the pixels in the same order).
+ViSP ``.init`` file, and ``--init-clicks``, the pixels in the same order). ``--pos-out`` writes the
+tracked poses as ViSP ``.pos`` files (the form ``--pose`` reads; with ``--intrinsics`` ViSP's cMo).
 
 Tracking stops at the first frame where the tracker is lost (exit status 3), and says where to
 restart with a new pose. Parsers here; the work is in app.vision.sequence.
@@ -54,6 +55,9 @@ def add_track_parser(sub) -> None:
     p.add_argument("--init-clicks", nargs="+", type=_pixel, metavar="U,V", help="the clicked pixels of --init-points, in order")
     p.add_argument("--out", default="tracked.mp4", help="overlay video to write (.mp4 or .avi; default tracked.mp4)")
     p.add_argument("--csv", help="also write the per-frame poses and figures to this CSV file")
+    p.add_argument("--pos-out", metavar="PATH",
+                   help="write poses as ViSP .pos (tx ty tz θux θuy θuz, as --pose reads them): PATH with %%d (e.g. "
+                   "poses/obj.%%04d.pos) gets one file per tracked frame, any other PATH the last tracked frame's pose")
     p.add_argument("--start", type=int, default=0, help="first frame to track (the initial pose is this frame's)")
     p.add_argument("--frames", type=int, help="number of frames to track (default: to the end)")
     p.add_argument("--fps", type=float, default=25.0, help="frame rate of the overlay video")
@@ -138,6 +142,28 @@ def _setup(args):
     return source, camera, model, T
 
 
+def _write_pos(pattern: str, frames) -> str:
+    """Write the tracked frames' poses as ViSP .pos files (see --pos-out); what was written, for the summary."""
+    from app.db.export import pos_text
+
+    good = [f for f in frames if not f.lost]
+    if not good:
+        raise ValueError(f"{pattern}: no frame was tracked, so there is no pose to write")
+    if "%" in pattern:
+        try:
+            names = [pattern % f.index for f in good]
+        except (TypeError, ValueError):
+            raise ValueError(f"--pos-out {pattern!r}: one %d (e.g. %04d) for the frame number expected") from None
+        for name, f in zip(names, good):
+            Path(name).parent.mkdir(parents=True, exist_ok=True)
+            Path(name).write_text(pos_text(f.T_world_obj))
+        return f"; {len(good)} .pos files: {names[0]} … {names[-1]}" if len(good) > 1 else f"; pose: {names[0]}"
+    path = Path(pattern)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(pos_text(good[-1].T_world_obj))
+    return f"; pose of frame {good[-1].index}: {path}"
+
+
 def _cmd_track(args) -> int:
     import numpy as np
 
@@ -165,6 +191,13 @@ def _cmd_track(args) -> int:
     if not frames:
         print(f"mcit track: no frame to track in {source} from frame {args.start}", file=sys.stderr)
         return 2
+    pos_written = ""
+    if args.pos_out:
+        try:
+            pos_written = _write_pos(args.pos_out, frames)
+        except (ValueError, OSError) as exc:
+            print(f"mcit track: {exc}", file=sys.stderr)
+            return 2
     conf = np.array([f.confidence for f in frames if not f.lost] or [0.0])
     ms = np.array([f.track_ms for f in frames])
     lost = [f for f in frames if f.lost]
@@ -173,7 +206,7 @@ def _cmd_track(args) -> int:
         f"confidence min {conf.min():.2f}, mean {conf.mean():.2f}; tracking {np.mean(ms):.1f} ms a frame "
         f"({1e3 / np.mean(ms):.0f} frames/s)"
     )
-    print(f"overlay video: {args.out}" + (f"; poses: {args.csv}" if args.csv else ""))
+    print(f"overlay video: {args.out}" + (f"; poses: {args.csv}" if args.csv else "") + pos_written)
     if lost:
         f = lost[0]
         print(

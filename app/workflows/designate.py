@@ -32,7 +32,8 @@ click but the range finder hits something, the target is the range finder's poin
 warning. Without devices the target is the database's and the summary says "not checked by the
 range finder". The measurement (≈0.1–1 s) runs outside the workflow's lock: the overlay keeps
 drawing, and the beam spot follows the aiming. A device fault raises WorkflowError and keeps
-nothing. Nothing is written to the database: the targets are shown and copied.
+nothing. Nothing is written to the database: the targets are shown and copied, and each one goes
+out on the site's live feed when one is attached (``mcit serve --feed-socket``; app.feed, docs/exchange.md).
 """
 
 from __future__ import annotations
@@ -162,13 +163,31 @@ class DesignateTarget(Workflow):
         with self.lock:
             self.targets.append(t)
             self.message = message
+            self._publish(t, len(self.targets))
             return t
+
+    def _publish(self, t: Target, index: int) -> None:
+        """Send the target out on the site's live feed (app.feed), when one is attached."""
+        if getattr(self.site, "feed", None) is None:
+            return
+        import time
+
+        from app.feed import target_event
+
+        try:
+            version = next((o.version for o in self.site.objects() if o.name == t.object), None)
+            self.site.publish(target_event(t, index=index, who=self.client, when=time.time(), version=version,
+                                           camera_centre=self.site.camera.center))
+        except Exception:  # noqa: BLE001 - the target stands (shown, copied) even if the feed fails
+            import logging
+
+            logging.getLogger("mcit.feed").exception("target %d could not be sent on the live feed", index)
 
     def _measure(self, cam, T, p, devices, hit):
         """The range finder put on pixel p (outside the lock): (PixelMeasurement, "") or (None, why
         not) when the turret cannot reach it. A device fault → WorkflowError; a cancel → Cancelled."""
         from app.devices.acquisition import AcquisitionCancelled, measure_at_pixel
-        from app.devices import DeviceError, TurretLimitError
+        from app.devices.errors import DeviceError, TurretLimitError
         from core.rangefinder import beam_point
 
         def report(prog) -> None:

@@ -176,6 +176,7 @@ class Site:
         self._feed: deque[Change] = deque(maxlen=FEED_LENGTH)
         self._feed_seq = int(db.last_change_id())
         self._feed_lock = threading.Lock()  # one reader of the history at a time (no change read twice)
+        self.feed: Any = None  # an app.feed.FeedPublisher the changes and targets go out on (attach_feed)
         self._load_calibrations()
         self._frames: Callable[[float], Any] | None = None
         if isinstance(frames, str):
@@ -413,12 +414,45 @@ class Site:
             return [c for c in self._feed if c.seq > seq]
 
     def _read_feed(self) -> None:
-        """Add the history's new changes to the feed (a cheap query when there are none)."""
+        """Add the history's new changes to the feed (a cheap query when there are none), and send
+        each object's change out on the attached live feed (``attach_feed``)."""
         with self._feed_lock:
             for rec in self.db.history_since(self._feed_seq):
                 self._feed.append(Change(int(rec.id), str(rec.client), _change_sentence(rec), rec.object_name,
                                          float(rec.time)))
                 self._feed_seq = int(rec.id)
+                if self.feed is not None:
+                    self._publish_change(rec)
+
+    def _publish_change(self, rec: Any) -> None:
+        """One history change out on the live feed; a failure is logged, never the writer's error
+        (the change is in the database already)."""
+        from app.feed import change_event
+
+        try:
+            self.feed.publish(change_event(rec))
+        except Exception:  # noqa: BLE001 - the feed must not fail a write that happened
+            import logging
+
+            logging.getLogger("mcit.feed").exception("change #%s could not be sent on the live feed", rec.id)
+
+    def attach_feed(self, feed: Any) -> None:
+        """Send every accepted change of an object (through this site, or another process's once
+        ``poll()`` sees it) and every designated target out on ``feed`` (``app.feed.FeedPublisher``,
+        its snapshot the objects as they stand: ``feed_snapshot``); None detaches it."""
+        self.feed = feed
+
+    def feed_snapshot(self) -> list[dict]:
+        """The live feed's lines for every object as it stands (``action`` "current")."""
+        from app.feed import object_event
+
+        return [object_event(rec) for rec in self.db.objects()]
+
+    def publish(self, event: dict | None) -> None:
+        """Send one line out on the live feed, if one is attached (a designated target)."""
+        feed = self.feed
+        if feed is not None:
+            feed.publish(event)
 
     def set_beam(self, X_world: np.ndarray | None) -> None:
         """Show the range finder's last measured point (None hides it)."""
