@@ -136,6 +136,15 @@ def build_interface(args: argparse.Namespace):
     return server, closers
 
 
+def _warm_pose_kernels() -> None:
+    try:
+        from core.pose import warm_up
+
+        warm_up()
+    except Exception:  # noqa: BLE001 - a first click then compiles them instead
+        log.warning("loading the pose kernels failed", exc_info=True)
+
+
 def run_serve(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
@@ -149,6 +158,8 @@ def run_serve(args: argparse.Namespace) -> int:
         print(f"mcit serve: {exc}", file=sys.stderr, flush=True)
         return 2
     server.start()
+    # The pose solvers' compiled kernels load (the first time on a machine: compile) while the page opens.
+    threading.Thread(target=_warm_pose_kernels, name="pose-kernels", daemon=True).start()
     from app.ui.access import is_loopback
 
     if not is_loopback(args.host):

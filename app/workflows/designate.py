@@ -187,7 +187,7 @@ class DesignateTarget(Workflow):
         """The range finder put on pixel p (outside the lock): (PixelMeasurement, "") or (None, why
         not) when the turret cannot reach it. A device fault → WorkflowError; a cancel → Cancelled."""
         from app.devices.acquisition import AcquisitionCancelled, measure_at_pixel
-        from app.devices.errors import DeviceError, TurretLimitError
+        from app.devices import DeviceError, TurretLimitError
         from core.rangefinder import beam_point
 
         def report(prog) -> None:
