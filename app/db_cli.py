@@ -7,8 +7,11 @@
     mcit db export-poses out.{json,csv,pos} [--object NAME ...] [--frame world|camera]
     mcit db feed --socket PATH | --file PATH     the pose changes as JSON lines (app.poses_cli)
 
-Every sub-command takes ``--db PATH`` (default ``~/.local/share/mcit/mcit.sqlite``). Heavy
-modules are imported inside the commands so that ``mcit --help`` stays fast.
+Every sub-command takes ``--db PATH`` (default ``~/.local/share/mcit/mcit.sqlite``) and ``--wait-s S``
+(how long a change waits for another writer to finish, default 5 s). list, show, history and
+export only read: they work on a read-only file, folder or mount and never create the file. Every
+failure is one line on stderr and exit status 1, with nothing written. Heavy modules are imported
+inside the commands so that ``mcit --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -25,10 +28,10 @@ def _when(t: float) -> str:
     return time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t))
 
 
-def _open(args):
+def _open(args, readonly: bool = False):
     from app.db import Database
 
-    return Database.open(args.db, client="cli")
+    return Database.open(args.db, client="cli", busy_timeout_s=args.wait_s, readonly=readonly)
 
 
 def _cmd_init(args) -> int:
@@ -62,7 +65,7 @@ def _cmd_import(args) -> int:
 
 
 def _cmd_list(args) -> int:
-    with _open(args) as db:
+    with _open(args, readonly=True) as db:
         objs = db.objects()
         if not objs:
             print(f"{db.path}: no objects")
@@ -79,7 +82,7 @@ def _cmd_show(args) -> int:
 
     from app.scene import pose_to_json
 
-    with _open(args) as db:
+    with _open(args, readonly=True) as db:
         o = db.get(int(args.name) if args.name.isdigit() else args.name)
         m = o.model
         rpy = pose_to_json(o.T_world_obj)["rpy_deg"]
@@ -103,7 +106,7 @@ def _cmd_show(args) -> int:
 def _cmd_export(args) -> int:
     from app.models_io import save_model
 
-    with _open(args) as db:
+    with _open(args, readonly=True) as db:
         o = db.get(int(args.name) if args.name.isdigit() else args.name)
         model = o.model.transformed(o.T_world_obj) if args.world else o.model
         frame = "world" if args.world else "object"
@@ -113,7 +116,7 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_history(args) -> int:
-    with _open(args) as db:
+    with _open(args, readonly=True) as db:
         name = None if args.name is None else (int(args.name) if args.name.isdigit() else args.name)
         changes = db.history(name, limit=args.limit)
         if not changes:
@@ -138,21 +141,38 @@ def _cmd_undo(args) -> int:
 
 def _run(func):
     def wrapped(args) -> int:
-        from app.db import ConflictError, DatabaseRefused, NotFoundError
+        from app.db import ConflictError, DatabaseRefused, DatabaseUnavailable, NotFoundError
 
         try:
             return func(args)
-        except (ValueError, NotFoundError, ConflictError, DatabaseRefused, OSError) as exc:
+        except (ValueError, NotFoundError, ConflictError, DatabaseRefused, DatabaseUnavailable) as exc:
             print(f"mcit db {args.db_command}: error: {exc}", file=sys.stderr)
+            return 1
+        except OSError as exc:  # a file named on the command line: say which and why, in one line
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"mcit db {args.db_command}: error: {where}{exc.strerror or exc}; check the path and its permissions",
+                  file=sys.stderr)
             return 1
 
     return wrapped
+
+
+def _wait_s(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds (a number), got {text!r}") from None
+    if not 0.0 <= value <= 3600.0:
+        raise argparse.ArgumentTypeError(f"expected 0 to 3600 seconds, got {text!r}")
+    return value
 
 
 def add_db_parser(subparsers) -> argparse.ArgumentParser:
     """Add ``db`` and its sub-commands to the ``mcit`` parser's sub-parsers."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--db", metavar="PATH", default=None, help="database file (default: ~/.local/share/mcit/mcit.sqlite)")
+    common.add_argument("--wait-s", type=_wait_s, default=5.0, metavar="S",
+                        help="how long a change waits for another program writing the database (default 5 s)")
     db = subparsers.add_parser("db", help="the site's database: import, list, show, export, history, undo",
                                description="The site's 3D geometric database (SQLite).")
     sub = db.add_subparsers(dest="db_command", metavar="DB_COMMAND", required=True)

@@ -14,6 +14,7 @@ from .database import Database, default_db_path
 from .records import CalibrationRecord, ChangeRecord, ConflictError, NotFoundError, ObjectRecord, STATUSES
 from .schema import LATEST_VERSION, DatabaseRefused
 from .seed import dimensions_of, seed_from_scene
+from .storage import DatabaseUnavailable
 
 __all__ = [
     "Database",
@@ -24,6 +25,7 @@ __all__ = [
     "ConflictError",
     "NotFoundError",
     "DatabaseRefused",
+    "DatabaseUnavailable",
     "STATUSES",
     "LATEST_VERSION",
     "seed_from_scene",

@@ -44,6 +44,7 @@ from .records import (
     to_json,
 )
 from .schema import LATEST_VERSION, DatabaseRefused, inspect_file, migrate
+from .storage import DatabaseUnavailable, can_write, check_writable, explain, read_uri, side_files
 
 __all__ = ["Database", "default_db_path"]
 
@@ -125,6 +126,21 @@ def _model_json(model: Any) -> tuple[str, str]:
     return text, hashlib.sha256(text.encode()).hexdigest()
 
 
+def _remove_if_unwritten(path: Path) -> None:
+    """After a refused open that created ``path``: remove it and its side files if it holds nothing
+    (no schema committed), so that a refused open leaves no file behind."""
+    try:
+        if inspect_file(path, quick_check=False).exists:
+            return
+    except (DatabaseRefused, DatabaseUnavailable):
+        return
+    for f in (path, *side_files(path)):
+        try:
+            f.unlink(missing_ok=True)
+        except OSError:
+            pass
+
+
 class Database:
     """The site's SQLite database; see the module docstring. Open it with ``Database.open``.
 
@@ -133,10 +149,11 @@ class Database:
     the change in the history.
     """
 
-    def __init__(self, path: Path, client: str, busy_timeout_s: float):
+    def __init__(self, path: Path, client: str, busy_timeout_s: float, readonly: bool = False):
         self._path = path
         self.client = client
         self._busy_timeout_s = busy_timeout_s
+        self.readonly = readonly
         self._local = threading.local()
         self._lock = threading.Lock()
         self._connections: list[sqlite3.Connection] = []
@@ -147,31 +164,86 @@ class Database:
     # ------------------------------------------------------------------ opening
     @classmethod
     def open(
-        cls, path: str | Path | None = None, *, client: str = "local", busy_timeout_s: float = 10.0, quick_check: bool = True
+        cls, path: str | Path | None = None, *, client: str = "local", busy_timeout_s: float = 10.0, quick_check: bool = True,
+        readonly: bool = False,
     ) -> "Database":
         """Open (creating it with the schema if absent or empty) the database at ``path``.
 
         path : the file; default ``default_db_path()``. quick_check : run SQLite's quick_check on
-        an existing file before using it (milliseconds for a site's database).
+        an existing file before using it (milliseconds for a site's database). busy_timeout_s :
+        how long a write waits for another writer to finish. readonly : only read (works on a
+        read-only file, folder or mount; never creates the file, nor any file beside it).
 
         Raises DatabaseRefused (file untouched) for a file that is not SQLite, is corrupt, belongs
-        to another program or was written by a newer mcit.
+        to another program or was written by a newer mcit; DatabaseUnavailable (nothing written,
+        no file left behind) when it cannot be written (read-only, disk full, locked past the
+        busy timeout), or, with ``readonly``, when there is none.
         """
         path = Path(path) if path is not None else default_db_path()
         state = inspect_file(path, quick_check=quick_check)
-        if not state.exists:
-            path.parent.mkdir(parents=True, exist_ok=True)
+        if readonly:
+            return cls._open_readonly(path, state, client, busy_timeout_s)
+        new = not path.exists()
+        if new:
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise DatabaseUnavailable(f"cannot make the folder for {path} ({exc.strerror}), so nothing was written; "
+                                          "choose a writable place with --db") from None
+            if not os.access(path.parent, os.W_OK):
+                raise DatabaseUnavailable(f"cannot create {path}: its folder is read-only, so nothing was written; "
+                                          "choose a writable place with --db")
+        else:
+            check_writable(path)
         db = cls(path, client, busy_timeout_s)
         try:
-            conn = db._conn()
-            mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
-            if mode.lower() != "wal":
-                raise DatabaseRefused(f"{path}: SQLite refused WAL mode (got {mode!r}); put the database on a local disk")
-            migrate(conn, LATEST_VERSION)
+            with db._errors():
+                conn = db._conn()
+                mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+                if mode.lower() != "wal":
+                    raise DatabaseRefused(f"{path}: SQLite refused WAL mode (got {mode!r}); put the database on a local disk")
+                if state.version < LATEST_VERSION:  # a file at the latest version needs no write lock to open
+                    migrate(conn, LATEST_VERSION)
+        except BaseException:
+            db.close()
+            if new:
+                _remove_if_unwritten(path)
+            raise
+        return db
+
+    @classmethod
+    def _open_readonly(cls, path: Path, state, client: str, busy_timeout_s: float) -> "Database":
+        if not state.exists:
+            raise DatabaseUnavailable(f"there is no database at {path}; create one with `mcit db init` or `mcit db import` "
+                                      "(with --db to choose the file)")
+        if state.version < LATEST_VERSION:  # upgraded once, by a writable open
+            if not can_write(path.resolve()):
+                raise DatabaseUnavailable(
+                    f"{path} was written by an older mcit (schema version {state.version}) and is read-only, so it cannot "
+                    "be upgraded to be read; make it writable once, or read it with the mcit that wrote it"
+                )
+            cls.open(path, client=client, busy_timeout_s=busy_timeout_s, quick_check=False).close()
+        db = cls(path, client, busy_timeout_s, readonly=True)
+        try:
+            with db._errors():
+                db._conn()
         except BaseException:
             db.close()
             raise
         return db
+
+    @contextmanager
+    def _errors(self) -> Iterator[None]:
+        """SQLite errors the disk or other programs cause become one sentence (DatabaseUnavailable)."""
+        try:
+            yield
+        except sqlite3.Error as exc:
+            if isinstance(exc, sqlite3.IntegrityError):
+                raise
+            told = explain(exc, self._path, self._busy_timeout_s)
+            if told is exc:
+                raise
+            raise told from exc
 
     @property
     def path(self) -> Path:
@@ -203,11 +275,18 @@ class Database:
         if conn is None:
             if self._closed:
                 raise RuntimeError(f"the database {self._path} is closed")
-            conn = sqlite3.connect(self._path, isolation_level=None, timeout=self._busy_timeout_s, check_same_thread=False)
+            if self.readonly:
+                uri, immutable = read_uri(self._path)
+                conn = sqlite3.connect(uri, uri=True, isolation_level=None, timeout=self._busy_timeout_s, check_same_thread=False)
+                conn.execute("PRAGMA query_only = ON")
+            else:
+                immutable = False
+                conn = sqlite3.connect(self._path, isolation_level=None, timeout=self._busy_timeout_s, check_same_thread=False)
             conn.execute("PRAGMA foreign_keys = ON")
             conn.execute(f"PRAGMA busy_timeout = {int(self._busy_timeout_s * 1000)}")
             conn.execute("PRAGMA synchronous = FULL")
             self._local.conn = conn
+            self._local.immutable = immutable  # read as on disk: no lock (see app/db/storage.py)
             self._local.depth = 0
             self._local.commits = 0  # this connection's commits (PRAGMA data_version counts the others')
             self._local.snapshot = None  # (data_version, commits, objects) of the last objects() read
@@ -226,18 +305,21 @@ class Database:
             finally:
                 self._local.depth -= 1
             return
-        conn.execute("BEGIN IMMEDIATE")
-        self._local.depth = 1
-        try:
-            yield conn
-            conn.execute("COMMIT")
-            self._local.commits += 1
-        except BaseException:
-            if conn.in_transaction:
-                conn.execute("ROLLBACK")
-            raise
-        finally:
-            self._local.depth = 0
+        if self.readonly:
+            raise DatabaseUnavailable(f"{self._path} was opened only to be read; nothing was written")
+        with self._errors():
+            conn.execute("BEGIN IMMEDIATE")
+            self._local.depth = 1
+            try:
+                yield conn
+                conn.execute("COMMIT")
+                self._local.commits += 1
+            except BaseException:
+                if conn.in_transaction:
+                    conn.execute("ROLLBACK")
+                raise
+            finally:
+                self._local.depth = 0
 
     @contextmanager
     def _read(self) -> Iterator[sqlite3.Connection]:
@@ -246,11 +328,22 @@ class Database:
         if self._local.depth:
             yield conn
             return
-        conn.execute("BEGIN")
-        try:
-            yield conn
-        finally:
-            conn.execute("COMMIT")
+        if self._local.immutable and self._path.with_name(self._path.name + "-wal").exists():
+            self._reconnect()  # another program opened it since: read its committed changes too
+            conn = self._conn()
+        with self._errors():
+            conn.execute("BEGIN")
+            try:
+                yield conn
+            finally:
+                conn.execute("COMMIT")
+
+    def _reconnect(self) -> None:
+        conn = self._local.conn
+        with self._lock:
+            self._connections.remove(conn)
+        conn.close()
+        self._local.conn = None
 
     # ------------------------------------------------------------------ objects: reading
     def _model(self, conn: sqlite3.Connection, model_id: int) -> BRep:

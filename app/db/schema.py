@@ -10,9 +10,12 @@ or was written by a newer mcit; nothing is ever written to such a file.
 
 from __future__ import annotations
 
+import os
 import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
+
+from .storage import DatabaseUnavailable, read_uri
 
 __all__ = ["APPLICATION_ID", "LATEST_VERSION", "MIGRATIONS", "DatabaseRefused", "FileState", "inspect_file", "migrate"]
 
@@ -111,10 +114,14 @@ def inspect_file(path: Path, quick_check: bool = True) -> FileState:
         raise DatabaseRefused(f"{path} is a directory; give a database file path with --db")
     if not path.exists() or path.stat().st_size == 0:
         return FileState(False, 0)
+    if not os.access(path, os.R_OK):
+        raise DatabaseUnavailable(f"{path} cannot be read (permission denied); check its owner and permissions")
+    uri, _ = read_uri(path)  # a look that leaves no -wal/-shm file behind, even on a read-only disk
     try:
-        conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
+        conn = sqlite3.connect(uri, uri=True)
+        conn.execute("PRAGMA query_only = ON")
     except sqlite3.Error as exc:
-        raise DatabaseRefused(f"{path}: cannot open it read-only ({exc}); check its permissions") from None
+        raise DatabaseUnavailable(f"{path} cannot be opened to be read ({exc}); check it and its folder's permissions") from None
     try:
         app_id = conn.execute("PRAGMA application_id").fetchone()[0]
         version = conn.execute("PRAGMA user_version").fetchone()[0]
@@ -139,6 +146,8 @@ def inspect_file(path: Path, quick_check: bool = True) -> FileState:
                     "Restore a backup, or recover it with the sqlite3 shell's .recover, then open the copy"
                 )
         return FileState(True, version)
+    except sqlite3.OperationalError as exc:  # the disk or another program, not the file's content
+        raise DatabaseUnavailable(f"{path} could not be read ({exc}); check the disk and try again") from None
     except sqlite3.DatabaseError as exc:
         raise DatabaseRefused(
             f"{path} cannot be read as an SQLite database ({exc}): it is not one, or it is corrupt. mcit will not "

@@ -1,6 +1,7 @@
 """``mcit db …`` end to end, and the real models' round trip import → database → export → import."""
 
 import sqlite3
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -88,10 +89,12 @@ def test_a_malformed_model_writes_nothing(tmp_path, capsys):
 
 def test_cli_errors_are_one_line_and_exit_1(tmp_path, capsys):
     db = str(tmp_path / "site.sqlite")
-    code, _, err = _mcit(capsys, "db", "show", "ghost", "--db", db)
-    assert code == 1 and "no object 'ghost'" in err
+    code, _, err = _mcit(capsys, "db", "show", "ghost", "--db", db)  # a read: the file is not created
+    assert code == 1 and "there is no database at" in err and "mcit db init" in err and not Path(db).exists()
     code, _, err = _mcit(capsys, "db", "undo", "42", "--db", db)
     assert code == 1 and "no change #42" in err
+    code, _, err = _mcit(capsys, "db", "show", "ghost", "--db", db)
+    assert code == 1 and "no object 'ghost'" in err
     not_db = tmp_path / "notes.txt"
     not_db.write_text("hello\n" * 100)
     code, _, err = _mcit(capsys, "db", "list", "--db", str(not_db))

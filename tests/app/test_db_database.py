@@ -9,6 +9,7 @@ import pytest
 from app.db import (
     ConflictError,
     Database,
+    DatabaseUnavailable,
     NotFoundError,
     ObjectRecord,
     default_db_path,
@@ -176,7 +177,7 @@ def test_a_failure_inside_a_transaction_writes_nothing(db, monkeypatch):
         raise sqlite3.OperationalError("disk I/O error (simulated)")
 
     monkeypatch.setattr(db, "_log", broken_log)
-    with pytest.raises(sqlite3.OperationalError):
+    with pytest.raises(DatabaseUnavailable, match="reported an error .*disk I/O error"):
         db.update_pose(rec.id, make_T(np.eye(3), [1, 2, 3]), expected_version=1, method="m")
     monkeypatch.undo()
     after = db.get(rec.id)
