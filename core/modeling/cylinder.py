@@ -39,7 +39,7 @@ from .profile import ProfileFit, axis_basis, fit_profile, front_plane, front_pla
 from .result import ModelResult
 from .returns import Returns, concat_returns
 from .scans import segment_scan
-from .small import image_line, interp_plane
+from .small import image_line, interp_plane, interp_plane_jacobian
 
 __all__ = ["METHODS", "model_cylinder", "CylinderData", "reduce_cylinder_data"]
 
@@ -384,6 +384,202 @@ def _finish(ctx: _Ctx, sil, Xa, a, r_ref, k) -> dict:
     return {"p0": Xa + t_base * a, "a": a, "r0": r0, "r1": r1, "h": h}
 
 
+# ---------------------------------------------------------------- its derivative (known axis direction)
+# Each quantity travels with its derivative with respect to z, an array (..., len(z)).
+
+
+def _unit_plane_jacobian(v: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``make_plane(v[:3], v[3]).as_vector()`` and its derivative from v (4,) and dv (4, n)."""
+    nu = np.linalg.norm(v[:3])
+    return v / nu, dv / nu - np.outer(v, v[:3] @ dv[:3]) / nu**3
+
+
+def _lateral_plane_jacobian(ctx: _Ctx, idx, angles, a, i_ang: int, n: int):
+    """A lateral tangent plane (4,) and its derivative: the plane's normal is the direction least
+    along the beams (and the axis), the eigenvector of M = DᵀD of its smallest eigenvalue λ₀, so
+    dn = −Σⱼ vⱼ vⱼᵀ dM n / (λⱼ − λ₀) over the other eigenvectors; the plane holds the origin."""
+    d = ctx.data
+    beams = d.tangents
+    ang = np.concatenate([angles[2 * i : 2 * i + 2] for i in idx])
+    plane = _lateral_plane(ctx, [beams[i] for i in idx], ang, a)
+    R = d.T_world_turret[:3, :3]
+    rows, drows = [], []
+    for i in idx:
+        pan, tilt = angles[2 * i], angles[2 * i + 1]
+        cp, sp, ct, st = np.cos(pan), np.sin(pan), np.cos(tilt), np.sin(tilt)
+        dD = np.zeros((3, n))
+        dD[:, i_ang + 2 * i] = R @ [-ct * sp, ct * cp, 0.0]
+        dD[:, i_ang + 2 * i + 1] = R @ [-st * cp, -st * sp, ct]
+        rows.append(R @ [ct * cp, ct * sp, st])
+        drows.append(dD)
+    if not d.cone:
+        rows.append(a)
+        drows.append(np.zeros((3, n)))
+    D, dD = np.array(rows), np.array(drows)
+    nv = plane.n
+    Dn, dDn = D @ nv, np.einsum("kin,i->kn", dD, nv)
+    dMn = np.einsum("kin,k->in", dD, Dn) + D.T @ dDn  # (dDᵀ D + Dᵀ dD) n
+    lam, V = np.linalg.eigh(D.T @ D)
+    lam0 = float(Dn @ Dn)
+    dnv = np.zeros((3, n))
+    for j in range(3):
+        if abs(V[:, j] @ nv) < 0.5:  # not the plane's normal
+            dnv -= np.outer(V[:, j], V[:, j] @ dMn) / (lam[j] - lam0)
+    o = d.rf_origin
+    return plane.as_vector(), np.vstack([dnv, -(o @ dnv)])
+
+
+def _paper_jacobian(z: np.ndarray, ctx: _Ctx, sol: dict) -> np.ndarray | None:
+    """d q / d z of ``_solid_vector(_solve_paper(z, ctx))`` (analytic) when the axis direction is
+    known (a hint or the support); None when the construction finds it (then differences)."""
+    d = ctx.data
+    a = d.axis_hint
+    if a is None:
+        return None
+    n = len(z)
+    cam = d.camera
+    sil, angles, _ = _unpack(z, ctx)
+    i_ang = 8 if sil is not None else 0
+    nb = len(d.tangents)
+    planes = {}
+    if sil is not None and ctx.method in ("tangential", "bisecting"):
+        for k, P in enumerate(_silhouette_planes(cam, sil)):
+            v, J = interp_plane_jacobian(cam.C, sil[k])
+            dv = np.zeros((4, n))
+            dv[:, 4 * k : 4 * k + 4] = J if v @ P.as_vector() > 0 else -J
+            planes[f"P{k + 1}"] = (P.as_vector(), dv)
+    if ctx.profile is not None:
+        dv = np.zeros((4, n))
+        dv[:, i_ang + 2 * nb :] = np.eye(4)
+        planes["p3"] = _unit_plane_jacobian(z[i_ang + 2 * nb :], dv)
+    if ctx.method in ("bisecting", "rf_tangential"):
+        for s in (-1, 1):
+            idx = [i for i, tb in enumerate(d.tangents) if tb.side == s]
+            planes[f"lat{s}"] = _lateral_plane_jacobian(ctx, idx, angles, a, i_ang, n)
+    e1, e2 = axis_basis(a)
+
+    def line(name, t):
+        (v, dv) = planes[name]
+        u_raw, du_raw = np.array([v[:3] @ e1, v[:3] @ e2]), np.array([e1 @ dv[:3], e2 @ dv[:3]])
+        g_raw, dg_raw = v[:3] @ ctx.X0 + t * (v[:3] @ a) + v[3], (ctx.X0 + t * a) @ dv[:3] + dv[3]
+        s_ = np.linalg.norm(u_raw)
+        ds = u_raw @ du_raw / s_
+        return u_raw / s_, du_raw / s_ - np.outer(u_raw, ds) / s_**2, g_raw / s_, dg_raw / s_ - g_raw * ds / s_**2
+
+    if ctx.method == "bisecting":
+        for pair, name in ((("P1", "P2"), "bis_cam"), (("lat-1", "lat1"), "bis_rf")):
+            (v1, dv1), (v2, dv2) = planes[pair[0]], planes[pair[1]]
+            planes[name] = _unit_plane_jacobian(v1 - v2, dv1 - dv2)
+    centres, dcentres, radii, dradii = [], [], [], []
+    for t in ctx.t_sections:
+        if ctx.method == "bisecting":
+            (u1, du1, g1, dg1), (u2, du2, g2, dg2) = line("bis_cam", t), line("bis_rf", t)
+            A = np.array([u1, u2])
+            y = np.linalg.solve(A, -np.array([g1, g2]))
+            dy = np.linalg.solve(A, -np.array([dg1, dg2]) - np.array([y @ du1, y @ du2]))
+            ls = [line("lat-1", t), line("lat1", t)]
+            r = np.mean([u @ y + g for u, _, g, _ in ls])
+            dr = np.mean([y @ du + u @ dy + dg for u, du, _, dg in ls], axis=0)
+        else:
+            names = ("P1", "P2", "p3") if ctx.method == "tangential" else ("lat-1", "lat1", "p3")
+            ls = [line(nm, t) for nm in names]
+            A = np.array([[u[0], u[1], -1.0] for u, _, _, _ in ls])
+            x, *_ = np.linalg.lstsq(A, -np.array([g for _, _, g, _ in ls]), rcond=None)
+            rhs = -np.array([dg for _, _, _, dg in ls]) - np.array([x[:2] @ du for _, du, _, _ in ls])
+            dx = np.linalg.pinv(A) @ rhs
+            y, dy, r, dr = x[:2], dx[:2], x[2], dx[2]
+        centres.append(y)
+        dcentres.append(dy)
+        radii.append(r)
+        dradii.append(dr)
+    dy = np.mean(dcentres, axis=0)
+    if d.cone:
+        X = np.column_stack([ctx.t_sections, np.ones(len(ctx.t_sections))])
+        dk, dr_ref = np.linalg.pinv(X) @ np.array(dradii)
+        k, r_ref = np.linalg.pinv(X) @ np.array(radii)
+    else:
+        k, dk, r_ref, dr_ref = 0.0, np.zeros(n), float(np.mean(radii)), np.mean(dradii, axis=0)
+    Xa = ctx.X0 + np.mean(centres, axis=0) @ np.array([e1, e2])
+    dXa = np.outer(e1, dy[0]) + np.outer(e2, dy[1])
+    # _finish: the generators seen from the camera, the clicked ends' heights on them, the support.
+    t_lo, t_hi = float(ctx.t_sections.min()), float(ctx.t_sections.max())
+    dt_base = dt_top = None
+    if sil is not None:
+        span = max(t_hi - t_lo, 0.05)
+        tl, th = t_lo - 0.1 * span, t_hi + 0.1 * span
+        gens = _generators(cam, Xa, a, r_ref, k, tl, th)
+        # Revolution.silhouette from c: e = (κ/D) ŵ ± √(1 − (κ/D)²) (a × ŵ), the generator
+        # (p0 + r_lo e) → (p1 + r_hi e).
+        c = cam.center
+        r_lo, r_hi, dr_lo, dr_hi = r_ref + k * tl, r_ref + k * th, dr_ref + tl * dk, dr_ref + th * dk
+        q = c - (Xa + tl * a)
+        q_a, dq_a = q @ a, -(a @ dXa)
+        w, dw = q - q_a * a, -dXa - np.outer(a, dq_a)
+        D = np.linalg.norm(w)
+        w_hat = w / D
+        dD = w_hat @ dw
+        dw_hat = (dw - np.outer(w_hat, dD)) / D
+        b_hat, db_hat = np.cross(a, w_hat), np.cross(a, dw_hat, axisa=0, axisb=0, axisc=0)
+        kap = r_lo - (r_lo - r_hi) * q_a / (th - tl)
+        dkap = dr_lo - ((dr_lo - dr_hi) * q_a + (r_lo - r_hi) * dq_a) / (th - tl)
+        cc, dcc = kap / D, dkap / D - kap * dD / D**2
+        sq = np.sqrt(max(0.0, 1.0 - cc * cc))
+        dsq = -cc * dcc / sq
+        dgens = []
+        for sign in (1.0, -1.0):
+            e = cc * w_hat + sign * sq * b_hat
+            de = np.outer(w_hat, dcc) + cc * dw_hat + sign * (np.outer(b_hat, dsq) + sq * db_hat)
+            P0, P1 = Xa + tl * a + r_lo * e, Xa + th * a + r_hi * e
+            dP0 = dXa + np.outer(e, dr_lo) + r_lo * de
+            dP1 = dXa + np.outer(e, dr_hi) + r_hi * de
+            L = np.linalg.norm(P1 - P0)
+            u = (P1 - P0) / L
+            dgens.append((P0, dP0, u, (np.eye(3) - np.outer(u, u)) @ (dP1 - dP0) / L))
+        # _click_heights
+        Minv = np.linalg.inv(cam.C[:, :3])
+        lines = [image_line(*cam.project(np.array([P, P + 0.1 * u]))) for P, u in gens]
+        ends = []
+        for si, seg in enumerate(sil):
+            H = np.column_stack([seg, np.ones(2)])
+            g = int(np.argmin([np.abs(H @ l).sum() for l in lines]))
+            P, dP, u, du = dgens[g]
+            ts, dts = [], []
+            for j in range(2):
+                ray_raw = Minv @ H[j]
+                dray_raw = np.zeros((3, n))
+                dray_raw[:, 4 * si + 2 * j : 4 * si + 2 * j + 2] = Minv[:, :2]
+                nr = np.linalg.norm(ray_raw)
+                ray = ray_raw / nr
+                dray = (dray_raw - np.outer(ray, ray @ dray_raw)) / nr
+                wv, dwv = P - c, dP
+                b, db = ray @ u, u @ dray + ray @ du
+                rw, drw = ray @ wv, wv @ dray + ray @ dwv
+                wu, dwu = wv @ u, u @ dwv + wv @ du
+                den = 1 - b * b
+                dden = -2 * b * db if den > 1e-12 else np.zeros(n)
+                den = max(den, 1e-12)
+                num, dnum = b * rw - wu, db * rw + b * drw - dwu
+                s_g, ds_g = num / den, dnum / den - num * dden / den**2
+                ts.append((P - Xa) @ a + s_g * (u @ a))
+                dts.append(a @ (dP - dXa) + ds_g * (u @ a) + s_g * (a @ du))
+            lo = int(np.argmin(ts))
+            ends.append((dts[lo], dts[1 - lo]))
+        dt_top = np.mean([hi for _, hi in ends], axis=0)
+        dt_base = np.mean([lo for lo, _ in ends], axis=0)
+    if d.support is not None:
+        dt_base = -(d.support.n @ dXa) / (d.support.n @ a)
+    if dt_top is None or dt_base is None:
+        return None
+    t_base_v = (sol["p0"] - Xa) @ a
+    h = sol["h"]
+    dh = dt_top - dt_base
+    dr0, dr1 = dr_ref + t_base_v * dk + k * dt_base, dr_ref + (t_base_v + h) * dk + k * dt_top
+    dp0 = dXa + np.outer(a, dt_base)
+    dmid = dp0 + 0.5 * np.outer(a, dh)
+    dradii = [dr0, dr1] if d.cone else [0.5 * (dr0 + dr1)]
+    return np.vstack([*dradii, dh, dmid, np.zeros((3, n))])
+
+
 def _solid_vector(s: dict, cone: bool) -> np.ndarray:
     mid = s["p0"] + 0.5 * s["h"] * s["a"]
     radii = [s["r0"], s["r1"]] if cone else [0.5 * (s["r0"] + s["r1"])]
@@ -524,8 +720,10 @@ def _model_paper(data: CylinderData, method: str, sigma_px: float) -> ModelResul
     scale = np.sqrt(np.maximum(np.diag(Sz), 1e-30))
     # Forward differences (the construction has no derivative at hand): the map is smooth on the
     # scale of σ; an input with no spread gets no column.
-    step = np.where(scale <= 1e-15, 0.0, 1e-4 * scale)
-    J = numeric_jacobian(lambda x: _solid_vector(_solve_paper(x, ctx), data.cone), z, step, f0=q0)
+    J = _paper_jacobian(z, ctx, sol)
+    if J is None:
+        step = np.where(scale <= 1e-15, 0.0, 1e-4 * scale)
+        J = numeric_jacobian(lambda x: _solid_vector(_solve_paper(x, ctx), data.cone), z, step, f0=q0)
     cov_q = J @ Sz @ J.T
     residuals = {}
     if ctx.profile is not None:

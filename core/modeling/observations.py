@@ -14,6 +14,7 @@ from ..camera import Camera, as_segment
 from ..checks import MAX_M, finite_array, positive_scale
 from ..geometry import Plane, PlaneFit, fit_plane_ols, fit_plane_tls, make_plane
 from .robust import ransac_plane
+from .small import interp_plane_jacobian
 
 __all__ = ["PlaneObs", "interpretation_plane_obs", "support_obs", "FaceFit", "fit_face_plane", "plane_var_at"]
 
@@ -40,20 +41,15 @@ def interpretation_plane_obs(camera: Camera, seg_uv: np.ndarray, sigma_px: float
 
     sigma_px : standard deviation of each clicked coordinate, pixels (independent). The
     covariance is σ² J Jᵀ with J the derivative of (n, d) with respect to the four coordinates
-    (analytic: π = Cᵀ l with l = (p₁ − q₁, q₀ − p₀, p₀q₁ − p₁q₀) bilinear in the ends, then (n, d) = π/‖π₁₂₃‖).
+    (analytic: ``small.interp_plane_jacobian``).
     """
     seg = as_segment(seg_uv)
     if sigma_px != 0:  # 0: exact clicks (a zero covariance)
         positive_scale(sigma_px, "sigma_px", " px")
     p = camera.interpretation_plane(seg)
     v0 = p.as_vector()
-    (p0, p1), (q0, q1) = seg
-    l = np.array([p1 - q1, q0 - p0, p0 * q1 - p1 * q0])
-    dl = np.array([[0.0, 1.0, 0.0, -1.0], [-1.0, 0.0, 1.0, 0.0], [q1, -q0, -p1, p0]])  # d l / d(p0, p1, q0, q1)
-    pi, dpi = camera.C.T @ l, camera.C.T @ dl
-    nu = np.linalg.norm(pi[:3])
-    J = dpi / nu - np.outer(pi, pi[:3] @ dpi[:3]) / nu**3
-    if pi @ v0 < 0:  # the same orientation as the plane returned
+    v, J = interp_plane_jacobian(camera.C, seg)
+    if v @ v0 < 0:  # the same orientation as the plane returned
         J = -J
     return PlaneObs(p, sigma_px**2 * (J @ J.T), label)
 
