@@ -11,16 +11,18 @@ from pathlib import Path
 
 from core.brep import BRep
 
-from .cao import CaoError, cao_text, concat_breps, read_cao, write_cao
+from .cao import CaoError, CaoWarning, cao_text, concat_breps, read_cao, read_init, write_cao
 from .mesh import MESH_SUFFIXES, MeshError, read_mesh, write_mesh
 
 __all__ = [
     "CaoError",
+    "CaoWarning",
     "MeshError",
     "MODEL_SUFFIXES",
     "load_model",
     "save_model",
     "read_cao",
+    "read_init",
     "write_cao",
     "cao_text",
     "read_mesh",

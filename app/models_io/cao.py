@@ -16,12 +16,20 @@ Each record is one line; what follows its numbers is a comment, except ``name=�
 and then dropped (mcit draws every edge). The cylinder and circle blocks may be absent (old files).
 ``load(path, t=[x; y; z], tu=[θux; θuy; θuz])`` includes a model whose points map into this file's
 frame by ``X = R(θu) X_included + t`` (θu in radians, or with a ``deg``/``rad`` suffix); a
-relative path is relative to the including file.
+relative path is relative to the including file. ViSP ≥ 3.7 also takes ``R=[r11; r12; …; r33]``
+(the rotation row by row) instead of ``tu``: accepted within 1e-3 of a rotation and made exact
+(nearest rotation), so that a matrix written with four digits neither shears nor scales the model.
+A file may hold only ``load()`` lines (ViSP ≥ 3.7).
 
 Reading into a ``BRep``: the vertices are the points that lines and faces use (points that only
 define a cylinder's axis or a circle are not vertices); the edges are every face's sides and
 every line, each once; faces from lines are chained into vertex loops. Bad input raises
-``CaoError`` naming the file, the line and the problem.
+``CaoError`` naming the file, the line and the problem. A circle whose centre and two points are
+on one line has no plane: ViSP parses it, mcit leaves it out with a ``CaoWarning`` naming its line
+and loads the rest (a face without area, by contrast, is refused: see the limits).
+
+``read_init`` reads a ViSP ``.init`` file (the model points a user clicks: a count, then ``X Y Z``
+per line), with the same ``load()`` lines first (ViSP ≥ 3.7) and the same limits.
 
 Limits, so that a careless or hostile file is refused at once, never hangs the reader or
 exhausts memory, and so that whatever loads can also be exported and read back:
@@ -51,6 +59,7 @@ from __future__ import annotations
 
 import re
 import stat
+import warnings
 from pathlib import Path
 from typing import IO
 
@@ -62,7 +71,9 @@ from core.transforms import exp_so3, make_T
 
 __all__ = [
     "CaoError",
+    "CaoWarning",
     "read_cao",
+    "read_init",
     "write_cao",
     "cao_text",
     "concat_breps",
@@ -81,11 +92,16 @@ MAX_TOTAL_BYTES = 64 * 1024 * 1024  # text read for one model, repeats counted
 MAX_COORD_M = 1e6  # |coordinate|, radius, include translation (metres)
 MIN_LENGTH_M = 1e-9  # points closer than this are the same point
 _MIN_AREA_RATIO = 1e-9  # a face's area / its size² below this has no area
+_ROTATION_TOL = 1e-3  # R=[...]: largest |RᵀR − I| accepted (then made exactly a rotation)
 _MIN_SINE = 1e-6  # a circle's two points seen from its centre at less than this sine: no plane
 
 
 class CaoError(ValueError):
     """A malformed ``.cao`` file; the message is ``file:line: problem``."""
+
+
+class CaoWarning(UserWarning):
+    """Something in a ``.cao`` file that ViSP accepts but mcit cannot use; the model still loads."""
 
 
 def _limits() -> str:
@@ -210,24 +226,47 @@ def _parse_vector(lines: _Lines, number: int, text: str, key: str, angles: bool)
     return np.array(out)
 
 
+def _parse_rotation(lines: _Lines, number: int, text: str) -> np.ndarray:
+    """R=[r11; r12; r13; r21; …; r33] (row by row, ViSP ≥ 3.7) → the nearest rotation, refused when far from one."""
+    parts = [p.strip() for p in text.split(";")]
+    if len(parts) != 9:
+        raise lines.error(number, f"load(): R=[...] needs 9 values separated by ';' (row by row), got {len(parts)}")
+    try:
+        R = np.array([float(p) for p in parts]).reshape(3, 3)
+    except ValueError:
+        raise lines.error(number, "load(): a value of R=[...] is not a number") from None
+    if not np.all(np.isfinite(R)) or np.abs(R.T @ R - np.eye(3)).max() > _ROTATION_TOL or np.linalg.det(R) <= 0:
+        raise lines.error(number, f"load(): R=[...] is not a rotation (orthonormal rows, determinant +1, to {_ROTATION_TOL:g})")
+    U, _, Vt = np.linalg.svd(R)
+    return U @ Vt
+
+
 def _parse_load(lines: _Lines, number: int, line: str) -> tuple[Path, np.ndarray]:
-    m = re.fullmatch(r'load\s*\(\s*"([^"]+)"\s*((?:,[^)]*)?)\)\s*', line)
+    """``load("file", t=[x; y; z], tu=[a; b; c] or R=[9 values])`` → the included file and T_this_included."""
+    m = re.fullmatch(r'load\s*\(\s*"([^"]+)"\s*((?:,[^)]*)?)\).*', line)
     if not m:
-        raise lines.error(number, 'malformed include; expected load("file.cao", t=[x; y; z], tu=[a; b; c])')
+        raise lines.error(number, 'malformed include; expected load("file.cao", t=[x; y; z], tu=[a; b; c]) or R=[9 values] instead of tu')
     target = Path(m.group(1))
     if not target.is_absolute():
         target = lines.path.parent / target
     t = np.zeros(3)
-    tu = np.zeros(3)
+    R = None
+    seen = set()
     for param in (p.strip() for p in m.group(2).split(",")[1:]):
-        pm = re.fullmatch(r"(t|tu)\s*=\s*\[([^\]]*)\]", param)
+        pm = re.fullmatch(r"(t|tu|R)\s*=\s*\[([^\]]*)\]", param)
         if not pm:
-            raise lines.error(number, "load(): unknown parameter; use t=[x; y; z] and tu=[a; b; c]")
-        if pm.group(1) == "t":
+            raise lines.error(number, "load(): unknown parameter; use t=[x; y; z] and tu=[a; b; c] or R=[9 values]")
+        key = pm.group(1)
+        if key in seen or (key != "t" and ({"tu", "R"} & seen)):
+            raise lines.error(number, "load(): give t= once and one rotation, tu= or R=")
+        seen.add(key)
+        if key == "t":
             t = _parse_vector(lines, number, pm.group(2), "t", angles=False)
+        elif key == "tu":
+            R = exp_so3(_parse_vector(lines, number, pm.group(2), "tu", angles=True))
         else:
-            tu = _parse_vector(lines, number, pm.group(2), "tu", angles=True)
-    return target.resolve(), make_T(exp_so3(tu), t)
+            R = _parse_rotation(lines, number, pm.group(2))
+    return target.resolve(), make_T(np.eye(3) if R is None else R, t)
 
 
 def _chain(lines: _Lines, number: int, segments: list[tuple[int, int]]) -> list[int]:
@@ -294,10 +333,12 @@ class _Reading:
     so that the limits bound the model that is built, not only the reading.
     """
 
-    def __init__(self):
+    def __init__(self, parse=None, what: str = "a .cao model"):
         self.files = 0
         self.bytes = 0
         self.parsed: dict[Path, tuple[BRep | None, int, int]] = {}  # model, files, bytes
+        self.parse = parse or _parse  # (path, text, stack, reading) → the file's content
+        self.what = what
 
     def read(self, path: Path, where: str, stack: tuple[Path, ...]) -> BRep | None:
         """Parse ``path`` (``where``: the file, or the ``file:line`` of the load() naming it), within the limits."""
@@ -322,8 +363,8 @@ class _Reading:
         try:
             text = data.decode("utf-8")
         except UnicodeDecodeError:
-            raise CaoError(f"{path}:1: not a .cao model (not a text file)") from None
-        model = _parse(path, text, stack, self)
+            raise CaoError(f"{path}:1: not {self.what} (not a text file)") from None
+        model = self.parse(path, text, stack, self)
         self.parsed[path] = (model, self.files - files0, self.bytes - bytes0)
         return model
 
@@ -347,8 +388,10 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
     if version not in (1, 2):
         raise lines.error(number, f"unsupported .cao version V{version}; mcit reads V1 and V2")
     parts: list[BRep] = []
+    n_loads = 0
     while (item := lines.peek()) is not None and item[1][:1] in ("l", "L"):
         number, line = lines.next("load(...)")
+        n_loads += 1
         target, T = _parse_load(lines, number, line)
         if target in stack:
             raise lines.error(number, f"cyclic include: {target} is already being read")
@@ -358,8 +401,10 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
         if sub is not None:
             placed = sub.transformed(T)
             if _reach_m(placed) > MAX_COORD_M:
-                raise lines.error(number, f"the included model, placed by t= and tu=, reaches beyond ±{MAX_COORD_M:g} m")
+                raise lines.error(number, f"the included model, placed by its t= and rotation, reaches beyond ±{MAX_COORD_M:g} m")
             parts.append(placed)
+    if lines.peek() is None and n_loads:
+        return concat_breps(parts) if parts else None  # a file of load() lines only (ViSP ≥ 3.7 reads it too)
     n_points = _count(lines, "points")
     n_num = 5 if version == 2 else 3
     P = np.zeros((n_points, 3))
@@ -401,6 +446,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
             loops.append(loop)
     solids: list[Revolution] = []
     circles: list[Circle] = []
+    dropped_circles = 0
     if lines.peek() is not None:
         for k in range(_count(lines, "cylinders")):
             number, line = lines.next(f"cylinder {k}")
@@ -420,15 +466,23 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
             c, i, j = (_index(lines, number, v, n_points, "point") for v in (c, i, j))
             _check_params(lines, number, rest)
             _within(lines, number, r, f"circle {k}: the radius")
+            if r <= 0:
+                raise lines.error(number, f"circle {k}: radius must be positive, got {r}")
             u, v = P[i] - P[c], P[j] - P[c]
             normal = np.cross(u, v)
-            if r <= 0 or np.linalg.norm(normal) <= _MIN_SINE * np.linalg.norm(u) * np.linalg.norm(v) or min(np.linalg.norm(u), np.linalg.norm(v)) <= MIN_LENGTH_M:
-                raise lines.error(number, f"circle {k}: needs a positive radius and a centre and two points not on one line")
+            if np.linalg.norm(normal) <= _MIN_SINE * np.linalg.norm(u) * np.linalg.norm(v) or min(np.linalg.norm(u), np.linalg.norm(v)) <= MIN_LENGTH_M:
+                # ViSP parses such a circle; its plane is unknown, so there is nothing true to draw.
+                warnings.warn(
+                    CaoWarning(f"{path}:{number}: circle {k} is left out: its centre and two points are on one line, so its plane is unknown"),
+                    stacklevel=2,
+                )
+                dropped_circles += 1
+                continue
             circles.append(Circle(P[c], normal, r))
     if (item := lines.peek()) is not None:
         raise lines.error(item[0], "unexpected content after the last block (circles)")
     used = sorted({v for loop in loops for v in loop} | {v for s in segs for v in s})
-    if not used and not solids and not circles and not parts:
+    if not used and not solids and not circles and not parts and not dropped_circles:
         raise CaoError(f"{path}:{lines.last_line}: the model has no lines, faces, cylinders or circles")
     remap = {old: new for new, old in enumerate(used)}
     edges: dict[tuple[int, int], None] = {}
@@ -461,8 +515,53 @@ def read_cao(path: str | Path) -> BRep:
     path = Path(path).resolve()
     model = _Reading().read(path, str(path), (path,))
     if model is None:
-        raise CaoError(f"{path}: the model is empty")
+        raise CaoError(f"{path}: the model has nothing mcit can draw (its only circles have no plane, or its includes are empty)")
     return model
+
+
+def _parse_init(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) -> np.ndarray | None:
+    lines = _Lines(path, text)
+    parts: list[np.ndarray] = []
+    while (item := lines.peek()) is not None and item[1][:1] in ("l", "L"):
+        number, line = lines.next("load(...)")
+        target, T = _parse_load(lines, number, line)
+        if target in stack:
+            raise lines.error(number, f"cyclic include: {target} is already being read")
+        if not target.exists():
+            raise lines.error(number, f"included file not found: {target}")
+        sub = reading.read(target, f"{path}:{number}", stack + (target,))
+        if sub is not None:
+            placed = sub @ T[:3, :3].T + T[:3, 3]
+            if np.abs(placed).max() > MAX_COORD_M:
+                raise lines.error(number, f"the included points, placed by its t= and rotation, reach beyond ±{MAX_COORD_M:g} m")
+            parts.append(placed)
+    if lines.peek() is not None:
+        n = _count(lines, "points")
+        P = np.zeros((n, 3))
+        for k in range(n):
+            number, line = lines.next(f"point {k} of {n}")
+            values, _ = _numbers(lines, number, line, 3, "f", f"point {k}")
+            _within(lines, number, values, f"point {k}")
+            P[k] = values
+        parts.append(P)  # what follows the points (ViSP's 2D points for initFromPoints) is not read
+    elif not parts:
+        raise CaoError(f"{path}:{lines.last_line}: the file ends where the number of points was expected")
+    return np.vstack(parts) if parts else None
+
+
+def read_init(path: str | Path) -> np.ndarray:
+    """Model points (N, 3), metres, object frame, from a ViSP ``.init`` file (the points a user clicks).
+
+    A count, then ``X Y Z`` per line (``#`` comments), as ViSP has always read it; and, as ViSP ≥ 3.7
+    reads it, ``load("other.init", t=[x; y; z], tu=[a; b; c])`` (or ``R=[9 values]``) lines first,
+    whose points, placed as in a ``.cao``, come before this file's own; a file may hold only
+    ``load()`` lines. The include limits of the module docstring apply. CaoError names file:line.
+    """
+    path = Path(path).resolve()
+    P = _Reading(_parse_init, "a ViSP .init file").read(path, str(path), (path,))
+    if P is None or len(P) == 0:
+        raise CaoError(f"{path}: the file holds no points")
+    return P
 
 
 def _fmt(x: float) -> str:

@@ -160,7 +160,7 @@ BAD_CAO = [
     ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n2\n0 1\n1 2\n1\n2 0 1\n", 10, "has 2 lines"),
     ("V1\n2\n0 0 0\n0 0 1\n0\n0\n0\n1\n0 1 -0.1\n", 9, "radius must be positive"),
     ("V1\n2\n0 0 0\n0 0 1\n0\n0\n0\n1\n0 0 0.1\n", 9, "two distinct axis endpoints"),
-    ("V1\n3\n0 0 0\n1 0 0\n2 0 0\n0\n0\n0\n0\n1\n0.5 0 1 2\n", 11, "not on one line"),
+    ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n0\n0\n1\n-0.5 0 1 2\n", 11, "circle 0: radius must be positive"),
     ("V1\n2\n0 0 0\n0 0 1\n1\n0 1 useLod=maybe\n0\n0\n", 6, "useLod= must be true, false, 1 or 0"),
     ("V1\n2\n0 0 0\n0 0 1\n1\n0 1\n0\n0\n0\n0\nextra\n", 11, "unexpected content"),
     ('V1\nload("nowhere.cao")\n0\n0\n0\n0\n', 2, "included file not found"),
