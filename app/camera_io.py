@@ -411,6 +411,13 @@ def read_intrinsics(path: str | Path, *, camera_name: str | None = None,
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: no such intrinsics file")
+    try:
+        return _read_intrinsics(path, camera_name, image_size)
+    except OSError as exc:  # unreadable: permissions, a vanished mount
+        raise ValueError(f"{path}: cannot be read ({exc.strerror or exc}); check the file's permissions") from None
+
+
+def _read_intrinsics(path: Path, camera_name: str | None, image_size: tuple[int, int] | None) -> Intrinsics:
     suffix = path.suffix.lower()
     if suffix == ".xml":
         try:

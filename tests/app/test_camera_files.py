@@ -252,3 +252,20 @@ def test_scene_camera_name(box_frames):
         _camera({"intrinsics_file": "rig.xml", "T_world_cam": pose}, d, "camera")
     with pytest.raises(SceneError, match="camera.camera_name: names a camera in 'intrinsics_file'"):
         _camera({"K": np.eye(3).tolist(), "camera_name": "tele", "width": 640, "height": 480, "T_world_cam": pose}, d, "camera")
+
+
+@pytest.mark.parametrize("name", ["cam.yaml", "cam.xml"])
+def test_an_unreadable_file_is_one_line(tmp_path, name, monkeypatch):
+    import pathlib
+    import xml.etree.ElementTree as ET
+
+    f = tmp_path / name
+    f.write_text(OST_YAML if name.endswith("yaml") else VISP_MULTI)
+
+    def denied(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(f))
+
+    monkeypatch.setattr(pathlib.Path, "read_bytes", denied)  # as chmod 0 would (the tests may run as root)
+    monkeypatch.setattr(ET, "parse", denied)
+    with pytest.raises(ValueError, match=r"cam\.(yaml|xml): cannot be read \(Permission denied\); check the file's permissions"):
+        read_intrinsics(f)
