@@ -7,19 +7,19 @@ clicks (four or more edges is best) and ``match_edges`` finds the assignment:
    from meeting in one point first (three concurrent lines fix no depth);
 2. on each base, every ordered triple of distinct model edges is assigned to the three clicks
    (E·(E−1)·(E−2) triples, 1,320 for a box, of which one in each family related by a symmetry of
-   the model: 330 for a box) and solved in one batch (``p3l_all_triples``): the rotations by the vectorised P3L of ``core.pose.p3l``
-   (``p3l_rotations``), the translations from the three interpretation planes (a batched 3 × 3
-   solve, the paper's eq. 5); the base edges must come out in front of the camera;
+   the model: 330 for a box) and solved in one batch (``p3l_all_triples``) by core.pose's P3L
+   kernel (``core.pose._kernels.p3l_many``, the one ``p3l`` runs: rotations, translations from the
+   three interpretation planes, the paper's eq. 5); the base edges must come out in front of the camera;
 3. each pose is scored against *all* the clicks: a base click against its own model edge, every
    other click against the visible model edge not yet taken that fits it best; the cost of a click
    is the squared distance of its two pixels to the projected *finite* edge (lengthened by a
    quarter at each end: P3L from noisy clicks slides edges along their lines), so a click must lie
    along its edge, not only on its line, and an edge hidden at that pose cannot be clicked;
 4. the plausible poses (RMS ≤ ``gate_px``; those drawing the same picture once) are refined with
-   every click (``core.pose.refine``); a refined pose is kept when the clicks lie on their model
+   every click, all in one call (``core.pose.refine_many``); a refined pose is kept when the clicks lie on their model
    lines (RMS ≤ 0.5 px + 3 σ) and within their edges (each ≤ 1 px + 3 σ from its edge lengthened
    by a tenth at each end), and ranked by that RMS; poses drawing the same picture (the model's
-   symmetries) are merged;
+   symmetries) are merged, the best fitting kept;
 5. with the frame given (``image=``), each candidate is first let settle on the image's edges (one
    step of the edge tracker, ``track.EdgeTracker``), then scored also by how well *all* its
    visible edges lie on the image's edges (``evaluate.edge_distance``): this tells apart poses
@@ -36,13 +36,14 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from core.brep import BRep
 from core.camera import Camera
-from core.pose import refine
-from core.pose.p3l import p3l_rotations
+from core.pose import refine_many
+from core.pose._kernels import MAX_SOLUTIONS, p3l_many
 from core.pose.symmetry import edge_symmetries
-from core.pose.residuals import interpretation_planes
+from core.pose.residuals import as_clicks, interpretation_planes
 
 from .evaluate import edge_distance, oriented_edges
 from .track import EdgeTracker
@@ -128,7 +129,24 @@ class TriplePoses:
     n_triples: int
 
 
-def p3l_all_triples(camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray, symmetries: list[np.ndarray] | None = None) -> TriplePoses:
+def _model_triples(ends: np.ndarray, symmetries: list[np.ndarray] | None) -> np.ndarray:
+    """Ordered triples (B, 3) of distinct model edges, one per family related by a symmetry, but
+    three parallel edges (they fix no rotation about their direction)."""
+    E = len(ends)
+    V_obj = ends[:, 1] - ends[:, 0]
+    V_obj = V_obj / np.linalg.norm(V_obj, axis=1, keepdims=True)
+    tri = np.array(list(itertools.permutations(range(E), 3)), dtype=np.int64)  # (B, 3): edges of clicks 0, 1, 2
+    if symmetries is not None and len(symmetries) > 1:
+        code = lambda t: (t[:, 0] * E + t[:, 1]) * E + t[:, 2]  # noqa: E731
+        canonical = np.min([code(np.asarray(p)[tri]) for p in symmetries], axis=0)
+        tri = tri[code(tri) == canonical]
+    par = np.linalg.norm(np.cross(V_obj[:, None], V_obj[None]), axis=2) < _PARALLEL_SIN
+    return tri[~(par[tri[:, 0], tri[:, 1]] & par[tri[:, 0], tri[:, 2]])]
+
+
+def p3l_all_triples(
+    camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray, symmetries: list[np.ndarray] | None = None, triples: np.ndarray | None = None
+) -> TriplePoses:
     """P3L for every ordered triple of distinct model edges on three clicked segments, in one batch.
 
     Parameters
@@ -140,13 +158,16 @@ def p3l_all_triples(camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray, 
         The model's symmetries as edge permutations (``edge_symmetries``): triples that one maps
         onto another give the same pictures, so one triple of each such family is solved (a box:
         a quarter of them).
+    triples : array (B, 3), optional
+        The model-edge triples to solve (``_model_triples(edges_obj, symmetries)``, computed once
+        by ``match_edges`` for all its bases); symmetries is then not read.
 
     Returns
     -------
     TriplePoses
-        Every real solution with the three matched edges in front of the camera. Rotations by
-        ``core.pose.p3l.p3l_rotations`` (vectorised over triples), translations from the three
-        interpretation planes ``N_i·T = −d_i − N_i·(R A_i)`` (paper eq. 5) by a batched 3 × 3 solve.
+        Every real solution with the three matched edges in front of the camera, by core.pose's
+        P3L kernel (``_kernels.p3l_many``, the one ``p3l`` runs): rotations, translations from the
+        three interpretation planes ``N_i·T = −d_i − N_i·(R A_i)`` (paper eq. 5), front test.
     """
     segs = np.asarray(segs_uv, dtype=float)
     ends = np.asarray(edges_obj, dtype=float)
@@ -154,77 +175,132 @@ def p3l_all_triples(camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray, 
         raise ValueError(f"segs_uv must have shape (3, 2, 2), got {segs.shape}")
     if ends.ndim != 3 or ends.shape[1:] != (2, 3) or len(ends) < 3:
         raise ValueError(f"edges_obj must have shape (E, 2, 3) with E ≥ 3, got {ends.shape}")
-    E = len(ends)
-    A_obj = ends[:, 0]
-    V_obj = ends[:, 1] - ends[:, 0]
-    V_obj = V_obj / np.linalg.norm(V_obj, axis=1, keepdims=True)
-    tri = np.array(list(itertools.permutations(range(E), 3)), dtype=np.int64)  # (B, 3): edges of clicks 0, 1, 2
-    if symmetries is not None and len(symmetries) > 1:
-        code = lambda t: (t[:, 0] * E + t[:, 1]) * E + t[:, 2]  # noqa: E731
-        canonical = np.min([code(np.asarray(p)[tri]) for p in symmetries], axis=0)
-        tri = tri[code(tri) == canonical]
-    # The solver's first edge must be parallel to neither other (paper appendix): roll each triple.
-    par = np.linalg.norm(np.cross(V_obj[:, None], V_obj[None]), axis=2) < _PARALLEL_SIN
-    rolls = np.array([[0, 1, 2], [1, 2, 0], [2, 0, 1]])
-    order = np.full(len(tri), -1)
-    for r in range(3):
-        f, o1, o2 = (tri[:, rolls[r, j]] for j in range(3))
-        order[(order < 0) & ~par[f, o1] & ~par[f, o2]] = r
-    keep = order >= 0
-    tri, perm = tri[keep], rolls[order[keep]]
-    edges_b = np.take_along_axis(tri, perm, axis=1)  # model edges in the solver's order
-    n_all, d_all = interpretation_planes(camera, segs)
-    N = n_all[perm]  # (B, 3, 3)
-    C = camera.C
-    first_px = segs[perm[:, 0], 0]  # the paper's x axis of R_c1: the ray of l1's first clicked pixel
-    ray = np.cross(C[0, :3][None] - first_px[:, :1] * C[2, :3][None], C[1, :3][None] - first_px[:, 1:] * C[2, :3][None])
-    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
-    R, valid = p3l_rotations(N, ray, V_obj[edges_b])  # (B, K, 3, 3), (B, K)
-    RA = np.einsum("bkij,bmj->bkmi", R, A_obj[edges_b])  # R A_i, (B, K, 3, 3)
-    rhs = -d_all[perm][:, None, :] - np.einsum("bmi,bkmi->bkm", N, RA)
+    tri = _model_triples(ends, symmetries) if triples is None else triples
+    n_all, _ = interpretation_planes(camera, segs)
     if abs(float(np.linalg.det(n_all))) <= 1e-12:
         raise ValueError("the three clicked lines meet in one point: their planes fix no depth")
-    t = np.linalg.solve(np.broadcast_to(N[:, None], R.shape), rhs[..., None])[..., 0]
+    # core.pose's P3L kernel on every triple (ordering, rays, rotations, translation from the three
+    # planes, front test); edges through one vertex too: noisy clicks make the planes solvable.
+    B = len(tri)
+    T = np.empty((B, MAX_SOLUTIONS, 4, 4))
+    valid = np.zeros((B, MAX_SOLUTIONS), dtype=bool)
+    p3l_many(camera.C, np.ascontiguousarray(np.broadcast_to(segs, (B, 3, 2, 2))), np.ascontiguousarray(ends[tri]), T, valid, True)
     b_idx, k_idx = np.nonzero(valid)
-    Rc, tc, edges = R[b_idx, k_idx], t[b_idx, k_idx], tri[b_idx]
+    Rc, tc, edges = T[b_idx, k_idx, :3, :3], T[b_idx, k_idx, :3, 3], tri[b_idx]
+    C = camera.C
     Xe = np.einsum("nij,nmsj->nmsi", Rc, ends[edges]) + tc[:, None, None, :]
     front = np.all(Xe @ C[2, :3] + C[2, 3] > 1e-9, axis=(1, 2))
     return TriplePoses(Rc[front], tc[front], edges[front], len(tri))
 
 
-def _point_segment_d2(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Squared distances of points q (..., 2) to segments [a, b] (..., 2), broadcast."""
-    d = b - a
-    lam = np.clip(np.sum((q - a) * d, axis=-1) / np.maximum(np.sum(d * d, axis=-1), 1e-300), 0.0, 1.0)
-    e = q - a - lam[..., None] * d
-    return np.sum(e * e, axis=-1)
-
-
 def _click_costs(
-    camera: Camera, model: BRep, R: np.ndarray, t: np.ndarray, segs_uv: np.ndarray, incidence: np.ndarray, extend: float = 0.0
+    camera: Camera, model: BRep, R: np.ndarray, t: np.ndarray, segs_uv: np.ndarray, incidence: "_Faces", extend: float = 0.0
 ) -> np.ndarray:
     """Cost (N, S, E): Σ of the squared pixel distances of each click's two pixels to each projected
     finite model edge at N poses, the edge lengthened by ``extend`` (a fraction of its length) at
-    each end; +inf where the edge is hidden or behind the camera."""
-    C = camera.C
-    V = model.vertices
-    Xw = np.einsum("nij,vj->nvi", R, V) + t[:, None, :]
-    h = Xw @ C[:, :3].T + C[:, 3]
-    depth = h[..., 2]
-    uv = h[..., :2] / np.where(depth > 1e-9, depth, np.nan)[..., None]
-    a = uv[:, model.edges[:, 0]]  # (N, E, 2)
-    b = uv[:, model.edges[:, 1]]
-    if extend:
-        a, b = a - extend * (b - a), b + extend * (b - a)
-    q = segs_uv.reshape(1, -1, 1, 2)  # the clicked pixels (N, 2S, E, 2) by broadcasting
-    d2 = _point_segment_d2(q, a[:, None], b[:, None]).reshape(len(R), len(segs_uv), 2, -1).sum(axis=2)
-    c_obj = np.einsum("nji,nj->ni", R, camera.center[None, :] - t)  # the optical centre, object frame
-    facing = np.einsum("fk,nfk->nf", model.face_normals(), c_obj[:, None, :] - model.face_centroids()[None]) > 0
-    visible = (facing.astype(float) @ incidence.T) > 0
-    if len(model.faces) == 0:
-        visible[:] = True
-    ok = visible & np.isfinite(a[..., 0]) & np.isfinite(b[..., 0])
-    return np.where(ok[:, None, :], d2, np.inf)
+    each end; +inf where the edge is hidden (none of its faces faces the camera) or behind it."""
+    out = np.empty((len(R), len(segs_uv), len(model.edges)))
+    _click_costs_kernel(
+        camera.C, np.ascontiguousarray(R, dtype=float), np.ascontiguousarray(t, dtype=float), incidence.vertices,
+        incidence.edges, np.ascontiguousarray(segs_uv, dtype=float), incidence.face_normals, incidence.face_centroids,
+        incidence.incidence, float(extend), camera.center, out,
+    )
+    return out
+
+
+@dataclass(frozen=True)
+class _Faces:
+    """What the visibility test needs of a model, computed once per call of ``match_edges``."""
+
+    vertices: np.ndarray
+    edges: np.ndarray  # (E, 2) int64
+    face_normals: np.ndarray
+    face_centroids: np.ndarray
+    incidence: np.ndarray  # (E, F): 1 where edge k borders face f
+
+    @classmethod
+    def of(cls, model: BRep) -> "_Faces":
+        E = len(model.edges)
+        incidence = np.zeros((E, len(model.faces)))
+        for k in range(E):
+            incidence[k, list(model.edge_faces(k))] = 1.0
+        return cls(
+            np.ascontiguousarray(model.vertices, dtype=float), np.ascontiguousarray(model.edges, dtype=np.int64),
+            np.ascontiguousarray(model.face_normals(), dtype=float).reshape(-1, 3),
+            np.ascontiguousarray(model.face_centroids(), dtype=float).reshape(-1, 3), incidence,
+        )
+
+
+@njit(cache=True, nogil=True)
+def _click_costs_kernel(C, R, t, verts, edge_idx, segs, face_n, face_c, incidence, extend, center, out):  # pragma: no cover - compiled
+    """``_click_costs`` in loops: per pose, the vertices projected once (depth ≤ 1e-9: no pixel),
+    the faces facing the optical centre, then per visible edge and click the distances of the two
+    clicked pixels to the (lengthened) projected segment."""
+    N, V, E, S, F = R.shape[0], verts.shape[0], edge_idx.shape[0], segs.shape[0], face_n.shape[0]
+    uv = np.empty((V, 2))
+    front = np.empty(V, np.bool_)
+    facing = np.empty(F, np.bool_)
+    for n in range(N):
+        Rn, tn = R[n], t[n]
+        for v in range(V):
+            X0 = Rn[0, 0] * verts[v, 0] + Rn[0, 1] * verts[v, 1] + Rn[0, 2] * verts[v, 2] + tn[0]
+            X1 = Rn[1, 0] * verts[v, 0] + Rn[1, 1] * verts[v, 1] + Rn[1, 2] * verts[v, 2] + tn[1]
+            X2 = Rn[2, 0] * verts[v, 0] + Rn[2, 1] * verts[v, 1] + Rn[2, 2] * verts[v, 2] + tn[2]
+            h2 = C[2, 0] * X0 + C[2, 1] * X1 + C[2, 2] * X2 + C[2, 3]
+            front[v] = h2 > 1e-9
+            uv[v, 0] = (C[0, 0] * X0 + C[0, 1] * X1 + C[0, 2] * X2 + C[0, 3]) / h2
+            uv[v, 1] = (C[1, 0] * X0 + C[1, 1] * X1 + C[1, 2] * X2 + C[1, 3]) / h2
+        # the optical centre in the object frame: Rᵀ (c − t)
+        d0, d1, d2 = center[0] - tn[0], center[1] - tn[1], center[2] - tn[2]
+        c0 = Rn[0, 0] * d0 + Rn[1, 0] * d1 + Rn[2, 0] * d2
+        c1 = Rn[0, 1] * d0 + Rn[1, 1] * d1 + Rn[2, 1] * d2
+        c2 = Rn[0, 2] * d0 + Rn[1, 2] * d1 + Rn[2, 2] * d2
+        for f in range(F):
+            facing[f] = face_n[f, 0] * (c0 - face_c[f, 0]) + face_n[f, 1] * (c1 - face_c[f, 1]) + face_n[f, 2] * (c2 - face_c[f, 2]) > 0
+        for e in range(E):
+            i, j = edge_idx[e, 0], edge_idx[e, 1]
+            visible = F == 0
+            for f in range(F):
+                if facing[f] and incidence[e, f] > 0:
+                    visible = True
+                    break
+            if not (visible and front[i] and front[j] and np.isfinite(uv[i, 0]) and np.isfinite(uv[j, 0])):
+                for s in range(S):
+                    out[n, s, e] = np.inf
+                continue
+            au, av, bu, bv = uv[i, 0], uv[i, 1], uv[j, 0], uv[j, 1]
+            if extend != 0.0:
+                du, dv = bu - au, bv - av
+                au, av, bu, bv = au - extend * du, av - extend * dv, bu + extend * du, bv + extend * dv
+            du, dv = bu - au, bv - av
+            dd = max(du * du + dv * dv, 1e-300)
+            for s in range(S):
+                cost = 0.0
+                for k in range(2):
+                    qu, qv = segs[s, k, 0] - au, segs[s, k, 1] - av
+                    lam = min(max((qu * du + qv * dv) / dd, 0.0), 1.0)
+                    eu, ev = qu - lam * du, qv - lam * dv
+                    cost += eu * eu + ev * ev
+                out[n, s, e] = cost
+
+
+def _within_edges_many(camera, model, Ts, segs, edges, incidence, gate_px) -> list[bool]:
+    """``_within_edges`` at N poses Ts (N, 4, 4) with their assignments edges (N, S), batched."""
+    if len(Ts) == 0:
+        return []
+    c = _click_costs(camera, model, Ts[:, :3, :3], Ts[:, :3, 3], segs, incidence, extend=0.1)
+    d = np.take_along_axis(c, edges[:, :, None], axis=2)[..., 0]  # (N, S)
+    return np.all(np.sqrt(d / 2.0) <= gate_px, axis=1).tolist()
+
+
+def _assign_many(camera, model, Ts, segs, incidence) -> list:
+    """``_assign`` at N poses Ts (N, 4, 4), batched."""
+    if len(Ts) == 0:
+        return []
+    c = _click_costs(camera, model, Ts[:, :3, :3], Ts[:, :3, 3], segs, incidence)
+    e = np.argmin(c, axis=2)  # (N, S)
+    finite = np.all(np.isfinite(np.take_along_axis(c, e[:, :, None], axis=2)), axis=(1, 2))
+    return [row if ok and len(set(row.tolist())) == len(row) else None for row, ok in zip(e, finite)]
 
 
 def _within_edges(camera, model, T, segs, edges, incidence, gate_px) -> bool:
@@ -332,7 +408,8 @@ def match_edges(
 
     ends = model.vertices[model.edges]  # (E, 2, 3)
     perms = edge_symmetries(model)
-    poses = [p3l_all_triples(camera, segs[list(b)], ends, perms) for b in bases]
+    tri = _model_triples(ends, perms)
+    poses = [p3l_all_triples(camera, segs[list(b)], ends, triples=tri) for b in bases]
     p3l_s = time.perf_counter() - t_start
     n_triples = sum(p.n_triples for p in poses)
     Rc = np.concatenate([p.R for p in poses])
@@ -347,9 +424,7 @@ def match_edges(
         return MatchResult([], bases, n_triples, 0, p3l_s, time.perf_counter() - t_start)
 
     # ---- score every pose against all the clicks
-    incidence = np.zeros((E, len(model.faces)))
-    for k in range(E):
-        incidence[k, list(model.edge_faces(k))] = 1.0
+    incidence = _Faces.of(model)
     # A P3L pose from three noisy clicks may slide the edges along their lines: lengthen them by a
     # quarter at each end for this first test. Each click is on a different edge; the base clicks'
     # come from P3L, each other click branches on its `branch` best visible edges (a P3L pose a
@@ -396,27 +471,43 @@ def match_edges(
     refined: list[MatchCandidate] = []
     line_gate = 0.5 + 3.0 * sigma_px  # RMS distance of the clicks to their model lines (pixels)
     extent_gate = 1.0 + 3.0 * sigma_px  # and of each click to its edge lengthened by a tenth at each end
-    for i in kept:
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = Rc[pose_of[i]], tc[pose_of[i]]
-        edges = edges_of[i].copy()
-        fit = None
-        for _ in range(3):  # refine, read the assignment again at the refined pose, until it holds
-            try:
-                fit = refine(camera, T, segs_uv=segs, edges_obj=ends[edges], sigma_px=sigma_px)
-            except ValueError:
-                fit = None
-                break
-            T = fit.T_world_obj
-            again = _assign(camera, model, T, segs, incidence)
-            if again is None or np.array_equal(again, edges):
-                break
-            edges = again
-        if fit is None:
-            continue
-        rms_px = fit.rms_px
-        if rms_px > line_gate or not _within_edges(camera, model, T, segs, edges, incidence, extent_gate):
-            continue
+    # One batched refinement of every kept pose (core.pose.refine_many), then the assignment read
+    # again at each refined pose; those whose assignment changed are refined again, up to 3 times.
+    n_kept = len(kept)
+    Ts = np.zeros((n_kept, 4, 4))
+    Ts[:, 3, 3] = 1.0
+    Ts[:, :3, :3], Ts[:, :3, 3] = Rc[pose_of[kept]], tc[pose_of[kept]]
+    E_cur = edges_of[kept].copy() if n_kept else np.zeros((0, S), np.int64)
+    fits: list = [None] * n_kept
+    active = list(range(n_kept))
+    clicks = as_clicks(segs, ends[E_cur[0]]) if n_kept else None
+    for _ in range(3):
+        if not active:
+            break
+        out = refine_many(camera, Ts[active], clicks, sigma_px=float(sigma_px), edges_obj=ends[E_cur[active]])
+        done = []
+        for j, (res, _) in zip(active, out):
+            fits[j] = None if isinstance(res, str) else res
+            if fits[j] is not None:
+                Ts[j] = res.T_world_obj
+                done.append(j)
+        active = []
+        for j, again in zip(done, _assign_many(camera, model, Ts[done], segs, incidence)):
+            if again is not None and not np.array_equal(again, E_cur[j]):
+                E_cur[j] = again
+                active.append(j)
+    fitted = [j for j in range(n_kept) if fits[j] is not None and fits[j].rms_px <= line_gate]
+    inside = _within_edges_many(camera, model, Ts[fitted], segs, E_cur[fitted], incidence, extent_gate)
+    # Poses that draw the same picture (the model's symmetries) count once, the best fitting kept:
+    # before the image step, which would only repeat itself on each twin.
+    distinct, drawn = [], []
+    for j in sorted((j for j, ok in zip(fitted, inside) if ok), key=lambda j: fits[j].rms_px):
+        uv = camera.project_obj(Ts[j], model.vertices)
+        if not any(_same_set(uv, o, max(1.0, sigma_px)) for o in drawn):
+            distinct.append(j)
+            drawn.append(uv)
+    for j in distinct:
+        T, edges, rms_px = Ts[j].copy(), E_cur[j].copy(), fits[j].rms_px
         img_px = float("nan")
         if oe is not None:
             # Let the whole model settle on the image's edges (one tracking step from this pose),
@@ -432,7 +523,10 @@ def match_edges(
         refined.append(MatchCandidate(T, edges, rms_px, img_px, score))
     refined.sort(key=lambda m: m.score_px)
     out: list[MatchCandidate] = []
+    drawn: list[np.ndarray] = []
     for m in refined:  # poses that draw the same picture (symmetries of the model) count once
-        if not any(same_drawing(camera, model, m.T_world_obj, o.T_world_obj, max(1.0, sigma_px)) for o in out):
+        uv = camera.project_obj(m.T_world_obj, model.vertices)
+        if not any(_same_set(uv, o, max(1.0, sigma_px)) for o in drawn):
             out.append(m)
+            drawn.append(uv)
     return MatchResult(out[:max_candidates], bases, n_triples, n_poses, p3l_s, time.perf_counter() - t_start)

@@ -594,7 +594,7 @@ def distance_cost(C, R, t, edges, segs, pts_obj, pts_uv):
 
 
 @_jit
-def p3l_solve(C, segs, edges, pts_uv, pts_obj, T, cost):
+def p3l_solve(C, segs, edges, pts_uv, pts_obj, T, cost, concurrent_ok=False):
     """Every pose putting three model edges (3, 2, 3) on three clicked segments (3, 2, 2).
 
     Fills T (≥ 16, 4, 4) with the distinct solutions whose clicked model edges and points are in
@@ -602,6 +602,8 @@ def p3l_solve(C, segs, edges, pts_uv, pts_obj, T, cost):
     status OK; SEGS_ij: clicked segments i and j on one image line; ALL_PARALLEL; CONCURRENT: the
     three lines meet in one point (or their planes share a line of sight), so lines alone do not
     fix the depth: T holds the count rotations only (translations from clicked points: the caller).
+    concurrent_ok: solve such triples from the three planes all the same, unless the planes are
+    singular (the matcher: noisy clicks on three edges through one vertex, refined with more clicks).
     """
     n = np.empty((3, 3))
     d = np.empty(3)
@@ -653,7 +655,7 @@ def p3l_solve(C, segs, edges, pts_uv, pts_obj, T, cost):
     det = n[0, 0] * (n[1, 1] * n[2, 2] - n[1, 2] * n[2, 1]) - n[0, 1] * (n[1, 0] * n[2, 2] - n[1, 2] * n[2, 0]) + n[0, 2] * (
         n[1, 0] * n[2, 1] - n[1, 1] * n[2, 0]
     )
-    if _concurrent(Ao, Vo, scale) or abs(det) <= 1e-9:
+    if (not concurrent_ok and _concurrent(Ao, Vo, scale)) or abs(det) <= 1e-9:
         for k in range(count):
             T[k, :3, :3] = Rs[k]
         return count, CONCURRENT
@@ -689,14 +691,15 @@ def p3l_solve(C, segs, edges, pts_uv, pts_obj, T, cost):
 
 
 @_jit
-def p3l_many(C, segs, edges, T, valid):
+def p3l_many(C, segs, edges, T, valid, concurrent_ok=False):
     """``p3l_solve`` for every triple b: segs (B, 3, 2, 2), edges (B, 3, 2, 3) → T (B, 16, 4, 4),
-    valid (B, 16); a triple p3l would reject (or that needs clicked points) has no valid slot."""
+    valid (B, 16); a triple p3l would reject (or that needs clicked points, unless concurrent_ok)
+    has no valid slot."""
     no_uv = np.zeros((0, 2))
     no_X = np.zeros((0, 3))
     cost = np.empty(MAX_SOLUTIONS)
     for b in range(segs.shape[0]):
-        count, status = p3l_solve(C, segs[b], edges[b], no_uv, no_X, T[b], cost)
+        count, status = p3l_solve(C, segs[b], edges[b], no_uv, no_X, T[b], cost, concurrent_ok)
         for k in range(MAX_SOLUTIONS):
             valid[b, k] = status == OK and k < count
 
@@ -930,7 +933,42 @@ def _norm3(v, o):
 
 
 # refine statuses
-REFINED, BEHIND, UNOBSERVABLE = 0, 1, 2
+REFINED, BEHIND, UNOBSERVABLE, SINGULAR = 0, 1, 2, 3
+
+
+@_jit
+def _inverse6(H, out):
+    """out = H⁻¹ (6 × 6) by Gauss–Jordan with partial pivoting; False when H is singular (a zero or
+    non-finite pivot), as LAPACK's getrf reports it."""
+    n = 6
+    A = np.empty((n, 2 * n))
+    for i in range(n):
+        for j in range(n):
+            A[i, j] = H[i, j]
+            A[i, n + j] = 1.0 if i == j else 0.0
+    for c in range(n):
+        p = c
+        for i in range(c + 1, n):
+            if abs(A[i, c]) > abs(A[p, c]):
+                p = i
+        piv = A[p, c]
+        if piv == 0.0 or not np.isfinite(piv):
+            return False
+        if p != c:
+            for j in range(2 * n):
+                A[c, j], A[p, j] = A[p, j], A[c, j]
+        for j in range(2 * n):
+            A[c, j] /= piv
+        for i in range(n):
+            if i != c:
+                f = A[i, c]
+                if f != 0.0:
+                    for j in range(2 * n):
+                        A[i, j] -= f * A[c, j]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = A[i, n + j]
+    return True
 
 
 @_jit
@@ -1032,7 +1070,7 @@ def refine_one(C, T0, edges, segs, pts_obj, pts_uv, b, huber, huber_px, max_iter
 def refine_many(C, T0, edges, segs, pts_obj, pts_uv, b, huber, huber_px, max_iterations, extent,
                 T, r, w_unit, cov, free, status, iterations, converged, score, summary):
     """``refine_one`` from each start T0 (K, 4, 4) with the model edges edges (K, S, 2, 3) (one
-    assignment per start); outputs gain a leading axis K: T, r, w_unit, cov = (Jᵀ W J)⁻¹, free,
+    assignment per start) and the clicked features' extent (K,); outputs gain a leading axis K: T, r, w_unit, cov = (Jᵀ W J)⁻¹, free,
     status, iterations, converged; score (K,): the RMS pixel distance of the clicks to the
     projected finite model features at the result (``distance_cost``), inf when a clicked feature
     is behind the camera or the refinement failed; summary (K, 2 (S + P) + 2): per click its
@@ -1047,12 +1085,14 @@ def refine_many(C, T0, edges, segs, pts_obj, pts_uv, b, huber, huber_px, max_ite
     H = np.empty((6, 6))
     for k in range(K):
         st, it, cv = refine_one(C, T0[k], edges[k], segs, pts_obj, pts_uv, b, huber, huber_px, max_iterations,
-                                extent, T[k], r[k], J, w, w_unit[k], H, free[k])
+                                extent[k], T[k], r[k], J, w, w_unit[k], H, free[k])
         status[k], iterations[k], converged[k] = st, it, cv
         score[k] = np.inf
         if st != REFINED:
             continue
-        cov[k] = np.linalg.inv(H)
+        if not _inverse6(H, cov[k]):
+            status[k] = SINGULAR
+            continue
         c = distance_cost(C, T[k, :3, :3], T[k, :3, 3], edges[k], segs, pts_obj, pts_uv)
         if c >= 0.0:
             score[k] = math.sqrt(c / max(n, 1))
@@ -1142,13 +1182,14 @@ def warm_up() -> None:
     n, d = np.empty((3, 3)), np.empty(3)
     planes(C, segs, n, d)
     valid = np.empty((1, MAX_SOLUTIONS), dtype=np.bool_)
-    p3l_many(C, segs[None].copy(), edges[None].copy(), T[None].copy(), valid)
+    p3l_many(C, segs[None].copy(), edges[None].copy(), T[None].copy(), valid, False)
+    p3l_many(C, segs[None].copy(), edges[None].copy(), T[None].copy(), valid, True)
     rotations_many(n[None].copy(), np.ones((1, 3)), np.eye(3)[None].copy(), np.empty((1, MAX_SOLUTIONS, 3, 3)), valid)
     clicks_ok(segs, edges, no_uv, no_X, 1e7, 1e6)
     T0 = np.eye(4)
     T0[2, 3] = 0.0
     pose_ok(T0, 1e6)
     m, S, P = 6, 3, 0
-    refine_many(C, T0[None].copy(), edges[None].copy(), segs, no_X, no_uv, np.ones(m), False, 3.0, 100, 1.0,
+    refine_many(C, T0[None].copy(), edges[None].copy(), segs, no_X, no_uv, np.ones(m), False, 3.0, 100, np.ones(1),
                 np.empty((1, 4, 4)), np.empty((1, m)), np.empty((1, 2 * S + P)), np.empty((1, 6, 6)), np.empty((1, 6)),
                 np.empty(1, np.int64), np.empty(1, np.int64), np.empty(1, np.bool_), np.empty(1), np.empty((1, 2 * (S + P) + 2)))

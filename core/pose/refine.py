@@ -262,6 +262,8 @@ def refine_many(
     pose (``residuals.pose_distance_cost``), inf when refinement failed.
     """
     m = clicks.n_residuals
+    if len(T_starts) == 0:
+        return []
     if m < 6:
         raise ValueError(
             f"{clicks.n_segments} segment(s) and {clicks.n_points} point(s) give {m} residuals; "
@@ -272,11 +274,9 @@ def refine_many(
     K = len(T0)
     edges = np.ascontiguousarray(np.broadcast_to(clicks.edges_obj, (K, S, 2, 3)) if edges_obj is None else edges_obj, dtype=float)
     # Scale of the problem for the step test: the clicked features' extent about the origin.
-    extent = max(
-        1e-3,
-        float(np.abs(edges).max()) if S else 0.0,
-        float(np.abs(clicks.points_obj).max()) if P else 0.0,
-    )
+    extent = np.full(K, max(1e-3, float(np.abs(clicks.points_obj).max()) if P else 0.0))
+    if S:
+        extent = np.maximum(extent, np.abs(edges).reshape(K, -1).max(axis=1))
     b = 1.0 / click_sigmas(sigma_px, clicks) ** 2  # ML weight of each residual row
     n = S + P
     T, r, w_unit, cov, free = np.empty((K, 4, 4)), np.empty((K, m)), np.empty((K, 2 * S + P)), np.empty((K, 6, 6)), np.empty((K, 6))
@@ -296,8 +296,14 @@ def refine_many(
                 "pose that shows the object in the image", np.inf,
             ))
             continue
+        if st == _k.SINGULAR:
+            out.append((
+                "the clicks do not fix the pose at the refined pose (singular normal equations); click more "
+                "edges with other directions, or a vertex", np.inf,
+            ))
+            continue
         if st == _k.UNOBSERVABLE:
-            out.append((_unobservable(free[k], extent), np.inf))
+            out.append((_unobservable(free[k], float(extent[k])), np.inf))
             continue
         sk = summary[k]
         click_w = sk[n : 2 * n]
