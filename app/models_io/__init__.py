@@ -11,17 +11,19 @@ from pathlib import Path
 
 from core.brep import BRep
 
-from .cao import CaoError, CaoWarning, cao_text, concat_breps, read_cao, read_init, write_cao
+from .cao import CaoError, CaoOptions, CaoWarning, cao_text, concat_breps, read_cao, read_cao_options, read_init, write_cao
 from .mesh import MESH_SUFFIXES, MeshError, read_mesh, write_mesh
 
 __all__ = [
     "CaoError",
     "CaoWarning",
+    "CaoOptions",
     "MeshError",
     "MODEL_SUFFIXES",
     "load_model",
     "save_model",
     "read_cao",
+    "read_cao_options",
     "read_init",
     "write_cao",
     "cao_text",

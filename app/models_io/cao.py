@@ -12,8 +12,10 @@ The format (ViSP's ``vpMbTracker::loadCAOModel``), plain text, ``#`` starts a co
     K                                   # circles, "radius centre p1 p2" (p1, p2 span its plane)
 
 Each record is one line; what follows its numbers is a comment, except ``name=…``,
-``useLod=…``, ``minLineLengthThreshold=…`` and ``minPolygonAreaThreshold=…``, which are checked
-and then dropped (mcit draws every edge). The cylinder and circle blocks may be absent (old files).
+``useLod=…``, ``minLineLengthThreshold=…`` and ``minPolygonAreaThreshold=…`` (ViSP's options),
+which are checked and kept by record: ``read_cao_options`` returns them with the model
+(``CaoOptions``) and ``write_cao(..., options=)`` writes them back (mcit itself draws every edge).
+The cylinder and circle blocks may be absent (old files).
 ``load(path, t=[x; y; z], tu=[θux; θuy; θuz])`` includes a model whose points map into this file's
 frame by ``X = R(θu) X_included + t`` (θu in radians, or with a ``deg``/``rad`` suffix); a
 relative path is relative to the including file. ViSP ≥ 3.7 also takes ``R=[r11; r12; …; r33]``
@@ -60,6 +62,7 @@ from __future__ import annotations
 import re
 import stat
 import warnings
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
@@ -72,7 +75,9 @@ from core.transforms import exp_so3, make_T
 __all__ = [
     "CaoError",
     "CaoWarning",
+    "CaoOptions",
     "read_cao",
+    "read_cao_options",
     "read_init",
     "write_cao",
     "cao_text",
@@ -102,6 +107,34 @@ class CaoError(ValueError):
 
 class CaoWarning(UserWarning):
     """Something in a ``.cao`` file that ViSP accepts but mcit cannot use; the model still loads."""
+
+
+@dataclass(frozen=True)
+class CaoOptions:
+    """ViSP's per-record options (``name=… useLod=… minLineLengthThreshold=… minPolygonAreaThreshold=…``).
+
+    Each value is the options' text as read (``"name=door useLod=true"``), keyed by the record of the
+    ``BRep`` it belongs to: ``edges`` by sorted vertex pair, ``faces``, ``cylinders`` (``solids``) and
+    ``circles`` by index. ``read_cao_options`` returns them; ``cao_text``/``write_cao`` write them back.
+    """
+
+    edges: dict = field(default_factory=dict)
+    faces: dict = field(default_factory=dict)
+    cylinders: dict = field(default_factory=dict)
+    circles: dict = field(default_factory=dict)
+
+    @staticmethod
+    def concat(models: list[BRep], options: list["CaoOptions"]) -> "CaoOptions":
+        """The options of ``concat_breps(models)``: each model's keys shifted like its records."""
+        out = CaoOptions()
+        nv = nf = ns = nc = 0
+        for m, o in zip(models, options):
+            out.edges.update({(a + nv, b + nv): v for (a, b), v in o.edges.items()})
+            out.faces.update({k + nf: v for k, v in o.faces.items()})
+            out.cylinders.update({k + ns: v for k, v in o.cylinders.items()})
+            out.circles.update({k + nc: v for k, v in o.circles.items()})
+            nv, nf, ns, nc = nv + len(m.vertices), nf + len(m.faces), ns + len(m.solids), nc + len(m.circles)
+        return out
 
 
 def _limits() -> str:
@@ -167,9 +200,11 @@ def _numbers(lines: _Lines, number: int, line: str, count: int, kinds: str, what
     return out, rest
 
 
-def _check_params(lines: _Lines, number: int, rest: str) -> None:
-    for key, value in _PARAM.findall(rest):
-        value = value.strip('"')
+def _check_params(lines: _Lines, number: int, rest: str) -> str:
+    """The record's ViSP options (``name=… useLod=… min…Threshold=…``), checked, as ``key=value`` words."""
+    found = _PARAM.findall(rest)
+    for key, raw in found:
+        value = raw.strip('"')
         if key == "name" and not value:
             raise lines.error(number, "name= is empty")
         if key == "useLod" and value.lower() not in ("true", "false", "1", "0"):
@@ -179,6 +214,7 @@ def _check_params(lines: _Lines, number: int, rest: str) -> None:
                 float(value)
             except ValueError:
                 raise lines.error(number, f"{key}= must be a number") from None
+    return " ".join(f"{key}={raw}" for key, raw in found)
 
 
 def _count(lines: _Lines, what: str) -> int:
@@ -338,6 +374,7 @@ class _Reading:
         self.bytes = 0
         self.parsed: dict[Path, tuple[BRep | None, int, int]] = {}  # model, files, bytes
         self.parse = parse or _parse  # (path, text, stack, reading) → the file's content
+        self.options: dict[Path, CaoOptions] = {}  # each parsed file's ViSP options, by record of its model
         self.what = what
 
     def read(self, path: Path, where: str, stack: tuple[Path, ...]) -> BRep | None:
@@ -388,6 +425,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
     if version not in (1, 2):
         raise lines.error(number, f"unsupported .cao version V{version}; mcit reads V1 and V2")
     parts: list[BRep] = []
+    part_options: list[CaoOptions] = []
     n_loads = 0
     while (item := lines.peek()) is not None and item[1][:1] in ("l", "L"):
         number, line = lines.next("load(...)")
@@ -403,8 +441,10 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
             if _reach_m(placed) > MAX_COORD_M:
                 raise lines.error(number, f"the included model, placed by its t= and rotation, reaches beyond ±{MAX_COORD_M:g} m")
             parts.append(placed)
-    if lines.peek() is None and n_loads:
-        return concat_breps(parts) if parts else None  # a file of load() lines only (ViSP ≥ 3.7 reads it too)
+            part_options.append(reading.options.get(target, CaoOptions()))
+    if lines.peek() is None and n_loads:  # a file of load() lines only (ViSP ≥ 3.7 reads it too)
+        reading.options[path] = CaoOptions.concat(parts, part_options)
+        return concat_breps(parts) if parts else None
     n_points = _count(lines, "points")
     n_num = 5 if version == 2 else 3
     P = np.zeros((n_points, 3))
@@ -415,6 +455,10 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
         P[k] = values[:3]
     n_lines = _count(lines, "lines")
     segs: list[tuple[int, int]] = []
+    seg_options: list[str] = []
+    loop_options: list[str] = []
+    cylinder_options: list[str] = []
+    circle_options: list[str] = []
     for k in range(n_lines):
         number, line = lines.next(f"line {k} of {n_lines}")
         (i, j), rest = _numbers(lines, number, line, 2, "ii", f"line {k}")
@@ -423,7 +467,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
             raise lines.error(number, f"line {k} joins point {i} to itself")
         if np.linalg.norm(P[i] - P[j]) <= MIN_LENGTH_M:
             raise lines.error(number, f"line {k}: its points {i} and {j} are at the same place")
-        _check_params(lines, number, rest)
+        seg_options.append(_check_params(lines, number, rest))
         segs.append((i, j))
     loops: list[list[int]] = []
     for what, by_lines in (("faces from lines", True), ("faces from points", False)):
@@ -434,7 +478,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
             if n < 3:
                 raise lines.error(number, f"face {k} has {n} {'lines' if by_lines else 'points'}; a face needs at least 3")
             values, rest = _numbers(lines, number, line, n + 1, "i", f"face {k}")
-            _check_params(lines, number, rest)
+            options = _check_params(lines, number, rest)
             if by_lines:
                 idx = [_index(lines, number, i, n_lines, "line") for i in values[1:]]
                 loop = _chain(lines, number, [segs[i] for i in idx])
@@ -444,6 +488,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
                     raise lines.error(number, f"face {k} lists a point twice")
             _check_face(lines, number, k, P, loop)
             loops.append(loop)
+            loop_options.append(options)
     solids: list[Revolution] = []
     circles: list[Circle] = []
     dropped_circles = 0
@@ -452,19 +497,20 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
             number, line = lines.next(f"cylinder {k}")
             (i, j, r), rest = _numbers(lines, number, line, 3, "iif", f"cylinder {k}")
             i, j = _index(lines, number, i, n_points, "point"), _index(lines, number, j, n_points, "point")
-            _check_params(lines, number, rest)
+            options = _check_params(lines, number, rest)
             if r <= 0:
                 raise lines.error(number, f"cylinder {k}: radius must be positive, got {r}")
             _within(lines, number, r, f"cylinder {k}: the radius")
             if np.linalg.norm(P[i] - P[j]) <= MIN_LENGTH_M:
                 raise lines.error(number, f"cylinder {k}: needs two distinct axis endpoints (points {i} and {j} are at the same place)")
             solids.append(Revolution(P[i], P[j], r, r))
+            cylinder_options.append(options)
     if lines.peek() is not None:
         for k in range(_count(lines, "circles")):
             number, line = lines.next(f"circle {k}")
             (r, c, i, j), rest = _numbers(lines, number, line, 4, "fiii", f"circle {k}")
             c, i, j = (_index(lines, number, v, n_points, "point") for v in (c, i, j))
-            _check_params(lines, number, rest)
+            options = _check_params(lines, number, rest)
             _within(lines, number, r, f"circle {k}: the radius")
             if r <= 0:
                 raise lines.error(number, f"circle {k}: radius must be positive, got {r}")
@@ -479,6 +525,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
                 dropped_circles += 1
                 continue
             circles.append(Circle(P[c], normal, r))
+            circle_options.append(options)
     if (item := lines.peek()) is not None:
         raise lines.error(item[0], "unexpected content after the last block (circles)")
     used = sorted({v for loop in loops for v in loop} | {v for s in segs for v in s})
@@ -501,6 +548,15 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
                 tuple(circles),
             )
         )
+        part_options.append(
+            CaoOptions(
+                {(min(remap[a], remap[b]), max(remap[a], remap[b])): o for (a, b), o in zip(segs, seg_options) if o},
+                {k: o for k, o in enumerate(loop_options) if o},
+                {k: o for k, o in enumerate(cylinder_options) if o},
+                {k: o for k, o in enumerate(circle_options) if o},
+            )
+        )
+    reading.options[path] = CaoOptions.concat(parts, part_options)
     return concat_breps(parts) if parts else None
 
 
@@ -512,11 +568,17 @@ def read_cao(path: str | Path) -> BRep:
     CaoError (a ValueError) naming the file, the line and the problem; also for a model beyond
     the limits in the module docstring (includes, counts, coordinates, degenerate geometry).
     """
+    return read_cao_options(path)[0]
+
+
+def read_cao_options(path: str | Path) -> tuple[BRep, CaoOptions]:
+    """``read_cao`` and the file's ViSP options (``name=``, LOD), for ``write_cao(..., options=)``."""
     path = Path(path).resolve()
-    model = _Reading().read(path, str(path), (path,))
+    reading = _Reading()
+    model = reading.read(path, str(path), (path,))
     if model is None:
         raise CaoError(f"{path}: the model has nothing mcit can draw (its only circles have no plane, or its includes are empty)")
-    return model
+    return model, reading.options.get(path, CaoOptions())
 
 
 def _parse_init(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) -> np.ndarray | None:
@@ -568,18 +630,28 @@ def _fmt(x: float) -> str:
     return repr(float(x))
 
 
-def cao_text(model: BRep, comment: str = "") -> str:
-    """The ``.cao`` (V1) text of a model; see the module docstring. ValueError for cones."""
+def cao_text(model: BRep, comment: str = "", options: CaoOptions | None = None) -> str:
+    """The ``.cao`` (V1) text of a model; see the module docstring. ValueError for cones.
+
+    options : the ViSP options of the model's records (``read_cao_options``), written after each
+    record's numbers. A line's options are written when the edge is written as a line (an edge
+    that is a face's side is written by the face, as ViSP draws it once).
+    """
+    options = options or CaoOptions()
+
+    def tail(text: str | None) -> str:
+        return f" {text}" if text else ""
+
     for s in model.solids:
         if not s.is_cylinder:
             raise ValueError(f"a .cao model has cylinders only; this model has a cone (radii {s.r0}, {s.r1}): export it as glTF or OBJ")
     edge_set = {(int(a), int(b)) for a, b in model.edges}
     faces = []
     covered: set[tuple[int, int]] = set()
-    for f in model.faces:
+    for k, f in enumerate(model.faces):
         sides = {(min(a, b), max(a, b)) for a, b in zip(f, f[1:] + f[:1])}
         if sides <= edge_set:
-            faces.append(f)
+            faces.append((k, f))
             covered |= sides
     lines = [(a, b) for a, b in map(tuple, model.edges.tolist()) if (a, b) not in covered]
     points = [tuple(p) for p in model.vertices.tolist()]
@@ -597,17 +669,18 @@ def cao_text(model: BRep, comment: str = "") -> str:
         out += [f"# {line}" for line in comment.splitlines()]
     out += ["# 3D points", str(len(points))]
     out += [" ".join(_fmt(x) for x in p) for p in points]
-    out += ["# 3D lines", str(len(lines))] + [f"{a} {b}" for a, b in lines]
+    out += ["# 3D lines", str(len(lines))] + [f"{a} {b}" + tail(options.edges.get((min(a, b), max(a, b)))) for a, b in lines]
     out += ["# Faces from 3D lines", "0"]
-    out += ["# Faces from 3D points", str(len(faces))] + [" ".join(str(v) for v in (len(f),) + tuple(f)) for f in faces]
-    out += ["# 3D cylinders", str(len(cylinders))] + [f"{i} {j} {_fmt(r)}" for i, j, r in cylinders]
-    out += ["# 3D circles", str(len(circles))] + [f"{_fmt(r)} {c} {i} {j}" for r, c, i, j in circles]
+    out += ["# Faces from 3D points", str(len(faces))]
+    out += [" ".join(str(v) for v in (len(f),) + tuple(f)) + tail(options.faces.get(k)) for k, f in faces]
+    out += ["# 3D cylinders", str(len(cylinders))] + [f"{i} {j} {_fmt(r)}" + tail(options.cylinders.get(k)) for k, (i, j, r) in enumerate(cylinders)]
+    out += ["# 3D circles", str(len(circles))] + [f"{_fmt(r)} {c} {i} {j}" + tail(options.circles.get(k)) for k, (r, c, i, j) in enumerate(circles)]
     return "\n".join(out) + "\n"
 
 
-def write_cao(model: BRep, path: str | Path | IO[str], comment: str = "") -> None:
+def write_cao(model: BRep, path: str | Path | IO[str], comment: str = "", options: CaoOptions | None = None) -> None:
     """Write a model as a ViSP ``.cao`` file (see ``cao_text``)."""
-    text = cao_text(model, comment)
+    text = cao_text(model, comment, options)
     if hasattr(path, "write"):
         path.write(text)
     else:

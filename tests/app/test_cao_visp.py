@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from app.models_io import CaoError, CaoWarning, cao_text, read_cao, read_init
-from core.transforms import exp_so3, make_T
+from core.transforms import exp_so3
 
 BOX = "V1\n8\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n1 0 1\n1 1 1\n0 1 1\n0\n0\n6\n4 0 3 2 1\n4 4 5 6 7\n4 0 1 5 4\n4 1 2 6 5\n4 2 3 7 6\n4 3 0 4 7\n0\n0\n"
 RZ90_ROWS = "0; -1; 0; 1; 0; 0; 0; 0; 1"  # rotation of +90° about z, row by row
@@ -189,3 +189,65 @@ def test_every_real_cao_file_loads_without_warning_and_round_trips(tmp_path, pat
 def test_every_real_init_file_loads(path):
     P = read_init(path)
     assert P.shape[1] == 3 and len(P) >= 4 and np.all(np.isfinite(P))
+
+
+# --- name= and LOD options through import and export ---
+
+NAMED = """V1
+5
+0 0 0
+1 0 0
+1 1 0
+0 1 0
+0 0 1
+2
+0 4 name=pole useLod=true minLineLengthThreshold=40
+1 4
+0
+1
+4 0 1 2 3 name=floor useLod=false minPolygonAreaThreshold=2500
+1
+0 4 0.1 name=shaft
+1
+0.5 0 1 3 name=rim
+"""
+
+
+def test_name_and_lod_options_survive_import_and_export(tmp_path):
+    from app.models_io import read_cao_options, write_cao
+
+    f = tmp_path / "named.cao"
+    f.write_text(NAMED)
+    m, opts = read_cao_options(f)
+    pole = tuple(sorted(int(i) for i in np.flatnonzero(np.all(m.vertices == [[0, 0, 0]], axis=1) | np.all(m.vertices == [[0, 0, 1]], axis=1))))
+    assert opts.edges == {pole: "name=pole useLod=true minLineLengthThreshold=40"}
+    assert opts.faces == {0: "name=floor useLod=false minPolygonAreaThreshold=2500"}
+    assert opts.cylinders == {0: "name=shaft"} and opts.circles == {0: "name=rim"}
+    out = tmp_path / "out.cao"
+    write_cao(m, out, options=opts)
+    text = out.read_text()
+    assert "name=pole useLod=true minLineLengthThreshold=40" in text and "name=floor useLod=false" in text
+    assert " name=shaft\n" in text and " name=rim\n" in text
+    m2, opts2 = read_cao_options(out)
+    assert m2 == m and opts2 == opts
+    assert "name=" not in cao_text(m)  # without options, none are invented
+
+
+def test_options_of_included_files_follow_their_records(tmp_path):
+    from app.models_io import read_cao_options, write_cao
+
+    (tmp_path / "named.cao").write_text(NAMED)
+    top = tmp_path / "two.cao"
+    top.write_text('V1\nload("named.cao")\nload("named.cao", t=[5; 0; 0])\n2\n0 0 0\n0 0 9\n1\n0 1 name=mast\n0\n0\n0\n0\n')
+    m, opts = read_cao_options(top)
+    floor = "name=floor useLod=false minPolygonAreaThreshold=2500"
+    assert opts.faces == {0: floor, 1: floor}
+    assert sorted(opts.cylinders) == [0, 1] and sorted(opts.circles) == [0, 1]
+    named_edges = {tuple(tuple(float(x) for x in m.vertices[i]) for i in k): v.split()[0] for k, v in opts.edges.items()}
+    assert named_edges == {((0, 0, 0), (0, 0, 1)): "name=pole", ((5, 0, 0), (5, 0, 1)): "name=pole", ((0, 0, 0), (0, 0, 9)): "name=mast"}
+    out = tmp_path / "out.cao"
+    write_cao(m, out, options=opts)
+    m2, opts2 = read_cao_options(out)
+    assert opts2 == opts  # the model itself round-trips (circle normals to rounding: see test_models_io)
+    assert np.array_equal(m2.vertices, m.vertices) and m2.faces == m.faces
+    assert sorted(map(tuple, m2.edges.tolist())) == sorted(map(tuple, m.edges.tolist()))  # faces' sides come first
