@@ -50,21 +50,12 @@ def read_visp_pose(path: str | Path) -> np.ndarray:
 
 
 def read_init_points(path: str | Path) -> np.ndarray:
-    """Model points (N, 3), metres, from a ViSP ``.init`` file: a count, then X Y Z per line (``#`` comments)."""
-    path = Path(path)
-    rows = []
-    for line in path.read_text().splitlines():
-        line = line.split("#", 1)[0].strip()
-        if line:
-            rows.append(line.split())
-    try:
-        n = int(rows[0][0])
-        P = np.array([[float(x) for x in r[:3]] for r in rows[1 : 1 + n]])
-    except (IndexError, ValueError) as exc:
-        raise ValueError(f"{path}: expected a point count then that many 'X Y Z' lines ({exc})") from None
-    if P.shape != (n, 3):
-        raise ValueError(f"{path}: announced {n} points, found {len(P)}")
-    return P
+    """Model points (N, 3), metres, from a ViSP ``.init`` file: a count, then X Y Z per line (``#``
+    comments), and the ViSP ≥ 3.7 ``load()`` lines (``app.models_io.read_init``, under the ``.cao``
+    reader's limits). ValueError (CaoError) naming file:line."""
+    from app.models_io import read_init
+
+    return read_init(path)
 
 
 def pose_from_points(K: np.ndarray, X_obj: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -187,6 +178,7 @@ def track_sequence(
     csv_out: str | Path | None = None,
     fps_out: float = 25.0,
     stop_when_lost: bool = True,
+    lens=None,
     **tracker_kwargs,
 ) -> list[TrackedFrame]:
     """Track a model through a recorded video from an initial pose.
@@ -199,6 +191,8 @@ def track_sequence(
     csv_out : write one row per frame (index, confidence, lost, rms_px, samples, inliers, ms,
         tx ty tz θux θuy θuz of T_world_obj).
     stop_when_lost : stop at the first lost frame (the operator must give the pose again).
+    lens : app.undistort.LensDistortion or None: undistort each frame first (once, with precomputed
+        maps); camera's C holds in the undistorted frames, which the overlay video shows.
     tracker_kwargs : passed to ``EdgeTracker``.
 
     Returns
@@ -210,6 +204,8 @@ def track_sequence(
     out: list[TrackedFrame] = []
     try:
         for index, frame in iter_frames(source, start, count):
+            if lens is not None:
+                frame = lens.undistort_image(frame)
             t0 = time.perf_counter()
             T, conf, lost = tracker.track(frame)
             ms = 1e3 * (time.perf_counter() - t0)

@@ -55,8 +55,13 @@ def test_visp_pose_and_init_files(tmp_path):
     q.write_text("# comment\n3 # points\n0 0 0 # first\n0.1 0 0\n0 0.2 0.3\n")
     assert np.allclose(read_init_points(q), [[0, 0, 0], [0.1, 0, 0], [0, 0.2, 0.3]])
     q.write_text("4\n0 0 0\n")
-    with pytest.raises(ValueError, match="announced 4"):
+    with pytest.raises(ValueError, match="pts.init:1: the number of points is more than"):
         read_init_points(q)
+    # ViSP >= 3.7: an .init may load another's points, placed by t= (mcit track --init-points reads it)
+    q.write_text("1\n0 0 0\n")
+    r = tmp_path / "both.init"
+    r.write_text('load("pts.init", t=[0.5; 0; 0])\n1\n0 0 1\n')
+    assert np.allclose(read_init_points(r), [[0.5, 0, 0], [0, 0, 1]])
 
 
 def test_pose_from_points_recovers_the_pose():
