@@ -13,8 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.stats import chi2
 
 from .camera import Camera
 from .checks import MAX_M, MAX_PX, MAX_SCALE, MIN_SCALE, finite_array, image_size
@@ -149,6 +147,8 @@ def calibrate_dlt(
     P = dlt(X, uv)
     linear_rms = float(np.sqrt(np.mean(np.sum(_reprojection(P, X, uv) ** 2, axis=1))))
     if refine:
+        from scipy.optimize import least_squares  # here, not at the top: scipy.optimize/stats cost start-up ~0.5 s
+
         sol = least_squares(
             lambda p: (_reprojection(p.reshape(3, 4), X, uv) * w[:, None]).ravel(), P.ravel(), method="lm", xtol=1e-14,
             ftol=1e-14,
@@ -197,6 +197,8 @@ def _dlt_cov(C: np.ndarray, X: np.ndarray, res: np.ndarray, w: np.ndarray) -> tu
     Pc = np.eye(12) - np.outer(c, c)
     cov = Pc @ np.linalg.pinv(J.T @ J, rcond=1e-12) @ Pc
     cov = 0.5 * (cov + cov.T)
+    from scipy.stats import chi2  # here, not at the top (start-up)
+
     if factor * dof > chi2.ppf(0.99, dof):
         cov = cov * factor
     return cov, factor
@@ -280,6 +282,8 @@ def calibrate_turret(
         X_in_turret = (X_world - T[:3, 3]) @ T[:3, :3]
         return np.einsum("nij,nj->ni", W, X_in_turret - X_turret).ravel()
 
+    from scipy.optimize import least_squares  # here, not at the top (start-up)
+
     sol = least_squares(residuals, np.zeros(6), method="lm", xtol=1e-15, ftol=1e-15)
     T = T0 @ make_T(exp_so3(sol.x[:3]), sol.x[3:])
     J = sol.jac
@@ -344,6 +348,8 @@ def calibrate_turret_planes(
         return (np.einsum("ni,ni->n", N, X) + d) / sig
 
     sig = sigma_along(T0)
+    from scipy.optimize import least_squares  # here, not at the top (start-up)
+
     sol = least_squares(residuals, np.zeros(6), args=(T0, sig), method="lm", xtol=1e-15, ftol=1e-15)
     T = T0 @ make_T(exp_so3(sol.x[:3]), sol.x[3:])
     J = sol.jac

@@ -15,7 +15,6 @@ world points the caller knows to be in front (``in_front=``).
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import rq
 
 from .checks import MAX_M, MAX_PX, finite_array, image_size
 from .geometry import Plane
@@ -116,6 +115,8 @@ class Camera:
         Returns K (3, 3) with K[2, 2] = 1, fy > 0, and T_cam_world (4, 4) with a proper rotation.
         fx is negative only for a mirrored camera (see the module's docstring).
         """
+        from scipy.linalg import rq  # here, not at the top: scipy costs the interface's start-up ~0.3 s
+
         M = self._C[:, :3]
         K, R = rq(M)
         D = np.diag(np.sign(np.diag(K)))

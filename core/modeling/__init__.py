@@ -15,11 +15,38 @@ Every result is a ``ModelResult``: a B-Rep in its object frame, ``T_world_obj``,
 and their standard deviations.
 """
 
-from .box import BoxFace, model_box
-from .cylinder import METHODS, model_cylinder
-from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs
-from .polyhedron import model_polyhedron
-from .result import ModelResult
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .box import BoxFace, model_box
+    from .cylinder import METHODS, model_cylinder
+    from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs
+    from .polyhedron import model_polyhedron
+    from .result import ModelResult
+
+# The names below load their module on first use (PEP 562): the interface imports
+# ``core.modeling.result`` at start-up, and the solvers' modules need not load before its first page.
+_WHERE = {
+    "BoxFace": "box", "model_box": "box", "METHODS": "cylinder", "model_cylinder": "cylinder",
+    "PlaneObs": "observations", "fit_face_plane": "observations", "interpretation_plane_obs": "observations",
+    "model_polyhedron": "polyhedron", "ModelResult": "result",
+}
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
+
 
 __all__ = [
     "BoxFace",
