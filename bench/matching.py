@@ -62,7 +62,7 @@ BOX = (0.35, 0.231, 0.132)
 TARGET = 0.95
 
 
-def random_trial(rng, camera, box):
+def random_trial(rng, camera, box, n_edges: int = 4):
     while True:
         T = make_T(random_rotation(rng), [rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05), 2.0])
         if not camera.in_image(camera.project_obj(T, box.vertices), 5.0).all():
@@ -75,8 +75,8 @@ def random_trial(rng, camera, box):
         contrast = edge_contrast(camera, box, T)
         S = box.edge_segments(T)
         ok = [k for k in range(len(S)) if contrast[k] >= 10.0 and np.linalg.norm(np.subtract(*camera.project(S[k]))) >= 30.0]
-        if len(ok) >= 4:
-            pick = rng.choice(ok, 4, replace=False)
+        if len(ok) >= n_edges:
+            pick = rng.choice(ok, n_edges, replace=False)
             exact = []
             for k in pick:
                 a, b = camera.project(S[k])
@@ -90,6 +90,7 @@ def main() -> int:
     ap.add_argument("--trials", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--p3l-only", action="store_true", help="time the batched P3L only (skip the matching trials)")
+    ap.add_argument("--edges", type=int, default=4, help="clicked edges per trial (default 4; issue 16 times 4-6)")
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):  # one core, as bench/pose.py
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
@@ -98,7 +99,8 @@ def main() -> int:
     box = BRep.box(*BOX)
     sym = edge_symmetries(box)
 
-    trials = [random_trial(rng, camera, box) for _ in range(1 if args.p3l_only else args.trials)]
+    trials = [random_trial(rng, camera, box, args.edges) for _ in range(1 if args.p3l_only else args.trials)]
+    match_edges(camera, box, trials[0][2])  # the compiled kernels loaded (mcit serve does it at start)
     if args.p3l_only:
         return batched_p3l(camera, box, trials[0])
     frames = render_poses(camera, box, [T for T, _, _ in trials], noise_sigma=2.0, blur_sigma_px=0.5, seed=args.seed)
@@ -132,13 +134,14 @@ def main() -> int:
     n = args.trials
     print("Automatic edge matching (bench/matching.py)")
     print(f"  camera {W}×{H} px, f = {F:.0f} px; box {BOX[0] * 100:.1f} × {BOX[1] * 100:.1f} × {BOX[2] * 100:.1f} cm at 2 m; "
-          f"{n} random poses, 4 clicked edges each, seed {args.seed}; the box has {len(sym)} proper symmetries")
+          f"{n} random poses, {args.edges} clicked edges each, seed {args.seed}; the box has {len(sym)} proper symmetries")
+    print(f"  one process pinned to one core; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores after the trials")
     print(f"  {'clicks':22s}{'right (top 1)':>15s}{'among cands':>13s}{'no cand.':>10s}{'ms/call med':>13s}{'ms 95 %':>9s}")
     for m in modes:
         st = stats[m]
         ms = np.asarray(st["ms"])
         print(f"  {m:22s}{100 * st['top'] / n:14.1f} %{100 * st['among'] / n:12.1f} %{st['none']:10d}{np.median(ms):13.0f}{np.percentile(ms, 95):9.0f}")
-    print(f"  target: right assignment for ≥ {100 * TARGET:.0f} % of random box poses from 4 clicked edges")
+    print(f"  target: right assignment for ≥ {100 * TARGET:.0f} % of random box poses from 4 clicked edges; issue 16: p95 ≤ 35 ms on 4-6 edges")
     print()
     return batched_p3l(camera, box, trials[0])
 

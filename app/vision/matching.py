@@ -62,7 +62,8 @@ class MatchCandidate:
     distance (pixels) of the clicked pixels to their projected model lines at T_world_obj (the
     maximum-likelihood cost that ``core.pose.refine`` minimises). image_px : mean distance (pixels)
     of all the candidate's visible projected edges to the image's edges (NaN without an image).
-    score_px : what ranks the candidates: rms_px, plus image_px when there is an image.
+    score_px : what ranks the candidates: rms_px, plus image_px when there is an image (inf when
+    the image measured none of its edges: ranked last).
     """
 
     T_world_obj: np.ndarray
@@ -498,14 +499,16 @@ def match_edges(
                 active.append(j)
     fitted = [j for j in range(n_kept) if fits[j] is not None and fits[j].rms_px <= line_gate]
     inside = _within_edges_many(camera, model, Ts[fitted], segs, E_cur[fitted], incidence, extent_gate)
-    # Poses that draw the same picture (the model's symmetries) count once, the best fitting kept:
-    # before the image step, which would only repeat itself on each twin.
-    distinct, drawn = [], []
+    # Refinements that ended on the same assignment (up to the model's symmetries) with the model in
+    # the same place count once, the best fitting kept: the image step would only repeat itself.
+    distinct, placed = [], {}
+    tol_m = 1e-4 * float(np.abs(model.vertices).max())
     for j in sorted((j for j, ok in zip(fitted, inside) if ok), key=lambda j: fits[j].rms_px):
-        uv = camera.project_obj(Ts[j], model.vertices)
-        if not any(_same_set(uv, o, max(1.0, sigma_px)) for o in drawn):
+        key = min(tuple(p[E_cur[j]].tolist()) for p in perms)
+        X = model.vertices @ Ts[j, :3, :3].T + Ts[j, :3, 3]
+        if not any(_same_set(X, o, tol_m) for o in placed.get(key, [])):
             distinct.append(j)
-            drawn.append(uv)
+            placed.setdefault(key, []).append(X)
     for j in distinct:
         T, edges, rms_px = Ts[j].copy(), E_cur[j].copy(), fits[j].rms_px
         img_px = float("nan")
@@ -520,6 +523,8 @@ def match_edges(
                     T, edges, rms_px = T_img, e_img, r_img
             img_px = edge_distance(oe, camera, model, T).mean_px
         score = rms_px + (img_px if oe is not None else 0.0)
+        if not np.isfinite(score):  # no visible edge measured in the image: ranked after every measured one
+            score = float("inf")
         refined.append(MatchCandidate(T, edges, rms_px, img_px, score))
     refined.sort(key=lambda m: m.score_px)
     out: list[MatchCandidate] = []
