@@ -259,13 +259,72 @@ def calibration_trials(n: int, rng: np.random.Generator) -> dict:
     return out
 
 
+def jacobian_table(n: int, rng: np.random.Generator) -> None:
+    """The paper's constructions' covariance: analytic Jacobian (``cylinder._paper_jacobian``) beside
+    the forward differences it replaced (one construction per input, steps 1e-4 σ), same instances."""
+    from core.modeling import cylinder as cyl
+    from core.modeling.lm import numeric_jacobian
+    from core.rangefinder import RangeFinderSpec
+
+    print(f"Covariance of the paper's constructions: analytic Jacobian vs forward differences, {n} trials at 1.2 m,"
+          " cylinder and cone on the table (medians; ms per Jacobian; max |Δσ|/σ over the outputs)")
+    print("| solid | method | inputs | analytic ms | differences ms | ratio | max rel. σ difference |")
+    print("|:---|:---|---:|---:|---:|---:|---:|")
+    for cone in (False, True):
+        cam, T_wt = look_at_setup(np.array([0.0, 0.0, H_CYL / 2]), 1.2)
+        rows = {m: ([], [], [], 0) for m in ("tangential", "bisecting", "rf_tangential")}
+        for _ in range(n):
+            p0 = np.array([*rng.uniform(-0.005, 0.005, 2), 0.0])
+            sol = Revolution(p0, p0 + [0.0, 0.0, H_CYL], R_CYL * (1.2 if cone else 1.0), R_CYL * (0.8 if cone else 1.0))
+            sil, scans = simulate_revolution(cam, SimWorld(T_wt, solids=(sol,)), sol, rng, sigma_px=1.0)
+            data = cyl.reduce_cylinder_data(cam, silhouettes_uv=sil, scans=scans, T_world_turret=T_wt, spec=RangeFinderSpec(),
+                                            support=TABLE, axis_dir=None, cone=cone, jump_m=0.05)
+            for m, (ta, tn, dev, _) in rows.items():
+                ctx = cyl._stage_one(data, m)
+                parts = [sil.reshape(-1)] + [[tb.pan_rad, tb.tilt_rad] for tb in data.tangents]
+                var = [np.full(8, 1.0)] + [[tb.sigma_pan_rad**2, tb.sigma_tilt_rad**2] for tb in data.tangents]
+                if ctx.profile is not None:
+                    parts.append(cyl.front_plane(ctx.profile, data.rf_origin, float(np.mean(ctx.t_sections))).as_vector())
+                    Jp = cyl.front_plane_jacobian(ctx.profile, data.rf_origin, float(np.mean(ctx.t_sections)))
+                z = np.concatenate([np.asarray(q, float).reshape(-1) for q in parts])
+                Sz = np.zeros((len(z), len(z)))
+                k = len(np.concatenate([np.asarray(v, float).reshape(-1) for v in var]))
+                Sz[:k, :k] = np.diag(np.concatenate([np.asarray(v, float).reshape(-1) for v in var]))
+                if ctx.profile is not None:
+                    Sz[k:, k:] = Jp @ ctx.profile.cov @ Jp.T
+                s0 = cyl._solve_paper(z, ctx)
+                q0 = cyl._solid_vector(s0, cone)
+                scale = np.sqrt(np.maximum(np.diag(Sz), 1e-30))
+                step = np.where(scale <= 1e-15, 0.0, 1e-4 * scale)
+                t0 = time.perf_counter()
+                Ja = cyl._paper_jacobian(z, ctx, s0)
+                t1 = time.perf_counter()
+                Jn = numeric_jacobian(lambda x: cyl._solid_vector(cyl._solve_paper(x, ctx), cone), z, step, f0=q0)
+                t2 = time.perf_counter()
+                sa, sn = np.sqrt(np.diag(Ja @ Sz @ Ja.T)), np.sqrt(np.diag(Jn @ Sz @ Jn.T))
+                ta.append(1e3 * (t1 - t0))
+                tn.append(1e3 * (t2 - t1))
+                keep = sn > 1e-12
+                dev.append(float(np.max(np.abs(sa - sn)[keep] / sn[keep])))
+                rows[m] = (ta, tn, dev, len(z))
+        for m, (ta, tn, dev, nz) in rows.items():
+            a, b = float(np.median(ta)), float(np.median(tn))
+            print(f"| {'cone' if cone else 'cylinder'} | {m} | {nz} | {a:.2f} | {b:.2f} | {b / a:.1f}× | {max(dev):.1e} |")
+    print()
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--box-trials", type=int, default=500)
     ap.add_argument("--cyl-trials", type=int, default=300)
     ap.add_argument("--cal-trials", type=int, default=300)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--jacobians", type=int, default=0, metavar="N",
+                    help="only the table of the constructions' Jacobians (analytic vs differences) over N trials")
     args = ap.parse_args(argv)
+    if args.jacobians:
+        jacobian_table(args.jacobians, np.random.default_rng(args.seed))
+        return 0
     rng = np.random.default_rng(args.seed)
     print("mcit bench/modeling.py —", platform.python_version(), platform.machine(), f"seed {args.seed}")
     print("noise: clicks σ = 1 px per coordinate; range σ = 5 mm; turret 0.0514° steps, beam error U(±½ step);")

@@ -10,6 +10,9 @@ returns. The front tangent plane (the paper's P3) follows from the fitted profil
 
 from __future__ import annotations
 
+import hashlib
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,13 +71,46 @@ def _kasa(q: np.ndarray) -> tuple[np.ndarray, float]:
     return c, float(np.sqrt(max(c @ c - F, 1e-12)))
 
 
+_RECENT: OrderedDict[bytes, ProfileFit] = OrderedDict()  # the last fits, by their inputs' bytes
+_RECENT_LOCK = threading.Lock()
+_RECENT_MAX = 16
+
+
 def fit_profile(ret: Returns, a: np.ndarray, *, cone: bool = False, groups: np.ndarray | None = None) -> ProfileFit:
     """Maximum-likelihood surface of revolution with axis direction a through range returns.
 
     ret : Returns (beams, ranges, noise). a : unit axis (3,). groups : array, shape (N,), int,
     the scan of each return (a cone's starting values need two scans at different heights).
     ValueError for too few returns, a cone measured at a single height, or no plausible radius.
+
+    The fit is a pure function of its inputs, and the cylinder methods fit the same profile
+    several times (the tangential constructions, the fused fit's start, rebuilds through another
+    camera calibration): the last few fits are kept by their inputs' exact bytes and returned
+    again (read-only arrays).
     """
+    h = hashlib.blake2b(digest_size=20)
+    for x in (ret.origin, ret.dirs, ret.range_m, ret.e_pan, ret.e_tilt, ret.sigma_pan_rad, ret.sigma_tilt_rad,
+              [ret.sigma_range_m], a, [float(cone)], np.zeros(0) if groups is None else groups):
+        x = np.ascontiguousarray(x, dtype=float)
+        h.update(repr(x.shape).encode())
+        h.update(x.tobytes())
+    key = h.digest()
+    with _RECENT_LOCK:
+        fit = _RECENT.get(key)
+        if fit is not None:
+            _RECENT.move_to_end(key)
+            return fit
+    fit = _fit_profile(ret, a, cone=cone, groups=groups)
+    for x in (fit.a, fit.X0, fit.e1, fit.e2, fit.params, fit.cov, fit.residuals, fit.inliers):
+        x.setflags(write=False)
+    with _RECENT_LOCK:
+        _RECENT[key] = fit
+        while len(_RECENT) > _RECENT_MAX:
+            _RECENT.popitem(last=False)
+    return fit
+
+
+def _fit_profile(ret: Returns, a: np.ndarray, *, cone: bool, groups: np.ndarray | None) -> ProfileFit:
     n_par = 4 if cone else 3
     if len(ret) < n_par + 1:
         raise ValueError(f"the profile fit needs at least {n_par + 1} returns on the object, got {len(ret)}")
