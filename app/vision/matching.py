@@ -448,22 +448,29 @@ def match_edges(
         cols = np.repeat(free_cols[:, c_i], len(combos))
         pick_k = np.tile(combos[:, c_i], len(Rc))
         edges_of[np.arange(len(edges_of)), cols] = best_k[pose_of, cols, pick_k]
-    distinct = np.array([len(set(r)) == S for r in edges_of.tolist()])
+    srt = np.sort(edges_of, axis=1)
+    distinct = np.all(srt[:, 1:] != srt[:, :-1], axis=1)  # every click on a different edge
     total = cost[pose_of[:, None], np.arange(S)[None, :], edges_of].sum(axis=1)
     rms = np.where(distinct, np.sqrt(total / (2 * S)), np.inf)
     plausible = np.flatnonzero(rms <= gate)
     plausible = plausible[np.argsort(rms[plausible], kind="stable")]
     # One refinement per assignment, counted up to the model's symmetries (they give several
     # equivalent assignments of one drawing): the best P3L pose of each, up to max_refine.
-    seen: set[tuple[int, ...]] = set()
     kept: list[int] = []
-    for i in plausible:
-        key = min(tuple(p[edges_of[i]].tolist()) for p in perms)
-        if key not in seen:
-            seen.add(key)
-            kept.append(int(i))
-            if len(kept) == max_refine:
-                break
+    if float(E) ** S < 2.0**62:  # an assignment as one base-E number: its order is the tuples' order
+        weights = E ** np.arange(S - 1, -1, -1, dtype=np.int64)
+        keys = np.min([np.asarray(p)[edges_of[plausible]] @ weights for p in perms], axis=0)
+        _, first = np.unique(keys, return_index=True)
+        kept = plausible[np.sort(first)][:max_refine].tolist()
+    else:
+        seen: set[tuple[int, ...]] = set()
+        for i in plausible:
+            key = min(tuple(p[edges_of[i]].tolist()) for p in perms)
+            if key not in seen:
+                seen.add(key)
+                kept.append(int(i))
+                if len(kept) == max_refine:
+                    break
 
     # ---- refine the plausible ones with every click, rescore, merge equal drawings
     oe = None
