@@ -43,7 +43,7 @@ _EXPORTS = {
     "AcquisitionCancelled": "acquisition",
 }
 _ERRORS = (
-    "DeviceError DeviceTimeout ProtocolError DeviceDisconnected MotionUnconfirmedError RangeFinderError "
+    "DeviceError DeviceTimeout ProtocolError NoisyLineError DeviceDisconnected MotionUnconfirmedError RangeFinderError "
     "CommandSyntaxError NotTrackingError TrackingActiveError NoTargetError SignalTooStrongError "
     "AmbiguousMeasurementError TooMuchLightError TurretError TurretLimitError"
 ).split()

@@ -20,6 +20,9 @@ Kinds (``Fault.kind``):
 * ``unsolicited``: a line the host did not ask for (``data``, default the device's own, e.g.
   ``g0?`` or ``!P``) comes before the reply.
 * ``error``: the reply is replaced by a device error line (``data``, default the device's own).
+* ``early``: a complete, well-formed reply comes just before the real one: ``data``, or by default
+  the reply itself with every digit redrawn at random (same form, another value) — what a reply
+  meant for another request, or a stray device on the line, looks like. No checksum catches it.
 * ``unplug``: the device is unplugged instead of replying, and replugged after ``delay_s``
   (default 0.3 s; ``math.inf``: stays unplugged until the emulator's ``replug``).
 """
@@ -33,7 +36,7 @@ import numpy as np
 
 __all__ = ["FAULT_KINDS", "Fault", "Delivery", "FaultInjector"]
 
-FAULT_KINDS = ("drop", "late", "truncate", "split", "junk", "garble", "unsolicited", "error", "unplug")
+FAULT_KINDS = ("drop", "late", "truncate", "split", "junk", "garble", "unsolicited", "error", "early", "unplug")
 _EOL = (b"\r\n", b"\n", b"\r")
 
 
@@ -194,5 +197,18 @@ class FaultInjector:
         if f.kind == "error":
             line = f.data if f.data is not None else self.error_line
             return Delivery([(0.0, line)], fault=f)
+        if f.kind == "early":
+            fake = f.data
+            if fake is None:
+                start = min([i for i in (text.find(b"+"), text.find(b"-"), text.find(b"*")) if i >= 0], default=len(text))
+                digits = [i for i, c in enumerate(text) if 48 <= c <= 57 and i > start]  # the value's, not an address
+                fake = bytearray(text)
+                for i in digits:
+                    fake[i] = 48 + int(rng.integers(10))
+                if digits and bytes(fake) == text:  # another value, not the same one again
+                    i = digits[-1]
+                    fake[i] = 48 + (text[i] - 48 + 1 + int(rng.integers(9))) % 10
+                fake = bytes(fake) + eol
+            return Delivery([(0.0, fake), (0.0, reply)], fault=f)
         assert f.kind == "unplug"
         return Delivery([], unplug=True, replug_after_s=f.delay_s if f.delay_s is not None else delay, fault=f)

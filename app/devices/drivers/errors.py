@@ -8,6 +8,8 @@ doubtful value silently.
 * ``DeviceTimeout``: no valid reply before the call's deadline, retries included.
 * ``ProtocolError``: replies kept arriving malformed or implausible (garbled, truncated) after the
   allowed retries.
+* ``NoisyLineError`` (a ``ProtocolError``): what came back was mostly not the device's protocol
+  (line noise, garbage, a wrong baud rate); the message says so and what to check.
 * ``DeviceDisconnected``: the port vanished (unplug) and could not be reopened before the deadline.
 * ``MotionUnconfirmedError``: a relative move was sent but not confirmed; it is never retried,
   since it may already have happened. Query the position before moving again.
@@ -24,6 +26,7 @@ __all__ = [
     "DeviceError",
     "DeviceTimeout",
     "ProtocolError",
+    "NoisyLineError",
     "DeviceDisconnected",
     "MotionUnconfirmedError",
     "RangeFinderError",
@@ -56,6 +59,10 @@ class DeviceTimeout(DeviceError):
 
 class ProtocolError(DeviceError):
     """Replies were malformed or implausible (garbled, truncated) after every allowed retry."""
+
+
+class NoisyLineError(ProtocolError):
+    """The line carried garbage instead of replies (noise, a bad cable, a wrong baud rate)."""
 
 
 class DeviceDisconnected(DeviceError):

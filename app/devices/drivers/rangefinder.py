@@ -17,24 +17,34 @@ Robustness (no checksum on the wire):
 * the device's error codes raise ``RangeFinderError`` subclasses (``NoTargetError`` for 255);
 * an unplugged port is reopened with back-off, the handshake (``sNc`` → ``gN?``) redone, and
   the shot retried;
-* a garbled digit that still parses to a plausible distance cannot be seen in one shot: ask
-  ``measure_n`` for precision — its median ignores such a shot and flags it as an outlier.
+* a reply must answer the request it is read for (the protocol has no echo and no sequence
+  number): after a distance the driver listens for one line's time more, and a second distance
+  arriving then (a complete reply pushed in ahead of the real one) voids the exchange, which is
+  measured again after a resynchronisation; a distance that jumps more than ``jump_sigmas`` × σ
+  (``sigma_m``) from the median of the last ones (and the first one, with none before it) is
+  measured a second time and kept only when two consecutive readings agree — a garbled digit that still parses, or a stray reply, is not
+  returned as the distance. ``stats["jumps"]``, ``stats["two_replies"]`` count them;
+* a line that brings only garbage (noise, a wrong baud rate) ends in ``NoisyLineError``: the
+  range finder's line is noisy, check the cable and the baud rate;
+* ``measure_n`` takes the median of several shots for precision and flags outliers.
 """
 
 from __future__ import annotations
 
 import re
 import time
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import RANGEFINDER_ERRORS, NoTargetError, ProtocolError, rangefinder_error
-from .transport import NOISE, LineDriver, deadline_after
+from .transport import NOISE, LineDriver, clip, deadline_after
 
 __all__ = ["RangeFinder", "RangeMeasurement"]
 
 EOL = "\r\n"
+_OWN_LINE = re.compile(r"g\d(?:\?|@E\d{3}|[a-z]{1,3}[+-]\d{8}(?:\+\d)?|[a-z]{1,3}\?)$")  # any DLS reply, at a line's end
 
 
 @dataclass(frozen=True)
@@ -65,10 +75,13 @@ class RangeFinder(LineDriver):
     baudrate, bytesize, parity, stopbits : line settings (DLS delivery: 19200 7E1).
     attempt_timeout_s : deadline of one shot (a measurement takes ~0.1 s, longer on dark or far
     targets). retries, reconnect_timeout_s : see ``LineDriver``. plausible_range_m : distances
-    outside are taken for garbled. connect : open and handshake now.
+    outside are taken for garbled. sigma_m : the range noise σ (metres, one shot);
+    jump_sigmas : a distance farther than this many σ from the median of the last ``history``
+    ones is read a second time. connect : open and handshake now.
     """
 
     device = "rangefinder"
+    display_name = "range finder"
 
     def __init__(
         self,
@@ -83,6 +96,9 @@ class RangeFinder(LineDriver):
         retries: int = 2,
         reconnect_timeout_s: float = 5.0,
         plausible_range_m: tuple[float, float] = (0.05, 100.0),
+        sigma_m: float = 0.005,
+        jump_sigmas: float = 5.0,
+        history: int = 3,
         connect: bool = True,
     ):
         if not (isinstance(device_id, (int, np.integer)) and 0 <= device_id <= 9):
@@ -90,6 +106,10 @@ class RangeFinder(LineDriver):
         lo, hi = (float(v) for v in plausible_range_m)
         if not 0 <= lo < hi:
             raise ValueError(f"plausible_range_m must be (low, high) with 0 <= low < high, got {plausible_range_m}")
+        if not (sigma_m > 0 and jump_sigmas > 0 and np.isfinite(sigma_m * jump_sigmas)):  # NaN fails too
+            raise ValueError(f"sigma_m and jump_sigmas must be positive and finite, got {sigma_m}, {jump_sigmas}")
+        if not (isinstance(history, (int, np.integer)) and history >= 1):
+            raise ValueError(f"history must be a positive integer, got {history!r}")
         super().__init__(
             url,
             baudrate=baudrate,
@@ -102,6 +122,8 @@ class RangeFinder(LineDriver):
         )
         self.device_id = int(device_id)
         self.plausible_range_m = (lo, hi)
+        self.jump_m = float(sigma_m) * float(jump_sigmas)
+        self._recent: deque[float] = deque(maxlen=int(history))
         n = self.device_id
         self._re_ready = re.compile(rf"g{n}\?$")
         self._re_error = re.compile(rf"g{n}@E(\d{{3}})$")
@@ -120,7 +142,7 @@ class RangeFinder(LineDriver):
         code = int(m.group(1))
         if code in RANGEFINDER_ERRORS:
             raise rangefinder_error(code, command)
-        raise ProtocolError(f"rangefinder: unknown error code in {line!r} (garbled?)", device=self.device, command=command)
+        raise ProtocolError(f"rangefinder: unknown error code in {clip(line)} (garbled?)", device=self.device, command=command)
 
     def _parse_ready(self, command: str):
         def parse(line: str):
@@ -141,13 +163,30 @@ class RangeFinder(LineDriver):
                 return int(m.group(1)) * scale
             self._check_error(line, command)
             if tag in line or f"g{self.device_id}@" in line:
-                raise ProtocolError(f"rangefinder: malformed reply {line!r} to {command!r}", device=self.device, command=command)
+                raise ProtocolError(f"rangefinder: malformed reply {clip(line)} to {command!r}", device=self.device, command=command)
             return NOISE
 
         return parse
 
+    def _is_garbage(self, line: str) -> bool:
+        return _OWN_LINE.search(line) is None
+
     def _handshake(self, deadline: float) -> None:
         self._resync(deadline)
+
+    def _no_second_reply(self, regex: re.Pattern, command: str, deadline: float) -> None:
+        """ProtocolError when another complete reply of the same kind follows within one reply's line
+        time (and a few ms): the one taken may have been pushed in ahead of the real one."""
+        chars = 16  # 'gNg+dddddddd' CR LF, and a margin
+        guard = chars * 10.0 / self._line.baudrate + 0.002 if self._line.baudrate else 0.002
+        end = min(deadline, time.monotonic() + guard)
+        while True:
+            line = self._line.read_line_soon(end)
+            if line is None:
+                return
+            if regex.search(line):
+                self.stats["two_replies"] += 1
+                raise ProtocolError(f"rangefinder: two replies to one {command!r}", device=self.device, command=command)
 
     def _resync(self, deadline: float) -> None:
         """Stop any measurement (``sNc``) and discard everything up to its ``gN?``."""
@@ -175,10 +214,32 @@ class RangeFinder(LineDriver):
                 raise ProtocolError(
                     f"rangefinder: implausible distance {value} m (outside {lo}-{hi} m; garbled?)", device=self.device, command=command
                 )
+            self._no_second_reply(self._re_value["g"], command, deadline)
             return float(value)
 
+        def checked(deadline: float) -> float:
+            first = shot(deadline)
+            if self._recent and abs(first - float(np.median(self._recent))) <= self.jump_m:
+                self._recent.append(first)
+                return first
+            # read again: keep a distance only when two readings in a row agree (also the first one,
+            # which has nothing to be compared with)
+            self.stats["jumps" if self._recent else "unconfirmed"] += 1
+            readings = [first]
+            for _ in range(2):
+                readings.append(self._step(shot))
+                if abs(readings[-1] - readings[-2]) <= self.jump_m:
+                    self._recent.clear()
+                    self._recent.append(readings[-2])
+                    return readings[-2]
+            raise ProtocolError(
+                f"rangefinder: three readings in a row disagree ({', '.join(f'{r:.4f}' for r in readings)} m)",
+                device=self.device,
+                command=command,
+            )
+
         deadline = deadline_after(timeout_s)
-        return self._transact(shot, what=command, idempotent=True, deadline=deadline)
+        return self._transact(checked, what=command, idempotent=True, deadline=deadline)
 
     def measure_n(self, n: int, *, outlier_m: float = 0.05, timeout_s: float | None = None) -> RangeMeasurement:
         """n shots at the current pointing: their median, spread and outliers (see RangeMeasurement).

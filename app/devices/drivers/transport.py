@@ -26,13 +26,14 @@ from typing import Callable, TypeVar
 import numpy as np
 import serial
 
-from .errors import DeviceDisconnected, DeviceError, DeviceTimeout, MotionUnconfirmedError, ProtocolError
+from .errors import DeviceDisconnected, DeviceError, DeviceTimeout, MotionUnconfirmedError, NoisyLineError, ProtocolError
 
 __all__ = [
     "PORT_ERRORS",
     "SerialLine",
     "LineDriver",
     "NOISE",
+    "clip",
     "deadline_after",
 ]
 
@@ -46,6 +47,18 @@ if _HANDLER_PACKAGE not in serial.protocol_handler_packages:
     serial.protocol_handler_packages.append(_HANDLER_PACKAGE)
 
 T = TypeVar("T")
+
+CLIP_BYTES = 200  # received data quoted in a message or a log line is cut to this
+MAX_LINE_BYTES = 1024  # a line longer than this without an end is garbage: all but its tail is dropped
+KEEP_TAIL_BYTES = 256  # the tail kept, where a reply behind the garbage may be starting
+
+
+def clip(data: str | bytes, limit: int = CLIP_BYTES) -> str:
+    """Received data as a quoted string of at most ``limit`` characters (and how long it really was)."""
+    text = data.decode("latin-1") if isinstance(data, (bytes, bytearray)) else str(data)
+    if len(text) <= limit:
+        return repr(text)
+    return f"{text[:limit]!r}… ({len(text)} bytes)"
 
 
 def deadline_after(timeout_s: float | None, name: str = "timeout_s") -> float | None:
@@ -99,6 +112,7 @@ class SerialLine:
         self._poll_s = float(poll_s)
         self._port: serial.SerialBase | None = None
         self._buffer = bytearray()
+        self.dropped_bytes = 0  # bytes of over-long lines thrown away (garbage), since opened
 
     @property
     def is_open(self) -> bool:
@@ -196,9 +210,35 @@ class SerialLine:
             except (TypeError, ValueError) as exc:  # the fd vanished under a blocking read
                 raise self._lost(exc, "reading") from exc
             self._buffer += chunk
+            if len(self._buffer) > MAX_LINE_BYTES and b"\r" not in self._buffer and b"\n" not in self._buffer:
+                drop = len(self._buffer) - KEEP_TAIL_BYTES  # an endless line is garbage; keep its tail only
+                del self._buffer[:drop]
+                self.dropped_bytes += drop
+
+    def read_line_soon(self, end: float) -> str | None:
+        """The next line if one completes before ``end`` (a short listen: polls every 0.5 ms rather
+        than blocking a whole poll period), else None."""
+        while True:
+            line = self._take_line()
+            if line is not None:
+                return line
+            if self._port is None:
+                raise DeviceDisconnected(f"{self.device}: port {self.url} is not open", device=self.device)
+            try:
+                n = self._port.in_waiting
+                if n:
+                    self._buffer += self._port.read(n)
+                    continue
+            except PORT_ERRORS as exc:
+                raise self._lost(exc, "reading") from exc
+            except (TypeError, ValueError) as exc:  # the fd vanished under the read
+                raise self._lost(exc, "reading") from exc
+            if time.monotonic() >= end:
+                return None
+            time.sleep(0.0005)
 
     def pending_text(self) -> str:
-        """Bytes received but not yet ending a line (for diagnostics)."""
+        """Bytes received but not yet ending a line (for diagnostics; at most MAX_LINE_BYTES)."""
         return bytes(self._buffer).decode("latin-1")
 
 
@@ -216,6 +256,7 @@ class LineDriver:
     """
 
     device = "device"
+    display_name = "device"  # how messages name it ("the range finder's line is noisy")
 
     def __init__(
         self,
@@ -240,6 +281,7 @@ class LineDriver:
         self.retries = int(retries)
         self.reconnect_timeout_s = float(reconnect_timeout_s)
         self.stats: Counter = Counter()
+        self._noise = [0, 0, ""]  # during the call under way: garbage lines, their bytes, the last one
         self._lock = threading.RLock()
         self._call_deadline = float("inf")  # the deadline of the call under way (set by _transact)
 
@@ -257,6 +299,7 @@ class LineDriver:
         with self._lock:
             deadline = time.monotonic() + (self.reconnect_timeout_s + 2 * self.attempt_timeout_s if timeout_s is None else timeout_s)
             self._line.open_with_backoff(deadline)
+            self._noise = [0, 0, ""]
             self._transact(self._handshake, what="handshake", idempotent=True, deadline=deadline, reopen=False)
 
     def close(self) -> None:
@@ -278,6 +321,32 @@ class LineDriver:
     def _resync(self, deadline: float) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
+    def _is_garbage(self, line: str) -> bool:
+        """Whether a line that is not the awaited reply is garbage rather than one of the device's own
+        (a stale reply, an unsolicited line). Overridden by each driver; everything is garbage here."""
+        return True
+
+    def _garbage(self, line: str) -> None:
+        self.stats["garbage"] += 1
+        self._noise[0] += 1
+        self._noise[1] += len(line)
+        self._noise[2] = line
+
+    def _noisy(self, what: str, last: DeviceError) -> NoisyLineError | None:
+        """The error to raise instead of ``last`` when the call saw garbage: the line is noisy."""
+        lines, nbytes, sample = self._noise
+        dropped = self._line.dropped_bytes
+        if not (lines or dropped):
+            return None
+        got = f"{lines} unreadable line(s), {nbytes + dropped} bytes" if lines else f"{dropped} bytes without a line end"
+        return NoisyLineError(
+            f"the {self.display_name}'s line is noisy ({got} during {what}"
+            + (f", the last {clip(sample, 40)}" if lines else "")
+            + "): check the cable and the baud rate",
+            device=self.device,
+            command=last.command,
+        )
+
     # -- requests
     def _default_deadline(self, attempts: int) -> float:
         return time.monotonic() + attempts * self.attempt_timeout_s + self.reconnect_timeout_s
@@ -296,14 +365,20 @@ class LineDriver:
                 partial = self._line.pending_text()
                 raise DeviceTimeout(
                     f"{self.device}: no valid reply to {command!r} in time"
-                    + (f" (received only {partial!r})" if partial else ""),
+                    + (f" (received only {clip(partial)})" if partial else ""),
                     device=self.device,
                     command=command,
                 )
-            result = parse(line)
+            try:
+                result = parse(line)
+            except ProtocolError:
+                self._garbage(line)
+                raise
             if result is NOISE:
                 self.stats["noise"] += 1
-                log.debug("%s: skipped %r while waiting for the reply to %r", self.device, line, command)
+                if self._is_garbage(line):
+                    self._garbage(line)
+                log.debug("%s: skipped %s while waiting for the reply to %r", self.device, clip(line), command)
                 continue
             return result
 
@@ -329,6 +404,9 @@ class LineDriver:
             if deadline is None:
                 deadline = self._default_deadline(attempts)
             outer, self._call_deadline = self._call_deadline, min(self._call_deadline, deadline)
+            if outer == float("inf"):  # the outermost call: count its garbage afresh
+                self._noise = [0, 0, ""]
+                self._line.dropped_bytes = 0
             try:
                 return self._attempts(op, what, idempotent, deadline, attempts, reopen)
             finally:
@@ -377,6 +455,12 @@ class LineDriver:
                     self._try_resync(deadline)
         if last is None:
             raise DeviceTimeout(f"{self.device}: no time left for {what} (deadline already passed)", device=self.device)
+        if isinstance(last, (DeviceTimeout, ProtocolError)) and not isinstance(last, NoisyLineError):
+            noisy = self._noisy(what, last)
+            if noisy is not None:
+                raise noisy from last
+        if isinstance(last, NoisyLineError):
+            raise last
         kind = type(last)
         raise kind(f"{last} — gave up on {what} after {attempt + 1} attempt(s)", device=self.device, command=last.command) from last
 
@@ -412,4 +496,4 @@ class LineDriver:
         except DeviceDisconnected:
             pass  # the next attempt reopens the port
         except (DeviceTimeout, ProtocolError) as exc:
-            log.warning("%s: resynchronisation failed (%s); retrying anyway", self.device, exc)
+            log.warning("%s: resynchronisation failed (%s); retrying anyway", self.device, clip(str(exc)))

@@ -11,11 +11,19 @@ unprompted at a limit. 9600 baud 8N1 (E-series also ``socket://HOST:4000``).
 
 Robustness:
 
-* connect handshake: ``ED`` (echo off) and ``FT`` (terse), then resolution and limits, each
+* connect handshake: ``EE`` (echo on) and ``FT`` (terse), then resolution and limits, each
   asked until two answers agree (a garbled resolution would scale every angle silently);
-* a reply is read from its last ``*``: junk before it, an echo, split reads and unprompted
-  ``!P``/``!T`` lines (kept in ``limit_events``) do no harm; a malformed or implausible answer
-  (a position outside the limits) is rejected;
+* echo stays on: the unit sends every command back before its reply, so a reply counts only after
+  its own command's echo. A stale reply (late, or one a fault pushed behind) or a complete reply
+  injected ahead of the echo is skipped, never taken for the answer to the next command; the
+  values that matter are read twice (positions, resolution, limits) or checked against the
+  target (a move's read-back), so one wrong line after the echo is outvoted;
+* a reply is read from its last ``*``: junk before it, split reads and unprompted ``!P``/``!T``
+  lines (kept in ``limit_events``) do no harm; a malformed or implausible answer (a position
+  outside the limits) is rejected; a ``!`` failure counts only as printable text after the echo,
+  so garbage is never reported as the turret refusing a command;
+* a line that brings only garbage (noise, a wrong baud rate) ends in ``NoisyLineError``: the
+  turret's line is noisy, check the cable and the baud rate;
 * after a timeout or a malformed reply the driver resynchronises (asks ``PR`` and discards
   every line up to its known answer) and retries — only idempotent commands: absolute moves,
   queries, speed, ``A``; a relative move (``PO``/``TO``) is never re-sent: if its ``*`` does not
@@ -41,7 +49,7 @@ import time
 import numpy as np
 
 from .errors import DeviceError, ProtocolError, TurretError, TurretLimitError
-from .transport import NOISE, LineDriver, deadline_after
+from .transport import NOISE, LineDriver, clip, deadline_after
 
 __all__ = ["Turret"]
 
@@ -49,6 +57,8 @@ log = logging.getLogger("mcit.devices")
 
 EOL = " "
 _LIMIT_EVENT = re.compile(r"^(?:\s*![PT])+\s*$")
+_REPLY = re.compile(r"^\s*(?:\*[ -~]*|![ -~]*)$")  # a line of the PTU's own: '*…' or '!…', printable
+_MESSAGE = re.compile(r"^[ -~]{0,120}$")  # a failure message is printable text
 _INT = re.compile(r"^[+-]?\d+$")
 _FLOAT = re.compile(r"^[+-]?\d+(?:\.\d+)?$")
 
@@ -68,6 +78,7 @@ class Turret(LineDriver):
     """
 
     device = "turret"
+    display_name = "turret"
 
     def __init__(
         self,
@@ -150,37 +161,63 @@ class Turret(LineDriver):
         return lo * self.tilt_step_rad, hi * self.tilt_step_rad
 
     # ----------------------------------------------------------------- parsing
-    def _parser(self, expect: str, command: str):
-        """Parse one line: expect "ack" (bare ``*``), "int" or "float" (``* <value>``)."""
+    def _limit_event(self, text: str) -> bool:
+        if not _LIMIT_EVENT.match(text):
+            return False
+        for axis in re.findall(r"!([PT])", text):
+            self.limit_events.append((time.monotonic(), axis))
+        log.warning("turret: unprompted limit event %s", clip(text))
+        return True
+
+    def _is_garbage(self, line: str) -> bool:
+        return not (_REPLY.match(line) or _LIMIT_EVENT.match(line))
+
+    def _parser(self, expect: str, command: str, echo_optional: bool = False):
+        """Parse the lines after ``command`` was sent: expect "ack" (bare ``*``), "int" or "float" (``* <value>``).
+
+        The reply counts only after the command's echo (``command`` + space, case-insensitive) —
+        on the echo's line or on a line after it; lines before the echo are stale or noise.
+        echo_optional : also take a reply with no echo (``EE``, sent when echo may be off).
+        """
+        echo = (command + EOL).upper()
+        seen = [False]
 
         def parse(line: str):
-            if _LIMIT_EVENT.match(line):
-                for axis in re.findall(r"!([PT])", line):
-                    self.limit_events.append((time.monotonic(), axis))
-                log.warning("turret: unprompted limit event %r", line)
+            if not seen[0]:
+                at = line.upper().rfind(echo)
+                if at >= 0:
+                    seen[0] = True
+                    line = line[at + len(echo) :]
+                elif not echo_optional:
+                    if not _REPLY.match(line):
+                        return NOISE
+                    self._limit_event(line)
+                    self.stats["stale"] += 1
+                    return NOISE  # a reply to something else (stale, or pushed ahead of ours)
+            if not line.strip() or self._limit_event(line):
                 return NOISE
             star = line.rfind("*")
             if star < 0:
                 bang = line.find("!")
-                if bang >= 0:
-                    message = line[bang + 1 :].strip()
+                message = line[bang + 1 :].strip() if bang >= 0 else ""
+                if bang >= 0 and not line[:bang].strip() and _MESSAGE.match(message):
                     cls = TurretLimitError if ("position" in message.lower() or "limit" in message.lower()) else TurretError
                     raise cls(f"turret refused {command!r}: {message}", command=command)
-                return NOISE
+                raise ProtocolError(f"turret: garbled reply {clip(line)} to {command!r}", device=self.device, command=command)
             rest = line[star + 1 :].strip()
             if expect == "ack":
                 if rest:
-                    raise ProtocolError(f"turret: expected '*' for {command!r}, got {line!r}", device=self.device, command=command)
+                    raise ProtocolError(f"turret: expected '*' for {command!r}, got {clip(line)}", device=self.device, command=command)
                 return None
             pattern = _INT if expect == "int" else _FLOAT
             if not pattern.match(rest):
-                raise ProtocolError(f"turret: malformed answer {line!r} to {command!r}", device=self.device, command=command)
+                raise ProtocolError(f"turret: malformed answer {clip(line)} to {command!r}", device=self.device, command=command)
             return int(rest) if expect == "int" else float(rest)
 
         return parse
 
-    def _ask(self, command: str, expect: str, deadline: float):
-        return self._request(command, self._parser(expect, command), deadline, EOL)
+    def _ask(self, command: str, expect: str, deadline: float, echo_optional: bool = False):
+        return self._request(command, self._parser(expect, command, echo_optional), deadline, EOL)
 
     def _ask_step(self, command: str, expect: str, timeout_s: float | None = None):
         """An idempotent command as one step of a longer operation: retried on its own (see LineDriver._step)."""
@@ -198,7 +235,7 @@ class Turret(LineDriver):
 
     # ------------------------------------------------------- handshake, resync
     def _handshake(self, deadline: float) -> None:
-        self._ask_step("ED", "ack")
+        self._step(lambda dl: self._ask("EE", "ack", dl, echo_optional=True))  # echo on: replies are told apart by it
         self._ask_step("FT", "ack")
         res_p = self._ask_agreed("PR", "float", deadline)
         res_t = self._ask_agreed("TR", "float", deadline)
@@ -230,10 +267,11 @@ class Turret(LineDriver):
             self._line.discard_input()
             return
         known = self.resolution_arcsec[0]
+        answer = self._parser("float", "PR")  # keeps whether PR's echo has come
 
         def parse(line: str):
             try:
-                value = self._parser("float", "PR")(line)
+                value = answer(line)
             except (ProtocolError, TurretError):
                 return NOISE
             if value is NOISE or abs(value - known) > 1e-9:

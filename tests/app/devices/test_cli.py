@@ -50,7 +50,7 @@ def test_mcit_emulate_serves_ptys_that_drivers_open_by_their_links(tmp_path):
 
 def test_fault_rate_options():
     rates = parse_fault_rates(None, 0.08)
-    assert "unplug" not in rates and sum(rates.values()) == pytest.approx(0.08) and len(rates) == 8
+    assert "unplug" not in rates and sum(rates.values()) == pytest.approx(0.08) and len(rates) == 9  # every kind but unplug
     assert parse_fault_rates("drop=0.05,unplug=0.001", 0.0) == {"drop": 0.05, "unplug": 0.001}
     assert parse_fault_rates(None, 0.0) == {}
     with pytest.raises(ValueError, match="kind=probability"):

@@ -93,3 +93,17 @@ def test_bad_faults_and_rates_are_refused():
     with pytest.raises(ValueError, match="within"):
         FaultInjector(0, {"drop": 1.5})
     assert set(FAULT_KINDS) >= {"drop", "late", "truncate", "split", "junk", "garble", "unsolicited", "error", "unplug"}
+
+
+def test_an_early_reply_is_a_complete_reply_of_the_same_form_with_another_value():
+    inj = FaultInjector(5)
+    for reply in (b"g0g+00014603\r\n", b"* 1234\r\n", b"* -907\r\n"):
+        inj.push("early")
+        d = inj.process(reply)
+        (_, fake), (_, real) = d.chunks
+        assert real == reply and fake != reply and fake.endswith(b"\r\n") and len(fake) == len(reply)
+        assert fake[: fake.find(b"+") if b"+" in fake else 1] == reply[: reply.find(b"+") if b"+" in reply else 1]
+    inj.push(Fault("early", data=b"g0g+00000500\r\n"))
+    assert [c for _, c in inj.process(b"g0g+00014603\r\n").chunks] == [b"g0g+00000500\r\n", b"g0g+00014603\r\n"]
+    inj.push("early")
+    assert [c for _, c in inj.process(b"*\r\n").chunks] == [b"*\r\n", b"*\r\n"]  # no value: the same reply twice

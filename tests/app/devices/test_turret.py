@@ -9,7 +9,14 @@ import time
 
 import pytest
 
-from app.devices.drivers.errors import DeviceDisconnected, DeviceTimeout, MotionUnconfirmedError, ProtocolError, TurretError, TurretLimitError
+from app.devices.drivers.errors import (
+    DeviceDisconnected,
+    DeviceTimeout,
+    MotionUnconfirmedError,
+    NoisyLineError,
+    TurretError,
+    TurretLimitError,
+)
 from app.devices.faults import Fault
 from app.devices.drivers.turret import Turret
 
@@ -40,7 +47,8 @@ def test_handshake_reads_resolution_and_limits_and_converts_units(workcell, benc
     assert tu.steps_to_rad(100, -50) == (pytest.approx(100 * tu.pan_step_rad), pytest.approx(-50 * tu.tilt_step_rad))
     assert tu.rad_to_steps(*tu.steps_to_rad(123, -45)) == (123, -45)
     assert tu.pan_limits_rad[1] == pytest.approx(3090 * tu.pan_step_rad)
-    assert site.turret.commands_seen[:2] == ["ED", "FT"]  # echo off, terse feedback first
+    assert site.turret.commands_seen[:2] == ["EE", "FT"]  # echo on (replies are told apart by it), terse feedback first
+    assert site.turret.echo
 
 
 def test_absolute_moves_in_steps_radians_and_degrees(bench):
@@ -210,10 +218,10 @@ def test_home_and_halt(bench):
     assert emulated_steps(site)[0] == stopped
 
 
-def test_the_same_corruption_every_time_is_a_protocol_error(bench):
+def test_the_same_corruption_every_time_is_a_noisy_line(bench):
     site, tu = bench
     site.turret.faults.set_rates({"garble": 1.0})
-    with pytest.raises((ProtocolError, DeviceTimeout), match="gave up"):
+    with pytest.raises(NoisyLineError, match="the turret's line is noisy .*check the cable and the baud rate"):
         tu.position_steps()
 
 
