@@ -119,6 +119,12 @@ def _check_values(d: Any, what: str, non_negative: bool) -> dict:
     return out
 
 
+def _row_id(value: Any) -> int:
+    """An id for SQLite: one beyond its 64-bit integers matches no row (-1) instead of overflowing."""
+    i = int(value)
+    return i if -(2**63) <= i < 2**63 else -1
+
+
 def _model_json(model: Any) -> tuple[str, str]:
     if not isinstance(model, BRep):
         raise ValueError(f"model must be a core.brep.BRep, got {type(model).__name__}")
@@ -416,7 +422,7 @@ class Database:
         if isinstance(obj, ObjectRecord):
             obj = obj.id
         if isinstance(obj, (int, np.integer)) and not isinstance(obj, bool):
-            row = conn.execute(f"SELECT {_OBJECT_COLUMNS} FROM objects WHERE id = ?", (int(obj),)).fetchone()
+            row = conn.execute(f"SELECT {_OBJECT_COLUMNS} FROM objects WHERE id = ?", (_row_id(obj),)).fetchone()
         elif isinstance(obj, str):
             row = conn.execute(f"SELECT {_OBJECT_COLUMNS} FROM objects WHERE name = ? AND removed = 0", (obj,)).fetchone()
         else:
@@ -637,7 +643,7 @@ class Database:
     )
 
     def _change_record(self, conn, change_id: int) -> ChangeRecord:
-        row = conn.execute(f"{self._HISTORY_SELECT} WHERE h.id = ?", (int(change_id),)).fetchone()
+        row = conn.execute(f"{self._HISTORY_SELECT} WHERE h.id = ?", (_row_id(change_id),)).fetchone()
         if row is None:
             raise NotFoundError(f"no change #{change_id} in the history of {self._path}")
         return self._change_from_row(row)
@@ -674,7 +680,7 @@ class Database:
         if limit is not None:
             q += f" LIMIT {max(0, int(limit))}"
         with self._read() as conn:
-            rows = conn.execute(q, (int(change_id),)).fetchall()
+            rows = conn.execute(q, (max(-1, min(int(change_id), 2**63 - 1)),)).fetchall()  # clamped to SQLite's integers
         return [self._change_from_row(r) for r in rows]
 
     def last_change_id(self) -> int:

@@ -1,0 +1,129 @@
+"""Every ``mcit`` command's failures (app/cli.py): one line on stderr saying what happened and what to
+do, a non-zero exit, no traceback. A sweep runs each sub-command (every one ``mcit --help`` lists:
+a new command without a case here fails the sweep) with bad input in its own process."""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from app import cli
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _commands() -> set[str]:
+    """Every command and db sub-command of the parser ("db list", "serve", ...)."""
+    out = set()
+
+    def walk(parser: argparse.ArgumentParser, prefix: str) -> None:
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    has_sub = any(isinstance(a, argparse._SubParsersAction) for a in sub._actions)
+                    if has_sub:
+                        walk(sub, f"{prefix}{name} ")
+                    else:
+                        out.add(f"{prefix}{name}")
+
+    walk(cli.build_parser(), "")
+    return out
+
+
+# (command, arguments after it); {tmp} is a fresh folder, {notes} a text file, {db} a seeded database.
+CASES = [
+    ("db init", "--scene {tmp}/no-scene --db {tmp}/new.sqlite"),
+    ("db import", "{tmp}/no-model.cao --db {db}"),
+    ("db import", "{notes} --db {db}"),
+    ("db list", "--db {notes}"),
+    ("db list", "--db {tmp}/no.sqlite"),
+    ("db show", "ghost --db {db}"),
+    ("db show", "99999999999999999999999 --db {db}"),
+    ("db export", "parallelepiped {tmp}/no-folder/out.cao --db {db}"),
+    ("db export", "parallelepiped {tmp}/out.xyz --db {db}"),
+    ("db history", "ghost --db {db}"),
+    ("db undo", "99999999999999999999999 --db {db}"),
+    ("db undo", "42 --db {db} --wait-s -1"),
+    ("db export-poses", "{tmp}/poses.json --db {notes}"),
+    ("db feed", "--file {tmp}/feed.jsonl --db {notes}"),
+    ("emulate", "--scene {tmp}/no-scene"),
+    ("serve", "--scene {tmp}/no-scene"),
+    ("serve", "--video {tmp}/no-video.mp4 --no-devices --db {db} --port 0"),
+    ("serve", "--no-devices --db {notes} --port 0"),
+    ("render", "--scene {tmp}/no-scene"),
+    ("script", "--scene {tmp}/no-scene"),
+    ("track", "{tmp}/no-video.mp4 --scene scenes/workcell --body parallelepiped"),
+    ("track", "{notes} --scene scenes/workcell --body parallelepiped"),
+    ("demo", "--scene {tmp}/no-scene"),
+    ("nosuch", ""),
+]
+
+
+def test_the_sweep_covers_every_command():
+    missing = _commands() - {c for c, _ in CASES}
+    assert not missing, f"add a failure case for: {sorted(missing)}"
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("cli")
+    notes = tmp / "notes.txt"
+    notes.write_text("hello\n" * 50)
+    db = tmp / "site.sqlite"
+    assert cli.main(["db", "init", "--db", str(db)]) == 0
+    return {"tmp": str(tmp), "notes": str(notes), "db": str(db)}
+
+
+@pytest.mark.parametrize("command, arguments", CASES, ids=[f"{c} {a.split(' ')[0]}".strip() for c, a in CASES])
+def test_a_failure_is_one_line(files, command, arguments):
+    argv = command.split() + [a.format(**files) for a in arguments.split()]
+    run = subprocess.run([sys.executable, "-m", "app.cli", *argv], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    err = run.stderr
+    assert run.returncode != 0, (argv, run.stdout, err)
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith(f"mcit {command}: " if command != "nosuch" else "mcit: error: "), err
+    assert "internal error" not in err, err  # each of these is the operator's to fix, not a bug
+
+
+def _with_render_raising(monkeypatch, func) -> None:
+    """``mcit render`` replaced by ``func`` (the parser is otherwise the real one)."""
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    sub.choices["render"].set_defaults(func=func)
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+
+
+@pytest.mark.parametrize(
+    "exc, status, says",
+    [
+        (ValueError("the scene has no video\nrender it first"), 1, "the scene has no video render it first"),
+        (FileNotFoundError(2, "No such file or directory", "/x/y.cao"), 1, "/x/y.cao: No such file or directory; check the path"),
+        (PermissionError(13, "Permission denied", "/x"), 1, "check its permissions"),
+        (OSError(28, "No space left on device", "/x"), 1, "free some space"),
+        (RuntimeError("cursor gone"), 70, "internal error (RuntimeError: cursor gone); this is a bug in mcit"),
+        (MemoryError(), 1, "ran out of memory"),
+        (KeyboardInterrupt(), 130, "stopped (Ctrl-C)"),
+    ],
+)
+def test_the_top_level_turns_any_error_into_one_line(monkeypatch, capsys, exc, status, says):
+    def func(args):
+        raise exc
+
+    _with_render_raising(monkeypatch, func)
+    monkeypatch.delenv("MCIT_TRACEBACK", raising=False)
+    code = cli.main(["render", "--scene", "scenes/workcell"])
+    err = capsys.readouterr().err
+    assert code == status and err.count("\n") == 1 and says in err and "Traceback" not in err, err
+    assert err.startswith("mcit render: ")
+
+
+def test_a_traceback_on_request(monkeypatch, capsys):
+    _with_render_raising(monkeypatch, lambda args: 1 / 0)
+    monkeypatch.setenv("MCIT_TRACEBACK", "1")
+    assert cli.main(["render"]) == 70
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "ZeroDivisionError" in err and err.rstrip().splitlines()[-1].startswith("mcit render: error")
