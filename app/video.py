@@ -18,6 +18,7 @@ live source (a camera or a stream) the time is the wall-clock time since the sou
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ __all__ = [
     "FolderSource",
     "StillSource",
     "open_video",
+    "why_not_opened",
     "FrameGrabber",
     "IMAGE_SUFFIXES",
 ]
@@ -117,6 +119,46 @@ class VideoSource:
         self.close()
 
 
+def why_not_opened(target: int | str | Path) -> str:
+    """Why OpenCV could not open ``target`` and what to do, in one line (OpenCV only says "no"; its
+    and FFmpeg's own log lines are silenced by ``mcit``, see app/cli.py)."""
+    if isinstance(target, int):
+        device = Path(f"/dev/video{target}")
+        if not device.exists() and Path("/dev").is_dir():
+            return (f"there is no camera {target} on this computer (no {device}); plug it in or give another index "
+                    "(ls /dev/video*)")
+        return (f"camera {target} could not be opened: another program may be using it, or this user may not (group "
+                "video); close the other program or check the permissions")
+    text = str(target)
+    if "://" in text:
+        from urllib.parse import urlsplit
+
+        try:
+            url = urlsplit(text)
+            host, port = url.hostname, url.port or {"rtsp": 554, "http": 80, "https": 443, "rtmp": 1935}.get(url.scheme)
+        except ValueError:
+            return f"cannot open the stream {text}: the address is not a valid URL; check it"
+        if url.password:  # never repeat a password in a message or a log
+            text = url._replace(netloc=url.netloc.replace(f":{url.password}@", ":***@")).geturl()
+        reason = ""
+        if host and port:
+            import socket
+
+            try:
+                socket.create_connection((host, port), timeout=2.0).close()
+            except OSError as exc:
+                reason = f" ({host}:{port}: {exc.strerror or exc})"
+        return (f"cannot open the stream {text}{reason}; check the address and that the camera or server is on and "
+                "reachable")
+    path = Path(text)
+    if not os.access(path, os.R_OK):
+        return f"cannot read the video {path} (permission denied); check its permissions"
+    if path.stat().st_size == 0:
+        return f"the video {path} is empty; give another file"
+    return (f"{path} is not a video OpenCV can decode (an unsupported format or a damaged file); convert it (e.g. "
+            "ffmpeg -i in out.mp4) or give another file")
+
+
 class CaptureSource(VideoSource):
     """An OpenCV ``VideoCapture``: a camera index, a video file (looped) or a stream URL.
 
@@ -132,10 +174,7 @@ class CaptureSource(VideoSource):
         self.live = not (isinstance(target, (str, Path)) and Path(str(target)).is_file())
         self._cap = cv2.VideoCapture(int(target) if isinstance(target, int) else str(target))
         if not self._cap.isOpened():
-            raise VideoError(
-                f"cannot open video {target!r}: OpenCV could not open it (a camera index, a video file "
-                "OpenCV can decode, or a stream URL is expected); check the path or device"
-            )
+            raise VideoError(why_not_opened(target))
         first = self._grab_first()
         self.height, self.width = first.shape[:2]
         reported = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
@@ -150,7 +189,8 @@ class CaptureSource(VideoSource):
         ok, image = self._cap.read()
         if not ok or image is None:
             self._cap.release()
-            raise VideoError(f"video {self._target!r} opened but gave no frame; is it empty or still starting?")
+            raise VideoError(f"video {self._target} opened but gave no frame (an empty or damaged file, or a camera still "
+                             "starting); check it, or try again")
         return _to_rgb(image)
 
     def _read(self) -> np.ndarray | None:
