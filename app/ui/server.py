@@ -38,6 +38,7 @@ from .client import ClientPanel
 from .db_overlay import DatabaseOverlay
 from .recent import RecentFrames
 from .world3d import World3D
+from .wslog import quiet_malformed_messages
 
 __all__ = ["InterfaceServer"]
 
@@ -71,6 +72,7 @@ class InterfaceServer:
         self.pixel_world = PixelWorld(src.width, src.height, k)
         self.jpeg_quality = int(jpeg_quality)
         self.access = AccessPolicy(host=host, allow_origins=tuple(allow_origins), token=token)
+        quiet_malformed_messages()  # a message a browser sent that cannot be read: one log line, not a traceback
         self.server = open_viser_server(self.access, host=host, port=port, label="mcit", verbose=verbose)
         self.host = host
         self.clients: dict[int, ClientPanel] = {}
