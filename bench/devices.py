@@ -1,6 +1,17 @@
 """Benchmark of the device chain: drivers ↔ emulators, with the serial line's rate modelled.
 
-Run: .venv/bin/python bench/devices.py [--shots 20] [--beams 40] [--seed 0]
+Run: .venv/bin/python bench/devices.py [--trials 5] [--shots 10] [--beams 20] [--seed 0] [--full]
+(--full: the timing tables with every configuration; by default the fault matrix and the quick ones.)
+
+Fault matrix: for each device fault (rows) and each device, N seeded trials, each one operation
+through the driver with the fault injected into a reply of it (which reply: drawn among the
+operation's replies of the matching kind); the outcome is "right" (the value returned is the
+truth, no retry), "recovered" (right after a retry, resync, re-read or reconnect), "error" (a
+DeviceError that says what happened), or "WRONG" (a value returned that is not the truth: the
+target is zero). Turret trial: an absolute move to a random position and a position query; right
+when both return where the emulated head is. Range-finder trial: one ``measure()`` at a random
+point of the box's facing face (the last ones near it); right within 5 σ_ρ of the true range.
+Lines modelled at 19200 (DLS) and 9600 (PTU) baud, 10 ms measurements, driver deadlines 0.15 s.
 
 Setup: the bundled scene (scenes/workcell), static (t = 0); the turret's beam on the centre of
 the unknown box's face that faces it (~1.46 m). Emulators as shipped: the DLS measures in
@@ -9,10 +20,12 @@ the unknown box's face that faces it (~1.46 m). Emulators as shipped: the DLS me
 10 bits / baud each way (start + 7E1 or 8N1 + stop), the measurement delay is added, and a reply
 is delivered when its last byte would have arrived. The "model" column is that arithmetic alone:
   shot    = delay + 5 ms/m × range + (len("s0g\\r") + len("g0g+dddddddd\\r\\n")) × 10 / baud
-  step    = (len("PPnnnn ") + 3 + len("A ") + 3 + len("PP ") + len("* nnnn\\r\\n") + len("TP ") + len("* nnnn\\r\\n")) × 10 / baud
+            + 16 × 10 / baud + 2 ms (listening one line more: a second reply voids the shot)
+  step    = 2 × (len("PPnnnn ") + len("A ") + len("PP ") + len("TP ")) + 3 + 3 + len("* nnnn\\r\\n") × 2) × 10 / baud
             + 1 step / speed
-            (absolute move, wait for the end, read the position back: what every scan beam does)
-  check   = (len("PP ") + len("* nnnn\\r\\n") + len("TP ") + len("* nnnn\\r\\n")) × 10 / baud
+            (absolute move, wait for the end, read the position back: what every scan beam does;
+            each command comes back as its echo before its reply)
+  check   = (2 × (len("PP ") + len("TP ")) + 2 × len("* nnnn\\r\\n")) × 10 / baud
             (after the shot: is the head still there? a unit that power-cycled has homed)
   beam    = step + shot + check
 "Measured" is wall-clock time through the driver (median and 90th percentile), on this shared
@@ -47,17 +60,18 @@ from app.devices.drivers.turret import Turret  # noqa: E402
 from app.scene import default_scene_path, load_scene  # noqa: E402
 from core.rangefinder import aim  # noqa: E402
 
-SHOT_CHARS = len("s0g\r") + len("g0g+00014603\r\n")
+SHOT_CHARS = len("s0g\r") + len("g0g+00014603\r\n") + 16  # and one line's listen for a second reply
+GUARD_S = 0.002
 
 
 def step_chars(pan: int, tilt: int) -> int:
     """Characters on the line for a pan step: PP, A, and the read-back of both axes (PP?, TP?)."""
-    return len(f"PP{pan} ") + 3 + len("A ") + 3 + len("PP ") + len(f"* {pan}\r\n") + len("TP ") + len(f"* {tilt}\r\n")
+    return 2 * (len(f"PP{pan} ") + len("A ") + len("PP ") + len("TP ")) + 3 + 3 + len(f"* {pan}\r\n") + len(f"* {tilt}\r\n")
 
 
 def check_chars(pan: int, tilt: int) -> int:
     """Characters on the line for the check after a shot that the head is still there (PP?, TP?)."""
-    return len("PP ") + len(f"* {pan}\r\n") + len("TP ") + len(f"* {tilt}\r\n")
+    return 2 * (len("PP ") + len("TP ")) + len(f"* {pan}\r\n") + len(f"* {tilt}\r\n")
 
 
 def face_target(scene):
@@ -95,10 +109,12 @@ def stats_ms(samples):
     return float(np.median(a)), float(np.percentile(a, 90))
 
 
-def bench_shots(scene, target, shots, tmp):
+def bench_shots(scene, target, shots, tmp, full=False):
     rows = []
     configs = (("pty", 19200, 0.1, 0.005), ("pty", 9600, 0.1, 0.005), ("pty", 19200, 0.05, 0.005), ("mcit://", 19200, 0.1, 0.005),
                ("pty", 0, 0.0, 0.0), ("mcit://", 0, 0.0, 0.0))
+    if not full:
+        configs = configs[:1] + configs[-1:]
     for transport, rf_baud, delay, per_m in configs:
         chain = Chain(scene, rf_baud=rf_baud, tu_baud=9600, delay_s=delay, per_m_s=per_m, transport="pty" if transport == "pty" else "inprocess", tmp=tmp)
         try:
@@ -111,7 +127,7 @@ def bench_shots(scene, target, shots, tmp):
                 chain.rf.measure()
                 times.append(time.perf_counter() - t0)
             line = SHOT_CHARS * 10 / rf_baud if rf_baud else 0.0
-            model = delay + per_m * float(rho) + line
+            model = delay + per_m * float(rho) + line + GUARD_S
             rows.append((transport, rf_baud or "∞", f"{delay * 1e3:.0f}", model * 1e3, *stats_ms(times)))
         finally:
             chain.close()
@@ -121,9 +137,9 @@ def bench_shots(scene, target, shots, tmp):
         print(f"{t:>9} {b!s:>6} {d:>6} {model:8.1f} {med:8.1f} {p90:8.1f} {med - model:9.1f}")
 
 
-def bench_steps(scene, target, shots, tmp):
+def bench_steps(scene, target, shots, tmp, full=False):
     rows = []
-    for tu_baud in (9600, 19200, 0):
+    for tu_baud in (9600, 19200, 0) if full else (9600,):
         chain = Chain(scene, rf_baud=19200, tu_baud=tu_baud, delay_s=0.1, tmp=tmp)
         try:
             pan, tilt, _ = aim(scene.turret.T_world_turret, target)
@@ -154,11 +170,12 @@ def surface_distance(scene, X):
     return best
 
 
-def bench_scans(scene, target, beams, tmp, seed):
-    kinds = ["drop", "late", "truncate", "split", "junk", "garble", "unsolicited"]  # line faults; a device error stops a scan by design
+def bench_scans(scene, target, beams, tmp, seed, full=False):
+    kinds = ["drop", "late", "truncate", "split", "junk", "garble", "unsolicited", "early"]  # line faults; a device error stops a scan by design
     rows = []
-    for rf_baud, tu_baud, delay, rate in ((19200, 9600, 0.1, 0.0), (19200, 9600, 0.05, 0.0), (9600, 9600, 0.1, 0.0), (0, 0, 0.1, 0.0),
-                                          (19200, 9600, 0.1, 0.02), (19200, 9600, 0.1, 0.10)):
+    configs = ((19200, 9600, 0.1, 0.0), (19200, 9600, 0.05, 0.0), (9600, 9600, 0.1, 0.0), (0, 0, 0.1, 0.0),
+               (19200, 9600, 0.1, 0.02), (19200, 9600, 0.1, 0.10))
+    for rf_baud, tu_baud, delay, rate in configs if full else configs[:1]:
         rates = {k: rate / len(kinds) for k in kinds} if rate else None
         chain = Chain(scene, rf_baud=rf_baud, tu_baud=tu_baud, delay_s=delay, rates=rates, seed=seed, tmp=tmp)
         for emu in (chain.site.rangefinder, chain.site.turret):
@@ -174,7 +191,7 @@ def bench_scans(scene, target, beams, tmp, seed):
             elapsed = time.perf_counter() - t0
             X = scan.points(scene.turret.T_world_turret)[scan.hits]
             worst = float(surface_distance(scene, X).max() / scene.rangefinder.sigma_range_m) if len(X) else np.nan
-            shot = delay + 0.005 * float(rho) + (SHOT_CHARS * 10 / rf_baud if rf_baud else 0.0)
+            shot = delay + 0.005 * float(rho) + (SHOT_CHARS * 10 / rf_baud if rf_baud else 0.0) + GUARD_S
             steps = chain.tu.rad_to_steps(float(pan), float(tilt))
             move = ((step_chars(*steps) + check_chars(*steps)) * 10 / tu_baud if tu_baud else 0.0) + 2 / scene.turret.speed_steps_s
             retries = chain.rf.stats["resyncs"] + chain.tu.stats["resyncs"]
@@ -190,11 +207,136 @@ def bench_scans(scene, target, beams, tmp, seed):
     print("max |d|/σ: largest distance of a scanned point to the true surfaces, in σ_ρ (all within the noise if ≲ 4)")
 
 
+# --------------------------------------------------------------------------- fault matrix
+def _garbage_line(rng) -> bytes:
+    pool = np.frombuffer(b"!*0123456789 PTg?@E+-\x00\x93\xff" + bytes(range(33, 127)), np.uint8)
+    return bytes(rng.choice(pool, int(rng.integers(3, 40))).tolist()) + b"\r\n"
+
+
+def matrix_rows(device: str):
+    """(row name, f(rng) -> faults to push) for a device; `m` draws which reply the fault hits."""
+    from app.devices.faults import Fault
+
+    def m(rng):
+        if device == "rangefinder":
+            return b"g0g"
+        return [b"*\r", b"* "][int(rng.integers(2))]  # an acknowledgement, or a position's value
+
+    rows = [
+        ("noise (junk bytes before a reply)", lambda r: [Fault("junk", match=m(r))]),
+        ("garbage line", lambda r: [Fault("unsolicited", match=m(r), data=_garbage_line(r))]),
+        ("dropped bytes (truncated reply)", lambda r: [Fault("truncate", match=m(r), keep_terminator=bool(r.random() < 0.5))]),
+        ("split reply", lambda r: [Fault("split", match=m(r), delay_s=float(r.uniform(0.0, 0.1)))]),
+        ("late reply", lambda r: [Fault("late", match=m(r), delay_s=float(r.uniform(0.05, 0.3)))]),
+        ("timeout (dropped reply)", lambda r: [Fault("drop", match=m(r))]),
+        ("garbled character", lambda r: [Fault("garble", match=m(r))]),
+        ("unsolicited line", lambda r: [Fault("unsolicited", match=m(r))]),
+        ("early reply (injected before)", lambda r: [Fault("early", match=m(r))]),
+        ("device error", lambda r: [Fault("error", match=m(r))]),
+        ("unplug and replug", lambda r: [Fault("unplug", match=m(r), delay_s=float(r.uniform(0.05, 0.3)))]),
+    ]
+    if device == "rangefinder":
+        rows.insert(7, ("jump (garbled digit, >= 1 cm)", lambda r: [Fault("garble", match=b"g0g", at=int(r.integers(4, 10)),
+                                                                           data=bytes([48 + int(r.integers(10))]))]))
+    else:
+        rows.insert(7, ("swapped digits in a position", lambda r: [Fault("garble", match=b"* ", at=int(r.integers(2, 4)),
+                                                                           data=bytes([48 + int(r.integers(10))]))]))
+    rows.append(("three faults at once", lambda r: [f for _ in range(3) for f in rows[int(r.integers(len(rows) - 1))][1](r)]))
+    return rows
+
+
+RECOVERY_STATS = ("resyncs", "reconnects", "timeouts", "corrupt", "jumps", "two_replies")  # a retry, re-read or reconnect
+
+
+def matrix_trials(scene, trials: int, seed: int):
+    """{(device, row): Counter of outcomes}."""
+    from collections import Counter
+
+    from app.devices import DeviceError
+    from app.render.raycast import BeamCaster
+    from core.rangefinder import beam_ray
+
+    exact_site = dict(rangefinder_baud=19200, turret_baud=9600, measure_delay_s=0.01, delay_per_m_s=0.0, no_target_delay_s=0.05)
+    driver = dict(attempt_timeout_s=0.15, retries=2, reconnect_timeout_s=1.0)
+    sigma = scene.rangefinder.sigma_range_m
+    caster = BeamCaster(scene)
+    face = face_target(scene)
+    results = {}
+    for device in ("turret", "rangefinder"):
+        for r_i, (row, make) in enumerate(matrix_rows(device)):
+            rng = np.random.default_rng([seed, r_i, device == "turret"])
+            site = EmulatedSite(scene, clock=lambda: 0.0, seed=seed + r_i, **exact_site)
+            urls = site.serve_inprocess()
+            rf = RangeFinder(urls[0], **driver)
+            tu = Turret(urls[1], **driver)
+            out = Counter()
+            try:
+                tu.speed_steps_s()
+                aim0 = tu.rad_to_steps(*aim(scene.turret.T_world_turret, face)[:2])
+                emu = site.turret if device == "turret" else site.rangefinder
+                drv = tu if device == "turret" else rf
+                for _ in range(trials):
+                    if device == "turret":
+                        target = (aim0[0] + int(rng.integers(-300, 301)), aim0[1] + int(rng.integers(-200, 201)))
+                    else:  # a point of the facing face within ±2 cm of its centre
+                        target = tu.rad_to_steps(*aim(scene.turret.T_world_turret, face + rng.uniform(-0.02, 0.02, 3))[:2])
+                        tu.move_to_steps(*target)
+                    before = sum(drv.stats[k] for k in RECOVERY_STATS)
+                    emu.faults.push(*make(rng))
+                    try:
+                        if device == "turret":
+                            got = tu.move_to_steps(*target)
+                            pos = tu.position_steps()
+                            truth = tuple(int(round(v)) for v in site.mount.steps_at())
+                            ok = got == truth == target and pos == truth
+                        else:
+                            value = rf.measure()
+                            o, d = beam_ray(scene.turret.T_world_turret, *site.mount.angles_rad())
+                            ok = abs(value - caster.cast(o, d)[0]) <= 5 * sigma
+                        retried = sum(drv.stats[k] for k in RECOVERY_STATS) > before
+                        out["WRONG" if not ok else "recovered" if retried else "right"] += 1
+                    except DeviceError:
+                        out["error"] += 1
+                        emu.faults.clear()
+                        time.sleep(0.05)  # let a late reply or a replug land before the next trial
+                        try:  # back to a known state, fault-free
+                            tu.move_to_steps(*aim0)
+                        except DeviceError:
+                            tu.connect()
+                            tu.move_to_steps(*aim0)
+                    emu.faults.clear()
+            finally:
+                rf.close()
+                tu.close()
+                site.close()
+            results[(device, row)] = out
+    return results
+
+
+def bench_fault_matrix(scene, trials, seed):
+    t0 = time.perf_counter()
+    results = matrix_trials(scene, trials, seed)
+    cols = ("right", "recovered", "error", "WRONG")
+    print(f"\nFault matrix: {trials} seeded trials per fault and device (seed {seed}); outcomes")
+    print(f"{'device':>11} {'fault':<36} " + " ".join(f"{c:>9}" for c in cols))
+    total = {c: 0 for c in cols}
+    for (device, row), out in results.items():
+        print(f"{device:>11} {row:<36} " + " ".join(f"{out[c]:>9}" for c in cols))
+        for c in cols:
+            total[c] += out[c]
+    print(f"{'all':>11} {'':<36} " + " ".join(f"{total[c]:>9}" for c in cols))
+    print(f"silently wrong: {total['WRONG']} of {sum(total.values())} trials ({time.perf_counter() - t0:.0f} s)")
+    return total["WRONG"]
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--shots", type=int, default=20)
-    ap.add_argument("--beams", type=int, default=40)
+    ap.add_argument("--trials", type=int, default=5, help="trials per fault and device in the fault matrix")
+    ap.add_argument("--shots", type=int, default=10)
+    ap.add_argument("--beams", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--full", action="store_true", help="every timing configuration (slower)")
+    ap.add_argument("--matrix-only", action="store_true", help="only the fault matrix")
     args = ap.parse_args()
     import logging
     import tempfile
@@ -206,13 +348,15 @@ def main() -> int:
     target = face_target(scene)
     print(__doc__.split("\n\n", 2)[2])
     print(f"\nmachine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start; σ_ρ = {scene.rangefinder.sigma_range_m * 1e3:.0f} mm; target at {np.linalg.norm(target - scene.turret.T_world_turret[:3, 3]):.3f} m")
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        bench_shots(scene, target, args.shots, tmp)
-        bench_steps(scene, target, args.shots, tmp)
-        bench_scans(scene, target, args.beams, tmp, args.seed)
+    wrong = bench_fault_matrix(replace(scene, turret=replace(scene.turret, speed_steps_s=4000.0)), args.trials, args.seed)
+    if not args.matrix_only:
+        with tempfile.TemporaryDirectory() as tmp:
+            tmp = Path(tmp)
+            bench_shots(scene, target, args.shots, tmp, args.full)
+            bench_steps(scene, target, args.shots, tmp, args.full)
+            bench_scans(scene, target, args.beams, tmp, args.seed, args.full)
     print(f"\nload average {os.getloadavg()[0]:.1f} at the end")
-    return 0
+    return 1 if wrong else 0
 
 
 if __name__ == "__main__":
