@@ -24,7 +24,7 @@ __all__ = ["add_pose_parsers"]
 def _open(args):
     from app.db import Database
 
-    kwargs = {"client": "cli"}
+    kwargs = {"client": "cli", "readonly": True}  # both commands only read: they work on a read-only file or mount
     if getattr(args, "wait_s", None) is not None:
         kwargs["busy_timeout_s"] = args.wait_s
     return Database.open(args.db, **kwargs)

@@ -54,10 +54,13 @@ CASES = [
     ("serve", "--scene {tmp}/no-scene"),
     ("serve", "--video {tmp}/no-video.mp4 --no-devices --db {db} --port 0"),
     ("serve", "--no-devices --db {notes} --port 0"),
+    ("serve", "--host 999.1.1.1 --no-devices --db {tmp}/unwritten.sqlite --port 0"),  # hung before: viser waits for a thread that failed to bind
+    ("serve", "--host 192.0.2.1 --no-devices --db {tmp}/unwritten.sqlite --port 0"),  # TEST-NET-1: no address of this machine
     ("render", "--scene {tmp}/no-scene"),
     ("script", "--scene {tmp}/no-scene"),
     ("track", "{tmp}/no-video.mp4 --scene scenes/workcell --body parallelepiped"),
     ("track", "{notes} --scene scenes/workcell --body parallelepiped"),
+    ("track", "--scene scenes/workcell --body nosuch"),
     ("demo", "--scene {tmp}/no-scene"),
     ("nosuch", ""),
 ]
@@ -87,6 +90,7 @@ def test_a_failure_is_one_line(files, command, arguments):
     assert err.count("\n") == 1 and "Traceback" not in err, err
     assert err.startswith(f"mcit {command}: " if command != "nosuch" else "mcit: error: "), err
     assert "internal error" not in err, err  # each of these is the operator's to fix, not a bug
+    assert not (Path(files["tmp"]) / "unwritten.sqlite").exists()  # a refused start writes nothing
 
 
 def _with_render_raising(monkeypatch, func) -> None:

@@ -88,6 +88,9 @@ def _check_reads_work_and_writes_refused(capsys, path: Path, tmp_path: Path, ref
     out_file.parent.mkdir(exist_ok=True)
     code, _, err = _mcit(capsys, "db", "export", "parallelepiped", str(out_file), "--db", str(path))
     assert code == 0 and out_file.stat().st_size > 0, err
+    poses = tmp_path / "out" / "poses.json"  # export-poses only reads too
+    code, _, err = _mcit(capsys, "db", "export-poses", str(poses), "--db", str(path))
+    assert code == 0 and "parallelepiped" in poses.read_text(), err
     for argv in (("undo", "1"), ("init",), ("import", str(out_file))):
         code, _, err = _mcit(capsys, "db", *argv, "--db", str(path))
         _one_line_error(code, err, refusal, "nothing was written")
