@@ -285,6 +285,17 @@ def _click_costs_kernel(C, R, t, verts, edge_idx, segs, face_n, face_c, incidenc
                 out[n, s, e] = cost
 
 
+def warm_up() -> None:
+    """Load (the first time on a machine: compile) the matcher's compiled loop; ``mcit serve`` calls
+    it in a background thread at start, with ``core.pose.warm_up``."""
+    box = BRep.box(0.3, 0.2, 0.1)
+    camera = Camera.from_intrinsics(np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]), np.eye(4), 640, 480)
+    T = np.eye(4)
+    T[2, 3] = 2.0
+    segs = np.array([[[300.0, 200.0], [340.0, 200.0]]])
+    _click_costs(camera, box, T[None, :3, :3], T[None, :3, 3], segs, _Faces.of(box), 0.1)
+
+
 def _within_edges_many(camera, model, Ts, segs, edges, incidence, gate_px) -> list[bool]:
     """``_within_edges`` at N poses Ts (N, 4, 4) with their assignments edges (N, S), batched."""
     if len(Ts) == 0:
