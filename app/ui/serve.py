@@ -83,6 +83,29 @@ def _access_policy(args: argparse.Namespace):
                         token=getattr(args, "token", None))
 
 
+def _check_host(host: str, port: int) -> None:
+    """ValueError when ``host`` is no address of this machine that a server could listen on (viser's
+    server thread would fail to bind and the start would wait for it for ever)."""
+    import errno
+    import socket
+
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise ValueError(f"--host {host}: not an address or a name this machine can resolve ({exc}); give one of its "
+                         "addresses, e.g. 127.0.0.1 (this machine only) or 0.0.0.0 (every network)") from None
+    family, kind, proto, _, addr = infos[0]
+    with socket.socket(family, kind, proto) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((addr[0], 0))  # the address only: a port in use is viser's to handle
+        except OSError as exc:
+            if exc.errno in (errno.EADDRNOTAVAIL, errno.EAFNOSUPPORT):
+                raise ValueError(f"--host {host}: not an address of this machine ({exc.strerror}); give one of its "
+                                 "addresses, e.g. 127.0.0.1 (this machine only) or 0.0.0.0 (every network)") from None
+            raise
+
+
 def build_interface(args: argparse.Namespace):
     """Open everything ``mcit serve`` needs; returns (InterfaceServer, closers)."""
     from app.db import Database, default_db_path, seed_from_scene
@@ -92,6 +115,7 @@ def build_interface(args: argparse.Namespace):
     from app.workflows import Site
 
     access = _access_policy(args)  # before anything opens: a bad --token or --allow-origin stops here
+    _check_host(args.host, args.port)  # and an address this machine does not have
     scene = load_scene(args.scene or default_scene_path())
     grabber = FrameGrabber(_video_source(args.video, scene, args.fps)).start()
     closers = [grabber.stop]
