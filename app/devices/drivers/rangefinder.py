@@ -203,8 +203,11 @@ class RangeFinder(LineDriver):
         )
 
     # ---------------------------------------------------------------------- commands
-    def measure(self, timeout_s: float | None = None) -> float:
-        """One distance (metres). NoTargetError on error 255; other codes raise their RangeFinderError."""
+    def measure(self, timeout_s: float | None = None, *, confirm: bool = True) -> float:
+        """One distance (metres). NoTargetError on error 255; other codes raise their RangeFinderError.
+
+        confirm : read again a distance that jumps from the last ones, or a first one (see the
+        module docstring); ``measure_n`` of 3 shots or more leaves it to its median instead."""
         command = self._command("g")
         lo, hi = self.plausible_range_m
 
@@ -219,7 +222,7 @@ class RangeFinder(LineDriver):
 
         def checked(deadline: float) -> float:
             first = shot(deadline)
-            if self._recent and abs(first - float(np.median(self._recent))) <= self.jump_m:
+            if not confirm or (self._recent and abs(first - float(np.median(self._recent))) <= self.jump_m):
                 self._recent.append(first)
                 return first
             # read again: keep a distance only when two readings in a row agree (also the first one,
@@ -241,12 +244,13 @@ class RangeFinder(LineDriver):
         deadline = deadline_after(timeout_s)
         return self._transact(checked, what=command, idempotent=True, deadline=deadline)
 
-    def measure_n(self, n: int, *, outlier_m: float = 0.05, timeout_s: float | None = None) -> RangeMeasurement:
+    def measure_n(self, n: int, *, outlier_m: float = 0.05, timeout_s: float | None = None, confirm: bool | None = None) -> RangeMeasurement:
         """n shots at the current pointing: their median, spread and outliers (see RangeMeasurement).
 
         A shot with error 255 counts as a miss (NaN); other device errors are raised. A shot
         farther than outlier_m (metres) from the median of the valid shots is an outlier and left
-        out of range_m and spread_m. NoTargetError when every shot misses.
+        out of range_m and spread_m. NoTargetError when every shot misses. confirm : read again a
+        shot that jumps (see ``measure``); by default only for fewer than 3 shots.
         """
         if not (isinstance(n, (int, np.integer)) and n >= 1):
             raise ValueError(f"n must be a positive integer, got {n!r}")
@@ -257,7 +261,7 @@ class RangeFinder(LineDriver):
         for i in range(int(n)):
             left = None if deadline is None else max(deadline - time.monotonic(), 1e-3)
             try:
-                shots[i] = self.measure(timeout_s=left)
+                shots[i] = self.measure(timeout_s=left, confirm=n < 3 if confirm is None else confirm)  # 3 or more: the median outvotes a stray
             except NoTargetError:
                 pass
         valid = np.isfinite(shots)
