@@ -26,9 +26,9 @@ distortion the file states.
   picks the map by its key or its ``camera_name``.
 
 Every failure is one ValueError line naming the file and what was missing or wrong.
-mcit's camera has no lens distortion yet: callers that build C from K refuse a file whose
-distortion is not zero (``Intrinsics.has_distortion``); ``Intrinsics.distortion`` and
-``distortion_model`` carry the coefficients for the code that undistorts.
+C has no lens distortion: a file whose distortion is not zero (``Intrinsics.has_distortion``)
+gives the camera a lens (``app.undistort.lens_of``), and the frames are undistorted on arrival so
+that C, with the file's K, holds in the undistorted image.
 """
 
 from __future__ import annotations

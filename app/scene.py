@@ -12,6 +12,8 @@ docs/scene-format.md is the full reference)::
                  "C": [[...4], [...4], [...4]]}                   # the global model, or
                  "K": [[...3] x3], "T_world_cam": <pose>}          # intrinsics + camera pose, or
                  "intrinsics_file": "cam.xml", "T_world_cam": <pose>}   # ViSP .xml / OpenCV .yml
+                 # (a file with lens distortion: Scene.lens; the video is undistorted on arrival and the
+                 #  renderer renders through the lens; C holds in the undistorted image, app/undistort.py)
       "turret": {"T_world_turret": <pose>, "resolution_arcsec": 185.1428,
                  "pan_limits_steps": [-3090, 3090], "tilt_limits_steps": [-907, 604],
                  "speed_steps_s": 1000},
@@ -333,6 +335,9 @@ class Scene:
     raw: dict = field(default_factory=dict, repr=False, compare=False)
     video: VideoSpec | None = None
     render: RenderSpec = RenderSpec()
+    # The camera's lens distortion (app.undistort.LensDistortion) from an intrinsics file, or None: the
+    # video is undistorted on arrival (C holds in the undistorted image); the renderer renders through it.
+    lens: Any = field(default=None, compare=False)
 
     def body(self, name: str) -> Body:
         for b in self.bodies:
@@ -375,6 +380,12 @@ _MODEL_KINDS = ("box", "cylinder", "cone", "brep", "cao", "mesh")
 
 
 def _camera(d: Any, root: Path, where: str) -> Camera:
+    """The Camera of a scene's camera block (its lens: ``_camera_and_lens``)."""
+    return _camera_and_lens(d, root, where)[0]
+
+
+def _camera_and_lens(d: Any, root: Path, where: str):
+    """(Camera, LensDistortion or None) of a scene's camera block."""
     _keys(d, _CAMERA_KEYS, where)
     given = [k for k in ("C", "K", "intrinsics_file") if k in d]
     if len(given) != 1:
@@ -395,7 +406,8 @@ def _camera(d: Any, root: Path, where: str) -> Camera:
         if given == ["C"]:
             C = _matrix(d["C"], (3, 4), f"{where}.C")
             w, h = _size(width, height, where)
-            return Camera(C, w, h)
+            return Camera(C, w, h), None
+        lens = None
         if given == ["K"]:
             K = _matrix(d["K"], (3, 3), f"{where}.K")
         else:
@@ -410,17 +422,22 @@ def _camera(d: Any, root: Path, where: str) -> Camera:
                 intr = read_intrinsics(file, camera_name=name, image_size=size)
             except ValueError as exc:
                 raise SceneError(f"{where}.intrinsics_file: {exc}") from None
-            if intr.has_distortion:
-                raise SceneError(
-                    f"{where}.intrinsics_file: {file} has lens distortion {intr.distortion.tolist()}; mcit's camera "
-                    "model C has none: undistort the video and give its new K"
-                )
             K = intr.K
             width = intr.width if width is None else width
             height = intr.height if height is None else height
+            if intr.has_distortion:
+                from app.undistort import lens_of
+
+                if intr.width is not None and (width, height) != (intr.width, intr.height):
+                    raise SceneError(f"{where}.intrinsics_file: {file} was calibrated on {intr.width}×{intr.height} "
+                                     f"images, the camera block says {width}×{height}; give the intrinsics for this size")
+                try:
+                    lens = lens_of(intr, width, height)
+                except ValueError as exc:
+                    raise SceneError(f"{where}.intrinsics_file: {exc}") from None
         T_world_cam = parse_pose(_need(d, "T_world_cam", where), f"{where}.T_world_cam")
         w, h = _size(width, height, where)
-        return Camera.from_intrinsics(K, invert_T(T_world_cam), w, h)
+        return Camera.from_intrinsics(K, invert_T(T_world_cam), w, h), lens
     except SceneError:
         raise
     except ValueError as exc:
@@ -590,7 +607,7 @@ def scene_from_dict(d: Any, root: str | Path, where: str = "scene.json") -> Scen
     if fmt != FORMAT:
         raise SceneError(f"{where}: 'format' must be {FORMAT!r}, got {fmt!r}")
     _keys(d, _TOP_KEYS, where)
-    camera = _camera(_need(d, "camera", where), root, f"{where}: camera")
+    camera, lens = _camera_and_lens(_need(d, "camera", where), root, f"{where}: camera")
     turret = _turret(_need(d, "turret", where), f"{where}: turret")
     spec = _rangefinder(d.get("rangefinder", {}), turret.step_rad, f"{where}: rangefinder")
     raw_bodies = _need(d, "bodies", where)
@@ -615,6 +632,7 @@ def scene_from_dict(d: Any, root: str | Path, where: str = "scene.json") -> Scen
         d,
         video,
         render,
+        lens,
     )
 
 

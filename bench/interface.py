@@ -21,8 +21,14 @@ DESIGN.md), viewport 1200 × 700.
    clicks at 2,000 objects (click → that client's marks sent). Targets (issue 13): gap ≤ 100 ms and
    ≥ 28 frames/s at 2,000 objects; click → overlay p95 ≤ 50 ms.
 
-Run: ``.venv/bin/python bench/interface.py [--seconds 10] [--clicks 60] [--stall]``. Targets (issue 7):
-≥ 25 frames/s; p95 click → overlay ≤ 100 ms.
+4. Undistortion table (also alone: ``--undistort``, no chromium): the frames/s the browser-like client
+   receives from a 30 frames/s source at 640 × 480 and 1280 × 720, with the frames undistorted on
+   arrival (``app.undistort.UndistortedSource``: OpenCV's 5-coefficient model, one ``cv2.remap``
+   with precomputed maps) and without, in the same run, and the remap's own time per frame.
+   Targets (issue 15): ≥ 28 frames/s at 640 × 480 and ≥ 25 at 1280 × 720 with undistortion on.
+
+Run: ``.venv/bin/python bench/interface.py [--seconds 10] [--clicks 60] [--stall] [--undistort]``. Targets
+(issue 7): ≥ 25 frames/s; p95 click → overlay ≤ 100 ms.
 """
 
 from __future__ import annotations
@@ -44,7 +50,7 @@ from tests.e2e.harness import close_webgl_notice, free_port, launch, screen_of, 
 FRAMES = ROOT / ".." / "shared" / "data" / "visp-cube" / "frames"
 
 
-def build(n_objects: int, fps: float):
+def build(n_objects: int, fps: float, source=None):
     from app.db import Database, seed_from_scene
     from app.scene import default_scene_path, load_scene
     from app.ui.server import InterfaceServer
@@ -70,7 +76,9 @@ def build(n_objects: int, fps: float):
             db.add_object(f"extra_{k}", "box" if k % 3 else "cylinder", model,
                           make_T(rot_z(rng.uniform(0, np.pi)), [xy[0], xy[1], 0.0]), status="known", method="bench")
             n += 1
-    if FRAMES.is_dir():
+    if source is not None:
+        video = source.description
+    elif FRAMES.is_dir():
         source, video = FolderSource(FRAMES, fps=fps), f"ViSP cube sequence (218 real frames, 640×480) at {fps:.0f} fps"
     else:
         source, video = StillSource(rng.integers(0, 255, (480, 640, 3), dtype=np.uint8), fps=fps), "a 640×480 noise still"
@@ -300,6 +308,99 @@ def stall_table(sizes, seconds: float, change_every_s: float, clicks: int) -> No
               f"{np.percentile(lat, 50):.1f} / {np.percentile(lat, 95):.1f} / {lat.max():.1f} ms | | p95 ≤ 50 ms |")
 
 
+def bench_lens(width: int, height: int):
+    """A wide-angle lens for ``width`` × ``height`` frames (OpenCV's 5 coefficients, tens of pixels at the corners)."""
+    from app.undistort import LensDistortion
+
+    f = 0.8 * width
+    K = np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
+    return LensDistortion(K, [-0.3, 0.1, 0.001, -0.001, -0.02], "opencv", width, height)
+
+
+def smooth_video(width: int, height: int):
+    """A 30 frames/s video of 8 smooth-noise images in turn (JPEG-friendly, like a camera's images rather than
+    pixel noise; viser sends nothing for an image that did not change, so not a still)."""
+    import cv2
+
+    from app.video import VideoSource
+
+    rng = np.random.default_rng(3)
+    images = [cv2.resize(rng.integers(0, 255, (height // 8, width // 8, 3), dtype=np.uint8), (width, height),
+                         interpolation=cv2.INTER_CUBIC) for _ in range(8)]
+
+    class Cycle(VideoSource):
+        def __init__(self):
+            super().__init__()
+            self.width, self.height, self.fps, self.frame_count = width, height, 30.0, len(images)
+            self.description = f"{width}×{height} smooth noise at 30 fps"
+
+        def _read(self):
+            if self._position + 1 >= len(images):
+                self._position = -1
+            return images[self._position + 1]
+
+    return Cycle()
+
+
+def measure_rate(source, seconds: float) -> dict:
+    """Frames/s a browser-like client receives (and the server sends) from ``source`` over ``seconds``."""
+    import subprocess
+
+    server, site, db, _ = build(50, fps=30.0, source=source)
+    out = tempfile.mktemp(prefix="mcit-bench-frames-", suffix=".txt")
+    before = set(server.clients)
+    client = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--ws-client",
+                               f"ws://127.0.0.1:{server.port}", out])
+    try:
+        wait_for_panel(server, before, timeout_s=120)
+        deadline = time.monotonic() + 300
+        while server._db_revision != site.revision and time.monotonic() < deadline:  # the first full draw
+            time.sleep(0.2)
+        time.sleep(3.0)
+        t0, sent0 = time.time(), server.frames_sent
+        time.sleep(seconds)
+        t1, sent1 = time.time(), server.frames_sent
+    finally:
+        client.kill()
+        client.wait()
+        server.stop()
+        db.close()
+    times = np.loadtxt(out, ndmin=1) if Path(out).stat().st_size else np.zeros(0)
+    Path(out).unlink()
+    window = np.sort(times[(times >= t0) & (times <= t1)])
+    return {"fps": len(window) / (t1 - t0), "sent_fps": (sent1 - sent0) / (t1 - t0)}
+
+
+def undistort_table(seconds: float) -> None:
+    """Frames/s with and without undistortion, same run (see the module docstring, 4)."""
+    from app.undistort import UndistortedSource
+
+    rows = []
+    for w, h in ((640, 480), (1280, 720)):
+        lens = bench_lens(w, h)
+        img = smooth_video(w, h).read().image
+        lens.undistort_image(img)
+        t = time.perf_counter()
+        for _ in range(50):
+            lens.undistort_image(img)
+        remap_ms = (time.perf_counter() - t) / 50 * 1000.0
+        plain = measure_rate(smooth_video(w, h), seconds)
+        und = measure_rate(UndistortedSource(smooth_video(w, h), lens), seconds)
+        rows.append((w, h, lens.describe(), remap_ms, plain, und))
+        print(f"  {w}×{h}: {plain['fps']:.1f} frames/s plain, {und['fps']:.1f} undistorted", file=sys.stderr, flush=True)
+    load = os.getloadavg()[0]
+    print(f"mcit interface with lens distortion — a 30 frames/s video (8 smooth-noise images in turn), 50 objects, one browser-like "
+          f"client (a websocket reader, its own process), {seconds:.0f} s each; machine: {os.cpu_count()} cores, load "
+          f"average {load:.1f}")
+    print()
+    print("| frames | lens | remap per frame (ms) | frames/s received, undistortion off | frames/s received, "
+          "undistortion on | target (on) |")
+    print("|---|---|---|---|---|---|")
+    for w, h, lens, ms, plain, und in rows:
+        target = "≥ 28" if w == 640 else "≥ 25"
+        print(f"| {w}×{h} | {lens} | {ms:.1f} | {plain['fps']:.1f} | {und['fps']:.1f} | {target} |")
+
+
 def main() -> int:
     if len(sys.argv) == 4 and sys.argv[1] == "--ws-client":
         ws_client(sys.argv[2], sys.argv[3])
@@ -313,7 +414,12 @@ def main() -> int:
     ap.add_argument("--stall-seconds", type=float, default=12.0)
     ap.add_argument("--change-every", type=float, default=2.0)
     ap.add_argument("--stall-clicks", type=int, default=30)
+    ap.add_argument("--undistort", action="store_true", help="only the undistortion table (no chromium)")
+    ap.add_argument("--undistort-seconds", type=float, default=10.0)
     args = ap.parse_args()
+    if args.undistort:
+        undistort_table(args.undistort_seconds)
+        return 0
     if args.stall:
         stall_table([int(n) for n in args.stall_sizes.split(",")], args.stall_seconds, args.change_every,
                     args.stall_clicks)
@@ -353,6 +459,8 @@ def main() -> int:
             print(f"| click → overlay sent, {name} | no click reached the server | p95 ≤ 100 ms |")
     print()
     stall_table([int(n) for n in args.stall_sizes.split(",")], args.stall_seconds, args.change_every, args.stall_clicks)
+    print()
+    undistort_table(args.undistort_seconds)
     return 0
 
 

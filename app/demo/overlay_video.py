@@ -134,6 +134,7 @@ def write_overlay_video(
     scale: int = 2,
     stills: dict[str, float] | None = None,
     progress: Callable[[int, int], None] | None = None,
+    lens=None,
 ) -> int:
     """Write the overlay video (mp4, MPEG-4 part 2) of a replay; returns the frames written.
 
@@ -141,6 +142,7 @@ def write_overlay_video(
     states, in time order. fps : the video's rate (frame k shows t = k / fps). frames : only the
     first N frames. stills : {file name: t_s} — also save as a PNG beside the video the first
     frame that shows what was done at t_s (``still_frame``). progress : ``progress(done, total)``.
+    lens : the scene camera's lens distortion (app.undistort), or None: frames are undistorted first.
     """
     import cv2
 
@@ -162,7 +164,10 @@ def write_overlay_video(
             if not ok:
                 break
             t = k / fps
-            img = draw_overlay(cv2.cvtColor(raw, cv2.COLOR_BGR2GRAY), state_at(timeline, t), t, scale)
+            grey = cv2.cvtColor(raw, cv2.COLOR_BGR2GRAY)
+            if lens is not None:  # the scene camera's lens: the overlay is drawn on the undistorted frame
+                grey = lens.undistort_image(grey)
+            img = draw_overlay(grey, state_at(timeline, t), t, scale)
             if writer is None:
                 out_path.parent.mkdir(parents=True, exist_ok=True)
                 writer = cv2.VideoWriter(str(out_path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (img.shape[1], img.shape[0]))

@@ -143,7 +143,8 @@ def run_demo(
             from .overlay_video import write_overlay_video
 
             write_overlay_video(scene.video.path, replay.timeline, video_path, fps=scene.video.fps, frames=frames,
-                                stills={name: t for name, _, t in stills}, progress=_bar(stream, "frames"))
+                                stills={name: t for name, _, t in stills}, progress=_bar(stream, "frames"),
+                                lens=scene.lens)
             wall["overlay video"] = time.perf_counter() - t0
         sims = None
         if sim_trials > 0:

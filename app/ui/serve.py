@@ -117,7 +117,13 @@ def build_interface(args: argparse.Namespace):
     access = _access_policy(args)  # before anything opens: a bad --token or --allow-origin stops here
     _check_host(args.host, args.port)  # and an address this machine does not have
     scene = load_scene(args.scene or default_scene_path())
-    grabber = FrameGrabber(_video_source(args.video, scene, args.fps)).start()
+    source = _video_source(args.video, scene, args.fps)
+    if scene.lens is not None:  # every frame undistorted once on arrival: C, clicks and the overlay hold in it
+        from app.undistort import UndistortedSource
+
+        source = UndistortedSource(source, scene.lens)
+        log.info("frames undistorted: %s", scene.lens.describe())
+    grabber = FrameGrabber(source).start()
     closers = [grabber.stop]
 
     def clock() -> float:

@@ -52,7 +52,8 @@ def add_track_parser(sub) -> None:
     p.add_argument("--body", help="with --scene: the body to track")
     p.add_argument("--pose", help="initial pose file: ViSP .pos (tx ty tz θux θuy θuz) or JSON (4×4 or {xyz, rpy_deg})")
     p.add_argument("--init-points", help="model points clicked to initialise (a ViSP .init file)")
-    p.add_argument("--init-clicks", nargs="+", type=_pixel, metavar="U,V", help="the clicked pixels of --init-points, in order")
+    p.add_argument("--init-clicks", nargs="+", type=_pixel, metavar="U,V", help="the clicked pixels of --init-points, in order "
+                   "(pixels of the video's frames as recorded; with lens distortion they are undistorted first)")
     p.add_argument("--out", default="tracked.mp4", help="overlay video to write (.mp4 or .avi; default tracked.mp4)")
     p.add_argument("--csv", help="also write the per-frame poses and figures to this CSV file")
     p.add_argument("--pos-out", metavar="PATH",
@@ -82,7 +83,9 @@ def _load_pose(path: Path):
 
 
 def _setup(args):
-    """(source, camera, model, T_world_obj, K or None) from the arguments; ValueError on bad input."""
+    """(source, camera, model, T_world_obj, lens or None) from the arguments; ValueError on bad input.
+    With lens distortion (the intrinsics file's or the scene's) the frames are undistorted as they are
+    read and C holds in the undistorted frames (app/undistort.py)."""
     import numpy as np
 
     from app.models_io import load_model
@@ -92,6 +95,7 @@ def _setup(args):
     model = load_model(args.model) if args.model else None
     T = None
     K = None
+    lens = None
     source = args.source
     if args.camera_name and not args.intrinsics:
         raise ValueError("--camera-name chooses a camera in the --intrinsics file; give --intrinsics FILE")
@@ -100,6 +104,7 @@ def _setup(args):
 
         scene = load_scene(args.scene)
         camera = scene.camera
+        lens = scene.lens
         if args.body:
             try:
                 body = scene.body(args.body)
@@ -121,13 +126,14 @@ def _setup(args):
         _, first = next(iter_frames(source, args.start, 1))
         h, w = first.shape[:2]
         intr = read_intrinsics(args.intrinsics, camera_name=args.camera_name, image_size=(w, h))
-        if intr.has_distortion:
-            raise ValueError(f"{args.intrinsics}: the camera has lens distortion; mcit's camera has none: undistort the video first")
         if intr.width is not None and (intr.width, intr.height) != (w, h):
             raise ValueError(f"{args.intrinsics}: the camera was calibrated on {intr.width}×{intr.height} images but the "
                              f"video's frames are {w}×{h}; give the intrinsics for this size")
         K = intr.K
         camera = Camera.from_intrinsics(K, np.eye(4), w, h)
+        from app.undistort import lens_of
+
+        lens = lens_of(intr, w, h)
     if model is None:
         raise ValueError("give the object's model: --model FILE (or --scene with --body)")
     if args.pose:
@@ -139,10 +145,13 @@ def _setup(args):
             K, T_cam_world = camera.decompose()
             if not np.allclose(T_cam_world, np.eye(4), atol=1e-9):
                 raise ValueError("--init-clicks needs --intrinsics (the camera frame as the world); with --scene give --pose or --body")
-        T = pose_from_points(K, read_init_points(args.init_points), np.array(args.init_clicks))
+        clicks = np.array(args.init_clicks, dtype=float)
+        if lens is not None:
+            clicks = lens.undistort(clicks)
+        T = pose_from_points(K, read_init_points(args.init_points), clicks)
     if T is None:
         raise ValueError("give the initial pose: --pose FILE, --init-points/--init-clicks, or --scene with --body")
-    return source, camera, model, T
+    return source, camera, model, T, lens
 
 
 def _write_pos(pattern: str, frames) -> str:
@@ -173,7 +182,7 @@ def _cmd_track(args) -> int:
     from app.vision.sequence import track_sequence
 
     try:
-        source, camera, model, T = _setup(args)
+        source, camera, model, T, lens = _setup(args)
         frames = track_sequence(
             source,
             camera,
@@ -187,6 +196,7 @@ def _cmd_track(args) -> int:
             stop_when_lost=not args.keep_going,
             search_px=args.search_px,
             sample_step_px=args.step_px,
+            lens=lens,
         )
     except (ValueError, OSError) as exc:
         print(f"mcit track: {exc}", file=sys.stderr)

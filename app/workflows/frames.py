@@ -34,10 +34,13 @@ class SceneVideoFrames:
     video : app.scene.VideoSpec
         The file, its frame rate and length; frame k shows scene time k / fps.
     cache : how many decoded frames to keep (clicks and tracking revisit the same ones).
+    lens : app.undistort.LensDistortion or None: the scene camera's lens; each frame is undistorted
+        once when decoded (C holds in the undistorted frames).
     """
 
-    def __init__(self, video: Any, cache: int = 8):
+    def __init__(self, video: Any, cache: int = 8, lens: Any = None):
         self.video = video
+        self.lens = lens
         self.path = Path(video.path)
         if not self.path.is_file():
             raise ValueError(f"the scene's video {self.path} does not exist: render it (mcit render) or give another source")
@@ -71,6 +74,8 @@ class SceneVideoFrames:
                 return None
             self._next = k + 1
             rgb = np.ascontiguousarray(bgr[:, :, ::-1]) if bgr.ndim == 3 else bgr
+            if self.lens is not None:
+                rgb = self.lens.undistort_image(rgb)
             rgb.setflags(write=False)
             self._cache[k] = rgb
             while len(self._cache) > self._size:

@@ -186,7 +186,7 @@ class Site:
             if video is not None and Path(video.path).is_file():
                 from .frames import SceneVideoFrames
 
-                self._frames = SceneVideoFrames(video)
+                self._frames = SceneVideoFrames(video, lens=getattr(scene, "lens", None))
         elif frames is not None:
             if not callable(frames):
                 raise ValueError(f"frames must be 'scene', None or a callable frames(t_s) -> image, got {type(frames).__name__}")

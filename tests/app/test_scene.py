@@ -116,7 +116,7 @@ def test_camera_from_C_and_from_an_intrinsics_file(tmp_path, shared_data):
         scene_from_dict(d, tmp_path)
 
 
-def test_intrinsics_file_with_distortion_is_refused(tmp_path):
+def test_intrinsics_file_with_distortion_gives_the_scene_its_lens(tmp_path):
     import cv2
 
     f = tmp_path / "cam.yml"
@@ -128,7 +128,12 @@ def test_intrinsics_file_with_distortion_is_refused(tmp_path):
     fs.release()
     d = minimal()
     d["camera"] = {"intrinsics_file": "cam.yml", "T_world_cam": minimal()["camera"]["T_world_cam"]}
-    with pytest.raises(SceneError, match=r"camera\.intrinsics_file: .*lens distortion"):
+    s = scene_from_dict(d, tmp_path)
+    assert s.lens is not None and s.lens.model == "opencv" and (s.lens.width, s.lens.height) == (64, 48)
+    np.testing.assert_array_equal(s.lens.coefficients, [-0.2, 0.05, 0, 0, 0])
+    np.testing.assert_allclose(s.camera.decompose()[0], s.lens.K, atol=1e-9)  # C keeps the file's K
+    d["camera"]["width"] = 128  # another size than the file's calibration
+    with pytest.raises(SceneError, match=r"camera\.intrinsics_file: .*calibrated on 64×48"):
         scene_from_dict(d, tmp_path)
 
 
