@@ -11,7 +11,6 @@ returns. The front tangent plane (the paper's P3) follows from the fitted profil
 from __future__ import annotations
 
 import hashlib
-import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -71,8 +70,9 @@ def _kasa(q: np.ndarray) -> tuple[np.ndarray, float]:
     return c, float(np.sqrt(max(c @ c - F, 1e-12)))
 
 
-_RECENT: OrderedDict[bytes, ProfileFit] = OrderedDict()  # the last fits, by their inputs' bytes
-_RECENT_LOCK = threading.Lock()
+# The last fits, by their inputs' bytes. No lock (core/ stays free of threading): each OrderedDict
+# operation is atomic under the GIL, and a fit evicted by another thread between two is fitted again.
+_RECENT: OrderedDict[bytes, ProfileFit] = OrderedDict()
 _RECENT_MAX = 16
 
 
@@ -95,18 +95,22 @@ def fit_profile(ret: Returns, a: np.ndarray, *, cone: bool = False, groups: np.n
         h.update(repr(x.shape).encode())
         h.update(x.tobytes())
     key = h.digest()
-    with _RECENT_LOCK:
-        fit = _RECENT.get(key)
-        if fit is not None:
+    fit = _RECENT.get(key)
+    if fit is not None:
+        try:
             _RECENT.move_to_end(key)
-            return fit
+        except KeyError:  # evicted meanwhile: still the right fit
+            pass
+        return fit
     fit = _fit_profile(ret, a, cone=cone, groups=groups)
     for x in (fit.a, fit.X0, fit.e1, fit.e2, fit.params, fit.cov, fit.residuals, fit.inliers):
         x.setflags(write=False)
-    with _RECENT_LOCK:
-        _RECENT[key] = fit
-        while len(_RECENT) > _RECENT_MAX:
+    _RECENT[key] = fit
+    while len(_RECENT) > _RECENT_MAX:
+        try:
             _RECENT.popitem(last=False)
+        except KeyError:  # emptied meanwhile
+            break
     return fit
 
 
