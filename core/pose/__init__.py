@@ -14,7 +14,7 @@ thread at start-up). Conventions: DESIGN.md §Frames; perturbations and covarian
 from .estimate import PoseCandidate, PoseEstimate, estimate_pose
 from .p3l import ConcurrentEdgesError, p3l, p3l_batch
 from .plausibility import plausibility
-from ._kernels import warm_up
+from ._lazy import warm_up
 from .refine import RefineResult, refine, refine_many
 from .symmetry import edge_symmetries, nearest_twin, symmetry_transforms
 

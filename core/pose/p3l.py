@@ -49,8 +49,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import Camera
-from . import _kernels as _k
+from ._lazy import kernels
 from .residuals import Clicks, as_clicks, distance_cost
+
+_k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded before mcit serve's first page)
 
 __all__ = ["p3l", "p3l_batch", "p3l_rotations", "ConcurrentEdgesError"]
 
@@ -60,7 +62,7 @@ class ConcurrentEdgesError(ValueError):
     """The three edges' interpretation planes share a line of sight: the depth along it is unknown."""
 
 
-_SEGS_PAIR = {_k.SEGS_01: (0, 1), _k.SEGS_02: (0, 2), _k.SEGS_12: (1, 2)}
+_SEGS_PAIR = {1: (0, 1), 2: (0, 2), 3: (1, 2)}  # _kernels.SEGS_01, SEGS_02, SEGS_12 (tests/core/pose/test_p3l.py checks)
 
 
 def _raise_for(status: int) -> None:

@@ -34,8 +34,10 @@ import numpy as np
 from ..camera import Camera
 from ..checks import MAX_M, MAX_SCALE, MIN_SCALE, finite_array, positive_scale
 from ..transforms import check_T
-from . import _kernels as _k
+from ._lazy import kernels
 from .residuals import Clicks, as_clicks
+
+_k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded before mcit serve's first page)
 
 __all__ = ["RefineResult", "refine", "refine_many", "huber_weights", "click_sigmas"]
 

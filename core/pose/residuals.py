@@ -32,7 +32,9 @@ import numpy as np
 
 from ..camera import Camera
 from ..checks import MAX_M, MAX_PX, finite_array
-from . import _kernels as _k
+from ._lazy import kernels
+
+_k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded before mcit serve's first page)
 
 __all__ = ["Clicks", "as_clicks", "interpretation_planes", "residuals", "perturb", "distance_cost", "pose_distance_cost"]
 

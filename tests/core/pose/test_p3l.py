@@ -486,3 +486,17 @@ def test_even_eliminant_with_roots_spanning_eight_decades(deflated):
     t = np.sort([s / c for c, s in pairs if c != 0])  # α = π (c = 0) is the deflated u = 0
     assert len(t) == len(expected) and np.allclose(t, expected, rtol=1e-6, atol=1e-12)
     assert sum(c == 0 for c, _ in pairs) == deflated
+
+
+def test_the_status_codes_p3l_names_are_the_kernels():
+    """p3l.py names the kernels' refusal codes without importing them (the kernels load lazily)."""
+    p3l_module = importlib.import_module("core.pose.p3l")
+    assert p3l_module._SEGS_PAIR == {_k.SEGS_01: (0, 1), _k.SEGS_02: (0, 2), _k.SEGS_12: (1, 2)}
+
+
+def test_importing_core_pose_loads_no_numba():
+    import subprocess
+    import sys
+
+    code = "import sys, core.pose; core.pose.p3l; assert 'numba' not in sys.modules, 'numba loaded on import'"
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).resolve().parents[3]))
