@@ -41,6 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
     from app.vision.track_cli import add_track_parser  # argparse only: the tracker loads when the command runs
 
     add_track_parser(sub)
+    from app.vision.intrinsics_cli import add_calibrate_intrinsics_parser  # argparse only: OpenCV loads when it runs
+
+    add_calibrate_intrinsics_parser(sub)
     from app.demo.cli import add_demo_parser  # argparse only: the replay, solvers and report load when the command runs
 
     add_demo_parser(sub)

@@ -61,6 +61,8 @@ CASES = [
     ("track", "{tmp}/no-video.mp4 --scene scenes/workcell --body parallelepiped"),
     ("track", "{notes} --scene scenes/workcell --body parallelepiped"),
     ("track", "--scene scenes/workcell --body nosuch"),
+    ("calibrate-intrinsics", "{tmp}/no-frames --cols 9 --rows 6 --square-mm 25 --out {tmp}/cam.yml"),
+    ("calibrate-intrinsics", "{notes} --cols 9 --rows 6 --square-mm 25 --out {tmp}/cam.yml"),
     ("demo", "--scene {tmp}/no-scene"),
     ("nosuch", ""),
 ]
