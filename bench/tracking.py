@@ -29,9 +29,12 @@ Lost or tracked (issue 14): from perturbed starts, on (c) the rendered box (the 
 many frames each lost rule reports as tracked while more than 5° or 1 cm from the truth, and how
 often it stops a run on a right frame; the old rule (confidence < 0.3) beside the new one.
 
+Capture range (issue 16): visp-cube from 10 starts 5° / 1 cm off the reference, 40 frames each:
+runs tracked whole, with the tracker's coarse-to-fine retry (``capture_px``) on and off.
+
 Speed: the tracker alone (frames decoded beforehand), pinned to one core with one thread
 (OpenCV, BLAS). Targets: mean edge distance ≤ 1.5 px on every frame of visp-cube, never lost,
-≥ 30 frames/s at 640×480 on one core.
+≥ 30 frames/s at 640×480 on one core; issue 16: also on every 3rd frame, ≤ 8 ms mean per frame.
 """
 
 from __future__ import annotations
@@ -72,6 +75,8 @@ TEABOX_K = np.array([[839.21470, 0, 325.66776], [0, 839.44555, 243.69727], [0, 0
 TEABOX_CLICKS = np.array([[192.0, 84.5], [349.5, 205.5], [324.0, 376.0], [458.5, 351.0]])
 TARGET_PX = 1.5
 TARGET_FPS = 30.0
+TARGET_MS = 8.0
+LAST_CPU_MS: list[float] = []  # CPU time per frame (ms) of the last run() kept: less moved by the load than wall time
 
 
 def run(frames: list[np.ndarray], camera: Camera, model: BRep, T0: np.ndarray, repeat: int = 1):
@@ -79,11 +84,12 @@ def run(frames: list[np.ndarray], camera: Camera, model: BRep, T0: np.ndarray, r
     best = None
     for _ in range(repeat):
         tracker = EdgeTracker(camera, model, T0)
-        poses, conf, ms, lost_at = [], [], [], None
+        poses, conf, ms, cpu, lost_at = [], [], [], [], None
         for i, f in enumerate(frames):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             T, c, lost = tracker.track(f)
             ms.append(1e3 * (time.perf_counter() - t0))
+            cpu.append(1e3 * (time.process_time() - c0))
             if lost:
                 lost_at = i
                 break
@@ -91,6 +97,7 @@ def run(frames: list[np.ndarray], camera: Camera, model: BRep, T0: np.ndarray, r
             conf.append(c)
         if best is None or np.mean(ms) < np.mean(best[3]):
             best = (poses, np.array(conf), lost_at, np.array(ms))
+            LAST_CPU_MS[:] = cpu
     return best
 
 
@@ -107,14 +114,14 @@ def row(name, n_total, poses, conf, lost_at, ms, dist, held):
     ok = "yes" if (lost_at is None and dist.max() <= TARGET_PX) else "NO"
     print(f"  {name:22s}{n:>5d}/{n_total:<5d}{lost:>9s}{conf.min():7.2f}{conf.mean():7.2f}"
           f"{dist.mean():8.2f}{np.median(dist):8.2f}{dist.max():8.2f}{held.mean():8.2f}{held.max():8.2f}"
-          f"{np.mean(ms):8.1f}{np.percentile(ms, 95):8.1f}{1e3 / np.mean(ms):8.0f}   {ok}")
+          f"{np.mean(ms):8.1f}{np.percentile(ms, 95):8.1f}{1e3 / np.mean(ms):8.0f}{np.mean(LAST_CPU_MS):9.1f}   {ok}")
 
 
 def real_sequences(repeat: int) -> None:
     cube = DATA / "visp-cube"
     tea = DATA / "visp-teabox"
-    print("  sequence              frames       lost  conf   conf   dist    dist    dist    held    held    ms/f    ms/f  frames/s  ≤1.5 px,")
-    print("                        tracked             min    mean   mean   median   max     mean    max     mean    95 %    (mean)   not lost")
+    print("  sequence              frames       lost  conf   conf   dist    dist    dist    held    held    ms/f    ms/f  frames/s  cpu ms/f  ≤1.5 px,")
+    print("                        tracked             min    mean   mean   median   max     mean    max     mean    95 %    (mean)    mean    not lost")
     if cube.is_dir():
         model = read_cao(cube / "cube_and_cylinder.cao")
         camera = Camera.from_intrinsics(CUBE_K, np.eye(4), 640, 480)
@@ -297,6 +304,42 @@ def confusion_tables(repeat_seed: int = 0, skip_rendered: bool = False) -> None:
         print(f"  (b) visp-cube: data not found at {cube} (skipped)")
 
 
+def capture_range(n_runs: int = 10, n_frames: int = 40, seed: int = 0) -> None:
+    """visp-cube from starts 5° / 1 cm off the reference (the tracker's own run from ViSP's pose):
+    how many runs of n_frames are tracked whole (never lost, every frame within 5° / 1 cm of it)."""
+    cube = DATA / "visp-cube"
+    if not cube.is_dir():
+        print(f"  capture range: data not found at {cube} (skipped)")
+        return
+    model = read_cao(cube / "cube_and_cylinder.cao")
+    camera = Camera.from_intrinsics(CUBE_K, np.eye(4), 640, 480)
+    frames = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for _, f in iter_frames(cube / "frames")]
+    ref_tracker = EdgeTracker(camera, model, read_visp_pose(cube / "cube.0.pos"))
+    ref = [ref_tracker.track(f).T_world_obj for f in frames]
+    rng = np.random.default_rng(seed)
+    starts = []
+    for _ in range(n_runs):
+        s = int(rng.integers(0, len(frames) - n_frames))
+        starts.append((s, perturbed(ref[s], 5.0, 0.01, rng)))
+    print(f"Capture range: visp-cube from {n_runs} starts 5° and 1 cm off (reference: tracked from ViSP's pose), {n_frames} frames each, "
+          f"seed {seed}; whole = never lost and every frame within {WRONG_DEG:.0f}° / {100 * WRONG_M:.0f} cm of the reference")
+    print("  (issue 16, measured outside this bench: ViSP's edge tracker 3 of 10 whole; target ≥ 8 of 10)")
+    for name, kw in (("now (coarse-to-fine retry from ±32 px)", {}), ("retry off (as before)", dict(capture_px=0.0)),
+                     ("retry off, band ±16 px", dict(capture_px=0.0, search_px=16.0))):
+        whole = 0
+        for s, T0 in starts:
+            tracker = EdgeTracker(camera, model, T0, **kw)
+            ok = True
+            for f, Tr in zip(frames[s:s + n_frames], ref[s:s + n_frames]):
+                T, _, lost = tracker.track(f)
+                deg, m = pose_error(T, Tr)
+                if lost or deg > WRONG_DEG or m > WRONG_M:
+                    ok = False
+                    break
+            whole += ok
+        print(f"    {name:42s}{whole:>3d} of {n_runs} runs whole")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--skip-rendered", action="store_true")
@@ -307,7 +350,8 @@ def main() -> int:
     print(f"  one core, one thread ({pin}; {platform.processor() or platform.machine()}, Python {platform.python_version()}, "
           f"OpenCV {cv2.__version__})")
     print("  dist = mean oriented-chamfer distance (px) of the projected model edges to Canny edges, per frame; held = initial pose kept")
-    print(f"  targets: visp-cube every frame: dist ≤ {TARGET_PX} px on every frame, never lost; ≥ {TARGET_FPS:.0f} frames/s at 640×480")
+    print(f"  targets: visp-cube every frame: dist ≤ {TARGET_PX} px on every frame, never lost; ≥ {TARGET_FPS:.0f} frames/s at 640×480;")
+    print(f"  issue 16: every 3rd frame too, and ≤ {TARGET_MS:.0f} ms mean per frame (ms/f: wall clock, one core; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores at the start)")
     print()
     real_sequences(args.repeat)
     print()
@@ -325,6 +369,8 @@ def main() -> int:
         lost = "never" if lost_at is None else f"frame {lost_at}"
         print(f"  {'rendered box':22s}{len(poses):>5d}/{len(frames):<3d}{lost:>8s}{err[:, 0].mean():12.3f}{err[:, 0].max():11.3f}"
               f"{1e3 * err[:, 1].mean():15.2f}{1e3 * err[:, 1].max():14.2f}{np.mean(ms):8.1f}{1e3 / np.mean(ms):10.0f}")
+    print()
+    capture_range()
     print()
     confusion_tables(skip_rendered=args.skip_rendered)
     return 0

@@ -5,7 +5,8 @@ the image's edges are OpenCV's Canny edge pixels, each with its gradient orienta
 the model's visible edges are sampled every ``step_px`` along their projection; each sample's
 distance is the Euclidean distance to the nearest Canny pixel whose gradient is within
 ``orient_tol_deg`` of the projected edge's normal (either sign): an oriented chamfer distance,
-read from one distance transform per orientation bin. Texture edges across the model's edges do
+read from one distance transform per orientation bin (evaluated only at the pixels around the
+samples, see ``OrientedEdges``; computed once per frame). Texture edges across the model's edges do
 not count; distances are capped at ``max_px`` (an edge not found at all counts as ``max_px``).
 
 Canny pixels sit at pixel centres, so a perfectly posed model still scores about 0.25 px (the
@@ -14,6 +15,9 @@ mean distance of a line to the pixel centres along it).
 
 from __future__ import annotations
 
+import threading
+import zlib
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import cv2
@@ -22,22 +26,84 @@ import numpy as np
 from core.brep import BRep
 from core.camera import Camera
 
-from .profiles import bilinear, to_gray_f32
+from .profiles import to_gray_f32
 from .track import sample_visible_edges
 
 __all__ = ["OrientedEdges", "EdgeDistance", "oriented_edges", "edge_distance"]
 
+_CACHE: OrderedDict = OrderedDict()  # the last few frames' OrientedEdges, by contents and options
+_CACHE_SIZE = 4
+_CACHE_LOCK = threading.Lock()
 
-@dataclass(frozen=True)
+
 class OrientedEdges:
-    """An image's Canny edges as one distance transform (H, W) float32 per orientation bin.
+    """An image's Canny edges split by gradient orientation, read as distances.
 
-    dist : array, shape (B, H, W), pixels to the nearest edge pixel whose gradient direction
-    (mod 180°) is within the bin's tolerance of the bin's centre. bin_deg : bin spacing (degrees).
+    The distance of any pixel to the nearest edge pixel of an orientation bin (the bin's distance
+    transform) is computed only where it is asked for (``distance``): each bin's edge pixels are put
+    in a k-d tree on first use, and only the pixels around the samples are queried. The values are
+    OpenCV's exact Euclidean distance transform (``DIST_MASK_PRECISE``) at those pixels, so the
+    scores are those of the whole-frame transforms, at a fraction of the cost.
+
+    bin_deg : bin spacing (degrees). ``dist`` : array, shape (B, H, W), every bin's whole distance
+    transform (computed on first access; scoring does not need it).
     """
 
-    dist: np.ndarray
-    bin_deg: float
+    def __init__(self, edges_uv: np.ndarray, theta_deg: np.ndarray, shape: tuple[int, int], bin_deg: float, orient_tol_deg: float):
+        self.edges_uv = edges_uv
+        self.theta_deg = theta_deg
+        self.shape = shape
+        self.bin_deg = float(bin_deg)
+        self.orient_tol_deg = float(orient_tol_deg)
+        self.n_bins = int(round(180.0 / self.bin_deg))
+        self._trees: dict[int, object] = {}
+        self._dist: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return self.n_bins
+
+    def _in_bin(self, b: int) -> np.ndarray:
+        diff = np.abs((self.theta_deg - b * self.bin_deg + 90.0) % 180.0 - 90.0)
+        return diff <= self.orient_tol_deg
+
+    def distance(self, b: int, u: np.ndarray, v: np.ndarray, max_px: float) -> np.ndarray:
+        """Bin b's distance transform read bilinearly at pixels (u, v), capped at max_px."""
+        from scipy.spatial import cKDTree
+
+        H, W = self.shape
+        u = np.clip(np.asarray(u, float), 0.0, W - 1.000001)
+        v = np.clip(np.asarray(v, float), 0.0, H - 1.000001)
+        if b not in self._trees:
+            pts = self.edges_uv[self._in_bin(b)]
+            self._trees[b] = cKDTree(pts) if len(pts) else None
+        tree = self._trees[b]
+        if tree is None:
+            return np.full(u.shape, float(max_px))
+        x0, y0 = u.astype(np.intp), v.astype(np.intp)
+        fx, fy = u - x0, v - y0
+        # The four pixels around each sample, each queried once. Neighbouring pixels' distances
+        # differ by at most √2, so beyond max_px + 1.5 every corner is beyond max_px: capped anyway.
+        corners = np.stack([y0 * W + x0, y0 * W + x0 + 1, (y0 + 1) * W + x0, (y0 + 1) * W + x0 + 1], axis=-1)
+        uniq, inv = np.unique(corners.ravel(), return_inverse=True)
+        q = np.column_stack([uniq % W, uniq // W]).astype(float)
+        dq, _ = tree.query(q, distance_upper_bound=float(max_px) + 1.5)
+        dq = np.where(np.isfinite(dq), dq, 1e6).astype(np.float32)[inv].reshape(corners.shape)
+        top = dq[..., 0] + fx * (dq[..., 1] - dq[..., 0])
+        bot = dq[..., 2] + fx * (dq[..., 3] - dq[..., 2])
+        return np.minimum(top + fy * (bot - top), max_px)
+
+    @property
+    def dist(self) -> np.ndarray:
+        if self._dist is None:
+            H, W = self.shape
+            dist = np.empty((self.n_bins, H, W), np.float32)
+            for b in range(self.n_bins):
+                sel = self._in_bin(b)
+                src = np.full((H, W), 255, np.uint8)
+                src[self.edges_uv[sel, 1].astype(int), self.edges_uv[sel, 0].astype(int)] = 0
+                dist[b] = cv2.distanceTransform(src, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) if sel.any() else np.float32(1e6)
+            self._dist = dist
+        return self._dist
 
 
 @dataclass(frozen=True)
@@ -59,24 +125,33 @@ class EdgeDistance:
 def oriented_edges(
     image: np.ndarray, *, canny_low: float = 10.0, canny_high: float = 30.0, sigma_px: float = 1.0, orient_tol_deg: float = 30.0, n_bins: int = 12
 ) -> OrientedEdges:
-    """Canny edges of an image (grey or RGB) split by gradient orientation, as distance transforms."""
-    gray = to_gray_f32(image)
+    """Canny edges of an image (grey or RGB) split by gradient orientation, to read as distances.
+
+    Computed once per frame: a call on an image of the same contents and options returns the
+    same ``OrientedEdges`` (the last few frames are kept), so auto match's candidates and a
+    benchmark's scores share them.
+    """
+    im = np.ascontiguousarray(image)
+    key = (im.shape, im.dtype.str, zlib.crc32(im.view(np.uint8).reshape(-1)) if im.size else 0,
+           float(canny_low), float(canny_high), float(sigma_px), float(orient_tol_deg), int(n_bins))
+    with _CACHE_LOCK:
+        hit = _CACHE.get(key)
+        if hit is not None:
+            _CACHE.move_to_end(key)
+            return hit
+    gray = to_gray_f32(im)
     blur = cv2.GaussianBlur(gray, (0, 0), sigma_px) if sigma_px > 0 else gray
     g8 = np.clip(np.round(blur), 0, 255).astype(np.uint8)
-    edges = cv2.Canny(g8, canny_low, canny_high, L2gradient=True) > 0
-    gx = cv2.Sobel(blur, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(blur, cv2.CV_32F, 0, 1, ksize=3)
+    ys, xs = np.nonzero(cv2.Canny(g8, canny_low, canny_high, L2gradient=True))
+    gx = cv2.Sobel(blur, cv2.CV_32F, 1, 0, ksize=3)[ys, xs]
+    gy = cv2.Sobel(blur, cv2.CV_32F, 0, 1, ksize=3)[ys, xs]
     theta = np.degrees(np.arctan2(gy, gx)) % 180.0
-    bin_deg = 180.0 / n_bins
-    H, W = gray.shape
-    dist = np.empty((n_bins, H, W), np.float32)
-    for b in range(n_bins):
-        centre = b * bin_deg
-        diff = np.abs((theta - centre + 90.0) % 180.0 - 90.0)
-        mask = edges & (diff <= orient_tol_deg)
-        src = np.where(mask, 0, 255).astype(np.uint8)
-        dist[b] = cv2.distanceTransform(src, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) if mask.any() else np.float32(1e6)
-    return OrientedEdges(dist, bin_deg)
+    out = OrientedEdges(np.column_stack([xs, ys]).astype(float), theta, gray.shape, 180.0 / n_bins, orient_tol_deg)
+    with _CACHE_LOCK:
+        _CACHE[key] = out
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    return out
 
 
 def edge_distance(
@@ -100,10 +175,9 @@ def edge_distance(
     if len(s) == 0:
         return EdgeDistance(np.zeros(0), np.zeros((0, 2)), float("nan"), float("nan"), 0.0)
     normal_deg = np.degrees(np.arctan2(s.normals[:, 1], s.normals[:, 0])) % 180.0
-    b = np.round(normal_deg / oe.bin_deg).astype(int) % len(oe.dist)
+    b = np.round(normal_deg / oe.bin_deg).astype(int) % len(oe)
     d = np.empty(len(s))
     for k in np.unique(b):
         sel = b == k
-        d[sel] = bilinear(oe.dist[k], s.uv[sel, 0], s.uv[sel, 1])
-    d = np.minimum(d, max_px)
+        d[sel] = oe.distance(int(k), s.uv[sel, 0], s.uv[sel, 1], max_px)
     return EdgeDistance(d, s.uv, float(d.mean()), float(np.median(d)), float(np.mean(d < max_px)))

@@ -10,7 +10,16 @@ Each frame (the "moving edges" tracker of Comport, Marchand et al., 2006, as in 
    model edge had in the previous frame (which side is brighter) when it is known;
 3. the pose is refined by the robust (Tukey) iterated small-motion step on the distances of the
    found points to their projected edges (``core.point_line_pose.refine_point_to_line``);
-4. steps 1–3 are repeated once at the refined pose with a narrower search (``refine_search_px``).
+4. steps 1–3 are repeated once at the refined pose with a narrower search (``refine_search_px``);
+5. if the answer fails the support check below while its confidence is good (motion beyond the
+   band), the frame is tried once more from the same start, coarse to fine (``capture_px``, then
+   the two bands above), before the object is declared lost.
+
+Which edges are seen is computed once per pass, at the pose the pass starts from
+(``visible_segments``), and the support check reuses the last pass's; the frame is smoothed only
+in tiles around the samples it searches (``BandSmoothed``). Keeping the first pass's visibility for
+the whole frame was tried: from starts 5° off on visp-cube, 6 more wrong frames were then reported
+tracked (``bench/tracking.py``, "Lost or tracked" (b)), so it is recomputed after the first pass.
 
 Per frame, ``confidence`` is the fraction of the samples whose edge was found and kept by the
 robust fit (weight ≥ 0.5). When it falls below ``lost_confidence``, too few samples remain, or the
@@ -38,16 +47,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import cv2
 import numpy as np
 
 from core.brep import BRep
 from core.camera import Camera
 from core.point_line_pose import PointLineFit, refine_point_to_line
-from core.transforms import check_T, invert_T
+from core.transforms import check_T
 
-from .profiles import search_along_normals, smooth, to_gray_f32
+from .profiles import search_along_normals, to_gray_f32
 
-__all__ = ["TrackResult", "TrackDiagnostics", "EdgeSamples", "EdgeTracker", "sample_visible_edges"]
+__all__ = ["TrackResult", "TrackDiagnostics", "EdgeSamples", "EdgeTracker", "sample_visible_edges", "VisibleSegments",
+           "visible_segments", "sample_view", "BandSmoothed"]
 
 
 class TrackResult(NamedTuple):
@@ -173,21 +184,55 @@ def sample_visible_edges(
         almost edge-on lies a pixel or two from the near one, and the search would confuse them.
     """
     T = np.asarray(T_world_obj, dtype=float)
+    view = visible_segments(camera, model, T, rims=rims, max_face_angle_deg=max_face_angle_deg, n_circle=n_circle)
+    return sample_view(camera, view, T, step_px=step_px, vertex_margin_px=vertex_margin_px, image_margin_px=image_margin_px)
+
+
+@dataclass(frozen=True)
+class VisibleSegments:
+    """The model's visible segments seen from one pose, in the object frame.
+
+    segments : array, shape (M, 2, 3), metres (object frame). kinds : array, shape (M,), str
+    ("edge", "silhouette", "rim"). feature : array, shape (M,), int, stable ids (``EdgeSamples``).
+    The tracker computes them once per pass and samples them again at the pass's refined pose for
+    the support check (a cylinder's silhouette generators, taken from the pass's starting pose,
+    move by r·δ²/2 along the line of sight: 6 µm for r = 4 cm and δ = 1°).
+    """
+
+    segments: np.ndarray
+    kinds: np.ndarray
+    feature: np.ndarray
+
+
+def visible_segments(
+    camera: Camera, model: BRep, T_world_obj: np.ndarray, *, rims: bool = False, max_face_angle_deg: float = 75.0, n_circle: int = 48
+) -> VisibleSegments:
+    """The segments ``sample_visible_edges`` samples at pose T_world_obj (object frame; see there)."""
+    T = np.asarray(T_world_obj, dtype=float)
     wf = model.wireframe(camera.center, T, n_circle=n_circle)
     fid, solid_rim = _feature_ids(model, wf.kind, n_circle)
     keep = wf.visible & (rims | ~solid_rim)
     if len(model.faces) and max_face_angle_deg < 90.0:
         keep[: len(model.edges)] &= _edges_on_faces_seen(model, T, camera.center, max_face_angle_deg)
     S = wf.segments[keep]
-    kinds = wf.kind[keep]
-    fid = fid[keep]
+    S_obj = (S - T[:3, 3]) @ T[:3, :3] if len(S) else np.zeros((0, 2, 3))
+    return VisibleSegments(S_obj, wf.kind[keep], fid[keep])
+
+
+def sample_view(
+    camera: Camera, view: VisibleSegments, T_world_obj: np.ndarray, *, step_px: float = 6.0, vertex_margin_px: float = 4.0, image_margin_px: float = 2.0
+) -> EdgeSamples:
+    """Samples along the segments of ``view`` placed at pose T_world_obj (see ``sample_visible_edges``)."""
+    T = np.asarray(T_world_obj, dtype=float)
+    kinds, fid = view.kinds, view.feature
     empty = EdgeSamples(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64))
-    if len(S) == 0:
+    if len(view.segments) == 0:
         return empty
-    A, B = S[:, 0], S[:, 1]
+    A_o, B_o = view.segments[:, 0], view.segments[:, 1]
+    A, B = A_o @ T[:3, :3].T + T[:3, 3], B_o @ T[:3, :3].T + T[:3, 3]
     sa, sb = camera.depth(A), camera.depth(B)
     front = (sa > 1e-6) & (sb > 1e-6)
-    A, B, sa, sb, kinds, fid = A[front], B[front], sa[front], sb[front], kinds[front], fid[front]
+    A, B, A_o, B_o, sa, sb, kinds, fid = A[front], B[front], A_o[front], B_o[front], sa[front], sb[front], kinds[front], fid[front]
     if len(A) == 0:
         return empty
     a, b = camera.project(A), camera.project(B)
@@ -217,15 +262,77 @@ def sample_visible_edges(
     lam = np.where(straight[seg_idx], lam_straight, lam_rim)
     sA, sB = sa[seg_idx], sb[seg_idx]
     mu = lam * sA / ((1.0 - lam) * sB + lam * sA)  # perspective-correct parameter on the 3D segment
-    Xw = A[seg_idx] + mu[:, None] * (B - A)[seg_idx]
+    X_obj = A_o[seg_idx] + mu[:, None] * (B_o - A_o)[seg_idx]
     uv = a[seg_idx] + lam[:, None] * d[seg_idx]
     dirs = d[seg_idx] / Ls[:, None]
     normals = np.column_stack([-dirs[:, 1], dirs[:, 0]])
     inside = camera.in_image(uv, image_margin_px)
-    T_obj_world = invert_T(T)
-    X_obj = Xw @ T_obj_world[:3, :3].T + T_obj_world[:3, 3]
-    D_obj = (B - A)[seg_idx] @ T_obj_world[:3, :3].T
+    D_obj = (B_o - A_o)[seg_idx]
     return EdgeSamples(uv[inside], normals[inside], X_obj[inside], D_obj[inside], fid[seg_idx][inside])
+
+
+class BandSmoothed:
+    """A frame smoothed (Gaussian, σ = sigma_px) only where the edge search reads it.
+
+    The frame is cut into ``tile_px`` tiles; ``around`` smooths the tiles within ``reach_px`` of
+    the given sample points that are not smoothed yet (one OpenCV call per run of tiles along a
+    row, each read with a margin of the kernel's radius, and the frame's edges replicated as the
+    whole-frame blur does), so the smoothed values are those of the whole frame's blur (to float
+    rounding: 1 ulp, 2e-5 grey levels, measured), computed in bands around the projected model only. ``img`` is the (H, W) float32 grey image; outside
+    the smoothed tiles its values are undefined.
+    """
+
+    def __init__(self, frame: np.ndarray, sigma_px: float, tile_px: int = 32):
+        im = np.asarray(frame)
+        to_gray_f32(im[:3, :3])  # the frame's kind checked (grey or RGB) before anything is read
+        self.frame = im
+        self.sigma_px = float(sigma_px)
+        self.tile = int(tile_px)
+        H, W = im.shape[:2]
+        self.img = np.empty((H, W), np.float32)
+        self.done = np.zeros((-(-H // self.tile), -(-W // self.tile)), bool)
+        # OpenCV's float kernel reaches 4σ (ksize = 8σ + 1); two pixels more (and every crop ≥ 3 px).
+        self.margin = int(np.ceil(4.0 * self.sigma_px)) + 2
+
+    def around(self, points_uv: np.ndarray, reach_px: float) -> np.ndarray:
+        """Smooth every tile within reach_px of the points (N, 2); returns ``img``."""
+        P = np.asarray(points_uv, float).reshape(-1, 2)
+        if len(P) == 0:
+            return self.img
+        nty, ntx = self.done.shape
+        lo = np.floor((P - reach_px) / self.tile).astype(np.int64)
+        hi = np.floor((P + reach_px) / self.tile).astype(np.int64)
+        need = np.zeros_like(self.done)
+        span = int(np.max(hi - lo)) + 1
+        for dy in range(span):
+            for dx in range(span):
+                ty, tx = np.minimum(lo[:, 1] + dy, hi[:, 1]), np.minimum(lo[:, 0] + dx, hi[:, 0])
+                ok = (ty >= 0) & (ty < nty) & (tx >= 0) & (tx < ntx)
+                need[ty[ok], tx[ok]] = True
+        need &= ~self.done
+        for ty in np.flatnonzero(need.any(axis=1)):
+            row = np.concatenate([[False], need[ty], [False]])
+            starts = np.flatnonzero(row[1:] & ~row[:-1])
+            ends = np.flatnonzero(~row[1:] & row[:-1])
+            for t0, t1 in zip(starts, ends):
+                self._smooth(ty * self.tile, (ty + 1) * self.tile, t0 * self.tile, t1 * self.tile)
+            self.done[ty] |= need[ty]
+        return self.img
+
+    def _smooth(self, y0: int, y1: int, x0: int, x1: int) -> None:
+        H, W = self.img.shape
+        y1, x1 = min(y1, H), min(x1, W)
+        m = self.margin
+        Y0, Y1, X0, X1 = max(0, y0 - m), min(H, y1 + m), max(0, x0 - m), min(W, x1 + m)
+        crop = to_gray_f32(self.frame[Y0:Y1, X0:X1])
+        if self.sigma_px > 0:
+            crop = cv2.GaussianBlur(crop, (0, 0), sigmaX=self.sigma_px, sigmaY=self.sigma_px, borderType=cv2.BORDER_REPLICATE)
+        self.img[y0:y1, x0:x1] = crop[y0 - Y0 : y1 - Y0, x0 - X0 : x1 - X0]
+
+
+def _reach(half_range_px: float) -> float:
+    """How far from a sample ``search_along_normals`` reads (its window, the derivative, bilinear)."""
+    return float(np.ceil(half_range_px)) + 4.0
 
 
 @dataclass(frozen=True)
@@ -274,6 +381,11 @@ class EdgeTracker:
     rims : also track the rims of cylinders and cones (see ``sample_visible_edges``).
     max_face_angle_deg : edges of faces seen more obliquely than this are not tracked (see
         ``sample_visible_edges``).
+    capture_px : when a frame fails the support check although most samples found an edge (the
+        signature of motion beyond the band), it is tracked once more from the same start, coarse
+        to fine: passes of ±capture_px, halved while wider than ±search_px, then ±search_px and
+        ±refine_search_px (the real cube tracked on every 3rd frame). The answer is kept only if
+        it passes every lost test, otherwise the object is lost as before. 0 turns it off.
     """
 
     def __init__(
@@ -297,6 +409,7 @@ class EdgeTracker:
         max_edge_distance_px: float = 1.5,
         check_search_px: float = 10.0,
         check_min_strength: float = 2.0,
+        capture_px: float = 32.0,
     ):
         if not isinstance(camera, Camera):
             raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
@@ -326,6 +439,7 @@ class EdgeTracker:
         self.max_edge_distance_px = float(max_edge_distance_px)
         self.check_search_px = float(check_search_px)
         self.check_min_strength = float(check_min_strength)
+        self.capture_px = float(capture_px)
         self.reset(T_world_obj)
 
     # ------------------------------------------------------------------ state
@@ -347,21 +461,33 @@ class EdgeTracker:
         return self._lost
 
     # ------------------------------------------------------------------ tracking
-    def _pass(self, img: np.ndarray, T: np.ndarray, half_range: float) -> _Pass:
+    def _view(self, T: np.ndarray) -> VisibleSegments:
+        """The visible segments at the frame's starting pose T (computed once per frame)."""
+        return visible_segments(self.camera, self.model, T, rims=self.rims, max_face_angle_deg=self.max_face_angle_deg)
+
+    def _samples(self, view: VisibleSegments, T: np.ndarray) -> EdgeSamples:
+        return sample_view(self.camera, view, T, step_px=self.sample_step_px, vertex_margin_px=self.vertex_margin_px)
+
+    def _schedule(self) -> tuple[float, ...]:
+        """The half-widths of the frame's search passes, coarse to fine."""
+        return (self.search_px, self.refine_search_px)
+
+    def _capture_schedule(self) -> tuple[float, ...]:
+        """The passes tried when the usual ones lose the object: from ``capture_px`` down (none if off)."""
+        out, h = [], self.capture_px
+        while h > self.search_px:
+            out.append(h)
+            h /= 2.0
+        return tuple(out) + (self.search_px, self.refine_search_px) if out else ()
+
+    def _pass(self, band: BandSmoothed, view: VisibleSegments, T: np.ndarray, half_range: float) -> _Pass:
         """Sample the visible edges at pose T, search the image along their normals, refine T."""
-        samples = sample_visible_edges(
-            self.camera,
-            self.model,
-            T,
-            step_px=self.sample_step_px,
-            vertex_margin_px=self.vertex_margin_px,
-            rims=self.rims,
-            max_face_angle_deg=self.max_face_angle_deg,
-        )
+        samples = self._samples(view, T)
         n = len(samples)
         if n == 0:
             return _Pass(samples, np.zeros((0, 2)), np.zeros(0, bool), np.zeros(0), np.zeros(0), None)
         pol = np.array([self._polarity.get(int(f), 0.0) for f in samples.feature]) if self._polarity else None
+        img = band.around(samples.uv, _reach(half_range))
         hits = search_along_normals(
             img, samples.uv, samples.normals, half_range, polarity=pol, min_strength=self.min_strength, prior_sigma_px=half_range / 2.0
         )
@@ -376,44 +502,30 @@ class EdgeTracker:
         w[found] = fit.weights
         return _Pass(samples, matched, found, hits.strength, w, fit)
 
-    def _edge_distance(self, img: np.ndarray, T: np.ndarray) -> float:
+    def _edge_distance(self, band: BandSmoothed, view: VisibleSegments, T: np.ndarray) -> float:
         """Mean distance (px) of the samples at pose T to the nearest image edge along their normals."""
-        s = sample_visible_edges(self.camera, self.model, T, step_px=self.sample_step_px, vertex_margin_px=self.vertex_margin_px,
-                                 rims=self.rims, max_face_angle_deg=self.max_face_angle_deg)
+        s = self._samples(view, T)
         if len(s) == 0:
             return float("inf")
         R = self.check_search_px
+        img = band.around(s.uv, _reach(R))
         hits = search_along_normals(img, s.uv, s.normals, R, min_strength=self.check_min_strength, prior_sigma_px=R / 4.0)
         return float(np.mean(np.where(hits.found, np.minimum(np.abs(hits.offset_px), R), R)))
 
-    def track(self, frame: np.ndarray) -> TrackResult:
-        """Follow the object into the next frame.
+    def _attempt(self, band: "BandSmoothed", view: VisibleSegments, schedule: tuple[float, ...]):
+        """The passes of ``schedule`` from the last good pose, and the lost tests on their answer.
 
-        Parameters
-        ----------
-        frame : array, shape (H, W) or (H, W, 3), the video frame (grey or RGB), of the camera's size.
-
-        Returns
-        -------
-        TrackResult
-            (T_world_obj (4, 4), confidence in [0, 1], lost). When lost, T_world_obj is the last
-            good pose and tracking stops until ``reset``; ``diagnostics`` says why.
+        Returns (T, the last pass, reason ("" if tracked), confidence, inliers (bool per sample),
+        edge_distance_px).
         """
-        if self._lost:
-            return TrackResult(self._T.copy(), 0.0, True)
-        gray = to_gray_f32(frame)
-        if gray.shape != (self.camera.height, self.camera.width):
-            raise ValueError(
-                f"frame is {gray.shape[1]}×{gray.shape[0]} px but the camera is {self.camera.width}×{self.camera.height}; "
-                "track frames of the calibrated camera"
-            )
-        img = smooth(gray, self.sigma_px)
         T = self._T
         reason = ""
         p = None
         try:
-            for half_range in (self.search_px, self.refine_search_px):
-                p = self._pass(img, T, half_range)
+            for k, half_range in enumerate(schedule):
+                if k:  # which edges are seen, again at the pose the last pass reached
+                    view = self._view(T)
+                p = self._pass(band, view, T, half_range)
                 if p.fit is None:
                     reason = f"only {int(p.found.sum())} of {len(p.samples)} samples found an edge"
                     break
@@ -437,14 +549,52 @@ class EdgeTracker:
                 jump = np.linalg.norm(
                     self.camera.project_obj(T, p.samples.X_obj) - self.camera.project_obj(self._T, p.samples.X_obj), axis=1
                 )
-                if np.median(jump) > 2.0 * self.search_px:
+                if np.median(jump) > 2.0 * max(schedule):
                     reason = f"the pose jumped {np.median(jump):.1f} px, more than the search band allows"
         edge_px = float("nan")
         if not reason:
-            edge_px = self._edge_distance(img, T)
+            edge_px = self._edge_distance(band, view, T)
             if edge_px > self.max_edge_distance_px:
                 reason = (f"the model's edges lie {edge_px:.1f} px from the image's edges on average (more than "
                           f"{self.max_edge_distance_px:.1f} px): the pose is not supported by the image")
+        return T, p, reason, confidence, inl, edge_px
+
+    def track(self, frame: np.ndarray) -> TrackResult:
+        """Follow the object into the next frame.
+
+        Parameters
+        ----------
+        frame : array, shape (H, W) or (H, W, 3), the video frame (grey or RGB), of the camera's size.
+
+        Returns
+        -------
+        TrackResult
+            (T_world_obj (4, 4), confidence in [0, 1], lost). When lost, T_world_obj is the last
+            good pose and tracking stops until ``reset``; ``diagnostics`` says why.
+        """
+        if self._lost:
+            return TrackResult(self._T.copy(), 0.0, True)
+        im = np.asarray(frame)
+        to_gray_f32(im[:3, :3] if im.ndim >= 2 else im)  # grey or RGB, or a clear error
+        if im.shape[:2] != (self.camera.height, self.camera.width):
+            raise ValueError(
+                f"frame is {im.shape[1]}×{im.shape[0]} px but the camera is {self.camera.width}×{self.camera.height}; "
+                "track frames of the calibrated camera"
+            )
+        band = BandSmoothed(im, self.sigma_px)  # blurred only around the samples, as they are searched
+        view = self._view(self._T)  # which edges are seen from the start (shared by a retry's first pass)
+        T, p, reason, confidence, inl, edge_px = self._attempt(band, view, self._schedule())
+        wide = self._capture_schedule()
+        if reason and wide and np.isfinite(edge_px) and confidence >= self.lost_confidence:
+            # Most samples found their edge but the model does not sit on the image's edges: the
+            # signature of motion beyond the band (a wrong convergence shows a low confidence, and
+            # a wider search would only settle it elsewhere). Once more from the same start, coarse
+            # to fine from a wider band; kept only if it passes every test, else the first answer stands.
+            retry = self._attempt(band, view, wide)
+            if not retry[2]:
+                T, p, reason, confidence, inl, edge_px = retry
+        n = len(p.samples)
+        n_inl = int(inl.sum())
         rms = p.fit.rms_px if p.fit is not None else float("nan")
         matched = np.where(p.found[:, None], p.matched, np.nan)
         cov = None if p.fit is None else p.fit.cov.copy()

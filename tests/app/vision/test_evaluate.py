@@ -38,3 +38,32 @@ def test_texture_across_the_model_edges_does_not_count():
     T = make_T(np.eye(3), [(160.5 - 159.5) / 420.0, 0.0, 1.0])  # the model line projects to u = 160.5
     d = edge_distance(img, cam, seg, T)
     assert d.mean_px < 0.7
+
+
+def test_distances_read_around_the_samples_equal_the_whole_frame_transforms():
+    from app.vision.profiles import bilinear
+    from app.vision.track import sample_visible_edges
+
+    cam = Camera.from_intrinsics(K, np.eye(4), 320, 240)
+    box = BRep.box(0.2, 0.13, 0.08)
+    T = make_T(exp_so3([2.2, 0.4, 0.3]), [0.0, 0.0, 0.9])
+    img = render_poses(cam, box, [T], noise_sigma=2.0)[0]
+    oe = oriented_edges(img)
+    rng = np.random.default_rng(1)
+    for k in range(6):
+        Tk = make_T(exp_so3(rng.normal(0.0, 0.05, 3)) @ T[:3, :3], T[:3, 3] + rng.normal(0.0, 0.01, 3))
+        d = edge_distance(oe, cam, box, Tk, max_px=10.0)
+        s = sample_visible_edges(cam, box, Tk, step_px=2.0)
+        b = np.round((np.degrees(np.arctan2(s.normals[:, 1], s.normals[:, 0])) % 180.0) / oe.bin_deg).astype(int) % 12
+        ref = np.array([bilinear(oe.dist[bi], np.array([u]), np.array([v]))[0] for bi, (u, v) in zip(b, s.uv)])
+        assert np.allclose(d.distances_px, np.minimum(ref, 10.0), atol=1e-4)
+
+
+def test_edges_are_computed_once_per_frame_contents():
+    img = np.full((60, 80), 50, np.uint8)
+    img[:, 40:] = 200
+    assert oriented_edges(img) is oriented_edges(img.copy())
+    other = img.copy()
+    other[10:20, 10:20] = 120  # the same array changed: its edges are computed again
+    assert oriented_edges(other) is not oriented_edges(img)
+    assert oriented_edges(img, sigma_px=2.0) is not oriented_edges(img)
