@@ -12,7 +12,7 @@ Each frame (the "moving edges" tracker of Comport, Marchand et al., 2006, as in 
    found points to their projected edges (``core.point_line_pose.refine_point_to_line``);
 4. steps 1–3 are repeated once at the refined pose with a narrower search (``refine_search_px``);
 5. if the answer fails the support check below while its confidence is good (motion beyond the
-   band), the frame is tried once more from the same start, coarse to fine (``capture_px``, then
+   band), after at least one frame followed, the frame is tried once more from the same start, coarse to fine (``capture_px``, then
    the two bands above), before the object is declared lost.
 
 Which edges are seen is computed once per pass, at the pose the pass starts from
@@ -382,8 +382,10 @@ class EdgeTracker:
     max_face_angle_deg : edges of faces seen more obliquely than this are not tracked (see
         ``sample_visible_edges``).
     capture_px : when a frame fails the support check although most samples found an edge (the
-        signature of motion beyond the band), it is tracked once more from the same start, coarse
-        to fine: passes of ±capture_px, halved while wider than ±search_px, then ±search_px and
+        signature of motion beyond the band), and the tracker has followed at least one frame since
+        its pose was given (``reset``: a given pose that fails is the operator's or the matcher's
+        to fix, and the matcher's one-step settling must stay quick), it is tracked once more from
+        the same start, coarse to fine: passes of ±capture_px, halved while wider than ±search_px, then ±search_px and
         ±refine_search_px (the real cube tracked on every 3rd frame). The answer is kept only if
         it passes every lost test, otherwise the object is lost as before. 0 turns it off.
     """
@@ -448,6 +450,7 @@ class EdgeTracker:
         self._T = check_T(T_world_obj, "T_world_obj").copy()
         self._lost = False
         self._polarity: dict[int, float] = {}
+        self._followed = False  # a frame tracked since this pose was given (the retry is for motion, not for a start)
         self.diagnostics: TrackDiagnostics | None = None
 
     @property
@@ -585,7 +588,7 @@ class EdgeTracker:
         view = self._view(self._T)  # which edges are seen from the start (shared by a retry's first pass)
         T, p, reason, confidence, inl, edge_px = self._attempt(band, view, self._schedule())
         wide = self._capture_schedule()
-        if reason and wide and np.isfinite(edge_px) and confidence >= self.lost_confidence:
+        if reason and wide and self._followed and np.isfinite(edge_px) and confidence >= self.lost_confidence:
             # Most samples found their edge but the model does not sit on the image's edges: the
             # signature of motion beyond the band (a wrong convergence shows a low confidence, and
             # a wider search would only settle it elsewhere). Once more from the same start, coarse
@@ -603,6 +606,7 @@ class EdgeTracker:
             self._lost = True
             return TrackResult(self._T.copy(), float(confidence), True)
         self._T = T
+        self._followed = True
         # Remember each feature's polarity (the sign of the derivative along its normal).
         pol: dict[int, float] = {}
         for f in np.unique(p.samples.feature[inl]):
