@@ -33,6 +33,13 @@ def test_track_follows_the_moving_box_and_accept_writes_the_tracked_pose(video_s
     marks = wf.marks()
     assert len(marks.tracked) == 1 and marks.tracked[0].chosen and len(marks.found_points) > 20
     assert wf.summary()["frames"] == 13 and wf.summary()["state"] == "tracking"
+    # the instruction says how well the tracked pose fits the frame, and that it can be wrong where the image does not show it
+    import re
+
+    fit = re.search(r"edges (\d+\.\d) px off, σ (\d+\.\d) mm / (\d+\.\d\d)°", wf.prompt_text())
+    assert fit, wf.prompt_text()
+    assert float(fit[1]) == round(wf.diagnostics.edge_distance_px, 1) and float(fit[1]) <= 1.5
+    assert 0 < float(fit[2]) < 20 and 0 < float(fit[3]) < 2 and "can be wrong" in wf.prompt_text()
     assert db.get("parallelepiped").version == obj.version  # nothing written before accept
     rec = wf.accept()
     assert rec.version == obj.version + 1 and np.allclose(rec.T_world_obj, wf.T_world_obj)
