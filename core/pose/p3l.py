@@ -222,10 +222,9 @@ def p3l(
         V /= np.linalg.norm(V, axis=1, keepdims=True)
         Rs = T[:count, :3, :3].copy()
         t = _translations_from_points(camera, Rs, n, d, A, clicks, _common_point(A, V))
-        Cl, el, sl = C.tolist(), edges_c.tolist(), segs_c.tolist()
         count = 0
         for R, tk in zip(Rs, t):
-            c = distance_cost(Cl, R.tolist(), tk.tolist(), el, sl, pobj.tolist(), puv.tolist())
+            c = distance_cost(C, R, tk, edges_c, segs_c, pobj, puv)
             if c is not None:
                 T[count, :3, :3], T[count, :3, 3], T[count, 3] = R, tk, (0.0, 0.0, 0.0, 1.0)
                 cost[count] = c

@@ -294,8 +294,8 @@ def residuals(
 def distance_cost(C, R, t, edges, segs, points_obj, points_uv) -> float | None:
     """Σ of squared pixel distances of the clicks to the projected *finite* model segments and
     points at pose (R, t), or None when a clicked model edge (both endpoints) or point is behind
-    the camera. Plain Python on nested lists (C (3, 4), R (3, 3), t (3,), edges (S, 2, 3),
-    segs (S, 2, 2), points_obj (P, 3), points_uv (P, 2)): it ranks P3L candidates in microseconds.
+    the camera. Arrays or nested lists (C (3, 4), R (3, 3), t (3,), edges (S, 2, 3),
+    segs (S, 2, 2), points_obj (P, 3), points_uv (P, 2)): the compiled kernel ``_kernels.distance_cost`` computes it.
 
     Unlike the measurement model (distance across the infinite projected line), beyond a
     segment's ends the distance is to the nearer end: poses that put the edges on the right lines
@@ -303,58 +303,16 @@ def distance_cost(C, R, t, edges, segs, points_obj, points_uv) -> float | None:
     distances between 2D points of image obtained and initial image" that picks the solution. An
     edge with one endpoint behind the camera is measured to its infinite image line.
     """
-    # Rows a of [C[:, :3] R | C[:, :3] t + C[:, 3]]: h = C (R X + t) for X in the object frame.
-    (a00, a01, a02, a03), (a10, a11, a12, a13), (a20, a21, a22, a23) = (
-        (
-            C0 * R[0][0] + C1 * R[1][0] + C2 * R[2][0],
-            C0 * R[0][1] + C1 * R[1][1] + C2 * R[2][1],
-            C0 * R[0][2] + C1 * R[1][2] + C2 * R[2][2],
-            C0 * t[0] + C1 * t[1] + C2 * t[2] + C3,
-        )
-        for C0, C1, C2, C3 in C
-    )
-    cost = 0.0
-    for ((x0, x1, x2), (y0, y1, y2)), ((qu1, qv1), (qu2, qv2)) in zip(edges, segs):
-        sa = a20 * x0 + a21 * x1 + a22 * x2 + a23  # depths of the two endpoints
-        sb = a20 * y0 + a21 * y1 + a22 * y2 + a23
-        if sa <= 0.0 and sb <= 0.0:
-            return None
-        ha0, ha1 = a00 * x0 + a01 * x1 + a02 * x2 + a03, a10 * x0 + a11 * x1 + a12 * x2 + a13
-        hb0, hb1 = a00 * y0 + a01 * y1 + a02 * y2 + a03, a10 * y0 + a11 * y1 + a12 * y2 + a13
-        if sa > 0.0 and sb > 0.0:
-            au, av = ha0 / sa, ha1 / sa
-            du, dv = hb0 / sb - au, hb1 / sb - av
-            dd = du * du + dv * dv + 1e-300
-            for qu, qv in ((qu1, qv1), (qu2, qv2)):
-                lam = min(max(((qu - au) * du + (qv - av) * dv) / dd, 0.0), 1.0)
-                eu, ev = qu - au - lam * du, qv - av - lam * dv
-                cost += eu * eu + ev * ev
-        else:
-            l0 = ha1 * sb - sa * hb1
-            l1 = sa * hb0 - ha0 * sb
-            l2 = ha0 * hb1 - ha1 * hb0
-            g2 = l0 * l0 + l1 * l1 + 1e-300
-            cost += ((l0 * qu1 + l1 * qv1 + l2) ** 2 + (l0 * qu2 + l1 * qv2 + l2) ** 2) / g2
-    for (x0, x1, x2), (qu, qv) in zip(points_obj, points_uv):
-        s = a20 * x0 + a21 * x1 + a22 * x2 + a23
-        if s <= 0.0:
-            return None
-        cost += ((a00 * x0 + a01 * x1 + a02 * x2 + a03) / s - qu) ** 2 + ((a10 * x0 + a11 * x1 + a12 * x2 + a13) / s - qv) ** 2
-    return cost
+    f = lambda x, *shape: np.ascontiguousarray(np.asarray(x, dtype=float).reshape(shape))  # noqa: E731
+    cost = _k.distance_cost(f(C, 3, 4), f(R, 3, 3), f(t, 3), f(edges, -1, 2, 3), f(segs, -1, 2, 2),
+                            f(points_obj, -1, 3), f(points_uv, -1, 2))
+    return None if cost < 0.0 else float(cost)  # the kernel's −1: a clicked feature behind the camera
 
 
 def pose_distance_cost(camera: Camera, T_world_obj: np.ndarray, clicks: Clicks) -> float:
     """RMS pixel distance of the clicks to the projected finite model segments and points at a
     pose (``distance_cost``), inf when a clicked feature is behind the camera."""
     T = np.asarray(T_world_obj, dtype=float)
-    cost = distance_cost(
-        camera.C.tolist(),
-        T[:3, :3].tolist(),
-        T[:3, 3].tolist(),
-        clicks.edges_obj.tolist(),
-        clicks.segs_uv.tolist(),
-        clicks.points_obj.tolist(),
-        clicks.points_uv.tolist(),
-    )
+    cost = distance_cost(camera.C, T[:3, :3], T[:3, 3], clicks.edges_obj, clicks.segs_uv, clicks.points_obj, clicks.points_uv)
     n = 2 * clicks.n_segments + clicks.n_points
     return float("inf") if cost is None else float(np.sqrt(cost / max(n, 1)))
