@@ -50,6 +50,28 @@ def wait_until(predicate, timeout_s: float = 8.0, what: str = "condition") -> No
     raise AssertionError(f"timed out waiting for {what}")
 
 
+def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float = 0.6) -> None:
+    """Wait until the page has been fitted and the viewer camera it reports has not changed for
+    ``steady_s`` (a click placed through a camera the page has already left misses: on a loaded
+    machine the fitted camera can arrive well after the page connects)."""
+
+    def state():
+        cam = panel.client.camera
+        return (panel.fitted_aspect is not None, tuple(np.round(cam.position, 6)), tuple(np.round(cam.wxyz, 6)),
+                round(float(cam.fov), 6), int(cam.image_width), int(cam.image_height))
+
+    deadline = time.monotonic() + timeout_s
+    last, since = None, time.monotonic()
+    while time.monotonic() < deadline:
+        now = state()
+        if now != last:
+            last, since = now, time.monotonic()
+        elif now[0] and time.monotonic() - since >= steady_s:
+            return
+        time.sleep(0.05)
+    raise AssertionError("timed out waiting for the page's fitted camera to settle")
+
+
 def wait_for_panel(server, before: set, timeout_s: float = 20.0):
     """The panel of the client that connected after ``before`` (a set of client ids), once fitted."""
     deadline = time.monotonic() + timeout_s
@@ -193,7 +215,7 @@ class Interface:
         # select an object pick what is drawn
         wait_until(lambda: self.server.database_drawn, 20.0, "the database overlay to be drawn")
         close_webgl_notice(page)
-        time.sleep(0.8)  # let the fitted camera and the first overlay arrive
+        wait_for_steady_camera(panel)  # clicks are placed through the camera the page reports: let the fit land
         page.panel = panel
         return page
 
