@@ -430,12 +430,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
     while (item := lines.peek()) is not None and item[1][:1] in ("l", "L"):
         number, line = lines.next("load(...)")
         n_loads += 1
-        target, T = _parse_load(lines, number, line)
-        if target in stack:
-            raise lines.error(number, f"cyclic include: {target} is already being read")
-        if not target.exists():
-            raise lines.error(number, f"included file not found: {target}")
-        sub = reading.read(target, f"{path}:{number}", stack + (target,))
+        target, sub, T = _read_include(lines, number, line, path, stack, reading)
         if sub is not None:
             placed = sub.transformed(T)
             if _reach_m(placed) > MAX_COORD_M:
@@ -581,17 +576,24 @@ def read_cao_options(path: str | Path) -> tuple[BRep, CaoOptions]:
     return model, reading.options.get(path, CaoOptions())
 
 
+def _read_include(lines, number: int, line: str, path: Path, stack: tuple[Path, ...], reading):
+    """One ``load(...)`` line of a ``.cao`` or ``.init``: (the included file, what reading it gave —
+    None when it holds nothing —, its placement T (4, 4)), after the cycle and existence checks;
+    CaoError naming path:number otherwise."""
+    target, T = _parse_load(lines, number, line)
+    if target in stack:
+        raise lines.error(number, f"cyclic include: {target} is already being read")
+    if not target.exists():
+        raise lines.error(number, f"included file not found: {target}")
+    return target, reading.read(target, f"{path}:{number}", stack + (target,)), T
+
+
 def _parse_init(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) -> np.ndarray | None:
     lines = _Lines(path, text)
     parts: list[np.ndarray] = []
     while (item := lines.peek()) is not None and item[1][:1] in ("l", "L"):
         number, line = lines.next("load(...)")
-        target, T = _parse_load(lines, number, line)
-        if target in stack:
-            raise lines.error(number, f"cyclic include: {target} is already being read")
-        if not target.exists():
-            raise lines.error(number, f"included file not found: {target}")
-        sub = reading.read(target, f"{path}:{number}", stack + (target,))
+        _, sub, T = _read_include(lines, number, line, path, stack, reading)
         if sub is not None:
             placed = sub @ T[:3, :3].T + T[:3, 3]
             if np.abs(placed).max() > MAX_COORD_M:
