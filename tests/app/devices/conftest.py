@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -96,3 +97,15 @@ def aim_steps(scene, X_world):
     pan, tilt, _ = aim(scene.turret.T_world_turret, X_world)
     step = scene.turret.step_rad
     return int(np.round(float(pan) / step)), int(np.round(float(tilt) / step))
+
+
+@pytest.fixture
+def rf_bench(workcell, make_site, drivers):
+    """A noiseless site with the beam on the unknown box's facing face: (site, rf, turret, exact range)."""
+    site, rf_url, tu_url = make_site()
+    rf, tu = drivers(rf_url, tu_url)
+    X, _, _ = facing_face(workcell)
+    tu.move_to_steps(*aim_steps(workcell, X))
+    dist, body = site.rangefinder.true_range(time.monotonic())
+    assert body == "unknown_box"
+    return site, rf, tu, round(dist, 4)

@@ -25,20 +25,8 @@ from app.devices.drivers.rangefinder import RangeFinder
 from .conftest import FAST_DRIVER, aim_steps, box_point, facing_face
 
 
-@pytest.fixture
-def bench(workcell, make_site, drivers):
-    """A noiseless site with the beam on the unknown box's facing face: (site, rf, turret, exact range)."""
-    site, rf_url, tu_url = make_site()
-    rf, tu = drivers(rf_url, tu_url)
-    X, _, _ = facing_face(workcell)
-    tu.move_to_steps(*aim_steps(workcell, X))
-    dist, body = site.rangefinder.true_range(time.monotonic())
-    assert body == "unknown_box"
-    return site, rf, tu, round(dist, 4)
-
-
-def test_measure_returns_the_true_range_to_a_tenth_of_a_millimetre(bench):
-    site, rf, tu, expected = bench
+def test_measure_returns_the_true_range_to_a_tenth_of_a_millimetre(rf_bench):
+    site, rf, tu, expected = rf_bench
     assert rf.measure() == pytest.approx(expected, abs=1e-9)
     assert rf.stats["timeouts"] == rf.stats["corrupt"] == rf.stats["resyncs"] == 0
 
@@ -62,32 +50,32 @@ RECOVERED = {
 
 
 @pytest.mark.parametrize("fault", list(RECOVERED.values()), ids=list(RECOVERED))
-def test_each_line_fault_still_gives_the_right_value(bench, fault):
-    site, rf, tu, expected = bench
+def test_each_line_fault_still_gives_the_right_value(rf_bench, fault):
+    site, rf, tu, expected = rf_bench
     site.rangefinder.faults.push(fault)
     assert rf.measure() == pytest.approx(expected, abs=1e-9)
     assert [k for k, _ in site.rangefinder.faults.applied] == [fault.kind]  # the fault did hit
     assert rf.measure() == pytest.approx(expected, abs=1e-9)  # and the line is clean afterwards
 
 
-def test_faults_that_need_no_retry_cost_none(bench):
-    site, rf, tu, expected = bench
+def test_faults_that_need_no_retry_cost_none(rf_bench):
+    site, rf, tu, expected = rf_bench
     for kind in ("split", "junk", "unsolicited"):
         site.rangefinder.faults.push(Fault(kind, match=b"g0g", delay_s=0.02))
         assert rf.measure() == pytest.approx(expected, abs=1e-9)
     assert rf.stats["timeouts"] == rf.stats["corrupt"] == rf.stats["resyncs"] == 0
 
 
-def test_faults_that_need_a_retry_resynchronise_first(bench):
-    site, rf, tu, expected = bench
+def test_faults_that_need_a_retry_resynchronise_first(rf_bench):
+    site, rf, tu, expected = rf_bench
     site.rangefinder.faults.push(Fault("drop", match=b"g0g"))
     assert rf.measure() == pytest.approx(expected, abs=1e-9)
     assert rf.stats["timeouts"] >= 1 and rf.stats["resyncs"] >= 1
     assert "s0c" in site.rangefinder.commands_seen  # stale replies flushed with sNc before retrying
 
 
-def test_a_late_reply_is_never_taken_for_the_next_measurement(workcell, bench):
-    site, rf, tu, first = bench
+def test_a_late_reply_is_never_taken_for_the_next_measurement(workcell, rf_bench):
+    site, rf, tu, first = rf_bench
     site.rangefinder.faults.push(Fault("late", match=b"g0g", delay_s=0.5))
     assert rf.measure() == pytest.approx(first, abs=1e-9)
     table = workcell.body("table")
@@ -98,8 +86,8 @@ def test_a_late_reply_is_never_taken_for_the_next_measurement(workcell, bench):
     assert rf.measure() == pytest.approx(second, abs=1e-9)
 
 
-def test_device_errors_raise_their_exceptions(workcell, bench):
-    site, rf, tu, expected = bench
+def test_device_errors_raise_their_exceptions(workcell, rf_bench):
+    site, rf, tu, expected = rf_bench
     site.rangefinder.faults.push(Fault("error", match=b"g0g"))  # the emulator's default: 260
     with pytest.raises(AmbiguousMeasurementError, match="260"):
         rf.measure()
@@ -112,15 +100,15 @@ def test_device_errors_raise_their_exceptions(workcell, bench):
         rf.measure()
 
 
-def test_the_same_corruption_on_every_attempt_is_a_noisy_line(bench):
-    site, rf, tu, expected = bench
+def test_the_same_corruption_on_every_attempt_is_a_noisy_line(rf_bench):
+    site, rf, tu, expected = rf_bench
     site.rangefinder.faults.push(*[Fault("garble", match=b"g0g", at=6, data=b"?")] * (rf.retries + 1))
     with pytest.raises(NoisyLineError, match="the range finder's line is noisy .*check the cable and the baud rate"):
         rf.measure()
 
 
-def test_plausibility_limits_reject_a_well_formed_distance(bench):
-    site, rf, tu, expected = bench
+def test_plausibility_limits_reject_a_well_formed_distance(rf_bench):
+    site, rf, tu, expected = rf_bench
     strict = RangeFinder(rf.url, plausible_range_m=(0.05, expected - 0.1), **FAST_DRIVER)
     try:
         with pytest.raises(ProtocolError, match="implausible"):
@@ -129,8 +117,8 @@ def test_plausibility_limits_reject_a_well_formed_distance(bench):
         strict.close()
 
 
-def test_a_garbled_digit_that_still_parses_is_an_outlier_of_n_shots_or_read_again(bench):
-    site, rf, tu, expected = bench
+def test_a_garbled_digit_that_still_parses_is_an_outlier_of_n_shots_or_read_again(rf_bench):
+    site, rf, tu, expected = rf_bench
     digit = b"7" if str(int(expected * 1e4)).zfill(8)[4] != "7" else b"3"
     site.rangefinder.faults.push(Fault("garble", match=b"g0g", at=8, data=digit))
     m = rf.measure_n(5)  # 3 shots or more: the median outvotes it, and it is flagged
@@ -160,8 +148,8 @@ def test_measure_n_counts_misses_and_reports_spread(workcell, make_site, drivers
         rf.measure_n(0)
 
 
-def test_deadline_is_kept_when_the_device_never_answers(bench):
-    site, rf, tu, expected = bench
+def test_deadline_is_kept_when_the_device_never_answers(rf_bench):
+    site, rf, tu, expected = rf_bench
     site.rangefinder.faults.set_rates({"drop": 1.0})
     t0 = time.monotonic()
     with pytest.raises(DeviceTimeout, match="no valid reply"):
@@ -169,8 +157,8 @@ def test_deadline_is_kept_when_the_device_never_answers(bench):
     assert time.monotonic() - t0 < 0.6 + 0.3
 
 
-def test_a_device_that_stays_unplugged_raises_device_disconnected(bench):
-    site, rf, tu, expected = bench
+def test_a_device_that_stays_unplugged_raises_device_disconnected(rf_bench):
+    site, rf, tu, expected = rf_bench
     site.rangefinder.unplug(math.inf)
     time.sleep(0.05)
     t0 = time.monotonic()
@@ -183,8 +171,8 @@ def test_a_device_that_stays_unplugged_raises_device_disconnected(bench):
     assert rf.stats["reconnects"] >= 1
 
 
-def test_other_commands(bench):
-    site, rf, tu, expected = bench
+def test_other_commands(rf_bench):
+    site, rf, tu, expected = rf_bench
     assert rf.temperature_c() == pytest.approx(24.0)
     rf.laser_on()
     assert site.rangefinder.laser_on
@@ -223,8 +211,8 @@ def test_through_a_real_pty_with_faults_and_a_replug(workcell, make_site, driver
     assert site.rangefinder.port.device.startswith("/dev/")  # a new pty behind the same link
 
 
-def test_nan_and_negative_arguments_are_refused_before_anything_is_sent(bench):
-    site, rf, tu, expected = bench
+def test_nan_and_negative_arguments_are_refused_before_anything_is_sent(rf_bench):
+    site, rf, tu, expected = rf_bench
     site.rangefinder.commands_seen.clear()
     nan = float("nan")
     for call in (

@@ -70,18 +70,6 @@ def test_an_endless_line_is_noisy_and_no_message_or_log_carries_more_than_200_by
     assert all(len(t) < 400 for t in texts)  # each quotes at most 200 received bytes
 
 
-@pytest.fixture
-def rf_bench(workcell, make_site, drivers):
-    """A noiseless site, the beam on the box: (site, rf, turret, exact range)."""
-    site, rf_url, tu_url = make_site()
-    rf, tu = drivers(rf_url, tu_url)
-    X, _, _ = facing_face(workcell)
-    tu.move_to_steps(*aim_steps(workcell, X))
-    dist, body = site.rangefinder.true_range(time.monotonic())
-    assert body == "unknown_box"
-    return site, rf, tu, round(dist, 4)
-
-
 @pytest.mark.parametrize("fake", [None, "near"], ids=["random value", "a value within 5 sigma"])
 def test_a_complete_distance_injected_before_the_real_one_is_not_returned(rf_bench, fake):
     site, rf, tu, expected = rf_bench
