@@ -95,18 +95,33 @@ def close_webgl_notice(page) -> None:
 
 def close_notifications(page, timeout_s: float = 10.0) -> None:
     """Close every notification and wait until none is left: they stack over the video's top-left
-    corner (below them a click or a drag reaches the notification, not the canvas)."""
+    corner (below them a click or a drag reaches the notification, not the canvas).
+
+    Each is closed by its close button. A click that cannot land (the toast still sliding in, or
+    something over it on a loaded machine) is sent to the button directly; the mouse then leaves the
+    toasts, since a toast under the cursor pauses its own auto-close."""
     deadline = time.monotonic() + timeout_s
     roots = page.locator(".mantine-Notification-root")
+    last_error = ""
     while roots.count() and time.monotonic() < deadline:
         for button in roots.locator("button").all():
             try:
                 button.click(timeout=1000)
-            except Exception:  # noqa: BLE001 - it may close (auto-close) before the click
-                pass
+            except Exception as exc:  # noqa: BLE001 - it may close (auto-close) before the click
+                last_error = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+                try:
+                    button.dispatch_event("click", timeout=1000)
+                except Exception:  # noqa: BLE001 - gone meanwhile
+                    pass
+        try:
+            page.mouse.move(1, page.viewport_size["height"] - 2 if page.viewport_size else 600)
+        except Exception:  # noqa: BLE001
+            pass
         time.sleep(0.2)
     if roots.count():
-        raise AssertionError(f"{roots.count()} notification(s) still open after {timeout_s} s")
+        texts = [t.strip()[:80] for t in roots.all_inner_texts()]
+        raise AssertionError(f"{roots.count()} notification(s) still open after {timeout_s} s: {texts}"
+                             + (f" (last click: {last_error})" if last_error else ""))
 
 
 def launch(playwright):
