@@ -13,7 +13,7 @@ import sys
 import threading
 from pathlib import Path
 
-__all__ = ["add_serve_parser", "run_serve", "build_interface"]
+__all__ = ["add_serve_parser", "run_serve", "build_interface", "scene_with_intrinsics"]
 
 log = logging.getLogger("mcit.serve")
 
@@ -44,6 +44,13 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
                    help="video source: camera index (0), video file, image folder, image file or stream URL "
                    "(default: the scene's video)")
     p.add_argument("--fps", type=float, default=None, help="frame rate for image folders and stills, or to override a file's")
+    p.add_argument("--intrinsics", type=Path, default=None, metavar="FILE",
+                   help="the camera's intrinsics (K and lens distortion) from this calibration file (mcit "
+                   "calibrate-intrinsics' output, OpenCV .yml, ROS .yaml, ViSP .xml), instead of the scene's: frames are "
+                   "undistorted with its lens, and Calibrate camera can solve the camera's pose alone from 4 points (PnP)")
+    p.add_argument("--camera-name", default=None,
+                   help="with --intrinsics: the camera to read in a file that holds several (ViSP <name>, or a YAML "
+                   "file's camera key or camera_name)")
     p.add_argument("--db", type=Path, default=None, help="database file (default: ~/.local/share/mcit/mcit.sqlite)")
     p.add_argument("--rangefinder", default=None, help="range finder device path or URL (with --turret); default: emulated")
     p.add_argument("--turret", default=None, help="turret device path or URL (with --rangefinder); default: emulated")
@@ -70,6 +77,35 @@ def _video_source(spec, scene, fps):
 
     log.warning("scene %s has no video file: showing a frame rendered from the scene", scene.name)
     return StillSource(render_frame(scene, 0.0), fps or 10.0, description=f"rendered still of {scene.name}")
+
+
+def scene_with_intrinsics(scene, path, camera_name: str | None = None):
+    """``scene`` with its camera's intrinsics read from ``path`` (``mcit serve --intrinsics``): K and
+    lens from the file, the camera's pose and image size the scene's, as if the scene's camera block
+    named the file as its ``intrinsics_file`` (so Calibrate camera knows the lens: PnP). ValueError,
+    naming the file, when it cannot be read or was calibrated for another image size."""
+    import dataclasses
+
+    from app.camera_io import read_intrinsics
+    from app.scene import pose_to_json
+    from app.undistort import lens_of
+    from core.camera import Camera
+    from core.transforms import invert_T
+
+    cam = scene.camera
+    w, h = cam.width, cam.height
+    path = Path(path).expanduser().resolve()
+    intr = read_intrinsics(path, camera_name=camera_name, image_size=(w, h))
+    if intr.width is not None and (intr.width, intr.height) != (w, h):
+        raise ValueError(f"--intrinsics {path}: the camera was calibrated on {intr.width}×{intr.height} images but the "
+                         f"scene's camera is {w}×{h}; give the intrinsics for this size")
+    _, T_cam_world = cam.decompose()
+    camera = Camera.from_intrinsics(intr.K, T_cam_world, w, h)
+    block = {"width": w, "height": h, "intrinsics_file": str(path), "T_world_cam": pose_to_json(invert_T(T_cam_world))}
+    if camera_name is not None:
+        block["camera_name"] = camera_name
+    raw = {**(scene.raw or {}), "camera": block}
+    return dataclasses.replace(scene, camera=camera, lens=lens_of(intr, w, h), raw=raw)
 
 
 def _access_policy(args: argparse.Namespace):
@@ -117,6 +153,11 @@ def build_interface(args: argparse.Namespace):
     access = _access_policy(args)  # before anything opens: a bad --token or --allow-origin stops here
     _check_host(args.host, args.port)  # and an address this machine does not have
     scene = load_scene(args.scene or default_scene_path())
+    if getattr(args, "camera_name", None) and not getattr(args, "intrinsics", None):
+        raise ValueError("--camera-name chooses a camera in the --intrinsics file; give --intrinsics FILE")
+    if getattr(args, "intrinsics", None):
+        scene = scene_with_intrinsics(scene, args.intrinsics, args.camera_name)
+        log.info("camera intrinsics from %s: Calibrate camera can solve the pose alone (PnP)", args.intrinsics)
     source = _video_source(args.video, scene, args.fps)
     if scene.lens is not None:  # every frame undistorted once on arrival: C, clicks and the overlay hold in it
         from app.undistort import UndistortedSource

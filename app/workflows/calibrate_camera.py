@@ -1,4 +1,5 @@
-"""Calibrate the camera: pair ≥ 6 known 3D points with their clicked pixels → C by DLT.
+"""Calibrate the camera: pair known 3D points with their clicked pixels → C by DLT (≥ 6), or,
+with the lens known, the camera's pose by PnP (≥ 4).
 
 The operator alternates two clicks: first a model vertex drawn in the overlay (a known object's
 corner, a table corner — the nearest projected vertex is taken), then where that point really is
@@ -12,6 +13,14 @@ directions from the object's database pose through the current C; for a bare 3D 
 ``cornerSubPix``). ``refuse_snap()`` keeps the last click as clicked; the calibration stores the
 raw and snapped pixels. The DLT weighs each point by its precision (``core.calibration.calibrate_dlt``'s
 ``sigma_px``): a snapped corner σ = 0.15 px (measured), a raw click the operator's ``sigma_px``.
+
+With the lens known (``known_K``: the camera's intrinsics come from a calibration file, the scene's
+``intrinsics_file`` or ``mcit serve --intrinsics FILE``), C = K [R | t] has 6 unknowns instead of
+11: the "Solve by" chooser offers the camera's pose by PnP (``app.vision.pnp.solve_pnp``, ≥ 4
+points, the default) or the full C by DLT (≥ 6). A scene's inline ``K`` or ``C`` is its nominal
+start-up camera (the workcell's, the demo's): there only the DLT is offered, as before. The
+result, the instruction and the history's record (``method`` "pnp" or "dlt") say which was solved;
+a PnP covariance is the pose's (K taken as exact).
 """
 
 from __future__ import annotations
@@ -21,26 +30,56 @@ from typing import Any
 import numpy as np
 
 from core.calibration import calibrate_dlt
+from core.camera import Camera
 
 from .base import CANCEL, Control, Marks, Step, Workflow, WorkflowError, as_pixel
 from .snapping import SNAPPED_CORNER_SIGMA_PX, SnapMixin, snap_marks
 
-__all__ = ["CalibrateCamera"]
+__all__ = ["CalibrateCamera", "known_K", "METHODS"]
 
 PICK_RADIUS_PX = 25.0
 # Weak results (Accept asks once more): fewer pairs than this leave little redundancy in C's 11
 # unknowns; a snap that moved farther than this may have jumped to another corner.
 MIN_REDUNDANT_PAIRS = 8
 MAX_SNAP_MOVE_PX = 2.0
+# The same redundancy (at least 5 coordinates beyond the unknowns) for the pose's 6 unknowns.
+MIN_REDUNDANT_PAIRS_PNP = 6
+
+# What Solve solves: method → (chooser text, points needed, what it solved, in words).
+METHODS = {
+    "pnp": ("Pose, lens known (PnP)", 4, "the camera's pose", "with the lens known (PnP)"),
+    "dlt": ("Full camera matrix (DLT)", 6, "the full camera matrix", "(DLT)"),
+}
+
+
+def _chi2_999(dof: int) -> float:
+    from scipy.stats import chi2  # here, not at the top (start-up)
+
+    return float(chi2.ppf(0.999, dof))
+
+
+def known_K(site) -> np.ndarray | None:
+    """The camera's intrinsics K (3, 3) when a calibration file gives them (the scene's camera block
+    names an ``intrinsics_file``; ``mcit serve --intrinsics FILE`` puts the file there), else None: a
+    scene's inline K or C is its nominal start-up camera, which this workflow corrects as a whole."""
+    scene = getattr(site, "scene", None)
+    block = (getattr(scene, "raw", None) or {}).get("camera")
+    if not isinstance(block, dict) or "intrinsics_file" not in block:
+        return None
+    cam: Camera = scene.camera
+    return cam.decompose()[0]
 
 
 class CalibrateCamera(SnapMixin, Workflow):
     name = "calibrate_camera"
     title = "Calibrate camera"
     actions = ("click", "choose_point", "choose_vertex", "remove_last", "remove_pair", "solve", "accept", "redo",
-               "cancel", "refuse_snap", "set_snap")
+               "cancel", "refuse_snap", "set_snap", "set_method")
     controls = (
-        Control("solve", "Solve", "R", color="blue", hint="C from the paired points (DLT)"),
+        Control("set_method", "Solve by", kind="choice",
+                hint="With the lens known: the camera's pose alone (PnP, 4 points or more) or the full camera matrix "
+                "(DLT, 6 or more)"),
+        Control("solve", "Solve", "R", color="blue", hint="C from the paired points (PnP or DLT, as chosen)"),
         Control("accept", "Accept", "enter", color="green", hint="Store the new calibration: every overlay is redrawn through it"),
         Control("refuse_snap", "Refuse snap", "U", hint="Use the last click as clicked, not moved onto the image's corner"),
         Control("remove_last", "Remove last", "backspace", hint="Undo the last click"),
@@ -50,12 +89,19 @@ class CalibrateCamera(SnapMixin, Workflow):
         CANCEL,
     )
 
-    def __init__(self, site, client: str = "operator", snap: bool = True, sigma_px: float = 1.0):
+    def __init__(self, site, client: str = "operator", snap: bool = True, sigma_px: float = 1.0,
+                 method: str | None = None):
         super().__init__(site, client)
         self._init_snap(snap)
         if not sigma_px > 0:
             raise WorkflowError(f"sigma_px (the clicks' noise, pixels) must be positive, got {sigma_px}")
         self.sigma_px = float(sigma_px)
+        self.K = known_K(site)  # the lens, when a calibration file gives it (PnP offered), else None
+        self.method = "pnp" if self.K is not None else "dlt"
+        self.solved_by: str | None = None  # the method of ``result``
+        if method is not None:
+            self._check_method(method)
+            self.method = method
         self.X_world: list[np.ndarray] = []
         self.uv: list[np.ndarray] = []
         self.snaps: list = []  # beside uv: each click's snap (None: snapping off)
@@ -137,21 +183,62 @@ class CalibrateCamera(SnapMixin, Workflow):
             self.result = None
             self.state = "pick_model"
 
-    def solve(self):
-        """C from the pairs (≥ 6, not coplanar); shows RMS and per-point residuals."""
+    def _check_method(self, method: str) -> None:
+        if method not in METHODS:
+            raise WorkflowError(f"Solve by is one of {', '.join(METHODS)}, not {method!r}")
+        if method == "pnp" and self.K is None:
+            raise WorkflowError("the camera's lens is not known here, so only the full camera matrix (DLT, 6 points or "
+                                "more) can be solved; start mcit serve with --intrinsics FILE to solve the pose alone")
+
+    def set_method(self, method: str) -> None:
+        """What Solve solves: "pnp" (the camera's pose, the lens known: ≥ 4 points) or "dlt" (the full C: ≥ 6)."""
         with self.lock:
             self._check_open()
-            if len(self.X_world) < 6:
-                raise WorkflowError(f"{len(self.X_world)} points paired; the DLT needs at least 6 (11 unknowns in C): pair more")
+            self._check_method(method)
+            if method != self.method:
+                self.method = method
+                self.result, self.solved_by = None, None
+                if self.state == "review":
+                    self.state = "pick_model"
+            self.message = f"Solve by: {METHODS[method][0]}."
+
+    def _sigmas(self) -> np.ndarray:
+        return np.array([SNAPPED_CORNER_SIGMA_PX if sn is not None and sn.applied else self.sigma_px for sn in self.snaps])
+
+    def solve(self):
+        """C from the pairs: by PnP with the lens known (≥ 4 points) or by DLT (≥ 6, not coplanar); shows
+        RMS and per-point residuals, and says which was solved."""
+        with self.lock:
+            self._check_open()
+            n = len(self.X_world)
+            text, need, what, how = METHODS[self.method]
+            if n < need:
+                unknowns = "6 unknowns: the pose" if self.method == "pnp" else "11 unknowns in C"
+                other = " (4 are enough for the pose alone: choose it in Solve by)" if self.K is not None and self.method == "dlt" else ""
+                raise WorkflowError(f"{n} points paired; {what} needs at least {need} ({unknowns}): pair more{other}")
             w, h = self.site.camera.width, self.site.camera.height
             try:
-                sigma = [SNAPPED_CORNER_SIGMA_PX if sn is not None and sn.applied else self.sigma_px for sn in self.snaps]
-                self.result = calibrate_dlt(np.array(self.X_world), np.array(self.uv), w, h, sigma_px=np.array(sigma))
+                if self.method == "pnp":
+                    from app.vision.pnp import solve_pnp
+
+                    self.result = solve_pnp(self.K, np.array(self.X_world), np.array(self.uv), w, h, sigma_px=self._sigmas())
+                else:
+                    self.result = calibrate_dlt(np.array(self.X_world), np.array(self.uv), w, h, sigma_px=self._sigmas())
             except ValueError as exc:
                 raise WorkflowError(f"calibration failed: {exc}") from None
+            self.solved_by = self.method
             self.state = "review"
-            self.message = f"Solved: RMS {self.result.rms_px:.1f} px over {len(self.uv)} points."
+            self.message = self._solved_text() + "."
             return self.result
+
+    def _solved_text(self) -> str:
+        """"Solved the camera's pose from 5 points with the lens known (PnP): RMS 0.4 px" (or the DLT's)."""
+        _, _, what, how = METHODS[self.solved_by]
+        text = f"Solved {what} from {len(self.uv)} points {how}: RMS {self.result.rms_px:.1f} px"
+        if self.solved_by == "pnp":
+            text += (f", position ±{1000 * self.result.std_position_m:.1f} mm, "
+                     f"orientation ±{np.degrees(self.result.std_angle_rad):.2f}°")
+        return text
 
     def accept(self) -> None:
         """Store the new C (one transaction) and redraw every overlay through it."""
@@ -159,20 +246,28 @@ class CalibrateCamera(SnapMixin, Workflow):
             self._check_open()
             if self.result is None:
                 raise WorkflowError("nothing to accept: solve first")
+            points = {"X_world": np.array(self.X_world).tolist(), "uv": np.array(self.uv).tolist(), "labels": list(self.labels),
+                      # raw and snapped pixels of each point above (None: snapping was off)
+                      "snaps": [None if sn is None else sn.record() for sn in self.snaps],
+                      "frame": self.frame_record(),  # the frozen frame clicked on (None: the site's frame)
+                      "solved_by": self.solved_by}
+            if self.solved_by == "pnp":  # the lens it was solved with, and the pose's σ (K taken as exact)
+                points.update(K=np.asarray(self.K).tolist(), std_position_m=self.result.std_position_m,
+                              std_angle_rad=self.result.std_angle_rad)
             self.site.set_camera(
                 self.result.camera,
                 rms_px=self.result.rms_px,
                 residuals_px=self.result.residuals_px,
                 cov=self.result.cov,
-                points={"X_world": np.array(self.X_world).tolist(), "uv": np.array(self.uv).tolist(), "labels": list(self.labels),
-                        # raw and snapped pixels of each point above (None: snapping was off)
-                        "snaps": [None if sn is None else sn.record() for sn in self.snaps],
-                        "frame": self.frame_record()},  # the frozen frame clicked on (None: the site's frame)
+                points=points,
                 client=self.client,
+                method=self.solved_by,
             )
             self.accepted = True
             self.state = "accepted"
-            self.message = f"Camera calibrated (RMS {self.result.rms_px:.1f} px): every overlay is now drawn through it."
+            what = "pose with the lens known (PnP" if self.solved_by == "pnp" else "full camera matrix (DLT"
+            self.message = (f"Camera calibrated from its {what}, RMS {self.result.rms_px:.1f} px): every overlay is now "
+                            "drawn through it.")
 
     def redo(self) -> None:
         """Forget every pair and the result; start again."""
@@ -180,7 +275,7 @@ class CalibrateCamera(SnapMixin, Workflow):
             self._check_open()
             n = len(self.uv)
             self.X_world, self.uv, self.labels, self.snaps = [], [], [], []
-            self.pending_X, self.pending_vertex, self.result = None, None, None
+            self.pending_X, self.pending_vertex, self.result, self.solved_by = None, None, None, None
             self.state = "pick_model"
             self.message = f"Started again: {n} points forgotten."
 
@@ -271,19 +366,28 @@ class CalibrateCamera(SnapMixin, Workflow):
             has |= {"pair", "remove_pair"} | ({"redo"} if n >= 2 else set())
         if self._last_snap()[0] is not None and self._last_snap()[0].applied:
             has.add("refuse_snap")
+        if self.K is not None:
+            has.add("set_method")
         if self.state == "click_image":
             return Step("click_image", f"Now click where {self.pending_label} (circled) really is in the video; "
                         "{remove_last} if you picked the wrong corner.", frozenset(has))
-        if n >= 6:
+        _, need, what, how = METHODS[self.method]
+        if n >= need:
             has.add("solve")
-        if self.state == "review":
-            return Step("review", f"Solved: RMS {self.result.rms_px:.1f} px. {{accept}} to use it, or delete a point with a "
+        if self.state == "review" and self.result is not None:
+            return Step("review", f"{self._solved_text()}. {{accept}} to use it, or delete a point with a "
                         "large residual ({remove_pair}) and {solve} again.", frozenset(has | {"accept"}))
-        more = max(0, 6 - n)
-        tail = f" ({more} more needed)." if more else ", or {solve}."
-        return Step("pick_model", f"Click a model corner drawn in the overlay (point {n + 1}){tail}", frozenset(has))
+        more = max(0, need - n)
+        tail = f" ({more} more needed for {what} {how})." if more else f", or {{solve}} for {what} {how}."
+        choose = " {set_method} chooses the pose alone (the lens is known) or the full camera matrix." if self.K is not None else ""
+        return Step("pick_model", f"Click a model corner drawn in the overlay (point {n + 1}){tail}{choose}", frozenset(has))
+
+    def choice_value(self, action: str) -> Any:
+        return self.method if action == "set_method" else None
 
     def choices(self, action: str) -> list[tuple[str, Any]]:
+        if action == "set_method":
+            return [(METHODS[m][0], m) for m in ("pnp", "dlt")] if self.K is not None else []
         if action != "pair":
             return []
         with self.lock:
@@ -297,11 +401,19 @@ class CalibrateCamera(SnapMixin, Workflow):
             if self.result is None:
                 return out
             n = len(self.uv)
-            if n < MIN_REDUNDANT_PAIRS:
-                out.append(f"only {n} points for C's 11 unknowns: little redundancy to catch a wrong click "
-                           f"({MIN_REDUNDANT_PAIRS} or more is safer)")
-            sig = np.array([SNAPPED_CORNER_SIGMA_PX if sn is not None and sn.applied else self.sigma_px for sn in self.snaps])
+            pnp = self.solved_by == "pnp"
+            least = MIN_REDUNDANT_PAIRS_PNP if pnp else MIN_REDUNDANT_PAIRS
+            if n < least:
+                unknowns = "the pose's 6 unknowns" if pnp else "C's 11 unknowns"
+                out.append(f"only {n} points for {unknowns}: little redundancy to catch a wrong click "
+                           f"({least} or more is safer)")
+            sig = self._sigmas()
             bad = [i for i, (e, sg) in enumerate(zip(self.result.errors_px, sig)) if e > 3 * max(sg, 0.5)]
+            chi = float(np.sum((self.result.errors_px / np.maximum(sig, 0.5)) ** 2))
+            if pnp and n > 4 and chi > _chi2_999(2 * n - 6):  # the residuals, all told, beyond the clicks' precision
+                out.append(f"the points fit the known lens poorly (RMS {self.result.rms_px:.1f} px): a wrong click, or a "
+                           "lens file that is not this camera's (zoom, focus, image size)? Solve by the full camera "
+                           "matrix to compare")
             for i in bad:
                 out.append(f"point {i + 1} ({self.labels[i]}) is {self.result.errors_px[i]:.1f} px from where C puts it "
                            "(more than 3σ): a wrong corner?")
@@ -333,7 +445,11 @@ class CalibrateCamera(SnapMixin, Workflow):
             if snaps:
                 out["snapped"] = f"{sum(sn.applied for sn in snaps)} of {len(snaps)} points"
             if self.result is not None:
+                out["solved_by"] = METHODS[self.solved_by][0]
                 out["rms_px"] = self.result.rms_px
+                if self.solved_by == "pnp":
+                    out["std_position_mm"] = 1000 * self.result.std_position_m
+                    out["std_angle_deg"] = float(np.degrees(self.result.std_angle_rad))
                 out["errors_px"] = self.result.errors_px.tolist()
                 out["labels"] = list(self.labels)
             return out

@@ -111,6 +111,52 @@ def test_calibrate_camera_states(site, scene, walk):
     assert {"pick_model", "click_image", "review", "cancelled"} <= walk.seen["calibrate_camera"]
 
 
+def test_calibrate_camera_states_with_the_lens_known(scene, tmp_path, walk):
+    """Served with a lens file (mcit serve --intrinsics): the Solve by chooser, PnP from 4 points, DLT from 6."""
+    from app.db import Database, seed_from_scene
+    from app.ui.serve import scene_with_intrinsics
+    from app.vision.intrinsics_cli import Calibration, write_camera_file
+    from app.workflows import Site
+
+    cam = scene.camera
+    write_camera_file(Calibration(cam.decompose()[0], np.zeros(5), 0.1, cam.width, cam.height, (0,), 1, "plumb_bob"),
+                      tmp_path / "cam.yml")
+    sc = scene_with_intrinsics(scene, tmp_path / "cam.yml")
+    db = Database.open(tmp_path / "lens.sqlite")
+    seed_from_scene(db, sc)
+    site = Site(sc, db, clock=lambda: 0.0, frames=None)
+    wf = CalibrateCamera(site, client="alice", snap=False)
+    assert "set_method" in walk.check(wf).named()
+    V = np.vstack([site.object("parallelepiped").vertices_world(), site.object("table").vertices_world()])
+    V = V[(cam.depth(V) > 0) & cam.in_image(cam.project(V), 2.0)]
+    for x in V[:4]:
+        wf.choose_point(x, "corner")
+        walk.check(wf)
+        wf.click(cam.project(x[None])[0] + [0.3, -0.2])
+        walk.check(wf)
+    assert "solve" in walk.check(wf).enabled
+    wf.solve()
+    assert walk.check(wf).name == "review" and "PnP" in wf.next_step
+    wf.set_method("dlt")
+    st = walk.check(wf)
+    assert st.name == "pick_model" and "solve" not in st.enabled
+    for x in V[4:6]:
+        wf.choose_point(x, "corner")
+        wf.click(cam.project(x[None])[0])
+    wf.solve()
+    assert walk.check(wf).name == "review" and "DLT" in wf.next_step
+    wf.set_method("pnp")
+    walk.check(wf)
+    wf.remove_pair(0)
+    walk.check(wf)
+    wf.solve()
+    walk.check(wf)
+    wf.accept()
+    walk.check(wf)
+    db.close()
+    assert {"pick_model", "click_image", "review", "accepted"} <= walk.seen["calibrate_camera"]
+
+
 def test_update_pose_states_by_hand_and_by_auto_match(site, walk):
     obj = site.object("parallelepiped")
     T_true = _moved(obj.T_world_obj, 20.0, -0.05, 0.03)

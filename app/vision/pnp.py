@@ -1,0 +1,169 @@
+"""The camera's pose from ≥ 4 clicked known points when its intrinsics K are known (PnP).
+
+With K known (a checkerboard calibration, ``mcit calibrate-intrinsics``, or the scene's camera
+block), C = K [R | t] has 6 unknowns instead of the DLT's 11: 4 points fix it, and every point
+beyond gives redundancy. ``solve_pnp`` starts from OpenCV's solvers (SQPnP, the iterative one,
+EPnP: the start with the smallest refined error, every point in front, wins), then refines the pose
+by Levenberg–Marquardt on the reprojection error in pixels, each point weighed by its σ (the
+maximum-likelihood pose under pixel noise, as ``core.calibration.calibrate_dlt`` does for C).
+
+The covariance is the pose's, first order from the refinement's Jacobian (the χ² policy of
+``calibrate_dlt``: scaled by χ²/dof when the χ² test rejects the stated σ, never shrunk), and
+taken through C = K [R | t] to the 12 entries of C for the workflows that propagate the
+calibration's uncertainty. K is taken as exact: its own uncertainty (a checkerboard calibration's)
+is not in it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from core.camera import Camera
+from core.checks import MAX_M, MAX_PX, MAX_SCALE, MIN_SCALE, finite_array, image_size
+from core.transforms import exp_so3, make_T
+
+__all__ = ["PnPResult", "solve_pnp", "MIN_PNP_POINTS"]
+
+MIN_PNP_POINTS = 4
+
+
+class PnPResult:
+    """A pose solved with K known.
+
+    camera : Camera, C = K [R | t] (normalised as Camera does). T_cam_world : (4, 4).
+    rms_px : RMS reprojection distance. residuals_px : (N, 2) projected minus clicked; errors_px (N,).
+    cov_pose : (6, 6) covariance of the pose's perturbation (δω rad, δt m), R = exp(δω) R̂, t = t̂ + δt
+    (camera frame). cov : (12, 12) covariance of ``camera.C.ravel()`` from it (K exact).
+    variance_factor : χ² of the weighted residuals per degree of freedom (2N − 6).
+    std_position_m : σ of the camera's optical centre in the world along its worst direction (m).
+    std_angle_rad : σ of its orientation about its worst axis (rad).
+    """
+
+    def __init__(self, camera, T_cam_world, rms_px, residuals_px, cov_pose, cov, variance_factor, std_position_m,
+                 std_angle_rad):
+        self.camera = camera
+        self.T_cam_world = T_cam_world
+        self.rms_px = float(rms_px)
+        self.residuals_px = residuals_px
+        self.errors_px = np.linalg.norm(residuals_px, axis=1)
+        self.cov_pose = cov_pose
+        self.cov = cov
+        self.variance_factor = float(variance_factor)
+        self.std_position_m = float(std_position_m)
+        self.std_angle_rad = float(std_angle_rad)
+
+
+def _check_K(K) -> np.ndarray:
+    K = finite_array(K, (3, 3), "K")
+    if K[2, 2] == 0 or abs(K[1, 0]) + abs(K[2, 0]) + abs(K[2, 1]) > 1e-9 * np.abs(K).max():
+        raise ValueError("K must be upper triangular (fx, skew, u0; 0, fy, v0; 0, 0, 1)")
+    K = K / K[2, 2]
+    if not (K[0, 0] > 0 and K[1, 1] > 0):
+        raise ValueError(f"K's focal lengths must be positive, got fx {K[0, 0]:g}, fy {K[1, 1]:g}")
+    return K
+
+
+def _pose(R0: np.ndarray, t0: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return exp_so3(x[:3]) @ R0, t0 + x[3:]
+
+
+def _project(K: np.ndarray, R: np.ndarray, t: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(pixels (N, 2), depths (N,))."""
+    Xc = X @ R.T + t
+    h = Xc @ K.T
+    return h[:, :2] / h[:, 2:3], Xc[:, 2]
+
+
+def _starts(K: np.ndarray, X: np.ndarray, uv: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    import cv2
+
+    out = []
+    flags = [cv2.SOLVEPNP_SQPNP, cv2.SOLVEPNP_ITERATIVE, cv2.SOLVEPNP_EPNP]
+    for flag in flags:
+        try:
+            ok, rvec, tvec = cv2.solvePnP(X.astype(np.float64), uv.astype(np.float64), K, None, flags=flag)
+        except cv2.error:
+            continue
+        if ok and np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec)):
+            out.append((cv2.Rodrigues(rvec)[0], tvec.reshape(3)))
+    return out
+
+
+def solve_pnp(K, X_world, uv, width: int, height: int, *, sigma_px=None) -> PnPResult:
+    """The camera C = K [R | t] from ≥ 4 clicked pixels ``uv`` (N, 2) of known world points
+    ``X_world`` (N, 3, metres, not all on one line), K (3, 3) known. ``sigma_px`` (N,): each
+    pixel's σ (default 1 px). ValueError (plain words) for too few points, collinear points, or no
+    pose that puts every point in front of the camera."""
+    K = _check_K(K)
+    X = finite_array(X_world, (None, 3), "X_world", max_abs=MAX_M, unit=" m")
+    uv = finite_array(uv, (None, 2), "uv", max_abs=MAX_PX, unit=" px")
+    width, height = image_size(width, height)
+    n = len(X)
+    if len(uv) != n:
+        raise ValueError(f"X_world has {n} points but uv has {len(uv)}: they must pair one to one")
+    if n < MIN_PNP_POINTS:
+        raise ValueError(f"{n} points paired; the camera's pose with the lens known needs at least {MIN_PNP_POINTS} "
+                         "(6 unknowns): pair more")
+    sv = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
+    if sv[1] <= 1e-6 * sv[0]:
+        raise ValueError("the points are on one line: they cannot fix the camera's pose; use corners spread over the scene")
+    w = np.ones(n)
+    if sigma_px is not None:
+        sig = np.asarray(sigma_px, dtype=float).reshape(-1)
+        if sig.shape != (n,) or not (np.all(sig >= MIN_SCALE) and np.all(sig <= MAX_SCALE)):
+            raise ValueError(f"sigma_px must hold {n} positive finite values (one per point), got {np.shape(sigma_px)}")
+        w = 1.0 / sig
+
+    from scipy.optimize import least_squares  # here, not at the top (start-up)
+
+    best = None
+    for R0, t0 in _starts(K, X, uv):
+        def residuals(x, R0=R0, t0=t0):
+            R, t = _pose(R0, t0, x)
+            return ((_project(K, R, t, X)[0] - uv) * w[:, None]).ravel()
+
+        sol = least_squares(residuals, np.zeros(6), method="lm", xtol=1e-15, ftol=1e-15)
+        R, t = _pose(R0, t0, sol.x)
+        if not np.all(np.isfinite(sol.fun)) or not np.all(_project(K, R, t, X)[1] > 0):
+            continue
+        cost = float(np.sum(sol.fun**2))
+        if best is None or cost < best[0]:
+            best = (cost, R, t)
+    if best is None:
+        raise ValueError("no camera pose puts every point in front of the camera: check that each click is on its corner")
+    cost, R, t = best
+
+    # The Jacobian at the optimum (central differences about the solution, exact enough for a covariance).
+    def weighted(x):
+        Rx, tx = _pose(R, t, x)
+        return ((_project(K, Rx, tx, X)[0] - uv) * w[:, None]).ravel()
+
+    eps = np.array([1e-7] * 3 + [1e-7 * max(1.0, float(np.linalg.norm(t)))] * 3)
+    J = np.column_stack([(weighted(e) - weighted(-e)) / (2 * e[i]) for i, e in enumerate(np.diag(eps))])
+    dof = 2 * n - 6
+    factor = cost / max(dof, 1)
+    cov_pose = np.linalg.pinv(J.T @ J, rcond=1e-12)
+    from scipy.stats import chi2  # here, not at the top (start-up)
+
+    if dof > 0 and cost > chi2.ppf(0.99, dof):
+        cov_pose = cov_pose * factor  # the clicks are worse than stated (or a point is wrong): say so in σ
+    cov_pose = 0.5 * (cov_pose + cov_pose.T)
+
+    def C_of(x):
+        Rx, tx = _pose(R, t, x)
+        return (K @ np.column_stack([Rx, tx])).ravel()  # ‖C[2, :3]‖ = 1 as Camera normalises it
+
+    def centre(x):
+        Rx, tx = _pose(R, t, x)
+        return -Rx.T @ tx
+
+    Jc = np.column_stack([(C_of(e) - C_of(-e)) / (2 * e[i]) for i, e in enumerate(np.diag(eps))])
+    Jo = np.column_stack([(centre(e) - centre(-e)) / (2 * e[i]) for i, e in enumerate(np.diag(eps))])
+    cov_C = Jc @ cov_pose @ Jc.T
+    cov_centre = Jo @ cov_pose @ Jo.T
+    camera = Camera(K @ np.column_stack([R, t]), width, height, in_front=X)
+    res = _project(K, R, t, X)[0] - uv
+    rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+    return PnPResult(camera, make_T(R, t), rms, res, cov_pose, 0.5 * (cov_C + cov_C.T), factor,
+                     float(np.sqrt(max(np.linalg.eigvalsh(cov_centre)[-1], 0.0))),
+                     float(np.sqrt(max(np.linalg.eigvalsh(cov_pose[:3, :3])[-1], 0.0))))
