@@ -505,7 +505,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                     for sn in snaps if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX]
             if self.shape == "box" and len(self.box_faces()) == 1 and not self.scans:
                 out.append("one face measured: the box's depth rests on the clicks alone (measure a second face, or scan)")
-            return out
+        return out + self._overlaps(r)
 
     def marks(self) -> Marks:
         with self.lock:

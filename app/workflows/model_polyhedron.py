@@ -542,7 +542,7 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
             if sum(f["points"] is not None for f in self.faces) == 1:
                 out.append(f"one face measured: the hidden corners rest on the clicks and the {self.shape}'s hints "
                            "(measure a second face)")
-            return out
+        return out + self._overlaps(r)
 
     def marks(self) -> Marks:
         with self.lock:

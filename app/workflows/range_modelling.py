@@ -16,9 +16,20 @@ from typing import Any
 
 import numpy as np
 
+from core.geometry import hull_overlap
 from core.rangefinder import RangeFinderSpec, beam_point, beam_point_cov
 
 from .base import Cancelled, Step, WorkflowError
+
+# A modelled object that shares this much of the smaller one's volume with an object already in the
+# database is probably that object modelled again: Accept asks once more.
+OVERLAP_SHARE = 0.25
+
+
+def _hull_points(model, T_world_obj: np.ndarray) -> np.ndarray:
+    """Points whose convex hull stands for the object's volume, in the world, (N, 3)."""
+    V = model.triangles(16)[0]
+    return V @ T_world_obj[:3, :3].T + T_world_obj[:3, 3] if len(V) else np.zeros((0, 3))
 
 __all__ = ["RangeModelling"]
 
@@ -163,6 +174,28 @@ class RangeModelling:
     def _spec(self) -> RangeFinderSpec:
         """The range finder's noise model (the scene's: σ_ρ, limits, the turret's step)."""
         return self.site.scene.rangefinder
+
+    def _overlaps(self, r) -> list[str]:
+        """The database objects the result ``r`` overlaps by a quarter of the smaller one's volume or
+        more (each a weakness: the object may be in the database already). Called outside the lock."""
+        if r is None:
+            return []
+        mine = _hull_points(r.model, r.T_world_obj)
+        if len(mine) < 4:
+            return []
+        lo, hi = mine.min(0), mine.max(0)
+        out = []
+        for obj in self.site.objects():
+            if obj.name == self.object_name:
+                continue
+            theirs = _hull_points(obj.model, obj.T_world_obj)
+            if len(theirs) < 4 or np.any(theirs.min(0) > hi) or np.any(theirs.max(0) < lo):
+                continue
+            share = max(hull_overlap(mine, theirs), hull_overlap(theirs, mine))
+            if share >= OVERLAP_SHARE:
+                out.append(f"it overlaps {obj.name} ({100 * share:.0f} % of the smaller one's volume): is it in the "
+                           "database already? (Accept anyway adds a second object)")
+        return out
 
     def _write_model(self, r, *, method: str, clicks: Any, measurements: Any, note: str, text: str):
         """Add the modelled object ``r`` (a ModelResult; one transaction, status "modelled") and close

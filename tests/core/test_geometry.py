@@ -229,3 +229,36 @@ def test_plane_fit_bad_input():
         fit_plane_ols(np.array([[0, 0, 0], [1, 0, 0], [0, 1, np.nan]]))
     with pytest.raises(ValueError, match="shape"):
         fit_plane_tls(np.zeros((5, 2)))
+
+
+# ---------------------------------------------------------------------------- hull_overlap
+def _cube(c, s):
+    g = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float) - 0.5
+    return np.asarray(c, float) + s * g
+
+
+def test_hull_overlap_of_two_unit_cubes_matches_the_exact_volume():
+    from core.geometry import hull_overlap
+
+    A = _cube([0, 0, 0], 1.0)
+    for shift, exact in [(0.0, 1.0), (0.25, 0.75), (0.5, 0.5), (0.9, 0.1), (1.5, 0.0)]:
+        got = hull_overlap(A, _cube([shift, 0, 0], 1.0))
+        assert abs(got - exact) < 0.03, (shift, got)
+    # A inside a bigger B: all of it; B's share inside A: (1/2)^3
+    assert hull_overlap(A, _cube([0, 0, 0], 2.0)) == 1.0
+    assert abs(hull_overlap(_cube([0, 0, 0], 2.0), A) - 0.125) < 0.02
+
+
+def test_hull_overlap_of_a_rotated_box_and_a_flat_or_apart_hull():
+    from core.geometry import hull_overlap
+    from core.transforms import rot_z
+
+    R = rot_z(np.radians(45.0))
+    A = _cube([0, 0, 0], 1.0) @ R.T  # a cube turned 45° about z inside the cube of side √2
+    assert hull_overlap(A, _cube([0, 0, 0], np.sqrt(2.0) + 1e-9)) == 1.0
+    # the turned cube's corners stick out of the axis-aligned unit cube: inside share 2(√2-1) ≈ 0.83
+    assert abs(hull_overlap(A, _cube([0, 0, 0], 1.0)) - 2 * (np.sqrt(2) - 1)) < 0.03
+    flat = _cube([0, 0, 0], 1.0) * np.array([1, 1, 0])
+    assert hull_overlap(A, flat) == 0.0 and hull_overlap(flat, A) == 0.0
+    with pytest.raises(ValueError):
+        hull_overlap(A[:3], A)

@@ -301,3 +301,19 @@ def test_calibrated_site_states_the_calibrations_share(device_site, fast_scene, 
     assert 0.005 < np.linalg.norm(shift) < 0.02, shift
     wf.accept()
     assert db.get("box_1").sigmas["position"] == pytest.approx(moved.sigmas["position"])
+
+
+def test_a_model_that_overlaps_an_object_in_the_database_is_weak(site):
+    """Modelling an object the database already holds (the parallelepiped, a few mm off) is said before
+    Accept: the panel asks once more; a model elsewhere on the table is not."""
+    from types import SimpleNamespace
+
+    known = site.object("parallelepiped")
+    wf = ModelObject(site, client="alice", shape="box", vertical=True, on_table=True)
+    T = known.T_world_obj.copy()
+    T[:3, 3] += [0.004, -0.003, 0.0]
+    wf.result = SimpleNamespace(model=known.model, T_world_obj=T, sigmas={}, residuals={})
+    weak = wf.weaknesses()
+    assert len(weak) == 1 and "overlaps parallelepiped" in weak[0] and "Accept anyway adds a second" in weak[0]
+    T[:3, 3] += [5.0, 0.0, 0.0]  # the same box far away: overlaps nothing
+    assert wf.weaknesses() == []
