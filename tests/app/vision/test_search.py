@@ -1,0 +1,117 @@
+"""One-click pose search (app.vision.search): the workcell video's moved parallelepiped found from one
+click, with and without the table hint; a rendered cylinder on the table; clicks on nothing refused."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from app.scene import default_scene_path, load_scene
+from app.vision.search import Cancelled, NoPoseFits, heading_period, rests_on, search_pose
+from app.vision.sequence import iter_frames
+from core.brep import BRep
+from core.geometry import Plane
+from core.transforms import make_T, pose_error, rot_z
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene(default_scene_path())
+
+
+@pytest.fixture(scope="module")
+def table(scene):
+    body = scene.body("table")
+    T = body.T_world_obj
+    top = T[:3, :3] @ np.array([0.0, 0.0, body.model.bounds()[1][2]]) + T[:3, 3]
+    return Plane(T[:3, 2], float(-T[:3, 2] @ top))
+
+
+def frame(scene, t_s: float):
+    k = int(round(t_s * scene.video.fps))
+    return next(iter_frames(scene.video.path, k, 1))[1], k / scene.video.fps
+
+
+def centre_pixel(scene, body, T):
+    return scene.camera.project_obj(T, body.model.vertices).mean(axis=0)
+
+
+def test_the_large_move_is_found_from_one_click_on_the_table(scene, table):
+    box = scene.body("parallelepiped")
+    image, t = frame(scene, 16.5)
+    T_true, T_old = box.pose_at(t), box.pose_at(0.0)
+    assert pose_error(T_true, T_old)[0] > 50.0  # the 55° move: beyond any tracker's reach
+    assert rests_on(box.model, T_old, table)
+    uv = centre_pixel(scene, box, T_true) + [6.0, -3.0]
+    res = search_pose(scene.camera, box.model, T_old, uv, image, table=table, name="parallelepiped")
+    assert res.mode == "table"
+    best = res.candidates[0]
+    deg, m = pose_error(best.T_world_obj, T_true)  # the twin nearest the old pose: the truth itself
+    assert deg < 1.0 and m < 0.005, (deg, m)
+    assert best.fit_px < 1.0 and best.support_px <= 1.5
+    assert np.all(best.std_t_mm < 5.0) and np.all(best.std_r_deg < 1.0)
+    fits = [c.fit_px for c in res.candidates]
+    assert fits == sorted(fits)
+
+
+def test_a_small_move_is_found_without_the_table_hint(scene):
+    box = scene.body("parallelepiped")
+    image, t = frame(scene, 20.0)
+    T_true, T_old = box.pose_at(t), box.pose_at(16.5)  # the 6° / 3.6 cm move
+    uv = centre_pixel(scene, box, T_true)
+    res = search_pose(scene.camera, box.model, T_old, uv, image, table=None, name="parallelepiped")
+    assert res.mode == "free"
+    deg, m = pose_error(res.candidates[0].T_world_obj, T_true)
+    assert deg < 1.0 and m < 0.005, (deg, m)
+
+
+@pytest.mark.parametrize("where", ["table", "unknown_box", "unknown_cylinder"])
+def test_a_click_on_nothing_or_on_another_object_finds_no_pose(scene, table, where):
+    box = scene.body("parallelepiped")
+    image, t = frame(scene, 16.5)
+    if where == "table":
+        uv = scene.camera.project(np.array([[0.3, -0.3, 0.0]]))[0]
+    else:
+        other = scene.body(where)
+        uv = scene.camera.project_obj(other.pose_at(t), np.array([[0.0, 0.0, 0.05]]))[0]
+    with pytest.raises(NoPoseFits, match="no pose of the parallelepiped fits the image near your click"):
+        search_pose(scene.camera, box.model, box.pose_at(0.0), uv, image, table=table, name="parallelepiped")
+
+
+def test_bad_input_and_cancel(scene, table):
+    box = scene.body("parallelepiped")
+    image, t = frame(scene, 16.5)
+    with pytest.raises(ValueError, match="outside the image"):
+        search_pose(scene.camera, box.model, box.pose_at(0.0), [-5.0, 10.0], image, table=table)
+    with pytest.raises(ValueError, match="camera is 512×256"):
+        search_pose(scene.camera, box.model, box.pose_at(0.0), [100.0, 100.0], image[:100], table=table)
+    with pytest.raises(Cancelled):
+        search_pose(scene.camera, box.model, box.pose_at(0.0), centre_pixel(scene, box, box.pose_at(t)), image, table=table,
+                    cancel=lambda: True)
+
+
+def test_heading_period_follows_the_model_symmetries_about_the_vertical():
+    up = np.array([0.0, 0.0, 1.0])
+    assert heading_period(BRep.box(0.35, 0.231, 0.132), np.eye(3), up) == pytest.approx(np.pi)
+    assert heading_period(BRep.box(0.2, 0.2, 0.1), rot_z(0.3), up) == pytest.approx(np.pi / 2)
+    assert heading_period(BRep.cylinder(0.05, 0.16), np.eye(3), up) == 0.0  # the heading is not seen
+    wedge = BRep.prism(np.array([[0.0, 0.0], [0.2, 0.0], [0.0, 0.1]]), 0.1)
+    assert heading_period(wedge, np.eye(3), up) == pytest.approx(2 * np.pi)
+
+
+def test_a_rendered_cylinder_moved_on_the_table_is_found(scene, table):
+    from app.render.renderer import Renderer
+
+    cyl = scene.body("unknown_cylinder")
+    T_old = cyl.pose_at(0.0)
+    T_new = make_T(np.eye(3), [0.25, -0.35, 0.0])
+    bodies = tuple(dataclasses.replace(b, T_world_obj=T_new, motion=()) if b.name == cyl.name else b for b in scene.bodies)
+    sc = dataclasses.replace(scene, bodies=bodies, render=dataclasses.replace(scene.render, aa_samples=4))
+    image = Renderer(sc).render(0.0, 3)
+    uv = scene.camera.project_obj(T_new, np.array([[0.01, 0.0, 0.09]]))[0]
+    res = search_pose(scene.camera, cyl.model, T_old, uv, image, table=table, name="cylinder")
+    T = res.candidates[0].T_world_obj
+    axis_deg = np.degrees(np.arccos(np.clip(T[:3, 2] @ [0.0, 0.0, 1.0], -1, 1)))
+    assert axis_deg < 1.0 and np.linalg.norm(T[:3, 3] - T_new[:3, 3]) < 0.005, (axis_deg, T[:3, 3])
