@@ -33,12 +33,15 @@ __all__ = ["DEVICE_TIMING", "DemoStepError", "OverlayState", "RunRecord", "Repla
 # Emulator timing (app.devices.EmulatedSite options, turret speed in steps/s).
 # "realistic": the emulators' defaults (the DLS's 19200 baud line, 0.1 s + 5 ms/m a measurement,
 # 0.3 s before a no-target error; the PTU's 9600 baud line) and the scene's turret speed.
-# "fast": lines without delay, instant measurements and a turret that moves (almost) at once.
+# "fast": lines without delay, instant measurements and a turret that moves (almost) at once; the
+# range finder's driver is told its line is that fast too (baudrate 0), so after each reply it
+# listens 2 ms for a stray second one instead of a 19200-baud reply's time (10 ms a shot).
 DEVICE_TIMING: dict[str, dict[str, Any]] = {
     "realistic": {"site_options": {}, "turret_speed_steps_s": None},
     "fast": {
         "site_options": dict(rangefinder_baud=0, turret_baud=0, measure_delay_s=0.0, delay_per_m_s=0.0,
                              no_target_delay_s=0.0),
+        "rangefinder_options": dict(baudrate=0),
         "turret_speed_steps_s": 1e6,
     },
 }
@@ -163,7 +166,8 @@ def replay_script(
     db = Database.open(db_path, client=client)
     seed_from_scene(db, scene)
     clock = {"t": 0.0}
-    devices = open_devices(device_scene, clock=lambda: clock["t"], site_options=opts["site_options"])
+    devices = open_devices(device_scene, clock=lambda: clock["t"], site_options=opts["site_options"],
+                           rangefinder_options=opts.get("rangefinder_options"))
     site = Site(scene, db, devices=devices, clock=lambda: clock["t"])
     session = Session(site, client=client)
     timeline = [_state(site, session, 0.0)]

@@ -22,13 +22,73 @@ from __future__ import annotations
 import numpy as np
 
 from ..brep import Revolution
-from ..rangefinder import beam_direction
 from .cylinder import CylinderData, build_result, solve_paper
-from .lm import huber_weights, levenberg_marquardt, numeric_jacobian
+from .lm import huber_weights, levenberg_marquardt
 from .profile import axis_basis
-from .returns import MIN_INCIDENCE_COS, beam_gap, beam_gap_jacobian, incidence_cos, range_residuals
+from .returns import (
+    MIN_INCIDENCE_COS,
+    beam_gap,
+    beam_gap_direction_jacobian,
+    beam_gap_jacobian,
+    incidence_cos,
+    range_residuals,
+)
 
-__all__ = ["fit_fused"]
+__all__ = ["fit_fused", "silhouette_ends"]
+
+_I3 = np.eye(3)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def silhouette_ends(p0: np.ndarray, a: np.ndarray, r0: float, r1: float, h: float, c: np.ndarray):
+    """The contour generators' ends seen from the optical centre c, and their derivatives.
+
+    The solid: base centre p0, unit axis a, radii r0 (base) and r1 (top), height h
+    (``Revolution(p0, p0 + h a, r0, r1).silhouette(c)``, same order). Returns (ends (2, 2, 3):
+    generator, end (base, top), xyz; J (2, 2, 3, 9): their derivatives with respect to
+    (p0, a, r0, r1, h), a's along any direction — the caller's map keeps it unit), or (None, None)
+    when c is inside the surface's extension.
+    """
+    q = c - p0
+    q_a = float(q @ a)
+    w = q - q_a * a
+    D = float(np.linalg.norm(w))
+    k = r0 - (r0 - r1) * q_a / h
+    if D <= abs(k) or D < 1e-12:
+        return None, None
+    w_hat = w / D
+    b_hat = np.cross(a, w_hat)
+    cc = k / D
+    s = np.sqrt(max(0.0, 1.0 - cc * cc))
+    # differentials (3, 9) or (9,) with respect to x = (p0, a, r0, r1, h)
+    dp0 = np.zeros((3, 9))
+    dp0[:, 0:3] = _I3
+    da = np.zeros((3, 9))
+    da[:, 3:6] = _I3
+    e_r0, e_r1, e_h = np.eye(9)[6], np.eye(9)[7], np.eye(9)[8]
+    dq_a = -a @ dp0 + q @ da
+    dw = -dp0 - np.outer(a, dq_a) - q_a * da
+    dD = w_hat @ dw
+    dw_hat = (dw - np.outer(w_hat, dD)) / D
+    db = _skew(a) @ dw_hat - _skew(w_hat) @ da
+    dk = e_r0 - (e_r0 - e_r1) * q_a / h - (r0 - r1) * (dq_a / h - q_a * e_h / h**2)
+    dcc = dk / D - k * dD / D**2
+    ds = -cc * dcc / s
+    ends = np.empty((2, 2, 3))
+    J = np.empty((2, 2, 3, 9))
+    top = p0 + h * a
+    d_top = dp0 + np.outer(a, e_h) + h * da
+    for g, sign in enumerate((1.0, -1.0)):
+        e = cc * w_hat + sign * s * b_hat
+        de = np.outer(w_hat, dcc) + cc * dw_hat + sign * (np.outer(b_hat, ds) + s * db)
+        ends[g, 0] = p0 + r0 * e
+        ends[g, 1] = top + r1 * e
+        J[g, 0] = dp0 + np.outer(e, e_r0) + r0 * de
+        J[g, 1] = d_top + np.outer(e, e_r1) + r1 * de
+    return ends, J
 
 
 def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
@@ -108,14 +168,15 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
     # Returns away from grazing, and per-beam σ of the gap, from the initial model.
     p0i, ai, r0i, r1i, hi = unpack(th0)
     sig_gap = np.zeros(len(beams))
-    for j, tb in enumerate(beams):
-        def gap(angles):
-            D = (beam_direction(angles[0], angles[1]) @ T[:3, :3].T)[None]
-            return beam_gap(O, D, p0i, ai, r0i, (r1i - r0i) / hi)[0]
-
-        g0 = beam_gap(O, Dm[j : j + 1], p0i, ai, r0i, (r1i - r0i) / hi)[0]
-        dg = numeric_jacobian(gap, np.array([tb.pan_rad, tb.tilt_rad]), 1e-6, f0=g0)[0]
-        sig_gap[j] = np.hypot(dg[0] * tb.sigma_pan_rad, dg[1] * tb.sigma_tilt_rad)
+    if len(beams):  # the gap's derivatives with respect to each beam's pan and tilt (analytic)
+        pan = np.array([tb.pan_rad for tb in beams])
+        tilt = np.array([tb.tilt_rad for tb in beams])
+        cp, sp, ct, st = np.cos(pan), np.sin(pan), np.cos(tilt), np.sin(tilt)
+        dD_pan = np.column_stack([-ct * sp, ct * cp, np.zeros_like(pan)]) @ T[:3, :3].T
+        dD_tilt = np.column_stack([-st * cp, -st * sp, ct]) @ T[:3, :3].T
+        dg_dD = beam_gap_direction_jacobian(O, Dm, p0i, ai, r0i, (r1i - r0i) / hi)
+        sig_gap = np.hypot(np.einsum("ij,ij->i", dg_dD, dD_pan) * [tb.sigma_pan_rad for tb in beams],
+                           np.einsum("ij,ij->i", dg_dD, dD_tilt) * [tb.sigma_tilt_rad for tb in beams])
     sig_gap = np.maximum(sig_gap, 1e-9)
 
     # Which generator and which end each clicked silhouette end is (fixed from the start).
@@ -154,19 +215,28 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
         out.append(((clicks - pred) / sigma_px).reshape(-1))
         return np.concatenate(out)
 
-    def silhouette_residuals(th):
+    C = cam.C
+
+    def silhouette_jacobian(th, dp0, da, dr0, dr1, dh):
+        """d(clicked-end residuals)/dθ (8, n): the generators' ends through the camera (analytic)."""
         p0, a, r0, r1, h = unpack(th)
-        gens = Revolution(p0, p0 + h * a, r0, r1).silhouette(c)
-        pred = np.concatenate([cam.project(gens[g]) for g in gen_idx])
-        return ((clicks - pred) / sigma_px).reshape(-1)
+        ends, dX = silhouette_ends(p0, a, r0, r1, h, c)
+        if ends is None:  # no silhouette at this θ (the residuals are the flat penalty there)
+            return np.zeros((8, len(th)))
+        X, dX = ends[gen_idx].reshape(4, 3), dX[gen_idx].reshape(4, 3, 9) @ np.vstack([dp0, da, dr0, dr1, dh])
+        P = X @ C[:, :3].T + C[:, 3]
+        uv = P[:, :2] / P[:, 2:3]
+        duv_dX = (C[None, :2, :3] - uv[:, :, None] * C[None, 2:3, :3]) / P[:, 2, None, None]  # (4, 2, 3)
+        return -(duv_dX @ dX).reshape(8, -1) / sigma_px
 
     def jacobian(th):
-        """Analytic for the returns and tangent beams (through (p0, a, r0, k)), numeric for the clicks."""
+        """Analytic: the returns and tangent beams through (p0, a, r0, k), the clicked ends through
+        the contour generators' ends (``silhouette_ends``) and the camera."""
         p0, a, r0, r1, h = unpack(th)
         k = (r1 - r0) / h
         dp0, da, dr0, dr1, dh = unpack_jacobian(th)
         M = np.vstack([dp0, da, dr0, (dr1 - dr0) / h - (r1 - r0) / h**2 * dh])  # d(p0, a, r0, k)/dθ
-        S = numeric_jacobian(silhouette_residuals, th, 1e-7)
+        S = silhouette_jacobian(th, dp0, da, dr0, dr1, dh)
         blocks = [range_residuals(ret, p0, a, r0, k, jac=True)[1] @ M]
         if len(beams):
             blocks.append((beam_gap_jacobian(O, Dm, p0, a, r0, k) / sig_gap[:, None]) @ M)

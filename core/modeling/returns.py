@@ -142,6 +142,16 @@ def beam_gap_jacobian(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarra
     return J
 
 
+def beam_gap_direction_jacobian(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float) -> np.ndarray:
+    """∂(beam_gap)/∂D, shape (M, 3), for unit directions D (M, 3): at the beam's point X = O + s D
+    nearest the surface the gap is stationary along the beam, so (envelope theorem) moving D moves
+    X by s dD and the gap by s ∇F(X)·dD, over √(1 + k²)."""
+    _, X = beam_gap(O, D, p0, a, r0, k)
+    grad_x, _ = surface_gradient(X, p0, a, r0, k)
+    s = np.einsum("ij,ij->i", X - O, D)
+    return s[:, None] * grad_x / np.sqrt(1.0 + k * k)
+
+
 def beam_gap(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float) -> tuple[np.ndarray, np.ndarray]:
     """Least signed distance (M,) from the lateral surface along each beam line, and where (M, 3).
 

@@ -105,3 +105,100 @@ def test_paper_construction_jacobian_matches_differences(case):
         Jn = numeric_jacobian(lambda x: cyl._solid_vector(cyl._solve_paper(x, ctx), cone), z, 1e-7, central=True)
         assert J.shape == Jn.shape
         assert np.abs(J - Jn).max() < 1e-6 * np.abs(Jn).max(), method
+
+
+def _rel_err(J, Jn):
+    return float(np.abs(J - Jn).max() / np.abs(Jn).max())
+
+
+def test_silhouette_ends_and_their_jacobian_at_random_solids():
+    from core.brep import Revolution
+    from core.modeling.fused import silhouette_ends
+
+    rng = np.random.default_rng(16)
+    checked = 0
+    for _ in range(30):
+        a = rng.normal(size=3)
+        a /= np.linalg.norm(a)
+        p0 = rng.normal(scale=0.2, size=3)
+        r0, r1, h = rng.uniform(0.02, 0.1), rng.uniform(0.0, 0.1), rng.uniform(0.05, 0.4)
+        c = p0 + rng.normal(size=3) * 1.5
+        ends, J = silhouette_ends(p0, a, r0, r1, h, c)
+        ref = Revolution(p0, p0 + h * a, r0, r1).silhouette(c)
+        if ends is None:
+            assert len(ref) == 0
+            continue
+        assert np.allclose(ends, ref, atol=1e-12)
+        x = np.concatenate([p0, a, [r0, r1, h]])
+        Jn = numeric_jacobian(lambda x: silhouette_ends(x[:3], x[3:6], x[6], x[7], x[8], c)[0].reshape(-1), x, 1e-6, central=True)
+        assert _rel_err(J.reshape(12, 9), Jn) <= 1e-6
+        checked += 1
+    assert checked >= 20
+
+
+@pytest.mark.parametrize("k", [0.0, -0.15])
+def test_beam_gap_direction_jacobian_matches_differences(k):
+    from core.modeling.returns import beam_gap, beam_gap_direction_jacobian
+
+    rng = np.random.default_rng(5)
+    p0, a, r0 = np.array([0.01, -0.02, 0.0]), np.array([0.05, 0.02, 1.0]), 0.05
+    a /= np.linalg.norm(a)
+    O = np.array([1.2, 0.3, 0.08])
+    for _ in range(10):
+        target = p0 + a * rng.uniform(0.02, 0.15) + rng.normal(scale=0.08, size=3)
+        D = (target - O) / np.linalg.norm(target - O)
+        J = beam_gap_direction_jacobian(O, D[None], p0, a, r0, k)[0]
+        Jn = numeric_jacobian(lambda d: beam_gap(O, d[None], p0, a, r0, k)[0], D, 1e-7, central=True)[0]
+        assert np.abs(J - Jn).max() <= 1e-6 * np.abs(Jn).max()
+
+
+@pytest.mark.parametrize("case", ["cylinder on the support", "cone on the support", "tilted cylinder, free axis"])
+def test_fused_fit_jacobian_matches_differences_of_its_residuals(case, monkeypatch):
+    """The fused fit's Jacobian against central differences of its own residuals, at its start and
+    at random points around it: the tangent beams' and the clicked ends' rows, to 1e-6. (The scan
+    returns' rows hold each return's σ — its slope term — fixed by design, ``range_residuals``:
+    they are not the residuals' full derivative and are left out here.)"""
+    import core.modeling.fused as fused
+    from core.modeling import model_cylinder
+    from core.modeling.simulate import simulate_revolution
+
+    from .conftest import TABLE, cylinder_scene
+
+    if case == "cone on the support":
+        cam, T_wt, sol, world = cylinder_scene(1.3, r0=0.06, r1=0.03, offset=(-0.01, 0.01))
+        kw = dict(support=TABLE, cone=True)
+    elif case == "cylinder on the support":
+        cam, T_wt, sol, world = cylinder_scene(1.3, offset=(0.01, -0.02))
+        kw = dict(support=TABLE)
+    else:
+        cam, T_wt, sol, world = cylinder_scene(1.3, tilt_axis=[0.15, -0.1, 1.0])
+        kw = {}
+    sil, scans = simulate_revolution(cam, world, sol, np.random.default_rng(2), step_multiple=4)
+    seen = []
+    real_lm = fused.levenberg_marquardt
+
+    def spy(fun, jac, x0, **k):
+        seen.append((fun, jac, np.array(x0, float)))
+        return real_lm(fun, jac, x0, **k)
+
+    monkeypatch.setattr(fused, "levenberg_marquardt", spy)
+    n_beams = []
+    real_dg = fused.beam_gap_direction_jacobian
+
+    def spy_dg(O, D, *args):
+        n_beams.append(len(D))
+        return real_dg(O, D, *args)
+
+    monkeypatch.setattr(fused, "beam_gap_direction_jacobian", spy_dg)
+    model_cylinder(cam, "fused", silhouettes_uv=sil, scans=scans, T_world_turret=T_wt, **kw)
+    assert seen
+    rng = np.random.default_rng(7)
+    fun, jac, th0 = seen[0]
+    for i in range(6):
+        th = th0 + (0 if i == 0 else rng.normal(scale=2e-3, size=th0.shape))
+        J = jac(th)
+        Jn = numeric_jacobian(fun, th, 1e-6, central=True)
+        assert J.shape == Jn.shape and np.abs(Jn[-8:]).max() > 1.0  # the clicked ends are in it
+        m = n_beams[0] + 8  # the tangent beams' rows, then the clicked ends'
+        assert n_beams[0] >= 2
+        assert _rel_err(J[-m:], Jn[-m:]) <= 1e-6, (i, _rel_err(J[-m:], Jn[-m:]))
