@@ -12,6 +12,9 @@ lines and text stay legible; a pixel centre (u, v) goes to ((u + ½)·scale − 
 from __future__ import annotations
 
 import bisect
+import queue
+import threading
+from functools import lru_cache
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -25,6 +28,61 @@ from .replay import OverlayState
 __all__ = ["ascii_text", "draw_overlay", "state_at", "still_frame", "write_overlay_video"]
 
 FONT_SCALE = 0.42
+
+
+def _read_frames(cap, total: int):
+    """The video's first ``total`` frames (BGR), until one cannot be read."""
+    for _ in range(total):
+        ok, raw = cap.read()
+        if not ok:
+            return
+        yield raw
+
+
+class _Pipeline:
+    """Iterate a generator on a thread of its own, a few items ahead (``depth``); ``close`` stops it."""
+
+    _END = object()
+
+    def __init__(self, make, depth: int = 4):
+        self._q: queue.Queue = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(make,), name="overlay-reader", daemon=True)
+        self._thread.start()
+
+    def _run(self, make) -> None:
+        try:
+            for item in make():
+                while not self._stop.is_set():
+                    try:
+                        self._q.put(item, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if self._stop.is_set():
+                    return
+            item = self._END
+        except BaseException as exc:  # noqa: BLE001 - raised again by the consumer
+            item = exc
+        while not self._stop.is_set():
+            try:
+                self._q.put(item, timeout=0.1)
+                return
+            except queue.Full:
+                continue
+
+    def __iter__(self):
+        while True:
+            item = self._q.get()
+            if item is self._END:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
 
 
 def still_frame(t_s: float, fps: float) -> int:
@@ -57,7 +115,7 @@ def _text(img: np.ndarray, text: str, org: tuple[int, int], color=(255, 255, 255
     import cv2
 
     text = ascii_text(text)
-    (w, h), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
+    (w, h), base = _text_size(text, scale)
     if centred:
         org = (org[0] - w // 2, org[1])
     x0, y0 = max(org[0] - 2, 0), max(org[1] - h - 2, 0)
@@ -67,6 +125,14 @@ def _text(img: np.ndarray, text: str, org: tuple[int, int], color=(255, 255, 255
     cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, color, 1, cv2.LINE_AA)
 
 
+@lru_cache(maxsize=4096)
+def _text_size(text: str, scale: float) -> tuple[tuple[int, int], int]:
+    import cv2
+
+    return cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
+
+
+@lru_cache(maxsize=4096)
 def _fit(text: str, width_px: int, scale: float = FONT_SCALE) -> str:
     """The text, cut and ended with "..." if it is wider than width_px (OpenCV's font has no "…")."""
     import cv2
@@ -82,19 +148,34 @@ def _fit(text: str, width_px: int, scale: float = FONT_SCALE) -> str:
     return text + "..."
 
 
-def draw_overlay(frame_gray: np.ndarray, state: OverlayState, t_s: float, scale: int = 2) -> np.ndarray:
-    """One overlay frame: BGR uint8 (H·scale, W·scale, 3) from a grey frame (H, W) and a state."""
-    import cv2
+class _Plan:
+    """What one state draws over any frame, in frame pixels × scale, computed once per state:
+    the line segments (fixed-point ends with 4 fractional bits, BGR colour), in drawing order, and
+    the labels (text, integer position)."""
 
-    if frame_gray.ndim != 2:
-        raise ValueError(f"frame_gray must be a grey image (H, W), got shape {frame_gray.shape}")
-    if int(scale) < 1:
-        raise ValueError(f"scale must be a whole number ≥ 1, got {scale}")
-    scale = int(scale)
-    h, w = frame_gray.shape
-    img = cv2.cvtColor(cv2.resize(frame_gray, (w * scale, h * scale), interpolation=cv2.INTER_LINEAR), cv2.COLOR_GRAY2BGR)
+    __slots__ = ("lines", "labels")
+
+    def __init__(self, lines: list, labels: list):
+        self.lines, self.labels = lines, labels
+
+
+def _db_key(state: OverlayState, w: int, h: int) -> tuple:
+    """What the database wireframes depend on: the camera, the frame size and each object's
+    snapshot (a state keeps the objects' snapshots until the database changes)."""
+    return (state.camera.C.tobytes(), w, h,
+            tuple((o.id, o.name, o.status, o.version, id(o.model), np.asarray(o.T_world_obj).tobytes()) for o in state.objects))
+
+
+def _plan(state: OverlayState, w: int, h: int, scale: int, db_cache: dict | None = None) -> _Plan:
+    """The state's _Plan; db_cache : {key: draw_database's result} shared over the states of a video."""
     cam = state.camera
-    batch, db_labels = draw_database(cam, state.objects, w, h)
+    key = _db_key(state, w, h) if db_cache is not None else None
+    if key is not None and key in db_cache:
+        batch, db_labels = db_cache[key]
+    else:
+        batch, db_labels = draw_database(cam, state.objects, w, h)
+        if key is not None:
+            db_cache[key] = (batch, db_labels)
     labels = [(uv, text) for _, uv, text in db_labels]
     if state.marks is not None:
         marks_batch, mark_labels = draw_marks(cam, state.marks, {o.name: o for o in state.objects}, w, h)
@@ -107,21 +188,50 @@ def draw_overlay(frame_gray: np.ndarray, state: OverlayState, t_s: float, scale:
         uv = cam.project(np.asarray(X, float))
         beam.add(circle_marker(uv, 5.0), COLORS["beam"])
     to_img = lambda uv: (np.asarray(uv, float) + 0.5) * scale - 0.5  # noqa: E731
+    lines = []
     for b in (batch, marks_batch, beam):
         segs, cols = b.arrays()
         P = np.round(to_img(segs) * 16).astype(np.int64)
-        for (a, c), col in zip(P, cols):
-            cv2.line(img, (int(a[0]), int(a[1])), (int(c[0]), int(c[1])), (int(col[2]), int(col[1]), int(col[0])), 1,
-                     cv2.LINE_AA, 4)
+        for (a, c), col in zip(P.tolist(), np.asarray(cols).tolist()):
+            lines.append(((int(a[0]), int(a[1])), (int(c[0]), int(c[1])), (int(col[2]), int(col[1]), int(col[0]))))
+    text_at = []
     for uv, text in labels:
         p = to_img(uv)
         if np.all(np.isfinite(p)):
-            _text(img, str(text), (int(p[0]), int(p[1])), scale=0.35, centred=True)
+            text_at.append((str(text), (int(p[0]), int(p[1]))))
+    return _Plan(lines, text_at)
+
+
+def _paint(frame_gray: np.ndarray, plan: _Plan, state: OverlayState, t_s: float, scale: int) -> np.ndarray:
+    import cv2
+
+    h, w = frame_gray.shape
+    img = cv2.cvtColor(cv2.resize(frame_gray, (w * scale, h * scale), interpolation=cv2.INTER_LINEAR), cv2.COLOR_GRAY2BGR)
+    line, aa = cv2.line, cv2.LINE_AA
+    for a, c, col in plan.lines:
+        line(img, a, c, col, 1, aa, 4)
+    for text, org in plan.labels:
+        _text(img, text, org, scale=0.35, centred=True)
     head = f"t = {t_s:5.2f} s" + (f"   {state.title}" if state.title else "")
     _text(img, _fit(head, w * scale - 12), (6, 16))
     if state.text:
         _text(img, _fit(state.text, w * scale - 12), (6, h * scale - 8), color=(200, 255, 255))
     return img
+
+
+def _check_frame(frame_gray: np.ndarray, scale) -> int:
+    if frame_gray.ndim != 2:
+        raise ValueError(f"frame_gray must be a grey image (H, W), got shape {frame_gray.shape}")
+    if int(scale) < 1:
+        raise ValueError(f"scale must be a whole number ≥ 1, got {scale}")
+    return int(scale)
+
+
+def draw_overlay(frame_gray: np.ndarray, state: OverlayState, t_s: float, scale: int = 2) -> np.ndarray:
+    """One overlay frame: BGR uint8 (H·scale, W·scale, 3) from a grey frame (H, W) and a state."""
+    scale = _check_frame(frame_gray, scale)
+    h, w = frame_gray.shape
+    return _paint(frame_gray, _plan(state, w, h, scale), state, t_s, scale)
 
 
 def write_overlay_video(
@@ -158,31 +268,62 @@ def write_overlay_video(
     want = {still_frame(t, fps): name for name, t in (stills or {}).items()}
     writer = None
     written = 0
+    plans: dict[int, _Plan] = {}  # per state (by its place in the timeline)
+    db_cache: dict = {}  # the database's wireframes, per camera and objects' snapshots
+    times = [st.t_s for st in timeline]
+    # Frames are read and encoded on two more threads (OpenCV lets go of the interpreter while it
+    # decodes and encodes), beside the drawing here; the bounded queues keep a few frames each.
+    frames_in = _Pipeline(lambda: _read_frames(cap, total))
+    encode: queue.Queue = queue.Queue(maxsize=8)
+    encoder = None
+    failure: list[BaseException] = []
+
+    def encode_all() -> None:
+        while (img := encode.get()) is not None:
+            if not failure:
+                try:
+                    writer.write(img)
+                except BaseException as exc:  # noqa: BLE001 - raised again in the caller
+                    failure.append(exc)
+
     try:
-        for k in range(total):
-            ok, raw = cap.read()
-            if not ok:
-                break
+        for k, raw in enumerate(frames_in):
             t = k / fps
             grey = cv2.cvtColor(raw, cv2.COLOR_BGR2GRAY)
             if lens is not None:  # the scene camera's lens: the overlay is drawn on the undistorted frame
                 grey = lens.undistort_image(grey)
-            img = draw_overlay(grey, state_at(timeline, t), t, scale)
+            i = max(bisect.bisect_right(times, t + 1e-9) - 1, 0)  # state_at's choice
+            if k == 0:
+                scale = _check_frame(grey, scale)
+            h, w = grey.shape
+            if i not in plans:
+                plans[i] = _plan(timeline[i], w, h, scale, db_cache)
+            img = _paint(grey, plans[i], timeline[i], t, scale)
             if writer is None:
                 out_path.parent.mkdir(parents=True, exist_ok=True)
                 writer = cv2.VideoWriter(str(out_path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (img.shape[1], img.shape[0]))
                 if not writer.isOpened():
                     raise RuntimeError(f"OpenCV cannot write an mp4v video to {out_path}")
-            writer.write(img)
+                encoder = threading.Thread(target=encode_all, name="overlay-encoder", daemon=True)
+                encoder.start()
+            if failure:
+                raise failure[0]
+            encode.put(img)
             written += 1
             if k in want:
                 cv2.imwrite(str(out_path.parent / want[k]), img)
             if progress:
                 progress(written, total)
     finally:
+        frames_in.close()
+        if encoder is not None:
+            encode.put(None)
+            encoder.join()
         cap.release()
         if writer is not None:
             writer.release()
+    if failure:
+        raise failure[0]
     if written == 0:
         raise ValueError(f"{video_path}: no frame could be read")
     return written

@@ -6,7 +6,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import Callable, TextIO
 
 import numpy as np
 
@@ -134,6 +134,13 @@ def run_demo(
         wall["analysis"] = time.perf_counter() - t0
         stills = _stills(script, scene.video.fps) if scene.video is not None else []
         video_path = None
+        n_pose = pose_trials if pose_trials is not None else 5 * sim_trials
+        beside = None
+        if sim_trials > 0 and video:  # the sweeps in a second process, beside the video (2 cores)
+            t_sim = time.perf_counter()
+            beside = _SimulationBeside.start(scene, script, sim_trials, n_pose, seed)
+            if beside is not None:
+                say(_simulating(sim_trials, n_pose, seed) + " in a second process, beside the overlay video")
         if video:
             if scene.video is None or not scene.video.path.is_file():
                 raise ValueError(f"scene {scene.name!r} has no video file to draw over; run with --no-video or render it")
@@ -147,10 +154,13 @@ def run_demo(
                                 lens=scene.lens)
             wall["overlay video"] = time.perf_counter() - t0
         sims = None
-        if sim_trials > 0:
+        if beside is not None:
+            sims = beside.result(_bar(stream, "trials"))
+            wall["simulation (beside the video)"] = time.perf_counter() - t_sim
+        elif sim_trials > 0:
             t0 = time.perf_counter()
-            sims = _simulate(scene, script, sim_trials, pose_trials if pose_trials is not None else 5 * sim_trials, seed,
-                             stream, say)
+            say(_simulating(sim_trials, n_pose, seed))
+            sims = _simulate(scene, script, sim_trials, n_pose, seed, _bar(stream, "trials"))
             wall["simulation"] = time.perf_counter() - t0
         wall["total"] = time.perf_counter() - t_all
         shown = [(name, caption) for name, caption, _ in stills if (out / name).is_file() and video_path is not None]
@@ -161,18 +171,86 @@ def run_demo(
         replay.site.db.close()
 
 
-def _simulate(scene: Scene, script: OperatorScript, trials: int, pose_trials: int, seed: int, stream, say):
+def _simulating(trials: int, pose_trials: int, seed: int) -> str:
+    return f"simulating the paper's sweeps: {trials} trials per distance, {pose_trials} pose problems (seed {seed})"
+
+
+def _sim_total(trials: int, pose_trials: int) -> int:
+    return trials * (len(BOX_DISTANCES_M) + len(CYLINDER_DISTANCES_M)) + pose_trials
+
+
+class _SimulationBeside:
+    """The simulated sweeps in a forked process, so that they run on the second core while this
+    one draws the overlay video: the same seeded sweeps (``_simulate``), sent back pickled; their
+    progress counted in shared memory."""
+
+    def __init__(self, process, conn, done, total: int):
+        self._process, self._conn, self._done, self._total = process, conn, done, total
+
+    @classmethod
+    def start(cls, scene: Scene, script: OperatorScript, trials: int, pose_trials: int, seed: int):
+        """Start the sweeps; None where processes cannot be forked (then run them in this one)."""
+        import multiprocessing as mp
+
+        if "fork" not in mp.get_all_start_methods():
+            return None
+        ctx = mp.get_context("fork")
+        done = ctx.Value("l", 0, lock=False)
+        recv, send = ctx.Pipe(duplex=False)
+
+        def child() -> None:
+            def count(n: int, _total: int) -> None:
+                done.value = n
+
+            try:
+                out = ("ok", _simulate(scene, script, trials, pose_trials, seed, count))
+            except BaseException as exc:  # noqa: BLE001 - raised again in the parent
+                import traceback
+
+                out = ("error", (exc, traceback.format_exc()))
+            try:
+                send.send(out)
+            except Exception as exc:  # an exception that does not pickle
+                send.send(("error", (RuntimeError(str(exc)), "")))
+            send.close()
+
+        process = ctx.Process(target=child, name="mcit-demo-simulation", daemon=True)
+        process.start()
+        send.close()
+        return cls(process, recv, done, _sim_total(trials, pose_trials))
+
+    def result(self, progress: Callable[[int, int], None] | None = None):
+        """Wait for the sweeps (showing their progress) and return their Simulations; raises what they raised."""
+        try:
+            while not self._conn.poll(0.1):
+                if progress:
+                    progress(min(self._done.value, self._total - 1), self._total)
+                if not self._process.is_alive() and not self._conn.poll(0):
+                    raise RuntimeError(f"the simulation process ended without a result (exit code {self._process.exitcode})")
+            status, value = self._conn.recv()
+        finally:
+            self._conn.close()
+            self._process.join(timeout=5)
+        if status == "error":
+            exc, tb = value
+            raise exc from RuntimeError("in the simulation process:\n" + tb) if tb else exc
+        if progress:
+            progress(self._total, self._total)
+        return value
+
+
+def _simulate(scene: Scene, script: OperatorScript, trials: int, pose_trials: int, seed: int,
+              progress: Callable[[int, int], None] | None = None):
     """The simulated sweeps (Simulations) with the script's click noise, for the scene's unknown
-    box and cylinder and the paper's pose problems."""
+    box and cylinder and the paper's pose problems. progress : ``progress(done, total)`` per trial."""
     from .report import Simulations
     from .simulation import box_sweep, cylinder_sweep, pose_sweep, sim_setup
 
     sigma = float(script.generator.get("click_sigma_px", 1.0))
     setup = sim_setup(scene, sigma)
     rng = np.random.default_rng(seed)
-    total = trials * (len(BOX_DISTANCES_M) + len(CYLINDER_DISTANCES_M)) + pose_trials
-    say(f"simulating the paper's sweeps: {trials} trials per distance, {pose_trials} pose problems (seed {seed})")
-    bar = _bar(stream, "trials")
+    total = _sim_total(trials, pose_trials)
+    bar = progress
     done = [0]
 
     def tick() -> None:

@@ -201,3 +201,50 @@ def test_unusable_inputs_exit_2(scene, script, tmp_path, capsys):
     path.write_text(json.dumps(d))
     assert _cli("--script", str(path), "--out", str(tmp_path / "out")) == 2
     assert "recorded on scene 'elsewhere'" in capsys.readouterr().err
+
+
+def test_simulation_beside_the_video_gives_the_same_sweeps(scene, script):
+    """The sweeps run in a second process (beside the overlay video) are those run here, number for number."""
+    from app.demo.run import _simulate, _SimulationBeside
+
+    beside = _SimulationBeside.start(scene, script, 1, 2, 3)
+    assert beside is not None  # Linux forks
+    seen = []
+    there = beside.result(lambda done, total: seen.append((done, total)))
+    here = _simulate(scene, script, 1, 2, 3)
+    assert seen[-1] == (10, 10)  # 1 trial x 8 distances + 2 pose problems
+    for name in ("box", "cylinder", "pose"):
+        assert _same(getattr(there, name), getattr(here, name)), name
+    assert there.box is not None and there.cylinder is not None and there.pose is not None
+
+
+def _same(a, b) -> bool:
+    """Equal value for value (arrays exactly, NaN equal to NaN), through dataclasses, containers and objects."""
+    import dataclasses
+
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, np.ndarray):
+        return a.shape == b.shape and np.array_equal(a, b, equal_nan=a.dtype.kind in "fc")
+    if isinstance(a, float):
+        return a == b or (np.isnan(a) and np.isnan(b))
+    if dataclasses.is_dataclass(a):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if hasattr(a, "__dict__"):
+        return _same(vars(a), vars(b))
+    return a == b
+
+
+def test_a_failing_simulation_beside_the_video_is_raised(scene, script, monkeypatch):
+    import app.demo.run as run
+
+    def broken(*args, **kwargs):
+        raise ValueError("no sweep today")
+
+    monkeypatch.setattr(run, "_simulate", broken)
+    with pytest.raises(ValueError, match="no sweep today"):
+        run._SimulationBeside.start(scene, script, 1, 2, 3).result()
