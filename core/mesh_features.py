@@ -13,8 +13,10 @@ would be an edge on the overlay, and a rectangle split in two would show a false
 * a vertex in the middle of a straight feature edge (two collinear feature edges meet there and
   it belongs to polygon faces only) is removed, so a subdivided side is one edge.
 
-Curved surfaces keep no silhouette (only their creases and borders are edges): model cylinders and
-cones analytically (``core.brep.Revolution``) when their contour matters.
+A curved region's triangles are faces whose sides are not edges: the overlay draws the region's
+silhouette from them at each pose (``core.silhouette``), so a cylinder shows its two side lines
+and a sphere its outline. Model cylinders and cones analytically (``core.brep.Revolution``) when
+the tracker should follow their contour: it uses the sharp edges of a mesh only.
 """
 
 from __future__ import annotations

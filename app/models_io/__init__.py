@@ -12,13 +12,14 @@ from pathlib import Path
 from core.brep import BRep
 
 from .cao import CaoError, CaoOptions, CaoWarning, cao_text, concat_breps, read_cao, read_cao_options, read_init, write_cao
-from .mesh import MESH_SUFFIXES, MeshError, read_mesh, write_mesh
+from .mesh import MESH_SUFFIXES, MeshError, MeshWarning, read_mesh, write_mesh
 
 __all__ = [
     "CaoError",
     "CaoWarning",
     "CaoOptions",
     "MeshError",
+    "MeshWarning",
     "MODEL_SUFFIXES",
     "load_model",
     "save_model",

@@ -52,9 +52,13 @@ exhausts memory, and so that whatever loads can also be exported and read back:
 Error messages say ``file:line`` and what was expected; they never quote the file's text (the
 named file may not be a model at all, e.g. a system file named in a ``load()``).
 
-Writing: every face whose sides are all model edges becomes a face from points, the other
-edges become lines, cylinders and circles get their defining points appended. A cone (two radii)
-has no ``.cao`` form: writing one raises ``ValueError``.
+Writing: every face becomes a face from points, the edges that are no face's side become lines,
+cylinders and circles get their defining points appended. A cone (two radii) has no ``.cao``
+form: writing one raises ``ValueError``. A mesh's curved region (triangles whose sides are not
+edges, drawn by its silhouette: ``core.silhouette``) is written as its triangles, so the surface
+reads back, in mcit and in ViSP, with the same vertices and faces; but a ``.cao`` face's sides are
+always edges (the format cannot say that a side is smooth), so the read-back model draws every
+triangle of the curved region: keep the mesh file (OBJ, glTF) for the silhouettes.
 """
 
 from __future__ import annotations
@@ -647,14 +651,8 @@ def cao_text(model: BRep, comment: str = "", options: CaoOptions | None = None) 
     for s in model.solids:
         if not s.is_cylinder:
             raise ValueError(f"a .cao model has cylinders only; this model has a cone (radii {s.r0}, {s.r1}): export it as glTF or OBJ")
-    edge_set = {(int(a), int(b)) for a, b in model.edges}
-    faces = []
-    covered: set[tuple[int, int]] = set()
-    for k, f in enumerate(model.faces):
-        sides = {(min(a, b), max(a, b)) for a, b in zip(f, f[1:] + f[:1])}
-        if sides <= edge_set:
-            faces.append((k, f))
-            covered |= sides
+    faces = list(enumerate(model.faces))  # every face, a mesh's smooth triangles too (see the module docstring)
+    covered = {(min(a, b), max(a, b)) for f in model.faces for a, b in zip(f, f[1:] + f[:1])}
     lines = [(a, b) for a, b in map(tuple, model.edges.tolist()) if (a, b) not in covered]
     points = [tuple(p) for p in model.vertices.tolist()]
     cylinders = []

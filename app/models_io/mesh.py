@@ -2,32 +2,43 @@
 
 Reading merges duplicate vertices (an STL is a triangle soup) and reduces the triangles to their
 feature edges with ``core.mesh_features.brep_from_mesh``: a triangulated planar face adds no
-false edge. A glTF scene's meshes are placed by their node transforms and merged into one model.
-Bad input raises ``MeshError`` naming the file (and, for OBJ, the line) and the problem.
+false edge. A curved region keeps its triangles as faces whose sides are not edges; the overlay
+draws its silhouette at each pose (``core.silhouette``, ``app.overlay.model_wireframe``): a
+cylinder's two side lines, a sphere's outline. A glTF scene's meshes are placed by their node
+transforms and merged into one model. Bad input raises ``MeshError`` naming the file (and, for
+OBJ, the line) and the problem; a mesh that gives nothing to draw (no sharp edge and no curved
+region with an outline, e.g. each triangle given twice) loads with a ``MeshWarning`` naming the file.
 
 Writing tessellates the model (``BRep.triangles``: faces fan-triangulated, cylinders and cones
 with ``n_circle`` sides) and exports the surface; ``.gltf`` embeds its buffer so the file stands
 alone. The edges are not written (these formats carry surfaces): reading the file back recovers
 the polyhedral edges through the dihedral-angle threshold, and a cylinder comes back as two rim
-polylines without silhouettes.
+polylines and a smooth side drawn by its silhouettes.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import warnings
+
 import numpy as np
 
 from core.brep import BRep
 from core.mesh_features import brep_from_mesh
+from core.silhouette import SmoothSides
 
-__all__ = ["MeshError", "MESH_SUFFIXES", "read_mesh", "write_mesh"]
+__all__ = ["MeshError", "MeshWarning", "MESH_SUFFIXES", "read_mesh", "write_mesh"]
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".gltf", ".glb")
 
 
 class MeshError(ValueError):
     """A mesh file that cannot be read; the message names the file and the problem."""
+
+
+class MeshWarning(UserWarning):
+    """A mesh that loads but that the overlay cannot show; the message names the file."""
 
 
 def _check_obj(path: Path) -> None:
@@ -87,9 +98,15 @@ def read_mesh(path: str | Path, angle_deg: float = 30.0) -> BRep:
         raise MeshError(f"{path}: the mesh has non-finite vertex coordinates")
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
     try:
-        return brep_from_mesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces), angle_deg=angle_deg)
+        model = brep_from_mesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces), angle_deg=angle_deg)
     except ValueError as exc:
         raise MeshError(f"{path}: {exc}") from None
+    if not len(model.edges) and not len(SmoothSides.of(model.vertices, model.faces, model.edges)):
+        warnings.warn(MeshWarning(
+            f"{path}: this mesh gives nothing to draw on the overlay (no sharp edge and no curved surface with an "
+            f"outline, e.g. each triangle given twice); export the object again from its CAD program as a closed surface"),
+            stacklevel=2)
+    return model
 
 
 def write_mesh(model: BRep, path: str | Path, n_circle: int = 48) -> None:
