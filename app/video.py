@@ -10,14 +10,21 @@ live source (a camera or a stream) the time is the wall-clock time since the sou
 ``open_video(spec)`` understands:
 
 * an integer, or a string of digits: a camera index (``cv2.VideoCapture(0)``);
-* a string with ``://`` (``rtsp://``, ``http://``...): a stream URL;
+* a string with ``://`` (``rtsp://``, ``http://``...): a stream URL (opened and read with time limits:
+  ``STREAM_OPEN_TIMEOUT_S``, ``STREAM_READ_TIMEOUT_S``, so that a stream that stops cannot hang a read);
 * a folder: the images in it (``.png``, ``.jpg``, ``.jpeg``, ``.bmp``, ``.tif``, ``.tiff``, ``.pgm``,
   ``.ppm``) in name order, played at ``fps`` (default 10) and looped;
 * an image file: a still frame; any other file: a video file, looped at its own frame rate.
+
+A live source that fails (a stream whose server stops, a camera unplugged) is not the end:
+``FrameGrabber`` says so in ``status()`` ("video lost at HH:MM:SS, reconnecting (try n)") and reopens
+it with a growing delay (``RECONNECT_DELAYS_S``) until frames arrive again ("live"). A live source
+that stays silent longer than ``stall_s`` is reported lost even while its read is still waiting.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import threading
 import time
@@ -26,6 +33,8 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+
+log = logging.getLogger("mcit.video")
 
 __all__ = [
     "Frame",
@@ -37,10 +46,15 @@ __all__ = [
     "open_video",
     "why_not_opened",
     "FrameGrabber",
+    "VideoStatus",
+    "stamp_not_live",
     "IMAGE_SUFFIXES",
 ]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")
+STREAM_OPEN_TIMEOUT_S = 5.0  # a stream URL that does not answer within this is not opened
+STREAM_READ_TIMEOUT_S = 3.0  # a stream read that waits longer fails (the grabber then reconnects)
+RECONNECT_DELAYS_S = (0.25, 0.5, 1.0, 2.0)  # waits before each reconnection try; the last repeats
 
 
 class VideoError(ValueError):
@@ -83,6 +97,7 @@ class VideoSource:
     live: bool = False
     description: str = ""
     frame_count: int | None = None
+    reconnects: bool = False  # True when reopen() can bring a failed live source back
 
     def __init__(self) -> None:
         self._index = -1
@@ -112,6 +127,10 @@ class VideoSource:
     def close(self) -> None:
         """Release the device or file."""
 
+    def reopen(self) -> None:
+        """Open the source again after a failure (``reconnects`` sources); VideoError if it cannot be."""
+        raise VideoError(f"{self.description} cannot be reopened")
+
     def __enter__(self) -> "VideoSource":
         return self
 
@@ -119,9 +138,24 @@ class VideoSource:
         self.close()
 
 
-def why_not_opened(target: int | str | Path) -> str:
+def _without_password(url: str) -> str:
+    """The URL with its password (if any) replaced by *** (never repeated in a message, the panel or a log)."""
+    from urllib.parse import urlsplit
+
+    try:
+        parts = urlsplit(url)
+        if parts.password:
+            return parts._replace(netloc=parts.netloc.replace(f":{parts.password}@", ":***@")).geturl()
+    except ValueError:
+        pass
+    return url
+
+
+def why_not_opened(target: int | str | Path, probe: bool = True) -> str:
     """Why OpenCV could not open ``target`` and what to do, in one line (OpenCV only says "no"; its
-    and FFmpeg's own log lines are silenced by ``mcit``, see app/cli.py)."""
+    and FFmpeg's own log lines are silenced by ``mcit``, see app/cli.py). ``probe``: for a stream,
+    try a connection to its host to say whether it answers (not while reconnecting: a server that
+    takes one client, as ``ffmpeg -listen 1``, would take the probe for it)."""
     if isinstance(target, int):
         device = Path(f"/dev/video{target}")
         if not device.exists() and Path("/dev").is_dir():
@@ -138,10 +172,9 @@ def why_not_opened(target: int | str | Path) -> str:
             host, port = url.hostname, url.port or {"rtsp": 554, "http": 80, "https": 443, "rtmp": 1935}.get(url.scheme)
         except ValueError:
             return f"cannot open the stream {text}: the address is not a valid URL; check it"
-        if url.password:  # never repeat a password in a message or a log
-            text = url._replace(netloc=url.netloc.replace(f":{url.password}@", ":***@")).geturl()
+        text = _without_password(text)  # never repeat a password in a message or a log
         reason = ""
-        if host and port:
+        if host and port and probe:
             import socket
 
             try:
@@ -172,7 +205,9 @@ class CaptureSource(VideoSource):
 
         self._target = target
         self.live = not (isinstance(target, (str, Path)) and Path(str(target)).is_file())
-        self._cap = cv2.VideoCapture(int(target) if isinstance(target, int) else str(target))
+        self.reconnects = self.live
+        self._closed = False
+        self._cap = self._open()
         if not self._cap.isOpened():
             raise VideoError(why_not_opened(target))
         first = self._grab_first()
@@ -182,8 +217,45 @@ class CaptureSource(VideoSource):
         count = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
         self.frame_count = count if (not self.live and count > 0) else None
         kind = "camera" if isinstance(target, int) else ("file" if not self.live else "stream")
-        self.description = f"{kind} {target}"
+        self.description = f"{kind} {_without_password(str(target)) if kind == 'stream' else target}"
         self._pending: np.ndarray | None = first
+
+    def _open(self):
+        import cv2
+
+        target = self._target
+        if isinstance(target, int):
+            return cv2.VideoCapture(target)
+        if "://" in str(target):  # a stream: bounded open and reads (FFmpeg's interrupt callback)
+            params = [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, int(STREAM_OPEN_TIMEOUT_S * 1000),
+                      cv2.CAP_PROP_READ_TIMEOUT_MSEC, int(STREAM_READ_TIMEOUT_S * 1000)]
+            return cv2.VideoCapture(str(target), cv2.CAP_FFMPEG, params)
+        return cv2.VideoCapture(str(target))
+
+    def reopen(self) -> None:
+        """Release the capture and open the target again (a stream or camera that failed); its first
+        frame must have the size the source had. VideoError saying why when it cannot."""
+        if not self.live:
+            raise VideoError(f"{self.description} cannot be reopened")
+        self._cap.release()
+        cap = self._open()
+        if not cap.isOpened():
+            cap.release()
+            raise VideoError(why_not_opened(self._target, probe=False))
+        ok, image = cap.read()
+        if not ok or image is None:
+            cap.release()
+            raise VideoError(f"{self.description} opened again but gave no frame; check the camera or server")
+        image = _to_rgb(image)
+        if image.shape[:2] != (self.height, self.width):
+            cap.release()
+            raise VideoError(f"{self.description} came back with {image.shape[1]}×{image.shape[0]} frames, it gave "
+                             f"{self.width}×{self.height} before; set the camera back to that size or restart mcit")
+        if self._closed:  # closed while this reopened: do not keep the new capture
+            cap.release()
+            raise VideoError(f"{self.description} was closed")
+        self._cap = cap
+        self._pending = image
 
     def _grab_first(self) -> np.ndarray:
         ok, image = self._cap.read()
@@ -212,6 +284,7 @@ class CaptureSource(VideoSource):
         return _to_rgb(image)
 
     def close(self) -> None:
+        self._closed = True
         self._cap.release()
 
 
@@ -311,17 +384,69 @@ def open_video(spec: int | str | Path, fps: float | None = None) -> VideoSource:
     )
 
 
+@dataclass(frozen=True)
+class VideoStatus:
+    """What the operator must know of the video now: ``live`` is True while frames arrive;
+    ``text`` is "live", "video lost at HH:MM:SS, reconnecting (try n)" (HH:MM:SS: this computer's
+    clock when the last frame arrived), "video stopped: ..." (a source that cannot come back) or
+    "waiting for the first frame"; ``reason`` why the last reconnection try failed ("" if none);
+    ``lost_at`` the wall-clock time (``time.time()``) of the last frame before the loss, or None;
+    ``tries`` the reconnection tries so far."""
+
+    live: bool
+    text: str
+    reason: str = ""
+    lost_at: float | None = None
+    tries: int = 0
+
+
+def _clock(t: float) -> str:
+    return time.strftime("%H:%M:%S", time.localtime(t))
+
+
+def stamp_not_live(image: np.ndarray, text: str) -> np.ndarray:
+    """A copy of ``image`` (RGB uint8) marked as not live: grey and darkened, framed in red, with a
+    red band across the top saying "NOT LIVE: <text>" — what the operator sees in place of a frozen
+    image while the video is lost."""
+    import cv2
+
+    h, w = image.shape[:2]
+    grey = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
+    out = cv2.cvtColor((grey.astype(np.float32) * 0.55 + 20.0).astype(np.uint8), cv2.COLOR_GRAY2RGB)
+    red = (200, 30, 30)
+    border = max(2, min(h, w) // 60)
+    cv2.rectangle(out, (0, 0), (w - 1, h - 1), red, 2 * border)
+    label = ("NOT LIVE: " + text).encode("ascii", "replace").decode("ascii")
+    font, thickness = cv2.FONT_HERSHEY_SIMPLEX, max(1, h // 240)
+    band = max(16, h // 12)
+    (tw, th), _ = cv2.getTextSize(label, font, 1.0, thickness)
+    scale = min(0.7 * band / th, 0.94 * w / tw)
+    (tw, th), base = cv2.getTextSize(label, font, scale, thickness)
+    band = max(band, th + base + 8)
+    out[:band] = red
+    cv2.putText(out, label, ((w - tw) // 2, (band + th) // 2), font, scale, (255, 255, 255), thickness, cv2.LINE_AA)
+    return out
+
+
 class FrameGrabber:
     """Reads a source on a background thread and keeps the latest frame.
 
     Prerecorded sources are paced at their frame rate (real-time playback); live sources are read
     as fast as they deliver. ``latest()`` never blocks. ``measured_fps`` is the delivered rate over
-    the last second or so. A read error stops the thread and is kept in ``error`` (shown to the
-    operator); ``on_frame`` callbacks (and those of ``add_listener``) run on the grabber thread and must
-    be quick.
+    the last second or so. ``status()`` says whether the video is live (see ``VideoStatus``).
+
+    A read error of a live source that can be reopened (a stream, a camera: ``source.reconnects``)
+    starts reconnection: the source is reopened after ``RECONNECT_DELAYS_S`` (the last delay repeats)
+    until it gives frames again; meanwhile ``latest()`` keeps the last frame and ``status()`` says the
+    video is lost. A live source that gives no frame for ``stall_s`` seconds (default: the larger of
+    2 s and 5 frame periods) is reported lost too, while its read still waits (a stream read gives up
+    after ``STREAM_READ_TIMEOUT_S``, then reconnection starts). Any other read error stops the thread
+    and is kept in ``error`` (shown to the operator). ``on_frame`` callbacks (and those of
+    ``add_listener``) run on the grabber thread and must be quick.
     """
 
-    def __init__(self, source: VideoSource, on_frame: Callable[[Frame], None] | None = None):
+    def __init__(self, source: VideoSource, on_frame: Callable[[Frame], None] | None = None,
+                 stall_s: float | None = None, reconnect_delays_s: tuple[float, ...] = RECONNECT_DELAYS_S):
         self.source = source
         self._listeners: list[Callable[[Frame], None]] = [on_frame] if on_frame is not None else []
         self._lock = threading.Lock()
@@ -329,6 +454,14 @@ class FrameGrabber:
         self._stop = threading.Event()
         self._times: list[float] = []
         self.error: Exception | None = None
+        self.stall_s = float(stall_s) if stall_s is not None else max(2.0, 5.0 / max(float(source.fps), 1e-3))
+        self._delays = tuple(float(d) for d in reconnect_delays_s) or (1.0,)
+        self._last_mono: float | None = None  # arrival of the latest frame (monotonic, wall clock)
+        self._last_wall: float | None = None
+        self._lost_at: float | None = None  # wall-clock time of the last frame before the loss
+        self._tries = 0
+        self._reason = ""
+        self.losses = 0  # how many times the video was lost (a read failed) since the start
         self._thread = threading.Thread(target=self._run, name="mcit-video", daemon=True)
 
     def start(self) -> "FrameGrabber":
@@ -338,17 +471,31 @@ class FrameGrabber:
         return self
 
     def _run(self) -> None:
+        try:
+            self._read_loop()
+        finally:
+            if self._stop.is_set():  # stopped while a read waited: stop() left the release to this thread
+                self.source.close()
+
+    def _read_loop(self) -> None:
         period = 1.0 / self.source.fps
         next_t = time.monotonic()
         while not self._stop.is_set():
             try:
                 frame = self.source.read()
-            except Exception as exc:  # noqa: BLE001 - kept and shown, the thread ends
+            except Exception as exc:  # noqa: BLE001 - a live source reconnects; otherwise kept, the thread ends
+                if self._stop.is_set():
+                    return
+                if self.source.live and getattr(self.source, "reconnects", False):
+                    self._reconnect(exc)
+                    continue
                 self.error = exc
                 return
             now = time.monotonic()
             with self._lock:
                 self._latest = frame
+                self._last_mono, self._last_wall = now, time.time()
+                self._lost_at, self._tries, self._reason = None, 0, ""
                 self._times.append(now)
                 while self._times and now - self._times[0] > 1.0:
                     self._times.pop(0)
@@ -361,6 +508,47 @@ class FrameGrabber:
                     next_t = time.monotonic()
                 elif delay > 0:
                     self._stop.wait(delay)
+
+    def _reconnect(self, exc: Exception) -> None:
+        """The live source failed: reopen it with growing delays until it opens (its frames then clear
+        the loss) or the grabber stops."""
+        with self._lock:
+            if self._lost_at is None:
+                self._lost_at = self._last_wall if self._last_wall is not None else time.time()
+                self.losses += 1
+            self._reason = str(exc)
+            self._times.clear()
+        log.warning("video lost at %s, reconnecting: %s", _clock(self._lost_at), exc)
+        while not self._stop.is_set():
+            with self._lock:
+                self._tries += 1
+                delay = self._delays[min(self._tries - 1, len(self._delays) - 1)]
+            if self._stop.wait(delay):
+                return
+            try:
+                self.source.reopen()
+            except Exception as failure:  # noqa: BLE001 - said in the status; the next try follows
+                with self._lock:
+                    self._reason = str(failure)
+                continue
+            log.info("video reopened after %d tries", self._tries)
+            return
+
+    def status(self) -> VideoStatus:
+        """Whether frames arrive now, and if not since when and what is being done (never blocks)."""
+        with self._lock:
+            if self.error is not None:
+                return VideoStatus(False, f"video stopped: {self.error}", reason=str(self.error))
+            if self._lost_at is not None:
+                return VideoStatus(False, f"video lost at {_clock(self._lost_at)}, reconnecting (try {max(self._tries, 1)})",
+                                   self._reason, self._lost_at, self._tries)
+            if self._latest is None:
+                return VideoStatus(False, "waiting for the first frame")
+            if self.source.live and self._last_mono is not None and time.monotonic() - self._last_mono > self.stall_s:
+                silent = time.monotonic() - self._last_mono
+                return VideoStatus(False, f"video lost at {_clock(self._last_wall)}, no frame for {silent:.0f} s; waiting "
+                                   "for it", lost_at=self._last_wall)
+            return VideoStatus(True, "live" if self.source.live else "playing")
 
     def add_listener(self, on_frame: Callable[[Frame], None]) -> None:
         """Call ``on_frame(frame)`` (on the grabber thread; keep it quick) for every new frame."""
@@ -388,8 +576,10 @@ class FrameGrabber:
             return (len(self._times) - 1) / span if span > 0 else 0.0
 
     def stop(self) -> None:
-        """Stop the thread and release the source."""
+        """Stop the thread and release the source (a read that still waits, at most a stream's read
+        timeout, is not cut under the thread: the thread releases the source when it returns)."""
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=2.0)
-        self.source.close()
+        if not self._thread.is_alive():
+            self.source.close()

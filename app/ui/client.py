@@ -707,7 +707,10 @@ class ClientPanel:
         self.gui_copy.visible = bool(text)
         if text and self.gui_copy.value != text:
             self.gui_copy.value = text
-        frame = "Live video (no frame frozen). *Seconds back* freezes an earlier frame." if self.frozen is None else (
+        video = self.app.grabber.status()
+        live = ("Live video (no frame frozen)" if video.live else "**Not live**: the video is lost and the image is its "
+                "last frame, greyed; no frame frozen (the status below says more)")
+        frame = f"{live}. *Seconds back* freezes an earlier frame." if self.frozen is None else (
             f"Frozen frame: t = {self.frozen.t_s:.2f} s" + (" · **live shown**" if self.show_live else "")
             + ". *Seconds back*: a frame that long before the live one.")
         if self.gui_frame.content != frame:

@@ -29,7 +29,7 @@ import numpy as np
 import viser
 
 from app.overlay import LineBatch, PixelWorld
-from app.video import FrameGrabber
+from app.video import FrameGrabber, stamp_not_live
 from app.workflows.frames import GrabberFrames
 from app.workflows.site import Site
 
@@ -88,6 +88,7 @@ class InterfaceServer:
         self._db_thread = threading.Thread(target=self._db_loop, name="mcit-database", daemon=True)
         self.frames_sent = 0
         self.redraws = 0
+        self._video_stamp: str | None = None  # the not-live text stamped on the shown frame, or None
         self._last_status_t = 0.0
         self.world3d = World3D(self.server.scene, offset=np.array([-60.0, 0.0, 0.0]))
         self._setup_scene()
@@ -276,12 +277,24 @@ class InterfaceServer:
         """One pass of the frame loop: the new video frame (sent at once, on its own), then each
         client's marks. The database overlay is the database thread's (``sync_database``)."""
         frame = self.grabber.latest()
-        if frame is not None and frame.index != self._frame_index:
+        status = self.grabber.status()
+        was_stamped = self._video_stamp is not None
+        if not status.live and frame is not None:
+            # The video is lost: its last frame stays, but greyed with what happened stamped on it
+            # (never a frozen image that looks live); the panels say it too, at once.
+            if self._video_stamp != status.text:
+                self.video.image = stamp_not_live(frame.image, status.text)
+                self._video_stamp = status.text
+        elif frame is not None and (frame.index != self._frame_index or was_stamped):
+            self._video_stamp = None
             self._frame_index = frame.index
             self.video.image = frame.image
             self.frames_sent += 1
+        video_changed = was_stamped != (self._video_stamp is not None)  # lost, or live again
+        if video_changed:
+            self._update_status()
         revision = self.site.revision
-        site_changed = revision != self._panels_revision
+        site_changed = revision != self._panels_revision or video_changed
         self._panels_revision = revision
         with self.clients_lock:
             panels = list(self.clients.values())
@@ -296,10 +309,15 @@ class InterfaceServer:
 
     def _update_status(self) -> None:
         src = self.grabber.source
-        err = self.grabber.error
+        status = self.grabber.status()
         video = f"**Video** {src.description} · {src.width}×{src.height} · {src.fps:.1f} fps (shown {self.grabber.measured_fps:.1f})"
-        if err is not None:
-            video += f"\n\n**Video stopped:** {err}"
+        if status.live:
+            video += " · **live**" if src.live else ""
+        elif self.grabber.error is not None:
+            video += f"\n\n**Video stopped:** {self.grabber.error}"
+        else:  # lost (reconnecting) or waiting: the image shown is not live
+            video += (f"\n\n**⚠ Not live: {status.text}.** The image shown is the last frame, greyed"
+                      + (f" (last try: {status.reason})" if status.reason else "") + ".")
         cam = self.site.camera
         text = f"{video}\n\nCamera {cam.width}×{cam.height} · {len(self.site.objects())} objects"
         with self.clients_lock:

@@ -20,11 +20,14 @@ clicks (four or more edges is best) and ``match_edges`` finds the assignment:
    lines (RMS ≤ 0.5 px + 3 σ) and within their edges (each ≤ 1 px + 3 σ from its edge lengthened
    by a tenth at each end), and ranked by that RMS; poses drawing the same picture (the model's
    symmetries) are merged, the best fitting kept;
-5. with the frame given (``image=``), each candidate is first let settle on the image's edges (one
-   step of the edge tracker, ``track.EdgeTracker``), then scored also by how well *all* its
+5. with the frame given (``image=``), each candidate is scored also by how well *all* its
    visible edges lie on the image's edges (``evaluate.edge_distance``): this tells apart poses
    that fit the clicks equally, e.g. a face's outline whose box extends towards or away from the
-   camera, and makes the pose as precise as the image allows.
+   camera. Every candidate is first measured where the clicks put it (all at once,
+   ``_image_distances``); the best of them (up to ``settle``, 2, and only those close to the best)
+   are then let settle on the image's edges (one step of the edge tracker, ``track.EdgeTracker``,
+   most of the call's time) and measured again there, which makes the pose as precise as the
+   image allows. Settling every candidate (``settle=None``) ranks the same on bench/matching.py.
 
 The candidates come back ranked, best first; the operator confirms one (the solver does not pick).
 """
@@ -46,11 +49,14 @@ from core.pose.symmetry import edge_symmetries
 from core.pose.residuals import as_clicks, interpretation_planes
 
 from .evaluate import edge_distance, oriented_edges
-from .track import EdgeTracker
+from .track import EdgeTracker, VisibleSegments, sample_view
 
 __all__ = ["MatchCandidate", "MatchResult", "TriplePoses", "p3l_all_triples", "match_edges", "same_drawing", "edge_symmetries"]
 
 _PARALLEL_SIN = 1e-6
+_PRE_STEP_PX = 4.0  # sample spacing (px) of the first image measure of every candidate
+_SETTLE_MARGIN_PX = 2.0  # candidates whose first score is within this of the best are settled (up to `settle`)
+_SETTLE_STOP_PX = 1.0  # ... while their first score is less than this above the best settled score
 
 
 @dataclass(frozen=True)
@@ -61,7 +67,8 @@ class MatchCandidate:
     model edge (index into ``model.edges``) each clicked segment is on, all different. rms_px : RMS
     distance (pixels) of the clicked pixels to their projected model lines at T_world_obj (the
     maximum-likelihood cost that ``core.pose.refine`` minimises). image_px : mean distance (pixels)
-    of all the candidate's visible projected edges to the image's edges (NaN without an image).
+    of all the candidate's visible projected edges to the image's edges (NaN without an image;
+    sampled every 2 px on a candidate settled on the image, every 4 px on the others).
     score_px : what ranks the candidates: rms_px, plus image_px when there is an image (inf when
     the image measured none of its edges: ranked last).
     """
@@ -286,14 +293,20 @@ def _click_costs_kernel(C, R, t, verts, edge_idx, segs, face_n, face_c, incidenc
 
 
 def warm_up() -> None:
-    """Load (the first time on a machine: compile) the matcher's compiled loop; ``mcit serve`` calls
-    it in a background thread at start, with ``core.pose.warm_up``."""
+    """Load (the first time on a machine: compile) the matcher's compiled loop, and what measuring
+    a pose against a frame imports (scipy.spatial's k-d tree: ~0.4 s, else paid by the first Auto
+    match on a frame); ``mcit serve`` calls it in a background thread at start, with
+    ``core.pose.warm_up``."""
     box = BRep.box(0.3, 0.2, 0.1)
     camera = Camera.from_intrinsics(np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]), np.eye(4), 640, 480)
     T = np.eye(4)
     T[2, 3] = 2.0
     segs = np.array([[[300.0, 200.0], [340.0, 200.0]]])
-    _click_costs(camera, box, T[None, :3, :3], T[None, :3, 3], segs, _Faces.of(box), 0.1)
+    faces = _Faces.of(box)
+    _click_costs(camera, box, T[None, :3, :3], T[None, :3, 3], segs, faces, 0.1)
+    frame = np.zeros((480, 640), np.uint8)
+    frame[200:280, 240:400] = 200  # a bright rectangle: edges in every direction the box's take
+    _image_distances(oriented_edges(frame), camera, box, faces, T[None], 4.0)
 
 
 def _within_edges_many(camera, model, Ts, segs, edges, incidence, gate_px) -> list[bool]:
@@ -356,6 +369,64 @@ def same_drawing(camera: Camera, model: BRep, T_a: np.ndarray, T_b: np.ndarray, 
     return _same_set(camera.project_obj(T_a, model.vertices), camera.project_obj(T_b, model.vertices), tol_px)
 
 
+def _image_distances(oe, camera: Camera, model: BRep, faces: "_Faces", Ts: np.ndarray, step_px: float) -> np.ndarray:
+    """``edge_distance(oe, camera, model, T, step_px=step_px).mean_px`` for every pose T in Ts (N, 4, 4).
+
+    For a model of straight edges only, all the poses at once: the visible edges of each (those
+    bordering a face that faces the camera, seen at less than 75°: ``track.visible_segments``'s
+    rule on a polyhedron) placed in the world and sampled in one ``sample_view``, and each
+    orientation bin's distances read once for all (the same samples and distances as one
+    ``edge_distance`` per pose). Models with solids of revolution or circles: one call per pose.
+    """
+    N = len(Ts)
+    if N == 0:
+        return np.zeros(0)
+    if model.solids or model.circles or len(model.faces) == 0:
+        return np.array([edge_distance(oe, camera, model, T, step_px=step_px).mean_px for T in Ts])
+    E = len(model.edges)
+    R, t = Ts[:, :3, :3], Ts[:, :3, 3]
+    c_obj = np.einsum("nj,nji->ni", camera.center[None, :] - t, R)  # (N, 3): (c − t) R, the optical centre seen from the object
+    v = c_obj[:, None, :] - faces.face_centroids[None]  # (N, F, 3)
+    d = np.einsum("fj,nfj->nf", faces.face_normals, v)
+    facing = d > 0
+    seen = d / np.linalg.norm(v, axis=2) > np.cos(np.radians(75.0))
+    bordered = faces.incidence.sum(axis=1) > 0
+    keep = ~bordered[None] | (((facing @ faces.incidence.T) > 0) & ((seen @ faces.incidence.T) > 0))  # (N, E)
+    n_idx, e_idx = np.nonzero(keep)
+    S = model.vertices[model.edges][e_idx]  # (M, 2, 3) object frame
+    S = np.einsum("mij,mkj->mki", R[n_idx], S) + t[n_idx, None, :]  # placed in the world
+    view = VisibleSegments(S, np.full(len(S), "edge"), n_idx * E + e_idx)
+    s = sample_view(camera, view, np.eye(4), step_px=step_px, vertex_margin_px=4.0)
+    out = np.full(N, np.nan)
+    if len(s) == 0:
+        return out
+    normal_deg = np.degrees(np.arctan2(s.normals[:, 1], s.normals[:, 0])) % 180.0
+    b = np.round(normal_deg / oe.bin_deg).astype(int) % len(oe)
+    dist = np.empty(len(s))
+    for k in np.unique(b):
+        sel = b == k
+        dist[sel] = oe.distance(int(k), s.uv[sel, 0], s.uv[sel, 1], 10.0)
+    pose = s.feature // E
+    count = np.bincount(pose, minlength=N)
+    total = np.bincount(pose, weights=dist, minlength=N)
+    np.divide(total, count, out=out, where=count > 0)
+    return out
+
+
+def _settle(camera, model, image, oe, T, edges, rms_px, segs, incidence, line_gate, extent_gate):
+    """Let the whole model settle on the image's edges (one tracking step from pose T), read the
+    assignment and the clicks' fit again there (kept if the clicks still fit), and measure all the
+    visible edges against the image's. Returns (T, edges, rms_px, image_px)."""
+    ends = model.vertices[model.edges]
+    T_img = EdgeTracker(camera, model, T, search_px=6.0, min_inliers=8, lost_confidence=0.0).track(image).T_world_obj
+    e_img = _assign(camera, model, T_img, segs, incidence)
+    if e_img is not None:
+        r_img = float(np.sqrt(np.mean(_line_d2(camera, T_img, segs, ends[e_img]))))
+        if r_img <= line_gate and _within_edges(camera, model, T_img, segs, e_img, incidence, extent_gate):
+            T, edges, rms_px = T_img, e_img, r_img
+    return T, edges, rms_px, float(_image_distances(oe, camera, model, incidence, T[None], 2.0)[0])  # = edge_distance(oe, camera, model, T)
+
+
 def match_edges(
     camera: Camera,
     model: BRep,
@@ -367,6 +438,7 @@ def match_edges(
     n_bases: int = 4,
     max_refine: int = 48,
     max_candidates: int = 8,
+    settle: int | None = 2,
 ) -> MatchResult:
     """Find which model edge each clicked image edge is, and the poses that follow, ranked.
 
@@ -395,6 +467,12 @@ def match_edges(
         At most this many of the best P3L poses (distinct drawings) are refined.
     max_candidates : int
         At most this many candidates are returned.
+    settle : int or None
+        With ``image``: at most this many candidates (the best by their clicks' RMS plus their
+        image distance where they are, and only those within 2 px of the best) are let settle on
+        the image's edges before the final ranking; the others are ranked where they are. None
+        settles every candidate (slower: a tracker step each; the same right rates on
+        bench/matching.py).
 
     Returns
     -------
@@ -527,19 +605,37 @@ def match_edges(
         if not any(_same_set(X, o, tol_m) for o in placed.get(key, [])):
             distinct.append(j)
             placed.setdefault(key, []).append(X)
+    # With the frame: every candidate is first measured against the image's edges where it is (its
+    # clicks' RMS + ``edge_distance`` every _PRE_STEP_PX, all candidates at once); then, best first,
+    # at most ``settle`` of them are let settle on the image (a tracker step each, most of the
+    # call's time): only those within _SETTLE_MARGIN_PX of the best first score, and a later one
+    # only while its first score is not _SETTLE_STOP_PX or more above the best settled score. The
+    # others are ranked by their first measure (bench/matching.py: the same right rates).
+    settled: dict[int, tuple] = {}
+    pre_img: dict[int, float] = {}
+    if oe is not None and settle is None:
+        order = list(distinct)
+    elif oe is not None:
+        pre_img = dict(zip(distinct, _image_distances(oe, camera, model, incidence, Ts[distinct], _PRE_STEP_PX).tolist()))
+        pre = {j: fits[j].rms_px + pre_img[j] for j in distinct if np.isfinite(pre_img[j])}
+        order = sorted(pre, key=lambda j: pre[j])[: max(int(settle), 0)]
+        order = [j for j in order if pre[j] <= pre[order[0]] + _SETTLE_MARGIN_PX]
+    else:
+        order = []
+    best_settled = np.inf
+    for j in order:
+        if settle is not None and pre[j] - _SETTLE_STOP_PX >= best_settled:
+            break  # clearly worse than a settled candidate already: settling it would not change the order
+        settled[j] = _settle(camera, model, image, oe, Ts[j].copy(), E_cur[j].copy(), fits[j].rms_px, segs, incidence, line_gate, extent_gate)
+        if np.isfinite(settled[j][2] + settled[j][3]):
+            best_settled = min(best_settled, settled[j][2] + settled[j][3])
     for j in distinct:
         T, edges, rms_px = Ts[j].copy(), E_cur[j].copy(), fits[j].rms_px
         img_px = float("nan")
-        if oe is not None:
-            # Let the whole model settle on the image's edges (one tracking step from this pose),
-            # then read the assignment and the clicks' fit again there.
-            T_img = EdgeTracker(camera, model, T, search_px=6.0, min_inliers=8, lost_confidence=0.0).track(image).T_world_obj
-            e_img = _assign(camera, model, T_img, segs, incidence)
-            if e_img is not None:
-                r_img = float(np.sqrt(np.mean(_line_d2(camera, T_img, segs, ends[e_img]))))
-                if r_img <= line_gate and _within_edges(camera, model, T_img, segs, e_img, incidence, extent_gate):
-                    T, edges, rms_px = T_img, e_img, r_img
-            img_px = edge_distance(oe, camera, model, T).mean_px
+        if j in settled:
+            T, edges, rms_px, img_px = settled[j]
+        elif oe is not None:
+            img_px = pre_img.get(j, float("nan"))
         score = rms_px + (img_px if oe is not None else 0.0)
         if not np.isfinite(score):  # no visible edge measured in the image: ranked after every measured one
             score = float("inf")

@@ -110,3 +110,59 @@ def test_bad_input():
         # three segments through one pixel
         star = np.array([[[100.0, 100.0], [150.0, 100.0]], [[100.0, 100.0], [100.0, 150.0]], [[100.0, 100.0], [150.0, 150.0]]])
         match_edges(cam, box, star)
+
+
+def test_image_distances_of_many_poses_are_edge_distances():
+    """The batched first measure of the candidates (all poses at once) is ``edge_distance`` per pose."""
+    from app.vision import matching
+    from app.vision.evaluate import edge_distance, oriented_edges
+
+    rng = np.random.default_rng(7)
+    cam = _camera()
+    box = BRep.box(*BOX)
+    oe = oriented_edges(render_poses(cam, box, [T_TRUE], noise_sigma=2.0)[0])
+    Ts = [T_TRUE] + [make_T(exp_so3(rng.normal(0.0, 1.5, 3)), [rng.uniform(-0.15, 0.15), rng.uniform(-0.1, 0.1), rng.uniform(1.5, 2.5)])
+                     for _ in range(12)]
+    Ts.append(make_T(np.eye(3), [0.0, 0.0, -2.0]))  # behind the camera: nothing measured
+    Ts = np.array(Ts)
+    for step in (2.0, 4.0):
+        got = matching._image_distances(oe, cam, box, matching._Faces.of(box), Ts, step)
+        want = np.array([edge_distance(oe, cam, box, T, step_px=step).mean_px for T in Ts])
+        assert np.array_equal(np.isnan(got), np.isnan(want)) and np.isnan(got[-1])
+        np.testing.assert_allclose(got[~np.isnan(got)], want[~np.isnan(want)], rtol=0, atol=1e-9)
+    cyl = BRep.cylinder(0.05, 0.2)  # a solid of revolution: measured one pose at a time, the same way
+    got = matching._image_distances(oe, cam, cyl, matching._Faces.of(cyl), Ts[:3], 4.0)
+    want = [edge_distance(oe, cam, cyl, T, step_px=4.0).mean_px for T in Ts[:3]]
+    np.testing.assert_allclose(got, want, rtol=0, atol=0)
+
+
+def test_only_the_best_candidates_settle_on_the_image(monkeypatch):
+    """With the frame, at most ``settle`` candidates take a tracker step; the others are ranked by
+    their clicks' RMS plus their image distance where they are; the best is the one settling all finds."""
+    from app.vision import matching
+    from app.vision.evaluate import edge_distance
+
+    cam = _camera()
+    box = BRep.box(*BOX)
+    pick = np.array([2, 3, 9, 10])  # four visible edges whose noisy clicks several assignments fit
+    assert box.wireframe(cam.center, T_TRUE).visible[pick].all()
+    segs = _clicks(cam, box, T_TRUE, pick, np.random.default_rng(0), 1.0)
+    img = render_poses(cam, box, [T_TRUE], noise_sigma=2.0)[0]
+    calls = []
+    real = matching._settle
+    monkeypatch.setattr(matching, "_settle", lambda *a, **k: calls.append(1) or real(*a, **k))
+    every = match_edges(cam, box, segs, image=img, sigma_px=1.0, settle=None)
+    n_every = len(calls)
+    calls.clear()
+    some = match_edges(cam, box, segs, image=img, sigma_px=1.0)
+    assert len(calls) <= 2 and n_every >= len(every.candidates) >= 5 and len(some.candidates) >= 5
+    assert np.array_equal(some.candidates[0].edges, every.candidates[0].edges) and _right(box, some.candidates[0].edges, pick)
+    np.testing.assert_allclose(some.candidates[0].T_world_obj, every.candidates[0].T_world_obj, atol=1e-12)
+    calls.clear()
+    match_edges(cam, box, segs, image=img, sigma_px=1.0, settle=0)
+    assert not calls
+    # those not settled are measured where the clicks put them (every 4 px), the settled every 2 px
+    at4 = [abs(c.image_px - edge_distance(img, cam, box, c.T_world_obj, step_px=4.0).mean_px) < 1e-9 for c in some.candidates]
+    at2 = [abs(c.image_px - edge_distance(img, cam, box, c.T_world_obj).mean_px) < 1e-9 for c in some.candidates]
+    assert sum(at4) >= len(some.candidates) - 2 and all(a or b for a, b in zip(at4, at2))
+    assert all(c.score_px == pytest.approx(c.rms_px + c.image_px) for c in some.candidates)
