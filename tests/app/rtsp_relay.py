@@ -41,6 +41,7 @@ class RtspRelay:
         for channel in (0, 1):
             udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             udp.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            udp.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)  # a busy machine: keep ffmpeg's packets
             udp.bind(("127.0.0.1", self.rtp_port + channel))
             self._sockets.append(udp)
             threading.Thread(target=self._forward, args=(udp, channel), daemon=True).start()
