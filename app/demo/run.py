@@ -105,8 +105,6 @@ def run_demo(
     Raises DemoStepError (app.demo.replay) naming the failing step; ValueError for a scene or
     script that cannot be used.
     """
-    from .report import write_report
-
     wall: dict[str, float] = {}
     t_all = time.perf_counter()
     scene = scene if isinstance(scene, Scene) else load_scene(scene)
@@ -123,6 +121,25 @@ def run_demo(
             stream.write(f"mcit demo: {text}\n")
             stream.flush()
 
+    n_pose = pose_trials if pose_trials is not None else 5 * sim_trials
+    beside = None
+    if sim_trials > 0:  # the sweeps need only the scene and the script: a second process runs them meanwhile
+        t_sim = time.perf_counter()
+        beside = _SimulationBeside.start(scene, script, sim_trials, n_pose, seed)
+        if beside is not None:
+            say(_simulating(sim_trials, n_pose, seed) + " in a second process, beside the replay")
+    try:
+        return _run(scene, script, out, db_path, timing, video, frames, sim_trials, n_pose, seed, stream, say, wall, t_all,
+                    beside, t_sim if beside is not None else 0.0)
+    finally:
+        if beside is not None:
+            beside.cancel()
+
+
+def _run(scene, script, out, db_path, timing, video, frames, sim_trials, n_pose, seed, stream, say, wall, t_all,
+         beside, t_sim) -> DemoOutcome:
+    from .report import write_report
+
     say(f"replaying {len(script.actions)} actions of {script.scene!r} through the workflows ({timing} device timing)")
     bar = _bar(stream, "actions")
     t0 = time.perf_counter()
@@ -134,13 +151,6 @@ def run_demo(
         wall["analysis"] = time.perf_counter() - t0
         stills = _stills(script, scene.video.fps) if scene.video is not None else []
         video_path = None
-        n_pose = pose_trials if pose_trials is not None else 5 * sim_trials
-        beside = None
-        if sim_trials > 0 and video:  # the sweeps in a second process, beside the video (2 cores)
-            t_sim = time.perf_counter()
-            beside = _SimulationBeside.start(scene, script, sim_trials, n_pose, seed)
-            if beside is not None:
-                say(_simulating(sim_trials, n_pose, seed) + " in a second process, beside the overlay video")
         if video:
             if scene.video is None or not scene.video.path.is_file():
                 raise ValueError(f"scene {scene.name!r} has no video file to draw over; run with --no-video or render it")
@@ -156,7 +166,7 @@ def run_demo(
         sims = None
         if beside is not None:
             sims = beside.result(_bar(stream, "trials"))
-            wall["simulation (beside the video)"] = time.perf_counter() - t_sim
+            wall["simulation (a second process, from the start)"] = time.perf_counter() - t_sim
         elif sim_trials > 0:
             t0 = time.perf_counter()
             say(_simulating(sim_trials, n_pose, seed))
@@ -181,8 +191,8 @@ def _sim_total(trials: int, pose_trials: int) -> int:
 
 class _SimulationBeside:
     """The simulated sweeps in a forked process, so that they run on the second core while this
-    one draws the overlay video: the same seeded sweeps (``_simulate``), sent back pickled; their
-    progress counted in shared memory."""
+    one replays the script and draws the overlay video: the same seeded sweeps (``_simulate``),
+    sent back pickled; their progress counted in shared memory."""
 
     def __init__(self, process, conn, done, total: int):
         self._process, self._conn, self._done, self._total = process, conn, done, total
@@ -218,6 +228,14 @@ class _SimulationBeside:
         process.start()
         send.close()
         return cls(process, recv, done, _sim_total(trials, pose_trials))
+
+    def cancel(self) -> None:
+        """Stop the sweeps if they still run (the demo failed, or their result was taken)."""
+        if self._process.is_alive():
+            self._process.terminate()
+        self._process.join(timeout=5)
+        if not self._conn.closed:
+            self._conn.close()
 
     def result(self, progress: Callable[[int, int], None] | None = None):
         """Wait for the sweeps (showing their progress) and return their Simulations; raises what they raised."""

@@ -248,3 +248,17 @@ def test_a_failing_simulation_beside_the_video_is_raised(scene, script, monkeypa
     monkeypatch.setattr(run, "_simulate", broken)
     with pytest.raises(ValueError, match="no sweep today"):
         run._SimulationBeside.start(scene, script, 1, 2, 3).result()
+
+
+def test_a_failing_replay_stops_the_simulation_beside_it(scene, script, tmp_path):
+    import multiprocessing
+
+    from app.demo.replay import DemoStepError
+    from app.demo.run import run_demo
+
+    first = script.runs()[0]
+    shortened = script.with_runs([first])
+    cut = type(shortened)(shortened.scene, shortened.actions[:-1], shortened.description, shortened.generator)
+    with pytest.raises(DemoStepError, match=r"calibrate_camera run ended still open"):
+        run_demo(scene, cut, tmp_path, timing="fast", video=False, sim_trials=50, stream=None)
+    assert not [p for p in multiprocessing.active_children() if p.name == "mcit-demo-simulation"]
