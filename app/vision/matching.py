@@ -195,9 +195,11 @@ def p3l_all_triples(
     p3l_many(camera.C, np.ascontiguousarray(np.broadcast_to(segs, (B, 3, 2, 2))), np.ascontiguousarray(ends[tri]), T, valid, True)
     b_idx, k_idx = np.nonzero(valid)
     Rc, tc, edges = T[b_idx, k_idx, :3, :3], T[b_idx, k_idx, :3, 3], tri[b_idx]
-    C = camera.C
-    Xe = np.einsum("nij,nmsj->nmsi", Rc, ends[edges]) + tc[:, None, None, :]
-    front = np.all(Xe @ C[2, :3] + C[2, 3] > 1e-9, axis=(1, 2))
+    # The base edges' ends in front of the camera: the depth row of C applied to every model
+    # vertex of every pose at once, (C₂R)·X + C₂·t + C₂₃, then read at the three edges' ends.
+    c3 = camera.C[2, :3]
+    depth = np.einsum("k,nkj->nj", c3, Rc) @ ends.reshape(-1, 3).T + (tc @ c3 + camera.C[2, 3])[:, None]  # (N, 2E)
+    front = np.all(np.take_along_axis(depth, np.concatenate([2 * edges, 2 * edges + 1], axis=1), axis=1) > 1e-9, axis=1)
     return TriplePoses(Rc[front], tc[front], edges[front], len(tri))
 
 
