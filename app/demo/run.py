@@ -145,24 +145,32 @@ def _run(scene, script, out, db_path, timing, video, frames, sim_trials, n_pose,
     t0 = time.perf_counter()
     replay = replay_script(scene, script, db_path, timing=timing, progress=(lambda d, n, _w: bar(d, n)) if bar else None)
     wall["replay"] = time.perf_counter() - t0
+    drawing = None
     try:
-        t0 = time.perf_counter()
-        results = demo_results(replay, scene)
-        wall["analysis"] = time.perf_counter() - t0
         stills = _stills(script, scene.video.fps) if scene.video is not None else []
         video_path = None
         if video:
             if scene.video is None or not scene.video.path.is_file():
                 raise ValueError(f"scene {scene.name!r} has no video file to draw over; run with --no-video or render it")
-            say(f"drawing the overlay over {scene.video.path.name}")
-            t0 = time.perf_counter()
             video_path = out / VIDEO_NAME
             from .overlay_video import write_overlay_video
 
-            write_overlay_video(scene.video.path, replay.timeline, video_path, fps=scene.video.fps, frames=frames,
-                                stills={name: t for name, _, t in stills}, progress=_bar(stream, "frames"),
-                                lens=scene.lens)
-            wall["overlay video"] = time.perf_counter() - t0
+            def draw(progress) -> float:
+                t0 = time.perf_counter()
+                write_overlay_video(scene.video.path, replay.timeline, video_path, fps=scene.video.fps, frames=frames,
+                                    stills={name: t for name, _, t in stills}, progress=progress, lens=scene.lens)
+                return time.perf_counter() - t0
+
+            # the video needs only the replay's timeline: a second process draws it beside the analysis
+            drawing = _Beside.fork(draw, scene.video.frame_count if frames is None else frames, "mcit-demo-video")
+            say(f"drawing the overlay over {scene.video.path.name}" + (" in a second process" if drawing else ""))
+            if drawing is None:
+                wall["overlay video"] = draw(_bar(stream, "frames"))
+        t0 = time.perf_counter()
+        results = demo_results(replay, scene)
+        wall["analysis"] = time.perf_counter() - t0
+        if drawing is not None:
+            wall["overlay video (a second process)"] = drawing.result(_bar(stream, "frames"))
         sims = None
         if beside is not None:
             sims = beside.result(_bar(stream, "trials"))
@@ -178,6 +186,8 @@ def _run(scene, script, out, db_path, timing, video, frames, sim_trials, n_pose,
         say(f"wrote {report}, {db_path}" + (f", {video_path}" if video_path else ""))
         return DemoOutcome(out, report, db_path, video_path, replay, results, wall)
     finally:
+        if drawing is not None:
+            drawing.cancel()
         replay.site.db.close()
 
 
@@ -189,31 +199,32 @@ def _sim_total(trials: int, pose_trials: int) -> int:
     return trials * (len(BOX_DISTANCES_M) + len(CYLINDER_DISTANCES_M)) + pose_trials
 
 
-class _SimulationBeside:
-    """The simulated sweeps in a forked process, so that they run on the second core while this
-    one replays the script and draws the overlay video: the same seeded sweeps (``_simulate``),
-    sent back pickled; their progress counted in shared memory."""
+class _Beside:
+    """A job in a forked process, so that it runs on the second core while this one goes on: its
+    result sent back pickled, its progress ``(done, total)`` counted in shared memory, an exception
+    in it raised again here."""
 
-    def __init__(self, process, conn, done, total: int):
-        self._process, self._conn, self._done, self._total = process, conn, done, total
+    def __init__(self, process, conn, count):
+        self._process, self._conn, self._count = process, conn, count
 
     @classmethod
-    def start(cls, scene: Scene, script: OperatorScript, trials: int, pose_trials: int, seed: int):
-        """Start the sweeps; None where processes cannot be forked (then run them in this one)."""
+    def fork(cls, job: Callable[[Callable[[int, int], None]], object], total: int, name: str):
+        """Start ``job(progress)``; None where processes cannot be forked (then run it in this one)."""
         import multiprocessing as mp
 
         if "fork" not in mp.get_all_start_methods():
             return None
         ctx = mp.get_context("fork")
-        done = ctx.Value("l", 0, lock=False)
+        count = ctx.Array("q", [0, max(int(total), 1)], lock=False)
         recv, send = ctx.Pipe(duplex=False)
 
         def child() -> None:
-            def count(n: int, _total: int) -> None:
-                done.value = n
+            def progress(n: int, of: int) -> None:
+                count[1] = max(int(of), 1)
+                count[0] = int(n)
 
             try:
-                out = ("ok", _simulate(scene, script, trials, pose_trials, seed, count))
+                out = ("ok", job(progress))
             except BaseException as exc:  # noqa: BLE001 - raised again in the parent
                 import traceback
 
@@ -224,13 +235,13 @@ class _SimulationBeside:
                 send.send(("error", (RuntimeError(str(exc)), "")))
             send.close()
 
-        process = ctx.Process(target=child, name="mcit-demo-simulation", daemon=True)
+        process = ctx.Process(target=child, name=name, daemon=True)
         process.start()
         send.close()
-        return cls(process, recv, done, _sim_total(trials, pose_trials))
+        return cls(process, recv, count)
 
     def cancel(self) -> None:
-        """Stop the sweeps if they still run (the demo failed, or their result was taken)."""
+        """Stop the job if it still runs (the demo failed, or its result was taken)."""
         if self._process.is_alive():
             self._process.terminate()
         self._process.join(timeout=5)
@@ -238,23 +249,32 @@ class _SimulationBeside:
             self._conn.close()
 
     def result(self, progress: Callable[[int, int], None] | None = None):
-        """Wait for the sweeps (showing their progress) and return their Simulations; raises what they raised."""
+        """Wait for the job (showing its progress) and return its result; raises what it raised."""
         try:
             while not self._conn.poll(0.1):
                 if progress:
-                    progress(min(self._done.value, self._total - 1), self._total)
+                    progress(min(self._count[0], self._count[1] - 1), self._count[1])
                 if not self._process.is_alive() and not self._conn.poll(0):
-                    raise RuntimeError(f"the simulation process ended without a result (exit code {self._process.exitcode})")
+                    raise RuntimeError(f"the {self._process.name} process ended without a result (exit code {self._process.exitcode})")
             status, value = self._conn.recv()
         finally:
             self._conn.close()
             self._process.join(timeout=5)
         if status == "error":
             exc, tb = value
-            raise exc from RuntimeError("in the simulation process:\n" + tb) if tb else exc
+            raise exc from RuntimeError("in the second process:\n" + tb) if tb else exc
         if progress:
-            progress(self._total, self._total)
+            progress(self._count[1], self._count[1])
         return value
+
+
+class _SimulationBeside(_Beside):
+    """The simulated sweeps (``_simulate``, the same seeded sweeps) in a second process."""
+
+    @classmethod
+    def start(cls, scene: Scene, script: OperatorScript, trials: int, pose_trials: int, seed: int):
+        return cls.fork(lambda progress: _simulate(scene, script, trials, pose_trials, seed, progress),
+                        _sim_total(trials, pose_trials), "mcit-demo-simulation")
 
 
 def _simulate(scene: Scene, script: OperatorScript, trials: int, pose_trials: int, seed: int,
