@@ -277,6 +277,24 @@ class Workflow:
         with self.lock:
             self.frame = frame
 
+    def scene_changed(self, uv: Any) -> str:
+        """"" when the live video around the pixels ``uv`` (N, 2) still looks as in the frozen frame
+        (or there is no frozen frame or no live one); otherwise why not, as a sentence's start. The
+        range finder and the turret measure the site as it is now: a measurement where the site
+        changed since the frozen frame lands on something that frame does not show (app.vision.change)."""
+        frame = self.frame
+        if frame is None:
+            return ""
+        live = self.site.frame_at(None)
+        if live is None or live is frame.image or np.shape(live) != np.shape(frame.image):
+            return ""
+        from app.vision.change import CHANGED_SHARE, changed_share
+
+        if changed_share(frame.image, live, np.asarray(uv, float).reshape(-1, 2)) <= CHANGED_SHARE:
+            return ""
+        return (f"the live video here differs from the frozen frame (t = {frame.t_s:.1f} s): something moved since, "
+                "and the range finder measures the site as it is now")
+
     def frame_record(self) -> dict[str, Any] | None:
         """Which frame the clicks were made on, for the history (None: the site's frame at the time)."""
         return None if self.frame is None else self.frame.record()

@@ -135,6 +135,13 @@ class CalibrateTurret(Workflow):
             T = self.site.T_world_turret
             pan, tilt, _ = aim(T, X)
             k = len(self.pan) + 1
+            uv = self.site.camera.project(X.reshape(1, 3))
+        why = self.scene_changed(uv)
+        if why:
+            raise WorkflowError(f"{why}: {label} may not be where the frozen frame shows it. Nothing was measured: "
+                                "freeze a new frame (F) and pick the point again")
+        with self.lock:
+            self._check_open()
             self.cancel_event.clear()
             self.progress, self.progress_text = 0.0, f"point {k} · aiming"
         try:

@@ -160,6 +160,14 @@ class DesignateTarget(Workflow):
             return self._keep(t, _sentence(t.warning or t.check))
 
     def _keep(self, t: Target, message: str) -> Target:
+        why = self.scene_changed(t.uv)
+        if why:
+            import dataclasses
+
+            warning = (f"Warning: {why}: the target is where the database{' and the range finder' if t.rangefinder_X is not None else ''}"
+                       " put it now, not what the frozen frame shows; look at the live video (L) or freeze a new frame (F)")
+            t = dataclasses.replace(t, warning=warning)
+            message = _sentence(warning)
         with self.lock:
             self.targets.append(t)
             self.message = message

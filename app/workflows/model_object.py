@@ -288,6 +288,10 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             T = self.site.T_world_turret
             Tb, h = box.T_world_obj, box.dimensions["size_z"]
             corners = box.vertices_world
+            camera = self.site.camera
+        self._refuse_if_changed(camera.project(corners[camera.depth(corners) > 0]), "the box")
+        with self.lock:
+            self._check_open()
             self.cancel_event.clear()
             self._clear_live()
             self.progress, self.progress_text = 0.0, "profile 1 of 2 · aiming"
@@ -322,6 +326,9 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             devices = self._devices()
             camera, T = self.site.camera, self.site.T_world_turret
             sil = np.array(self.silhouettes)
+        self._refuse_if_changed(sil.reshape(-1, 2), f"the {self.shape}")
+        with self.lock:
+            self._check_open()
             self.cancel_event.clear()
             self._clear_live()
             self.progress, self.progress_text = 0.0, "profile 1 of 2 · aiming"

@@ -141,6 +141,9 @@ class RangeModelling:
             area = 0.5 * abs(float(np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])))  # shoelace
             spacing = self.spacing_px or max(2.0, float(np.sqrt(area / 25.0)))
             camera, T = self.site.camera, self.site.T_world_turret
+        self._refuse_if_changed(np.vstack([ends, centre]), "this face")
+        with self.lock:
+            self._check_open()
             self.cancel_event.clear()
             self._clear_live()
             self.progress, self.progress_text = 0.0, "face patch · aiming"
@@ -163,6 +166,15 @@ class RangeModelling:
             self.result = None
             self.message = f"Face {len(self.faces)}: {len(X)} range points of {len(scan)} beams."
             return scan
+
+    def _refuse_if_changed(self, uv: np.ndarray, what: str) -> None:
+        """WorkflowError when the live video around the pixels ``uv`` differs from the frozen frame:
+        the devices would measure what the clicks do not show (Workflow.scene_changed). Call it
+        without the lock."""
+        why = self.scene_changed(uv)
+        if why:
+            raise WorkflowError(f"{why}: {what} may not be where the frozen frame shows it. Nothing was measured: "
+                                "freeze a new frame (F), Cancel and click again")
 
     def support_point(self, uv: np.ndarray) -> np.ndarray:
         """The table point seen at pixel uv (a depth guess for aiming), else a point 2 m away."""

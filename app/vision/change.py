@@ -1,0 +1,55 @@
+"""Has the site changed since the frozen frame? A look at the live video around given pixels.
+
+The range finder and the turret measure the site as it is now, while the operator clicked on a frozen
+frame that may be seconds or minutes old. Where the live video around the clicked pixels no longer
+looks like the frozen frame (an object moved in or out), a measurement made now would be put on
+something the frozen frame does not show: the workflows refuse it, or say so.
+
+Test: both patches are blurred (5 px Gaussian, σ 1.2 px: sensor noise and JPEG blocks), their
+difference has its median taken off (a change of exposure or lighting shifts the whole patch), and
+the patch has changed when more than ``CHANGED_SHARE`` of its pixels differ by more than
+``CHANGED_GREY`` grey levels — an edge crossing a patch changes a few percent of it; the workcell's
+rendered noise (σ 2 grey levels, √2·2 in a difference, less after the blur) changes none.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["changed_share", "CHANGED_GREY", "CHANGED_SHARE", "HALF_PX"]
+
+CHANGED_GREY = 20.0  # grey levels (0-255) of difference that count as a change
+CHANGED_SHARE = 0.03  # share of a patch's pixels that must change
+HALF_PX = 24  # half size of the patch around each pixel
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    import cv2
+
+    a = np.asarray(image)
+    if a.ndim == 3:
+        a = cv2.cvtColor(a, cv2.COLOR_RGB2GRAY)
+    return a.astype(np.float32)
+
+
+def changed_share(frozen: np.ndarray, live: np.ndarray, uv: np.ndarray, half_px: int = HALF_PX) -> float:
+    """The largest share of changed pixels over the patches around the pixels ``uv`` (N, 2) between
+    the frozen frame and the live one (same size); 0.0 for pixels outside the image. See the module."""
+    import cv2
+
+    a, b = _grey(frozen), _grey(live)
+    if a.shape != b.shape:
+        raise ValueError(f"the frozen frame is {a.shape[1]}×{a.shape[0]} px and the live one {b.shape[1]}×{b.shape[0]}")
+    h, w = a.shape
+    worst = 0.0
+    for u, v in np.asarray(uv, float).reshape(-1, 2):
+        if not (np.isfinite(u) and np.isfinite(v)):
+            continue
+        x0, x1 = max(int(u) - half_px, 0), min(int(u) + half_px + 1, w)
+        y0, y1 = max(int(v) - half_px, 0), min(int(v) + half_px + 1, h)
+        if x1 - x0 < 5 or y1 - y0 < 5:
+            continue
+        d = cv2.GaussianBlur(a[y0:y1, x0:x1], (5, 5), 1.2) - cv2.GaussianBlur(b[y0:y1, x0:x1], (5, 5), 1.2)
+        d -= np.median(d)
+        worst = max(worst, float(np.mean(np.abs(d) > CHANGED_GREY)))
+    return worst

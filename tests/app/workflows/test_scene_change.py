@@ -1,0 +1,74 @@
+"""The devices measure the site as it is now; the operator clicked on a frozen frame. Where the live
+video around the clicks differs from the frozen frame (the parallelepiped moved between 12 s and 15 s
+of the workcell's video), a measurement is refused or the target says so — never a silent success."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.vision.change import CHANGED_SHARE, changed_share
+from app.workflows import CalibrateTurret, DesignateTarget, Site, WorkflowError
+from app.workflows.base import FrameRef
+
+FROZEN_T = 5.0  # the parallelepiped at its first pose
+
+
+def _top_centre(scene, t):
+    body = scene.body("parallelepiped")
+    T = body.pose_at(t)
+    lo, hi = body.model.bounds()
+    return T[:3, :3] @ np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2]]) + T[:3, 3]
+
+
+@pytest.fixture
+def clock():
+    return {"t": FROZEN_T}
+
+
+@pytest.fixture
+def device_video_site(fast_scene, db, devices, clock):
+    return Site(fast_scene, db, devices=devices, clock=lambda: clock["t"])
+
+
+def _frozen(site, t):
+    return FrameRef(site.frame_at(t), t, source="live")
+
+
+def test_changed_share_sees_a_moved_object_and_not_the_noise(video_site, scene):
+    a, b = video_site.frame_at(FROZEN_T), video_site.frame_at(FROZEN_T + 0.5)
+    c = video_site.frame_at(16.0)
+    uv = video_site.camera.project(_top_centre(scene, FROZEN_T).reshape(1, 3))
+    assert not np.array_equal(a, b)  # rendered noise differs frame to frame
+    assert changed_share(a, b, uv) <= CHANGED_SHARE  # ... and is not a change
+    assert changed_share(a, c, uv) > 5 * CHANGED_SHARE  # the box left: a change
+    far = np.array([[5.0, 5.0]])  # a corner where nothing moves
+    assert changed_share(a, c, far) <= CHANGED_SHARE
+
+
+def test_designate_on_a_frame_the_site_no_longer_looks_like_warns(video_site, scene):
+    site = video_site
+    uv = site.camera.project(_top_centre(scene, FROZEN_T).reshape(1, 3))[0]
+    wf = DesignateTarget(site, client="alice")
+    wf.use_frame(_frozen(site, FROZEN_T))
+    site.t["t"] = FROZEN_T + 0.4
+    t = wf.click(uv)
+    assert "differs from the frozen frame" not in t.warning
+    site.t["t"] = 16.0  # the live video shows the box moved away
+    t = wf.click(uv)
+    assert "differs from the frozen frame (t = 5.0 s)" in t.warning and "differs" in wf.message
+
+
+def test_calibrate_turret_refuses_to_measure_where_the_site_changed(device_video_site, fast_scene, clock):
+    site = device_video_site
+    wf = CalibrateTurret(site, client="alice")
+    wf.use_frame(_frozen(site, FROZEN_T))
+    X = _top_centre(fast_scene, FROZEN_T)
+    wf.choose_point(X, "parallelepiped top centre")
+    clock["t"] = 16.0
+    with pytest.raises(WorkflowError, match="differs from the frozen frame.*Nothing was measured"):
+        wf.measure()
+    assert len(wf.pan) == 0 and wf.progress is None
+    clock["t"] = FROZEN_T + 0.4  # as frozen: measured
+    wf.measure()
+    assert len(wf.pan) == 1
