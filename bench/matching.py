@@ -140,7 +140,7 @@ def main() -> int:
             if image is not None:
                 clear_frame_cache()  # each call measures its frame's edges, as a new frame in the interface does
             t0 = time.process_time()
-            res = match_edges(camera, box, segs, image=image, sigma_px=sigma, settle=settle[0] if settle else 2)
+            res = match_edges(camera, box, segs, image=image, sigma_px=sigma, **({"settle": settle[0]} if settle else {}))
             cpu_s = time.process_time() - t0
             st = stats[m]
             st["ms"].append(1e3 * cpu_s)

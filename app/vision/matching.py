@@ -24,7 +24,7 @@ clicks (four or more edges is best) and ``match_edges`` finds the assignment:
    visible edges lie on the image's edges (``evaluate.edge_distance``): this tells apart poses
    that fit the clicks equally, e.g. a face's outline whose box extends towards or away from the
    camera. Every candidate is first measured where the clicks put it (all at once,
-   ``_image_distances``); the best of them (up to ``settle``, 2, and only those close to the best)
+   ``_image_distances``); the best of them (up to ``settle``, 4, and only those close to the best)
    are then let settle on the image's edges (one step of the edge tracker, ``track.EdgeTracker``,
    most of the call's time) and measured again there, which makes the pose as precise as the
    image allows. Settling every candidate (``settle=None``) ranks the same on bench/matching.py.
@@ -56,7 +56,7 @@ __all__ = ["MatchCandidate", "MatchResult", "TriplePoses", "p3l_all_triples", "m
 _PARALLEL_SIN = 1e-6
 _PRE_STEP_PX = 4.0  # sample spacing (px) of the first image measure of every candidate
 _SETTLE_MARGIN_PX = 2.0  # candidates whose first score is within this of the best are settled (up to `settle`)
-_SETTLE_STOP_PX = 1.0  # ... while their first score is less than this above the best settled score
+_SETTLE_STOP_PX = 1.5  # ... while their first score is less than this above the best settled score
 
 
 @dataclass(frozen=True)
@@ -440,7 +440,7 @@ def match_edges(
     n_bases: int = 4,
     max_refine: int = 48,
     max_candidates: int = 8,
-    settle: int | None = 2,
+    settle: int | None = 4,
 ) -> MatchResult:
     """Find which model edge each clicked image edge is, and the poses that follow, ranked.
 
@@ -471,10 +471,11 @@ def match_edges(
         At most this many candidates are returned.
     settle : int or None
         With ``image``: at most this many candidates (the best by their clicks' RMS plus their
-        image distance where they are, and only those within 2 px of the best) are let settle on
+        image distance where they are, only those within 2 px of the best, and a later one only
+        while that score is less than 1.5 px above the best settled candidate's) are let settle on
         the image's edges before the final ranking; the others are ranked where they are. None
         settles every candidate (slower: a tracker step each; the same right rates on
-        bench/matching.py).
+        bench/matching.py, seeds 0-3, 4-6 edges).
 
     Returns
     -------

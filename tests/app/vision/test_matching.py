@@ -155,7 +155,7 @@ def test_only_the_best_candidates_settle_on_the_image(monkeypatch):
     n_every = len(calls)
     calls.clear()
     some = match_edges(cam, box, segs, image=img, sigma_px=1.0)
-    assert len(calls) <= 2 and n_every >= len(every.candidates) >= 5 and len(some.candidates) >= 5
+    assert len(calls) <= 4 and len(calls) < n_every and n_every >= len(every.candidates) >= 5 and len(some.candidates) >= 5
     assert np.array_equal(some.candidates[0].edges, every.candidates[0].edges) and _right(box, some.candidates[0].edges, pick)
     np.testing.assert_allclose(some.candidates[0].T_world_obj, every.candidates[0].T_world_obj, atol=1e-12)
     calls.clear()
@@ -164,5 +164,5 @@ def test_only_the_best_candidates_settle_on_the_image(monkeypatch):
     # those not settled are measured where the clicks put them (every 4 px), the settled every 2 px
     at4 = [abs(c.image_px - edge_distance(img, cam, box, c.T_world_obj, step_px=4.0).mean_px) < 1e-9 for c in some.candidates]
     at2 = [abs(c.image_px - edge_distance(img, cam, box, c.T_world_obj).mean_px) < 1e-9 for c in some.candidates]
-    assert sum(at4) >= len(some.candidates) - 2 and all(a or b for a, b in zip(at4, at2))
+    assert sum(at4) >= len(some.candidates) - 4 and all(a or b for a, b in zip(at4, at2))
     assert all(c.score_px == pytest.approx(c.rms_px + c.image_px) for c in some.candidates)
