@@ -2,6 +2,7 @@
 // this takes the wheel over the 3D canvas and sends (cursor x, y in 0..1 of the canvas, deltaY, n)
 // to the server through a hidden text field labelled "mcit-wheel"; the server moves the camera so
 // that the point under the cursor stays under it (app/ui/client.py, ClientPanel._on_wheel).
+// It also gives the keyboard back to the page's shortcuts after a chooser is used (see below).
 (function () {
   if (window.__mcitWheel) return;
   window.__mcitWheel = true;
@@ -42,4 +43,32 @@
     if (timer === null) timer = setTimeout(send, 16); // at most one update a frame
   }, { capture: true, passive: false });
   setInterval(field, 1000); // keep the field hidden when the panel re-renders
+
+  // Choosers give the keys back: a chooser (Mantine Select) keeps the keyboard after an option is
+  // picked, so the next shortcut (Z: Undo change, R: Solve) was typed into it instead. Once an option
+  // is picked the chooser lets go of the keyboard; a key pressed in a closed chooser goes to the
+  // page's shortcuts instead.
+  function chooserInput(el) {
+    return el && el.tagName === "INPUT" && el.closest && el.closest(".mantine-Select-root, [class*='Select-root']") ? el : null;
+  }
+  document.addEventListener("click", function (e) {
+    var opt = e.target && e.target.closest && e.target.closest("[role='option']");
+    if (!opt) return;
+    setTimeout(function () {
+      var input = chooserInput(document.activeElement);
+      if (input) input.blur();
+    }, 0);
+  }, true);
+  document.addEventListener("keydown", function (e) {
+    var input = chooserInput(e.target);
+    if (!input || input.getAttribute("aria-expanded") === "true") return; // an open list: its own keys
+    if (e.key.length !== 1 && e.key !== "Enter" && e.key !== "Escape" && e.key !== "Backspace") return;
+    if (e.key === "Enter" || e.key === "Escape") { if (e.isTrusted === false) return; }
+    e.preventDefault();
+    e.stopPropagation();
+    input.blur();
+    document.body.dispatchEvent(new KeyboardEvent("keydown", {
+      key: e.key, code: e.code, keyCode: e.keyCode, which: e.which, shiftKey: e.shiftKey, ctrlKey: e.ctrlKey,
+      altKey: e.altKey, metaKey: e.metaKey, bubbles: true, cancelable: true }));
+  }, true);
 })();
