@@ -238,9 +238,12 @@ class CalibrateTurret(Workflow):
             # drag the fit: only points within OFF_SURFACE_M of a surface at the current estimate count.
             _, dist0, _ = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
             used = dist0 <= OFF_SURFACE_M
+            off = [f"{i + 1} {self.labels[i]}" for i in np.flatnonzero(~used)]
+            off_text = (f" Left out, more than {100 * OFF_SURFACE_M:.0f} cm from every known surface (did their object "
+                        f"move, or is it not in the database?): {', '.join(off)}." if off else "")
             if used.sum() < 6:
                 raise WorkflowError(f"only {int(used.sum())} of {n} measurements landed within {100 * OFF_SURFACE_M:.0f} cm "
-                                    "of a known surface; measure points well inside faces of known objects")
+                                    f"of a known surface; measure points well inside faces of known objects.{off_text}")
             for _ in range(max_rounds):
                 # each measured point belongs to the face it is nearest to (re-associated every round)
                 closest, _, tri = mesh.nearest.on_surface(beam_point(T, pan[used], tilt[used], rho[used]))
@@ -250,8 +253,11 @@ class CalibrateTurret(Workflow):
                                                   -np.einsum("ij,ij->i", normals, closest), T, self.site.scene.rangefinder)
                 except ValueError as exc:
                     if "independent normals" in str(exc):
-                        raise WorkflowError("the measured points lie on faces of fewer than 3 orientations: the "
-                                            "turret's pose is not fixed; measure the table top and two sides of a box") from None
+                        kinds = _orientations(normals)
+                        raise WorkflowError(f"the {int(used.sum())} measurements on known surfaces lie on faces of only "
+                                            f"{kinds} orientation{'s' if kinds > 1 else ''} (faces facing the same way count "
+                                            "once): the turret's pose is not fixed; measure a face that faces another way "
+                                            f"(the table top and two sides of a box at an angle).{off_text}") from None
                     raise WorkflowError(f"turret calibration failed: {exc}") from None
                 deg, m = pose_error(cal.T_world_turret, T)
                 T = cal.T_world_turret
@@ -265,14 +271,16 @@ class CalibrateTurret(Workflow):
             self.surface_residuals_m = dist
             deg, m = pose_error(T, self.site.T_world_turret)
             self.state = "review"
-            dropped = f" ({n - int(used.sum())} off the known surfaces, left out)" if not used.all() else ""
+            dropped = f" ({n - int(used.sum())} off the known surfaces, left out: {', '.join(off)})" if off else ""
             self.message = (f"RMS {1000 * np.sqrt(np.mean(dist ** 2)):.1f} mm to the surfaces over {int(used.sum())} "
                             f"points{dropped}; {deg:.2f}° and {100 * m:.1f} cm from the current calibration")
             sd_rot_deg, sd_t_m = self._sigmas()
             if sd_rot_deg.max() > POORLY_DEG or sd_t_m.max() > POORLY_M:
-                self.message += (f". Poorly determined (σ up to {sd_rot_deg.max():.2f}° and {100 * sd_t_m.max():.1f} cm): "
-                                 "measure faces of other objects, at other distances, before accepting (with only "
-                                 "the table and one box known, model another object first: Model object)")
+                few = len(self.site.objects()) <= 2
+                self.message += (f". Poorly determined (σ up to {sd_rot_deg.max():.2f}° and {1000 * sd_t_m.max():.1f} mm): "
+                                 "measure faces of other objects, at other distances, before accepting"
+                                 + (" (with only the table and one box known, model another object first: Model object)"
+                                    if few else ""))
             return cal
 
     def _sigmas(self) -> tuple[np.ndarray, np.ndarray]:
@@ -387,3 +395,12 @@ class CalibrateTurret(Workflow):
                 out["points"] = [{"point": lab, "range_m": r, "to_surface_mm": 1000 * float(d)}
                                  for lab, r, d in zip(labels, ranges, self.surface_residuals_m)]
             return out
+
+
+def _orientations(normals: np.ndarray, tol_deg: float = 10.0) -> int:
+    """How many different directions the unit normals (N, 3) point in (within ``tol_deg``)."""
+    kinds: list[np.ndarray] = []
+    for n in np.asarray(normals, float).reshape(-1, 3):
+        if not any(float(n @ k) > np.cos(np.radians(tol_deg)) for k in kinds):
+            kinds.append(n)
+    return len(kinds)

@@ -81,8 +81,9 @@ def test_one_orientation_is_not_enough(device_site):
     for x, y in ((-0.3, 0.5), (-0.2, 0.45), (-0.35, 0.3), (0.35, 0.55), (-0.3, -0.4), (0.3, -0.5)):
         wf.choose_point(T[:3, :3] @ [x, y, 0.04] + T[:3, 3])
         wf.measure()
-    with pytest.raises(WorkflowError, match="fewer than 3 orientations"):
+    with pytest.raises(WorkflowError, match="the 6 measurements on known surfaces lie on faces of only 1 orientation ") as e:
         wf.solve()
+    assert "Left out" not in str(e.value)  # none was: nothing to name
     with pytest.raises(WorkflowError, match="Solve first"):
         wf.accept()
 
@@ -121,3 +122,19 @@ def test_measure_says_which_point_and_moves_the_beam_spot(device_site, devices):
         wf.measure()
     devices.site.rangefinder.faults.clear()
     assert len(wf.pan) == 2 and wf.progress is None
+
+
+def test_points_left_out_are_named(device_site):
+    """A measurement off every known surface is named in the refusal (the operator sees which)."""
+    site = device_site
+    wf = CalibrateTurret(site, shots=1)
+    T = site.object("table").T_world_obj
+    for x, y in ((-0.3, 0.5), (-0.2, 0.45), (-0.35, 0.3), (0.35, 0.55), (-0.3, -0.4)):
+        wf.choose_point(T[:3, :3] @ [x, y, 0.04] + T[:3, 3], f"table {x} {y}")
+        wf.measure()
+    # a sixth one whose range is 20 cm off (as if its object had moved): left out, and named
+    wf.choose_point(T[:3, :3] @ [0.3, -0.5, 0.04] + T[:3, 3], "the moved one")
+    wf.measure()
+    wf.range_m[-1] += 0.2
+    with pytest.raises(WorkflowError, match=r"only 5 of 6 .*Left out.*: 6 the moved one\."):
+        wf.solve()
