@@ -32,7 +32,7 @@ START_BUTTONS: tuple[tuple[str, str], ...] = (
 # Units a result key ends with → (shown unit, decimals): 0.1 px, 0.1 mm, 0.01°.
 _UNITS = (("_px", "px", 1), ("_mm", "mm", 1), ("_cm", "cm", 2), ("_deg", "°", 2), ("_m", "m", 4), ("_s", "s", 2),
           ("_pct", "%", 0))
-_WORDS = {"rms": "RMS", "std": "σ", "sigma": "σ", "uv": "pixel", "x_world": "X (world)"}
+_WORDS = {"rms": "RMS", "std": "σ", "sd": "σ", "sigma": "σ", "uv": "pixel", "x_world": "X (world)", "xyz": "x y z"}
 
 
 def key_label(key: str) -> str:
@@ -43,8 +43,12 @@ def key_label(key: str) -> str:
             key, unit = key[: -len(suffix)], shown
             break
     words = [_WORDS.get(w.lower(), w) for w in key.replace("-", "_").split("_") if w]
+    if words[:1] == ["σ"] and words[1:] in (["t"], ["rot"]):  # a pose's σ: "σ translation", "σ rotation"
+        words = ["σ", {"t": "translation", "rot": "rotation"}[words[1]]]
     text = " ".join(words)
-    text = text[:1].upper() + text[1:]
+    coordinates = all(len(w) == 1 for w in text.split(" "))  # "x y z", "t" stay lower case
+    if text[:1].isascii() and not coordinates:  # "σ" stays σ: its capital Σ reads as a sum
+        text = text[:1].upper() + text[1:]
     return f"{text} ({unit})" if unit else text
 
 
@@ -64,6 +68,17 @@ def format_value(key: str, v: Any) -> str:
         text = f"{x:.{decimals}f}"
         return "0" if float(text) == 0 else text
     return str(v)
+
+
+def _with_unit(unit: str, v: Any) -> str:
+    """One entry of a {unit: value} result ({"deg": 49.04, "cm": 22.48}) as the messages say it:
+    "49.04°", "224.8 mm" (lengths in mm, as everywhere else in the panel)."""
+    if isinstance(v, (float, np.floating, int, np.integer)) and not isinstance(v, (bool, np.bool_)):
+        if unit == "deg":
+            return f"{float(v):.2f}°"
+        if unit in ("cm", "m", "mm"):
+            return f"{float(v) * {'cm': 10.0, 'm': 1000.0, 'mm': 1.0}[unit]:.1f} mm"
+    return f"{format_value(unit, v)} {unit}"
 
 
 def operator_help() -> str:
@@ -91,7 +106,7 @@ def report_markdown(summary: dict[str, Any]) -> str:
             shown = ", ".join(format_value(key, x) for x in arr[:12]) + (" …" if len(arr) > 12 else "")
             lines.append(f"- **{key_label(key)}**: {shown}")
         elif isinstance(value, dict):
-            lines.append(f"- **{key_label(key)}**: " + ", ".join(f"{format_value(k, v)} {k}" for k, v in value.items()))
+            lines.append(f"- **{key_label(key)}**: " + ", ".join(_with_unit(k, v) for k, v in value.items()))
         else:
             lines.append(f"- **{key_label(key)}**: {format_value(key, value)}")
     for key, rows in tables.items():

@@ -52,5 +52,10 @@ def test_report_markdown_lists_scalars_and_tables():
     assert "**RMS (px)**: 0.5" in text and "1.0, 2.0, 3.0" in text  # rounded to what it means: 0.1 px, 0.1 mm
     assert "| Click | Residual (px) |" in text and "| edge 2 | 0.7 |" in text
     assert report_markdown({}) == ""
+    # σ stays σ (its capital Σ reads as a sum: the panel showed "Σ t (mm)"); coordinates stay lower case
+    heads = report_markdown({"std_t_mm": 1.0, "sd_rot_deg": 0.1, "sigma_cm": 2.0, "x_y_z_m": 1.0, "t_s": 3.0})
+    assert "**σ translation (mm)**" in heads and "**σ rotation (°)**" in heads and "**σ (cm)**" in heads
+    assert "**Change**: 49.04°, 224.8 mm" in report_markdown({"change": {"deg": 49.04, "cm": 22.48}})  # as the messages say it
+    assert "**x y z (m)**" in heads and "**t (s)**" in heads and "Σ" not in heads and "Sd" not in heads
     tiny = report_markdown({"rms_px": 2.332e-14, "std_r_deg": 0.123456, "x_m": 1.234567891})
     assert "e-14" not in tiny and "**RMS (px)**: 0" in tiny and "0.12" in tiny and "1.2346" in tiny
