@@ -22,8 +22,15 @@ from ..camera import Camera, as_segment
 from ..geometry import Plane, angle_between_planes
 from ..rangefinder import RangeFinderSpec, RangeScan
 from ..transforms import check_T, exp_so3, make_T, skew
-from .box_scans import BoxScans, assign_returns, associate_tangents, reduce_box_scans, tangent_distances
-from .lm import huber_weights, levenberg_marquardt, numeric_jacobian
+from .box_scans import (
+    BoxScans,
+    assign_returns,
+    associate_tangents,
+    reduce_box_scans,
+    tangent_distances,
+    tangent_distances_jacobian,
+)
+from .lm import huber_weights, levenberg_marquardt
 from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs, support_obs
 from .result import ModelResult
 from .vertices import solve_vertices
@@ -504,8 +511,62 @@ def _fused_box(
         pts_m, sig, edges_m, click_px = distances(th)
         return np.concatenate([pts_m / sig, edges_m / pts["sig_t"], click_px / sigma_px])
 
+    C = camera.C
+    n_th = len(th0)
+
     def jacobian(th):
-        return numeric_jacobian(residuals, th, 1e-7)
+        """d(residuals)/dθ (analytic): through the box's axes, origin and sizes to its faces (the
+        range points' distances and their σ along the normals), its corners (the scan tangents'
+        edges; the clicked edges' images through the camera)."""
+        R, t, dims = unpack(th)
+        # dR (n, 3, 3), dt (n, 3), ddims (n, 3)
+        dR, dt, ddims = np.zeros((n_th, 3, 3)), np.zeros((n_th, 3)), np.zeros((n_th, 3))
+        if on_support:
+            dR[0] = R @ skew(np.array([0.0, 0.0, 1.0]))
+            dt[1], dt[2] = R0[:, 0], R0[:, 1]
+        else:
+            Jr = _so3_right_jacobian(th[:3])
+            for j in range(3):
+                dR[j] = R @ skew(Jr[:, j])
+            dt[3:6] = np.eye(3)
+        ddims[-3:] = np.eye(3)
+        # the faces: N6[f] = s_f R[:, f // 2], d6 = −N6·t − far(dims)
+        N6, d6 = _face_planes(R, t, dims)
+        dN6 = np.repeat(np.transpose(dR, (0, 2, 1)), 2, axis=1) * _FACE_SIDES[None]  # (n, 6, 3)
+        dfar = np.column_stack([ddims[:, 0] / 2, ddims[:, 0] / 2, ddims[:, 1] / 2, ddims[:, 1] / 2,
+                                np.zeros(n_th), ddims[:, 2]])
+        dd6 = -(dN6 @ t) - dt @ N6.T - dfar
+        k = pts["k"]
+        N, dN = N6[k], dN6[:, k]
+        X, Cov = pts["X"], pts["C"]
+        pts_m = np.einsum("ij,ij->i", X, N) + d6[k]
+        sig_raw = np.sqrt(np.einsum("ni,nij,nj->n", N, Cov, N))
+        sig = np.maximum(sig_raw, 1e-7)
+        dpts = np.einsum("pi,npi->np", X, dN) + dd6[:, k]
+        dsig = np.where(sig_raw > 1e-7, np.einsum("pi,pij,npj->np", N, Cov, dN) / sig, 0.0)
+        rows = [(dpts / sig - pts_m * dsig / sig**2).T]
+        # the corners: t + R (unit ⊙ dims)
+        Cb = _corner_offsets(dims)
+        corners = t + Cb @ R.T
+        dcorners = dt[:, None, :] + np.einsum("nij,kj->nki", dR, Cb) + (_CORNER_UNIT[None] * ddims[:, None, :]) @ R.T
+        if pts["assoc"]:
+            rows.append((tangent_distances_jacobian(pts["assoc"], corners, dcorners, T_world_turret[:3, 3]) / pts["sig_t"][None]).T)
+        else:
+            rows.append(np.zeros((0, n_th)))
+        # the clicked ends' distances to the lines through their edge's projected corners
+        P = corners @ C[:, :3].T + C[:, 3]
+        uv = P[:, :2] / P[:, 2:3]
+        duv = np.einsum("kab,nkb->nka", (C[None, :2, :3] - uv[:, :, None] * C[None, 2:3, :3]) / P[:, 2, None, None], dcorners)
+        a, b, da, db = uv[vi], uv[vj], duv[:, vi], duv[:, vj]
+        l = np.column_stack([a[:, 1] - b[:, 1], b[:, 0] - a[:, 0], a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]])
+        dl = np.stack([da[..., 1] - db[..., 1], db[..., 0] - da[..., 0],
+                       da[..., 0] * b[:, 1] + a[:, 0] * db[..., 1] - da[..., 1] * b[:, 0] - a[:, 1] * db[..., 0]], axis=-1)
+        nrm = np.hypot(l[:, 0], l[:, 1])
+        dnrm = (l[:, 0] * dl[..., 0] + l[:, 1] * dl[..., 1]) / nrm
+        dl = dl / nrm[:, None] - l[None] * (dnrm / nrm**2)[..., None]  # (n, S, 3)
+        ddist = clicks[None, :, :, 0] * dl[..., None, 0] + clicks[None, :, :, 1] * dl[..., None, 1] + dl[..., None, 2]
+        rows.append(ddist.reshape(n_th, -1).T / sigma_px)
+        return np.vstack(rows)
 
     th, it, passes = th0, 0, 0
     for passes in range(1, 4):

@@ -283,6 +283,36 @@ def tangent_distances(assoc: Sequence[EdgeTangent], corners: np.ndarray, origin:
     return np.einsum("ij,ij->i", Q - origin, N)
 
 
+def tangent_distances_jacobian(assoc: Sequence[EdgeTangent], corners: np.ndarray, d_corners: np.ndarray,
+                               origin: np.ndarray) -> np.ndarray:
+    """Derivatives (n, M) of ``tangent_distances`` given the corners' derivatives d_corners (n, 8, 3)
+    with respect to n parameters (the tangent planes are fixed: they are measured)."""
+    n = len(d_corners)
+    if not assoc:
+        return np.zeros((n, 0))
+    i0 = [a.edge[0] for a in assoc]
+    i1 = [a.edge[1] for a in assoc]
+    A, B, dA, dB = corners[i0], corners[i1], d_corners[:, i0], d_corners[:, i1]
+    D = np.array([a.beam for a in assoc])
+    N = np.array([a.normal for a in assoc])
+    e, de = B - A, dB - dA
+    w = A - origin
+    a_ = np.einsum("ij,ij->i", e, e)
+    b = np.einsum("ij,ij->i", e, D)
+    d_ = np.einsum("ij,ij->i", e, w)
+    f = np.einsum("ij,ij->i", D, w)
+    den = np.maximum(a_ - b * b, 1e-300)
+    num = b * f - d_
+    s = num / den
+    da = 2 * np.einsum("mi,nmi->nm", e, de)
+    db = np.einsum("mi,nmi->nm", D, de)
+    dd = np.einsum("nmi,mi->nm", de, w) + np.einsum("mi,nmi->nm", e, dA)
+    df = np.einsum("mi,nmi->nm", D, dA)
+    ds = ((db * f + b * df - dd) * den - num * (da - 2 * b * db)) / den**2
+    dQ = dA + ds[:, :, None] * e + s[:, None] * de
+    return np.einsum("nmi,mi->nm", dQ, N)
+
+
 def assign_returns(
     data: BoxScans, R: np.ndarray, t: np.ndarray, dims: np.ndarray, *, edge_margin_m: float = 0.005
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

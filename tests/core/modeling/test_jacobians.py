@@ -202,3 +202,37 @@ def test_fused_fit_jacobian_matches_differences_of_its_residuals(case, monkeypat
         m = n_beams[0] + 8  # the tangent beams' rows, then the clicked ends'
         assert n_beams[0] >= 2
         assert _rel_err(J[-m:], Jn[-m:]) <= 1e-6, (i, _rel_err(J[-m:], Jn[-m:]))
+
+
+@pytest.mark.parametrize("case", ["on the support, with scans", "free, with scans", "on the support, no scans"])
+def test_fused_box_jacobian_matches_differences_of_its_residuals(case, box_scene, monkeypatch):
+    """The fused box fit's Jacobian (range points with their σ along the normals, scan tangents,
+    clicked ends; all analytic) against central differences of its residuals, at each pass's
+    start and at random points around it."""
+    import core.modeling.box as box
+    from core.modeling import model_box
+    from core.modeling.simulate import simulate_box, simulate_box_scans
+
+    from .conftest import BOX_SIZE, TABLE
+
+    cam, T_wt, T_obj, world = box_scene
+    rng = np.random.default_rng(4)
+    faces = simulate_box(cam, world, T_obj, BOX_SIZE, rng)
+    kw = {} if "no scans" in case else dict(scans=simulate_box_scans(world, T_obj, BOX_SIZE, rng), T_world_turret=T_wt)
+    seen = []
+    real_lm = box.levenberg_marquardt
+
+    def spy(fun, jac, x0, **k):
+        seen.append((fun, jac, np.array(x0, float)))
+        return real_lm(fun, jac, x0, **k)
+
+    monkeypatch.setattr(box, "levenberg_marquardt", spy)
+    model_box(cam, faces, TABLE if "support" in case else None, method="fused", **kw)
+    assert seen
+    fun, jac, th0 = seen[-1]  # the residuals are the last pass's (its points and tangents)
+    for i in range(6):
+        th = th0 + (0 if i == 0 else rng.normal(scale=2e-3, size=th0.shape))
+        J = jac(th)
+        Jn = numeric_jacobian(fun, th, 1e-6, central=True)
+        assert J.shape == Jn.shape and np.abs(Jn).max() > 1.0
+        assert _rel_err(J, Jn) <= 1e-6, (i, _rel_err(J, Jn))
