@@ -181,19 +181,19 @@ def dash_segments(seg_uv: np.ndarray, dash_px: float = 6.0, gap_px: float = 4.0)
     if dash_px <= 0 or gap_px < 0:
         raise ValueError(f"dash_px must be > 0 and gap_px ≥ 0, got {dash_px}, {gap_px}")
     period = dash_px + gap_px
-    out, idx = [], []
-    for i, (a, b) in enumerate(P):
-        length = float(np.linalg.norm(b - a))
-        if length < 1e-9:
-            continue
-        starts = np.arange(0.0, length, period)
-        ends = np.minimum(starts + dash_px, length)
-        u = (b - a) / length
-        out.append(np.stack([a + starts[:, None] * u, a + ends[:, None] * u], axis=1))
-        idx.append(np.full(len(starts), i))
-    if not out:
+    d = P[:, 1] - P[:, 0]
+    length = np.linalg.norm(d, axis=1)
+    count = np.zeros(len(P), np.int64)
+    long_enough = length >= 1e-9
+    count[long_enough] = np.ceil(length[long_enough] / period)  # dashes start at 0, period, … < length
+    if count.sum() == 0:
         return np.zeros((0, 2, 2)), np.zeros(0, np.int64)
-    return np.concatenate(out), np.concatenate(idx)
+    idx = np.repeat(np.arange(len(P)), count)
+    starts = (np.arange(len(idx)) - np.repeat(np.cumsum(count) - count, count)) * period
+    ends = np.minimum(starts + dash_px, length[idx])
+    u = d[idx] / length[idx, None]
+    a = P[idx, 0]
+    return np.stack([a + starts[:, None] * u, a + ends[:, None] * u], axis=1), idx
 
 
 @dataclass(frozen=True)

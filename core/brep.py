@@ -314,10 +314,30 @@ class BRep:
         """Indices of the faces that edge k borders."""
         return self._edge_faces[k]
 
+    def _cached(self, name: str, compute):
+        """A pose-independent array computed once per model (the model is immutable)."""
+        value = self.__dict__.get(name)
+        if value is None:
+            value = compute()
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        return value
+
     def face_normals(self) -> np.ndarray:
         """Outward unit normals (F, 3) by Newell's method (robust for non-planar loops)."""
+        return self._cached("_face_normals", self._compute_face_normals).copy()
+
+    def _compute_face_normals(self) -> np.ndarray:
         out = np.zeros((len(self.faces), 3))
-        for k, f in enumerate(self.faces):
+        tri = np.fromiter((len(f) == 3 for f in self.faces), dtype=bool, count=len(self.faces))
+        if tri.any():  # a mesh's triangles at once, summed and normalised as the loop below does
+            P = self.vertices[np.array([f for f, t in zip(self.faces, tri) if t], dtype=np.int64)]
+            Q = np.roll(P, -1, axis=1)
+            n = np.stack([(P[..., 1] - Q[..., 1]) * (P[..., 2] + Q[..., 2]), (P[..., 2] - Q[..., 2]) * (P[..., 0] + Q[..., 0]),
+                          (P[..., 0] - Q[..., 0]) * (P[..., 1] + Q[..., 1])], axis=-1).sum(axis=1)
+            out[tri] = [v / max(np.linalg.norm(v), 1e-300) for v in n]
+        for k in np.flatnonzero(~tri):
+            f = self.faces[k]
             P = self.vertices[list(f)]
             Q = np.roll(P, -1, axis=0)
             n = np.array(
@@ -332,7 +352,23 @@ class BRep:
 
     def face_centroids(self) -> np.ndarray:
         """Centroids (F, 3) of the faces' vertex loops."""
-        return np.array([self.vertices[list(f)].mean(axis=0) for f in self.faces]).reshape(-1, 3)
+        return self._cached("_face_centroids", self._compute_face_centroids).copy()
+
+    def _compute_face_centroids(self) -> np.ndarray:
+        out = np.zeros((len(self.faces), 3))
+        tri = np.fromiter((len(f) == 3 for f in self.faces), dtype=bool, count=len(self.faces))
+        if tri.any():
+            out[tri] = self.vertices[np.array([f for f, t in zip(self.faces, tri) if t], dtype=np.int64)].mean(axis=1)
+        for k in np.flatnonzero(~tri):
+            out[k] = self.vertices[list(self.faces[k])].mean(axis=0)
+        return out
+
+    def _edge_face_pairs(self) -> np.ndarray:
+        """(M, 2) int: every (edge, face it borders) pair, edges in order (for vectorised visibility)."""
+        def compute():
+            pairs = [(k, f) for k, fs in enumerate(self._edge_faces) for f in fs]
+            return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+        return self._cached("_edge_face_pairs_", compute)
 
     def bounds(self) -> np.ndarray:
         """Axis-aligned bounds (2, 3) in the object frame: (min, max)."""
@@ -379,12 +415,17 @@ class BRep:
         c_obj = (np.asarray(center_world, dtype=float) - T[:3, 3]) @ T[:3, :3]
         segs, vis, idx, kind = [], [], [], []
         if len(self.edges):
-            normals = self.face_normals()
-            cents = self.face_centroids()
-            facing = np.einsum("ij,ij->i", normals, c_obj - cents) > 0 if len(self.faces) else np.zeros(0, bool)
-            for k in range(len(self.edges)):
-                fs = self._edge_faces[k]
-                vis.append(True if not fs else bool(np.any(facing[list(fs)])))
+            if len(self.faces):
+                normals = self._cached("_face_normals", self._compute_face_normals)
+                cents = self._cached("_face_centroids", self._compute_face_centroids)
+                facing = np.einsum("ij,ij->i", normals, c_obj - cents) > 0
+            else:
+                facing = np.zeros(0, bool)
+            # an edge is visible when it borders no face or one of its faces faces the centre
+            pairs = self._edge_face_pairs()
+            has_face = np.bincount(pairs[:, 0], minlength=len(self.edges)) > 0
+            seen = np.bincount(pairs[:, 0], weights=facing[pairs[:, 1]], minlength=len(self.edges)) > 0
+            vis += (~has_face | seen).tolist()
             segs.append(self.edge_segments())
             idx += list(range(len(self.edges)))
             kind += ["edge"] * len(self.edges)
