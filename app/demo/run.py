@@ -125,6 +125,13 @@ def run_demo(
     beside = None
     if sim_trials > 0:  # the sweeps need only the scene and the script: a second process runs them meanwhile
         t_sim = time.perf_counter()
+        # What both processes use is loaded once, before the fork (the solvers' modules, numba and the
+        # compiled pose kernels: ~0.6 s that the second process would otherwise load again).
+        from core.pose import warm_up
+
+        from . import report, simulation  # noqa: F401
+
+        warm_up()
         beside = _SimulationBeside.start(scene, script, sim_trials, n_pose, seed)
         if beside is not None:
             say(_simulating(sim_trials, n_pose, seed) + " in a second process, beside the replay")
