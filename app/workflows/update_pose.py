@@ -36,6 +36,7 @@ from core.transforms import pose_error
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
 from .pose_matching import AutoMatchMixin, Match
+from .pose_search import OneClickMixin
 from .snapping import SNAPPED_CORNER_SIGMA_PX, SNAPPED_SEGMENT_SIGMA_PX, ClickSnap, SnapMixin, snap_marks
 
 __all__ = ["UpdatePose", "Match", "plausibility", "nearest_twin"]
@@ -51,14 +52,16 @@ MAX_TRIPLES = 20  # Solve (P3L) tries at most this many triples of the assigned 
 MAX_CANDIDATES = 8
 
 
-class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
+class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
     name = "update_pose"
     title = "Update pose"
     options = ("object_name",)
     actions = ("click", "assign_edge", "add_segment", "add_point", "start_point", "remove_last", "remove_click", "solve",
                "choose_candidate", "refine", "accept", "cancel", "refuse_snap", "set_snap", "auto_assign",
-               "auto_match", "confirm_match")
+               "auto_match", "confirm_match", "find")
     controls = (
+        Control("find", "Find", "G", kind="long", color="blue",
+                hint="Find the object's pose from your one click on it (where it is now in the video)"),
         Control("auto_match", "Auto match", "M", kind="long", color="blue",
                 hint="Find which model edge each clicked image edge is (3 or more edges, 4 is best)"),
         Control("confirm_match", "Confirm match", "C", color="blue", hint="Adopt the assignment shown"),
@@ -113,6 +116,7 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
         # solve that ran outside the lock commits only if it is unchanged (snapshot, compute, commit).
         self._generation = 0
         self.last_refined: np.ndarray | None = None  # the last refined pose, once a click changed it
+        self._init_found()  # Find from one click (app/workflows/pose_search.py)
         self.state = "click_edge"
 
     # ------------------------------------------------------------------ estimate in use
@@ -241,6 +245,8 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
         """Undo the last click (a pending end, an assignment, a segment or a point)."""
         with self.lock:
             self._check_open()
+            if self._drop_found():
+                return
             if self.mode == "point":
                 self.mode, self.pending_vertex = "edge", None
             elif self.pending is not None:
@@ -404,8 +410,11 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
             return result
 
     def accept(self):
-        """Write the refined pose and covariance (one transaction); ConflictError → nothing written."""
-
+        """Write the refined pose and covariance (one transaction); ConflictError → nothing written.
+        A pose found from one click, with no click since, is written as found (method "search")."""
+        rec = self._accept_found()
+        if rec is not None:
+            return rec
         with self.lock:
             self._check_open()
             unrefined = self.refined is None
@@ -431,6 +440,9 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
                 clicks["match"] = self.match_info
             residuals = {"rms_px": r.rms_px, "click_residuals_px": r.click_residuals_px, "kinds": list(r.kinds)}
             method = "match+refine" if self.match_info is not None else ("p3l+refine" if self.chosen is not None else "refine")
+            if self.found is not None:
+                method = "search+refine"
+                clicks["search"] = self.search_info
             rec, self.obj = self._write_pose(self.obj, r.T_world_obj, r.cov, method=method, clicks=clicks,
                                              residuals=residuals, todo="Cancel, and update the pose again from its new one.")
             self.accepted = True
@@ -573,6 +585,12 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
                             frozenset(base))
             return Step("click_point_image", f"Now click where vertex {self.pending_vertex} (circled) really is in the video.",
                         frozenset(base))
+        found = self._found_step(base)
+        if found is not None:
+            return found
+        if self._first_click_pending():
+            return Step("click_edge_end", "{find} the pose of " + f"{self.object_name} from this one click, or click a second "
+                        f"point on the same image edge (edge {k + 1}).", frozenset(base | {"find"}))
         if self.pending is not None:
             return Step("click_edge_end", f"Click a second point on the same image edge (edge {k + 1}).", frozenset(base))
         rows = {"click_row", "remove_click"} if self._click_rows() else set()
@@ -601,7 +619,9 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
             more.add("auto_match")
         if n < 3 and not self.refined:
             tail = " Or {refine} from the database pose (a small motion)." if "refine" in more else ""
-            return Step("click_edge", f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3), "
+            one = (f"Click once on {self.object_name} where it is now in the video to find its pose from that click; or c"
+                   if not self.segs and not self.points_uv and self.found is None else "C")
+            return Step("click_edge", one + f"lick two points along an edge of {self.object_name} in the video (edge {n + 1} of 3), "
                         "then click which model edge it is; or {auto_match} to skip saying which is which." + tail
                         if "auto_match" in more else
                         f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3)." + tail,
@@ -652,7 +672,7 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
         with self.lock:
             r = self.refined
             if r is None:
-                return []
+                return self._found_weaknesses() if self._found_pending() else []
             out = []
             sd, st = float(np.max(r.std_r_deg)), float(np.max(r.std_t_m)) * 1000
             if sd > WEAK_SIGMA_DEG or st > WEAK_SIGMA_MM:
@@ -677,6 +697,8 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
 
     def candidate_labels(self) -> list[str]:
         """One label per candidate for a chooser: "#1 (best)", "#2", ..."""
+        if self.found is not None and len(self.found) == len(self.candidates):
+            return self._found_labels()
         return [f"#{i + 1}" + (" (best)" if i == 0 else "") for i in range(len(self.candidates))]
 
     def marks(self) -> Marks:
@@ -691,6 +713,9 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
                             for i, (s, e) in enumerate(zip(self.segs, ids))]
             if self.pending is not None:
                 m.pending = self.pending.reshape(1, 2)
+            if self.search_click is not None:  # the one click Find used
+                m.circles = self.search_click.reshape(1, 2)
+                m.labels.append((self.search_click + [8.0, -8.0], "click"))
             if self.points_uv:
                 m.points = np.array(self.points_uv)
                 m.labels += [(p, f"v{k}") for p, k in zip(self.points_uv, self.vertex_ids)]
@@ -735,6 +760,7 @@ class UpdatePose(AutoMatchMixin, SnapMixin, Workflow):
             snaps = [s for s in self.seg_snaps + self.point_snaps if s is not None]
             if snaps:
                 out["snapped"] = f"{sum(s.applied for s in snaps)} of {len(snaps)} clicks"
+            self._found_summary(out)
             if self.candidates:
                 out["candidates"] = len(self.candidates)
                 out["chosen"] = (self.chosen or 0) + 1

@@ -285,3 +285,27 @@ def test_calibrate_turret_designate_history_track_states(device_site, site, walk
     walk.check(t)
     t.cancel()
     walk.check(t)
+
+
+def test_update_pose_one_click_states(video_site, scene, walk):
+    """Update pose's one-click path (issue 17): the first click offers Find; found poses offer Accept
+    (and the chooser when several fit); Remove last goes back to the click; Accept ends it."""
+    from .test_update_pose import T_MOVED
+
+    site = video_site
+    site.t["t"] = T_MOVED
+    wf = UpdatePose(site, client="alice", object_name="parallelepiped", snap=False)
+    assert "find" not in walk.check(wf).enabled  # no click yet: nothing to find from
+    T = scene.body("parallelepiped").pose_at(T_MOVED)
+    wf.click(site.camera.project_obj(T, wf.obj.model.vertices).mean(axis=0))
+    st = walk.check(wf)
+    assert st.name == "click_edge_end" and "find" in st.named()
+    wf.find()
+    st = walk.check(wf)
+    assert st.name == "found" and "accept" in st.named() and ("choose_candidate" in st.enabled) == (len(wf.found) > 1)
+    wf.remove_last()
+    assert walk.check(wf).name == "click_edge_end"
+    wf.find()
+    wf.accept()
+    assert walk.check(wf).name == "accepted"
+    assert {"click_edge", "click_edge_end", "found", "accepted"} <= walk.seen["update_pose"]

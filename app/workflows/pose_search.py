@@ -1,0 +1,189 @@
+"""Update pose's one-click path (issue 17): one click on the moved object, Find, Accept.
+
+The operator's first click in Update pose (on the object where it is now, in the frozen frame) can
+start an edge or, with **Find**, be the whole input: ``app.vision.search.search_pose`` searches the
+poses consistent with the click — on the table (x, y, heading) when the database pose rests on the
+database's table, else the full pose near the old one — scores them on the frame's edges, settles the
+best on the image with the edge tracker and returns every pose that fits, ranked by fit with σ. They
+are shown as ghosts (the best in white, a chooser for the others); Accept writes the chosen one with
+method "search" and the click in the history. Edges clicked afterwards are assigned on the found pose
+and Refine starts from it (method "search+refine").
+
+The search runs outside the workflow's lock (the overlay keeps drawing), reports its progress
+(``progress``, ``progress_text``) and stops when the workflow is cancelled; it commits only if the
+clicks did not change meanwhile. A mixin of ``UpdatePose`` (app/workflows/update_pose.py).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from core.transforms import pose_error
+
+from .base import Step, WorkflowError, as_pixel
+
+__all__ = ["OneClickMixin", "WEAK_FOUND_SIGMA_DEG", "WEAK_FOUND_SIGMA_MM"]
+
+WEAK_FOUND_SIGMA_DEG = 2.0  # a found pose is weak (Accept asks once more) above these σ, as a refined one
+WEAK_FOUND_SIGMA_MM = 20.0
+
+
+class OneClickMixin:
+    """Find from one click (see the module docstring)."""
+
+    found: list | None
+    search_click: np.ndarray | None
+    search_info: dict[str, Any] | None
+
+    def _init_found(self) -> None:
+        self.found = None  # the search's candidates (app.vision.search.SearchCandidate), best first
+        self.search_click = None  # the pixel the search used
+        self.search_info = None  # what the history keeps of the search
+
+    # ------------------------------------------------------------------ action
+    def find(self, uv=None):
+        """Find the object's pose from one click on it: the pending first click (or ``uv``).
+
+        Searches outside the lock on the workflow's frame; WorkflowError, nothing changed, when no
+        pose fits ("no pose of the parallelepiped fits the image near your click"), when cancelled,
+        or when the clicks changed meanwhile. Returns the candidates (best first).
+        """
+        from app.vision.search import Cancelled, NoPoseFits, rests_on, search_pose
+
+        from .model_object import table_support
+
+        with self.lock:  # snapshot
+            self._check_open()
+            if uv is not None:
+                p = as_pixel(uv)
+                if self.pending is not None or self.segs or self.points_uv or self.mode != "edge":
+                    raise WorkflowError("Find uses one click on the object and no others: Remove last first")
+            elif self.pending is not None and not self.segs and not self.points_uv and self.mode == "edge":
+                p = self.pending.copy()
+            else:
+                raise WorkflowError(f"click once on {self.object_name} where it is now in the video, then Find "
+                                    "(Find uses that one click, before any edge)")
+            camera, model, T_db, generation = self.site.camera, self.obj.model, self.obj.T_world_obj, self._generation
+            table = table_support(self.site)
+            if table is not None and not rests_on(model, T_db, table):
+                table = None  # it did not lie on the table: the full pose is searched near the old one
+        image = self._frame()  # compute, outside the lock: the overlay keeps drawing
+        if image is None:
+            raise WorkflowError(f"no video frame to search in ({self._no_frame_reason()}); check the video, then Find again")
+
+        def progress(frac: float, what: str) -> None:
+            self.progress, self.progress_text = float(frac), what
+
+        try:
+            res = search_pose(camera, model, T_db, p, image, table=table, name=self.object_name,
+                              cancel=self.cancel_event.is_set, progress=progress)
+        except Cancelled:
+            raise WorkflowError("Find cancelled: nothing was written") from None
+        except NoPoseFits as exc:
+            raise WorkflowError(str(exc)) from None
+        except ValueError as exc:
+            raise WorkflowError(f"Find failed: {exc}") from None
+        finally:
+            self.progress, self.progress_text = None, ""
+        with self.lock:  # commit
+            self._unchanged_since(generation, "Find")
+            self.pending = None  # the click was the search's, not an edge's start
+            self.search_click = p
+            self.found = list(res.candidates)
+            self.candidates = [c.T_world_obj for c in res.candidates]
+            self.chosen = 0
+            self.matches = None
+            self._invalidate()
+            self.state = "found"
+            where = "on the table" if res.mode == "table" else "near its old pose"
+            self.search_info = {"click_uv": [float(p[0]), float(p[1])], "mode": res.mode, "candidates": len(res.candidates),
+                                "seconds": round(res.total_s, 3)}
+            best = res.candidates[0]
+            n = len(res.candidates)
+            self.message = (f"{n} pose{'s' if n > 1 else ''} of {self.object_name} fit{'' if n > 1 else 's'} your click "
+                            f"(searched {where} in {res.total_s:.1f} s); the best fits the image's edges within "
+                            f"{best.fit_px:.1f} px" + (": the others are near-ties, check the white ghost" if n > 1 else ""))
+            return self.found
+
+    # ------------------------------------------------------------------ hooks for UpdatePose
+    def _found_pending(self) -> bool:
+        """Only the found pose is in use (no edge or point clicked since): Accept writes it."""
+        return (self.found is not None and self.pending is None and not self.segs and not self.points_uv
+                and self.mode == "edge" and self.refined is None)
+
+    def _first_click_pending(self) -> bool:
+        """One click made, nothing else: it can be Find's."""
+        return (self.found is None and self.pending is not None and not self.segs and not self.points_uv
+                and self.mode == "edge" and self.matches is None)
+
+    def _drop_found(self) -> bool:
+        """Remove last on the found poses alone: they go (back to the first click). True if dropped."""
+        if not self._found_pending():
+            return False
+        self.found, self.search_info = None, None
+        self.pending, self.search_click = self.search_click, None  # the click stays: Find again, or go on with an edge
+        self.candidates, self.chosen = [], None
+        self._invalidate()
+        self.state = "click_edge_end"
+        return True
+
+    def _found_step(self, base: set) -> Step | None:
+        if not self._found_pending():
+            return None
+        i = self.chosen or 0
+        c = self.found[i]
+        n = len(self.found)
+        sd = f"σ {np.max(c.std_t_mm):.1f} mm, {np.max(c.std_r_deg):.2f}°" if np.all(np.isfinite(c.std_t_mm)) else "σ unknown"
+        enabled = set(base) | {"accept", "remove_last", "start_point"}
+        choose = ""
+        if n > 1:
+            enabled.add("choose_candidate")
+            choose = f" {n} poses fit (near-ties, e.g. a symmetric object): pick another " + "{choose_candidate} if it is not on the object."
+        return Step("found", f"Pose {i + 1} of {n} drawn in white: the model's edges {c.fit_px:.1f} px from the image's, "
+                    f"{sd}." + choose + " {accept} to write it, or click edges of " + f"{self.object_name} to refine it.",
+                    frozenset(enabled))
+
+    def _found_labels(self) -> list[str]:
+        return [f"#{i + 1} · {c.fit_px:.1f} px" + (" (best)" if i == 0 else "") for i, c in enumerate(self.found)]
+
+    def _found_weaknesses(self) -> list[str]:
+        c = self.found[self.chosen or 0]
+        out = []
+        sd, st = float(np.max(c.std_r_deg)), float(np.max(c.std_t_mm))
+        if not (np.isfinite(sd) and np.isfinite(st)):
+            out.append("the pose's uncertainty is unknown; click edges and Refine")
+        elif sd > WEAK_FOUND_SIGMA_DEG or st > WEAK_FOUND_SIGMA_MM:
+            out.append(f"the pose is uncertain: σ up to {sd:.2f}° and {st:.1f} mm (more than {WEAK_FOUND_SIGMA_DEG:.0f}° or "
+                       f"{WEAK_FOUND_SIGMA_MM:.0f} mm); click edges and Refine")
+        return out
+
+    def _accept_found(self):
+        """Write the chosen found pose (method "search", the click in the history); None when Accept is
+        for a refined pose instead."""
+        with self.lock:
+            self._check_open()
+            if not self._found_pending():
+                return None
+            i = self.chosen or 0
+            c = self.found[i]
+            clicks = dict(self.search_info or {})
+            clicks.update({"chosen": i, "frame": self.frame_record()})
+            residuals = {"fit_px": c.fit_px, "support_px": c.support_px, "confidence": c.confidence}
+            rec, self.obj = self._write_pose(self.obj, c.T_world_obj, c.cov, method="search", clicks=clicks,
+                                             residuals=residuals, todo="Cancel, and update the pose again from its new one.")
+            self.accepted = True
+            self.state = "accepted"
+            self.message = f"{self.object_name} updated (version {rec.version}): found from one click, edges {c.fit_px:.1f} px off"
+            return rec
+
+    def _found_summary(self, out: dict[str, Any]) -> None:
+        if self.found is None:
+            return
+        c = self.found[self.chosen or 0]
+        out["found"] = {"candidates": len(self.found), "chosen": (self.chosen or 0) + 1, "fit_px": round(c.fit_px, 2),
+                        "std_t_mm": [round(float(v), 1) for v in c.std_t_mm],
+                        "std_r_deg": [round(float(v), 2) for v in c.std_r_deg]}
+        deg, m = pose_error(c.T_world_obj, self.obj.T_world_obj)
+        out["found"]["change"] = {"deg": round(float(deg), 2), "cm": round(float(100 * m), 1)}
