@@ -90,7 +90,8 @@ class ClientPanel:
         self._choice_options: dict[str, dict[str, Any]] = {}
         self.confirm_pending: tuple | None = None  # (action, args) waiting for its second press
         self.warning = ""  # a weak result's reasons, or a question, shown above the buttons
-        self.error = ""  # the last refused action, said in the panel until the next action
+        self.error = ""  # the last refused action, said in the panel until the next action or step
+        self.error_step: str | None = None  # the step it was said in
         self.frozen: FrameRef | None = None
         self.show_live = False
         self._frozen_sent: Any = None
@@ -126,8 +127,10 @@ class ClientPanel:
                 return fn(*args, **kwargs)
             except WorkflowError as exc:
                 # Said in the panel, at the top (no toast: toasts stack over the video's corner and
-                # close under the cursor, so that a click meant for one lands on the video).
+                # close under the cursor, so that a click meant for one lands on the video), until the
+                # next action or until the workflow moves on to another step.
                 self.error = _sentence(str(exc))
+                self.error_step = self._step_name()
             except Cancelled:
                 self.error = ""
                 self.notify("Stopped", "The measurement was stopped; nothing was kept.", "blue")
@@ -140,14 +143,23 @@ class ClientPanel:
                 self.app.wake()
         return wrapper
 
-    def notify(self, title: str, body: str, color: str = "yellow", stays: bool = False) -> None:
+    def _step_name(self) -> str | None:
+        """The current workflow's step name (None: no workflow, or it cannot say)."""
+        wf = self.session.workflow
+        try:
+            return None if wf is None else wf.current_step().name
+        except Exception:  # noqa: BLE001 - only used to tell when a message went stale
+            return None
+
+    def notify(self, title: str, body: str, color: str = "yellow", stays: bool = False) -> Any:
         """A notification on this client (errors and ``stays`` ones stay until closed, others close
         after a few seconds)."""
         try:
-            self.client.add_notification(title, body, color=color, with_close_button=True,
-                                         auto_close_seconds=None if (color == "red" or stays) else 6.0)
+            return self.client.add_notification(title, body, color=color, with_close_button=True,
+                                                auto_close_seconds=None if (color == "red" or stays) else 6.0)
         except Exception:  # noqa: BLE001 - the client may have gone
             log.debug("notification to a departed client dropped", exc_info=True)
+            return None
 
     # ------------------------------------------------------------------ GUI
     def _build_gui(self) -> None:
@@ -683,16 +695,20 @@ class ClientPanel:
             step = None
         else:
             step = wf.current_step()
-            state = " (accepted)" if wf.accepted else (" (cancelled)" if wf.cancelled else "")
+            closes = wf.control("accept")  # History's Close, Designate's Done: nothing is accepted
+            done = "accepted" if closes is None or closes.label == "Accept" else "closed"
+            state = f" ({done})" if wf.accepted else (" (cancelled)" if wf.cancelled else "")
             subject = wf.object_name
             head = f"**{wf.title}{': ' + subject if subject else ''}**{state}"
             prompt = wf.prompt_text()
             title = f"{head}\n\n{prompt}"
-            if wf.message and not wf.finished and wf.message[:40] not in prompt:  # not said twice
-                title += f"\n\n_{wf.message}_"
+            if wf.message and not wf.finished and not self.warning and wf.message[:40] not in prompt:
+                title += f"\n\n_{wf.message}_"  # not said twice, nor above a question being asked
             if wf.finished:
                 title += f"\n\n{idle}"
-            report = report_markdown(wf.summary())
+            report = "" if wf.cancelled else report_markdown(wf.summary())  # a cancelled result is gone
+            if self.error and self.error_step is not None and step.name != self.error_step:
+                self.error = ""  # said in a step the workflow has left
         if self.error:
             title += f"\n\n⚠ {self.error}"
         if self.gui_title.content != title:

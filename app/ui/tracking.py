@@ -51,6 +51,7 @@ class TrackFeeder:
 
     def _run(self) -> None:
         wf, last, lost_seen = self.wf, -1, self.wf.lost_count
+        lost_note = None  # the "Tracking lost" notification on screen
         self._event.set()  # the frame on screen now is the first to track
         try:
             while not self._stop.is_set() and not wf.finished:
@@ -72,7 +73,10 @@ class TrackFeeder:
                         self.panel.error = f"Tracking paused: {exc}"  # said in the panel (no toast over the video)
                 if wf.lost_count != lost_seen:  # also at the top of the panel; this one stays until closed
                     lost_seen = wf.lost_count   # (an auto-closing toast vanished under the cursor aiming at it)
-                    self.panel.notify("Tracking lost", wf.message, "orange", stays=True)
+                    lost_note = self.panel.notify("Tracking lost", wf.message, "orange", stays=True)
+                elif lost_note is not None and not wf.lost:  # following again: the old news goes
+                    _remove(lost_note)
+                    lost_note = None
                 self.panel.dirty = True
                 self.panel.app.wake()
         except Exception as exc:  # noqa: BLE001 - say so, keep the server running
@@ -81,3 +85,13 @@ class TrackFeeder:
                               "again.", "red")
         finally:
             self.grabber.remove_listener(self._on_frame)
+            if lost_note is not None and wf.finished:
+                _remove(lost_note)
+
+
+def _remove(note) -> None:
+    """Take a notification off the page (the client may have gone)."""
+    try:
+        note.remove()
+    except Exception:  # noqa: BLE001
+        log.debug("could not remove a notification", exc_info=True)
