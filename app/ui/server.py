@@ -312,7 +312,11 @@ class InterfaceServer:
         status = self.grabber.status()
         video = f"**Video** {src.description} · {src.width}×{src.height} · {src.fps:.1f} fps (shown {self.grabber.measured_fps:.1f})"
         if status.live:
-            video += " · **live**" if src.live else ""
+            loop = src.duration_s if not src.live else None
+            if src.live:
+                video += " · **live**"
+            elif loop and (src.frame_count or 0) > 1:  # say it: what moved in it jumps back at every loop
+                video += f" · **a recording, replayed every {loop:.1f} s** (not live: objects jump back when it restarts)"
         elif self.grabber.error is not None:
             video += f"\n\n**Video stopped:** {self.grabber.error}"
         else:  # lost (reconnecting) or waiting: the image shown is not live

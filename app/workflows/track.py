@@ -129,14 +129,18 @@ class TrackObject(SnapMixin, Workflow):
             self._generation += 1
             self.tracker = worker
             self.frames += 1
-            self.t_first = t if self.t_first is None else self.t_first
-            self.t_last = t
             self.diagnostics = self.tracker.diagnostics
             self.confidence = float(res.confidence)
+            jumped = self.t_last is not None and t < self.t_last - 0.5  # before the last frame: the video restarted
+            self.t_first = t if self.t_first is None else self.t_first
+            self.t_last = t
             if res.lost:
                 self.lost = True
                 self.lost_count += 1
                 self.reason = self.diagnostics.reason if self.diagnostics is not None else "lost"
+                if jumped:
+                    self.reason += (" — the video jumped back in time (a recording restarting, or a stream that "
+                                    "reconnected): the object is where that frame shows it")
                 self.state = "lost"
                 self.message = (f"Lost at t = {t:.2f} s: {self.reason}. Nothing is written while lost: click three or "
                                 f"more edges of {self.object_name} (two clicks each) and Re-initialise, or Restart "
