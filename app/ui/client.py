@@ -74,7 +74,7 @@ class ClientPanel:
     def __init__(self, app: "InterfaceServer", client: viser.ClientHandle):
         self.app = app
         self.client = client
-        self.session = Session(app.site, client=f"browser-{client.client_id}")
+        self.session = Session(app.site, client=f"browser-{client.client_id + getattr(app, 'client_number_offset', 0)}")
         self.lock = threading.RLock()
         self.view = "video"
         self.dirty = True

@@ -77,6 +77,9 @@ class InterfaceServer:
         self.host = host
         self.clients: dict[int, ClientPanel] = {}
         self.clients_lock = threading.RLock()
+        # Browsers are named browser-N in the history; N goes on from the last run's (viser counts
+        # from 0 again when the server restarts, and 'browser-1' then named two different pages).
+        self.client_number_offset = _last_browser_number(site.db) + 1
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._db_revision = -1
@@ -328,3 +331,16 @@ class InterfaceServer:
             panels = list(self.clients.values())
         for panel in panels:
             panel.set_status(text)
+
+
+def _last_browser_number(db) -> int:
+    """The largest N of the 'browser-N' names in the database's recent history (-1: none)."""
+    import re
+
+    try:
+        changes = db.history(limit=5000)
+    except Exception:  # noqa: BLE001 - a name is not worth failing the start for
+        log.debug("could not read the history for the browsers' names", exc_info=True)
+        return -1
+    numbers = [int(m[1]) for c in changes if (m := re.fullmatch(r"browser-(\d+)", str(c.client or "")))]
+    return max(numbers, default=-1)

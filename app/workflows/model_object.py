@@ -455,7 +455,8 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             return Step("review", f"{self.result.dimension_text('cm')}. " + "{accept} to add it, or add measurements and "
                         "{solve} again.", frozenset(base | again | {"accept"}))
         if self.pending is not None:
-            return Step("click_end", "Click the other end of that edge.", frozenset(base))
+            side = "silhouette" if self.shape != "box" else "side"
+            return Step("click_end", f"Click the other end of that {side}.", frozenset(base))
         if self.shape == "box":
             face = self.faces[-1]
             n = len(self.faces)
