@@ -634,6 +634,10 @@ class ClientPanel:
         self._announce()
         wf = self.session.workflow
         if wf is not self.built_for or (wf is not None and wf.finished and self.controls):
+            ended = self.built_for
+            if ended is not None and ended.finished and getattr(ended, "progress", None) is None \
+                    and ended.name in ("calibrate_turret", "model_object", "model_polyhedron", "designate"):
+                self.app.site.set_beam(None)  # the range finder's spot of a closed workflow would go stale
             self._rebuild_controls()
         busy = self.worker is not None and self.worker.is_alive()
         progress = wf.progress if wf is not None else None
