@@ -230,3 +230,18 @@ def test_workcell_known_box_makes_one_large_then_small_motions(workcell):
         assert 1.0 < deg < 18.0 and 0.01 < m < 0.05
     assert windows[0] == (0.0, 12.0)
     assert all(b - a >= 2.5 for a, b in windows)
+
+
+def test_the_bundled_lens_file_is_the_workcell_camera_s():
+    """scenes/workcell/lens.yml (for trying the pose-only camera calibration: mcit serve --intrinsics
+    scenes/workcell/lens.yml) holds the bundled camera's K and size, with no distortion."""
+    import numpy as np
+
+    from app.camera_io import read_intrinsics
+    from app.scene import default_scene_path, load_scene
+
+    scene = load_scene(default_scene_path())
+    lens = read_intrinsics(default_scene_path() / "lens.yml")
+    K = scene.camera.decompose()[0]
+    assert (lens.width, lens.height) == (scene.camera.width, scene.camera.height)
+    assert np.allclose(lens.K, K, atol=1e-6) and not np.any(lens.distortion)
