@@ -1,6 +1,6 @@
 """Benchmark of automatic edge matching (app.vision.matching) and of the batched P3L under it.
 
-Run: .venv/bin/python bench/matching.py [--trials 100] [--seed 0]
+Run: .venv/bin/python bench/matching.py [--trials 100] [--seed 0] [--edges 4] [--compare]
 
 Setup (DESIGN.md's simulation): camera 512 × 256 px, f = 500 px; the paper's box
 35 × 23.1 × 13.2 cm at 2 m, uniformly random orientation (every visible face seen at less than 75°
@@ -18,7 +18,13 @@ the first third and one in the last third of the edge, then:
 Right: the top-ranked candidate's assignment is the true one up to a symmetry of the box (its four
 proper symmetries, core.pose.edge_symmetries, map edges to edges and leave the picture
 unchanged). Also reported: how
-often the right assignment is among the candidates at all, and the time per call.
+often the right assignment is among the candidates at all, and the time per call: CPU time
+(time.process_time, one process pinned to one core; the wall clock's 95th percentile beside it),
+median and 95th percentile beside issue 16's target (≤ 35 ms on 4-6 edges); with the image each
+call computes its frame's edges (the per-frame cache cleared, as on a new frame). ``--compare``
+also runs the image rows with every candidate settled on the image (``settle=None``, the path
+before the settle limit) on the same trials and clicks, so both paths' rates and times come from
+one run.
 
 Batched P3L: ``p3l_all_triples`` on the ordered triples of a box's edges (core.pose's P3L kernel,
 ``_kernels.p3l_many``: rotations, translations, front test; triples of three parallel edges are
