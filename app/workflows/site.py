@@ -470,7 +470,7 @@ class Site:
         with self.lock:
             if self._meshes.get("key") == key:
                 return self._meshes["mesh"], self._meshes["owner"]
-        Vs, Fs, owner, offset = [], [], [], 0
+        Vs, Fs, names, counts, offset = [], [], [], [], 0
         cache = {}
         for obj in objects:  # each object's world triangles are kept until its version moves
             okey = (obj.version, obj.status)
@@ -482,13 +482,17 @@ class Site:
             _, V, F = hit
             Vs.append(V)
             Fs.append(F + offset)
-            owner += [obj.name] * len(F)
+            names.append(obj.name)
+            counts.append(len(F))
             offset += len(V)
         self._triangles = cache
         mesh = trimesh.Trimesh(np.vstack(Vs), np.vstack(Fs), process=False) if Vs else None
+        # each triangle's object name (the name objects repeated in C: a list of one name per triangle
+        # turned into a string array held the interpreter 110-200 ms with 40 meshes among 2,000 objects)
+        owner = np.repeat(np.array(names, dtype=object), counts) if names else np.array([])
         with self.lock:
-            self._meshes = {"key": key, "mesh": mesh, "owner": np.array(owner)}
-        return mesh, np.array(owner)
+            self._meshes = {"key": key, "mesh": mesh, "owner": owner}
+        return mesh, owner
 
     def raycast(self, origin: np.ndarray, direction: np.ndarray) -> RayHit | None:
         """The first database surface a ray (origin (3,), direction (3,), world) meets, or None.
