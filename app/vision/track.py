@@ -13,7 +13,12 @@ Each frame (the "moving edges" tracker of Comport, Marchand et al., 2006, as in 
 4. steps 1–3 are repeated once at the refined pose with a narrower search (``refine_search_px``);
 5. if the answer fails the support check below while its confidence is good (motion beyond the
    band), after at least one frame followed, the frame is tried once more from the same start, coarse to fine (``capture_px``, then
-   the two bands above), before the object is declared lost.
+   the two bands above), before the object is declared lost;
+6. the first frame after a pose is given (which may be degrees or a centimetre off) that fails,
+   whatever its confidence, is tried again from the same start coarse to fine from each of
+   ``start_capture_px`` (±24 and ±16 px): two hypotheses, each kept only if it passes every lost
+   test and turns the given pose by at most ``start_capture_deg`` (10°), and the frame is lost
+   when both are kept but lie apart (the image fits two poses).
 
 Which edges are seen is computed once per pass, at the pose the pass starts from
 (``visible_segments``), and the support check reuses the last pass's; the frame is smoothed only
@@ -53,7 +58,7 @@ import numpy as np
 from core.brep import BRep
 from core.camera import Camera
 from core.point_line_pose import PointLineFit, refine_point_to_line
-from core.transforms import check_T
+from core.transforms import check_T, pose_error
 
 from .profiles import search_along_normals, to_gray_f32
 
@@ -388,6 +393,21 @@ class EdgeTracker:
         the same start, coarse to fine: passes of ±capture_px, halved while wider than ±search_px, then ±search_px and
         ±refine_search_px (the real cube tracked on every 3rd frame). The answer is kept only if
         it passes every lost test, otherwise the object is lost as before. 0 turns it off.
+    start_capture_px : the capture range of a given pose. When the first frame after it (the
+        constructor's or ``reset``'s) fails a lost test, whatever its confidence, it is tracked
+        again from the same start coarse to fine from each of these bands (passes of ±px, halved
+        while wider than ±search_px, then ±search_px and ±refine_search_px). Each answer counts
+        only if it passes every lost test and turns the given pose by at most ``start_capture_deg``
+        (a rendered box started 20° off settles 58° off with its edges on the image's, 0.8 px);
+        when two answers count and their samples lie more than
+        ``max_edge_distance_px`` apart (median), the image fits both equally (visp-cube's frames
+        140–160 from a start 5° off: the cube 4° and 16 mm off, its edges 0.6 px from the image's)
+        and the frame is lost; else the first answer is kept. From 10 starts 5° / 1 cm off on
+        visp-cube, 8 of 10 runs tracked whole instead of 4 (``bench/tracking.py``, "Capture
+        range"). Off (no capture) when ``lost_confidence`` is 0 or ``max_edge_distance_px`` is
+        infinite: a tracker that does not judge its answer with both tests (auto match's settling
+        step, the one-click search's) cannot tell a captured pose from a wrong one.
+        Bands not wider than ``search_px`` are left out; ``()`` turns it off.
     """
 
     def __init__(
@@ -412,6 +432,8 @@ class EdgeTracker:
         check_search_px: float = 10.0,
         check_min_strength: float = 2.0,
         capture_px: float = 32.0,
+        start_capture_px: tuple[float, ...] = (24.0, 16.0),
+        start_capture_deg: float = 10.0,
     ):
         if not isinstance(camera, Camera):
             raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
@@ -442,6 +464,8 @@ class EdgeTracker:
         self.check_search_px = float(check_search_px)
         self.check_min_strength = float(check_min_strength)
         self.capture_px = float(capture_px)
+        self.start_capture_deg = float(start_capture_deg)
+        self.start_capture_px = tuple(float(px) for px in np.atleast_1d(np.asarray(start_capture_px, float)) if px > self.search_px)
         self.reset(T_world_obj)
 
     # ------------------------------------------------------------------ state
@@ -475,9 +499,9 @@ class EdgeTracker:
         """The half-widths of the frame's search passes, coarse to fine."""
         return (self.search_px, self.refine_search_px)
 
-    def _capture_schedule(self) -> tuple[float, ...]:
+    def _capture_schedule(self, capture_px: float | None = None) -> tuple[float, ...]:
         """The passes tried when the usual ones lose the object: from ``capture_px`` down (none if off)."""
-        out, h = [], self.capture_px
+        out, h = [], self.capture_px if capture_px is None else capture_px
         while h > self.search_px:
             out.append(h)
             h /= 2.0
@@ -588,7 +612,21 @@ class EdgeTracker:
         view = self._view(self._T)  # which edges are seen from the start (shared by a retry's first pass)
         T, p, reason, confidence, inl, edge_px = self._attempt(band, view, self._schedule())
         wide = self._capture_schedule()
-        if reason and wide and self._followed and np.isfinite(edge_px) and confidence >= self.lost_confidence:
+        if reason and not self._followed and self.start_capture_px and self.lost_confidence > 0 and np.isfinite(self.max_edge_distance_px):
+            # The first frame after a given pose: the pose may be degrees or a centimetre off (a
+            # stale database pose, clicked edges), beyond the ±search_px band. See start_capture_px.
+            tried = [self._attempt(band, view, self._capture_schedule(px)) for px in self.start_capture_px]
+            good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
+            if good:
+                X = good[0][1].samples.X_obj
+                uv0 = self.camera.project_obj(good[0][0], X)
+                apart = max((float(np.median(np.linalg.norm(self.camera.project_obj(g[0], X) - uv0, axis=1))) for g in good[1:]), default=0.0)
+                if apart > self.max_edge_distance_px:
+                    reason = (f"near the given pose the image fits two poses whose edges lie {apart:.1f} px apart, "
+                              "and does not show which is right")
+                else:
+                    T, p, reason, confidence, inl, edge_px = good[0]
+        elif reason and wide and self._followed and np.isfinite(edge_px) and confidence >= self.lost_confidence:
             # Most samples found their edge but the model does not sit on the image's edges: the
             # signature of motion beyond the band (a wrong convergence shows a low confidence, and
             # a wider search would only settle it elsewhere). Once more from the same start, coarse
