@@ -93,6 +93,22 @@ def close_webgl_notice(page) -> None:
         pass
 
 
+def select_by_click(page, name: str, click) -> int:
+    """Select object ``name`` by ``click()`` (a canvas click on its wireframe) and wait for the
+    selection. On a loaded machine a page's first canvas click can arrive before the page listens
+    for clicks (nothing happens, as an operator would see): then the click is made once more, as an
+    operator would. Returns the number of clicks made (1 or 2)."""
+    for attempt, timeout_s in ((1, 6.0), (2, 14.0)):
+        click()
+        try:
+            wait_until(lambda: page.panel.session.selected == name, timeout_s, "the selection")
+            return attempt
+        except AssertionError:
+            if attempt == 2:
+                raise
+    return 2
+
+
 def close_notifications(page, timeout_s: float = 10.0) -> None:
     """Close every notification and wait until none is left: they stack over the video's top-left
     corner (below them a click or a drag reaches the notification, not the canvas).

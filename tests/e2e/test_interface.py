@@ -12,7 +12,7 @@ import pytest
 from core.transforms import pose_error
 
 from .flows import Operator
-from .harness import close_notifications
+from .harness import close_notifications, select_by_click
 
 pytestmark = pytest.mark.e2e
 
@@ -140,8 +140,7 @@ def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
     drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
     true = cam.project(obj.model.edge_segments(T_true).reshape(-1, 3)).reshape(-1, 2, 2)
     # select the box by clicking its wireframe
-    op.click(drawn[_visible_box_edges(site, obj.T_world_obj)[0]].mean(axis=0))
-    _wait(lambda: page.panel.session.selected == "parallelepiped", what="the selection")
+    select_by_click(page, "parallelepiped", lambda: op.click(drawn[_visible_box_edges(site, obj.T_world_obj)[0]].mean(axis=0)))
     op.press("Update pose")
     _wait(lambda: page.panel.session.workflow is not None, what="the workflow")
     wf = page.panel.session.workflow

@@ -8,6 +8,7 @@ import re
 import numpy as np
 import pytest
 
+from .harness import select_by_click
 from .harness import wait_until as _wait
 
 pytestmark = pytest.mark.e2e
@@ -23,8 +24,7 @@ def test_a_clicked_edge_is_snapped_shown_and_can_be_refused(browser, interface, 
     drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
     wfv = obj.model.wireframe(cam.center, obj.T_world_obj)
     k_sel = next(int(k) for k, v, kind in zip(wfv.edge_index, wfv.visible, wfv.kind) if v and kind == "edge")
-    ui.click_pixel(page, drawn[k_sel].mean(axis=0))
-    _wait(lambda: page.panel.session.selected == "parallelepiped", what="the selection")
+    select_by_click(page, "parallelepiped", lambda: ui.click_pixel(page, drawn[k_sel].mean(axis=0)))
     page.get_by_role("button", name="Update pose").click()
     _wait(lambda: page.panel.session.workflow is not None, what="the workflow")
     wf = page.panel.session.workflow

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from .harness import press, wait_until
+from .harness import press, select_by_click, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -88,8 +88,7 @@ def test_double_and_rapid_clicks_are_taken_in_order_or_refused_with_the_state_in
     obj = ui.site.object("parallelepiped")
     cam = ui.site.camera
     drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
-    ui.click_pixel(page, drawn[1].mean(axis=0))
-    wait_until(lambda: panel.session.selected == "parallelepiped", what="the selection")
+    select_by_click(page, "parallelepiped", lambda: ui.click_pixel(page, drawn[1].mean(axis=0)))
     page.get_by_role("button", name="Update pose").click()
     wait_until(lambda: panel.session.workflow is not None and panel.controls, what="the workflow")
     wf = panel.session.workflow

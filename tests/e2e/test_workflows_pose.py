@@ -20,7 +20,7 @@ import pytest
 from core.transforms import pose_error
 
 from .flows import Operator, projected_edges, visible_edges
-from .harness import wait_until
+from .harness import select_by_click, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -36,8 +36,7 @@ def _select(op, page, obj, camera) -> None:
     """Click the object's wireframe (where the database draws it) to select it."""
     drawn = projected_edges(camera, obj.model, obj.T_world_obj)
     k = max(visible_edges(camera, obj.model, obj.T_world_obj), key=lambda i: np.linalg.norm(drawn[i, 1] - drawn[i, 0]))
-    op.click(drawn[k].mean(axis=0))
-    wait_until(lambda: page.panel.session.selected == obj.name, what="the selection")
+    select_by_click(page, obj.name, lambda: op.click(drawn[k].mean(axis=0)))
 
 
 def test_update_pose_by_auto_match(browser, interface, scene):

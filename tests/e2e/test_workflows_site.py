@@ -28,7 +28,7 @@ import pytest
 from core.camera import Camera
 from core.transforms import exp_so3, make_T, pose_error
 
-from .harness import assert_prompt_controls, close_notifications, press, wait_until
+from .harness import assert_prompt_controls, close_notifications, press, select_by_click, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -305,8 +305,7 @@ def _select_box(op, ui):
     cam = site.camera
     drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
     k = max(_visible_edges(site, obj.T_world_obj), key=lambda i: np.linalg.norm(drawn[i, 1] - drawn[i, 0]))
-    op.click(drawn[k].mean(axis=0))
-    wait_until(lambda: op.page.panel.session.selected == "parallelepiped", what="the selection")
+    select_by_click(op.page, "parallelepiped", lambda: op.click(drawn[k].mean(axis=0)))
 
 
 def _visible_edges(site, T):
