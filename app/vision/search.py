@@ -254,19 +254,9 @@ def _hull(model: BRep) -> np.ndarray:
     """Half-spaces (F, 4) a·x + b ≤ 0 of the model's convex hull (object frame)."""
     from scipy.spatial import ConvexHull
 
-    pts = [model.vertices] if len(model.vertices) else []
-    th = np.linspace(0.0, 2.0 * np.pi, 32, endpoint=False)
-    for sol in model.solids:
-        a = sol.axis
-        u = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-        u /= np.linalg.norm(u)
-        v = np.cross(a, u)
-        ring = np.cos(th)[:, None] * u + np.sin(th)[:, None] * v
-        pts += [sol.p0 + max(sol.r0, 1e-6) * ring, sol.p1 + max(sol.r1, 1e-6) * ring]
-    for c in model.circles:
-        pts.append(c.polyline(32))
-    P = np.vstack(pts)
-    return ConvexHull(P).equations
+    pts = [_support_points(model, n=32, min_radius=1e-6)]  # a cone's apex as a small ring: a hull with volume
+    pts += [c.polyline(32) for c in model.circles]
+    return ConvexHull(np.vstack(pts)).equations
 
 
 def _ray_hits(hull: np.ndarray, R: np.ndarray, t: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -357,8 +347,10 @@ def level_on(model: BRep, T_world_obj: np.ndarray, table: Plane) -> np.ndarray:
     return make_T(R2, t2 - gap * up)
 
 
-def _support_points(model: BRep) -> np.ndarray:
-    th = np.linspace(0.0, 2.0 * np.pi, 48, endpoint=False)
+def _support_points(model: BRep, n: int = 48, min_radius: float = 0.0) -> np.ndarray:
+    """The model's vertices and ``n`` points on each rim of its solids (radius at least
+    ``min_radius``), object frame, (P, 3): what its outline and its hull are made of."""
+    th = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
     pts = [model.vertices] if len(model.vertices) else []
     for sol in model.solids:
         a = sol.axis
@@ -366,8 +358,8 @@ def _support_points(model: BRep) -> np.ndarray:
         u /= np.linalg.norm(u)
         v = np.cross(a, u)
         ring = np.cos(th)[:, None] * u + np.sin(th)[:, None] * v
-        pts += [sol.p0 + sol.r0 * ring, sol.p1 + sol.r1 * ring]
-    return np.vstack(pts)
+        pts += [sol.p0 + max(sol.r0, min_radius) * ring, sol.p1 + max(sol.r1, min_radius) * ring]
+    return np.vstack(pts) if pts else np.zeros((0, 3))
 
 
 def _rot_about(n: np.ndarray, psi: np.ndarray) -> np.ndarray:
