@@ -20,7 +20,7 @@ import pytest
 from core.camera import Camera
 
 from .harness import Interface, assert_prompt_controls, wait_until
-from .test_workflows_site import Operator, _visible_corners, _workflow, _wrong_camera
+from .test_workflows_site import Operator, _pair_corner, _visible_corners, _workflow, _wrong_camera
 
 pytestmark = pytest.mark.e2e
 
@@ -67,17 +67,11 @@ def test_calibrate_camera_by_pnp_from_5_points(browser, lens_interface, scene):
     assert len(corners) >= 5
     idx = np.linspace(0, len(corners) - 1, 5).round().astype(int)
     corners = [corners[i] for i in idx]
-    for j, (name, k, X) in enumerate(corners):
+    for j, corner in enumerate(corners):
         if j == 0:
             op.choose("Solve by", "Pose, lens known (PnP)")
             wait_until(lambda: wf.method == "pnp", what="PnP chosen")
-        op.click(wrong.project(X[None])[0])  # the corner as the overlay draws it (the stale C)
-        wait_until(lambda: wf.pending_vertex == (name, k), what=f"{name} corner {k} picked")
-        assert_prompt_controls(page)
-        n = len(wf.uv)
-        op.click(true_cam.project(X[None])[0])  # where it is in the video
-        wait_until(lambda: len(wf.uv) == n + 1, what=f"{name} corner {k} paired")
-        assert_prompt_controls(page)
+        _pair_corner(op, page, wf, corner, wrong, true_cam)  # where the overlay draws it (the stale C), then in the video
     op.key("r")  # Solve (R)
     wait_until(lambda: wf.result is not None, what="the solution")
     assert_prompt_controls(page)

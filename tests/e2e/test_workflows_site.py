@@ -113,6 +113,19 @@ def _visible_corners(site, cam: Camera):
     return out
 
 
+def _pair_corner(op, page, wf, corner, drawn_by: Camera, true_cam: Camera) -> None:
+    """Pair one known corner: click it where the overlay draws it (through ``drawn_by``, the stale C),
+    then where it is in the video (the true camera); the instruction's controls checked each time."""
+    name, k, X = corner
+    op.click(drawn_by.project(X[None])[0])
+    wait_until(lambda: wf.pending_vertex == (name, k), what=f"{name} corner {k} picked")
+    assert_prompt_controls(page)
+    n = len(wf.uv)
+    op.click(true_cam.project(X[None])[0])
+    wait_until(lambda: len(wf.uv) == n + 1, what=f"{name} corner {k} paired")
+    assert_prompt_controls(page)
+
+
 # ---------------------------------------------------------------------------------------------- 1
 def test_calibrate_camera_by_clicks(browser, interface, scene):
     ui = interface
@@ -135,14 +148,8 @@ def test_calibrate_camera_by_clicks(browser, interface, scene):
     box = [c for c in corners if c[0] == "parallelepiped"]
     corners = [c for c in corners if c[0] == "table"] + box[::2]
     assert len(corners) >= 9
-    for name, k, X in corners:
-        op.click(wrong.project(X[None])[0])  # the corner as the overlay draws it (the wrong C)
-        wait_until(lambda: wf.pending_vertex == (name, k), what=f"{name} corner {k} picked")
-        assert_prompt_controls(page)
-        n = len(wf.uv)
-        op.click(true_cam.project(X[None])[0])  # where it is in the video
-        wait_until(lambda: len(wf.uv) == n + 1, what=f"{name} corner {k} paired")
-        assert_prompt_controls(page)
+    for corner in corners:
+        _pair_corner(op, page, wf, corner, wrong, true_cam)  # where the overlay draws it (the wrong C), then in the video
     op.key("r")  # Solve (R)
     wait_until(lambda: wf.result is not None, what="the solution")
     assert_prompt_controls(page)
