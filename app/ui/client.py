@@ -385,6 +385,9 @@ class ClientPanel:
         wf = self.session.workflow
         if wf is not None and not wf.finished:
             wf.use_frame(self.frozen)
+            if wf.name == "update_pose":  # its auto match and search read the frame's edges: ready them now
+                threading.Thread(target=_prepare_frame, args=(self.frozen.image,), daemon=True,
+                                 name="mcit-frame-edges").start()
 
     def _unfreeze(self) -> None:
         self.frozen = None
@@ -811,3 +814,13 @@ def _sentence(text: str) -> str:
         return text
     text = text[0].upper() + text[1:]
     return text if text.endswith((".", "!", "?")) else text + "."
+
+
+def _prepare_frame(image) -> None:
+    """The frozen frame's oriented edges, computed in the background (app.vision.evaluate)."""
+    try:
+        from app.vision.evaluate import prepare_frame
+
+        prepare_frame(image)
+    except Exception:  # noqa: BLE001 - only a head start: the workflow computes them when it needs them
+        log.debug("could not prepare the frozen frame's edges", exc_info=True)

@@ -29,7 +29,7 @@ from core.camera import Camera
 from .profiles import to_gray_f32
 from .track import sample_visible_edges
 
-__all__ = ["OrientedEdges", "EdgeDistance", "oriented_edges", "edge_distance"]
+__all__ = ["OrientedEdges", "EdgeDistance", "oriented_edges", "edge_distance", "prepare_frame"]
 
 _CACHE: OrderedDict = OrderedDict()  # the last few frames' OrientedEdges, by contents and options
 _CACHE_SIZE = 4
@@ -65,6 +65,16 @@ class OrientedEdges:
     def _in_bin(self, b: int) -> np.ndarray:
         diff = np.abs((self.theta_deg - b * self.bin_deg + 90.0) % 180.0 - 90.0)
         return diff <= self.orient_tol_deg
+
+    def prepare(self) -> "OrientedEdges":
+        """Build every bin's k-d tree now (each is otherwise built on its first ``distance``)."""
+        from scipy.spatial import cKDTree
+
+        for b in range(self.n_bins):
+            if b not in self._trees:
+                pts = self.edges_uv[self._in_bin(b)]
+                self._trees[b] = cKDTree(pts) if len(pts) else None
+        return self
 
     def distance(self, b: int, u: np.ndarray, v: np.ndarray, max_px: float) -> np.ndarray:
         """Bin b's distance transform read bilinearly at pixels (u, v), capped at max_px."""
@@ -152,6 +162,13 @@ def oriented_edges(
         while len(_CACHE) > _CACHE_SIZE:
             _CACHE.popitem(last=False)
     return out
+
+
+def prepare_frame(image: np.ndarray) -> None:
+    """Compute a frame's oriented edges and their k-d trees ahead of use (the interface does it in
+    the background when a workflow freezes a frame: auto match and the one-click search then find
+    them ready, a few ms less on the operator's wait)."""
+    oriented_edges(image).prepare()
 
 
 def edge_distance(
