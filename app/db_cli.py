@@ -54,11 +54,17 @@ def _cmd_import(args) -> int:
 
     path = Path(args.file)
     model = load_model(path, angle_deg=args.angle_deg)  # raises before the database is touched
+    options = None
+    if path.suffix.lower() == ".cao":  # ViSP's name= and LOD options, kept in the history for export
+        from app.models_io import read_cao_options
+
+        options = read_cao_options(path)[1]
     roll, pitch, yaw = np.radians(args.rpy_deg)
     T = make_T(rot_z(yaw) @ rot_y(pitch) @ rot_x(roll), np.asarray(args.xyz, float))
     with _open(args) as db:
         rec = db.add_object(args.name or path.stem, args.kind, model, T, status=args.status, source=str(path.resolve()),
-                            method=f"import {path.suffix.lower().lstrip('.')}", client="cli")
+                            method=f"import {path.suffix.lower().lstrip('.')}", client="cli",
+                            measurements={"cao_options": options.to_json()} if options else None)
         print(f"{db.path}: added #{rec.id} {rec.name!r} ({rec.kind}, {rec.status}): {len(model.vertices)} vertices, "
               f"{len(model.edges)} edges, {len(model.faces)} faces, {len(model.solids)} solids, {len(model.circles)} circles")
     return 0
@@ -110,9 +116,31 @@ def _cmd_export(args) -> int:
         o = db.get(int(args.name) if args.name.isdigit() else args.name)
         model = o.model.transformed(o.T_world_obj) if args.world else o.model
         frame = "world" if args.world else "object"
-        save_model(model, args.out, comment=f"mcit object {o.name!r} (version {o.version}), {frame} frame, metres")
+        comment = f"mcit object {o.name!r} (version {o.version}), {frame} frame, metres"
+        if Path(args.out).suffix.lower() == ".cao":
+            from app.models_io import write_cao
+
+            write_cao(model, args.out, comment, options=_imported_cao_options(db, o))
+        else:
+            save_model(model, args.out, comment=comment)
         print(f"wrote {args.out}: {o.name!r} in the {frame} frame")
     return 0
+
+
+def _imported_cao_options(db, o):
+    """The ViSP options (name=, LOD) of the .cao file the object's current model was imported from,
+    from the import's history record; None when the model is not that file's (modelled, changed)."""
+    from app.models_io import CaoOptions
+
+    for change in db.history(o.id):
+        m = change.measurements
+        if change.action == "add" and isinstance(m, dict) and "cao_options" in m \
+                and (change.after or {}).get("model_id") == o.model_id:
+            try:
+                return CaoOptions.from_json(m["cao_options"])
+            except ValueError:
+                return None
+    return None
 
 
 def _cmd_history(args) -> int:

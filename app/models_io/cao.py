@@ -127,6 +127,26 @@ class CaoOptions:
     cylinders: dict = field(default_factory=dict)
     circles: dict = field(default_factory=dict)
 
+    def to_json(self) -> dict:
+        """JSON-ready (an edge's key "a-b"), for the database's history of an import."""
+        return {"edges": {f"{a}-{b}": v for (a, b), v in self.edges.items()},
+                "faces": {str(k): v for k, v in self.faces.items()},
+                "cylinders": {str(k): v for k, v in self.cylinders.items()},
+                "circles": {str(k): v for k, v in self.circles.items()}}
+
+    @staticmethod
+    def from_json(d: dict) -> "CaoOptions":
+        """Inverse of ``to_json``; ValueError on a malformed description."""
+        try:
+            edges = {tuple(int(i) for i in k.split("-")): str(v) for k, v in d.get("edges", {}).items()}
+            return CaoOptions(edges, *({int(k): str(v) for k, v in d.get(part, {}).items()}
+                                       for part in ("faces", "cylinders", "circles")))
+        except (AttributeError, TypeError, ValueError) as exc:
+            raise ValueError(f"malformed .cao options: {exc}") from None
+
+    def __bool__(self) -> bool:
+        return bool(self.edges or self.faces or self.cylinders or self.circles)
+
     @staticmethod
     def concat(models: list[BRep], options: list["CaoOptions"]) -> "CaoOptions":
         """The options of ``concat_breps(models)``: each model's keys shifted like its records."""

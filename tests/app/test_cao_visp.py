@@ -251,3 +251,24 @@ def test_options_of_included_files_follow_their_records(tmp_path):
     assert opts2 == opts  # the model itself round-trips (circle normals to rounding: see test_models_io)
     assert np.array_equal(m2.vertices, m.vertices) and m2.faces == m.faces
     assert sorted(map(tuple, m2.edges.tolist())) == sorted(map(tuple, m.edges.tolist()))  # faces' sides come first
+
+
+def test_name_and_lod_options_survive_the_database(tmp_path, capsys):
+    """mcit db import keeps a .cao's ViSP options in the import's history; mcit db export writes them
+    back while the object's model is the imported one."""
+    from app.cli import main
+    from app.models_io import read_cao_options
+
+    f = tmp_path / "named.cao"
+    f.write_text(NAMED)
+    db = str(tmp_path / "site.sqlite")
+    assert main(["db", "init", "--db", db]) == 0
+    assert main(["db", "import", str(f), "--db", db, "--name", "pole"]) == 0
+    out = tmp_path / "out.cao"
+    assert main(["db", "export", "pole", str(out), "--db", db]) == 0
+    capsys.readouterr()
+    m, opts = read_cao_options(f)
+    m2, opts2 = read_cao_options(out)
+    assert m2 == m and opts2 == opts and opts2.faces == {0: "name=floor useLod=false minPolygonAreaThreshold=2500"}
+    mesh = tmp_path / "out.obj"  # another format: no options to keep, nothing breaks
+    assert main(["db", "export", "pole", str(mesh), "--db", db]) == 0
