@@ -93,6 +93,7 @@ class ClientPanel:
         self.error = ""  # the last refused action, said in the panel until the next action or step
         self.error_step: str | None = None  # the step it was said in
         self.frozen: FrameRef | None = None
+        self.frozen_by: Any = None  # the workflow the frozen frame is for (None: frozen to look at it)
         self.show_live = False
         self._frozen_sent: Any = None
         self._labels_sent: dict = {}
@@ -313,12 +314,13 @@ class ClientPanel:
             if action == "accept":
                 weak = wf.weaknesses()
                 if weak:
-                    question = ("**Weak result:** " + "; ".join(weak) + ". Press **Accept** again to write it anyway, or "
+                    question = ("**Weak result — check before accepting:** " + "; ".join(weak) + ". Press **Accept** again to write it anyway, or "
                                 "improve it first.")
             if question:
                 again = "" if "Press **" in question else f" Press **{c.label}** again to confirm."
                 self.confirm_pending, self.warning, self.error = (action, args), question + again, ""
-                self._relabel(action, "Accept anyway" if action == "accept" else f"{c.label}: confirm")
+                again_label = "Accept anyway" if action == "accept" else f"{c.label}: confirm"
+                self._relabel(action, f"{again_label} ({c.key_text})" if c.key else again_label)
                 return
         self.confirm_pending, self.warning, self.error = None, "", ""
         wf.message = ""  # old messages go: the action says what it did
@@ -383,6 +385,9 @@ class ClientPanel:
         self.frozen = FrameRef(frame.image, float(frame.t_s), int(frame.index), source)
         self.show_live = False
         wf = self.session.workflow
+        # a workflow's frozen frame goes with it; one frozen with no workflow under way (to look at
+        # it) stays until Show live, or until a workflow freezes its own
+        self.frozen_by = wf if wf is not None and not wf.finished else None
         if wf is not None and not wf.finished:
             wf.use_frame(self.frozen)
             if wf.name == "update_pose":  # its auto match and search read the frame's edges: ready them now
@@ -391,6 +396,7 @@ class ClientPanel:
 
     def _unfreeze(self) -> None:
         self.frozen = None
+        self.frozen_by = None
         self.show_live = False
 
     def _workflow_has_clicks(self) -> bool:
@@ -418,7 +424,7 @@ class ClientPanel:
         Track freezes the frame where it paused or was lost (its clicks and re-initialisation use
         it) and lets it go when it follows the video again."""
         if wf is None or wf.finished:
-            if self.frozen is not None:
+            if self.frozen is not None and getattr(self, "frozen_by", None) is not None:
                 self._unfreeze()
                 self.dirty = True
             return
@@ -726,7 +732,7 @@ class ClientPanel:
         if self.gui_warning.content != self.warning:
             self.gui_warning.content = self.warning
         self._update_controls(wf, step)
-        text = wf.copy_text() if wf is not None else ""
+        text = wf.copy_text() if wf is not None and not wf.finished else ""
         self.gui_copy.visible = bool(text)
         if text and self.gui_copy.value != text:
             self.gui_copy.value = text

@@ -70,6 +70,28 @@ def format_value(key: str, v: Any) -> str:
     return str(v)
 
 
+_UNIT_KEYS = {"deg", "cm", "m", "mm", "px"}
+
+
+def _items(key: str, value: Any, indent: str) -> list[str]:
+    """One result entry as Markdown list lines: a number or a list on one line, a {unit: value}
+    dict as "49.04°, 224.8 mm", any other dict as a nested list of its own entries."""
+    if isinstance(value, (list, tuple, np.ndarray)):
+        arr = np.asarray(value, dtype=object).ravel()
+        if not len(arr):
+            return []
+        shown = ", ".join(format_value(key, x) for x in arr[:12]) + (" …" if len(arr) > 12 else "")
+        return [f"{indent}- **{key_label(key)}**: {shown}"]
+    if isinstance(value, dict):
+        if value and set(value) <= _UNIT_KEYS:
+            return [f"{indent}- **{key_label(key)}**: " + ", ".join(_with_unit(k, v) for k, v in value.items())]
+        out = [f"{indent}- **{key_label(key)}**"]
+        for k, v in value.items():
+            out += _items(str(k), v, indent + "  ")
+        return out
+    return [f"{indent}- **{key_label(key)}**: {format_value(key, value)}"]
+
+
 def _with_unit(unit: str, v: Any) -> str:
     """One entry of a {unit: value} result ({"deg": 49.04, "cm": 22.48}) as the messages say it:
     "49.04°", "224.8 mm" (lengths in mm, as everywhere else in the panel)."""
@@ -99,16 +121,7 @@ def report_markdown(summary: dict[str, Any]) -> str:
     for key, value in summary.items():
         if key in tables:
             continue
-        if isinstance(value, (list, tuple, np.ndarray)):
-            arr = np.asarray(value, dtype=object).ravel()
-            if not len(arr):
-                continue
-            shown = ", ".join(format_value(key, x) for x in arr[:12]) + (" …" if len(arr) > 12 else "")
-            lines.append(f"- **{key_label(key)}**: {shown}")
-        elif isinstance(value, dict):
-            lines.append(f"- **{key_label(key)}**: " + ", ".join(_with_unit(k, v) for k, v in value.items()))
-        else:
-            lines.append(f"- **{key_label(key)}**: {format_value(key, value)}")
+        lines += _items(key, value, "")
     for key, rows in tables.items():
         cols = list(rows[0].keys())
         lines.append(f"\n**{key_label(key)}**\n")

@@ -405,8 +405,8 @@ class CalibrateCamera(SnapMixin, Workflow):
             least = MIN_REDUNDANT_PAIRS_PNP if pnp else MIN_REDUNDANT_PAIRS
             if n < least:
                 unknowns = "the pose's 6 unknowns" if pnp else "C's 11 unknowns"
-                out.append(f"only {n} points for {unknowns}: little redundancy to catch a wrong click "
-                           f"({least} or more is safer)")
+                out.append(f"only {n} points ({2 * n} coordinates) for {unknowns}: enough to solve, but little "
+                           f"redundancy to catch a wrong click ({least} or more is safer)")
             sig = self._sigmas()
             bad = [i for i, (e, sg) in enumerate(zip(self.result.errors_px, sig)) if e > 3 * max(sg, 0.5)]
             chi = float(np.sum((self.result.errors_px / np.maximum(sig, 0.5)) ** 2))

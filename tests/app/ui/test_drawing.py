@@ -56,6 +56,9 @@ def test_report_markdown_lists_scalars_and_tables():
     heads = report_markdown({"std_t_mm": 1.0, "sd_rot_deg": 0.1, "sigma_cm": 2.0, "x_y_z_m": 1.0, "t_s": 3.0})
     assert "**σ translation (mm)**" in heads and "**σ rotation (°)**" in heads and "**σ (cm)**" in heads
     assert "**Change**: 49.04°, 224.8 mm" in report_markdown({"change": {"deg": 49.04, "cm": 22.48}})  # as the messages say it
+    nested = report_markdown({"found": {"candidates": 1, "fit_px": 0.31, "std_t_mm": [0.1, 0.8], "change": {"deg": 53.01, "cm": 21.9}}})
+    assert "- **Found**\n  - **Candidates**: 1\n  - **Fit (px)**: 0.3\n  - **σ translation (mm)**: 0.1, 0.8" in nested
+    assert "  - **Change**: 53.01°, 219.0 mm" in nested and "{" not in nested and "[" not in nested
     assert "**x y z (m)**" in heads and "**t (s)**" in heads and "Σ" not in heads and "Sd" not in heads
     tiny = report_markdown({"rms_px": 2.332e-14, "std_r_deg": 0.123456, "x_m": 1.234567891})
     assert "e-14" not in tiny and "**RMS (px)**: 0" in tiny and "0.12" in tiny and "1.2346" in tiny

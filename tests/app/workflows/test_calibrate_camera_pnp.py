@@ -171,7 +171,7 @@ def test_with_the_lens_known_5_points_solve_the_pose_by_pnp_and_say_so(lens_site
     s = wf.summary()
     assert s["solved_by"] == "Pose, lens known (PnP)" and len(s["errors_px"]) == 5 and s["std_position_mm"] > 0
     weak = wf.weaknesses()
-    assert any("only 5 points for the pose's 6 unknowns" in w for w in weak)
+    assert any("only 5 points (10 coordinates) for the pose's 6 unknowns: enough to solve" in w for w in weak)
     assert len(site.db.calibrations("camera")) == n_cal  # nothing written before Accept
     wf.accept()
     cal = site.db.calibrations("camera")[-1]
