@@ -336,9 +336,15 @@ class LineDriver:
         """The error to raise instead of ``last`` when the call saw garbage: the line is noisy."""
         lines, nbytes, sample = self._noise
         dropped = self._line.dropped_bytes
-        if not (lines or dropped):
+        # Bytes still waiting for a line end count when no reply could be like them: a byte no
+        # device sends, or more than any reply holds (a slow reply cut by the deadline does not count).
+        partial = self._line.pending_text()
+        if not (len(partial) > 64 or any(not 32 <= ord(ch) < 127 for ch in partial.strip("\r\n"))):
+            partial = ""
+        if not (lines or dropped or partial):
             return None
-        got = f"{lines} unreadable line(s), {nbytes + dropped} bytes" if lines else f"{dropped} bytes without a line end"
+        got = (f"{lines} unreadable line(s), {nbytes + dropped} bytes" if lines
+               else f"{dropped + len(partial)} bytes without a line end")
         return NoisyLineError(
             f"the {self.display_name}'s line is noisy ({got} during {what}"
             + (f", the last {clip(sample, 40)}" if lines else "")
