@@ -39,6 +39,16 @@ def _select(op, page, obj, camera) -> None:
     select_by_click(page, obj.name, lambda: op.click(drawn[k].mean(axis=0)))
 
 
+def _start_update_pose(op, page, obj, camera):
+    """Select the object by a click on its wireframe and press Update pose: the workflow started."""
+    _select(op, page, obj, camera)
+    op.press("Update pose")
+    wait_until(lambda: page.panel.session.workflow is not None, what="the workflow")
+    wf = page.panel.session.workflow
+    op.check()
+    return wf
+
+
 def test_update_pose_by_auto_match(browser, interface, scene):
     ui = interface
     page = ui.open(browser, viewport={"width": 1280, "height": 720})  # this flow at 1280×720 (the others at 1200×700)
@@ -51,11 +61,7 @@ def test_update_pose_by_auto_match(browser, interface, scene):
     assert set(AUTO_EDGES) <= set(visible_edges(cam, obj.model, T_true))
     n_changes = len(ui.db.history(BOX))
 
-    _select(op, page, obj, cam)
-    op.press("Update pose")
-    wait_until(lambda: page.panel.session.workflow is not None, what="the workflow")
-    wf = page.panel.session.workflow
-    op.check()
+    wf = _start_update_pose(op, page, obj, cam)
     op.press("Auto match")  # fewer than 3 edges: switches to automatic assignment
     wait_until(lambda: wf.auto and wf.current_step().name == "auto_click", what="automatic assignment")
     op.check()

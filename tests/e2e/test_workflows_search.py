@@ -17,7 +17,7 @@ from core.transforms import pose_error
 
 from .flows import Operator
 from .harness import wait_until
-from .test_workflows_pose import _select
+from .test_workflows_pose import _start_update_pose
 
 pytestmark = pytest.mark.e2e
 
@@ -34,11 +34,7 @@ def test_update_pose_from_one_click(browser, interface, scene):
     assert pose_error(T_true, obj.T_world_obj)[0] > 50.0  # the 55° move: the database is stale
     n_changes = len(ui.db.history(BOX))
 
-    _select(op, page, obj, cam)
-    op.press("Update pose")
-    wait_until(lambda: page.panel.session.workflow is not None, what="the workflow")
-    wf = page.panel.session.workflow
-    op.check()
+    wf = _start_update_pose(op, page, obj, cam)
     on_box = cam.project_obj(T_true, obj.model.vertices).mean(axis=0)  # where the frame shows the box
     op.click(on_box)
     wait_until(lambda: wf.current_step().name == "click_edge_end", what="the click")
