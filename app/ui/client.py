@@ -50,6 +50,8 @@ Z_FROZEN = -0.0005  # the frozen frame: in front of the live video, behind the o
 FROZEN_MAX_SIDE = 2048  # the frozen frame is upscaled (nearest neighbour) up to this many pixels a side
 # Workflows that do not take a frozen frame: tracking follows the live video; history has no clicks.
 LIVE_WORKFLOWS = ("track", "history")
+DOUBLE_CLICK_S = 0.6  # two clicks this close in time and place are a double click
+DOUBLE_CLICK_PX = 4.0
 WHEEL_FIELD = "mcit-wheel"  # the hidden text field static/wheel.js writes the wheel into
 WHEEL_ZOOM_PER_DELTA = 0.0015  # a wheel notch (deltaY 100) zooms by 14 %
 WHEEL_JS = Path(__file__).resolve().parents[2] / "static" / "wheel.js"
@@ -476,8 +478,16 @@ class ClientPanel:
     def on_pixel_click(self, uv: np.ndarray) -> None:
         """A click at pixel uv of the video: the workflow's, or else select the nearest object."""
         wf = self.session.workflow
+        now, last = time.monotonic(), getattr(self, "_last_click", None)
+        self._last_click = (now, np.asarray(uv, float).copy())
         if wf is not None and not wf.finished and "click" in wf.actions:
             step = wf.current_step()
+            if (last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX
+                    and "find" in step.enabled):
+                # a double click on the moved object: find its pose from that point (Find, at once)
+                self._last_click = None
+                self.press("find")
+                return
             if step.clicks:
                 if self.show_live and self.frozen is not None:
                     raise WorkflowError("you are looking at the live video: clicks go to the frozen frame. Press Show "

@@ -589,8 +589,8 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         if found is not None:
             return found
         if self._first_click_pending():
-            return Step("click_edge_end", "{find} the pose of " + f"{self.object_name} from this one click, or click a second "
-                        f"point on the same image edge (edge {k + 1}).", frozenset(base | {"find"}))
+            return Step("click_edge_end", "{find} the pose of " + f"{self.object_name} from this one click (or double-click "
+                        f"it), or click a second point on the same image edge (edge {k + 1}).", frozenset(base | {"find"}))
         if self.pending is not None:
             return Step("click_edge_end", f"Click a second point on the same image edge (edge {k + 1}).", frozenset(base))
         rows = {"click_row", "remove_click"} if self._click_rows() else set()
@@ -619,7 +619,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             more.add("auto_match")
         if n < 3 and not self.refined:
             tail = " Or {refine} from the database pose (a small motion)." if "refine" in more else ""
-            one = (f"Click once on {self.object_name} where it is now in the video to find its pose from that click; or c"
+            one = (f"Double-click {self.object_name} where it is now in the video to find its pose from that point; or c"
                    if not self.segs and not self.points_uv and self.found is None else "C")
             return Step("click_edge", one + f"lick two points along an edge of {self.object_name} in the video (edge {n + 1} of 3), "
                         "then click which model edge it is; or {auto_match} to skip saying which is which." + tail

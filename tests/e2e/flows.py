@@ -39,6 +39,13 @@ class Operator:
         self.actions += 1
         self.log.append("click")
 
+    def double_click(self, uv) -> None:
+        """A double click on video pixel uv (one gesture, one action)."""
+        x, y = self.ui.screen_of(self.page, uv)
+        self.page.locator("canvas").nth(1).dblclick(position={"x": x, "y": y})
+        self.actions += 1
+        self.log.append("double click")
+
     def press(self, label: str) -> None:
         press(self.page, label)
         self.actions += 1

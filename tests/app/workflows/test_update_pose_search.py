@@ -29,7 +29,7 @@ def test_one_click_find_accept_writes_the_true_pose_with_the_click(video_site, s
     site = video_site
     site.t["t"] = T_MOVED
     wf = _start(site)
-    assert wf.next_step.startswith(f"Click once on {BOX} where it is now")
+    assert wf.next_step.startswith(f"Double-click {BOX} where it is now")
     uv, T_true = _on_box(site, scene)
     version = db.get(BOX).version
     wf.click(uv)
