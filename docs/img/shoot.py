@@ -142,6 +142,19 @@ def main() -> int:
             click(page, "Fit view")
             click(page, "Cancel")
 
+            # Update pose from one double click on the moved box where the frame shows it: Find, the
+            # pose found shown as a ghost with its fit and σ, ready to Accept.
+            click(page, "Update pose")
+            wf = panel.session.workflow
+            on_box = cam.project_obj(T_true, box.model.vertices).mean(axis=0)
+            x, y = ui.screen_of(page, on_box)
+            page.locator("canvas").nth(1).dblclick(position={"x": x, "y": y})
+            deadline = time.monotonic() + 30
+            while getattr(wf, "found", None) is None and time.monotonic() < deadline:
+                time.sleep(0.2)
+            save(ui, page, "update_pose_one_click")
+            click(page, "Cancel")
+
             # Update pose by hand: click edges, say which model edge each is, solve, refine.
             old = wf
             click(page, "Update pose")
