@@ -91,7 +91,7 @@ class ClientPanel:
         self.choice_values: dict[str, Any] = {}  # choice control → the value chosen
         self._choice_options: dict[str, dict[str, Any]] = {}
         self.confirm_pending: tuple | None = None  # (action, args) waiting for its second press
-        self.warning = ""  # a weak result's reasons, or a question, shown above the buttons
+        self.warning = ""  # a weak result's reasons, or a question, shown under the buttons
         self.error = ""  # the last refused action, said in the panel until the next action or step
         self.error_step: str | None = None  # the step it was said in
         self.frozen: FrameRef | None = None
@@ -175,8 +175,10 @@ class ClientPanel:
         # The workflow under way comes first: its instruction and actions are always above the fold.
         self.gui_title = gui.add_markdown("**No workflow.** Click an object to select it, or start a workflow below.")
         self.gui_progress = gui.add_progress_bar(0.0, visible=False)
-        self.gui_warning = gui.add_markdown("", visible=False)
         self.gui_actions = gui.add_folder(None)
+        # A question asked once more (a weak result, Redo) goes under the buttons: shown above them it
+        # pushed the button just pressed down, away from the cursor about to press it again.
+        self.gui_warning = gui.add_markdown("", visible=False)
         self.gui_copy = gui.add_text("Target (m)", "", visible=False, hint="World x y z of the last target: copy it")
         with gui.add_folder("Start a workflow"):
             for label, name in START_BUTTONS:
