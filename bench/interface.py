@@ -218,6 +218,21 @@ def ws_client(url: str, out: str) -> None:
     asyncio.run(run())
 
 
+def _stop(client, server, db) -> None:
+    """End a measurement: the websocket reader process, the interface and its database."""
+    client.kill()
+    client.wait()
+    server.stop()
+    db.close()
+
+
+def _arrivals(out: str, t0: float, t1: float) -> np.ndarray:
+    """The reader's frame arrival times (``ws_client``'s file, then removed) within [t0, t1], sorted."""
+    times = np.loadtxt(out, ndmin=1) if Path(out).stat().st_size else np.zeros(0)
+    Path(out).unlink()
+    return np.sort(times[(times >= t0) & (times <= t1)])
+
+
 def click_event(server, uv):
     """What viser gives a scene click callback: a ray that meets the image plane at pixel uv."""
     from types import SimpleNamespace
@@ -273,13 +288,8 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
                 latencies.append(panel.click_latencies_s[-1] * 1000.0)
                 time.sleep(0.1)
     finally:
-        client.kill()
-        client.wait()
-        server.stop()
-        db.close()
-    times = np.loadtxt(out, ndmin=1) if Path(out).stat().st_size else np.zeros(0)
-    Path(out).unlink()
-    window = np.sort(times[(times >= t0) & (times <= t1)])
+        _stop(client, server, db)
+    window = _arrivals(out, t0, t1)
     gaps = np.diff(np.concatenate([[t0], window, [t1]]))
     return {"objects": n_objects, "gap_ms": 1000.0 * float(gaps.max()), "fps": len(window) / (t1 - t0),
             "changes": changes, "seconds": t1 - t0, "clicks_ms": np.array(latencies)}
@@ -361,13 +371,8 @@ def measure_rate(source, seconds: float) -> dict:
         time.sleep(seconds)
         t1, sent1 = time.time(), server.frames_sent
     finally:
-        client.kill()
-        client.wait()
-        server.stop()
-        db.close()
-    times = np.loadtxt(out, ndmin=1) if Path(out).stat().st_size else np.zeros(0)
-    Path(out).unlink()
-    window = np.sort(times[(times >= t0) & (times <= t1)])
+        _stop(client, server, db)
+    window = _arrivals(out, t0, t1)
     return {"fps": len(window) / (t1 - t0), "sent_fps": (sent1 - sent0) / (t1 - t0)}
 
 
