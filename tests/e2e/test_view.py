@@ -39,8 +39,15 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     ui = interface
     page = ui.open(browser)
     panel = page.panel
+    # with no workflow under way, Freeze (F) freezes a frame to look at; it stays (it was undone at once)
+    page.keyboard.press("f")
+    wait_until(lambda: panel.frozen is not None and panel.frozen_by is None, what="a frame frozen to look at")
+    page.get_by_text("Frozen frame: t =").first.wait_for(timeout=5000)
+    time.sleep(0.5)
+    assert panel.frozen is not None
     page.get_by_role("button", name="Calibrate camera").click()
-    wait_until(lambda: panel.session.workflow is not None and panel.frozen is not None, what="the frozen frame")
+    wait_until(lambda: panel.session.workflow is not None and panel.frozen_by is panel.session.workflow,
+               what="the workflow's own frozen frame")
     wf = panel.session.workflow
     assert wf.frame is panel.frozen  # clicks, snapping and solving use it
     page.get_by_text("Frozen frame: t =").first.wait_for(timeout=5000)

@@ -72,3 +72,29 @@ def test_calibrate_turret_refuses_to_measure_where_the_site_changed(device_video
     clock["t"] = FROZEN_T + 0.4  # as frozen: measured
     wf.measure()
     assert len(wf.pan) == 1
+
+
+def test_model_object_refuses_to_measure_a_face_that_moved_since_the_frozen_frame(device_video_site, fast_scene, clock):
+    """A face clicked on the frozen frame (the parallelepiped's, as if unknown) is not measured when the
+    live video shows the box gone from there: said, nothing measured; as frozen, it is measured."""
+    from app.workflows import ModelObject
+
+    site = device_video_site
+    body = fast_scene.body("parallelepiped")
+    T = body.pose_at(FROZEN_T)
+    wf = ModelObject(site, client="alice", shape="box", vertical=True, on_table=True)
+    wf.use_frame(_frozen(site, FROZEN_T))
+    cam = site.camera
+    top = next(k for k, n in enumerate(body.model.face_normals()) if n[2] > 0.9)  # the top face, seen from above
+    f = body.model.faces[top]
+    for a, b in zip(f, f[1:] + f[:1]):
+        uv = cam.project(body.model.vertices[[a, b]] @ T[:3, :3].T + T[:3, 3])
+        wf.click(uv[0] + 0.25 * (uv[1] - uv[0]))
+        wf.click(uv[0] + 0.75 * (uv[1] - uv[0]))
+    clock["t"] = 16.0
+    with pytest.raises(WorkflowError, match="differs from the frozen frame.*Nothing was measured"):
+        wf.measure()
+    assert wf.faces[-1]["points"] is None and wf.progress is None
+    clock["t"] = FROZEN_T + 0.4
+    wf.measure()
+    assert wf.faces[-1]["points"] is not None and len(wf.faces[-1]["points"]) >= 5
