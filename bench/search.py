@@ -21,7 +21,9 @@ Cases:
     "free": no hint.
 
 Success: the top candidate (the one Accept writes) within 1° and 5 mm of the truth, up to the model's
-symmetries (for the upright cylinder: its axis and origin; its heading is not seen). "among": the right
+symmetries (for the upright cylinder: its axis and origin; its heading is not seen). "σ ok": of the
+right top candidates, the share whose error lies inside the 95 % region of their stated covariance
+(χ² of its rank: 3 on the table, 2 for the upright cylinder, 6 in the free search). "among": the right
 pose among the candidates shown. Auto match (app.vision.matching.match_edges, with the frame): 4 visible
 edges at least 30 px long (not hidden), two clicks each with σ = 1 px, its top candidate; not
 applicable to the cylinder (no straight edges). Operator actions after selecting the object:
@@ -91,6 +93,31 @@ def error(model: BRep, T: np.ndarray, T_true: np.ndarray) -> tuple[float, float]
         a, b = T[:3, :3] @ model.solids[0].axis, T_true[:3, :3] @ model.solids[0].axis
         return float(np.degrees(np.arccos(np.clip(a @ b, -1, 1)))), float(np.linalg.norm(T[:3, 3] - T_true[:3, 3]))
     return min((pose_error(T @ S, T_true) for _, S in symmetry_transforms(model)), key=lambda e: e[0] / OK_DEG + e[1] / OK_M)
+
+
+def sigma_coverage(model: BRep, cand, T_true: np.ndarray) -> float | None:
+    """The error of a candidate in its own stated σ: the squared Mahalanobis distance of (δt, δr)
+    (``core.pose.residuals``: T_true = (exp(δr) R, t + δt)) over the range of its covariance (the
+    table's unknowns: x, y, heading; the cylinder's heading is not seen), as the χ² quantile of its
+    rank, so that ≤ 0.95 means "inside the stated 95 % region". None without a covariance."""
+    from scipy.stats import chi2
+
+    from core.transforms import log_so3
+
+    if cand.cov is None or not np.all(np.isfinite(cand.cov)):
+        return None
+    w, U = np.linalg.eigh(cand.cov)
+    keep = w > 1e-12 * max(float(w.max()), 1e-300)
+    T = cand.T_world_obj
+    best = None
+    for _, S in symmetry_transforms(model):
+        Tt = T_true @ np.linalg.inv(S) if len(model.edges) else T_true
+        e = np.concatenate([Tt[:3, 3] - T[:3, 3], log_so3(Tt[:3, :3] @ T[:3, :3].T)])
+        if not len(model.edges):
+            e[3:] = 0.0  # the upright cylinder's turn about its axis is not seen: only where the axis is counts
+        m2 = float(np.sum((U[:, keep].T @ e) ** 2 / w[keep]))
+        best = m2 if best is None else min(best, m2)
+    return float(chi2.cdf(best, int(keep.sum())))
 
 
 def random_click(rng, camera, model, T, hidden=None):
@@ -276,7 +303,8 @@ def run_search(c: Case):
     top = bool(right and right[0])
     among = any(right)
     actions = SEARCH_ACTIONS + (0 if top else 1) if among else None
-    return top, among, cpu, len(cands), actions, (errs[0] if errs else (np.nan, np.nan))
+    cover = sigma_coverage(c.model, cands[0], c.T_true) if top else None
+    return top, among, cpu, len(cands), actions, (errs[0] if errs else (np.nan, np.nan)), cover
 
 
 def run_match(c: Case):
@@ -297,7 +325,7 @@ def run_match(c: Case):
 
 def table_rows(title: str, groups: dict[str, list[Case]], target: float) -> None:
     print(title)
-    print(f"  {'case':34s}{'n':>4s}{'right top':>11s}{'among':>8s}{'none':>6s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}"
+    print(f"  {'case':34s}{'n':>4s}{'right top':>11s}{'among':>8s}{'none':>6s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}{'σ ok':>7s}"
           f"{'|  auto match n':>16s}{'right':>8s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}")
     for name, cases in groups.items():
         if not cases:
@@ -311,6 +339,8 @@ def table_rows(title: str, groups: dict[str, list[Case]], target: float) -> None
         acts = [r[4] for r in rs if r[4] is not None]
         line = (f"  {name:34s}{len(rs):4d}{100 * top:10.1f}%{100 * among:7.1f}%{none:6d}{np.median(cpu):7.2f}"
                 f"{np.percentile(cpu, 95):7.2f}{(np.mean(acts) if acts else float('nan')):9.2f}")
+        cov_q = [r[6] for r in rs if r[6] is not None]
+        line += f"{100 * np.mean(np.array(cov_q) <= 0.95):6.0f}%" if cov_q else f"{'-':>7s}"
         if ms:
             mc = np.array([m[1] for m in ms])
             line += (f"{'|':>3s}{len(ms):13d}{100 * np.mean([m[0] for m in ms]):7.1f}%{np.median(mc):7.2f}"
@@ -321,6 +351,13 @@ def table_rows(title: str, groups: dict[str, list[Case]], target: float) -> None
             line += f"{'|':>3s}{'(the same cases as above)':>44s}"
         print(line)
         bad = [(c.name, r[5]) for c, r in zip(cases, rs) if not r[0]]
+        if bad:
+            e = np.array([b[1] for b in bad], float)
+            refused = int(np.sum(~np.isfinite(e[:, 0])))
+            close = int(np.sum((e[:, 0] <= 3.0) & (e[:, 1] <= 0.01)))
+            turned = int(np.sum((e[:, 0] >= 45.0) & (e[:, 1] <= 0.01)))
+            print(f"      misses: {refused} refused, {close} within 3° / 1 cm, {turned} turned in place (a near-symmetry), "
+                  f"{len(bad) - refused - close - turned} elsewhere")
         for nm, e in bad[:4]:
             print(f"      missed: {nm}: top candidate {e[0]:.2f}° / {1000 * e[1]:.1f} mm off" if np.isfinite(e[0]) else f"      missed: {nm}: no candidate")
     print(f"  target: right top ≥ {100 * target:.0f} %, p95 ≤ 1 s")

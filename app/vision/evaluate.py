@@ -29,7 +29,7 @@ from core.camera import Camera
 from .profiles import to_gray_f32
 from .track import sample_visible_edges
 
-__all__ = ["OrientedEdges", "EdgeDistance", "oriented_edges", "edge_distance", "prepare_frame"]
+__all__ = ["OrientedEdges", "EdgeDistance", "oriented_edges", "edge_distance", "sample_distances", "prepare_frame"]
 
 _CACHE: OrderedDict = OrderedDict()  # the last few frames' OrientedEdges, by contents and options
 _CACHE_SIZE = 4
@@ -191,10 +191,17 @@ def edge_distance(
     s = sample_visible_edges(camera, model, T_world_obj, step_px=step_px, vertex_margin_px=vertex_margin_px, rims=rims)
     if len(s) == 0:
         return EdgeDistance(np.zeros(0), np.zeros((0, 2)), float("nan"), float("nan"), 0.0)
-    normal_deg = np.degrees(np.arctan2(s.normals[:, 1], s.normals[:, 0])) % 180.0
+    d = sample_distances(oe, s, max_px)
+    return EdgeDistance(d, s.uv, float(d.mean()), float(np.median(d)), float(np.mean(d < max_px)))
+
+
+def sample_distances(oe: OrientedEdges, samples, max_px: float = 10.0) -> np.ndarray:
+    """(N,) distance (pixels, capped at max_px) of each edge sample (``track.EdgeSamples``) to the
+    nearest image edge of its orientation."""
+    normal_deg = np.degrees(np.arctan2(samples.normals[:, 1], samples.normals[:, 0])) % 180.0
     b = np.round(normal_deg / oe.bin_deg).astype(int) % len(oe)
-    d = np.empty(len(s))
+    d = np.empty(len(samples))
     for k in np.unique(b):
         sel = b == k
-        d[sel] = oe.distance(int(k), s.uv[sel, 0], s.uv[sel, 1], max_px)
-    return EdgeDistance(d, s.uv, float(d.mean()), float(np.median(d)), float(np.mean(d < max_px)))
+        d[sel] = oe.distance(int(k), samples.uv[sel, 0], samples.uv[sel, 1], max_px)
+    return d
