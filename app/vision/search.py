@@ -724,7 +724,7 @@ def _settle_table(camera: Camera, model: BRep, T0: np.ndarray, oe, img_s: np.nda
     rims = bool(model.solids) and not len(model.edges)
     k = 3 if per[2] > 0 else 2
     T = _polish(T0, ef, camera, ms, sp, zc, centre_obj, per)
-    T, cov = _refine_on_table(camera, model, T, img_s, sp, zc, centre_obj, k, rims)
+    T, cov = _refine(camera, model, T, img_s, _OnTable(sp, zc, centre_obj, k), rims)
     return _check(camera, model, T, oe, img_s, rims, cov, coarse_px)
 
 
@@ -779,67 +779,99 @@ def _measure(camera: Camera, model: BRep, T: np.ndarray, oe, img_s: np.ndarray, 
     return d, float(np.mean(d <= 1.5)), float(np.median(d)), float(np.mean(np.minimum(off / 0.5, 1.0) ** 2))
 
 
-def _table_params(T: np.ndarray, sp: _TableSpace, centre_obj: np.ndarray) -> np.ndarray:
-    """(x, y, ψ) of a pose on the table (``_TableSpace``)."""
-    up = sp.up
-    cw = T[:3, :3] @ centre_obj + T[:3, 3]
-    f = T[:3, :3] @ sp.R_old.T @ sp.e1
-    return np.array([cw @ sp.e1, cw @ sp.e2, float(np.arctan2(np.cross(sp.e1, f) @ up, sp.e1 @ f))])
+class _OnTable:
+    """Poses on the table as parameters for ``_refine``: p = (x, y[, ψ]) of ``_TableSpace`` (k = 2
+    for an upright solid of revolution, whose heading is not seen)."""
+
+    def __init__(self, sp: _TableSpace, zc: float, centre_obj: np.ndarray, k: int):
+        self.sp, self.zc, self.centre, self.k = sp, zc, centre_obj, k
+        self.h = np.array([1e-4, 1e-4, 1e-3])[:k]
+
+    def params(self, T: np.ndarray) -> np.ndarray:
+        sp, up = self.sp, self.sp.up
+        cw = T[:3, :3] @ self.centre + T[:3, 3]
+        f = T[:3, :3] @ sp.R_old.T @ sp.e1
+        return np.array([cw @ sp.e1, cw @ sp.e2, float(np.arctan2(np.cross(sp.e1, f) @ up, sp.e1 @ f))])[:self.k]
+
+    def pose(self, p: np.ndarray) -> np.ndarray:
+        q = np.zeros(3)
+        q[:self.k] = p
+        R, t = self.sp.poses(q[None], self.zc, self.centre)
+        return make_T(R[0], t[0])
+
+    def G(self, T: np.ndarray) -> np.ndarray:
+        """(6, k): d(δt, δr)/dp (``core.pose.residuals``) at T."""
+        G = np.zeros((6, self.k))
+        G[:3, 0], G[:3, 1] = self.sp.e1, self.sp.e2
+        if self.k == 3:
+            G[:3, 2] = -np.cross(self.sp.up, T[:3, :3] @ self.centre)
+            G[3:, 2] = self.sp.up
+        return G
 
 
-def _table_jacobian(camera: Camera, p0: np.ndarray, X_obj: np.ndarray, normals: np.ndarray, sp: _TableSpace, zc: float,
-                    centre_obj: np.ndarray, k: int) -> np.ndarray:
-    """(N, k): how far each sample X_obj moves along its image normal per unit of x, y (and ψ)."""
-    h = np.array([1e-4, 1e-4, 1e-3])
-    J = np.zeros((len(X_obj), k))
-    for j in range(k):
-        dp = np.zeros((2, 3))
-        dp[0, j], dp[1, j] = h[j], -h[j]
-        R, t = sp.poses(p0[None] + dp, zc, centre_obj)
-        fwd = camera.project_obj(make_T(R[0], t[0]), X_obj)
-        bwd = camera.project_obj(make_T(R[1], t[1]), X_obj)
-        J[:, j] = np.einsum("ni,ni->n", (fwd - bwd) / (2 * h[j]), normals)
-    return J
+class _Free:
+    """The full pose as parameters for ``_refine``: p = (δt, δr) about a reference pose, in the
+    convention of ``core.pose.residuals`` (R = exp(δr) R_ref, t = t_ref + δt)."""
+
+    k = 6
+    h = np.array([1e-4, 1e-4, 1e-4, 1e-3, 1e-3, 1e-3])
+
+    def __init__(self, T_ref: np.ndarray):
+        self.T_ref = np.asarray(T_ref, float).copy()
+
+    def params(self, T: np.ndarray) -> np.ndarray:
+        from core.transforms import log_so3
+
+        return np.concatenate([T[:3, 3] - self.T_ref[:3, 3], log_so3(T[:3, :3] @ self.T_ref[:3, :3].T)])
+
+    def pose(self, p: np.ndarray) -> np.ndarray:
+        return make_T(exp_so3(p[3:]) @ self.T_ref[:3, :3], self.T_ref[:3, 3] + p[:3])
+
+    def G(self, T: np.ndarray) -> np.ndarray:
+        return np.eye(6)
 
 
-def _refine_on_table(camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, sp: _TableSpace, zc: float,
-                     centre_obj: np.ndarray, k: int, rims: bool, iters: int = 8):
-    """Gauss–Newton (IRLS, Tukey) on x, y (and ψ) of the model's visible edge samples to the image's edges
-    found along their normals (``profiles.search_along_normals``, sub-pixel). Returns (T, cov (6, 6))."""
-    p = _table_params(T, sp, centre_obj)
-    cov_p = None
+def _refine(camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space, rims: bool, iters: int = 8,
+            bands: tuple = (3.0, 3.0, 2.0)):
+    """Gauss–Newton (IRLS, Tukey at ``GN_SCALE_PX``) of the pose's parameters (``_OnTable``: x, y, ψ;
+    ``_Free``: all six) on the model's visible edge samples and the image's edges found along their
+    normals (``profiles.search_along_normals``, sub-pixel), searched ± ``bands[i]`` pixels at iteration i
+    (the last one after). Returns (T, cov (6, 6) of (δt, δr) from ``_edge_covariance``, or None)."""
+    k = space.k
+    p = space.params(T)
+    cov = None
     for it in range(iters):
-        R, t = sp.poses(p[None], zc, centre_obj)
-        T = make_T(R[0], t[0])
+        T = space.pose(p)
         s = sample_visible_edges(camera, model, T, step_px=2.0, rims=rims)
         if len(s) < 8:
             break
-        hits = search_along_normals(img_s, s.uv, s.normals, 3.0 if it < 2 else 2.0, prior_sigma_px=1.5)
+        hits = search_along_normals(img_s, s.uv, s.normals, bands[min(it, len(bands) - 1)], prior_sigma_px=1.5)
         f = hits.found
         if f.sum() <= k + 2:
             break
         r = hits.offset_px[f]
-        J = _table_jacobian(camera, p, s.X_obj[f], s.normals[f], sp, zc, centre_obj, k)
+        X, nrm = s.X_obj[f], s.normals[f]
+        J = np.zeros((len(X), k))  # how far each sample moves along its image normal per unit of p
+        for j in range(k):
+            dp = np.zeros(k)
+            dp[j] = space.h[j]
+            fwd = camera.project_obj(space.pose(p + dp), X)
+            bwd = camera.project_obj(space.pose(p - dp), X)
+            J[:, j] = np.einsum("ni,ni->n", (fwd - bwd) / (2 * space.h[j]), nrm)
         w = robust_weights(r, "tukey", GN_SCALE_PX)
         A = (J * w[:, None]).T @ J
         try:
-            dp = np.linalg.solve(A + 1e-9 * np.eye(k), (J * w[:, None]).T @ r)
+            step = np.linalg.solve(A + 1e-9 * np.eye(k), (J * w[:, None]).T @ r)
         except np.linalg.LinAlgError:
             break
         groups = _feature_groups(model, s.feature[f])
         floor = np.where(groups < len(model.edges), EDGE_BIAS_PX, CURVED_EDGE_BIAS_PX)
-        cov_p = _edge_covariance(J, r, w, groups, floor, k, s.uv[f], s.normals[f])
-        p[:k] += dp
-        if np.max(np.abs(J @ dp)) < 0.01:
+        Gm = space.G(T)
+        cov = Gm @ _edge_covariance(J, r, w, groups, floor, k, s.uv[f], nrm) @ Gm.T
+        p = p + step
+        if np.max(np.abs(J @ step)) < 0.01:
             break
-    R, t = sp.poses(p[None], zc, centre_obj)
-    T = make_T(R[0], t[0])
-    G = np.zeros((6, k))  # d(δt, δr)/dp
-    G[:3, 0], G[:3, 1] = sp.e1, sp.e2
-    if k == 3:
-        G[:3, 2] = -np.cross(sp.up, T[:3, :3] @ centre_obj)
-        G[3:, 2] = sp.up
-    return T, (None if cov_p is None else G @ cov_p @ G.T)
+    return space.pose(p), cov
 
 
 def _feature_groups(model: BRep, feature: np.ndarray, n_circle: int = 48, arc: int = 8) -> np.ndarray:

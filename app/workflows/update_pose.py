@@ -369,8 +369,15 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 starts = [(-1, self.last_refined)] + starts
             camera, camera_cov, sigmas = self.site.camera, self.site.calibration_covs[0], self._click_sigmas()
             generation = self._generation
+            prior = None
+            if self.found is not None and self.last_refined is None:  # found from one click: the clicks refine it
+                c = self.found[self.chosen or 0]
+                if c.cov is not None:
+                    prior = (self.chosen or 0, c.T_world_obj, c.cov)
         clicks = dict(segs_uv=segs if len(segs) else None, edges_obj=edges if len(edges) else None,
                       points_uv=pts_uv if len(pts_uv) else None, points_obj=pts_obj if len(pts_obj) else None)
+        if prior is not None:
+            return self._refine_found(prior, camera, clicks, sigmas, generation)
         failures = []  # compute, outside the lock: the overlay keeps drawing
         for i, start in starts:
             what = "from the database pose" if i is None else ("from the last refined pose" if i == -1 else f"candidate {i + 1}")
@@ -611,7 +618,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             return Step("auto_ready", f"{k} edges clicked: " + "{auto_match}, or click another edge (4 or more is best).",
                         frozenset(base | rows | {"auto_match"}))
         constraints = 2 * (n + len(self.points_uv))
-        if constraints >= 6:
+        if constraints >= 6 or (self.found is not None and constraints >= 2):  # with a found pose one edge is enough
             more.add("refine")
         if n >= 3:
             more.add("solve")
@@ -619,6 +626,8 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             more.add("auto_match")
         if n < 3 and not self.refined:
             tail = " Or {refine} from the database pose (a small motion)." if "refine" in more else ""
+            if self.found is not None and "refine" in more:
+                tail = " Or {refine}: the clicks fit together with the found pose (one edge is enough)."
             one = (f"Double-click {self.object_name} where it is now in the video to find its pose from that point; or c"
                    if not self.segs and not self.points_uv and self.found is None else "C")
             return Step("click_edge", one + f"lick two points along an edge of {self.object_name} in the video (edge {n + 1} of 3), "

@@ -15,7 +15,7 @@ from .estimate import PoseCandidate, PoseEstimate, estimate_pose
 from .p3l import ConcurrentEdgesError, p3l, p3l_batch
 from .plausibility import plausibility
 from ._lazy import warm_up
-from .refine import RefineResult, refine, refine_many
+from .refine import RefineResult, refine, refine_many, refine_with_prior
 from .symmetry import edge_symmetries, nearest_twin, symmetry_transforms
 
 __all__ = [
@@ -23,6 +23,7 @@ __all__ = [
     "p3l_batch",
     "refine",
     "refine_many",
+    "refine_with_prior",
     "warm_up",
     "estimate_pose",
     "RefineResult",

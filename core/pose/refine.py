@@ -39,7 +39,7 @@ from .residuals import Clicks, as_clicks
 
 _k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded before mcit serve's first page)
 
-__all__ = ["RefineResult", "refine", "refine_many", "huber_weights", "click_sigmas"]
+__all__ = ["RefineResult", "refine", "refine_many", "refine_with_prior", "huber_weights", "click_sigmas"]
 
 _LOSSES = ("l2", "huber")
 
@@ -326,3 +326,88 @@ def refine_many(
         )
         out.append((res, float(score[k])))
     return out
+
+
+def refine_with_prior(
+    camera: Camera,
+    T_prior: np.ndarray,
+    cov_prior: np.ndarray,
+    *,
+    segs_uv: np.ndarray | None = None,
+    edges_obj: np.ndarray | None = None,
+    points_uv: np.ndarray | None = None,
+    points_obj: np.ndarray | None = None,
+    sigma_px: float | np.ndarray = 1.0,
+    fixed_std: tuple[float, float] = (1e-4, 1e-4),
+    max_iterations: int = 30,
+) -> RefineResult:
+    """Refine a pose known already (a pose found on the image, with its covariance) together with
+    clicked edges and points: the maximum a posteriori pose of the clicks and the prior.
+
+    Minimises Σ (r_click / σ)² + eᵀ Λ e, e = (t − t_prior, log(R R_priorᵀ)) (the module's δ), Λ the
+    prior's information: ``pinv(cov_prior)`` on the range of ``cov_prior`` and, along the
+    directions it leaves at zero variance (a pose constrained to lie on the table: its height and
+    tilt), 1/``fixed_std``² (metres, radians): those stay as the prior has them. Any number of clicks
+    helps (one clicked edge settles which of two near-symmetric poses it is); none returns the prior.
+
+    Returns RefineResult: the pose, cov = (Jᵀ W J + Λ)⁻¹ (the prior included), the clicks' residuals
+    and diagnostics. ValueError for bad input.
+    """
+    from .residuals import perturb, residuals
+
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
+    T0 = _as_pose(T_prior)
+    P = np.asarray(cov_prior, dtype=float)
+    if P.shape != (6, 6) or not np.all(np.isfinite(P)):
+        raise ValueError(f"cov_prior must be a finite (6, 6) covariance of (δt, δr), got shape {P.shape}")
+    P = 0.5 * (P + P.T)
+    w, U = np.linalg.eigh(P)
+    if w.min() < -1e-9 * max(float(w.max()), 1e-300):
+        raise ValueError("cov_prior must be positive semi-definite")
+    scale = np.concatenate([np.full(3, fixed_std[0]), np.full(3, fixed_std[1])])  # δ's units per direction
+    big = np.array([1.0 / float(np.sum((U[:, j] * scale) ** 2)) for j in range(6)])  # 1/σ² of a fixed direction
+    keep = w > 1e-12 * max(float(w.max()), 1e-300)
+    lam = np.where(keep, 1.0 / np.where(keep, w, 1.0), big)
+    Lam = (U * lam) @ U.T
+    clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
+    b = 1.0 / click_sigmas(sigma_px, clicks) ** 2 if clicks.n_residuals else np.zeros(0)
+    T = T0.copy()
+    it, converged = 0, False
+
+    def err(T_):
+        from ..transforms import log_so3
+
+        return np.concatenate([T_[:3, 3] - T0[:3, 3], log_so3(T_[:3, :3] @ T0[:3, :3].T)])
+
+    for it in range(1, max_iterations + 1):
+        e = err(T)
+        H, g = Lam.copy(), Lam @ e
+        if clicks.n_residuals:
+            r, J, feasible = residuals(camera, T[:3, :3], T[:3, 3], clicks, jacobian=True)
+            if not feasible:
+                raise ValueError("a clicked model edge or point is behind the camera at the prior pose: check the assignments")
+            H += (J * b[:, None]).T @ J
+            g += (J * b[:, None]).T @ r
+        step = -np.linalg.solve(H, g)
+        T = perturb(T, step)
+        if np.max(np.abs(step[:3])) < 1e-9 and np.max(np.abs(step[3:])) < 1e-9:
+            converged = True
+            break
+    H = Lam.copy()
+    if clicks.n_residuals:
+        r, J, _ = residuals(camera, T[:3, :3], T[:3, 3], clicks, jacobian=True)
+        H += (J * b[:, None]).T @ J
+        n = clicks.n_segments + clicks.n_points
+        S = clicks.n_segments
+        per_click = np.concatenate([np.max(np.abs(r[: 2 * S].reshape(-1, 2)), axis=1),
+                                    np.linalg.norm(r[2 * S:].reshape(-1, 2), axis=1)]) if n else np.zeros(0)
+        rms = float(np.sqrt(np.mean(r * r)))
+    else:
+        r, per_click, rms, n = np.zeros(0), np.zeros(0), 0.0, 0
+    cov = np.linalg.inv(H)
+    cov = 0.5 * (cov + cov.T)
+    sigma_out = float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, dtype=float).copy()
+    return RefineResult(T_world_obj=T, cov=cov, rms_px=rms, residuals_px=r, iterations=it, converged=converged,
+                        kinds=clicks.kinds, click_residuals_px=per_click, weights=np.ones(n), downweighted=(),
+                        sigma_px=sigma_out, sigma_est_px=float("nan"), loss="l2")

@@ -93,3 +93,45 @@ def test_remove_last_drops_the_found_poses_and_edges_refine_from_the_found_pose(
     wf.accept()
     last = db.history(BOX)[-1]
     assert last.method == "search+refine" and last.clicks["search"]["mode"] == "table"
+
+
+def test_one_clicked_edge_refines_together_with_the_found_pose(video_site, scene, db):
+    """A found pose 2° off in heading with a σ to match (as a partly hidden box can be found): one
+    clicked edge, Refine (enabled from one edge, where clicks alone need three), and the pose comes back
+    toward the truth, on the table, with a σ smaller than the found one's."""
+    import dataclasses
+
+    from core.pose.residuals import perturb
+
+    site = video_site
+    site.t["t"] = T_MOVED
+    wf = _start(site)
+    uv, T_true = _on_box(site, scene)
+    wf.click(uv)
+    wf.find()
+    c = wf.found[0]
+    off = perturb(c.T_world_obj, np.r_[0.0, 0.0, 0.0, 0.0, 0.0, np.radians(2.0)])
+    scale = (2.0 / float(np.max(c.std_r_deg))) ** 2  # the found pose's σ: 2° in heading
+    c = dataclasses.replace(c, T_world_obj=off, cov=c.cov * scale, std_t_mm=c.std_t_mm * np.sqrt(scale),
+                            std_r_deg=c.std_r_deg * np.sqrt(scale))
+    wf.found[0] = c
+    wf.candidates[0] = off
+    obj = wf.obj
+    k = max(_visible_edges(site, obj.model, T_true),
+            key=lambda e: np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[e]), axis=0)))
+    seg = _true_segments(site, obj.model, T_true, [k], np.random.default_rng(3), 0.5)[0]
+    wf.click(seg[0])
+    wf.click(seg[1])
+    assert "refine" not in wf.current_step().enabled  # not yet assigned
+    wf.click(site.camera.project(obj.model.edge_segments(off)[k]).mean(axis=0))
+    st = wf.current_step()
+    assert wf.edge_ids == [k] and "refine" in st.enabled and "found pose" in wf.next_step
+    r = wf.refine()
+    before, after = pose_error(off, T_true)[0], pose_error(r.T_world_obj, T_true)[0]
+    assert after < 0.5 * before, (before, after)
+    assert abs(r.T_world_obj[2, 3] - off[2, 3]) < 1e-3  # still on the table
+    assert np.max(r.std_r_deg) < 0.5 * np.max(c.std_r_deg)
+    assert "refined with 1 click" in wf.message
+    wf.accept()
+    last = db.history(BOX)[-1]
+    assert last.method == "search+refine" and last.clicks["edge_ids"] == [k]
