@@ -370,7 +370,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             camera, camera_cov, sigmas = self.site.camera, self.site.calibration_covs[0], self._click_sigmas()
             generation = self._generation
             prior = None
-            if self.found is not None and self.last_refined is None:  # found from one click: the clicks refine it
+            if self.found is not None:  # found from one click: the clicks refine it, together
                 c = self.found[self.chosen or 0]
                 if c.cov is not None:
                     prior = (self.chosen or 0, c.T_world_obj, c.cov)
@@ -699,7 +699,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             for j, sn in enumerate(self.point_snaps):
                 if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
                     out.append(f"point {j + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)")
-            if len(r.kinds) * 2 <= 6:
+            if len(r.kinds) * 2 <= 6 and self.found is None:  # with a found pose the image's edges are the redundancy
                 out.append("no redundant click: the clicks fix the pose's 6 unknowns exactly, so a wrong one cannot show; "
                            "click a fourth edge")
             return out

@@ -15,7 +15,7 @@ import pytest
 
 from core.transforms import pose_error
 
-from .flows import Operator
+from .flows import Operator, projected_edges, visible_edges
 from .harness import wait_until
 from .test_workflows_pose import _start_update_pose
 
@@ -67,4 +67,41 @@ def test_update_pose_from_one_click(browser, interface, scene):
                what="the refusal")
     assert len(ui.db.history(BOX)) == n_changes and wf2.found is None
     op.press("Cancel")
+    page.close()
+
+
+def test_update_pose_from_one_click_and_one_edge(browser, interface, scene):
+    """The ambiguity path: after the double click, one edge of the box clicked (two points and the
+    model edge on the white ghost), Refine — the edge fits together with the found pose (one edge is
+    enough) — and Accept: method search+refine, the pose within 1° / 5 mm of the truth. 8 actions."""
+    ui = interface
+    page = ui.open(browser, viewport={"width": 1280, "height": 720})
+    op = Operator(ui, page)
+    site, cam = ui.site, ui.site.camera
+    obj = site.object(BOX)
+    T_true = scene.body(BOX).pose_at(ui.frame_t_s)
+
+    wf = _start_update_pose(op, page, obj, cam)
+    op.double_click(cam.project_obj(T_true, obj.model.vertices).mean(axis=0))
+    wait_until(lambda: wf.found is not None, timeout_s=30, what="the found poses")
+    T_found = wf.candidates[wf.chosen or 0]
+    true = projected_edges(cam, obj.model, T_true)
+    k = max(visible_edges(cam, obj.model, T_true), key=lambda i: np.linalg.norm(true[i, 1] - true[i, 0]))
+    a, b = true[k]
+    op.click(a + 0.3 * (b - a))
+    op.click(a + 0.7 * (b - a))
+    wait_until(lambda: wf.current_step().name == "assign_edge", what="the edge's two points")
+    op.click(projected_edges(cam, obj.model, T_found)[k].mean(axis=0))  # which model edge: on the white ghost
+    wait_until(lambda: wf.edge_ids == [k], what="the assignment")
+    assert "Refine" in op.check()
+    op.press("Refine")
+    wait_until(lambda: wf.refined is not None, timeout_s=20, what="the refined pose")
+    op.accept(wf)
+    entry = ui.db.history(BOX)[-1]
+    assert entry.method == "search+refine" and entry.clicks["edge_ids"] == [k]
+    deg, m = pose_error(ui.db.get(BOX).T_world_obj, T_true)
+    print(f"written: {deg:.3f}° / {1000 * m:.2f} mm from the truth")
+    assert deg < 1.0 and m < 0.005
+    text = op.report("update pose from one click and one edge")
+    assert op.actions <= 8, text  # select, Update pose, double click, 2 clicks, the model edge, Refine, Accept
     page.close()
