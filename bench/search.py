@@ -23,7 +23,9 @@ Cases:
 Success: the top candidate (the one Accept writes) within 1° and 5 mm of the truth, up to the model's
 symmetries (for the upright cylinder: its axis and origin; its heading is not seen). "σ ok": of the
 right top candidates, the share whose error lies inside the 95 % region of their stated covariance
-(χ² of its rank: 3 on the table, 2 for the upright cylinder, 6 in the free search). "among": the right
+(χ² of its rank: 3 on the table, 2 for the upright cylinder, 6 in the free search). "silent": top
+candidates that are wrong and that the interface does not flag (no near-tie said, σ within 1° and
+5 mm: app/workflows/pose_search.py); a refused click is not silent (it says no pose fits). "among": the right
 pose among the candidates shown. Auto match (app.vision.matching.match_edges, with the frame): 4 visible
 edges at least 30 px long (not hidden), two clicks each with σ = 1 px, its top candidate; not
 applicable to the cylinder (no straight edges). Operator actions after selecting the object:
@@ -304,7 +306,20 @@ def run_search(c: Case):
     among = any(right)
     actions = SEARCH_ACTIONS + (0 if top else 1) if among else None
     cover = sigma_coverage(c.model, cands[0], c.T_true) if top else None
-    return top, among, cpu, len(cands), actions, (errs[0] if errs else (np.nan, np.nan)), cover
+    # a wrong top candidate the operator is not told of: no near-tie said, its σ within the accuracy asked
+    silent = bool(cands) and not top and not said(cands)
+    return top, among, cpu, len(cands), actions, (errs[0] if errs else (np.nan, np.nan)), cover, silent
+
+
+def said(cands) -> bool:
+    """The interface tells the operator that the best found pose may be wrong: another pose fits almost as
+    well (a near-tie), or its σ exceeds what a one-click update is held to (app/workflows/pose_search.py)."""
+    from app.workflows.pose_search import NEAR_TIE_MISMATCH, WEAK_FOUND_SIGMA_DEG, WEAK_FOUND_SIGMA_MM
+
+    c0 = cands[0]
+    ties = any(c.mismatch <= c0.mismatch + NEAR_TIE_MISMATCH for c in cands[1:])
+    weak = (not np.all(np.isfinite(c0.std_t_mm))) or np.max(c0.std_r_deg) > WEAK_FOUND_SIGMA_DEG or np.max(c0.std_t_mm) > WEAK_FOUND_SIGMA_MM
+    return bool(ties or weak)
 
 
 def run_match(c: Case):
@@ -325,7 +340,7 @@ def run_match(c: Case):
 
 def table_rows(title: str, groups: dict[str, list[Case]], target: float) -> None:
     print(title)
-    print(f"  {'case':34s}{'n':>4s}{'right top':>11s}{'among':>8s}{'none':>6s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}{'σ ok':>7s}"
+    print(f"  {'case':34s}{'n':>4s}{'right top':>11s}{'among':>8s}{'none':>6s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}{'σ ok':>7s}{'silent':>7s}"
           f"{'|  auto match n':>16s}{'right':>8s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}")
     for name, cases in groups.items():
         if not cases:
@@ -341,6 +356,7 @@ def table_rows(title: str, groups: dict[str, list[Case]], target: float) -> None
                 f"{np.percentile(cpu, 95):7.2f}{(np.mean(acts) if acts else float('nan')):9.2f}")
         cov_q = [r[6] for r in rs if r[6] is not None]
         line += f"{100 * np.mean(np.array(cov_q) <= 0.95):6.0f}%" if cov_q else f"{'-':>7s}"
+        line += f"{sum(r[7] for r in rs):7d}"
         if ms:
             mc = np.array([m[1] for m in ms])
             line += (f"{'|':>3s}{len(ms):13d}{100 * np.mean([m[0] for m in ms]):7.1f}%{np.median(mc):7.2f}"

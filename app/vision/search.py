@@ -964,8 +964,9 @@ def _on_table(T: np.ndarray, T_old: np.ndarray, table: Plane, centre_obj: np.nda
 
 
 def _settle(camera, model, T, image, oe, img_s, coarse_px) -> SearchCandidate | None:
-    """Free search: track twice from T (the edge tracker, 6 unknowns), then the support check. None
-    when the image does not support the pose.
+    """Free search: track twice from T (the edge tracker, 6 unknowns), refine on the sub-pixel edges
+    (``_refine``, for the covariance), then the support check. None when the image does not support the
+    pose.
 
     The tracker's own support check (mean distance ≤ 1.5 px, a sample with no edge counting as its
     10 px band) is off here: an object partly hidden (by another object, an arm) fails it on its
@@ -985,15 +986,15 @@ def _settle(camera, model, T, image, oe, img_s, coarse_px) -> SearchCandidate | 
         if res.lost:
             return None
         tr.reset(res.T_world_obj)
-    T2 = res.T_world_obj
+    # the tracked pose refined on the sub-pixel edges, all six unknowns, for the covariance of the edge
+    # model (``_edge_covariance``) that the table's search has too
+    T2, cov = _refine(camera, model, res.T_world_obj, img_s, _Free(res.T_world_obj), rims)
     m = _measure(camera, model, T2, oe, img_s, rims)
     if m is None:
         return None
     d, near, med, mismatch = m
     if near < 0.5 or med > MAX_MEDIAN_PX:
         return None
-    dg = tr.diagnostics
-    cov = None if dg is None or dg.cov is None else dg.cov
     if cov is not None and np.all(np.isfinite(cov)):
         sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         std_t, std_r = 1000.0 * sd[:3], np.degrees(sd[3:])
