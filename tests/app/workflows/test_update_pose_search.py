@@ -25,6 +25,16 @@ def _on_box(site, scene):
     return site.camera.project_obj(T, scene.body(BOX).model.vertices).mean(axis=0) + [4.0, 2.0], T
 
 
+def _found(site, scene):
+    """Update pose at the moved frame, one click on the box and Find: (workflow, click, true pose)."""
+    site.t["t"] = T_MOVED
+    wf = _start(site)
+    uv, T_true = _on_box(site, scene)
+    wf.click(uv)
+    wf.find()
+    return wf, uv, T_true
+
+
 def test_one_click_find_accept_writes_the_true_pose_with_the_click(video_site, scene, db):
     site = video_site
     site.t["t"] = T_MOVED
@@ -70,11 +80,7 @@ def test_a_click_on_the_table_finds_nothing_and_writes_nothing(video_site, scene
 
 def test_remove_last_drops_the_found_poses_and_edges_refine_from_the_found_pose(video_site, scene, db):
     site = video_site
-    site.t["t"] = T_MOVED
-    wf = _start(site)
-    uv, T_true = _on_box(site, scene)
-    wf.click(uv)
-    wf.find()
+    wf, uv, T_true = _found(site, scene)
     wf.remove_last()  # the found poses go; the click stays, to Find again or go on with an edge
     assert wf.found is None and wf.current_step().name == "click_edge_end" and np.allclose(wf.pending, uv)
     wf.find()
@@ -104,11 +110,7 @@ def test_one_clicked_edge_refines_together_with_the_found_pose(video_site, scene
     from core.pose.residuals import perturb
 
     site = video_site
-    site.t["t"] = T_MOVED
-    wf = _start(site)
-    uv, T_true = _on_box(site, scene)
-    wf.click(uv)
-    wf.find()
+    wf, _, T_true = _found(site, scene)
     c = wf.found[0]
     off = perturb(c.T_world_obj, np.r_[0.0, 0.0, 0.0, 0.0, 0.0, np.radians(2.0)])
     scale = (2.0 / float(np.max(c.std_r_deg))) ** 2  # the found pose's σ: 2° in heading
