@@ -36,6 +36,8 @@ model, its old pose, the calibrated camera C and, usually, that it lies on the t
    the tracker's covariance. The check (``_check`` on the table, ``_settle`` free) is made for a
    partly hidden object: it asks that the model's visible edges that the image shows pin the pose,
    not that every edge is seen.
+   Where the camera was calibrated in the database (``camera_cov``), its uncertainty joins each
+   pose's covariance: the linearised move of the refinement's solution with C (``_camera_share``).
 4. **Ranked by mismatch** (``_check``: 0 when every visible edge of the model lies on an image edge
    within a fraction of a pixel, 1 when none does), with σ. Poses that draw the same picture (the
    model's symmetries) count once, as the twin nearest the old pose; every other candidate that fits
@@ -488,6 +490,7 @@ def search_pose(
     n_seeds: int = 24,
     n_refine: int | None = None,
     max_turn_deg: float = 30.0,
+    camera_cov: np.ndarray | None = None,
 ) -> SearchResult:
     """The poses of ``model`` that fit one click on it in ``image`` (see the module docstring).
 
@@ -500,6 +503,8 @@ def search_pose(
     name : the object's name, for the messages. cancel : called between stages; True stops the
         search (``Cancelled``). progress : called with (fraction done, what).
     max_candidates : at most this many candidates returned. n_seeds : distinct coarse poses descended.
+    camera_cov : (12, 12) covariance of C's entries (a camera calibrated in the database): its share
+        joins each candidate's covariance (``_camera_share``).
     n_refine : poses refined (default 4 on the table, 8 free: on the real cube without the hint 4, 6, 9 of
         22 right with 4, 8, 12). max_turn_deg : the free search's reach in orientation.
 
@@ -677,7 +682,18 @@ def search_pose(
     if not out:
         raise NoPoseFits(f"no pose of the {name} fits the image near your click: click on the {name} itself "
                          "(not on another object or the table), or update it by clicking edges")
-    return SearchResult(out[:max_candidates], mode, n_scored, len(top), time.perf_counter() - t0, timings)
+    out = out[:max_candidates]
+    if camera_cov is not None:  # the camera's calibration uncertainty joins each pose's σ
+        from dataclasses import replace
+
+        rims = bool(model.solids) and not len(model.edges)
+        for j, c in enumerate(out):
+            space = _OnTable(sp, z0, centre_obj, 3 if per[2] > 0 else 2) if table is not None else _Free(c.T_world_obj)
+            share = _camera_share(camera, model, c.T_world_obj, img_s, space, rims, np.asarray(camera_cov, float))
+            if share is not None and c.cov is not None:
+                cov = c.cov + share
+                out[j] = replace(c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1])
+    return SearchResult(out, mode, n_scored, len(top), time.perf_counter() - t0, timings)
 
 
 def _near_turns(model: BRep, sp: _TableSpace, centre_obj: np.ndarray, period: float, tol: float = 0.1) -> list:
@@ -764,11 +780,9 @@ def _check(camera: Camera, model: BRep, T: np.ndarray, oe, img_s: np.ndarray, ri
     if m is None:
         return None
     d, near, med, mismatch = m
-    if cov is not None and np.all(np.isfinite(cov)):
-        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        std_t, std_r = 1000.0 * sd[:3], np.degrees(sd[3:])
-    else:
-        cov, std_t, std_r = None, np.full(3, np.nan), np.full(3, np.nan)
+    if cov is not None and not np.all(np.isfinite(cov)):
+        cov = None
+    std_t, std_r = _std(cov)
     if mismatch > MAX_MISMATCH or near < MIN_NEAR:
         return None
     if cov is None or np.max(std_t) > MAX_SIGMA_MM or np.max(std_r) > MAX_SIGMA_DEG:
@@ -840,6 +854,30 @@ class _Free:
         return np.eye(6)
 
 
+def _linearize(camera: Camera, model: BRep, p: np.ndarray, img_s: np.ndarray, space, rims: bool, band: float):
+    """At parameters p: the model's visible edge samples whose image edge was found along their normal
+    within ± band pixels, their offsets r (pixels), the Jacobian J (N, k) of their moves along the
+    normals, and their robust weights w; None with too few."""
+    k = space.k
+    T = space.pose(p)
+    s = sample_visible_edges(camera, model, T, step_px=2.0, rims=rims, max_face_angle_deg=REFINE_FACE_DEG)
+    if len(s) < 8:
+        return None
+    hits = search_along_normals(img_s, s.uv, s.normals, band, prior_sigma_px=1.5)
+    f = hits.found
+    if f.sum() <= k + 2:
+        return None
+    s, r = s.subset(f), hits.offset_px[f]
+    J = np.zeros((len(s), k))  # how far each sample moves along its image normal per unit of p
+    for j in range(k):
+        dp = np.zeros(k)
+        dp[j] = space.h[j]
+        fwd = camera.project_obj(space.pose(p + dp), s.X_obj)
+        bwd = camera.project_obj(space.pose(p - dp), s.X_obj)
+        J[:, j] = np.einsum("ni,ni->n", (fwd - bwd) / (2 * space.h[j]), s.normals)
+    return T, s, r, J, robust_weights(r, "tukey", GN_SCALE_PX)
+
+
 def _refine(camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space, rims: bool, iters: int = 8,
             bands: tuple = (3.0, 3.0, 2.0)):
     """Gauss–Newton (IRLS, Tukey at ``GN_SCALE_PX``) of the pose's parameters (``_OnTable``: x, y, ψ;
@@ -850,37 +888,44 @@ def _refine(camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space
     p = space.params(T)
     cov = None
     for it in range(iters):
-        T = space.pose(p)
-        s = sample_visible_edges(camera, model, T, step_px=2.0, rims=rims, max_face_angle_deg=REFINE_FACE_DEG)
-        if len(s) < 8:
+        lin = _linearize(camera, model, p, img_s, space, rims, bands[min(it, len(bands) - 1)])
+        if lin is None:
             break
-        hits = search_along_normals(img_s, s.uv, s.normals, bands[min(it, len(bands) - 1)], prior_sigma_px=1.5)
-        f = hits.found
-        if f.sum() <= k + 2:
-            break
-        r = hits.offset_px[f]
-        X, nrm = s.X_obj[f], s.normals[f]
-        J = np.zeros((len(X), k))  # how far each sample moves along its image normal per unit of p
-        for j in range(k):
-            dp = np.zeros(k)
-            dp[j] = space.h[j]
-            fwd = camera.project_obj(space.pose(p + dp), X)
-            bwd = camera.project_obj(space.pose(p - dp), X)
-            J[:, j] = np.einsum("ni,ni->n", (fwd - bwd) / (2 * space.h[j]), nrm)
-        w = robust_weights(r, "tukey", GN_SCALE_PX)
+        T, s, r, J, w = lin
         A = (J * w[:, None]).T @ J
         try:
             step = np.linalg.solve(A + 1e-9 * np.eye(k), (J * w[:, None]).T @ r)
         except np.linalg.LinAlgError:
             break
-        groups = _feature_groups(model, s.feature[f])
+        groups = _feature_groups(model, s.feature)
         floor = np.where(groups < len(model.edges), EDGE_BIAS_PX, CURVED_EDGE_BIAS_PX)
         Gm = space.G(T)
-        cov = Gm @ _edge_covariance(J, r, w, groups, floor, k, s.uv[f], nrm) @ Gm.T
+        cov = Gm @ _edge_covariance(J, r, w, groups, floor, k, s.uv, s.normals) @ Gm.T
         p = p + step
         if np.max(np.abs(J @ step)) < 0.01:
             break
     return space.pose(p), cov
+
+
+def _camera_share(camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space, rims: bool,
+                  camera_cov: np.ndarray) -> np.ndarray | None:
+    """(6, 6) covariance of (δt, δr) that the camera's calibration (``camera_cov``, of C's 12 entries)
+    adds to a pose refined on the image's edges: the refinement's solution moves with C by
+    dp/dC = −A⁻¹ Jᵀ W ∂(n·uv)/∂C, each sample's projection uv = (C X̃)₀,₁ / (C X̃)₂ differentiated in C."""
+    lin = _linearize(camera, model, space.params(T), img_s, space, rims, 2.0)
+    if lin is None:
+        return None
+    T, s, r, J, w = lin
+    Xw = s.X_obj @ T[:3, :3].T + T[:3, 3]
+    Xh = np.column_stack([Xw, np.ones(len(Xw))])
+    h = Xh @ camera.C.T
+    uv = h[:, :2] / h[:, 2:3]
+    n = s.normals
+    dC = np.concatenate([n[:, :1] * Xh, n[:, 1:] * Xh, -(n * uv).sum(axis=1, keepdims=True) * Xh], axis=1) / h[:, 2:3]
+    A = (J * w[:, None]).T @ J
+    D = -np.linalg.pinv(A) @ (J * w[:, None]).T @ dC  # (k, 12)
+    Gm = space.G(T)
+    return Gm @ D @ camera_cov @ D.T @ Gm.T
 
 
 def _feature_groups(model: BRep, feature: np.ndarray, n_circle: int = 48, arc: int = 8) -> np.ndarray:
@@ -941,9 +986,26 @@ def _edge_covariance(J: np.ndarray, r: np.ndarray, w: np.ndarray, groups: np.nda
 
 
 def _replace_T(c: SearchCandidate, T: np.ndarray) -> SearchCandidate:
+    """c at T, a pose that draws the same picture (a symmetry of the model): its covariance moved to
+    T's origin (δt' = δt + δr × (o' − o), δr' = δr)."""
     from dataclasses import replace
 
-    return replace(c, T_world_obj=T)
+    cov = c.cov
+    if cov is not None:
+        M = np.eye(6)
+        d = T[:3, 3] - c.T_world_obj[:3, 3]
+        M[:3, 3:] = -np.array([[0.0, -d[2], d[1]], [d[2], 0.0, -d[0]], [-d[1], d[0], 0.0]])
+        cov = M @ cov @ M.T
+    return replace(c, T_world_obj=T, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1])
+
+
+def _std(cov: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """(σ of the translation (3,) in mm, σ of the rotation (3,) in degrees) of a (δt, δr) covariance;
+    NaN without one."""
+    if cov is None or not np.all(np.isfinite(cov)):
+        return np.full(3, np.nan), np.full(3, np.nan)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return 1000.0 * sd[:3], np.degrees(sd[3:])
 
 
 def _same_pose(Ta: np.ndarray, Tb: np.ndarray, syms: list[np.ndarray], deg: float = 1.0, m: float = 0.005) -> bool:
@@ -1004,11 +1066,9 @@ def _settle(camera, model, T, image, oe, img_s, coarse_px) -> SearchCandidate | 
     d, near, med, mismatch = m
     if near < 0.5 or med > MAX_MEDIAN_PX:
         return None
-    if cov is not None and np.all(np.isfinite(cov)):
-        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        std_t, std_r = 1000.0 * sd[:3], np.degrees(sd[3:])
-    else:
-        cov, std_t, std_r = None, np.full(3, np.nan), np.full(3, np.nan)
+    if cov is not None and not np.all(np.isfinite(cov)):
+        cov = None
+    std_t, std_r = _std(cov)
     return SearchCandidate(T2, _fit(d), med, near, cov, std_t, std_r, coarse_px, mismatch)
 
 

@@ -74,6 +74,7 @@ class OneClickMixin:
                 raise WorkflowError(f"click once on {self.object_name} where it is now in the video, then Find "
                                     "(Find uses that one click, before any edge)")
             camera, model, T_db, generation = self.site.camera, self.obj.model, self.obj.T_world_obj, self._generation
+            camera_cov = self.site.calibration_covs[0]  # a camera calibrated in this database: its σ joins the pose's
             table = table_support(self.site)
             if table is not None and not rests_on(model, T_db, table):
                 table = None  # it did not lie on the table: the full pose is searched near the old one
@@ -86,7 +87,7 @@ class OneClickMixin:
 
         try:
             res = search_pose(camera, model, T_db, p, image, table=table, name=self.object_name,
-                              cancel=self.cancel_event.is_set, progress=progress)
+                              cancel=self.cancel_event.is_set, progress=progress, camera_cov=camera_cov)
         except Cancelled:
             raise WorkflowError("Find cancelled: nothing was written") from None
         except NoPoseFits as exc:

@@ -145,3 +145,37 @@ def test_a_partly_hidden_parallelepiped_is_found_on_the_table_with_a_true_sigma(
         assert np.all(err_mm[:2] <= 3.0 * np.maximum(best.std_t_mm[:2], 1e-3)), (err_mm, best.std_t_mm)
     mism = [c.mismatch for c in res.candidates]
     assert mism == sorted(mism) and 0.0 <= mism[0] < 0.7
+
+
+def test_the_camera_calibration_share_of_a_found_pose_matches_a_perturbed_camera(scene, table):
+    """The covariance the camera's calibration adds to a found pose (``camera_cov``) is the linearised
+    move of the refinement's solution with C: checked against refining again with C moved along one
+    direction (rank-one camera_cov), and it enlarges the σ the search reports."""
+    from app.vision import search as S
+    from app.vision.profiles import smooth, to_gray_f32
+    from core.camera import Camera
+
+    box = scene.body("parallelepiped")
+    image, t = frame(scene, 16.5)
+    T_true, T_old = box.pose_at(t), box.pose_at(0.0)
+    uv = centre_pixel(scene, box, T_true)
+    plain = search_pose(scene.camera, box.model, T_old, uv, image, table=table).candidates[0]
+    C = scene.camera.C
+    d = np.random.default_rng(0).normal(size=12) * 1e-3 * np.abs(C).ravel()
+    with_cam = search_pose(scene.camera, box.model, T_old, uv, image, table=table, camera_cov=np.outer(d, d)).candidates[0]
+    assert np.max(with_cam.std_t_mm) > np.max(plain.std_t_mm)
+    # the linearised share against the refinement redone with C + d
+    sp = S._TableSpace(S.level_on(box.model, T_old, table), table)
+    pts = S._support_points(box.model)
+    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    z0 = -table.d - float((((pts - centre) @ sp.R_old.T) @ sp.up).min())
+    space = S._OnTable(sp, z0, centre, 3)
+    img_s = smooth(to_gray_f32(image), 1.0)
+    T0, _ = S._refine(scene.camera, box.model, plain.T_world_obj, img_s, space, False)
+    share = S._camera_share(scene.camera, box.model, T0, img_s, space, False, np.outer(d, d))
+    moved = Camera(C + d.reshape(3, 4), scene.camera.width, scene.camera.height)
+    T1, _ = S._refine(moved, box.model, T0, img_s, space, False)
+    dt = T1[:3, 3] - T0[:3, 3]
+    predicted = np.sqrt(np.diag(share)[:3])  # rank one: |the predicted move| per axis
+    assert np.linalg.norm(dt) > 2e-4  # the move is real (metres)
+    assert np.allclose(np.abs(dt), predicted, rtol=0.3, atol=2e-5), (dt, predicted)
