@@ -487,7 +487,7 @@ def search_pose(
     cancel: Callable[[], bool] | None = None,
     progress: Callable[[float, str], None] | None = None,
     max_candidates: int = 6,
-    n_seeds: int = 24,
+    n_seeds: int | None = None,
     n_refine: int | None = None,
     max_turn_deg: float = 30.0,
     camera_cov: np.ndarray | None = None,
@@ -502,11 +502,12 @@ def search_pose(
         the old pose's face-down and height kept); None searches the full pose near the old one.
     name : the object's name, for the messages. cancel : called between stages; True stops the
         search (``Cancelled``). progress : called with (fraction done, what).
-    max_candidates : at most this many candidates returned. n_seeds : distinct coarse poses descended.
+    max_candidates : at most this many candidates returned. n_seeds : distinct coarse poses descended
+        (default 48 on the table, 24 free).
     camera_cov : (12, 12) covariance of C's entries (a camera calibrated in the database): its share
         joins each candidate's covariance (``_camera_share``).
-    n_refine : poses refined (default 4 on the table, 8 free: on the real cube without the hint 4, 6, 9 of
-        22 right with 4, 8, 12). max_turn_deg : the free search's reach in orientation.
+    n_refine : poses refined (default 8; bench/search.py: the real cube without the hint 4, 6, 9 of 22
+        right with 4, 8, 12; the rendered box on the table, 48 seeds, 40 → 42 of 50 from 4 to 8, 42 with 12). max_turn_deg : the free search's reach in orientation.
 
     Returns
     -------
@@ -632,6 +633,8 @@ def search_pose(
     t1 = time.perf_counter()
     sc = evaluate(p, TAU_COARSE, coarse)
     timings["coarse"] = time.perf_counter() - t1
+    if n_seeds is None:
+        n_seeds = 48 if mode == "table" else 24
     seeds = _distinct(p, sc, np.where(step > 0, step, 1.0), n_seeds, per)
     if not len(seeds):
         raise NoPoseFits(f"no pose of the {name} fits the image near your click: click on the object itself")
@@ -641,7 +644,7 @@ def search_pose(
     timings["descent"] = time.perf_counter() - t1
     order = np.argsort(best, kind="stable")
     if n_refine is None:
-        n_refine = 4 if mode == "table" else 8
+        n_refine = 8
     top = _distinct(q[order], best[order], np.where(step > 0, step / 2.0, 1.0), n_refine, per)
     top = order[top]
 
