@@ -1019,24 +1019,6 @@ def _same_pose(Ta: np.ndarray, Tb: np.ndarray, syms: list[np.ndarray], deg: floa
     return False
 
 
-def _on_table(T: np.ndarray, T_old: np.ndarray, table: Plane, centre_obj: np.ndarray) -> np.ndarray:
-    """T put back on the table: the old pose's tilt and height, T's heading about the table's normal
-    and its centre's place on the table kept."""
-    up = table.n / np.linalg.norm(table.n)
-    Rd = T[:3, :3] @ T_old[:3, :3].T  # the turn from the old orientation
-    # its heading about up: the angle of Rd applied to a horizontal vector
-    e = np.cross(up, [0.0, 0.0, 1.0] if abs(up[2]) < 0.9 else [1.0, 0.0, 0.0])
-    e /= np.linalg.norm(e)
-    f = Rd @ e
-    f -= (f @ up) * up
-    psi = float(np.arctan2(np.cross(e, f) @ up, e @ f))
-    R = _rot_about(up, np.array([psi]))[0] @ T_old[:3, :3]
-    c = T[:3, :3] @ centre_obj + T[:3, 3]
-    c_old = T_old[:3, :3] @ centre_obj + T_old[:3, 3]
-    c = c - (c @ up) * up + (c_old @ up) * up
-    return make_T(R, c - R @ centre_obj)
-
-
 def _settle(camera, model, T, image, oe, img_s, coarse_px) -> SearchCandidate | None:
     """Free search: track twice from T (the edge tracker, 6 unknowns), refine on the sub-pixel edges
     (``_refine``, for the covariance), then the support check. None when the image does not support the
