@@ -139,7 +139,7 @@ class CalibrateTurret(Workflow):
         why = self.scene_changed(uv)
         if why:
             raise WorkflowError(f"{why}: {label} may not be where the frozen frame shows it. Nothing was measured: "
-                                "freeze a new frame (F) and pick the point again")
+                                "measure again when the video there looks as frozen, or pick another point")
         with self.lock:
             self._check_open()
             self.cancel_event.clear()

@@ -289,7 +289,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             Tb, h = box.T_world_obj, box.dimensions["size_z"]
             corners = box.vertices_world
             camera = self.site.camera
-        self._refuse_if_changed(camera.project(corners[camera.depth(corners) > 0]), "the box")
+        self._refuse_if_changed(camera.project(corners[camera.depth(corners) > 0]), "the box", inside=True)
         with self.lock:
             self._check_open()
             self.cancel_event.clear()
@@ -326,7 +326,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             devices = self._devices()
             camera, T = self.site.camera, self.site.T_world_turret
             sil = np.array(self.silhouettes)
-        self._refuse_if_changed(sil.reshape(-1, 2), f"the {self.shape}")
+        self._refuse_if_changed(sil.reshape(-1, 2), f"the {self.shape}", inside=True)
         with self.lock:
             self._check_open()
             self.cancel_event.clear()

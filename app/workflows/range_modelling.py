@@ -141,7 +141,7 @@ class RangeModelling:
             area = 0.5 * abs(float(np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])))  # shoelace
             spacing = self.spacing_px or max(2.0, float(np.sqrt(area / 25.0)))
             camera, T = self.site.camera, self.site.T_world_turret
-        self._refuse_if_changed(np.vstack([ends, centre]), "this face")
+        self._refuse_if_changed(np.vstack([ends, centre]), "this face", inside=True)
         with self.lock:
             self._check_open()
             self.cancel_event.clear()
@@ -167,14 +167,20 @@ class RangeModelling:
             self.message = f"Face {len(self.faces)}: {len(X)} range points of {len(scan)} beams."
             return scan
 
-    def _refuse_if_changed(self, uv: np.ndarray, what: str) -> None:
+    def _refuse_if_changed(self, uv: np.ndarray, what: str, inside: bool = False) -> None:
         """WorkflowError when the live video around the pixels ``uv`` differs from the frozen frame:
-        the devices would measure what the clicks do not show (Workflow.scene_changed). Call it
-        without the lock."""
+        the devices would measure what the clicks do not show (Workflow.scene_changed). ``inside``:
+        the pixels outline what is measured; they are taken a third of the way in towards their centre
+        (on the outline the background shows, and something moving behind is no change of the object).
+        Call it without the lock."""
+        uv = np.asarray(uv, float).reshape(-1, 2)
+        if inside and len(uv):
+            c = uv.mean(axis=0)
+            uv = np.vstack([c, uv + (c - uv) / 3.0])
         why = self.scene_changed(uv)
         if why:
             raise WorkflowError(f"{why}: {what} may not be where the frozen frame shows it. Nothing was measured: "
-                                "freeze a new frame (F), Cancel and click again")
+                                "measure again when the video there looks as frozen, or Cancel and start on a new frame")
 
     def support_point(self, uv: np.ndarray) -> np.ndarray:
         """The table point seen at pixel uv (a depth guess for aiming), else a point 2 m away."""

@@ -14,11 +14,22 @@ from app.workflows.base import FrameRef
 FROZEN_T = 5.0  # the parallelepiped at its first pose
 
 
-def _top_centre(scene, t):
+def _left_point(scene, camera, t0=FROZEN_T, t1=16.0):
+    """A point of the parallelepiped's top face at t0 whose pixel the box no longer covers at t1 (its top
+    at the same height under the same pixel would look, and measure, the same)."""
+    import cv2
+
     body = scene.body("parallelepiped")
-    T = body.pose_at(t)
     lo, hi = body.model.bounds()
-    return T[:3, :3] @ np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2]]) + T[:3, 3]
+    T0, T1 = body.pose_at(t0), body.pose_at(t1)
+    hull = cv2.convexHull(camera.project_obj(T1, body.model.vertices).astype(np.float32))
+    for fx in np.linspace(0.15, 0.85, 8):
+        for fy in np.linspace(0.15, 0.85, 8):
+            X = T0[:3, :3] @ np.array([lo[0] + fx * (hi[0] - lo[0]), lo[1] + fy * (hi[1] - lo[1]), hi[2]]) + T0[:3, 3]
+            uv = camera.project(X.reshape(1, 3))[0]
+            if cv2.pointPolygonTest(hull, (float(uv[0]), float(uv[1])), True) < -12:
+                return X
+    raise AssertionError("the box at 16 s covers its whole top at 5 s")
 
 
 @pytest.fixture
@@ -38,17 +49,17 @@ def _frozen(site, t):
 def test_changed_share_sees_a_moved_object_and_not_the_noise(video_site, scene):
     a, b = video_site.frame_at(FROZEN_T), video_site.frame_at(FROZEN_T + 0.5)
     c = video_site.frame_at(16.0)
-    uv = video_site.camera.project(_top_centre(scene, FROZEN_T).reshape(1, 3))
+    uv = video_site.camera.project(_left_point(scene, video_site.camera).reshape(1, 3))
     assert not np.array_equal(a, b)  # rendered noise differs frame to frame
     assert changed_share(a, b, uv) <= CHANGED_SHARE  # ... and is not a change
-    assert changed_share(a, c, uv) > 5 * CHANGED_SHARE  # the box left: a change
+    assert changed_share(a, c, uv) > 3 * CHANGED_SHARE  # the box left: a change
     far = np.array([[5.0, 5.0]])  # a corner where nothing moves
     assert changed_share(a, c, far) <= CHANGED_SHARE
 
 
 def test_designate_on_a_frame_the_site_no_longer_looks_like_warns(video_site, scene):
     site = video_site
-    uv = site.camera.project(_top_centre(scene, FROZEN_T).reshape(1, 3))[0]
+    uv = site.camera.project(_left_point(scene, site.camera).reshape(1, 3))[0]
     wf = DesignateTarget(site, client="alice")
     wf.use_frame(_frozen(site, FROZEN_T))
     site.t["t"] = FROZEN_T + 0.4
@@ -63,8 +74,8 @@ def test_calibrate_turret_refuses_to_measure_where_the_site_changed(device_video
     site = device_video_site
     wf = CalibrateTurret(site, client="alice")
     wf.use_frame(_frozen(site, FROZEN_T))
-    X = _top_centre(fast_scene, FROZEN_T)
-    wf.choose_point(X, "parallelepiped top centre")
+    X = _left_point(fast_scene, site.camera)
+    wf.choose_point(X, "parallelepiped top")
     clock["t"] = 16.0
     with pytest.raises(WorkflowError, match="differs from the frozen frame.*Nothing was measured"):
         wf.measure()
@@ -98,3 +109,27 @@ def test_model_object_refuses_to_measure_a_face_that_moved_since_the_frozen_fram
     clock["t"] = FROZEN_T + 0.4
     wf.measure()
     assert wf.faces[-1]["points"] is not None and len(wf.faces[-1]["points"]) >= 5
+
+
+@pytest.mark.parametrize("name", ["unknown_box", "unknown_cylinder"])
+def test_an_object_that_stands_still_is_not_changed_by_the_box_moving_beside_it(video_site, scene, name):
+    """A new operator's scans of a box that never moved were refused while the parallelepiped moved
+    elsewhere in the image: the check looked at 49 px patches around the box's outline, where the
+    background shows (measured: up to 12 % of such a patch changed, against 3 % allowed). Now Model
+    object's check takes the outline a third of the way in, with 17 px patches: no refusal at any
+    frame of the recording, from frames frozen before, during and after the moves."""
+    from app.workflows import ModelObject
+
+    site = video_site
+    body = scene.body(name)
+    T = body.pose_at(0.0)
+    pts = body.model.vertices if len(body.model.vertices) else np.array(
+        [[r * np.cos(a), r * np.sin(a), z] for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)
+         for r, z in ((0.051, 0.0), (0.051, 0.166))])
+    outline = site.camera.project_obj(T, pts)
+    wf = ModelObject(site, client="alice", shape="box", vertical=True, on_table=True)
+    for t_frozen in (FROZEN_T, 20.0, 26.8):
+        wf.frame = _frozen(site, t_frozen)
+        for t in np.arange(0.0, 28.5, 0.5):
+            site.t["t"] = t
+            wf._refuse_if_changed(outline, "the box", inside=True)  # WorkflowError if it saw a change
