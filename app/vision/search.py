@@ -683,8 +683,8 @@ def search_pose(
         T = min((c.T_world_obj @ S for S in syms), key=lambda U: pose_error(U, T_old)[0])
         out.append(_replace_T(c, T))
     if not out:
-        raise NoPoseFits(f"no pose of the {name} fits the image near your click: click on the {name} itself "
-                         "(not on another object or the table), or update it by clicking edges")
+        other = "another object" + (" or the table" if name != "table" else "")
+        raise NoPoseFits(f"no pose of the {name} fits the image near your click: click on the {name} itself (not on {other})")
     out = out[:max_candidates]
     if camera_cov is not None:  # the camera's calibration uncertainty joins each pose's σ
         from dataclasses import replace

@@ -97,7 +97,13 @@ class OneClickMixin:
         except Cancelled:
             raise WorkflowError("Find cancelled: nothing was written") from None
         except NoPoseFits as exc:
-            raise WorkflowError(str(exc)) from None
+            with self.lock:  # the click found nothing: it goes (the next click or double click starts afresh)
+                if self._generation == generation and self.pending is not None and np.allclose(self.pending, p):
+                    self.pending = None
+                    self._invalidate()
+                    self.state = "click_edge"
+            advice = "" if self.search_only else ", or update it by clicking its edges"
+            raise WorkflowError(f"{exc}{advice}. Nothing was written, and the click was dropped") from None
         except ValueError as exc:
             raise WorkflowError(f"Find failed: {exc}") from None
         finally:
@@ -119,7 +125,8 @@ class OneClickMixin:
             n, ties = len(res.candidates), self._near_ties()
             self.message = (f"{n} pose{'s' if n > 1 else ''} of {self.object_name} fit{'' if n > 1 else 's'} your click "
                             f"(searched {where} in {res.total_s:.1f} s); the best fits the image's edges within "
-                            f"{best.fit_px:.1f} px" + (f": {ties} others fit almost as well, check the white ghost" if ties else
+                            f"{best.fit_px:.1f} px" + (f": {ties} other{'s' if ties > 1 else ''} fit{'' if ties > 1 else 's'} "
+                                                       "almost as well, check the white ghost" if ties else
                                                        (": the others fit clearly worse" if n > 1 else "")))
             return self.found
 
@@ -160,17 +167,22 @@ class OneClickMixin:
         c = self.found[i]
         n = len(self.found)
         sd = f"σ {np.max(c.std_t_mm):.1f} mm, {np.max(c.std_r_deg):.2f}°" if np.all(np.isfinite(c.std_t_mm)) else "σ unknown"
-        enabled = set(base) | {"accept", "remove_last", "start_point"}
+        enabled = set(base) | {"accept", "remove_last"} | (set() if self.search_only else {"start_point"})
         choose = ""
         if n > 1:
             enabled.add("choose_candidate")
             ties = self._near_ties()
-            choose = (f" {ties + 1} poses fit almost equally (e.g. a box of nearly square footprint turned 90°): look closely, "
-                      "pick another {choose_candidate} if the white one is not on the object" if ties else
-                      f" {n - 1} other pose{'s' if n > 2 else ''} fit{'' if n > 2 else 's'} clearly worse " + "({choose_candidate})") + "."
+            if i > 0:
+                choose = f" Pose 1 matches the image best ({100 * (1 - self.found[0].mismatch):.0f} % against " \
+                         f"{100 * (1 - c.mismatch):.0f} %): " + "pick it back {choose_candidate} unless this one is plainly on the object."
+            elif ties:
+                choose = (f" {ties + 1} poses fit almost equally (e.g. a box of nearly square footprint turned 90°): look closely, "
+                          "pick another {choose_candidate} if the white one is not on the object.")
+            else:
+                choose = f" {n - 1} other pose{'s' if n > 2 else ''} fit{'' if n > 2 else 's'} clearly worse " + "({choose_candidate})."
+        tail = " {accept} to write it" + ("." if self.search_only else f", or click edges of {self.object_name} to refine it.")
         return Step("found", f"Pose {i + 1} of {n} drawn in white: the model's edges {c.fit_px:.1f} px from the image's, "
-                    f"{sd}." + choose + " {accept} to write it, or click edges of " + f"{self.object_name} to refine it.",
-                    frozenset(enabled))
+                    f"{sd}." + choose + tail, frozenset(enabled))
 
     def _found_labels(self) -> list[str]:
         return [f"#{i + 1} · {100 * (1 - c.mismatch):.0f} % matched" + (" (best)" if i == 0 else "") for i, c in enumerate(self.found)]

@@ -90,9 +90,11 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             self.obj = site.object(object_name)
         except KeyError as exc:
             raise WorkflowError(str(exc.args[0])) from None
-        if not len(self.obj.model.edges):
-            raise WorkflowError(f"{object_name} has no straight edges (a cylinder or cone): its pose cannot come from edges; "
-                                "model it again instead")
+        # no straight edges (a cylinder, a cone): its pose can only be found from one click (the search draws
+        # its outline), not from clicked edges
+        self.search_only = not len(self.obj.model.edges)
+        if self.search_only and not self.obj.model.solids:
+            raise WorkflowError(f"{object_name} has neither straight edges nor an outline to find: model it again instead")
         self.object_name = object_name
         self.loss = loss
         self.segs: list[np.ndarray] = []
@@ -175,10 +177,13 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                                         f"(nearest {dist:.0f} px); click on its wireframe in the overlay")
                 self._assign(k)
                 return
-            if self.pending is None:
-                self.pending = p
+            if self.pending is None or (self.search_only and self.found is None):
+                self.pending = p  # with no edges to click, a new click replaces the one waiting for Find
                 self.state = "click_edge_end"
                 return
+            if self.search_only:
+                raise WorkflowError(f"{self.object_name} has no straight edges to click: Accept the found pose, pick another, "
+                                    "or Remove last and double-click it again")
             seg, snap = self._finish_segment(self.pending, p, MIN_SEGMENT_PX)
             self.pending = None
             self.segs.append(seg)
@@ -596,8 +601,14 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         if found is not None:
             return found
         if self._first_click_pending():
+            if self.search_only:
+                return Step("click_edge_end", "{find} the pose of " + f"{self.object_name} from this click (or double-click "
+                            "it).", frozenset(base | {"find"}))
             return Step("click_edge_end", "{find} the pose of " + f"{self.object_name} from this one click (or double-click "
                         f"it), or click a second point on the same image edge (edge {k + 1}).", frozenset(base | {"find"}))
+        if self.search_only:
+            return Step("click_edge", f"Double-click {self.object_name} where it is now in the video to find its pose "
+                        "(it has no straight edges to click).", frozenset(base))
         if self.pending is not None:
             return Step("click_edge_end", f"Click a second point on the same image edge (edge {k + 1}).", frozenset(base))
         rows = {"click_row", "remove_click"} if self._click_rows() else set()

@@ -70,12 +70,15 @@ def test_a_click_on_the_table_finds_nothing_and_writes_nothing(video_site, scene
     wf = _start(site)
     n = len(db.history(BOX))
     wf.click(site.camera.project(np.array([[0.3, -0.3, 0.0]]))[0])
-    with pytest.raises(WorkflowError, match=f"no pose of the {BOX} fits the image near your click"):
+    with pytest.raises(WorkflowError, match=f"no pose of the {BOX} fits the image near your click.*or update it by "
+                       "clicking its edges. Nothing was written, and the click was dropped"):
         wf.find()
-    assert wf.current_step().name == "click_edge_end" and wf.found is None and wf.pending is not None  # state intact
+    # the click that found nothing is dropped: the next click (or double click) starts afresh
+    assert wf.current_step().name == "click_edge" and wf.found is None and wf.pending is None
     assert len(db.history(BOX)) == n
+    wf.click([10.0, 10.0])
     with pytest.raises(WorkflowError, match="Find uses one click"):
-        wf.find([10.0, 10.0])  # a click under way already
+        wf.find([20.0, 20.0])  # a click under way already
 
 
 def test_remove_last_drops_the_found_poses_and_edges_refine_from_the_found_pose(video_site, scene, db):
@@ -137,3 +140,34 @@ def test_one_clicked_edge_refines_together_with_the_found_pose(video_site, scene
     wf.accept()
     last = db.history(BOX)[-1]
     assert last.method == "search+refine" and last.clicks["edge_ids"] == [k]
+
+
+def test_a_cylinder_is_updated_from_one_double_click(video_site, scene, db):
+    """An object with no straight edges (a modelled cylinder whose database pose is 8 cm off): Update
+    pose offers only the one-click path — a double click where the video shows it, Accept — and the
+    written axis is within 5 mm of the truth; a second click replaces the first rather than starting an
+    edge."""
+    from core.transforms import make_T
+
+    site = video_site
+    site.t["t"] = T_MOVED
+    body = scene.body("unknown_cylinder")
+    T_true = body.pose_at(T_MOVED)
+    db.add_object("cylinder_1", "cylinder", body.model, make_T(T_true[:3, :3], T_true[:3, 3] + [0.08, 0.0, 0.0]),
+                  status="modelled")
+    session = Session(site, client="alice")
+    session.select("cylinder_1")
+    wf = session.start("update_pose")
+    assert wf.search_only and "no straight edges to click" in wf.next_step
+    assert wf.current_step().enabled == {"cancel"}
+    on = site.camera.project_obj(T_true, np.array([[0.0, 0.0, 0.09]]))[0]
+    wf.click(on + [30.0, 0.0])
+    wf.click(on)  # replaces the first click: no edge to start
+    assert wf.segs == [] and np.allclose(wf.pending, on) and "find" in wf.current_step().enabled
+    found = wf.find()
+    assert {"accept"} <= wf.current_step().enabled and "start_point" not in wf.current_step().enabled
+    wf.accept()
+    rec = db.get("cylinder_1")
+    axis_deg = np.degrees(np.arccos(np.clip(rec.T_world_obj[:3, 2] @ T_true[:3, 2], -1, 1)))
+    assert axis_deg < 1.0 and np.linalg.norm(rec.T_world_obj[:3, 3] - T_true[:3, 3]) < 0.005, (axis_deg, rec.T_world_obj[:3, 3])
+    assert db.history("cylinder_1")[-1].method == "search" and len(found) >= 1
