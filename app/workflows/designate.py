@@ -241,8 +241,9 @@ class DesignateTarget(Workflow):
                if np.isfinite(pm.aim.error_px) and pm.aim.error_px > AIM_OFF_PX else "")
         limit = LIMIT_SIGMA * sigma
         if hit is None:
-            warning = (f"Warning: the database has no surface here but the range finder met one {100 * depth_rf:.1f} cm "
-                       f"away at {_xyz(X_rf)} m: something not in the database is in the way{off}")
+            warning = (f"Warning: the database has no surface here, but the range finder met one {depth_rf:.2f} m "
+                       f"away, at {_xyz(X_rf)} m: something the database does not have (an object, or the room "
+                       f"behind){off}")
             return Target(p, X_rf, NOT_IN_DATABASE, float(np.linalg.norm(X_rf - origin)), np.full(3, np.nan),
                           rangefinder_X=X_rf, sigma_m=sigma, check="the range finder's point: the database has no surface here",
                           warning=warning, details=details)

@@ -114,7 +114,7 @@ def test_no_database_surface_but_the_range_finder_hits(device_site, fast_scene):
     assert site.raycast(o, d[0]) is None  # above the table: no database surface
     wf = DesignateTarget(site)
     t = wf.click(uv)
-    assert t.object == "not in the database" and t.warning and "something not in the database is in the way" in t.warning
+    assert t.object == "not in the database" and t.warning and "something the database does not have" in t.warning
     assert np.array_equal(t.X_world, t.rangefinder_X)
     assert min(_true_distance(fast_scene, b.name, t.X_world) for b in fast_scene.bodies) < 3 * t.sigma_m
 
