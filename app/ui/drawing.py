@@ -20,14 +20,21 @@ from core.camera import Camera
 
 __all__ = ["label_anchor", "draw_database", "draw_object", "draw_marks"]
 
+WIDE_TOP_PX = 160.0  # label_anchor: a top wider than this gets its label near the left end ...
+WIDE_TOP_INSET_PX = 40.0  # ... this far in
+
 
 def label_anchor(pw: ProjectedWireframe) -> np.ndarray | None:
-    """Pixel (2,) where an object's label goes: just above the top of its drawn wireframe, or None."""
+    """Pixel (2,) where an object's label goes: just above the top of its drawn wireframe, or None. Over
+    a wide top (a table's far edge) near its left end, not its middle, where the objects standing on
+    it are drawn (a new operator read "table" as the parallelepiped's label)."""
     P = pw.seg_uv[pw.visible].reshape(-1, 2) if pw.visible.any() else pw.seg_uv.reshape(-1, 2)
     if not len(P):
         return None
     top = P[P[:, 1] <= P[:, 1].min() + 3.0]
-    return np.array([top[:, 0].mean(), P[:, 1].min() - 4.0])
+    lo, hi = float(top[:, 0].min()), float(top[:, 0].max())
+    x = lo + WIDE_TOP_INSET_PX if hi - lo > WIDE_TOP_PX else 0.5 * (lo + hi)
+    return np.array([x, P[:, 1].min() - 4.0])
 
 
 def draw_database(camera: Camera, objects: Iterable[SiteObject], width: int, height: int,

@@ -27,6 +27,17 @@ def test_database_colours_by_status_and_labels_above_the_wireframe(site, db):
     assert by_name["parallelepiped"][0][1] < top_v  # above the drawing
 
 
+def test_the_table_label_is_not_drawn_on_the_parallelepiped(site):
+    """The table's label went above the middle of its far edge, where the parallelepiped stands in the
+    bundled scene: a new operator read it as the parallelepiped's name. It now goes near the far edge's
+    left end, clear of the parallelepiped's drawing."""
+    _, labels = draw_database(site.camera, site.objects(), 512, 256)
+    uv = {name: p for name, p, _ in labels}["table"]
+    P = site.camera.project(site.object("parallelepiped").vertices_world())
+    lo, hi = P.min(axis=0) - 10.0, P.max(axis=0) + 10.0
+    assert not (lo[0] <= uv[0] <= hi[0] and lo[1] <= uv[1] <= hi[1] + 12.0), (uv, lo, hi)
+
+
 def test_marks_draw_selection_ghosts_clicks_targets_beam(site):
     obj = site.object("parallelepiped")
     moved = obj.T_world_obj.copy()
