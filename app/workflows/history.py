@@ -51,6 +51,11 @@ class History(Workflow):
 
         with self.lock:
             self._check_open()
+            if which == "undo":
+                later = self._later_changes(int(change_id))
+                if later and later[-1].method == "undo" and later[-1].undoes == int(change_id):
+                    raise WorkflowError(f"change {int(change_id)} is undone already (change {later[-1].id}): nothing to do; "
+                                        f"to bring it back, undo change {later[-1].id}")
             seen = self._seen_version(int(change_id))
             try:
                 if which == "undo":

@@ -28,6 +28,10 @@ def test_undo_brings_the_old_pose_back_and_is_recorded(site, db):
     with pytest.raises(WorkflowError, match="pick a change number"):
         wf.undo(10_000)
     assert change.version + 1 == site.object("parallelepiped").version
+    n = len(db.history())
+    with pytest.raises(WorkflowError, match=f"change {last_id} is undone already .*undo change {rec.id}"):
+        wf.undo(last_id)  # pressed again (the chooser still shows it): nothing recorded
+    assert len(db.history()) == n
 
 
 def test_undo_asks_when_it_discards_later_changes_and_refuses_a_stale_list(site):
