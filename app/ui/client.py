@@ -92,6 +92,7 @@ class ClientPanel:
         self._choice_options: dict[str, dict[str, Any]] = {}
         self.confirm_pending: tuple | None = None  # (action, args) waiting for its second press
         self.warning = ""  # a weak result's reasons, or a question, shown under the buttons
+        self._finished_at: tuple | None = None  # (the finished workflow, when this page saw it finish)
         self.error = ""  # the last refused action, said in the panel until the next action or step
         self.error_step: str | None = None  # the step it was said in
         self.frozen: FrameRef | None = None
@@ -722,7 +723,10 @@ class ClientPanel:
             step = wf.current_step()
             closes = wf.control("accept")  # History's Close, Designate's Done: nothing is accepted
             done = "accepted" if closes is None or closes.label == "Accept" else "closed"
-            state = f" ({done})" if wf.accepted else (" (cancelled)" if wf.cancelled else "")
+            if wf.finished and (self._finished_at is None or self._finished_at[0] is not wf):
+                self._finished_at = (wf, time.strftime("%H:%M:%S"))  # when this page saw it finish
+            at = f" at {self._finished_at[1]}" if wf.finished else ""  # a finished workflow's text says when
+            state = f" ({done}{at})" if wf.accepted else (f" (cancelled{at})" if wf.cancelled else "")
             subject = wf.object_name
             head = f"**{wf.title}{': ' + subject if subject else ''}**{state}"
             prompt = wf.prompt_text()

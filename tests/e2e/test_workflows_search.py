@@ -10,6 +10,8 @@ double click: 5 actions, 2.9-6.2 s at load 8-16); written 0.05° / 0.5 mm from t
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -44,6 +46,7 @@ def test_update_pose_from_one_click(browser, interface, scene):
     deg, m = pose_error(wf.candidates[wf.chosen or 0], T_true)
     print(f"found {len(wf.found)} pose(s); the shown one {deg:.3f}° / {1000 * m:.2f} mm from the truth")
     op.accept(wf)
+    page.get_by_text(re.compile(r"\(accepted at \d\d:\d\d:\d\d\)")).first.wait_for(timeout=5000)  # says when
     rec = ui.db.get(BOX)
     assert rec.version == obj.version + 1
     entry = ui.db.history(BOX)[-1]
