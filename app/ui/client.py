@@ -482,11 +482,20 @@ class ClientPanel:
         """A click at pixel uv of the video: the workflow's, or else select the nearest object."""
         wf = self.session.workflow
         now, last = time.monotonic(), getattr(self, "_last_click", None)
-        self._last_click = (now, np.asarray(uv, float).copy())
+        double = last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX
+        self._last_click = (now, np.asarray(uv, float).copy(), self.session.selected)
+        if (wf is None or wf.finished) and double and last[2] is not None and self.session.selected in (None, last[2]):
+            # no workflow, an object selected, a double click (its first click picked nothing else): the
+            # object's pose is found from that point — Update pose started and Find pressed at once
+            self._last_click = None
+            self.session.select(last[2])
+            self._on_start("update_pose")
+            self.session.workflow.click(uv)
+            self.press("find")
+            return
         if wf is not None and not wf.finished and "click" in wf.actions:
             step = wf.current_step()
-            if (last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX
-                    and "find" in step.enabled):
+            if double and "find" in step.enabled:
                 # a double click on the moved object: find its pose from that point (Find, at once)
                 self._last_click = None
                 self.press("find")

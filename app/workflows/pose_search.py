@@ -127,7 +127,8 @@ class OneClickMixin:
                             f"(searched {where} in {res.total_s:.1f} s); the best fits the image's edges within "
                             f"{best.fit_px:.1f} px" + (f": {ties} other{'s' if ties > 1 else ''} fit{'' if ties > 1 else 's'} "
                                                        "almost as well, check the white ghost" if ties else
-                                                       (": the others fit clearly worse" if n > 1 else "")))
+                                                       ((": the others fit clearly worse" if n > 2 else
+                                                         ": the other fits clearly worse") if n > 1 else "")))
             return self.found
 
     def _near_ties(self) -> int:
@@ -150,14 +151,15 @@ class OneClickMixin:
                 and self.mode == "edge" and self.matches is None)
 
     def _drop_found(self) -> bool:
-        """Remove last on the found poses alone: they go (back to the first click). True if dropped."""
+        """Remove last on the found poses alone: they go, and the click (or double click) they came from
+        with them — back to the start, as one Remove last undoes one double click. True if dropped."""
         if not self._found_pending():
             return False
         self.found, self.search_info = None, None
-        self.pending, self.search_click = self.search_click, None  # the click stays: Find again, or go on with an edge
+        self.pending, self.search_click = None, None
         self.candidates, self.chosen = [], None
         self._invalidate()
-        self.state = "click_edge_end"
+        self.state = "click_edge"
         return True
 
     def _found_step(self, base: set) -> Step | None:
@@ -242,16 +244,18 @@ class OneClickMixin:
             self.state = "review"
             deg, m = pose_error(result.T_world_obj, T)
             sig_deg, sig_mm = float(np.max(result.std_r_deg)), 1000 * float(np.max(result.std_t_m))
-            self.message = (f"found pose {i + 1} refined with {len(result.kinds)} click{'s' if len(result.kinds) != 1 else ''}: "
-                            f"RMS {result.rms_px:.1f} px, moved {deg:.2f}° and {1000 * m:.1f} mm from the found pose; "
-                            f"σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm")
+            n_e, n_p = result.kinds.count("segment"), result.kinds.count("point")
+            what = " and ".join(x for x in (f"{n_e} edge{'s' if n_e != 1 else ''}" if n_e else "",
+                                            f"{n_p} point{'s' if n_p != 1 else ''}" if n_p else "") if x)
+            self.message = (f"found pose {i + 1} refined with {what}: RMS {result.rms_px:.2f} px, moved {deg:.2f}° and "
+                            f"{1000 * m:.1f} mm from the found pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm")
             return result
 
     def _found_summary(self, out: dict[str, Any]) -> None:
         if self.found is None:
             return
         c = self.found[self.chosen or 0]
-        out["found"] = {"candidates": len(self.found), "chosen": (self.chosen or 0) + 1, "fit_px": round(c.fit_px, 2),
+        out["found"] = {"candidates": len(self.found), "chosen": (self.chosen or 0) + 1, "fit_px": round(c.fit_px, 1),
                         "std_t_mm": [round(float(v), 1) for v in c.std_t_mm],
                         "std_r_deg": [round(float(v), 2) for v in c.std_r_deg]}
         deg, m = pose_error(c.T_world_obj, self.obj.T_world_obj)

@@ -658,7 +658,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             return Step("ready", "{solve} for a large motion, or {refine} from the database pose for a small one; or click "
                         "more edges.", frozenset(more))
         extra = {"choose_candidate"} if self.candidates else set()
-        return Step("review", f"Refined: RMS {self.refined.rms_px:.1f} px. " + "{accept} to write it, or add clicks and "
+        return Step("review", f"Refined: RMS {self.refined.rms_px:.2f} px. " + "{accept} to write it, or add clicks and "
                     "{refine} again.", frozenset(more | extra | {"accept"}))
 
     def choices(self, action: str) -> list[tuple[str, Any]]:

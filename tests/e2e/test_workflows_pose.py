@@ -32,11 +32,12 @@ BOX = "parallelepiped"
 AUTO_EDGES = (2, 3, 4, 5)
 
 
-def _select(op, page, obj, camera) -> None:
-    """Click the object's wireframe (where the database draws it) to select it."""
+def _select(op, page, obj, camera) -> int:
+    """Click the object's wireframe (where the database draws it) to select it; the clicks it took (2
+    when a loaded machine's page missed the first)."""
     drawn = projected_edges(camera, obj.model, obj.T_world_obj)
     k = max(visible_edges(camera, obj.model, obj.T_world_obj), key=lambda i: np.linalg.norm(drawn[i, 1] - drawn[i, 0]))
-    select_by_click(page, obj.name, lambda: op.click(drawn[k].mean(axis=0)))
+    return select_by_click(page, obj.name, lambda: op.click(drawn[k].mean(axis=0)))
 
 
 def _start_update_pose(op, page, obj, camera):

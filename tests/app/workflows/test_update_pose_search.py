@@ -84,8 +84,9 @@ def test_a_click_on_the_table_finds_nothing_and_writes_nothing(video_site, scene
 def test_remove_last_drops_the_found_poses_and_edges_refine_from_the_found_pose(video_site, scene, db):
     site = video_site
     wf, uv, T_true = _found(site, scene)
-    wf.remove_last()  # the found poses go; the click stays, to Find again or go on with an edge
-    assert wf.found is None and wf.current_step().name == "click_edge_end" and np.allclose(wf.pending, uv)
+    wf.remove_last()  # the found poses go, and their click: back to the start
+    assert wf.found is None and wf.current_step().name == "click_edge" and wf.pending is None
+    wf.click(uv)
     wf.find()
     T_found = wf.candidates[0]
     obj = wf.obj
@@ -136,7 +137,7 @@ def test_one_clicked_edge_refines_together_with_the_found_pose(video_site, scene
     assert after < 0.5 * before, (before, after)
     assert abs(r.T_world_obj[2, 3] - off[2, 3]) < 1e-3  # still on the table
     assert np.max(r.std_r_deg) < 0.5 * np.max(c.std_r_deg)
-    assert "refined with 1 click" in wf.message
+    assert "refined with 1 edge:" in wf.message
     wf.accept()
     last = db.history(BOX)[-1]
     assert last.method == "search+refine" and last.clicks["edge_ids"] == [k]
