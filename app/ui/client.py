@@ -734,6 +734,13 @@ class ClientPanel:
             done = "accepted" if closes is None or closes.label == "Accept" else "closed"
             if wf.finished and (self._finished_at is None or self._finished_at[0] is not wf):
                 self._finished_at = (wf, time.strftime("%H:%M:%S"))  # when this page saw it finish
+                if wf.accepted and wf.name.startswith("model_") and wf.object_name:
+                    try:  # the object just modelled is selected: Update pose, Track … apply to it next
+                        self.session.select(wf.object_name)
+                    except WorkflowError:
+                        pass
+                    selected = self.session.selected
+                    idle = f"**{selected}** is selected: start a workflow below (Update pose, Track, …), or click another object."
             at = f" at {self._finished_at[1]}" if wf.finished else ""  # a finished workflow's text says when
             state = f" ({done}{at})" if wf.accepted else (f" (cancelled{at})" if wf.cancelled else "")
             subject = wf.object_name

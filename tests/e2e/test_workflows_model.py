@@ -297,4 +297,6 @@ def test_model_a_cylinder_by_clicking_its_silhouettes(browser, device_interface,
           f"(error {dh * 1000:.1f} mm, σ {sh * 1000:.1f} mm), axis {axis * 1000:.1f} mm off")
     assert abs(dr) <= 3 * sr and abs(dh) <= 3 * sh
     assert abs(dr) < 0.004 and abs(dh) < 0.01 and axis < 0.006
+    # the cylinder just modelled is selected (Update pose, Track … apply to it next)
+    wait_until(lambda: page.panel.session.selected == rec.name, what="the new cylinder selected")
     page.close()
