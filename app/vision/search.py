@@ -507,7 +507,8 @@ def search_pose(
     camera_cov : (12, 12) covariance of C's entries (a camera calibrated in the database): its share
         joins each candidate's covariance (``_camera_share``).
     n_refine : poses refined (default 8; bench/search.py: the real cube without the hint 4, 6, 9 of 22
-        right with 4, 8, 12; the rendered box on the table, 48 seeds, 40 → 42 of 50 from 4 to 8, 42 with 12). max_turn_deg : the free search's reach in orientation.
+        right with 4, 8, 12, but with 12 one wrong pose passed unflagged; the rendered box on the table,
+        48 seeds, 40 → 42 of 50 from 4 to 8, 42 with 12). max_turn_deg : the free search's reach in orientation.
 
     Returns
     -------
