@@ -78,7 +78,7 @@ MAX_ON_TABLE_GAP_M = 0.01  # ... and its lowest point within this of the table p
 # that passed 1 px lay 0.5-0.9 px (free search, boxes turned 70-90° lying on the outline of the real one).
 MAX_MEDIAN_PX = 0.6
 # The check on the table (``_check``), made for a partly hidden object; measured values in its docstring.
-MAX_MISMATCH = 0.70
+MAX_MISMATCH = 0.65
 MIN_NEAR = 0.40
 MAX_SIGMA_MM, MAX_SIGMA_DEG = 3.0, 3.0
 # An edge found by the refinement may sit a fraction of a pixel off the model's edge along its whole
@@ -768,17 +768,19 @@ def _check(camera: Camera, model: BRep, T: np.ndarray, oe, img_s: np.ndarray, ri
     counting 1: 0 when every edge of the model lies on an image edge, 1 when none does; a hidden
     edge counts as a missing one. The pose fits when
 
-    - the mismatch is at most ``MAX_MISMATCH`` (0.70): up to about two thirds of the model's edges
-      may be hidden;
-    - at least ``MIN_NEAR`` (35 %) of the samples lie within 1.5 px of an edge of their orientation;
+    - the mismatch is at most ``MAX_MISMATCH`` (0.65): up to about half the model's edges may be
+      hidden;
+    - at least ``MIN_NEAR`` (40 %) of the samples lie within 1.5 px of an edge of their orientation;
     - the samples that agree pin the pose: its σ (``cov``) at most ``MAX_SIGMA_MM`` and
-      ``MAX_SIGMA_DEG``. A few edges that happen to line up (another object's corner, the table's
-      border) leave the pose loose along them.
+      ``MAX_SIGMA_DEG`` (3 mm, 3°). A few edges that happen to line up (another object's corner, the
+      table's border) leave the pose loose along them.
 
-    Measured (bench/search.py, rendered placements with 20-35 % of the object hidden, 3 seeds):
-    right poses mismatch 0.04-0.72 (p95 0.55), σ ≤ 1.5 mm and 0.46°; a click on the table or on
-    another object, or a box model clicked on the parallelepiped: mismatch ≥ 0.66 with σ 4.4-5 mm
-    and 5.4-5.9°, or mismatch ≥ 0.77.
+    Measured (bench/search.py (b), 150 rendered placements with 20-35 % of the object hidden): the right
+    top poses had mismatch 0.22-0.66 (95 % below 0.51). Of 70 clicks on the table, on the box or the
+    cylinder, or with the box's model on the parallelepiped (workcell video, 5 frames), 69 are refused
+    (the one found had landed on the parallelepiped itself, and found it right);
+    at 0.70 the box's model was found on the parallelepiped in 4 of 5 frames (mismatch 0.66-0.69), and
+    one right cylinder of 50 is refused at 0.65.
     """
     m = _measure(camera, model, T, oe, img_s, rims)
     if m is None:
