@@ -694,9 +694,9 @@ def search_pose(
         for j, c in enumerate(out):
             space = _OnTable(sp, z0, centre_obj, 3 if per[2] > 0 else 2) if table is not None else _Free(c.T_world_obj)
             share = _camera_share(camera, model, c.T_world_obj, img_s, space, rims, np.asarray(camera_cov, float))
-            if share is not None and c.cov is not None:
-                cov = c.cov + share
-                out[j] = replace(c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1])
+            # no share (too few edges found at the final pose): σ unknown, said so, rather than the image's alone
+            cov = None if share is None or c.cov is None else c.cov + share
+            out[j] = replace(c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1])
     return SearchResult(out, mode, n_scored, len(top), time.perf_counter() - t0, timings)
 
 
@@ -724,12 +724,9 @@ def _polish(T: np.ndarray, ef: EdgeField, camera: Camera, ms: _ModelSamples, sp:
             centre_obj: np.ndarray, per: np.ndarray) -> np.ndarray:
     """T moved on the table (x, y, heading) to the minimum of the bilinear oriented distance
     (τ = 3 px), steps from 4 mm (1°) halved four times."""
-    up = sp.up
-    Rd = T[:3, :3] @ sp.R_old.T
-    f = Rd @ sp.e1
-    psi = float(np.arctan2(np.cross(sp.e1, f) @ up, sp.e1 @ f)) if per[2] > 0 else 0.0
-    cw = T[:3, :3] @ centre_obj + T[:3, 3]
-    p0 = np.array([[cw @ sp.e1, cw @ sp.e2, psi]])
+    p0 = _OnTable(sp, zc, centre_obj, 3).params(T)[None]
+    if per[2] <= 0:
+        p0[0, 2] = 0.0  # an upright solid of revolution: its heading is not seen
 
     def evaluate(q, tau):
         R, t = sp.poses(q, zc, centre_obj)
@@ -936,7 +933,8 @@ def _camera_share(camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray,
 
 def _feature_groups(model: BRep, feature: np.ndarray, n_circle: int = 48, arc: int = 8) -> np.ndarray:
     """Which edge each sample lies on (``track.EdgeSamples.feature``), as group ids: a straight edge
-    or a silhouette is one group, a rim an arc of ``arc`` chords (60°)."""
+    or a silhouette is one group, a rim an arc of ``arc`` chords (60°). ``n_circle`` must be the rims'
+    chord count the samples were drawn with (``track.sample_visible_edges``' default, 48)."""
     E = len(model.edges)
     f = np.asarray(feature, np.int64)
     per_solid = 2 + 2 * n_circle
