@@ -20,7 +20,7 @@ import pytest
 from core.camera import Camera
 
 from .harness import Interface, assert_prompt_controls, wait_until
-from .test_workflows_site import Operator, _pair_corner, _visible_corners, _workflow, _wrong_camera
+from .test_workflows_site import Operator, _miscalibrated, _pair_corner, _visible_corners, _workflow
 
 pytestmark = pytest.mark.e2e
 
@@ -41,15 +41,10 @@ def lens_interface(scene, frame, tmp_path):
 
 def test_calibrate_camera_by_pnp_from_5_points(browser, lens_interface, scene):
     ui = lens_interface
-    true_cam = scene.camera
-    ui.site.set_camera(_wrong_camera(true_cam), rms_px=0.0, residuals_px=np.zeros((0, 2)), points={}, client="test setup")
-    wrong = ui.site.camera
-    t = ui.frame_t_s
-    truth = np.vstack([b.model.vertices @ b.pose_at(t)[:3, :3].T + b.pose_at(t)[:3, 3]
-                       for b in scene.bodies if b.name in ("table", "parallelepiped", "unknown_box")])
-    truth = truth[(true_cam.depth(truth) > 0) & true_cam.in_image(true_cam.project(truth))]
+    true_cam, wrong, truth = _miscalibrated(ui, scene)
+    truth = truth[(true_cam.depth(truth) > 0) & true_cam.in_image(true_cam.project(truth))]  # the corners in view
     err_before = np.linalg.norm(wrong.project(truth) - true_cam.project(truth), axis=1).max()
-    assert err_before > 4  # the overlay is visibly off
+    assert err_before > 4  # visibly off in view too
     n_cal = len(ui.db.calibrations("camera"))
     page = ui.open(browser)
     op = Operator(ui, page, "Calibrate camera by PnP")

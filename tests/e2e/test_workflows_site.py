@@ -94,6 +94,19 @@ def _wrong_camera(true_cam: Camera) -> Camera:
     return Camera(H @ true_cam.C, true_cam.width, true_cam.height)
 
 
+def _miscalibrated(ui, scene):
+    """Setup: the site's camera set to ``_wrong_camera``; returns (true camera, wrong camera, the table's,
+    parallelepiped's and box's corners in the world at the frame's time), the overlay checked visibly off."""
+    true_cam = scene.camera
+    ui.site.set_camera(_wrong_camera(true_cam), rms_px=0.0, residuals_px=np.zeros((0, 2)), points={}, client="test setup")
+    t = ui.frame_t_s
+    corners = np.vstack([b.model.vertices @ b.pose_at(t)[:3, :3].T + b.pose_at(t)[:3, 3]
+                         for b in scene.bodies if b.name in ("table", "parallelepiped", "unknown_box")])
+    wrong = ui.site.camera
+    assert np.linalg.norm(wrong.project(corners) - true_cam.project(corners), axis=1).max() > 4  # the overlay is off
+    return true_cam, wrong, corners
+
+
 def _visible_corners(site, cam: Camera):
     """(object, vertex, X_world) of the database's corners on an edge ``cam`` sees and not behind
     another database surface (what the workflow lets the operator pick)."""
@@ -129,14 +142,9 @@ def _pair_corner(op, page, wf, corner, drawn_by: Camera, true_cam: Camera) -> No
 # ---------------------------------------------------------------------------------------------- 1
 def test_calibrate_camera_by_clicks(browser, interface, scene):
     ui = interface
-    true_cam = scene.camera
     _true_box_in_database(ui, scene)
-    ui.site.set_camera(_wrong_camera(true_cam), rms_px=0.0, residuals_px=np.zeros((0, 2)), points={}, client="test setup")
-    wrong = ui.site.camera
-    bodies = np.vstack([b.model.vertices @ b.pose_at(ui.frame_t_s)[:3, :3].T + b.pose_at(ui.frame_t_s)[:3, 3]
-                        for b in scene.bodies if b.name in ("table", "parallelepiped", "unknown_box")])
+    true_cam, wrong, bodies = _miscalibrated(ui, scene)
     err_before = np.linalg.norm(wrong.project(bodies) - true_cam.project(bodies), axis=1).max()
-    assert err_before > 4  # the overlay is visibly off
     n_cal = len(ui.db.calibrations("camera"))
     page = ui.open(browser)
     op = Operator(ui, page, "Calibrate camera")
