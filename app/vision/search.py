@@ -128,6 +128,9 @@ class SearchCandidate:
     refinement (on the table: x, y, heading; free: the tracker's last pose step), or None.
     std_t_mm (3,), std_r_deg (3,): its square-root diagonal. coarse_px : the search's score of the
     pose the refinement started from. mismatch : in [0, 1], ranks the candidates (``_check``).
+    cov_camera : (6, 6), the camera calibration's share of ``cov`` (``camera_cov`` given), or None: a
+    common error of every measurement in this camera, which a later refinement with clicks must not
+    average away (``workflows.pose_search``).
     """
 
     T_world_obj: np.ndarray
@@ -139,6 +142,7 @@ class SearchCandidate:
     std_r_deg: np.ndarray
     coarse_px: float
     mismatch: float = 0.0
+    cov_camera: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -712,7 +716,7 @@ def search_pose(
             share = _camera_share(camera, model, c.T_world_obj, img_s, space, rims, np.asarray(camera_cov, float))
             # no share (too few edges found at the final pose): σ unknown, said so, rather than the image's alone
             cov = None if share is None or c.cov is None else c.cov + share
-            out[j] = replace(c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1])
+            out[j] = replace(c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1], cov_camera=None if cov is None else share)
     return SearchResult(out, mode, n_scored, len(top), time.perf_counter() - t0, timings)
 
 

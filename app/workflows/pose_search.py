@@ -225,15 +225,24 @@ class OneClickMixin:
     def _refine_found(self, prior, camera, clicks: dict, sigmas, generation: int):
         """Refine: the found pose and the clicks since, together (``core.pose.refine_with_prior``: the
         found pose with its covariance as the prior, so one clicked edge already helps; on the table
-        its height and tilt stay as the table has them). Runs outside the lock; WorkflowError, nothing
-        changed, when the result is not plausible."""
+        its height and tilt stay as the table has them). The camera calibration's share of the found
+        pose's σ (``SearchCandidate.cov_camera``) is common to the found pose and the clicks: it is taken
+        out of the prior and added to the result. Runs outside the lock; WorkflowError, nothing changed,
+        when the result is not plausible."""
+        from dataclasses import replace
+
         from core.pose import plausibility, refine_with_prior
 
-        i, T, cov = prior
+        i, T, cov, cov_camera = prior
         try:
-            result = refine_with_prior(camera, T, cov, **clicks, sigma_px=sigmas)
+            # the camera calibration's share is an error common to the found pose and the clicks (both
+            # measured through C): the two are combined on the image's share alone, and it is added after
+            result = refine_with_prior(camera, T, cov if cov_camera is None else cov - cov_camera, **clicks, sigma_px=sigmas)
         except ValueError as exc:
             raise WorkflowError(f"Refine failed: {exc}") from None
+        if cov_camera is not None:
+            result = replace(result, cov=result.cov + cov_camera,
+                             cov_parts={"found pose and clicks": result.cov, "camera calibration": cov_camera})
         why = plausibility(camera, self.obj.model, result.T_world_obj, result.rms_px, 3.0 * self.sigma_px)
         if why:
             raise WorkflowError(f"the clicks do not agree with the found pose ({why}): check the edge assignments, or "
@@ -248,7 +257,8 @@ class OneClickMixin:
             what = " and ".join(x for x in (f"{n_e} edge{'s' if n_e != 1 else ''}" if n_e else "",
                                             f"{n_p} point{'s' if n_p != 1 else ''}" if n_p else "") if x)
             self.message = (f"found pose {i + 1} refined with {what}: RMS {result.rms_px:.2f} px, moved {deg:.2f}° and "
-                            f"{1000 * m:.1f} mm from the found pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm")
+                            f"{1000 * m:.1f} mm from the found pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
+                            + (" (camera calibration included)" if result.cov_parts else ""))
             return result
 
     def _found_summary(self, out: dict[str, Any]) -> None:

@@ -378,7 +378,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             if self.found is not None:  # found from one click: the clicks refine it, together
                 c = self.found[self.chosen or 0]
                 if c.cov is not None:
-                    prior = (self.chosen or 0, c.T_world_obj, c.cov)
+                    prior = (self.chosen or 0, c.T_world_obj, c.cov, c.cov_camera)
         clicks = dict(segs_uv=segs if len(segs) else None, edges_obj=edges if len(edges) else None,
                       points_uv=pts_uv if len(pts_uv) else None, points_obj=pts_obj if len(pts_obj) else None)
         if prior is not None:

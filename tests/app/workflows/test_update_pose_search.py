@@ -143,6 +143,34 @@ def test_one_clicked_edge_refines_together_with_the_found_pose(video_site, scene
     assert last.method == "search+refine" and last.clicks["edge_ids"] == [k]
 
 
+def test_a_refine_after_find_keeps_the_camera_calibration_share_of_the_sigma(video_site, scene, db, monkeypatch):
+    """With the camera calibrated in the database, its share of the found pose's σ is an error common
+    to the found pose and the clicks (both seen through C): clicked edges refined together with the
+    found pose do not average it away. The refined covariance is the combination of the image's
+    shares plus the camera's, at least the camera's along every direction."""
+    site = video_site
+    C = site.camera.C
+    d = np.random.default_rng(0).normal(size=12) * 2e-3 * np.abs(C).ravel()
+    monkeypatch.setattr(type(site), "calibration_covs", property(lambda self: (np.outer(d, d), None)))
+    wf, _, T_true = _found(site, scene)
+    c = wf.found[0]
+    share = c.cov_camera
+    assert share is not None and np.allclose(c.cov, c.cov - share + share)
+    obj = wf.obj
+    rng = np.random.default_rng(4)
+    for k in sorted(_visible_edges(site, obj.model, T_true))[:3]:
+        seg = _true_segments(site, obj.model, T_true, [k], rng, 0.5)[0]
+        wf.click(seg[0])
+        wf.click(seg[1])
+        wf.click(site.camera.project(obj.model.edge_segments(c.T_world_obj)[k]).mean(axis=0))
+    r = wf.refine()
+    assert set(r.cov_parts) == {"found pose and clicks", "camera calibration"}
+    assert np.allclose(r.cov, r.cov_parts["found pose and clicks"] + share)
+    w, U = np.linalg.eigh(share)
+    u = U[:, -1]  # the camera's strongest direction: the refined variance along it is at least the share's
+    assert u @ r.cov @ u >= w[-1] * (1 - 1e-9)
+
+
 def test_a_cylinder_is_updated_from_one_double_click(video_site, scene, db):
     """An object with no straight edges (a modelled cylinder whose database pose is 8 cm off): Update
     pose offers only the one-click path — a double click where the video shows it, Accept — and the
