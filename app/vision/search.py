@@ -125,7 +125,8 @@ class SearchCandidate:
     2 px, to the image's oriented edges at that pose (``evaluate.sample_distances``), each capped at
     3 px (shown). support_px : the median of those distances. confidence : the share of the
     samples within 1.5 px of an edge. cov : (6, 6) covariance of (δt [m], δr [rad]) from the
-    refinement (on the table: x, y, heading; free: the tracker's last pose step), or None.
+    refinement on the image's edges (``_refine``; on the table: x, y, heading only), the camera's share
+    included when known, or None.
     std_t_mm (3,), std_r_deg (3,): its square-root diagonal. coarse_px : the search's score of the
     pose the refinement started from. mismatch : in [0, 1], ranks the candidates (``_check``).
     cov_camera : (6, 6), the camera calibration's share of ``cov`` (``camera_cov`` given), or None: a
