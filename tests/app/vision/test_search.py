@@ -244,3 +244,45 @@ def test_a_box_with_a_face_seen_edge_on_and_a_third_hidden_is_found_on_the_table
     res = search_pose(scene.camera, box.model, box.pose_at(0.0), np.array([207.6, 121.1]), image, table=table, name="box")
     deg, m = pose_error(res.candidates[0].T_world_obj, T_new)
     assert deg < 1.0 and m < 0.005, (deg, m)
+
+
+def test_a_long_box_with_one_end_behind_a_board_is_not_found_slid_to_the_board(scene, table):
+    """bench/search.py (b) seed 1, parallelepiped #23: its left end hidden by a dark board, whose border
+    stands in for the box's end. There the refined starts all lay slid 65-117 mm along its length and
+    the pose offered was 85 mm off. The slides (``_slides``) step a found pose along its footprint's axes
+    and refine again: from that pose they reach the truth, which fits better."""
+    from app.render.renderer import Renderer
+    from app.vision import search as S
+    from app.vision.evaluate import oriented_edges
+    from app.vision.profiles import smooth, to_gray_f32
+
+    box = scene.body("parallelepiped")
+    T_new = make_T(rot_z(np.radians(10.126)), [0.086406, 0.240628, 0.0])
+    bodies = tuple(dataclasses.replace(b, T_world_obj=T_new, motion=()) if b.name == box.name else
+                   dataclasses.replace(b, T_world_obj=b.pose_at(0.0), motion=()) for b in scene.bodies)
+    sc = dataclasses.replace(scene, bodies=bodies, render=dataclasses.replace(scene.render, aa_samples=8, seed=109730574))
+    image = np.array(Renderer(sc).render(0.0, 23))  # the bench's frame
+    image[18:84, 224:261] = np.clip(60 + np.random.default_rng(0).normal(0, 2.0, (66, 37)), 0, 255).astype(np.uint8)  # the board
+
+    def err(T):
+        return min((pose_error(T @ S_, T_new) for S_ in (np.eye(4), make_T(rot_z(np.pi), [0, 0, 0]))), key=lambda e: e[0])
+
+    c = search_pose(scene.camera, box.model, box.pose_at(0.0), np.array([305.8848, 54.0240]), image, table=table).candidates[0]
+    deg, m = err(c.T_world_obj)
+    assert deg < 1.0 and m < 0.005, (deg, m)
+    # the pose the bench offered: slid 85 mm along the box's length, its left end on the board's border
+    sp = S._TableSpace(box.pose_at(0.0), table)
+    pts = S._support_points(box.model)
+    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    z0 = -table.d - float((((pts - centre) @ sp.R_old.T) @ sp.up).min())
+    oe, img_s = oriented_edges(image), smooth(to_gray_f32(image), 1.0)
+    slid = T_new.copy()
+    slid[:3, 3] += 0.085 * T_new[:3, 0]
+    space = S._OnTable(sp, z0, centre, 3)
+    T, cov = S._refine(scene.camera, box.model, slid, img_s, space, False)
+    wrong = S._check(scene.camera, box.model, T, oe, img_s, False, cov, 1.0)
+    assert wrong is not None and err(wrong.T_world_obj)[1] > 0.05  # it fits: the board's border taken for the end
+    better = S._slides(scene.camera, box.model, wrong, oe, img_s, sp, z0, centre)
+    assert better is not None and better.mismatch < wrong.mismatch
+    deg, m = err(better.T_world_obj)
+    assert deg < 1.0 and m < 0.005, (deg, m)
