@@ -358,6 +358,10 @@ class ClientPanel:
             return
         value = options[handle.value]
         self.choice_values[action] = value
+        if self.confirm_pending is not None:  # a question about the item chosen before: it no longer applies
+            asked = wf.control(self.confirm_pending[0])
+            if asked is not None and asked.arg == action and self.confirm_pending[1] != (value,):
+                self.confirm_pending, self.warning = None, ""
         if action in wf.actions and value != wf.choice_value(action):  # a chooser that acts (candidate, method)
             wf.message = ""
             wf.perform(action, value)

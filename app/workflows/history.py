@@ -82,6 +82,8 @@ class History(Workflow):
     def question(self, action: str, *args: Any) -> str:
         if action == "undo" and args:
             later = self._later_changes(int(args[0]))
+            if later and later[-1].method == "undo" and later[-1].undoes == int(args[0]):
+                return ""  # undone already: the press says so (``_revert``), nothing to confirm
             if later:
                 last = later[-1]
                 when = time.strftime("%H:%M:%S", time.localtime(last.time))

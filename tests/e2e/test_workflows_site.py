@@ -451,3 +451,34 @@ def wait_until_either(first, second, timeout_s: float = 8.0) -> bool:
     """Wait until ``first()`` or ``second()`` is true; True when it was ``second``."""
     wait_until(lambda: first() or second(), timeout_s, "an answer")
     return not first() and bool(second())
+
+
+def test_history_a_question_about_one_change_does_not_carry_over_to_another(browser, interface):
+    """Undo change asks first when the undo discards later changes of the object. Choosing another
+    change then drops that question (its text and the button's "confirm"), and the other change's undo
+    asks, or not, on its own: before, the question about the first stayed on screen and the next press
+    undid the second change without a word."""
+    ui = interface
+    first = ui.site.set_status("parallelepiped", "stale", client="setup")
+    ui.site.set_status("parallelepiped", "known", client="setup")
+    c1 = next(c for c in ui.db.history("parallelepiped") if c.id >= first.id)
+    c2 = ui.db.history("parallelepiped")[-1]
+    page = ui.open(browser)
+    op = Operator(ui, page, "History: a question, another change, its own undo")
+    op.press("History")
+    wf = _workflow(page, "history")
+    text = {v: t for t, v in wf.choices("change")}
+    op.choose("Change", text[c1.id])
+    wait_until(lambda: page.panel.choice_values.get("change") == c1.id, what="the first change chosen")
+    op.press("Undo change")
+    page.get_by_text(f"Undoing change #{c1.id}", exact=False).first.wait_for(timeout=5000)
+    assert page.panel.asking == "undo"
+    op.choose("Change", text[c2.id])  # the last change: its undo discards nothing, so it asks nothing
+    wait_until(lambda: page.panel.asking is None, what="the question dropped")
+    page.get_by_text(f"Undoing change #{c1.id}", exact=False).first.wait_for(state="hidden", timeout=5000)
+    n = len(ui.db.history("parallelepiped"))
+    op.press("Undo change")
+    wait_until(lambda: len(ui.db.history("parallelepiped")) == n + 1, what="the undo of the second change")
+    undo = ui.db.history("parallelepiped")[-1]
+    assert undo.action == "undo" and undo.undoes == c2.id  # the change chosen, not the one asked about
+    op.report()

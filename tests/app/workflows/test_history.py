@@ -29,6 +29,7 @@ def test_undo_brings_the_old_pose_back_and_is_recorded(site, db):
         wf.undo(10_000)
     assert change.version + 1 == site.object("parallelepiped").version
     n = len(db.history())
+    assert wf.question("undo", last_id) == ""  # nothing to confirm: the press itself says it is undone already
     with pytest.raises(WorkflowError, match=f"change {last_id} is undone already .*undo change {rec.id}"):
         wf.undo(last_id)  # pressed again (the chooser still shows it): nothing recorded
     assert len(db.history()) == n
