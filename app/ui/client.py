@@ -29,7 +29,7 @@ import numpy as np
 import viser
 
 from app.workflows import Cancelled, Session, WorkflowError
-from app.workflows.base import FrameRef, Marks
+from app.workflows.base import MOTION_GAP_S, FrameRef, Marks
 from app.workflows.session import WORKFLOWS
 
 from .controls import START_BUTTONS, operator_help, report_markdown
@@ -391,7 +391,9 @@ class ClientPanel:
         if frame is None:
             self.frozen = None
             return
-        self.frozen = FrameRef(frame.image, float(frame.t_s), int(frame.index), source)
+        earlier = self.app.recent.before(frame, MOTION_GAP_S)  # to see whether what is clicked on was moving
+        self.frozen = FrameRef(frame.image, float(frame.t_s), int(frame.index), source,
+                               previous=None if earlier is None else earlier.image)
         self.show_live = False
         wf = self.session.workflow
         # a workflow's frozen frame goes with it; one frozen with no workflow under way (to look at

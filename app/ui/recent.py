@@ -57,6 +57,16 @@ class RecentFrames:
             best = min(self._frames, key=lambda fa: abs(newest - float(seconds) - fa[1]))
             return best[0]
 
+    def before(self, frame: Any, seconds: float) -> Any:
+        """The kept frame that arrived about ``seconds`` before ``frame`` (at least half that), or None
+        (``frame`` not kept, or nothing that much older)."""
+        with self._lock:
+            at = next((a for f, a in self._frames if f.index == frame.index), None)
+            if at is None:
+                return None
+            older = [(f, a) for f, a in self._frames if a <= at - 0.5 * float(seconds) and f.index != frame.index]
+            return min(older, key=lambda fa: abs(at - float(seconds) - fa[1]))[0] if older else None
+
     def __len__(self) -> int:
         with self._lock:
             return len(self._frames)

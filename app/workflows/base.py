@@ -159,17 +159,23 @@ class Step:
         return _PLACEHOLDER.findall(self.prompt)
 
 
+MOTION_GAP_S = 0.3  # FrameRef.previous: how long before the frozen frame (a few video frames)
+
+
 @dataclass(frozen=True)
 class FrameRef:
     """The video frame a workflow's clicks, snapping and solving use (frozen when it starts).
 
     image : (H, W, 3) or (H, W) uint8. t_s : its scene time (seconds). index : its frame number in
-    the source (-1 when unknown). source : where it came from ("live", "scrubbed", "scene video")."""
+    the source (-1 when unknown). source : where it came from ("live", "scrubbed", "scene video").
+    previous : the frame shown about ``MOTION_GAP_S`` before it, when the interface kept one (to see
+    whether what was clicked on was moving: ``Workflow.moving_share``), else None."""
 
     image: np.ndarray
     t_s: float
     index: int = -1
     source: str = "live"
+    previous: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     def record(self) -> dict[str, Any]:
         """JSON-ready: which frame was used (for the history)."""
@@ -294,6 +300,18 @@ class Workflow:
             return ""
         return (f"the live video here differs from the frozen frame (t = {frame.t_s:.1f} s): something moved since, "
                 "and the range finder measures the site as it is now")
+
+    def moving_share(self, uv: Any) -> float | None:
+        """The largest share of changed pixels around the pixels ``uv`` (N, 2) between the frozen frame
+        and the one shown ``MOTION_GAP_S`` before it (``app.vision.change.changed_share``): above
+        ``CHANGED_SHARE`` what lies there was moving when the frame was taken. None when no earlier
+        frame is known."""
+        frame = self.frame
+        if frame is None or frame.previous is None or np.shape(frame.previous) != np.shape(frame.image):
+            return None
+        from app.vision.change import changed_share
+
+        return changed_share(frame.previous, frame.image, np.asarray(uv, float).reshape(-1, 2))
 
     def frame_record(self) -> dict[str, Any] | None:
         """Which frame the clicks were made on, for the history (None: the site's frame at the time)."""

@@ -23,7 +23,7 @@ import numpy as np
 
 from core.transforms import pose_error
 
-from .base import Step, WorkflowError, as_pixel
+from .base import MOTION_GAP_S, Step, WorkflowError, as_pixel
 
 __all__ = ["OneClickMixin", "WEAK_FOUND_SIGMA_DEG", "WEAK_FOUND_SIGMA_MM", "WEAK_FOUND_MATCH", "NEAR_TIE_MISMATCH"]
 
@@ -55,6 +55,7 @@ class OneClickMixin:
         self.found = None  # the search's candidates (app.vision.search.SearchCandidate), best first
         self.search_click = None  # the pixel the search used
         self.search_info = None  # what the history keeps of the search
+        self.found_moving = ""  # said when the object was moving in the frame the pose was found in
 
     # ------------------------------------------------------------------ action
     def find(self, uv=None):
@@ -108,8 +109,10 @@ class OneClickMixin:
             raise WorkflowError(f"Find failed: {exc}") from None
         finally:
             self.progress, self.progress_text = None, ""
+        moving = self._moving_at(res.candidates[0].T_world_obj, camera, model)
         with self.lock:  # commit
             self._unchanged_since(generation, "Find")
+            self.found_moving = moving
             self.pending = None  # the click was the search's, not an edge's start
             self.search_click = p
             self.found = list(res.candidates)
@@ -129,7 +132,30 @@ class OneClickMixin:
                                                        "almost as well, check the white ghost" if ties else
                                                        ((": the others fit clearly worse" if n > 2 else
                                                          ": the other fits clearly worse") if n > 1 else "")))
+            if moving:
+                self.message += f". ⚠ {moving}"
             return self.found
+
+    def _moving_at(self, T: np.ndarray, camera, model) -> str:
+        """"" unless the object at pose T changed between the frozen frame and the one shown just before
+        it (``Workflow.moving_share``): then it was moving, and the pose found there is where it passed,
+        not where it stays. The pixels are its outline's points taken a third of the way in towards their
+        centre (on the outline the background shows)."""
+        from app.vision.change import CHANGED_SHARE
+
+        lo, hi = model.bounds()
+        box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        X = box @ T[:3, :3].T + T[:3, 3]
+        uv = camera.project(X[camera.depth(X) > 0])
+        if not len(uv):
+            return ""
+        c = uv.mean(axis=0)
+        share = self.moving_share(np.vstack([c, uv + (c - uv) / 3.0]))
+        if share is None or share <= CHANGED_SHARE:
+            return ""
+        return (f"{self.object_name} was moving in this frame (it differs from the frame {MOTION_GAP_S:.1f} s before): "
+                "the pose found is where it passed, not where it stays; go back (Seconds back) to a frame where it "
+                "holds still, or Accept if it stopped there")
 
     def _near_ties(self) -> int:
         """How many found poses besides the best match the image almost as well (mismatch within
@@ -155,7 +181,7 @@ class OneClickMixin:
         with them — back to the start, as one Remove last undoes one double click. True if dropped."""
         if not self._found_pending():
             return False
-        self.found, self.search_info = None, None
+        self.found, self.search_info, self.found_moving = None, None, ""
         self.pending, self.search_click = None, None
         self.candidates, self.chosen = [], None
         self._invalidate()
@@ -191,7 +217,7 @@ class OneClickMixin:
 
     def _found_weaknesses(self) -> list[str]:
         c = self.found[self.chosen or 0]
-        out = []
+        out = [self.found_moving] if self.found_moving else []
         sd, st = float(np.max(c.std_r_deg)), float(np.max(c.std_t_mm))
         if not (np.isfinite(sd) and np.isfinite(st)):
             out.append("the pose's uncertainty is unknown; click edges and Refine")

@@ -41,3 +41,20 @@ def test_frames_kept_bounded_and_found_by_seconds_back():
     assert r.seconds_back(100.0).index == r.frames()[0].index  # clamped to the oldest kept
     with pytest.raises(ValueError):
         RecentFrames(g, seconds=0.0)
+
+
+def test_the_frame_shown_before_a_frozen_one():
+    """``before``: the kept frame that arrived about that long before the given one (whose motion the
+    frozen frame is checked for), None for the first kept or a frame not kept."""
+    g = _Grabber()
+    r = RecentFrames(g, seconds=5.0, max_frames=100)
+    img = np.zeros((2, 2, 3), np.uint8)
+    frames = []
+    for i in range(12):
+        frames.append(Frame(img, i, i * 0.05))
+        g.push(frames[-1])
+        time.sleep(0.06)
+    got = r.before(frames[-1], 0.3)
+    assert got is not None and 1 <= frames[-1].index - got.index <= 7  # about 0.3 s: 5 frames at one per 0.06 s
+    assert r.before(frames[0], 0.3) is None  # nothing older
+    assert r.before(Frame(img, 99, 9.9), 0.3) is None  # not kept

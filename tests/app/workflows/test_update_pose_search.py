@@ -200,3 +200,23 @@ def test_a_cylinder_is_updated_from_one_double_click(video_site, scene, db):
     axis_deg = np.degrees(np.arccos(np.clip(rec.T_world_obj[:3, 2] @ T_true[:3, 2], -1, 1)))
     assert axis_deg < 1.0 and np.linalg.norm(rec.T_world_obj[:3, 3] - T_true[:3, 3]) < 0.005, (axis_deg, rec.T_world_obj[:3, 3])
     assert db.history("cylinder_1")[-1].method == "search" and len(found) >= 1
+
+
+def test_a_pose_found_while_the_object_was_moving_is_said(video_site, scene, db):
+    """The frozen frame caught the box in transit (13.4 s, 26 mm per 0.3 s): the pose found is where it
+    passed. The frame shown 0.3 s before differs there, so the operator is told and Accept asks once
+    more; at 16 s, where it stands still, nothing is said."""
+    from app.workflows.base import FrameRef
+
+    site = video_site
+    box = scene.body(BOX)
+    for t, moving in ((13.4, True), (T_MOVED, False)):
+        site.t["t"] = t
+        wf = _start(site)
+        wf.use_frame(FrameRef(site.frame_at(t), t, previous=site.frame_at(t - 0.3)))
+        T = box.pose_at(t)
+        wf.click(site.camera.project_obj(T, box.model.vertices).mean(axis=0) + [4.0, 2.0])
+        wf.find()
+        said = [w for w in wf.weaknesses() if "was moving in this frame" in w]
+        assert bool(said) == moving and ("was moving" in wf.message) == moving, (t, wf.message)
+        wf.cancel()
