@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from core.pose import nearest_twin, p3l, plausibility, refine
+from core.pose.p3l import ConcurrentEdgesError
 from core.pose.uncertainty import with_camera_uncertainty
 from core.transforms import pose_error
 
@@ -300,12 +301,17 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             try:
                 cands = p3l(camera, segs[idx], edges[idx], pts_uv if len(pts_uv) else None,
                             pts_obj if len(pts_obj) else None)
+            except ConcurrentEdgesError:
+                errors.append(f"edges {', '.join(str(i + 1) for i in idx)} meet at one corner of {self.object_name}: they "
+                              "give its turn but not its distance; click a fourth edge that does not pass through that "
+                              "corner, or Add point on another corner")
+                continue
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
                 # a degenerate triple (or a numerical failure in it): try the next triple
-                errors.append(f"edges {[i + 1 for i in idx]}: {exc}")
+                errors.append(f"edges {', '.join(str(i + 1) for i in idx)}: {exc}")
                 continue
             if not cands:
-                errors.append(f"edges {[i + 1 for i in idx]}: no pose puts the object in front of the camera")
+                errors.append(f"edges {', '.join(str(i + 1) for i in idx)}: no pose puts the object in front of the camera")
                 continue
             triples += 1
             found += [np.asarray(T, float) for T in cands]
@@ -641,10 +647,11 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 tail = " Or {refine}: the clicks fit together with the found pose (one edge is enough)."
             one = (f"Double-click {self.object_name} where it is now in the video to find its pose from that point; or c"
                    if not self.segs and not self.points_uv and self.found is None else "C")
-            return Step("click_edge", one + f"lick two points along an edge of {self.object_name} in the video (edge {n + 1} of 3), "
-                        "then click which model edge it is; or {auto_match} to skip saying which is which." + tail
+            spread = " (not all three through one corner)" if n == 2 else ""
+            return Step("click_edge", one + f"lick two points along an edge of {self.object_name} in the video (edge {n + 1} of 3"
+                        f"{spread}), then click which model edge it is; " + "or {auto_match} to skip saying which is which." + tail
                         if "auto_match" in more else
-                        f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3)." + tail,
+                        f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3{spread})." + tail,
                         frozenset(more))
         if self.last_refined is not None and self.refined is None:
             return Step("refine_again", "Clicks changed since Refine (the white ghost is the last refined pose): "

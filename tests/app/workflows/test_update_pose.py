@@ -382,3 +382,24 @@ def test_accept_survives_a_status_change_but_not_a_move(site):
     with pytest.raises(WorkflowError, match="moved by bob since you started.*nothing was written"):
         wf2.accept()
     assert len(site.db.history("parallelepiped")) == n
+
+
+def test_three_edges_through_one_corner_are_refused_in_the_operators_words(site):
+    """Three edges that meet at one corner (the natural first choice) fix the turn but not the distance:
+    Solve says so in the operator's words (no API parameter names), and the prompt for the third edge
+    says to avoid it."""
+    obj = site.object("parallelepiped")
+    T_true = _moved(obj.T_world_obj, 3.0, 0.01, -0.005)
+    E = obj.model.edges
+    visible = _visible_edges(site, obj.model, T_true)
+    corner = next(v for v in range(len(obj.model.vertices)) if sum(v in E[k] for k in visible) >= 3)
+    three = [k for k in visible if corner in E[k]][:3]
+    wf = UpdatePose(site, object_name="parallelepiped", snap=False)
+    segs = _true_segments(site, obj.model, T_true, three, np.random.default_rng(2), 0.3)
+    for seg, k in zip(segs[:2], three[:2]):
+        wf.add_segment(seg, k)
+    assert "not all three through one corner" in wf.current_step().prompt
+    wf.add_segment(segs[2], three[2])
+    with pytest.raises(WorkflowError, match="edges 1, 2, 3 meet at one corner of parallelepiped") as err:
+        wf.solve()
+    assert "points_uv" not in str(err.value) and "[" not in str(err.value)
