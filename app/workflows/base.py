@@ -182,6 +182,14 @@ class FrameRef:
         return {"t_s": round(float(self.t_s), 3), "index": int(self.index), "source": self.source}
 
 
+def sigma_over(sd_deg: float, sd_mm: float, max_deg: float, max_mm: float) -> str:
+    """"σ up to 1.17° and 26.4 mm: the position's is above 20 mm" — which of the two exceeds its limit
+    (a weak result's reason, said so that 1.17° does not read as above 2°)."""
+    over = [f"the rotation's is above {max_deg:g}°"] if sd_deg > max_deg else []
+    over += [f"the position's is above {max_mm:g} mm"] if sd_mm > max_mm else []
+    return f"σ up to {sd_deg:.2f}° and {sd_mm:.1f} mm" + (f": {' and '.join(over)}" if over else "")
+
+
 def as_pixel(uv: Any) -> np.ndarray:
     """A clicked pixel as a finite array (2,); WorkflowError otherwise."""
     try:

@@ -22,7 +22,7 @@ from core.calibration import calibrate_turret_planes
 from core.rangefinder import aim, beam_point
 from core.transforms import pose_error
 
-from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel, sigma_over
 
 __all__ = ["CalibrateTurret"]
 
@@ -274,6 +274,9 @@ class CalibrateTurret(Workflow):
             dropped = f" ({n - int(used.sum())} off the known surfaces, left out: {', '.join(off)})" if off else ""
             self.message = (f"RMS {1000 * np.sqrt(np.mean(dist ** 2)):.1f} mm to the surfaces over {int(used.sum())} "
                             f"points{dropped}; {deg:.2f}° and {100 * m:.1f} cm from the current calibration")
+            far = self._far_points()
+            if far:
+                self.message += f". ⚠ {far}"
             sd_rot_deg, sd_t_m = self._sigmas()
             if sd_rot_deg.max() > POORLY_DEG or sd_t_m.max() > POORLY_M:
                 few = len(self.site.objects()) <= 2
@@ -282,6 +285,23 @@ class CalibrateTurret(Workflow):
                                  + (" (with only the table and one box known, model another object first: Model object)"
                                     if few else ""))
             return cal
+
+    def _far_points(self) -> str:
+        """The measured points that lie more than 3σ of the range finder from their surface after Solve,
+        named with their distances, worst first, and what to do; "" when none does. Such a point (a beam
+        on an edge, a wrong pick, an object moving when it was measured) pulls the whole solve."""
+        sigma = float(self.site.scene.rangefinder.sigma_range_m)
+        if self.result is None or sigma <= 0:
+            return ""
+        idx = np.flatnonzero(self.used)
+        far = sorted(((float(d), int(i)) for d, i in zip(self.surface_residuals_m, idx) if d > 3 * sigma), reverse=True)
+        if not far:
+            return ""
+        names = ", ".join(f"{i + 1} {self.labels[i]} ({1000 * d:.1f} mm)" for d, i in far)
+        one = len(far) == 1
+        return (f"{'this point lies' if one else f'{len(far)} points lie'} more than 3σ ({3000 * sigma:.0f} mm) from "
+                f"{'its' if one else 'their'} surface — a wrong pick, or the object moving when it was measured? {names}: "
+                f"choose {'it' if one else 'each'} under Measurement and Delete measurement, then Solve again")
 
     def _sigmas(self) -> tuple[np.ndarray, np.ndarray]:
         """Standard deviations of the solved pose: rotation (3,) degrees, translation (3,) metres (turret axes)."""
@@ -352,13 +372,11 @@ class CalibrateTurret(Workflow):
             out = []
             sd_rot_deg, sd_t_m = self._sigmas()
             if sd_rot_deg.max() > POORLY_DEG or sd_t_m.max() > POORLY_M:
-                out.append(f"the turret's pose is poorly determined: σ up to {sd_rot_deg.max():.2f}° and "
-                           f"{1000 * sd_t_m.max():.1f} mm (more than {POORLY_DEG}° or {1000 * POORLY_M:.0f} mm)")
-            sigma = float(self.site.scene.rangefinder.sigma_range_m)
-            if sigma > 0:
-                bad = int(np.sum(self.surface_residuals_m > 3 * sigma))
-                if bad:
-                    out.append(f"{bad} measured point(s) lie more than 3σ ({3000 * sigma:.0f} mm) from the surfaces")
+                out.append("the turret's pose is poorly determined ("
+                           + sigma_over(float(sd_rot_deg.max()), 1000 * float(sd_t_m.max()), POORLY_DEG, 1000 * POORLY_M) + ")")
+            far = self._far_points()
+            if far:
+                out.append(far)
             if int(np.sum(self.used)) <= 6:
                 out.append("only 6 points: little redundancy to catch a wrong one (8 or more is safer)")
             return out

@@ -23,7 +23,7 @@ import numpy as np
 
 from core.transforms import pose_error
 
-from .base import MOTION_GAP_S, Step, WorkflowError, as_pixel
+from .base import MOTION_GAP_S, Step, WorkflowError, as_pixel, sigma_over
 
 __all__ = ["OneClickMixin", "WEAK_FOUND_SIGMA_DEG", "WEAK_FOUND_SIGMA_MM", "WEAK_FOUND_MATCH", "NEAR_TIE_MISMATCH"]
 
@@ -222,8 +222,8 @@ class OneClickMixin:
         if not (np.isfinite(sd) and np.isfinite(st)):
             out.append("the pose's uncertainty is unknown; click edges and Refine")
         elif sd > WEAK_FOUND_SIGMA_DEG or st > WEAK_FOUND_SIGMA_MM:
-            out.append(f"the pose is uncertain: σ up to {sd:.2f}° and {st:.1f} mm (more than {WEAK_FOUND_SIGMA_DEG:.0f}° or "
-                       f"{WEAK_FOUND_SIGMA_MM:.0f} mm); click an edge of it and Refine")
+            out.append(f"the pose is uncertain ({sigma_over(sd, st, WEAK_FOUND_SIGMA_DEG, WEAK_FOUND_SIGMA_MM)}); "
+                       "click an edge of it and Refine")
         if 1.0 - c.mismatch < WEAK_FOUND_MATCH:
             out.append(f"only {100 * (1 - c.mismatch):.0f} % of its outline matches the image (the rest hidden, or not there): "
                        "check the white ghost where the object is hidden, or click an edge of it and Refine")

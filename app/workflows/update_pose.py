@@ -35,7 +35,7 @@ from core.pose.p3l import ConcurrentEdgesError
 from core.pose.uncertainty import with_camera_uncertainty
 from core.transforms import pose_error
 
-from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel, sigma_over
 from .pose_matching import AutoMatchMixin, Match
 from .pose_search import OneClickMixin
 from .snapping import SNAPPED_CORNER_SIGMA_PX, SNAPPED_SEGMENT_SIGMA_PX, ClickSnap, SnapMixin, snap_marks
@@ -703,8 +703,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             out = []
             sd, st = float(np.max(r.std_r_deg)), float(np.max(r.std_t_m)) * 1000
             if sd > WEAK_SIGMA_DEG or st > WEAK_SIGMA_MM:
-                out.append(f"the pose is uncertain: σ up to {sd:.2f}° and {st:.1f} mm (more than {WEAK_SIGMA_DEG:.0f}° or "
-                           f"{WEAK_SIGMA_MM:.0f} mm); click more edges")
+                out.append(f"the pose is uncertain ({sigma_over(sd, st, WEAK_SIGMA_DEG, WEAK_SIGMA_MM)}); click more edges")
             sig = self._click_sigmas()
             names = [f"edge {j + 1}" for j, e in enumerate(self.edge_ids) if e is not None] + \
                     [f"point {j + 1}" for j in range(len(self.points_uv))]

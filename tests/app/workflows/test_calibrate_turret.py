@@ -138,3 +138,25 @@ def test_points_left_out_are_named(device_site):
     wf.range_m[-1] += 0.2
     with pytest.raises(WorkflowError, match=r"only 5 of 6 .*Left out.*: 6 the moved one\."):
         wf.solve()
+
+
+def test_a_point_far_from_its_surface_is_named_after_solve(device_site, fast_scene, db):
+    """A measurement off its surface (an object moving through the beam when it was measured)
+    pulls the whole solve: Solve names it, with its distance, and says what to do; Accept asks once
+    more. Before, only the count was said, and a new operator never found which one it was."""
+    site = device_site
+    for name in ("unknown_box", "back_wall"):
+        body = fast_scene.body(name)
+        db.add_object(name, "box", body.model, body.pose_at(0.0), status="known", method="test")
+    wf = CalibrateTurret(site, client="alice", shots=5)
+    site.poll()
+    targets = _face_targets(site, ("table", "parallelepiped", "unknown_box", "back_wall"))
+    for X in targets:
+        wf.choose_point(X)
+        wf.measure()
+    k = 0
+    wf.range_m[k] -= 0.08  # short of its surface (an object in the beam, moving)
+    wf.solve()
+    named = f"{k + 1} {wf.labels[k]} ("
+    assert named in wf.message and "more than 3σ" in wf.message and "Delete measurement" in wf.message, wf.message
+    assert any(named in w for w in wf.weaknesses())

@@ -403,3 +403,13 @@ def test_three_edges_through_one_corner_are_refused_in_the_operators_words(site)
     with pytest.raises(WorkflowError, match="edges 1, 2, 3 meet at one corner of parallelepiped") as err:
         wf.solve()
     assert "points_uv" not in str(err.value) and "[" not in str(err.value)
+
+
+def test_a_weak_sigma_says_which_limit_it_exceeds():
+    """"σ up to 1.17° and 26.4 mm (more than 2° or 20 mm)" read as if 1.17° were above 2° (a new
+    operator): the reason names the one that exceeds its limit."""
+    from app.workflows.base import sigma_over
+
+    assert sigma_over(1.17, 26.4, 2, 20) == "σ up to 1.17° and 26.4 mm: the position's is above 20 mm"
+    assert sigma_over(2.5, 3.0, 2, 20) == "σ up to 2.50° and 3.0 mm: the rotation's is above 2°"
+    assert "and the position's" in sigma_over(2.5, 30.0, 2, 20)
