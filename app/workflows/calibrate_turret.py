@@ -56,6 +56,7 @@ class CalibrateTurret(Workflow):
         self.targets: list[np.ndarray] = []
         self.labels: list[str] = []
         self.result = None
+        self.solve_text = ""  # what the last Solve said (the review step repeats it)
         self.progress: float | None = None
         self.progress_text = ""  # "point k · aiming" / "point k · measuring n shots" while measuring
         self.state = "pick"
@@ -212,13 +213,16 @@ class CalibrateTurret(Workflow):
             self._check_open()
             if self.pending_X is None and not self.pan:
                 raise WorkflowError("there is no picked point or measurement to remove")
-            if self.pending_X is not None:
+            if self.pending_X is not None:  # the pick only: the measurements, and a solve of them, stand
                 self.pending_X = None
-            elif self.pan:
-                for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
-                    lst.pop()
+                self.state = "review" if self.result is not None else "pick"
+                self.message = "The picked point is dropped" + ("; the solve stands." if self.result is not None else ".")
+                return
+            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
+                lst.pop()
             self.result = None
             self.state = "pick"
+            self.message = f"The last measurement is removed: {len(self.pan)} left."
 
     # ------------------------------------------------------------------ solving
     def solve(self, max_rounds: int = 10):
@@ -284,6 +288,7 @@ class CalibrateTurret(Workflow):
                                  "measure faces of other objects, at other distances, before accepting"
                                  + (" (with only the table and one box known, model another object first: Model object)"
                                     if few else ""))
+            self.solve_text = self.message
             return cal
 
     def _far_points(self) -> str:
@@ -339,11 +344,15 @@ class CalibrateTurret(Workflow):
         if self.site.devices is None:
             return Step("no_devices", "No range finder and turret are connected: restart mcit serve with devices to "
                         "calibrate the turret.", frozenset(base), clicks=False)
+        if self.pending_X is not None and self.result is not None:  # solved, and a point picked since: both apply
+            return Step("review", f"Solved: {self.solve_text}. " + "{accept} to use it; or {measure} " + f"{self.pending_label}, "
+                        "the point picked, and {solve} again ({remove_last} drops the pick).",
+                        frozenset(base | {"accept", "measure"}))
         if self.pending_X is not None:
             return Step("measure", "{measure} " + f"{self.pending_label} (the turret aims with the current calibration), or "
                         "click another known point.", frozenset(base | {"measure"}))
         if self.result is not None:
-            return Step("review", f"Solved: {self.message}. " + "{accept} to use it, or measure more points and {solve} again.",
+            return Step("review", f"Solved: {self.solve_text}. " + "{accept} to use it, or measure more points and {solve} again.",
                         frozenset(base | {"accept"}))
         more = f" ({6 - n} more at least)" if n < 6 else "; {solve} when done"
         return Step("pick", f"Click a known point — a face centre (cyan), a corner, or anywhere on a known face — "

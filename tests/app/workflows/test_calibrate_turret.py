@@ -160,3 +160,10 @@ def test_a_point_far_from_its_surface_is_named_after_solve(device_site, fast_sce
     named = f"{k + 1} {wf.labels[k]} ("
     assert named in wf.message and "more than 3σ" in wf.message and "Delete measurement" in wf.message, wf.message
     assert any(named in w for w in wf.weaknesses())
+    # a point picked after Solve: Accept stays offered beside Measure, and Remove last drops the pick only
+    wf.choose_point(targets[0])
+    st = wf.current_step()
+    assert {"accept", "measure"} <= st.enabled and st.prompt.startswith("Solved: RMS")
+    wf.remove_last()
+    assert wf.result is not None and "accept" in wf.current_step().enabled and len(wf.pan) == len(targets)
+    assert wf.current_step().prompt.startswith("Solved: RMS") and "solve stands" in wf.message
