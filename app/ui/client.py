@@ -300,6 +300,14 @@ class ClientPanel:
         if action not in step.enabled:
             raise WorkflowError(f"{c.label} does not apply now. {wf.prompt_text(markdown=False)}")
         if action == "cancel":
+            # work done (clicks, measurements: Remove last applies) is asked about once more; a running
+            # measurement stops at once
+            if self._workflow_has_clicks() and self.confirm_pending != ("cancel", ()):
+                self.confirm_pending, self.error = ("cancel", ()), ""
+                self.warning = (f"Cancel throws away what you did in {wf.title} (your clicks and measurements; nothing "
+                                "was written). Press **Cancel** again to throw it away, or go on.")
+                self._relabel("cancel", f"Cancel: confirm ({c.key_text})" if c.key else "Cancel: confirm")
+                return
             self.confirm_pending, self.warning, self.error = None, "", ""
             wf.cancel()  # also stops a running measurement
             return

@@ -482,3 +482,31 @@ def test_history_a_question_about_one_change_does_not_carry_over_to_another(brow
     undo = ui.db.history("parallelepiped")[-1]
     assert undo.action == "undo" and undo.undoes == c2.id  # the change chosen, not the one asked about
     op.report()
+
+
+def test_cancel_asks_once_more_before_throwing_work_away(browser, interface):
+    """Cancel with clicks made asks once more (a new operator lost two measured faces and a 65 s scan to
+    one press); the second press cancels, nothing written. With nothing done, one press cancels."""
+    ui = interface
+    page = ui.open(browser)
+    op = Operator(ui, page, "Cancel after clicks: asked, then cancelled")
+    _select_box(op, ui)
+    op.press("Update pose")
+    wf = _workflow(page, "update_pose")
+    n = len(ui.db.history())
+    op.click([200.0, 150.0])
+    op.click([260.0, 170.0])
+    wait_until(lambda: "remove_last" in wf.current_step().enabled, what="the edge clicked")
+    op.key("Escape")  # Cancel (Esc)
+    wait_until(lambda: page.panel.asking == "cancel", what="the question")
+    page.get_by_text("Cancel throws away what you did", exact=False).first.wait_for(timeout=5000)
+    assert not wf.finished
+    op.press("Cancel: confirm")
+    wait_until(lambda: wf.finished, what="the cancel")
+    assert len(ui.db.history()) == n
+    op.press("Update pose")
+    wf2 = _workflow(page, "update_pose")
+    assert wf2 is not wf
+    op.press("Cancel")  # nothing done: cancelled at once
+    wait_until(lambda: wf2.finished, what="the cancel without a question")
+    op.report()
