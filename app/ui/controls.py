@@ -29,8 +29,9 @@ START_BUTTONS: tuple[tuple[str, str], ...] = (
     ("History", "history"),
 )
 
-# Units a result key ends with → (shown unit, decimals): 0.1 px, 0.1 mm, 0.01°.
-_UNITS = (("_px", "px", 1), ("_mm", "mm", 1), ("_cm", "cm", 2), ("_deg", "°", 2), ("_m", "m", 4), ("_s", "s", 2),
+# Units a result key ends with → (shown unit, decimals): 0.01 px (an RMS of a few hundredths read "0"
+# beside the message's "0.03 px"), 0.1 mm, 0.01°.
+_UNITS = (("_px", "px", 2), ("_mm", "mm", 1), ("_cm", "cm", 2), ("_deg", "°", 2), ("_m", "m", 4), ("_s", "s", 2),
           ("_pct", "%", 0))
 _WORDS = {"rms": "RMS", "std": "σ", "sd": "σ", "sigma": "σ", "uv": "pixel", "x_world": "X (world)", "xyz": "x y z"}
 

@@ -422,7 +422,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             self.state = "review"
             deg, m = pose_error(result.T_world_obj, self.obj.T_world_obj)
             sig_deg, sig_mm = float(np.max(result.std_r_deg)), 1000 * float(np.max(result.std_t_m))
-            self.message = (f"{note}RMS {result.rms_px:.1f} px over {len(result.kinds)} clicks; moved {deg:.2f}° and "
+            self.message = (f"{note}RMS {result.rms_px:.2f} px over {len(result.kinds)} clicks; moved {deg:.2f}° and "
                             f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
                             + (" (camera calibration included)" if result.cov_parts else ""))
             return result
