@@ -60,15 +60,16 @@ def test_marks_draw_selection_ghosts_clicks_targets_beam(site):
 def test_report_markdown_lists_scalars_and_tables():
     text = report_markdown({"rms_px": 0.51234, "std_t_mm": [1.0, 2.0, 3.0],
                             "clicks": [{"click": "edge 1", "residual_px": 0.2}, {"click": "edge 2", "residual_px": 0.7}]})
-    assert "**RMS (px)**: 0.5" in text and "1.0, 2.0, 3.0" in text  # rounded to what it means: 0.1 px, 0.1 mm
-    assert "| Click | Residual (px) |" in text and "| edge 2 | 0.7 |" in text
+    assert "**RMS (px)**: 0.51\n" in text and "1.0, 2.0, 3.0" in text  # rounded to what it means: 0.01 px, 0.1 mm
+    assert "| Click | Residual (px) |" in text and "| edge 2 | 0.70 |" in text
+    assert "**RMS (px)**: 0.03" in report_markdown({"rms_px": 0.031})  # not "0" beside the message's 0.03 px
     assert report_markdown({}) == ""
     # σ stays σ (its capital Σ reads as a sum: the panel showed "Σ t (mm)"); coordinates stay lower case
     heads = report_markdown({"std_t_mm": 1.0, "sd_rot_deg": 0.1, "sigma_cm": 2.0, "x_y_z_m": 1.0, "t_s": 3.0})
     assert "**σ translation (mm)**" in heads and "**σ rotation (°)**" in heads and "**σ (cm)**" in heads
     assert "**Change**: 49.04°, 224.8 mm" in report_markdown({"change": {"deg": 49.04, "cm": 22.48}})  # as the messages say it
     nested = report_markdown({"found": {"candidates": 1, "fit_px": 0.31, "std_t_mm": [0.1, 0.8], "change": {"deg": 53.01, "cm": 21.9}}})
-    assert "- **Found**\n  - **Candidates**: 1\n  - **Fit (px)**: 0.3\n  - **σ translation (mm)**: 0.1, 0.8" in nested
+    assert "- **Found**\n  - **Candidates**: 1\n  - **Fit (px)**: 0.31\n  - **σ translation (mm)**: 0.1, 0.8" in nested
     assert "  - **Change**: 53.01°, 219.0 mm" in nested and "{" not in nested and "[" not in nested
     assert "**x y z (m)**" in heads and "**t (s)**" in heads and "Σ" not in heads and "Sd" not in heads
     tiny = report_markdown({"rms_px": 2.332e-14, "std_r_deg": 0.123456, "x_m": 1.234567891})
