@@ -428,6 +428,25 @@ def stamp_not_live(image: np.ndarray, text: str) -> np.ndarray:
     return out
 
 
+def stamp_replay_time(image: np.ndarray, t_s: float, duration_s: float) -> np.ndarray:
+    """A copy of ``image`` (RGB or grey uint8) with "REPLAY 12.3 / 28.6 s" in a dark box at its
+    bottom-left corner: a recording replayed in a loop (the workcell's), whose objects jump back when it
+    restarts, says where it is on the video itself (a new operator took a restart for a wrong update)."""
+    import cv2
+
+    out = np.ascontiguousarray(image).copy()
+    h, w = out.shape[:2]
+    label = f"REPLAY {t_s % duration_s:4.1f} / {duration_s:.1f} s"
+    font, thickness = cv2.FONT_HERSHEY_SIMPLEX, 1
+    scale = max(0.35, h / 900.0)
+    (tw, th), base = cv2.getTextSize(label, font, scale, thickness)
+    x0, y1 = 4, h - 4
+    colour = (255, 255, 255) if out.ndim == 3 else 255
+    cv2.rectangle(out, (x0 - 2, y1 - th - base - 4), (x0 + tw + 4, y1), (0, 0, 0) if out.ndim == 3 else 0, -1)
+    cv2.putText(out, label, (x0 + 1, y1 - base - 1), font, scale, colour, thickness, cv2.LINE_AA)
+    return out
+
+
 class FrameGrabber:
     """Reads a source on a background thread and keeps the latest frame.
 

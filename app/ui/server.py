@@ -29,7 +29,7 @@ import numpy as np
 import viser
 
 from app.overlay import LineBatch, PixelWorld
-from app.video import FrameGrabber, stamp_not_live
+from app.video import FrameGrabber, stamp_not_live, stamp_replay_time
 from app.workflows.frames import GrabberFrames
 from app.workflows.site import Site
 
@@ -291,7 +291,10 @@ class InterfaceServer:
         elif frame is not None and (frame.index != self._frame_index or was_stamped):
             self._video_stamp = None
             self._frame_index = frame.index
-            self.video.image = frame.image
+            src = self.grabber.source
+            loop = None if src.live or (src.frame_count or 0) <= 1 else src.duration_s
+            # a looping recording says where it is on the video itself: what moved in it jumps back at each restart
+            self.video.image = frame.image if not loop else stamp_replay_time(frame.image, float(frame.t_s), loop)
             self.frames_sent += 1
         video_changed = was_stamped != (self._video_stamp is not None)  # lost, or live again
         if video_changed:

@@ -92,3 +92,17 @@ def test_grabber_paces_a_recording_and_keeps_the_latest(tmp_path):
     finally:
         grabber.stop()
     assert grabber.error is None
+
+
+def test_a_replayed_recording_says_where_it_is_on_the_image():
+    """stamp_replay_time: a dark box at the bottom-left corner with the time within the loop; the rest
+    of the image untouched, the frame itself not modified; grey frames too."""
+    from app.video import stamp_replay_time
+
+    im = np.full((256, 512, 3), 90, np.uint8)
+    out = stamp_replay_time(im, 40.3, 28.6)  # the second loop: 11.7 s into it
+    changed = np.any(out != 90, axis=2)
+    ys, xs = np.nonzero(changed)
+    assert changed.sum() > 200 and ys.min() > 256 - 30 and xs.max() < 160  # only the corner
+    assert np.all(im == 90)
+    assert stamp_replay_time(im[:, :, 0], 1.0, 28.6).shape == (256, 512)
