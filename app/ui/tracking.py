@@ -73,7 +73,10 @@ class TrackFeeder:
                         self.panel.error = f"Tracking paused: {exc}"  # said in the panel (no toast over the video)
                 if wf.lost_count != lost_seen:  # also at the top of the panel; this one stays until closed
                     lost_seen = wf.lost_count   # (an auto-closing toast vanished under the cursor aiming at it)
-                    lost_note = self.panel.notify("Tracking lost", wf.message, "orange", stays=True)
+                    # short: the panel's instruction says why and what to do (said once, not three times)
+                    lost_note = self.panel.notify("Tracking lost", f"{wf.object_name}: the track stopped on the last "
+                                                  "frame it fitted. The panel says why; Re-initialise or Restart there.",
+                                                  "orange", stays=True)
                 elif lost_note is not None and not wf.lost:  # following again: the old news goes
                     _remove(lost_note)
                     lost_note = None

@@ -554,7 +554,8 @@ class EdgeTracker:
                     view = self._view(T)
                 p = self._pass(band, view, T, half_range)
                 if p.fit is None:
-                    reason = f"only {int(p.found.sum())} of {len(p.samples)} samples found an edge"
+                    reason = (f"the image shows an edge near only {int(p.found.sum())} of the {len(p.samples)} points "
+                              "checked along the model's edges")
                     break
                 T = p.fit.T_world_obj
         except ValueError as exc:  # the pose went behind the camera, or an edge is seen end-on
@@ -567,7 +568,7 @@ class EdgeTracker:
         confidence = n_inl / n if n else 0.0
         if not reason:
             if n_inl < self.min_inliers:
-                reason = f"only {n_inl} samples support the pose (fewer than {self.min_inliers})"
+                reason = f"only {n_inl} points along the model's edges support the pose (fewer than {self.min_inliers})"
             elif confidence < self.lost_confidence:
                 reason = (f"only {100 * confidence:.0f} % of the model's edges lie on image edges "
                           f"(fewer than {100 * self.lost_confidence:.0f} %): the pose is not supported by the image")

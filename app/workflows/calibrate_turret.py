@@ -286,7 +286,8 @@ class CalibrateTurret(Workflow):
                 few = len(self.site.objects()) <= 2
                 self.message += (f". Poorly determined (σ up to {sd_rot_deg.max():.2f}° and {1000 * sd_t_m.max():.1f} mm): "
                                  "measure faces of other objects, at other distances, before accepting"
-                                 + (" (with only the table and one box known, model another object first: Model object)"
+                                 + (" (with only the table and one box known, model another object first: Model object; "
+                                    "it measures with the current calibration, which stays in use until one is accepted)"
                                     if few else ""))
             self.solve_text = self.message
             return cal
