@@ -181,7 +181,10 @@ class ClientPanel:
         # pushed the button just pressed down, away from the cursor about to press it again.
         self.gui_warning = gui.add_markdown("", visible=False)
         self.gui_copy = gui.add_text("Target (m)", "", visible=False, hint="World x y z of the last target: copy it")
-        with gui.add_folder("Start a workflow"):
+        # Hidden while a workflow is under way (Cancel it to start another): at 1280×720 its buttons
+        # pushed the frame's controls (Freeze, Seconds back) below the fold (a new operator's run).
+        self.gui_start = gui.add_folder("Start a workflow")
+        with self.gui_start:
             for label, name in START_BUTTONS:
                 button = gui.add_button(label)
                 button.on_click(self._guard(functools.partial(self._on_start, name)))
@@ -684,6 +687,9 @@ class ClientPanel:
                     and ended.name in ("calibrate_turret", "model_object", "model_polyhedron", "designate"):
                 self.app.site.set_beam(None)  # the range finder's spot of a closed workflow would go stale
             self._rebuild_controls()
+        idle = wf is None or wf.finished
+        if self.gui_start.visible != idle:
+            self.gui_start.visible = idle
         busy = self.worker is not None and self.worker.is_alive()
         progress = wf.progress if wf is not None else None
         self.gui_progress.visible = bool(busy or (progress is not None and 0 < progress < 1))
