@@ -85,7 +85,12 @@ MAX_MEDIAN_PX = 0.6
 # The check on the table (``_check``), made for a partly hidden object; measured values in its docstring.
 MAX_MISMATCH = 0.65
 MIN_NEAR = 0.40
-MAX_SIGMA_MM, MAX_SIGMA_DEG = 3.0, 3.0
+# ... and its σ at most these (6 mm, 3°). At 3 mm the truth of a parallelepiped whose top a board hid, σ 3.3 mm
+# along its length, was refused, and a pose 1.2° off (σ 0.3°, the board's border taken for its top edge) offered
+# unsaid (bench/search.py (b), seed 1); at 6 mm that placement is right, nothing else changes on the 300
+# placements of seeds 0 and 1 nor on the 95 wrong clicks of the workcell video. Above 5 mm the pose is said
+# uncertain (workflows.pose_search.WEAK_FOUND_SIGMA_MM).
+MAX_SIGMA_MM, MAX_SIGMA_DEG = 6.0, 3.0
 # An edge found by the refinement may sit a fraction of a pixel off the model's edge along its whole
 # length (a blurred corner, the occluder's rim, a shaded curved side): the covariance counts each edge's
 # offset as one error of at least this size, straight edges and curved ones (silhouettes, rims)
@@ -868,7 +873,7 @@ def _check(camera: Camera, model: BRep, T: np.ndarray, oe, img_s: np.ndarray, ri
       hidden;
     - at least ``MIN_NEAR`` (40 %) of the samples lie within 1.5 px of an edge of their orientation;
     - the samples that agree pin the pose: its σ (``cov``) at most ``MAX_SIGMA_MM`` and
-      ``MAX_SIGMA_DEG`` (3 mm, 3°). A few edges that happen to line up (another object's corner, the
+      ``MAX_SIGMA_DEG`` (6 mm, 3°). A few edges that happen to line up (another object's corner, the
       table's border) leave the pose loose along them.
 
     Measured (bench/search.py (b), 150 rendered placements with 20-35 % of the object hidden): the 145
