@@ -10,7 +10,7 @@ import time
 from typing import Any
 
 from .base import Control, Step, Workflow, WorkflowError
-from .site import _change_sentence
+from .site import _change_sentence, method_words
 
 __all__ = ["History"]
 
@@ -130,5 +130,5 @@ class History(Workflow):
             rows = []
             for c in self.entries:
                 rows.append({"#": c.id, "when": time.strftime("%H:%M:%S", time.localtime(c.time)), "who": c.client,
-                             "what": _change_sentence(c), "method": c.method})
+                             "what": _change_sentence(c), "how": method_words(c.method)})
             return {"changes": rows}

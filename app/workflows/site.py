@@ -85,6 +85,30 @@ class Change:
     when: float
 
 
+# The history's method tags in the operator's words (the tag itself stays in the database and `mcit db`).
+METHOD_WORDS = {
+    "search": "found from one click",
+    "search+refine": "one click, then edges refined",
+    "p3l+refine": "three edges solved, then refined",
+    "match+refine": "edges matched automatically, then refined",
+    "refine": "refined from clicked edges",
+    "tracking": "tracked in the video",
+    "operator": "by hand",
+    "dlt": "camera matrix from clicked points",
+    "pnp": "camera pose from clicked points (lens known)",
+    "undo": "undo",
+    "restore": "brought back",
+}
+
+
+def method_words(method: str | None) -> str:
+    """A change's method tag as the operator reads it ("p3l+refine" → "three edges solved, then
+    refined"); a tag without words (a script's, "model box (fused)") as it is."""
+    if not method:
+        return ""
+    return METHOD_WORDS.get(method, method)
+
+
 def _change_sentence(rec: Any) -> str:
     """What an ``app.db.ChangeRecord`` did, in one plain sentence (without who)."""
     name = rec.object_name or "an object"

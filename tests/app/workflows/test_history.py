@@ -17,7 +17,7 @@ def test_undo_brings_the_old_pose_back_and_is_recorded(site, db):
     assert np.allclose(site.object("parallelepiped").T_world_obj, T_new)
     wf = History(site, client="alice")
     rows = wf.summary()["changes"]
-    assert rows[0]["what"] == "moved parallelepiped" and rows[0]["method"] == "test"
+    assert rows[0]["what"] == "moved parallelepiped" and rows[0]["how"] == "test"  # a tag without words: as it is
     last_id = db.history()[-1].id
     rev = site.revision
     rec = wf.undo(last_id)
@@ -56,3 +56,18 @@ def test_undo_asks_when_it_discards_later_changes_and_refuses_a_stale_list(site)
     with pytest.raises(WorkflowError, match="changed"):
         h.undo(first.id)
     assert len(site.db.history("parallelepiped")) == n + 1
+
+
+def test_the_history_says_how_in_the_operators_words(site):
+    """History's table says how each change was made in words ("three edges solved, then refined"),
+    not the database's tags ("p3l+refine", "search"), which a new operator read as jargon."""
+    from app.workflows import History
+    from app.workflows.site import method_words
+
+    obj = site.object("parallelepiped")
+    T = obj.T_world_obj.copy()
+    T[0, 3] += 0.01
+    site.update_pose(obj, T, None, method="p3l+refine", client="alice", clicks={}, residuals={})
+    rows = History(site, client="alice").summary()["changes"]
+    assert rows[0]["how"] == "three edges solved, then refined"
+    assert method_words("search") == "found from one click" and method_words("model box (fused)") == "model box (fused)"
