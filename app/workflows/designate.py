@@ -321,7 +321,7 @@ class DesignateTarget(Workflow):
             if self.targets:
                 X = np.array([t.X_world for t in self.targets])
                 m.targets = cam.project(X)
-                m.labels = [(uv, f"T{i + 1}" + (" ⚠ range finder disagrees" if t.warning else ""))
+                m.labels = [(uv, f"T{i + 1}" + (f" ⚠ {_check_word(t)}" if t.warning else ""))
                             for i, (uv, t) in enumerate(zip(m.targets, self.targets))]
                 # the range finder's points where they differ from the target (a disagreement or its only point)
                 rf = [(i, t.rangefinder_X) for i, t in enumerate(self.targets) if t.warning and t.rangefinder_X is not None]
@@ -336,11 +336,18 @@ class DesignateTarget(Workflow):
             rows = []
             for i, t in enumerate(self.targets):
                 row = {"target": f"T{i + 1}", "on": t.object, "x y z (m)": self._copy_point(t),
-                       "check": "range finder disagrees" if t.warning else t.check}
+                       "check": _check_word(t)}
                 if np.isfinite(t.disagreement_m):
                     row["disagreement_mm"] = _mm(t.disagreement_m)
                 rows.append(row)
             return {"targets": rows}
+
+
+def _check_word(t: Target) -> str:
+    """The target's check in a few words (the table, the label on the video): what its warning says."""
+    if not t.warning:
+        return t.check
+    return "not in the database: the range finder's point" if t.object == NOT_IN_DATABASE else "range finder disagrees"
 
 
 def _mm(v: float) -> float | None:

@@ -117,6 +117,8 @@ def test_no_database_surface_but_the_range_finder_hits(device_site, fast_scene):
     assert t.object == "not in the database" and t.warning and "something the database does not have" in t.warning
     assert np.array_equal(t.X_world, t.rangefinder_X)
     assert min(_true_distance(fast_scene, b.name, t.X_world) for b in fast_scene.bodies) < 3 * t.sigma_m
+    # the table says the same as the message (it said "range finder disagrees": with nothing to disagree with)
+    assert wf.summary()["targets"][0]["check"] == "not in the database: the range finder's point"
 
 
 def test_a_device_fault_keeps_nothing(device_site, devices):
