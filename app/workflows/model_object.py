@@ -539,7 +539,9 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             if self.result is not None:
                 m.ghosts = [Ghost(self.result.model, self.result.T_world_obj, self.object_name, chosen=True)]
                 lo, hi = self.result.model.bounds()
-                top = self.result.T_world_obj[:3, :3] @ np.array([0, 0, hi[2]]) + self.result.T_world_obj[:3, 3]
+                # above the middle of its top (a prism's origin may be at a corner of its footprint)
+                top = self.result.T_world_obj[:3, :3] @ np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2]]) \
+                    + self.result.T_world_obj[:3, 3]
                 if cam.depth(top) > 0:
                     m.labels = [(cam.project(top) - [0, 14], self.result.dimension_text("cm"))]  # the result, not the snaps
             return m
