@@ -257,11 +257,14 @@ class CalibrateTurret(Workflow):
                                                   -np.einsum("ij,ij->i", normals, closest), T, self.site.scene.rangefinder)
                 except ValueError as exc:
                     if "independent normals" in str(exc):
-                        kinds = _orientations(normals)
-                        raise WorkflowError(f"the {int(used.sum())} measurements on known surfaces lie on faces of only "
-                                            f"{kinds} orientation{'s' if kinds > 1 else ''} (faces facing the same way count "
-                                            "once): the turret's pose is not fixed; measure a face that faces another way "
-                                            f"(the table top and two sides of a box at an angle).{off_text}") from None
+                        groups = _orientation_groups(normals)
+                        labels = [self.labels[i] for i in np.flatnonzero(used)]
+                        spread = "; ".join(f"{len(g)} facing {_facing(normals[g[0]])} ({labels[g[0]]}"
+                                           + (f" and {len(g) - 1} more" if len(g) > 1 else "") + ")" for g in groups)
+                        raise WorkflowError(f"the {int(used.sum())} measurements on known surfaces do not fix the turret's "
+                                            f"pose: by the way their faces face, {spread}. It needs points spread over three "
+                                            "directions, two or more on each (the table top and two sides of a box at an "
+                                            f"angle): measure more on the fewest.{off_text}") from None
                     raise WorkflowError(f"turret calibration failed: {exc}") from None
                 deg, m = pose_error(cal.T_world_turret, T)
                 T = cal.T_world_turret
@@ -425,10 +428,23 @@ class CalibrateTurret(Workflow):
             return out
 
 
-def _orientations(normals: np.ndarray, tol_deg: float = 10.0) -> int:
-    """How many different directions the unit normals (N, 3) point in (within ``tol_deg``)."""
-    kinds: list[np.ndarray] = []
-    for n in np.asarray(normals, float).reshape(-1, 3):
-        if not any(float(n @ k) > np.cos(np.radians(tol_deg)) for k in kinds):
-            kinds.append(n)
-    return len(kinds)
+def _orientation_groups(normals: np.ndarray, tol_deg: float = 10.0) -> list[list[int]]:
+    """The unit normals (N, 3) grouped by the direction they point in (within ``tol_deg``), largest first."""
+    groups: list[list[int]] = []
+    N = np.asarray(normals, float).reshape(-1, 3)
+    for i, n in enumerate(N):
+        g = next((g for g in groups if float(n @ N[g[0]]) > np.cos(np.radians(tol_deg))), None)
+        if g is None:
+            groups.append([i])
+        else:
+            g.append(i)
+    return sorted(groups, key=len, reverse=True)
+
+
+def _facing(n: np.ndarray) -> str:
+    """A world normal in words: "up", "down", or the compass-free "sideways (x +0.71, y -0.71)"."""
+    if n[2] > 0.9:
+        return "up"
+    if n[2] < -0.9:
+        return "down"
+    return f"sideways (x {n[0]:+.2f}, y {n[1]:+.2f})"

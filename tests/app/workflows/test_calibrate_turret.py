@@ -81,7 +81,8 @@ def test_one_orientation_is_not_enough(device_site):
     for x, y in ((-0.3, 0.5), (-0.2, 0.45), (-0.35, 0.3), (0.35, 0.55), (-0.3, -0.4), (0.3, -0.5)):
         wf.choose_point(T[:3, :3] @ [x, y, 0.04] + T[:3, 3])
         wf.measure()
-    with pytest.raises(WorkflowError, match="the 6 measurements on known surfaces lie on faces of only 1 orientation ") as e:
+    with pytest.raises(WorkflowError, match=r"the 6 measurements on known surfaces do not fix the turret's pose: by the way "
+                                            r"their faces face, 6 facing up \(.* and 5 more\)\. It needs points spread") as e:
         wf.solve()
     assert "Left out" not in str(e.value)  # none was: nothing to name
     with pytest.raises(WorkflowError, match="Solve first"):
