@@ -501,9 +501,11 @@ class ClientPanel:
         now, last = time.monotonic(), getattr(self, "_last_click", None)
         double = last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX
         self._last_click = (now, np.asarray(uv, float).copy(), self.session.selected)
-        if (wf is None or wf.finished) and double and last[2] is not None and self.session.selected in (None, last[2]):
-            # no workflow, an object selected, a double click (its first click picked nothing else): the
-            # object's pose is found from that point — Update pose started and Find pressed at once
+        if (wf is None or wf.finished) and double and last[2] is not None:
+            # no workflow, an object selected, a double click: the object's pose is found from that point —
+            # Update pose started and Find pressed at once. The object is the one selected before the double
+            # click, even when its first click selected another whose wireframe runs there (the table's
+            # edge across the moved box: a new operator's double click selected the table)
             self._last_click = None
             self.session.select(last[2])
             self._on_start("update_pose")

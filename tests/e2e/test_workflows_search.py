@@ -162,7 +162,16 @@ def test_update_pose_by_a_double_click_on_the_selected_object(browser, interface
     obj = ui.site.object(BOX)
     T_true = scene.body(BOX).pose_at(ui.frame_t_s)
     missed = _select(op, page, obj, cam) - 1  # a first click the loaded page did not take, clicked again
-    op.double_click(cam.project_obj(T_true, obj.model.vertices).mean(axis=0))
+    # on the box where the frame shows it, at a pixel where the table's wireframe runs: the double click's
+    # first click alone would select the table (a new operator lost the box so), the double click is the box's
+    from scipy.spatial import Delaunay
+
+    hull = Delaunay(cam.project_obj(T_true, obj.model.vertices))
+    grid = np.stack(np.meshgrid(np.arange(0, cam.width, 2.0), np.arange(0, cam.height, 2.0)), axis=-1).reshape(-1, 2)
+    inside = grid[hull.find_simplex(grid) >= 0]
+    on_table = [uv for uv in inside if page.panel._object_at(uv) == "table"]
+    assert on_table, "no pixel of the moved box lies by the table's wireframe in this frame"
+    op.double_click(on_table[len(on_table) // 2])
     wait_until(lambda: page.panel.session.workflow is not None and page.panel.session.workflow.found is not None,
                timeout_s=30, what="Update pose started and the found poses")
     wf = page.panel.session.workflow
