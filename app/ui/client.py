@@ -262,7 +262,7 @@ class ClientPanel:
                 self.controls[c.action] = handle
 
     # ------------------------------------------------------------------ callbacks (state only)
-    def _on_start(self, name: str, _event=None) -> None:
+    def _on_start(self, name: str, _event=None, frame: Any = None) -> None:
         if self.worker is not None and self.worker.is_alive():
             raise WorkflowError("a measurement is running: wait for it or Cancel it first")
         options: dict[str, Any] = {}
@@ -282,7 +282,7 @@ class ClientPanel:
         if name == "track":
             self.feeder = TrackFeeder(self, wf, self.app.grabber)
         if name not in LIVE_WORKFLOWS:
-            self._freeze(self.app.grabber.latest(), "live")
+            self._freeze(frame if frame is not None else self.app.grabber.latest(), "live")
         else:
             self._unfreeze()
         if self.gui_scrub.value != 0.0:  # the newest frame is frozen: the scrubber says 0 s back
@@ -500,7 +500,9 @@ class ClientPanel:
         wf = self.session.workflow
         now, last = time.monotonic(), getattr(self, "_last_click", None)
         double = last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX
-        self._last_click = (now, np.asarray(uv, float).copy(), self.session.selected)
+        # the frame shown at this click: a double click that starts Update pose freezes it (the newest, a
+        # moment later, showed a moving box elsewhere: a new operator's run)
+        self._last_click = (now, np.asarray(uv, float).copy(), self.session.selected, self.app.grabber.latest())
         if (wf is None or wf.finished) and double and last[2] is not None:
             # no workflow, an object selected, a double click: the object's pose is found from that point —
             # Update pose started and Find pressed at once. The object is the one selected before the double
@@ -508,7 +510,7 @@ class ClientPanel:
             # edge across the moved box: a new operator's double click selected the table)
             self._last_click = None
             self.session.select(last[2])
-            self._on_start("update_pose")
+            self._on_start("update_pose", frame=last[3])
             self.session.workflow.click(uv)
             self.press("find")
             return
