@@ -690,11 +690,27 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                         "often corrects a candidate that looks off.",
                         frozenset(more | {"choose_candidate"}))
         if self.refined is None:
+            corner = self._one_corner()
+            if corner is not None and not self.points_uv:  # said now, not after Solve
+                return Step("ready", f"Edges {', '.join(str(i + 1) for i in corner)} meet at one corner of "
+                            f"{self.object_name}: they give its turn but not its distance. Click a fourth edge that does not "
+                            "pass through that corner, or {start_point} on another corner; or {refine} from the database "
+                            "pose for a small motion.", frozenset(more - {"solve"}))
             return Step("ready", "{solve} for a large motion, or {refine} from the database pose for a small one; or click "
                         "more edges.", frozenset(more))
         extra = {"choose_candidate"} if self.candidates else set()
         return Step("review", f"Refined: RMS {self.refined.rms_px:.2f} px. " + "{accept} to write it, or add clicks and "
                     "{refine} again.", frozenset(more | extra | {"accept"}))
+
+    def _one_corner(self) -> list[int] | None:
+        """The clicked edges (indices) when exactly three are assigned and their model edges share one
+        vertex (P3L cannot fix the distance from them, ``core.pose.p3l``), else None."""
+        assigned = [(i, e) for i, e in enumerate(self.edge_ids) if e is not None]
+        if len(assigned) != 3:
+            return None
+        E = self.obj.model.edges
+        common = set(E[assigned[0][1]]) & set(E[assigned[1][1]]) & set(E[assigned[2][1]])
+        return [i for i, _ in assigned] if common else None
 
     def choices(self, action: str) -> list[tuple[str, Any]]:
         with self.lock:

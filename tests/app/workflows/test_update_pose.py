@@ -400,6 +400,8 @@ def test_three_edges_through_one_corner_are_refused_in_the_operators_words(site)
         wf.add_segment(seg, k)
     assert "not all three through one corner" in wf.current_step().prompt
     wf.add_segment(segs[2], three[2])
+    st = wf.current_step()  # said as the third edge is assigned, not after Solve
+    assert "Edges 1, 2, 3 meet at one corner of parallelepiped" in st.prompt and "solve" not in st.enabled
     with pytest.raises(WorkflowError, match="edges 1, 2, 3 meet at one corner of parallelepiped") as err:
         wf.solve()
     assert "points_uv" not in str(err.value) and "[" not in str(err.value)
