@@ -122,7 +122,11 @@ class History(Workflow):
         if action != "change":
             return []
         with self.lock:
-            return [(f"#{c.id} {c.client} {_change_sentence(c)} ({time.strftime('%H:%M:%S', time.localtime(c.time))})",
+            # a change undone since says so (a new operator saw the chooser stay on one just undone, unmarked)
+            undone = {int(c.undoes): int(c.id) for c in sorted(self.entries, key=lambda c: c.id)
+                      if c.method == "undo" and c.undoes is not None}
+            return [(f"#{c.id} {c.client} {_change_sentence(c)} ({time.strftime('%H:%M:%S', time.localtime(c.time))})"
+                     + (f" — undone by #{undone[int(c.id)]}" if undone.get(int(c.id)) not in (None, *undone) else ""),
                      int(c.id)) for c in self.entries]
 
     def summary(self) -> dict[str, Any]:

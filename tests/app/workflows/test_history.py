@@ -30,6 +30,7 @@ def test_undo_brings_the_old_pose_back_and_is_recorded(site, db):
     assert change.version + 1 == site.object("parallelepiped").version
     n = len(db.history())
     assert wf.question("undo", last_id) == ""  # nothing to confirm: the press itself says it is undone already
+    assert any(v == last_id and text.endswith(f"— undone by #{rec.id}") for text, v in wf.choices("change"))
     with pytest.raises(WorkflowError, match=f"change {last_id} is undone already .*undo change {rec.id}"):
         wf.undo(last_id)  # pressed again (the chooser still shows it): nothing recorded
     assert len(db.history()) == n
@@ -71,3 +72,21 @@ def test_the_history_says_how_in_the_operators_words(site):
     rows = History(site, client="alice").summary()["changes"]
     assert rows[0]["how"] == "three edges solved, then refined"
     assert method_words("search") == "found from one click" and method_words("model box (fused)") == "model box (fused)"
+
+
+def test_the_chooser_marks_a_change_undone_until_its_undo_is_undone(site):
+    """The Change chooser says "undone by #k" after a change that is undone, and stops saying it when
+    that undo is undone in turn (the change is back)."""
+    from app.workflows import History
+
+    site.set_status("parallelepiped", "stale", client="alice")
+    c = site.db.history("parallelepiped")[-1]
+    h = History(site, client="alice")
+    u = h.undo(c.id)
+    h.refresh()
+    text = {v: t for t, v in h.choices("change")}
+    assert text[c.id].endswith(f"— undone by #{u.id}") and "undone by" not in text[u.id]
+    uu = h.undo(u.id)
+    h.refresh()
+    text = {v: t for t, v in h.choices("change")}
+    assert "undone by" not in text[c.id] and text[u.id].endswith(f"— undone by #{uu.id}")
