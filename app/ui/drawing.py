@@ -87,7 +87,8 @@ def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], wid
         obj = objects[name]
         batch.add_wireframe(project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height),
                             STATUS_COLORS["selected"])
-    for ghost in marks.ghosts:
+    # the chosen ghost last, drawn over the others (a near-identical candidate hid it: a new operator's run)
+    for ghost in sorted(marks.ghosts, key=lambda g: bool(g.chosen)):
         pw = project_wireframe(camera, ghost.model, ghost.T_world_obj, width=width, height=height)
         batch.add_wireframe(pw, COLORS["ghost_chosen"] if ghost.chosen else COLORS["ghost"],
                             hidden="dashed" if ghost.chosen else "removed")

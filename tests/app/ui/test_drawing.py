@@ -52,6 +52,10 @@ def test_marks_draw_selection_ghosts_clicks_targets_beam(site):
     for key in ("ghost_chosen", "ghost", "click", "pending", "target", "beam", "assigned"):
         assert COLORS[key] in cols, key
     assert STATUS_COLORS["selected"] in cols
+    # the chosen ghost (listed first) is drawn after the other: over it where they overlap
+    order = [tuple(int(v) for v in c) for c in batch.arrays()[1]]
+    last_ghost = max(i for i, c in enumerate(order) if c == COLORS["ghost"])
+    assert min(i for i, c in enumerate(order) if c == COLORS["ghost_chosen"]) > last_ghost
     assert len(labels) == 1 and labels[0][1] == "1" and np.allclose(labels[0][0], [5.0, 5.0])
     empty, _ = draw_marks(site.camera, Marks(), objects, 512, 256)
     assert len(empty) == 0
