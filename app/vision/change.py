@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["changed_share", "CHANGED_GREY", "CHANGED_SHARE", "HALF_PX"]
+__all__ = ["changed_share", "inside", "CHANGED_GREY", "CHANGED_SHARE", "HALF_PX"]
 
 CHANGED_GREY = 20.0  # grey levels (0-255) of difference that count as a change
 CHANGED_SHARE = 0.08  # share of a patch's pixels that must change
@@ -34,6 +34,17 @@ def _grey(image: np.ndarray) -> np.ndarray:
     if a.ndim == 3:
         a = cv2.cvtColor(a, cv2.COLOR_RGB2GRAY)
     return a.astype(np.float32)
+
+
+def inside(uv: np.ndarray) -> np.ndarray:
+    """Pixels to look at for an outline ``uv`` (N, 2): its centre and its points taken a third of the way in
+    towards it (on the outline itself the background shows, and something moving behind is no change of
+    the object)."""
+    uv = np.asarray(uv, float).reshape(-1, 2)
+    if not len(uv):
+        return uv
+    c = uv.mean(axis=0)
+    return np.vstack([c, uv + (c - uv) / 3.0])
 
 
 def changed_share(frozen: np.ndarray, live: np.ndarray, uv: np.ndarray, half_px: int = HALF_PX) -> float:

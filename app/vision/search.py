@@ -794,12 +794,23 @@ def _settle_table(camera: Camera, model: BRep, T0: np.ndarray, oe, img_s: np.nda
     c = _check(camera, model, T, oe, img_s, rims, cov, coarse_px)
     if c is None and k == 3:  # a local minimum a few degrees off (``_heading_profile``): from its heading ± RETRY_DEG
         p = space.params(T)
-        for d in (-RETRY_DEG, RETRY_DEG):
-            T, cov = _refine(camera, model, space.pose(p + [0.0, 0.0, np.radians(d)]), img_s, space, rims)
-            cd = _check(camera, model, T, oe, img_s, rims, cov, coarse_px)
-            if cd is not None and (c is None or cd.mismatch < c.mismatch):
-                c = cd
+        c = _best_refined(camera, model, [p + [0.0, 0.0, np.radians(d)] for d in (-RETRY_DEG, RETRY_DEG)], oe, img_s,
+                          space, rims, coarse_px)
     return c
+
+
+def _best_refined(camera: Camera, model: BRep, starts: list, oe, img_s: np.ndarray, space, rims: bool, coarse_px: float,
+                  than: SearchCandidate | None = None) -> SearchCandidate | None:
+    """Of the poses refined (``_refine``) from the parameter vectors ``starts`` of ``space`` that pass
+    ``_check``, the one of lowest mismatch — lower than ``than``'s when given — or None."""
+    best = None
+    for q in starts:
+        T, cov = _refine(camera, model, space.pose(np.asarray(q, float)), img_s, space, rims)
+        c = _check(camera, model, T, oe, img_s, rims, cov, coarse_px)
+        bar = best if best is not None else than
+        if c is not None and (bar is None or c.mismatch < bar.mismatch):
+            best = c
+    return best
 
 
 def _heading_profile(camera: Camera, model: BRep, c: SearchCandidate, oe, img_s: np.ndarray, sp: _TableSpace, zc: float,
@@ -823,9 +834,7 @@ def _heading_profile(camera: Camera, model: BRep, c: SearchCandidate, oe, img_s:
             best_m, best_p = m[3], held.params(T).tolist() + [p[2] + d]
     if best_p is None:
         return None
-    T, cov = _refine(camera, model, space.pose(np.array(best_p)), img_s, space, False)
-    out = _check(camera, model, T, oe, img_s, False, cov, c.coarse_px)
-    return out if out is not None and out.mismatch < c.mismatch else None
+    return _best_refined(camera, model, [best_p], oe, img_s, space, False, c.coarse_px, than=c)
 
 
 def _slides(camera: Camera, model: BRep, c: SearchCandidate, oe, img_s: np.ndarray, sp: _TableSpace, zc: float,
@@ -841,18 +850,10 @@ def _slides(camera: Camera, model: BRep, c: SearchCandidate, oe, img_s: np.ndarr
     p = space.params(c.T_world_obj)
     P = (_support_points(model) - centre_obj) @ c.T_world_obj[:3, :3].T
     xy = np.column_stack([P @ sp.e1, P @ sp.e2])
-    w, U = np.linalg.eigh(np.cov(xy.T))
-    best = None
-    for axis in U.T:
-        length = float(np.ptp(xy @ axis))
-        for f in SLIDE_FRACTIONS:
-            for sign in (-1.0, 1.0):
-                q = p + np.r_[sign * f * length * axis, 0.0]
-                T, cov = _refine(camera, model, space.pose(q), img_s, space, False)
-                cd = _check(camera, model, T, oe, img_s, False, cov, c.coarse_px)
-                if cd is not None and cd.mismatch < (c.mismatch if best is None else best.mismatch):
-                    best = cd
-    return best
+    U = np.linalg.eigh(np.cov(xy.T))[1]  # the footprint's axes on the table (e1, e2), metres along them
+    starts = [p + np.r_[sign * f * float(np.ptp(xy @ axis)) * axis, 0.0]
+              for axis in U.T for f in SLIDE_FRACTIONS for sign in (-1.0, 1.0)]
+    return _best_refined(camera, model, starts, oe, img_s, space, False, c.coarse_px, than=c)
 
 
 def _check(camera: Camera, model: BRep, T: np.ndarray, oe, img_s: np.ndarray, rims: bool, cov: np.ndarray | None,

@@ -139,9 +139,9 @@ class OneClickMixin:
     def _moving_at(self, T: np.ndarray, camera, model) -> str:
         """"" unless the object at pose T changed between the frozen frame and the one shown just before
         it (``Workflow.moving_share``): then it was moving, and the pose found there is where it passed,
-        not where it stays. The pixels are its outline's points taken a third of the way in towards their
-        centre (on the outline the background shows)."""
-        from app.vision.change import CHANGED_SHARE
+        not where it stays. The pixels: its bounding box's corners, projected, taken inside
+        (``app.vision.change.inside``)."""
+        from app.vision.change import CHANGED_SHARE, inside
 
         lo, hi = model.bounds()
         box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
@@ -149,8 +149,7 @@ class OneClickMixin:
         uv = camera.project(X[camera.depth(X) > 0])
         if not len(uv):
             return ""
-        c = uv.mean(axis=0)
-        share = self.moving_share(np.vstack([c, uv + (c - uv) / 3.0]))
+        share = self.moving_share(inside(uv))
         if share is None or share <= CHANGED_SHARE:
             return ""
         return (f"{self.object_name} was moving in this frame (it differs from the frame {MOTION_GAP_S:.1f} s before): "

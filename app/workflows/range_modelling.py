@@ -173,10 +173,11 @@ class RangeModelling:
         the pixels outline what is measured; they are taken a third of the way in towards their centre
         (on the outline the background shows, and something moving behind is no change of the object).
         Call it without the lock."""
+        from app.vision.change import inside as inward
+
         uv = np.asarray(uv, float).reshape(-1, 2)
-        if inside and len(uv):
-            c = uv.mean(axis=0)
-            uv = np.vstack([c, uv + (c - uv) / 3.0])
+        if inside:
+            uv = inward(uv)
         why = self.scene_changed(uv)
         if why:
             raise WorkflowError(f"{why}: {what} may not be where the frozen frame shows it. Nothing was measured: "

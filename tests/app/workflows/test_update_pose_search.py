@@ -155,7 +155,7 @@ def test_a_refine_after_find_keeps_the_camera_calibration_share_of_the_sigma(vid
     wf, _, T_true = _found(site, scene)
     c = wf.found[0]
     share = c.cov_camera
-    assert share is not None and np.allclose(c.cov, c.cov - share + share)
+    assert share is not None and np.all(np.linalg.eigvalsh(c.cov - share) > -1e-12)  # the image's share stays a covariance
     obj = wf.obj
     rng = np.random.default_rng(4)
     for k in sorted(_visible_edges(site, obj.model, T_true))[:3]:
