@@ -125,14 +125,19 @@ class History(Workflow):
             # a change undone since says so (a new operator saw the chooser stay on one just undone, unmarked)
             undone = {int(c.undoes): int(c.id) for c in sorted(self.entries, key=lambda c: c.id)
                       if c.method == "undo" and c.undoes is not None}
-            return [(f"#{c.id} {c.client} {_change_sentence(c)} ({time.strftime('%H:%M:%S', time.localtime(c.time))})"
+            return [(f"#{c.id} {c.client} {self._sentence(c)} ({time.strftime('%H:%M:%S', time.localtime(c.time))})"
                      + (f" — undone by #{undone[int(c.id)]}" if undone.get(int(c.id)) not in (None, *undone) else ""),
                      int(c.id)) for c in self.entries]
+
+    def _sentence(self, c) -> str:
+        by_id = {int(e.id): e for e in self.entries}
+        undone = by_id.get(int(c.undoes)) if c.undoes is not None else None
+        return _change_sentence(c, undone if undone is not None else self.site.undone(c))
 
     def summary(self) -> dict[str, Any]:
         with self.lock:
             rows = []
             for c in self.entries:
                 rows.append({"#": c.id, "when": time.strftime("%H:%M:%S", time.localtime(c.time)), "who": c.client,
-                             "what": _change_sentence(c), "how": method_words(c.method)})
+                             "what": self._sentence(c), "how": method_words(c.method)})
             return {"changes": rows}

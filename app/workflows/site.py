@@ -109,11 +109,21 @@ def method_words(method: str | None) -> str:
     return METHOD_WORDS.get(method, method)
 
 
-def _change_sentence(rec: Any) -> str:
-    """What an ``app.db.ChangeRecord`` did, in one plain sentence (without who)."""
+def _is_undo(rec: Any) -> bool:
+    return rec.action == "undo" or (rec.action == "calibration" and rec.method == "undo" and rec.undoes is not None)
+
+
+def _change_sentence(rec: Any, undone: Any = None) -> str:
+    """What an ``app.db.ChangeRecord`` did, in one plain sentence (without who). ``undone``: the
+    record an undo undid, when known: the undo of an undo is said as a redo of the change first
+    undone ("redid change #7 (undid undo #9)"; a new operator read "undid change #9" as a second undo)."""
     name = rec.object_name or "an object"
+    redo = (rec.undoes is not None and undone is not None and int(undone.id) == int(rec.undoes) and _is_undo(rec)
+            and _is_undo(undone) and undone.undoes is not None)
     if rec.action == "calibration":
         kind = (rec.after or {}).get("kind", "")
+        if redo:
+            return f"redid change #{undone.undoes} ({kind} calibration; undid undo #{rec.undoes})"
         if rec.undoes is not None:
             return f"{'undid' if rec.method == 'undo' else 'went back to'} change #{rec.undoes} ({kind} calibration)"
         return f"calibrated the {kind}" if kind else "stored a calibration"
@@ -121,6 +131,9 @@ def _change_sentence(rec: Any) -> str:
         return f"added {name}"
     if rec.action == "remove":
         return f"removed {name}"
+    if redo:
+        return f"redid change #{undone.undoes}" + (f" ({name}; undid undo #{rec.undoes})" if rec.object_name
+                                                   else f" (undid undo #{rec.undoes})")
     if rec.action == "undo":
         return f"undid change #{rec.undoes}" + (f" ({name})" if rec.object_name else "")
     if rec.action == "restore":
@@ -437,12 +450,21 @@ class Site:
         with self._feed_lock:
             return [c for c in self._feed if c.seq > seq]
 
+    def undone(self, rec: Any) -> Any:
+        """The history record that ``rec`` (an undo) undid, or None (not an undo, or not found)."""
+        if not _is_undo(rec):
+            return None
+        try:
+            return self.db.change(int(rec.undoes))
+        except Exception:  # noqa: BLE001 - the sentence then says "undid", as before
+            return None
+
     def _read_feed(self) -> None:
         """Add the history's new changes to the feed (a cheap query when there are none), and send
         each object's change out on the attached live feed (``attach_feed``)."""
         with self._feed_lock:
             for rec in self.db.history_since(self._feed_seq):
-                self._feed.append(Change(int(rec.id), str(rec.client), _change_sentence(rec), rec.object_name,
+                self._feed.append(Change(int(rec.id), str(rec.client), _change_sentence(rec, self.undone(rec)), rec.object_name,
                                          float(rec.time)))
                 self._feed_seq = int(rec.id)
                 if self.feed is not None:

@@ -34,6 +34,12 @@ def test_undo_brings_the_old_pose_back_and_is_recorded(site, db):
     with pytest.raises(WorkflowError, match=f"change {last_id} is undone already .*undo change {rec.id}"):
         wf.undo(last_id)  # pressed again (the chooser still shows it): nothing recorded
     assert len(db.history()) == n
+    redo = wf.undo(rec.id)  # the undo undone: said as a redo of the first change, in the list and to the others
+    assert np.allclose(site.object("parallelepiped").T_world_obj, T_new)
+    what = f"redid change #{last_id} (parallelepiped; undid undo #{rec.id})"
+    assert wf.summary()["changes"][0]["what"] == what
+    assert any(text.startswith(f"#{redo.id} alice {what}") for text, _ in wf.choices("change"))
+    assert [c.what for c in site.changes_since(rec.id)] == [what]
 
 
 def test_undo_asks_when_it_discards_later_changes_and_refuses_a_stale_list(site):

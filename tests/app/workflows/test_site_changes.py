@@ -87,3 +87,7 @@ def test_undoing_a_calibration_is_announced_and_used(site, db):
     site.undo(last.id, client="alice")
     assert np.allclose(site.camera.C, C1)  # the calibration before the undone one is in use again
     assert site.changes_since(last.id)[0].what == f"undid change #{last.id} (camera calibration)"
+    undo = db.history()[-1]
+    site.undo(undo.id, client="alice")  # the undo undone: a redo of the calibration
+    assert np.allclose(site.camera.C, cam0.C)
+    assert site.changes_since(undo.id)[0].what == f"redid change #{last.id} (camera calibration; undid undo #{undo.id})"
