@@ -30,9 +30,11 @@ START_BUTTONS: tuple[tuple[str, str], ...] = (
 )
 
 # Units a result key ends with → (shown unit, decimals): 0.01 px (an RMS of a few hundredths read "0"
-# beside the message's "0.03 px"), 0.1 mm, 0.01°.
-_UNITS = (("_px", "px", 2), ("_mm", "mm", 1), ("_cm", "cm", 2), ("_deg", "°", 2), ("_m", "m", 4), ("_s", "s", 2),
+# beside the message's "0.03 px"), 0.1 mm, 0.01°. Lengths kept in metres are shown in mm, as every other
+# length in the panel (a new operator met "Range (m) 1.8688" beside "To surface (mm) 3.2").
+_UNITS = (("_px", "px", 2), ("_mm", "mm", 1), ("_cm", "cm", 2), ("_deg", "°", 2), ("_m", "mm", 1), ("_s", "s", 2),
           ("_pct", "%", 0))
+_SCALE = {"_m": 1000.0}  # a key's value → the shown unit
 _WORDS = {"rms": "RMS", "std": "σ", "sd": "σ", "sigma": "σ", "uv": "pixel", "x_world": "X (world)", "xyz": "x y z"}
 
 
@@ -63,7 +65,9 @@ def format_value(key: str, v: Any) -> str:
         x = float(v)
         if not math.isfinite(x):
             return "—"
-        decimals = next((d for suffix, _, d in _UNITS if key.endswith(suffix)), None)
+        suffix = next((u for u, _, _ in _UNITS if key.endswith(u) and len(key) > len(u)), "")
+        x *= _SCALE.get(suffix, 1.0)
+        decimals = next((d for u, _, d in _UNITS if u == suffix), None)
         if decimals is None:
             decimals = 2 if abs(x) < 100 else 0
         text = f"{x:.{decimals}f}"

@@ -75,6 +75,9 @@ def test_report_markdown_lists_scalars_and_tables():
     nested = report_markdown({"found": {"candidates": 1, "fit_px": 0.31, "std_t_mm": [0.1, 0.8], "change": {"deg": 53.01, "cm": 21.9}}})
     assert "- **Found**\n  - **Candidates**: 1\n  - **Fit (px)**: 0.31\n  - **σ translation (mm)**: 0.1, 0.8" in nested
     assert "  - **Change**: 53.01°, 219.0 mm" in nested and "{" not in nested and "[" not in nested
-    assert "**x y z (m)**" in heads and "**t (s)**" in heads and "Σ" not in heads and "Sd" not in heads
+    assert "**x y z (mm)**" in heads and "**t (s)**" in heads and "Σ" not in heads and "Sd" not in heads
     tiny = report_markdown({"rms_px": 2.332e-14, "std_r_deg": 0.123456, "x_m": 1.234567891})
-    assert "e-14" not in tiny and "**RMS (px)**: 0" in tiny and "0.12" in tiny and "1.2346" in tiny
+    assert "e-14" not in tiny and "**RMS (px)**: 0" in tiny and "0.12" in tiny
+    assert "**x (mm)**: 1234.6" in tiny  # metres shown in mm, as every other length in the panel
+    table = report_markdown({"points": [{"point": "A", "range_m": 1.86881, "to_surface_mm": 3.21}]})
+    assert "| Point | Range (mm) | To surface (mm) |" in table and "| A | 1868.8 | 3.2 |" in table
