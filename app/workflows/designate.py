@@ -145,7 +145,7 @@ class DesignateTarget(Workflow):
                 )
             if devices is not None:
                 self.cancel_event.clear()
-                self.progress, self.progress_text = 0.0, "checking with the range finder · aiming"
+                self.progress, self.progress_text = 0.0, "aiming"
         if devices is None:
             t = Target(p, hit.X_world, hit.name, hit.distance_m, hit.normal)
             return self._keep(t, _sentence(NOT_CHECKED))
@@ -200,8 +200,7 @@ class DesignateTarget(Workflow):
 
         def report(prog) -> None:
             self.progress = prog.done / max(prog.total, 1)
-            self.progress_text = ("checking with the range finder · aiming" if "aiming" in prog.message
-                                  else "checking with the range finder · measuring")
+            self.progress_text = "aiming" if "aiming" in prog.message else "measuring"
             if prog.beam is not None and np.isfinite(prog.beam[2]):
                 self.site.set_beam(beam_point(T, *prog.beam))
 
@@ -212,15 +211,18 @@ class DesignateTarget(Workflow):
                                   cancel=self.cancel_event)
         except AcquisitionCancelled:
             self.progress = None
+            self.site.set_beam(None)  # the spot of an aim stopped half-way marks no target
             raise Cancelled() from None
         except TurretLimitError as exc:
             self.progress = None
+            self.site.set_beam(None)
             if hit is None:
                 raise WorkflowError(f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object of the database and the range "
                                     f"finder cannot aim there ({exc}); click on an object or the table") from None
             return None, f"{NOT_CHECKED}: the turret cannot aim there"
         except DeviceError as exc:
             self.progress = None
+            self.site.set_beam(None)
             raise WorkflowError(f"device fault while checking the target with the range finder: {exc}. Check the "
                                 "devices and click again") from None
         return pm, ""
@@ -300,7 +302,7 @@ class DesignateTarget(Workflow):
         if self.finished:
             return self._finished_step()
         if self.progress is not None:
-            return Step("checking", f"Checking the target with the range finder… {self.progress_text}. " + "{cancel} stops it.",
+            return Step("checking", f"Checking the target with the range finder: {self.progress_text}… " + "{cancel} stops it.",
                         frozenset({"cancel"}), clicks=False)
         if self.targets:
             t = self.targets[-1]

@@ -203,3 +203,29 @@ def test_the_measurement_runs_outside_the_workflows_lock(device_site, devices):
     devices.rangefinder.measure = watched
     wf.click(uv)
     assert free and all(free)
+
+
+def test_a_measurement_stopped_half_way_leaves_no_beam_spot(device_site, devices):
+    """Stopped while the turret aims (the operator's Cancel/Esc): no target, the workflow stays open,
+    and the beam spot of the half-done aim is taken away (a new operator saw it left on the video)."""
+    from app.workflows import Cancelled
+
+    site = device_site
+    box = site.object("parallelepiped")
+    uv = site.camera.project(box.T_world_obj[:3, :3] @ np.array([0.0, 0.0, 0.132]) + box.T_world_obj[:3, 3])
+    wf = DesignateTarget(site)
+    seen = []
+    shot = devices.rangefinder.measure
+
+    def stop_while_aiming(*args, **kwargs):  # an aiming shot
+        seen.append((wf.current_step().name, wf.current_step().prompt))
+        site.set_beam(np.array([0.1, 0.2, 0.3]))  # where the aim had got to
+        wf.cancel_event.set()
+        return shot(*args, **kwargs)
+
+    devices.rangefinder.measure = stop_while_aiming
+    with pytest.raises(Cancelled):
+        wf.click(uv)
+    assert seen and seen[0][0] == "checking" and "Checking the target with the range finder: " in seen[0][1]
+    assert wf.targets == [] and wf.progress is None and not wf.finished
+    assert site.beam_X_world is None
