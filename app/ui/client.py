@@ -33,7 +33,7 @@ from app.workflows.base import MOTION_GAP_S, FrameRef, Marks
 from app.workflows.session import WORKFLOWS
 
 from .controls import START_BUTTONS, operator_help, report_markdown
-from .drawing import draw_marks
+from .drawing import draw_marks, spread_labels
 from .tracking import TrackFeeder
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -633,6 +633,17 @@ class ClientPanel:
         fit = abs(float(fit_pos[2]))
         return float(np.clip(dist / fit, 0.02, 4.0)) if fit > 0 else None
 
+    def _image_px_per_screen_px(self) -> float:
+        """Video pixels per screen pixel in this client's view now (1 when it is not known)."""
+        try:
+            cam = self.client.camera
+            dist = abs(float(cam.position[2]))
+            visible = 2.0 * dist * np.tan(float(cam.fov) / 2.0) / self.app.pixel_world.k  # video px across the canvas' height
+            k = visible / float(cam.image_height)
+        except (AssertionError, ZeroDivisionError, TypeError, AttributeError, ValueError):
+            return 1.0
+        return k if np.isfinite(k) and k > 0 else 1.0
+
     # ------------------------------------------------------------------ helpers
     def _object_at(self, uv: np.ndarray) -> str | None:
         return self.app.object_at(uv, SELECT_RADIUS_PX)  # the overlay's own projections: nothing projected here
@@ -723,6 +734,7 @@ class ClientPanel:
         pw = self.app.pixel_world
         batch, labels = draw_marks(site.camera, marks, objects, pw.width, pw.height, selected=self.session.selected,
                                    scale=self.marks_scale)
+        labels = spread_labels(labels, self._image_px_per_screen_px())
         self._labels_sent = self.app.send_client_overlay(self.client, batch, labels, self._labels_sent)
         self._update_texts(wf)
         if self.click_t is not None:

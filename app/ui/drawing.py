@@ -18,7 +18,7 @@ from app.workflows.base import Marks
 from app.workflows.site import SiteObject
 from core.camera import Camera
 
-__all__ = ["label_anchor", "draw_database", "draw_object", "draw_marks"]
+__all__ = ["label_anchor", "draw_database", "draw_object", "draw_marks", "spread_labels"]
 
 WIDE_TOP_PX = 160.0  # label_anchor: a top wider than this gets its label near the left end ...
 WIDE_TOP_INSET_PX = 40.0  # ... this far in
@@ -125,3 +125,33 @@ def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], wid
         batch.add(circle_marker(marks.beam_uv, 2.0 * s, n=8), COLORS["beam"])
     labels = [(np.asarray(uv, float), str(text)) for uv, text in marks.labels]
     return batch, labels
+
+
+LABEL_CHAR_PX = 7.0  # spread_labels: a label's character width and line height on screen (font_screen_scale 0.8)
+LABEL_LINE_PX = 15.0
+LABEL_OFFSET_PX = 6.0  # ... its corner this far right of and above the point it names
+
+
+def spread_labels(labels: list[tuple[np.ndarray, str]], image_px_per_screen_px: float) -> list[tuple[np.ndarray, str]]:
+    """Labels moved apart so that none covers another: each label's bottom-left corner (image pixels),
+    placed just above and right of its point, then lifted a line at a time while its box meets a label
+    placed before it (a new operator met "3→e2" written over "snapped 2.6 px" at one corner).
+
+    image_px_per_screen_px : the view's scale (the label's size on screen is fixed)."""
+    k = float(image_px_per_screen_px)
+    if not (np.isfinite(k) and k > 0):
+        raise ValueError(f"image_px_per_screen_px must be a positive number, got {image_px_per_screen_px!r}")
+    h = LABEL_LINE_PX * k
+    placed: list[tuple[float, float, float, float]] = []  # x0, y0 (top), x1, y1 (bottom)
+    out = []
+    for uv, text in labels:
+        x = float(uv[0]) + LABEL_OFFSET_PX * k
+        y = float(uv[1]) - LABEL_OFFSET_PX * k
+        w = (len(text) * LABEL_CHAR_PX + 4.0) * k
+        for _ in range(len(placed) + 1):
+            if not any(x < b[2] and b[0] < x + w and y - h < b[3] and b[1] < y for b in placed):
+                break
+            y = min(b[1] for b in placed if x < b[2] and b[0] < x + w and y - h < b[3] and b[1] < y)  # just above it
+        placed.append((x, y - h, x + w, y))
+        out.append((np.array([x, y]), text))
+    return out

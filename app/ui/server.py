@@ -189,13 +189,14 @@ class InterfaceServer:
         scene_api.add_line_segments(name, points.astype(np.float32), colors, thickness=LINE_PX, thickness_units="screen")
 
     def send_client_overlay(self, client: viser.ClientHandle, batch: LineBatch, labels: list, sent: dict) -> dict:
-        """Draw one client's marks (client-scoped nodes). ``sent`` holds the labels this client was
+        """Draw one client's marks (client-scoped nodes); each label's bottom-left corner at its uv
+        (``drawing.spread_labels``). ``sent`` holds the labels this client was
         sent last (name → (text, position)); only changed ones are sent again. Returns the new dict."""
         self._send_lines(client.scene, "/overlay/marks", batch, Z_MARKS)
         new: dict = {}
         for i, (uv, text) in enumerate(labels):
             name = f"/overlay/marks_labels/{i}"
-            position = tuple(float(v) for v in self.pixel_world.to_world(np.asarray(uv, float) + [6.0, -6.0], Z_MARKS))
+            position = tuple(float(v) for v in self.pixel_world.to_world(np.asarray(uv, float), Z_MARKS))  # spread_labels' corner
             new[name] = (text, position)
             if sent.get(name) != new[name]:
                 client.scene.add_label(name, text, position=position, anchor="bottom-left", font_screen_scale=0.8)

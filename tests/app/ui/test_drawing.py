@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from app.overlay import COLORS, STATUS_COLORS
 from app.ui.controls import report_markdown
@@ -81,3 +82,20 @@ def test_report_markdown_lists_scalars_and_tables():
     assert "**x (mm)**: 1234.6" in tiny  # metres shown in mm, as every other length in the panel
     table = report_markdown({"points": [{"point": "A", "range_m": 1.86881, "to_surface_mm": 3.21}]})
     assert "| Point | Range (mm) | To surface (mm) |" in table and "| A | 1868.8 | 3.2 |" in table
+
+
+def test_spread_labels_lifts_a_label_off_the_one_it_would_cover():
+    from app.ui.drawing import LABEL_LINE_PX, LABEL_OFFSET_PX, spread_labels
+
+    corner = np.array([200.0, 150.0])
+    out = spread_labels([(corner, "3→e2"), (corner + [2.0, 1.0], "snapped 2.6 px"), (np.array([400.0, 150.0]), "R1")], 0.5)
+    (a, _), (b, text), (c, _) = out
+    assert text == "snapped 2.6 px"
+    assert np.allclose(a, corner + [LABEL_OFFSET_PX * 0.5, -LABEL_OFFSET_PX * 0.5])  # just right of and above its point
+    assert a[1] - b[1] >= LABEL_LINE_PX * 0.5 - 1e-9  # a line up: the boxes do not meet
+    assert np.allclose(c, [403.0, 147.0])  # far from the others: not moved
+    # zoomed in 10×: the same labels on screen are ten times smaller in video pixels
+    near = spread_labels([(corner, "3→e2"), (corner + [0.0, 3.0], "snapped 2.6 px")], 0.1)
+    assert np.allclose(near[1][0], corner + [0.6, 2.4])  # 3 px apart is room enough there: not moved
+    with pytest.raises(ValueError, match="positive"):
+        spread_labels([], 0.0)
