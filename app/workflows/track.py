@@ -80,6 +80,9 @@ class TrackObject(SnapMixin, Workflow):
         self.frames = 0
         self.t_first: float | None = None
         self.t_last: float | None = None
+        self.t_good: float | None = None  # the scene time of the last good pose (T_world_obj), None before one
+        self.confidence_good: float | None = None
+        self.t_lost: float | None = None
         self.lost = False
         self.lost_count = 0  # how many times it was lost (the interface notifies on each)
         self.reason = ""
@@ -142,10 +145,12 @@ class TrackObject(SnapMixin, Workflow):
                     self.reason += (" — the video jumped back in time (a recording restarting, or a stream that "
                                     "reconnected): the object is where that frame shows it")
                 self.state = "lost"
+                self.t_lost = t
                 self.message = (f"Lost at t = {t:.2f} s: {self.reason}. Nothing is written while lost: click three or "
                                 f"more edges of {self.object_name} (two clicks each) and Re-initialise, or Restart "
-                                "from the last good pose.")
+                                "from the last good pose" + (", or Accept that pose." if self.t_good is not None else "."))
             else:
+                self.t_good, self.confidence_good = t, float(res.confidence)
                 self.T_world_obj = res.T_world_obj.copy()
                 self.cov = None if self.diagnostics.cov is None else self.diagnostics.cov.copy()
                 self.rms_px = float(self.diagnostics.rms_px)
@@ -249,6 +254,7 @@ class TrackObject(SnapMixin, Workflow):
             self.tracker.reset(T)
             self._generation += 1
             self.T_world_obj = T.copy()
+            self.t_good = self.reinits[-1]["t_s"]
             self.segs, self.seg_snaps, self.pending = [], [], None
             self.lost = self.paused = False
             self.reason = ""
@@ -259,17 +265,21 @@ class TrackObject(SnapMixin, Workflow):
 
     # ------------------------------------------------------------------ accept
     def accept(self):
-        """Write the tracked pose (one transaction, method "tracking"); refused while lost."""
+        """Write the tracked pose (one transaction, method "tracking"). While lost, its last good pose
+        (the panel asks once more: ``weaknesses``; a run lost at a recording's restart had tracked the
+        object to its rest first), with the loss recorded; refused when none was tracked before the loss."""
         with self.lock:
             self._check_open()
-            if self.lost:
-                raise WorkflowError(f"the track is lost ({self.reason}): nothing written. Re-initialise (click edges) "
-                                    "or Restart, or Cancel")
+            if self.lost and self.t_good is None:
+                raise WorkflowError(f"the track is lost ({self.reason}) and no frame was tracked before: nothing written. "
+                                    "Re-initialise (click edges) or Restart, or Cancel")
             if self.frames == 0:
                 raise WorkflowError("no frame has been tracked yet: wait for the video (or step), then Accept")
             clicks = {"reinit": self.reinits} if self.reinits else None
-            measurements = {"frames": self.frames, "t_first_s": self.t_first, "t_last_s": self.t_last}
-            residuals = {"confidence": self.confidence, "rms_px": self.rms_px}
+            measurements = {"frames": self.frames, "t_first_s": self.t_first, "t_last_s": self.t_good}
+            if self.lost:
+                measurements.update(lost_at_s=self.t_lost, lost_reason=self.reason)
+            residuals = {"confidence": self.confidence_good, "rms_px": self.rms_px}
             d = self.diagnostics
             if d is not None:
                 residuals.update(n_samples=int(d.n_samples), n_inliers=int(d.n_inliers))
@@ -279,8 +289,16 @@ class TrackObject(SnapMixin, Workflow):
             self.accepted = True
             self.state = "accepted"
             self.message = (f"{self.object_name} updated from tracking (version {rec.version}): {self.frames} frames, "
-                            f"confidence {100 * (self.confidence or 0):.0f} %")
+                            f"confidence {100 * (self.confidence_good or 0):.0f} %"
+                            + (f"; its last good pose, at t = {self.t_good:.2f} s (lost after)" if self.lost else ""))
             return rec
+
+    def weaknesses(self) -> list[str]:
+        with self.lock:
+            if self.lost and self.t_good is not None and not self.finished:
+                return [f"the track was lost at t = {self.t_lost:.2f} s ({self.reason}): Accept writes its last good "
+                        f"pose, tracked at t = {self.t_good:.2f} s; where {self.object_name} is since, the track cannot say"]
+            return []
 
     # ------------------------------------------------------------------ display
     def _step(self) -> Step:
@@ -297,8 +315,11 @@ class TrackObject(SnapMixin, Workflow):
         then = "then {reinit}" if reinit else "then Re-initialise"
         if self.lost:
             more = f" ({n} clicked)" if n else ""
+            acc = {"accept"} if self.t_good is not None else set()
+            last = (" from the last good pose, or {accept} that pose" + f" (t = {self.t_good:.2f} s)." if acc
+                    else " from the last good pose.")
             return Step("lost", f"Lost: {self.reason}. Click three or more edges of {self.object_name}, two clicks each{more}, "
-                        f"{then}; or " + "{restart} from the last good pose.", frozenset(base | reinit | {"restart"}))
+                        f"{then}; or " + "{restart}" + last, frozenset(base | reinit | acc | {"restart"}))
         if self.paused:
             acc = {"accept"} if self.frames else set()
             return Step("paused", "Paused: {resume}, " + ("{accept} the tracked pose, " if acc else "")

@@ -89,6 +89,29 @@ def test_a_lost_track_says_what_to_do_writes_nothing_and_reinitialises_from_clic
     assert sorted(change.clicks["reinit"][0]["edges"]) == sorted(edges) and rec.version == obj.version + 1
 
 
+def test_a_track_lost_after_good_frames_can_accept_its_last_good_pose_when_asked(video_site, scene, db):
+    """Tracked to its rest, then lost (a recording restarting, an arm passing): the last good pose can be
+    written, said as such (asked once more: a weakness), with the loss recorded; a new operator could
+    not accept a run lost at the recording's restart."""
+    site = video_site
+    site.t["t"] = 11.5
+    obj = site.object("parallelepiped")
+    wf = TrackObject(site, object_name="parallelepiped")
+    T_good, _, lost = wf.step()
+    assert not lost and wf.weaknesses() == []
+    wf.step(frame=np.full((256, 512, 3), 60, np.uint8), t_s=12.0)  # then a blank frame: lost
+    assert wf.lost and "or Accept that pose" in wf.message
+    step = wf.current_step()
+    assert "accept" in step.enabled and "(t = 11.50 s)" in step.prompt
+    (why,) = wf.weaknesses()
+    assert "lost at t = 12.00 s" in why and "last good pose, tracked at t = 11.50 s" in why
+    rec = wf.accept()
+    assert np.allclose(db.get("parallelepiped").T_world_obj, T_good) and rec.version == obj.version + 1
+    change = db.history("parallelepiped")[-1]
+    assert change.measurements["t_last_s"] == 11.5 and change.measurements["lost_at_s"] == 12.0
+    assert "last good pose, at t = 11.50 s" in wf.message
+
+
 def test_pause_resume_restart_and_clicks_only_when_stopped(video_site):
     site = video_site
     site.t["t"] = 2.0
