@@ -29,7 +29,7 @@ import numpy as np
 import viser
 
 from app.workflows import Cancelled, Session, WorkflowError
-from app.workflows.base import MOTION_GAP_S, FrameRef, Marks
+from app.workflows.base import KEY_TEXT, MOTION_GAP_S, FrameRef, Marks
 from app.workflows.session import WORKFLOWS
 
 from .controls import START_BUTTONS, operator_help, report_markdown
@@ -50,6 +50,7 @@ Z_FROZEN = -0.0005  # the frozen frame: in front of the live video, behind the o
 FROZEN_MAX_SIDE = 2048  # the frozen frame is upscaled (nearest neighbour) up to this many pixels a side
 # Workflows that do not take a frozen frame: tracking follows the live video; history has no clicks.
 LIVE_WORKFLOWS = ("track", "history")
+GLOBAL_KEYS = {"f", "l", "h"}  # the panel's own shortcuts (Freeze, Show live, Fit view), live in every workflow
 DOUBLE_CLICK_S = 0.6  # two clicks this close in time and place are a double click
 DOUBLE_CLICK_PX = 4.0
 WHEEL_FIELD = "mcit-wheel"  # the hidden text field static/wheel.js writes the wheel into
@@ -106,6 +107,7 @@ class ClientPanel:
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
         self.seen_change = app.site.change_seq
         self._build_gui()
+        self._foreign_keys(None)
         # Clicks are handled one at a time, in the order they arrive (viser runs plain callbacks
         # on a thread pool, where two quick clicks could swap); the event loop is not blocked.
         self._click_worker = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"mcit-click-{client.client_id}")
@@ -227,7 +229,7 @@ class ClientPanel:
         if script:
             gui.add_html(script)
         for label, key, fn in (("Freeze", "F", lambda: self._freeze_back(0)), ("Show live / frozen", "L", self._toggle_live),
-                               ("Fit view", "H", self._request_fit)):
+                               ("Fit view", "H", self._request_fit)):  # GLOBAL_KEYS
             cmd = gui.add_command(label, hotkey=key)
             cmd.on_trigger(self._guard(lambda _e, fn=fn: fn()))
 
@@ -240,6 +242,7 @@ class ClientPanel:
         self.confirm_pending, self.warning = None, ""
         wf = self.session.workflow
         self.built_for = wf
+        self._foreign_keys(None if wf is None or wf.finished else wf)
         if wf is None or wf.finished:
             return
         gui = self.client.gui
@@ -260,6 +263,30 @@ class ClientPanel:
                         self.commands.append(cmd)
                         self._command_of[c.action] = cmd
                 self.controls[c.action] = handle
+
+    def _foreign_keys(self, wf) -> None:
+        """The keys of other workflows' controls, live here so that pressing one says it does nothing now
+        and which keys do (a new operator pressed P, Solve in Update pose, in Designate: nothing said)."""
+        own = {c.key.lower() for c in (wf.controls if wf is not None else ()) if c.key}
+        uses: dict[str, list[str]] = {}
+        for cls in WORKFLOWS.values():
+            for c in getattr(cls, "controls", ()):
+                if c.key and c.key.lower() not in own and c.key.lower() not in GLOBAL_KEYS and (wf is not None or c.key != "escape"):
+                    uses.setdefault(c.key, [])
+                    if f"{c.label} in {cls.title}" not in uses[c.key]:
+                        uses[c.key].append(f"{c.label} in {cls.title}")
+        here = (f"{wf.title}'s keys: " + ", ".join(f"{c.key_text} {c.label}" for c in wf.controls if c.key)
+                if wf is not None else "start a workflow first")
+        for key, where in sorted(uses.items()):
+            name = KEY_TEXT.get(key, key.upper())
+
+            def said(_event, name=name, where=where) -> None:
+                raise WorkflowError(f"{name} does nothing {'in ' + wf.title if wf is not None else 'now'} "
+                                    f"(it is {', '.join(where[:2])}): {here}")
+
+            cmd = self.client.gui.add_command(f"{name}: {', '.join(where[:2])}", hotkey=key)
+            cmd.on_trigger(self._guard(said))
+            self.commands.append(cmd)
 
     # ------------------------------------------------------------------ callbacks (state only)
     def _on_start(self, name: str, _event=None, frame: Any = None) -> None:

@@ -281,6 +281,9 @@ def test_designate_known_and_unknown_by_clicks(browser, device_interface, scene)
     op.press("Designate target")
     wf = _workflow(page, "designate")
     assert_prompt_controls(page)
+    page.keyboard.press("p")  # Solve's key in Update pose: said to do nothing here, with the keys that do
+    page.get_by_text("P does nothing in Designate target", exact=False).first.wait_for(timeout=5000)
+    assert page.get_by_text("Designate target's keys: X Clear, Enter Done, Esc Cancel", exact=False).first.is_visible()
     # a point of the table top in front, where nothing else stands (in the database and in the truth)
     table = site.object("table")
     T = table.T_world_obj
