@@ -153,8 +153,8 @@ class OneClickMixin:
         if share is None or share <= CHANGED_SHARE:
             return ""
         return (f"{self.object_name} was moving in this frame (it differs from the frame {MOTION_GAP_S:.1f} s before): "
-                "the pose found is where it passed, not where it stays; go back (Seconds back) to a frame where it "
-                "holds still, or Accept if it stopped there")
+                "the pose found is where it passed, not where it stays; once it has stopped, freeze the live frame (F) "
+                "and Find again (Seconds back reaches a frame where it had stopped before), or Accept if it stopped there")
 
     def _near_ties(self) -> int:
         """How many found poses besides the best match the image almost as well (mismatch within
