@@ -122,8 +122,6 @@ def test_no_database_surface_but_the_range_finder_hits(device_site, fast_scene):
 
 
 def test_a_device_fault_keeps_nothing(device_site, devices):
-    from app.devices.faults import Fault
-
     site = device_site
     box = site.object("parallelepiped")
     X = box.T_world_obj[:3, :3] @ np.array([0.0, 0.0, 0.132]) + box.T_world_obj[:3, 3]
@@ -156,8 +154,7 @@ def test_the_turret_calibrations_share_of_sigma(device_site):
     from core.calibration import perturbed_turret
 
     site = device_site
-    box = site.object("parallelepiped")
-    uv = site.camera.project(box.T_world_obj[:3, :3] @ np.array([0.0, 0.0, 0.132]) + box.T_world_obj[:3, 3])
+    uv = _box_top(site)
     wf = DesignateTarget(site)
     plain = wf.click(uv)
     assert plain.details["sigma_turret_m"] == 0.0
@@ -176,13 +173,18 @@ def test_the_turret_calibrations_share_of_sigma(device_site):
     assert s_T == pytest.approx(np.std(along), rel=0.1)
 
 
+def _box_top(site) -> np.ndarray:
+    """The pixel of the middle of the parallelepiped's top face."""
+    box = site.object("parallelepiped")
+    return site.camera.project(box.T_world_obj[:3, :3] @ np.array([0.0, 0.0, 0.132]) + box.T_world_obj[:3, 3])
+
+
 def test_the_measurement_runs_outside_the_workflows_lock(device_site, devices):
     """The redraw loop calls marks(), which takes the lock: it must be free while the devices run."""
     import threading
 
     site = device_site
-    box = site.object("parallelepiped")
-    uv = site.camera.project(box.T_world_obj[:3, :3] @ np.array([0.0, 0.0, 0.132]) + box.T_world_obj[:3, 3])
+    uv = _box_top(site)
     wf = DesignateTarget(site)
     free = []
     measure = devices.rangefinder.measure
@@ -211,8 +213,7 @@ def test_a_measurement_stopped_half_way_leaves_no_beam_spot(device_site, devices
     from app.workflows import Cancelled
 
     site = device_site
-    box = site.object("parallelepiped")
-    uv = site.camera.project(box.T_world_obj[:3, :3] @ np.array([0.0, 0.0, 0.132]) + box.T_world_obj[:3, 3])
+    uv = _box_top(site)
     wf = DesignateTarget(site)
     seen = []
     shot = devices.rangefinder.measure
