@@ -106,6 +106,7 @@ class ClientPanel:
         self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
         self.seen_change = app.site.change_seq
+        self._double_at: str | None = None  # where the double click that pressed Find was, for its refusal
         self._build_gui()
         self._foreign_keys(None)
         # Clicks are handled one at a time, in the order they arrive (viser runs plain callbacks
@@ -375,7 +376,14 @@ class ClientPanel:
         self._act(wf, c, args)
 
     def _act(self, wf, c, args: tuple) -> Any:
-        result = wf.perform(c.action, *args)
+        where, self._double_at = (self._double_at, None) if c.action == "find" else (None, self._double_at)
+        try:
+            result = wf.perform(c.action, *args)
+        except WorkflowError as exc:
+            if where is None:
+                raise
+            said = str(exc).rstrip(".")
+            raise WorkflowError(f"{said}. {where[0].upper()}{where[1:]}" if where.startswith("your") else f"{said} ({where})") from None
         if not wf.message:
             wf.message = f"{c.label}: done."
         # (an accepted result is said at the top of the panel: no toast over the video's corner)
@@ -530,23 +538,28 @@ class ClientPanel:
         # the frame shown at this click: a double click that starts Update pose freezes it (the newest, a
         # moment later, showed a moving box elsewhere: a new operator's run)
         self._last_click = (now, np.asarray(uv, float).copy(), self.session.selected, self.app.grabber.latest())
-        if (wf is None or wf.finished) and double and last[2] is not None:
-            # no workflow, an object selected, a double click: the object's pose is found from that point —
-            # Update pose started and Find pressed at once. The object is the one selected before the double
-            # click, even when its first click selected another whose wireframe runs there (the table's
-            # edge across the moved box: a new operator's double click selected the table)
+        if (wf is None or wf.finished) and double:
+            # no workflow, a double click: the object's pose is found from that point — Update pose started
+            # and Find pressed at once. The object is the one selected before the double click, even when its
+            # first click selected another whose wireframe runs there (the table's edge across the moved box:
+            # a new operator's double click selected the table); with none selected before, the one its first
+            # click selected (a new operator's double click with nothing selected only selected it)
             self._last_click = None
-            self.session.select(last[2])
+            name = last[2] if last[2] is not None else self.session.selected
+            if name is None:
+                raise WorkflowError("a double click finds the pose of the selected object: click its wireframe to "
+                                    "select it, then double-click where it is in the video")
+            self.session.select(name)
             self._on_start("update_pose", frame=last[3])
             self.session.workflow.click(uv)
-            self.press("find")
+            self._find_from_double_click(uv, name)
             return
         if wf is not None and not wf.finished and "click" in wf.actions:
             step = wf.current_step()
             if double and "find" in step.enabled:
                 # a double click on the moved object: find its pose from that point (Find, at once)
                 self._last_click = None
-                self.press("find")
+                self._find_from_double_click(uv, getattr(wf, "object_name", None))
                 return
             if step.clicks:
                 if self.show_live and self.frozen is not None:
@@ -561,6 +574,16 @@ class ClientPanel:
         name = self._object_at(uv)
         self.session.select(name)
         self.error = ""
+
+    def _find_from_double_click(self, uv: np.ndarray, name: str | None) -> None:
+        """Find, pressed by a double click at uv; a refusal says where the click was and, when it lies on
+        another object's wireframe, that object (a new operator double-clicked box_1 with the parallelepiped
+        selected, and read the same refusal three times, not knowing whether a click was taken)."""
+        other = self._object_at(uv)
+        self._double_at = (f"your double click at ({uv[0]:.0f}, {uv[1]:.0f}) is on {other}'s wireframe: to update "
+                           f"{other}, click it to select it, then double-click where it is in the video"
+                           if other not in (None, name, "table") else f"double click at ({uv[0]:.0f}, {uv[1]:.0f})")
+        self.press("find")
 
     def _on_click(self, event) -> None:
         arrival = time.monotonic()
@@ -786,7 +809,8 @@ class ClientPanel:
     def _update_texts(self, wf) -> None:
         selected = self.session.selected
         idle = ("Click an object to select it, or start a workflow below." if selected is None else
-                f"**{selected}** is selected: start a workflow below (Update pose, Track, …), or click another object.")
+                f"**{selected}** is selected: double-click where it is in the video to find its pose, start a workflow "
+                "below (Update pose, Track, …), or click another object.")
         if wf is None:
             title = f"**No workflow.** {idle}"
             report = ""
@@ -803,7 +827,8 @@ class ClientPanel:
                     except WorkflowError:
                         pass
                     selected = self.session.selected
-                    idle = f"**{selected}** is selected: start a workflow below (Update pose, Track, …), or click another object."
+                    idle = (f"**{selected}** is selected: double-click where it is in the video to find its pose, start a "
+                            "workflow below (Update pose, Track, …), or click another object.")
             at = f" at {self._finished_at[1]}" if wf.finished else ""  # a finished workflow's text says when
             state = f" ({done}{at})" if wf.accepted else (f" (cancelled{at})" if wf.cancelled else "")
             subject = wf.object_name

@@ -185,3 +185,52 @@ def test_update_pose_by_a_double_click_on_the_selected_object(browser, interface
     text = op.report("update pose by a double click on the selected object")
     assert op.actions - missed <= 3, text  # select, double click, Accept
     page.close()
+
+
+def test_a_double_click_says_which_object_and_where(browser, interface, scene):
+    """A double click with nothing selected: on an object's wireframe it selects that object and finds its
+    pose (a new operator's only selected it, silently); on no wireframe it says to select first. With the
+    box selected, a double click on another object's wireframe is refused for the box and names that other
+    object (the same refusal three times had left a new operator unsure a click was taken)."""
+    from app.overlay import project_wireframe
+    from core.transforms import make_T
+
+    ui = interface
+    body = scene.body("unknown_cylinder")
+    T_cyl = body.pose_at(ui.frame_t_s)
+    ui.db.add_object("cylinder_1", "cylinder", body.model, make_T(T_cyl[:3, :3], T_cyl[:3, 3] + [0.003, 0.0, 0.0]),
+                     status="modelled")
+    page = ui.open(browser)
+    op = Operator(ui, page)
+    cam = ui.site.camera
+    wait_until(lambda: "cylinder_1" in {o.name for o in ui.site.objects()}, what="the cylinder in the database")
+    panel = page.panel
+    # nothing selected, on the table away from every wireframe: said, nothing started
+    empty = next(uv for uv in (cam.project(np.array([[x, y, 0.0]]))[0] for x in np.linspace(-0.3, 0.3, 13)
+                                for y in np.linspace(-0.5, 0.2, 15)) if panel._object_at(uv) is None)
+    op.double_click(empty)
+    wait_until(lambda: "a double click finds the pose of the selected object" in panel.error.lower(), what="the hint")
+    assert panel.session.workflow is None
+    # the box selected, a double click on the cylinder's wireframe: the box's search refused, the cylinder named
+    from .test_workflows_pose import _select
+
+    _select(op, page, ui.site.object(BOX), cam)
+    pw = project_wireframe(cam, body.model, ui.site.object("cylinder_1").T_world_obj)
+    outline = pw.seg_uv[int(np.argmax(np.linalg.norm(pw.seg_uv[:, 1] - pw.seg_uv[:, 0], axis=1)))].mean(axis=0)
+    op.double_click(outline)
+    wait_until(lambda: "is on cylinder_1's wireframe: to update cylinder_1" in panel.error, timeout_s=30,
+               what="the refusal naming the cylinder")
+    assert panel.session.workflow.object_name == BOX and panel.session.workflow.found is None
+    page.get_by_text(re.compile(r"Your double click at \(\d+, \d+\) is on cylinder_1's wireframe")).first.wait_for(timeout=5000)
+    op.key("Escape")  # Cancel (the refused click was dropped: nothing to lose, no question)
+    wait_until(lambda: panel.session.workflow.finished, what="the cancel")
+    # nothing selected (a click away from every wireframe), then a double click on the cylinder's outline:
+    # selected and found in one gesture
+    op.click(empty)
+    wait_until(lambda: panel.session.selected is None, what="the selection cleared")
+    op.double_click(outline)
+    wait_until(lambda: panel.session.workflow is not None and not panel.session.workflow.finished
+               and panel.session.workflow.found is not None, timeout_s=30, what="the cylinder's pose found")
+    assert panel.session.workflow.object_name == "cylinder_1"
+    op.key("Escape")
+    page.close()
