@@ -309,6 +309,12 @@ class ClientPanel:
         wf = self.session.start(name, **options)
         if name == "track":
             self.feeder = TrackFeeder(self, wf, self.app.grabber)
+        if name not in LIVE_WORKFLOWS and frame is None and self.frozen is not None and self.frozen_by is None \
+                and not self.show_live:
+            # a frame the operator froze (F, Seconds back) before starting: the workflow's clicks use it (a
+            # new operator froze t = 3.4 s, started a workflow, and found the newest frame frozen instead)
+            self._adopt_frozen(wf)
+            return
         if name not in LIVE_WORKFLOWS:
             self._freeze(frame if frame is not None else self.app.grabber.latest(), "live")
         else:
@@ -444,6 +450,10 @@ class ClientPanel:
         wf = self.session.workflow
         # a workflow's frozen frame goes with it; one frozen with no workflow under way (to look at
         # it) stays until Show live, or until a workflow freezes its own
+        self._adopt_frozen(wf)
+
+    def _adopt_frozen(self, wf) -> None:
+        """The frozen frame becomes the workflow's (None or finished: frozen to look at it)."""
         self.frozen_by = wf if wf is not None and not wf.finished else None
         if wf is not None and not wf.finished:
             wf.use_frame(self.frozen)
