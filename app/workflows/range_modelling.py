@@ -165,6 +165,12 @@ class RangeModelling:
             self.site.set_beam(X[-1])
             self.result = None
             self.message = f"Face {len(self.faces)}: {len(X)} range points of {len(scan)} beams."
+            doubt = _patch_doubts(X, covs, len(scan))
+            if doubt:
+                # said now, not as a wrong face blamed at Solve (a new operator's patch fell half off its face)
+                self.message += (f" ⚠ {doubt}: part of the patch may lie off face {len(self.faces)} (on another "
+                                 "surface, or beyond it). Remove last drops these points; click all of the face's "
+                                 "visible sides, then Measure face again.")
             return scan
 
     def _refuse_if_changed(self, uv: np.ndarray, what: str, inside: bool = False) -> None:
@@ -266,3 +272,26 @@ def _convex_hull(P: np.ndarray) -> np.ndarray:
 
     lower, upper = half(pts), half(list(reversed(pts)))
     return np.array(lower[:-1] + upper[:-1])
+
+
+PATCH_MIN_RETURNED = 0.6  # _patch_doubts: at least this share of a face patch's beams come back from the face ...
+PATCH_MAX_OFF_PLANE = 0.2  # ... and at most this share of its points lie off the plane the others fit
+
+
+def _patch_doubts(X: np.ndarray, covs: np.ndarray, n_beams: int) -> str:
+    """Why a face patch's points may not all be on the face ("" when nothing is wrong): few of its beams
+    came back, or many of its points lie off the plane the others fit (the RANSAC of the face's plane
+    fit at Solve, ``core.modeling.observations.fit_face_plane``: 3.5 σ along the beam, at least 3 mm)."""
+    from core.modeling.observations import fit_face_plane
+
+    out = []
+    if len(X) < PATCH_MIN_RETURNED * n_beams:
+        out.append(f"only {len(X)} of {n_beams} beams came back from the patch")
+    if len(X) >= 4:
+        try:
+            share = 1.0 - float(np.mean(fit_face_plane(X, covs=covs).inliers))
+        except ValueError:
+            share = 1.0
+        if share > PATCH_MAX_OFF_PLANE:
+            out.append(f"{share:.0%} of its points lie off the plane of the others")
+    return " and ".join(out)

@@ -191,7 +191,7 @@ def model_box(
         if not isinstance(f, BoxFace):
             raise ValueError(f"faces[{k}] must be a BoxFace, got {type(f).__name__}")
         fit = fit_face_plane(
-            f.points_world, covs=f.point_covs, sigma_m=sigma_point_m, method=plane_fit, robust=robust, label=f"face {k}"
+            f.points_world, covs=f.point_covs, sigma_m=sigma_point_m, method=plane_fit, robust=robust, label=f"face {k + 1}"
         )
         cen = np.asarray(f.points_world, dtype=float)[fit.inliers].mean(axis=0)
         p = fit.obs.plane
@@ -217,14 +217,15 @@ def model_box(
         ax = int(np.argmax(np.abs(a)))
         if abs(a[ax]) < np.cos(np.radians(30.0)):
             raise ValueError(
-                f"face {k} is {np.degrees(np.arccos(min(1.0, abs(a[ax])))):.0f}° from every box axis: "
-                "the measured faces are not those of a box (or a face's points are wrong)"
+                f"face {k + 1} is {np.degrees(np.arccos(min(1.0, abs(a[ax])))):.0f}° from every box axis: "
+                f"the measured faces are not those of a box, or face {k + 1}'s points are wrong (part of its patch on "
+                "another surface: measure it again with all its visible sides clicked)"
             )
         key = (ax, int(np.sign(a[ax])))
         if key in face_plane:
-            raise ValueError(f"faces {face_plane[key][0]} and {k} are the same side of the box")
+            raise ValueError(f"faces {face_plane[key][0] + 1} and {k + 1} are the same side of the box")
         if key == (2, -1) and sup is not None:
-            raise ValueError(f"face {k} faces down, where the box lies on its support")
+            raise ValueError(f"face {k + 1} faces down, where the box lies on its support")
         face_plane[key] = [len(planes)]
         labels.append(key)
         planes.append(PlaneObs(fit.obs.plane, fit.obs.cov, f"face {_sgn(key)}"))
@@ -251,8 +252,8 @@ def model_box(
             ang = angle_between_planes(ip.plane, fp)
             if ang < min_angle:
                 raise ValueError(
-                    f"the interpretation plane of faces[{k}].edges_uv[{j}] is {np.degrees(ang):.1f}° from "
-                    f"the face's plane (< {min_angle_deg}°): the camera sees that face edge-on, so the edge "
+                    f"side {j + 1} of face {k + 1}: its plane through the camera is {np.degrees(ang):.1f}° from "
+                    f"the face's plane (< {min_angle_deg}°): the camera sees that face edge-on, so the side "
                     "cannot be placed on it; model it from another view or another face"
                 )
             # Which side: compare the clicked direction in the image with the two box axes of
@@ -270,8 +271,9 @@ def model_box(
             m = cand[int(np.argmin(offs))]
             if min(offs) > 30.0:
                 raise ValueError(
-                    f"faces[{k}].edges_uv[{j}] does not run along a side of its face (in the image it is "
-                    f"{min(offs):.0f}° from the nearest side direction)"
+                    f"side {j + 1} of face {k + 1} does not run along a side of that face (in the image it is "
+                    f"{min(offs):.0f}° from the nearest side direction): check its clicks, or measure face {k + 1} "
+                    "again with all its visible sides clicked"
                 )
             q = 3 - ax - m
             sq = int(np.sign(R0[:, q] @ (M - centroids[k])) or 1)

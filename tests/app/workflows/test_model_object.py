@@ -317,3 +317,41 @@ def test_a_model_that_overlaps_an_object_in_the_database_is_weak(site):
     assert len(weak) == 1 and "overlaps parallelepiped" in weak[0] and "Accept anyway adds a second" in weak[0]
     T[:3, 3] += [5.0, 0.0, 0.0]  # the same box far away: overlaps nothing
     assert wf.weaknesses() == []
+
+
+def test_a_face_patch_partly_off_its_face_is_said_at_once():
+    """A patch whose points do not all lie on one face is said when measured (a new operator's second face,
+    its sides clicked short, put half its beams off the box; the box was refused at Solve, blaming face 1)."""
+    from app.workflows.range_modelling import _patch_doubts
+
+    rng = np.random.default_rng(0)
+    covs = np.repeat((0.001 * np.eye(3))[None] ** 2, 30, axis=0)
+    face = np.column_stack([rng.uniform(0, 0.1, 30), rng.uniform(0, 0.1, 30), rng.normal(0, 0.001, 30)])
+    assert _patch_doubts(face, covs, 32) == ""
+    mixed = face.copy()
+    mixed[:10, 2] += 0.05  # a third of them on a surface 5 cm behind
+    assert _patch_doubts(mixed, covs, 32) == "33% of its points lie off the plane of the others"
+    assert _patch_doubts(face[:12], covs[:12], 26) == "only 12 of 26 beams came back from the patch"
+
+
+def test_a_face_patch_spilling_off_the_box_is_said_when_measured(device_site, fast_scene):
+    site = device_site
+    body = fast_scene.body("unknown_box")
+    T = body.pose_at(0.0)
+    cam = site.camera
+    wf = ModelObject(site, shape="box")
+    k = next(k for k in _facing_faces(cam, body.model, T) if abs(body.model.face_normals()[k][2]) < 0.5)  # a side
+    f = body.model.faces[k]
+    uv = cam.project(body.model.vertices[list(f)] @ T[:3, :3].T + T[:3, 3])
+    big = uv.mean(axis=0) + 1.6 * (uv - uv.mean(axis=0))  # its sides clicked outside the face
+    for a, b in [(big[0], big[1]), (big[1], big[2])]:
+        wf.click(a + 0.2 * (b - a))
+        wf.click(a + 0.8 * (b - a))
+    wf.measure()
+    assert "⚠" in wf.message and "part of the patch may lie off face 1" in wf.message
+    wf.remove_last()  # the points dropped, the sides kept
+    assert wf.faces[-1]["points"] is None and len(wf.faces[-1]["segs"]) == 2
+    wf.remove_last(), wf.remove_last()
+    _click_face(wf, cam, body.model, T, k, np.random.default_rng(8))
+    wf.measure()
+    assert "⚠" not in wf.message
