@@ -45,6 +45,7 @@ class RangeModelling:
         self.progress_text = ""
         self.live_points_world: list[np.ndarray] = []
         self._live_lock = threading.Lock()
+        self._acquiring_since: float | None = None  # when the acquisition under way started (its time left)
 
     @staticmethod
     def _new_face() -> dict[str, Any]:
@@ -61,6 +62,14 @@ class RangeModelling:
         """One step of an acquisition (called on the acquiring thread): the bar at ``fraction``, the
         text, the beam spot moved to the point X just measured (None: no return) and, with ``keep``,
         X added to the live points; Cancelled when the operator cancelled."""
+        import time
+
+        now = time.monotonic()
+        if self._acquiring_since is None:
+            self._acquiring_since = now
+        elapsed = now - self._acquiring_since
+        if fraction >= 0.05 and elapsed >= 3.0:  # said once the pace is known (a scan took 70 s, unannounced)
+            text += f" · about {_duration(elapsed * (1.0 - fraction) / fraction)} left"
         self.progress = float(fraction)
         self.progress_text = text
         if X is not None and np.all(np.isfinite(X)):
@@ -85,6 +94,7 @@ class RangeModelling:
         return report
 
     def _clear_live(self) -> None:
+        self._acquiring_since = None
         with self._live_lock:
             self.live_points_world = []
 
@@ -272,6 +282,12 @@ def _convex_hull(P: np.ndarray) -> np.ndarray:
 
     lower, upper = half(pts), half(list(reversed(pts)))
     return np.array(lower[:-1] + upper[:-1])
+
+
+def _duration(seconds: float) -> str:
+    """A time left as said: "40 s", "2 min"."""
+    s = max(0.0, float(seconds))
+    return f"{5 * max(1, round(s / 5)):.0f} s" if s < 90 else f"{round(s / 60):.0f} min"
 
 
 PATCH_MIN_RETURNED = 0.6  # _patch_doubts: at least this share of a face patch's beams come back from the face ...

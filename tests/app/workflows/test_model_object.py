@@ -355,3 +355,19 @@ def test_a_face_patch_spilling_off_the_box_is_said_when_measured(device_site, fa
     _click_face(wf, cam, body.model, T, k, np.random.default_rng(8))
     wf.measure()
     assert "⚠" not in wf.message
+
+
+def test_a_long_acquisition_says_its_time_left(site, monkeypatch):
+    """Once its pace is known (3 s and 5 % in), a scan says about how long it has left (a new operator's
+    profile scans took 70 s with no word of it)."""
+    from app.workflows.range_modelling import _duration
+
+    clock = iter([100.0, 101.0, 110.0])
+    monkeypatch.setattr("time.monotonic", lambda: next(clock))
+    wf = ModelObject(site, shape="box")
+    wf._report(0.0, "profile 1 of 2 · aiming")
+    wf._report(0.02, "profile 1 of 2 · beam 3 of 153")
+    assert wf.progress_text == "profile 1 of 2 · beam 3 of 153"  # too early to say
+    wf._report(0.2, "profile 1 of 2 · beam 61 of 153")
+    assert wf.progress_text == "profile 1 of 2 · beam 61 of 153 · about 40 s left"  # 10 s for a fifth
+    assert (_duration(3.0), _duration(62.0), _duration(400.0)) == ("5 s", "60 s", "7 min")
