@@ -279,8 +279,12 @@ class CalibrateTurret(Workflow):
             deg, m = pose_error(T, self.site.T_world_turret)
             self.state = "review"
             dropped = f" ({n - int(used.sum())} off the known surfaces, left out: {', '.join(off)})" if off else ""
+            # the pose has 6 unknowns: with 6 points the fit is exact, its RMS says nothing (a new operator read
+            # "RMS 0.0 mm" as a perfect calibration)
+            exact = " (6 points for 6 unknowns: an exact fit, its RMS checks nothing; measure more)" \
+                if int(used.sum()) <= 6 else ""
             self.message = (f"RMS {1000 * np.sqrt(np.mean(dist ** 2)):.1f} mm to the surfaces over {int(used.sum())} "
-                            f"points{dropped}; {deg:.2f}° and {100 * m:.1f} cm from the current calibration")
+                            f"points{exact}{dropped}; {deg:.2f}° and {1000 * m:.1f} mm from the current calibration")
             far = self._far_points()
             if far:
                 self.message += f". ⚠ {far}"
@@ -419,7 +423,7 @@ class CalibrateTurret(Workflow):
                 out["sd_rot_deg"] = [float(v) for v in sd_rot_deg]
                 out["sd_t_mm"] = [float(1000 * v) for v in sd_t_m]
                 deg, m = pose_error(self.T_solved, self.site.T_world_turret)
-                out["change"] = {"deg": float(deg), "cm": float(100 * m)}
+                out["change"] = {"deg": float(deg), "mm": float(1000 * m)}
                 labels = [lab for lab, u in zip(self.labels, self.used) if u]
                 ranges = [r for r, u in zip(self.range_m, self.used) if u]
                 out["left_out"] = int((~self.used).sum())

@@ -71,6 +71,20 @@ def test_the_table_and_one_box_leave_the_pose_poorly_determined(device_site, fas
         wf.measure()
     wf.solve()
     assert "poorly determined" in wf.message.lower() and wf.summary()["sd_t_mm"][1] > 10
+    assert "mm from the current calibration" in wf.message and "exact fit" not in wf.message
+
+
+def test_six_points_are_said_to_be_an_exact_fit(device_site):
+    """6 points for the pose's 6 unknowns: the RMS is ~0 whatever the calibration (a new operator read
+    "RMS 0.0 mm" as a perfect one)."""
+    site = device_site
+    wf = CalibrateTurret(site, shots=1)
+    targets = _face_targets(site, ("table", "parallelepiped"))
+    for X in [targets[i] for i in (0, 3, 6, 9, 12, 14)]:
+        wf.choose_point(X)
+        wf.measure()
+    wf.solve()
+    assert "6 points for 6 unknowns: an exact fit" in wf.message
 
 
 def test_one_orientation_is_not_enough(device_site):
