@@ -93,7 +93,7 @@ class ClientPanel:
         self._choice_options: dict[str, dict[str, Any]] = {}
         self.confirm_pending: tuple | None = None  # (action, args) waiting for its second press
         self.warning = ""  # a weak result's reasons, or a question, shown under the buttons
-        self._finished_at: tuple | None = None  # (the finished workflow, when this page saw it finish)
+        self._finished_at: tuple | None = None  # (the finished workflow, when this page saw it finish, the selection then)
         self.error = ""  # the last refused action, said in the panel until the next action or step
         self.error_step: str | None = None  # the step it was said in
         self.frozen: FrameRef | None = None
@@ -821,6 +821,9 @@ class ClientPanel:
         idle = ("Click an object to select it, or start a workflow below." if selected is None else
                 f"**{selected}** is selected: double-click where it is in the video to find its pose, start a workflow "
                 "below (Update pose, Track, …), or click another object.")
+        if wf is not None and wf.finished and self._finished_at is not None and self._finished_at[0] is wf \
+                and self._finished_at[2] != selected:
+            wf = None  # a finished workflow's text goes once the operator selects another object (it stayed on)
         if wf is None:
             title = f"**No workflow.** {idle}"
             report = ""
@@ -839,6 +842,7 @@ class ClientPanel:
                     selected = self.session.selected
                     idle = (f"**{selected}** is selected: double-click where it is in the video to find its pose, start a "
                             "workflow below (Update pose, Track, …), or click another object.")
+                self._finished_at = (wf, self._finished_at[1], selected)
             at = f" at {self._finished_at[1]}" if wf.finished else ""  # a finished workflow's text says when
             state = f" ({done}{at})" if wf.accepted else (f" (cancelled{at})" if wf.cancelled else "")
             subject = wf.object_name
@@ -849,7 +853,8 @@ class ClientPanel:
                 title += f"\n\n_{wf.message}_"  # not said twice, nor above a question being asked
             if wf.finished:
                 title += f"\n\n{idle}"
-            report = "" if wf.cancelled else report_markdown(wf.summary())  # a cancelled result is gone
+            # a cancelled result is gone; a closed one (History, Designate: nothing accepted) too
+            report = "" if wf.cancelled or (wf.finished and done == "closed") else report_markdown(wf.summary())
             if self.error and self.error_step is not None and step.name != self.error_step:
                 self.error = ""  # said in a step the workflow has left
         if self.error:

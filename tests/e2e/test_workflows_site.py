@@ -418,6 +418,12 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     assert any(v == undo.id for _, v in wf.choices("change"))  # the undo is listed: it can be undone too
     op_a.key("Escape")  # Close (Esc)
     wait_until(lambda: wf.accepted, what="the history closed")
+    wait_until(lambda: a.panel.gui_report.content == "", what="the closed history's table gone from the Result")
+    from .test_workflows_pose import _select
+
+    _select(op_a, a, ui.site.object("table"), ui.site.camera)  # another object selected: the closed text goes too
+    wait_until(lambda: "History" not in a.panel.gui_title.content and "**table** is selected" in a.panel.gui_title.content,
+               what="the closed history's text gone")
     op_a.report()
     _announced(b, f"{who_a} undid change #{change.id}")
     # Meanwhile another writer (here a second connection, as `mcit db` would be) moves the box: B's
