@@ -460,12 +460,18 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
         if self.shape == "box":
             face = self.faces[-1]
             n = len(self.faces)
-            measured = any(f["points"] is not None for f in self.faces)
+            # Solve once it can work: two faces measured, or one and the profile scans
+            measured = sum(f["points"] is not None for f in self.faces) >= 2 or (bool(self.scans) and any(
+                f["points"] is not None for f in self.faces))
             solvable = {"solve"} if measured else set()
             if face["points"] is not None:
                 if self.scans:
                     return Step("scanned", "Profiles scanned: {solve} (fused with the faces and clicks).",
                                 frozenset(base | {"solve", "scan"}))
+                if not measured:  # one face does not fix the three sizes: Solve would only refuse (a new operator's)
+                    scan = ", or {scan} for the far edges" if devices else ""
+                    return Step("face_measured", f"Face {n} measured. A box needs a second face: click the sides of "
+                                f"another visible face{scan}.", frozenset(base | ({"scan"} if devices else set())))
                 nxt = "" if n == 3 else "Click the sides of another face for more accuracy, "
                 scan = "{scan} for the far edges, or " if devices else ""
                 return Step("face_measured", f"Face {n} measured. {nxt}{scan}" + "{solve}.",
