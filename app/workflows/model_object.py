@@ -59,6 +59,16 @@ CYLINDER_METHODS = {"fused": "fused (all measurements)", "tangential": "tangenti
                     "rf_tangential": "tangential planes (range finder alone)"}
 
 
+def _placed(r) -> str:
+    """"; placed to ± 4.1 mm": the σ of where a modelled object stands (its frame's origin, or its axis),
+    "" when the result has none (a new operator saw a box sit 1 cm off with only its sizes' σ shown)."""
+    for k, what in (("position", "placed"), ("axis_position", "axis placed")):
+        v = r.sigmas.get(k)
+        if v is not None and np.isfinite(v):
+            return f"; {what} to ± {1000 * v:.1f} mm"
+    return ""
+
+
 def table_support(site) -> Plane | None:
     """The top plane of the database's table (normal up), or None when there is no table."""
     for obj in site.objects():
@@ -395,7 +405,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             self.result = result
             self.state = "review"
             parts = result.details.get("sigma_parts", {})
-            self.message = result.dimension_text("cm") + (
+            self.message = result.dimension_text("cm") + _placed(result) + (
                 f" (σ include the {' and '.join(k for k in parts if k != 'measurements')})" if parts else "")
             return result
 
@@ -452,7 +462,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             base.add("set_method")
         if self.result is not None:
             again = {"solve"} | ({"scan"} if devices and (self.shape != "box" or self.box_faces()) else set())
-            return Step("review", f"{self.result.dimension_text('cm')}. " + "{accept} to add it, or add measurements and "
+            return Step("review", f"{self.result.dimension_text('cm')}{_placed(self.result)}. " + "{accept} to add it, or add measurements and "
                         "{solve} again.", frozenset(base | again | {"accept"}))
         if self.pending is not None:
             side = "silhouette" if self.shape != "box" else "side"
@@ -512,8 +522,8 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             r = self.result
             if r is None:
                 return []
-            out = [f"{k} is uncertain: σ {1000 * v:.1f} mm (more than {WEAK_SIGMA_MM:.0f} mm)"
-                   for k, v in r.sigmas.items() if np.isfinite(v) and 1000 * v > WEAK_SIGMA_MM]
+            out = [f"the {DIMENSION_WORDS.get(k, k.replace('_', ' '))} is uncertain: σ {1000 * v:.1f} mm (more than "
+                   f"{WEAK_SIGMA_MM:.0f} mm)" for k, v in r.sigmas.items() if np.isfinite(v) and 1000 * v > WEAK_SIGMA_MM]
             snaps = [sn for f in self.faces for sn in f["snaps"]] if self.shape == "box" else list(self.silhouette_snaps)
             out += [f"a snap moved a click {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
                     for sn in snaps if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX]
@@ -573,6 +583,9 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                 out["dimensions"] = [{"dimension": DIMENSION_WORDS.get(k, k), "value_cm": 100 * v, "sigma_cm": 100 * r.sigmas.get(k, float("nan")),
                                       **{short.get(src, src): 100 * p.get(k, float("nan")) for src, p in parts.items()}}
                                      for k, v in r.dimensions.items()]
+                for k in ("position", "axis_position"):  # where it stands, with its σ (only the sizes' were shown)
+                    if k in r.sigmas:
+                        out[f"sigma_{k}_mm"] = 1000 * r.sigmas[k]
             return out
 
 

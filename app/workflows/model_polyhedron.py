@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from core.brep import BRep
+from core.modeling.result import DIMENSION_WORDS
 from core.rangefinder import beam_point_cov
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
@@ -530,8 +531,8 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
             r = self.result
             if r is None:
                 return []
-            out = [f"{k} is uncertain: σ {1000 * v:.1f} mm (more than {WEAK_SIGMA_MM:.0f} mm)"
-                   for k, v in r.sigmas.items() if np.isfinite(v) and 1000 * v > WEAK_SIGMA_MM]
+            out = [f"the {DIMENSION_WORDS.get(k, k.replace('_', ' '))} is uncertain: σ {1000 * v:.1f} mm (more than "
+                   f"{WEAK_SIGMA_MM:.0f} mm)" for k, v in r.sigmas.items() if np.isfinite(v) and 1000 * v > WEAK_SIGMA_MM]
             res = np.abs(np.asarray(r.residuals.get("clicks_px", [])))
             if len(res) and res.max() > MAX_CLICK_RESIDUAL_PX:
                 out.append(f"a clicked side is {res.max():.1f} px from the model's edge (more than "

@@ -52,6 +52,8 @@ def test_box_from_three_faces_is_added_with_sigmas(device_site, fast_scene, db):
     assert np.all(sig > 0) and np.all(sig < 0.01)
     assert np.linalg.norm(r.T_world_obj[:3, 3] - T[:3, 3]) < 0.01
     assert len(wf.marks().ghosts) == 1 and "±" in wf.next_step
+    assert f"placed to ± {1000 * r.sigmas['position']:.1f} mm" in wf.next_step  # where it stands, not only its sizes
+    assert wf.summary()["sigma_position_mm"] == pytest.approx(1000 * r.sigmas["position"])
     assert "box_1" not in [o.name for o in db.objects()]
     rec = wf.accept()
     assert rec.status == "modelled" and rec.kind == "box"
