@@ -126,7 +126,7 @@ class CalibrateCamera(SnapMixin, Workflow):
                         f"No visible model corner within {PICK_RADIUS_PX:.0f} px of your click{near}: "
                         "click on a corner drawn in the overlay."
                     )
-                self._set_pending(X, f"{name}:{k}", (name, k))
+                self._set_pending(X, f"{name} corner {k}", (name, k))
             else:
                 self._add_pair(p)
 
@@ -140,7 +140,7 @@ class CalibrateCamera(SnapMixin, Workflow):
                 raise WorkflowError(str(exc.args[0])) from None
             if not 0 <= int(index) < len(V):
                 raise WorkflowError(f"{name} has vertices 0..{len(V) - 1}, not {index}")
-            self._set_pending(V[int(index)], f"{name}:{int(index)}", (name, int(index)))
+            self._set_pending(V[int(index)], f"{name} corner {int(index)}", (name, int(index)))
 
     def choose_point(self, X_world, label: str = "") -> None:
         """Use a known world point X_world (3,) metres as the next known point (then click its image)."""

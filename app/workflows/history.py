@@ -69,7 +69,8 @@ class History(Workflow):
             except ValueError as exc:
                 raise WorkflowError(f"cannot {which} change {change_id}: {exc}") from None
             self.refresh()
-            self.message = f"{which} of change {change_id} recorded as change {rec.id}"
+            said = _change_sentence(rec, self.site.undone(rec))  # "undid change #14 (box)", or a redo
+            self.message = f"{said[0].upper()}{said[1:]}, recorded as change #{rec.id} (it can be undone in turn)"
             return rec
 
     def _later_changes(self, change_id: int) -> list:

@@ -88,7 +88,7 @@ class AutoMatchMixin:
                 raise WorkflowError(f"{len(self.segs)} edge{'s' if len(self.segs) != 1 else ''} clicked: automatic "
                                     "matching needs 3 (4 or more is best); click more image edges")
             if all(e is not None for e in self.edge_ids):
-                raise WorkflowError("every clicked edge is assigned already: Solve (P3L) or Refine")
+                raise WorkflowError("every clicked edge is assigned already: Solve or Refine")
             segs = np.array(self.segs)
             snapped = all(s is not None and s.applied for s in self.seg_snaps)
             sigma = SNAPPED_SIGMA_PX if snapped else self.sigma_px
@@ -126,9 +126,9 @@ class AutoMatchMixin:
             self._invalidate()
             self.state = "match"
             self._match_s = res.total_s
-            self.message = (f"{len(kept)} assignment{'s' if len(kept) > 1 else ''} fit (searched {res.n_triples} "
-                            f"model-edge triples in {res.total_s:.2f} s); the best is shown with its edge labels: "
-                            "Confirm match, or choose another candidate" + warning)
+            self.message = (f"{len(kept)} way{'s' if len(kept) > 1 else ''} of pairing your edges with the model's "
+                            f"edges fit{'' if len(kept) > 1 else 's'} ({res.total_s:.1f} s); the best is drawn, each clicked "
+                            "edge labelled with its model edge: Confirm match, or choose another candidate" + warning)
             return kept
 
     def confirm_match(self) -> None:

@@ -53,7 +53,7 @@ MAX_SNAP_MOVE_PX = 2.0
 # may fit a wrong assignment): the one-click search's own floor (app.vision.search.MIN_NEAR), which the right
 # poses of 150 rendered placements, a fifth to a third of them hidden, all passed.
 MIN_OUTLINE_SEEN = 0.40
-MAX_TRIPLES = 20  # Solve (P3L) tries at most this many triples of the assigned edges (6 edges: all 20)
+MAX_TRIPLES = 20  # Solve tries at most this many triples of the assigned edges (6 edges: all 20)
 MAX_CANDIDATES = 8
 
 
@@ -70,7 +70,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         Control("auto_match", "Auto match", "M", kind="long", color="blue",
                 hint="Find which model edge each clicked image edge is (3 or more edges, 4 is best)"),
         Control("confirm_match", "Confirm match", "C", color="blue", hint="Adopt the assignment shown"),
-        Control("solve", "Solve (P3L)", "P", color="blue", hint="Large motion: the three-line solver's candidate poses"),
+        Control("solve", "Solve", "P", color="blue", hint="Large motion: the three-line solver's candidate poses"),
         Control("choose_candidate", "Candidate", kind="choice", hint="The candidate pose drawn in white"),
         Control("refine", "Refine", "R", color="blue", hint="Least squares on every click, from the candidate or the database pose"),
         Control("accept", "Accept", "enter", color="green", hint="Write the refined pose to the database"),
@@ -412,7 +412,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         else:
             advice = "Check the edge assignments (Remove last and assign again), or add clicks (another edge, a point)"
             if i is None:
-                advice += "; for a large motion Solve (P3L) first"
+                advice += "; for a large motion Solve first"
             raise WorkflowError("no plausible pose: " + "; ".join(failures) + f". {advice}")
         if camera_cov is not None:  # the camera calibrated in this database: its share joins the clicks'
             result = with_camera_uncertainty(result, camera, camera_cov, **clicks)

@@ -172,7 +172,7 @@ def main() -> int:
                 wf.assign_edge(k)
             panel.dirty = True  # calls into the workflow (not the panel's) do not mark the panel for a redraw
             ui.server.wake()
-            click(page, "Solve (P3L)")
+            click(page, "Solve")
             save(ui, page, "update_pose_candidates")
             best = min(range(len(wf.candidates)), key=lambda i: np.linalg.norm(wf.candidates[i][:3, 3] - T_true[:3, 3]))
             wf.choose_candidate(best)

@@ -125,7 +125,7 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
 
 def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
     """Update pose by hand-assigned edges, by visible controls and canvas clicks alone: six edges
-    (two clicks on the video, one on the model edge each), Solve (P3L), the best candidate picked in
+    (two clicks on the video, one on the model edge each), Solve, the best candidate picked in
     the Candidate chooser, Refine, one click deleted (Click chooser + Delete click), Refine again on
     five, Accept (not weak). Measured (1200×700, 2 shared cores, -s prints it): 28 operator actions
     in 19 s; written pose 0.05° / 1.3 mm from the truth (0.07° / 1.2 mm with the six edges)."""
@@ -164,7 +164,7 @@ def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
         op.click(drawn[k].mean(axis=0))  # "this is model edge k", clicked on the overlay
         _wait(lambda: len(wf.edge_ids) and wf.edge_ids[-1] == k, what=f"edge {k} assigned")
         op.check()
-    op.press("Solve (P3L)")
+    op.press("Solve")
     _wait(lambda: len(wf.candidates) > 0, what="P3L candidates")
     op.check()
     best = min(range(len(wf.candidates)), key=lambda i: pose_error(wf.candidates[i], T_true)[0])

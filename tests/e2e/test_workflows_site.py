@@ -365,7 +365,7 @@ def _update_pose_until_refined(op, ui, scene):
         op.click(drawn[k].mean(axis=0))  # "this is model edge k", clicked on the overlay
         wait_until(lambda: len(wf.edge_ids) and wf.edge_ids[-1] == k, what=f"edge {k} assigned")
         assert_prompt_controls(page)
-    op.key("p")  # Solve (P3L) (P)
+    op.key("p")  # Solve (P)
     wait_until(lambda: len(wf.candidates) > 0, what="P3L candidates")
     assert_prompt_controls(page)
     best = min(range(len(wf.candidates)), key=lambda i: pose_error(wf.candidates[i], T_true)[0])
@@ -413,7 +413,7 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     undo = ui.db.history("parallelepiped")[-1]
     assert undo.action == "undo" and undo.undoes == change.id and undo.client == who_a
     assert ui.db.get("parallelepiped").status == "known"  # the status only: the pose is as it was
-    a.get_by_text(f"undo of change {change.id} recorded", exact=False).first.wait_for(timeout=5000)
+    a.get_by_text(f"Undid change #{change.id} (parallelepiped), recorded as change #", exact=False).first.wait_for(timeout=5000)
     assert_prompt_controls(a)
     assert any(v == undo.id for _, v in wf.choices("change"))  # the undo is listed: it can be undone too
     op_a.key("Escape")  # Close (Esc)
