@@ -291,7 +291,8 @@ class OneClickMixin:
             return
         c = self.found[self.chosen or 0]
         out["found"] = {"candidates": len(self.found), "chosen": (self.chosen or 0) + 1, "fit_px": round(c.fit_px, 1),
-                        "std_t_mm": [round(float(v), 1) for v in c.std_t_mm],
-                        "std_r_deg": [round(float(v), 2) for v in c.std_r_deg]}
+                        # an axis the table holds has σ 0: said as held, not as "0" (read as certain)
+                        "std_t_mm": [round(float(v), 1) if v > 0 else "held by the table" for v in c.std_t_mm],
+                        "std_r_deg": [round(float(v), 2) if v > 0 else "held" for v in c.std_r_deg]}
         deg, m = pose_error(c.T_world_obj, self.obj.T_world_obj)
-        out["found"]["change"] = {"deg": round(float(deg), 2), "cm": round(float(100 * m), 1)}
+        out["found"]["change"] = {"deg": round(float(deg), 2), "mm": round(float(1000 * m), 1)}

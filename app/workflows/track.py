@@ -387,7 +387,7 @@ class TrackObject(SnapMixin, Workflow):
             if self.lost:
                 out["reason"] = self.reason
             deg, m = pose_error(self.T_world_obj, self.obj.T_world_obj)
-            out["change"] = {"deg": float(deg), "cm": float(100 * m)}
+            out["change"] = {"deg": float(deg), "mm": float(1000 * m)}
             if self.reinits:
                 out["re-initialised"] = len(self.reinits)
             return out

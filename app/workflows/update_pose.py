@@ -833,7 +833,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             if snaps:
                 out["snapped"] = f"{sum(s.applied for s in snaps)} of {len(snaps)} clicks"
             self._found_summary(out)
-            if self.candidates:
+            if self.candidates and self.found is None:  # the found poses' are in "found" (they were listed twice)
                 out["candidates"] = len(self.candidates)
                 out["chosen"] = (self.chosen or 0) + 1
             if self.matches is not None:
@@ -845,7 +845,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 out["std_t_mm"] = [float(v) for v in 1000 * r.std_t_m]
                 out["std_r_deg"] = [float(v) for v in r.std_r_deg]
                 deg, m = pose_error(r.T_world_obj, self.obj.T_world_obj)
-                out["change"] = {"deg": float(deg), "cm": float(100 * m)}
+                out["change"] = {"deg": float(deg), "mm": float(1000 * m)}
                 names = [f"edge {i + 1}" for i in range(r.kinds.count("segment"))] + \
                         [f"point {i + 1}" for i in range(r.kinds.count("point"))]
                 out["clicks"] = [{"click": n, "residual_px": float(v), "weight": float(w)}
