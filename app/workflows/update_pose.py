@@ -53,6 +53,13 @@ MAX_SNAP_MOVE_PX = 2.0
 # may fit a wrong assignment): the one-click search's own floor (app.vision.search.MIN_NEAR), which the right
 # poses of 150 rendered placements, a fifth to a third of them hidden, all passed.
 MIN_OUTLINE_SEEN = 0.40
+def _counted(kinds) -> str:
+    """"4 edges", "3 edges and 1 point": what a refinement used (its clicks count two per edge)."""
+    n_e, n_p = list(kinds).count("segment"), list(kinds).count("point")
+    parts = [f"{n} {w}{'s' if n != 1 else ''}" for n, w in ((n_e, "edge"), (n_p, "point")) if n]
+    return " and ".join(parts) or "no click"
+
+
 MAX_TRIPLES = 20  # Solve tries at most this many triples of the assigned edges (6 edges: all 20)
 MAX_CANDIDATES = 8
 
@@ -428,7 +435,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             self.state = "review"
             deg, m = pose_error(result.T_world_obj, self.obj.T_world_obj)
             sig_deg, sig_mm = float(np.max(result.std_r_deg)), 1000 * float(np.max(result.std_t_m))
-            self.message = (f"{note}RMS {result.rms_px:.2f} px over {len(result.kinds)} clicks; moved {deg:.2f}° and "
+            self.message = (f"{note}RMS {result.rms_px:.2f} px over {_counted(result.kinds)}; moved {deg:.2f}° and "
                             f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
                             + (" (camera calibration included)" if result.cov_parts else "")
                             + (f". ⚠ {unseen}" if unseen else ""))
