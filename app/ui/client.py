@@ -574,7 +574,7 @@ class ClientPanel:
             if step.clicks:
                 if self.show_live and self.frozen is not None:
                     raise WorkflowError("you are looking at the live video: clicks go to the frozen frame. Press Show "
-                                        "live again (L) to see it, then click")
+                                        "frozen (L) to see it, then click")
                 self.error, self.confirm_pending, self.warning = "", None, ""
                 wf.message = ""
                 wf.click(uv)
@@ -879,6 +879,9 @@ class ClientPanel:
             + ". *Seconds back*: a frame that long before the live one.")
         if self.gui_frame.content != frame:
             self.gui_frame.content = frame
+        live_label = "Show frozen (L)" if self.show_live and self.frozen is not None else "Show live (L)"
+        if self.gui_live.label != live_label:  # says what it does now (it kept "Show live" while live was shown)
+            self.gui_live.label = live_label
 
     def _update_controls(self, wf, step) -> None:
         """Show the controls that apply now (the others hidden), the choosers' options, shortcuts on/off."""

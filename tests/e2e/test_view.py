@@ -61,7 +61,7 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     ui.click_pixel(page, corner)
     page.get_by_text("you are looking at the live video", exact=False).first.wait_for(timeout=5000)
     assert wf.pending_X is None  # the click was refused
-    press(page, "Show live")  # back to the frozen frame
+    press(page, "Show frozen")  # back to the frozen frame (the button says so while live is shown)
     wait_until(lambda: not panel.show_live, what="the frozen view")
     ui.click_pixel(page, corner)
     wait_until(lambda: wf.pending_X is not None, what="the corner picked on the frozen frame")
