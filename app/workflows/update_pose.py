@@ -691,6 +691,9 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         if self.last_refined is not None and self.refined is None:
             return Step("refine_again", "Clicks changed since Refine (the white ghost is the last refined pose): "
                         "{refine} again to use them, then Accept.", frozenset(more - {"solve"} | {"refine"}))
+        if self.candidates and self.refined is None and len(self.candidates) == 1:  # no other to pick
+            return Step("candidates", "The pose is drawn in white: add edges if it looks off, then {refine} — it uses "
+                        "every click and often corrects a pose that looks off.", frozenset(more))
         if self.candidates and self.refined is None:
             return Step("candidates", f"Candidate {(self.chosen or 0) + 1} of {len(self.candidates)} is drawn in white: pick "
                         "another {choose_candidate} if it is clearly wrong, add edges, then {refine} — it uses every click and "
