@@ -71,4 +71,20 @@
       key: e.key, code: e.code, keyCode: e.keyCode, which: e.which, shiftKey: e.shiftKey, ctrlKey: e.ctrlKey,
       altKey: e.altKey, metaKey: e.metaKey, bubbles: true, cancelable: true }));
   }, true);
+
+  // A number typed in a box (Seconds back) kept the keyboard: Backspace and F then went into the box,
+  // not to Remove last and Freeze (a new operator's run). Enter in such a box, or a click on the video,
+  // gives the keyboard back to the page's shortcuts.
+  function textInput(el) {
+    return el && (el.tagName === "INPUT" || el.tagName === "TEXTAREA") && !chooserInput(el) ? el : null;
+  }
+  document.addEventListener("pointerdown", function (e) {
+    if (!e.target || e.target.tagName !== "CANVAS") return;
+    var input = textInput(document.activeElement);
+    if (input) input.blur();
+  }, true);
+  document.addEventListener("keyup", function (e) {
+    var input = textInput(e.target);
+    if (input && e.key === "Enter") input.blur();
+  }, true);
 })();

@@ -125,3 +125,28 @@ def test_double_and_rapid_clicks_are_taken_in_order_or_refused_with_the_state_in
     assert np.allclose(np.array(raw), np.array(pts).reshape(4, 2, 2), atol=0.6)
     assert all(c.client != panel.session.client for c in ui.db.history())  # nothing written
     page.close()
+
+
+def test_a_number_typed_in_a_box_gives_the_keys_back_on_enter_or_a_click_on_the_video(browser, interface):
+    """Seconds back typed and entered, then F: Freeze acts (the F went into the box before, and a
+    Backspace meant for Remove last too: a new operator's run). A click on the video gives the keys back too."""
+    ui = interface
+    page = ui.open(browser)
+    panel = page.panel
+    box = page.get_by_text("Seconds back", exact=True).first.locator("xpath=ancestor::div[2]").locator("input").last
+    box.click()
+    box.fill("1")
+    page.keyboard.press("Enter")
+    wait_until(lambda: panel.frozen is not None and panel.gui_scrub.value == 1.0, what="the frame 1 s back frozen")
+    first = panel.frozen
+    page.keyboard.press("f")  # Freeze: the newest frame, not an "f" in the box
+    wait_until(lambda: panel.frozen is not first, what="Freeze by its key after Enter in the box")
+    assert box.input_value() in ("0", "1")
+    box.click()
+    box.fill("2")
+    time.sleep(1.0)  # the value taken (or not) before the click
+    second = panel.frozen
+    ui.click_pixel(page, [20.0, 20.0])  # a click on the video (nothing selected there): the box lets go
+    page.keyboard.press("f")
+    wait_until(lambda: panel.frozen is not second, what="Freeze by its key after a click on the video")
+    page.close()
