@@ -835,13 +835,18 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
 
     def summary(self) -> dict[str, Any]:
         with self.lock:
-            out: dict[str, Any] = {"object": self.object_name, "edges": sum(e is not None for e in self.edge_ids),
-                                   "points": len(self.points_uv)}
-            if self.auto:
-                out["clicked edges"] = len(self.segs)
+            # edges clicked, and of them assigned to a model edge (an auto match assigns them all at once: it
+            # showed "Edges: 0" beside "Clicked edges: 4")
+            assigned = sum(e is not None for e in self.edge_ids)
+            out: dict[str, Any] = {"object": self.object_name, "edges clicked": len(self.segs),
+                                   "edges assigned": assigned, "points": len(self.points_uv)}
             snaps = [s for s in self.seg_snaps + self.point_snaps if s is not None]
             if snaps:
-                out["snapped"] = f"{sum(s.applied for s in snaps)} of {len(snaps)} clicks"
+                n_seg = sum(1 for s in self.seg_snaps if s is not None)
+                what = " and ".join(p for p in (f"{n_seg} edge{'s' if n_seg != 1 else ''}" if n_seg else "",
+                                                f"{len(snaps) - n_seg} point{'s' if len(snaps) - n_seg != 1 else ''}"
+                                                if len(snaps) > n_seg else "") if p)
+                out["snapped"] = f"{sum(s.applied for s in snaps)} of {what}"
             self._found_summary(out)
             if self.candidates and self.found is None:  # the found poses' are in "found" (they were listed twice)
                 out["candidates"] = len(self.candidates)
