@@ -89,7 +89,7 @@ class Change:
 METHOD_WORDS = {
     "search": "found from one click",
     "search+refine": "one click, then edges refined",
-    "p3l+refine": "three edges solved, then refined",
+    "p3l+refine": "solved from clicked edges, then refined",
     "match+refine": "edges matched automatically, then refined",
     "refine": "refined from clicked edges",
     "tracking": "tracked in the video",

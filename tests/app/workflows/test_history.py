@@ -67,7 +67,7 @@ def test_undo_asks_when_it_discards_later_changes_and_refuses_a_stale_list(site)
 
 
 def test_the_history_says_how_in_the_operators_words(site):
-    """History's table says how each change was made in words ("three edges solved, then refined"),
+    """History's table says how each change was made in words ("solved from clicked edges, then refined"),
     not the database's tags ("p3l+refine", "search"), which a new operator read as jargon."""
     from app.workflows import History
     from app.workflows.site import method_words
@@ -77,7 +77,7 @@ def test_the_history_says_how_in_the_operators_words(site):
     T[0, 3] += 0.01
     site.update_pose(obj, T, None, method="p3l+refine", client="alice", clicks={}, residuals={})
     rows = History(site, client="alice").summary()["changes"]
-    assert rows[0]["how"] == "three edges solved, then refined"
+    assert rows[0]["how"] == "solved from clicked edges, then refined"
     assert method_words("search") == "found from one click" and method_words("model box (fused)") == "model box (fused)"
 
 
