@@ -20,21 +20,26 @@ from core.camera import Camera
 
 __all__ = ["label_anchor", "draw_database", "draw_object", "draw_marks", "spread_labels"]
 
-WIDE_TOP_PX = 160.0  # label_anchor: a top wider than this gets its label near the left end ...
-WIDE_TOP_INSET_PX = 40.0  # ... this far in
+WIDE_TOP_PX = 160.0  # label_anchor: an outline wider than this (a table) gets its label under its front edge
 
 
-def label_anchor(pw: ProjectedWireframe) -> np.ndarray | None:
-    """Pixel (2,) where an object's label goes: just above the top of its drawn wireframe, or None. Over
-    a wide top (a table's far edge) near its left end, not its middle, where the objects standing on
-    it are drawn (a new operator read "table" as the parallelepiped's label)."""
+def label_anchor(pw: ProjectedWireframe, height: int | None = None) -> np.ndarray | None:
+    """Pixel (2,) where an object's label goes: just above the top of its drawn wireframe, or None. A
+    wide outline (a table) has it just under the middle of its front (lowest) edge instead, kept inside
+    the image of ``height`` rows: above, its far edge is where the objects standing on it are drawn (two
+    new operators read "table" as the parallelepiped's label, at its middle and near its left end)."""
     P = pw.seg_uv[pw.visible].reshape(-1, 2) if pw.visible.any() else pw.seg_uv.reshape(-1, 2)
     if not len(P):
         return None
     top = P[P[:, 1] <= P[:, 1].min() + 3.0]
     lo, hi = float(top[:, 0].min()), float(top[:, 0].max())
-    x = lo + WIDE_TOP_INSET_PX if hi - lo > WIDE_TOP_PX else 0.5 * (lo + hi)
-    return np.array([x, P[:, 1].min() - 4.0])
+    if float(np.ptp(P[:, 0])) > WIDE_TOP_PX:
+        front = P[P[:, 1] >= P[:, 1].max() - 3.0]
+        y = float(P[:, 1].max()) + 16.0
+        if height is not None:
+            y = min(y, float(height) - 4.0)
+        return np.array([0.5 * (float(front[:, 0].min()) + float(front[:, 0].max())), y])
+    return np.array([0.5 * (lo + hi), P[:, 1].min() - 4.0])
 
 
 def draw_database(camera: Camera, objects: Iterable[SiteObject], width: int, height: int,
@@ -62,7 +67,7 @@ def draw_object(camera: Camera, obj: SiteObject, width: int, height: int, hidden
     color = STATUS_COLORS.get(obj.status, STATUS_COLORS["known"])
     pw = project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height)
     batch.add_wireframe(pw, color, hidden=hidden)
-    anchor = label_anchor(pw)
+    anchor = label_anchor(pw, height)
     label = None
     if anchor is not None:
         label = (anchor, obj.name if obj.status == "known" else f"{obj.name} ({obj.status})")
