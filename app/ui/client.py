@@ -114,8 +114,8 @@ class ClientPanel:
         self._click_worker = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"mcit-click-{client.client_id}")
         guarded_click = self._guard(self._on_click)
 
-        async def on_click(event) -> None:
-            self._click_worker.submit(guarded_click, event)
+        async def on_click(event) -> None:  # its arrival time read here: a busy worker does not split a double click
+            self._click_worker.submit(guarded_click, event, time.monotonic())
 
         client.scene.on_click()(on_click)
         self._rect_cb = client.scene.on_rect_select()(self._guard(self._on_rect))
@@ -540,10 +540,11 @@ class ClientPanel:
                                     cast_shadow=False, receive_shadow=False)
 
     # ------------------------------------------------------------------ clicks
-    def on_pixel_click(self, uv: np.ndarray) -> None:
-        """A click at pixel uv of the video: the workflow's, or else select the nearest object."""
+    def on_pixel_click(self, uv: np.ndarray, at: float | None = None) -> None:
+        """A click at pixel uv of the video, arrived at time ``at`` (monotonic; default now): the
+        workflow's, or else select the nearest object."""
         wf = self.session.workflow
-        now, last = time.monotonic(), getattr(self, "_last_click", None)
+        now, last = (time.monotonic() if at is None else float(at)), getattr(self, "_last_click", None)
         double = last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX
         # the frame shown at this click: a double click that starts Update pose freezes it (the newest, a
         # moment later, showed a moving box elsewhere: a new operator's run)
@@ -595,14 +596,14 @@ class ClientPanel:
                            if other not in (None, name, "table") else f"double click at ({uv[0]:.0f}, {uv[1]:.0f})")
         self.press("find")
 
-    def _on_click(self, event) -> None:
-        arrival = time.monotonic()
+    def _on_click(self, event, arrival: float | None = None) -> None:
+        arrival = time.monotonic() if arrival is None else arrival
         try:
-            self._handle_click(event)
+            self._handle_click(event, arrival)
         finally:
             self.click_t = arrival  # answered by the first redraw after this callback (for the benchmark)
 
-    def _handle_click(self, event) -> None:
+    def _handle_click(self, event, arrival: float | None = None) -> None:
         if self.view != "video":
             raise WorkflowError("clicks work on the video: switch the view to Video")
         uv = self.app.pixel_world.pixel_from_ray(np.array(event.ray_origin), np.array(event.ray_direction))
@@ -611,7 +612,7 @@ class ClientPanel:
         w, h = self.app.pixel_world.width, self.app.pixel_world.height
         if not (-0.5 <= uv[0] <= w - 0.5 and -0.5 <= uv[1] <= h - 0.5):
             raise WorkflowError(f"that click is outside the {w}×{h} image: click on the video")
-        self.on_pixel_click(uv)
+        self.on_pixel_click(uv, arrival)
 
     def _on_rect(self, event) -> None:
         """A left drag on the video zooms to the dragged rectangle (and never rotates the view)."""
