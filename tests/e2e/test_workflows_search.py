@@ -27,6 +27,24 @@ pytestmark = pytest.mark.e2e
 BOX = "parallelepiped"
 
 
+def _with_cylinder(ui, browser, scene, off_m: float):
+    """The scene's cylinder in the database as "cylinder_1", off_m along x from where the frame shows it,
+    and a page open: (its true pose, the page, its Operator, its longest drawn segment (2, 2))."""
+    from app.overlay import project_wireframe
+    from core.transforms import make_T
+
+    body = scene.body("unknown_cylinder")
+    T_true = body.pose_at(ui.frame_t_s)
+    ui.db.add_object("cylinder_1", "cylinder", body.model, make_T(T_true[:3, :3], T_true[:3, 3] + [off_m, 0.0, 0.0]),
+                     status="modelled")
+    page = ui.open(browser)
+    op = Operator(ui, page)
+    wait_until(lambda: "cylinder_1" in {o.name for o in ui.site.objects()}, what="the cylinder in the database")
+    obj = ui.site.object("cylinder_1")
+    pw = project_wireframe(ui.site.camera, obj.model, obj.T_world_obj)
+    return T_true, page, op, pw.seg_uv[int(np.argmax(np.linalg.norm(pw.seg_uv[:, 1] - pw.seg_uv[:, 0], axis=1)))]
+
+
 def _missed(op) -> int:
     """Clicks of the selection that a loaded machine's fresh page did not take (clicked again): the
     clicks before the first button, less the one that selects."""
@@ -122,21 +140,9 @@ def test_update_a_cylinder_from_one_double_click(browser, interface, scene):
     """An object with no straight edges (a cylinder modelled earlier, its database pose 8 cm off): select
     it on its outline, Update pose, a double click where the video shows it, Accept — 4 actions; the
     written axis within 1° and 5 mm of the truth. (Before, Update pose refused it.)"""
-    from app.overlay import project_wireframe
-    from core.transforms import make_T
-
     ui = interface
-    body = scene.body("unknown_cylinder")
-    T_true = body.pose_at(ui.frame_t_s)
-    ui.db.add_object("cylinder_1", "cylinder", body.model, make_T(T_true[:3, :3], T_true[:3, 3] + [0.08, 0.0, 0.0]),
-                     status="modelled")
-    page = ui.open(browser)
-    op = Operator(ui, page)
+    T_true, page, op, longest = _with_cylinder(ui, browser, scene, 0.08)
     cam = ui.site.camera
-    wait_until(lambda: "cylinder_1" in {o.name for o in ui.site.objects()}, what="the cylinder in the database")
-    obj = ui.site.object("cylinder_1")
-    pw = project_wireframe(cam, obj.model, obj.T_world_obj)
-    longest = pw.seg_uv[int(np.argmax(np.linalg.norm(pw.seg_uv[:, 1] - pw.seg_uv[:, 0], axis=1)))]
     select_by_click(page, "cylinder_1", lambda: op.click(longest.mean(axis=0)))
     op.press("Update pose")
     wait_until(lambda: page.panel.session.workflow is not None, what="the workflow")
@@ -200,18 +206,9 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     pose (a new operator's only selected it, silently); on no wireframe it says to select first. With the
     box selected, a double click on another object's wireframe is refused for the box and names that other
     object (the same refusal three times had left a new operator unsure a click was taken)."""
-    from app.overlay import project_wireframe
-    from core.transforms import make_T
-
     ui = interface
-    body = scene.body("unknown_cylinder")
-    T_cyl = body.pose_at(ui.frame_t_s)
-    ui.db.add_object("cylinder_1", "cylinder", body.model, make_T(T_cyl[:3, :3], T_cyl[:3, 3] + [0.003, 0.0, 0.0]),
-                     status="modelled")
-    page = ui.open(browser)
-    op = Operator(ui, page)
+    _, page, op, longest = _with_cylinder(ui, browser, scene, 0.003)
     cam = ui.site.camera
-    wait_until(lambda: "cylinder_1" in {o.name for o in ui.site.objects()}, what="the cylinder in the database")
     panel = page.panel
     # nothing selected, on the table away from every wireframe: said, nothing started
     empty = next(uv for uv in (cam.project(np.array([[x, y, 0.0]]))[0] for x in np.linspace(-0.3, 0.3, 13)
@@ -231,8 +228,7 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     from .test_workflows_pose import _select
 
     _select(op, page, ui.site.object(BOX), cam)
-    pw = project_wireframe(cam, body.model, ui.site.object("cylinder_1").T_world_obj)
-    outline = pw.seg_uv[int(np.argmax(np.linalg.norm(pw.seg_uv[:, 1] - pw.seg_uv[:, 0], axis=1)))].mean(axis=0)
+    outline = longest.mean(axis=0)
     op.double_click(outline)
     wait_until(lambda: "is on cylinder_1's wireframe: to update cylinder_1" in panel.error, timeout_s=30,
                what="the refusal naming the cylinder")
