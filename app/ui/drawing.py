@@ -140,7 +140,8 @@ LABEL_OFFSET_PX = 6.0  # ... its corner this far right of and above the point it
 def spread_labels(labels: list[tuple[np.ndarray, str]], image_px_per_screen_px: float) -> list[tuple[np.ndarray, str]]:
     """Labels moved apart so that none covers another: each label's bottom-left corner (image pixels),
     placed just above and right of its point, then lifted a line at a time while its box meets a label
-    placed before it (a new operator met "3→e2" written over "snapped 2.6 px" at one corner).
+    placed before it (a new operator met "3→e2" written over "snapped 2.6 px" at one corner); moved down
+    instead when lifting would take it off the image's top.
 
     image_px_per_screen_px : the view's scale (the label's size on screen is fixed)."""
     k = float(image_px_per_screen_px)
@@ -153,10 +154,17 @@ def spread_labels(labels: list[tuple[np.ndarray, str]], image_px_per_screen_px: 
         x = float(uv[0]) + LABEL_OFFSET_PX * k
         y = float(uv[1]) - LABEL_OFFSET_PX * k
         w = (len(text) * LABEL_CHAR_PX + 4.0) * k
+        y0 = y
         for _ in range(len(placed) + 1):
             if not any(x < b[2] and b[0] < x + w and y - h < b[3] and b[1] < y for b in placed):
                 break
             y = min(b[1] for b in placed if x < b[2] and b[0] < x + w and y - h < b[3] and b[1] < y)  # just above it
+        if y - h < 0.0:  # lifted off the image's top: moved down below the labels instead
+            y = y0
+            for _ in range(len(placed) + 1):
+                if not any(x < b[2] and b[0] < x + w and y - h < b[3] and b[1] < y for b in placed):
+                    break
+                y = max(b[3] for b in placed if x < b[2] and b[0] < x + w and y - h < b[3] and b[1] < y) + h
         placed.append((x, y - h, x + w, y))
         out.append((np.array([x, y]), text))
     return out

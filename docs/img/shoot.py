@@ -73,6 +73,9 @@ def click(page, name: str) -> None:
     if name == "Accept" and page.get_by_role("button", name="Accept anyway").first.is_visible():
         page.get_by_role("button", name="Accept anyway").first.click()
         time.sleep(0.4)
+    if name == "Cancel" and page.get_by_role("button", name=re.compile("^Cancel: confirm")).first.is_visible():
+        page.get_by_role("button", name=re.compile("^Cancel: confirm")).first.click()  # clicks made: asked once more
+        time.sleep(0.4)
 
 
 def main() -> int:

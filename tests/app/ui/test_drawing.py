@@ -99,3 +99,6 @@ def test_spread_labels_lifts_a_label_off_the_one_it_would_cover():
     assert np.allclose(near[1][0], corner + [0.6, 2.4])  # 3 px apart is room enough there: not moved
     with pytest.raises(ValueError, match="positive"):
         spread_labels([], 0.0)
+    # near the image's top a label is moved down instead, off the image no more
+    top = spread_labels([(np.array([100.0, 12.0]), "1→e3"), (np.array([101.0, 12.0]), "snapped 1.4 px")], 1.0)
+    assert top[1][0][1] - LABEL_LINE_PX >= 0.0 and top[1][0][1] - top[0][0][1] >= LABEL_LINE_PX - 1e-9
