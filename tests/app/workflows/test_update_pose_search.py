@@ -247,3 +247,25 @@ def test_a_refined_pose_whose_outline_misses_the_image_is_said(video_site, scene
     assert wf.refined_unseen == "" and not any("outline" in w for w in wf.weaknesses())
     wf.refined_unseen = said  # as a wrong assignment leaves it: a weakness, so Accept asks once more
     assert said in wf.weaknesses()
+
+
+def test_a_box_clicked_on_the_cylinder_is_said_not_to_single_out_a_pose(video_site, scene, db):
+    """The box's model double-clicked on the cylinder: its two vertical edges lie on the cylinder's outline and
+    several poses fit about as well (bench/search.py's wrong clicks: not refused). Accept asks once more, saying
+    the click may not be on the box."""
+    site = video_site
+    site.t["t"] = 16.5
+    box = scene.body("unknown_box")
+    db.add_object("box_1", "box", box.model, box.pose_at(0.0), status="modelled", method="test")
+    site.poll()
+    session = Session(site, client="alice")
+    session.select("box_1")
+    wf = session.start("update_pose")
+    cyl = scene.body("unknown_cylinder")
+    wf.click(site.camera.project_obj(cyl.pose_at(16.5), np.array([[0.0, 0.0, 0.05]]))[0])
+    try:
+        wf.find()
+    except WorkflowError:
+        pytest.fail("the search now refuses this click outright: assert that refusal here instead")
+    assert wf._near_ties() >= 4
+    assert any("does not single out one pose of box_1" in w for w in wf.weaknesses())
