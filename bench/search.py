@@ -19,13 +19,19 @@ Cases:
     random pixel of the cube. "table": the plane of the cube's lowest face at the reference (the
     table it stands on: the camera moves, so this plane is taken from the reference in each frame);
     "free": no hint.
+(d) wrong clicks on the workcell video, 5 frames (16.5, 20, 24, 27, 5 s): a model clicked where it is not —
+    the parallelepiped's on three table points, on the box and on the cylinder; the box's and the
+    cylinder's on the parallelepiped; the cylinder's on the table points and on the box; the box's on the
+    table points and on the cylinder (19 clicks a frame). Each is refused ("no pose fits"), found right (a
+    table point that lies on the box itself), said (Accept asks once more: near-ties, weak σ or match), or
+    silent: a wrong pose offered with nothing said.
 
 Success: the top candidate (the one Accept writes) within 1° and 5 mm of the truth, up to the model's
 symmetries (for the upright cylinder: its axis and origin; its heading is not seen). "σ ok": of the
 right top candidates, the share whose error lies inside the 95 % region of their stated covariance
 (χ² of its rank: 3 on the table, 2 for the upright cylinder, 6 in the free search). "silent": top
 candidates that are wrong and that the interface does not flag (no near-tie said, σ within 1° and
-5 mm, 40 % or more of the outline matched: app/workflows/pose_search.py); a refused click is not silent
+5 mm, 45 % or more of the outline matched: app/workflows/pose_search.py); a refused click is not silent
 (it says no pose fits). "among": the right
 pose among the candidates shown. Auto match (app.vision.matching.match_edges, with the frame): 4 visible
 edges at least 30 px long (not hidden), two clicks each with σ = 1 px, its top candidate; not
@@ -327,6 +333,57 @@ def said(cands) -> bool:
     return bool(ties or weak)
 
 
+def wrong_clicks(scene) -> list[tuple[str, object, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """(d): (what, model, old pose, own true pose or None, frame, click) for each wrong click."""
+    names = ("parallelepiped", "unknown_box", "unknown_cylinder")
+    out = []
+    for t in (16.5, 20.0, 24.0, 27.0, 5.0):
+        k = int(round(t * scene.video.fps))
+        image = next(iter_frames(scene.video.path, k, 1))[1]
+        at = {f"table point {i + 1}": scene.camera.project(np.array([X]))[0]
+              for i, X in enumerate(([0.3, -0.3, 0.0], [-0.3, -0.2, 0.0], [0.0, -0.45, 0.0]))}
+        for o in names:
+            at[o] = scene.camera.project_obj(scene.body(o).pose_at(t), np.array([[0.0, 0.0, 0.05]]))[0]
+        para = scene.body("parallelepiped")
+        at["parallelepiped"] = scene.camera.project_obj(para.pose_at(t), para.model.vertices).mean(axis=0)
+        plan = {"parallelepiped": ("table point 1", "table point 2", "table point 3", "unknown_box", "unknown_cylinder"),
+                "unknown_box": ("parallelepiped", "table point 1", "table point 2", "table point 3", "unknown_cylinder"),
+                "unknown_cylinder": ("parallelepiped", "table point 1", "table point 2", "table point 3", "unknown_box")}
+        for m, where in plan.items():
+            body = scene.body(m)
+            for w in where:
+                out.append((f"{m} model on {w}", body.model, body.pose_at(0.0), body.pose_at(t), image, at[w]))
+    return out
+
+
+def wrong_rows(scene) -> None:
+    """(d): what becomes of clicks on the wrong place."""
+    table = table_plane(scene)
+    tally: dict[str, list] = {}
+    for what, model, T_old, T_own, image, uv in wrong_clicks(scene):
+        try:
+            cands = search_pose(scene.camera, model, T_old, uv, image, table=table).candidates
+        except NoPoseFits:
+            cands = []
+        key = what.split(" on ")[0] + " on " + ("the table" if "table point" in what else what.split(" on ")[1])
+        if not cands:
+            outcome = "refused"
+        else:
+            e = error(model, cands[0].T_world_obj, T_own)
+            outcome = "right" if (e[0] <= OK_DEG and e[1] <= OK_M) else ("said" if said(cands) else "silent")
+        tally.setdefault(key, []).append(outcome)
+    print("(d) wrong clicks on the workcell video, 5 frames")
+    print(f"  {'click':44s}{'n':>4s}{'refused':>9s}{'said':>6s}{'right':>7s}{'silent':>8s}")
+    for key, outs in tally.items():
+        print(f"  {key:44s}{len(outs):4d}" + "".join(f"{outs.count(o):{w}d}" for o, w in
+                                                     (("refused", 9), ("said", 6), ("right", 7), ("silent", 8))))
+    every = [o for outs in tally.values() for o in outs]
+    print(f"  {'all':44s}{len(every):4d}" + "".join(f"{every.count(o):{w}d}" for o, w in
+                                                    (("refused", 9), ("said", 6), ("right", 7), ("silent", 8))))
+    print("  target: none silent (a click on nothing or on another object: no pose fits, or said)")
+    print()
+
+
 def run_match(c: Case):
     from app.vision.matching import match_edges
 
@@ -409,7 +466,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--placements", type=int, default=10, help="(b): random placements per object")
     ap.add_argument("--cube", type=int, default=22, help="(c): frames of the real cube")
-    ap.add_argument("--skip", default="", help="groups to skip, e.g. 'b' or 'bc'")
+    ap.add_argument("--skip", default="", help="groups to skip, e.g. 'b' or 'bcd'")
     args = ap.parse_args()
     pinned = pin_one_core()
     rng = np.random.default_rng(args.seed)
@@ -444,6 +501,8 @@ def main() -> int:
         else:
             table_rows("(c) real ViSP cube, starts 30° / 10 cm off the reference",
                        {"on its table (plane from the reference)": tc, "no hint (full pose near the old)": fc}, 0.80)
+    if "d" not in args.skip:
+        wrong_rows(scene)
     print(f"  load average {os.getloadavg()[0]:.2f} at the end")
     return 0
 
