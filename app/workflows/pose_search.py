@@ -137,6 +137,9 @@ class OneClickMixin:
                                                        "almost as well, check the white ghost" if ties else
                                                        ((": the others fit clearly worse" if n > 2 else
                                                          ": the other fits clearly worse") if n > 1 else "")))
+            if best.beside_click:
+                self.message += (f". ⚠ The best lies beside your click, not under it: {self.object_name} fits the image "
+                                 "there far better than any pose under the click (check the white ghost)")
             if moving:
                 self.message += f". ⚠ {moving}"
             return self.found
@@ -228,6 +231,9 @@ class OneClickMixin:
         elif sd > WEAK_FOUND_SIGMA_DEG or st > WEAK_FOUND_SIGMA_MM:
             out.append(f"the pose is uncertain ({sigma_over(sd, st, WEAK_FOUND_SIGMA_DEG, WEAK_FOUND_SIGMA_MM)}); "
                        "click an edge of it and Refine")
+        if getattr(c, "beside_click", False):
+            out.append(f"this pose lies beside your click, not under it (there {self.object_name} fits the image far "
+                       "better): check that the white ghost is on the object")
         ties = self._near_ties()
         if ties >= MANY_TIES:
             out.append(f"{ties} other poses fit about as well: the image near your click does not single out one pose "
