@@ -561,7 +561,11 @@ class ClientPanel:
                 raise WorkflowError("a double click finds the pose of the selected object: click its wireframe to "
                                     "select it, then double-click where it is in the video")
             self.session.select(name)
-            self._on_start("update_pose", frame=last[3])
+            # the frame the double click was made on: the one the operator froze (F, Seconds back) when one is
+            # shown, else the live frame shown at its first click (a new operator's frozen t = 24.75 s was
+            # replaced by 27.58 s, where the box had moved)
+            looked_at = self.frozen is not None and self.frozen_by is None and not self.show_live
+            self._on_start("update_pose", frame=None if looked_at else last[3])
             self.session.workflow.click(uv)
             self._find_from_double_click(uv, name)
             return

@@ -185,11 +185,15 @@ def test_update_pose_by_a_double_click_on_the_selected_object(browser, interface
     inside = grid[hull.find_simplex(grid) >= 0]
     on_table = [uv for uv in inside if page.panel._object_at(uv) == "table"]
     assert on_table, "no pixel of the moved box lies by the table's wireframe in this frame"
+    page.keyboard.press("f")  # a frame frozen to look at first: the double click is made on it, and uses it
+    wait_until(lambda: page.panel.frozen is not None, what="the frame frozen")
+    looked_at = page.panel.frozen
     op.double_click(on_table[len(on_table) // 2])
     wait_until(lambda: page.panel.session.workflow is not None and page.panel.session.workflow.found is not None,
                timeout_s=30, what="Update pose started and the found poses")
     wf = page.panel.session.workflow
     assert wf.name == "update_pose" and wf.object_name == BOX
+    assert wf.frame is looked_at  # not the newest frame (a new operator's frozen frame was replaced)
     op.accept(wf)
     entry = ui.db.history(BOX)[-1]
     assert entry.method == "search"
