@@ -337,8 +337,14 @@ class ClientPanel:
         if action not in step.enabled:
             raise WorkflowError(f"{c.label} does not apply now. {wf.prompt_text(markdown=False)}")
         if action == "cancel":
-            # work done (clicks, measurements: Remove last applies) is asked about once more; a running
-            # measurement stops at once
+            # a running measurement (or search) is stopped alone, at once: the workflow and what was done
+            # before it stay (a new operator's Esc while Designate checked a target lost the targets before);
+            # work done (clicks, measurements: Remove last applies) is asked about once more
+            busy = (self.worker is not None and self.worker.is_alive()) or getattr(wf, "progress", None) is not None
+            if busy:
+                self.confirm_pending, self.warning, self.error = None, "", ""
+                wf.stop_measurement()
+                return
             if self._workflow_has_clicks() and self.confirm_pending != ("cancel", ()):
                 self.confirm_pending, self.error = ("cancel", ()), ""
                 self.warning = (f"Cancel throws away what you did in {wf.title} (your clicks and measurements; nothing "

@@ -773,9 +773,9 @@ def refine_from(camera: Camera, model: BRep, T_start: np.ndarray, image: np.ndar
     return _check(camera, model, T, oe, img_s, rims, cov, float("nan"))
 
 
-BESIDE_TRIGGER = 0.30  # _beside runs when the best pose under the click has a mismatch above this ...
+BESIDE_TRIGGER = 0.40  # _beside runs when the best pose under the click has a mismatch above this ...
 BESIDE_MARGIN = 0.15  # ... and a pose beside it is offered when its mismatch is lower by more than this
-BESIDE_SEEDS = 16
+BESIDE_SEEDS = 8
 
 
 def _beside(camera: Camera, model: BRep, p: np.ndarray, step: np.ndarray, per: np.ndarray,
@@ -793,7 +793,7 @@ def _beside(camera: Camera, model: BRep, p: np.ndarray, step: np.ndarray, per: n
     q, best = _descend(lambda q_, tau: evaluate(q_, tau, under_click=False), p[ok][seeds], step / 2.0,
                        (6.0, TAU_FINE, TAU_FINE))
     found = []
-    for j in np.argsort(best)[:6]:
+    for j in np.argsort(best)[:3]:
         R, t = sp.poses(q[j:j + 1], zc, centre_obj)
         c = _settle_table(camera, model, make_T(R[0], t[0]), oe, img_s, ef, ms, sp, zc, centre_obj, per, float(best[j]))
         if c is not None:

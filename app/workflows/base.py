@@ -236,6 +236,11 @@ class Workflow:
     def finished(self) -> bool:
         return self.accepted or self.cancelled
 
+    def stop_measurement(self) -> None:
+        """Stop the measurement (or search) under way, keeping the workflow and what was done before it
+        (the acquisition raises Cancelled; the next one clears the request)."""
+        self.cancel_event.set()
+
     def cancel(self) -> None:
         """Abandon the workflow: nothing is written; a running measurement stops."""
         self.cancel_event.set()

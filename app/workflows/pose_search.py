@@ -97,6 +97,8 @@ class OneClickMixin:
         def progress(frac: float, what: str) -> None:
             self.progress, self.progress_text = float(frac), what
 
+        if not self.finished:
+            self.cancel_event.clear()  # a search stopped before (stop_measurement) does not stop this one
         try:
             res = search_pose(camera, model, T_db, p, image, table=table, name=self.object_name,
                               cancel=self.cancel_event.is_set, progress=progress, camera_cov=camera_cov)
