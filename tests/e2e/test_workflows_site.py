@@ -519,3 +519,40 @@ def test_cancel_asks_once_more_before_throwing_work_away(browser, interface):
     op.press("Cancel")  # nothing done: cancelled at once
     wait_until(lambda: wf2.finished, what="the cancel without a question")
     op.report()
+
+
+def test_esc_while_designate_measures_stops_the_check_only(browser, scene, frame, tmp_path):
+    """Esc while the range finder checks a target (the devices at their real pace) stops that check alone: the
+    targets designated before stay, the workflow goes on, and the stopped check leaves no beam spot (a new
+    operator lost the first target to an Esc meant for the second check)."""
+    from app.devices import open_devices
+
+    from .harness import FRAME_T_S, Interface
+
+    devices = open_devices(scene, clock=lambda: FRAME_T_S)
+    ui = Interface(scene, frame, tmp_path / "site.sqlite", devices=devices)
+    try:
+        site = ui.site
+        page = ui.open(browser)
+        op = Operator(ui, page, "Designate: Esc during the second check")
+        op.press("Designate target")
+        wf = _workflow(page, "designate")
+        table = site.object("table")
+        T = table.T_world_obj
+        top = float(table.model.vertices[:, 2].max())
+        first = site.camera.project((T[:3, :3] @ np.array([0.25, -0.3, top]) + T[:3, 3])[None])[0]
+        op.click(first)
+        wait_until(lambda: len(wf.targets) == 1 and wf.progress is None, timeout_s=30, what="the first target")
+        op.click(site.camera.project((T[:3, :3] @ np.array([-0.25, -0.35, top]) + T[:3, 3])[None])[0])
+        wait_until(lambda: wf.progress is not None, timeout_s=10, what="the second check under way")
+        page.get_by_text("Checking the target with the range finder", exact=False).first.wait_for(timeout=5000)
+        op.key("Escape")
+        wait_until(lambda: wf.progress is None, timeout_s=15, what="the check stopped")
+        assert not wf.finished and len(wf.targets) == 1  # the first target kept, the workflow open
+        wait_until(lambda: site.beam_X_world is None, what="no beam spot left")
+        op.key("Escape")  # now Cancel closes it (nothing was written: no question)
+        wait_until(lambda: wf.finished, what="the cancel")
+        page.close()
+    finally:
+        ui.close()
+        devices.close()
