@@ -499,6 +499,8 @@ class ClientPanel:
         if wf is None or wf.finished:
             if self.frozen is not None and getattr(self, "frozen_by", None) is not None:
                 self._unfreeze()
+                if self.gui_scrub.value != 0.0:  # back to the live video: the scrubber says so (it kept "4")
+                    self.gui_scrub.value = 0.0
                 self.dirty = True
             return
         if wf.name != "track":
@@ -813,6 +815,21 @@ class ClientPanel:
             self.click_t = None
         return True
 
+    def _weak_now(self, wf, step) -> list[str]:
+        """The result's weaknesses while Accept applies (``Workflow.weaknesses``), read again only when the
+        workflow's step, message or choice changed."""
+        if wf.finished or "accept" not in step.enabled:
+            return []
+        key = (id(wf), step.name, wf.message, getattr(wf, "chosen", None))
+        if getattr(self, "_weak_key", None) != key:
+            self._weak_key = key
+            try:
+                self._weak = list(wf.weaknesses())
+            except Exception:  # noqa: BLE001 - Accept asks again anyway
+                log.exception("weaknesses of %s failed", wf.name)
+                self._weak = []
+        return self._weak
+
     def _announce(self) -> None:
         """Tell this operator of database changes made by others (who, what, when)."""
         site = self.app.site
@@ -862,6 +879,9 @@ class ClientPanel:
             title = f"{head}\n\n{prompt}"
             if wf.message and not wf.finished and not self.warning and wf.message[:40] not in prompt:
                 title += f"\n\n_{wf.message}_"  # not said twice, nor above a question being asked
+            weak = self._weak_now(wf, step)
+            if weak and not self.warning:  # said with the result, not first at Accept (a new operator's)
+                title += "\n\n⚠ **Check before accepting:** " + "; ".join(weak) + "."
             if wf.finished:
                 title += f"\n\n{idle}"
             # a cancelled result is gone; a closed one (History, Designate: nothing accepted) too

@@ -88,8 +88,8 @@ class TrackFeeder:
                               "again.", "red")
         finally:
             self.grabber.remove_listener(self._on_frame)
-            if lost_note is not None and wf.finished:
-                _remove(lost_note)
+            if lost_note is not None:  # the track is over (finished, or another workflow started): its news goes
+                _remove(lost_note)  # (a new operator had "Tracking lost" notes stacked 15 minutes on)
 
 
 def _remove(note) -> None:

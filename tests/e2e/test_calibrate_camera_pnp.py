@@ -76,6 +76,8 @@ def test_calibrate_camera_by_pnp_from_5_points(browser, lens_interface, scene):
     said = page.get_by_text("Solved the camera's pose from 5 points with the lens known (PnP)").first
     said.wait_for(timeout=5000)  # the panel says which was solved
     assert len(ui.db.calibrations("camera")) == n_cal  # nothing written before Accept
+    # the weakness is said with the result, before Accept is pressed
+    page.get_by_text("Check before accepting:", exact=False).first.wait_for(timeout=5000)
     op.press("Accept")
     wait_until(lambda: wf.accepted or page.panel.asking == "accept", what="the accept or its question")
     assert not wf.accepted and len(ui.db.calibrations("camera")) == n_cal  # 5 points: weak, asked once more
