@@ -608,8 +608,10 @@ def search_pose(
         lam = np.clip(((XY - f2[0]) @ d) / max(float(d @ d), 1e-12), 0.0, 1.0)
         dist_foot = np.linalg.norm(XY - (f2[0] + lam[:, None] * d), axis=1)
         psis = np.arange(0.0, period - 1e-9, step_psi) if period > 0 else np.zeros(1)
-        # poses beside the click (_beside): centres up to twice as far
-        XYw = XY[dist_foot <= 2.0 * r_foot + 0.5 * step_xy]
+        # poses beside the click (_beside): centres up to twice as far, on a grid twice as coarse (its cost:
+        # bench (b) p95 0.82-0.85 s on the full grid, against 0.52-0.60 s without _beside)
+        coarse_xy = (np.rint((XY - lo2) / step_xy).astype(int) % 2 == 0).all(axis=1)
+        XYw = XY[(dist_foot <= 2.0 * r_foot + 0.5 * step_xy) & coarse_xy]
         p_wide = np.column_stack([np.repeat(XYw, len(psis), axis=0), np.tile(psis, len(XYw))])
         XY = XY[dist_foot <= r_foot + 0.5 * step_xy]
         p = np.column_stack([np.repeat(XY, len(psis), axis=0), np.tile(psis, len(XY))])
@@ -790,7 +792,7 @@ def _beside(camera: Camera, model: BRep, p: np.ndarray, step: np.ndarray, per: n
     seeds = _distinct(p[ok], sc2[ok], np.where(step > 0, step, 1.0), BESIDE_SEEDS, per)
     if not len(seeds):
         return None
-    q, best = _descend(lambda q_, tau: evaluate(q_, tau, under_click=False), p[ok][seeds], step / 2.0,
+    q, best = _descend(lambda q_, tau: evaluate(q_, tau, under_click=False), p[ok][seeds], step,
                        (6.0, TAU_FINE, TAU_FINE))
     found = []
     for j in np.argsort(best)[:3]:
