@@ -397,7 +397,7 @@ class ClientPanel:
             said = str(exc).rstrip(".")
             raise WorkflowError(f"{said}. {where[0].upper()}{where[1:]}" if where.startswith("your") else f"{said} ({where})") from None
         if not wf.message:
-            wf.message = f"{c.label}: done."
+            wf.message = f"{c.label}: done." if c.action not in ("resume", "pause", "restart") else ""
         # (an accepted result is said at the top of the panel: no toast over the video's corner)
         return result
 

@@ -587,7 +587,7 @@ def search_pose(
         s_a, s_b = sorted(((lo_h - hz[0]) / hz[1], (hi_h - hz[0]) / hz[1]))
         s_a = max(s_a, 1e-3)
         if s_b <= s_a:
-            raise NoPoseFits(f"no pose of the {name} on the table is on the line of your click (it passes above the "
+            raise NoPoseFits(f"no pose of {the(name)} on the table is on the line of your click (it passes above the "
                              "object's height or behind the camera): click on the object")
         P = origin + np.outer([s_a, s_b], ray)
         f2 = np.column_stack([P @ sp.e1, P @ sp.e2])  # segment ends on the table (x, y)
@@ -624,7 +624,7 @@ def search_pose(
         c_old = R_old @ centre_obj + T_old[:3, 3]
         s0 = float((c_old - origin) @ ray)  # the old centre's distance along the click's ray
         if s0 <= 0:
-            raise NoPoseFits(f"the {name}'s old place is behind the camera: its pose cannot be searched from it")
+            raise NoPoseFits(f"{the(name)}'s old place is behind the camera: its pose cannot be searched from it")
         r_b = float(np.max(np.linalg.norm(pts - centre_obj, axis=1)))
         a1 = np.cross(ray, [0.0, 0.0, 1.0] if abs(ray[2]) < 0.9 else [1.0, 0.0, 0.0])
         a1 /= np.linalg.norm(a1)
@@ -668,7 +668,7 @@ def search_pose(
         n_seeds = 48 if mode == "table" else 24
     seeds = _distinct(p, sc, np.where(step > 0, step, 1.0), n_seeds, per)
     if not len(seeds):
-        raise NoPoseFits(f"no pose of the {name} fits the image near your click: click on the object itself")
+        raise NoPoseFits(f"no pose of {the(name)} fits the image near your click: click on the object itself")
     check(0.4, "refining the best poses")
     t1 = time.perf_counter()
     q, best = _descend(evaluate, p[seeds], step / 2.0, (6.0, TAU_FINE, TAU_FINE))
@@ -723,7 +723,7 @@ def search_pose(
         out.append(_replace_T(c, T))
     if not out:
         other = "another object" + (" or the table" if name != "table" else "")
-        raise NoPoseFits(f"no pose of the {name} fits the image near your click: click on the {name} itself (not on {other})")
+        raise NoPoseFits(f"no pose of {the(name)} fits the image near your click: click on {the(name)} itself (not on {other})")
     if table is not None and out[0].mismatch > BESIDE_TRIGGER:
         # a click beside the object: poses under it can lie half on the object and half on the floor
         # (the parallelepiped turned 90° and 84 mm off, mismatch 0.48, from a click 15 px left of it: a new
@@ -747,6 +747,11 @@ def search_pose(
             cov = None if share is None or c.cov is None else c.cov + share
             out[j] = replace(c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1], cov_camera=None if cov is None else share)
     return SearchResult(out, mode, n_scored, len(top), time.perf_counter() - t0, timings)
+
+
+def the(name: str) -> str:
+    """"the parallelepiped", but "box_1": an object's name as a message says it."""
+    return name if any(ch.isdigit() or ch == "_" for ch in name) else f"the {name}"
 
 
 def refine_from(camera: Camera, model: BRep, T_start: np.ndarray, image: np.ndarray, *,

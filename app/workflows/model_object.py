@@ -506,8 +506,8 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                 return Step("no_devices", f"Both silhouettes clicked.{no_dev}", frozenset(base | tangential))
             return Step("scan", "{scan}: the turret sweeps the range finder across the object at two heights.",
                         frozenset(base | tangential | {"scan"}))
-        return Step("solve", "{solve} " + f"by {CYLINDER_METHODS.get(self.method, self.method)} (or choose another "
-                    "{set_method}).", frozenset(base | {"solve", "scan"}))
+        return Step("solve", "{solve} " + f"with the method {CYLINDER_METHODS.get(self.method, self.method)}; another "
+                    "{set_method} can be chosen.", frozenset(base | {"solve", "scan"}))
 
     def choice_value(self, action: str) -> Any:
         return self.method if action == "set_method" else None

@@ -682,7 +682,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 tail = " Or {refine}: the clicks fit together with the found pose (one edge is enough)."
             one = (f"Double-click {self.object_name} where it is now in the video to find its pose from that point; or c"
                    if not self.segs and not self.points_uv and self.found is None else "C")
-            spread = " (not all three through one corner)" if n == 2 else ""
+            spread = ", not all three through one corner" if n == 2 else ""
             return Step("click_edge", one + f"lick two points along an edge of {self.object_name} in the video (edge {n + 1} of 3"
                         f"{spread}), then click which model edge it is; " + "or {auto_match} to skip saying which is which." + tail
                         if "auto_match" in more else
