@@ -140,5 +140,6 @@ class History(Workflow):
             rows = []
             for c in self.entries:
                 rows.append({"#": c.id, "when": time.strftime("%H:%M:%S", time.localtime(c.time)), "who": c.client,
-                             "what": self._sentence(c), "how": method_words(c.method)})
+                             "what": (what := self._sentence(c)),
+                             "how": "redo" if what.startswith("redid") else method_words(c.method)})
             return {"changes": rows}

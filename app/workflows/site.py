@@ -134,6 +134,8 @@ def _change_sentence(rec: Any, undone: Any = None) -> str:
     if redo:
         return f"redid change #{undone.undoes}" + (f" ({name}; undid undo #{rec.undoes})" if rec.object_name
                                                    else f" (undid undo #{rec.undoes})")
+    if rec.action == "undo" and undone is not None and int(undone.id) == int(rec.undoes) and undone.action == "add":
+        return f"removed {name} (undid change #{rec.undoes}, its addition)"
     if rec.action == "undo":
         return f"undid change #{rec.undoes}" + (f" ({name})" if rec.object_name else "")
     if rec.action == "restore":

@@ -38,7 +38,7 @@ def test_every_write_through_the_site_is_announced_with_who_and_what(site, db):
         ("bob", "marked parallelepiped stale", "parallelepiped"),
         ("alice", "added box_1", "box_1"),
         ("carol", "calibrated the camera", None),
-        ("bob", f"undid change #{rec.id} (parallelepiped)", "parallelepiped"),
+        ("bob", f"removed parallelepiped (undid change #{rec.id}, its addition)", "parallelepiped"),  # change #{rec.id}: the seed's add
     ]
     assert [c.seq for c in changes] == [h.id for h in db.history()[-5:]]
     assert site.change_seq == undo.id == changes[-1].seq
