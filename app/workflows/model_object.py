@@ -59,6 +59,9 @@ CYLINDER_METHODS = {"fused": "fused (all measurements)", "tangential": "tangenti
                     "rf_tangential": "tangential planes (range finder alone)"}
 
 
+MAX_CLICK_RESIDUAL_PX = 3.0  # a clicked side this far from the model's edge: the model does not fit the clicks
+
+
 def _placed(r) -> str:
     """"; placed to ± 4.1 mm": the σ of where a modelled object stands (its frame's origin, or its axis),
     "" when the result has none (a new operator saw a box sit 1 cm off with only its sizes' σ shown)."""
@@ -524,6 +527,13 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                 return []
             out = [f"the {DIMENSION_WORDS.get(k, k.replace('_', ' '))} is uncertain: σ {1000 * v:.1f} mm (more than "
                    f"{WEAK_SIGMA_MM:.0f} mm)" for k, v in r.sigmas.items() if np.isfinite(v) and 1000 * v > WEAK_SIGMA_MM]
+            res = np.abs(np.asarray(r.residuals.get("clicks_px", []), float))
+            if self.shape == "box" and len(res) and res.max() > MAX_CLICK_RESIDUAL_PX:
+                # the box drawn does not run through a side clicked (a new operator's box from two upright sides
+                # per face came out half as deep, σ 3 mm, and was offered without a word)
+                out.append(f"a clicked side is {res.max():.1f} px from the box's edge (more than "
+                           f"{MAX_CLICK_RESIDUAL_PX:.0f} px): the box does not fit your clicks; click all the sides "
+                           "of each face (four), or check them")
             snaps = [sn for f in self.faces for sn in f["snaps"]] if self.shape == "box" else list(self.silhouette_snaps)
             out += [f"a snap moved a click {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
                     for sn in snaps if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX]

@@ -40,7 +40,7 @@ from core.modeling.result import DIMENSION_WORDS
 from core.rangefinder import beam_point_cov
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
-from .model_object import MAX_SNAP_MOVE_PX, MIN_SEGMENT_PX, WEAK_SIGMA_MM, table_support
+from .model_object import MAX_CLICK_RESIDUAL_PX, MAX_SNAP_MOVE_PX, MIN_SEGMENT_PX, WEAK_SIGMA_MM, table_support
 from .range_modelling import RangeModelling
 from .snapping import SnapMixin, snap_marks
 
@@ -53,7 +53,6 @@ FACE_COST_SLACK = 0.12
 # A clicked side farther than this from every projected edge of its face (mean of its ends, px) is refused.
 MAX_SIDE_DISTANCE_PX = 12.0
 # A click residual over this (px, 3σ of a 1 px click) makes the model weak.
-MAX_CLICK_RESIDUAL_PX = 3.0
 
 
 @dataclass(frozen=True)
