@@ -345,7 +345,8 @@ class ClientPanel:
                 self.confirm_pending, self.warning, self.error = None, "", ""
                 wf.stop_measurement()
                 return
-            if self._workflow_has_clicks() and self.confirm_pending != ("cancel", ()):
+            targets = bool(getattr(wf, "targets", None))  # Designate's: nothing written, but the list goes
+            if (self._workflow_has_clicks() or targets) and self.confirm_pending != ("cancel", ()):
                 self.confirm_pending, self.error = ("cancel", ()), ""
                 self.warning = (f"Cancel throws away what you did in {wf.title} (your clicks and measurements; nothing "
                                 "was written). Press **Cancel** again to throw it away, or go on.")
@@ -483,6 +484,8 @@ class ClientPanel:
                 wf.name == "track" and wf.current_step().name in ("tracking", "waiting"))):
             raise WorkflowError(f"{wf.title} follows the live video: nothing to freeze"
                                 + (" (Pause it first)" if wf.name == "track" else ""))
+        if wf is not None and wf.finished and self._finished_at is not None and self._finished_at[0] is wf:
+            self._finished_at = (wf, self._finished_at[1], object())  # the operator moved on: its text goes
         if self._workflow_has_clicks():
             raise WorkflowError("your clicks were made on the frozen frame: every click of a workflow uses one frame. "
                                 "Remove them (Remove last) or Cancel before freezing another frame")
@@ -603,9 +606,10 @@ class ClientPanel:
         another object's wireframe, that object (a new operator double-clicked box_1 with the parallelepiped
         selected, and read the same refusal three times, not knowing whether a click was taken)."""
         other = self._object_at(uv)
-        self._double_at = (f"your double click at ({uv[0]:.0f}, {uv[1]:.0f}) is on {other}'s wireframe: to update "
-                           f"{other}, click it to select it, then double-click where it is in the video"
-                           if other not in (None, name, "table") else f"double click at ({uv[0]:.0f}, {uv[1]:.0f})")
+        # when it was (a repeated refusal reads as new: the pixel meant nothing to a new operator)
+        self._double_at = (f"your double click is on {other}'s wireframe: to update {other}, click it to select it, "
+                           "then double-click where it is in the video"
+                           if other not in (None, name, "table") else f"double click at {time.strftime('%H:%M:%S')}")
         self.press("find")
 
     def _on_click(self, event, arrival: float | None = None) -> None:

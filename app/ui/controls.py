@@ -49,7 +49,8 @@ def key_label(key: str) -> str:
     if words[:1] == ["σ"] and words[1:] in (["t"], ["rot"]):  # a pose's σ: "σ translation", "σ rotation"
         words = ["σ", {"t": "translation", "rot": "rotation"}[words[1]]]
     text = " ".join(words)
-    coordinates = all(len(w) == 1 for w in text.split(" "))  # "x y z", "t" stay lower case
+    bare = [w for w in text.split(" ") if not (w.startswith("(") and w.endswith(")"))]  # "x y z (m)": its unit aside
+    coordinates = bool(bare) and all(len(w) == 1 for w in bare)  # "x y z", "t" stay lower case
     if text[:1].isascii() and not coordinates:  # "σ" stays σ: its capital Σ reads as a sum
         text = text[:1].upper() + text[1:]
     return f"{text} ({unit})" if unit else text

@@ -68,8 +68,9 @@ class RangeModelling:
         if self._acquiring_since is None:
             self._acquiring_since = now
         elapsed = now - self._acquiring_since
-        if fraction >= 0.05 and elapsed >= 3.0:  # said once the pace is known (a scan took 70 s, unannounced)
-            text += f" · about {_duration(elapsed * (1.0 - fraction) / fraction)} left"
+        left = elapsed * (1.0 - fraction) / max(fraction, 1e-9)
+        if fraction >= 0.05 and elapsed >= 3.0 and left >= 15.0:  # said once the pace is known (a scan took 70 s,
+            text += f" · about {_duration(left)} left"  # unannounced); a short patch's "5 s" went stale
         self.progress = float(fraction)
         self.progress_text = text
         if X is not None and np.all(np.isfinite(X)):

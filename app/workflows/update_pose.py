@@ -623,6 +623,9 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
     def _step(self) -> Step:
         if self.finished:
             return self._finished_step()
+        if self.progress is not None:  # Find under way (its click was taken: not "click a second point")
+            return Step("searching", f"Searching for the pose of {self.object_name} from your click… "
+                        + "{cancel} stops the search.", frozenset({"cancel"}), clicks=False)
         n = sum(e is not None for e in self.edge_ids)
         k = len(self.segs)
         where = "on the white ghost" if (self.chosen is not None or self.last_refined is not None) else "on its wireframe"

@@ -550,7 +550,10 @@ def test_esc_while_designate_measures_stops_the_check_only(browser, scene, frame
         wait_until(lambda: wf.progress is None, timeout_s=15, what="the check stopped")
         assert not wf.finished and len(wf.targets) == 1  # the first target kept, the workflow open
         wait_until(lambda: site.beam_X_world is None, what="no beam spot left")
-        op.key("Escape")  # now Cancel closes it (nothing was written: no question)
+        op.key("Escape")  # now Cancel would throw the target list away: asked once more ...
+        wait_until(lambda: page.panel.asking == "cancel", what="the question")
+        assert not wf.finished and len(wf.targets) == 1
+        op.key("Escape")  # ... and the second press cancels
         wait_until(lambda: wf.finished, what="the cancel")
         page.close()
     finally:

@@ -269,3 +269,29 @@ def test_a_box_clicked_on_the_cylinder_is_said_not_to_single_out_a_pose(video_si
         pytest.fail("the search now refuses this click outright: assert that refusal here instead")
     assert wf._near_ties() >= 4
     assert any("does not single out one pose of box_1" in w for w in wf.weaknesses())
+
+
+def test_while_find_searches_the_step_says_so(video_site, scene, db, monkeypatch):
+    """During the search the instruction says it is searching from the click (a new operator read the old
+    "click a second point" prompt for 1-2 s and took the double click for a single click)."""
+    import app.vision.search as ps  # imported by Find when it runs
+
+    site = video_site
+    site.t["t"] = T_MOVED
+    wf = _start(site)
+    uv, _ = _on_box(site, scene)
+    wf.click(uv)
+    seen = []
+    real = ps.search_pose
+
+    def watched(*args, progress=None, **kwargs):
+        def spy(frac, what):
+            progress(frac, what)
+            seen.append((wf.current_step().name, wf.current_step().prompt, wf.current_step().clicks))
+        return real(*args, progress=spy, **kwargs)
+
+    monkeypatch.setattr(ps, "search_pose", watched)
+    wf.find()
+    assert seen and all(name == "searching" and not clicks for name, _, clicks in seen)
+    assert "Searching for the pose of parallelepiped from your click" in seen[0][1]
+    assert wf.current_step().name != "searching"
