@@ -491,13 +491,15 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                             frozenset(base | {"solve"} | ({"scan"} if devices else set())))
             tail = " Or {solve} with the faces measured." if measured else ""
             if len(face["segs"]) < 2:
-                return Step("click_sides", f"Face {n}: click two points on each side of one visible face "
-                            f"(side {len(face['segs']) + 1}).{tail}", frozenset(base | solvable))
+                return Step("click_sides", f"Face {n}: click two points on each side of one visible face, all four "
+                            f"where you see them (side {len(face['segs']) + 1}).{tail}", frozenset(base | solvable))
             if not devices:
                 return Step("sides_clicked", f"Face {n}: {len(face['segs'])} sides clicked.{no_dev}{tail}",
                             frozenset(base | solvable))
-            return Step("sides_clicked", f"Face {n}: click more sides, or " + "{measure} (the turret scans inside them)."
-                        + tail, frozenset(base | solvable | {"measure"}))
+            # all four: two upright sides alone gave a new operator a box half as deep
+            more = "click its other sides (all four fix the box's corners), or " if len(face["segs"]) < 4 else ""
+            return Step("sides_clicked", f"Face {n}: {len(face['segs'])} sides clicked; " + more
+                        + "{measure} (the turret scans inside them)." + tail, frozenset(base | solvable | {"measure"}))
         if len(self.silhouettes) < 2:
             which = "left" if not self.silhouettes else "right"
             return Step("click_silhouettes", f"Click the {which} silhouette of the {self.shape} (its outline's {which} "

@@ -400,8 +400,8 @@ def _fit_box(X: np.ndarray, cov: np.ndarray, which: np.ndarray, R0: np.ndarray):
         dscale = 1.0 / np.sqrt(np.maximum(np.diag(H), 1e-300))
         if np.linalg.cond(H * np.outer(dscale, dscale)) > 1e12:
             raise ValueError(
-                "the constructed corners do not fix all three sizes and the pose of the box; "
-                "click the edges of every visible face (and measure at least two faces)"
+                "the clicked sides and measured faces do not fix all three sizes and the pose of the box; "
+                "click all four sides of each measured face, and measure at least two faces"
             )
         step = np.linalg.solve(H, J.T @ W @ r)
         dims = dims + step[:3]
