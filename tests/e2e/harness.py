@@ -109,7 +109,7 @@ def select_by_click(page, name: str, click) -> int:
     return 2
 
 
-def close_notifications(page, timeout_s: float = 10.0) -> None:
+def close_notifications(page, timeout_s: float = 20.0) -> None:
     """Close every notification and wait until none is left: they stack over the video's top-left
     corner (below them a click or a drag reaches the notification, not the canvas).
 
