@@ -399,8 +399,9 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     assert change.client == who_a
     _announced(b, f"{who_a} marked parallelepiped stale")  # B is told who and what
     assert not a.locator(".mantine-Notification-root", has_text="Changed by another operator").count()
-    # A: History, the change chosen in the Change chooser, Undo change
-    close_notifications(a)
+    # A: History, the change chosen in the Change chooser, Undo change (panel controls and keys only: a toast
+    # left over the video's corner is in nobody's way; in two fresh-clone runs one outlived 20 s)
+    close_notifications(a, required=False)
     op_a = Operator(ui, a, "A: History, choose, Undo change, Close")
     op_a.press("History")
     wf = _workflow(a, "history")
