@@ -850,9 +850,7 @@ class ClientPanel:
 
     def _update_texts(self, wf) -> None:
         selected = self.session.selected
-        idle = ("Click an object to select it, or start a workflow below." if selected is None else
-                f"**{selected}** is selected: double-click where it is in the video to find its pose, start a workflow "
-                "below (Update pose, Track, …), or click another object.")
+        idle = _idle_text(selected)
         if wf is not None and wf.finished and self._finished_at is not None and self._finished_at[0] is wf \
                 and self._finished_at[2] != selected:
             wf = None  # a finished workflow's text goes once the operator selects another object (it stayed on)
@@ -872,8 +870,7 @@ class ClientPanel:
                     except WorkflowError:
                         pass
                     selected = self.session.selected
-                    idle = (f"**{selected}** is selected: double-click where it is in the video to find its pose, start a "
-                            "workflow below (Update pose, Track, …), or click another object.")
+                    idle = _idle_text(selected)
                 self._finished_at = (wf, self._finished_at[1], selected)
             at = f" at {self._finished_at[1]}" if wf.finished else ""  # a finished workflow's text says when
             state = f" ({done}{at})" if wf.accepted else (f" (cancelled{at})" if wf.cancelled else "")
@@ -970,6 +967,14 @@ class ClientPanel:
     def set_status(self, text: str) -> None:
         if self.gui_status.content != text:
             self.gui_status.content = text
+
+
+def _idle_text(selected: str | None) -> str:
+    """What the panel says with no workflow under way."""
+    if selected is None:
+        return "Click an object to select it, or start a workflow below."
+    return (f"**{selected}** is selected: double-click where it is in the video to find its pose, start a workflow "
+            "below (Update pose, Track, …), or click another object.")
 
 
 def _live_shortcuts(controls, applies) -> dict[str, str]:

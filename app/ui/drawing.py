@@ -154,17 +154,21 @@ def spread_labels(labels: list[tuple[np.ndarray, str]], image_px_per_screen_px: 
         x = float(uv[0]) + LABEL_OFFSET_PX * k
         y = float(uv[1]) - LABEL_OFFSET_PX * k
         w = (len(text) * LABEL_CHAR_PX + 4.0) * k
+
+        def met(y_: float) -> list:  # the boxes placed that the label's box with its bottom at y_ meets
+            return [b for b in placed if x < b[2] and b[0] < x + w and y_ - h < b[3] and b[1] < y_]
+
         y0 = y
-        for _ in range(len(placed) + 1):
-            if not any(x < b[2] and b[0] < x + w and y - h < b[3] and b[1] < y for b in placed):
+        for _ in range(len(placed) + 1):  # lifted just above what it meets
+            if not met(y):
                 break
-            y = min(b[1] for b in placed if x < b[2] and b[0] < x + w and y - h < b[3] and b[1] < y)  # just above it
+            y = min(b[1] for b in met(y))
         if y - h < 0.0:  # lifted off the image's top: moved down below the labels instead
             y = y0
             for _ in range(len(placed) + 1):
-                if not any(x < b[2] and b[0] < x + w and y - h < b[3] and b[1] < y for b in placed):
+                if not met(y):
                     break
-                y = max(b[3] for b in placed if x < b[2] and b[0] < x + w and y - h < b[3] and b[1] < y) + h
+                y = max(b[3] for b in met(y)) + h
         placed.append((x, y - h, x + w, y))
         out.append((np.array([x, y]), text))
     return out

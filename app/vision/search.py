@@ -575,7 +575,7 @@ def search_pose(
         sp = _TableSpace(T_old, table)
         up = sp.up
         h = ((pts - centre_obj) @ sp.R_old.T) @ up  # heights of the model's points above its centre (any heading)
-        z0 = -table.d - float(h.min())  # the centre's height: the lowest point on the table
+        z0 = _centre_height(pts, centre_obj, sp, table)
         horiz = (pts - centre_obj) @ sp.R_old.T
         horiz = horiz - (horiz @ up)[:, None] * up
         r_foot = float(np.max(np.linalg.norm(horiz, axis=1)))
@@ -734,7 +734,9 @@ def search_pose(
             from dataclasses import replace
 
             T = min((near.T_world_obj @ S for S in syms), key=lambda U: pose_error(U, T_old)[0])
-            out = [replace(_replace_T(near, T), beside_click=True)] + out
+            # said to lie beside the click only if it does once settled (the refinement may bring it under)
+            under = bool(_ray_hits(hull, T[None, :3, :3], T[None, :3, 3], origin, ray)[0])
+            out = [replace(_replace_T(near, T), beside_click=not under)] + out
     out = out[:max_candidates]
     if camera_cov is not None:  # the camera's calibration uncertainty joins each pose's σ
         from dataclasses import replace
@@ -747,6 +749,12 @@ def search_pose(
             cov = None if share is None or c.cov is None else c.cov + share
             out[j] = replace(c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1], cov_camera=None if cov is None else share)
     return SearchResult(out, mode, n_scored, len(top), time.perf_counter() - t0, timings)
+
+
+def _centre_height(pts: np.ndarray, centre_obj: np.ndarray, sp: "_TableSpace", table: Plane) -> float:
+    """The height along the table's normal (metres, world) of the model's centre ``centre_obj`` (object
+    frame) when its lowest support point (``pts``, object frame) rests on the table, face-down as sp's."""
+    return -table.d - float((((pts - centre_obj) @ sp.R_old.T) @ sp.up).min())
 
 
 def the(name: str) -> str:
@@ -772,8 +780,8 @@ def refine_from(camera: Camera, model: BRep, T_start: np.ndarray, image: np.ndar
         sp = _TableSpace(T_start, table)
         pts = _support_points(model)
         centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
-        z0 = -table.d - float((((pts - centre) @ sp.R_old.T) @ sp.up).min())
-        space = _OnTable(sp, z0, centre, 3 if heading_period(model, sp.R_old, sp.up) > 0 else 2)
+        space = _OnTable(sp, _centre_height(pts, centre, sp, table), centre,
+                         3 if heading_period(model, sp.R_old, sp.up) > 0 else 2)
     else:
         space = _Free(T_start)
     T, cov = _refine(camera, model, T_start, img_s, space, rims)

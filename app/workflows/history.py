@@ -10,7 +10,7 @@ import time
 from typing import Any
 
 from .base import Control, Step, Workflow, WorkflowError
-from .site import _change_sentence, method_words
+from .site import _change_sentence, is_redo, method_words
 
 __all__ = ["History"]
 
@@ -130,16 +130,20 @@ class History(Workflow):
                      + (f" — undone by #{undone[int(c.id)]}" if undone.get(int(c.id)) not in (None, *undone) else ""),
                      int(c.id)) for c in self.entries]
 
+    def _undone(self, c):
+        """The record change c undid (from the list when it is there), or None."""
+        if c.undoes is None:
+            return None
+        return next((e for e in self.entries if int(e.id) == int(c.undoes)), None) or self.site.undone(c)
+
     def _sentence(self, c) -> str:
-        by_id = {int(e.id): e for e in self.entries}
-        undone = by_id.get(int(c.undoes)) if c.undoes is not None else None
-        return _change_sentence(c, undone if undone is not None else self.site.undone(c))
+        return _change_sentence(c, self._undone(c))
 
     def summary(self) -> dict[str, Any]:
         with self.lock:
             rows = []
             for c in self.entries:
                 rows.append({"#": c.id, "when": time.strftime("%H:%M:%S", time.localtime(c.time)), "who": c.client,
-                             "what": (what := self._sentence(c)),
-                             "how": "redo" if what.startswith("redid") else method_words(c.method)})
+                             "what": self._sentence(c),
+                             "how": "redo" if is_redo(c, self._undone(c)) else method_words(c.method)})
             return {"changes": rows}

@@ -102,7 +102,7 @@ METHOD_WORDS = {
 
 
 def method_words(method: str | None) -> str:
-    """A change's method tag as the operator reads it ("p3l+refine" → "three edges solved, then
+    """A change's method tag as the operator reads it ("p3l+refine" → "solved from clicked edges, then
     refined"); a tag without words (a script's, "model box (fused)") as it is."""
     if not method:
         return ""
@@ -113,13 +113,18 @@ def _is_undo(rec: Any) -> bool:
     return rec.action == "undo" or (rec.action == "calibration" and rec.method == "undo" and rec.undoes is not None)
 
 
+def is_redo(rec: Any, undone: Any) -> bool:
+    """``rec`` undoes ``undone`` (the record it names), itself an undo: a redo of the change first undone."""
+    return (rec.undoes is not None and undone is not None and int(undone.id) == int(rec.undoes) and _is_undo(rec)
+            and _is_undo(undone) and undone.undoes is not None)
+
+
 def _change_sentence(rec: Any, undone: Any = None) -> str:
     """What an ``app.db.ChangeRecord`` did, in one plain sentence (without who). ``undone``: the
     record an undo undid, when known: the undo of an undo is said as a redo of the change first
     undone ("redid change #7 (undid undo #9)"; a new operator read "undid change #9" as a second undo)."""
     name = rec.object_name or "an object"
-    redo = (rec.undoes is not None and undone is not None and int(undone.id) == int(rec.undoes) and _is_undo(rec)
-            and _is_undo(undone) and undone.undoes is not None)
+    redo = is_redo(rec, undone)
     if rec.action == "calibration":
         kind = (rec.after or {}).get("kind", "")
         if redo:
@@ -456,9 +461,11 @@ class Site:
         """The history record that ``rec`` (an undo) undid, or None (not an undo, or not found)."""
         if not _is_undo(rec):
             return None
+        from app.db import NotFoundError
+
         try:
             return self.db.change(int(rec.undoes))
-        except Exception:  # noqa: BLE001 - the sentence then says "undid", as before
+        except NotFoundError:  # the sentence then says "undid", as before
             return None
 
     def _read_feed(self) -> None:

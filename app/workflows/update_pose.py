@@ -53,15 +53,14 @@ MAX_SNAP_MOVE_PX = 2.0
 # may fit a wrong assignment): the one-click search's own floor (app.vision.search.MIN_NEAR), which the right
 # poses of 150 rendered placements, a fifth to a third of them hidden, all passed.
 MIN_OUTLINE_SEEN = 0.40
-def _counted(kinds) -> str:
-    """"4 edges", "3 edges and 1 point": what a refinement used (its clicks count two per edge)."""
-    n_e, n_p = list(kinds).count("segment"), list(kinds).count("point")
-    parts = [f"{n} {w}{'s' if n != 1 else ''}" for n, w in ((n_e, "edge"), (n_p, "point")) if n]
-    return " and ".join(parts) or "no click"
-
-
 MAX_TRIPLES = 20  # Solve tries at most this many triples of the assigned edges (6 edges: all 20)
 MAX_CANDIDATES = 8
+
+
+def _counted(n_edges: int, n_points: int) -> str:
+    """"4 edges", "3 edges and 1 point", "no click": what a refinement used, or what was snapped."""
+    parts = [f"{n} {w}{'s' if n != 1 else ''}" for n, w in ((n_edges, "edge"), (n_points, "point")) if n]
+    return " and ".join(parts) or "no click"
 
 
 class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
@@ -435,7 +434,8 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             self.state = "review"
             deg, m = pose_error(result.T_world_obj, self.obj.T_world_obj)
             sig_deg, sig_mm = float(np.max(result.std_r_deg)), 1000 * float(np.max(result.std_t_m))
-            self.message = (f"{note}RMS {result.rms_px:.2f} px over {_counted(result.kinds)}; moved {deg:.2f}° and "
+            used = _counted(list(result.kinds).count("segment"), list(result.kinds).count("point"))
+            self.message = (f"{note}RMS {result.rms_px:.2f} px over {used}; moved {deg:.2f}° and "
                             f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
                             + (" (camera calibration included)" if result.cov_parts else "")
                             + (f". ⚠ {unseen}" if unseen else ""))
@@ -846,10 +846,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             snaps = [s for s in self.seg_snaps + self.point_snaps if s is not None]
             if snaps:
                 n_seg = sum(1 for s in self.seg_snaps if s is not None)
-                what = " and ".join(p for p in (f"{n_seg} edge{'s' if n_seg != 1 else ''}" if n_seg else "",
-                                                f"{len(snaps) - n_seg} point{'s' if len(snaps) - n_seg != 1 else ''}"
-                                                if len(snaps) > n_seg else "") if p)
-                out["snapped"] = f"{sum(s.applied for s in snaps)} of {what}"
+                out["snapped"] = f"{sum(s.applied for s in snaps)} of {_counted(n_seg, len(snaps) - n_seg)}"
             self._found_summary(out)
             if self.candidates and self.found is None:  # the found poses' are in "found" (they were listed twice)
                 out["candidates"] = len(self.candidates)
