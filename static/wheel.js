@@ -2,15 +2,17 @@
 // this takes the wheel over the 3D canvas and sends (cursor x, y in 0..1 of the canvas, deltaY, n)
 // to the server through a hidden text field labelled "mcit-wheel"; the server moves the camera so
 // that the point under the cursor stays under it (app/ui/client.py, ClientPanel._on_wheel).
-// It also gives the keyboard back to the page's shortcuts after a chooser is used (see below).
+// It also tells the server of double clicks on the video, and gives the keyboard back to the page's
+// shortcuts after a chooser or a number box is used (see below).
 (function () {
   if (window.__mcitWheel) return;
   window.__mcitWheel = true;
   var n = 0, pending = null, timer = null;
-  function field() {
+  function field(label) {
+    label = label || "mcit-wheel";
     var labels = document.querySelectorAll("p");
     for (var i = 0; i < labels.length; i++) {
-      if (labels[i].textContent === "mcit-wheel") {
+      if (labels[i].textContent === label) {
         var row = labels[i].parentElement && labels[i].parentElement.parentElement;
         var box = row && row.parentElement;
         if (box && box.style.display !== "none") box.style.display = "none";
@@ -19,21 +21,28 @@
     }
     return null;
   }
+  function write(input, text) { // as if typed: the panel sends it to the server
+    var setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, "value").set;
+    setter.call(input, text);
+    input.dispatchEvent(new Event("input", { bubbles: true }));
+  }
   function send() {
     timer = null;
     var input = field();
     if (!input || !pending) return;
-    var setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, "value").set;
     n += 1;
-    setter.call(input, pending.x.toFixed(5) + " " + pending.y.toFixed(5) + " " + pending.dy.toFixed(2) + " " + n);
-    input.dispatchEvent(new Event("input", { bubbles: true }));
+    write(input, pending.x.toFixed(5) + " " + pending.y.toFixed(5) + " " + pending.dy.toFixed(2) + " " + n);
     pending = null;
   }
-  window.addEventListener("wheel", function (e) {
+  function view(e) { // the 3D view's canvas rectangle, when the event is on it; else null
     var t = e.target;
-    if (!t || t.tagName !== "CANVAS") return;
+    if (!t || t.tagName !== "CANVAS") return null;
     var r = t.getBoundingClientRect();
-    if (r.width < 200 || r.height < 200) return; // not the 3D view
+    return r.width < 200 || r.height < 200 ? null : r;
+  }
+  window.addEventListener("wheel", function (e) {
+    var r = view(e);
+    if (!r) return; // not the 3D view
     if (!field()) return; // no mcit panel: leave the wheel to the viewer
     e.preventDefault();
     e.stopPropagation();
@@ -42,7 +51,44 @@
     pending = pending ? { x: x, y: y, dy: pending.dy + dy } : { x: x, y: y, dy: dy };
     if (timer === null) timer = setTimeout(send, 16); // at most one update a frame
   }, { capture: true, passive: false });
-  setInterval(field, 1000); // keep the field hidden when the panel re-renders
+  setInterval(function () { field(); field("mcit-dblclick"); }, 1000); // keep the fields hidden when the panel re-renders
+
+  // Double clicks on the video are told here, from the presses' own timestamps (e.timeStamp): the
+  // server cannot time them, since a busy page, network or server delays one click's message more
+  // than the other's (0.3-2.7 s apart at the server for a double click on a loaded machine, which then
+  // read it as two clicks). The first press is an ordinary click; the second press of a double click
+  // is kept from the viewer, and sent as "x y n" (x, y in 0..1 of the canvas) through the hidden field
+  // "mcit-dblclick" (app/ui/client.py, ClientPanel._on_double).
+  var DOUBLE_MS = 500, DOUBLE_PX = 5; // the usual desktop double click (500 ms), a steady hand
+  var down = null, lastUp = null, swallowed = null, nd = 0;
+  window.addEventListener("pointerdown", function (e) {
+    var r = view(e);
+    if (!r || e.button !== 0 || !field("mcit-dblclick")) { down = lastUp = null; return; }
+    if (lastUp && e.timeStamp - lastUp.t <= DOUBLE_MS && Math.hypot(e.clientX - lastUp.x, e.clientY - lastUp.y) <= DOUBLE_PX) {
+      swallowed = { id: e.pointerId, x: (e.clientX - r.left) / r.width, y: (e.clientY - r.top) / r.height };
+      down = lastUp = null;
+      e.stopPropagation();
+      e.preventDefault();
+      return;
+    }
+    down = { x: e.clientX, y: e.clientY };
+  }, true);
+  window.addEventListener("pointerup", function (e) {
+    if (swallowed && e.pointerId === swallowed.id) {
+      var input = field("mcit-dblclick"), s = swallowed;
+      swallowed = null;
+      e.stopPropagation();
+      e.preventDefault();
+      nd += 1;
+      if (input) write(input, s.x.toFixed(5) + " " + s.y.toFixed(5) + " " + nd);
+      return;
+    }
+    // a press on the video released where it was pressed (not a drag) may start a double click (the
+    // release's target is the viewer's overlay, not the canvas)
+    var still = down && e.button === 0 && Math.hypot(e.clientX - down.x, e.clientY - down.y) <= DOUBLE_PX;
+    lastUp = still ? { t: e.timeStamp, x: e.clientX, y: e.clientY } : null;
+    down = null;
+  }, true);
 
   // Choosers give the keys back: a chooser (Mantine Select) keeps the keyboard after an option is
   // picked, so the next shortcut (Z: Undo change, R: Solve) was typed into it instead. Once an option

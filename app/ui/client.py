@@ -54,6 +54,7 @@ GLOBAL_KEYS = {"f", "l", "h"}  # the panel's own shortcuts (Freeze, Show live, F
 DOUBLE_CLICK_S = 0.6  # two clicks this close in time and place are a double click
 DOUBLE_CLICK_PX = 4.0
 WHEEL_FIELD = "mcit-wheel"  # the hidden text field static/wheel.js writes the wheel into
+DOUBLE_FIELD = "mcit-dblclick"  # the hidden text field static/wheel.js writes a double click into
 WHEEL_ZOOM_PER_DELTA = 0.0015  # a wheel notch (deltaY 100) zooms by 14 %
 WHEEL_JS = Path(__file__).resolve().parents[2] / "static" / "wheel.js"
 
@@ -226,7 +227,18 @@ class ClientPanel:
         # the page script sends the cursor and the wheel through this hidden field instead.
         self.gui_wheel = gui.add_text(WHEEL_FIELD, "")
         self.gui_wheel.on_update(self._guard(self._on_wheel))
+        # Double clicks are told by the page (static/wheel.js), timed by the browser: at the server a
+        # double click's two messages arrived 0.3–2.7 s apart on a loaded machine. Without the page
+        # script, two clicks close in time and place at the server are a double click.
+        self.gui_double = gui.add_text(DOUBLE_FIELD, "")
+        guarded_double = self._guard(self._on_double)
+
+        async def on_double(_event) -> None:  # after the click before it, in the order they arrive
+            self._click_worker.submit(guarded_double, str(self.gui_double.value), time.monotonic())
+
+        self.gui_double.on_update(on_double)
         script = wheel_script()
+        self.page_doubles = bool(script)
         if script:
             gui.add_html(script)
         for label, key, fn in (("Freeze", "F", lambda: self._freeze_back(0)), ("Show live / frozen", "L", self._toggle_live),
@@ -551,12 +563,15 @@ class ClientPanel:
                                     cast_shadow=False, receive_shadow=False)
 
     # ------------------------------------------------------------------ clicks
-    def on_pixel_click(self, uv: np.ndarray, at: float | None = None) -> None:
+    def on_pixel_click(self, uv: np.ndarray, at: float | None = None, double: bool | None = None) -> None:
         """A click at pixel uv of the video, arrived at time ``at`` (monotonic; default now): the
-        workflow's, or else select the nearest object."""
+        workflow's, or else select the nearest object. ``double``: it is the second click of a double
+        click (told by the page), or not; None: a double click if it follows the last click closely in
+        time and place at the server."""
         wf = self.session.workflow
         now, last = (time.monotonic() if at is None else float(at)), getattr(self, "_last_click", None)
-        double = last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX
+        if double is None:
+            double = last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX
         # the frame shown at this click: a double click that starts Update pose freezes it (the newest, a
         # moment later, showed a moving box elsewhere: a new operator's run)
         self._last_click = (now, np.asarray(uv, float).copy(), self.session.selected, self.app.grabber.latest())
@@ -567,6 +582,8 @@ class ClientPanel:
             # a new operator's double click selected the table); with none selected before, the one its first
             # click selected (a new operator's double click with nothing selected only selected it)
             self._last_click = None
+            if last is None:  # its first click not seen (told by the page alone): as if made here
+                last = (now, uv, self.session.selected, self.app.grabber.latest())
             name = last[2] if last[2] is not None else self.session.selected
             if name is None:
                 raise WorkflowError("a double click finds the pose of the selected object: click its wireframe to "
@@ -622,13 +639,34 @@ class ClientPanel:
     def _handle_click(self, event, arrival: float | None = None) -> None:
         if self.view != "video":
             raise WorkflowError("clicks work on the video: switch the view to Video")
-        uv = self.app.pixel_world.pixel_from_ray(np.array(event.ray_origin), np.array(event.ray_direction))
+        uv = self._on_image(self.app.pixel_world.pixel_from_ray(np.array(event.ray_origin), np.array(event.ray_direction)))
+        # with the page script, the page tells the double clicks (_on_double): this one is single
+        self.on_pixel_click(uv, arrival, double=False if self.page_doubles else None)
+
+    def _on_image(self, uv: np.ndarray | None) -> np.ndarray:
+        """uv, a clicked pixel, if it lies on the image; else a WorkflowError that says so."""
         if uv is None:
             raise WorkflowError("that click missed the image: click on the video")
         w, h = self.app.pixel_world.width, self.app.pixel_world.height
         if not (-0.5 <= uv[0] <= w - 0.5 and -0.5 <= uv[1] <= h - 0.5):
             raise WorkflowError(f"that click is outside the {w}×{h} image: click on the video")
-        self.on_pixel_click(uv, arrival)
+        return uv
+
+    def _on_double(self, value: str, arrival: float) -> None:
+        """A double click on the video, told by static/wheel.js as "x y n" (x, y in 0..1 of the canvas):
+        the second click of it, at that point. Its first click came as an ordinary click."""
+        try:
+            sx, sy = (float(v) for v in value.split()[:2])
+        except ValueError:
+            return  # cleared, or typed into the hidden field: not a double click
+        if not (np.isfinite(sx) and np.isfinite(sy)) or self.view != "video":
+            return
+        try:
+            uv = self._screen_to_pixel(self.client.camera, (sx, sy))
+        except (AssertionError, ZeroDivisionError):  # no camera reported yet
+            return
+        self.on_pixel_click(self._on_image(uv), arrival, double=True)
+        self.click_t = arrival
 
     def _on_rect(self, event) -> None:
         """A left drag on the video zooms to the dragged rectangle (and never rotates the view)."""

@@ -515,8 +515,9 @@ def test_cancel_asks_once_more_before_throwing_work_away(browser, interface):
     wait_until(lambda: wf.finished, what="the cancel")
     assert len(ui.db.history()) == n
     op.press("Update pose")
+    wait_until(lambda: page.panel.session.workflow is not wf, what="a new Update pose")  # not the cancelled one
     wf2 = _workflow(page, "update_pose")
-    assert wf2 is not wf
+    assert wf2 is not wf and not wf2.finished
     op.press("Cancel")  # nothing done: cancelled at once
     wait_until(lambda: wf2.finished, what="the cancel without a question")
     op.report()
@@ -530,7 +531,9 @@ def test_esc_while_designate_measures_stops_the_check_only(browser, scene, frame
 
     from .harness import FRAME_T_S, Interface
 
-    devices = open_devices(scene, clock=lambda: FRAME_T_S)
+    # each range reading takes 0.4 s (0.1 s on the emulator's default): on a loaded machine the check had
+    # ended before the Esc arrived
+    devices = open_devices(scene, clock=lambda: FRAME_T_S, site_options={"measure_delay_s": 0.4})
     ui = Interface(scene, frame, tmp_path / "site.sqlite", devices=devices)
     try:
         site = ui.site
