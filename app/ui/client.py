@@ -228,8 +228,8 @@ class ClientPanel:
         self.gui_wheel = gui.add_text(WHEEL_FIELD, "")
         self.gui_wheel.on_update(self._guard(self._on_wheel))
         # Double clicks are told by the page (static/wheel.js), timed by the browser: at the server a
-        # double click's two messages arrived 0.3–2.7 s apart on a loaded machine. Without the page
-        # script, two clicks close in time and place at the server are a double click.
+        # double click's two messages arrived 0.3–2.7 s apart on a loaded machine. Until the page says
+        # its script runs, two clicks close in time and place at the server are a double click.
         self.gui_double = gui.add_text(DOUBLE_FIELD, "")
         guarded_double = self._guard(self._on_double)
 
@@ -237,8 +237,8 @@ class ClientPanel:
             self._click_worker.submit(guarded_double, str(self.gui_double.value), time.monotonic())
 
         self.gui_double.on_update(on_double)
+        self.page_doubles = False  # the page tells double clicks (its script said "ready")
         script = wheel_script()
-        self.page_doubles = bool(script)
         if script:
             gui.add_html(script)
         for label, key, fn in (("Freeze", "F", lambda: self._freeze_back(0)), ("Show live / frozen", "L", self._toggle_live),
@@ -654,7 +654,11 @@ class ClientPanel:
 
     def _on_double(self, value: str, arrival: float) -> None:
         """A double click on the video, told by static/wheel.js as "x y n" (x, y in 0..1 of the canvas):
-        the second click of it, at that point. Its first click came as an ordinary click."""
+        the second click of it, at that point. Its first click came as an ordinary click. "ready": the
+        page's script runs, and tells every double click from now on."""
+        if value == "ready":
+            self.page_doubles = True
+            return
         try:
             sx, sy = (float(v) for v in value.split()[:2])
         except ValueError:

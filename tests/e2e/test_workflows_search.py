@@ -219,6 +219,7 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
     obj = ui.site.object(BOX)
     T_true = scene.body(BOX).pose_at(ui.frame_t_s)
     _select(op, page, obj, cam)
+    wait_until(lambda: panel.page_doubles, what="the page saying it tells double clicks")
     submit, held = panel._click_worker.submit, []
 
     def take_then_hold(fn, *args):  # called in the server's event loop as each click arrives
