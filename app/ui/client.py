@@ -444,7 +444,7 @@ class ClientPanel:
     def _on_stale(self, _event) -> None:
         name = self.session.selected
         if name is None:
-            raise WorkflowError("select an object first (click its wireframe, or choose it in the list)")
+            raise WorkflowError("select an object first (click it in the video, or choose it in the list)")
         self.app.site.set_status(name, "stale", method="operator", client=self.session.client)
         self.error = ""
         self.notify("Marked stale", f"{name} is drawn orange until its pose is updated.", "blue")
@@ -586,8 +586,8 @@ class ClientPanel:
                 last = (now, uv, self.session.selected, self.app.grabber.latest())
             name = last[2] if last[2] is not None else self.session.selected
             if name is None:
-                raise WorkflowError("a double click finds the pose of the selected object: click its wireframe to "
-                                    "select it, then double-click where it is in the video")
+                raise WorkflowError("a double click finds the pose of the selected object: select it by a click where the "
+                                    "database draws it, then double-click where it is in the video")
             self.session.select(name)
             # the frame the double click was made on: the one the operator froze (F, Seconds back) when one is
             # shown, else the live frame shown at its first click (a new operator's frozen t = 24.75 s was
@@ -620,11 +620,11 @@ class ClientPanel:
 
     def _find_from_double_click(self, uv: np.ndarray, name: str | None) -> None:
         """Find, pressed by a double click at uv; a refusal says where the click was and, when it lies on
-        another object's wireframe, that object (a new operator double-clicked box_1 with the parallelepiped
+        another object as the database draws it, that object (a new operator double-clicked box_1 with the parallelepiped
         selected, and read the same refusal three times, not knowing whether a click was taken)."""
         other = self._object_at(uv)
         # when it was (a repeated refusal reads as new: the pixel meant nothing to a new operator)
-        self._double_at = (f"your double click is on {other}'s wireframe: to update {other}, click it to select it, "
+        self._double_at = (f"your double click is on {other} as the database draws it: to update {other}, click it to select it, "
                            "then double-click where it is in the video"
                            if other not in (None, name, "table") else f"double click at {time.strftime('%H:%M:%S')}")
         self.press("find")

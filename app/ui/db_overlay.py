@@ -27,6 +27,7 @@ from .drawing import draw_object
 __all__ = ["DatabaseOverlay"]
 
 SEND_CHUNK = 100  # objects sent per atomic group (a full redraw never holds viser's buffer for long)
+MAX_OUTLINE_SHARE = 0.25  # an outline larger than this share of the image is not picked by a click inside it
 
 
 @dataclass
@@ -34,6 +35,8 @@ class _Drawn:
     key: tuple  # (version, status, name)
     name: str
     seg_uv: np.ndarray  # (K, 2, 2) the visible segments drawn, pixels (for picking)
+    outline: np.ndarray | None = None  # (H, 2) its drawn outline's convex hull, pixels: a click inside picks it
+    depth: float = np.inf  # its centre's depth from the camera (the nearest of several outlines is picked)
     lines: Any = None  # viser handle of /overlay/db/<id>, or None when nothing is in view
     label: Any = None  # viser handle of /overlay/db_labels/<id>, or None
 
@@ -88,13 +91,14 @@ class DatabaseOverlay:
                 old = self._drawn.get(obj.id)
                 if full or old is None or old.key != key:
                     batch, label, wire = draw_object(camera, obj, pw.width, pw.height)
-                    todo.append((obj, key, batch, label, wire))
+                    todo.append((obj, key, batch, label, wire, _outline(camera, obj, wire)))
             live = {o.id for o in objects}
             gone = [i for i in self._drawn if i not in live]
             for k in range(0, max(len(todo), 1), SEND_CHUNK):
                 with self.atomic():
-                    for obj, key, batch, label, wire in todo[k:k + SEND_CHUNK]:
+                    for obj, key, batch, label, wire, outline in todo[k:k + SEND_CHUNK]:
                         self._send(obj, key, batch, label, wire)
+                        self._drawn[obj.id].outline, self._drawn[obj.id].depth = outline
                     if k == 0:
                         for i in gone:
                             self._remove(self._drawn.pop(i))
@@ -160,7 +164,37 @@ class DatabaseOverlay:
 
     def object_at(self, uv: np.ndarray, radius_px: float) -> str | None:
         """The name of the object whose drawn (visible) wireframe passes nearest to pixel ``uv`` (2,),
-        within ``radius_px``; None if none does. Uses the projections already drawn."""
+        within ``radius_px``; else the nearest object whose drawn outline holds ``uv`` (the table's
+        excepted: a click on the table's top picks nothing); None if none does. Uses the projections
+        already drawn (a new operator clicked on a box's face, and nothing was selected)."""
         segs, owners = self._pick
         i, dist = nearest_segment(segs, uv)
-        return str(owners[i]) if i >= 0 and dist < radius_px else None
+        if i >= 0 and dist < radius_px:
+            return str(owners[i])
+        import cv2
+
+        p = (float(uv[0]), float(uv[1]))
+        holding = [d for d in list(self._drawn.values())
+                   if d.outline is not None and cv2.pointPolygonTest(d.outline, p, False) >= 0]
+        return min(holding, key=lambda d: d.depth).name if holding else None
+
+
+def _outline(camera: Camera, obj: SiteObject, wire) -> tuple[np.ndarray | None, float]:
+    """(the convex hull (H, 2) float32 of an object's drawn wireframe, pixels, or None; its centre's depth)
+    for picking by a click inside it. None for the table and for anything whose outline covers more
+    than MAX_OUTLINE_SHARE of the image (a wall: they hold the other objects, and are picked by their
+    wireframe), for an object not wholly in front of the camera, or drawn as fewer than 3 points."""
+    import cv2
+
+    X = obj.vertices_world()
+    if len(X) == 0:  # a cylinder, a cone: no vertices, its origin on its axis
+        X = obj.T_world_obj[:3, 3][None]
+    if obj.kind == "table" or wire is None or len(wire.seg_uv) == 0 or not np.all(camera.depth(X) > 0):
+        return None, float("inf")
+    pts = wire.seg_uv.reshape(-1, 2).astype(np.float32)
+    if len(np.unique(pts, axis=0)) < 3:
+        return None, float("inf")
+    hull = cv2.convexHull(pts).reshape(-1, 2)
+    if cv2.contourArea(hull) > MAX_OUTLINE_SHARE * camera.width * camera.height:
+        return None, float("inf")
+    return hull, float(camera.depth(X.mean(axis=0)[None])[0])

@@ -270,10 +270,10 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     _select(op, page, ui.site.object(BOX), cam)
     outline = longest.mean(axis=0)
     op.double_click(outline)
-    wait_until(lambda: "is on cylinder_1's wireframe: to update cylinder_1" in panel.error, timeout_s=30,
+    wait_until(lambda: "is on cylinder_1 as the database draws it: to update cylinder_1" in panel.error, timeout_s=30,
                what="the refusal naming the cylinder")
     assert panel.session.workflow.object_name == BOX and panel.session.workflow.found is None
-    page.get_by_text("Your double click is on cylinder_1's wireframe", exact=False).first.wait_for(timeout=5000)
+    page.get_by_text("Your double click is on cylinder_1 as the database draws it", exact=False).first.wait_for(timeout=5000)
     op.key("Escape")  # Cancel (the refused click was dropped: nothing to lose, no question)
     wait_until(lambda: panel.session.workflow.finished, what="the cancel")
     # nothing selected (a click away from every wireframe), then a double click on the cylinder's outline:
@@ -284,5 +284,23 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     wait_until(lambda: panel.session.workflow is not None and not panel.session.workflow.finished
                and panel.session.workflow.found is not None, timeout_s=30, what="the cylinder's pose found")
     assert panel.session.workflow.object_name == "cylinder_1"
-    op.key("Escape")
+    op.key("Escape")  # Cancel: the found poses would be thrown away, so it asks once more ...
+    wait_until(lambda: panel.asking == "cancel", what="the question")
+    op.key("Escape")  # ... and the second press cancels
+    wait_until(lambda: panel.session.workflow.finished, what="the cancel")
+    # a click inside the box's drawn outline, far from every wireframe, selects it (a new operator clicked
+    # a face, and nothing was selected)
+    from scipy.spatial import Delaunay
+
+    from app.overlay import nearest_segment
+    from app.ui.client import SELECT_RADIUS_PX
+
+    box = ui.site.object(BOX)
+    drawn = ui.server.db_overlay._pick[0]
+    grid = np.stack(np.meshgrid(np.arange(0, cam.width, 2.0), np.arange(0, cam.height, 2.0)), axis=-1).reshape(-1, 2)
+    inside = grid[Delaunay(cam.project(box.vertices_world())).find_simplex(grid) >= 0]
+    face = max(inside, key=lambda uv: nearest_segment(drawn, uv)[1])
+    assert nearest_segment(drawn, face)[1] > SELECT_RADIUS_PX  # by no wireframe
+    op.click(face)
+    wait_until(lambda: panel.session.selected == BOX, what="the box selected by a click inside it")
     page.close()

@@ -139,6 +139,45 @@ def test_object_at_picks_on_the_drawn_projections(site):
     assert overlay.object_at(p, 2.0) != "parallelepiped"
 
 
+def test_a_click_inside_an_objects_outline_picks_it_the_nearest_first_not_the_table(site, scene):
+    """A click on a box's face, far from its edges, picks it (a new operator clicked a face and nothing
+    was selected); where two outlines overlap, the nearer object; on the table's top, nothing."""
+    _, overlay = _overlay(site)
+    overlay.sync(site.camera, site.objects())
+    cam, box = site.camera, site.object("parallelepiped")
+    hull = cam.project(box.vertices_world())
+    centre = hull.mean(axis=0)
+    assert overlay.object_at(centre, 2.0) == "parallelepiped"
+    segs = box.model.edge_segments(box.T_world_obj)
+    assert np.min([np.linalg.norm(cam.project(S)[0] - centre) for S in segs]) > 2.0  # not by its wireframe
+    # on the table, away from every wireframe: nothing (the table is picked by its wireframe only)
+    table = site.object("table")
+    top = float(table.model.vertices[:, 2].max())
+    far = next(uv for uv in (cam.project(np.array([[x, y, top]]))[0] for x in np.linspace(-0.3, 0.3, 7)
+                             for y in np.linspace(-0.5, 0.2, 8)) if overlay.object_at(uv, 15.0) is None)
+    assert overlay.object_at(far, 15.0) is None
+    # a second box of the same size, 0.3 m nearer the camera along the view: both outlines hold its centre
+    ray = box.T_world_obj[:3, 3] - cam.center
+    T_near = box.T_world_obj.copy()
+    T_near[:3, 3] -= 0.3 * ray / np.linalg.norm(ray)
+    site.add_object("box_near", "box", box.model, T_near, method="test", client="test")
+    overlay.sync(cam, site.objects())
+    near_centre = cam.project(T_near[:3, 3][None])[0]
+    import cv2
+
+    for T in (box.T_world_obj, T_near):  # inside both outlines
+        outline = cv2.convexHull(cam.project_obj(T, box.model.vertices).astype(np.float32))
+        assert cv2.pointPolygonTest(outline, tuple(float(v) for v in near_centre), False) > 0
+    assert overlay.object_at(near_centre, 0.5) == "box_near"
+    # a cylinder (a model without vertices): inside its outline, half way up its axis
+    body = scene.body("unknown_cylinder")
+    T = body.pose_at(0.0)
+    site.add_object("cylinder_1", "cylinder", body.model, T, method="test", client="test")
+    overlay.sync(cam, site.objects())
+    mid = cam.project((T[:3, :3] @ [0.0, 0.0, 0.08] + T[:3, 3])[None])[0]
+    assert overlay.object_at(mid, 0.5) == "cylinder_1"
+
+
 def test_world3d_moves_only_the_changed_objects_node(site, db):
     scene = FakeScene()
     world = World3D(scene, offset=np.zeros(3))
