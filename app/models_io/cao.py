@@ -44,7 +44,8 @@ exhausts memory, and so that whatever loads can also be exported and read back:
 * every count (points, lines, faces, a face's points, cylinders, circles) is checked against the
   lines or numbers left in the file before anything is allocated.
 * coordinates, radii and include translations are finite and within ±1e6 m (``MAX_COORD_M``,
-  1000 km; a model placed by its includes too); a line's ends, two points of a face or a
+  1000 km; a model placed by its includes too, and a circle's rim and a cylinder's side, so that
+  what is read is written back readable); a line's ends, two points of a face or a
   cylinder's axis ends closer than 1 nm (``MIN_LENGTH_M``) are refused as coincident; a face
   whose area is below 1e-9 of its size squared (its points on one line, or folded over itself)
   is refused.
@@ -520,6 +521,8 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
             if r <= 0:
                 raise lines.error(number, f"cylinder {k}: radius must be positive, got {r}")
             _within(lines, number, r, f"cylinder {k}: the radius")
+            # its written form (axis ends, rim) must read back: the rim within the limit too
+            _within(lines, number, max(np.abs(P[i]).max(), np.abs(P[j]).max()) + r, f"cylinder {k}: its side (axis end and radius)")
             if np.linalg.norm(P[i] - P[j]) <= MIN_LENGTH_M:
                 raise lines.error(number, f"cylinder {k}: needs two distinct axis endpoints (points {i} and {j} are at the same place)")
             solids.append(Revolution(P[i], P[j], r, r))
@@ -543,6 +546,8 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
                 )
                 dropped_circles += 1
                 continue
+            # its written form (centre and two rim points) must read back: the rim within the limit too
+            _within(lines, number, np.abs(P[c]).max() + r, f"circle {k}: its rim (centre and radius)")
             circles.append(Circle(P[c], normal, r))
             circle_options.append(options)
     if (item := lines.peek()) is not None:
