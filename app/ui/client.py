@@ -599,6 +599,9 @@ class ClientPanel:
             return
         if wf is not None and not wf.finished and "click" in wf.actions:
             step = wf.current_step()
+            if double and wf.double_click_is_one:  # its first click was the click: the second is dropped
+                self._last_click = None
+                return
             if double and "find" in step.enabled:
                 # a double click on the moved object: find its pose from that point (Find, at once)
                 self._last_click = None

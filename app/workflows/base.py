@@ -219,6 +219,8 @@ class Workflow:
     progress: float | None = None  # a measurement under way: 0..1 (the panel's progress bar), else None
     progress_text: str = ""
     snapping: ClassVar[bool] = False  # True: takes a ``snap`` option (clicks snapped to the image)
+    # True: a double click on the video is one click here (its second click is dropped)
+    double_click_is_one: ClassVar[bool] = False
 
     def __init__(self, site: "Site", client: str = "operator"):
         self.site = site

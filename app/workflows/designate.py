@@ -108,6 +108,7 @@ def along_ray_sigma(cov_rf: np.ndarray, X_rf: np.ndarray, ray: np.ndarray, T_wor
 class DesignateTarget(Workflow):
     name = "designate"
     title = "Designate target"
+    double_click_is_one = True  # a habitual double click had designated the same point twice
     actions = ("click", "clear", "accept", "cancel")
     controls = (
         Control("clear", "Clear", "X", hint="Forget the targets designated so far"),

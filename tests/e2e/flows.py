@@ -41,8 +41,7 @@ class Operator:
 
     def double_click(self, uv) -> None:
         """A double click on video pixel uv (one gesture, one action)."""
-        x, y = self.ui.screen_of(self.page, uv)
-        self.page.locator("canvas").nth(1).dblclick(position={"x": x, "y": y})
+        self.ui.double_click_pixel(self.page, uv)
         self.actions += 1
         self.log.append("double click")
 

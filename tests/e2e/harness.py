@@ -259,6 +259,11 @@ class Interface:
         page.locator("canvas").nth(1).click(position={"x": x, "y": y})
         time.sleep(0.05)
 
+    def double_click_pixel(self, page, uv):
+        """A double click on video pixel uv (one gesture)."""
+        x, y = self.screen_of(page, uv)
+        page.locator("canvas").nth(1).dblclick(position={"x": x, "y": y})
+
     def screenshot(self, page, path=None) -> np.ndarray:
         import cv2
 
