@@ -103,6 +103,7 @@ class ClientPanel:
         self._frozen_sent: Any = None
         self._labels_sent: dict = {}
         self.worker: threading.Thread | None = None
+        self.worker_action = ""  # the action the worker runs (a measurement, "find")
         self.feeder: TrackFeeder | None = None  # feeds a Track workflow the video
         self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
@@ -394,6 +395,7 @@ class ClientPanel:
         self.confirm_pending, self.warning, self.error = None, "", ""
         wf.message = ""  # old messages go: the action says what it did
         if c.kind == "long":
+            self.worker_action = action
             self.worker = threading.Thread(target=self._guard(lambda: self._act(wf, c, args)), daemon=True,
                                            name=f"mcit-measure-{self.client.client_id}")
             self.worker.start()
@@ -598,9 +600,20 @@ class ClientPanel:
             self._find_from_double_click(uv, name)
             return
         if wf is not None and not wf.finished and "click" in wf.actions:
+            if self.worker_action == "find" and self.worker is not None and self.worker.is_alive():
+                # a click while Find searches had become an edge's point, and the found poses could not be
+                # accepted (a new operator double-clicked again during the search)
+                raise WorkflowError(f"finding the pose of {getattr(wf, 'object_name', 'the object')} from your click: wait "
+                                    "for it (a second or two), or Cancel (Esc) to stop it")
             step = wf.current_step()
             if double and wf.double_click_is_one:  # its first click was the click: the second is dropped
                 self._last_click = None
+                return
+            if double and getattr(wf, "found", None) is not None and hasattr(wf, "search_again"):
+                # found poses there, a double click again (a better point): search again from it
+                self._last_click = None
+                wf.search_again(uv)
+                self._find_from_double_click(uv, getattr(wf, "object_name", None))
                 return
             if double and "find" in step.enabled:
                 # a double click on the moved object: find its pose from that point (Find, at once)

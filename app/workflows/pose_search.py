@@ -185,6 +185,23 @@ class OneClickMixin:
         return (self.found is None and self.pending is not None and not self.segs and not self.points_uv
                 and self.mode == "edge" and self.matches is None)
 
+    def search_again(self, uv) -> None:
+        """A double click at ``uv`` once poses are found: they go (with the double click's first click, an
+        edge's first point by then), and ``uv`` waits for Find, as the first click of a new search (a new
+        operator double-clicked again to retry at a better point: it was split into two edge points).
+        WorkflowError, nothing changed, once edges or points were clicked after the search."""
+        p = as_pixel(uv)
+        with self.lock:
+            self._check_open()
+            if self.found is None or self.segs or self.points_uv or self.mode != "edge":
+                raise WorkflowError("a double click searches again only while no edge has been clicked since the search: "
+                                    "Remove last the edges first, then double-click")
+            self.found, self.search_info, self.found_moving = None, None, ""
+            self.search_click, self.candidates, self.chosen, self.matches = None, [], None, None
+            self.pending = p
+            self._invalidate()
+            self.state = "click_edge_end"
+
     def _drop_found(self) -> bool:
         """Remove last on the found poses alone: they go, and the click (or double click) they came from
         with them — back to the start, as one Remove last undoes one double click. True if dropped."""

@@ -235,6 +235,48 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
     assert len(held) == 2 and held[1] - held[0] >= 1.4  # the second click did reach the server late
     wf = panel.session.workflow
     assert wf.name == "update_pose" and wf.object_name == BOX
+    # found, a double click again at another point of the box: the search runs again from it (a new
+    # operator's was split into two edge points, and Accept went)
+    first, other = wf.found, cam.project_obj(T_true, obj.model.vertices).mean(axis=0) + [3.0, -2.0]
+    op.double_click(other)
+    wait_until(lambda: wf.found is not None and wf.found is not first, timeout_s=30, what="the poses found again")
+    assert np.linalg.norm(wf.search_click - other) < 2.0 and not wf.segs and wf.pending is None
+    op.accept(wf)
+    deg, m = pose_error(ui.db.get(BOX).T_world_obj, T_true)
+    assert deg < 1.0 and m < 0.005
+    page.close()
+
+
+def test_a_click_while_find_searches_is_refused_and_the_found_poses_stay_acceptable(browser, interface, scene,
+                                                                                      monkeypatch):
+    """A click while Find searches (here slowed to 3 s) is refused and said; it had become an edge's point,
+    and the found poses could then not be accepted (a new operator double-clicked again during a search)."""
+    import app.vision.search as search
+    from .test_workflows_pose import _select
+
+    slow = search.search_pose
+
+    def slowed(*args, **kwargs):
+        time.sleep(3.0)
+        return slow(*args, **kwargs)
+
+    monkeypatch.setattr(search, "search_pose", slowed)
+    ui = interface
+    page = ui.open(browser, viewport={"width": 1280, "height": 720})
+    op = Operator(ui, page)
+    cam, panel = ui.site.camera, page.panel
+    obj = ui.site.object(BOX)
+    T_true = scene.body(BOX).pose_at(ui.frame_t_s)
+    _select(op, page, obj, cam)
+    on_box = cam.project_obj(T_true, obj.model.vertices).mean(axis=0)
+    op.double_click(on_box)
+    wait_until(lambda: panel.session.workflow is not None and panel.worker is not None and panel.worker.is_alive(),
+               what="Find searching")
+    wf = panel.session.workflow
+    op.click(on_box + [20.0, 0.0])
+    page.get_by_text("wait for it (a second or two), or Cancel (Esc)", exact=False).first.wait_for(timeout=5000)
+    wait_until(lambda: wf.found is not None, timeout_s=30, what="the found poses")
+    assert wf.pending is None and not wf.segs and "accept" in wf.current_step().enabled
     op.accept(wf)
     deg, m = pose_error(ui.db.get(BOX).T_world_obj, T_true)
     assert deg < 1.0 and m < 0.005

@@ -295,3 +295,31 @@ def test_while_find_searches_the_step_says_so(video_site, scene, db, monkeypatch
     assert seen and all(name == "searching" and not clicks for name, _, clicks in seen)
     assert "Searching for the pose of parallelepiped from your click" in seen[0][1]
     assert wf.current_step().name != "searching"
+
+
+def test_a_double_click_after_the_found_poses_searches_again_from_it(video_site, scene, db):
+    """Found poses, then a double click (its first click is an edge's first point by then): the found
+    poses and that point go, the double click's point waits for Find, and Find finds the pose again (a new
+    operator's second double click was split into two edge points, the second refused, Accept gone).
+    Once an edge is clicked after the search, a double click is refused, nothing changed."""
+    wf, uv, T_true = _found(video_site, scene)
+    again = uv + [-6.0, 3.0]
+    wf.click(again)  # the double click's first click
+    assert wf.pending is not None and wf.found is not None
+    wf.search_again(again)
+    st = wf.current_step()
+    assert wf.found is None and np.allclose(wf.pending, again) and "find" in st.enabled and "accept" not in st.enabled
+    found = wf.find()
+    assert np.allclose(wf.search_click, again)
+    deg, m = pose_error(found[0].T_world_obj, T_true)
+    assert deg < 1.0 and m < 0.005, (deg, m)
+    # an edge clicked after the search: a double click does not throw it away
+    model = wf.obj.model
+    k = _visible_edges(video_site, model, T_true)[0]
+    seg = _true_segments(video_site, model, T_true, [k], np.random.default_rng(3), 0.5)[0]
+    wf.click(seg[0])
+    wf.click(seg[1])
+    assert len(wf.segs) == 1
+    with pytest.raises(WorkflowError, match="only while no edge has been clicked since the search"):
+        wf.search_again(again)
+    assert len(wf.segs) == 1 and wf.found is not None
