@@ -43,7 +43,9 @@ __all__ = ["ClientPanel"]
 
 log = logging.getLogger("mcit.ui")
 
-SELECT_RADIUS_PX = 15.0
+# a click this near an object's drawn wireframe selects it, in screen pixels (15 video pixels, 35 on the
+# screen at the fitted view, had let the table's edges take clicks meant to clear the selection)
+SELECT_RADIUS_SCREEN_PX = 10.0
 NO_SELECTION = "(none)"
 NO_CHOICE = "—"
 Z_FROZEN = -0.0005  # the frozen frame: in front of the live video, behind the overlays
@@ -781,7 +783,12 @@ class ClientPanel:
 
     # ------------------------------------------------------------------ helpers
     def _object_at(self, uv: np.ndarray) -> str | None:
-        return self.app.object_at(uv, SELECT_RADIUS_PX)  # the overlay's own projections: nothing projected here
+        """The object a click at uv picks (the overlay's own projections: nothing projected here)."""
+        return self.app.object_at(uv, self.select_radius_px())
+
+    def select_radius_px(self) -> float:
+        """How near a wireframe a click picks its object, in video pixels at this client's zoom."""
+        return SELECT_RADIUS_SCREEN_PX * self._image_px_per_screen_px()
 
     # ------------------------------------------------------------------ drawing (loop only)
     def fit(self) -> None:
