@@ -205,20 +205,26 @@ def test_update_pose_by_a_double_click_on_the_selected_object(browser, interface
     page.close()
 
 
+def _box_selected(ui, browser, scene):
+    """A page at 1280×720 with the box selected by a click on its wireframe: (page, its Operator, its
+    panel, the box's SiteObject, its true pose in the frame)."""
+    from .test_workflows_pose import _select
+
+    page = ui.open(browser, viewport={"width": 1280, "height": 720})
+    op = Operator(ui, page)
+    obj = ui.site.object(BOX)
+    _select(op, page, obj, ui.site.camera)
+    return page, op, page.panel, obj, scene.body(BOX).pose_at(ui.frame_t_s)
+
+
 def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, interface, scene):
     """A double click's two clicks reached a loaded server 0.3–2.7 s apart, were read as two clicks, and
     Update pose did not start (a CI run failed so). The page tells a double click, timed by the browser:
     here the server's event loop is held 1.5 s once the double click's first click arrives, so that its
     second reaches the server 1.5 s late, and the double click still finds the box's pose."""
-    from .test_workflows_pose import _select
-
     ui = interface
-    page = ui.open(browser, viewport={"width": 1280, "height": 720})
-    op = Operator(ui, page)
-    cam, panel = ui.site.camera, page.panel
-    obj = ui.site.object(BOX)
-    T_true = scene.body(BOX).pose_at(ui.frame_t_s)
-    _select(op, page, obj, cam)
+    page, op, panel, obj, T_true = _box_selected(ui, browser, scene)
+    cam = ui.site.camera
     wait_until(lambda: panel.page_doubles, what="the page saying it tells double clicks")
     submit, held = panel._click_worker.submit, []
 
@@ -252,7 +258,6 @@ def test_a_click_while_find_searches_is_refused_and_the_found_poses_stay_accepta
     """A click while Find searches (here slowed to 3 s) is refused and said; it had become an edge's point,
     and the found poses could then not be accepted (a new operator double-clicked again during a search)."""
     import app.vision.search as search
-    from .test_workflows_pose import _select
 
     slow = search.search_pose
 
@@ -262,12 +267,8 @@ def test_a_click_while_find_searches_is_refused_and_the_found_poses_stay_accepta
 
     monkeypatch.setattr(search, "search_pose", slowed)
     ui = interface
-    page = ui.open(browser, viewport={"width": 1280, "height": 720})
-    op = Operator(ui, page)
-    cam, panel = ui.site.camera, page.panel
-    obj = ui.site.object(BOX)
-    T_true = scene.body(BOX).pose_at(ui.frame_t_s)
-    _select(op, page, obj, cam)
+    page, op, panel, obj, T_true = _box_selected(ui, browser, scene)
+    cam = ui.site.camera
     on_box = cam.project_obj(T_true, obj.model.vertices).mean(axis=0)
     op.double_click(on_box)
     wait_until(lambda: panel.session.workflow is not None and panel.worker is not None and panel.worker.is_alive(),
