@@ -589,6 +589,11 @@ class ClientPanel:
             if last is None:  # its first click not seen (told by the page alone): as if made here
                 last = (now, uv, self.session.selected, self.app.grabber.latest())
             name = last[2] if last[2] is not None else self.session.selected
+            on = self._object_at(uv)
+            if name is not None and on not in (None, name) and self.app.site.object(name).kind == "table":
+                # the table selected, a double click on another object: that object's pose is meant (the
+                # table's search was refused, and a new operator was left in Update pose: table)
+                name = on
             if name is None:
                 raise WorkflowError("a double click finds the pose of the selected object: select it by a click where the "
                                     "database draws it, then double-click where it is in the video")
@@ -642,8 +647,8 @@ class ClientPanel:
         selected, and read the same refusal three times, not knowing whether a click was taken)."""
         other = self._object_at(uv)
         # when it was (a repeated refusal reads as new: the pixel meant nothing to a new operator)
-        self._double_at = (f"your double click is on {other} as the database draws it: to update {other}, click it to select it, "
-                           "then double-click where it is in the video"
+        self._double_at = (f"your double click is on {other} as the database draws it: to update {other}, Cancel (Esc), "
+                           "click it to select it, then double-click where it is in the video"
                            if other not in (None, name, "table") else f"double click at {time.strftime('%H:%M:%S')}")
         self.press("find")
 
@@ -945,7 +950,7 @@ class ClientPanel:
             title = f"{head}\n\n{prompt}"
             if wf.message and not wf.finished and not self.warning and wf.message[:40] not in prompt:
                 title += f"\n\n_{wf.message}_"  # not said twice, nor above a question being asked
-            weak = self._weak_now(wf, step)
+            weak = [w for w in self._weak_now(wf, step) if w not in wf.message]  # not said twice
             if weak and not self.warning:  # said with the result, not first at Accept (a new operator's)
                 title += "\n\n⚠ **Check before accepting:** " + "; ".join(weak) + "."
             if wf.finished:

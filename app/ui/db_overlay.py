@@ -165,18 +165,22 @@ class DatabaseOverlay:
     def object_at(self, uv: np.ndarray, radius_px: float) -> str | None:
         """The name of the object whose drawn (visible) wireframe passes nearest to pixel ``uv`` (2,),
         within ``radius_px``; else the nearest object whose drawn outline holds ``uv`` (the table's
-        excepted: a click on the table's top picks nothing); None if none does. Uses the projections
-        already drawn (a new operator clicked on a box's face, and nothing was selected)."""
-        segs, owners = self._pick
-        i, dist = nearest_segment(segs, uv)
-        if i >= 0 and dist < radius_px:
-            return str(owners[i])
+        excepted: a click on the table's top picks nothing); else the table (or another object with no
+        outline) whose wireframe passes there; None if none does. Uses the projections already drawn (a
+        new operator clicked on a box's face, and nothing was selected)."""
         import cv2
 
+        segs, owners = self._pick
+        i, dist = nearest_segment(segs, uv)
+        near = str(owners[i]) if i >= 0 and dist < radius_px else None
+        drawn = list(self._drawn.values())
+        if near is not None and any(d.name == near and d.outline is not None for d in drawn):
+            return near
+        # inside an object's outline, before the table's wireframe (its back edge is drawn across the boxes
+        # on it: a click on a box's top selected the table, in a new operator's run)
         p = (float(uv[0]), float(uv[1]))
-        holding = [d for d in list(self._drawn.values())
-                   if d.outline is not None and cv2.pointPolygonTest(d.outline, p, False) >= 0]
-        return min(holding, key=lambda d: d.depth).name if holding else None
+        holding = [d for d in drawn if d.outline is not None and cv2.pointPolygonTest(d.outline, p, False) >= 0]
+        return min(holding, key=lambda d: d.depth).name if holding else near
 
 
 def _outline(camera: Camera, obj: SiteObject, wire) -> tuple[np.ndarray | None, float]:

@@ -235,7 +235,7 @@ def snap_segment(
     elif rms > max_rms_px:
         reason = f"the edge points scatter {rms:.2f} px about the line (more than {max_rms_px} px)"
     elif moved > band_px + 2.0 * refine_px:
-        reason = f"the segment would move {moved:.1f} px, beyond the search band"
+        reason = f"the segment would move {moved:.1f} px, farther than a snap may ({band_px + 2.0 * refine_px:.0f} px)"
     ok = not reason
     return SnapResult(
         seg_uv=snapped if ok else seg.copy(),

@@ -163,8 +163,9 @@ class OneClickMixin:
         if share is None or share <= CHANGED_SHARE:
             return ""
         return (f"{self.object_name} was moving in this frame (it differs from the frame {MOTION_GAP_S:.1f} s before): "
-                "the pose found is where it passed, not where it stays; once it has stopped, freeze the live frame (F) "
-                "and Find again (Seconds back reaches a frame where it had stopped before), or Accept if it stopped there")
+                "the pose found is where it passed, not where it stays; once it has stopped, press Remove last, freeze a frame "
+                "(F; Seconds back reaches one where it had stopped before) and double-click it again, or Accept if it "
+                "stopped there")
 
     def _near_ties(self) -> int:
         """How many found poses besides the best match the image almost as well (mismatch within

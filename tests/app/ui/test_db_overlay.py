@@ -142,6 +142,10 @@ def test_object_at_picks_on_the_drawn_projections(site):
 def test_a_click_inside_an_objects_outline_picks_it_the_nearest_first_not_the_table(site, scene):
     """A click on a box's face, far from its edges, picks it (a new operator clicked a face and nothing
     was selected); where two outlines overlap, the nearer object; on the table's top, nothing."""
+    import cv2
+
+    from app.overlay import nearest_segment
+
     _, overlay = _overlay(site)
     overlay.sync(site.camera, site.objects())
     cam, box = site.camera, site.object("parallelepiped")
@@ -156,6 +160,14 @@ def test_a_click_inside_an_objects_outline_picks_it_the_nearest_first_not_the_ta
     far = next(uv for uv in (cam.project(np.array([[x, y, top]]))[0] for x in np.linspace(-0.3, 0.3, 7)
                              for y in np.linspace(-0.5, 0.2, 8)) if overlay.object_at(uv, 15.0) is None)
     assert overlay.object_at(far, 15.0) is None
+    # inside the box's outline, by the table's edge drawn across it: the box, not the table (a new operator's
+    # click on the box's top selected the table)
+    segs, owners = overlay._pick
+    grid = np.stack(np.meshgrid(np.arange(0, cam.width, 1.0), np.arange(0, cam.height, 1.0)), axis=-1).reshape(-1, 2)
+    hull = cv2.convexHull(cam.project(box.vertices_world()).astype(np.float32))
+    by_table = [uv for uv in grid if cv2.pointPolygonTest(hull, (float(uv[0]), float(uv[1])), False) > 0
+                and owners[nearest_segment(segs, uv)[0]] == "table" and nearest_segment(segs, uv)[1] < 8.0]
+    assert by_table and all(overlay.object_at(uv, 8.0) == "parallelepiped" for uv in by_table)
     # a second box of the same size, 0.3 m nearer the camera along the view: both outlines hold its centre
     ray = box.T_world_obj[:3, 3] - cam.center
     T_near = box.T_world_obj.copy()
@@ -163,8 +175,6 @@ def test_a_click_inside_an_objects_outline_picks_it_the_nearest_first_not_the_ta
     site.add_object("box_near", "box", box.model, T_near, method="test", client="test")
     overlay.sync(cam, site.objects())
     near_centre = cam.project(T_near[:3, 3][None])[0]
-    import cv2
-
     for T in (box.T_world_obj, T_near):  # inside both outlines
         outline = cv2.convexHull(cam.project_obj(T, box.model.vertices).astype(np.float32))
         assert cv2.pointPolygonTest(outline, tuple(float(v) for v in near_centre), False) > 0
