@@ -38,6 +38,7 @@ out on the site's live feed when one is attached (``mcit serve --feed-socket``; 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,6 +52,7 @@ NOT_CHECKED = "not checked by the range finder"
 LIMIT_SIGMA = 3.0  # a disagreement beyond this many σ along the ray is a warning
 NOT_IN_DATABASE = "not in the database"
 AIM_OFF_PX = 1.0  # a beam that lands farther than this from the click is said so
+OLD_FRAME_S = 1.0  # a disagreement found from a frame older than this says when the frame was
 
 
 @dataclass(frozen=True)
@@ -163,12 +165,17 @@ class DesignateTarget(Workflow):
     def _keep(self, t: Target, message: str) -> Target:
         why = self.scene_changed(t.uv)
         if why:
-            import dataclasses
-
             warning = (f"Warning: {why}: the target is where the database{' and the range finder' if t.rangefinder_X is not None else ''}"
                        " put it now, not what the frozen frame shows; look at the live video (L) or freeze a new frame (F)")
             t = dataclasses.replace(t, warning=warning)
             message = _sentence(warning)
+        elif t.warning and t.rangefinder_X is not None and self.frame is not None:
+            now = self.site.time_s()
+            if abs(now - float(self.frame.t_s)) > OLD_FRAME_S:  # a frozen frame's box was where the database had it: the disagreement read
+                # as false to a new operator, though the site had changed since
+                t = dataclasses.replace(t, warning=f"{t.warning} (the range finder measures the site as it is now, at "
+                                                   f"t = {now:.1f} s; your click was on the frame of t = {self.frame.t_s:.1f} s)")
+                message = _sentence(t.warning)
         with self.lock:
             self.targets.append(t)
             self.message = message

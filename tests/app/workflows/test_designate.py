@@ -230,3 +230,22 @@ def test_a_measurement_stopped_half_way_leaves_no_beam_spot(device_site, devices
     assert seen and seen[0][0] == "checking" and "Checking the target with the range finder: " in seen[0][1]
     assert wf.targets == [] and wf.progress is None and not wf.finished
     assert site.beam_X_world is None
+
+
+def test_a_disagreement_found_from_an_old_frozen_frame_says_when_the_frame_was(device_site, fast_scene):
+    """The range finder measures the site now: a disagreement found from a frame frozen 2.5 s before says
+    so and the frame's time (a new operator read a true disagreement as false: the frozen frame showed the
+    box where the database had it); from a frame 0.5 s old nothing is added."""
+    from app.workflows.base import FrameRef
+
+    site = device_site
+    image = np.zeros((site.camera.height, site.camera.width, 3), np.uint8)
+    uv = _on_body(fast_scene, site.camera, "unknown_box")
+    for t_s, said in ((-2.5, True), (-0.5, False)):
+        wf = DesignateTarget(site)
+        wf.use_frame(FrameRef(image, t_s))
+        t = wf.click(uv)
+        assert "something not in the database is in the way" in t.warning
+        assert ("(the range finder measures the site as it is now, at t = 0.0 s; your click was on the frame of "
+                "t = -2.5 s)" in t.warning) == said
+        assert ("measures the site as it is now" in wf.message) == said
