@@ -923,7 +923,10 @@ class ClientPanel:
         idle = _idle_text(selected)
         if wf is not None and wf.finished and self._finished_at is not None and self._finished_at[0] is wf \
                 and self._finished_at[2] != selected:
-            wf = None  # a finished workflow's text goes once the operator selects another object (it stayed on)
+            # a finished workflow's text goes once the operator selects another object (it stayed on), and does
+            # not come back with the selection it finished with (a new operator's Designate "closed" text did)
+            self._finished_at = (wf, self._finished_at[1], object())
+            wf = None
         if wf is None:
             title = f"**No workflow.** {idle}"
             report = ""

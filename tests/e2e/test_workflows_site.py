@@ -317,6 +317,17 @@ def test_designate_known_and_unknown_by_clicks(browser, device_interface, scene)
     assert_prompt_controls(page)
     op.key("Enter")  # Done (Enter)
     wait_until(lambda: wf.accepted, what="Done")
+    panel = page.panel
+    wait_until(lambda: "(closed at" in panel.gui_title.content, what="the closed workflow's text")
+    # it goes once another object is selected, and does not come back with the selection it closed with (a
+    # new operator's "Designate target (closed at …)" headed the panel through later selections)
+    select_by_click(page, "table", lambda: op.click(cam.project(T[:3, :3] @ np.array([0.45, -0.2, top]) + T[:3, 3])))
+    wait_until(lambda: "(closed at" not in panel.gui_title.content, what="the closed text gone")
+    assert panel._object_at(cam.project(X_table[None])[0]) is None
+    op.click(cam.project(X_table[None])[0])  # on the table's top, by no wireframe: nothing selected, as at Done
+    wait_until(lambda: panel.session.selected is None, what="the selection cleared")
+    time.sleep(0.5)  # a redraw or more
+    assert "(closed at" not in panel.gui_title.content
     op.report()
     assert _db_state(ui.db) == before  # nothing written
     page.close()
