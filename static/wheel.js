@@ -51,12 +51,7 @@
     pending = pending ? { x: x, y: y, dy: pending.dy + dy } : { x: x, y: y, dy: dy };
     if (timer === null) timer = setTimeout(send, 16); // at most one update a frame
   }, { capture: true, passive: false });
-  var told = false; // the server told that this page tells double clicks (until then, it times them)
-  setInterval(function () { // keep the fields hidden when the panel re-renders
-    field();
-    var input = field("mcit-dblclick");
-    if (input && !told) { told = true; write(input, "ready"); }
-  }, 1000);
+  setInterval(function () { field(); field("mcit-dblclick"); }, 1000); // keep the fields hidden when the panel re-renders
 
   // Double clicks on the video are told here, from the presses' own timestamps (e.timeStamp): the
   // server cannot time them, since a busy page, network or server delays one click's message more

@@ -231,8 +231,8 @@ class ClientPanel:
         self.gui_wheel = gui.add_text(WHEEL_FIELD, "")
         self.gui_wheel.on_update(self._guard(self._on_wheel))
         # Double clicks are told by the page (static/wheel.js), timed by the browser: at the server a
-        # double click's two messages arrived 0.3–2.7 s apart on a loaded machine. Until the page says
-        # its script runs, two clicks close in time and place at the server are a double click.
+        # double click's two messages arrived 0.3–2.7 s apart on a loaded machine. Two clicks close in time
+        # and place at the server are a double click too (a page whose script did not run).
         self.gui_double = gui.add_text(DOUBLE_FIELD, "")
         guarded_double = self._guard(self._on_double)
 
@@ -240,7 +240,6 @@ class ClientPanel:
             self._click_worker.submit(guarded_double, str(self.gui_double.value), time.monotonic())
 
         self.gui_double.on_update(on_double)
-        self.page_doubles = False  # the page tells double clicks (its script said "ready")
         script = wheel_script()
         if script:
             gui.add_html(script)
@@ -663,8 +662,9 @@ class ClientPanel:
         if self.view != "video":
             raise WorkflowError("clicks work on the video: switch the view to Video")
         uv = self._on_image(self.app.pixel_world.pixel_from_ray(np.array(event.ray_origin), np.array(event.ray_direction)))
-        # with the page script, the page tells the double clicks (_on_double): this one is single
-        self.on_pixel_click(uv, arrival, double=False if self.page_doubles else None)
+        # the page tells double clicks (_on_double), keeping their second click from the viewer; two clicks
+        # that reach the server close in time and place are one too (a page whose script did not run)
+        self.on_pixel_click(uv, arrival)
 
     def _on_image(self, uv: np.ndarray | None) -> np.ndarray:
         """uv, a clicked pixel, if it lies on the image; else a WorkflowError that says so."""
@@ -677,11 +677,7 @@ class ClientPanel:
 
     def _on_double(self, value: str, arrival: float) -> None:
         """A double click on the video, told by static/wheel.js as "x y n" (x, y in 0..1 of the canvas):
-        the second click of it, at that point. Its first click came as an ordinary click. "ready": the
-        page's script runs, and tells every double click from now on."""
-        if value == "ready":
-            self.page_doubles = True
-            return
+        the second click of it, at that point. Its first click came as an ordinary click."""
         try:
             sx, sy = (float(v) for v in value.split()[:2])
         except ValueError:

@@ -40,14 +40,25 @@ def screen_of(server, panel, uv) -> tuple[float, float]:
     return float(x), float(y)
 
 
-def wait_until(predicate, timeout_s: float = 8.0, what: str = "condition") -> None:
-    """Poll ``predicate()`` until it is true; AssertionError naming ``what`` after timeout_s."""
+def wait_until(predicate, timeout_s: float = 8.0, what: str = "condition", panel=None) -> None:
+    """Poll ``predicate()`` until it is true; AssertionError naming ``what`` after timeout_s (and, given a
+    client ``panel``, what its panel said then)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if predicate():
             return
         time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
+    said = "" if panel is None else f"; the panel: {panel_state(panel)}"
+    raise AssertionError(f"timed out waiting for {what}{said}")
+
+
+def panel_state(panel) -> str:
+    """What a client's panel shows: its workflow and step, error, warning, message, selection."""
+    wf = panel.session.workflow
+    step = None if wf is None else wf.current_step().name
+    return (f"workflow={getattr(wf, 'name', None)}:{getattr(wf, 'object_name', None)} step={step} "
+            f"finished={getattr(wf, 'finished', None)} error={panel.error!r} warning={panel.warning!r} "
+            f"message={getattr(wf, 'message', '')!r} selected={panel.session.selected!r}")
 
 
 def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float = 0.6) -> None:

@@ -190,7 +190,7 @@ def test_update_pose_by_a_double_click_on_the_selected_object(browser, interface
     looked_at = page.panel.frozen
     op.double_click(on_table[len(on_table) // 2])
     wait_until(lambda: page.panel.session.workflow is not None and page.panel.session.workflow.found is not None,
-               timeout_s=30, what="Update pose started and the found poses")
+               timeout_s=30, what="Update pose started and the found poses", panel=page.panel)
     wf = page.panel.session.workflow
     assert wf.name == "update_pose" and wf.object_name == BOX
     assert wf.frame is looked_at  # not the newest frame (a new operator's frozen frame was replaced)
@@ -225,7 +225,6 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
     ui = interface
     page, op, panel, obj, T_true = _box_selected(ui, browser, scene)
     cam = ui.site.camera
-    wait_until(lambda: panel.page_doubles, what="the page saying it tells double clicks")
     submit, held = panel._click_worker.submit, []
 
     def take_then_hold(fn, *args):  # called in the server's event loop as each click arrives
@@ -237,7 +236,7 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
     panel._click_worker.submit = take_then_hold
     op.double_click(cam.project(T_true[:3, 3][None])[0])  # on the box where the frame shows it
     wait_until(lambda: panel.session.workflow is not None and panel.session.workflow.found is not None,
-               timeout_s=30, what="Update pose started and the found poses")
+               timeout_s=30, what="Update pose started and the found poses", panel=page.panel)
     assert len(held) == 2 and held[1] - held[0] >= 1.4  # the second click did reach the server late
     wf = panel.session.workflow
     assert wf.name == "update_pose" and wf.object_name == BOX
@@ -245,7 +244,8 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
     # operator's was split into two edge points, and Accept went)
     first, other = wf.found, cam.project_obj(T_true, obj.model.vertices).mean(axis=0) + [3.0, -2.0]
     op.double_click(other)
-    wait_until(lambda: wf.found is not None and wf.found is not first, timeout_s=30, what="the poses found again")
+    wait_until(lambda: wf.found is not None and wf.found is not first, timeout_s=30, what="the poses found again",
+               panel=panel)
     assert np.linalg.norm(wf.search_click - other) < 2.0 and not wf.segs and wf.pending is None
     op.accept(wf)
     deg, m = pose_error(ui.db.get(BOX).T_world_obj, T_true)
@@ -305,7 +305,8 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
             continue
     time.sleep(1.0)  # not part of the double click below
     op.double_click(empty)
-    wait_until(lambda: "a double click finds the pose of the selected object" in panel.error.lower(), what="the hint")
+    wait_until(lambda: "a double click finds the pose of the selected object" in panel.error.lower(), what="the hint",
+               panel=panel)
     assert panel.session.workflow is None
     # the box selected, a double click on the cylinder's wireframe: the box's search refused, the cylinder named
     from .test_workflows_pose import _select
@@ -314,7 +315,7 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     outline = longest.mean(axis=0)
     op.double_click(outline)
     wait_until(lambda: "is on cylinder_1 as the database draws it: to update cylinder_1" in panel.error, timeout_s=30,
-               what="the refusal naming the cylinder")
+               what="the refusal naming the cylinder", panel=panel)
     assert panel.session.workflow.object_name == BOX and panel.session.workflow.found is None
     page.get_by_text("Your double click is on cylinder_1 as the database draws it", exact=False).first.wait_for(timeout=5000)
     op.key("Escape")  # Cancel (the refused click was dropped: nothing to lose, no question)
@@ -325,7 +326,7 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     wait_until(lambda: panel.session.selected is None, what="the selection cleared")
     op.double_click(outline)
     wait_until(lambda: panel.session.workflow is not None and not panel.session.workflow.finished
-               and panel.session.workflow.found is not None, timeout_s=30, what="the cylinder's pose found")
+               and panel.session.workflow.found is not None, timeout_s=30, what="the cylinder's pose found", panel=panel)
     assert panel.session.workflow.object_name == "cylinder_1"
     op.key("Escape")  # Cancel: the found poses would be thrown away, so it asks once more ...
     wait_until(lambda: panel.asking == "cancel", what="the question")
