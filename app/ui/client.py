@@ -105,7 +105,6 @@ class ClientPanel:
         self._frozen_sent: Any = None
         self._labels_sent: dict = {}
         self.worker: threading.Thread | None = None
-        self.worker_action = ""  # the action the worker runs (a measurement, "find")
         self.feeder: TrackFeeder | None = None  # feeds a Track workflow the video
         self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
@@ -396,7 +395,6 @@ class ClientPanel:
         self.confirm_pending, self.warning, self.error = None, "", ""
         wf.message = ""  # old messages go: the action says what it did
         if c.kind == "long":
-            self.worker_action = action
             self.worker = threading.Thread(target=self._guard(lambda: self._act(wf, c, args)), daemon=True,
                                            name=f"mcit-measure-{self.client.client_id}")
             self.worker.start()
@@ -589,7 +587,7 @@ class ClientPanel:
                 last = (now, uv, self.session.selected, self.app.grabber.latest())
             name = last[2] if last[2] is not None else self.session.selected
             on = self._object_at(uv)
-            if name is not None and on not in (None, name) and self.app.site.object(name).kind == "table":
+            if name is not None and on not in (None, name) and self._is_table(name):
                 # the table selected, a double click on another object: that object's pose is meant (the
                 # table's search was refused, and a new operator was left in Update pose: table)
                 name = on
@@ -606,11 +604,6 @@ class ClientPanel:
             self._find_from_double_click(uv, name)
             return
         if wf is not None and not wf.finished and "click" in wf.actions:
-            if self.worker_action == "find" and self.worker is not None and self.worker.is_alive():
-                # a click while Find searches had become an edge's point, and the found poses could not be
-                # accepted (a new operator double-clicked again during the search)
-                raise WorkflowError(f"finding the pose of {getattr(wf, 'object_name', 'the object')} from your click: wait "
-                                    "for it (a second or two), or Cancel (Esc) to stop it")
             step = wf.current_step()
             if double and wf.double_click_is_one:  # its first click was the click: the second is dropped
                 self._last_click = None
@@ -648,7 +641,8 @@ class ClientPanel:
         # when it was (a repeated refusal reads as new: the pixel meant nothing to a new operator)
         self._double_at = (f"your double click is on {other} as the database draws it: to update {other}, Cancel (Esc), "
                            "click it to select it, then double-click where it is in the video"
-                           if other not in (None, name, "table") else f"double click at {time.strftime('%H:%M:%S')}")
+                           if other not in (None, name) and not self._is_table(other)
+                           else f"double click at {time.strftime('%H:%M:%S')}")
         self.press("find")
 
     def _on_click(self, event, arrival: float | None = None) -> None:
@@ -786,6 +780,13 @@ class ClientPanel:
     def _object_at(self, uv: np.ndarray) -> str | None:
         """The object a click at uv picks (the overlay's own projections: nothing projected here)."""
         return self.app.object_at(uv, self.select_radius_px())
+
+    def _is_table(self, name: str) -> bool:
+        """The object ``name`` is the site's table (what the others stand on)."""
+        try:
+            return self.app.site.object(name).kind == "table"
+        except ValueError:  # gone from the database meanwhile
+            return False
 
     def select_radius_px(self) -> float:
         """How near a wireframe a click picks its object, in video pixels at this client's zoom."""

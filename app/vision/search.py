@@ -54,7 +54,7 @@ No candidate fits: ``NoPoseFits`` ("no pose of the parallelepiped fits the image
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import cv2
@@ -731,16 +731,12 @@ def search_pose(
         check(0.97, "looking beside your click")
         near = _beside(camera, model, p_wide, step, per, evaluate, oe, img_s, ef, fine, sp, z0, centre_obj)
         if near is not None and near.mismatch < out[0].mismatch - BESIDE_MARGIN:
-            from dataclasses import replace
-
             T = min((near.T_world_obj @ S for S in syms), key=lambda U: pose_error(U, T_old)[0])
             # said to lie beside the click only if it does once settled (the refinement may bring it under)
             under = bool(_ray_hits(hull, T[None, :3, :3], T[None, :3, 3], origin, ray)[0])
             out = [replace(_replace_T(near, T), beside_click=not under)] + out
     out = out[:max_candidates]
     if camera_cov is not None:  # the camera's calibration uncertainty joins each pose's σ
-        from dataclasses import replace
-
         rims = bool(model.solids) and not len(model.edges)
         for j, c in enumerate(out):
             space = _OnTable(sp, z0, centre_obj, 3 if per[2] > 0 else 2) if table is not None else _Free(c.T_world_obj)
@@ -1226,8 +1222,6 @@ def _edge_covariance(J: np.ndarray, r: np.ndarray, w: np.ndarray, groups: np.nda
 def _replace_T(c: SearchCandidate, T: np.ndarray) -> SearchCandidate:
     """c at T, a pose that draws the same picture (a symmetry of the model): its covariance moved to
     T's origin (δt' = δt + δr × (o' − o), δr' = δr)."""
-    from dataclasses import replace
-
     cov = c.cov
     if cov is not None:
         M = np.eye(6)

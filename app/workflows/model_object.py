@@ -59,7 +59,8 @@ CYLINDER_METHODS = {"fused": "fused (all measurements)", "tangential": "tangenti
                     "rf_tangential": "tangential planes (range finder alone)"}
 
 
-MAX_CLICK_RESIDUAL_PX = 3.0  # a clicked side this far from the model's edge: the model does not fit the clicks
+# A clicked side this far from the model's edge (px, 3σ of a 1 px click): the model does not fit the clicks (weak).
+MAX_CLICK_RESIDUAL_PX = 3.0
 
 
 def _placed(r) -> str:

@@ -52,7 +52,6 @@ VERTICAL_DEG = 12.0
 FACE_COST_SLACK = 0.12
 # A clicked side farther than this from every projected edge of its face (mean of its ends, px) is refused.
 MAX_SIDE_DISTANCE_PX = 12.0
-# A click residual over this (px, 3σ of a 1 px click) makes the model weak.
 
 
 @dataclass(frozen=True)

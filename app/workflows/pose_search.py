@@ -99,6 +99,9 @@ class OneClickMixin:
 
         if not self.finished:
             self.cancel_event.clear()  # a search stopped before (stop_measurement) does not stop this one
+        # under way from now (its step refuses clicks: one made before the first progress report had become an
+        # edge's point, and the found poses could then not be accepted: a new operator's second double click)
+        self.progress, self.progress_text = 0.0, "searching"
         try:
             res = search_pose(camera, model, T_db, p, image, table=table, name=self.object_name,
                               cancel=self.cancel_event.is_set, progress=progress, camera_cov=camera_cov)

@@ -275,7 +275,8 @@ def test_a_click_while_find_searches_is_refused_and_the_found_poses_stay_accepta
                what="Find searching")
     wf = panel.session.workflow
     op.click(on_box + [20.0, 0.0])
-    page.get_by_text("wait for it (a second or two), or Cancel (Esc)", exact=False).first.wait_for(timeout=5000)
+    page.get_by_text("Clicks are not taken now. Searching for the pose of parallelepiped from your click… Cancel stops "
+                     "the search", exact=False).first.wait_for(timeout=5000)
     wait_until(lambda: wf.found is not None, timeout_s=30, what="the found poses")
     assert wf.pending is None and not wf.segs and "accept" in wf.current_step().enabled
     op.accept(wf)
