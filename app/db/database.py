@@ -240,10 +240,11 @@ class Database:
 
     @contextmanager
     def _errors(self) -> Iterator[None]:
-        """SQLite errors the disk or other programs cause become one sentence (DatabaseUnavailable)."""
+        """SQLite's (or the system's) errors the disk or other programs cause become one sentence
+        (DatabaseUnavailable)."""
         try:
             yield
-        except sqlite3.Error as exc:
+        except (sqlite3.Error, OSError) as exc:
             if isinstance(exc, sqlite3.IntegrityError):
                 raise
             told = explain(exc, self._path, self._busy_timeout_s)
@@ -359,8 +360,9 @@ class Database:
             if row is None:
                 raise NotFoundError(f"model {model_id} is missing from the database")
             model = BRep.from_dict(json.loads(row[0]))
-            with self._lock:
-                self._models[model_id] = model
+            if not self._local.depth:  # a row read inside a write transaction may yet be rolled back (its id reused)
+                with self._lock:
+                    self._models[model_id] = model
         return model
 
     def _record(self, conn: sqlite3.Connection, row: tuple) -> ObjectRecord:

@@ -9,14 +9,16 @@
   there (another program has it open), where ``mode=ro`` reads the committed changes in it.
 * ``check_writable(path)``: refuse, before SQLite creates anything, a write to a read-only file,
   a read-only folder (the journal files could not be made) or a read-only file system.
-* ``explain(exc, path, wait_s)``: an SQLite error turned into ``DatabaseUnavailable`` with one
-  sentence (disk full, read-only, locked by another writer and by whom, I/O error).
+* ``explain(exc, path, wait_s)``: an SQLite error (or the system's OSError: ENOSPC, EROFS, EACCES,
+  EIO) turned into ``DatabaseUnavailable`` with one sentence that says nothing was written and what
+  to do before trying again (disk full, read-only, locked by another writer and by whom, I/O error).
 * ``lock_holders(path)``: the processes of this computer holding the database's write lock, from
   ``/proc/locks`` (SQLite's POSIX locks: byte 120 of the ``-shm`` file is the WAL write lock).
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import sqlite3
 from pathlib import Path
@@ -65,24 +67,28 @@ def _read_only_fs(path: Path) -> bool:
         return False
 
 
+def _read_only(path: Path) -> tuple[str, str, str] | None:
+    """(what is read-only, how to make it writable, what else to do instead) when this process may not
+    write the database ``path`` or its folder; None when it may."""
+    p = path.resolve()
+    copy = " or work on a copy (list, show, history and export work on it as it is)"
+    if _read_only_fs(p.parent):
+        return f"{path} is on a read-only file system", "remount it read-write", copy
+    if not os.access(p, os.W_OK):
+        return f"{path} is read-only", "make it writable", copy
+    if not os.access(p.parent, os.W_OK):
+        return (f"the folder {p.parent} is read-only and the database needs to keep its journal files beside {p.name}",
+                "make the folder writable", " or move the database")
+    return None
+
+
 def check_writable(path: Path) -> None:
     """DatabaseUnavailable unless mcit may write the existing database ``path`` and its side files."""
-    p = path.resolve()
-    if _read_only_fs(p.parent):
-        raise DatabaseUnavailable(
-            f"{path} is on a read-only file system, so nothing was written; remount it read-write or work on a copy "
-            "(list, show, history and export work on it as it is)"
-        )
-    if not os.access(p, os.W_OK):
-        raise DatabaseUnavailable(
-            f"{path} is read-only, so nothing was written; make it writable or work on a copy "
-            "(list, show, history and export work on it as it is)"
-        )
-    if not os.access(p.parent, os.W_OK):
-        raise DatabaseUnavailable(
-            f"the folder {p.parent} is read-only and the database needs to keep its journal files beside {p.name}, "
-            "so nothing was written; make the folder writable or move the database"
-        )
+    found = _read_only(path)
+    if found is None:
+        return
+    what, remedy, instead = found
+    raise DatabaseUnavailable(f"{what}, so nothing was written; {remedy}{instead}")
 
 
 def _describe(pid: int) -> str:
@@ -153,34 +159,46 @@ def _code(exc: sqlite3.Error) -> str:
     return ""
 
 
-def explain(exc: sqlite3.Error, path: Path, wait_s: float) -> Exception:
-    """The operator's exception for an SQLite error on ``path`` (``exc`` itself when it is not one
-    the disk or another program caused: a programming error stays visible)."""
-    code = _code(exc)
+# The system's storage errors as the SQLite codes that mean the same to the operator.
+_OS_CODES = {errno.ENOSPC: "SQLITE_FULL", errno.EDQUOT: "SQLITE_FULL", errno.EROFS: "SQLITE_READONLY",
+             errno.EACCES: "SQLITE_READONLY", errno.EPERM: "SQLITE_READONLY", errno.EIO: "SQLITE_IOERR"}
+
+
+def explain(exc: Exception, path: Path, wait_s: float) -> Exception:
+    """The operator's exception for an SQLite error, or an OSError of the system, met writing ``path``
+    (``exc`` itself when it is not one the disk or another program caused: a programming error stays
+    visible). Each message says that nothing was written and what to do before trying again."""
+    if isinstance(exc, OSError):
+        code = _OS_CODES.get(exc.errno, "")
+        detail = (exc.strerror or str(exc)).lower()
+    elif isinstance(exc, sqlite3.Error):
+        code = _code(exc)
+        detail = f"SQLite: {exc}"
+    else:
+        return exc
     if code.startswith("SQLITE_FULL"):
-        return DatabaseUnavailable(f"the disk holding {path} is full, so the change was not saved and the database is as it "
-                                   "was; free some space and try again")
+        return DatabaseUnavailable(f"the disk holding {path} is full, so nothing was written; free some space, then try again")
     if code.startswith("SQLITE_READONLY"):
-        try:
-            check_writable(path)
-        except DatabaseUnavailable as known:
-            return known
-        return DatabaseUnavailable(f"{path} could not be written (SQLite: {exc}), so nothing was written; check that the file "
-                                   "and its folder are writable")
+        found = _read_only(path)
+        if found is not None:
+            what, remedy, _ = found  # (the command line's "instead" is no advice for a running server)
+            return DatabaseUnavailable(f"{what}, so nothing was written; {remedy}, then try again")
+        return DatabaseUnavailable(f"{path} could not be written ({detail}), so nothing was written; check that the file "
+                                   "and its folder are writable, then try again")
     if code.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")):
         holders = lock_holders(path)
         who = f" ({'; '.join(holders)})" if holders else ""
-        return DatabaseUnavailable(f"{path} is being written by another program{who} and was still locked after {wait_s:g} s, "
-                                   "so nothing was written; try again when it has finished")
+        return DatabaseUnavailable(f"the database {path} is locked by another program{who}, still after {wait_s:g} s, so "
+                                   "nothing was written; try again when that program has finished")
     if code.startswith("SQLITE_IOERR"):
-        return DatabaseUnavailable(f"the disk holding {path} reported an error (SQLite: {exc}), so the change was not saved; "
-                                   "check the disk (space, cable, dmesg) and try again")
+        return DatabaseUnavailable(f"the disk holding {path} reported an error ({detail}), so nothing was written; check "
+                                   "the disk (space, cable, dmesg), then try again")
     if code.startswith("SQLITE_CANTOPEN"):
-        return DatabaseUnavailable(f"{path} cannot be opened (SQLite: {exc}); check that it and its folder exist and are "
+        return DatabaseUnavailable(f"{path} cannot be opened ({detail}); check that it and its folder exist and are "
                                    "readable")
     if code.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB")):
         from .schema import DatabaseRefused
 
-        return DatabaseRefused(f"{path} is damaged (SQLite: {exc}); nothing was written. Restore a backup, or recover it with "
+        return DatabaseRefused(f"{path} is damaged ({detail}); nothing was written. Restore a backup, or recover it with "
                                "the sqlite3 shell's .recover, then open the copy")
     return exc

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 import viser
 
+from app.db import DatabaseRefused, DatabaseUnavailable
 from app.workflows import Cancelled, Session, WorkflowError
 from app.workflows.base import KEY_TEXT, MOTION_GAP_S, FrameRef, Marks
 from app.workflows.session import WORKFLOWS
@@ -144,6 +145,16 @@ class ClientPanel:
             except Cancelled:
                 self.error = ""
                 self.notify("Stopped", "The measurement was stopped; nothing was kept.", "blue")
+            except (DatabaseUnavailable, DatabaseRefused) as exc:
+                # The disk or another program refused the write (a full disk, a lock, a read-only file):
+                # its transaction was rolled back and the workflow is as before the press, so the same
+                # press writes once the cause is gone. Said like a WorkflowError; not mcit's fault, so
+                # one line in the log, without a traceback.
+                log.warning("database write refused: %s", exc)
+                wf = self.session.workflow
+                kept = f" Your work in {wf.title} is kept." if wf is not None and not wf.finished else ""
+                self.error = _sentence(str(exc)) + kept
+                self.error_step = self._step_name()
             except Exception as exc:  # noqa: BLE001 - the server must survive any callback error
                 log.exception("callback %s failed", getattr(fn, "__name__", fn))
                 self.error = "Something went wrong inside mcit; nothing was written. Cancel the workflow and try again."

@@ -370,7 +370,7 @@ class Site:
             self._camera_cov = None if cov is None else np.asarray(cov, float).copy()
             self._cal_ids["camera"] = rec.id
             self.revision += 1
-        self._read_feed()
+        self._feed_after_write()
 
     def set_turret(self, T_world_turret: np.ndarray, *, rms_m: float, residuals_m: np.ndarray, cov: np.ndarray,
                    measurements: dict, client: str, method: str = "turret calibration") -> None:
@@ -383,15 +383,28 @@ class Site:
             self._turret_cov = np.asarray(cov, float).copy()
             self._cal_ids["turret"] = rec.id
             self.revision += 1
-        self._read_feed()
+        self._feed_after_write()
 
     # ------------------------------------------------------------------ writing objects
     # Each is one database transaction (the Database's own methods are), redraws every client and
     # joins the change feed. Errors pass through (app.db.ConflictError when the object moved since
-    # it was read, NotFoundError, ValueError for refused values); nothing is written then.
+    # it was read, NotFoundError, ValueError for refused values, DatabaseUnavailable when the disk or
+    # another program refuses the write); nothing is written then.
     def _wrote(self) -> None:
         self._changed()
-        self._read_feed()
+        self._feed_after_write()
+
+    def _feed_after_write(self) -> None:
+        """Read the change just committed into the feed. A failed read does not undo the write (a
+        second Accept would write it twice): the change joins the feed at the next ``poll()``."""
+        from app.db import DatabaseUnavailable
+
+        try:
+            self._read_feed()
+        except DatabaseUnavailable as exc:
+            import logging
+
+            logging.getLogger("mcit.site").warning("the change feed will catch up at the next poll: %s", exc)
 
     def update_pose(self, obj: SiteObject, T_world_obj: np.ndarray, cov: np.ndarray | None, *, method: str,
                     client: str, clicks: Any = None, measurements: Any = None, residuals: Any = None,

@@ -227,7 +227,7 @@ def test_a_full_disk_changes_nothing(tmp_path):
     if run.returncode and not (tmp_path / "before").exists():
         pytest.skip(f"cannot mount a small tmpfs here: {run.stderr.strip()}")
     assert run.returncode == 0, (run.stdout, run.stderr)
-    _one_line_error(1, (tmp_path / "import.err").read_text(), "is full", "not saved", "free some space")
+    _one_line_error(1, (tmp_path / "import.err").read_text(), "is full", "nothing was written", "free some space, then try again")
     assert (tmp_path / "before").read_text() == (tmp_path / "after").read_text()
     assert (tmp_path / "ls").read_text().split() == [".", "..", "filler", "site.sqlite"]  # no -wal/-shm left
     listed = (tmp_path / "list.out").read_text()
@@ -263,7 +263,7 @@ def test_a_write_error_from_the_disk_changes_nothing(tmp_path):
     )
     run = subprocess.run([sys.executable, "-c", code, "db", "import", str(big), "--db", str(path)], capture_output=True,
                          text=True, cwd=ROOT, timeout=120)
-    _one_line_error(run.returncode, run.stderr, "reported an error", "not saved")
+    _one_line_error(run.returncode, run.stderr, "reported an error", "nothing was written", "check the disk")
     assert _files(path.parent) == before
 
 
@@ -285,7 +285,7 @@ def test_a_database_locked_by_another_writer(tmp_path, capsys):
     try:
         assert holder.stdout.readline().strip() == "locked"
         code, _, err = _mcit(capsys, "db", "undo", "1", "--db", str(path), "--wait-s", "0.2")
-        _one_line_error(code, err, "being written by another program", f"pid {holder.pid}", "still locked after 0.2 s",
+        _one_line_error(code, err, "is locked by another program", f"pid {holder.pid}", "still after 0.2 s",
                         "try again")
         holders = storage.lock_holders(path)
         assert len(holders) == 1 and holders[0].startswith(f"pid {holder.pid}: python") and "-c" in holders[0], holders

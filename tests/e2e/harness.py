@@ -226,15 +226,17 @@ class Interface:
     """A running interface and helpers to reach it from a page.
 
     devices : None (no range finder and turret), "fast" (emulated, answering at once, closed with
-    the interface) or opened devices."""
+    the interface) or opened devices. busy_timeout_s : how long a write waits for another program
+    holding the database (the database's default when None)."""
 
-    def __init__(self, scene, frame, db_path, devices=None, frame_t_s: float = FRAME_T_S):
+    def __init__(self, scene, frame, db_path, devices=None, frame_t_s: float = FRAME_T_S,
+                 busy_timeout_s: float | None = None):
         from app.db import Database, seed_from_scene
         from app.ui.server import InterfaceServer
         from app.video import FrameGrabber, StillSource
         from app.workflows import Site
 
-        self.db = Database.open(db_path)
+        self.db = Database.open(db_path) if busy_timeout_s is None else Database.open(db_path, busy_timeout_s=busy_timeout_s)
         seed_from_scene(self.db, scene)
         self._own_devices = None
         if devices == "fast":
