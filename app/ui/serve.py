@@ -21,6 +21,8 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
 def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from app.cli import frame_rate, port_number
+
     p = sub.add_parser(
         "serve",
         help="open the operator interface in a browser (viser)",
@@ -39,11 +41,13 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument("--token", default=None,
                    help="access token required to open the interface (open the printed URL, which carries it); "
                    "default: none on loopback, a generated one otherwise")
-    p.add_argument("--port", type=int, default=8080, help="port (default 8080; the next free one if taken)")
+    p.add_argument("--port", type=port_number, default=8080,
+                   help="port, 1 to 65535 (default 8080; the next free one if taken; 0: any free port)")
     p.add_argument("--video", default=None,
                    help="video source: camera index (0), video file, image folder, image file or stream URL "
                    "(default: the scene's video)")
-    p.add_argument("--fps", type=float, default=None, help="frame rate for image folders and stills, or to override a file's")
+    p.add_argument("--fps", type=frame_rate, default=None,
+                   help="frame rate for image folders and stills, or to override a file's (above 0, at most 240)")
     p.add_argument("--intrinsics", type=Path, default=None, metavar="FILE",
                    help="the camera's intrinsics (K and lens distortion) from this calibration file (mcit "
                    "calibrate-intrinsics' output, OpenCV .yml, ROS .yaml, ViSP .xml), instead of the scene's: frames are "

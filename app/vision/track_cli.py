@@ -34,6 +34,8 @@ def _pixel(text: str) -> tuple[float, float]:
 
 
 def add_track_parser(sub) -> None:
+    from app.cli import frame_rate
+
     p = sub.add_parser(
         "track",
         help="track a known object through a recorded video (model-based edge tracking) and write the overlay video",
@@ -61,7 +63,8 @@ def add_track_parser(sub) -> None:
                    "poses/obj.%%04d.pos) gets one file per tracked frame, any other PATH the last tracked frame's pose")
     p.add_argument("--start", type=int, default=0, help="first frame to track (the initial pose is this frame's)")
     p.add_argument("--frames", type=int, help="number of frames to track (default: to the end)")
-    p.add_argument("--fps", type=float, default=25.0, help="frame rate of the overlay video")
+    p.add_argument("--fps", type=frame_rate, default=25.0,
+                   help="frame rate of the overlay video (above 0, at most 240)")
     p.add_argument("--search-px", type=float, default=8.0, help="search ±this many pixels along the edges' normals")
     p.add_argument("--step-px", type=float, default=5.0, help="spacing of the edge samples (pixels)")
     p.add_argument("--keep-going", action="store_true", help="do not stop at a lost frame (draw the last good pose)")

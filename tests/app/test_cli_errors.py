@@ -133,3 +133,38 @@ def test_a_traceback_on_request(monkeypatch, capsys):
     assert cli.main(["render"]) == 70
     err = capsys.readouterr().err
     assert "Traceback" in err and "ZeroDivisionError" in err and err.rstrip().splitlines()[-1].startswith("mcit render: error")
+
+
+@pytest.mark.parametrize("argv, says", [
+    ("serve --fps nan", "argument --fps: expected a frame rate above 0 and at most 240 frames per second, got 'nan'"),
+    ("serve --fps inf", "got 'inf'"),
+    ("serve --fps=-inf", "got '-inf'"),
+    ("serve --fps 0", "got '0'"),
+    ("serve --fps -25", "got '-25'"),
+    ("serve --fps 240.5", "got '240.5'"),
+    ("serve --fps 1e400", "got '1e400'"),
+    ("serve --fps fast", "argument --fps: expected frames per second (a number), got 'fast'"),
+    ("serve --port 70000", "argument --port: expected a TCP port from 1 to 65535 (0: any free port), got '70000'"),
+    ("serve --port 65536", "got '65536'"),
+    ("serve --port -1", "got '-1'"),
+    ("serve --port 80.5", "argument --port: expected a TCP port number, got '80.5'"),
+    ("track video.mp4 --fps nan", "argument --fps: expected a frame rate above 0"),
+    ("track video.mp4 --fps 0", "argument --fps: expected a frame rate above 0"),
+])
+def test_a_rate_or_port_out_of_range_is_refused_by_the_parser(capsys, argv, says):
+    with pytest.raises(SystemExit) as exit_:
+        cli.build_parser().parse_args(argv.split())
+    err = capsys.readouterr().err
+    command = argv.split()[0]
+    assert exit_.value.code == 2 and err.count("\n") == 1 and err.startswith(f"mcit {command}: error: "), err
+    assert says in err, err
+
+
+@pytest.mark.parametrize("argv, name, value", [
+    ("serve --fps 240", "fps", 240.0), ("serve --fps 0.5", "fps", 0.5), ("serve", "fps", None),
+    ("serve --port 1", "port", 1), ("serve --port 65535", "port", 65535), ("serve", "port", 8080),
+    ("serve --port 0", "port", 0),  # any free port: viser binds port 0 and reports the one the system chose
+    ("track video.mp4 --fps 60", "fps", 60.0), ("track video.mp4", "fps", 25.0),
+])
+def test_rates_and_ports_in_range_are_kept(argv, name, value):
+    assert getattr(cli.build_parser().parse_args(argv.split()), name) == value
