@@ -25,7 +25,9 @@ distortion the file states.
 * A YAML file holding several cameras as top-level maps (``cam0: {…}``, ``left: {…}``): ``camera_name``
   picks the map by its key or its ``camera_name``.
 
-Every failure is one ValueError line naming the file and what was missing or wrong.
+Every failure is one ValueError line naming the file and what was missing or wrong. A K that no lens
+has (a focal length beyond 178° to 0.006° of field for the image, a principal point far outside it)
+and a distortion that cannot be undone over the image (``_check_lens``) are refused too.
 C has no lens distortion: a file whose distortion is not zero (``Intrinsics.has_distortion``)
 gives the camera a lens (``app.undistort.lens_of``), and the frames are undistorted on arrival so
 that C, with the file's K, holds in the undistorted image.
@@ -50,6 +52,12 @@ _OPENCV_DIST_KEYS = ("distortion_coefficients", "distortion_coefficents", "dist_
 _WIDTH_KEYS = ("image_width", "width")
 _HEIGHT_KEYS = ("image_height", "height")
 _OPENCV_DIST_COUNTS = (4, 5, 8, 12, 14)  # OpenCV's distortion models (k1 k2 p1 p2 [k3 [k4 k5 k6 [s1..s4 [τx τy]]]])
+_DIST_NAMES = {"opencv": ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tauX", "tauY"),
+               "fisheye": ("k1", "k2", "k3", "k4"), "visp": ("kud", "kdu")}
+# A focal length, in image sides (the larger of width and height): from a 178° field of view to 0.006°.
+_MIN_FOCAL_SIDES, _MAX_FOCAL_SIDES = 0.01, 1e4
+_MAX_FOCAL_PX = 1e8  # when the file states no image size: 10⁴ sides of a 10⁴-pixel image
+_MIN_SHOWN = 0.25  # the least part of the undistorted image that a lens may leave showing the camera's image
 
 
 @dataclass(frozen=True)
@@ -98,6 +106,103 @@ def _check_size(width: int | None, height: int | None, where: str) -> tuple[int 
         if v is not None and v <= 0:
             raise ValueError(f"{where}: the image {what} must be a positive number of pixels, got {v}")
     return width, height
+
+
+def _check_plausible_K(K: np.ndarray, width: int | None, height: int | None, where: str) -> None:
+    """ValueError when K (finite, fx, fy > 0) is no lens's for the image size (or any size when None):
+    a focal length or a principal point absurdly far from the image's scale."""
+    fx, fy, skew, u0, v0 = K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]
+    if width is not None and height is not None:
+        side = max(width, height)
+        lo, hi, images = _MIN_FOCAL_SIDES * side, _MAX_FOCAL_SIDES * side, f"{width}×{height} images"
+    else:
+        lo, hi, images = 1.0, _MAX_FOCAL_PX, "images of any size"
+    for what, f in (("fx", fx), ("fy", fy)):
+        if not lo <= f <= hi:
+            raise ValueError(f"{where}: {what}={f:g} px is not a focal length a lens gives for {images} (between "
+                             f"{lo:g} and {hi:g} px: a field of view from 178° down to 0.006°); check the file's "
+                             "camera matrix")
+    if abs(skew) > max(fx, fy):
+        raise ValueError(f"{where}: the skew K[0, 1]={skew:g} is larger than the focal lengths (fx={fx:g}, fy={fy:g}): "
+                         "no camera's pixel axes are that slanted; check the file's camera matrix")
+    if width is not None and height is not None:
+        far = not (-width <= u0 <= 2 * width and -height <= v0 <= 2 * height)
+    else:
+        far = max(abs(u0), abs(v0)) > _MAX_FOCAL_PX
+    if far:
+        raise ValueError(f"{where}: the principal point (u0, v0) = ({u0:g}, {v0:g}) px lies far outside "
+                         f"{images}; check the file's camera matrix")
+
+
+def _coefficients_text(model: str, d: np.ndarray) -> str:
+    names = _DIST_NAMES.get(model, ())
+    named = [f"{names[k] if k < len(names) else f'd{k}'}={v:g}" for k, v in enumerate(d) if v != 0.0]
+    return ", ".join(named) or "all zero"
+
+
+def _check_lens(intr: "Intrinsics", width: int, height: int) -> None:
+    """ValueError when the file's lens distortion cannot be undone over a ``width`` × ``height`` image.
+
+    First, the undistorted image must show the camera's image over at least ``_MIN_SHOWN`` of its
+    area (a huge k1 stretches a few central pixels over the whole frame). Then, along rays from the
+    principal point (every 5°, and through the four corners), the distance from the principal point
+    of the pixel where the lens puts an ideal pixel must grow with the ideal pixel's distance, out
+    to the undistorted image's edge and to where the lens's image leaves the frame: a model that
+    turns back within the image (a fit's polynomial beyond its data) maps two rays to one pixel,
+    leaves the frame's border with no ray, and undistorting the frame mirrors part of it.
+    """
+    from app.undistort import LensDistortion
+
+    where = intr.source
+    try:
+        lens = LensDistortion(intr.K, intr.distortion, intr.distortion_model or "opencv", width, height)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    coefficients = _coefficients_text(lens.model, lens.coefficients)
+    K, K_inv = lens.K, np.linalg.inv(lens.K)
+    pp = K[:2, 2]
+
+    def inside(uv):
+        return (uv[..., 0] >= -0.5) & (uv[..., 0] <= width - 0.5) & (uv[..., 1] >= -0.5) & (uv[..., 1] <= height - 0.5)
+
+    with np.errstate(all="ignore"):  # coefficients that overflow far out give inf, judged as such
+        u, v = np.meshgrid(np.linspace(0.0, width - 1.0, 65), np.linspace(0.0, height - 1.0, 49))
+        shown = float(np.mean(inside(lens.distort(np.column_stack([u.ravel(), v.ravel()])))))
+        if shown < _MIN_SHOWN:
+            raise ValueError(f"the lens distortion in {where} ({coefficients}) stretches the image so far that "
+                             f"undistorted frames would show it in only {100 * shown:.2g} % of their area: check the "
+                             "file's distortion coefficients")
+        corners = np.array([[0.0, 0.0], [width - 1.0, 0.0], [0.0, height - 1.0], [width - 1.0, height - 1.0]]) - pp
+        angles = np.r_[np.radians(np.arange(0.0, 360.0, 5.0)), np.arctan2(corners[:, 1], corners[:, 0])]
+        dirs_px = np.column_stack([np.cos(angles), np.sin(angles)])  # image directions from the principal point
+        dirs = dirs_px @ K_inv[:2, :2].T
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)  # the same directions, normalised coordinates
+        radii = np.tan(np.radians(np.linspace(0.0, 89.5, 2000)))  # rays out to 89.5° off the optical axis
+        xy = radii[None, :, None] * dirs[:, None, :]  # (directions, radii, 2)
+        ideal = xy @ K[:2, :2].T + pp
+        seen = lens.distort(ideal.reshape(-1, 2)).reshape(ideal.shape)
+        rho = np.linalg.norm((seen - pp) @ K_inv[:2, :2].T, axis=2)
+        ideal_in, seen_in = inside(ideal), inside(seen)
+        for k in range(len(angles)):
+            # out to the undistorted image's edge, and to where the lens's image leaves the frame (its field
+            # of view's edge: what the model does with rays beyond it is never seen)
+            last = int(np.flatnonzero(ideal_in[k]).max(initial=0))
+            entered = np.flatnonzero(seen_in[k])
+            if entered.size:
+                left = np.flatnonzero(~seen_in[k, entered[0]:])
+                last = max(last, (entered[0] + int(left[0])) if left.size else len(radii) - 1)
+            if not np.all(np.diff(rho[k, :last + 1]) > 0.0):
+                raise ValueError(f"the lens distortion in {where} ({coefficients}) folds the image over itself within "
+                                 "the image: check the file's distortion coefficients")
+
+
+def _checked(intr: "Intrinsics", image_size: tuple[int, int] | None) -> "Intrinsics":
+    """``intr`` once its K is a lens's and its distortion can be undone over the image (its size, or ``image_size``)."""
+    width, height = (intr.width, intr.height) if intr.width is not None else (image_size or (None, None))
+    _check_plausible_K(intr.K, width, height, intr.source)
+    if intr.has_distortion and width is not None and height is not None:
+        _check_lens(intr, int(width), int(height))
+    return intr
 
 
 def _float(node: ET.Element | None, tag: str, where: str) -> float:
@@ -199,7 +304,7 @@ def read_visp_xml(path: str | Path, camera_name: str | None = None) -> np.ndarra
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: no such file")
-    return _read_visp(path, camera_name).K
+    return _checked(_read_visp(path, camera_name), None).K
 
 
 # ---------------------------------------------------------------------------- OpenCV / ROS files
@@ -395,7 +500,7 @@ def read_opencv_yml(path: str | Path, key: str | None = None) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: no such file")
-    return _read_opencv(path, key).K
+    return _checked(_read_opencv(path, key), None).K
 
 
 def read_intrinsics(path: str | Path, *, camera_name: str | None = None,
@@ -406,13 +511,14 @@ def read_intrinsics(path: str | Path, *, camera_name: str | None = None,
     camera_name : the camera to read in a file of several (ViSP ``<name>``, a YAML file's top-level
     key or ``camera_name``); a file of one camera with another name is refused.
     image_size : (width, height) of the images, choosing among ViSP cameras of one name at several
-    sizes. ValueError, one line naming the file and what is missing, on bad input.
+    sizes, and the size K and the distortion are checked against when the file states none.
+    ValueError, one line naming the file and what is missing or wrong, on bad input.
     """
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: no such intrinsics file")
     try:
-        return _read_intrinsics(path, camera_name, image_size)
+        return _checked(_read_intrinsics(path, camera_name, image_size), image_size)
     except OSError as exc:  # unreadable: permissions, a vanished mount
         raise ValueError(f"{path}: cannot be read ({exc.strerror or exc}); check the file's permissions") from None
 

@@ -269,3 +269,119 @@ def test_an_unreadable_file_is_one_line(tmp_path, name, monkeypatch):
     monkeypatch.setattr(ET, "parse", denied)
     with pytest.raises(ValueError, match=r"cam\.(yaml|xml): cannot be read \(Permission denied\); check the file's permissions"):
         read_intrinsics(f)
+
+
+# --- a lens or camera matrix no camera has (attack review): refused, saying which number and why ---
+
+def _camera_file(tmp_path, fmt: str, fx: float = 700.0, k1: float = 0.0):
+    """A 640×480 camera with focal length fx and radial distortion k1 (ViSP: kud), as each tool writes it."""
+    K = [fx, 0, 320, 0, fx, 240, 0, 0, 1]
+    if fmt == "visp":
+        f = tmp_path / "camera.xml"
+        f.write_text(f"<root><camera><name>Camera</name><image_width>640</image_width><image_height>480</image_height>"
+                     f"<model><type>perspectiveProjWithDistortion</type><px>{fx!r}</px><py>{fx!r}</py>"
+                     f"<u0>320</u0><v0>240</v0><kud>{k1!r}</kud><kdu>0</kdu></model></camera></root>")
+    elif fmt == "opencv":
+        f = tmp_path / "calib.yml"
+        _write_fs(f, image_width=640, image_height=480, camera_matrix=np.array(K, float).reshape(3, 3),
+                  distortion_coefficients=np.array([[k1, 0, 0, 0, 0]], float))
+    else:
+        f = tmp_path / "ost.yaml"
+        f.write_text(f"image_width: 640\nimage_height: 480\ncamera_name: cam\ncamera_matrix: {{rows: 3, cols: 3, data: "
+                     f"{[float(v) for v in K]}}}\ndistortion_model: plumb_bob\ndistortion_coefficients: {{rows: 1, cols: 5, "
+                     f"data: [{k1!r}, 0, 0, 0, 0]}}\n")
+    return f
+
+
+FORMATS = ["visp", "opencv", "ros"]
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_a_huge_k1_is_refused_as_a_lens_that_leaves_the_frame_black(tmp_path, fmt):
+    f = _camera_file(tmp_path, fmt, k1=1e6)
+    with pytest.raises(ValueError) as info:
+        read_intrinsics(f)
+    msg = str(info.value)
+    name = "kud" if fmt == "visp" else "k1"
+    assert msg.startswith(f"the lens distortion in {f} ({name}=1e+06) stretches the image so far that undistorted frames "
+                          "would show it in only "), msg
+    assert msg.endswith("of their area: check the file's distortion coefficients") and "\n" not in msg, msg
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("k1", [-0.5, -2.0, -1e300])
+def test_a_lens_that_folds_within_the_image_is_refused(tmp_path, fmt, k1):
+    # r(1 + k1 r²) turns back at r = 1/√(-3 k1): for k1 = -0.5 (fx = 700) 381 px from the centre, short of the
+    # 640×480 image's corners 400 px away: their pixels are seen by no ray
+    f = _camera_file(tmp_path, fmt, k1=k1)
+    with pytest.raises(ValueError) as info:
+        read_intrinsics(f)
+    msg = str(info.value)
+    assert "\n" not in msg and msg.startswith(f"the lens distortion in {f} ("), msg
+    if k1 != -1e300:  # a fold so sharp that nearly every pixel leaves the frame is said as such
+        assert msg.endswith("folds the image over itself within the image: check the file's distortion coefficients"), msg
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("k1", [-0.3, -0.1, 0.0, 0.1, 0.3])
+def test_real_lenses_load_and_their_border_undistorts_and_round_trips(tmp_path, fmt, k1):
+    from app.undistort import lens_of
+
+    intr = read_intrinsics(_camera_file(tmp_path, fmt, k1=k1))
+    if k1 == 0.0:
+        assert not intr.has_distortion
+        return
+    lens = lens_of(intr)
+    border = np.array([[u, v] for u in np.linspace(0, 639, 17) for v in (0.0, 479.0)]
+                      + [[u, v] for v in np.linspace(0, 479, 13) for u in (0.0, 639.0)])
+    ideal = lens.undistort(border)
+    assert np.isfinite(ideal).all()
+    np.testing.assert_allclose(lens.distort(ideal), border, atol=1e-5)
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("fx, says", [(1e300, "fx=1e+300 px"), (1e8, "fx=1e+08 px"), (1.0, "fx=1 px")])
+def test_an_absurd_focal_length_is_refused_as_such(tmp_path, fmt, fx, says):
+    f = _camera_file(tmp_path, fmt, fx=fx)
+    with pytest.raises(ValueError) as info:
+        read_intrinsics(f)
+    msg = str(info.value)
+    assert msg.startswith(f"{f}") and "\n" not in msg and "coplanar" not in msg, msg
+    assert f"{says} is not a focal length a lens gives for 640×480 images (between 6.4 and 6.4e+06 px" in msg, msg
+    assert msg.endswith("check the file's camera matrix"), msg
+
+
+def test_an_absurd_focal_length_without_an_image_size(tmp_path):
+    f = tmp_path / "cam.yaml"
+    f.write_text("camera_matrix: {rows: 3, cols: 3, data: [1e300, 0, 320, 0, 700, 240, 0, 0, 1]}\n")
+    with pytest.raises(ValueError, match=r"fx=1e\+300 px is not a focal length a lens gives for images of any size"):
+        read_opencv_yml(f)
+    with pytest.raises(ValueError, match=r"for 640×480 images"):
+        read_intrinsics(f, image_size=(640, 480))
+
+
+@pytest.mark.parametrize("data, says", [
+    ("[700, 0, 1e300, 0, 700, 240, 0, 0, 1]", "the principal point (u0, v0) = (1e+300, 240) px lies far outside 640×480 images"),
+    ("[700, 0, 320, 0, 700, -5000, 0, 0, 1]", "the principal point (u0, v0) = (320, -5000) px lies far outside"),
+    ("[700, 1e300, 320, 0, 700, 240, 0, 0, 1]", "the skew K[0, 1]=1e+300 is larger than the focal lengths"),
+])
+def test_an_absurd_principal_point_or_skew_is_refused_as_such(tmp_path, data, says):
+    f = tmp_path / "cam.yaml"
+    f.write_text(f"image_width: 640\nimage_height: 480\ncamera_matrix: {{rows: 3, cols: 3, data: {data}}}\n")
+    with pytest.raises(ValueError) as info:
+        read_intrinsics(f)
+    assert says in str(info.value) and str(info.value).startswith(str(f)), str(info.value)
+
+
+def test_serve_intrinsics_with_an_absurd_focal_length_names_it(tmp_path):
+    from app.scene import default_scene_path, load_scene
+    from app.ui.serve import scene_with_intrinsics
+
+    scene = load_scene(default_scene_path())
+    f = tmp_path / "cam.yaml"
+    w, h = scene.camera.width, scene.camera.height
+    f.write_text(f"image_width: {w}\nimage_height: {h}\ncamera_matrix: {{rows: 3, cols: 3, data: [1e300, 0, {w / 2}, 0, "
+                 f"1e300, {h / 2}, 0, 0, 1]}}\n")
+    with pytest.raises(ValueError) as info:
+        scene_with_intrinsics(scene, f)
+    assert "fx=1e+300 px is not a focal length" in str(info.value) and "coplanar" not in str(info.value)
