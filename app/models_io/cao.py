@@ -64,6 +64,7 @@ triangle of the curved region: keep the mesh file (OBJ, glTF) for the silhouette
 
 from __future__ import annotations
 
+import errno
 import re
 import stat
 import warnings
@@ -167,6 +168,18 @@ def _limits() -> str:
         f"mcit reads at most {MAX_INCLUDE_DEPTH} levels of includes, {MAX_FILES} files (every include counts) "
         f"and {MAX_TOTAL_BYTES / 2**20:g} MB in all for one model"
     )
+
+
+def _resolved(path: Path, where: str | None = None) -> Path:
+    """``path`` absolute, its symbolic links followed; CaoError (naming ``where``, the file:line that
+    names it) for links that lead back to each other."""
+    try:
+        return path.resolve()
+    except (RuntimeError, OSError) as exc:  # RuntimeError before Python 3.13, OSError ELOOP since
+        if isinstance(exc, OSError) and exc.errno != errno.ELOOP:
+            raise CaoError(f"{where or path}: cannot follow {path}: {exc.strerror or type(exc).__name__}") from None
+        raise CaoError(f"{where + ': ' if where else ''}{path} is a loop of symbolic links that never reaches a file; "
+                       "point the link at the model file") from None
 
 
 class _Lines:
@@ -327,7 +340,7 @@ def _parse_load(lines: _Lines, number: int, line: str) -> tuple[Path, np.ndarray
             R = exp_so3(_parse_vector(lines, number, pm.group(2), "tu", angles=True))
         else:
             R = _parse_rotation(lines, number, pm.group(2))
-    return target.resolve(), make_T(np.eye(3) if R is None else R, t)
+    return _resolved(target, f"{lines.path}:{number}"), make_T(np.eye(3) if R is None else R, t)
 
 
 def _chain(lines: _Lines, number: int, segments: list[tuple[int, int]]) -> list[int]:
@@ -597,7 +610,7 @@ def read_cao(path: str | Path) -> BRep:
 
 def read_cao_options(path: str | Path) -> tuple[BRep, CaoOptions]:
     """``read_cao`` and the file's ViSP options (``name=``, LOD), for ``write_cao(..., options=)``."""
-    path = Path(path).resolve()
+    path = _resolved(Path(path))
     reading = _Reading()
     model = reading.read(path, str(path), (path,))
     if model is None:
@@ -650,7 +663,7 @@ def read_init(path: str | Path) -> np.ndarray:
     whose points, placed as in a ``.cao``, come before this file's own; a file may hold only
     ``load()`` lines. The include limits of the module docstring apply. CaoError names file:line.
     """
-    path = Path(path).resolve()
+    path = _resolved(Path(path))
     P = _Reading(_parse_init, "a ViSP .init file").read(path, str(path), (path,))
     if P is None or len(P) == 0:
         raise CaoError(f"{path}: the file holds no points")

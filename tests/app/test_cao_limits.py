@@ -126,6 +126,42 @@ def test_self_include_is_a_cycle(tmp_path):
         read_cao(f)
 
 
+@pytest.mark.parametrize("links", [{"a.cao": "b.cao", "b.cao": "a.cao"}, {"a.cao": "a.cao"}], ids=["two links", "one link"])
+def test_an_include_through_a_symlink_loop_is_said_as_such(tmp_path, links):
+    for name, target in links.items():
+        (tmp_path / name).symlink_to(target)
+    top = tmp_path / "top.cao"
+    top.write_text('V1\nload("a.cao")\n0\n0\n0\n0\n')
+    loop = tmp_path / "a.cao"
+    with pytest.raises(CaoError) as info:
+        read_cao(top)
+    assert _one_line(info) == (f"{top}:2: {loop} is a loop of symbolic links that never reaches a file; point the link "
+                               "at the model file")
+    with pytest.raises(CaoError) as info:  # the model itself
+        read_cao(loop)
+    assert _one_line(info) == f"{loop} is a loop of symbolic links that never reaches a file; point the link at the model file"
+    init = tmp_path / "top.init"
+    init.write_text('load("a.init")\n')
+    (tmp_path / "a.init").symlink_to("a.init")
+    with pytest.raises(CaoError, match=rf"top\.init:1: .*a\.init is a loop of symbolic links"):
+        cao_module.read_init(init)
+
+
+def test_mcit_db_import_of_a_symlink_loop_is_one_line_not_a_bug(tmp_path, capsys):
+    from app.cli import main
+
+    (tmp_path / "a.cao").symlink_to("b.cao")
+    (tmp_path / "b.cao").symlink_to("a.cao")
+    top = tmp_path / "top.cao"
+    top.write_text('V1\nload("a.cao")\n0\n0\n0\n0\n')
+    db = tmp_path / "site.sqlite"
+    assert main(["db", "import", str(top), "--db", str(db)]) == 1
+    err = capsys.readouterr().err
+    assert err == (f"mcit db import: error: {top}:2: {tmp_path / 'a.cao'} is a loop of symbolic links that never reaches "
+                   "a file; point the link at the model file\n")
+    assert not db.exists()
+
+
 HUGE_COUNTS = [
     ("V1\n1000000000000000\n0 0 0\n", 2, "number of points"),
     ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n1000000000\n0 1\n", 6, "number of lines"),
