@@ -92,12 +92,16 @@ def _one_line(text: str, limit: int = 1000) -> str:
     return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
+def os_error_advice(exc: OSError) -> str:
+    """What to do about a failed file operation, by its errno ("free some space and try again")."""
+    return _ERRNO_ADVICE.get(exc.errno, "check the file or device named and try again")
+
+
 def explain(exc: BaseException) -> tuple[str, int]:
     """(one line saying what happened and what to do, exit status) for an error that ended a command."""
     if isinstance(exc, OSError) and exc.strerror:
         where = f"{exc.filename}: " if exc.filename else ""
-        advice = _ERRNO_ADVICE.get(exc.errno, "check the file or device named and try again")
-        return _one_line(f"{where}{exc.strerror}; {advice}"), 1
+        return _one_line(f"{where}{exc.strerror}; {os_error_advice(exc)}"), 1
     if isinstance(exc, (ValueError, OSError)) or type(exc).__module__.split(".")[0] == "app":
         return _one_line(str(exc) or type(exc).__name__), 1  # mcit's own errors say what to do
     if isinstance(exc, MemoryError):

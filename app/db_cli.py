@@ -110,19 +110,30 @@ def _cmd_show(args) -> int:
 
 
 def _cmd_export(args) -> int:
+    from app.cli import os_error_advice
+    from app.db.export import write_atomically
     from app.models_io import save_model
 
+    out = Path(args.out)
     with _open(args, readonly=True) as db:
         o = db.get(int(args.name) if args.name.isdigit() else args.name)
         model = o.model.transformed(o.T_world_obj) if args.world else o.model
         frame = "world" if args.world else "object"
         comment = f"mcit object {o.name!r} (version {o.version}), {frame} frame, metres"
-        if Path(args.out).suffix.lower() == ".cao":
+        if out.suffix.lower() == ".cao":
             from app.models_io import write_cao
 
-            write_cao(model, args.out, comment, options=_imported_cao_options(db, o))
+            options = _imported_cao_options(db, o)
+
+            def write(tmp):
+                write_cao(model, tmp, comment, options=options)
         else:
-            save_model(model, args.out, comment=comment)
+            def write(tmp):
+                save_model(model, tmp, comment=comment)
+        try:
+            write_atomically({out: write})  # a full disk leaves OUT as it was, and no temporary beside it
+        except OSError as exc:
+            raise ValueError(f"{out}: {exc.strerror or exc} (nothing was written); {os_error_advice(exc)}") from None
         print(f"wrote {args.out}: {o.name!r} in the {frame} frame")
     return 0
 

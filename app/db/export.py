@@ -17,19 +17,22 @@ what ``vpMbTracker::initFromPose`` reads), so it is written in the camera frame 
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
 import math
+import os
+import secrets
 import time
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
 from core.transforms import log_so3
 
-__all__ = ["POSES_FORMAT", "pose_fields", "object_record", "camera_T", "export_poses", "format_of"]
+__all__ = ["POSES_FORMAT", "pose_fields", "object_record", "camera_T", "export_poses", "format_of", "write_atomically"]
 
 POSES_FORMAT = "mcit-poses/1"
 FORMATS = ("json", "csv", "pos")
@@ -178,13 +181,47 @@ def pos_text(T: np.ndarray) -> str:
     return "".join(f"{v:.12g}\n" for v in np.r_[T[:3, 3], log_so3(T[:3, :3])])
 
 
+def write_atomically(files: Mapping[Path, Callable[[Path], None]]) -> None:
+    """Write files all or none: ``write(temporary)`` for each, then each temporary replaces its file.
+
+    files : {path: write}; ``write`` writes the whole file at the path it is given: a temporary in
+    the path's folder, with the path's suffix (a writer that picks the format by suffix picks the
+    same). A reader never sees half a file. On any failure (a full disk, Ctrl-C) every temporary is
+    removed and every file is as it was; the error names the file, not its temporary.
+    """
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for path, write in files.items():
+            path = Path(path)
+            tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp{path.suffix}")
+            staged.append((tmp, path))
+            try:
+                write(tmp)
+                with open(tmp, "rb") as fh:
+                    os.fsync(fh.fileno())  # a full disk may only show here; and the file is whole before it is named
+            except OSError as exc:
+                raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
+            except ValueError as exc:
+                if str(tmp) not in str(exc):
+                    raise
+                raise ValueError(str(exc).replace(str(tmp), str(path))) from None
+        for tmp, path in staged:
+            os.replace(tmp, path)
+    except BaseException:
+        for tmp, _ in staged:
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)
+        raise
+
+
 def export_poses(db, out: str | Path, *, fmt: str | None = None, names: Iterable[str] | None = None,
                  frame: str | None = None) -> list[Path]:
     """Write the poses of the database's objects (all, or ``names``) to ``out``; returns the files written.
 
     fmt : "json", "csv" or "pos" (default: from the suffix). frame : "world" or "camera" (default:
     world, camera for .pos). A ``.pos`` holds one object: give one name, or put ``{name}`` in ``out``
-    (one file per object). ValueError, nothing written, on bad input.
+    (one file per object). ValueError, nothing written, on bad input; OSError (naming the file),
+    nothing written either, when a file cannot be written (``write_atomically``).
     """
     fmt = format_of(out, fmt)
     frame = frame or ("camera" if fmt == "pos" else "world")
@@ -210,9 +247,7 @@ def export_poses(db, out: str | Path, *, fmt: str | None = None, names: Iterable
         files[Path(out)] = json.dumps(doc, indent=1) + "\n"
     else:
         files[Path(out)] = _csv_text(records)
-    for path, text in files.items():
+    for path in files:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(text)
-        tmp.replace(path)  # a reader never sees half a file
+    write_atomically({path: (lambda tmp, text=text: tmp.write_text(text)) for path, text in files.items()})
     return list(files)

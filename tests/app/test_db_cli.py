@@ -105,3 +105,75 @@ def test_cli_errors_are_one_line_and_exit_1(tmp_path, capsys):
     assert code == 1 and "cone" in err and "glTF" in err
     code, _, err = _mcit(capsys, "db", "export", "cone", str(tmp_path / "cone.glb"), "--db", db)
     assert code == 0
+
+
+def _disk_full_after(n_bytes: int, real_writer):
+    """A writer that writes the first ``n_bytes`` of what ``real_writer`` would, then fails as a full disk does."""
+    import errno
+
+    def writer(model, path, *args, **kwargs):
+        real_writer(model, path, *args, **kwargs)
+        data = Path(path).read_bytes()
+        Path(path).write_bytes(data[:n_bytes])
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    return writer
+
+
+@pytest.mark.parametrize("suffix", [".cao", ".glb"])
+@pytest.mark.parametrize("existing", [None, b"the previous export\n"])
+def test_export_on_a_full_disk_leaves_out_as_it_was(tmp_path, capsys, monkeypatch, suffix, existing):
+    import app.models_io as models_io
+
+    db = str(tmp_path / "site.sqlite")
+    assert _mcit(capsys, "db", "init", "--db", db)[0] == 0
+    folder = tmp_path / "out"
+    folder.mkdir()
+    out = folder / f"model{suffix}"
+    if existing is not None:
+        out.write_bytes(existing)
+    name = "write_cao" if suffix == ".cao" else "save_model"
+    monkeypatch.setattr(models_io, name, _disk_full_after(100, getattr(models_io, name)))
+    code, stdout, err = _mcit(capsys, "db", "export", "parallelepiped", str(out), "--db", db)
+    assert code == 1 and stdout == ""
+    assert err == f"mcit db export: error: {out}: No space left on device (nothing was written); free some space and try again\n"
+    assert [p.name for p in folder.iterdir()] == ([] if existing is None else [out.name])  # no temporary left
+    if existing is not None:
+        assert out.read_bytes() == existing
+
+
+def test_export_is_interrupted_cleanly_and_then_replaces_the_file(tmp_path, capsys, monkeypatch):
+    import app.models_io as models_io
+
+    db = str(tmp_path / "site.sqlite")
+    assert _mcit(capsys, "db", "init", "--db", db)[0] == 0
+    out = tmp_path / "box.cao"
+    out.write_text("old\n")
+    real = models_io.write_cao
+
+    def interrupted(model, path, *args, **kwargs):
+        Path(path).write_text("V1\n")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(models_io, "write_cao", interrupted)
+    assert _mcit(capsys, "db", "export", "parallelepiped", str(out), "--db", db)[0] == 130
+    assert out.read_text() == "old\n" and sorted(p.name for p in tmp_path.iterdir()) == ["box.cao", "site.sqlite"]
+    monkeypatch.setattr(models_io, "write_cao", real)
+    assert _mcit(capsys, "db", "export", "parallelepiped", str(out), "--db", db)[0] == 0
+    assert len(read_cao(out).faces) == 6 and sorted(p.name for p in tmp_path.iterdir()) == ["box.cao", "site.sqlite"]
+
+
+def test_export_errors_name_the_file_not_its_temporary(tmp_path, capsys):
+    db = str(tmp_path / "site.sqlite")
+    edges = tmp_path / "edges.cao"
+    edges.write_text("V1\n3\n0 0 0\n1 0 0\n0 1 0\n2\n0 1\n1 2\n0\n0\n")  # two lines, no face
+    with Database.open(db) as d:
+        d.add_object("wire", "polyhedron", read_cao(edges), np.eye(4))
+    out = tmp_path / "wire.stl"
+    code, _, err = _mcit(capsys, "db", "export", "wire", str(out), "--db", db)
+    assert code == 1 and err == (f"mcit db export: error: {out}: the model has no surface to export (edges or circles only); "
+                                 "export it as .cao\n")
+    code, _, err = _mcit(capsys, "db", "export", "wire", str(tmp_path / "no-folder" / "wire.cao"), "--db", db)
+    assert code == 1 and err == (f"mcit db export: error: {tmp_path / 'no-folder' / 'wire.cao'}: No such file or directory "
+                                 "(nothing was written); check the path\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["edges.cao", "site.sqlite"]

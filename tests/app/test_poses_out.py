@@ -107,6 +107,39 @@ def test_export_errors_write_nothing(db, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir() if p.suffix in (".pos", ".json", ".txt")) == []
 
 
+def _disk_full_on(n_write: int, monkeypatch):
+    """Path.write_text failing as a full disk does, half-way through its ``n_write``-th call."""
+    import errno
+    import pathlib
+
+    real, calls = pathlib.Path.write_text, []
+
+    def write_text(self, text, *args, **kwargs):
+        calls.append(self)
+        if len(calls) == n_write:
+            real(self, text[: len(text) // 2], *args, **kwargs)
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, text, *args, **kwargs)
+
+    monkeypatch.setattr(pathlib.Path, "write_text", write_text)
+
+
+@pytest.mark.parametrize("out, n_write, failed", [("poses.json", 1, "poses.json"), ("poses.csv", 1, "poses.csv"),
+                                                  ("{name}.pos", 2, "cyl.pos")])
+def test_a_full_disk_writes_nothing_and_leaves_no_temporary(db, tmp_path, monkeypatch, out, n_write, failed):
+    folder = tmp_path / "out"
+    folder.mkdir()
+    kept = folder / "poses.json"
+    kept.write_text("the previous export\n")
+    _disk_full_on(n_write, monkeypatch)
+    with pytest.raises(OSError) as info:
+        export_poses(db, folder / out, frame="world")
+    assert info.value.filename == str(folder / failed)  # the file, not its temporary
+    assert info.value.strerror == "No space left on device"
+    assert sorted(p.name for p in folder.iterdir()) == ["poses.json"]  # the .pos of box1, written first, too
+    assert kept.read_text() == "the previous export\n"
+
+
 def test_mcit_db_export_poses(db, tmp_path, capsys):
     path = str(db.path)
     assert main(["db", "export-poses", str(tmp_path / "p.json"), "--db", path]) == 0
