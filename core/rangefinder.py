@@ -26,6 +26,7 @@ from typing import Callable
 import numpy as np
 
 from .camera import Camera, as_uv
+from .checks import finite_array
 from .transforms import check_T, make_T, rot_y, rot_z
 
 __all__ = [
@@ -109,10 +110,11 @@ def aim(T_world_turret: np.ndarray, X_world: np.ndarray) -> tuple[np.ndarray, np
     """Angles that put the beam on world points, and the range there.
 
     X_world : array, shape (N, 3) or (3,). Returns pan_rad, tilt_rad, range_m, each (N,) or scalar.
-    ValueError for a point at the turret's origin.
+    ValueError naming the input for a T_world_turret that is no finite rigid transform, points that
+    are not finite (NaN, inf) or not (N, 3) / (3,), and a point at the turret's origin.
     """
     T = check_T(T_world_turret, "T_world_turret")
-    X = np.asarray(X_world, dtype=float)
+    X = finite_array(X_world, (3,) if np.ndim(X_world) == 1 else (None, 3), "X_world")
     Xt = (X - T[:3, 3]) @ T[:3, :3]  # R.T @ (X - t), row-wise
     rho = np.linalg.norm(Xt, axis=-1)
     if np.any(rho < 1e-9):

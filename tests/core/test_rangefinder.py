@@ -65,6 +65,36 @@ def test_vectorised_beams_and_misses():
         aim(T_WORLD_TURRET, T_WORLD_TURRET[:3, 3])
 
 
+@pytest.mark.parametrize("X, says", [
+    ([np.nan, 1.0, 1.0], r"X_world must be finite, got shape \(3,\) with 1 NaN/inf value\(s\)"),
+    ([[1.0, 2.0, 0.5], [np.inf, 0.0, 0.0]], r"X_world must be finite, got shape \(2, 3\) with 1 NaN/inf"),
+    ([[1.0, 2.0, -np.inf]], r"X_world must be finite"),
+    ([1.0, 2.0], r"X_world must have shape \(3,\), got \(2,\)"),
+    (np.ones((2, 2, 3)), r"X_world must have shape \(N, 3\), got \(2, 2, 3\)"),
+])
+def test_aim_refuses_points_that_are_not_finite(X, says):
+    with pytest.raises(ValueError, match=says):
+        aim(T_WORLD_TURRET, X)
+
+
+@pytest.mark.parametrize("where", [(0, 3), (1, 1), (2, 0)])
+def test_aim_refuses_a_turret_pose_that_is_not_finite(where):
+    T = T_WORLD_TURRET.copy()
+    T[where] = np.nan
+    with pytest.raises(ValueError, match="T_world_turret contains NaN or inf"):
+        aim(T, [1.0, 2.0, 0.5])
+
+
+def test_aim_of_one_point_and_of_several_agree():
+    rng = np.random.default_rng(0)
+    X = T_WORLD_TURRET[:3, 3] + rng.uniform(-3.0, 3.0, (5, 3))
+    pan, tilt, rho = aim(T_WORLD_TURRET, X)
+    assert pan.shape == tilt.shape == rho.shape == (5,)
+    for k in range(5):
+        np.testing.assert_allclose([v for v in aim(T_WORLD_TURRET, X[k])], [pan[k], tilt[k], rho[k]], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(beam_point(T_WORLD_TURRET, pan, tilt, rho), X, atol=1e-12)
+
+
 def test_quantize_angle():
     step = RangeFinderSpec().step_rad
     assert quantize_angle(2.4 * step, step) == pytest.approx(2 * step)
