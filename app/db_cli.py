@@ -50,9 +50,15 @@ def _cmd_import(args) -> int:
     import numpy as np
 
     from app.models_io import load_model
+    from app.names import check_object_name
     from core.transforms import make_T, rot_x, rot_y, rot_z
 
     path = Path(args.file)
+    name = args.name or path.stem
+    try:  # before the file is read: the name is checked again when it is written
+        check_object_name(name, "--name" if args.name else f"the object's name, {path.name}'s stem,")
+    except ValueError as exc:
+        raise ValueError(f"{exc}" + ("" if args.name else "; give the object a name with --name NAME")) from None
     model = load_model(path, angle_deg=args.angle_deg)  # raises before the database is touched
     options = None
     if path.suffix.lower() == ".cao":  # ViSP's name= and LOD options, kept in the history for export
@@ -62,7 +68,7 @@ def _cmd_import(args) -> int:
     roll, pitch, yaw = np.radians(args.rpy_deg)
     T = make_T(rot_z(yaw) @ rot_y(pitch) @ rot_x(roll), np.asarray(args.xyz, float))
     with _open(args) as db:
-        rec = db.add_object(args.name or path.stem, args.kind, model, T, status=args.status, source=str(path.resolve()),
+        rec = db.add_object(name, args.kind, model, T, status=args.status, source=str(path.resolve()),
                             method=f"import {path.suffix.lower().lstrip('.')}", client="cli",
                             measurements={"cao_options": options.to_json()} if options else None)
         print(f"{db.path}: added #{rec.id} {rec.name!r} ({rec.kind}, {rec.status}): {len(model.vertices)} vertices, "

@@ -57,6 +57,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from app.names import check_object_name
 from core.brep import BRep
 from core.camera import Camera
 from core.rangefinder import RangeFinderSpec
@@ -534,8 +535,10 @@ def _body(b: Any, i: int, root: Path, names: set, where: str) -> Body:
     if not isinstance(b, dict):
         raise SceneError(f"{bw}: expected an object {{name, model, pose, ...}}, got {type(b).__name__}")
     name = _need(b, "name", bw)
-    if not isinstance(name, str) or not name.strip():
-        raise SceneError(f"{bw}.name: a non-empty string expected, got {name!r}")
+    try:
+        check_object_name(name, "a body's name")
+    except ValueError as exc:
+        raise SceneError(f"{bw}.name: {exc}") from None
     if name in names:
         raise SceneError(f"{bw}.name: duplicate body name {name!r}; every body needs its own name")
     names.add(name)

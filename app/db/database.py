@@ -29,6 +29,7 @@ from typing import Any, Iterator, Mapping
 
 import numpy as np
 
+from app.names import check_object_name
 from core.brep import BRep
 from core.transforms import check_T
 
@@ -63,9 +64,7 @@ def default_db_path() -> Path:
 
 # ---------------------------------------------------------------------- validation
 def _check_name(name: Any) -> str:
-    if not isinstance(name, str) or not name.strip() or name != name.strip():
-        raise ValueError(f"an object name must be a non-empty string without surrounding spaces, got {name!r}")
-    return name
+    return check_object_name(name)
 
 
 def _check_kind(kind: Any) -> str:

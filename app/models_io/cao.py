@@ -75,6 +75,7 @@ from typing import IO
 import numpy as np
 from scipy.spatial import cKDTree
 
+from app.names import NAME_RULE, check_object_name
 from core.brep import BRep, Circle, Revolution
 from core.transforms import exp_so3, make_T
 
@@ -243,8 +244,11 @@ def _check_params(lines: _Lines, number: int, rest: str) -> str:
     found = _PARAM.findall(rest)
     for key, raw in found:
         value = raw.strip('"')
-        if key == "name" and not value:
-            raise lines.error(number, "name= is empty")
+        if key == "name":
+            try:
+                check_object_name(value)
+            except ValueError:  # the value is not quoted: the file may not be a model at all
+                raise lines.error(number, f"name= must be {NAME_RULE}") from None
         if key == "useLod" and value.lower() not in ("true", "false", "1", "0"):
             raise lines.error(number, "useLod= must be true, false, 1 or 0")
         if key.startswith("min"):

@@ -11,9 +11,12 @@ request and websocket handshake first goes through :func:`AccessPolicy.check`:
   server answers to: a loopback name or the ``--host`` it listens on) or one given with
   ``--allow-origin`` (a reverse proxy's public address). The host-name condition also stops DNS
   rebinding (a page at ``http://evil.example:8080`` whose name resolves to 127.0.0.1).
-- **Token.** With a token, every request needs it: ``?token=`` on the URL (the page then keeps it
-  in an HttpOnly cookie, which the browser sends with the page's files and its websocket, since
-  viser's client drops the query when it builds the websocket URL) or that cookie.
+- **Token.** With a token, every request needs it: ``?token=`` on the URL, or the HttpOnly cookie
+  the answer to that address sets (the browser sends it with the page's files and its websocket,
+  since viser's client drops the query when it builds the websocket URL). The cookie holds a secret
+  drawn at this start, not the token: cookies ignore the port, so every other service on the same
+  host name receives it, and there it tells nothing of the token; it admits to this server only
+  until it stops.
 
 Refusals are HTTP 403 at the handshake: no viser client is created. :func:`open_viser_server` is
 the one place that hooks viser; it fails at start-up if viser no longer goes through the hook.
@@ -33,6 +36,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from http.cookies import CookieError, SimpleCookie
 from urllib.parse import parse_qs, urlsplit
+
+from .page import client_page
 
 __all__ = ["AccessPolicy", "normalize_origin", "generate_token", "is_loopback", "open_viser_server",
            "LOOPBACK_NAMES"]
@@ -106,6 +111,9 @@ class AccessPolicy:
     allow_origins: tuple[str, ...] = ()
     token: str | None = None
     _seen: set = field(default_factory=set, compare=False, repr=False)
+    # What the page's cookie holds in place of the token: drawn at each start, it admits to this server
+    # only while it runs, and tells nothing of the token to whoever else receives the cookie.
+    _cookie_secret: str = field(default_factory=lambda: secrets.token_urlsafe(32), compare=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "allow_origins", tuple(normalize_origin(o) for o in self.allow_origins))
@@ -115,9 +123,15 @@ class AccessPolicy:
 
     @property
     def cookie_name(self) -> str:
-        """The cookie that keeps the token: named after it, so two servers on one host do not overwrite each other's."""
-        assert self.token is not None
-        return "mcit_" + hashlib.sha256(self.token.encode()).hexdigest()[:12]
+        """The cookie that admits the page once its address gave the token: named after this start's
+        secret, so two servers on one host name (cookies ignore the port) do not overwrite each other's."""
+        return "mcit_" + hashlib.sha256(self._cookie_secret.encode()).hexdigest()[:12]
+
+    def cookie_header(self, secure: bool) -> str:
+        """The ``Set-Cookie`` value: this start's secret (never the token), HttpOnly, SameSite=Strict,
+        Secure when the page came over HTTPS."""
+        return (f"{self.cookie_name}={self._cookie_secret}; Path=/; HttpOnly; SameSite=Strict"
+                + ("; Secure" if secure else ""))
 
     def _known_hosts(self) -> set[str]:
         hosts = {h for h in LOOPBACK_NAMES}
@@ -136,6 +150,8 @@ class AccessPolicy:
         values = {name: _values(headers, name) for name in ("Host", "Origin", "Cookie")}
         if len(values["Host"]) > 1 or len(values["Origin"]) > 1:
             return "a request with more than one Host or Origin header", False
+        if not all(v.isascii() and v.isprintable() for name in ("Host", "Origin") for v in values[name]):
+            return "a Host or Origin header that is not a plain (ASCII) address", False
         host_name, host_port = _split_host(values["Host"][0] if values["Host"] else "")
         origin = values["Origin"][0] if values["Origin"] else None
         if origin is not None and origin.strip().lower() != "null":
@@ -170,7 +186,7 @@ class AccessPolicy:
         except CookieError:
             cookie = SimpleCookie()
         morsel = cookie.get(self.cookie_name)
-        if morsel is not None and hmac.compare_digest(morsel.value.encode(), self.token.encode()):
+        if morsel is not None and hmac.compare_digest(morsel.value.encode(), self._cookie_secret.encode()):
             return None, False
         return "no access token", False
 
@@ -199,10 +215,23 @@ class AccessPolicy:
                 if inspect.isawaitable(response):
                     response = await response
             if set_cookie and response is not None:
-                response.headers["Set-Cookie"] = f"{self.cookie_name}={self.token}; Path=/; HttpOnly; SameSite=Lax"
+                response.headers["Set-Cookie"] = self.cookie_header(secure=came_over_https(request.headers))
             return response
 
         return guarded
+
+
+def came_over_https(headers) -> bool:
+    """True when a reverse proxy says the browser's request came over HTTPS (``X-Forwarded-Proto`` or
+    ``Forwarded: proto=``): the cookie is then sent over HTTPS only. A client that lies here only
+    keeps its own cookie from being sent back over plain HTTP."""
+    protos = [v.strip().lower() for v in _values(headers, "X-Forwarded-Proto")]
+    for value in _values(headers, "Forwarded"):
+        for part in value.replace(",", ";").split(";"):
+            key, _, proto = part.strip().partition("=")
+            if key.lower() == "proto":
+                protos.append(proto.strip('"').lower())
+    return "https" in protos
 
 
 # --------------------------------------------------------------------------- the hook into viser
@@ -223,7 +252,8 @@ def _viser_serve_guarded(policy: AccessPolicy):
     def serve(handler, *args, **kwargs):
         if getattr(handler, "__module__", None) != _VISER_MODULE:
             return original(handler, *args, **kwargs)
-        kwargs["process_request"] = policy.process_request(kwargs.get("process_request"))
+        # who may ask first (refusals cost nothing), then mcit's page, then viser's own answers
+        kwargs["process_request"] = policy.process_request(client_page().process_request(kwargs.get("process_request")))
         state["hooked"] += 1
         return original(handler, *args, **kwargs)
 

@@ -22,13 +22,13 @@ import functools
 import logging
 import threading
 import time
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 import viser
 
 from app.db import DatabaseRefused, DatabaseUnavailable
+from app.markup import Md, as_markdown, escape
 from app.workflows import Cancelled, Session, WorkflowError
 from app.workflows.base import KEY_TEXT, MOTION_GAP_S, FrameRef, Marks
 from app.workflows.session import WORKFLOWS
@@ -59,20 +59,6 @@ DOUBLE_CLICK_PX = 4.0
 WHEEL_FIELD = "mcit-wheel"  # the hidden text field static/wheel.js writes the wheel into
 DOUBLE_FIELD = "mcit-dblclick"  # the hidden text field static/wheel.js writes a double click into
 WHEEL_ZOOM_PER_DELTA = 0.0015  # a wheel notch (deltaY 100) zooms by 14 %
-WHEEL_JS = Path(__file__).resolve().parents[2] / "static" / "wheel.js"
-
-
-def wheel_script() -> str:
-    """The HTML that runs static/wheel.js in the page (an image that fails to load runs it), or ""."""
-    import base64
-
-    try:
-        code = WHEEL_JS.read_text(encoding="utf-8")
-    except OSError:
-        log.warning("%s is missing: the wheel zooms towards the centre of the view", WHEEL_JS)
-        return ""
-    b64 = base64.b64encode(code.encode("utf-8")).decode("ascii")
-    return f'<img src="data:image/gif;base64,AA==" alt="" style="display:none" onerror="eval(atob(\'{b64}\'))">'
 
 
 class ClientPanel:
@@ -191,7 +177,7 @@ class ClientPanel:
         except Exception:  # noqa: BLE001 - layout only
             log.debug("could not dock the panel", exc_info=True)
         # The workflow under way comes first: its instruction and actions are always above the fold.
-        self.gui_title = gui.add_markdown("**No workflow.** Click an object to select it, or start a workflow below.")
+        self.gui_title = gui.add_markdown(Md("**No workflow.** Click an object to select it, or start a workflow below."))
         self.gui_progress = gui.add_progress_bar(0.0, visible=False)
         self.gui_actions = gui.add_folder(None)
         # A question asked once more (a weak result, Redo) goes under the buttons: shown above them it
@@ -235,8 +221,8 @@ class ClientPanel:
             self.gui_report = gui.add_markdown("")
         self.gui_status = gui.add_markdown("…")
         with gui.add_folder("Help", expand_by_default=False):
-            gui.add_markdown(operator_help())
-        # Wheel zoom about the cursor (static/wheel.js): viser's controls zoom towards the view's centre;
+            gui.add_markdown(Md(operator_help()))  # static/help.md: the project's own file
+        # Wheel zoom about the cursor (static/wheel.js, run by the page: app/ui/page.py): viser zooms to the centre;
         # the page script sends the cursor and the wheel through this hidden field instead.
         self.gui_wheel = gui.add_text(WHEEL_FIELD, "")
         self.gui_wheel.on_update(self._guard(self._on_wheel))
@@ -250,9 +236,6 @@ class ClientPanel:
             self._click_worker.submit(guarded_double, str(self.gui_double.value), time.monotonic())
 
         self.gui_double.on_update(on_double)
-        script = wheel_script()
-        if script:
-            gui.add_html(script)
         for label, key, fn in (("Freeze", "F", lambda: self._freeze_back(0)), ("Show live / frozen", "L", self._toggle_live),
                                ("Fit view", "H", self._request_fit)):  # GLOBAL_KEYS
             cmd = gui.add_command(label, hotkey=key)
@@ -372,8 +355,8 @@ class ClientPanel:
             targets = bool(getattr(wf, "targets", None))  # Designate's: nothing written, but the list goes
             if (self._workflow_has_clicks() or targets) and self.confirm_pending != ("cancel", ()):
                 self.confirm_pending, self.error = ("cancel", ()), ""
-                self.warning = (f"Cancel throws away what you did in {wf.title} (your clicks and measurements; nothing "
-                                "was written). Press **Cancel** again to throw it away, or go on.")
+                self.warning = Md("Cancel throws away what you did in {} (your clicks and measurements; nothing was "
+                                  "written). Press **Cancel** again to throw it away, or go on.").format(wf.title)
                 self._relabel("cancel", f"Cancel: confirm ({c.key_text})" if c.key else "Cancel: confirm")
                 return
             self.confirm_pending, self.warning, self.error = None, "", ""
@@ -391,15 +374,15 @@ class ClientPanel:
         # A question asked once more: Redo forgets every click; an undo that discards later changes;
         # Accept of a weak result.
         if (action, args) != self.confirm_pending:
-            question = wf.question(action, *args)
+            question = wf.question(action, *args)  # plain text
+            again = Md(" Press **{}** again to confirm.").format(c.label)
             if action == "accept":
                 weak = wf.weaknesses()
                 if weak:
-                    question = ("**Weak result — check before accepting:** " + "; ".join(weak) + ". Press **Accept** again to write it anyway, or "
-                                "improve it first.")
+                    question = Md("**Weak result — check before accepting:** {}.").format("; ".join(weak))
+                    again = Md(" Press **Accept** again to write it anyway, or improve it first.")
             if question:
-                again = "" if "Press **" in question else f" Press **{c.label}** again to confirm."
-                self.confirm_pending, self.warning, self.error = (action, args), question + again, ""
+                self.confirm_pending, self.warning, self.error = (action, args), escape(question) + again, ""
                 again_label = "Accept anyway" if action == "accept" else f"{c.label}: confirm"
                 self._relabel(action, f"{again_label} ({c.key_text})" if c.key else again_label)
                 return
@@ -936,7 +919,7 @@ class ClientPanel:
             self._finished_at = (wf, self._finished_at[1], object())
             wf = None
         if wf is None:
-            title = f"**No workflow.** {idle}"
+            title = Md("**No workflow.** ") + idle
             report = ""
             step = None
         else:
@@ -956,42 +939,38 @@ class ClientPanel:
             at = f" at {self._finished_at[1]}" if wf.finished else ""  # a finished workflow's text says when
             state = f" ({done}{at})" if wf.accepted else (f" (cancelled{at})" if wf.cancelled else "")
             subject = wf.object_name
-            head = f"**{wf.title}{': ' + subject if subject else ''}**{state}"
+            head = Md("**{}**{}").format(f"{wf.title}: {subject}" if subject else wf.title, state)
             prompt = wf.prompt_text()
-            title = f"{head}\n\n{prompt}"
-            if wf.message and not wf.finished and not self.warning and wf.message[:40] not in prompt:
-                title += f"\n\n_{wf.message}_"  # not said twice, nor above a question being asked
+            title = head + Md("\n\n") + prompt
+            if wf.message and not wf.finished and not self.warning and wf.message[:40] not in wf.prompt_text(markdown=False):
+                title += Md("\n\n_{}_").format(wf.message)  # not said twice, nor above a question being asked
             weak = [w for w in self._weak_now(wf, step) if w not in wf.message]  # not said twice
             if weak and not self.warning:  # said with the result, not first at Accept (a new operator's)
-                title += "\n\n⚠ **Check before accepting:** " + "; ".join(weak) + "."
+                title += Md("\n\n⚠ **Check before accepting:** {}.").format("; ".join(weak))
             if wf.finished:
-                title += f"\n\n{idle}"
+                title += Md("\n\n") + idle
             # a cancelled result is gone; a closed one (History, Designate: nothing accepted) too
             report = "" if wf.cancelled or (wf.finished and done == "closed") else report_markdown(wf.summary())
             if self.error and self.error_step is not None and step.name != self.error_step:
                 self.error = ""  # said in a step the workflow has left
         if self.error:
-            title += f"\n\n⚠ {self.error}"
-        if self.gui_title.content != title:
-            self.gui_title.content = title
-        if self.gui_report.content != report:
-            self.gui_report.content = report
+            title += Md("\n\n⚠ {}").format(self.error)
+        _show(self.gui_title, title)
+        _show(self.gui_report, report)
         self.gui_warning.visible = bool(self.warning)
-        if self.gui_warning.content != self.warning:
-            self.gui_warning.content = self.warning
+        _show(self.gui_warning, self.warning)
         self._update_controls(wf, step)
         text = wf.copy_text() if wf is not None and not wf.finished else ""
         self.gui_copy.visible = bool(text)
         if text and self.gui_copy.value != text:
             self.gui_copy.value = text
         video = self.app.grabber.status()
-        live = ("Live video (no frame frozen)" if video.live else "**Not live**: the video is lost and the image is its "
-                "last frame, greyed; no frame frozen (the status below says more)")
-        frame = f"{live}. *Seconds back* freezes an earlier frame." if self.frozen is None else (
-            f"Frozen frame: t = {self.frozen.t_s:.2f} s" + (" · **live shown**" if self.show_live else "")
-            + ". *Seconds back*: a frame that long before the live one.")
-        if self.gui_frame.content != frame:
-            self.gui_frame.content = frame
+        live = Md("Live video (no frame frozen)" if video.live else "**Not live**: the video is lost and the image is "
+                  "its last frame, greyed; no frame frozen (the status below says more)")
+        frame = live + Md(". *Seconds back* freezes an earlier frame.") if self.frozen is None else (
+            Md("Frozen frame: t = {:.2f} s").format(self.frozen.t_s) + Md(" · **live shown**" if self.show_live else "")
+            + Md(". *Seconds back*: a frame that long before the live one."))
+        _show(self.gui_frame, frame)
         live_label = "Show frozen (L)" if self.show_live and self.frozen is not None else "Show live (L)"
         if self.gui_live.label != live_label:  # says what it does now (it kept "Show live" while live was shown)
             self.gui_live.label = live_label
@@ -1046,16 +1025,22 @@ class ClientPanel:
         self.session.cancel()
 
     def set_status(self, text: str) -> None:
-        if self.gui_status.content != text:
-            self.gui_status.content = text
+        _show(self.gui_status, text)
+
+
+def _show(handle, content) -> None:
+    """Set a Markdown element's content: ``Md`` as written, any other text escaped (app.markup)."""
+    text = as_markdown(content)
+    if handle.content != text:
+        handle.content = text
 
 
 def _idle_text(selected: str | None) -> str:
     """What the panel says with no workflow under way."""
     if selected is None:
-        return "Click an object to select it, or start a workflow below."
-    return (f"**{selected}** is selected: double-click where it is in the video to find its pose, start a workflow "
-            "below (Update pose, Track, …), or click another object.")
+        return Md("Click an object to select it, or start a workflow below.")
+    return Md("**{}** is selected: double-click where it is in the video to find its pose, start a workflow below "
+              "(Update pose, Track, …), or click another object.").format(selected)
 
 
 def _live_shortcuts(controls, applies) -> dict[str, str]:

@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from app.markup import Md
+
 __all__ = ["START_BUTTONS", "report_markdown", "operator_help", "HELP_PATH", "format_value", "key_label"]
 
 # The operator's quick reference, shown in the panel's Help folder (static/: files the UI shows).
@@ -87,15 +89,16 @@ def _items(key: str, value: Any, indent: str) -> list[str]:
         if not len(arr):
             return []
         shown = ", ".join(format_value(key, x) for x in arr[:12]) + (" …" if len(arr) > 12 else "")
-        return [f"{indent}- **{key_label(key)}**: {shown}"]
+        return [Md("{}- **{}**: {}").format(Md(indent), key_label(key), shown)]
     if isinstance(value, dict):
         if value and set(value) <= _UNIT_KEYS:
-            return [f"{indent}- **{key_label(key)}**: " + ", ".join(_with_unit(k, v) for k, v in value.items())]
-        out = [f"{indent}- **{key_label(key)}**"]
+            shown = ", ".join(_with_unit(k, v) for k, v in value.items())
+            return [Md("{}- **{}**: {}").format(Md(indent), key_label(key), shown)]
+        out = [Md("{}- **{}**").format(Md(indent), key_label(key))]
         for k, v in value.items():
             out += _items(str(k), v, indent + "  ")
         return out
-    return [f"{indent}- **{key_label(key)}**: {format_value(key, value)}"]
+    return [Md("{}- **{}**: {}").format(Md(indent), key_label(key), format_value(key, value))]
 
 
 def _with_unit(unit: str, v: Any) -> str:
@@ -117,11 +120,12 @@ def operator_help() -> str:
         return f"*Help not found ({HELP_PATH}: {exc.strerror}); see docs/interface.md.*"
 
 
-def report_markdown(summary: dict[str, Any]) -> str:
+def report_markdown(summary: dict[str, Any]) -> Md:
     """A workflow's ``summary()`` as Markdown: scalars as a list, per-item lists as a table, every
-    key in words and every number rounded to what it means."""
+    key in words and every number rounded to what it means; keys and values are escaped (they may
+    hold names, methods and notes from the database)."""
     if not summary:
-        return ""
+        return Md("")
     lines = []
     tables = {k: v for k, v in summary.items() if isinstance(v, list) and v and isinstance(v[0], dict)}
     for key, value in summary.items():
@@ -130,9 +134,9 @@ def report_markdown(summary: dict[str, Any]) -> str:
         lines += _items(key, value, "")
     for key, rows in tables.items():
         cols = list(rows[0].keys())
-        lines.append(f"\n**{key_label(key)}**\n")
-        lines.append("| " + " | ".join(key_label(c) for c in cols) + " |")
-        lines.append("|" + "---|" * len(cols))
+        lines.append(Md("\n**{}**\n").format(key_label(key)))
+        lines.append(Md("| ") + Md(" | ").join(key_label(c) for c in cols) + Md(" |"))
+        lines.append(Md("|" + "---|" * len(cols)))
         for row in rows[:30]:
             cells = []
             for c in cols:
@@ -141,7 +145,7 @@ def report_markdown(summary: dict[str, Any]) -> str:
                     cells.append(" ".join(format_value(c, x) for x in np.asarray(v, dtype=object).ravel()))
                 else:
                     cells.append(format_value(c, v))
-            lines.append("| " + " | ".join(cells) + " |")
+            lines.append(Md("| ") + Md(" | ").join(cells) + Md(" |"))
         if len(rows) > 30:
-            lines.append(f"\n… and {len(rows) - 30} more")
-    return "\n".join(lines)
+            lines.append(Md("\n… and {} more").format(len(rows) - 30))
+    return Md("\n").join(lines)

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import viser
 
+from app.markup import Md
 from app.overlay import LineBatch, PixelWorld
 from app.video import FrameGrabber, stamp_not_live, stamp_replay_time
 from app.workflows.frames import GrabberFrames
@@ -317,20 +318,22 @@ class InterfaceServer:
     def _update_status(self) -> None:
         src = self.grabber.source
         status = self.grabber.status()
-        video = f"**Video** {src.description} · {src.width}×{src.height} · {src.fps:.1f} fps (shown {self.grabber.measured_fps:.1f})"
+        video = Md("**Video** {} · {}×{} · {:.1f} fps (shown {:.1f})").format(
+            src.description, src.width, src.height, src.fps, self.grabber.measured_fps)
         if status.live:
             loop = src.duration_s if not src.live else None
             if src.live:
-                video += " · **live**"
+                video += Md(" · **live**")
             elif loop and (src.frame_count or 0) > 1:  # say it: what moved in it jumps back at every loop
-                video += f" · **a recording, replayed every {loop:.1f} s** (not live: objects jump back when it restarts)"
+                video += Md(" · **a recording, replayed every {:.1f} s** (not live: objects jump back when it "
+                            "restarts)").format(loop)
         elif self.grabber.error is not None:
-            video += f"\n\n**Video stopped:** {self.grabber.error}"
+            video += Md("\n\n**Video stopped:** {}").format(self.grabber.error)
         else:  # lost (reconnecting) or waiting: the image shown is not live
-            video += (f"\n\n**⚠ Not live: {status.text}.** The image shown is the last frame, greyed"
-                      + (f" (last try: {status.reason})" if status.reason else "") + ".")
+            video += Md("\n\n**⚠ Not live: {}.** The image shown is the last frame, greyed{}.").format(
+                status.text, f" (last try: {status.reason})" if status.reason else "")
         cam = self.site.camera
-        text = f"{video}\n\nCamera {cam.width}×{cam.height} · {len(self.site.objects())} objects"
+        text = video + Md("\n\nCamera {}×{} · {} objects").format(cam.width, cam.height, len(self.site.objects()))
         with self.clients_lock:
             panels = list(self.clients.values())
         for panel in panels:

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from app.markup import Md, escape
 from core.brep import BRep
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -359,15 +360,21 @@ class Workflow:
         return st
 
     def prompt_text(self, markdown: bool = True) -> str:
-        """The current prompt with each named control as its label (bold in Markdown)."""
+        """The current prompt with each named control as its label: plain text, or ``Md`` with the
+        labels in bold and the rest escaped (a prompt may name an object)."""
         st = self.current_step()
 
-        def label(m: re.Match) -> str:
-            c = self.control(m.group(1))
-            text = c.label if c is not None else m.group(1)
-            return f"**{text}**" if markdown else text
+        def label(action: str) -> str:
+            c = self.control(action)
+            return c.label if c is not None else action
 
-        return _PLACEHOLDER.sub(label, st.prompt)
+        if not markdown:
+            return _PLACEHOLDER.sub(lambda m: label(m.group(1)), st.prompt)
+        parts, pos = [], 0
+        for m in _PLACEHOLDER.finditer(st.prompt):
+            parts += [escape(st.prompt[pos:m.start()]), Md("**{}**").format(label(m.group(1)))]
+            pos = m.end()
+        return Md("").join(parts + [escape(st.prompt[pos:])])
 
     @property
     def next_step(self) -> str:

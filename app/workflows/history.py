@@ -90,7 +90,7 @@ class History(Workflow):
                 when = time.strftime("%H:%M:%S", time.localtime(last.time))
                 return (f"Undoing change #{int(args[0])} brings {last.object_name} back to before it, and so also discards "
                         f"the {len(later)} later change{'s' if len(later) > 1 else ''} of it (the last by {last.client} at "
-                        f"{when}). Press **Undo change** again to do it.")
+                        f"{when}).")
         return super().question(action, *args)
 
     def undo(self, change_id: int):

@@ -247,12 +247,16 @@ class Interface:
         self.server = InterfaceServer(self.site, FrameGrabber(StillSource(frame, fps=20)), port=free_port()).start()
         self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
         self.frame_t_s = frame_t_s
+        # What the page's Content-Security-Policy refused (app/ui/page.py): every browser test fails on one.
+        self.csp_refusals: list[str] = []
 
     def open(self, browser, viewport: dict | None = None):
         """A new page on the interface (``viewport``, default VIEWPORT), connected, fitted, with the
         software-WebGL notice closed."""
         before = set(self.server.clients)
         page = browser.new_page(viewport=viewport or VIEWPORT)
+        page.on("console", lambda m: self.csp_refusals.append(m.text[:300]) if "Content Security Policy" in m.text else None)
+        page.on("pageerror", lambda e: self.csp_refusals.append(str(e)[:300]) if "Content Security Policy" in str(e) else None)
         page.goto(self.url)
         panel = wait_for_panel(self.server, before)
         # the database drawn as it is now (its own thread; slow on a loaded machine): clicks that
@@ -288,5 +292,8 @@ class Interface:
         if self._own_devices is not None:
             self._own_devices.close()
         self.db.close()
+        if self.csp_refusals:
+            raise AssertionError(f"the page's Content-Security-Policy refused {len(self.csp_refusals)} thing(s): "
+                                 f"{self.csp_refusals[:3]}")
 
 

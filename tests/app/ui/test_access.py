@@ -133,9 +133,9 @@ def test_the_page_opened_with_the_token_keeps_it_in_a_cookie_for_its_websocket(s
     page = s.get(f"/?token={TOKEN}")
     assert page.status == 200
     cookie = page.getheader("Set-Cookie")
-    assert cookie is not None and "HttpOnly" in cookie and TOKEN in cookie
+    assert cookie is not None and "HttpOnly" in cookie and "SameSite=Strict" in cookie
     name_value = cookie.split(";")[0]
-    # viser's client drops the query from the websocket URL: the cookie carries the token
+    # viser's client drops the query from the websocket URL: the cookie admits its websocket
     assert s.ws(origin=f"http://127.0.0.1:{s.port}", headers={"Cookie": name_value}) is None
     assert s.get("/index.html", {"Cookie": name_value}).status == 200
     # exposed with a token, the page's own origin under any name is admitted (the token authenticates)
@@ -188,3 +188,63 @@ def test_duplicate_host_or_origin_headers_are_refused_not_an_error():
         headers = Headers(list(own.raw_items()) + [extra])
         reason, _ = policy.check("/", headers)
         assert reason is not None and "more than one" in reason
+
+
+def test_the_cookie_carries_no_token_and_admits_to_this_server_only_while_it_runs(serve):
+    """Cookies ignore the port: every service on the same host name receives the cookie. It holds a
+    secret of this start, not the token, so another server with the same token refuses it."""
+    a, b = serve(token=TOKEN), serve(token=TOKEN)
+    cookie = a.get(f"/?token={TOKEN}").getheader("Set-Cookie")
+    name_value = cookie.split(";")[0]
+    assert TOKEN not in cookie and "Secure" not in cookie  # plain HTTP: a Secure cookie would not come back
+    assert a.ws(origin=f"http://127.0.0.1:{a.port}", headers={"Cookie": name_value}) is None
+    # the same token on another port (another start): the first one's cookie is refused there
+    assert b.ws(origin=f"http://127.0.0.1:{b.port}", headers={"Cookie": name_value}) == 403
+    # both cookies side by side in one browser (one host name): each server finds its own
+    other = b.get(f"/?token={TOKEN}").getheader("Set-Cookie").split(";")[0]
+    assert other.split("=")[0] != name_value.split("=")[0]
+    both = {"Cookie": f"{name_value}; {other}"}
+    assert a.ws(origin=f"http://127.0.0.1:{a.port}", headers=both) is None
+    assert b.ws(origin=f"http://127.0.0.1:{b.port}", headers=both) is None
+
+
+def test_the_cookie_is_secure_when_a_proxy_says_the_page_came_over_https(serve):
+    s = serve(token=TOKEN, allow_origins=("https://mcit.example.org",))
+    for header in ({"X-Forwarded-Proto": "https"}, {"Forwarded": 'for=192.0.2.1;proto=https;host="mcit.example.org"'}):
+        assert "; Secure" in s.get(f"/?token={TOKEN}", header).getheader("Set-Cookie")
+    assert "Secure" not in s.get(f"/?token={TOKEN}", {"X-Forwarded-Proto": "http"}).getheader("Set-Cookie")
+
+
+def test_a_non_ascii_origin_or_host_is_refused_with_403(serve):
+    s = serve()
+    for headers in ({"Origin": "http://\u00e9vil.example"}, {"Host": f"\u00e9vil.example:{s.port}"},
+                    {"Origin": f"http://127.0.0.1:{s.port}/\u00e9"}):
+        conn = socket.create_connection(("127.0.0.1", s.port), timeout=10)
+        lines = ["GET / HTTP/1.1"] + [f"{k}: {v}" for k, v in headers.items()]
+        if "Host" not in headers:
+            lines.append(f"Host: 127.0.0.1:{s.port}")
+        conn.sendall(("\r\n".join(lines) + "\r\n\r\n").encode("utf-8"))
+        status = conn.recv(4096).split(b"\r\n", 1)[0]
+        conn.close()
+        assert b" 403 " in status, (headers, status)
+    assert s.get("/").status == 200  # still serving
+
+
+def test_every_answer_carries_the_content_security_policy(serve):
+    """The page runs only viser's two inline scripts (by hash) and mcit's own; no inline handler, no eval,
+    nothing from elsewhere, no frames; viser needs eval (see page.py) (app/ui/page.py)."""
+    s = serve()
+    for path in ("/", "/index.html", "/mcit/page.js", "/no-such-file"):
+        answer = s.get(path)
+        csp = answer.getheader("Content-Security-Policy")
+        assert csp is not None, path
+        assert answer.getheader("X-Content-Type-Options") == "nosniff"
+        assert answer.getheader("Referrer-Policy") == "no-referrer"  # the address may carry ?token=
+        rules = dict(rule.strip().split(" ", 1) for rule in csp.split(";"))
+        assert "'unsafe-inline'" not in rules["script-src"] and "'unsafe-hashes'" not in rules["script-src"]
+        assert rules["script-src"].count("'sha256-") == 2
+        assert rules["frame-src"] == "'none'" and rules["object-src"] == "'none'" and rules["default-src"] == "'none'"
+        assert rules["frame-ancestors"] == "'none'"
+    page = s.get("/").body
+    assert b'<script src="/mcit/page.js" defer></script></head>' in page
+    assert b"mcit-dblclick" in s.get("/mcit/page.js").body
