@@ -1,7 +1,7 @@
 """``mcit db …``: the site's database from the command line (parsers here, work in app.db).
 
     mcit db init --scene scenes/workcell        a new database from a scene's known objects
-    mcit db import model.cao [--name N] [--xyz X Y Z] [--rpy-deg R P Y] [--status known]
+    mcit db import model.cao [--name N] [--xyz X Y Z] [--rpy-deg R P Y] [--status known] [--max-faces N]
     mcit db list | show NAME | history [NAME] | undo CHANGE [--restore]
     mcit db export NAME out.{cao,obj,stl,ply,gltf,glb} [--world]
     mcit db export-poses out.{json,csv,pos} [--object NAME ...] [--frame world|camera]
@@ -49,7 +49,7 @@ def _cmd_init(args) -> int:
 def _cmd_import(args) -> int:
     import numpy as np
 
-    from app.models_io import load_model
+    from app.models_io import MAX_MESH_FACES, load_model
     from app.names import check_object_name
     from core.transforms import make_T, rot_x, rot_y, rot_z
 
@@ -59,7 +59,8 @@ def _cmd_import(args) -> int:
         check_object_name(name, "--name" if args.name else f"the object's name, {path.name}'s stem,")
     except ValueError as exc:
         raise ValueError(f"{exc}" + ("" if args.name else "; give the object a name with --name NAME")) from None
-    model = load_model(path, angle_deg=args.angle_deg)  # raises before the database is touched
+    max_faces = args.max_faces or MAX_MESH_FACES
+    model = load_model(path, angle_deg=args.angle_deg, max_faces=max_faces)  # raises before the database is touched
     options = None
     if path.suffix.lower() == ".cao":  # ViSP's name= and LOD options, kept in the history for export
         from app.models_io import read_cao_options
@@ -212,6 +213,16 @@ def _wait_s(text: str) -> float:
     return value
 
 
+def _max_faces(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of triangles, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected at least 1 triangle, got {text!r}")
+    return value
+
+
 def add_db_parser(subparsers) -> argparse.ArgumentParser:
     """Add ``db`` and its sub-commands to the ``mcit`` parser's sub-parsers."""
     common = argparse.ArgumentParser(add_help=False)
@@ -235,6 +246,9 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--rpy-deg", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("R", "P", "Y"),
                    help="orientation R = Rz(yaw) Ry(pitch) Rx(roll), degrees")
     p.add_argument("--angle-deg", type=float, default=30.0, help="meshes: dihedral angle from which an edge is drawn")
+    p.add_argument("--max-faces", type=_max_faces, default=None, metavar="N",
+                   help="meshes: the most triangles the file may hold (default 200,000, app.models_io.MAX_MESH_FACES); "
+                        "it also allows 3 vertices a triangle and 64 MB per 200,000 triangles")
     p.set_defaults(func=_run(_cmd_import))
 
     p = sub.add_parser("list", parents=[common], help="every object with its status, version and position")

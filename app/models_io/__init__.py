@@ -12,7 +12,7 @@ from pathlib import Path
 from core.brep import BRep
 
 from .cao import CaoError, CaoOptions, CaoWarning, cao_text, concat_breps, read_cao, read_cao_options, read_init, write_cao
-from .mesh import MESH_SUFFIXES, MeshError, MeshWarning, read_mesh, write_mesh
+from .mesh import MAX_MESH_BYTES, MAX_MESH_FACES, MESH_SUFFIXES, MeshError, MeshWarning, read_mesh, write_mesh
 
 __all__ = [
     "CaoError",
@@ -21,6 +21,8 @@ __all__ = [
     "MeshError",
     "MeshWarning",
     "MODEL_SUFFIXES",
+    "MAX_MESH_BYTES",
+    "MAX_MESH_FACES",
     "load_model",
     "save_model",
     "read_cao",
@@ -36,13 +38,14 @@ __all__ = [
 MODEL_SUFFIXES = (".cao",) + MESH_SUFFIXES
 
 
-def load_model(path: str | Path, angle_deg: float = 30.0) -> BRep:
-    """Read a model file (``.cao`` or a mesh; ``angle_deg``: meshes' feature-edge threshold)."""
+def load_model(path: str | Path, angle_deg: float = 30.0, *, max_faces: int = MAX_MESH_FACES) -> BRep:
+    """Read a model file (``.cao`` or a mesh; ``angle_deg``: meshes' feature-edge threshold;
+    ``max_faces``: the most triangles a mesh may hold, see ``read_mesh``; a ``.cao`` has its own limits)."""
     suffix = Path(path).suffix.lower()
     if suffix == ".cao":
         return read_cao(path)
     if suffix in MESH_SUFFIXES:
-        return read_mesh(path, angle_deg=angle_deg)
+        return read_mesh(path, angle_deg=angle_deg, max_faces=max_faces)
     raise ValueError(f"{path}: unknown model type {suffix!r}; use one of {', '.join(MODEL_SUFFIXES)}")
 
 

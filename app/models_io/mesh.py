@@ -8,6 +8,27 @@ cylinder's two side lines, a sphere's outline. A glTF scene's meshes are placed 
 transforms and merged into one model. Bad input raises ``MeshError`` naming the file (and, for
 OBJ, the line) and the problem; a mesh that gives nothing to draw (no sharp edge and no curved
 region with an outline, e.g. each triangle given twice) loads with a ``MeshWarning`` naming the file.
+Materials and textures are not read (only the geometry is kept): an OBJ's ``mtllib``, a PLY's
+``TextureFile`` and a glTF's images are never opened.
+
+Limits, so that a careless or hostile file is refused before trimesh allocates anything (reading
+a 10^6-triangle mesh takes 20 s and 1.2 GB; at the limit it takes 3.5 s and 0.3 GB):
+
+* at most ``max_faces`` triangles (default ``MAX_MESH_FACES``, 200,000: a detailed CAD part)
+  and ``3 * max_faces`` vertices (a triangle soup's three corners per triangle);
+* at most 64 MB (``MAX_MESH_BYTES``; more in proportion when ``max_faces`` is raised): the file
+  and a glTF's buffer files (each reference counted), checked first, from the file system;
+* the counts are taken before reading: OBJ, its ``v``/``vn``/``vt``/``f`` lines counted in the
+  bytes, then each line checked (a polygon of n vertices is n - 2 triangles; a record is at most
+  1 MB); STL, the binary header's count, which must match the file's size, or an ASCII file's
+  ``vertex`` lines; PLY, the header's elements, which must match the bytes that follow (binary)
+  or the lines (ASCII); glTF/GLB, the accessors, which must fit in their buffers, the meshes'
+  triangles, each placed node counted, at most ``max_faces / 20`` primitives and nodes (trimesh
+  spends 0.4 ms and 12 KB on each) and a JSON of at most 10 values a triangle.
+
+``read_mesh(path, max_faces=N)`` raises them (``mcit db import --max-faces N``); a refusal is one
+line that names the file, what it holds, the limit and how to raise it. A file whose header
+declares more than its bytes hold is refused as such, whatever the limits.
 
 Writing tessellates the model (``BRep.triangles``: faces fan-triangulated, cylinders and cones
 with ``n_circle`` sides) and exports the surface; ``.gltf`` embeds its buffer so the file stands
@@ -18,9 +39,14 @@ polylines and a smooth side drawn by its silhouettes.
 
 from __future__ import annotations
 
-from pathlib import Path
-
+import json
+import re
+import stat
+import struct
 import warnings
+from dataclasses import dataclass
+from itertools import islice
+from pathlib import Path
 
 import numpy as np
 
@@ -28,9 +54,15 @@ from core.brep import BRep
 from core.mesh_features import brep_from_mesh
 from core.silhouette import SmoothSides
 
-__all__ = ["MeshError", "MeshWarning", "MESH_SUFFIXES", "read_mesh", "write_mesh"]
+__all__ = ["MeshError", "MeshWarning", "MESH_SUFFIXES", "MAX_MESH_FACES", "MAX_MESH_BYTES", "read_mesh", "write_mesh"]
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".gltf", ".glb")
+
+MAX_MESH_FACES = 200_000  # triangles; a 10^6-triangle mesh reads in 20 s and 1.2 GB, this in 3.5 s and 0.3 GB
+MAX_MESH_BYTES = 64 * 2**20  # per MAX_MESH_FACES triangles allowed: an ASCII STL of 200,000 facets fits
+_MAX_OBJ_RECORD = 2**20  # bytes in one OBJ record (a line and its continuations): bounds the split into tokens
+_MAX_PLY_HEADER = 2**16  # bytes of a PLY header
+_PLY_EXTRA_LINES = 16  # lines after an ASCII PLY's declared rows (trimesh makes an array of every line)
 
 
 class MeshError(ValueError):
@@ -41,58 +73,510 @@ class MeshWarning(UserWarning):
     """A mesh that loads but that the overlay cannot show; the message names the file."""
 
 
-def _check_obj(path: Path) -> None:
-    """Line-level check of an OBJ's vertices and faces, so an error names its line."""
+@dataclass(frozen=True)
+class _Limits:
+    """What one mesh file may hold, from the triangle limit the caller chose."""
+
+    faces: int
+
+    @property
+    def vertices(self) -> int:
+        return 3 * self.faces
+
+    @property
+    def bytes(self) -> int:
+        return max(MAX_MESH_BYTES, -(-self.faces * MAX_MESH_BYTES // MAX_MESH_FACES))
+
+    @property
+    def json_values(self) -> int:
+        """Values in a glTF's JSON (10 a triangle: a 10,000-part assembly holds about 1.3 million);
+        Python spends 30 to 200 bytes on each."""
+        return 10 * self.faces
+
+    @property
+    def parts(self) -> int:
+        """glTF primitives, nodes and links between nodes: trimesh spends 0.4 ms and 12 KB on each."""
+        return max(100, self.faces // 20)
+
+    def refuse(self, where: str, holds: str) -> MeshError:
+        return MeshError(
+            f"{where}: {holds}, beyond mcit's limits for one mesh ({self.faces:,} triangles, {self.vertices:,} vertices, "
+            f"{self.bytes / 2**20:g} MB); simplify the mesh in its CAD program, or raise the limits with "
+            f"`mcit db import --max-faces N`")
+
+
+def _unreadable(path: Path, why: str) -> MeshError:
+    return MeshError(f"{path}: cannot read the mesh: {why}")
+
+
+def _count(path: Path, needles: tuple[bytes, ...], lower: bool = False) -> list[int]:
+    """How many times each needle occurs in the file's bytes (lowered first if ``lower``), streamed in
+    4 MB chunks. A needle must not overlap itself (``b"vertex"`` does not)."""
+    counts = [0] * len(needles)
+    keep = max(map(len, needles)) - 1
+    tail = b""
+    with open(path, "rb") as fh:
+        while chunk := fh.read(2**22):
+            buf = tail + (chunk.lower() if lower else chunk)
+            for k, needle in enumerate(needles):
+                counts[k] += buf.count(needle) - tail.count(needle)  # those inside the tail were counted before
+            tail = buf[len(buf) - keep:]
+    return counts
+
+
+def _file_size(path: Path, limits: _Limits, what: str = "the file") -> int:
+    """The size of a regular file, refused beyond the byte limit (read from the file system, nothing parsed)."""
+    st = path.stat()
+    if not stat.S_ISREG(st.st_mode):
+        raise _unreadable(path, f"{what} is not a regular file")
+    if st.st_size > limits.bytes:
+        raise limits.refuse(str(path), f"{what} holds {st.st_size:,} bytes ({st.st_size / 2**20:,.1f} MB)")
+    return st.st_size
+
+
+# --- OBJ -----------------------------------------------------------------------------------------
+
+# a v or f line (indented too) and the lines it continues with a backslash at its end
+_OBJ_RECORD = re.compile(rb"^[ \t]*[vf][ \t](?:[^\n]*\\\r?\n)*[^\n]*", re.M)
+_OBJ_CONTINUATION = re.compile(rb"\\\r?\n")
+
+
+def _check_obj(path: Path, limits: _Limits) -> None:
+    """Bound an OBJ's counts (its ``v``/``vn``/``vt``/``f`` lines counted in its bytes), then check its
+    vertices and faces, so an error names its line, counting the triangles as trimesh makes them (a
+    polygon of n vertices makes n - 2; a line ending in a backslash continues on the next). Only
+    the v and f records are split, so a file of comments costs no Python loop per line."""
+    data = path.read_bytes()
+    keys = {"v": ("vertices (v lines)", limits.vertices), "vn": ("normals (vn lines)", limits.vertices),
+            "vt": ("texture coordinates (vt lines)", limits.vertices), "f": ("faces (f lines)", limits.faces)}
+    for key, (what, limit) in keys.items():
+        n = sum(data.count(f"\n{key}{space}".encode()) + data.startswith(f"{key}{space}".encode()) for space in " \t")
+        if n > limit:
+            raise limits.refuse(str(path), f"the file holds {n:,} {what}")
     n_vertices = 0
-    with open(path, "r", errors="replace") as fh:
-        for number, raw in enumerate(fh, start=1):
-            tokens = raw.split("#", 1)[0].split()
-            if not tokens:
-                continue
-            if tokens[0] == "v":
+    n_triangles = 0
+    number, counted_to = 1, 0
+    for match in _OBJ_RECORD.finditer(data):
+        number += data.count(b"\n", counted_to, match.start())
+        counted_to = match.start()
+        if match.end() - match.start() > _MAX_OBJ_RECORD:
+            raise _unreadable(path, f"line {number} is longer than {_MAX_OBJ_RECORD // 2**20} MB (with the lines it continues)")
+        record = _OBJ_CONTINUATION.sub(b"", match.group())
+        tokens = record.split(b"#", 1)[0].split()
+        shown = record.decode("utf-8", "replace").strip()
+        if tokens[0] == b"v":
+            try:
+                xyz = [float(t) for t in tokens[1:4]]
+            except ValueError:
+                raise MeshError(f"{path}:{number}: vertex coordinates must be numbers, got {shown!r}") from None
+            if len(xyz) < 3 or not np.all(np.isfinite(xyz)):
+                raise MeshError(f"{path}:{number}: a vertex needs 3 finite coordinates, got {shown!r}")
+            n_vertices += 1
+            if n_vertices > limits.vertices:
+                raise limits.refuse(f"{path}:{number}", f"the file holds more than {limits.vertices:,} vertices")
+        else:
+            if len(tokens) < 4:
+                raise MeshError(f"{path}:{number}: a face needs at least 3 vertices, got {shown!r}")
+            n_triangles += len(tokens) - 3
+            if n_triangles > limits.faces:
+                raise limits.refuse(f"{path}:{number}", f"the faces up to this line make {n_triangles:,} triangles "
+                                                        f"(a polygon of n vertices makes n - 2)")
+            for ref in tokens[1:]:
                 try:
-                    xyz = [float(t) for t in tokens[1:4]]
+                    i = int(ref.split(b"/")[0])
                 except ValueError:
-                    raise MeshError(f"{path}:{number}: vertex coordinates must be numbers, got {raw.strip()!r}") from None
-                if len(xyz) < 3 or not np.all(np.isfinite(xyz)):
-                    raise MeshError(f"{path}:{number}: a vertex needs 3 finite coordinates, got {raw.strip()!r}")
-                n_vertices += 1
-            elif tokens[0] == "f":
-                if len(tokens) < 4:
-                    raise MeshError(f"{path}:{number}: a face needs at least 3 vertices, got {raw.strip()!r}")
-                for ref in tokens[1:]:
-                    try:
-                        i = int(ref.split("/")[0])
-                    except ValueError:
-                        raise MeshError(f"{path}:{number}: face vertex {ref!r} is not an index") from None
-                    if i == 0 or i > n_vertices or -i > n_vertices:
-                        raise MeshError(f"{path}:{number}: face vertex index {i} refers to no vertex (1..{n_vertices} defined so far)")
+                    raise MeshError(f"{path}:{number}: face vertex {ref.decode('utf-8', 'replace')!r} is not an index") from None
+                if i == 0 or i > n_vertices or -i > n_vertices:
+                    raise MeshError(f"{path}:{number}: face vertex index {i} refers to no vertex (1..{n_vertices} defined so far)")
 
 
-def read_mesh(path: str | Path, angle_deg: float = 30.0) -> BRep:
+# --- STL -----------------------------------------------------------------------------------------
+
+def _check_stl(path: Path, limits: _Limits, size: int) -> None:
+    """Binary STL: the header's triangle count, which must agree with the file's size (trimesh reads
+    any other file as ASCII). ASCII STL (``solid`` first): its ``vertex`` lines, three a triangle."""
+    with open(path, "rb") as fh:
+        head = fh.read(84)
+    if len(head) == 84:
+        n = struct.unpack_from("<I", head, 80)[0]
+        if size == 84 + 50 * n:
+            if n > limits.faces:
+                raise limits.refuse(str(path), f"the binary STL holds {n:,} triangles")
+            return
+    if not head.lstrip().lower().startswith(b"solid"):
+        if len(head) < 84:
+            raise _unreadable(path, f"{size} bytes: too short for a binary STL (84 bytes of header) and not an ASCII STL")
+        raise MeshError(f"{path}: the binary STL's header declares {n:,} triangles, which take {84 + 50 * n:,} bytes, "
+                        f"but the file holds {size:,}: it is truncated or not an STL file")
+    n_vertex, n_facet = _count(path, (b"vertex", b"endfacet"), lower=True)
+    n = max(-(-n_vertex // 3), n_facet)
+    if n > limits.faces:
+        raise limits.refuse(str(path), f"the ASCII STL holds {n:,} triangles")
+
+
+# --- PLY -----------------------------------------------------------------------------------------
+
+_PLY_TYPES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
+              "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "float16": 2,
+              "int64": 8, "uint64": 8, "double": 8, "float64": 8}
+_PLY_STRUCT = {"uchar": "B", "uint8": "B", "ushort": "H", "uint16": "H", "uint": "I", "uint32": "I", "uint64": "Q",
+               "char": "b", "int8": "b", "short": "h", "int16": "h", "int": "i", "int32": "i", "int64": "q"}
+_PLY_TEXT = bytes(range(32, 127)) + b"\t\n\r"
+_TOKEN = re.compile(rb"\S+")
+
+
+@dataclass
+class _PlyElement:
+    name: str
+    count: int
+    properties: list  # (name, type) for a scalar, (name, (count type, item type)) for a list
+
+
+def _ply_header(path: Path) -> tuple[str, list[_PlyElement], int]:
+    """(format, elements, offset of the data) from a PLY header, which must end within 64 KB."""
+    with open(path, "rb") as fh:
+        head = fh.read(_MAX_PLY_HEADER)
+    end = re.search(rb"^end_header[ \t\r]*\n", head, re.M)
+    if not head.startswith(b"ply") or end is None:
+        raise _unreadable(path, "no PLY header (a first line 'ply' and an 'end_header' line within 64 KB)")
+    fmt, elements = None, []
+    for raw in head[:end.start()].decode("ascii", "replace").splitlines()[1:]:
+        tokens = raw.split()
+        if not tokens or tokens[0] in ("comment", "obj_info"):
+            continue
+        if tokens[0] == "format" and len(tokens) >= 2:
+            fmt = tokens[1]
+        elif tokens[0] == "element" and len(tokens) == 3 and tokens[2].isdigit():
+            elements.append(_PlyElement(tokens[1], int(tokens[2]), []))
+        elif tokens[0] == "property" and elements and len(tokens) == 3 and tokens[1] in _PLY_TYPES:
+            elements[-1].properties.append((tokens[2], tokens[1]))
+        elif (tokens[0] == "property" and elements and len(tokens) == 5 and tokens[1] == "list"
+              and tokens[2] in _PLY_STRUCT and tokens[3] in _PLY_TYPES):
+            elements[-1].properties.append((tokens[4], (tokens[2], tokens[3])))
+        else:
+            raise _unreadable(path, f"the PLY header line {raw.strip()[:80]!r} is not an element, property, format or comment")
+    if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
+        raise _unreadable(path, "the PLY header names no format among ascii, binary_little_endian, binary_big_endian")
+    return fmt, elements, end.end()
+
+
+def _face_list(element: _PlyElement) -> int | None:
+    """Index among the face element's properties of its vertex-index list (as trimesh picks it)."""
+    lists = [k for k, (name, kind) in enumerate(element.properties) if isinstance(kind, tuple)]
+    named = [k for k in lists if element.properties[k][0] in ("vertex_indices", "vertex_index")]
+    return (named or lists or [None])[0]
+
+
+def _check_ply(path: Path, limits: _Limits, size: int) -> None:
+    """The header's element counts against the limits, then against the bytes (binary: every list as
+    long as its first row, as trimesh reads it) or the lines (ASCII) that follow; the triangles are
+    counted from the faces' vertex lists (a polygon of n vertices makes n - 2)."""
+    fmt, elements, start = _ply_header(path)
+    for el in elements:
+        limit = limits.faces if el.name == "face" else limits.vertices
+        if el.count > limit:
+            raise limits.refuse(str(path), f"the PLY header declares {el.count:,} {el.name} elements")
+    declared = ", ".join(f"{el.count:,} {el.name}" for el in elements)
+    face = next((el for el in elements if el.name == "face"), None)
+    index = _face_list(face) if face is not None else None
+    triangles = 0
+    if fmt != "ascii":
+        order = "<" if fmt == "binary_little_endian" else ">"
+        offset = start
+        with open(path, "rb") as fh:
+            for el in elements:
+                row = 0
+                for k, (name, kind) in enumerate(el.properties):
+                    if not isinstance(kind, tuple):
+                        row += _PLY_TYPES[kind]
+                        continue
+                    n = 0
+                    if el.count:
+                        fh.seek(offset + row)
+                        blob = fh.read(_PLY_TYPES[kind[0]])
+                        if len(blob) < _PLY_TYPES[kind[0]]:
+                            raise MeshError(f"{path}: the PLY header declares {declared}, but the file ends inside "
+                                            f"the first {el.name}: it is truncated or its header is wrong")
+                        n = struct.unpack(order + _PLY_STRUCT[kind[0]], blob)[0]
+                        if n < 0:
+                            raise _unreadable(path, f"the first {el.name}'s {name} has {n} items")
+                    if el is face and k == index:
+                        triangles = el.count * max(n - 2, 1)
+                    row += _PLY_TYPES[kind[0]] + n * _PLY_TYPES[kind[1]]
+                offset += el.count * row
+        if offset != size:
+            raise MeshError(f"{path}: the PLY header declares {declared}, which take {offset - start:,} bytes "
+                            f"(every list as long as the first), but {size - start:,} follow the header: "
+                            f"it is truncated or its header is wrong")
+    else:
+        with open(path, "rb") as fh:
+            fh.seek(start)
+            body = fh.read()
+        if body.translate(None, _PLY_TEXT):
+            raise _unreadable(path, "the ASCII PLY's data holds bytes that are not text")
+        n_lines = body.count(b"\n") + body.count(b"\r") - body.count(b"\r\n") + (not body.endswith((b"\n", b"\r")) and bool(body))
+        rows = sum(el.count for el in elements)
+        if n_lines < rows:
+            raise MeshError(f"{path}: the PLY header declares {declared} ({rows:,} lines), but {n_lines:,} lines "
+                            f"follow the header: it is truncated or its header is wrong")
+        if n_lines > rows + _PLY_EXTRA_LINES:
+            raise MeshError(f"{path}: {n_lines:,} lines follow the PLY header, which declares {declared} "
+                            f"({rows:,} lines): its header is wrong")
+        if face is not None and index is not None:
+            first = sum(el.count for el in elements[:elements.index(face)])
+            for number, line in enumerate(islice(body.splitlines(), first, first + face.count), start=1):
+                tokens = _TOKEN.finditer(line)
+                try:
+                    for k, (name, kind) in enumerate(face.properties):
+                        n = 1 if not isinstance(kind, tuple) else int(next(tokens).group())
+                        if k == index:
+                            break
+                        for _ in islice(tokens, n):
+                            pass
+                except (StopIteration, ValueError):
+                    raise _unreadable(path, f"face {number} does not hold its properties") from None
+                triangles += max(n - 2, 1)
+                if triangles > limits.faces:
+                    break
+    if triangles > limits.faces:
+        raise limits.refuse(str(path), f"the PLY's {face.count:,} faces make at least {triangles:,} triangles "
+                                       f"(a polygon of n vertices makes n - 2)")
+
+
+# --- glTF / GLB ----------------------------------------------------------------------------------
+
+_GLTF_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_GLTF_TYPE_SIZE = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_GLB_JSON, _GLB_BIN = 0x4E4F534A, 0x004E4942
+_MAX_GLB_CHUNKS = 64  # the format has a JSON chunk and a binary one; trimesh walks every chunk header
+
+
+def _gltf_json(path: Path, size: int) -> tuple[bytes, list[int]]:
+    """(the JSON text, the lengths of the BIN chunks in order) of a .gltf or .glb file, each GLB
+    chunk's declared length checked against the file's size."""
+    if path.suffix.lower() == ".gltf":
+        return path.read_bytes(), []
+    with open(path, "rb") as fh:
+        head = fh.read(20)
+        if len(head) < 20 or head[:4] != b"glTF":
+            raise _unreadable(path, "no GLB header (the magic 'glTF', a version, a length and a JSON chunk)")
+        json_length, json_type = struct.unpack_from("<II", head, 12)
+        if json_type != _GLB_JSON or 20 + json_length > size:
+            raise MeshError(f"{path}: the GLB's first chunk declares {json_length:,} bytes of JSON, but the file holds "
+                            f"{size:,} bytes: it is truncated or not a GLB file")
+        text = fh.read(json_length)
+        chunks, offset, n_chunks = [], 20 + json_length, 0
+        while offset + 8 <= size:
+            fh.seek(offset)
+            length, kind = struct.unpack("<II", fh.read(8))
+            if offset + 8 + length > size:
+                raise MeshError(f"{path}: a GLB chunk at byte {offset:,} declares {length:,} bytes, past the file's "
+                                f"end at {size:,}: it is truncated or its header is wrong")
+            if kind == _GLB_BIN:
+                chunks.append(length)
+            offset += 8 + length
+            n_chunks += 1
+            if n_chunks > _MAX_GLB_CHUNKS:
+                raise _unreadable(path, f"the GLB holds more than {_MAX_GLB_CHUNKS} chunks (a JSON and a binary one expected)")
+    return text, chunks
+
+
+def _gltf_external(path: Path, uri: str) -> Path:
+    """The file a relative buffer URI names, as trimesh's resolver finds it (inside the glTF's folder)."""
+    folder = path.parent
+    for candidate in (uri.strip(), uri.strip().lstrip("/"), Path(uri).name):
+        target = (folder / candidate.strip()).resolve()
+        if target.is_relative_to(folder) and target.exists():
+            return target
+    raise _unreadable(path, f"its buffer file {uri[:80]!r} is not in {folder}")
+
+
+def _nat(value, path: Path, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise _unreadable(path, f"{what} must be a whole number ≥ 0, got {str(value)[:40]!r}")
+    return value
+
+
+def _items(tree: dict, key: str, path: Path, limit: int, limits: _Limits) -> list:
+    items = tree.get(key, [])
+    if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
+        raise _unreadable(path, f"the glTF's {key!r} is not a list of objects")
+    if len(items) > limit:
+        raise limits.refuse(str(path), f"the glTF holds {len(items):,} {key}")
+    return items
+
+
+def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
+    """A glTF's buffers (a .gltf's files counted towards the bytes), buffer views and accessors, which
+    must fit in one another; then the triangles and vertices of every mesh read, and of every mesh
+    placed by a node of the scene trimesh shows (a mesh placed twice counted twice)."""
+    text, chunks = _gltf_json(path, size)
+    n_values = sum(text.count(c) for c in b",:[{") + 1  # a base64 data URI holds none of these
+    if n_values > limits.json_values:
+        raise limits.refuse(str(path), f"the glTF's JSON holds {n_values:,} values (counted by its commas, colons "
+                                       f"and brackets), more than {limits.json_values:,}")
+    try:
+        tree = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise _unreadable(path, f"its JSON does not parse ({str(exc)[:80]})") from None
+    if not isinstance(tree, dict):
+        raise _unreadable(path, "its JSON is not an object")
+    buffers = _items(tree, "buffers", path, limits.faces, limits)
+    views = _items(tree, "bufferViews", path, limits.faces, limits)
+    accessors = _items(tree, "accessors", path, limits.faces, limits)
+    meshes = _items(tree, "meshes", path, limits.parts, limits)
+    nodes = _items(tree, "nodes", path, limits.parts, limits)
+
+    held, total = [], size
+    for b, buffer in enumerate(buffers):  # trimesh reads a buffer's uri if it has one, else the next BIN chunk
+        uri = buffer.get("uri")
+        if uri is None:
+            held.append(chunks.pop(0) if chunks else 0)
+        elif not isinstance(uri, str):
+            raise _unreadable(path, f"buffer {b}'s uri is not a string")
+        elif "base64," in uri:
+            held.append(len(uri) * 3 // 4)
+        else:
+            external = _gltf_external(path, uri)
+            total += _file_size(external, limits, f"its buffer file {external}")
+            held.append(external.stat().st_size)
+            if total > limits.bytes:
+                raise limits.refuse(str(path), f"the file and its buffer files hold {total:,} bytes ({total / 2**20:,.1f} MB)")
+
+    view_bytes = []
+    for v, view in enumerate(views):
+        b = _nat(view.get("buffer"), path, f"buffer view {v}'s buffer")
+        length = _nat(view.get("byteLength"), path, f"buffer view {v}'s byteLength")
+        end = _nat(view.get("byteOffset", 0), path, f"buffer view {v}'s byteOffset") + length
+        if b >= len(held) or end > held[b]:
+            raise MeshError(f"{path}: the glTF's buffer view {v} ends at byte {end:,} of buffer {b}, which holds "
+                            f"{held[b] if b < len(held) else 0:,} bytes: the file is truncated or its JSON is wrong")
+        view_bytes.append(length)
+
+    counts, placeholders = [], 0
+    for a, accessor in enumerate(accessors):
+        count = _nat(accessor.get("count"), path, f"accessor {a}'s count")
+        item = _GLTF_COMPONENT_BYTES.get(accessor.get("componentType"), 0) * _GLTF_TYPE_SIZE.get(accessor.get("type"), 0)
+        if not item:
+            raise _unreadable(path, f"accessor {a} has no known componentType and type")
+        if "bufferView" not in accessor:  # trimesh fills it with zeros; one with data is a view of its buffer
+            placeholders += count
+            if placeholders > limits.vertices:
+                raise limits.refuse(str(path), f"the glTF's accessors without data declare {placeholders:,} items")
+        elif count:
+            v = _nat(accessor["bufferView"], path, f"accessor {a}'s bufferView")
+            if v >= len(views):
+                raise _unreadable(path, f"accessor {a} names buffer view {v}, which does not exist")
+            stride = _nat(views[v].get("byteStride", item), path, f"buffer view {v}'s byteStride")
+            if stride < item:  # overlapping items: trimesh's copy would outgrow the buffer
+                raise _unreadable(path, f"buffer view {v}'s byteStride {stride} is shorter than accessor {a}'s items "
+                                        f"({item} bytes)")
+            need = _nat(accessor.get("byteOffset", 0), path, f"accessor {a}'s byteOffset") + (count - 1) * stride + item
+            if need > view_bytes[v]:
+                raise MeshError(f"{path}: the glTF's accessor {a} declares {count:,} items, which take {need:,} bytes, "
+                                f"but its buffer view {v} holds {view_bytes[v]:,}: the file is truncated or its JSON is wrong")
+        counts.append(count)
+
+    def count_of(index, what: str) -> int:
+        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < len(counts):
+            raise _unreadable(path, f"{what} names no accessor")
+        return counts[index]
+
+    mesh_size, n_primitives = [], 0  # (triangles, vertices) of each mesh
+    for m, mesh in enumerate(meshes):
+        primitives = mesh.get("primitives", [])
+        n_primitives += len(primitives) if isinstance(primitives, list) else 0
+        if n_primitives > limits.parts:
+            raise limits.refuse(str(path), f"the glTF's meshes hold more than {limits.parts:,} primitives")
+        triangles = vertices = 0
+        for p, primitive in enumerate(primitives):
+            if not isinstance(primitive, dict) or not isinstance(primitive.get("attributes"), dict):
+                raise _unreadable(path, f"mesh {m}'s primitive {p} has no attributes")
+            n_vertices = count_of(primitive["attributes"].get("POSITION"), f"mesh {m}'s primitive {p}'s POSITION")
+            n_corners = count_of(primitive["indices"], f"mesh {m}'s primitive {p}'s indices") \
+                if "indices" in primitive else n_vertices
+            mode = primitive.get("mode", 4)
+            triangles += n_corners // 3 if mode == 4 else max(n_corners - 2, 0) if mode == 5 else 0
+            vertices += n_vertices
+        mesh_size.append((triangles, vertices))
+    read = [sum(t for t, _ in mesh_size), sum(v for _, v in mesh_size)]
+
+    # trimesh walks the nodes from the chosen scene's roots, each (parent, child) link once, and places
+    # a mesh at each link (a node reached twice makes a DAG, not the tree the format asks for)
+    scenes = tree.get("scenes") if isinstance(tree.get("scenes"), list) else []
+    chosen = tree.get("scene", 0)
+    scene = scenes[chosen] if isinstance(chosen, int) and 0 <= chosen < len(scenes) else {}
+    roots = scene.get("nodes", []) if isinstance(scene, dict) else []
+    roots = roots if isinstance(roots, list) else []
+    children = [n.get("children", []) if isinstance(n.get("children", []), list) else [] for n in nodes]
+    n_links = len(roots) + sum(map(len, children))
+    if n_links > limits.parts:
+        raise limits.refuse(str(path), f"the glTF's scene links {n_links:,} nodes")
+    placed = [0, 0]
+    stack, seen = [(None, r) for r in roots], set()
+    while stack and placed[0] <= limits.faces and placed[1] <= limits.vertices:
+        link = stack.pop()
+        if link in seen:
+            continue
+        seen.add(link)
+        n = link[1]
+        if isinstance(n, bool) or not isinstance(n, int) or not 0 <= n < len(nodes):
+            raise _unreadable(path, f"the scene names node {str(n)[:20]}, which does not exist")
+        if "mesh" in nodes[n]:
+            m = nodes[n]["mesh"]
+            if isinstance(m, bool) or not isinstance(m, int) or not 0 <= m < len(mesh_size):
+                raise _unreadable(path, f"node {n} names mesh {str(m)[:20]}, which does not exist")
+            placed[0] += mesh_size[m][0]
+            placed[1] += mesh_size[m][1]
+        stack.extend((n, c) for c in children[n])
+    for (triangles, vertices), how in ((read, "its meshes hold"), (placed, "its scene places at least")):
+        if triangles > limits.faces or vertices > limits.vertices:
+            raise limits.refuse(str(path), f"{how} {triangles:,} triangles and {vertices:,} vertices")
+
+
+def _check_limits(path: Path, suffix: str, limits: _Limits) -> None:
+    """Refuse a mesh file beyond ``limits`` (or whose header lies) before trimesh reads it."""
+    size = _file_size(path, limits)
+    if suffix == ".obj":
+        _check_obj(path, limits)
+    elif suffix == ".stl":
+        _check_stl(path, limits, size)
+    elif suffix == ".ply":
+        _check_ply(path, limits, size)
+    else:
+        _check_gltf(path, limits, size)
+
+
+def read_mesh(path: str | Path, angle_deg: float = 30.0, *, max_faces: int = MAX_MESH_FACES) -> BRep:
     """Read a mesh file into a feature-edge ``BRep`` (object frame = the file's frame, metres).
 
     Parameters
     ----------
     path : an ``.obj``, ``.stl``, ``.ply``, ``.gltf`` or ``.glb`` file.
     angle_deg : dihedral angle from which an edge between two triangles is drawn.
+    max_faces : the most triangles the file may hold; it also sets the vertex limit (3 per triangle)
+        and the byte limit (64 MB per 200,000 triangles, never less than 64 MB).
     """
     import trimesh
 
+    if isinstance(max_faces, bool) or not isinstance(max_faces, (int, np.integer)) or max_faces < 1:
+        raise ValueError(f"max_faces must be a whole number ≥ 1, got {max_faces!r}")
+    limits = _Limits(int(max_faces))
     path = Path(path).resolve()
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise MeshError(f"{path}: unknown mesh type {suffix!r}; use one of {', '.join(MESH_SUFFIXES)}")
     if not path.is_file():
         raise MeshError(f"{path}: no such file")
-    if suffix == ".obj":
-        _check_obj(path)
+    _check_limits(path, suffix, limits)
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=False)
+        mesh = trimesh.load(str(path), force="mesh", process=False, skip_materials=True)
     except Exception as exc:  # trimesh raises many types for bad files
         raise MeshError(f"{path}: cannot read the mesh: {exc}") from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise MeshError(f"{path}: the file holds no triangles")
+    if len(mesh.faces) > limits.faces or len(mesh.vertices) > limits.vertices:  # the checks above bound trimesh's
+        raise limits.refuse(str(path), f"trimesh read {len(mesh.faces):,} triangles and {len(mesh.vertices):,} vertices")
     V = np.asarray(mesh.vertices, dtype=float)
     if not np.all(np.isfinite(V)):
         raise MeshError(f"{path}: the mesh has non-finite vertex coordinates")
