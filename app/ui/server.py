@@ -37,6 +37,7 @@ from app.workflows.site import Site
 from .access import AccessPolicy, open_viser_server
 from .client import ClientPanel
 from .db_overlay import DatabaseOverlay
+from .inbound import guard_inbound_messages
 from .recent import RecentFrames
 from .world3d import World3D
 from .wslog import quiet_malformed_messages
@@ -75,6 +76,8 @@ class InterfaceServer:
         self.access = AccessPolicy(host=host, allow_origins=tuple(allow_origins), token=token)
         quiet_malformed_messages()  # a message a browser sent that cannot be read: one log line, not a traceback
         self.server = open_viser_server(self.access, host=host, port=port, label="mcit", verbose=verbose)
+        # each browser message checked against its type before viser dispatches it; a bad one dropped, one log line
+        self.inbound = guard_inbound_messages(self.server, name_of=lambda cid: f"browser-{cid + self.client_number_offset}")
         self.host = host
         self.clients: dict[int, ClientPanel] = {}
         self.clients_lock = threading.RLock()

@@ -8,7 +8,8 @@ hostile client repeats at will. ``quiet_malformed_messages()`` installs a filter
 viser's message reader) into one WARNING line saying who sent what; any other failure of a
 connection keeps its traceback (it is a fault of the server, not of the message). A message viser
 decodes but whose field has the wrong shape only raises viser's UserWarning (two lines, source
-included); that warning becomes one WARNING line too (logger ``mcit.ui``).
+included); that warning becomes one WARNING line too (logger ``mcit.ui``). mcit's interface checks
+each message before viser reads it (app/ui/inbound.py): these lines are the net for what passes it.
 """
 
 from __future__ import annotations
