@@ -23,32 +23,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-MAX_FPS = 240.0  # the fastest rate a command replays, renders or writes at (frames per second)
-
-
-def frame_rate(text: str) -> float:
-    """argparse ``type=`` of an ``--fps``: a finite rate in (0, MAX_FPS] frames per second."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected frames per second (a number), got {text!r}") from None
-    if not 0.0 < value <= MAX_FPS:  # NaN fails this too
-        raise argparse.ArgumentTypeError(f"expected a frame rate above 0 and at most {MAX_FPS:g} frames per second, "
-                                         f"got {text!r}")
-    return value
-
-
-def port_number(text: str) -> int:
-    """argparse ``type=`` of a ``--port``: 1 to 65535, or 0 for any free port the system chooses."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a TCP port number, got {text!r}") from None
-    if not 0 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"expected a TCP port from 1 to 65535 (0: any free port), got {text!r}")
-    return value
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="mcit", description="Keep a remote site's 3D model true to its live video.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -21,6 +21,8 @@ import sys
 import time
 from pathlib import Path
 
+from app.argtypes import number
+
 __all__ = ["add_db_parser"]
 
 
@@ -203,24 +205,8 @@ def _run(func):
     return wrapped
 
 
-def _wait_s(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds (a number), got {text!r}") from None
-    if not 0.0 <= value <= 3600.0:
-        raise argparse.ArgumentTypeError(f"expected 0 to 3600 seconds, got {text!r}")
-    return value
-
-
-def _max_faces(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of triangles, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected at least 1 triangle, got {text!r}")
-    return value
+_wait_s = number(float, lambda v: 0.0 <= v <= 3600.0, kind="seconds (a number)", expected="0 to 3600 seconds")
+_max_faces = number(int, lambda v: v >= 1, kind="a whole number of triangles", expected="at least 1 triangle")
 
 
 def add_db_parser(subparsers) -> argparse.ArgumentParser:

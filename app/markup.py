@@ -19,14 +19,14 @@ from typing import Any, Iterable
 __all__ = ["Md", "escape", "as_markdown"]
 
 # HTML's three (an element, an entity), and every character that starts Markdown inline syntax
-# (emphasis, code, links and images, tables, strike-through, headings), and what makes GitHub's
-# autolinks of bare addresses (``http://…``, ``name@host``; ``www.`` below). A line break would start
-# a new block (a heading, a list, a table row): it becomes a space.
+# (emphasis, code, links and images, tables, strike-through, headings), and ``@`` of GitHub's e-mail
+# autolinks. A line break would start a new block (a heading, a list, a table row): it becomes a space.
 _ESCAPES = str.maketrans(
     {"&": "&amp;", "<": "&lt;", ">": "&gt;", "\n": " ", "\r": " ", "\t": " ", "\x00": ""}
-    | {c: "\\" + c for c in "\\`*_[]|~#!:@"}
+    | {c: "\\" + c for c in "\\`*_[]|~#!@"}
 )
-_WWW = re.compile(r"(www)\.", re.IGNORECASE)
+# The rest of GitHub's autolinks of bare addresses: ``scheme://…``, ``www.…``, ``mailto:``, ``xmpp:``.
+_AUTOLINK = re.compile(r"(://|\bwww\.|\bmailto:|\bxmpp:)", re.IGNORECASE)
 
 
 class Md(str):
@@ -58,7 +58,13 @@ def escape(text: Any) -> Md:
     """``text`` as Markdown that shows it verbatim (on one line); ``Md`` passes unchanged."""
     if isinstance(text, Md):
         return text
-    return Md(_WWW.sub(r"\1\\.", str(text).translate(_ESCAPES)))
+    return Md(_AUTOLINK.sub(_break_autolink, str(text).translate(_ESCAPES)))
+
+
+def _break_autolink(m: re.Match) -> str:
+    """``://`` → ``\\://``; ``www.`` → ``www\\.``; ``mailto:`` → ``mailto\\:``: shown the same, linked no more."""
+    found = m.group(1)
+    return "\\://" if found == "://" else found[:-1] + "\\" + found[-1]
 
 
 def as_markdown(content: Any) -> str:

@@ -64,7 +64,6 @@ triangle of the curved region: keep the mesh file (OBJ, glTF) for the silhouette
 
 from __future__ import annotations
 
-import errno
 import re
 import stat
 import warnings
@@ -75,6 +74,7 @@ from typing import IO
 import numpy as np
 from scipy.spatial import cKDTree
 
+from app.models_io.files import resolve_file
 from app.names import NAME_RULE, check_object_name
 from core.brep import BRep, Circle, Revolution
 from core.transforms import exp_so3, make_T
@@ -172,15 +172,8 @@ def _limits() -> str:
 
 
 def _resolved(path: Path, where: str | None = None) -> Path:
-    """``path`` absolute, its symbolic links followed; CaoError (naming ``where``, the file:line that
-    names it) for links that lead back to each other."""
-    try:
-        return path.resolve()
-    except (RuntimeError, OSError) as exc:  # RuntimeError before Python 3.13, OSError ELOOP since
-        if isinstance(exc, OSError) and exc.errno != errno.ELOOP:
-            raise CaoError(f"{where or path}: cannot follow {path}: {exc.strerror or type(exc).__name__}") from None
-        raise CaoError(f"{where + ': ' if where else ''}{path} is a loop of symbolic links that never reaches a file; "
-                       "point the link at the model file") from None
+    """``path`` absolute, its symbolic links followed; CaoError for a loop of them (``resolve_file``)."""
+    return resolve_file(path, CaoError, where)
 
 
 class _Lines:

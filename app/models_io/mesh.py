@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.models_io.files import resolve_file
 from core.brep import BRep
 from core.mesh_features import brep_from_mesh
 from core.silhouette import SmoothSides
@@ -562,7 +563,7 @@ def read_mesh(path: str | Path, angle_deg: float = 30.0, *, max_faces: int = MAX
     if isinstance(max_faces, bool) or not isinstance(max_faces, (int, np.integer)) or max_faces < 1:
         raise ValueError(f"max_faces must be a whole number ≥ 1, got {max_faces!r}")
     limits = _Limits(int(max_faces))
-    path = Path(path).resolve()
+    path = resolve_file(Path(path), MeshError)
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise MeshError(f"{path}: unknown mesh type {suffix!r}; use one of {', '.join(MESH_SUFFIXES)}")

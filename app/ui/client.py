@@ -726,11 +726,11 @@ class ClientPanel:
         if self.view == "video":  # between 200× in and a little beyond the whole image
             fit = abs(float(self.app.pixel_world.fit_camera(aspect, cam.fov)[0][2]))
             dist = abs(float(position[2]))
+            if not dist > 1e-9:  # a camera in the image's plane (a page can report one): nothing to zoom about
+                return
             f = float(np.clip(f, 0.005 * fit / dist, 2.0 * fit / dist))
         with self.client.atomic():
-            cam.look_at = X + f * (look_at - X)
-            cam.position = X + f * (position - X)
-            cam.look_at = X + f * (look_at - X)
+            _place_camera(cam, X + f * (position - X), X + f * (look_at - X))
         self.dirty = True
 
     def _on_camera(self, cam) -> None:
@@ -815,9 +815,7 @@ class ClientPanel:
             cam.near = 0.05
             cam.far = 2000.0
             cam.up_direction = up
-            cam.look_at = look_at
-            cam.position = position
-            cam.look_at = look_at
+            _place_camera(cam, position, look_at)
         self.dirty = True
 
     def _ensure_rect_select(self, on: bool) -> None:
@@ -1033,6 +1031,13 @@ def _show(handle, content) -> None:
     text = as_markdown(content)
     if handle.content != text:
         handle.content = text
+
+
+def _place_camera(cam, position: np.ndarray, look_at: np.ndarray) -> None:
+    """Move a client's camera. The position first: viser moves the look-at point with it, and refuses a
+    look-at point equal to the position the camera has at that moment (whatever the page reported)."""
+    cam.position = position
+    cam.look_at = look_at
 
 
 def _idle_text(selected: str | None) -> str:

@@ -301,6 +301,9 @@ class InboundGuard:
         An input that is gone passes: viser ignores a message about it."""
         import viser
 
+        if mapping["type"] in ("ShareUrlRequest", "ShareUrlDisconnect"):
+            # viser's Share opens a tunnel through viser's public relay: mcit's interface is not shared that way
+            return "a request to share the interface through viser's public relay (mcit hides that button)"
         if mapping["type"] == "GuiUpdateMessage":
             handle = self.gui_handle(client_id, mapping["uuid"])
             return None if handle is None else gui_update_problem(mapping["updates"]["value"], handle)

@@ -21,7 +21,7 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
 def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    from app.cli import frame_rate, port_number
+    from app.argtypes import frame_rate, port_number
 
     p = sub.add_parser(
         "serve",

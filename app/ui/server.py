@@ -78,6 +78,8 @@ class InterfaceServer:
         self.server = open_viser_server(self.access, host=host, port=port, label="mcit", verbose=verbose)
         # each browser message checked against its type before viser dispatches it; a bad one dropped, one log line
         self.inbound = guard_inbound_messages(self.server, name_of=lambda cid: f"browser-{cid + self.client_number_offset}")
+        # no Share button: it would open a tunnel to the interface through viser's public relay
+        self.server.gui.configure_theme(show_share_button=False)
         self.host = host
         self.clients: dict[int, ClientPanel] = {}
         self.clients_lock = threading.RLock()

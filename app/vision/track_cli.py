@@ -34,7 +34,7 @@ def _pixel(text: str) -> tuple[float, float]:
 
 
 def add_track_parser(sub) -> None:
-    from app.cli import frame_rate
+    from app.argtypes import frame_rate
 
     p = sub.add_parser(
         "track",

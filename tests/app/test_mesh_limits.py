@@ -392,3 +392,11 @@ def test_max_faces_must_be_a_positive_whole_number(tmp_path):
     for bad in (0, -1, 2.5, True, "10"):
         with pytest.raises(ValueError, match="max_faces must be a whole number"):
             read_mesh(path, max_faces=bad)
+
+
+def test_a_mesh_through_a_loop_of_symbolic_links_is_said_as_such(tmp_path):
+    a, b = tmp_path / "a.stl", tmp_path / "b.stl"
+    a.symlink_to(b)
+    b.symlink_to(a)
+    with pytest.raises(MeshError, match=r"a\.stl is a loop of symbolic links that never reaches a file"):
+        read_mesh(a)

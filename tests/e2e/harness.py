@@ -40,7 +40,7 @@ def screen_of(server, panel, uv) -> tuple[float, float]:
     return float(x), float(y)
 
 
-def wait_until(predicate, timeout_s: float = 8.0, what: str = "condition", panel=None) -> None:
+def wait_until(predicate, timeout_s: float = 20.0, what: str = "condition", panel=None) -> None:
     """Poll ``predicate()`` until it is true; AssertionError naming ``what`` after timeout_s (and, given a
     client ``panel``, what its panel said then)."""
     deadline = time.monotonic() + timeout_s
@@ -184,7 +184,7 @@ def prompt_controls(panel) -> list[str]:
     return [wf.control(a).label for a in step.named()]
 
 
-def assert_prompt_controls(page, timeout_s: float = 5.0) -> list[str]:
+def assert_prompt_controls(page, timeout_s: float = 15.0) -> list[str]:
     """Every control the instruction names is a visible, enabled button (or chooser) on the page.
 
     Returns the labels checked. The prompt's named controls come from the workflow's declared step;
@@ -213,7 +213,7 @@ def assert_prompt_controls(page, timeout_s: float = 5.0) -> list[str]:
         time.sleep(0.1)
 
 
-def press(page, label: str, timeout_ms: int = 5000) -> None:
+def press(page, label: str, timeout_ms: int = 15000) -> None:
     """Click the visible button whose name starts with ``label`` (e.g. "Solve" for "Solve (R)")."""
     import re
 

@@ -185,6 +185,19 @@ def test_a_pointer_message_of_the_wrong_shape_is_dropped_with_one_line(served, c
     page.close()
 
 
+def test_a_request_to_share_through_viser_s_relay_is_dropped(served, capfd):
+    """viser's Share opens a tunnel to the interface through its public relay: mcit hides the button
+    and drops the request, so no page can open one."""
+    page, panel = served.page()
+    page.send({"type": "ShareUrlRequest"})
+    served.settle(page, panel)
+    (line,) = served.inbound_lines()
+    assert "share the interface through viser's public relay" in line.getMessage()
+    assert served.server.server._share_tunnel is None
+    served.assert_no_failure(page)
+    page.close()
+
+
 # --------------------------------------------------------------------------- the fuzzer
 
 BAD_NUMBERS = (None, "1.5", math.nan, math.inf, -math.inf, 1e300, -2e9, [1.0], {"x": 1.0}, True, b"\x01")

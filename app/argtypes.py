@@ -1,0 +1,33 @@
+"""argparse ``type=`` checks for the command line's numbers: each refusal is argparse's one line,
+"argument --X: expected …, got '…'"."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Callable
+
+__all__ = ["MAX_FPS", "number", "frame_rate", "port_number"]
+
+MAX_FPS = 240.0  # the fastest rate a command replays, renders or writes at (frames per second)
+
+
+def number(convert: Callable[[str], float], ok: Callable[[float], bool], *, kind: str, expected: str):
+    """A ``type=`` that reads ``convert(text)`` (else "expected {kind}") and keeps it when ``ok`` (else
+    "expected {expected}"); ``ok`` is false for NaN when written as a comparison."""
+
+    def parse(text: str):
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {kind}, got {text!r}") from None
+        if not ok(value):
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+        return value
+
+    return parse
+
+
+frame_rate = number(float, lambda v: 0.0 < v <= MAX_FPS, kind="frames per second (a number)",
+                    expected=f"a frame rate above 0 and at most {MAX_FPS:g} frames per second")
+port_number = number(int, lambda v: 0 <= v <= 65535, kind="a TCP port number",
+                     expected="a TCP port from 1 to 65535 (0: any free port)")
