@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import argparse
-from typing import Callable
+from collections.abc import Callable
 
 __all__ = ["MAX_FPS", "number", "frame_rate", "port_number"]
 
@@ -27,7 +27,12 @@ def number(convert: Callable[[str], float], ok: Callable[[float], bool], *, kind
     return parse
 
 
-frame_rate = number(float, lambda v: 0.0 < v <= MAX_FPS, kind="frames per second (a number)",
-                    expected=f"a frame rate above 0 and at most {MAX_FPS:g} frames per second")
-port_number = number(int, lambda v: 0 <= v <= 65535, kind="a TCP port number",
-                     expected="a TCP port from 1 to 65535 (0: any free port)")
+frame_rate = number(
+    float,
+    lambda v: 0.0 < v <= MAX_FPS,
+    kind="frames per second (a number)",
+    expected=f"a frame rate above 0 and at most {MAX_FPS:g} frames per second",
+)
+port_number = number(
+    int, lambda v: 0 <= v <= 65535, kind="a TCP port number", expected="a TCP port from 1 to 65535 (0: any free port)"
+)

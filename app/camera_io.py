@@ -52,8 +52,11 @@ _OPENCV_DIST_KEYS = ("distortion_coefficients", "distortion_coefficents", "dist_
 _WIDTH_KEYS = ("image_width", "width")
 _HEIGHT_KEYS = ("image_height", "height")
 _OPENCV_DIST_COUNTS = (4, 5, 8, 12, 14)  # OpenCV's distortion models (k1 k2 p1 p2 [k3 [k4 k5 k6 [s1..s4 [τx τy]]]])
-_DIST_NAMES = {"opencv": ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tauX", "tauY"),
-               "fisheye": ("k1", "k2", "k3", "k4"), "visp": ("kud", "kdu")}
+_DIST_NAMES = {
+    "opencv": ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tauX", "tauY"),
+    "fisheye": ("k1", "k2", "k3", "k4"),
+    "visp": ("kud", "kdu"),
+}
 # A focal length, in image sides (the larger of width and height): from a 178° field of view to 0.006°.
 _MIN_FOCAL_SIDES, _MAX_FOCAL_SIDES = 0.01, 1e4
 _MAX_FOCAL_PX = 1e8  # when the file states no image size: 10⁴ sides of a 10⁴-pixel image
@@ -119,19 +122,25 @@ def _check_plausible_K(K: np.ndarray, width: int | None, height: int | None, whe
         lo, hi, images = 1.0, _MAX_FOCAL_PX, "images of any size"
     for what, f in (("fx", fx), ("fy", fy)):
         if not lo <= f <= hi:
-            raise ValueError(f"{where}: {what}={f:g} px is not a focal length a lens gives for {images} (between "
-                             f"{lo:g} and {hi:g} px: a field of view from 178° down to 0.006°); check the file's "
-                             "camera matrix")
+            raise ValueError(
+                f"{where}: {what}={f:g} px is not a focal length a lens gives for {images} (between "
+                f"{lo:g} and {hi:g} px: a field of view from 178° down to 0.006°); check the file's "
+                "camera matrix"
+            )
     if abs(skew) > max(fx, fy):
-        raise ValueError(f"{where}: the skew K[0, 1]={skew:g} is larger than the focal lengths (fx={fx:g}, fy={fy:g}): "
-                         "no camera's pixel axes are that slanted; check the file's camera matrix")
+        raise ValueError(
+            f"{where}: the skew K[0, 1]={skew:g} is larger than the focal lengths (fx={fx:g}, fy={fy:g}): "
+            "no camera's pixel axes are that slanted; check the file's camera matrix"
+        )
     if width is not None and height is not None:
         far = not (-width <= u0 <= 2 * width and -height <= v0 <= 2 * height)
     else:
         far = max(abs(u0), abs(v0)) > _MAX_FOCAL_PX
     if far:
-        raise ValueError(f"{where}: the principal point (u0, v0) = ({u0:g}, {v0:g}) px lies far outside "
-                         f"{images}; check the file's camera matrix")
+        raise ValueError(
+            f"{where}: the principal point (u0, v0) = ({u0:g}, {v0:g}) px lies far outside "
+            f"{images}; check the file's camera matrix"
+        )
 
 
 def _coefficients_text(model: str, d: np.ndarray) -> str:
@@ -140,7 +149,7 @@ def _coefficients_text(model: str, d: np.ndarray) -> str:
     return ", ".join(named) or "all zero"
 
 
-def _check_lens(intr: "Intrinsics", width: int, height: int) -> None:
+def _check_lens(intr: Intrinsics, width: int, height: int) -> None:
     """ValueError when the file's lens distortion cannot be undone over a ``width`` × ``height`` image.
 
     First, the undistorted image must show the camera's image over at least ``_MIN_SHOWN`` of its
@@ -169,9 +178,11 @@ def _check_lens(intr: "Intrinsics", width: int, height: int) -> None:
         u, v = np.meshgrid(np.linspace(0.0, width - 1.0, 65), np.linspace(0.0, height - 1.0, 49))
         shown = float(np.mean(inside(lens.distort(np.column_stack([u.ravel(), v.ravel()])))))
         if shown < _MIN_SHOWN:
-            raise ValueError(f"the lens distortion in {where} ({coefficients}) stretches the image so far that "
-                             f"undistorted frames would show it in only {100 * shown:.2g} % of their area: check the "
-                             "file's distortion coefficients")
+            raise ValueError(
+                f"the lens distortion in {where} ({coefficients}) stretches the image so far that "
+                f"undistorted frames would show it in only {100 * shown:.2g} % of their area: check the "
+                "file's distortion coefficients"
+            )
         corners = np.array([[0.0, 0.0], [width - 1.0, 0.0], [0.0, height - 1.0], [width - 1.0, height - 1.0]]) - pp
         angles = np.r_[np.radians(np.arange(0.0, 360.0, 5.0)), np.arctan2(corners[:, 1], corners[:, 0])]
         dirs_px = np.column_stack([np.cos(angles), np.sin(angles)])  # image directions from the principal point
@@ -189,14 +200,16 @@ def _check_lens(intr: "Intrinsics", width: int, height: int) -> None:
             last = int(np.flatnonzero(ideal_in[k]).max(initial=0))
             entered = np.flatnonzero(seen_in[k])
             if entered.size:
-                left = np.flatnonzero(~seen_in[k, entered[0]:])
+                left = np.flatnonzero(~seen_in[k, entered[0] :])
                 last = max(last, (entered[0] + int(left[0])) if left.size else len(radii) - 1)
-            if not np.all(np.diff(rho[k, :last + 1]) > 0.0):
-                raise ValueError(f"the lens distortion in {where} ({coefficients}) folds the image over itself within "
-                                 "the image: check the file's distortion coefficients")
+            if not np.all(np.diff(rho[k, : last + 1]) > 0.0):
+                raise ValueError(
+                    f"the lens distortion in {where} ({coefficients}) folds the image over itself within "
+                    "the image: check the file's distortion coefficients"
+                )
 
 
-def _checked(intr: "Intrinsics", image_size: tuple[int, int] | None) -> "Intrinsics":
+def _checked(intr: Intrinsics, image_size: tuple[int, int] | None) -> Intrinsics:
     """``intr`` once its K is a lens's and its distortion can be undone over the image (its size, or ``image_size``)."""
     width, height = (intr.width, intr.height) if intr.width is not None else (image_size or (None, None))
     _check_plausible_K(intr.K, width, height, intr.source)
@@ -232,9 +245,11 @@ def _size_text(w: int | None, h: int | None) -> str:
     return f"{w}×{h}" if w is not None and h is not None else "no size"
 
 
-def _pick_visp(cameras: list[ET.Element], where: str, camera_name: str | None,
-               image_size: tuple[int, int] | None) -> ET.Element:
+def _pick_visp(
+    cameras: list[ET.Element], where: str, camera_name: str | None, image_size: tuple[int, int] | None
+) -> ET.Element:
     """The one <camera> that ``camera_name`` and ``image_size`` choose (as vpXmlParserCamera::parse)."""
+
     def name(c):
         return (c.findtext("name") or "").strip()
 
@@ -253,12 +268,16 @@ def _pick_visp(cameras: list[ET.Element], where: str, camera_name: str | None,
         if sized:
             cameras, among = sized, f"for {image_size[0]}×{image_size[1]} images"
         elif all(None not in size(c) for c in cameras):
-            raise ValueError(f"{where}: no camera{' named ' + repr(camera_name) if camera_name else ''} for "
-                             f"{image_size[0]}×{image_size[1]} images; it has: {listed}")
+            raise ValueError(
+                f"{where}: no camera{' named ' + repr(camera_name) if camera_name else ''} for "
+                f"{image_size[0]}×{image_size[1]} images; it has: {listed}"
+            )
     if len(cameras) > 1:
         listed = "; ".join(f"{name(c) or '(no name)'} {_size_text(*size(c))}" for c in cameras)
-        raise ValueError(f"{where}: {len(cameras)} cameras {among} ({listed}); choose one with --camera-name "
-                         "(camera_name= in Python)")
+        raise ValueError(
+            f"{where}: {len(cameras)} cameras {among} ({listed}); choose one with --camera-name "
+            "(camera_name= in Python)"
+        )
     return cameras[0]
 
 
@@ -270,7 +289,9 @@ def _read_visp(path: Path, camera_name: str | None, image_size: tuple[int, int] 
         raise ValueError(f"{where}: not well-formed XML ({exc})") from None
     cameras = [root] if root.tag == "camera" else root.findall("camera")
     if not cameras:
-        raise ValueError(f"{where}: no <camera> element; expected a ViSP camera file (<root><camera>…) or tracker settings (<conf><camera>…)")
+        raise ValueError(
+            f"{where}: no <camera> element; expected a ViSP camera file (<root><camera>…) or tracker settings (<conf><camera>…)"
+        )
     cam = _pick_visp(cameras, where, camera_name, image_size)
     name = (cam.findtext("name") or "").strip() or None
     cw = f"{where}: <camera>" if name is None else f"{where}: <camera> {name!r}"
@@ -393,7 +414,9 @@ def _matrix(value: Any, where: str, shape: tuple[int, ...] | None = None) -> np.
             raise ValueError(f"{where}: not a list of numbers: {value!r}") from None
     if shape is not None and a.shape != shape:
         if a.size != int(np.prod(shape)):
-            raise ValueError(f"{where}: {int(np.prod(shape))} numbers expected ({'×'.join(map(str, shape))}), got {a.size}")
+            raise ValueError(
+                f"{where}: {int(np.prod(shape))} numbers expected ({'×'.join(map(str, shape))}), got {a.size}"
+            )
         a = a.reshape(shape)
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{where}: holds a number that is not finite")
@@ -428,7 +451,9 @@ def _pick_map(tree: dict, where: str, camera_name: str | None) -> tuple[dict, st
     cams = {str(k): v for k, v in tree.items() if _has_K(v)}
     if not cams:
         keys = ", ".join(_OPENCV_K_KEYS)
-        raise ValueError(f"{where}: no camera matrix (looked for {keys}, in any case; found {', '.join(map(str, tree))})")
+        raise ValueError(
+            f"{where}: no camera matrix (looked for {keys}, in any case; found {', '.join(map(str, tree))})"
+        )
 
     def name_of(key, m):
         n = _get(m, ("camera_name",))[1]
@@ -442,8 +467,10 @@ def _pick_map(tree: dict, where: str, camera_name: str | None) -> tuple[dict, st
     elif len(cams) == 1:
         key = next(iter(cams))
     else:
-        raise ValueError(f"{where}: {len(cams)} cameras in the file ({', '.join(cams)}); choose one with "
-                         "--camera-name (camera_name= in Python)")
+        raise ValueError(
+            f"{where}: {len(cams)} cameras in the file ({', '.join(cams)}); choose one with "
+            "--camera-name (camera_name= in Python)"
+        )
     return cams[key], name_of(key, cams[key]), f"{where}: {key}"
 
 
@@ -467,8 +494,10 @@ def _intrinsics_from_tree(tree: dict, path: Path, key: str | None, camera_name: 
                 raise ValueError(f"{cw}: '{k}' must be [width, height] in whole pixels, got {s.tolist()}")
             width, height = int(s[0]), int(s[1])
     if (width is None) != (height is None):
-        raise ValueError(f"{cw}: states the image {'width' if width is not None else 'height'} but not the "
-                         f"{'height' if width is not None else 'width'}")
+        raise ValueError(
+            f"{cw}: states the image {'width' if width is not None else 'height'} but not the "
+            f"{'height' if width is not None else 'width'}"
+        )
     width, height = _check_size(width, height, cw)
     dk, dv = _get(d, _OPENCV_DIST_KEYS)
     dist = np.zeros(0) if dk is None else _matrix(dv, f"{cw}: {dk}").ravel()
@@ -481,8 +510,10 @@ def _intrinsics_from_tree(tree: dict, path: Path, key: str | None, camera_name: 
         if model == "equidistant" and dist.size != 4:
             raise ValueError(f"{cw}: the equidistant (fisheye) model has 4 distortion coefficients, got {dist.size}")
         if model != "equidistant" and dist.size not in _OPENCV_DIST_COUNTS:
-            raise ValueError(f"{cw}: '{dk}' holds {dist.size} coefficients; OpenCV's distortion models have "
-                             f"{', '.join(map(str, _OPENCV_DIST_COUNTS))}")
+            raise ValueError(
+                f"{cw}: '{dk}' holds {dist.size} coefficients; OpenCV's distortion models have "
+                f"{', '.join(map(str, _OPENCV_DIST_COUNTS))}"
+            )
         model = model or "opencv"
     return Intrinsics(K, width, height, dist, where, model if dist.size else "", name)
 
@@ -503,8 +534,9 @@ def read_opencv_yml(path: str | Path, key: str | None = None) -> np.ndarray:
     return _checked(_read_opencv(path, key), None).K
 
 
-def read_intrinsics(path: str | Path, *, camera_name: str | None = None,
-                    image_size: tuple[int, int] | None = None) -> Intrinsics:
+def read_intrinsics(
+    path: str | Path, *, camera_name: str | None = None, image_size: tuple[int, int] | None = None
+) -> Intrinsics:
     """Intrinsics (K, size, distortion) of a ViSP ``.xml``, an OpenCV or ROS ``.yml``/``.yaml``/``.json``.
 
     An ``.xml`` is tried as ViSP first, then as an OpenCV FileStorage (``<opencv_storage>``).
@@ -535,4 +567,6 @@ def _read_intrinsics(path: Path, camera_name: str | None, image_size: tuple[int,
         return _read_visp(path, camera_name, image_size)
     if suffix in (".yml", ".yaml", ".json"):
         return _read_opencv(path, None, camera_name)
-    raise ValueError(f"{path}: unknown intrinsics format {suffix!r}; use a ViSP .xml, or an OpenCV or ROS .yml/.yaml/.json")
+    raise ValueError(
+        f"{path}: unknown intrinsics format {suffix!r}; use a ViSP .xml, or an OpenCV or ROS .yml/.yaml/.json"
+    )

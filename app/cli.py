@@ -80,8 +80,10 @@ def explain(exc: BaseException) -> tuple[str, int]:
         return _one_line(str(exc) or type(exc).__name__), 1  # mcit's own errors say what to do
     if isinstance(exc, MemoryError):
         return "ran out of memory; close other programs or give smaller input", 1
-    return _one_line(f"internal error ({type(exc).__name__}: {exc}); this is a bug in mcit: please report it with the "
-                     "command you ran (MCIT_TRACEBACK=1 shows where it happened)"), 70
+    return _one_line(
+        f"internal error ({type(exc).__name__}: {exc}); this is a bug in mcit: please report it with the "
+        "command you ran (MCIT_TRACEBACK=1 shows where it happened)"
+    ), 70
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -43,8 +43,10 @@ def _cmd_init(args) -> int:
     scene = load_scene(args.scene or default_scene_path())
     with _open(args) as db:
         out = seed_from_scene(db, scene, client="cli")
-        print(f"{db.path}: seeded from scene {scene.name!r}: objects {', '.join(out['objects']) or '(none)'}; "
-              f"camera and turret calibrations #{out['calibrations'][0]}, #{out['calibrations'][1]}")
+        print(
+            f"{db.path}: seeded from scene {scene.name!r}: objects {', '.join(out['objects']) or '(none)'}; "
+            f"camera and turret calibrations #{out['calibrations'][0]}, #{out['calibrations'][1]}"
+        )
     return 0
 
 
@@ -71,11 +73,21 @@ def _cmd_import(args) -> int:
     roll, pitch, yaw = np.radians(args.rpy_deg)
     T = make_T(rot_z(yaw) @ rot_y(pitch) @ rot_x(roll), np.asarray(args.xyz, float))
     with _open(args) as db:
-        rec = db.add_object(name, args.kind, model, T, status=args.status, source=str(path.resolve()),
-                            method=f"import {path.suffix.lower().lstrip('.')}", client="cli",
-                            measurements={"cao_options": options.to_json()} if options else None)
-        print(f"{db.path}: added #{rec.id} {rec.name!r} ({rec.kind}, {rec.status}): {len(model.vertices)} vertices, "
-              f"{len(model.edges)} edges, {len(model.faces)} faces, {len(model.solids)} solids, {len(model.circles)} circles")
+        rec = db.add_object(
+            name,
+            args.kind,
+            model,
+            T,
+            status=args.status,
+            source=str(path.resolve()),
+            method=f"import {path.suffix.lower().lstrip('.')}",
+            client="cli",
+            measurements={"cao_options": options.to_json()} if options else None,
+        )
+        print(
+            f"{db.path}: added #{rec.id} {rec.name!r} ({rec.kind}, {rec.status}): {len(model.vertices)} vertices, "
+            f"{len(model.edges)} edges, {len(model.faces)} faces, {len(model.solids)} solids, {len(model.circles)} circles"
+        )
     return 0
 
 
@@ -88,7 +100,9 @@ def _cmd_list(args) -> int:
         print(f"{'id':>4}  {'name':<20} {'kind':<12} {'status':<9} {'ver':>4}  {'x':>8} {'y':>8} {'z':>8}  updated")
         for o in objs:
             x, y, z = o.T_world_obj[:3, 3]
-            print(f"{o.id:>4}  {o.name:<20} {o.kind:<12} {o.status:<9} {o.version:>4}  {x:8.4f} {y:8.4f} {z:8.4f}  {_when(o.updated_at)}")
+            print(
+                f"{o.id:>4}  {o.name:<20} {o.kind:<12} {o.status:<9} {o.version:>4}  {x:8.4f} {y:8.4f} {z:8.4f}  {_when(o.updated_at)}"
+            )
     return 0
 
 
@@ -102,19 +116,27 @@ def _cmd_show(args) -> int:
         m = o.model
         rpy = pose_to_json(o.T_world_obj)["rpy_deg"]
         print(f"#{o.id} {o.name!r}  kind {o.kind}  status {o.status}  version {o.version}")
-        print(f"  model: {len(m.vertices)} vertices, {len(m.edges)} edges, {len(m.faces)} faces, {len(m.solids)} solids, "
-              f"{len(m.circles)} circles (model row {o.model_id}){'  from ' + o.source if o.source else ''}")
+        print(
+            f"  model: {len(m.vertices)} vertices, {len(m.edges)} edges, {len(m.faces)} faces, {len(m.solids)} solids, "
+            f"{len(m.circles)} circles (model row {o.model_id}){'  from ' + o.source if o.source else ''}"
+        )
         for k, v in o.dims.items():
             s = o.sigmas.get(k)
             print(f"  {k} = {v:.4f} m" + (f" ± {s:.4f} m" if s is not None else ""))
-        print(f"  position (m): {np.array2string(o.T_world_obj[:3, 3], precision=4)}   rpy (deg): "
-              f"{np.array2string(np.array(rpy), precision=2)}")
+        print(
+            f"  position (m): {np.array2string(o.T_world_obj[:3, 3], precision=4)}   rpy (deg): "
+            f"{np.array2string(np.array(rpy), precision=2)}"
+        )
         print("  T_world_obj:")
         for row in o.T_world_obj:
             print("    " + " ".join(f"{v:10.6f}" for v in row))
         if o.cov is not None:
-            print(f"  pose σ (sqrt of the covariance's diagonal): {np.array2string(np.sqrt(np.diag(o.cov)), precision=5)}")
-        print(f"  created {_when(o.created_at)}, updated {_when(o.updated_at)}, {len(db.history(o.id))} changes in the history")
+            print(
+                f"  pose σ (sqrt of the covariance's diagonal): {np.array2string(np.sqrt(np.diag(o.cov)), precision=5)}"
+            )
+        print(
+            f"  created {_when(o.created_at)}, updated {_when(o.updated_at)}, {len(db.history(o.id))} changes in the history"
+        )
     return 0
 
 
@@ -137,8 +159,10 @@ def _cmd_export(args) -> int:
             def write(tmp):
                 write_cao(model, tmp, comment, options=options)
         else:
+
             def write(tmp):
                 save_model(model, tmp, comment=comment)
+
         try:
             write_atomically({out: write})  # a full disk leaves OUT as it was, and no temporary beside it
         except OSError as exc:
@@ -154,8 +178,12 @@ def _imported_cao_options(db, o):
 
     for change in db.history(o.id):
         m = change.measurements
-        if change.action == "add" and isinstance(m, dict) and "cao_options" in m \
-                and (change.after or {}).get("model_id") == o.model_id:
+        if (
+            change.action == "add"
+            and isinstance(m, dict)
+            and "cao_options" in m
+            and (change.after or {}).get("model_id") == o.model_id
+        ):
             try:
                 return CaoOptions.from_json(m["cao_options"])
             except ValueError:
@@ -174,7 +202,9 @@ def _cmd_history(args) -> int:
         for c in changes:
             what = c.object_name or (f"calibration #{c.calibration_id}" if c.calibration_id else "")
             extra = f" (of #{c.undoes})" if c.undoes else ""
-            print(f"{c.id:>5}  {_when(c.time)}  {c.client:<10} {c.action + extra:<14} {what:<20} {c.version or '':>4}  {c.method}")
+            print(
+                f"{c.id:>5}  {_when(c.time)}  {c.client:<10} {c.action + extra:<14} {what:<20} {c.version or '':>4}  {c.method}"
+            )
     return 0
 
 
@@ -198,8 +228,10 @@ def _run(func):
             return 1
         except OSError as exc:  # a file named on the command line: say which and why, in one line
             where = f"{exc.filename}: " if exc.filename else ""
-            print(f"mcit db {args.db_command}: error: {where}{exc.strerror or exc}; check the path and its permissions",
-                  file=sys.stderr)
+            print(
+                f"mcit db {args.db_command}: error: {where}{exc.strerror or exc}; check the path and its permissions",
+                file=sys.stderr,
+            )
             return 1
 
     return wrapped
@@ -212,11 +244,21 @@ _max_faces = number(int, lambda v: v >= 1, kind="a whole number of triangles", e
 def add_db_parser(subparsers) -> argparse.ArgumentParser:
     """Add ``db`` and its sub-commands to the ``mcit`` parser's sub-parsers."""
     common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--db", metavar="PATH", default=None, help="database file (default: ~/.local/share/mcit/mcit.sqlite)")
-    common.add_argument("--wait-s", type=_wait_s, default=5.0, metavar="S",
-                        help="how long a change waits for another program writing the database (default 5 s)")
-    db = subparsers.add_parser("db", help="the site's database: import, list, show, export, history, undo",
-                               description="The site's 3D geometric database (SQLite).")
+    common.add_argument(
+        "--db", metavar="PATH", default=None, help="database file (default: ~/.local/share/mcit/mcit.sqlite)"
+    )
+    common.add_argument(
+        "--wait-s",
+        type=_wait_s,
+        default=5.0,
+        metavar="S",
+        help="how long a change waits for another program writing the database (default 5 s)",
+    )
+    db = subparsers.add_parser(
+        "db",
+        help="the site's database: import, list, show, export, history, undo",
+        description="The site's 3D geometric database (SQLite).",
+    )
     sub = db.add_subparsers(dest="db_command", metavar="DB_COMMAND", required=True)
 
     p = sub.add_parser("init", parents=[common], help="create a database from a scene's known objects and calibrations")
@@ -228,13 +270,26 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--name", help="object name (default: the file's stem)")
     p.add_argument("--kind", default="polyhedron", help="box, cylinder, polyhedron, ... (default polyhedron)")
     p.add_argument("--status", default="known", choices=("known", "modelled", "stale"))
-    p.add_argument("--xyz", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"), help="position, metres")
-    p.add_argument("--rpy-deg", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("R", "P", "Y"),
-                   help="orientation R = Rz(yaw) Ry(pitch) Rx(roll), degrees")
+    p.add_argument(
+        "--xyz", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"), help="position, metres"
+    )
+    p.add_argument(
+        "--rpy-deg",
+        nargs=3,
+        type=float,
+        default=(0.0, 0.0, 0.0),
+        metavar=("R", "P", "Y"),
+        help="orientation R = Rz(yaw) Ry(pitch) Rx(roll), degrees",
+    )
     p.add_argument("--angle-deg", type=float, default=30.0, help="meshes: dihedral angle from which an edge is drawn")
-    p.add_argument("--max-faces", type=_max_faces, default=None, metavar="N",
-                   help="meshes: the most triangles the file may hold (default 200,000, app.models_io.MAX_MESH_FACES); "
-                        "it also allows 3 vertices a triangle and 64 MB per 200,000 triangles")
+    p.add_argument(
+        "--max-faces",
+        type=_max_faces,
+        default=None,
+        metavar="N",
+        help="meshes: the most triangles the file may hold (default 200,000, app.models_io.MAX_MESH_FACES); "
+        "it also allows 3 vertices a triangle and 64 MB per 200,000 triangles",
+    )
     p.set_defaults(func=_run(_cmd_import))
 
     p = sub.add_parser("list", parents=[common], help="every object with its status, version and position")
@@ -255,7 +310,9 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--limit", type=int, default=None, help="only the last N changes")
     p.set_defaults(func=_run(_cmd_history))
 
-    p = sub.add_parser("undo", parents=[common], help="bring an object back to its state before a change (itself recorded)")
+    p = sub.add_parser(
+        "undo", parents=[common], help="bring an object back to its state before a change (itself recorded)"
+    )
     p.add_argument("change", type=int, help="the change's number (see `mcit db history`)")
     p.add_argument("--restore", action="store_true", help="go back to the state just after the change instead")
     p.set_defaults(func=_run(_cmd_undo))

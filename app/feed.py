@@ -36,8 +36,9 @@ import socket
 import stat
 import threading
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -59,8 +60,20 @@ def object_event(rec: Any, *, who: str | None = None, method: str | None = None)
     """The ``pose`` line of an object as it stands (an ``app.db.ObjectRecord``): action "current"."""
     ev = _header("pose")
     ev.update({"seq": None, "action": "current", "moved": False})
-    ev.update(object_record(rec.name, rec.id, rec.kind, rec.status, rec.version, rec.T_world_obj, rec.cov, who=who,
-                            method=method, when=rec.updated_at))
+    ev.update(
+        object_record(
+            rec.name,
+            rec.id,
+            rec.kind,
+            rec.status,
+            rec.version,
+            rec.T_world_obj,
+            rec.cov,
+            who=who,
+            method=method,
+            when=rec.updated_at,
+        )
+    )
     return ev
 
 
@@ -72,19 +85,41 @@ def change_event(rec: Any) -> dict[str, Any] | None:
     after, before = rec.after or {}, rec.before or {}
     if not after or after.get("removed"):
         ev = _header("removed")
-        ev.update({"seq": int(rec.id), "action": rec.action, "object": rec.object_name, "object_id": rec.object_id,
-                   "version": rec.version, "who": rec.client, "method": rec.method, "time": float(rec.time),
-                   "time_iso": iso(rec.time)})
+        ev.update(
+            {
+                "seq": int(rec.id),
+                "action": rec.action,
+                "object": rec.object_name,
+                "object_id": rec.object_id,
+                "version": rec.version,
+                "who": rec.client,
+                "method": rec.method,
+                "time": float(rec.time),
+                "time_iso": iso(rec.time),
+            }
+        )
         return ev
     T = np.asarray(after["T_world_obj"], float)
-    moved = (not before or bool(before.get("removed"))
-             or not np.array_equal(np.asarray(before.get("T_world_obj"), float), T))
+    moved = (
+        not before or bool(before.get("removed")) or not np.array_equal(np.asarray(before.get("T_world_obj"), float), T)
+    )
     cov = after.get("cov")
     ev = _header("pose")
     ev.update({"seq": int(rec.id), "action": rec.action, "moved": bool(moved)})
-    ev.update(object_record(after.get("name", rec.object_name), rec.object_id, after.get("kind"), after.get("status"),
-                            rec.version, T, None if cov is None else np.asarray(cov, float), who=rec.client,
-                            method=rec.method, when=rec.time))
+    ev.update(
+        object_record(
+            after.get("name", rec.object_name),
+            rec.object_id,
+            after.get("kind"),
+            after.get("status"),
+            rec.version,
+            T,
+            None if cov is None else np.asarray(cov, float),
+            who=rec.client,
+            method=rec.method,
+            when=rec.time,
+        )
+    )
     return ev
 
 
@@ -108,8 +143,9 @@ def _target_frame(X: np.ndarray, normal: np.ndarray, camera_centre: np.ndarray |
     return T
 
 
-def target_event(target: Any, *, index: int, who: str, when: float, version: int | None,
-                 camera_centre: np.ndarray | None = None) -> dict[str, Any]:
+def target_event(
+    target: Any, *, index: int, who: str, when: float, version: int | None, camera_centre: np.ndarray | None = None
+) -> dict[str, Any]:
     """The ``target`` line of a designated target (``app.workflows.designate.Target``).
 
     index : the target's number in the operator's list (1, 2, …). version : the object's database
@@ -124,21 +160,29 @@ def target_event(target: Any, *, index: int, who: str, when: float, version: int
     fields = pose_fields(T, None)
     sigma = float(target.sigma_m)
     ev = _header("target")
-    ev.update({
-        "target": int(index),
-        "object": target.object if on_db else None,
-        "version": None if version is None else int(version),
-        "point": "rangefinder" if use_rf else "database",
-        "T": fields["T"], "xyz_m": fields["xyz_m"], "quat_xyzw": fields["quat_xyzw"], "rotvec_rad": fields["rotvec_rad"],
-        "normal": [float(v) for v in target.normal] if on_db else None,
-        "database_xyz_m": [float(v) for v in X_db] if on_db else None,
-        "rangefinder_xyz_m": None if rf is None else [float(v) for v in rf],
-        "range_m": float(target.range_m),
-        "sigma": {"along_sight_m": sigma} if np.isfinite(sigma) else None,
-        "pixel_uv": [float(v) for v in target.uv],
-        "check": target.check, "warning": target.warning or None,
-        "who": who, "time": float(when), "time_iso": iso(when),
-    })
+    ev.update(
+        {
+            "target": int(index),
+            "object": target.object if on_db else None,
+            "version": None if version is None else int(version),
+            "point": "rangefinder" if use_rf else "database",
+            "T": fields["T"],
+            "xyz_m": fields["xyz_m"],
+            "quat_xyzw": fields["quat_xyzw"],
+            "rotvec_rad": fields["rotvec_rad"],
+            "normal": [float(v) for v in target.normal] if on_db else None,
+            "database_xyz_m": [float(v) for v in X_db] if on_db else None,
+            "rangefinder_xyz_m": None if rf is None else [float(v) for v in rf],
+            "range_m": float(target.range_m),
+            "sigma": {"along_sight_m": sigma} if np.isfinite(sigma) else None,
+            "pixel_uv": [float(v) for v in target.uv],
+            "check": target.check,
+            "warning": target.warning or None,
+            "who": who,
+            "time": float(when),
+            "time_iso": iso(when),
+        }
+    )
     return ev
 
 
@@ -155,8 +199,13 @@ class FeedPublisher:
     sent to each socket reader when it connects and written to the file when the feed starts.
     """
 
-    def __init__(self, *, file: str | Path | None = None, socket_path: str | Path | None = None,
-                 snapshot: Callable[[], list[dict]] | None = None):
+    def __init__(
+        self,
+        *,
+        file: str | Path | None = None,
+        socket_path: str | Path | None = None,
+        snapshot: Callable[[], list[dict]] | None = None,
+    ):
         if file is None and socket_path is None:
             raise ValueError("a feed needs a file or a socket path to publish to")
         self.file = None if file is None else Path(file)
@@ -236,7 +285,7 @@ class FeedPublisher:
         while not self._closed.is_set():
             try:
                 conn, _ = self._server.accept()
-            except socket.timeout:
+            except TimeoutError:
                 continue
             except OSError:
                 return
@@ -302,7 +351,7 @@ class FeedPublisher:
         if self._fh is not None:
             self._fh.close()
 
-    def __enter__(self) -> "FeedPublisher":
+    def __enter__(self) -> FeedPublisher:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -325,7 +374,7 @@ def follow(path: str | Path, *, timeout_s: float | None = None, from_start: bool
             while True:
                 try:
                     chunk = s.recv(65536)
-                except socket.timeout:
+                except TimeoutError:
                     return
                 if not chunk:
                     return

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import numbers
 import re
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 __all__ = ["Md", "escape", "as_markdown"]
 
@@ -34,16 +35,16 @@ class Md(str):
 
     __slots__ = ()
 
-    def __add__(self, other: Any) -> "Md":
+    def __add__(self, other: Any) -> Md:
         return Md(str.__add__(self, escape(other)))
 
-    def __radd__(self, other: Any) -> "Md":
+    def __radd__(self, other: Any) -> Md:
         return Md(str.__add__(escape(other), self))
 
-    def format(self, *args: Any, **kwargs: Any) -> "Md":
+    def format(self, *args: Any, **kwargs: Any) -> Md:
         return Md(str.format(self, *map(_arg, args), **{k: _arg(v) for k, v in kwargs.items()}))
 
-    def join(self, parts: Iterable[Any]) -> "Md":
+    def join(self, parts: Iterable[Any]) -> Md:
         return Md(str.join(self, (escape(p) for p in parts)))
 
 

@@ -16,8 +16,10 @@ from typing import Any
 __all__ = ["MAX_NAME_CHARS", "NAME_RULE", "check_object_name"]
 
 MAX_NAME_CHARS = 64
-NAME_RULE = (f"1 to {MAX_NAME_CHARS} characters: a letter or digit first, then letters, digits, spaces and _ - . + ( ), "
-             "not ending in a space")
+NAME_RULE = (
+    f"1 to {MAX_NAME_CHARS} characters: a letter or digit first, then letters, digits, spaces and _ - . + ( ), "
+    "not ending in a space"
+)
 _NAME = re.compile(r"[^\W_][\w .+()\-]*", re.UNICODE)
 
 

@@ -105,7 +105,9 @@ class PixelWorld:
         """The image plane's size in world units (width, height)."""
         return self.width * self.k, self.height * self.k
 
-    def fit_camera(self, aspect: float, fov_rad: float, margin: float = 1.02) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def fit_camera(
+        self, aspect: float, fov_rad: float, margin: float = 1.02
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Viewer camera (position (3,), look_at (3,), up (3,)) showing the whole image, centred.
 
         aspect : canvas width / height. fov_rad : the viewer's vertical field of view.
@@ -118,7 +120,9 @@ class PixelWorld:
         return look_at + np.array([0.0, 0.0, -distance]), look_at, np.array([0.0, -1.0, 0.0])
 
 
-def clip_segments_depth(camera: Camera, S_world: np.ndarray, min_depth_m: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+def clip_segments_depth(
+    camera: Camera, S_world: np.ndarray, min_depth_m: float = 1e-3
+) -> tuple[np.ndarray, np.ndarray]:
     """Clip world segments (K, 2, 3) to the half-space in front of the camera.
 
     Returns the clipped segments (M, 2, 3) and the index (M,) of the input segment each came from;
@@ -142,7 +146,9 @@ def clip_segments_depth(camera: Camera, S_world: np.ndarray, min_depth_m: float 
     return S, idx
 
 
-def clip_segments_rect(seg_uv: np.ndarray, width: int, height: int, margin_px: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+def clip_segments_rect(
+    seg_uv: np.ndarray, width: int, height: int, margin_px: float = 0.5
+) -> tuple[np.ndarray, np.ndarray]:
     """Clip pixel segments (K, 2, 2) to the image rectangle (Liang–Barsky).
 
     The rectangle is the image's outer border [−margin, size − 1 + margin]. Returns the clipped
@@ -245,13 +251,23 @@ def model_wireframe(model: BRep, center_world: np.ndarray, T_world_obj: np.ndarr
         return wf
     sil = sil @ T[:3, :3].T + T[:3, 3]
     m = len(sil)
-    return Wireframe(np.concatenate([wf.segments.reshape(-1, 2, 3), sil]), np.concatenate([wf.visible, np.ones(m, bool)]),
-                     np.concatenate([wf.edge_index, np.full(m, -1, np.int64)]),
-                     np.concatenate([wf.kind.astype("<U10"), np.full(m, "silhouette", dtype="<U10")]))
+    return Wireframe(
+        np.concatenate([wf.segments.reshape(-1, 2, 3), sil]),
+        np.concatenate([wf.visible, np.ones(m, bool)]),
+        np.concatenate([wf.edge_index, np.full(m, -1, np.int64)]),
+        np.concatenate([wf.kind.astype("<U10"), np.full(m, "silhouette", dtype="<U10")]),
+    )
 
 
-def project_wireframe(camera: Camera, model: BRep, T_world_obj: np.ndarray, *, n_circle: int = 48,
-                      width: int | None = None, height: int | None = None) -> ProjectedWireframe:
+def project_wireframe(
+    camera: Camera,
+    model: BRep,
+    T_world_obj: np.ndarray,
+    *,
+    n_circle: int = 48,
+    width: int | None = None,
+    height: int | None = None,
+) -> ProjectedWireframe:
     """Project a model at a pose through C: hidden-line flags, cylinder and mesh silhouettes, clipping.
 
     width, height : the image to clip to (default: the camera's).
@@ -280,8 +296,9 @@ class LineBatch:
         self.segments.append(seg)
         self.colors.append(np.broadcast_to(c, (len(seg), 3)) if c.ndim == 1 else c.reshape(len(seg), 3))
 
-    def add_wireframe(self, pw: ProjectedWireframe, color: tuple[int, int, int], hidden: str = "dashed",
-                      dim: float = 0.55) -> None:
+    def add_wireframe(
+        self, pw: ProjectedWireframe, color: tuple[int, int, int], hidden: str = "dashed", dim: float = 0.55
+    ) -> None:
         """Visible segments solid; hidden ones dashed and dimmed ("dashed"), or left out ("removed")."""
         self.add(pw.seg_uv[pw.visible], color)
         if hidden == "dashed":

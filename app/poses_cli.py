@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import signal
-import sys
 import threading
 
 __all__ = ["add_pose_parsers"]
@@ -51,14 +50,18 @@ def _cmd_feed(args) -> int:
     stop = threading.Event()
     with _open(args) as db:
         last = db.last_change_id()
-        feed = FeedPublisher(file=args.file, socket_path=args.socket,
-                             snapshot=lambda: [object_event(r) for r in db.objects()])
+        feed = FeedPublisher(
+            file=args.file, socket_path=args.socket, snapshot=lambda: [object_event(r) for r in db.objects()]
+        )
         try:
             where = " and ".join(f"{k} {v}" for k, v in (("socket", args.socket), ("file", args.file)) if v)
             import time
 
-            print(f"mcit db feed: publishing the changes of {db.path} on {where} from change #{last} "
-                  f"({iso(time.time())}); Ctrl-C stops", flush=True)
+            print(
+                f"mcit db feed: publishing the changes of {db.path} on {where} from change #{last} "
+                f"({iso(time.time())}); Ctrl-C stops",
+                flush=True,
+            )
             for sig in (signal.SIGTERM, signal.SIGINT):
                 signal.signal(sig, lambda *_: stop.set())
             while not stop.wait(args.interval_s):
@@ -72,25 +75,37 @@ def _cmd_feed(args) -> int:
 
 def add_pose_parsers(sub, common: argparse.ArgumentParser, run) -> None:
     """Add ``export-poses`` and ``feed`` to ``mcit db``'s sub-parsers (``run`` wraps a command's errors)."""
-    p = sub.add_parser("export-poses", parents=[common],
-                       help="write the objects' poses (4×4, xyz + quaternion, σ, version) as JSON, CSV or ViSP .pos",
-                       description="Write the objects' poses for another program: JSON, CSV, or ViSP .pos (the pose "
-                       "in the camera, cMo). Schema: docs/exchange.md.")
-    p.add_argument("out", help="output file: .json, .csv or .pos; with several objects to .pos, put {name} in the "
-                   "path (one file per object)")
+    p = sub.add_parser(
+        "export-poses",
+        parents=[common],
+        help="write the objects' poses (4×4, xyz + quaternion, σ, version) as JSON, CSV or ViSP .pos",
+        description="Write the objects' poses for another program: JSON, CSV, or ViSP .pos (the pose "
+        "in the camera, cMo). Schema: docs/exchange.md.",
+    )
+    p.add_argument(
+        "out",
+        help="output file: .json, .csv or .pos; with several objects to .pos, put {name} in the "
+        "path (one file per object)",
+    )
     p.add_argument("--object", nargs="+", metavar="NAME", help="only these objects (name or id; default: all)")
     p.add_argument("--format", choices=("json", "csv", "pos"), help="the format (default: from the suffix)")
-    p.add_argument("--frame", choices=("world", "camera"),
-                   help="poses in the world frame (default for JSON and CSV) or the camera's (default for .pos; "
-                   "from the latest camera calibration)")
+    p.add_argument(
+        "--frame",
+        choices=("world", "camera"),
+        help="poses in the world frame (default for JSON and CSV) or the camera's (default for .pos; "
+        "from the latest camera calibration)",
+    )
     p.set_defaults(func=run(_cmd_export_poses))
 
-    p = sub.add_parser("feed", parents=[common],
-                       help="publish every pose change as JSON lines on a local socket or file until stopped",
-                       description="Publish every accepted change of an object (who, version, pose as 4×4 and "
-                       "xyz + quaternion, σ) as JSON lines, for a robot controller: on a Unix socket (each reader "
-                       "first gets every object as it stands) and/or appended to a file. Schema: docs/exchange.md. "
-                       "mcit serve --feed-socket also sends designated targets.")
+    p = sub.add_parser(
+        "feed",
+        parents=[common],
+        help="publish every pose change as JSON lines on a local socket or file until stopped",
+        description="Publish every accepted change of an object (who, version, pose as 4×4 and "
+        "xyz + quaternion, σ) as JSON lines, for a robot controller: on a Unix socket (each reader "
+        "first gets every object as it stands) and/or appended to a file. Schema: docs/exchange.md. "
+        "mcit serve --feed-socket also sends designated targets.",
+    )
     p.add_argument("--socket", metavar="PATH", help="Unix socket to listen on (readers connect to it)")
     p.add_argument("--file", metavar="PATH", help="JSON-lines file to append to")
     p.add_argument("--interval-s", type=float, default=0.2, help="how often the database is read (default 0.2 s)")

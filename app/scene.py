@@ -51,9 +51,10 @@ typo), raises ``SceneError`` (a ``ValueError``) naming the file and the field. K
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -120,7 +121,9 @@ def _need(d: dict, key: str, where: str) -> Any:
     return d[key]
 
 
-def _number(value: Any, where: str, *, lo: float | None = None, lo_open: bool = False, hi: float | None = None) -> float:
+def _number(
+    value: Any, where: str, *, lo: float | None = None, lo_open: bool = False, hi: float | None = None
+) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(f"{where}: a number expected, got {value!r}")
     v = float(value)
@@ -185,7 +188,10 @@ def pose_to_json(T: np.ndarray) -> dict[str, list[float]]:
     else:  # gimbal lock: put everything in yaw
         roll = 0.0
         yaw = float(np.arctan2(-R[0, 1], R[1, 1]))
-    return {"xyz": [float(v) for v in np.asarray(T)[:3, 3]], "rpy_deg": [float(np.degrees(a)) for a in (roll, pitch, yaw)]}
+    return {
+        "xyz": [float(v) for v in np.asarray(T)[:3, 3]],
+        "rpy_deg": [float(np.degrees(a)) for a in (roll, pitch, yaw)],
+    }
 
 
 # ---------------------------------------------------------------------- data
@@ -417,7 +423,9 @@ def _camera_and_lens(d: Any, root: Path, where: str):
             file = (root / str(d["intrinsics_file"])).resolve()
             name = d.get("camera_name")
             if name is not None and not isinstance(name, str):
-                raise SceneError(f"{where}.camera_name: the name of a camera in the intrinsics file expected, got {name!r}")
+                raise SceneError(
+                    f"{where}.camera_name: the name of a camera in the intrinsics file expected, got {name!r}"
+                )
             try:
                 size = (width, height) if width is not None and height is not None else None
                 intr = read_intrinsics(file, camera_name=name, image_size=size)
@@ -430,8 +438,10 @@ def _camera_and_lens(d: Any, root: Path, where: str):
                 from app.undistort import lens_of
 
                 if intr.width is not None and (width, height) != (intr.width, intr.height):
-                    raise SceneError(f"{where}.intrinsics_file: {file} was calibrated on {intr.width}×{intr.height} "
-                                     f"images, the camera block says {width}×{height}; give the intrinsics for this size")
+                    raise SceneError(
+                        f"{where}.intrinsics_file: {file} was calibrated on {intr.width}×{intr.height} "
+                        f"images, the camera block says {width}×{height}; give the intrinsics for this size"
+                    )
                 try:
                     lens = lens_of(intr, width, height)
                 except ValueError as exc:

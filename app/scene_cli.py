@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 __all__ = ["add_scene_parsers", "cli_render", "cli_script", "progress_bar"]
 
@@ -68,7 +68,9 @@ def add_scene_parsers(subparsers) -> None:
     q.add_argument("--scene", default=None, help="scene folder (default: the bundled workcell)")
     q.add_argument("--out", default=None, help="output file (default: <scene>/operator.json)")
     q.add_argument("--seed", type=int, default=None, help="click-noise seed (default: the script generator's)")
-    q.add_argument("--click-sigma", type=float, default=None, metavar="PX", help="click noise σ in pixels (default 1.0)")
+    q.add_argument(
+        "--click-sigma", type=float, default=None, metavar="PX", help="click noise σ in pixels (default 1.0)"
+    )
     q.set_defaults(func=cli_script)
 
 
@@ -89,7 +91,9 @@ def cli_render(args) -> int:
         return 0
     info = render_video(scene, args.out, frames=args.frames, progress=progress_bar())
     size_mb = info.path.stat().st_size / 1e6
-    print(f"wrote {info.path}: {info.frame_count} frames, {info.width}×{info.height}, {info.fps:g} fps, {size_mb:.2f} MB")
+    print(
+        f"wrote {info.path}: {info.frame_count} frames, {info.width}×{info.height}, {info.fps:g} fps, {size_mb:.2f} MB"
+    )
     return 0
 
 

@@ -34,8 +34,15 @@ import numpy as np
 
 __all__ = ["LensDistortion", "UndistortedSource", "lens_of"]
 
-_MODELS = {"opencv": "opencv", "plumb_bob": "opencv", "rational_polynomial": "opencv", "radtan": "opencv",
-           "equidistant": "fisheye", "fisheye": "fisheye", "visp": "visp"}
+_MODELS = {
+    "opencv": "opencv",
+    "plumb_bob": "opencv",
+    "rational_polynomial": "opencv",
+    "radtan": "opencv",
+    "equidistant": "fisheye",
+    "fisheye": "fisheye",
+    "visp": "visp",
+}
 _COUNTS = {"opencv": (4, 5, 8, 12, 14), "fisheye": (4,), "visp": (2,)}
 
 
@@ -57,12 +64,15 @@ class LensDistortion:
     def __post_init__(self):
         model = _MODELS.get(str(self.model).strip().lower())
         if model is None:
-            raise ValueError(f"unknown lens distortion model {self.model!r}; mcit knows OpenCV's (plumb_bob, "
-                             "rational_polynomial), the equidistant fisheye model and ViSP's kud")
+            raise ValueError(
+                f"unknown lens distortion model {self.model!r}; mcit knows OpenCV's (plumb_bob, "
+                "rational_polynomial), the equidistant fisheye model and ViSP's kud"
+            )
         d = np.asarray(self.coefficients, dtype=float).ravel()
         if d.size not in _COUNTS[model]:
-            raise ValueError(f"the {model} distortion model takes {' or '.join(map(str, _COUNTS[model]))} "
-                             f"coefficients, got {d.size}")
+            raise ValueError(
+                f"the {model} distortion model takes {' or '.join(map(str, _COUNTS[model]))} coefficients, got {d.size}"
+            )
         if not np.all(np.isfinite(d)):
             raise ValueError("a distortion coefficient is not finite")
         K = np.asarray(self.K, dtype=float)
@@ -89,7 +99,9 @@ class LensDistortion:
             s = 1.0 + self.coefficients[0] * (x * x + y * y)
             return np.column_stack([K[0, 2] + K[0, 0] * x * s, K[1, 2] + K[1, 1] * y * s])
         if self.model == "fisheye":
-            out = cv2.fisheye.distortPoints(np.column_stack([x, y])[:, None, :].astype(np.float64), K, self.coefficients)
+            out = cv2.fisheye.distortPoints(
+                np.column_stack([x, y])[:, None, :].astype(np.float64), K, self.coefficients
+            )
             return out.reshape(-1, 2)
         X = np.column_stack([x, y, np.ones_like(x)])
         out, _ = cv2.projectPoints(X[:, None, :], np.zeros(3), np.zeros(3), K, self.coefficients)
@@ -100,8 +112,8 @@ class LensDistortion:
         uv = np.asarray(uv, dtype=float).reshape(-1, 2)
         n = len(uv)
         d = self.distort(np.concatenate([uv + [h, 0.0], uv - [h, 0.0], uv + [0.0, h], uv - [0.0, h]]))
-        du = (d[:n] - d[n:2 * n]) / (2 * h)
-        dv = (d[2 * n:3 * n] - d[3 * n:]) / (2 * h)
+        du = (d[:n] - d[n : 2 * n]) / (2 * h)
+        dv = (d[2 * n : 3 * n] - d[3 * n :]) / (2 * h)
         return np.stack([du, dv], axis=2)
 
     def undistort(self, uv: np.ndarray, tol_px: float = 1e-7, max_iter: int = 30) -> np.ndarray:
@@ -146,8 +158,9 @@ class LensDistortion:
             if self.model == "opencv":
                 m1, m2 = cv2.initUndistortRectifyMap(self.K, self.coefficients, None, self.K, size, cv2.CV_16SC2)
             elif self.model == "fisheye":
-                m1, m2 = cv2.fisheye.initUndistortRectifyMap(self.K, self.coefficients, np.eye(3), self.K, size,
-                                                             cv2.CV_16SC2)
+                m1, m2 = cv2.fisheye.initUndistortRectifyMap(
+                    self.K, self.coefficients, np.eye(3), self.K, size, cv2.CV_16SC2
+                )
             else:
                 u, v = np.meshgrid(np.arange(self.width, dtype=float), np.arange(self.height, dtype=float))
                 d = self.distort(np.column_stack([u.ravel(), v.ravel()])).astype(np.float32)
@@ -160,8 +173,10 @@ class LensDistortion:
         import cv2
 
         if image.shape[:2] != (self.height, self.width):
-            raise ValueError(f"the frame is {image.shape[1]}×{image.shape[0]} but the camera was calibrated on "
-                             f"{self.width}×{self.height} images; give the intrinsics for this size")
+            raise ValueError(
+                f"the frame is {image.shape[1]}×{image.shape[0]} but the camera was calibrated on "
+                f"{self.width}×{self.height} images; give the intrinsics for this size"
+            )
         m1, m2 = self.maps()
         return cv2.remap(image, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
 
@@ -181,8 +196,9 @@ def lens_of(intrinsics, width: int | None = None, height: int | None = None) -> 
     w = intrinsics.width if intrinsics.width is not None else width
     h = intrinsics.height if intrinsics.height is not None else height
     if w is None or h is None:
-        raise ValueError(f"{intrinsics.source}: states lens distortion but not the image size; add image_width and "
-                         "image_height")
+        raise ValueError(
+            f"{intrinsics.source}: states lens distortion but not the image size; add image_width and image_height"
+        )
     model = intrinsics.distortion_model or "opencv"
     try:
         return LensDistortion(intrinsics.K, intrinsics.distortion, model, w, h)
@@ -203,8 +219,10 @@ class UndistortedSource:
 
         if (source.width, source.height) != (lens.width, lens.height):
             source.close()
-            raise VideoError(f"{source.description} gives {source.width}×{source.height} frames but the camera was "
-                             f"calibrated on {lens.width}×{lens.height} images; give the intrinsics for this size")
+            raise VideoError(
+                f"{source.description} gives {source.width}×{source.height} frames but the camera was "
+                f"calibrated on {lens.width}×{lens.height} images; give the intrinsics for this size"
+            )
         self.source = source
         self.lens = lens
         self.description = f"{source.description}, undistorted ({lens.model} lens)"

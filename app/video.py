@@ -28,9 +28,9 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -108,7 +108,9 @@ class VideoSource:
         """The next frame (blocking for live sources); VideoError when the source has failed."""
         image = self._read()
         if image is None:
-            raise VideoError(f"{self.description}: no frame could be read (the source ended or failed); check the source")
+            raise VideoError(
+                f"{self.description}: no frame could be read (the source ended or failed); check the source"
+            )
         self._index += 1
         self._position += 1
         t_s = time.monotonic() - self._opened_at if self.live else self._position / self.fps
@@ -131,7 +133,7 @@ class VideoSource:
         """Open the source again after a failure (``reconnects`` sources); VideoError if it cannot be."""
         raise VideoError(f"{self.description} cannot be reopened")
 
-    def __enter__(self) -> "VideoSource":
+    def __enter__(self) -> VideoSource:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -159,10 +161,14 @@ def why_not_opened(target: int | str | Path, probe: bool = True) -> str:
     if isinstance(target, int):
         device = Path(f"/dev/video{target}")
         if not device.exists() and Path("/dev").is_dir():
-            return (f"there is no camera {target} on this computer (no {device}); plug it in or give another index "
-                    "(ls /dev/video*)")
-        return (f"camera {target} could not be opened: another program may be using it, or this user may not (group "
-                "video); close the other program or check the permissions")
+            return (
+                f"there is no camera {target} on this computer (no {device}); plug it in or give another index "
+                "(ls /dev/video*)"
+            )
+        return (
+            f"camera {target} could not be opened: another program may be using it, or this user may not (group "
+            "video); close the other program or check the permissions"
+        )
     text = str(target)
     if "://" in text:
         from urllib.parse import urlsplit
@@ -181,15 +187,19 @@ def why_not_opened(target: int | str | Path, probe: bool = True) -> str:
                 socket.create_connection((host, port), timeout=2.0).close()
             except OSError as exc:
                 reason = f" ({host}:{port}: {exc.strerror or exc})"
-        return (f"cannot open the stream {text}{reason}; check the address and that the camera or server is on and "
-                "reachable")
+        return (
+            f"cannot open the stream {text}{reason}; check the address and that the camera or server is on and "
+            "reachable"
+        )
     path = Path(text)
     if not os.access(path, os.R_OK):
         return f"cannot read the video {path} (permission denied); check its permissions"
     if path.stat().st_size == 0:
         return f"the video {path} is empty; give another file"
-    return (f"{path} is not a video OpenCV can decode (an unsupported format or a damaged file); convert it (e.g. "
-            "ffmpeg -i in out.mp4) or give another file")
+    return (
+        f"{path} is not a video OpenCV can decode (an unsupported format or a damaged file); convert it (e.g. "
+        "ffmpeg -i in out.mp4) or give another file"
+    )
 
 
 class CaptureSource(VideoSource):
@@ -227,8 +237,12 @@ class CaptureSource(VideoSource):
         if isinstance(target, int):
             return cv2.VideoCapture(target)
         if "://" in str(target):  # a stream: bounded open and reads (FFmpeg's interrupt callback)
-            params = [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, int(STREAM_OPEN_TIMEOUT_S * 1000),
-                      cv2.CAP_PROP_READ_TIMEOUT_MSEC, int(STREAM_READ_TIMEOUT_S * 1000)]
+            params = [
+                cv2.CAP_PROP_OPEN_TIMEOUT_MSEC,
+                int(STREAM_OPEN_TIMEOUT_S * 1000),
+                cv2.CAP_PROP_READ_TIMEOUT_MSEC,
+                int(STREAM_READ_TIMEOUT_S * 1000),
+            ]
             return cv2.VideoCapture(str(target), cv2.CAP_FFMPEG, params)
         return cv2.VideoCapture(str(target))
 
@@ -249,8 +263,10 @@ class CaptureSource(VideoSource):
         image = _to_rgb(image)
         if image.shape[:2] != (self.height, self.width):
             cap.release()
-            raise VideoError(f"{self.description} came back with {image.shape[1]}×{image.shape[0]} frames, it gave "
-                             f"{self.width}×{self.height} before; set the camera back to that size or restart mcit")
+            raise VideoError(
+                f"{self.description} came back with {image.shape[1]}×{image.shape[0]} frames, it gave "
+                f"{self.width}×{self.height} before; set the camera back to that size or restart mcit"
+            )
         if self._closed:  # closed while this reopened: do not keep the new capture
             cap.release()
             raise VideoError(f"{self.description} was closed")
@@ -261,8 +277,10 @@ class CaptureSource(VideoSource):
         ok, image = self._cap.read()
         if not ok or image is None:
             self._cap.release()
-            raise VideoError(f"video {self._target} opened but gave no frame (an empty or damaged file, or a camera still "
-                             "starting); check it, or try again")
+            raise VideoError(
+                f"video {self._target} opened but gave no frame (an empty or damaged file, or a camera still "
+                "starting); check it, or try again"
+            )
         return _to_rgb(image)
 
     def _read(self) -> np.ndarray | None:
@@ -350,7 +368,9 @@ class StillSource(VideoSource):
         else:
             image = np.asarray(image)
             if image.dtype != np.uint8 or image.ndim not in (2, 3):
-                raise VideoError(f"a still frame must be a uint8 (H, W) or (H, W, 3) array, got {image.dtype} {image.shape}")
+                raise VideoError(
+                    f"a still frame must be a uint8 (H, W) or (H, W, 3) array, got {image.dtype} {image.shape}"
+                )
             if image.ndim == 2:
                 image = np.repeat(image[:, :, None], 3, axis=2)
         self._image = np.ascontiguousarray(image)
@@ -464,8 +484,13 @@ class FrameGrabber:
     ``add_listener``) run on the grabber thread and must be quick.
     """
 
-    def __init__(self, source: VideoSource, on_frame: Callable[[Frame], None] | None = None,
-                 stall_s: float | None = None, reconnect_delays_s: tuple[float, ...] = RECONNECT_DELAYS_S):
+    def __init__(
+        self,
+        source: VideoSource,
+        on_frame: Callable[[Frame], None] | None = None,
+        stall_s: float | None = None,
+        reconnect_delays_s: tuple[float, ...] = RECONNECT_DELAYS_S,
+    ):
         self.source = source
         self._listeners: list[Callable[[Frame], None]] = [on_frame] if on_frame is not None else []
         self._lock = threading.Lock()
@@ -483,7 +508,7 @@ class FrameGrabber:
         self.losses = 0  # how many times the video was lost (a read failed) since the start
         self._thread = threading.Thread(target=self._run, name="mcit-video", daemon=True)
 
-    def start(self) -> "FrameGrabber":
+    def start(self) -> FrameGrabber:
         """Start reading (once; later calls do nothing)."""
         if self._thread.ident is None:
             self._thread.start()
@@ -559,14 +584,22 @@ class FrameGrabber:
             if self.error is not None:
                 return VideoStatus(False, f"video stopped: {self.error}", reason=str(self.error))
             if self._lost_at is not None:
-                return VideoStatus(False, f"video lost at {_clock(self._lost_at)}, reconnecting (try {max(self._tries, 1)})",
-                                   self._reason, self._lost_at, self._tries)
+                return VideoStatus(
+                    False,
+                    f"video lost at {_clock(self._lost_at)}, reconnecting (try {max(self._tries, 1)})",
+                    self._reason,
+                    self._lost_at,
+                    self._tries,
+                )
             if self._latest is None:
                 return VideoStatus(False, "waiting for the first frame")
             if self.source.live and self._last_mono is not None and time.monotonic() - self._last_mono > self.stall_s:
                 silent = time.monotonic() - self._last_mono
-                return VideoStatus(False, f"video lost at {_clock(self._last_wall)}, no frame for {silent:.0f} s; waiting "
-                                   "for it", lost_at=self._last_wall)
+                return VideoStatus(
+                    False,
+                    f"video lost at {_clock(self._last_wall)}, no frame for {silent:.0f} s; waiting for it",
+                    lost_at=self._last_wall,
+                )
             return VideoStatus(True, "live" if self.source.live else "playing")
 
     def add_listener(self, on_frame: Callable[[Frame], None]) -> None:

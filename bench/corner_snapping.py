@@ -65,8 +65,15 @@ def calibration_corners(scene):
         if a["action"] == "choose_vertex":
             pending = (a["name"], int(a["index"]))
         elif a["action"] == "click" and pending is not None:
-            out.append((*pending, float(a["t"]), np.array(a["truth"]["X_world"]), np.array(a["truth"]["uv_true"]),
-                        np.array(a["uv"])))
+            out.append(
+                (
+                    *pending,
+                    float(a["t"]),
+                    np.array(a["truth"]["X_world"]),
+                    np.array(a["truth"]["uv_true"]),
+                    np.array(a["uv"]),
+                )
+            )
             pending = None
     return out
 
@@ -110,7 +117,7 @@ def main() -> int:
 
     def one_set(clicks, record=True):
         uv_w, sig_w = [], []
-        for (name, k, img, X, uv, _, D, L), c in zip(prepared, clicks):
+        for (name, k, img, _X, uv, _, D, L), c in zip(prepared, clicks):
             t0 = time.perf_counter()
             w = snap_corner(img, c, D, L)
             times.append(time.perf_counter() - t0)
@@ -119,7 +126,11 @@ def main() -> int:
             if not record:
                 continue
             err["raw"].append(np.linalg.norm(c - uv))
-            for key, res in (("subpix", snap_corner_subpix(img, c)), ("edges", snap_corner_edges(img, c, D, L)), ("workflow", w)):
+            for key, res in (
+                ("subpix", snap_corner_subpix(img, c)),
+                ("edges", snap_corner_edges(img, c, D, L)),
+                ("workflow", w),
+            ):
                 if res.ok:
                     err[key].append(np.linalg.norm(res.uv - uv))
                 else:
@@ -137,19 +148,33 @@ def main() -> int:
     # the recorded script's own clicks (what mcit demo replays)
     script = [p[5] for p in prepared]
     script_snapped, script_sig = one_set(script, record=False)
-    demo = {key: c_error(scene, calibrate_dlt(X_world, uv, cam.width, cam.height, sigma_px=sig)[0], t_cal)
-            for key, uv, sig in (("raw", np.array(script), None), ("workflow", script_snapped, None),
-                                 ("weighted", script_snapped, script_sig))}
+    demo = {
+        key: c_error(scene, calibrate_dlt(X_world, uv, cam.width, cam.height, sigma_px=sig)[0], t_cal)
+        for key, uv, sig in (
+            ("raw", np.array(script), None),
+            ("workflow", script_snapped, None),
+            ("weighted", script_snapped, script_sig),
+        )
+    }
 
     n = args.trials * len(prepared)
     print("Corner snapping for the camera calibration (bench/corner_snapping.py)")
-    print(f"  workcell scene, its video (app.render frames, blur σ = 0.5 px, noise σ = 2 grey levels, Motion-JPEG); "
-          f"the operator script's {len(prepared)} calibration corners on the frames of their clicks;")
-    print(f"  {args.trials} trials of clicks with σ = {CLICK_SIGMA_PX:.0f} px per coordinate, seed {args.seed}: {n} clicks")
+    print(
+        f"  workcell scene, its video (app.render frames, blur σ = 0.5 px, noise σ = 2 grey levels, Motion-JPEG); "
+        f"the operator script's {len(prepared)} calibration corners on the frames of their clicks;"
+    )
+    print(
+        f"  {args.trials} trials of clicks with σ = {CLICK_SIGMA_PX:.0f} px per coordinate, seed {args.seed}: {n} clicks"
+    )
     print()
     print("  corner error (px, distance to the true corner), over the snaps that succeeded")
     print(f"  {'':14s}{'mean':>8s}{'median':>8s}{'90 %':>8s}{'95 %':>8s}{'max':>8s}  refused")
-    for key, name in (("raw", "raw clicks"), ("subpix", "cornerSubPix"), ("edges", "edges ∩"), ("workflow", "workflow")):
+    for key, name in (
+        ("raw", "raw clicks"),
+        ("subpix", "cornerSubPix"),
+        ("edges", "edges ∩"),
+        ("workflow", "workflow"),
+    ):
         print(f"  {name:14s}{stats(err[key])}  {refused[key]:4d} ({100 * refused[key] / n:.0f} %)")
     print()
     print("  per corner (workflow: snapped, or the raw click when refused), mean error px")
@@ -157,23 +182,31 @@ def main() -> int:
     for (name, k), v in per_corner.items():
         line.append(f"{name[:5]}:{k} {np.mean(v):.2f}")
     for i in range(0, len(line), 7):
-        print("   " + "  ".join(line[i:i + 7]))
+        print("   " + "  ".join(line[i : i + 7]))
     print()
     print("  DLT on the 13 pairs: calibrated C vs the true C at the bodies' corners; optical centre")
-    print(f"  {'':14s}{'RMS px mean':>12s}{'median':>8s}{'max px mean':>12s}{'median':>8s}{'95 %':>8s}{'centre cm mean':>15s}{'median':>8s}{'95 %':>8s}")
+    print(
+        f"  {'':14s}{'RMS px mean':>12s}{'median':>8s}{'max px mean':>12s}{'median':>8s}{'95 %':>8s}{'centre cm mean':>15s}{'median':>8s}{'95 %':>8s}"
+    )
     for key, name in (("raw", "raw clicks"), ("workflow", "snapped"), ("weighted", "snapped, 1/σ")):
         d = np.array(dlt[key])
-        print(f"  {name:14s}{d[:, 0].mean():12.2f}{np.median(d[:, 0]):8.2f}{d[:, 1].mean():12.2f}{np.median(d[:, 1]):8.2f}"
-              f"{np.percentile(d[:, 1], 95):8.2f}{100 * d[:, 2].mean():15.2f}{100 * np.median(d[:, 2]):8.2f}"
-              f"{100 * np.percentile(d[:, 2], 95):8.2f}")
-    print(f"  the recorded script's clicks (seed 8, as mcit demo replays them): raw {demo['raw'][0]:.2f} px RMS, "
-          f"{demo['raw'][1]:.2f} px max, centre {100 * demo['raw'][2]:.1f} cm; snapped {demo['workflow'][0]:.2f} px RMS, "
-          f"{demo['workflow'][1]:.2f} px max, centre {100 * demo['workflow'][2]:.1f} cm; snapped, 1/σ {demo['weighted'][0]:.2f} px "
-          f"RMS, {demo['weighted'][1]:.2f} px max, centre {100 * demo['weighted'][2]:.1f} cm")
+        print(
+            f"  {name:14s}{d[:, 0].mean():12.2f}{np.median(d[:, 0]):8.2f}{d[:, 1].mean():12.2f}{np.median(d[:, 1]):8.2f}"
+            f"{np.percentile(d[:, 1], 95):8.2f}{100 * d[:, 2].mean():15.2f}{100 * np.median(d[:, 2]):8.2f}"
+            f"{100 * np.percentile(d[:, 2], 95):8.2f}"
+        )
+    print(
+        f"  the recorded script's clicks (seed 8, as mcit demo replays them): raw {demo['raw'][0]:.2f} px RMS, "
+        f"{demo['raw'][1]:.2f} px max, centre {100 * demo['raw'][2]:.1f} cm; snapped {demo['workflow'][0]:.2f} px RMS, "
+        f"{demo['workflow'][1]:.2f} px max, centre {100 * demo['workflow'][2]:.1f} cm; snapped, 1/σ {demo['weighted'][0]:.2f} px "
+        f"RMS, {demo['weighted'][1]:.2f} px max, centre {100 * demo['weighted'][2]:.1f} cm"
+    )
     print()
     s = 1e3 * np.asarray(times)
-    print(f"  snap_corner time: median {np.median(s):.1f} ms, 95 % {np.percentile(s, 95):.1f} ms per click "
-          f"(one core; {platform.processor() or platform.machine()}, Python {platform.python_version()})")
+    print(
+        f"  snap_corner time: median {np.median(s):.1f} ms, 95 % {np.percentile(s, 95):.1f} ms per click "
+        f"(one core; {platform.processor() or platform.machine()}, Python {platform.python_version()})"
+    )
     frames.close()
     return 0
 

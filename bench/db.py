@@ -67,8 +67,17 @@ def populate(path: Path, n: int, rng: np.random.Generator) -> float:
         t0 = time.perf_counter()
         with db.transaction():
             for i in range(n):
-                db.add_object(f"obj{i:04d}", "box", BRep.box(*rng.uniform(0.05, 0.5, 3)), make_T(random_rotation(rng), rng.uniform(-2, 2, 3)),
-                              cov=np.eye(6) * 1e-6, dims={"size_x": 0.1}, sigmas={"size_x": 0.001}, status="known", method="bench")
+                db.add_object(
+                    f"obj{i:04d}",
+                    "box",
+                    BRep.box(*rng.uniform(0.05, 0.5, 3)),
+                    make_T(random_rotation(rng), rng.uniform(-2, 2, 3)),
+                    cov=np.eye(6) * 1e-6,
+                    dims={"size_x": 0.1},
+                    sigmas={"size_x": 0.001},
+                    status="known",
+                    method="bench",
+                )
         return time.perf_counter() - t0
 
 
@@ -84,8 +93,10 @@ def main() -> int:
     tmp = Path(tempfile.mkdtemp(prefix="mcit-bench-db-"))
     path = tmp / "site.sqlite"
     n = args.objects
-    print(f"# bench/db.py: {n} objects (boxes, one model each), SQLite {sqlite3.sqlite_version}, Python {platform.python_version()}, "
-          f"{os.cpu_count()} CPUs; database {path} ({os.statvfs(tmp).f_bsize} B blocks)")
+    print(
+        f"# bench/db.py: {n} objects (boxes, one model each), SQLite {sqlite3.sqlite_version}, Python {platform.python_version()}, "
+        f"{os.cpu_count()} CPUs; database {path} ({os.statvfs(tmp).f_bsize} B blocks)"
+    )
     t_fill = populate(path, n, rng)
     print(f"# filling: {n} add_object in one transaction: {t_fill:.2f} s ({t_fill / n * 1e3:.2f} ms each)\n")
 
@@ -127,8 +138,13 @@ def main() -> int:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     duration_s = 4.0
     for rate, label in ((10.0, "10 updates/s"), (0.0, "flat out, {:.0f} updates/s")):
-        proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path), str(duration_s), str(rate)], stdout=subprocess.PIPE,
-                                text=True, env=env, cwd=ROOT)
+        proc = subprocess.Popen(
+            [sys.executable, "-c", WRITER, str(path), str(duration_s), str(rate)],
+            stdout=subprocess.PIPE,
+            text=True,
+            env=env,
+            cwd=ROOT,
+        )
         assert proc.stdout.readline().strip() == "ready"
         concurrent = []
         t_end = time.monotonic() + duration_s - 0.5
@@ -139,16 +155,33 @@ def main() -> int:
             time.sleep(0.005)
         writes = int(proc.stdout.readline())
         proc.wait()
-        rows.append((f"overlay read, other process writing {label.format(writes / duration_s)}", len(concurrent), *stats_ms(concurrent)))
+        rows.append(
+            (
+                f"overlay read, other process writing {label.format(writes / duration_s)}",
+                len(concurrent),
+                *stats_ms(concurrent),
+            )
+        )
 
-    print(f"{'measurement (Database.objects(), ' + str(n) + ' objects)':<62} {'n':>5} {'median ms':>10} {'p95 ms':>8} {'max ms':>8}  target")
+    print(
+        f"{'measurement (Database.objects(), ' + str(n) + ' objects)':<62} {'n':>5} {'median ms':>10} {'p95 ms':>8} {'max ms':>8}  target"
+    )
     for name, count, med, p95, mx in rows:
-        verdict = f"≤ {TARGET_READ_MS:.0f} ms: {'met' if p95 <= TARGET_READ_MS else 'NOT met'} (p95)" if "cold" not in name else "(once per connection)"
+        verdict = (
+            f"≤ {TARGET_READ_MS:.0f} ms: {'met' if p95 <= TARGET_READ_MS else 'NOT met'} (p95)"
+            if "cold" not in name
+            else "(once per connection)"
+        )
         print(f"{name:<62} {count:>5} {med:>10.3f} {p95:>8.3f} {mx:>8.3f}  {verdict}")
 
     print()
-    print(f"{'updates (update_pose: version check + history row, 1 transaction each)':<72} {'n':>5} {'per s':>7} {'median ms':>10} {'p95 ms':>8}")
-    for label, sync in (("synchronous=FULL (mcit's setting: survives a power cut)", "FULL"), ("synchronous=NORMAL (comparison only)", "NORMAL")):
+    print(
+        f"{'updates (update_pose: version check + history row, 1 transaction each)':<72} {'n':>5} {'per s':>7} {'median ms':>10} {'p95 ms':>8}"
+    )
+    for label, sync in (
+        ("synchronous=FULL (mcit's setting: survives a power cut)", "FULL"),
+        ("synchronous=NORMAL (comparison only)", "NORMAL"),
+    ):
         writer._conn().execute(f"PRAGMA synchronous = {sync}")
         lat = []
         t_all = time.perf_counter()
@@ -163,7 +196,9 @@ def main() -> int:
         med, p95, _ = stats_ms(lat)
         print(f"{label:<72} {args.updates:>5} {rate:>7.0f} {med:>10.3f} {p95:>8.3f}")
     writer._conn().execute("PRAGMA synchronous = FULL")
-    print(f"\n# file size after the run: {path.stat().st_size / 1e6:.1f} MB (+ WAL); the machine is shared, so rerun for spread")
+    print(
+        f"\n# file size after the run: {path.stat().st_size / 1e6:.1f} MB (+ WAL); the machine is shared, so rerun for spread"
+    )
     reader.close()
     writer.close()
     if not args.keep:

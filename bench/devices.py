@@ -55,8 +55,8 @@ import trimesh  # noqa: E402
 
 from app.devices.acquisition import profile_scan  # noqa: E402
 from app.devices.drivers.rangefinder import RangeFinder  # noqa: E402
-from app.devices.site import EmulatedSite  # noqa: E402
 from app.devices.drivers.turret import Turret  # noqa: E402
+from app.devices.site import EmulatedSite  # noqa: E402
 from app.scene import default_scene_path, load_scene  # noqa: E402
 from core.rangefinder import aim  # noqa: E402
 
@@ -66,7 +66,13 @@ GUARD_S = 0.002
 
 def step_chars(pan: int, tilt: int) -> int:
     """Characters on the line for a pan step: PP, A, and the read-back of both axes (PP?, TP?)."""
-    return 2 * (len(f"PP{pan} ") + len("A ") + len("PP ") + len("TP ")) + 3 + 3 + len(f"* {pan}\r\n") + len(f"* {tilt}\r\n")
+    return (
+        2 * (len(f"PP{pan} ") + len("A ") + len("PP ") + len("TP "))
+        + 3
+        + 3
+        + len(f"* {pan}\r\n")
+        + len(f"* {tilt}\r\n")
+    )
 
 
 def check_chars(pan: int, tilt: int) -> int:
@@ -88,11 +94,23 @@ def face_target(scene):
 class Chain:
     """An emulated site and its two drivers."""
 
-    def __init__(self, scene, *, rf_baud, tu_baud, delay_s, per_m_s=0.005, transport="pty", rates=None, seed=0, tmp=None):
-        self.site = EmulatedSite(scene, clock=lambda: 0.0, seed=seed, rangefinder_baud=rf_baud, turret_baud=tu_baud,
-                                 measure_delay_s=delay_s, delay_per_m_s=per_m_s, fault_rates=rates)
+    def __init__(
+        self, scene, *, rf_baud, tu_baud, delay_s, per_m_s=0.005, transport="pty", rates=None, seed=0, tmp=None
+    ):
+        self.site = EmulatedSite(
+            scene,
+            clock=lambda: 0.0,
+            seed=seed,
+            rangefinder_baud=rf_baud,
+            turret_baud=tu_baud,
+            measure_delay_s=delay_s,
+            delay_per_m_s=per_m_s,
+            fault_rates=rates,
+        )
         if transport == "pty":
-            urls = self.site.serve_pty(tmp / f"rf-{rf_baud}-{tu_baud}-{delay_s}", tmp / f"tu-{rf_baud}-{tu_baud}-{delay_s}")
+            urls = self.site.serve_pty(
+                tmp / f"rf-{rf_baud}-{tu_baud}-{delay_s}", tmp / f"tu-{rf_baud}-{tu_baud}-{delay_s}"
+            )
         else:
             urls = self.site.serve_inprocess()
         self.rf = RangeFinder(urls[0], baudrate=rf_baud or 19200, attempt_timeout_s=1.0)
@@ -111,12 +129,26 @@ def stats_ms(samples):
 
 def bench_shots(scene, target, shots, tmp, full=False):
     rows = []
-    configs = (("pty", 19200, 0.1, 0.005), ("pty", 9600, 0.1, 0.005), ("pty", 19200, 0.05, 0.005), ("mcit://", 19200, 0.1, 0.005),
-               ("pty", 0, 0.0, 0.0), ("mcit://", 0, 0.0, 0.0))
+    configs = (
+        ("pty", 19200, 0.1, 0.005),
+        ("pty", 9600, 0.1, 0.005),
+        ("pty", 19200, 0.05, 0.005),
+        ("mcit://", 19200, 0.1, 0.005),
+        ("pty", 0, 0.0, 0.0),
+        ("mcit://", 0, 0.0, 0.0),
+    )
     if not full:
         configs = configs[:1] + configs[-1:]
     for transport, rf_baud, delay, per_m in configs:
-        chain = Chain(scene, rf_baud=rf_baud, tu_baud=9600, delay_s=delay, per_m_s=per_m, transport="pty" if transport == "pty" else "inprocess", tmp=tmp)
+        chain = Chain(
+            scene,
+            rf_baud=rf_baud,
+            tu_baud=9600,
+            delay_s=delay,
+            per_m_s=per_m,
+            transport="pty" if transport == "pty" else "inprocess",
+            tmp=tmp,
+        )
         try:
             pan, tilt, rho = aim(scene.turret.T_world_turret, target)
             chain.tu.move_to(float(pan), float(tilt))
@@ -171,10 +203,25 @@ def surface_distance(scene, X):
 
 
 def bench_scans(scene, target, beams, tmp, seed, full=False):
-    kinds = ["drop", "late", "truncate", "split", "junk", "garble", "unsolicited", "early"]  # line faults; a device error stops a scan by design
+    kinds = [
+        "drop",
+        "late",
+        "truncate",
+        "split",
+        "junk",
+        "garble",
+        "unsolicited",
+        "early",
+    ]  # line faults; a device error stops a scan by design
     rows = []
-    configs = ((19200, 9600, 0.1, 0.0), (19200, 9600, 0.05, 0.0), (9600, 9600, 0.1, 0.0), (0, 0, 0.1, 0.0),
-               (19200, 9600, 0.1, 0.02), (19200, 9600, 0.1, 0.10))
+    configs = (
+        (19200, 9600, 0.1, 0.0),
+        (19200, 9600, 0.05, 0.0),
+        (9600, 9600, 0.1, 0.0),
+        (0, 0, 0.1, 0.0),
+        (19200, 9600, 0.1, 0.02),
+        (19200, 9600, 0.1, 0.10),
+    )
     for rf_baud, tu_baud, delay, rate in configs if full else configs[:1]:
         rates = {k: rate / len(kinds) for k in kinds} if rate else None
         chain = Chain(scene, rf_baud=rf_baud, tu_baud=tu_baud, delay_s=delay, rates=rates, seed=seed, tmp=tmp)
@@ -186,22 +233,43 @@ def bench_scans(scene, target, beams, tmp, seed, full=False):
             start = float(pan) - beams // 2 * 2 * step
             chain.tu.move_to(start, float(tilt))
             t0 = time.perf_counter()
-            scan = profile_scan(chain.tu, chain.rf, tilt_rad=float(tilt), pan_start_rad=start,
-                                pan_stop_rad=start + (beams - 1) * 2 * step, pan_step_rad=2 * step)
+            scan = profile_scan(
+                chain.tu,
+                chain.rf,
+                tilt_rad=float(tilt),
+                pan_start_rad=start,
+                pan_stop_rad=start + (beams - 1) * 2 * step,
+                pan_step_rad=2 * step,
+            )
             elapsed = time.perf_counter() - t0
             X = scan.points(scene.turret.T_world_turret)[scan.hits]
             worst = float(surface_distance(scene, X).max() / scene.rangefinder.sigma_range_m) if len(X) else np.nan
             shot = delay + 0.005 * float(rho) + (SHOT_CHARS * 10 / rf_baud if rf_baud else 0.0) + GUARD_S
             steps = chain.tu.rad_to_steps(float(pan), float(tilt))
-            move = ((step_chars(*steps) + check_chars(*steps)) * 10 / tu_baud if tu_baud else 0.0) + 2 / scene.turret.speed_steps_s
+            move = (
+                (step_chars(*steps) + check_chars(*steps)) * 10 / tu_baud if tu_baud else 0.0
+            ) + 2 / scene.turret.speed_steps_s
             retries = chain.rf.stats["resyncs"] + chain.tu.stats["resyncs"]
             faults = len(chain.site.rangefinder.faults.applied) + len(chain.site.turret.faults.applied)
-            rows.append((rf_baud or "∞", tu_baud or "∞", f"{delay * 1e3:.0f}", f"{rate:.0%}", 1 / (shot + move), len(scan) / elapsed,
-                         f"{faults}/{retries}", f"{int(scan.hits.sum())}/{len(scan)}", worst))
+            rows.append(
+                (
+                    rf_baud or "∞",
+                    tu_baud or "∞",
+                    f"{delay * 1e3:.0f}",
+                    f"{rate:.0%}",
+                    1 / (shot + move),
+                    len(scan) / elapsed,
+                    f"{faults}/{retries}",
+                    f"{int(scan.hits.sum())}/{len(scan)}",
+                    worst,
+                )
+            )
         finally:
             chain.close()
     print(f"\nProfile scan across the unknown box ({beams} beams, 2 steps = 0.103° apart, 1 shot each), beams/s")
-    print(f"{'RF baud':>7} {'PTU baud':>8} {'delay':>6} {'faults':>6} {'model':>7} {'measured':>8} {'faults/resyncs':>14} {'hits':>7} {'max |d|/σ':>9}")
+    print(
+        f"{'RF baud':>7} {'PTU baud':>8} {'delay':>6} {'faults':>6} {'model':>7} {'measured':>8} {'faults/resyncs':>14} {'hits':>7} {'max |d|/σ':>9}"
+    )
     for rb, tb, d, fr, model, meas, fx, hits, worst in rows:
         print(f"{rb!s:>7} {tb!s:>8} {d:>6} {fr:>6} {model:7.2f} {meas:8.2f} {fx:>14} {hits:>7} {worst:9.2f}")
     print("max |d|/σ: largest distance of a scanned point to the true surfaces, in σ_ρ (all within the noise if ≲ 4)")
@@ -225,7 +293,10 @@ def matrix_rows(device: str):
     rows = [
         ("noise (junk bytes before a reply)", lambda r: [Fault("junk", match=m(r))]),
         ("garbage line", lambda r: [Fault("unsolicited", match=m(r), data=_garbage_line(r))]),
-        ("dropped bytes (truncated reply)", lambda r: [Fault("truncate", match=m(r), keep_terminator=bool(r.random() < 0.5))]),
+        (
+            "dropped bytes (truncated reply)",
+            lambda r: [Fault("truncate", match=m(r), keep_terminator=bool(r.random() < 0.5))],
+        ),
         ("split reply", lambda r: [Fault("split", match=m(r), delay_s=float(r.uniform(0.0, 0.1)))]),
         ("late reply", lambda r: [Fault("late", match=m(r), delay_s=float(r.uniform(0.05, 0.3)))]),
         ("timeout (dropped reply)", lambda r: [Fault("drop", match=m(r))]),
@@ -236,16 +307,39 @@ def matrix_rows(device: str):
         ("unplug and replug", lambda r: [Fault("unplug", match=m(r), delay_s=float(r.uniform(0.05, 0.3)))]),
     ]
     if device == "rangefinder":
-        rows.insert(7, ("jump (garbled digit, >= 1 cm)", lambda r: [Fault("garble", match=b"g0g", at=int(r.integers(4, 10)),
-                                                                           data=bytes([48 + int(r.integers(10))]))]))
+        rows.insert(
+            7,
+            (
+                "jump (garbled digit, >= 1 cm)",
+                lambda r: [
+                    Fault("garble", match=b"g0g", at=int(r.integers(4, 10)), data=bytes([48 + int(r.integers(10))]))
+                ],
+            ),
+        )
     else:
-        rows.insert(7, ("swapped digits in a position", lambda r: [Fault("garble", match=b"* ", at=int(r.integers(2, 4)),
-                                                                           data=bytes([48 + int(r.integers(10))]))]))
-    rows.append(("three faults at once", lambda r: [f for _ in range(3) for f in rows[int(r.integers(len(rows) - 1))][1](r)]))
+        rows.insert(
+            7,
+            (
+                "swapped digits in a position",
+                lambda r: [
+                    Fault("garble", match=b"* ", at=int(r.integers(2, 4)), data=bytes([48 + int(r.integers(10))]))
+                ],
+            ),
+        )
+    rows.append(
+        ("three faults at once", lambda r: [f for _ in range(3) for f in rows[int(r.integers(len(rows) - 1))][1](r)])
+    )
     return rows
 
 
-RECOVERY_STATS = ("resyncs", "reconnects", "timeouts", "corrupt", "jumps", "two_replies")  # a retry, re-read or reconnect
+RECOVERY_STATS = (
+    "resyncs",
+    "reconnects",
+    "timeouts",
+    "corrupt",
+    "jumps",
+    "two_replies",
+)  # a retry, re-read or reconnect
 
 
 def matrix_trials(scene, trials: int, seed: int):
@@ -256,7 +350,9 @@ def matrix_trials(scene, trials: int, seed: int):
     from app.render.raycast import BeamCaster
     from core.rangefinder import beam_ray
 
-    exact_site = dict(rangefinder_baud=19200, turret_baud=9600, measure_delay_s=0.01, delay_per_m_s=0.0, no_target_delay_s=0.05)
+    exact_site = dict(
+        rangefinder_baud=19200, turret_baud=9600, measure_delay_s=0.01, delay_per_m_s=0.0, no_target_delay_s=0.05
+    )
     driver = dict(attempt_timeout_s=0.15, retries=2, reconnect_timeout_s=1.0)
     sigma = scene.rangefinder.sigma_range_m
     caster = BeamCaster(scene)
@@ -279,7 +375,9 @@ def matrix_trials(scene, trials: int, seed: int):
                     if device == "turret":
                         target = (aim0[0] + int(rng.integers(-300, 301)), aim0[1] + int(rng.integers(-200, 201)))
                     else:  # a point of the facing face within ±2 cm of its centre
-                        target = tu.rad_to_steps(*aim(scene.turret.T_world_turret, face + rng.uniform(-0.02, 0.02, 3))[:2])
+                        target = tu.rad_to_steps(
+                            *aim(scene.turret.T_world_turret, face + rng.uniform(-0.02, 0.02, 3))[:2]
+                        )
                         tu.move_to_steps(*target)
                     before = sum(drv.stats[k] for k in RECOVERY_STATS)
                     emu.faults.push(*make(rng))
@@ -347,8 +445,12 @@ def main() -> int:
     scene = replace(scene, turret=replace(scene.turret, speed_steps_s=1000.0))
     target = face_target(scene)
     print(__doc__.split("\n\n", 2)[2])
-    print(f"\nmachine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start; σ_ρ = {scene.rangefinder.sigma_range_m * 1e3:.0f} mm; target at {np.linalg.norm(target - scene.turret.T_world_turret[:3, 3]):.3f} m")
-    wrong = bench_fault_matrix(replace(scene, turret=replace(scene.turret, speed_steps_s=4000.0)), args.trials, args.seed)
+    print(
+        f"\nmachine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start; σ_ρ = {scene.rangefinder.sigma_range_m * 1e3:.0f} mm; target at {np.linalg.norm(target - scene.turret.T_world_turret[:3, 3]):.3f} m"
+    )
+    wrong = bench_fault_matrix(
+        replace(scene, turret=replace(scene.turret, speed_steps_s=4000.0)), args.trials, args.seed
+    )
     if not args.matrix_only:
         with tempfile.TemporaryDirectory() as tmp:
             tmp = Path(tmp)

@@ -73,15 +73,24 @@ def build(n_objects: int, fps: float, source=None):
                 model = BRep.box(*rng.uniform(0.03, 0.08, 3))
             else:
                 model = BRep.cylinder(rng.uniform(0.02, 0.04), rng.uniform(0.05, 0.12))
-            db.add_object(f"extra_{k}", "box" if k % 3 else "cylinder", model,
-                          make_T(rot_z(rng.uniform(0, np.pi)), [xy[0], xy[1], 0.0]), status="known", method="bench")
+            db.add_object(
+                f"extra_{k}",
+                "box" if k % 3 else "cylinder",
+                model,
+                make_T(rot_z(rng.uniform(0, np.pi)), [xy[0], xy[1], 0.0]),
+                status="known",
+                method="bench",
+            )
             n += 1
     if source is not None:
         video = source.description
     elif FRAMES.is_dir():
         source, video = FolderSource(FRAMES, fps=fps), f"ViSP cube sequence (218 real frames, 640×480) at {fps:.0f} fps"
     else:
-        source, video = StillSource(rng.integers(0, 255, (480, 640, 3), dtype=np.uint8), fps=fps), "a 640×480 noise still"
+        source, video = (
+            StillSource(rng.integers(0, 255, (480, 640, 3), dtype=np.uint8), fps=fps),
+            "a 640×480 noise still",
+        )
     site = Site(scene, db, clock=lambda: 0.0)
     server = InterfaceServer(site, FrameGrabber(source), port=free_port()).start()
     return server, site, db, video
@@ -124,8 +133,11 @@ def measure_video(page, server, seconds: float) -> dict:
     t1, sent1 = time.monotonic(), server.frames_sent
     window = [(k, b) for t, k, b in DELIVERED if t0 <= t <= t1 and k]
     n = sum(k for k, _ in window)
-    return {"delivered_fps": n / (t1 - t0), "sent_fps": (sent1 - sent0) / (t1 - t0),
-            "kib": float(sum(b for _, b in window) / max(n, 1) / 1024)}
+    return {
+        "delivered_fps": n / (t1 - t0),
+        "sent_fps": (sent1 - sent0) / (t1 - t0),
+        "kib": float(sum(b for _, b in window) / max(n, 1) / 1024),
+    }
 
 
 def video_updates(payload) -> tuple[int, int]:
@@ -140,7 +152,7 @@ def video_updates(payload) -> tuple[int, int]:
         return 0, 0
     n_inner = int.from_bytes(payload[:8], "little")
     n_comp = int.from_bytes(payload[8:16], "little")
-    inner = zstandard.ZstdDecompressor().decompress(bytes(payload[16:16 + n_comp]), max_output_size=n_inner)
+    inner = zstandard.ZstdDecompressor().decompress(bytes(payload[16 : 16 + n_comp]), max_output_size=n_inner)
     msgs = msgspec.msgpack.decode(inner).get("messages", [])
     count = size = 0
     for m in msgs:
@@ -161,7 +173,10 @@ def measure_clicks(page, server, panel, workflow: str, n: int, rng) -> np.ndarra
         time.sleep(0.5)
         table = site.object("table")
         for _ in range(n):
-            X = table.T_world_obj[:3, :3] @ [rng.uniform(-0.4, 0.4), rng.uniform(-0.6, 0.6), 0.04] + table.T_world_obj[:3, 3]
+            X = (
+                table.T_world_obj[:3, :3] @ [rng.uniform(-0.4, 0.4), rng.uniform(-0.6, 0.6), 0.04]
+                + table.T_world_obj[:3, 3]
+            )
             x, y = screen_of(server, panel, cam.project(X))
             canvas.click(position={"x": x, "y": y})
             time.sleep(0.15)
@@ -175,7 +190,11 @@ def measure_clicks(page, server, panel, workflow: str, n: int, rng) -> np.ndarra
         while done < n:
             for k in range(len(drawn)):
                 a, b = drawn[k]
-                for uv in (a + 0.3 * (b - a) + rng.normal(0, 2, 2), a + 0.7 * (b - a) + rng.normal(0, 2, 2), (a + b) / 2):
+                for uv in (
+                    a + 0.3 * (b - a) + rng.normal(0, 2, 2),
+                    a + 0.7 * (b - a) + rng.normal(0, 2, 2),
+                    (a + b) / 2,
+                ):
                     x, y = screen_of(server, panel, uv)
                     canvas.click(position={"x": x, "y": y})
                     time.sleep(0.15)
@@ -204,10 +223,22 @@ def ws_client(url: str, out: str) -> None:
     async def run() -> None:
         async with connect(url, subprotocols=[f"viser-v{viser.__version__}"], max_size=None, compression=None) as ws:
             # viser counts a client as connected once it reports its camera, as the page does
-            await ws.send(msgspec.msgpack.encode({
-                "type": "ViewerCameraMessage", "wxyz": [1.0, 0.0, 0.0, 0.0], "position": [3.2, 2.4, -5.0], "fov": 0.9,
-                "near": 0.05, "far": 2000.0, "image_height": 700, "image_width": 1200, "look_at": [3.2, 2.4, 0.0],
-                "up_direction": [0.0, -1.0, 0.0]}))
+            await ws.send(
+                msgspec.msgpack.encode(
+                    {
+                        "type": "ViewerCameraMessage",
+                        "wxyz": [1.0, 0.0, 0.0, 0.0],
+                        "position": [3.2, 2.4, -5.0],
+                        "fov": 0.9,
+                        "near": 0.05,
+                        "far": 2000.0,
+                        "image_height": 700,
+                        "image_width": 1200,
+                        "look_at": [3.2, 2.4, 0.0],
+                        "up_direction": [0.0, -1.0, 0.0],
+                    }
+                )
+            )
             with open(out, "a", buffering=1) as f:
                 while True:
                     k, _ = video_updates(await ws.recv())
@@ -251,8 +282,9 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
     server, site, db, _ = build(n_objects, fps=30.0)
     out = tempfile.mktemp(prefix="mcit-bench-frames-", suffix=".txt")
     before = set(server.clients)
-    client = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--ws-client",
-                               f"ws://127.0.0.1:{server.port}", out])
+    client = subprocess.Popen(
+        [sys.executable, str(Path(__file__).resolve()), "--ws-client", f"ws://127.0.0.1:{server.port}", out]
+    )
     try:
         panel = wait_for_panel(server, before, timeout_s=120)
         deadline = time.monotonic() + 300
@@ -268,8 +300,11 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
             if hasattr(site, "update_pose"):
                 site.update_pose(obj, T, None, method="bench", client="bench")
             else:  # the interface before Site's named writes
-                site.write(lambda d, obj=obj, T=T: d.update_pose(obj.id, T, None, expected_version=obj.version,
-                                                                  method="bench", client="bench"))
+                site.write(
+                    lambda d, obj=obj, T=T: d.update_pose(
+                        obj.id, T, None, expected_version=obj.version, method="bench", client="bench"
+                    )
+                )
             changes += 1
             time.sleep(max(0.0, t0 + changes * change_every_s - time.time()))
         t1 = time.time()
@@ -291,8 +326,14 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
         _stop(client, server, db)
     window = _arrivals(out, t0, t1)
     gaps = np.diff(np.concatenate([[t0], window, [t1]]))
-    return {"objects": n_objects, "gap_ms": 1000.0 * float(gaps.max()), "fps": len(window) / (t1 - t0),
-            "changes": changes, "seconds": t1 - t0, "clicks_ms": np.array(latencies)}
+    return {
+        "objects": n_objects,
+        "gap_ms": 1000.0 * float(gaps.max()),
+        "fps": len(window) / (t1 - t0),
+        "changes": changes,
+        "seconds": t1 - t0,
+        "clicks_ms": np.array(latencies),
+    }
 
 
 def stall_table(sizes, seconds: float, change_every_s: float, clicks: int) -> None:
@@ -303,19 +344,25 @@ def stall_table(sizes, seconds: float, change_every_s: float, clicks: int) -> No
         r = rows[-1]
         print(f"  {n} objects: longest gap {r['gap_ms']:.0f} ms, {r['fps']:.1f} frames/s", file=sys.stderr, flush=True)
     load = os.getloadavg()[0]
-    print(f"mcit interface stall table — video 30 frames/s (640×480), one browser-like client (a websocket reader, "
-          f"no rendering, its own process); one database change (a pose moved 1 cm, written as Accept writes it) every "
-          f"{change_every_s:.0f} s over {seconds:.0f} s; machine: {os.cpu_count()} cores, load average {load:.1f}")
+    print(
+        f"mcit interface stall table — video 30 frames/s (640×480), one browser-like client (a websocket reader, "
+        f"no rendering, its own process); one database change (a pose moved 1 cm, written as Accept writes it) every "
+        f"{change_every_s:.0f} s over {seconds:.0f} s; machine: {os.cpu_count()} cores, load average {load:.1f}"
+    )
     print()
     print("| objects | database changes | longest video gap (ms) | frames/s delivered | target |")
     print("|---|---|---|---|---|")
     for r in rows:
         target = "gap ≤ 100 ms, ≥ 28 frames/s" if r["objects"] == max(sizes) else "—"
-        print(f"| {r['objects']} | {r['changes']} in {r['seconds']:.1f} s | {r['gap_ms']:.0f} | {r['fps']:.1f} | {target} |")
+        print(
+            f"| {r['objects']} | {r['changes']} in {r['seconds']:.1f} s | {r['gap_ms']:.0f} | {r['fps']:.1f} | {target} |"
+        )
     lat = rows[-1]["clicks_ms"]
     if len(lat):
-        print(f"| click → overlay (select by clicking), {rows[-1]['objects']} objects: p50 / p95 / max (n = {len(lat)}) | | "
-              f"{np.percentile(lat, 50):.1f} / {np.percentile(lat, 95):.1f} / {lat.max():.1f} ms | | p95 ≤ 50 ms |")
+        print(
+            f"| click → overlay (select by clicking), {rows[-1]['objects']} objects: p50 / p95 / max (n = {len(lat)}) | | "
+            f"{np.percentile(lat, 50):.1f} / {np.percentile(lat, 95):.1f} / {lat.max():.1f} ms | | p95 ≤ 50 ms |"
+        )
 
 
 def bench_lens(width: int, height: int):
@@ -335,8 +382,14 @@ def smooth_video(width: int, height: int):
     from app.video import VideoSource
 
     rng = np.random.default_rng(3)
-    images = [cv2.resize(rng.integers(0, 255, (height // 8, width // 8, 3), dtype=np.uint8), (width, height),
-                         interpolation=cv2.INTER_CUBIC) for _ in range(8)]
+    images = [
+        cv2.resize(
+            rng.integers(0, 255, (height // 8, width // 8, 3), dtype=np.uint8),
+            (width, height),
+            interpolation=cv2.INTER_CUBIC,
+        )
+        for _ in range(8)
+    ]
 
     class Cycle(VideoSource):
         def __init__(self):
@@ -359,8 +412,9 @@ def measure_rate(source, seconds: float) -> dict:
     server, site, db, _ = build(50, fps=30.0, source=source)
     out = tempfile.mktemp(prefix="mcit-bench-frames-", suffix=".txt")
     before = set(server.clients)
-    client = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--ws-client",
-                               f"ws://127.0.0.1:{server.port}", out])
+    client = subprocess.Popen(
+        [sys.executable, str(Path(__file__).resolve()), "--ws-client", f"ws://127.0.0.1:{server.port}", out]
+    )
     try:
         wait_for_panel(server, before, timeout_s=120)
         deadline = time.monotonic() + 300
@@ -392,14 +446,20 @@ def undistort_table(seconds: float) -> None:
         plain = measure_rate(smooth_video(w, h), seconds)
         und = measure_rate(UndistortedSource(smooth_video(w, h), lens), seconds)
         rows.append((w, h, lens.describe(), remap_ms, plain, und))
-        print(f"  {w}×{h}: {plain['fps']:.1f} frames/s plain, {und['fps']:.1f} undistorted", file=sys.stderr, flush=True)
+        print(
+            f"  {w}×{h}: {plain['fps']:.1f} frames/s plain, {und['fps']:.1f} undistorted", file=sys.stderr, flush=True
+        )
     load = os.getloadavg()[0]
-    print(f"mcit interface with lens distortion — a 30 frames/s video (8 smooth-noise images in turn), 50 objects, one browser-like "
-          f"client (a websocket reader, its own process), {seconds:.0f} s each; machine: {os.cpu_count()} cores, load "
-          f"average {load:.1f}")
+    print(
+        f"mcit interface with lens distortion — a 30 frames/s video (8 smooth-noise images in turn), 50 objects, one browser-like "
+        f"client (a websocket reader, its own process), {seconds:.0f} s each; machine: {os.cpu_count()} cores, load "
+        f"average {load:.1f}"
+    )
     print()
-    print("| frames | lens | remap per frame (ms) | frames/s received, undistortion off | frames/s received, "
-          "undistortion on | target (on) |")
+    print(
+        "| frames | lens | remap per frame (ms) | frames/s received, undistortion off | frames/s received, "
+        "undistortion on | target (on) |"
+    )
     print("|---|---|---|---|---|---|")
     for w, h, lens, ms, plain, und in rows:
         target = "≥ 28" if w == 640 else "≥ 25"
@@ -426,8 +486,9 @@ def main() -> int:
         undistort_table(args.undistort_seconds)
         return 0
     if args.stall:
-        stall_table([int(n) for n in args.stall_sizes.split(",")], args.stall_seconds, args.change_every,
-                    args.stall_clicks)
+        stall_table(
+            [int(n) for n in args.stall_sizes.split(",")], args.stall_seconds, args.change_every, args.stall_clicks
+        )
         return 0
     from playwright.sync_api import sync_playwright
 
@@ -448,18 +509,27 @@ def main() -> int:
         server.stop()
         db.close()
     load = os.getloadavg()[0]
-    print(f"mcit interface benchmark — {len(site.objects())} objects in the database, video: {video}, JPEG q{server.jpeg_quality}")
-    print(f"one headless chromium (swiftshader), viewport 1200×700; machine: {os.cpu_count()} cores, load average {load:.1f}")
+    print(
+        f"mcit interface benchmark — {len(site.objects())} objects in the database, video: {video}, JPEG q{server.jpeg_quality}"
+    )
+    print(
+        f"one headless chromium (swiftshader), viewport 1200×700; machine: {os.cpu_count()} cores, load average {load:.1f}"
+    )
     print()
     print("| metric | measured | target |")
     print("|---|---|---|")
     print(f"| video frames/s delivered to the browser (640×480, overlay live) | {v['delivered_fps']:.1f} | ≥ 25 |")
     print(f"| video frames/s produced by the server's redraw loop | {v['sent_fps']:.1f} | (source: 30) |")
     print(f"| mean video frame size (JPEG) | {v['kib']:.1f} KiB | — |")
-    for name, lat in (("designate target (ray cast on 50 objects)", lat_d), ("update pose (points, segments, edges)", lat_u)):
+    for name, lat in (
+        ("designate target (ray cast on 50 objects)", lat_d),
+        ("update pose (points, segments, edges)", lat_u),
+    ):
         if len(lat):
-            print(f"| click → overlay sent, {name}: p50 / p95 / max (n = {len(lat)}) | "
-                  f"{np.percentile(lat, 50):.1f} / {np.percentile(lat, 95):.1f} / {lat.max():.1f} ms | p95 ≤ 100 ms |")
+            print(
+                f"| click → overlay sent, {name}: p50 / p95 / max (n = {len(lat)}) | "
+                f"{np.percentile(lat, 50):.1f} / {np.percentile(lat, 95):.1f} / {lat.max():.1f} ms | p95 ≤ 100 ms |"
+            )
         else:
             print(f"| click → overlay sent, {name} | no click reached the server | p95 ≤ 100 ms |")
     print()

@@ -55,11 +55,11 @@ sys.path.insert(0, str(ROOT))
 
 from app.vision import evaluate  # noqa: E402
 from app.vision.matching import _base_triples, match_edges, p3l_all_triples, warm_up  # noqa: E402
-from core.pose import edge_symmetries  # noqa: E402
 from app.vision.snap import snap_segment  # noqa: E402
 from app.vision.synthetic import edge_contrast, render_poses  # noqa: E402
 from core.brep import BRep  # noqa: E402
 from core.camera import Camera  # noqa: E402
+from core.pose import edge_symmetries  # noqa: E402
 from core.pose.p3l import p3l_rotations  # noqa: E402
 from core.transforms import make_T, random_rotation  # noqa: E402
 
@@ -87,7 +87,11 @@ def random_trial(rng, camera, box, n_edges: int = 4):
             continue  # a face seen almost edge-on: its two long edges a pixel or two apart
         contrast = edge_contrast(camera, box, T)
         S = box.edge_segments(T)
-        ok = [k for k in range(len(S)) if contrast[k] >= 10.0 and np.linalg.norm(np.subtract(*camera.project(S[k]))) >= 30.0]
+        ok = [
+            k
+            for k in range(len(S))
+            if contrast[k] >= 10.0 and np.linalg.norm(np.subtract(*camera.project(S[k]))) >= 30.0
+        ]
         if len(ok) >= n_edges:
             pick = rng.choice(ok, n_edges, replace=False)
             exact = []
@@ -104,7 +108,11 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--p3l-only", action="store_true", help="time the batched P3L only (skip the matching trials)")
     ap.add_argument("--edges", type=int, default=4, help="clicked edges per trial (default 4; issue 16 times 4-6)")
-    ap.add_argument("--compare", action="store_true", help="also run every candidate settled on the image (settle=None), same trials")
+    ap.add_argument(
+        "--compare",
+        action="store_true",
+        help="also run every candidate settled on the image (settle=None), same trials",
+    )
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):  # one core, as bench/pose.py
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
@@ -123,13 +131,20 @@ def main() -> int:
     def right(edges, pick):
         return any(np.array_equal(p[pick], edges) for p in sym)
 
-    modes = ["exact", "σ = 1 px", "σ = 1 px + image", "σ = 1 px + image, ready", "snapped (σ = 2 px)", "snapped + image",
-             "snapped + image, ready"]
+    modes = [
+        "exact",
+        "σ = 1 px",
+        "σ = 1 px + image",
+        "σ = 1 px + image, ready",
+        "snapped (σ = 2 px)",
+        "snapped + image",
+        "snapped + image, ready",
+    ]
     if args.compare:
         modes += ["σ = 1 px + image, all", "snapped + image, all"]
     stats = {m: {"top": 0, "among": 0, "none": 0, "ms": [], "wall": []} for m in modes}
     load0 = os.getloadavg()[0]
-    for (T, pick, exact), img in zip(trials, frames):
+    for (_T, pick, exact), img in zip(trials, frames):
         noisy1 = exact + rng.normal(0.0, 1.0, exact.shape)
         noisy2 = exact + rng.normal(0.0, 2.0, exact.shape)
         snapped = np.array([snap_segment(img, s).seg_uv for s in noisy2])
@@ -151,7 +166,9 @@ def main() -> int:
                 if m.endswith(", ready"):  # ... or finds them ready, as the interface prepares them at the freeze
                     evaluate.prepare_frame(image)
             t0 = time.process_time()
-            res = match_edges(camera, box, segs, image=image, sigma_px=sigma, **({"settle": settle[0]} if settle else {}))
+            res = match_edges(
+                camera, box, segs, image=image, sigma_px=sigma, **({"settle": settle[0]} if settle else {})
+            )
             cpu_s = time.process_time() - t0
             st = stats[m]
             st["ms"].append(1e3 * cpu_s)
@@ -164,19 +181,35 @@ def main() -> int:
 
     n = args.trials
     print("Automatic edge matching (bench/matching.py)")
-    print(f"  camera {W}×{H} px, f = {F:.0f} px; box {BOX[0] * 100:.1f} × {BOX[1] * 100:.1f} × {BOX[2] * 100:.1f} cm at 2 m; "
-          f"{n} random poses, {args.edges} clicked edges each, seed {args.seed}; the box has {len(sym)} proper symmetries")
-    print(f"  one process pinned to one core; load average {load0:.2f} before the trials, {os.getloadavg()[0]:.2f} after, on {os.cpu_count()} cores")
-    print(f"  {'clicks':26s}{'right (top 1)':>15s}{'among cands':>13s}{'no cand.':>10s}{'ms/call med':>13s}{'ms 95 %':>9s}{'target':>9s}{'wall 95 %':>11s}")
+    print(
+        f"  camera {W}×{H} px, f = {F:.0f} px; box {BOX[0] * 100:.1f} × {BOX[1] * 100:.1f} × {BOX[2] * 100:.1f} cm at 2 m; "
+        f"{n} random poses, {args.edges} clicked edges each, seed {args.seed}; the box has {len(sym)} proper symmetries"
+    )
+    print(
+        f"  one process pinned to one core; load average {load0:.2f} before the trials, {os.getloadavg()[0]:.2f} after, on {os.cpu_count()} cores"
+    )
+    print(
+        f"  {'clicks':26s}{'right (top 1)':>15s}{'among cands':>13s}{'no cand.':>10s}{'ms/call med':>13s}{'ms 95 %':>9s}{'target':>9s}{'wall 95 %':>11s}"
+    )
     for m in modes:
         st = stats[m]
         ms = np.asarray(st["ms"])
-        print(f"  {m:26s}{100 * st['top'] / n:14.1f} %{100 * st['among'] / n:12.1f} %{st['none']:10d}{np.median(ms):13.0f}"
-              f"{np.percentile(ms, 95):9.0f}{'≤ 35':>9s}{np.percentile(st['wall'], 95):11.0f}")
-    print(f"  target: right assignment for ≥ {100 * TARGET:.0f} % of random box poses from 4 clicked edges; issue 16: p95 ≤ 35 ms on 4-6 edges")
-    print("  ms: CPU time per call (time.process_time; 'wall 95 %': wall clock, which the load inflates); with the image each")
-    print("  call computes its frame's edges (the frame cache cleared), as on a new frame; ', ready': the frame's edges computed")
-    print("  before the call, as the interface does in the background when Update pose freezes its frame (seconds before")
+        print(
+            f"  {m:26s}{100 * st['top'] / n:14.1f} %{100 * st['among'] / n:12.1f} %{st['none']:10d}{np.median(ms):13.0f}"
+            f"{np.percentile(ms, 95):9.0f}{'≤ 35':>9s}{np.percentile(st['wall'], 95):11.0f}"
+        )
+    print(
+        f"  target: right assignment for ≥ {100 * TARGET:.0f} % of random box poses from 4 clicked edges; issue 16: p95 ≤ 35 ms on 4-6 edges"
+    )
+    print(
+        "  ms: CPU time per call (time.process_time; 'wall 95 %': wall clock, which the load inflates); with the image each"
+    )
+    print(
+        "  call computes its frame's edges (the frame cache cleared), as on a new frame; ', ready': the frame's edges computed"
+    )
+    print(
+        "  before the call, as the interface does in the background when Update pose freezes its frame (seconds before"
+    )
     print("  the operator has clicked four edges)")
     if args.compare:
         print("  ', all': every candidate settled on the image (settle=None, the path before), same trials and clicks")
@@ -191,7 +224,10 @@ def batched_p3l(camera, box, trial) -> int:
     T, pick, exact = trial
     base = list(_base_triples(exact, float(W), 1)[0])  # three clicked lines not through one point
     rows = []
-    for name, perms in (("p3l_all_triples (box, rotations + T)", None), ("  one triple per symmetric family", edge_symmetries(box))):
+    for name, perms in (
+        ("p3l_all_triples (box, rotations + T)", None),
+        ("  one triple per symmetric family", edge_symmetries(box)),
+    ):
         best = np.inf
         for _ in range(5):
             t0 = time.process_time()
@@ -217,7 +253,9 @@ def batched_p3l(camera, box, trial) -> int:
         print(f"  {name:42s}{n_tri:9d}{1e6 * tot / n_tri:11.1f}{n_poses:8d}")
     print(f"  {'core.pose.p3l.p3l_rotations (random)':42s}{B:9d}{1e6 * best_rot / B:11.1f}")
     print("  target: ≤ 15 µs per triple in batches of 1,000")
-    print(f"  ({platform.processor() or platform.machine()}, Python {platform.python_version()}, numpy {np.__version__}, one thread)")
+    print(
+        f"  ({platform.processor() or platform.machine()}, Python {platform.python_version()}, numpy {np.__version__}, one thread)"
+    )
     return 0
 
 

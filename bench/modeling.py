@@ -56,11 +56,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from core.brep import Revolution  # noqa: E402
-from core.geometry import Line, Plane, distance_point_line  # noqa: E402
 from core.calibration import calibrate_dlt, calibrate_turret, perturbed_camera, perturbed_turret  # noqa: E402
+from core.geometry import Line, Plane, distance_point_line  # noqa: E402
 from core.modeling import METHODS, BoxFace, model_box, model_cylinder  # noqa: E402
-from core.modeling.uncertainty import result_vector, with_calibration_uncertainty  # noqa: E402
-from core.rangefinder import aim  # noqa: E402
 from core.modeling.simulate import (  # noqa: E402
     SimWorld,
     look_at_setup,
@@ -68,6 +66,8 @@ from core.modeling.simulate import (  # noqa: E402
     simulate_box_scans,
     simulate_revolution,
 )
+from core.modeling.uncertainty import result_vector, with_calibration_uncertainty  # noqa: E402
+from core.rangefinder import aim  # noqa: E402
 from core.transforms import make_T, rot_z  # noqa: E402
 
 TABLE = Plane(np.array([0.0, 0.0, 1.0]), 0.0)
@@ -76,7 +76,12 @@ BOX = np.array([0.09, 0.094, 0.14])  # width, length, height
 R_CYL, H_CYL = 0.051, 0.166
 
 # The paper's Table III.1: errors (cm; volume dm³) at 1.3–1.6 m.
-PAPER_T31 = {1.3: (0.67, 0.73, 0.52, 0.20), 1.4: (0.66, 0.58, 0.53, 0.19), 1.5: (0.55, 0.53, 0.48, 0.14), 1.6: (0.37, 0.38, 0.47, 0.13)}
+PAPER_T31 = {
+    1.3: (0.67, 0.73, 0.52, 0.20),
+    1.4: (0.66, 0.58, 0.53, 0.19),
+    1.5: (0.55, 0.53, 0.48, 0.14),
+    1.6: (0.37, 0.38, 0.47, 0.13),
+}
 # The paper's Table III.2: depth (cm) for tangential (VC+RF), bisecting (VC+RF), tangential (RF).
 PAPER_T32 = {
     1.0: (4.8314, 3.5098, 5.6332),
@@ -110,7 +115,11 @@ def box_trials(distance: float, n: int, rng: np.random.Generator, scan_rng: np.r
             order = [int(np.flatnonzero(perm == i)[0]) for i in (0, 2, 1)]
             errs[m].append([*(est - BOX[perm])[order], np.prod(est) - np.prod(BOX)])
             sigs[m].append(sig[order])
-    return {m: np.array(v) for m, v in errs.items()}, {m: np.array(v) for m, v in sigs.items()}, {m: float(np.median(v)) for m, v in t_ms.items()}
+    return (
+        {m: np.array(v) for m, v in errs.items()},
+        {m: np.array(v) for m, v in sigs.items()},
+        {m: float(np.median(v)) for m, v in t_ms.items()},
+    )
 
 
 def box_noise_free() -> dict[str, float]:
@@ -152,8 +161,15 @@ def cylinder_trials(distance: float, n: int, rng: np.random.Generator):
             depth = np.linalg.norm((mid - O)[:2]) - front
             ax = distance_point_line(mid, Line(sol.p0, sol.axis))
             out[m].append(
-                [depth, res.dimensions["radius"] - R_CYL, ax, res.dimensions["height"] - H_CYL,
-                 res.sigmas["radius"], res.sigmas["axis_position"], res.sigmas["height"]]
+                [
+                    depth,
+                    res.dimensions["radius"] - R_CYL,
+                    ax,
+                    res.dimensions["height"] - H_CYL,
+                    res.sigmas["radius"],
+                    res.sigmas["axis_position"],
+                    res.sigmas["height"],
+                ]
             )
     return {m: np.array(v) for m, v in out.items()}, {m: float(np.median(v)) for m, v in t_ms.items()}
 
@@ -167,7 +183,11 @@ def cylinder_noise_free() -> dict[str, float]:
         for m in METHODS:
             res = model_cylinder(cam, m, silhouettes_uv=sil, scans=scans, T_world_turret=T_wt, support=TABLE)
             mid = res.axis.point + 0.5 * res.dimensions["height"] * res.axis.direction
-            e = max(abs(res.dimensions["radius"] - R_CYL), abs(res.dimensions["height"] - H_CYL), distance_point_line(mid, Line(sol.p0, sol.axis)))
+            e = max(
+                abs(res.dimensions["radius"] - R_CYL),
+                abs(res.dimensions["height"] - H_CYL),
+                distance_point_line(mid, Line(sol.p0, sol.axis)),
+            )
             worst[m] = max(worst[m], e)
     return worst
 
@@ -196,8 +216,10 @@ def _faces_through(faces, T_true, T_est):
     """The faces' range points as mapped through the estimated turret pose instead of the true one."""
     M = T_est @ np.linalg.inv(T_true)
     R = M[:3, :3]
-    return [BoxFace(f.points_world @ R.T + M[:3, 3], f.edges_uv, None if f.point_covs is None else R @ f.point_covs @ R.T)
-            for f in faces]
+    return [
+        BoxFace(f.points_world @ R.T + M[:3, 3], f.edges_uv, None if f.point_covs is None else R @ f.point_covs @ R.T)
+        for f in faces
+    ]
 
 
 def calibration_trials(n: int, rng: np.random.Generator) -> dict:
@@ -211,8 +233,13 @@ def calibration_trials(n: int, rng: np.random.Generator) -> dict:
     T_obj = make_T(rot_z(np.radians(40.0)), [0.0, 0.0, 0.0])
     world = SimWorld(T_wt, boxes=((T_obj, tuple(BOX)),))
     faces = simulate_box(cam, world, T_obj, BOX, rng)
-    ref = with_calibration_uncertainty(lambda c, T: model_box(c, _faces_through(faces, T_wt, T), TABLE, support_sigma_m=1e-6),
-                                       cam, T_wt, camera_cov=ccov, turret_cov=tcov)
+    ref = with_calibration_uncertainty(
+        lambda c, T: model_box(c, _faces_through(faces, T_wt, T), TABLE, support_sigma_m=1e-6),
+        cam,
+        T_wt,
+        camera_cov=ccov,
+        turret_cov=tcov,
+    )
     names = list(ref.cov_names)
     # the paper's width, height, length are the true box's x, z, y: the reference frame's axes matched to them
     match = np.argmax(np.abs(ref.T_world_obj[:3, :3].T @ T_obj[:3, :3]), axis=1)  # ref axis i ↔ true axis match[i]
@@ -225,12 +252,19 @@ def calibration_trials(n: int, rng: np.random.Generator) -> dict:
         T_est = perturbed_turret(T_wt, rng.multivariate_normal(np.zeros(6), tcov))
         r = model_box(c_est, _faces_through(faces, T_wt, T_est), TABLE, support_sigma_m=1e-6)
         q = result_vector(r, ref)
-        err.append([q[i] - t for i, t in zip(idx, (BOX[0], BOX[2], BOX[1]))] + [np.linalg.norm(r.T_world_obj[:3, 3] - T_obj[:3, 3])])
+        err.append(
+            [q[i] - t for i, t in zip(idx, (BOX[0], BOX[2], BOX[1]))]
+            + [np.linalg.norm(r.T_world_obj[:3, 3] - T_obj[:3, 3])]
+        )
         sig_m.append([r.sigmas[k] for k in keys] + [r.sigmas["position"]])
     parts = ref.details["sigma_parts"]
-    out["box at 1.5 m (planes)"] = (("width", "height", "length", "position"), np.array(err), np.array(sig_m),
-                                    np.array([ref.sigmas[k] for k in keys] + [ref.sigmas["position"]]),
-                                    {s: [p[k] for k in keys] + [p["position"]] for s, p in parts.items()})
+    out["box at 1.5 m (planes)"] = (
+        ("width", "height", "length", "position"),
+        np.array(err),
+        np.array(sig_m),
+        np.array([ref.sigmas[k] for k in keys] + [ref.sigmas["position"]]),
+        {s: [p[k] for k in keys] + [p["position"]] for s, p in parts.items()},
+    )
     # cylinder: radius, height and the axis position at mid-height
     cam, T_wt = look_at_setup(np.array([0.0, 0.0, H_CYL / 2]), 1.2)
     ccov, tcov = calibration_covariances(cam, T_wt, world0.spec, rng)
@@ -241,7 +275,9 @@ def calibration_trials(n: int, rng: np.random.Generator) -> dict:
         return model_cylinder(c, "fused", silhouettes_uv=sil, scans=scans, T_world_turret=T, support=TABLE)
 
     sil, scans = simulate_revolution(cam, world, sol, rng)
-    ref = with_calibration_uncertainty(lambda c, T: build(c, T, sil, scans), cam, T_wt, camera_cov=ccov, turret_cov=tcov)
+    ref = with_calibration_uncertainty(
+        lambda c, T: build(c, T, sil, scans), cam, T_wt, camera_cov=ccov, turret_cov=tcov
+    )
     err, sig_m = [], []
     for _ in range(n):
         sil, scans = simulate_revolution(cam, world, sol, rng)
@@ -249,13 +285,23 @@ def calibration_trials(n: int, rng: np.random.Generator) -> dict:
         T_est = perturbed_turret(T_wt, rng.multivariate_normal(np.zeros(6), tcov))
         r = build(c_est, T_est, sil, scans)
         mid = r.axis.point + 0.5 * r.dimensions["height"] * r.axis.direction
-        err.append([r.dimensions["radius"] - R_CYL, r.dimensions["height"] - H_CYL, distance_point_line(mid, Line(sol.p0, sol.axis))])
+        err.append(
+            [
+                r.dimensions["radius"] - R_CYL,
+                r.dimensions["height"] - H_CYL,
+                distance_point_line(mid, Line(sol.p0, sol.axis)),
+            ]
+        )
         sig_m.append([r.sigmas["radius"], r.sigmas["height"], r.sigmas["axis_position"]])
     parts = ref.details["sigma_parts"]
     keys = ("radius", "height", "axis_position")
-    out["cylinder at 1.2 m (fused)"] = (("radius", "height", "axis position"), np.array(err), np.array(sig_m),
-                                        np.array([ref.sigmas[k] for k in keys]),
-                                        {s: [p[k] for k in keys] for s, p in parts.items()})
+    out["cylinder at 1.2 m (fused)"] = (
+        ("radius", "height", "axis position"),
+        np.array(err),
+        np.array(sig_m),
+        np.array([ref.sigmas[k] for k in keys]),
+        {s: [p[k] for k in keys] for s, p in parts.items()},
+    )
     return out
 
 
@@ -266,8 +312,10 @@ def jacobian_table(n: int, rng: np.random.Generator) -> None:
     from core.modeling.lm import numeric_jacobian
     from core.rangefinder import RangeFinderSpec
 
-    print(f"Covariance of the paper's constructions: analytic Jacobian vs forward differences, {n} trials at 1.2 m,"
-          " cylinder and cone on the table (medians; ms per Jacobian; max |Δσ|/σ over the outputs)")
+    print(
+        f"Covariance of the paper's constructions: analytic Jacobian vs forward differences, {n} trials at 1.2 m,"
+        " cylinder and cone on the table (medians; ms per Jacobian; max |Δσ|/σ over the outputs)"
+    )
     print("| solid | method | inputs | analytic ms | differences ms | ratio | max rel. σ difference |")
     print("|:---|:---|---:|---:|---:|---:|---:|")
     for cone in (False, True):
@@ -277,14 +325,25 @@ def jacobian_table(n: int, rng: np.random.Generator) -> None:
             p0 = np.array([*rng.uniform(-0.005, 0.005, 2), 0.0])
             sol = Revolution(p0, p0 + [0.0, 0.0, H_CYL], R_CYL * (1.2 if cone else 1.0), R_CYL * (0.8 if cone else 1.0))
             sil, scans = simulate_revolution(cam, SimWorld(T_wt, solids=(sol,)), sol, rng, sigma_px=1.0)
-            data = cyl.reduce_cylinder_data(cam, silhouettes_uv=sil, scans=scans, T_world_turret=T_wt, spec=RangeFinderSpec(),
-                                            support=TABLE, axis_dir=None, cone=cone, jump_m=0.05)
+            data = cyl.reduce_cylinder_data(
+                cam,
+                silhouettes_uv=sil,
+                scans=scans,
+                T_world_turret=T_wt,
+                spec=RangeFinderSpec(),
+                support=TABLE,
+                axis_dir=None,
+                cone=cone,
+                jump_m=0.05,
+            )
             for m, (ta, tn, dev, _) in rows.items():
                 ctx = cyl._stage_one(data, m)
                 parts = [sil.reshape(-1)] + [[tb.pan_rad, tb.tilt_rad] for tb in data.tangents]
                 var = [np.full(8, 1.0)] + [[tb.sigma_pan_rad**2, tb.sigma_tilt_rad**2] for tb in data.tangents]
                 if ctx.profile is not None:
-                    parts.append(cyl.front_plane(ctx.profile, data.rf_origin, float(np.mean(ctx.t_sections))).as_vector())
+                    parts.append(
+                        cyl.front_plane(ctx.profile, data.rf_origin, float(np.mean(ctx.t_sections))).as_vector()
+                    )
                     Jp = cyl.front_plane_jacobian(ctx.profile, data.rf_origin, float(np.mean(ctx.t_sections)))
                 z = np.concatenate([np.asarray(q, float).reshape(-1) for q in parts])
                 Sz = np.zeros((len(z), len(z)))
@@ -309,7 +368,9 @@ def jacobian_table(n: int, rng: np.random.Generator) -> None:
                 rows[m] = (ta, tn, dev, len(z))
         for m, (ta, tn, dev, nz) in rows.items():
             a, b = float(np.median(ta)), float(np.median(tn))
-            print(f"| {'cone' if cone else 'cylinder'} | {m} | {nz} | {a:.2f} | {b:.2f} | {b / a:.1f}× | {max(dev):.1e} |")
+            print(
+                f"| {'cone' if cone else 'cylinder'} | {m} | {nz} | {a:.2f} | {b:.2f} | {b / a:.1f}× | {max(dev):.1e} |"
+            )
     print()
 
 
@@ -319,8 +380,13 @@ def main(argv=None) -> int:
     ap.add_argument("--cyl-trials", type=int, default=300)
     ap.add_argument("--cal-trials", type=int, default=300)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--jacobians", type=int, default=0, metavar="N",
-                    help="only the table of the constructions' Jacobians (analytic vs differences) over N trials")
+    ap.add_argument(
+        "--jacobians",
+        type=int,
+        default=0,
+        metavar="N",
+        help="only the table of the constructions' Jacobians (analytic vs differences) over N trials",
+    )
     args = ap.parse_args(argv)
     if args.jacobians:
         jacobian_table(args.jacobians, np.random.default_rng(args.seed))
@@ -332,13 +398,17 @@ def main(argv=None) -> int:
     print()
 
     print(f"Table III.1 — box 9 × 9.4 × 14 cm (w × l × h) on the table, {args.box_trials} trials per distance")
-    print("range points: 4 × 4 per visible face; clicks: every visible side once; fused + scans: also 2 pan sweeps"
-          " at 50 % / 75 % of the height, finest step, 3 cm past the box, misses kept")
+    print(
+        "range points: 4 × 4 per visible face; clicks: every visible side once; fused + scans: also 2 pan sweeps"
+        " at 50 % / 75 % of the height, finest step, 3 cm past the box, misses kept"
+    )
     nf = box_noise_free()
     print("noise-free: worst size error " + ", ".join(f"{m} {v:.1e} m" for m, v in nf.items()) + " (target ≤ 1e-6 m)")
     print("errors in cm (volume in dm³): the paper's one measurement | ours: RMS over the trials [mean predicted σ]")
-    print("dist m | paper: width height length volume | planes (paper's construction): width height length volume"
-          " | fused ML fit: width height length volume [σ w h l] | fused + scans: width height length volume [σ w h l]")
+    print(
+        "dist m | paper: width height length volume | planes (paper's construction): width height length volume"
+        " | fused ML fit: width height length volume [σ w h l] | fused + scans: width height length volume [σ w h l]"
+    )
     worst_rows = []
     scan_rng = np.random.default_rng(args.seed + 1)
     for d in (1.3, 1.4, 1.5, 1.6):
@@ -354,8 +424,10 @@ def main(argv=None) -> int:
                 cell += f" [{100 * s[0]:4.2f} {100 * s[1]:4.2f} {100 * s[2]:4.2f}]"
             cells.append(cell)
         worst_rows.append((d, worst, t))
-        print(f"  {d:.1f}  | {p[0]:5.2f} {p[1]:5.2f} {p[2]:5.2f} {p[3]:5.2f}       | {cells[0]}                        "
-              f"| {cells[1]} | {cells[2]}")
+        print(
+            f"  {d:.1f}  | {p[0]:5.2f} {p[1]:5.2f} {p[2]:5.2f} {p[3]:5.2f}       | {cells[0]}                        "
+            f"| {cells[1]} | {cells[2]}"
+        )
     print("worst size RMS (mm), ≤ 3 mm? — planes / fused / fused + scans | median ms per model, same order")
     for d, worst, t in worst_rows:
         ok = " / ".join(f"{w:.2f} {'yes' if w <= 3.0 else 'NO'}" for w in worst)
@@ -364,7 +436,11 @@ def main(argv=None) -> int:
 
     print(f"Table III.2 — cylinder r = 5.1 cm, h = 16.6 cm on the table, {args.cyl_trials} trials per distance")
     nf = cylinder_noise_free()
-    print("noise-free: worst error (radius, height, axis) " + ", ".join(f"{m} {v:.1e} m" for m, v in nf.items()) + " (target ≤ 1e-6 m)")
+    print(
+        "noise-free: worst error (radius, height, axis) "
+        + ", ".join(f"{m} {v:.1e} m" for m, v in nf.items())
+        + " (target ≤ 1e-6 m)"
+    )
     rows = {}
     for d in (1.0, 1.2, 1.4, 1.6):
         rows[d] = cylinder_trials(d, args.cyl_trials, rng)
@@ -378,8 +454,10 @@ def main(argv=None) -> int:
         dep = res["fused"][:, 0]
         cells.append(f"  —    | {100 * dep.mean():5.3f} / {1000 * rms(dep - R_CYL):5.2f}")
         print(f"  {d:.1f}  | " + " | ".join(cells))
-    print("paper's depth error |depth − 5.1| (cm): " + "; ".join(
-        f"{d:.1f} m: " + " ".join(f"{abs(v - 5.1):.2f}" for v in PAPER_T32[d]) for d in PAPER_T32))
+    print(
+        "paper's depth error |depth − 5.1| (cm): "
+        + "; ".join(f"{d:.1f} m: " + " ".join(f"{abs(v - 5.1):.2f}" for v in PAPER_T32[d]) for d in PAPER_T32)
+    )
     print()
     print("RMS error (mm) [predicted σ] of radius / axis position / height; median time per model (ms)")
     print("dist m | " + " | ".join(f"{m:^30s}" for m in METHODS))
@@ -398,10 +476,14 @@ def main(argv=None) -> int:
     print()
 
     if args.cal_trials > 0:
-        print(f"Calibration errors — the model built through a camera and a turret drawn from their calibrations' "
-              f"covariances, {args.cal_trials} trials")
-        print("(mm) RMS error | σ: measurements only (mean) → with the calibrations' share [of which camera, turret] | "
-              "|error| ≤ 2σ: measurements-only σ → with the share (95 % if right)")
+        print(
+            f"Calibration errors — the model built through a camera and a turret drawn from their calibrations' "
+            f"covariances, {args.cal_trials} trials"
+        )
+        print(
+            "(mm) RMS error | σ: measurements only (mean) → with the calibrations' share [of which camera, turret] | "
+            "|error| ≤ 2σ: measurements-only σ → with the share (95 % if right)"
+        )
         cal_rng = np.random.default_rng(args.seed + 2)  # its own draws: the same table whatever the other trial counts
         for what, (labels, err, sig_m, sig_all, parts) in calibration_trials(args.cal_trials, cal_rng).items():
             print(f"  {what}")
@@ -410,9 +492,15 @@ def main(argv=None) -> int:
                 vector = lab in ("position", "axis position")  # a distance: compare its RMS with the σ of the norm
                 cover_m = np.mean(np.abs(e) <= 2 * sig_m[:, i]) * 100
                 cover_a = np.mean(np.abs(e) <= 2 * sig_all[i]) * 100
-                cover = "(a distance: its RMS against σ = √E‖offset‖²)" if vector else f"{cover_m:5.1f} % → {cover_a:5.1f} %"
-                print(f"    {lab:14s} {1000 * rms(e):6.2f} | {1000 * np.mean(sig_m[:, i]):5.2f} → {1000 * sig_all[i]:5.2f} "
-                      f"[{1000 * parts['camera calibration'][i]:4.2f}, {1000 * parts['turret calibration'][i]:4.2f}] | {cover}")
+                cover = (
+                    "(a distance: its RMS against σ = √E‖offset‖²)"
+                    if vector
+                    else f"{cover_m:5.1f} % → {cover_a:5.1f} %"
+                )
+                print(
+                    f"    {lab:14s} {1000 * rms(e):6.2f} | {1000 * np.mean(sig_m[:, i]):5.2f} → {1000 * sig_all[i]:5.2f} "
+                    f"[{1000 * parts['camera calibration'][i]:4.2f}, {1000 * parts['turret calibration'][i]:4.2f}] | {cover}"
+                )
     return 0
 
 

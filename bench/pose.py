@@ -98,7 +98,12 @@ class PoseLibAnchor:
         self.poselib = poselib
         self.camera = camera
         K, self.T_cam_world = camera.decompose()
-        self.cam_dict = {"model": "PINHOLE", "width": camera.width, "height": camera.height, "params": [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]}
+        self.cam_dict = {
+            "model": "PINHOLE",
+            "width": camera.width,
+            "height": camera.height,
+            "params": [K[0, 0], K[1, 1], K[0, 2], K[1, 2]],
+        }
         self.opts = {"loss_type": "TRIVIAL"}
         self.no_uv, self.no_X = np.zeros((0, 2)), np.zeros((0, 3))
 
@@ -120,8 +125,18 @@ class PoseLibAnchor:
         T_cam_obj = self.T_cam_world @ T_world_obj
         pose = self.poselib.CameraPose()
         pose.R, pose.t = T_cam_obj[:3, :3], T_cam_obj[:3, 3]
-        return (self.no_uv, self.no_X, segs_uv[:, 0].copy(), segs_uv[:, 1].copy(), edges_obj[:, 0].copy(),
-                edges_obj[:, 1].copy(), pose, self.cam_dict, self.opts, self.opts)
+        return (
+            self.no_uv,
+            self.no_X,
+            segs_uv[:, 0].copy(),
+            segs_uv[:, 1].copy(),
+            edges_obj[:, 0].copy(),
+            edges_obj[:, 1].copy(),
+            pose,
+            self.cam_dict,
+            self.opts,
+            self.opts,
+        )
 
     def refine(self, segs_uv, edges_obj, T_world_obj):
         out, info = self.poselib.refine_absolute_pose_pnpl(*self.refine_args(segs_uv, edges_obj, T_world_obj))
@@ -142,9 +157,31 @@ def crb_traces(camera, pb, sigma_px: float) -> tuple[float, float]:
 
 
 def run_sigma(rng, n: int, sigma_px: float, anchor: PoseLibAnchor) -> dict:
-    rows = {k: [] for k in ("p3l", "refined", "poselib", "crb", "t_p3l", "t_refine", "t_estimate", "t_pl_p3ll", "t_pl_refine", "t_pl_estimate")}
-    flags = {"truth_among_p3l": 0, "p3l_first": 0, "refined_first": 0, "same_as_poselib_p3ll": 0, "poselib_fail": 0, "p3l_none": 0,
-             "same_minimum": 0, "ours_lower": 0}
+    rows = {
+        k: []
+        for k in (
+            "p3l",
+            "refined",
+            "poselib",
+            "crb",
+            "t_p3l",
+            "t_refine",
+            "t_estimate",
+            "t_pl_p3ll",
+            "t_pl_refine",
+            "t_pl_estimate",
+        )
+    }
+    flags = {
+        "truth_among_p3l": 0,
+        "p3l_first": 0,
+        "refined_first": 0,
+        "same_as_poselib_p3ll": 0,
+        "poselib_fail": 0,
+        "p3l_none": 0,
+        "same_minimum": 0,
+        "ours_lower": 0,
+    }
     for pb, order in problems(rng, n, sigma_px):
         cam = pb.camera
         segs, edges = pb.segs_uv[order], pb.edges_obj[order]
@@ -252,8 +289,10 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(args.seed)
     anchor = PoseLibAnchor(paper_camera())
     print(__doc__.split("\n\n")[1].replace("\n", " "))
-    print(f"{args.n} instances per σ, seed {args.seed}; {pinned}; Python {sys.version.split()[0]}, NumPy {np.__version__};"
-          f" load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores at the start.\n")
+    print(
+        f"{args.n} instances per σ, seed {args.seed}; {pinned}; Python {sys.version.split()[0]}, NumPy {np.__version__};"
+        f" load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores at the start.\n"
+    )
     head = (
         f"{'σ px':>4} {'step':<8} | {'rot° med':>8} {'p95':>7} {'mean±std':>13} {'RMS':>7} {'CRB':>6} | "
         f"{'trans cm med':>12} {'p95':>6} {'mean±std':>11} {'RMS':>6} {'CRB':>5} | {'paper V.1 ° ; cm':>19} | "
@@ -268,45 +307,66 @@ def main(argv=None) -> int:
         crb_deg = np.degrees(np.sqrt(np.mean(r["crb"][:, 0])))
         crb_cm = 100 * np.sqrt(np.mean(r["crb"][:, 1]))
         pl = stats(r["poselib"]) if len(r["poselib"]) else None
-        for step, err, t_ours, t_pl in (("P3L", r["p3l"], r["t_p3l"], r["t_pl_p3ll"]), ("refined", r["refined"], r["t_refine"], r["t_pl_refine"])):
+        for step, err, t_ours, t_pl in (
+            ("P3L", r["p3l"], r["t_p3l"], r["t_pl_p3ll"]),
+            ("refined", r["refined"], r["t_refine"], r["t_pl_refine"]),
+        ):
             s = stats(err)
             (pd, psd), (pm, psm) = PAPER_V1[step]
             crb = (fmt(crb_deg), fmt(crb_cm)) if step == "refined" else ("", "")
-            pls = f"{fmt(pl['deg'][4])} ; {fmt(pl['cm'][4])}" if (pl and step == "refined") else ("same solutions" if step == "P3L" else "")
+            pls = (
+                f"{fmt(pl['deg'][4])} ; {fmt(pl['cm'][4])}"
+                if (pl and step == "refined")
+                else ("same solutions" if step == "P3L" else "")
+            )
             print(
                 f"{sigma:>4.1f} {step:<8} | {fmt(s['deg'][0]):>8} {fmt(s['deg'][1]):>7} {fmt(s['deg'][2]) + '±' + fmt(s['deg'][3]):>13} "
                 f"{fmt(s['deg'][4]):>7} {crb[0]:>6} | {fmt(s['cm'][0]):>12} {fmt(s['cm'][1]):>6} "
                 f"{fmt(s['cm'][2]) + '±' + fmt(s['cm'][3]):>11} {fmt(s['cm'][4]):>6} {crb[1]:>5} | "
                 f"{f'{pd}±{psd} ; {100 * pm:.2f}±{100 * psm:.2f}':>19} | {pls:>18} | {np.median(t_ours):>7.0f} {np.median(t_pl):>7.1f}"
             )
-    print("\nµs: P3L row = core.pose.p3l vs poselib.p3ll (from Python); refined row = core.pose.refine (9 edges, from the")
-    print("candidate estimate_pose kept) vs poselib.refine_absolute_pose_pnpl from the same start. PoseLib RMS: p3ll + its")
+    print(
+        "\nµs: P3L row = core.pose.p3l vs poselib.p3ll (from Python); refined row = core.pose.refine (9 edges, from the"
+    )
+    print(
+        "candidate estimate_pose kept) vs poselib.refine_absolute_pose_pnpl from the same start. PoseLib RMS: p3ll + its"
+    )
     print("refinement of every in-front solution, lowest cost kept. Paper V.1: real operator clicks on real images.\n")
 
     n = args.n
     r0, r1 = results[0.0], results[1.0]
     e0 = np.max(r0["refined"], axis=0)
     print("Targets:")
-    print(f"  noise-free: truth among the P3L candidates {r0['truth_among_p3l']}/{n}, P3L ranks it first {r0['p3l_first']}/{n}"
-          f" (three edges can tie), estimate_pose returns it first {r0['refined_first']}/{n}; max error {e0[0]:.1e}° and {e0[1]:.1e} m"
-          f" (target < 1e-5°, < 1e-7 m)")
+    print(
+        f"  noise-free: truth among the P3L candidates {r0['truth_among_p3l']}/{n}, P3L ranks it first {r0['p3l_first']}/{n}"
+        f" (three edges can tie), estimate_pose returns it first {r0['refined_first']}/{n}; max error {e0[0]:.1e}° and {e0[1]:.1e} m"
+        f" (target < 1e-5°, < 1e-7 m)"
+    )
     for sigma in SIGMAS_PX:
         r = results[sigma]
-        print(f"  σ = {sigma} px: P3L solution set equal to poselib.p3ll's (in front) on {r['same_as_poselib_p3ll']}/{n};"
-              f" P3L without any solution in front on {r['p3l_none']}/{n} (estimate_pose then uses the next triple)")
+        print(
+            f"  σ = {sigma} px: P3L solution set equal to poselib.p3ll's (in front) on {r['same_as_poselib_p3ll']}/{n};"
+            f" P3L without any solution in front on {r['p3l_none']}/{n} (estimate_pose then uses the next triple)"
+        )
     rms_deg = np.sqrt(np.mean(r1["refined"][:, 0] ** 2))
     rms_cm = 100 * np.sqrt(np.mean(r1["refined"][:, 1] ** 2))
     crb_deg = np.degrees(np.sqrt(np.mean(r1["crb"][:, 0])))
     crb_cm = 100 * np.sqrt(np.mean(r1["crb"][:, 1]))
-    print(f"  σ = 1 px, 9 edges: RMS error / CRB = {rms_deg / crb_deg:.3f} (rotation), {rms_cm / crb_cm:.3f} (translation)"
-          " (target within 10 %)")
-    print(f"  time: p3l median {np.median(r1['t_p3l']):.0f} µs (target ≤ 150), refine 9 edges median {np.median(r1['t_refine']) / 1e3:.2f} ms"
-          f" (target ≤ 2), estimate_pose median {np.median(r1['t_estimate']) / 1e3:.2f} ms")
+    print(
+        f"  σ = 1 px, 9 edges: RMS error / CRB = {rms_deg / crb_deg:.3f} (rotation), {rms_cm / crb_cm:.3f} (translation)"
+        " (target within 10 %)"
+    )
+    print(
+        f"  time: p3l median {np.median(r1['t_p3l']):.0f} µs (target ≤ 150), refine 9 edges median {np.median(r1['t_refine']) / 1e3:.2f} ms"
+        f" (target ≤ 2), estimate_pose median {np.median(r1['t_estimate']) / 1e3:.2f} ms"
+    )
     for sigma in SIGMAS_PX:
         r = results[sigma]
-        print(f"  σ = {sigma} px: core.pose.refine and PoseLib's refinement from the same start reach the same minimum"
-              f" (1e-4°, 1e-6 m) on {r['same_minimum']}/{n} (target ≥ 98 %); where not, ours has the lower pixel cost"
-              f" (or PoseLib's puts a clicked edge behind the camera) on {r['ours_lower']}/{n - r['same_minimum']}")
+        print(
+            f"  σ = {sigma} px: core.pose.refine and PoseLib's refinement from the same start reach the same minimum"
+            f" (1e-4°, 1e-6 m) on {r['same_minimum']}/{n} (target ≥ 98 %); where not, ours has the lower pixel cost"
+            f" (or PoseLib's puts a clicked edge behind the camera) on {r['ours_lower']}/{n - r['same_minimum']}"
+        )
     print("\nTime beside PoseLib (issue 16: each ≤ 5×), medians over the σ > 0 instances, CPU µs per call, same run:")
     print(f"  {'':44s}{'ours':>9s}{'PoseLib':>9s}{'ratio':>7s}")
     pos = [results[s_] for s_ in SIGMAS_PX if s_ > 0]
@@ -322,13 +382,19 @@ def main(argv=None) -> int:
     batch = [(pb.segs_uv[o][:3], pb.edges_obj[o][:3]) for pb, o in problems(rng, 1000, 1.0)]
     segs_b, edges_b = np.array([b[0] for b in batch]), np.array([b[1] for b in batch])
     t_batch = cpu_us(lambda: p3l_batch(paper_camera(), segs_b, edges_b), repeats=5) / 1000  # best of 5
-    print(f"  p3l_batch: {t_batch:.1f} µs per triple in batches of 1000, best of 5 (the σ = 1 px problems' first triples: three"
-          " orthogonal box edges; issue 9's target ≤ 15)")
+    print(
+        f"  p3l_batch: {t_batch:.1f} µs per triple in batches of 1000, best of 5 (the σ = 1 px problems' first triples: three"
+        " orthogonal box edges; issue 9's target ≤ 15)"
+    )
     print(f"  (load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores after the timings)")
 
     nb = max(50, n // 2)
-    print(f"\nBasin of the refinement (σ = 1 px, 9 edges, {nb} instances): start = truth rotated about a random axis through")
-    print("the object's origin and shifted in a random direction; success = reaches the estimate refined from the truth")
+    print(
+        f"\nBasin of the refinement (σ = 1 px, 9 edges, {nb} instances): start = truth rotated about a random axis through"
+    )
+    print(
+        "the object's origin and shifted in a random direction; success = reaches the estimate refined from the truth"
+    )
     print("(1e-4°, 1e-6 m). The paper's single linear step: accurate to 18° and 5 cm.")
     print(f"{'rotation °':>10} {'shift cm':>9} | {'core.pose.refine':>16} {'PoseLib refine':>15}")
     for rot_deg, trans_m, ours, pl in basin(rng, nb, 1.0, anchor):

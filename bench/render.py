@@ -42,10 +42,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.render import Renderer  # noqa: E402
 from app.render.measure import edge_offsets, polygon_coverage, visible_edges  # noqa: E402
-from app.render.video import read_frame  # noqa: E402
 from app.report.markdown import markdown_table  # noqa: E402
 from app.scene import default_scene_path, load_scene, scene_from_dict  # noqa: E402
-
 
 CLIP = 12  # frames (one second) of each still scene
 
@@ -53,11 +51,21 @@ CLIP = 12  # frames (one second) of each still scene
 def top_down(yaw_deg: float) -> dict:
     return {
         "format": "mcit-scene/1",
-        "camera": {"width": 40, "height": 30, "K": [[100, 0, 19.5], [0, 100, 14.5], [0, 0, 1]],
-                   "T_world_cam": {"xyz": [0, 0, 2.0], "rpy_deg": [180, 0, 0]}},
+        "camera": {
+            "width": 40,
+            "height": 30,
+            "K": [[100, 0, 19.5], [0, 100, 14.5], [0, 0, 1]],
+            "T_world_cam": {"xyz": [0, 0, 2.0], "rpy_deg": [180, 0, 0]},
+        },
         "turret": {"T_world_turret": {"xyz": [0.2, 0, 2.0]}},
-        "bodies": [{"name": "box", "model": {"box": [1.0, 1.0, 0.1]},
-                    "pose": {"xyz": [0.4969, 0, 0], "rpy_deg": [0, 0, yaw_deg]}, "appearance": {"albedo": 0.8}}],
+        "bodies": [
+            {
+                "name": "box",
+                "model": {"box": [1.0, 1.0, 0.1]},
+                "pose": {"xyz": [0.4969, 0, 0], "rpy_deg": [0, 0, yaw_deg]},
+                "appearance": {"albedo": 0.8},
+            }
+        ],
         "render": {"ambient": 1.0, "sky": 0.1, "gain": 200.0, "noise_sigma": 0.0, "blur_sigma_px": 0.0},
     }
 
@@ -102,8 +110,10 @@ def main() -> int:
     scene = load_scene(default_scene_path())
     spec = scene.render
     print(f"# mcit renderer — {platform.processor() or platform.machine()}, Python {platform.python_version()}")
-    print(f"scene {scene.name}: {scene.camera.width}×{scene.camera.height}, aa {spec.aa_samples} samples/edge pixel, "
-          f"blur σ {spec.blur_sigma_px} px, noise σ {spec.noise_sigma} grey levels\n")
+    print(
+        f"scene {scene.name}: {scene.camera.width}×{scene.camera.height}, aa {spec.aa_samples} samples/edge pixel, "
+        f"blur σ {spec.blur_sigma_px} px, noise σ {spec.noise_sigma} grey levels\n"
+    )
 
     rows_t, rows_s = [], []
     offsets: dict[str, list[float]] = {}
@@ -138,8 +148,13 @@ def main() -> int:
 
     print("## Time per frame (CPU s, one thread)")
     print(markdown_table(["t (s)", "render (s)", "label changes"], rows_t))
-    print(f"## Edge offsets from the projected true edges (px), all edges at t = {', '.join(f'{t:g}' for t in args.times)} s")
-    rows_e = [[name, len(v), float(np.median(v)), float(np.percentile(v, 95)), float(np.max(v))] for name, v in offsets.items()]
+    print(
+        f"## Edge offsets from the projected true edges (px), all edges at t = {', '.join(f'{t:g}' for t in args.times)} s"
+    )
+    rows_e = [
+        [name, len(v), float(np.median(v)), float(np.percentile(v, 95)), float(np.max(v))]
+        for name, v in offsets.items()
+    ]
     print(f"(each still scene seen in {CLIP} consecutive frames; one row per edge per frame)")
     print(markdown_table(["image", "edge × frame", "median |offset|", "95th percentile", "max |offset|"], rows_e))
     print("## Cylinder silhouettes, noise-free (px, left and right)")

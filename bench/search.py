@@ -104,7 +104,9 @@ def error(model: BRep, T: np.ndarray, T_true: np.ndarray) -> tuple[float, float]
     if not len(model.edges) and model.solids:
         a, b = T[:3, :3] @ model.solids[0].axis, T_true[:3, :3] @ model.solids[0].axis
         return float(np.degrees(np.arccos(np.clip(a @ b, -1, 1)))), float(np.linalg.norm(T[:3, 3] - T_true[:3, 3]))
-    return min((pose_error(T @ S, T_true) for _, S in symmetry_transforms(model)), key=lambda e: e[0] / OK_DEG + e[1] / OK_M)
+    return min(
+        (pose_error(T @ S, T_true) for _, S in symmetry_transforms(model)), key=lambda e: e[0] / OK_DEG + e[1] / OK_M
+    )
 
 
 def sigma_coverage(model: BRep, cand, T_true: np.ndarray) -> float | None:
@@ -202,8 +204,20 @@ def workcell_cases(rng, scene) -> list[Case]:
         T_true, T_old = body.pose_at(t), body.pose_at(a0)
         segs = edge_clicks(rng, scene.camera, body.model, T_true)
         for j in range(5):
-            cases.append(Case("a", f"move from {a0:.0f} s, frame {k}", scene.camera, body.model, T_old, T_true, frames[k],
-                              random_click(rng, scene.camera, body.model, T_true), table, segs if j == 0 else None))
+            cases.append(
+                Case(
+                    "a",
+                    f"move from {a0:.0f} s, frame {k}",
+                    scene.camera,
+                    body.model,
+                    T_old,
+                    T_true,
+                    frames[k],
+                    random_click(rng, scene.camera, body.model, T_true),
+                    table,
+                    segs if j == 0 else None,
+                )
+            )
     return cases
 
 
@@ -218,7 +232,11 @@ def rendered_cases(rng, scene, n_per_object: int) -> list[Case]:
     cases = []
     for name in names:
         body = scene.body(name)
-        pts = body.model.vertices if len(body.model.vertices) else np.array([[0.051, 0, 0], [-0.051, 0, 0], [0, 0.051, 0], [0, -0.051, 0]])
+        pts = (
+            body.model.vertices
+            if len(body.model.vertices)
+            else np.array([[0.051, 0, 0], [-0.051, 0, 0], [0, 0.051, 0], [0, -0.051, 0]])
+        )
         r_foot = float(np.max(np.linalg.norm(pts[:, :2], axis=1)))
         others = [(base[o][:3, 3][:2], 0.22 if o == "parallelepiped" else 0.09) for o in names if o != name]
         boxes = {}
@@ -226,7 +244,11 @@ def rendered_cases(rng, scene, n_per_object: int) -> list[Case]:
             if o == name:
                 continue
             m = scene.body(o).model
-            P = m.vertices if len(m.vertices) else np.array([[x, y, z] for x in (-0.051, 0.051) for y in (-0.051, 0.051) for z in (0, 0.166)])
+            P = (
+                m.vertices
+                if len(m.vertices)
+                else np.array([[x, y, z] for x in (-0.051, 0.051) for y in (-0.051, 0.051) for z in (0, 0.166)])
+            )
             q = scene.camera.project_obj(base[o], P)
             boxes[o] = (q.min(axis=0), q.max(axis=0))
         made = 0
@@ -241,8 +263,15 @@ def rendered_cases(rng, scene, n_per_object: int) -> list[Case]:
             lo, hi = uv.min(axis=0), uv.max(axis=0)
             if any(np.all(lo <= b_hi + 3) and np.all(b_lo - 3 <= hi) for b_lo, b_hi in boxes.values()):
                 continue  # another object in front of it or behind it in the image: only the grey rectangle hides it
-            bodies = tuple(dataclasses.replace(b, T_world_obj=(T if b.name == name else base[b.name]), motion=()) for b in scene.bodies)
-            sc = dataclasses.replace(scene, bodies=bodies, render=dataclasses.replace(scene.render, aa_samples=8, seed=int(rng.integers(1 << 30))))
+            bodies = tuple(
+                dataclasses.replace(b, T_world_obj=(T if b.name == name else base[b.name]), motion=())
+                for b in scene.bodies
+            )
+            sc = dataclasses.replace(
+                scene,
+                bodies=bodies,
+                render=dataclasses.replace(scene.render, aa_samples=8, seed=int(rng.integers(1 << 30))),
+            )
             img = Renderer(sc).render(0.0, made)
             # partial occlusion: a grey rectangle over 20-35 % of the object's image, from one side
             lo, hi = uv.min(axis=0), uv.max(axis=0)
@@ -258,13 +287,24 @@ def rendered_cases(rng, scene, n_per_object: int) -> list[Case]:
             else:
                 y0 = y1 - frac * (y1 - y0)
             hidden = np.zeros(img.shape[:2], bool)
-            hidden[max(int(y0) - 3, 0):int(y1) + 3, max(int(x0) - 3, 0):int(x1) + 3] = True
+            hidden[max(int(y0) - 3, 0) : int(y1) + 3, max(int(x0) - 3, 0) : int(x1) + 3] = True
             img = img.copy()
             grey = rng.uniform(40, 200)
             img[hidden] = np.clip(grey + rng.normal(0, 2.0, hidden.sum()), 0, 255).astype(np.uint8)
-            cases.append(Case("b", f"{name} #{made}", scene.camera, body.model, base[name], T, img,
-                              random_click(rng, scene.camera, body.model, T, hidden), table,
-                              edge_clicks(rng, scene.camera, body.model, T, hidden)))
+            cases.append(
+                Case(
+                    "b",
+                    f"{name} #{made}",
+                    scene.camera,
+                    body.model,
+                    base[name],
+                    T,
+                    img,
+                    random_click(rng, scene.camera, body.model, T, hidden),
+                    table,
+                    edge_clicks(rng, scene.camera, body.model, T, hidden),
+                )
+            )
             made += 1
     return cases
 
@@ -329,8 +369,12 @@ def said(cands) -> bool:
 
     c0 = cands[0]
     ties = any(c.mismatch <= c0.mismatch + NEAR_TIE_MISMATCH for c in cands[1:])
-    weak = ((not np.all(np.isfinite(c0.std_t_mm))) or np.max(c0.std_r_deg) > WEAK_FOUND_SIGMA_DEG
-            or np.max(c0.std_t_mm) > WEAK_FOUND_SIGMA_MM or 1.0 - c0.mismatch < WEAK_FOUND_MATCH)
+    weak = (
+        (not np.all(np.isfinite(c0.std_t_mm)))
+        or np.max(c0.std_r_deg) > WEAK_FOUND_SIGMA_DEG
+        or np.max(c0.std_t_mm) > WEAK_FOUND_SIGMA_MM
+        or 1.0 - c0.mismatch < WEAK_FOUND_MATCH
+    )
     beside = bool(getattr(c0, "beside_click", False))  # said: "the best lies beside your click"
     return bool(ties or weak or beside)
 
@@ -342,15 +386,19 @@ def wrong_clicks(scene) -> list[tuple[str, object, np.ndarray, np.ndarray, np.nd
     for t in (16.5, 20.0, 24.0, 27.0, 5.0):
         k = int(round(t * scene.video.fps))
         image = next(iter_frames(scene.video.path, k, 1))[1]
-        at = {f"table point {i + 1}": scene.camera.project(np.array([X]))[0]
-              for i, X in enumerate(([0.3, -0.3, 0.0], [-0.3, -0.2, 0.0], [0.0, -0.45, 0.0]))}
+        at = {
+            f"table point {i + 1}": scene.camera.project(np.array([X]))[0]
+            for i, X in enumerate(([0.3, -0.3, 0.0], [-0.3, -0.2, 0.0], [0.0, -0.45, 0.0]))
+        }
         for o in names:
             at[o] = scene.camera.project_obj(scene.body(o).pose_at(t), np.array([[0.0, 0.0, 0.05]]))[0]
         para = scene.body("parallelepiped")
         at["parallelepiped"] = scene.camera.project_obj(para.pose_at(t), para.model.vertices).mean(axis=0)
-        plan = {"parallelepiped": ("table point 1", "table point 2", "table point 3", "unknown_box", "unknown_cylinder"),
-                "unknown_box": ("parallelepiped", "table point 1", "table point 2", "table point 3", "unknown_cylinder"),
-                "unknown_cylinder": ("parallelepiped", "table point 1", "table point 2", "table point 3", "unknown_box")}
+        plan = {
+            "parallelepiped": ("table point 1", "table point 2", "table point 3", "unknown_box", "unknown_cylinder"),
+            "unknown_box": ("parallelepiped", "table point 1", "table point 2", "table point 3", "unknown_cylinder"),
+            "unknown_cylinder": ("parallelepiped", "table point 1", "table point 2", "table point 3", "unknown_box"),
+        }
         for m, where in plan.items():
             body = scene.body(m)
             for w in where:
@@ -384,11 +432,15 @@ def wrong_rows(scene) -> None:
     print("(d) wrong clicks on the workcell video, 5 frames")
     print(f"  {'click':44s}{'n':>4s}{'refused':>9s}{'said':>6s}{'right':>7s}{'silent':>8s}")
     for key, outs in tally.items():
-        print(f"  {key:44s}{len(outs):4d}" + "".join(f"{outs.count(o):{w}d}" for o, w in
-                                                     (("refused", 9), ("said", 6), ("right", 7), ("silent", 8))))
+        print(
+            f"  {key:44s}{len(outs):4d}"
+            + "".join(f"{outs.count(o):{w}d}" for o, w in (("refused", 9), ("said", 6), ("right", 7), ("silent", 8)))
+        )
     every = [o for outs in tally.values() for o in outs]
-    print(f"  {'all':44s}{len(every):4d}" + "".join(f"{every.count(o):{w}d}" for o, w in
-                                                    (("refused", 9), ("said", 6), ("right", 7), ("silent", 8))))
+    print(
+        f"  {'all':44s}{len(every):4d}"
+        + "".join(f"{every.count(o):{w}d}" for o, w in (("refused", 9), ("said", 6), ("right", 7), ("silent", 8)))
+    )
     print("  target: none silent (a click on nothing or on another object: no pose fits, or said)")
     print()
 
@@ -421,8 +473,10 @@ def table_rows(title: str, groups: dict[str, list[Case]], target: float, total: 
     reach from the truth; with ``total``, a row for all the groups' cases together (the target's)."""
     print(title)
     every: list = []
-    print(f"  {'case':34s}{'n':>4s}{'right top':>11s}{'among':>8s}{'none':>6s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}{'σ ok':>7s}{'silent':>7s}"
-          f"{'|  auto match n':>16s}{'right':>8s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}")
+    print(
+        f"  {'case':34s}{'n':>4s}{'right top':>11s}{'among':>8s}{'none':>6s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}{'σ ok':>7s}{'silent':>7s}"
+        f"{'|  auto match n':>16s}{'right':>8s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}"
+    )
     for name, cases in groups.items():
         if not cases:
             continue
@@ -434,15 +488,19 @@ def table_rows(title: str, groups: dict[str, list[Case]], target: float, total: 
         none = sum(r[3] == 0 for r in rs)
         cpu = np.array([r[2] for r in rs])
         acts = [r[4] for r in rs if r[4] is not None]
-        line = (f"  {name:34s}{len(rs):4d}{100 * top:10.1f}%{100 * among:7.1f}%{none:6d}{np.median(cpu):7.2f}"
-                f"{np.percentile(cpu, 95):7.2f}{(np.mean(acts) if acts else float('nan')):9.2f}")
+        line = (
+            f"  {name:34s}{len(rs):4d}{100 * top:10.1f}%{100 * among:7.1f}%{none:6d}{np.median(cpu):7.2f}"
+            f"{np.percentile(cpu, 95):7.2f}{(np.mean(acts) if acts else float('nan')):9.2f}"
+        )
         cov_q = [r[6] for r in rs if r[6] is not None]
         line += f"{100 * np.mean(np.array(cov_q) <= 0.95):6.0f}%" if cov_q else f"{'-':>7s}"
         line += f"{sum(r[7] for r in rs):7d}"
         if ms:
             mc = np.array([m[1] for m in ms])
-            line += (f"{'|':>3s}{len(ms):13d}{100 * np.mean([m[0] for m in ms]):7.1f}%{np.median(mc):7.2f}"
-                     f"{np.percentile(mc, 95):7.2f}{MATCH_ACTIONS:9d}")
+            line += (
+                f"{'|':>3s}{len(ms):13d}{100 * np.mean([m[0] for m in ms]):7.1f}%{np.median(mc):7.2f}"
+                f"{np.percentile(mc, 95):7.2f}{MATCH_ACTIONS:9d}"
+            )
         elif any(c.segs is not None for c in cases) or all(not len(c.model.edges) for c in cases):
             line += f"{'|':>3s}{'n/a (no straight edges)':>44s}"
         else:
@@ -454,18 +512,28 @@ def table_rows(title: str, groups: dict[str, list[Case]], target: float, total: 
             refused = int(np.sum(~np.isfinite(e[:, 0])))
             close = int(np.sum((e[:, 0] <= 3.0) & (e[:, 1] <= 0.01)))
             turned = int(np.sum((e[:, 0] >= 45.0) & (e[:, 1] <= 0.01)))
-            print(f"      misses: {refused} refused, {close} within 3° / 1 cm, {turned} turned in place (a near-symmetry), "
-                  f"{len(bad) - refused - close - turned} elsewhere")
+            print(
+                f"      misses: {refused} refused, {close} within 3° / 1 cm, {turned} turned in place (a near-symmetry), "
+                f"{len(bad) - refused - close - turned} elsewhere"
+            )
         for nm, e in bad[:4]:
-            print(f"      missed: {nm}: top candidate {e[0]:.2f}° / {1000 * e[1]:.1f} mm off" if np.isfinite(e[0]) else f"      missed: {nm}: no candidate")
+            print(
+                f"      missed: {nm}: top candidate {e[0]:.2f}° / {1000 * e[1]:.1f} mm off"
+                if np.isfinite(e[0])
+                else f"      missed: {nm}: no candidate"
+            )
         reach = [from_truth(c) for c in cases]
-        print(f"      from the truth: {sum(reach)} of {len(cases)} refined within {OK_DEG:.0f}° / {1000 * OK_M:.0f} mm "
-              f"(the most a search ending in this refinement finds); the search found {sum(r[0] for r in rs)}, "
-              f"{sum(r[0] and ok for r, ok in zip(rs, reach))} of them among those")
+        print(
+            f"      from the truth: {sum(reach)} of {len(cases)} refined within {OK_DEG:.0f}° / {1000 * OK_M:.0f} mm "
+            f"(the most a search ending in this refinement finds); the search found {sum(r[0] for r in rs)}, "
+            f"{sum(r[0] and ok for r, ok in zip(rs, reach))} of them among those"
+        )
     if total is not None and every:
         top = [r[0] for r in every]
-        print(f"  {total:34s}{len(every):4d}{100 * np.mean(top):10.1f}%{100 * np.mean([r[1] for r in every]):7.1f}%"
-              f"{sum(r[3] == 0 for r in every):6d}{'':>37s}{sum(r[7] for r in every):7d}")
+        print(
+            f"  {total:34s}{len(every):4d}{100 * np.mean(top):10.1f}%{100 * np.mean([r[1] for r in every]):7.1f}%"
+            f"{sum(r[3] == 0 for r in every):6d}{'':>37s}{sum(r[7] for r in every):7d}"
+        )
     print(f"  target: right top ≥ {100 * target:.0f} %, p95 ≤ 1 s")
     print()
 
@@ -482,34 +550,56 @@ def main() -> int:
     scene = load_scene(default_scene_path())
     load0 = os.getloadavg()[0]
     print("One-click pose search (bench/search.py, issue 17) beside auto match")
-    print(f"  {pinned}, one BLAS/OpenCV thread; load average {load0:.2f} at start, on {os.cpu_count()} cores; seed {args.seed}")
-    print(f"  success: the top candidate within {OK_DEG:.0f}° and {1000 * OK_M:.0f} mm of the truth (up to symmetries); "
-          "s: CPU seconds per call; actions after selecting the object")
+    print(
+        f"  {pinned}, one BLAS/OpenCV thread; load average {load0:.2f} at start, on {os.cpu_count()} cores; seed {args.seed}"
+    )
+    print(
+        f"  success: the top candidate within {OK_DEG:.0f}° and {1000 * OK_M:.0f} mm of the truth (up to symmetries); "
+        "s: CPU seconds per call; actions after selecting the object"
+    )
     # warm-up (compiled kernels, caches): not timed
     body = scene.body("parallelepiped")
     img0 = cv2.cvtColor(next(iter_frames(scene.video.path, 0, 1))[1], cv2.COLOR_RGB2GRAY)
-    search_pose(scene.camera, body.model, body.pose_at(0), scene.camera.project_obj(body.pose_at(0), body.model.vertices).mean(0),
-                img0, table=table_plane(scene))
+    search_pose(
+        scene.camera,
+        body.model,
+        body.pose_at(0),
+        scene.camera.project_obj(body.pose_at(0), body.model.vertices).mean(0),
+        img0,
+        table=table_plane(scene),
+    )
     print()
     if "a" not in args.skip:
         cases = workcell_cases(rng, scene)
         free = [dataclasses.replace(c, table=None, segs=None) for c in cases]
-        table_rows("(a) workcell video, the parallelepiped's 4 moves, 3 frames each, 5 clicks per frame",
-                   {"on the table (x, y, heading)": cases, "no hint (full pose near the old)": free}, 0.95)
+        table_rows(
+            "(a) workcell video, the parallelepiped's 4 moves, 3 frames each, 5 clicks per frame",
+            {"on the table (x, y, heading)": cases, "no hint (full pose near the old)": free},
+            0.95,
+        )
     if "b" not in args.skip:
         t0 = time.time()
         cases = rendered_cases(rng, scene, args.placements)
         print(f"  ({len(cases)} frames rendered in {time.time() - t0:.0f} s)")
-        table_rows("(b) random placements on the table, rendered, noise + blur + 20-35 % hidden",
-                   {n: [c for c in cases if c.name.startswith(n)] for n in ("unknown_box", "parallelepiped", "unknown_cylinder")}, 0.95,
-                   total="all three objects")
+        table_rows(
+            "(b) random placements on the table, rendered, noise + blur + 20-35 % hidden",
+            {
+                n: [c for c in cases if c.name.startswith(n)]
+                for n in ("unknown_box", "parallelepiped", "unknown_cylinder")
+            },
+            0.95,
+            total="all three objects",
+        )
     if "c" not in args.skip:
         tc, fc = cube_cases(rng, args.cube)
         if not tc:
             print(f"(c) visp-cube: data not found at {DATA / 'visp-cube'} (skipped)")
         else:
-            table_rows("(c) real ViSP cube, starts 30° / 10 cm off the reference",
-                       {"on its table (plane from the reference)": tc, "no hint (full pose near the old)": fc}, 0.80)
+            table_rows(
+                "(c) real ViSP cube, starts 30° / 10 cm off the reference",
+                {"on its table (plane from the reference)": tc, "no hint (full pose near the old)": fc},
+                0.80,
+            )
     if "d" not in args.skip:
         wrong_rows(scene)
     print(f"  load average {os.getloadavg()[0]:.2f} at the end")

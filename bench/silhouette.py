@@ -103,14 +103,20 @@ def main() -> int:
             best = [min(a, b) for a, b in zip(best, (pre, contour, with_sil, without, first))]
         n_sil = int(np.median([len(sides.contour(c)) for c in centres]))
         rows.append((name, sum(len(f) == 3 for f in model.faces), len(sides), n_sil, *best))
-    print(f"mesh silhouettes, per object — camera 640×480, 800 px; {args.poses} random poses, medians, best of "
-          f"{args.repeat} runs; machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
+    print(
+        f"mesh silhouettes, per object — camera 640×480, 800 px; {args.poses} random poses, medians, best of "
+        f"{args.repeat} runs; machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}"
+    )
     print()
-    print("| model | triangles | smooth sides | silhouette sides (median) | smooth sides found, once per model (ms) "
-          "| contour at one pose (ms) | one object's redraw (ms) | same without mesh silhouettes (ms) | first redraw (ms) |")
+    print(
+        "| model | triangles | smooth sides | silhouette sides (median) | smooth sides found, once per model (ms) "
+        "| contour at one pose (ms) | one object's redraw (ms) | same without mesh silhouettes (ms) | first redraw (ms) |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     for name, tris, ns, nsil, pre, contour, with_sil, without, first in rows:
-        print(f"| {name} | {tris} | {ns} | {nsil} | {pre:.2f} | {contour:.3f} | {with_sil:.2f} | {without:.2f} | {first:.1f} |")
+        print(
+            f"| {name} | {tris} | {ns} | {nsil} | {pre:.2f} | {contour:.3f} | {with_sil:.2f} | {without:.2f} | {first:.1f} |"
+        )
     return 0
 
 

@@ -99,7 +99,9 @@ def canny_fitline(gray: np.ndarray, click: np.ndarray, band_px: float) -> np.nda
     return c + ((click - c) @ u_dir)[:, None] * u_dir
 
 
-def pose_from_segments(camera: Camera, T0: np.ndarray, segs: list[np.ndarray], edges_obj: list[np.ndarray]) -> np.ndarray:
+def pose_from_segments(
+    camera: Camera, T0: np.ndarray, segs: list[np.ndarray], edges_obj: list[np.ndarray]
+) -> np.ndarray:
     """The maximum-likelihood pose from clicked segments on known model edges (core.pose.refine:
     the distances of the clicked points to the projected model lines), iterated from T0."""
     return refine(camera, T0, segs_uv=np.array(segs), edges_obj=np.array(edges_obj)).T_world_obj
@@ -154,33 +156,54 @@ def main() -> int:
 
     n = len(err["raw"])
     print("Edge snapping on rendered frames with known edges (bench/snapping.py)")
-    print(f"  camera {W}×{H} px, f = {F:.0f} px; box {BOX[0] * 100:.1f} × {BOX[1] * 100:.1f} × {BOX[2] * 100:.1f} cm at 2 m, "
-          f"{args.trials} random poses (faces seen at < 75°), seed {args.seed}")
-    print(f"  frames by app.render (exact ray casting, area-coverage edges; {render_s:.0f} s): blur σ = {BLUR_PX} px, noise σ = "
-          f"{NOISE_GREY:.0f} grey levels; clicks at 10 %/90 % of each visible edge ≥ 30 px with contrast ≥ {MIN_CONTRAST:.0f} grey levels, σ = {CLICK_SIGMA_PX:.0f} px per "
-          f"coordinate; band ±{BAND_PX:.0f} px")
-    print(f"  {n} segments; snaps refused: {refused} ({100 * refused / n:.1f} %, raw clicks kept); "
-          f"Canny+fitLine found no edge: {canny_failed}")
+    print(
+        f"  camera {W}×{H} px, f = {F:.0f} px; box {BOX[0] * 100:.1f} × {BOX[1] * 100:.1f} × {BOX[2] * 100:.1f} cm at 2 m, "
+        f"{args.trials} random poses (faces seen at < 75°), seed {args.seed}"
+    )
+    print(
+        f"  frames by app.render (exact ray casting, area-coverage edges; {render_s:.0f} s): blur σ = {BLUR_PX} px, noise σ = "
+        f"{NOISE_GREY:.0f} grey levels; clicks at 10 %/90 % of each visible edge ≥ 30 px with contrast ≥ {MIN_CONTRAST:.0f} grey levels, σ = {CLICK_SIGMA_PX:.0f} px per "
+        f"coordinate; band ±{BAND_PX:.0f} px"
+    )
+    print(
+        f"  {n} segments; snaps refused: {refused} ({100 * refused / n:.1f} %, raw clicks kept); "
+        f"Canny+fitLine found no edge: {canny_failed}"
+    )
     print()
     print("  segment error (px, max endpoint distance to the true line)")
     print(f"  {'':16s}{'mean':>8s}{'median':>8s}{'90 %':>8s}{'95 %':>8s}{'max':>8s}   {'≤ 0.3 px':>9s}")
-    for key, name in (("raw", "raw clicks"), ("canny", "Canny+fitLine"), ("snap", "snap_segment"), ("accepted", "  accepted only")):
+    for key, name in (
+        ("raw", "raw clicks"),
+        ("canny", "Canny+fitLine"),
+        ("snap", "snap_segment"),
+        ("accepted", "  accepted only"),
+    ):
         e = np.asarray(err[key])
-        print(f"  {name:16s}{e.mean():8.3f}{np.median(e):8.3f}{np.percentile(e, 90):8.3f}{np.percentile(e, 95):8.3f}{e.max():8.3f}   "
-              f"{100 * np.mean(e <= 0.3):8.1f} %")
+        print(
+            f"  {name:16s}{e.mean():8.3f}{np.median(e):8.3f}{np.percentile(e, 90):8.3f}{np.percentile(e, 95):8.3f}{e.max():8.3f}   "
+            f"{100 * np.mean(e <= 0.3):8.1f} %"
+        )
     print("  target: snapped segments within 0.3 px")
     print()
     pr, ps = np.asarray(pose_raw), np.asarray(pose_snap)
-    print(f"  pose error from all clicked edges of a frame ({len(pr)} frames with ≥ 4 edges; core.pose.refine from the true pose)")
+    print(
+        f"  pose error from all clicked edges of a frame ({len(pr)} frames with ≥ 4 edges; core.pose.refine from the true pose)"
+    )
     print(f"  {'':16s}{'rot mean °':>12s}{'rot med °':>11s}{'trans mean mm':>15s}{'trans med mm':>14s}")
     for name, p in (("raw clicks", pr), ("snapped", ps)):
-        print(f"  {name:16s}{p[:, 0].mean():12.3f}{np.median(p[:, 0]):11.3f}{1e3 * p[:, 1].mean():15.2f}{1e3 * np.median(p[:, 1]):14.2f}")
-    print(f"  ratio snapped/raw (mean): rotation {ps[:, 0].mean() / pr[:, 0].mean():.3f}, translation {ps[:, 1].mean() / pr[:, 1].mean():.3f}"
-          "   target ≤ 0.333")
+        print(
+            f"  {name:16s}{p[:, 0].mean():12.3f}{np.median(p[:, 0]):11.3f}{1e3 * p[:, 1].mean():15.2f}{1e3 * np.median(p[:, 1]):14.2f}"
+        )
+    print(
+        f"  ratio snapped/raw (mean): rotation {ps[:, 0].mean() / pr[:, 0].mean():.3f}, translation {ps[:, 1].mean() / pr[:, 1].mean():.3f}"
+        "   target ≤ 0.333"
+    )
     print()
     s = np.asarray(snap_ms)
-    print(f"  snap_segment time: median {np.median(s):.2f} ms, 95 % {np.percentile(s, 95):.2f} ms per segment "
-          f"(one core; {platform.processor() or platform.machine()}, Python {platform.python_version()})")
+    print(
+        f"  snap_segment time: median {np.median(s):.2f} ms, 95 % {np.percentile(s, 95):.2f} ms per segment "
+        f"(one core; {platform.processor() or platform.machine()}, Python {platform.python_version()})"
+    )
     return 0
 
 

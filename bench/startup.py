@@ -43,9 +43,7 @@ def free_port() -> int:
 
 
 def bare_cmd(port: int) -> list[str]:
-    code = ("import time, viser\n"
-            f"viser.ViserServer(host='127.0.0.1', port={port})\n"
-            "while True: time.sleep(1)\n")
+    code = f"import time, viser\nviser.ViserServer(host='127.0.0.1', port={port})\nwhile True: time.sleep(1)\n"
     return [PY, "-c", code]
 
 
@@ -91,10 +89,12 @@ def import_table(db: Path, timeout_s: float, top: int = 15) -> None:
         for line in err.read().decode(errors="replace").splitlines():
             if not line.startswith("import time:") or "self [us]" in line:
                 continue
-            fields = line[len("import time:"):].split("|")  # self [us] | cumulative | name
+            fields = line[len("import time:") :].split("|")  # self [us] | cumulative | name
             self_us, pkg = int(fields[0]), fields[2].strip().split(".")[0]
             per[pkg] = per.get(pkg, 0) + self_us
-    print(f"\nimports of mcit serve before its first page ({t:.2f} s with -X importtime; self time per top-level package):")
+    print(
+        f"\nimports of mcit serve before its first page ({t:.2f} s with -X importtime; self time per top-level package):"
+    )
     print("| package | ms |\n|:---|---:|")
     for pkg, us in sorted(per.items(), key=lambda kv: -kv[1])[:top]:
         print(f"| {pkg} | {us / 1000:.0f} |")
@@ -121,8 +121,10 @@ def main() -> int:
             mcit.append(time_to_first_page(mcit_cmd(port, db), port, args.timeout))
         med_b, med_m = sorted(bare)[len(bare) // 2], sorted(mcit)[len(mcit) // 2]
         diffs = sorted(m - b for b, m in zip(bare, mcit))
-        print(f"# mcit serve start-up ({platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores, "
-              f"load {os.getloadavg()[0]:.1f}); {args.runs} runs each, alternating")
+        print(
+            f"# mcit serve start-up ({platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores, "
+            f"load {os.getloadavg()[0]:.1f}); {args.runs} runs each, alternating"
+        )
         print("| server | median to first page (s) | min | max |\n|:---|---:|---:|---:|")
         print(f"| bare viser | {med_b:.2f} | {min(bare):.2f} | {max(bare):.2f} |")
         print(f"| mcit serve | {med_m:.2f} | {min(mcit):.2f} | {max(mcit):.2f} |")

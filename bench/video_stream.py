@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import cv2  # noqa: E402
 
 from app.video import RECONNECT_DELAYS_S, STREAM_READ_TIMEOUT_S, FrameGrabber, open_video  # noqa: E402
-from tests.app.test_video_streams import N, HttpStream, RtspStream, clip_frame, open_when_served  # noqa: E402
+from tests.app.test_video_streams import HttpStream, N, RtspStream, clip_frame, open_when_served  # noqa: E402
 
 
 def wait(predicate, timeout_s: float = 30.0) -> float:
@@ -55,8 +55,9 @@ def trial(kind: str, clip: Path, outage_s: float, stream=None):
         t_lost = wait(lambda: not grabber.status().live)
         time.sleep(max(0.0, outage_s - (time.monotonic() - t_kill)))
         last = grabber.latest().index
-        again = make(clip, port=stream.port) if kind == "HTTP" else make(clip, port=stream.port,
-                                                                           rtp_port=stream.rtp_port)
+        again = (
+            make(clip, port=stream.port) if kind == "HTTP" else make(clip, port=stream.port, rtp_port=stream.rtp_port)
+        )
         stream = again.start()
         t_up = time.monotonic()
         tries = grabber.status().tries
@@ -91,8 +92,10 @@ def main() -> int:
         print("ffmpeg is not installed (apt-get install ffmpeg)")
         return 1
     outages = [float(x) for x in args.outages.split(",")]
-    print(f"load average {os.getloadavg()[0]:.1f}; read timeout {STREAM_READ_TIMEOUT_S} s; reconnection delays "
-          f"{'/'.join(f'{d:g}' for d in RECONNECT_DELAYS_S)} s (the last repeats)")
+    print(
+        f"load average {os.getloadavg()[0]:.1f}; read timeout {STREAM_READ_TIMEOUT_S} s; reconnection delays "
+        f"{'/'.join(f'{d:g}' for d in RECONNECT_DELAYS_S)} s (the last repeats)"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         clip = Path(tmp)
         for i in range(N):
@@ -102,11 +105,15 @@ def main() -> int:
             for outage in outages:
                 rows = [trial(kind, clip, outage) for _ in range(args.trials)]
                 detect, resume, tries = zip(*rows)
-                print(f"{kind:<6} {outage:>6.1f} {statistics.median(detect):>15.2f} {max(detect):>8.2f} "
-                      f"{statistics.median(resume):>15.2f} {max(resume):>8.2f} {statistics.median(tries):>6.0f}")
+                print(
+                    f"{kind:<6} {outage:>6.1f} {statistics.median(detect):>15.2f} {max(detect):>8.2f} "
+                    f"{statistics.median(resume):>15.2f} {max(resume):>8.2f} {statistics.median(tries):>6.0f}"
+                )
         stall, reconnecting = hang(clip)
-        print(f"hang (SIGSTOP, HTTP): said lost after {stall:.2f} s (no frame for 2 s), reconnecting after "
-              f"{reconnecting:.2f} s (the read timed out)")
+        print(
+            f"hang (SIGSTOP, HTTP): said lost after {stall:.2f} s (no frame for 2 s), reconnecting after "
+            f"{reconnecting:.2f} s (the read timed out)"
+        )
     return 0
 
 

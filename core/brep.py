@@ -245,7 +245,7 @@ class BRep:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def from_faces(cls, vertices: np.ndarray, faces, solids=()) -> "BRep":
+    def from_faces(cls, vertices: np.ndarray, faces, solids=()) -> BRep:
         """Model whose edges are the sides of its faces (each shared side once)."""
         seen: dict[tuple[int, int], None] = {}
         for f in faces:
@@ -255,20 +255,29 @@ class BRep:
         return cls(vertices, np.array(list(seen), dtype=np.int64).reshape(-1, 2), tuple(faces), tuple(solids))
 
     @classmethod
-    def box(cls, size_x: float, size_y: float, size_z: float) -> "BRep":
+    def box(cls, size_x: float, size_y: float, size_z: float) -> BRep:
         """Rectangular box with its frame at the centre of its bottom face, z up (lies on z = 0)."""
         if min(size_x, size_y, size_z) <= 0:
             raise ValueError(f"box sizes must be positive, got {size_x}, {size_y}, {size_z}")
         x, y = size_x / 2.0, size_y / 2.0
         V = np.array(
-            [[-x, -y, 0], [x, -y, 0], [x, y, 0], [-x, y, 0], [-x, -y, size_z], [x, -y, size_z], [x, y, size_z], [-x, y, size_z]],
+            [
+                [-x, -y, 0],
+                [x, -y, 0],
+                [x, y, 0],
+                [-x, y, 0],
+                [-x, -y, size_z],
+                [x, -y, size_z],
+                [x, y, size_z],
+                [-x, y, size_z],
+            ],
             dtype=float,
         )
         faces = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
         return cls.from_faces(V, faces)
 
     @classmethod
-    def prism(cls, base_xy: np.ndarray, height: float) -> "BRep":
+    def prism(cls, base_xy: np.ndarray, height: float) -> BRep:
         """Right prism over a convex polygon base_xy (N, 2) (counter-clockwise seen from +z) on z = 0."""
         B = np.asarray(base_xy, dtype=float)
         n = len(B)
@@ -280,7 +289,7 @@ class BRep:
         return cls.from_faces(V, faces)
 
     @classmethod
-    def pyramid(cls, base_xy: np.ndarray, apex: np.ndarray) -> "BRep":
+    def pyramid(cls, base_xy: np.ndarray, apex: np.ndarray) -> BRep:
         """Pyramid over a convex polygon base_xy (N, 2) on z = 0 (counter-clockwise from +z) with an apex (3,)."""
         B = np.asarray(base_xy, dtype=float)
         n = len(B)
@@ -291,16 +300,21 @@ class BRep:
         return cls.from_faces(V, faces)
 
     @classmethod
-    def cylinder(cls, radius: float, height: float) -> "BRep":
+    def cylinder(cls, radius: float, height: float) -> BRep:
         """Cylinder standing on z = 0, axis along +z through the frame's origin."""
         return cls.cone(radius, radius, height)
 
     @classmethod
-    def cone(cls, radius_bottom: float, radius_top: float, height: float) -> "BRep":
+    def cone(cls, radius_bottom: float, radius_top: float, height: float) -> BRep:
         """Cone or frustum standing on z = 0, axis along +z through the frame's origin."""
         if height <= 0:
             raise ValueError(f"height must be positive, got {height}")
-        return cls(np.zeros((0, 3)), np.zeros((0, 2), dtype=np.int64), (), (Revolution([0, 0, 0], [0, 0, height], radius_bottom, radius_top),))
+        return cls(
+            np.zeros((0, 3)),
+            np.zeros((0, 2), dtype=np.int64),
+            (),
+            (Revolution([0, 0, 0], [0, 0, height], radius_bottom, radius_top),),
+        )
 
     # ------------------------------------------------------------------ queries
     def edge_segments(self, T_world_obj: np.ndarray | None = None) -> np.ndarray:
@@ -333,8 +347,14 @@ class BRep:
         if tri.any():  # a mesh's triangles at once, summed and normalised as the loop below does
             P = self.vertices[np.array([f for f, t in zip(self.faces, tri) if t], dtype=np.int64)]
             Q = np.roll(P, -1, axis=1)
-            n = np.stack([(P[..., 1] - Q[..., 1]) * (P[..., 2] + Q[..., 2]), (P[..., 2] - Q[..., 2]) * (P[..., 0] + Q[..., 0]),
-                          (P[..., 0] - Q[..., 0]) * (P[..., 1] + Q[..., 1])], axis=-1).sum(axis=1)
+            n = np.stack(
+                [
+                    (P[..., 1] - Q[..., 1]) * (P[..., 2] + Q[..., 2]),
+                    (P[..., 2] - Q[..., 2]) * (P[..., 0] + Q[..., 0]),
+                    (P[..., 0] - Q[..., 0]) * (P[..., 1] + Q[..., 1]),
+                ],
+                axis=-1,
+            ).sum(axis=1)
             out[tri] = [v / max(np.linalg.norm(v), 1e-300) for v in n]
         for k in np.flatnonzero(~tri):
             f = self.faces[k]
@@ -365,9 +385,11 @@ class BRep:
 
     def _edge_face_pairs(self) -> np.ndarray:
         """(M, 2) int: every (edge, face it borders) pair, edges in order (for vectorised visibility)."""
+
         def compute():
             pairs = [(k, f) for k, fs in enumerate(self._edge_faces) for f in fs]
             return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+
         return self._cached("_edge_face_pairs_", compute)
 
     def bounds(self) -> np.ndarray:
@@ -395,7 +417,7 @@ class BRep:
             offset += len(V)
         return np.vstack(Vs), np.vstack(Ts)
 
-    def transformed(self, T_new_obj: np.ndarray) -> "BRep":
+    def transformed(self, T_new_obj: np.ndarray) -> BRep:
         """The same model with its vertices mapped by ``T_new_obj`` (e.g. to bake a pose)."""
         R, t = T_new_obj[:3, :3], T_new_obj[:3, 3]
         solids = tuple(Revolution(R @ s.p0 + t, R @ s.p1 + t, s.r0, s.r1) for s in self.solids)
@@ -438,7 +460,7 @@ class BRep:
                 kind += ["silhouette"] * len(sil)
             th = np.linspace(0.0, 2.0 * np.pi, n_circle + 1)
             e, lat_n = s.lateral_normal(th)
-            for which, (centre, r, cap_n) in enumerate(((s.p0, s.r0, -s.axis), (s.p1, s.r1, s.axis))):
+            for _which, (centre, r, cap_n) in enumerate(((s.p0, s.r0, -s.axis), (s.p1, s.r1, s.axis))):
                 if r <= 0:
                     continue
                 P = centre + r * e
@@ -475,7 +497,7 @@ class BRep:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "BRep":
+    def from_dict(cls, d: dict[str, Any]) -> BRep:
         """Inverse of ``to_dict``; ValueError naming the field on bad input."""
         try:
             solids = tuple(Revolution(s["p0"], s["p1"], s["r0"], s["r1"]) for s in d.get("solids", []))

@@ -19,7 +19,19 @@ from .checks import MAX_M, MAX_PX, MAX_SCALE, MIN_SCALE, finite_array, image_siz
 from .rangefinder import RangeFinderSpec, beam_direction, beam_point_cov
 from .transforms import check_T, exp_so3, make_T
 
-__all__ = ["DLTResult", "calibrate_dlt", "check_covariance", "perturbed_camera", "perturbed_turret", "principal_steps", "dlt", "TurretCalibration", "calibrate_turret", "calibrate_turret_planes", "kabsch"]
+__all__ = [
+    "DLTResult",
+    "calibrate_dlt",
+    "check_covariance",
+    "perturbed_camera",
+    "perturbed_turret",
+    "principal_steps",
+    "dlt",
+    "TurretCalibration",
+    "calibrate_turret",
+    "calibrate_turret_planes",
+    "kabsch",
+]
 
 
 class DLTResult(tuple):
@@ -36,8 +48,15 @@ class DLTResult(tuple):
     shrunk below the stated σ.
     """
 
-    def __new__(cls, camera: Camera, rms_px: float, residuals_px: np.ndarray, linear_rms_px: float,
-                cov: np.ndarray | None = None, variance_factor: float = float("nan")):
+    def __new__(
+        cls,
+        camera: Camera,
+        rms_px: float,
+        residuals_px: np.ndarray,
+        linear_rms_px: float,
+        cov: np.ndarray | None = None,
+        variance_factor: float = float("nan"),
+    ):
         self = super().__new__(cls, (camera, float(rms_px)))
         self.camera = camera
         self.rms_px = float(rms_px)
@@ -67,7 +86,9 @@ def _check_calibration_points(X: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray
     if len(X) != len(uv):
         raise ValueError(f"X_world has {len(X)} points but uv has {len(uv)}: they must pair one to one")
     if len(X) < 6:
-        raise ValueError(f"calibration needs at least 6 points (11 unknowns in C), got {len(X)}; click more known points")
+        raise ValueError(
+            f"calibration needs at least 6 points (11 unknowns in C), got {len(X)}; click more known points"
+        )
     sv = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
     if sv[1] <= 1e-6 * sv[0]:
         raise ValueError("the calibration points are collinear: use points spread over a 3D calibration object")
@@ -84,8 +105,8 @@ def dlt(X_world: np.ndarray, uv: np.ndarray) -> np.ndarray:
     X, uv = _check_calibration_points(X_world, uv)
     T3 = _normaliser(X)
     T2 = _normaliser(uv)
-    Xn = (np.column_stack([X, np.ones(len(X))]) @ T3.T)
-    un = (np.column_stack([uv, np.ones(len(uv))]) @ T2.T)
+    Xn = np.column_stack([X, np.ones(len(X))]) @ T3.T
+    un = np.column_stack([uv, np.ones(len(uv))]) @ T2.T
     n = len(X)
     A = np.zeros((2 * n, 12))
     A[0::2, 0:4] = Xn
@@ -108,7 +129,12 @@ def _reprojection(P: np.ndarray, X: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 def calibrate_dlt(
-    X_world: np.ndarray, uv: np.ndarray, width: int, height: int, *, refine: bool = True,
+    X_world: np.ndarray,
+    uv: np.ndarray,
+    width: int,
+    height: int,
+    *,
+    refine: bool = True,
     sigma_px: np.ndarray | None = None,
 ) -> DLTResult:
     """The camera C from clicked pixels of known world points.
@@ -150,7 +176,10 @@ def calibrate_dlt(
         from scipy.optimize import least_squares  # here, not at the top: scipy.optimize/stats cost start-up ~0.5 s
 
         sol = least_squares(
-            lambda p: (_reprojection(p.reshape(3, 4), X, uv) * w[:, None]).ravel(), P.ravel(), method="lm", xtol=1e-14,
+            lambda p: (_reprojection(p.reshape(3, 4), X, uv) * w[:, None]).ravel(),
+            P.ravel(),
+            method="lm",
+            xtol=1e-14,
             ftol=1e-14,
         )
         P = sol.x.reshape(3, 4)
@@ -358,7 +387,9 @@ def calibrate_turret_planes(
     dist = np.einsum("ni,ni->n", N, X) + d
     X0 = X_turret @ T0[:3, :3].T + T0[:3, 3]
     dist0 = np.einsum("ni,ni->n", N, X0) + d
-    return TurretCalibration(T, cov, float(np.sqrt(np.mean(dist**2))), dist[:, None] * N, float(np.sqrt(np.mean(dist0**2))))
+    return TurretCalibration(
+        T, cov, float(np.sqrt(np.mean(dist**2))), dist[:, None] * N, float(np.sqrt(np.mean(dist0**2)))
+    )
 
 
 # ---------------------------------------------------------------------- moving a calibration through its σ

@@ -82,7 +82,9 @@ class Camera:
             sign = np.sign(np.linalg.det(M))
         else:
             Xf = np.asarray(in_front, dtype=float)
-            Xf = finite_array(Xf[None] if Xf.shape == (3,) else Xf, (None, 3), "in_front", max_abs=MAX_M, unit=" m", min_count=1)
+            Xf = finite_array(
+                Xf[None] if Xf.shape == (3,) else Xf, (None, 3), "in_front", max_abs=MAX_M, unit=" m", min_count=1
+            )
             s = Xf @ M[2] + C[2, 3]
             sign = np.sign(np.median(s))
             if sign == 0:
@@ -92,14 +94,16 @@ class Camera:
         self._M_inv = np.linalg.inv(self._C[:, :3])
         self._center = -self._M_inv @ self._C[:, 3]
         if not np.all(np.abs(self._center) <= MAX_M):
-            raise ValueError(f"C puts the optical centre at {self._center.tolist()} m, beyond ±{MAX_M:g} m: recalibrate the camera")
+            raise ValueError(
+                f"C puts the optical centre at {self._center.tolist()} m, beyond ±{MAX_M:g} m: recalibrate the camera"
+            )
         self._center.setflags(write=False)
         self.width = width
         self.height = height
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_intrinsics(cls, K: np.ndarray, T_cam_world: np.ndarray, width: int, height: int) -> "Camera":
+    def from_intrinsics(cls, K: np.ndarray, T_cam_world: np.ndarray, width: int, height: int) -> Camera:
         """Camera ``C = K [R_cam_world | t_cam_world]`` from intrinsics K (3, 3) and a pose (4, 4)."""
         K = np.asarray(K, dtype=float)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)):

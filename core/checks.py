@@ -33,7 +33,9 @@ def _describe(a: np.ndarray) -> str:
     return f"shape {a.shape} with max |value| {float(np.abs(a).max()):.3g}"
 
 
-def finite_array(x, shape: tuple, name: str, *, max_abs: float | None = None, unit: str = "", min_count: int = 0) -> np.ndarray:
+def finite_array(
+    x, shape: tuple, name: str, *, max_abs: float | None = None, unit: str = "", min_count: int = 0
+) -> np.ndarray:
     """``x`` as a float array of ``shape`` (``None`` for any size along that axis), every entry
     finite and, when ``max_abs`` is given, at most ``max_abs`` in magnitude; else ValueError naming
     ``name`` and what was received (``unit`` follows the bound in the message, e.g. " m").
@@ -65,7 +67,9 @@ def positive_scale(x, name: str, unit: str = "") -> float:
     except (TypeError, ValueError, OverflowError):
         raise ValueError(f"{name} must be a number, got {x!r:.80}") from None
     if not (MIN_SCALE <= v <= MAX_SCALE):
-        raise ValueError(f"{name} must be a positive finite number between {MIN_SCALE:g} and {MAX_SCALE:g}{unit}, got {x!r}")
+        raise ValueError(
+            f"{name} must be a positive finite number between {MIN_SCALE:g} and {MAX_SCALE:g}{unit}, got {x!r}"
+        )
     return v
 
 

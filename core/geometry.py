@@ -7,8 +7,9 @@ uses consistently. ``Plane`` and ``Line`` are named tuples, so ``n, d = plane`` 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -45,7 +46,7 @@ class Plane(NamedTuple):
     n: np.ndarray
     d: float
 
-    def flipped(self) -> "Plane":
+    def flipped(self) -> Plane:
         """The same plane with the opposite orientation."""
         return Plane(-self.n, -self.d)
 
@@ -158,9 +159,7 @@ def intersect_line_plane(line: Line, plane: Plane) -> np.ndarray:
     return P + s * u
 
 
-def point_from_planes(
-    planes: Sequence[Plane], weights: np.ndarray | None = None, return_cov: bool = False
-):
+def point_from_planes(planes: Sequence[Plane], weights: np.ndarray | None = None, return_cov: bool = False):
     """Least-squares point of k ≥ 3 planes: minimises Σ wᵢ (nᵢ·X + dᵢ)².
 
     planes : sequence of k Plane; weights : array, shape (k,), optional (1/σᵢ², 1/m²).

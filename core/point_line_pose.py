@@ -194,7 +194,7 @@ def refine_point_to_line(
         raise ValueError("sample_weights must be finite and non-negative")
     converged = False
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 - the count of iterations, returned
         r, J, _ = point_line_residuals(camera, T, X, D, m)
         scale = scale_px if scale_px is not None else max(_mad_scale(r), min_scale_px)
         w = w0 * robust_weights(r, loss, scale)

@@ -20,8 +20,8 @@ The turret convention, written once (every other module uses these functions):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

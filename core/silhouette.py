@@ -60,7 +60,7 @@ class SmoothSides:
         return len(self.sides)
 
     @classmethod
-    def of(cls, vertices: np.ndarray, faces, edges: np.ndarray) -> "SmoothSides":
+    def of(cls, vertices: np.ndarray, faces, edges: np.ndarray) -> SmoothSides:
         """The smooth sides of faces (vertex loops) over vertices (V, 3), given the sharp edges (E, 2).
 
         A side is smooth when exactly two faces share it, it is not one of ``edges``, the faces
@@ -85,7 +85,11 @@ class SmoothSides:
         lo, hi = np.minimum(a, b), np.maximum(a, b)
         key = lo * n + hi
         E = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-        sharp = np.isin(key, np.minimum(E[:, 0], E[:, 1]) * n + np.maximum(E[:, 0], E[:, 1])) if len(E) else np.zeros(len(key), bool)
+        sharp = (
+            np.isin(key, np.minimum(E[:, 0], E[:, 1]) * n + np.maximum(E[:, 0], E[:, 1]))
+            if len(E)
+            else np.zeros(len(key), bool)
+        )
         order = np.argsort(key, kind="stable")
         k_sorted = key[order]
         first = np.ones(len(k_sorted), bool)

@@ -49,7 +49,9 @@ def test_core_never_imports_app_or_io_libraries():
 
 
 def test_console_script_answers_help():
-    out = subprocess.run([sys.executable, "-m", "app.cli", "--help"], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "app.cli", "--help"], capture_output=True, text=True, cwd=ROOT, timeout=60
+    )
     assert out.returncode == 0 and "usage: mcit" in out.stdout
 
 

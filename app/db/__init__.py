@@ -11,7 +11,7 @@ See ``docs/database.md``. The interface and the demo use ``Database``::
 """
 
 from .database import Database, default_db_path
-from .records import CalibrationRecord, ChangeRecord, ConflictError, NotFoundError, ObjectRecord, STATUSES
+from .records import STATUSES, CalibrationRecord, ChangeRecord, ConflictError, NotFoundError, ObjectRecord
 from .schema import LATEST_VERSION, DatabaseRefused
 from .seed import dimensions_of, seed_from_scene
 from .storage import DatabaseUnavailable

@@ -23,9 +23,10 @@ import os
 import sqlite3
 import threading
 import time
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -169,9 +170,14 @@ class Database:
     # ------------------------------------------------------------------ opening
     @classmethod
     def open(
-        cls, path: str | Path | None = None, *, client: str = "local", busy_timeout_s: float = 10.0, quick_check: bool = True,
+        cls,
+        path: str | Path | None = None,
+        *,
+        client: str = "local",
+        busy_timeout_s: float = 10.0,
+        quick_check: bool = True,
         readonly: bool = False,
-    ) -> "Database":
+    ) -> Database:
         """Open (creating it with the schema if absent or empty) the database at ``path``.
 
         path : the file; default ``default_db_path()``. quick_check : run SQLite's quick_check on
@@ -193,11 +199,15 @@ class Database:
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
-                raise DatabaseUnavailable(f"cannot make the folder for {path} ({exc.strerror}), so nothing was written; "
-                                          "choose a writable place with --db") from None
+                raise DatabaseUnavailable(
+                    f"cannot make the folder for {path} ({exc.strerror}), so nothing was written; "
+                    "choose a writable place with --db"
+                ) from None
             if not os.access(path.parent, os.W_OK):
-                raise DatabaseUnavailable(f"cannot create {path}: its folder is read-only, so nothing was written; "
-                                          "choose a writable place with --db")
+                raise DatabaseUnavailable(
+                    f"cannot create {path}: its folder is read-only, so nothing was written; "
+                    "choose a writable place with --db"
+                )
         else:
             check_writable(path)
         db = cls(path, client, busy_timeout_s)
@@ -206,7 +216,9 @@ class Database:
                 conn = db._conn()
                 mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
                 if mode.lower() != "wal":
-                    raise DatabaseRefused(f"{path}: SQLite refused WAL mode (got {mode!r}); put the database on a local disk")
+                    raise DatabaseRefused(
+                        f"{path}: SQLite refused WAL mode (got {mode!r}); put the database on a local disk"
+                    )
                 if state.version < LATEST_VERSION:  # a file at the latest version needs no write lock to open
                     migrate(conn, LATEST_VERSION)
         except BaseException:
@@ -217,10 +229,12 @@ class Database:
         return db
 
     @classmethod
-    def _open_readonly(cls, path: Path, state, client: str, busy_timeout_s: float) -> "Database":
+    def _open_readonly(cls, path: Path, state, client: str, busy_timeout_s: float) -> Database:
         if not state.exists:
-            raise DatabaseUnavailable(f"there is no database at {path}; create one with `mcit db init` or `mcit db import` "
-                                      "(with --db to choose the file)")
+            raise DatabaseUnavailable(
+                f"there is no database at {path}; create one with `mcit db init` or `mcit db import` "
+                "(with --db to choose the file)"
+            )
         if state.version < LATEST_VERSION:  # upgraded once, by a writable open
             if not can_write(path.resolve()):
                 raise DatabaseUnavailable(
@@ -270,7 +284,7 @@ class Database:
                     pass
             self._connections.clear()
 
-    def __enter__(self) -> "Database":
+    def __enter__(self) -> Database:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -283,11 +297,15 @@ class Database:
                 raise RuntimeError(f"the database {self._path} is closed")
             if self.readonly:
                 uri, immutable = read_uri(self._path)
-                conn = sqlite3.connect(uri, uri=True, isolation_level=None, timeout=self._busy_timeout_s, check_same_thread=False)
+                conn = sqlite3.connect(
+                    uri, uri=True, isolation_level=None, timeout=self._busy_timeout_s, check_same_thread=False
+                )
                 conn.execute("PRAGMA query_only = ON")
             else:
                 immutable = False
-                conn = sqlite3.connect(self._path, isolation_level=None, timeout=self._busy_timeout_s, check_same_thread=False)
+                conn = sqlite3.connect(
+                    self._path, isolation_level=None, timeout=self._busy_timeout_s, check_same_thread=False
+                )
             conn.execute("PRAGMA foreign_keys = ON")
             conn.execute(f"PRAGMA busy_timeout = {int(self._busy_timeout_s * 1000)}")
             conn.execute("PRAGMA synchronous = FULL")
@@ -425,7 +443,9 @@ class Database:
         if isinstance(obj, (int, np.integer)) and not isinstance(obj, bool):
             row = conn.execute(f"SELECT {_OBJECT_COLUMNS} FROM objects WHERE id = ?", (_row_id(obj),)).fetchone()
         elif isinstance(obj, str):
-            row = conn.execute(f"SELECT {_OBJECT_COLUMNS} FROM objects WHERE name = ? AND removed = 0", (obj,)).fetchone()
+            row = conn.execute(
+                f"SELECT {_OBJECT_COLUMNS} FROM objects WHERE name = ? AND removed = 0", (obj,)
+            ).fetchone()
         else:
             raise ValueError(f"an object is named by its id (int), name (str) or record, got {type(obj).__name__}")
         if row is None or (row[-1] and not include_removed):
@@ -459,15 +479,45 @@ class Database:
             "removed": int(removed),
         }
 
-    def _log(self, conn, action, method, client, *, object_id=None, calibration_id=None, version=None, before=None,
-             after=None, clicks=None, measurements=None, residuals=None, note=None, undoes=None) -> int:
+    def _log(
+        self,
+        conn,
+        action,
+        method,
+        client,
+        *,
+        object_id=None,
+        calibration_id=None,
+        version=None,
+        before=None,
+        after=None,
+        clicks=None,
+        measurements=None,
+        residuals=None,
+        note=None,
+        undoes=None,
+    ) -> int:
         if not isinstance(method, str) or not method:
             raise ValueError(f"method must be a non-empty string saying how the change was made, got {method!r}")
         cur = conn.execute(
             "INSERT INTO history (time, client, method, action, object_id, calibration_id, version, before, after, "
             "clicks, measurements, residuals, note, undoes) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (time.time(), str(client or self.client), method, action, object_id, calibration_id, version, to_json(before),
-             to_json(after), to_json(clicks), to_json(measurements), to_json(residuals), note, undoes),
+            (
+                time.time(),
+                str(client or self.client),
+                method,
+                action,
+                object_id,
+                calibration_id,
+                version,
+                to_json(before),
+                to_json(after),
+                to_json(clicks),
+                to_json(measurements),
+                to_json(residuals),
+                note,
+                undoes,
+            ),
         )
         return int(cur.lastrowid)
 
@@ -515,8 +565,19 @@ class Database:
             except sqlite3.IntegrityError:
                 raise ValueError(f"an object named {name!r} already exists; choose another name") from None
             row = self._row(conn, int(cur.lastrowid))
-            self._log(conn, "add", method, client, object_id=row[0], version=1, after=self._snapshot(row), clicks=clicks,
-                      measurements=measurements, residuals=residuals, note=note)
+            self._log(
+                conn,
+                "add",
+                method,
+                client,
+                object_id=row[0],
+                version=1,
+                after=self._snapshot(row),
+                clicks=clicks,
+                measurements=measurements,
+                residuals=residuals,
+                note=note,
+            )
             return self._record(conn, row)
 
     def _change(self, conn, row, fields: dict, action, method, client, expected_version, **log) -> ObjectRecord:
@@ -536,9 +597,13 @@ class Database:
                 (*sets.values(), time.time(), row[0], version),
             )
         except sqlite3.IntegrityError:
-            raise ValueError(f"cannot bring back {name!r}: another live object has that name; remove or rename it first") from None
+            raise ValueError(
+                f"cannot bring back {name!r}: another live object has that name; remove or rename it first"
+            ) from None
         assert cur.rowcount == 1, "the write lock is held: the version cannot have moved"
-        self._log(conn, action, method, client, object_id=row[0], version=version + 1, before=before, after=after, **log)
+        self._log(
+            conn, action, method, client, object_id=row[0], version=version + 1, before=before, after=after, **log
+        )
         return self._record(conn, self._row(conn, row[0], include_removed=True))
 
     def update(
@@ -586,8 +651,19 @@ class Database:
             row = self._row(conn, obj)
             if model is not _KEEP:
                 fields["model_id"] = self._model_id(conn, model)
-            return self._change(conn, row, fields, "update", method, client, expected_version, clicks=clicks,
-                                measurements=measurements, residuals=residuals, note=note)
+            return self._change(
+                conn,
+                row,
+                fields,
+                "update",
+                method,
+                client,
+                expected_version,
+                clicks=clicks,
+                measurements=measurements,
+                residuals=residuals,
+                note=note,
+            )
 
     def update_pose(
         self,
@@ -609,17 +685,44 @@ class Database:
         clicks, measurements, residuals : what the estimate used (JSON values or arrays), kept in
         the history. ConflictError when the object's version is not ``expected_version``.
         """
-        return self.update(obj, expected_version=expected_version, method=method, T_world_obj=T_world_obj, cov=cov,
-                           status=status, client=client, clicks=clicks, measurements=measurements,
-                           residuals=residuals, note=note)
+        return self.update(
+            obj,
+            expected_version=expected_version,
+            method=method,
+            T_world_obj=T_world_obj,
+            cov=cov,
+            status=status,
+            client=client,
+            clicks=clicks,
+            measurements=measurements,
+            residuals=residuals,
+            note=note,
+        )
 
-    def set_status(self, obj: int | str | ObjectRecord, status: str, *, expected_version: int | None = None,
-                   method: str = "operator", client: str | None = None, note: str | None = None) -> ObjectRecord:
+    def set_status(
+        self,
+        obj: int | str | ObjectRecord,
+        status: str,
+        *,
+        expected_version: int | None = None,
+        method: str = "operator",
+        client: str | None = None,
+        note: str | None = None,
+    ) -> ObjectRecord:
         """Mark an object known, modelled or stale (e.g. stale when it is seen to have moved)."""
-        return self.update(obj, expected_version=expected_version, method=method, status=status, client=client, note=note)
+        return self.update(
+            obj, expected_version=expected_version, method=method, status=status, client=client, note=note
+        )
 
-    def remove(self, obj: int | str | ObjectRecord, *, expected_version: int | None = None, method: str = "operator",
-               client: str | None = None, note: str | None = None) -> ChangeRecord:
+    def remove(
+        self,
+        obj: int | str | ObjectRecord,
+        *,
+        expected_version: int | None = None,
+        method: str = "operator",
+        client: str | None = None,
+        note: str | None = None,
+    ) -> ChangeRecord:
         """Remove an object from the site (kept in the history; ``undo`` brings it back)."""
         with self.transaction() as conn:
             row = self._row(conn, obj)
@@ -635,8 +738,24 @@ class Database:
     def _change_from_row(row: tuple) -> ChangeRecord:
         (i, t, client, method, action, oid, cid, version, before, after, clicks, meas, res, note, undoes, name) = row
         load = lambda s: None if s is None else json.loads(s)  # noqa: E731
-        return ChangeRecord(i, t, client, method, action, oid, name, cid, version, load(before), load(after), load(clicks),
-                            load(meas), load(res), note, undoes)
+        return ChangeRecord(
+            i,
+            t,
+            client,
+            method,
+            action,
+            oid,
+            name,
+            cid,
+            version,
+            load(before),
+            load(after),
+            load(clicks),
+            load(meas),
+            load(res),
+            note,
+            undoes,
+        )
 
     _HISTORY_SELECT = (
         "SELECT h.id, h.time, h.client, h.method, h.action, h.object_id, h.calibration_id, h.version, h.before, h.after, "
@@ -681,7 +800,9 @@ class Database:
         if limit is not None:
             q += f" LIMIT {max(0, int(limit))}"
         with self._read() as conn:
-            rows = conn.execute(q, (max(-1, min(int(change_id), 2**63 - 1)),)).fetchall()  # clamped to SQLite's integers
+            rows = conn.execute(
+                q, (max(-1, min(int(change_id), 2**63 - 1)),)
+            ).fetchall()  # clamped to SQLite's integers
         return [self._change_from_row(r) for r in rows]
 
     def last_change_id(self) -> int:
@@ -704,16 +825,18 @@ class Database:
             self._change(conn, row, fields, which, which, client, expected_version, note=note, undoes=change.id)
             return self._change_record(conn, self._last_change_id(conn))
 
-    def undo(self, change_id: int, *, expected_version: int | None = None, client: str | None = None,
-             note: str | None = None) -> ChangeRecord:
+    def undo(
+        self, change_id: int, *, expected_version: int | None = None, client: str | None = None, note: str | None = None
+    ) -> ChangeRecord:
         """Bring the object back to its state just before change ``change_id`` (pose, covariance,
         status, model, presence). It is itself a change ("undo") and can be undone in turn.
         Undoing a calibration makes the calibration before it the latest again.
         """
         return self._revert(change_id, "undo", expected_version, client, note)
 
-    def restore(self, change_id: int, *, expected_version: int | None = None, client: str | None = None,
-                note: str | None = None) -> ChangeRecord:
+    def restore(
+        self, change_id: int, *, expected_version: int | None = None, client: str | None = None, note: str | None = None
+    ) -> ChangeRecord:
         """Bring the object back to its state just after change ``change_id`` (any earlier pose)."""
         return self._revert(change_id, "restore", expected_version, client, note)
 
@@ -728,12 +851,24 @@ class Database:
             (kind, data_json, res_json, time.time(), str(client or self.client), method),
         )
         cid = int(cur.lastrowid)
-        self._log(conn, "calibration", method, client, calibration_id=cid, after={"kind": kind}, note=note, undoes=undoes)
-        row = conn.execute("SELECT id, kind, data, residuals, time, client, method FROM calibrations WHERE id = ?", (cid,)).fetchone()
+        self._log(
+            conn, "calibration", method, client, calibration_id=cid, after={"kind": kind}, note=note, undoes=undoes
+        )
+        row = conn.execute(
+            "SELECT id, kind, data, residuals, time, client, method FROM calibrations WHERE id = ?", (cid,)
+        ).fetchone()
         return self._calibration_from_row(row)
 
-    def add_calibration(self, kind: str, data: Mapping[str, Any], residuals: Any = None, *, method: str = "calibration",
-                        client: str | None = None, note: str | None = None) -> CalibrationRecord:
+    def add_calibration(
+        self,
+        kind: str,
+        data: Mapping[str, Any],
+        residuals: Any = None,
+        *,
+        method: str = "calibration",
+        client: str | None = None,
+        note: str | None = None,
+    ) -> CalibrationRecord:
         """Store a calibration (one transaction, logged): kind "camera" with data {"C": (3, 4),
         "width", "height", ...} or "turret" with data {"T_world_turret": (4, 4), ...}; residuals as
         the method gives them (pixels, metres)."""
@@ -764,17 +899,23 @@ class Database:
         """Every calibration (of one kind), oldest first."""
         with self._read() as conn:
             q = "SELECT id, kind, data, residuals, time, client, method FROM calibrations"
-            rows = conn.execute(q + (" WHERE kind = ? ORDER BY id" if kind else " ORDER BY id"), (kind,) if kind else ()).fetchall()
+            rows = conn.execute(
+                q + (" WHERE kind = ? ORDER BY id" if kind else " ORDER BY id"), (kind,) if kind else ()
+            ).fetchall()
         return [self._calibration_from_row(r) for r in rows]
 
     def _revert_calibration(self, conn, change: ChangeRecord, which: str, client, note) -> ChangeRecord:
         cid = change.calibration_id
         kind = conn.execute("SELECT kind FROM calibrations WHERE id = ?", (cid,)).fetchone()[0]
         if which == "undo":
-            row = conn.execute("SELECT data, residuals FROM calibrations WHERE kind = ? AND id < ? ORDER BY id DESC LIMIT 1",
-                               (kind, cid)).fetchone()
+            row = conn.execute(
+                "SELECT data, residuals FROM calibrations WHERE kind = ? AND id < ? ORDER BY id DESC LIMIT 1",
+                (kind, cid),
+            ).fetchone()
             if row is None:
-                raise ValueError(f"change #{change.id} is the first {kind} calibration; there is none before it to go back to")
+                raise ValueError(
+                    f"change #{change.id} is the first {kind} calibration; there is none before it to go back to"
+                )
         else:
             row = conn.execute("SELECT data, residuals FROM calibrations WHERE id = ?", (cid,)).fetchone()
         self._insert_calibration(conn, kind, row[0], row[1], which, client, note, undoes=change.id)

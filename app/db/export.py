@@ -25,8 +25,9 @@ import math
 import os
 import secrets
 import time
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -36,9 +37,34 @@ __all__ = ["POSES_FORMAT", "pose_fields", "object_record", "camera_T", "export_p
 
 POSES_FORMAT = "mcit-poses/1"
 FORMATS = ("json", "csv", "pos")
-CSV_COLUMNS = ("object", "object_id", "kind", "status", "version", "frame", "x_m", "y_m", "z_m", "qx", "qy", "qz", "qw",
-               "rx_rad", "ry_rad", "rz_rad", "sigma_x_m", "sigma_y_m", "sigma_z_m", "sigma_rx_rad", "sigma_ry_rad",
-               "sigma_rz_rad", "who", "method", "time", "time_iso")
+CSV_COLUMNS = (
+    "object",
+    "object_id",
+    "kind",
+    "status",
+    "version",
+    "frame",
+    "x_m",
+    "y_m",
+    "z_m",
+    "qx",
+    "qy",
+    "qz",
+    "qw",
+    "rx_rad",
+    "ry_rad",
+    "rz_rad",
+    "sigma_x_m",
+    "sigma_y_m",
+    "sigma_z_m",
+    "sigma_rx_rad",
+    "sigma_ry_rad",
+    "sigma_rz_rad",
+    "who",
+    "method",
+    "time",
+    "time_iso",
+)
 
 
 def quat_xyzw(R: np.ndarray) -> list[float]:
@@ -87,16 +113,35 @@ def pose_fields(T: np.ndarray, cov: np.ndarray | None, R_frame: np.ndarray | Non
     return out
 
 
-def object_record(name: str, object_id: Any, kind: str, status: str, version: int, T_world_obj: np.ndarray,
-                  cov: np.ndarray | None, *, who: str | None, method: str | None, when: float | None,
-                  T_frame_world: np.ndarray | None = None, frame: str = "world") -> dict[str, Any]:
+def object_record(
+    name: str,
+    object_id: Any,
+    kind: str,
+    status: str,
+    version: int,
+    T_world_obj: np.ndarray,
+    cov: np.ndarray | None,
+    *,
+    who: str | None,
+    method: str | None,
+    when: float | None,
+    T_frame_world: np.ndarray | None = None,
+    frame: str = "world",
+) -> dict[str, Any]:
     """One object's record (see the module docstring); T_frame_world (4, 4) moves it to another frame."""
     T = np.asarray(T_world_obj, float)
     R = None
     if T_frame_world is not None:
         T = np.asarray(T_frame_world, float) @ T
         R = np.asarray(T_frame_world, float)[:3, :3]
-    rec = {"object": name, "object_id": object_id, "kind": kind, "status": status, "version": int(version), "frame": frame}
+    rec = {
+        "object": name,
+        "object_id": object_id,
+        "kind": kind,
+        "status": status,
+        "version": int(version),
+        "frame": frame,
+    }
     rec.update(pose_fields(T, cov, R))
     rec.update({"who": who, "method": method, "time": None if when is None else float(when), "time_iso": iso(when)})
     return rec
@@ -108,14 +153,18 @@ def camera_T(db) -> tuple[np.ndarray, int]:
 
     cal = db.latest_calibration("camera")
     if cal is None:
-        raise ValueError(f"{db.path}: the database has no camera calibration, so poses cannot be given in the "
-                         "camera frame; calibrate the camera or export with --frame world")
+        raise ValueError(
+            f"{db.path}: the database has no camera calibration, so poses cannot be given in the "
+            "camera frame; calibrate the camera or export with --frame world"
+        )
     d = cal.data
     cam = Camera(np.asarray(d["C"], float), int(d.get("width", 1)), int(d.get("height", 1)))
     K, T_cam_world = cam.decompose()
     if K[0, 0] < 0:
-        raise ValueError(f"{db.path}: the camera calibration #{cal.id} is mirrored (its image is flipped), so it has "
-                         "no camera frame; export with --frame world")
+        raise ValueError(
+            f"{db.path}: the camera calibration #{cal.id} is mirrored (its image is flipped), so it has "
+            "no camera frame; export with --frame world"
+        )
     return T_cam_world, int(cal.id)
 
 
@@ -127,8 +176,10 @@ def format_of(path: str | Path, fmt: str | None) -> str:
         return fmt
     suffix = Path(str(path).replace("{name}", "x")).suffix.lower().lstrip(".")
     if suffix not in FORMATS:
-        raise ValueError(f"{path}: cannot tell the format from the suffix {('.' + suffix) if suffix else '(none)'}; "
-                         "name it .json, .csv or .pos, or give --format")
+        raise ValueError(
+            f"{path}: cannot tell the format from the suffix {('.' + suffix) if suffix else '(none)'}; "
+            "name it .json, .csv or .pos, or give --format"
+        )
     return suffix
 
 
@@ -136,10 +187,14 @@ def _records(db, names: Iterable[str] | None, frame: str) -> tuple[list[dict], d
     objs = db.objects()
     if names:
         by_name = {o.name: o for o in objs}
-        missing = [n for n in names if n not in by_name and not (str(n).isdigit() and any(o.id == int(n) for o in objs))]
+        missing = [
+            n for n in names if n not in by_name and not (str(n).isdigit() and any(o.id == int(n) for o in objs))
+        ]
         if missing:
-            raise ValueError(f"no object named {', '.join(map(repr, missing))} in the database; it has "
-                             f"{', '.join(o.name for o in objs) or 'none'}")
+            raise ValueError(
+                f"no object named {', '.join(map(repr, missing))} in the database; it has "
+                f"{', '.join(o.name for o in objs) or 'none'}"
+            )
         wanted = [by_name.get(n) or next(o for o in objs if o.id == int(n)) for n in names]
     else:
         wanted = list(objs)
@@ -157,8 +212,22 @@ def _records(db, names: Iterable[str] | None, frame: str) -> tuple[list[dict], d
     for o in wanted:
         last = db.history(o.id, limit=1)
         who, method = (last[0].client, last[0].method) if last else (None, None)
-        out.append(object_record(o.name, o.id, o.kind, o.status, o.version, o.T_world_obj, o.cov, who=who,
-                                 method=method, when=o.updated_at, T_frame_world=T_fw, frame=frame))
+        out.append(
+            object_record(
+                o.name,
+                o.id,
+                o.kind,
+                o.status,
+                o.version,
+                o.T_world_obj,
+                o.cov,
+                who=who,
+                method=method,
+                when=o.updated_at,
+                T_frame_world=T_fw,
+                frame=frame,
+            )
+        )
     return out, meta
 
 
@@ -169,9 +238,11 @@ def _csv_text(records: list[dict]) -> str:
     for r in records:
         s = r["sigma"] or {"xyz_m": [None] * 3, "rot_rad": [None] * 3}
         num = lambda v: "" if v is None else repr(float(v))  # noqa: E731 - full precision, empty when unknown
-        w.writerow([r["object"], r["object_id"], r["kind"], r["status"], r["version"], r["frame"]]
-                   + [num(v) for v in r["xyz_m"] + r["quat_xyzw"] + r["rotvec_rad"] + s["xyz_m"] + s["rot_rad"]]
-                   + [r["who"] or "", r["method"] or "", num(r["time"]), r["time_iso"] or ""])
+        w.writerow(
+            [r["object"], r["object_id"], r["kind"], r["status"], r["version"], r["frame"]]
+            + [num(v) for v in r["xyz_m"] + r["quat_xyzw"] + r["rotvec_rad"] + s["xyz_m"] + s["rot_rad"]]
+            + [r["who"] or "", r["method"] or "", num(r["time"]), r["time_iso"] or ""]
+        )
     return buf.getvalue()
 
 
@@ -214,8 +285,9 @@ def write_atomically(files: Mapping[Path, Callable[[Path], None]]) -> None:
         raise
 
 
-def export_poses(db, out: str | Path, *, fmt: str | None = None, names: Iterable[str] | None = None,
-                 frame: str | None = None) -> list[Path]:
+def export_poses(
+    db, out: str | Path, *, fmt: str | None = None, names: Iterable[str] | None = None, frame: str | None = None
+) -> list[Path]:
     """Write the poses of the database's objects (all, or ``names``) to ``out``; returns the files written.
 
     fmt : "json", "csv" or "pos" (default: from the suffix). frame : "world" or "camera" (default:
@@ -238,11 +310,12 @@ def export_poses(db, out: str | Path, *, fmt: str | None = None, names: Iterable
         elif len(records) == 1:
             files[Path(out)] = pos_text(np.array(records[0]["T"]))
         else:
-            raise ValueError(f"{out}: a ViSP .pos holds one pose; name one object, or put {{name}} in the path "
-                             f"(e.g. poses/{{name}}.pos) for one file per object ({len(records)} objects)")
+            raise ValueError(
+                f"{out}: a ViSP .pos holds one pose; name one object, or put {{name}} in the path "
+                f"(e.g. poses/{{name}}.pos) for one file per object ({len(records)} objects)"
+            )
     elif fmt == "json":
-        doc = {"format": POSES_FORMAT, **meta, "database": str(db.path), "exported_at": time.time(),
-               "objects": records}
+        doc = {"format": POSES_FORMAT, **meta, "database": str(db.path), "exported_at": time.time(), "objects": records}
         doc["exported_at_iso"] = iso(doc["exported_at"])
         files[Path(out)] = json.dumps(doc, indent=1) + "\n"
     else:

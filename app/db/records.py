@@ -7,9 +7,10 @@ SQLite tool; numpy arrays and scalars given to the database are converted on the
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -55,7 +56,9 @@ def _default(value: Any) -> Any:
         return list(value)
     if hasattr(value, "_asdict"):
         return value._asdict()
-    raise TypeError(f"cannot store a {type(value).__name__} in the database (use numbers, strings, lists, dicts, arrays)")
+    raise TypeError(
+        f"cannot store a {type(value).__name__} in the database (use numbers, strings, lists, dicts, arrays)"
+    )
 
 
 def to_json(value: Any) -> str | None:

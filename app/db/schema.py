@@ -121,7 +121,9 @@ def inspect_file(path: Path, quick_check: bool = True) -> FileState:
         conn = sqlite3.connect(uri, uri=True)
         conn.execute("PRAGMA query_only = ON")
     except sqlite3.Error as exc:
-        raise DatabaseUnavailable(f"{path} cannot be opened to be read ({exc}); check it and its folder's permissions") from None
+        raise DatabaseUnavailable(
+            f"{path} cannot be opened to be read ({exc}); check it and its folder's permissions"
+        ) from None
     try:
         app_id = conn.execute("PRAGMA application_id").fetchone()[0]
         version = conn.execute("PRAGMA user_version").fetchone()[0]
@@ -170,7 +172,9 @@ def migrate(conn: sqlite3.Connection, target: int = LATEST_VERSION) -> tuple[int
         current = conn.execute("PRAGMA user_version").fetchone()[0]
         app_id = conn.execute("PRAGMA application_id").fetchone()[0]
         if current > LATEST_VERSION or (current > 0 and app_id != APPLICATION_ID):
-            raise DatabaseRefused(f"the database changed under us (application_id {app_id:#x}, version {current}); not migrating")
+            raise DatabaseRefused(
+                f"the database changed under us (application_id {app_id:#x}, version {current}); not migrating"
+            )
         for version in range(current, target):
             for statement in _statements(MIGRATIONS[version]):
                 conn.execute(statement)

@@ -38,19 +38,44 @@ def seed_from_scene(db: Database, scene: Scene, *, client: str = "seed") -> dict
     Returns {"objects": [names], "calibrations": [ids]}.
     """
     if db.objects() or db.calibrations():
-        raise ValueError(f"the database {db.path} already holds a site; seed only a new database (or choose another --db)")
+        raise ValueError(
+            f"the database {db.path} already holds a site; seed only a new database (or choose another --db)"
+        )
     method = f"seed from scene {scene.name!r}"
     names, cal_ids = [], []
     with db.transaction():
         for body in scene.known:
-            db.add_object(body.name, body.kind, body.model, body.pose_at(0.0), dims=dimensions_of(body.model, body.kind),
-                          status="known", source=str(scene.root), method=method, client=client)
+            db.add_object(
+                body.name,
+                body.kind,
+                body.model,
+                body.pose_at(0.0),
+                dims=dimensions_of(body.model, body.kind),
+                status="known",
+                source=str(scene.root),
+                method=method,
+                client=client,
+            )
             names.append(body.name)
         cam = scene.camera
-        cal_ids.append(db.add_calibration("camera", {"C": cam.C, "width": cam.width, "height": cam.height}, None,
-                                          method=method, client=client).id)
+        cal_ids.append(
+            db.add_calibration(
+                "camera", {"C": cam.C, "width": cam.width, "height": cam.height}, None, method=method, client=client
+            ).id
+        )
         t = scene.turret
-        cal_ids.append(db.add_calibration("turret", {"T_world_turret": t.T_world_turret, "resolution_arcsec": t.resolution_arcsec,
-                                                     "pan_limits_steps": t.pan_limits_steps, "tilt_limits_steps": t.tilt_limits_steps},
-                                          None, method=method, client=client).id)
+        cal_ids.append(
+            db.add_calibration(
+                "turret",
+                {
+                    "T_world_turret": t.T_world_turret,
+                    "resolution_arcsec": t.resolution_arcsec,
+                    "pan_limits_steps": t.pan_limits_steps,
+                    "tilt_limits_steps": t.tilt_limits_steps,
+                },
+                None,
+                method=method,
+                client=client,
+            ).id
+        )
     return {"objects": names, "calibrations": cal_ids}

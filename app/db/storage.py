@@ -77,8 +77,11 @@ def _read_only(path: Path) -> tuple[str, str, str] | None:
     if not os.access(p, os.W_OK):
         return f"{path} is read-only", "make it writable", copy
     if not os.access(p.parent, os.W_OK):
-        return (f"the folder {p.parent} is read-only and the database needs to keep its journal files beside {p.name}",
-                "make the folder writable", " or move the database")
+        return (
+            f"the folder {p.parent} is read-only and the database needs to keep its journal files beside {p.name}",
+            "make the folder writable",
+            " or move the database",
+        )
     return None
 
 
@@ -151,17 +154,30 @@ def _code(exc: sqlite3.Error) -> str:
     if name:
         return name
     text = str(exc).lower()
-    for needle, code in (("disk is full", "SQLITE_FULL"), ("readonly", "SQLITE_READONLY"), ("read-only", "SQLITE_READONLY"),
-                         ("is locked", "SQLITE_BUSY"), ("i/o error", "SQLITE_IOERR"), ("unable to open", "SQLITE_CANTOPEN"),
-                         ("malformed", "SQLITE_CORRUPT"), ("not a database", "SQLITE_NOTADB")):
+    for needle, code in (
+        ("disk is full", "SQLITE_FULL"),
+        ("readonly", "SQLITE_READONLY"),
+        ("read-only", "SQLITE_READONLY"),
+        ("is locked", "SQLITE_BUSY"),
+        ("i/o error", "SQLITE_IOERR"),
+        ("unable to open", "SQLITE_CANTOPEN"),
+        ("malformed", "SQLITE_CORRUPT"),
+        ("not a database", "SQLITE_NOTADB"),
+    ):
         if needle in text:
             return code
     return ""
 
 
 # The system's storage errors as the SQLite codes that mean the same to the operator.
-_OS_CODES = {errno.ENOSPC: "SQLITE_FULL", errno.EDQUOT: "SQLITE_FULL", errno.EROFS: "SQLITE_READONLY",
-             errno.EACCES: "SQLITE_READONLY", errno.EPERM: "SQLITE_READONLY", errno.EIO: "SQLITE_IOERR"}
+_OS_CODES = {
+    errno.ENOSPC: "SQLITE_FULL",
+    errno.EDQUOT: "SQLITE_FULL",
+    errno.EROFS: "SQLITE_READONLY",
+    errno.EACCES: "SQLITE_READONLY",
+    errno.EPERM: "SQLITE_READONLY",
+    errno.EIO: "SQLITE_IOERR",
+}
 
 
 def explain(exc: Exception, path: Path, wait_s: float) -> Exception:
@@ -177,28 +193,39 @@ def explain(exc: Exception, path: Path, wait_s: float) -> Exception:
     else:
         return exc
     if code.startswith("SQLITE_FULL"):
-        return DatabaseUnavailable(f"the disk holding {path} is full, so nothing was written; free some space, then try again")
+        return DatabaseUnavailable(
+            f"the disk holding {path} is full, so nothing was written; free some space, then try again"
+        )
     if code.startswith("SQLITE_READONLY"):
         found = _read_only(path)
         if found is not None:
             what, remedy, _ = found  # (the command line's "instead" is no advice for a running server)
             return DatabaseUnavailable(f"{what}, so nothing was written; {remedy}, then try again")
-        return DatabaseUnavailable(f"{path} could not be written ({detail}), so nothing was written; check that the file "
-                                   "and its folder are writable, then try again")
+        return DatabaseUnavailable(
+            f"{path} could not be written ({detail}), so nothing was written; check that the file "
+            "and its folder are writable, then try again"
+        )
     if code.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")):
         holders = lock_holders(path)
         who = f" ({'; '.join(holders)})" if holders else ""
-        return DatabaseUnavailable(f"the database {path} is locked by another program{who}, still after {wait_s:g} s, so "
-                                   "nothing was written; try again when that program has finished")
+        return DatabaseUnavailable(
+            f"the database {path} is locked by another program{who}, still after {wait_s:g} s, so "
+            "nothing was written; try again when that program has finished"
+        )
     if code.startswith("SQLITE_IOERR"):
-        return DatabaseUnavailable(f"the disk holding {path} reported an error ({detail}), so nothing was written; check "
-                                   "the disk (space, cable, dmesg), then try again")
+        return DatabaseUnavailable(
+            f"the disk holding {path} reported an error ({detail}), so nothing was written; check "
+            "the disk (space, cable, dmesg), then try again"
+        )
     if code.startswith("SQLITE_CANTOPEN"):
-        return DatabaseUnavailable(f"{path} cannot be opened ({detail}); check that it and its folder exist and are "
-                                   "readable")
+        return DatabaseUnavailable(
+            f"{path} cannot be opened ({detail}); check that it and its folder exist and are readable"
+        )
     if code.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB")):
         from .schema import DatabaseRefused
 
-        return DatabaseRefused(f"{path} is damaged ({detail}); nothing was written. Restore a backup, or recover it with "
-                               "the sqlite3 shell's .recover, then open the copy")
+        return DatabaseRefused(
+            f"{path} is damaged ({detail}); nothing was written. Restore a backup, or recover it with "
+            "the sqlite3 shell's .recover, then open the copy"
+        )
     return exc

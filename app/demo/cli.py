@@ -25,14 +25,26 @@ def add_demo_parser(subparsers) -> None:
     )
     p.add_argument("--scene", default=None, help="scene folder (default: the bundled workcell)")
     p.add_argument("--script", default=None, help="operator script (default: <scene>/operator.json)")
-    p.add_argument("--out", default="mcit-demo-out", help="output folder (default: ./mcit-demo-out; its site.sqlite is replaced)")
-    p.add_argument("--fast", action="store_true",
-                   help="instant emulated devices (no line or measurement delay) and 20 simulated trials, for a quick look")
+    p.add_argument(
+        "--out", default="mcit-demo-out", help="output folder (default: ./mcit-demo-out; its site.sqlite is replaced)"
+    )
+    p.add_argument(
+        "--fast",
+        action="store_true",
+        help="instant emulated devices (no line or measurement delay) and 20 simulated trials, for a quick look",
+    )
     p.add_argument("--no-video", action="store_true", help="do not write the overlay video")
-    p.add_argument("--frames", type=int, default=None, metavar="N", help="write only the first N frames of the overlay video")
-    p.add_argument("--sim-trials", type=int, default=None, metavar="N",
-                   help="simulated trials per distance for Tables III.1/III.2, and 5N pose problems (default 100, "
-                        "20 with --fast; 0: no simulation)")
+    p.add_argument(
+        "--frames", type=int, default=None, metavar="N", help="write only the first N frames of the overlay video"
+    )
+    p.add_argument(
+        "--sim-trials",
+        type=int,
+        default=None,
+        metavar="N",
+        help="simulated trials per distance for Tables III.1/III.2, and 5N pose problems (default 100, "
+        "20 with --fast; 0: no simulation)",
+    )
     p.add_argument("--seed", type=int, default=0, help="the simulations' seed (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=cli_demo)
@@ -57,13 +69,24 @@ def cli_demo(args) -> int:
         if script.scene != scene.name:
             raise ValueError(f"the script {args.script} was recorded on scene {script.scene!r}, not on {scene.name!r}")
         if not args.no_video and (scene.video is None or not scene.video.path.is_file()):
-            raise ValueError(f"scene {scene.name!r} has no video file to draw over: render it (mcit render) or use --no-video")
+            raise ValueError(
+                f"scene {scene.name!r} has no video file to draw over: render it (mcit render) or use --no-video"
+            )
     except ValueError as exc:  # SceneError, ScriptError
         print(f"mcit demo: {exc}", file=sys.stderr)
         return 2
     try:
-        outcome = run_demo(scene, script, args.out, timing="fast" if args.fast else "realistic", video=not args.no_video,
-                           frames=args.frames, sim_trials=trials, seed=args.seed, stream=None if args.quiet else sys.stderr)
+        outcome = run_demo(
+            scene,
+            script,
+            args.out,
+            timing="fast" if args.fast else "realistic",
+            video=not args.no_video,
+            frames=args.frames,
+            sim_trials=trials,
+            seed=args.seed,
+            stream=None if args.quiet else sys.stderr,
+        )
     except DemoStepError as exc:
         print(f"mcit demo: FAILED at {exc}", file=sys.stderr)
         cause = exc.__cause__
@@ -75,6 +98,9 @@ def cli_demo(args) -> int:
     from app.demo.report import summary_table
 
     print(summary_table(outcome.results))
-    print(f"report: {outcome.report}\ndatabase: {outcome.db}" + (f"\noverlay video: {outcome.video}" if outcome.video else ""))
+    print(
+        f"report: {outcome.report}\ndatabase: {outcome.db}"
+        + (f"\noverlay video: {outcome.video}" if outcome.video else "")
+    )
     print("wall time: " + ", ".join(f"{k} {v:.1f} s" for k, v in outcome.wall_s.items()))
     return 0

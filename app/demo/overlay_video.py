@@ -14,9 +14,9 @@ from __future__ import annotations
 import bisect
 import queue
 import threading
+from collections.abc import Callable, Sequence
 from functools import lru_cache
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -97,7 +97,19 @@ def state_at(timeline: Sequence[OverlayState], t_s: float) -> OverlayState:
     return timeline[max(i, 0)]
 
 
-_ASCII = {"±": "+/-", "°": " deg", "…": "...", "—": "-", "–": "-", "σ": "s", "→": "->", "×": "x", "²": "2", "³": "3", "µ": "u"}
+_ASCII = {
+    "±": "+/-",
+    "°": " deg",
+    "…": "...",
+    "—": "-",
+    "–": "-",
+    "σ": "s",
+    "→": "->",
+    "×": "x",
+    "²": "2",
+    "³": "3",
+    "µ": "u",
+}
 
 
 def ascii_text(text: str) -> str:
@@ -107,8 +119,14 @@ def ascii_text(text: str) -> str:
     return text.encode("ascii", "replace").decode("ascii")
 
 
-def _text(img: np.ndarray, text: str, org: tuple[int, int], color=(255, 255, 255), scale: float = FONT_SCALE,
-          centred: bool = False) -> None:
+def _text(
+    img: np.ndarray,
+    text: str,
+    org: tuple[int, int],
+    color=(255, 255, 255),
+    scale: float = FONT_SCALE,
+    centred: bool = False,
+) -> None:
     """Text at org (its baseline's left end, or its middle when centred) on a darkened box, so it
     reads over any background. (An outline drawn thicker would not do: OpenCV advances thicker
     glyphs further.)"""
@@ -162,8 +180,14 @@ class _Plan:
 def _db_key(state: OverlayState, w: int, h: int) -> tuple:
     """What the database wireframes depend on: the camera, the frame size and each object's
     snapshot (a state keeps the objects' snapshots until the database changes)."""
-    return (state.camera.C.tobytes(), w, h,
-            tuple((o.id, o.name, o.status, o.version, id(o.model), np.asarray(o.T_world_obj).tobytes()) for o in state.objects))
+    return (
+        state.camera.C.tobytes(),
+        w,
+        h,
+        tuple(
+            (o.id, o.name, o.status, o.version, id(o.model), np.asarray(o.T_world_obj).tobytes()) for o in state.objects
+        ),
+    )
 
 
 def _plan(state: OverlayState, w: int, h: int, scale: int, db_cache: dict | None = None) -> _Plan:
@@ -206,7 +230,9 @@ def _paint(frame_gray: np.ndarray, plan: _Plan, state: OverlayState, t_s: float,
     import cv2
 
     h, w = frame_gray.shape
-    img = cv2.cvtColor(cv2.resize(frame_gray, (w * scale, h * scale), interpolation=cv2.INTER_LINEAR), cv2.COLOR_GRAY2BGR)
+    img = cv2.cvtColor(
+        cv2.resize(frame_gray, (w * scale, h * scale), interpolation=cv2.INTER_LINEAR), cv2.COLOR_GRAY2BGR
+    )
     line, aa = cv2.line, cv2.LINE_AA
     for a, c, col in plan.lines:
         line(img, a, c, col, 1, aa, 4)
@@ -301,7 +327,9 @@ def write_overlay_video(
             img = _paint(grey, plans[i], timeline[i], t, scale)
             if writer is None:
                 out_path.parent.mkdir(parents=True, exist_ok=True)
-                writer = cv2.VideoWriter(str(out_path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (img.shape[1], img.shape[0]))
+                writer = cv2.VideoWriter(
+                    str(out_path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (img.shape[1], img.shape[0])
+                )
                 if not writer.isOpened():
                     raise RuntimeError(f"OpenCV cannot write an mp4v video to {out_path}")
                 encoder = threading.Thread(target=encode_all, name="overlay-encoder", daemon=True)

@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -39,8 +40,9 @@ __all__ = ["DEVICE_TIMING", "DemoStepError", "OverlayState", "RunRecord", "Repla
 DEVICE_TIMING: dict[str, dict[str, Any]] = {
     "realistic": {"site_options": {}, "turret_speed_steps_s": None},
     "fast": {
-        "site_options": dict(rangefinder_baud=0, turret_baud=0, measure_delay_s=0.0, delay_per_m_s=0.0,
-                             no_target_delay_s=0.0),
+        "site_options": dict(
+            rangefinder_baud=0, turret_baud=0, measure_delay_s=0.0, delay_per_m_s=0.0, no_target_delay_s=0.0
+        ),
         "rangefinder_options": dict(baudrate=0),
         "turret_speed_steps_s": 1e6,
     },
@@ -131,7 +133,9 @@ def _state(site, session, t_s: float) -> OverlayState:
         title = wf.title + (f": {wf.object_name}" if getattr(wf, "object_name", None) else "")
         text = wf.message if wf.finished else wf.next_step
     beam = site.beam_X_world
-    return OverlayState(float(t_s), site.objects(), site.camera, marks, None if beam is None else beam.copy(), title, text)
+    return OverlayState(
+        float(t_s), site.objects(), site.camera, marks, None if beam is None else beam.copy(), title, text
+    )
 
 
 def replay_script(
@@ -156,18 +160,26 @@ def replay_script(
     from app.workflows import Session, Site, WorkflowError
 
     if script.scene != scene.name:
-        raise ValueError(f"the script was recorded on scene {script.scene!r}, not on {scene.name!r}: give the matching --scene")
+        raise ValueError(
+            f"the script was recorded on scene {script.scene!r}, not on {scene.name!r}: give the matching --scene"
+        )
     if timing not in DEVICE_TIMING:
         raise ValueError(f"timing must be one of {sorted(DEVICE_TIMING)}, got {timing!r}")
     opts = DEVICE_TIMING[timing]
     device_scene = scene
     if opts["turret_speed_steps_s"] is not None:
-        device_scene = dataclasses.replace(scene, turret=dataclasses.replace(scene.turret, speed_steps_s=opts["turret_speed_steps_s"]))
+        device_scene = dataclasses.replace(
+            scene, turret=dataclasses.replace(scene.turret, speed_steps_s=opts["turret_speed_steps_s"])
+        )
     db = Database.open(db_path, client=client)
     seed_from_scene(db, scene)
     clock = {"t": 0.0}
-    devices = open_devices(device_scene, clock=lambda: clock["t"], site_options=opts["site_options"],
-                           rangefinder_options=opts.get("rangefinder_options"))
+    devices = open_devices(
+        device_scene,
+        clock=lambda: clock["t"],
+        site_options=opts["site_options"],
+        rangefinder_options=opts.get("rangefinder_options"),
+    )
     site = Site(scene, db, devices=devices, clock=lambda: clock["t"])
     session = Session(site, client=client)
     timeline = [_state(site, session, 0.0)]
@@ -198,11 +210,27 @@ def replay_script(
             last = steps[indices[-1]]
             if wf is None or not wf.finished or (wf.cancelled and last["action"] != "cancel"):
                 state = "still open" if wf is not None and not wf.finished else "cancelled"
-                raise DemoStepError(indices[-1], last, f"the {run.workflow} run ended {state}: a run must end with accept "
-                                                        f"(or an explicit cancel); last message: {getattr(wf, 'message', '')!r}")
-            runs.append(RunRecord(run.workflow, run.object_name, run.t_start, run.t_end, wf, site.camera,
-                                  site.T_world_turret, indices, time.perf_counter() - t_run, run.actions,
-                                  site.calibration_covs))
+                raise DemoStepError(
+                    indices[-1],
+                    last,
+                    f"the {run.workflow} run ended {state}: a run must end with accept "
+                    f"(or an explicit cancel); last message: {getattr(wf, 'message', '')!r}",
+                )
+            runs.append(
+                RunRecord(
+                    run.workflow,
+                    run.object_name,
+                    run.t_start,
+                    run.t_end,
+                    wf,
+                    site.camera,
+                    site.T_world_turret,
+                    indices,
+                    time.perf_counter() - t_run,
+                    run.actions,
+                    site.calibration_covs,
+                )
+            )
     except BaseException:
         db.close()
         raise

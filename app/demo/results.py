@@ -54,7 +54,9 @@ __all__ = [
 PAPER_BOX_ORDER = (("width", 0), ("height", 2), ("length", 1))
 
 
-def box_dims_paper_order(result: ModelResult, T_world_true: np.ndarray, dims_true_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def box_dims_paper_order(
+    result: ModelResult, T_world_true: np.ndarray, dims_true_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A modelled box's sizes matched to the true box's axes, in the paper's (width, height,
     length) order.
 
@@ -84,7 +86,9 @@ def cylinder_depth_m(result: ModelResult, origin_world: np.ndarray, front_distan
     return float(np.linalg.norm((mid - np.asarray(origin_world, float))[:2]) - front_distance_m)
 
 
-def first_p3l(camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray) -> tuple[list[np.ndarray], tuple[int, ...] | None]:
+def first_p3l(
+    camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray
+) -> tuple[list[np.ndarray], tuple[int, ...] | None]:
     """P3L on the first workable triple of clicked edges, in click order (as the Update pose
     workflow's Solve does). Returns (candidates, best first; the triple's indices), or ([], None)."""
     for triple in itertools.combinations(range(len(segs_uv)), 3):
@@ -142,16 +146,24 @@ def calibration_results(replay: Replay, scene: Scene) -> CalibrationResults:
         X = _body_corners(scene, run.t_end)
         X = X[(scene.camera.depth(X) > 0) & (run.camera.depth(X) > 0)]
         d = np.linalg.norm(run.camera.project(X) - scene.camera.project(X), axis=1)
-        out.update(camera_rms_px=float(wf.result.rms_px), camera_points=len(wf.uv),
-                   camera_reprojection_rms_px=float(np.sqrt(np.mean(d**2))), camera_reprojection_max_px=float(d.max()),
-                   camera_centre_error_m=float(np.linalg.norm(run.camera.center - scene.camera.center)))
+        out.update(
+            camera_rms_px=float(wf.result.rms_px),
+            camera_points=len(wf.uv),
+            camera_reprojection_rms_px=float(np.sqrt(np.mean(d**2))),
+            camera_reprojection_max_px=float(d.max()),
+            camera_centre_error_m=float(np.linalg.norm(run.camera.center - scene.camera.center)),
+        )
     turrets = replay.runs_of("calibrate_turret")
     if turrets:
         run = turrets[-1]
         s = run.workflow.summary()
         deg, m = pose_error(run.T_world_turret, scene.turret.T_world_turret)
-        out.update(turret_rms_mm=float(s["rms_mm"]), turret_points=len(s.get("points", [])),
-                   turret_error_deg=float(deg), turret_error_m=float(m))
+        out.update(
+            turret_rms_mm=float(s["rms_mm"]),
+            turret_points=len(s.get("points", [])),
+            turret_error_deg=float(deg),
+            turret_error_m=float(m),
+        )
     return CalibrationResults(**out)
 
 
@@ -193,7 +205,9 @@ class BoxResults:
 def _with_calibrations(run: RunRecord, build) -> ModelResult:
     """``build(camera, T_world_turret)`` through the run's calibrations, σ with their share."""
     camera_cov, turret_cov = run.calibration_covs
-    return with_calibration_uncertainty(build, run.camera, run.T_world_turret, camera_cov=camera_cov, turret_cov=turret_cov)
+    return with_calibration_uncertainty(
+        build, run.camera, run.T_world_turret, camera_cov=camera_cov, turret_cov=turret_cov
+    )
 
 
 def box_results(run: RunRecord, scene: Scene) -> BoxResults:
@@ -210,16 +224,28 @@ def box_results(run: RunRecord, scene: Scene) -> BoxResults:
     fused = _with_calibrations(run, lambda cam, T: model_box(cam, wf.box_faces(T), wf.support, method="fused"))
     alt["fused"] = box_dims_paper_order(fused, T_true, dims_true)[:2]
     # The diagnostic through the true camera: the same construction, its measurement σ only.
-    alt["true_camera"] = box_dims_paper_order(model_box(scene.camera, faces, wf.support, method=r.method), T_true, dims_true)[:2]
+    alt["true_camera"] = box_dims_paper_order(
+        model_box(scene.camera, faces, wf.support, method=r.method), T_true, dims_true
+    )[:2]
     parts = {}
     for source, sig_d in r.details.get("sigma_parts", {}).items():
         tmp = replace(r, sigmas={k: sig_d.get(k, float("nan")) for k in ("size_x", "size_y", "size_z")})
         parts[source] = box_dims_paper_order(tmp, T_true, dims_true)[1]
     centre = T_true[:3, :3] @ ((lo + hi) / 2) + T_true[:3, 3]
     return BoxResults(
-        run.object_name, r.method, est, sig, truth, float(np.prod(est)), float(np.prod(dims_true)),
-        float(np.linalg.norm(centre - scene.turret.T_world_turret[:3, 3])), float(np.linalg.norm(centre - scene.camera.center)),
-        tuple(len(f.points_world) for f in faces), alt["fused"], alt["true_camera"], parts,
+        run.object_name,
+        r.method,
+        est,
+        sig,
+        truth,
+        float(np.prod(est)),
+        float(np.prod(dims_true)),
+        float(np.linalg.norm(centre - scene.turret.T_world_turret[:3, 3])),
+        float(np.linalg.norm(centre - scene.camera.center)),
+        tuple(len(f.points_world) for f in faces),
+        alt["fused"],
+        alt["true_camera"],
+        parts,
     )
 
 
@@ -268,27 +294,52 @@ def cylinder_results(run: RunRecord, scene: Scene) -> CylinderResults:
     by_method: dict[str, dict[str, Any]] = {}
     for m in METHODS:
         try:
-            res = wf.result if m == wf.result.method else _with_calibrations(run, lambda cam, T, m=m: model_cylinder(
-                cam, m, silhouettes_uv=np.array(wf.silhouettes), scans=wf.scans, T_world_turret=T,
-                spec=scene.rangefinder, support=wf.support, cone=wf.shape == "cone"))
+            res = (
+                wf.result
+                if m == wf.result.method
+                else _with_calibrations(
+                    run,
+                    lambda cam, T, m=m: model_cylinder(
+                        cam,
+                        m,
+                        silhouettes_uv=np.array(wf.silhouettes),
+                        scans=wf.scans,
+                        T_world_turret=T,
+                        spec=scene.rangefinder,
+                        support=wf.support,
+                        cone=wf.shape == "cone",
+                    ),
+                )
+            )
         except ValueError as exc:
-            by_method[m] = {k: float("nan") for k in ("radius", "height", "sigma_radius", "sigma_height", "axis_error",
-                                                      "sigma_axis", "depth")}
+            by_method[m] = {
+                k: float("nan")
+                for k in ("radius", "height", "sigma_radius", "sigma_height", "axis_error", "sigma_axis", "depth")
+            }
             by_method[m]["error"] = str(exc)
             continue
         mid = res.axis.point + 0.5 * res.dimensions["height"] * res.axis.direction
         by_method[m] = {
-            "radius": res.dimensions["radius"], "height": res.dimensions["height"],
-            "sigma_radius": res.sigmas.get("radius", float("nan")), "sigma_height": res.sigmas.get("height", float("nan")),
+            "radius": res.dimensions["radius"],
+            "height": res.dimensions["height"],
+            "sigma_radius": res.sigmas.get("radius", float("nan")),
+            "sigma_height": res.sigmas.get("height", float("nan")),
             "axis_error": float(distance_point_line(mid, Line(p0, axis))),
             "sigma_axis": res.sigmas.get("axis_position", float("nan")),
-            "depth": cylinder_depth_m(res, O_rf, front), "error": "",
+            "depth": cylinder_depth_m(res, O_rf, front),
+            "error": "",
             "sigma_parts": res.details.get("sigma_parts", {}),
         }
     return CylinderResults(
-        run.object_name, wf.result.method, by_method, float(solid.r0), float(solid.height),
-        float(np.linalg.norm(mid_true - O_rf)), float(np.linalg.norm(mid_true - scene.camera.center)),
-        tuple(len(s) for s in wf.scans), tuple(int(s.hits.sum()) for s in wf.scans),
+        run.object_name,
+        wf.result.method,
+        by_method,
+        float(solid.r0),
+        float(solid.height),
+        float(np.linalg.norm(mid_true - O_rf)),
+        float(np.linalg.norm(mid_true - scene.camera.center)),
+        tuple(len(s) for s in wf.scans),
+        tuple(int(s.hits.sum()) for s in wf.scans),
     )
 
 
@@ -351,7 +402,9 @@ def _true_segments(run: RunRecord, scene: Scene, T_true: np.ndarray) -> tuple[np
     return segs, np.array([model.vertices[model.edges[e]] for e in edge_ids[0::2]])
 
 
-def pose_update(run: RunRecord, scene: Scene, T_before: np.ndarray, large_deg: float = 18.0, large_m: float = 0.05) -> PoseUpdate:
+def pose_update(
+    run: RunRecord, scene: Scene, T_before: np.ndarray, large_deg: float = 18.0, large_m: float = 0.05
+) -> PoseUpdate:
     """One accepted update_pose run, compared with the true pose at its end.
 
     T_before : (4, 4) the true pose before the motion. large_deg, large_m : the paper's limit of
@@ -388,10 +441,22 @@ def pose_update(run: RunRecord, scene: Scene, T_before: np.ndarray, large_deg: f
     except ValueError:
         true_cam = nan2
     return PoseUpdate(
-        run.object_name, run.t_end, "large" if (motion_deg > large_deg or motion_m > large_m) else "small",
-        float(motion_deg), float(motion_m), source, tuple(map(float, p3l_err)), tuple(map(float, pose_error(r.T_world_obj, T_true))),
-        tuple(map(float, noise_free)), tuple(map(float, nearest)), true_cam, float(r.rms_px), float(np.linalg.norm(r.std_r_deg)), float(np.linalg.norm(r.std_t_m)),
-        len(pairs), len(cands),
+        run.object_name,
+        run.t_end,
+        "large" if (motion_deg > large_deg or motion_m > large_m) else "small",
+        float(motion_deg),
+        float(motion_m),
+        source,
+        tuple(map(float, p3l_err)),
+        tuple(map(float, pose_error(r.T_world_obj, T_true))),
+        tuple(map(float, noise_free)),
+        tuple(map(float, nearest)),
+        true_cam,
+        float(r.rms_px),
+        float(np.linalg.norm(r.std_r_deg)),
+        float(np.linalg.norm(r.std_t_m)),
+        len(pairs),
+        len(cands),
     )
 
 

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, TextIO
+from typing import TextIO
 
 import numpy as np
 
@@ -61,15 +62,21 @@ def _stills(script: OperatorScript, fps: float) -> list[tuple[str, str, float]]:
     solve and the first pose refinement of the script, when it has them."""
     from .overlay_video import still_frame
 
-    wanted = {("model_object", "solve"): ("overlay_model.png", "{name} modelled (the preview before Accept)"),
-              ("update_pose", "refine"): ("overlay_pose.png", "{name}'s pose refined (before Accept)")}
+    wanted = {
+        ("model_object", "solve"): ("overlay_model.png", "{name} modelled (the preview before Accept)"),
+        ("update_pose", "refine"): ("overlay_pose.png", "{name}'s pose refined (before Accept)"),
+    }
     out: dict[str, tuple[str, str, float]] = {}
     for run in script.runs():
         for a in run.actions:
             name, caption = wanted.get((run.workflow, a.action), (None, ""))
             if name is not None and name not in out:
                 t_frame = still_frame(a.t, fps) / fps
-                out[name] = (name, f"The overlay video at t = {t_frame:.2f} s: " + caption.format(name=run.object_name), a.t)
+                out[name] = (
+                    name,
+                    f"The overlay video at t = {t_frame:.2f} s: " + caption.format(name=run.object_name),
+                    a.t,
+                )
     return list(out.values())
 
 
@@ -136,21 +143,55 @@ def run_demo(
         if beside is not None:
             say(_simulating(sim_trials, n_pose, seed) + " in a second process, beside the replay")
     try:
-        return _run(scene, script, out, db_path, timing, video, frames, sim_trials, n_pose, seed, stream, say, wall, t_all,
-                    beside, t_sim if beside is not None else 0.0)
+        return _run(
+            scene,
+            script,
+            out,
+            db_path,
+            timing,
+            video,
+            frames,
+            sim_trials,
+            n_pose,
+            seed,
+            stream,
+            say,
+            wall,
+            t_all,
+            beside,
+            t_sim if beside is not None else 0.0,
+        )
     finally:
         if beside is not None:
             beside.cancel()
 
 
-def _run(scene, script, out, db_path, timing, video, frames, sim_trials, n_pose, seed, stream, say, wall, t_all,
-         beside, t_sim) -> DemoOutcome:
+def _run(
+    scene,
+    script,
+    out,
+    db_path,
+    timing,
+    video,
+    frames,
+    sim_trials,
+    n_pose,
+    seed,
+    stream,
+    say,
+    wall,
+    t_all,
+    beside,
+    t_sim,
+) -> DemoOutcome:
     from .report import write_report
 
     say(f"replaying {len(script.actions)} actions of {script.scene!r} through the workflows ({timing} device timing)")
     bar = _bar(stream, "actions")
     t0 = time.perf_counter()
-    replay = replay_script(scene, script, db_path, timing=timing, progress=(lambda d, n, _w: bar(d, n)) if bar else None)
+    replay = replay_script(
+        scene, script, db_path, timing=timing, progress=(lambda d, n, _w: bar(d, n)) if bar else None
+    )
     wall["replay"] = time.perf_counter() - t0
     drawing = None
     try:
@@ -158,14 +199,24 @@ def _run(scene, script, out, db_path, timing, video, frames, sim_trials, n_pose,
         video_path = None
         if video:
             if scene.video is None or not scene.video.path.is_file():
-                raise ValueError(f"scene {scene.name!r} has no video file to draw over; run with --no-video or render it")
+                raise ValueError(
+                    f"scene {scene.name!r} has no video file to draw over; run with --no-video or render it"
+                )
             video_path = out / VIDEO_NAME
             from .overlay_video import write_overlay_video
 
             def draw(progress) -> float:
                 t0 = time.perf_counter()
-                write_overlay_video(scene.video.path, replay.timeline, video_path, fps=scene.video.fps, frames=frames,
-                                    stills={name: t for name, _, t in stills}, progress=progress, lens=scene.lens)
+                write_overlay_video(
+                    scene.video.path,
+                    replay.timeline,
+                    video_path,
+                    fps=scene.video.fps,
+                    frames=frames,
+                    stills={name: t for name, _, t in stills},
+                    progress=progress,
+                    lens=scene.lens,
+                )
                 return time.perf_counter() - t0
 
             # the video needs only the replay's timeline: a second process draws it beside the analysis
@@ -262,7 +313,9 @@ class _Beside:
                 if progress:
                     progress(min(self._count[0], self._count[1] - 1), self._count[1])
                 if not self._process.is_alive() and not self._conn.poll(0):
-                    raise RuntimeError(f"the {self._process.name} process ended without a result (exit code {self._process.exitcode})")
+                    raise RuntimeError(
+                        f"the {self._process.name} process ended without a result (exit code {self._process.exitcode})"
+                    )
             status, value = self._conn.recv()
         finally:
             self._conn.close()
@@ -280,12 +333,21 @@ class _SimulationBeside(_Beside):
 
     @classmethod
     def start(cls, scene: Scene, script: OperatorScript, trials: int, pose_trials: int, seed: int):
-        return cls.fork(lambda progress: _simulate(scene, script, trials, pose_trials, seed, progress),
-                        _sim_total(trials, pose_trials), "mcit-demo-simulation")
+        return cls.fork(
+            lambda progress: _simulate(scene, script, trials, pose_trials, seed, progress),
+            _sim_total(trials, pose_trials),
+            "mcit-demo-simulation",
+        )
 
 
-def _simulate(scene: Scene, script: OperatorScript, trials: int, pose_trials: int, seed: int,
-              progress: Callable[[int, int], None] | None = None):
+def _simulate(
+    scene: Scene,
+    script: OperatorScript,
+    trials: int,
+    pose_trials: int,
+    seed: int,
+    progress: Callable[[int, int], None] | None = None,
+):
     """The simulated sweeps (Simulations) with the script's click noise, for the scene's unknown
     box and cylinder and the paper's pose problems. progress : ``progress(done, total)`` per trial."""
     from .report import Simulations

@@ -14,8 +14,8 @@ range finder's horizontal offset from the camera.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -30,8 +30,17 @@ from core.transforms import make_T, pose_error, rot_z
 
 from .results import box_dims_paper_order, cylinder_depth_m, first_p3l
 
-__all__ = ["SimSetup", "sim_setup", "BoxSweep", "box_sweep", "CylinderSweep", "cylinder_sweep", "PoseSweep", "pose_sweep",
-           "operator_order"]
+__all__ = [
+    "SimSetup",
+    "sim_setup",
+    "BoxSweep",
+    "box_sweep",
+    "CylinderSweep",
+    "cylinder_sweep",
+    "PoseSweep",
+    "pose_sweep",
+    "operator_order",
+]
 
 TABLE = Plane(np.array([0.0, 0.0, 1.0]), 0.0)
 BOX_METHODS = ("planes", "fused")
@@ -52,8 +61,15 @@ class SimSetup:
 
     def sensors(self, target_world: np.ndarray, distance_m: float):
         """(camera, T_world_turret (4, 4)) looking at ``target_world`` from ``distance_m``."""
-        return look_at_setup(np.asarray(target_world, float), distance_m, elevation_deg=self.elevation_deg,
-                             baseline_m=self.baseline_m, f_px=self.f_px, width=self.width, height=self.height)
+        return look_at_setup(
+            np.asarray(target_world, float),
+            distance_m,
+            elevation_deg=self.elevation_deg,
+            baseline_m=self.baseline_m,
+            f_px=self.f_px,
+            width=self.width,
+            height=self.height,
+        )
 
 
 def sim_setup(scene: Scene, sigma_px: float = 1.0) -> SimSetup:
@@ -63,8 +79,14 @@ def sim_setup(scene: Scene, sigma_px: float = 1.0) -> SimSetup:
     axis = C[2, :3] / np.linalg.norm(C[2, :3])  # towards the scene (s > 0 in front)
     K = scene.camera.decompose()[0]
     offset = scene.turret.T_world_turret[:3, 3] - scene.camera.center
-    return SimSetup(float(np.degrees(np.arcsin(-axis[2]))), float(np.linalg.norm(offset[:2])),
-                    float(abs(K[0, 0])), scene.camera.width, scene.camera.height, sigma_px)
+    return SimSetup(
+        float(np.degrees(np.arcsin(-axis[2]))),
+        float(np.linalg.norm(offset[:2])),
+        float(abs(K[0, 0])),
+        scene.camera.width,
+        scene.camera.height,
+        sigma_px,
+    )
 
 
 # ---------------------------------------------------------------------- Table III.1
@@ -84,8 +106,14 @@ class BoxSweep:
         return np.sqrt(np.mean(self.errors[method] ** 2, axis=1))
 
 
-def box_sweep(setup: SimSetup, size_m, distances_m, trials: int, rng: np.random.Generator,
-              progress: Callable[[], None] | None = None) -> BoxSweep:
+def box_sweep(
+    setup: SimSetup,
+    size_m,
+    distances_m,
+    trials: int,
+    rng: np.random.Generator,
+    progress: Callable[[], None] | None = None,
+) -> BoxSweep:
     """The paper's box (size_m = x, y, z sizes) on the table, turned U(20°, 70°) so that two sides
     show, jittered ±5 mm; every visible face gets a 4 × 4 lattice of range points and each of its
     sides is clicked once (``simulate_box``); ``model_box`` by both methods on the same data."""
@@ -96,7 +124,9 @@ def box_sweep(setup: SimSetup, size_m, distances_m, trials: int, rng: np.random.
         cam, T_wt = setup.sensors([0.0, 0.0, size[2] / 2], d)
         for k in range(trials):
             T_obj = make_T(rot_z(np.radians(rng.uniform(20.0, 70.0))), [*rng.uniform(-0.005, 0.005, 2), 0.0])
-            faces = simulate_box(cam, SimWorld(T_wt, boxes=((T_obj, tuple(size)),)), T_obj, size, rng, sigma_px=setup.sigma_px)
+            faces = simulate_box(
+                cam, SimWorld(T_wt, boxes=((T_obj, tuple(size)),)), T_obj, size, rng, sigma_px=setup.sigma_px
+            )
             for m in BOX_METHODS:
                 res = model_box(cam, faces, TABLE, sigma_px=setup.sigma_px, support_sigma_m=1e-6, method=m)
                 est, sig, truth = box_dims_paper_order(res, T_obj, size)
@@ -128,8 +158,15 @@ class CylinderSweep:
         return np.sqrt(np.mean(v**2, axis=1))
 
 
-def cylinder_sweep(setup: SimSetup, radius_m: float, height_m: float, distances_m, trials: int, rng: np.random.Generator,
-                   progress: Callable[[], None] | None = None) -> CylinderSweep:
+def cylinder_sweep(
+    setup: SimSetup,
+    radius_m: float,
+    height_m: float,
+    distances_m,
+    trials: int,
+    rng: np.random.Generator,
+    progress: Callable[[], None] | None = None,
+) -> CylinderSweep:
     """A vertical cylinder on the table, jittered ±5 mm: both silhouettes clicked at their ends, two
     horizontal scans at ⅓ and ⅔ of the height at the turret's finest step (``simulate_revolution``);
     every method of ``core.modeling.model_cylinder`` on the same data."""
@@ -144,11 +181,16 @@ def cylinder_sweep(setup: SimSetup, radius_m: float, height_m: float, distances_
             mid_true = p0 + [0.0, 0.0, height_m / 2]
             front = float(np.linalg.norm((mid_true - O)[:2]) - radius_m)
             for m in METHODS:
-                res = model_cylinder(cam, m, silhouettes_uv=sil, scans=scans, T_world_turret=T_wt, support=TABLE,
-                                     sigma_px=setup.sigma_px)
+                res = model_cylinder(
+                    cam, m, silhouettes_uv=sil, scans=scans, T_world_turret=T_wt, support=TABLE, sigma_px=setup.sigma_px
+                )
                 mid = res.axis.point + 0.5 * res.dimensions["height"] * res.axis.direction
-                vals[m][i, k] = [cylinder_depth_m(res, O, front), res.dimensions["radius"] - radius_m,
-                                 distance_point_line(mid, Line(sol.p0, sol.axis)), res.dimensions["height"] - height_m]
+                vals[m][i, k] = [
+                    cylinder_depth_m(res, O, front),
+                    res.dimensions["radius"] - radius_m,
+                    distance_point_line(mid, Line(sol.p0, sol.axis)),
+                    res.dimensions["height"] - height_m,
+                ]
             if progress:
                 progress()
     return CylinderSweep(tuple(distances_m), trials, float(radius_m), float(height_m), vals)
@@ -192,7 +234,9 @@ def operator_order(edges_obj: np.ndarray) -> np.ndarray:
     raise ValueError("no three edges are pairwise non-parallel and not concurrent")
 
 
-def pose_sweep(trials: int, sigma_px: float, rng: np.random.Generator, progress: Callable[[], None] | None = None) -> PoseSweep:
+def pose_sweep(
+    trials: int, sigma_px: float, rng: np.random.Generator, progress: Callable[[], None] | None = None
+) -> PoseSweep:
     """P3L then refinement on the paper's box at ~2 m (the large-motion update's Solve, then Refine
     from the candidate it ranks first), the clicks in the operator's order (``operator_order``)."""
     p3l_e, ref_e, free_e, failed, refine_failed, candidates_tried = [], [], [], 0, 0, []
@@ -226,5 +270,13 @@ def pose_sweep(trials: int, sigma_px: float, rng: np.random.Generator, progress:
         if progress:
             progress()
     arr = lambda v: np.array(v, float).reshape(-1, 2)  # noqa: E731
-    return PoseSweep(trials, float(sigma_px), arr(p3l_e), arr(ref_e), arr(free_e), failed, refine_failed,
-                     np.array(candidates_tried, int))
+    return PoseSweep(
+        trials,
+        float(sigma_px),
+        arr(p3l_e),
+        arr(ref_e),
+        arr(free_e),
+        failed,
+        refine_failed,
+        np.array(candidates_tried, int),
+    )

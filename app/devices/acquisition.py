@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import numpy as np
 
@@ -94,8 +94,13 @@ class PixelMeasurement:
         return bool(np.isfinite(self.range_m))
 
 
-def _report(progress: Callable[[Progress], None] | None, done: int, total: int, message: str,
-            beam: tuple[float, float, float] | None = None) -> None:
+def _report(
+    progress: Callable[[Progress], None] | None,
+    done: int,
+    total: int,
+    message: str,
+    beam: tuple[float, float, float] | None = None,
+) -> None:
     if progress is not None:
         progress(Progress(done, total, message, None if beam is None else tuple(float(v) for v in beam)))
 
@@ -117,8 +122,9 @@ def _move(turret: Turret, pan_steps: int, tilt_steps: int) -> tuple[int, int]:
     return int(got[0]), int(got[1])
 
 
-def _beam(turret: Turret, rangefinder: RangeFinder, shots: int, pan_steps: int, tilt_steps: int,
-          shoot=None) -> tuple[tuple[int, int], object]:
+def _beam(
+    turret: Turret, rangefinder: RangeFinder, shots: int, pan_steps: int, tilt_steps: int, shoot=None
+) -> tuple[tuple[int, int], object]:
     """Move to (pan, tilt) steps, measure, and check that the head is still there (a unit that power-cycled
     during the measurement has homed): ((pan, tilt) reported, the measurement). Measured again once
     when the head moved; a DeviceError when it moved again."""
@@ -188,15 +194,31 @@ def measure_at_pixel(
                 return None
 
         (p_steps, t_steps), rho = _beam(turret, rangefinder, 1, p_steps, t_steps, one_shot)
-        if abs(p_steps * turret.pan_step_rad - pan_rad) > 0.5 * turret.pan_step_rad + 1e-12 or \
-                abs(t_steps * turret.tilt_step_rad - tilt_rad) > 0.5 * turret.tilt_step_rad + 1e-12:
-            raise DeviceError(f"turret: the head is at {p_steps}, {t_steps} steps, not at the aimed angles", device="turret")
-        _report(progress, iteration[0], max_iter + 1, f"aiming at ({uv[0]:.1f}, {uv[1]:.1f}): iteration {iteration[0]}",
-                (pan_rad, tilt_rad, np.nan if rho is None else rho))
+        if (
+            abs(p_steps * turret.pan_step_rad - pan_rad) > 0.5 * turret.pan_step_rad + 1e-12
+            or abs(t_steps * turret.tilt_step_rad - tilt_rad) > 0.5 * turret.tilt_step_rad + 1e-12
+        ):
+            raise DeviceError(
+                f"turret: the head is at {p_steps}, {t_steps} steps, not at the aimed angles", device="turret"
+            )
+        _report(
+            progress,
+            iteration[0],
+            max_iter + 1,
+            f"aiming at ({uv[0]:.1f}, {uv[1]:.1f}): iteration {iteration[0]}",
+            (pan_rad, tilt_rad, np.nan if rho is None else rho),
+        )
         return rho
 
     result = aim_at_pixel(
-        camera, T_world_turret, uv, measure, depth_guess_m=depth_guess_m, step_rad=_common_step(turret), tol_px=tol_px, max_iter=max_iter
+        camera,
+        T_world_turret,
+        uv,
+        measure,
+        depth_guess_m=depth_guess_m,
+        step_rad=_common_step(turret),
+        tol_px=tol_px,
+        max_iter=max_iter,
     )
     if cancel is not None and cancel.is_set():
         raise AcquisitionCancelled("aiming cancelled")
@@ -214,7 +236,9 @@ def measure_at_pixel(
     X = beam_point(T_world_turret, result.pan_rad, result.tilt_rad, rho)
     if np.isfinite(rho):
         sigma = max(spec.sigma_range_m, 0.0 if measurement is None else measurement.spread_m)
-        cov = beam_point_cov(T_world_turret, result.pan_rad, result.tilt_rad, rho, replace(spec, sigma_range_m=sigma))[0]
+        cov = beam_point_cov(T_world_turret, result.pan_rad, result.tilt_rad, rho, replace(spec, sigma_range_m=sigma))[
+            0
+        ]
     else:
         cov = np.full((3, 3), np.nan)
     return PixelMeasurement(uv, result, measurement, float(result.pan_rad), float(result.tilt_rad), float(rho), X, cov)
@@ -266,12 +290,16 @@ def profile_scan(
             "spread_m": spreads[:count].copy(),
             "duration_s": time.monotonic() - t0,
         }
-        return _scan_from(pan_steps[:count] * step, np.full(count, tilt_steps * turret.tilt_step_rad), ranges[:count], meta)
+        return _scan_from(
+            pan_steps[:count] * step, np.full(count, tilt_steps * turret.tilt_step_rad), ranges[:count], meta
+        )
 
     for i, p in enumerate(pan_steps):
         if cancel is not None and cancel.is_set():
             raise AcquisitionCancelled(f"profile scan cancelled after {i} of {n} beams", partial(i))
-        _, m = _beam(turret, rangefinder, shots, int(p), tilt_steps)  # both axes: the tilt is re-sent when not confirmed
+        _, m = _beam(
+            turret, rangefinder, shots, int(p), tilt_steps
+        )  # both axes: the tilt is re-sent when not confirmed
         if m is not None:
             ranges[i], spreads[i] = m.range_m, m.spread_m
         _report(progress, i + 1, n, f"profile scan: beam {i + 1} of {n}", (p * step, tilts_rad, ranges[i]))
@@ -395,8 +423,16 @@ def face_patch_scan(
     def aiming(p: Progress) -> None:  # the centroid's parallax iteration: before the first of n beams
         _report(progress, 0, n, f"face patch scan: aiming ({p.message})", p.beam)
 
-    first = measure_at_pixel(camera, T_world_turret, centroid_uv, turret, rangefinder, depth_guess_m=depth_guess_m,
-                             progress=aiming, cancel=cancel)
+    first = measure_at_pixel(
+        camera,
+        T_world_turret,
+        centroid_uv,
+        turret,
+        rangefinder,
+        depth_guess_m=depth_guess_m,
+        progress=aiming,
+        cancel=cancel,
+    )
     c = camera.center
     distance = float(np.linalg.norm(first.X_world - c)) if first.hit else float(depth_guess_m)
     _, rays = camera.rays(targets)
@@ -405,7 +441,11 @@ def face_patch_scan(
         if cancel is not None and cancel.is_set():
             raise AcquisitionCancelled(f"face patch scan cancelled after {i} of {n} beams", partial(i))
         good = np.isfinite(ranges[:i]) & inside[:i]
-        plane = _plane_if_spread(beam_point(T_world_turret, pan[:i][good], tilt[:i][good], ranges[:i][good])) if good.sum() >= 4 else None
+        plane = (
+            _plane_if_spread(beam_point(T_world_turret, pan[:i][good], tilt[:i][good], ranges[:i][good]))
+            if good.sum() >= 4
+            else None
+        )
         lam = distance
         if plane is not None:
             denom = float(plane.n @ rays[i])

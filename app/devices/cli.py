@@ -34,7 +34,9 @@ def parse_fault_rates(text: str | None, rate: float) -> dict[str, float]:
             try:
                 rates[kind] = float(value)
             except ValueError:
-                raise ValueError(f"--faults expects kind=probability pairs like 'drop=0.05,garble=0.02', got {item!r}") from None
+                raise ValueError(
+                    f"--faults expects kind=probability pairs like 'drop=0.05,garble=0.02', got {item!r}"
+                ) from None
         return rates
     if not 0.0 <= rate <= 1.0:
         raise ValueError(f"--fault-rate must be within [0, 1], got {rate}")
@@ -50,16 +52,39 @@ def add_emulate_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
         "pseudo-terminals with stable symlinks, print them, and run until Ctrl-C.",
     )
     p.add_argument("--scene", default=None, help="scene folder (default: the bundled scenes/workcell)")
-    p.add_argument("--rangefinder-link", default=DEFAULT_RANGEFINDER_LINK, help=f"symlink to the range finder's pty (default {DEFAULT_RANGEFINDER_LINK})")
-    p.add_argument("--turret-link", default=DEFAULT_TURRET_LINK, help=f"symlink to the turret's pty (default {DEFAULT_TURRET_LINK})")
+    p.add_argument(
+        "--rangefinder-link",
+        default=DEFAULT_RANGEFINDER_LINK,
+        help=f"symlink to the range finder's pty (default {DEFAULT_RANGEFINDER_LINK})",
+    )
+    p.add_argument(
+        "--turret-link",
+        default=DEFAULT_TURRET_LINK,
+        help=f"symlink to the turret's pty (default {DEFAULT_TURRET_LINK})",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the range noise and random faults (default 0)")
-    p.add_argument("--measure-delay-ms", type=float, default=100.0, help="range-finder measurement time (default 100 ms)")
-    p.add_argument("--rangefinder-baud", type=int, default=19200, help="modelled range-finder line rate (default 19200)")
+    p.add_argument(
+        "--measure-delay-ms", type=float, default=100.0, help="range-finder measurement time (default 100 ms)"
+    )
+    p.add_argument(
+        "--rangefinder-baud", type=int, default=19200, help="modelled range-finder line rate (default 19200)"
+    )
     p.add_argument("--turret-baud", type=int, default=9600, help="modelled turret line rate (default 9600)")
-    p.add_argument("--fault-rate", type=float, default=0.0, help="probability that a reply is faulty, spread over every fault kind but unplug (default 0)")
+    p.add_argument(
+        "--fault-rate",
+        type=float,
+        default=0.0,
+        help="probability that a reply is faulty, spread over every fault kind but unplug (default 0)",
+    )
     p.add_argument("--faults", default=None, help="explicit fault rates, e.g. 'drop=0.05,garble=0.02,unplug=0.001'")
-    p.add_argument("--static", action="store_true", help="bodies stay at their t = 0 pose (default: they move with the scene's looping video time)")
-    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: run until Ctrl-C)")
+    p.add_argument(
+        "--static",
+        action="store_true",
+        help="bodies stay at their t = 0 pose (default: they move with the scene's looping video time)",
+    )
+    p.add_argument(
+        "--duration", type=float, default=None, help="stop after this many seconds (default: run until Ctrl-C)"
+    )
     p.set_defaults(func=run_emulate)
     return p
 
@@ -94,7 +119,9 @@ def run_emulate(args: argparse.Namespace) -> int:
             return 2
         scene_arg = f" --scene {args.scene}" if args.scene else ""
         print(f"scene: {scene.name} ({scene.root})")
-        print(f"range finder (Dimetix DLS, {args.rangefinder_baud} baud modelled): {rf_path} -> {site.rangefinder.port.device}")
+        print(
+            f"range finder (Dimetix DLS, {args.rangefinder_baud} baud modelled): {rf_path} -> {site.rangefinder.port.device}"
+        )
         print(f"turret (FLIR PTU-D46, {args.turret_baud} baud modelled): {turret_path} -> {site.turret.port.device}")
         if rates:
             print("fault rates per reply: " + ", ".join(f"{k}={v:g}" for k, v in rates.items()))

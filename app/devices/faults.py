@@ -200,7 +200,9 @@ class FaultInjector:
         if f.kind == "early":
             fake = f.data
             if fake is None:
-                start = min([i for i in (text.find(b"+"), text.find(b"-"), text.find(b"*")) if i >= 0], default=len(text))
+                start = min(
+                    [i for i in (text.find(b"+"), text.find(b"-"), text.find(b"*")) if i >= 0], default=len(text)
+                )
                 digits = [i for i, c in enumerate(text) if 48 <= c <= 57 and i > start]  # the value's, not an address
                 fake = bytearray(text)
                 for i in digits:

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -198,4 +198,6 @@ def open_devices(
                 thing.close()
         raise
     log.info("devices: range finder on %s, turret on %s%s", rangefinder_url, turret_url, " (emulated)" if site else "")
-    return Devices(rf, turret, np.asarray(scene.turret.T_world_turret, dtype=float).copy(), site, (rangefinder_url, turret_url))
+    return Devices(
+        rf, turret, np.asarray(scene.turret.T_world_turret, dtype=float).copy(), site, (rangefinder_url, turret_url)
+    )

@@ -11,7 +11,17 @@ from pathlib import Path
 
 from core.brep import BRep
 
-from .cao import CaoError, CaoOptions, CaoWarning, cao_text, concat_breps, read_cao, read_cao_options, read_init, write_cao
+from .cao import (
+    CaoError,
+    CaoOptions,
+    CaoWarning,
+    cao_text,
+    concat_breps,
+    read_cao,
+    read_cao_options,
+    read_init,
+    write_cao,
+)
 from .mesh import MAX_MESH_BYTES, MAX_MESH_FACES, MESH_SUFFIXES, MeshError, MeshWarning, read_mesh, write_mesh
 
 __all__ = [

@@ -132,18 +132,22 @@ class CaoOptions:
 
     def to_json(self) -> dict:
         """JSON-ready (an edge's key "a-b"), for the database's history of an import."""
-        return {"edges": {f"{a}-{b}": v for (a, b), v in self.edges.items()},
-                "faces": {str(k): v for k, v in self.faces.items()},
-                "cylinders": {str(k): v for k, v in self.cylinders.items()},
-                "circles": {str(k): v for k, v in self.circles.items()}}
+        return {
+            "edges": {f"{a}-{b}": v for (a, b), v in self.edges.items()},
+            "faces": {str(k): v for k, v in self.faces.items()},
+            "cylinders": {str(k): v for k, v in self.cylinders.items()},
+            "circles": {str(k): v for k, v in self.circles.items()},
+        }
 
     @staticmethod
-    def from_json(d: dict) -> "CaoOptions":
+    def from_json(d: dict) -> CaoOptions:
         """Inverse of ``to_json``; ValueError on a malformed description."""
         try:
             edges = {tuple(int(i) for i in k.split("-")): str(v) for k, v in d.get("edges", {}).items()}
-            return CaoOptions(edges, *({int(k): str(v) for k, v in d.get(part, {}).items()}
-                                       for part in ("faces", "cylinders", "circles")))
+            return CaoOptions(
+                edges,
+                *({int(k): str(v) for k, v in d.get(part, {}).items()} for part in ("faces", "cylinders", "circles")),
+            )
         except (AttributeError, TypeError, ValueError) as exc:
             raise ValueError(f"malformed .cao options: {exc}") from None
 
@@ -151,7 +155,7 @@ class CaoOptions:
         return bool(self.edges or self.faces or self.cylinders or self.circles)
 
     @staticmethod
-    def concat(models: list[BRep], options: list["CaoOptions"]) -> "CaoOptions":
+    def concat(models: list[BRep], options: list[CaoOptions]) -> CaoOptions:
         """The options of ``concat_breps(models)``: each model's keys shifted like its records."""
         out = CaoOptions()
         nv = nf = ns = nc = 0
@@ -259,7 +263,9 @@ def _count(lines: _Lines, what: str) -> int:
     if n < 0:
         raise lines.error(number, f"the number of {what} is negative")
     if n > lines.left():
-        raise lines.error(number, f"the number of {what} is more than the {lines.left()} lines left in the file (one line each)")
+        raise lines.error(
+            number, f"the number of {what} is more than the {lines.left()} lines left in the file (one line each)"
+        )
     if n > _MAX_COUNT:
         raise lines.error(number, f"the number of {what} is more than {_MAX_COUNT:,}, mcit's limit")
     return n
@@ -307,7 +313,9 @@ def _parse_rotation(lines: _Lines, number: int, text: str) -> np.ndarray:
     except ValueError:
         raise lines.error(number, "load(): a value of R=[...] is not a number") from None
     if not np.all(np.isfinite(R)) or np.abs(R.T @ R - np.eye(3)).max() > _ROTATION_TOL or np.linalg.det(R) <= 0:
-        raise lines.error(number, f"load(): R=[...] is not a rotation (orthonormal rows, determinant +1, to {_ROTATION_TOL:g})")
+        raise lines.error(
+            number, f"load(): R=[...] is not a rotation (orthonormal rows, determinant +1, to {_ROTATION_TOL:g})"
+        )
     U, _, Vt = np.linalg.svd(R)
     return U @ Vt
 
@@ -316,7 +324,10 @@ def _parse_load(lines: _Lines, number: int, line: str) -> tuple[Path, np.ndarray
     """``load("file", t=[x; y; z], tu=[a; b; c] or R=[9 values])`` → the included file and T_this_included."""
     m = re.fullmatch(r'load\s*\(\s*"([^"]+)"\s*((?:,[^)]*)?)\).*', line)
     if not m:
-        raise lines.error(number, 'malformed include; expected load("file.cao", t=[x; y; z], tu=[a; b; c]) or R=[9 values] instead of tu')
+        raise lines.error(
+            number,
+            'malformed include; expected load("file.cao", t=[x; y; z], tu=[a; b; c]) or R=[9 values] instead of tu',
+        )
     target = Path(m.group(1))
     if not target.is_absolute():
         target = lines.path.parent / target
@@ -353,7 +364,10 @@ def _chain(lines: _Lines, number: int, segments: list[tuple[int, int]]) -> list[
         elif d == loop[-1]:
             loop.append(c)
         else:
-            raise lines.error(number, f"line {k} of the face does not continue from point {loop[-1]}: the face's lines must form a loop")
+            raise lines.error(
+                number,
+                f"line {k} of the face does not continue from point {loop[-1]}: the face's lines must form a loop",
+            )
     if loop[-1] != loop[0]:
         raise lines.error(number, f"the face's lines do not close: they end at point {loop[-1]}, not {loop[0]}")
     loop.pop()
@@ -446,7 +460,9 @@ class _Reading:
         if self.files > MAX_FILES:
             raise CaoError(f"{where}: the model includes more than {MAX_FILES} files; {_limits()}")
         if self.bytes > MAX_TOTAL_BYTES:
-            raise CaoError(f"{where}: the model's files hold more than {MAX_TOTAL_BYTES / 2**20:g} MB of text; {_limits()}")
+            raise CaoError(
+                f"{where}: the model's files hold more than {MAX_TOTAL_BYTES / 2**20:g} MB of text; {_limits()}"
+            )
 
 
 def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) -> BRep | None:
@@ -469,7 +485,9 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
         if sub is not None:
             placed = sub.transformed(T)
             if _reach_m(placed) > MAX_COORD_M:
-                raise lines.error(number, f"the included model, placed by its t= and rotation, reaches beyond ±{MAX_COORD_M:g} m")
+                raise lines.error(
+                    number, f"the included model, placed by its t= and rotation, reaches beyond ±{MAX_COORD_M:g} m"
+                )
             parts.append(placed)
             part_options.append(reading.options.get(target, CaoOptions()))
     if lines.peek() is None and n_loads:  # a file of load() lines only (ViSP ≥ 3.7 reads it too)
@@ -506,7 +524,9 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
             number, line = lines.next(f"face {k} of the {what}")
             (n,), _ = _numbers(lines, number, line, 1, "i", f"face {k}")
             if n < 3:
-                raise lines.error(number, f"face {k} has {n} {'lines' if by_lines else 'points'}; a face needs at least 3")
+                raise lines.error(
+                    number, f"face {k} has {n} {'lines' if by_lines else 'points'}; a face needs at least 3"
+                )
             values, rest = _numbers(lines, number, line, n + 1, "i", f"face {k}")
             options = _check_params(lines, number, rest)
             if by_lines:
@@ -532,9 +552,17 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
                 raise lines.error(number, f"cylinder {k}: radius must be positive, got {r}")
             _within(lines, number, r, f"cylinder {k}: the radius")
             # its written form (axis ends, rim) must read back: the rim within the limit too
-            _within(lines, number, max(np.abs(P[i]).max(), np.abs(P[j]).max()) + r, f"cylinder {k}: its side (axis end and radius)")
+            _within(
+                lines,
+                number,
+                max(np.abs(P[i]).max(), np.abs(P[j]).max()) + r,
+                f"cylinder {k}: its side (axis end and radius)",
+            )
             if np.linalg.norm(P[i] - P[j]) <= MIN_LENGTH_M:
-                raise lines.error(number, f"cylinder {k}: needs two distinct axis endpoints (points {i} and {j} are at the same place)")
+                raise lines.error(
+                    number,
+                    f"cylinder {k}: needs two distinct axis endpoints (points {i} and {j} are at the same place)",
+                )
             solids.append(Revolution(P[i], P[j], r, r))
             cylinder_options.append(options)
     if lines.peek() is not None:
@@ -548,10 +576,15 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
                 raise lines.error(number, f"circle {k}: radius must be positive, got {r}")
             u, v = P[i] - P[c], P[j] - P[c]
             normal = np.cross(u, v)
-            if np.linalg.norm(normal) <= _MIN_SINE * np.linalg.norm(u) * np.linalg.norm(v) or min(np.linalg.norm(u), np.linalg.norm(v)) <= MIN_LENGTH_M:
+            if (
+                np.linalg.norm(normal) <= _MIN_SINE * np.linalg.norm(u) * np.linalg.norm(v)
+                or min(np.linalg.norm(u), np.linalg.norm(v)) <= MIN_LENGTH_M
+            ):
                 # ViSP parses such a circle; its plane is unknown, so there is nothing true to draw.
                 warnings.warn(
-                    CaoWarning(f"{path}:{number}: circle {k} is left out: its centre and two points are on one line, so its plane is unknown"),
+                    CaoWarning(
+                        f"{path}:{number}: circle {k} is left out: its centre and two points are on one line, so its plane is unknown"
+                    ),
                     stacklevel=2,
                 )
                 dropped_circles += 1
@@ -611,7 +644,9 @@ def read_cao_options(path: str | Path) -> tuple[BRep, CaoOptions]:
     reading = _Reading()
     model = reading.read(path, str(path), (path,))
     if model is None:
-        raise CaoError(f"{path}: the model has nothing mcit can draw (its only circles have no plane, or its includes are empty)")
+        raise CaoError(
+            f"{path}: the model has nothing mcit can draw (its only circles have no plane, or its includes are empty)"
+        )
     return model, reading.options.get(path, CaoOptions())
 
 
@@ -636,7 +671,9 @@ def _parse_init(path: Path, text: str, stack: tuple[Path, ...], reading: _Readin
         if sub is not None:
             placed = sub @ T[:3, :3].T + T[:3, 3]
             if np.abs(placed).max() > MAX_COORD_M:
-                raise lines.error(number, f"the included points, placed by its t= and rotation, reach beyond ±{MAX_COORD_M:g} m")
+                raise lines.error(
+                    number, f"the included points, placed by its t= and rotation, reach beyond ±{MAX_COORD_M:g} m"
+                )
             parts.append(placed)
     if lines.peek() is not None:
         n = _count(lines, "points")
@@ -685,7 +722,9 @@ def cao_text(model: BRep, comment: str = "", options: CaoOptions | None = None) 
 
     for s in model.solids:
         if not s.is_cylinder:
-            raise ValueError(f"a .cao model has cylinders only; this model has a cone (radii {s.r0}, {s.r1}): export it as glTF or OBJ")
+            raise ValueError(
+                f"a .cao model has cylinders only; this model has a cone (radii {s.r0}, {s.r1}): export it as glTF or OBJ"
+            )
     faces = list(enumerate(model.faces))  # every face, a mesh's smooth triangles too (see the module docstring)
     covered = {(min(a, b), max(a, b)) for f in model.faces for a, b in zip(f, f[1:] + f[:1])}
     lines = [(a, b) for a, b in map(tuple, model.edges.tolist()) if (a, b) not in covered]
@@ -704,12 +743,18 @@ def cao_text(model: BRep, comment: str = "", options: CaoOptions | None = None) 
         out += [f"# {line}" for line in comment.splitlines()]
     out += ["# 3D points", str(len(points))]
     out += [" ".join(_fmt(x) for x in p) for p in points]
-    out += ["# 3D lines", str(len(lines))] + [f"{a} {b}" + tail(options.edges.get((min(a, b), max(a, b)))) for a, b in lines]
+    out += ["# 3D lines", str(len(lines))] + [
+        f"{a} {b}" + tail(options.edges.get((min(a, b), max(a, b)))) for a, b in lines
+    ]
     out += ["# Faces from 3D lines", "0"]
     out += ["# Faces from 3D points", str(len(faces))]
     out += [" ".join(str(v) for v in (len(f),) + tuple(f)) + tail(options.faces.get(k)) for k, f in faces]
-    out += ["# 3D cylinders", str(len(cylinders))] + [f"{i} {j} {_fmt(r)}" + tail(options.cylinders.get(k)) for k, (i, j, r) in enumerate(cylinders)]
-    out += ["# 3D circles", str(len(circles))] + [f"{_fmt(r)} {c} {i} {j}" + tail(options.circles.get(k)) for k, (r, c, i, j) in enumerate(circles)]
+    out += ["# 3D cylinders", str(len(cylinders))] + [
+        f"{i} {j} {_fmt(r)}" + tail(options.cylinders.get(k)) for k, (i, j, r) in enumerate(cylinders)
+    ]
+    out += ["# 3D circles", str(len(circles))] + [
+        f"{_fmt(r)} {c} {i} {j}" + tail(options.circles.get(k)) for k, (r, c, i, j) in enumerate(circles)
+    ]
     return "\n".join(out) + "\n"
 
 

@@ -16,5 +16,7 @@ def resolve_file(path: Path, error: type[Exception], where: str | None = None) -
     except (RuntimeError, OSError) as exc:  # RuntimeError before Python 3.13, OSError ELOOP since
         if isinstance(exc, OSError) and exc.errno != errno.ELOOP:
             raise error(f"{where or path}: cannot follow {path}: {exc.strerror or type(exc).__name__}") from None
-        raise error(f"{where + ': ' if where else ''}{path} is a loop of symbolic links that never reaches a file; "
-                    "point the link at the model file") from None
+        raise error(
+            f"{where + ': ' if where else ''}{path} is a loop of symbolic links that never reaches a file; "
+            "point the link at the model file"
+        ) from None

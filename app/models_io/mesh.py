@@ -103,7 +103,8 @@ class _Limits:
         return MeshError(
             f"{where}: {holds}, beyond mcit's limits for one mesh ({self.faces:,} triangles, {self.vertices:,} vertices, "
             f"{self.bytes / 2**20:g} MB); simplify the mesh in its CAD program, or raise the limits with "
-            f"`mcit db import --max-faces N`")
+            f"`mcit db import --max-faces N`"
+        )
 
 
 def _unreadable(path: Path, why: str) -> MeshError:
@@ -121,7 +122,7 @@ def _count(path: Path, needles: tuple[bytes, ...], lower: bool = False) -> list[
             buf = tail + (chunk.lower() if lower else chunk)
             for k, needle in enumerate(needles):
                 counts[k] += buf.count(needle) - tail.count(needle)  # those inside the tail were counted before
-            tail = buf[len(buf) - keep:]
+            tail = buf[len(buf) - keep :]
     return counts
 
 
@@ -148,8 +149,12 @@ def _check_obj(path: Path, limits: _Limits) -> None:
     polygon of n vertices makes n - 2; a line ending in a backslash continues on the next). Only
     the v and f records are split, so a file of comments costs no Python loop per line."""
     data = path.read_bytes()
-    keys = {"v": ("vertices (v lines)", limits.vertices), "vn": ("normals (vn lines)", limits.vertices),
-            "vt": ("texture coordinates (vt lines)", limits.vertices), "f": ("faces (f lines)", limits.faces)}
+    keys = {
+        "v": ("vertices (v lines)", limits.vertices),
+        "vn": ("normals (vn lines)", limits.vertices),
+        "vt": ("texture coordinates (vt lines)", limits.vertices),
+        "f": ("faces (f lines)", limits.faces),
+    }
     for key, (what, limit) in keys.items():
         n = sum(data.count(f"\n{key}{space}".encode()) + data.startswith(f"{key}{space}".encode()) for space in " \t")
         if n > limit:
@@ -161,7 +166,9 @@ def _check_obj(path: Path, limits: _Limits) -> None:
         number += data.count(b"\n", counted_to, match.start())
         counted_to = match.start()
         if match.end() - match.start() > _MAX_OBJ_RECORD:
-            raise _unreadable(path, f"line {number} is longer than {_MAX_OBJ_RECORD // 2**20} MB (with the lines it continues)")
+            raise _unreadable(
+                path, f"line {number} is longer than {_MAX_OBJ_RECORD // 2**20} MB (with the lines it continues)"
+            )
         record = _OBJ_CONTINUATION.sub(b"", match.group())
         tokens = record.split(b"#", 1)[0].split()
         shown = record.decode("utf-8", "replace").strip()
@@ -180,18 +187,25 @@ def _check_obj(path: Path, limits: _Limits) -> None:
                 raise MeshError(f"{path}:{number}: a face needs at least 3 vertices, got {shown!r}")
             n_triangles += len(tokens) - 3
             if n_triangles > limits.faces:
-                raise limits.refuse(f"{path}:{number}", f"the faces up to this line make {n_triangles:,} triangles "
-                                                        f"(a polygon of n vertices makes n - 2)")
+                raise limits.refuse(
+                    f"{path}:{number}",
+                    f"the faces up to this line make {n_triangles:,} triangles (a polygon of n vertices makes n - 2)",
+                )
             for ref in tokens[1:]:
                 try:
                     i = int(ref.split(b"/")[0])
                 except ValueError:
-                    raise MeshError(f"{path}:{number}: face vertex {ref.decode('utf-8', 'replace')!r} is not an index") from None
+                    raise MeshError(
+                        f"{path}:{number}: face vertex {ref.decode('utf-8', 'replace')!r} is not an index"
+                    ) from None
                 if i == 0 or i > n_vertices or -i > n_vertices:
-                    raise MeshError(f"{path}:{number}: face vertex index {i} refers to no vertex (1..{n_vertices} defined so far)")
+                    raise MeshError(
+                        f"{path}:{number}: face vertex index {i} refers to no vertex (1..{n_vertices} defined so far)"
+                    )
 
 
 # --- STL -----------------------------------------------------------------------------------------
+
 
 def _check_stl(path: Path, limits: _Limits, size: int) -> None:
     """Binary STL: the header's triangle count, which must agree with the file's size (trimesh reads
@@ -206,9 +220,13 @@ def _check_stl(path: Path, limits: _Limits, size: int) -> None:
             return
     if not head.lstrip().lower().startswith(b"solid"):
         if len(head) < 84:
-            raise _unreadable(path, f"{size} bytes: too short for a binary STL (84 bytes of header) and not an ASCII STL")
-        raise MeshError(f"{path}: the binary STL's header declares {n:,} triangles, which take {84 + 50 * n:,} bytes, "
-                        f"but the file holds {size:,}: it is truncated or not an STL file")
+            raise _unreadable(
+                path, f"{size} bytes: too short for a binary STL (84 bytes of header) and not an ASCII STL"
+            )
+        raise MeshError(
+            f"{path}: the binary STL's header declares {n:,} triangles, which take {84 + 50 * n:,} bytes, "
+            f"but the file holds {size:,}: it is truncated or not an STL file"
+        )
     n_vertex, n_facet = _count(path, (b"vertex", b"endfacet"), lower=True)
     n = max(-(-n_vertex // 3), n_facet)
     if n > limits.faces:
@@ -217,11 +235,43 @@ def _check_stl(path: Path, limits: _Limits, size: int) -> None:
 
 # --- PLY -----------------------------------------------------------------------------------------
 
-_PLY_TYPES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
-              "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "float16": 2,
-              "int64": 8, "uint64": 8, "double": 8, "float64": 8}
-_PLY_STRUCT = {"uchar": "B", "uint8": "B", "ushort": "H", "uint16": "H", "uint": "I", "uint32": "I", "uint64": "Q",
-               "char": "b", "int8": "b", "short": "h", "int16": "h", "int": "i", "int32": "i", "int64": "q"}
+_PLY_TYPES = {
+    "char": 1,
+    "uchar": 1,
+    "int8": 1,
+    "uint8": 1,
+    "short": 2,
+    "ushort": 2,
+    "int16": 2,
+    "uint16": 2,
+    "int": 4,
+    "uint": 4,
+    "int32": 4,
+    "uint32": 4,
+    "float": 4,
+    "float32": 4,
+    "float16": 2,
+    "int64": 8,
+    "uint64": 8,
+    "double": 8,
+    "float64": 8,
+}
+_PLY_STRUCT = {
+    "uchar": "B",
+    "uint8": "B",
+    "ushort": "H",
+    "uint16": "H",
+    "uint": "I",
+    "uint32": "I",
+    "uint64": "Q",
+    "char": "b",
+    "int8": "b",
+    "short": "h",
+    "int16": "h",
+    "int": "i",
+    "int32": "i",
+    "int64": "q",
+}
 _PLY_TEXT = bytes(range(32, 127)) + b"\t\n\r"
 _TOKEN = re.compile(rb"\S+")
 
@@ -241,7 +291,7 @@ def _ply_header(path: Path) -> tuple[str, list[_PlyElement], int]:
     if not head.startswith(b"ply") or end is None:
         raise _unreadable(path, "no PLY header (a first line 'ply' and an 'end_header' line within 64 KB)")
     fmt, elements = None, []
-    for raw in head[:end.start()].decode("ascii", "replace").splitlines()[1:]:
+    for raw in head[: end.start()].decode("ascii", "replace").splitlines()[1:]:
         tokens = raw.split()
         if not tokens or tokens[0] in ("comment", "obj_info"):
             continue
@@ -251,11 +301,19 @@ def _ply_header(path: Path) -> tuple[str, list[_PlyElement], int]:
             elements.append(_PlyElement(tokens[1], int(tokens[2]), []))
         elif tokens[0] == "property" and elements and len(tokens) == 3 and tokens[1] in _PLY_TYPES:
             elements[-1].properties.append((tokens[2], tokens[1]))
-        elif (tokens[0] == "property" and elements and len(tokens) == 5 and tokens[1] == "list"
-              and tokens[2] in _PLY_STRUCT and tokens[3] in _PLY_TYPES):
+        elif (
+            tokens[0] == "property"
+            and elements
+            and len(tokens) == 5
+            and tokens[1] == "list"
+            and tokens[2] in _PLY_STRUCT
+            and tokens[3] in _PLY_TYPES
+        ):
             elements[-1].properties.append((tokens[4], (tokens[2], tokens[3])))
         else:
-            raise _unreadable(path, f"the PLY header line {raw.strip()[:80]!r} is not an element, property, format or comment")
+            raise _unreadable(
+                path, f"the PLY header line {raw.strip()[:80]!r} is not an element, property, format or comment"
+            )
     if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
         raise _unreadable(path, "the PLY header names no format among ascii, binary_little_endian, binary_big_endian")
     return fmt, elements, end.end()
@@ -296,8 +354,10 @@ def _check_ply(path: Path, limits: _Limits, size: int) -> None:
                         fh.seek(offset + row)
                         blob = fh.read(_PLY_TYPES[kind[0]])
                         if len(blob) < _PLY_TYPES[kind[0]]:
-                            raise MeshError(f"{path}: the PLY header declares {declared}, but the file ends inside "
-                                            f"the first {el.name}: it is truncated or its header is wrong")
+                            raise MeshError(
+                                f"{path}: the PLY header declares {declared}, but the file ends inside "
+                                f"the first {el.name}: it is truncated or its header is wrong"
+                            )
                         n = struct.unpack(order + _PLY_STRUCT[kind[0]], blob)[0]
                         if n < 0:
                             raise _unreadable(path, f"the first {el.name}'s {name} has {n} items")
@@ -306,29 +366,40 @@ def _check_ply(path: Path, limits: _Limits, size: int) -> None:
                     row += _PLY_TYPES[kind[0]] + n * _PLY_TYPES[kind[1]]
                 offset += el.count * row
         if offset != size:
-            raise MeshError(f"{path}: the PLY header declares {declared}, which take {offset - start:,} bytes "
-                            f"(every list as long as the first), but {size - start:,} follow the header: "
-                            f"it is truncated or its header is wrong")
+            raise MeshError(
+                f"{path}: the PLY header declares {declared}, which take {offset - start:,} bytes "
+                f"(every list as long as the first), but {size - start:,} follow the header: "
+                f"it is truncated or its header is wrong"
+            )
     else:
         with open(path, "rb") as fh:
             fh.seek(start)
             body = fh.read()
         if body.translate(None, _PLY_TEXT):
             raise _unreadable(path, "the ASCII PLY's data holds bytes that are not text")
-        n_lines = body.count(b"\n") + body.count(b"\r") - body.count(b"\r\n") + (not body.endswith((b"\n", b"\r")) and bool(body))
+        n_lines = (
+            body.count(b"\n")
+            + body.count(b"\r")
+            - body.count(b"\r\n")
+            + (not body.endswith((b"\n", b"\r")) and bool(body))
+        )
         rows = sum(el.count for el in elements)
         if n_lines < rows:
-            raise MeshError(f"{path}: the PLY header declares {declared} ({rows:,} lines), but {n_lines:,} lines "
-                            f"follow the header: it is truncated or its header is wrong")
+            raise MeshError(
+                f"{path}: the PLY header declares {declared} ({rows:,} lines), but {n_lines:,} lines "
+                f"follow the header: it is truncated or its header is wrong"
+            )
         if n_lines > rows + _PLY_EXTRA_LINES:
-            raise MeshError(f"{path}: {n_lines:,} lines follow the PLY header, which declares {declared} "
-                            f"({rows:,} lines): its header is wrong")
+            raise MeshError(
+                f"{path}: {n_lines:,} lines follow the PLY header, which declares {declared} "
+                f"({rows:,} lines): its header is wrong"
+            )
         if face is not None and index is not None:
-            first = sum(el.count for el in elements[:elements.index(face)])
+            first = sum(el.count for el in elements[: elements.index(face)])
             for number, line in enumerate(islice(body.splitlines(), first, first + face.count), start=1):
                 tokens = _TOKEN.finditer(line)
                 try:
-                    for k, (name, kind) in enumerate(face.properties):
+                    for k, (_name, kind) in enumerate(face.properties):
                         n = 1 if not isinstance(kind, tuple) else int(next(tokens).group())
                         if k == index:
                             break
@@ -340,8 +411,11 @@ def _check_ply(path: Path, limits: _Limits, size: int) -> None:
                 if triangles > limits.faces:
                     break
     if triangles > limits.faces:
-        raise limits.refuse(str(path), f"the PLY's {face.count:,} faces make at least {triangles:,} triangles "
-                                       f"(a polygon of n vertices makes n - 2)")
+        raise limits.refuse(
+            str(path),
+            f"the PLY's {face.count:,} faces make at least {triangles:,} triangles "
+            f"(a polygon of n vertices makes n - 2)",
+        )
 
 
 # --- glTF / GLB ----------------------------------------------------------------------------------
@@ -363,22 +437,28 @@ def _gltf_json(path: Path, size: int) -> tuple[bytes, list[int]]:
             raise _unreadable(path, "no GLB header (the magic 'glTF', a version, a length and a JSON chunk)")
         json_length, json_type = struct.unpack_from("<II", head, 12)
         if json_type != _GLB_JSON or 20 + json_length > size:
-            raise MeshError(f"{path}: the GLB's first chunk declares {json_length:,} bytes of JSON, but the file holds "
-                            f"{size:,} bytes: it is truncated or not a GLB file")
+            raise MeshError(
+                f"{path}: the GLB's first chunk declares {json_length:,} bytes of JSON, but the file holds "
+                f"{size:,} bytes: it is truncated or not a GLB file"
+            )
         text = fh.read(json_length)
         chunks, offset, n_chunks = [], 20 + json_length, 0
         while offset + 8 <= size:
             fh.seek(offset)
             length, kind = struct.unpack("<II", fh.read(8))
             if offset + 8 + length > size:
-                raise MeshError(f"{path}: a GLB chunk at byte {offset:,} declares {length:,} bytes, past the file's "
-                                f"end at {size:,}: it is truncated or its header is wrong")
+                raise MeshError(
+                    f"{path}: a GLB chunk at byte {offset:,} declares {length:,} bytes, past the file's "
+                    f"end at {size:,}: it is truncated or its header is wrong"
+                )
             if kind == _GLB_BIN:
                 chunks.append(length)
             offset += 8 + length
             n_chunks += 1
             if n_chunks > _MAX_GLB_CHUNKS:
-                raise _unreadable(path, f"the GLB holds more than {_MAX_GLB_CHUNKS} chunks (a JSON and a binary one expected)")
+                raise _unreadable(
+                    path, f"the GLB holds more than {_MAX_GLB_CHUNKS} chunks (a JSON and a binary one expected)"
+                )
     return text, chunks
 
 
@@ -414,8 +494,11 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
     text, chunks = _gltf_json(path, size)
     n_values = sum(text.count(c) for c in b",:[{") + 1  # a base64 data URI holds none of these
     if n_values > limits.json_values:
-        raise limits.refuse(str(path), f"the glTF's JSON holds {n_values:,} values (counted by its commas, colons "
-                                       f"and brackets), more than {limits.json_values:,}")
+        raise limits.refuse(
+            str(path),
+            f"the glTF's JSON holds {n_values:,} values (counted by its commas, colons "
+            f"and brackets), more than {limits.json_values:,}",
+        )
     try:
         tree = json.loads(text)
     except (ValueError, RecursionError) as exc:
@@ -442,7 +525,9 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
             total += _file_size(external, limits, f"its buffer file {external}")
             held.append(external.stat().st_size)
             if total > limits.bytes:
-                raise limits.refuse(str(path), f"the file and its buffer files hold {total:,} bytes ({total / 2**20:,.1f} MB)")
+                raise limits.refuse(
+                    str(path), f"the file and its buffer files hold {total:,} bytes ({total / 2**20:,.1f} MB)"
+                )
 
     view_bytes = []
     for v, view in enumerate(views):
@@ -450,14 +535,18 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
         length = _nat(view.get("byteLength"), path, f"buffer view {v}'s byteLength")
         end = _nat(view.get("byteOffset", 0), path, f"buffer view {v}'s byteOffset") + length
         if b >= len(held) or end > held[b]:
-            raise MeshError(f"{path}: the glTF's buffer view {v} ends at byte {end:,} of buffer {b}, which holds "
-                            f"{held[b] if b < len(held) else 0:,} bytes: the file is truncated or its JSON is wrong")
+            raise MeshError(
+                f"{path}: the glTF's buffer view {v} ends at byte {end:,} of buffer {b}, which holds "
+                f"{held[b] if b < len(held) else 0:,} bytes: the file is truncated or its JSON is wrong"
+            )
         view_bytes.append(length)
 
     counts, placeholders = [], 0
     for a, accessor in enumerate(accessors):
         count = _nat(accessor.get("count"), path, f"accessor {a}'s count")
-        item = _GLTF_COMPONENT_BYTES.get(accessor.get("componentType"), 0) * _GLTF_TYPE_SIZE.get(accessor.get("type"), 0)
+        item = _GLTF_COMPONENT_BYTES.get(accessor.get("componentType"), 0) * _GLTF_TYPE_SIZE.get(
+            accessor.get("type"), 0
+        )
         if not item:
             raise _unreadable(path, f"accessor {a} has no known componentType and type")
         if "bufferView" not in accessor:  # trimesh fills it with zeros; one with data is a view of its buffer
@@ -470,12 +559,15 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
                 raise _unreadable(path, f"accessor {a} names buffer view {v}, which does not exist")
             stride = _nat(views[v].get("byteStride", item), path, f"buffer view {v}'s byteStride")
             if stride < item:  # overlapping items: trimesh's copy would outgrow the buffer
-                raise _unreadable(path, f"buffer view {v}'s byteStride {stride} is shorter than accessor {a}'s items "
-                                        f"({item} bytes)")
+                raise _unreadable(
+                    path, f"buffer view {v}'s byteStride {stride} is shorter than accessor {a}'s items ({item} bytes)"
+                )
             need = _nat(accessor.get("byteOffset", 0), path, f"accessor {a}'s byteOffset") + (count - 1) * stride + item
             if need > view_bytes[v]:
-                raise MeshError(f"{path}: the glTF's accessor {a} declares {count:,} items, which take {need:,} bytes, "
-                                f"but its buffer view {v} holds {view_bytes[v]:,}: the file is truncated or its JSON is wrong")
+                raise MeshError(
+                    f"{path}: the glTF's accessor {a} declares {count:,} items, which take {need:,} bytes, "
+                    f"but its buffer view {v} holds {view_bytes[v]:,}: the file is truncated or its JSON is wrong"
+                )
         counts.append(count)
 
     def count_of(index, what: str) -> int:
@@ -494,8 +586,11 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
             if not isinstance(primitive, dict) or not isinstance(primitive.get("attributes"), dict):
                 raise _unreadable(path, f"mesh {m}'s primitive {p} has no attributes")
             n_vertices = count_of(primitive["attributes"].get("POSITION"), f"mesh {m}'s primitive {p}'s POSITION")
-            n_corners = count_of(primitive["indices"], f"mesh {m}'s primitive {p}'s indices") \
-                if "indices" in primitive else n_vertices
+            n_corners = (
+                count_of(primitive["indices"], f"mesh {m}'s primitive {p}'s indices")
+                if "indices" in primitive
+                else n_vertices
+            )
             mode = primitive.get("mode", 4)
             triangles += n_corners // 3 if mode == 4 else max(n_corners - 2, 0) if mode == 5 else 0
             vertices += n_vertices
@@ -577,7 +672,9 @@ def read_mesh(path: str | Path, angle_deg: float = 30.0, *, max_faces: int = MAX
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise MeshError(f"{path}: the file holds no triangles")
     if len(mesh.faces) > limits.faces or len(mesh.vertices) > limits.vertices:  # the checks above bound trimesh's
-        raise limits.refuse(str(path), f"trimesh read {len(mesh.faces):,} triangles and {len(mesh.vertices):,} vertices")
+        raise limits.refuse(
+            str(path), f"trimesh read {len(mesh.faces):,} triangles and {len(mesh.vertices):,} vertices"
+        )
     V = np.asarray(mesh.vertices, dtype=float)
     if not np.all(np.isfinite(V)):
         raise MeshError(f"{path}: the mesh has non-finite vertex coordinates")
@@ -587,10 +684,13 @@ def read_mesh(path: str | Path, angle_deg: float = 30.0, *, max_faces: int = MAX
     except ValueError as exc:
         raise MeshError(f"{path}: {exc}") from None
     if not len(model.edges) and not len(SmoothSides.of(model.vertices, model.faces, model.edges)):
-        warnings.warn(MeshWarning(
-            f"{path}: this mesh gives nothing to draw on the overlay (no sharp edge and no curved surface with an "
-            f"outline, e.g. each triangle given twice); export the object again from its CAD program as a closed surface"),
-            stacklevel=2)
+        warnings.warn(
+            MeshWarning(
+                f"{path}: this mesh gives nothing to draw on the overlay (no sharp edge and no curved surface with an "
+                f"outline, e.g. each triangle given twice); export the object again from its CAD program as a closed surface"
+            ),
+            stacklevel=2,
+        )
     return model
 
 
@@ -609,7 +709,7 @@ def write_mesh(model: BRep, path: str | Path, n_circle: int = 48) -> None:
     mesh = trimesh.Trimesh(V, T, process=False)
     if suffix == ".gltf":
         files = export_gltf(trimesh.Scene(mesh), embed_buffers=True)
-        (name, data), = files.items()
+        ((name, data),) = files.items()
         path.write_bytes(data)
     else:
         mesh.export(str(path))

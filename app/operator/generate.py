@@ -63,7 +63,7 @@ class ScriptOptions:
     large_motion_deg: float = 18.0
     large_motion_m: float = 0.05
 
-    def replace(self, **changes) -> "ScriptOptions":
+    def replace(self, **changes) -> ScriptOptions:
         return dataclasses.replace(self, **changes)
 
 
@@ -140,7 +140,9 @@ class _Generator:
         for f in fr:
             X = A + f * (B - A)
             uv_true = self.cam.project(X)
-            self.emit(workflow, "click", dict(truth, X_world=_round(X, 6), uv_true=_round(uv_true, 4)), uv=self.noisy(uv_true))
+            self.emit(
+                workflow, "click", dict(truth, X_world=_round(X, 6), uv_true=_round(uv_true, 4)), uv=self.noisy(uv_true)
+            )
 
     def facing(self, n_world: np.ndarray, X: np.ndarray, eye: np.ndarray, max_deg: float = 89.0) -> bool:
         v = eye - X
@@ -162,7 +164,10 @@ class _Generator:
                 if faces and not any(self.facing(normals[f], X, c) for f in faces):
                     continue
                 uv = self.cam.project(X)
-                if not self.cam.in_image(uv[None], margin_px=5.0)[0] or caster.occluded(c, X[None], body=bi, tol_m=1e-4)[0]:
+                if (
+                    not self.cam.in_image(uv[None], margin_px=5.0)[0]
+                    or caster.occluded(c, X[None], body=bi, tol_m=1e-4)[0]
+                ):
                     continue
                 self.emit(wf, "choose_vertex", {"X_world": _round(X, 6)}, name=body.name, index=int(k))
                 self.emit(wf, "click", {"X_world": _round(X, 6), "uv_true": _round(uv, 4)}, uv=self.noisy(uv))
@@ -193,7 +198,10 @@ class _Generator:
                 for j, X in enumerate([ctr] + inset):
                     if not self.cam.in_image(self.cam.project(X)[None], margin_px=10.0)[0]:
                         continue
-                    if caster.occluded(eye_t, X[None], body=bi, tol_m=1e-4)[0] or caster.occluded(eye_c, X[None], body=bi, tol_m=1e-4)[0]:
+                    if (
+                        caster.occluded(eye_t, X[None], body=bi, tol_m=1e-4)[0]
+                        or caster.occluded(eye_c, X[None], body=bi, tol_m=1e-4)[0]
+                    ):
                         continue
                     pan, tilt, rho = aim(T_wt, X)
                     if not (spec.min_range_m + 0.05 <= rho <= spec.max_range_m - 0.05):
@@ -209,8 +217,10 @@ class _Generator:
         N = np.array([n for _, _, n in cands]).reshape(-1, 3)
         orientations = len({tuple(np.round(n, 3)) for n in N})
         if len(cands) < 3 or orientations < 3:
-            raise ValueError(f"the turret reaches {len(cands)} known face centres of {orientations} orientations; "
-                             "its calibration needs faces of 3 orientations")
+            raise ValueError(
+                f"the turret reaches {len(cands)} known face centres of {orientations} orientations; "
+                "its calibration needs faces of 3 orientations"
+            )
         # Faces of the most different orientations first (they fix the pose), then spread in space.
         P = np.array([X for _, X, _ in cands])
         chosen = [int(np.argmax(N[:, 2]))]
@@ -227,8 +237,13 @@ class _Generator:
         for i in chosen:
             label, X, n = cands[i]
             pan, tilt, rho = aim(T_wt, X)
-            truth = {"X_world": _round(X, 6), "normal_world": _round(n, 9), "pan_steps_exact": round(float(pan) / step, 3),
-                     "tilt_steps_exact": round(float(tilt) / step, 3), "range_m_exact": round(float(rho), 6)}
+            truth = {
+                "X_world": _round(X, 6),
+                "normal_world": _round(n, 9),
+                "pan_steps_exact": round(float(pan) / step, 3),
+                "tilt_steps_exact": round(float(tilt) / step, 3),
+                "range_m_exact": round(float(rho), 6),
+            }
             self.emit(wf, "choose_point", truth, X_world=_round(X, 6), label=label)
             self.emit(wf, "measure", truth)
         self.emit(wf, "solve", {"T_world_turret": np.round(T_wt, 9).tolist()})
@@ -273,7 +288,7 @@ class _Generator:
         self.emit(wf, "accept", truth)
 
     def model_revolution(self, body: Body) -> None:
-        caster = self.caster(self.t)
+        self.caster(self.t)  # the scene's ray casters at this time, kept for the steps that follow
         bi = self.index[body.name]
         T = body.pose_at(self.t)
         s = body.model.solids[0]
@@ -323,17 +338,26 @@ class _Generator:
             run = self.visible_run(caster, bi, A, B)
             if run is None:
                 continue
-            length = float(np.linalg.norm(self.cam.project(A + run[1] * (B - A)) - self.cam.project(A + run[0] * (B - A))))
+            length = float(
+                np.linalg.norm(self.cam.project(A + run[1] * (B - A)) - self.cam.project(A + run[0] * (B - A)))
+            )
             edges.append((length, k, A, B, run))
         edges.sort(key=lambda e: -e[0])
         triple = _p3l_triple(body, [e[1] for e in edges])
         if triple is None:
-            raise ValueError(f"{body.name} at t = {self.t:.2f} s: no three visible edges form a non-degenerate P3L triple")
+            raise ValueError(
+                f"{body.name} at t = {self.t:.2f} s: no three visible edges form a non-degenerate P3L triple"
+            )
         rest = [e for e in edges if e[1] not in triple]
         chosen = [e for k in triple for e in edges if e[1] == k] + rest[: max(0, self.o.pose_edges - 3)]
         wf = "update_pose"
-        truth = {"T_world_obj": np.round(T, 9).tolist(), "T_before": np.round(T_before, 9).tolist(),
-                 "motion_deg": round(rot_deg, 4), "motion_m": round(trans_m, 6), "motion": method}
+        truth = {
+            "T_world_obj": np.round(T, 9).tolist(),
+            "T_before": np.round(T_before, 9).tolist(),
+            "motion_deg": round(rot_deg, 4),
+            "motion_m": round(trans_m, 6),
+            "motion": method,
+        }
         self.emit(wf, "start", truth, object_name=body.name)
         for _, k, A, B, run in chosen:
             self.click_edge(wf, A, B, run, {"body": body.name, "edge": int(k)})
@@ -383,7 +407,9 @@ def generate_script(scene: Scene, options: ScriptOptions = ScriptOptions()) -> O
         elif body.model.solids:
             g.model_revolution(body)
         else:
-            raise ValueError(f"{body.name}: the modelling workflow knows boxes, cylinders and cones, not this {body.kind}")
+            raise ValueError(
+                f"{body.name}: the modelling workflow knows boxes, cylinders and cones, not this {body.kind}"
+            )
     if g.t > first_move:
         raise ValueError(
             f"the calibration and modelling clicks need {g.t:.1f} s of still video but the first motion starts at "
@@ -399,8 +425,10 @@ def generate_script(scene: Scene, options: ScriptOptions = ScriptOptions()) -> O
         g.update_pose(body, T_before)
         window_end = next(w[1] for w in still_windows(body, duration) if w[0] <= start < w[1])
         if g.t > window_end:
-            raise ValueError(f"{body.name}: the update after the motion ending at {start:.1f} s needs until {g.t:.1f} s, "
-                             f"but the body moves again at {window_end:.1f} s")
+            raise ValueError(
+                f"{body.name}: the update after the motion ending at {start:.1f} s needs until {g.t:.1f} s, "
+                f"but the body moves again at {window_end:.1f} s"
+            )
     generator = dataclasses.asdict(options)
     generator["tool"] = "mcit script (app/operator/generate.py)"
     description = (

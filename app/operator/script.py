@@ -22,13 +22,24 @@ arguments) and raises ``ScriptError`` (a ``ValueError``) naming the action index
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 
-__all__ = ["FORMAT", "WORKFLOWS", "ScriptError", "Action", "Run", "OperatorScript", "load_script", "save_script", "script_from_dict"]
+__all__ = [
+    "FORMAT",
+    "WORKFLOWS",
+    "ScriptError",
+    "Action",
+    "Run",
+    "OperatorScript",
+    "load_script",
+    "save_script",
+    "script_from_dict",
+]
 
 FORMAT = "mcit-operator-script/1"
 
@@ -152,7 +163,7 @@ class OperatorScript:
             runs.append(Run(cur[0].workflow, tuple(cur)))
         return tuple(runs)
 
-    def with_runs(self, runs: Iterable[Run]) -> "OperatorScript":
+    def with_runs(self, runs: Iterable[Run]) -> OperatorScript:
         """A shorter script made of some of this script's runs (e.g. for a quick demo test)."""
         actions = tuple(a for r in runs for a in r.actions)
         return OperatorScript(self.scene, actions, self.description, dict(self.generator, shortened=True))
@@ -230,7 +241,9 @@ def _action(d: Any, i: int, last_t: float) -> Action:
             continue
         kind = required.get(key) or optional.get(key)
         if kind is None:
-            raise ScriptError(f"{where} ({wf}.{act}): unknown argument '{key}'; allowed: {sorted(required) + sorted(optional)}")
+            raise ScriptError(
+                f"{where} ({wf}.{act}): unknown argument '{key}'; allowed: {sorted(required) + sorted(optional)}"
+            )
         args[key] = _check_arg(value, kind, f"{where}.{key}")
     for key in required:
         if key not in args:
@@ -266,7 +279,9 @@ def script_from_dict(d: Any) -> OperatorScript:
         raise ScriptError(f"actions[0]: a script begins with a workflow's 'start', got {first.workflow}.{first.action}")
     for i, (prev, cur) in enumerate(zip(actions, actions[1:]), start=1):
         if cur.action != "start" and cur.workflow != prev.workflow:
-            raise ScriptError(f"actions[{i}]: {cur.workflow}.{cur.action} follows a {prev.workflow} action without a 'start'")
+            raise ScriptError(
+                f"actions[{i}]: {cur.workflow}.{cur.action} follows a {prev.workflow} action without a 'start'"
+            )
     return OperatorScript(scene, tuple(actions), str(d.get("description", "")), dict(d.get("generator") or {}))
 
 

@@ -9,7 +9,7 @@ renderer's (or a blur's, or a shading gradient's) doing.
 
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 from scipy.ndimage import map_coordinates
@@ -21,7 +21,9 @@ from .renderer import Renderer
 __all__ = ["edge_offsets", "visible_edges", "polygon_coverage"]
 
 
-def edge_offsets(image: np.ndarray, seg_uv: np.ndarray, *, half_px: float = 2.0, step_px: float = 0.25, n: int = 9) -> np.ndarray:
+def edge_offsets(
+    image: np.ndarray, seg_uv: np.ndarray, *, half_px: float = 2.0, step_px: float = 0.25, n: int = 9
+) -> np.ndarray:
     """Signed offsets (n,), pixels, of the image's edge from the line of ``seg_uv`` (2, 2).
 
     At n places spread over the middle half of the segment, the profile across it (±half_px,

@@ -175,7 +175,7 @@ class BodyCaster:
             hit = good & (t > 0) & (h >= 0) & (h <= H) & (rq + k * t * da >= 0) & (t < best)
             best = np.where(hit, t, best)
             face = np.where(hit, label, face)
-        for cap, (centre, r, hval) in enumerate(((s.p0, s.r0, 0.0), (s.p1, s.r1, H))):
+        for cap, (_centre, r, hval) in enumerate(((s.p0, s.r0, 0.0), (s.p1, s.r1, H))):
             if r <= 0:
                 continue
             ok = np.abs(da) > _EPS
@@ -218,7 +218,8 @@ class BodyCaster:
         if len(self.triangles):
             parts.append(self._triangles)
         parts += [
-            (lambda oo, dd, s=s, k=k: self._revolution(s, LABEL_SOLID + 3 * k, oo, dd)) for k, s in enumerate(self.solids)
+            (lambda oo, dd, s=s, k=k: self._revolution(s, LABEL_SOLID + 3 * k, oo, dd))
+            for k, s in enumerate(self.solids)
         ]
         for part in parts:
             t, f, nrm = part(o, d)
@@ -255,11 +256,11 @@ class SceneCaster:
         self.casters = casters if casters is not None else [BodyCaster(b.model) for b in self.bodies]
 
     @classmethod
-    def for_scene(cls, scene, t_s: float = 0.0, casters: list[BodyCaster] | None = None) -> "SceneCaster":
+    def for_scene(cls, scene, t_s: float = 0.0, casters: list[BodyCaster] | None = None) -> SceneCaster:
         """Every body of ``scene`` (app.scene.Scene) at its true pose at time t_s (seconds)."""
         return cls(scene.bodies, [b.pose_at(t_s) for b in scene.bodies], casters)
 
-    def with_poses(self, poses) -> "SceneCaster":
+    def with_poses(self, poses) -> SceneCaster:
         """The same bodies (and cached casters) at other poses."""
         return SceneCaster(self.bodies, poses, self.casters)
 
@@ -302,7 +303,9 @@ class SceneCaster:
             normal[hit] = n_obj[hit] @ self.poses[i][:3, :3].T
         return Hits(t_best, body, face, normal, X_obj)
 
-    def occluded(self, origin: np.ndarray, X_world: np.ndarray, body: int | None = None, tol_m: float = 1e-6) -> np.ndarray:
+    def occluded(
+        self, origin: np.ndarray, X_world: np.ndarray, body: int | None = None, tol_m: float = 1e-6
+    ) -> np.ndarray:
         """True (N,) for world points hidden from ``origin`` (3,) by a surface in front of them.
 
         With ``body`` (the index of the body the points lie on), that body is ignored: a point on

@@ -60,7 +60,11 @@ def _hash01(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray, salt: int) -> np.nda
 
 def _hash_unit(ix: np.ndarray, iy: np.ndarray, salt: int) -> np.ndarray:
     """Deterministic pseudo-random values in [0, 1) of pixel indices."""
-    return 0.5 * (_hash01(np.asarray(ix, np.int64), np.asarray(iy, np.int64), np.zeros_like(ix, np.int64), salt) + 1.0) % 1.0
+    return (
+        0.5
+        * (_hash01(np.asarray(ix, np.int64), np.asarray(iy, np.int64), np.zeros_like(ix, np.int64), salt) + 1.0)
+        % 1.0
+    )
 
 
 def value_noise(X: np.ndarray, scale_m: float, salt: int = 0) -> np.ndarray:
@@ -112,8 +116,10 @@ class Renderer:
         if lens is Renderer._SCENE_LENS:
             lens = getattr(scene, "lens", None) if camera is None else None
         if lens is not None and (lens.width, lens.height) != (self.camera.width, self.camera.height):
-            raise ValueError(f"the lens was calibrated on {lens.width}×{lens.height} images, the camera renders "
-                             f"{self.camera.width}×{self.camera.height}")
+            raise ValueError(
+                f"the lens was calibrated on {lens.width}×{lens.height} images, the camera renders "
+                f"{self.camera.width}×{self.camera.height}"
+            )
         self.lens = lens
         self._casters = [BodyCaster(b.model) for b in scene.bodies]
         C = self.camera.C

@@ -14,9 +14,9 @@ Rendering is deterministic and so is the encoder: re-rendering writes the same b
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -98,7 +98,9 @@ def render_video(
 
     spec = video or scene.video
     if spec is None:
-        raise SceneError(f"scene {scene.name!r} has no 'video' block: add {{\"file\": \"video.mp4\", \"fps\": 12, \"duration_s\": 20}}")
+        raise SceneError(
+            f'scene {scene.name!r} has no \'video\' block: add {{"file": "video.mp4", "fps": 12, "duration_s": 20}}'
+        )
     out = Path(path) if path is not None else spec.path
     fourcc = CODECS.get(out.suffix.lower())
     if fourcc is None:
@@ -123,5 +125,7 @@ def render_video(
     tmp.replace(out)  # a finished file or none: an interrupted render leaves the old video intact
     info = read_video_info(out)
     if info.frame_count != total or (info.width, info.height) != (w, h):
-        raise RuntimeError(f"{out}: read back {info.frame_count} frames of {info.width}×{info.height}, wrote {total} of {w}×{h}")
+        raise RuntimeError(
+            f"{out}: read back {info.frame_count} frames of {info.width}×{info.height}, wrote {total} of {w}×{h}"
+        )
     return info

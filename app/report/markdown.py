@@ -8,8 +8,9 @@ report.md with its PNG figures in one folder.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 __all__ = ["format_value", "markdown_table", "side_by_side", "ReportWriter"]
 
@@ -34,7 +35,9 @@ def format_value(v: Any, digits: int = 3) -> str:
     return str(v).replace("|", "\\|").replace("\n", " ")
 
 
-def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]], *, digits: int = 3, align: str | None = None) -> str:
+def markdown_table(
+    headers: Sequence[str], rows: Sequence[Sequence[Any]], *, digits: int = 3, align: str | None = None
+) -> str:
     """A Markdown table.
 
     headers : column titles. rows : rows of cells (numbers, text, None). digits : significant
@@ -106,7 +109,9 @@ class ReportWriter:
     def paragraph(self, text: str) -> None:
         self.parts.append(text.strip() + "\n")
 
-    def table(self, headers: Sequence[str], rows: Sequence[Sequence[Any]], *, digits: int = 3, caption: str = "") -> None:
+    def table(
+        self, headers: Sequence[str], rows: Sequence[Sequence[Any]], *, digits: int = 3, caption: str = ""
+    ) -> None:
         if caption:
             self.parts.append(f"*{caption}*\n")
         self.parts.append(markdown_table(headers, rows, digits=digits))

@@ -8,7 +8,7 @@
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -34,9 +34,14 @@ def _pyplot():
     return plt
 
 
-def plot_depth_errors(ours: Mapping[str, tuple[Sequence[float], Sequence[float]]], *, title: str = "Figure III.6 — depth error",
-                      label: str = "ours", points: Mapping[str, tuple[Sequence[float], Sequence[float]]] | None = None,
-                      points_label: str = "this run"):
+def plot_depth_errors(
+    ours: Mapping[str, tuple[Sequence[float], Sequence[float]]],
+    *,
+    title: str = "Figure III.6 — depth error",
+    label: str = "ours",
+    points: Mapping[str, tuple[Sequence[float], Sequence[float]]] | None = None,
+    points_label: str = "this run",
+):
     """Figure III.6, ours beside the paper's.
 
     ours : method → (distances_m (K,), depth errors in cm (K,)); methods named like Table III.2's
@@ -52,15 +57,25 @@ def plot_depth_errors(ours: Mapping[str, tuple[Sequence[float], Sequence[float]]
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
     dist = TABLE_III_2.column("distance_m")
     for m in ("tangential_vc_rf_cm", "bisecting_vc_rf_cm", "tangential_rf_cm"):
-        ax.plot(dist, depth_errors_cm(m), "--o", color=_COLOURS[m], alpha=0.55, ms=4, label=f"paper {METHOD_LABELS[m][:3]}")
+        ax.plot(
+            dist, depth_errors_cm(m), "--o", color=_COLOURS[m], alpha=0.55, ms=4, label=f"paper {METHOD_LABELS[m][:3]}"
+        )
     for m, (d, e) in ours.items():
         d, e = np.asarray(d, dtype=float), np.asarray(e, dtype=float)
         if d.shape != e.shape:
             raise ValueError(f"{m}: {d.shape} distances but {e.shape} errors")
         ax.plot(d, e, "-s", color=_COLOURS[m], ms=5, label=f"{label} {METHOD_LABELS[m][:3]}")
     for m, (d, e) in (points or {}).items():
-        ax.plot(np.asarray(d, dtype=float), np.asarray(e, dtype=float), "*", color=_COLOURS[m], ms=12, mec="k", mew=0.5,
-                label=f"{points_label} {METHOD_LABELS[m][:3]}")
+        ax.plot(
+            np.asarray(d, dtype=float),
+            np.asarray(e, dtype=float),
+            "*",
+            color=_COLOURS[m],
+            ms=12,
+            mec="k",
+            mew=0.5,
+            label=f"{points_label} {METHOD_LABELS[m][:3]}",
+        )
     ax.axhline(0.0, color="k", lw=0.6)
     ax.set_xlabel("distance object / sensors (m)")
     ax.set_ylabel("depth error (cm)")
@@ -92,7 +107,9 @@ def plot_pose_errors(
     for i, (method, (et, er)) in enumerate(errors.items()):
         et, er = np.asarray(et, dtype=float), np.asarray(er, dtype=float)
         if et.shape != er.shape or et.ndim != 1:
-            raise ValueError(f"{method}: translation {et.shape} and rotation {er.shape} errors must be two equal 1-D lists")
+            raise ValueError(
+                f"{method}: translation {et.shape} and rotation {er.shape} errors must be two equal 1-D lists"
+            )
         x = np.arange(1, len(et) + 1)
         k_max = max(k_max, len(et))
         ax_t.plot(x, et * 100.0, "-o", color=f"C{i}", label=method)
@@ -102,7 +119,12 @@ def plot_pose_errors(
         method = key.split("_")[0]
         if key.endswith("_m"):
             ax_t.axhline(value * 100.0, ls="--", lw=0.8, color="grey")
-            ax_t.annotate(f"paper {method} ≤ {value * 100:g} cm", (0.02, value * 100.0), xycoords=("axes fraction", "data"), fontsize=7)
+            ax_t.annotate(
+                f"paper {method} ≤ {value * 100:g} cm",
+                (0.02, value * 100.0),
+                xycoords=("axes fraction", "data"),
+                fontsize=7,
+            )
         elif key.endswith("_deg"):
             ax_r.axhline(value, ls="--", lw=0.8, color="grey")
             ax_r.annotate(f"paper {method} ≤ {value:g}°", (0.02, value), xycoords=("axes fraction", "data"), fontsize=7)

@@ -39,8 +39,7 @@ from urllib.parse import parse_qs, urlsplit
 
 from .page import client_page
 
-__all__ = ["AccessPolicy", "normalize_origin", "generate_token", "is_loopback", "open_viser_server",
-           "LOOPBACK_NAMES"]
+__all__ = ["AccessPolicy", "normalize_origin", "generate_token", "is_loopback", "open_viser_server", "LOOPBACK_NAMES"]
 
 log = logging.getLogger("mcit.access")
 
@@ -71,7 +70,9 @@ def normalize_origin(url: str) -> str:
     if parts.scheme not in ("http", "https") or not parts.hostname:
         raise ValueError(f"--allow-origin {url!r} is not a web address: give it as https://name[:port]")
     if parts.path not in ("", "/") or parts.query or parts.fragment or parts.username or parts.password:
-        raise ValueError(f"--allow-origin {url!r} has more than a scheme, host and port: give it as https://name[:port]")
+        raise ValueError(
+            f"--allow-origin {url!r} has more than a scheme, host and port: give it as https://name[:port]"
+        )
     try:
         port = parts.port
     except ValueError as exc:
@@ -118,8 +119,10 @@ class AccessPolicy:
     def __post_init__(self) -> None:
         object.__setattr__(self, "allow_origins", tuple(normalize_origin(o) for o in self.allow_origins))
         if self.token is not None and (len(self.token) < 8 or not _TOKEN_CHARS.issuperset(self.token)):
-            raise ValueError("the access token must be at least 8 characters among letters, digits and - _ . ~ "
-                             "(leave --token out to have one generated)")
+            raise ValueError(
+                "the access token must be at least 8 characters among letters, digits and - _ . ~ "
+                "(leave --token out to have one generated)"
+            )
 
     @property
     def cookie_name(self) -> str:
@@ -130,8 +133,9 @@ class AccessPolicy:
     def cookie_header(self, secure: bool) -> str:
         """The ``Set-Cookie`` value: this start's secret (never the token), HttpOnly, SameSite=Strict,
         Secure when the page came over HTTPS."""
-        return (f"{self.cookie_name}={self._cookie_secret}; Path=/; HttpOnly; SameSite=Strict"
-                + ("; Secure" if secure else ""))
+        return f"{self.cookie_name}={self._cookie_secret}; Path=/; HttpOnly; SameSite=Strict" + (
+            "; Secure" if secure else ""
+        )
 
     def _known_hosts(self) -> set[str]:
         hosts = {h for h in LOOPBACK_NAMES}
@@ -166,8 +170,10 @@ class AccessPolicy:
                     default = {"http": 80, "https": 443}[o.scheme]
                     same = (o.hostname, o.port or default) == (host_name, host_port or default)
                 if not same or (self.token is None and not self._host_known(host_name)):
-                    return (f"a page at {origin[:100]} is not this interface's own page "
-                            "(add it with --allow-origin if it is a proxy's address)"), False
+                    return (
+                        f"a page at {origin[:100]} is not this interface's own page "
+                        "(add it with --allow-origin if it is a proxy's address)"
+                    ), False
         elif origin is not None:  # "null": sandboxed frames, file:// pages
             return "a page without an origin (a local file or a sandboxed frame)", False
         elif self.token is None and host_name and not self._host_known(host_name):
@@ -278,5 +284,6 @@ def open_viser_server(policy: AccessPolicy, **kwargs):
         server.stop()
         raise RuntimeError(
             f"viser {viser.__version__} no longer opens its server through websockets.asyncio.server.serve, so the "
-            "origin check and access token could not be installed: refusing to serve (update app/ui/access.py)")
+            "origin check and access token could not be installed: refusing to serve (update app/ui/access.py)"
+        )
     return server

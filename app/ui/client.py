@@ -22,7 +22,8 @@ import functools
 import logging
 import threading
 import time
-from typing import TYPE_CHECKING, Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import viser
@@ -64,7 +65,7 @@ WHEEL_ZOOM_PER_DELTA = 0.0015  # a wheel notch (deltaY 100) zooms by 14 %
 class ClientPanel:
     """Per-client state and GUI. ``client`` is viser's handle; ``app`` the server."""
 
-    def __init__(self, app: "InterfaceServer", client: viser.ClientHandle):
+    def __init__(self, app: InterfaceServer, client: viser.ClientHandle):
         self.app = app
         self.client = client
         self.session = Session(app.site, client=f"browser-{client.client_id + getattr(app, 'client_number_offset', 0)}")
@@ -83,7 +84,9 @@ class ClientPanel:
         self._choice_options: dict[str, dict[str, Any]] = {}
         self.confirm_pending: tuple | None = None  # (action, args) waiting for its second press
         self.warning = ""  # a weak result's reasons, or a question, shown under the buttons
-        self._finished_at: tuple | None = None  # (the finished workflow, when this page saw it finish, the selection then)
+        self._finished_at: tuple | None = (
+            None  # (the finished workflow, when this page saw it finish, the selection then)
+        )
         self.error = ""  # the last refused action, said in the panel until the next action or step
         self.error_step: str | None = None  # the step it was said in
         self.frozen: FrameRef | None = None
@@ -101,7 +104,9 @@ class ClientPanel:
         self._foreign_keys(None)
         # Clicks are handled one at a time, in the order they arrive (viser runs plain callbacks
         # on a thread pool, where two quick clicks could swap); the event loop is not blocked.
-        self._click_worker = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"mcit-click-{client.client_id}")
+        self._click_worker = concurrent.futures.ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix=f"mcit-click-{client.client_id}"
+        )
         guarded_click = self._guard(self._on_click)
 
         async def on_click(event) -> None:  # its arrival time read here: a busy worker does not split a double click
@@ -144,10 +149,13 @@ class ClientPanel:
             except Exception as exc:  # noqa: BLE001 - the server must survive any callback error
                 log.exception("callback %s failed", getattr(fn, "__name__", fn))
                 self.error = "Something went wrong inside mcit; nothing was written. Cancel the workflow and try again."
-                self.notify("Internal error", f"{self.error} ({type(exc).__name__}: {exc}; the error is logged.)", "red")
+                self.notify(
+                    "Internal error", f"{self.error} ({type(exc).__name__}: {exc}; the error is logged.)", "red"
+                )
             finally:
                 self.dirty = True
                 self.app.wake()
+
         return wrapper
 
     def _step_name(self) -> str | None:
@@ -162,8 +170,13 @@ class ClientPanel:
         """A notification on this client (errors and ``stays`` ones stay until closed, others close
         after a few seconds)."""
         try:
-            return self.client.add_notification(title, body, color=color, with_close_button=True,
-                                                auto_close_seconds=None if (color == "red" or stays) else 6.0)
+            return self.client.add_notification(
+                title,
+                body,
+                color=color,
+                with_close_button=True,
+                auto_close_seconds=None if (color == "red" or stays) else 6.0,
+            )
         except Exception:  # noqa: BLE001 - the client may have gone
             log.debug("notification to a departed client dropped", exc_info=True)
             return None
@@ -177,7 +190,9 @@ class ClientPanel:
         except Exception:  # noqa: BLE001 - layout only
             log.debug("could not dock the panel", exc_info=True)
         # The workflow under way comes first: its instruction and actions are always above the fold.
-        self.gui_title = gui.add_markdown(Md("**No workflow.** Click an object to select it, or start a workflow below."))
+        self.gui_title = gui.add_markdown(
+            Md("**No workflow.** Click an object to select it, or start a workflow below.")
+        )
         self.gui_progress = gui.add_progress_bar(0.0, visible=False)
         self.gui_actions = gui.add_folder(None)
         # A question asked once more (a weak result, Redo) goes under the buttons: shown above them it
@@ -191,31 +206,47 @@ class ClientPanel:
             for label, name in START_BUTTONS:
                 button = gui.add_button(label)
                 button.on_click(self._guard(functools.partial(self._on_start, name)))
-            self.gui_shape = gui.add_dropdown("Shape", ("box", "cylinder", "cone", "wedge", "pyramid"), initial_value="box",
-                                              hint="Model object: the shape you see")
+            self.gui_shape = gui.add_dropdown(
+                "Shape",
+                ("box", "cylinder", "cone", "wedge", "pyramid"),
+                initial_value="box",
+                hint="Model object: the shape you see",
+            )
             self.gui_vertical = gui.add_checkbox("Vertical", True, hint="Model object: its axis/sides are vertical")
             self.gui_on_table = gui.add_checkbox("Lies on the table", True, hint="Model object: it stands on the table")
-            self.gui_snap = gui.add_checkbox("Snap clicks", True, hint="Snap clicked edges and corners to the image "
-                                             "(Refuse snap keeps a click as clicked)")
+            self.gui_snap = gui.add_checkbox(
+                "Snap clicks",
+                True,
+                hint="Snap clicked edges and corners to the image (Refuse snap keeps a click as clicked)",
+            )
             self.gui_snap.on_update(self._guard(lambda _e: self.session.set_snap(bool(self.gui_snap.value))))
         with gui.add_folder("Frame and view"):
             self.gui_frame = gui.add_markdown("")
-            self.gui_freeze = gui.add_button("Freeze (F)", hint="Freeze the newest frame: clicks, snapping and solving use it")
+            self.gui_freeze = gui.add_button(
+                "Freeze (F)", hint="Freeze the newest frame: clicks, snapping and solving use it"
+            )
             self.gui_freeze.on_click(self._guard(lambda _e: self._freeze_back(0)))
-            self.gui_live = gui.add_button("Show live (L)", hint="Look at the live video (clicks still go to the frozen frame: "
-                                           "switch back to click)")
+            self.gui_live = gui.add_button(
+                "Show live (L)",
+                hint="Look at the live video (clicks still go to the frozen frame: switch back to click)",
+            )
             self.gui_live.on_click(self._guard(lambda _e: self._toggle_live()))
             self.gui_scrub = gui.add_slider("Seconds back", 0.0, float(self.app.recent.seconds), 0.5, 0.0)
             self.gui_scrub.on_update(self._guard(self._on_scrub))
             self.gui_view = gui.add_button_group("View", ("Video", "3D world"))
             self.gui_view.on_click(self._guard(self._on_view))
-            self.gui_fit = gui.add_button("Fit view (H)", icon=viser.Icon.ZOOM_RESET,
-                                          hint="Show the whole image (a left drag zooms onto a rectangle)")
+            self.gui_fit = gui.add_button(
+                "Fit view (H)",
+                icon=viser.Icon.ZOOM_RESET,
+                hint="Show the whole image (a left drag zooms onto a rectangle)",
+            )
             self.gui_fit.on_click(self._guard(lambda _e: self._request_fit()))
         with gui.add_folder("Object"):
             self.gui_object = gui.add_dropdown("Object", (NO_SELECTION,), initial_value=NO_SELECTION)
             self.gui_object.on_update(self._guard(self._on_object))
-            self.gui_stale = gui.add_button("Mark stale", hint="The selected object has moved: flag it until its pose is updated")
+            self.gui_stale = gui.add_button(
+                "Mark stale", hint="The selected object has moved: flag it until its pose is updated"
+            )
             self.gui_stale.on_click(self._guard(self._on_stale))
         with gui.add_folder("Result"):
             self.gui_report = gui.add_markdown("")
@@ -236,8 +267,11 @@ class ClientPanel:
             self._click_worker.submit(guarded_double, str(self.gui_double.value), time.monotonic())
 
         self.gui_double.on_update(on_double)
-        for label, key, fn in (("Freeze", "F", lambda: self._freeze_back(0)), ("Show live / frozen", "L", self._toggle_live),
-                               ("Fit view", "H", self._request_fit)):  # GLOBAL_KEYS
+        for label, key, fn in (
+            ("Freeze", "F", lambda: self._freeze_back(0)),
+            ("Show live / frozen", "L", self._toggle_live),
+            ("Fit view", "H", self._request_fit),
+        ):  # GLOBAL_KEYS
             cmd = gui.add_command(label, hotkey=key)
             cmd.on_trigger(self._guard(lambda _e, fn=fn: fn()))
 
@@ -258,15 +292,20 @@ class ClientPanel:
         with self.gui_actions:
             for c in wf.controls:
                 if c.kind == "choice":
-                    handle = gui.add_dropdown(c.label, (NO_CHOICE,), initial_value=NO_CHOICE, hint=c.hint or None,
-                                              visible=False)
+                    handle = gui.add_dropdown(
+                        c.label, (NO_CHOICE,), initial_value=NO_CHOICE, hint=c.hint or None, visible=False
+                    )
                     handle.on_update(self._guard(functools.partial(self._on_choice, c.action)))
                 else:
                     handle = gui.add_button(c.button_label, color=c.color, hint=c.hint or None, visible=False)
                     handle.on_click(self._guard(functools.partial(self._press_event, c.action)))
                     if c.key is not None:
-                        cmd = gui.add_command(f"{wf.title}: {c.label}", hotkey=c.key, description=c.hint or None,
-                                              disabled=live_keys.get(c.key) != c.action)
+                        cmd = gui.add_command(
+                            f"{wf.title}: {c.label}",
+                            hotkey=c.key,
+                            description=c.hint or None,
+                            disabled=live_keys.get(c.key) != c.action,
+                        )
                         cmd.on_trigger(self._guard(functools.partial(self._press_event, c.action)))
                         self.commands.append(cmd)
                         self._command_of[c.action] = cmd
@@ -279,18 +318,28 @@ class ClientPanel:
         uses: dict[str, list[str]] = {}
         for cls in WORKFLOWS.values():
             for c in getattr(cls, "controls", ()):
-                if c.key and c.key.lower() not in own and c.key.lower() not in GLOBAL_KEYS and (wf is not None or c.key != "escape"):
+                if (
+                    c.key
+                    and c.key.lower() not in own
+                    and c.key.lower() not in GLOBAL_KEYS
+                    and (wf is not None or c.key != "escape")
+                ):
                     uses.setdefault(c.key, [])
                     if f"{c.label} in {cls.title}" not in uses[c.key]:
                         uses[c.key].append(f"{c.label} in {cls.title}")
-        here = (f"{wf.title}'s keys: " + ", ".join(f"{c.key_text} {c.label}" for c in wf.controls if c.key)
-                if wf is not None else "start a workflow first")
+        here = (
+            f"{wf.title}'s keys: " + ", ".join(f"{c.key_text} {c.label}" for c in wf.controls if c.key)
+            if wf is not None
+            else "start a workflow first"
+        )
         for key, where in sorted(uses.items()):
             name = KEY_TEXT.get(key, key.upper())
 
             def said(_event, name=name, where=where) -> None:
-                raise WorkflowError(f"{name} does nothing {'in ' + wf.title if wf is not None else 'now'} "
-                                    f"(it is {', '.join(where[:2])}): {here}")
+                raise WorkflowError(
+                    f"{name} does nothing {'in ' + wf.title if wf is not None else 'now'} "
+                    f"(it is {', '.join(where[:2])}): {here}"
+                )
 
             cmd = self.client.gui.add_command(f"{name}: {', '.join(where[:2])}", hotkey=key)
             cmd.on_trigger(self._guard(said))
@@ -303,10 +352,16 @@ class ClientPanel:
         options: dict[str, Any] = {}
         if name == "model_object" and self.gui_shape.value in ("wedge", "pyramid"):
             # A polyhedron the operator names: its own workflow (faces identified, sides assigned to edges).
-            name, options = "model_polyhedron", {"shape": self.gui_shape.value, "on_table": bool(self.gui_on_table.value)}
+            name, options = (
+                "model_polyhedron",
+                {"shape": self.gui_shape.value, "on_table": bool(self.gui_on_table.value)},
+            )
         elif name == "model_object":
-            options = {"shape": self.gui_shape.value, "vertical": bool(self.gui_vertical.value),
-                       "on_table": bool(self.gui_on_table.value)}
+            options = {
+                "shape": self.gui_shape.value,
+                "vertical": bool(self.gui_vertical.value),
+                "on_table": bool(self.gui_on_table.value),
+            }
         if name not in WORKFLOWS:
             raise WorkflowError(f"the {name.replace('_', ' ')} workflow is not available in this build")
         if self.feeder is not None:
@@ -316,8 +371,13 @@ class ClientPanel:
         wf = self.session.start(name, **options)
         if name == "track":
             self.feeder = TrackFeeder(self, wf, self.app.grabber)
-        if name not in LIVE_WORKFLOWS and frame is None and self.frozen is not None and self.frozen_by is None \
-                and not self.show_live:
+        if (
+            name not in LIVE_WORKFLOWS
+            and frame is None
+            and self.frozen is not None
+            and self.frozen_by is None
+            and not self.show_live
+        ):
             # a frame the operator froze (F, Seconds back) before starting: the workflow's clicks use it (a
             # new operator froze t = 3.4 s, started a workflow, and found the newest frame frozen instead)
             self._adopt_frozen(wf)
@@ -355,8 +415,10 @@ class ClientPanel:
             targets = bool(getattr(wf, "targets", None))  # Designate's: nothing written, but the list goes
             if (self._workflow_has_clicks() or targets) and self.confirm_pending != ("cancel", ()):
                 self.confirm_pending, self.error = ("cancel", ()), ""
-                self.warning = Md("Cancel throws away what you did in {} (your clicks and measurements; nothing was "
-                                  "written). Press **Cancel** again to throw it away, or go on.").format(wf.title)
+                self.warning = Md(
+                    "Cancel throws away what you did in {} (your clicks and measurements; nothing was "
+                    "written). Press **Cancel** again to throw it away, or go on."
+                ).format(wf.title)
                 self._relabel("cancel", f"Cancel: confirm ({c.key_text})" if c.key else "Cancel: confirm")
                 return
             self.confirm_pending, self.warning, self.error = None, "", ""
@@ -389,8 +451,11 @@ class ClientPanel:
         self.confirm_pending, self.warning, self.error = None, "", ""
         wf.message = ""  # old messages go: the action says what it did
         if c.kind == "long":
-            self.worker = threading.Thread(target=self._guard(lambda: self._act(wf, c, args)), daemon=True,
-                                           name=f"mcit-measure-{self.client.client_id}")
+            self.worker = threading.Thread(
+                target=self._guard(lambda: self._act(wf, c, args)),
+                daemon=True,
+                name=f"mcit-measure-{self.client.client_id}",
+            )
             self.worker.start()
             return
         self._act(wf, c, args)
@@ -403,7 +468,9 @@ class ClientPanel:
             if where is None:
                 raise
             said = str(exc).rstrip(".")
-            raise WorkflowError(f"{said}. {where[0].upper()}{where[1:]}" if where.startswith("your") else f"{said} ({where})") from None
+            raise WorkflowError(
+                f"{said}. {where[0].upper()}{where[1:]}" if where.startswith("your") else f"{said} ({where})"
+            ) from None
         if not wf.message:
             wf.message = f"{c.label}: done." if c.action not in ("resume", "pause", "restart") else ""
         # (an accepted result is said at the top of the panel: no toast over the video's corner)
@@ -458,8 +525,9 @@ class ClientPanel:
             self.frozen = None
             return
         earlier = self.app.recent.before(frame, MOTION_GAP_S)  # to see whether what is clicked on was moving
-        self.frozen = FrameRef(frame.image, float(frame.t_s), int(frame.index), source,
-                               previous=None if earlier is None else earlier.image)
+        self.frozen = FrameRef(
+            frame.image, float(frame.t_s), int(frame.index), source, previous=None if earlier is None else earlier.image
+        )
         self.show_live = False
         wf = self.session.workflow
         # a workflow's frozen frame goes with it; one frozen with no workflow under way (to look at
@@ -472,8 +540,9 @@ class ClientPanel:
         if wf is not None and not wf.finished:
             wf.use_frame(self.frozen)
             if wf.name == "update_pose":  # its auto match and search read the frame's edges: ready them now
-                threading.Thread(target=_prepare_frame, args=(self.frozen.image,), daemon=True,
-                                 name="mcit-frame-edges").start()
+                threading.Thread(
+                    target=_prepare_frame, args=(self.frozen.image,), daemon=True, name="mcit-frame-edges"
+                ).start()
 
     def _unfreeze(self) -> None:
         self.frozen = None
@@ -487,15 +556,22 @@ class ClientPanel:
     def _freeze_back(self, seconds: float) -> None:
         """Freeze the frame shown ``seconds`` before the newest (0: the newest)."""
         wf = self.session.workflow
-        if wf is not None and not wf.finished and (wf.name == "history" or (
-                wf.name == "track" and wf.current_step().name in ("tracking", "waiting"))):
-            raise WorkflowError(f"{wf.title} follows the live video: nothing to freeze"
-                                + (" (Pause it first)" if wf.name == "track" else ""))
+        if (
+            wf is not None
+            and not wf.finished
+            and (wf.name == "history" or (wf.name == "track" and wf.current_step().name in ("tracking", "waiting")))
+        ):
+            raise WorkflowError(
+                f"{wf.title} follows the live video: nothing to freeze"
+                + (" (Pause it first)" if wf.name == "track" else "")
+            )
         if wf is not None and wf.finished and self._finished_at is not None and self._finished_at[0] is wf:
             self._finished_at = (wf, self._finished_at[1], object())  # the operator moved on: its text goes
         if self._workflow_has_clicks():
-            raise WorkflowError("your clicks were made on the frozen frame: every click of a workflow uses one frame. "
-                                "Remove them (Remove last) or Cancel before freezing another frame")
+            raise WorkflowError(
+                "your clicks were made on the frozen frame: every click of a workflow uses one frame. "
+                "Remove them (Remove last) or Cancel before freezing another frame"
+            )
         frame = self.app.recent.seconds_back(seconds) if seconds > 0 else self.app.grabber.latest()
         if frame is None:
             raise WorkflowError("no video frame has arrived yet: check the video source")
@@ -554,8 +630,16 @@ class ClientPanel:
             image = cv2.resize(image, None, fx=up, fy=up, interpolation=cv2.INTER_NEAREST)
         rw, rh = pw.render_size
         cx, cy, _ = pw.image_center
-        self.client.scene.add_image("/frozen", image, rw, rh, format="png", position=(float(cx), float(cy), Z_FROZEN),
-                                    cast_shadow=False, receive_shadow=False)
+        self.client.scene.add_image(
+            "/frozen",
+            image,
+            rw,
+            rh,
+            format="png",
+            position=(float(cx), float(cy), Z_FROZEN),
+            cast_shadow=False,
+            receive_shadow=False,
+        )
 
     # ------------------------------------------------------------------ clicks
     def on_pixel_click(self, uv: np.ndarray, at: float | None = None, double: bool | None = None) -> None:
@@ -566,7 +650,9 @@ class ClientPanel:
         wf = self.session.workflow
         now, last = (time.monotonic() if at is None else float(at)), getattr(self, "_last_click", None)
         if double is None:
-            double = last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX
+            double = (
+                last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX
+            )
         # the frame shown at this click: a double click that starts Update pose freezes it (the newest, a
         # moment later, showed a moving box elsewhere: a new operator's run)
         self._last_click = (now, np.asarray(uv, float).copy(), self.session.selected, self.app.grabber.latest())
@@ -586,8 +672,10 @@ class ClientPanel:
                 # table's search was refused, and a new operator was left in Update pose: table)
                 name = on
             if name is None:
-                raise WorkflowError("a double click finds the pose of the selected object: select it by a click where the "
-                                    "database draws it, then double-click where it is in the video")
+                raise WorkflowError(
+                    "a double click finds the pose of the selected object: select it by a click where the "
+                    "database draws it, then double-click where it is in the video"
+                )
             self.session.select(name)
             # the frame the double click was made on: the one the operator froze (F, Seconds back) when one is
             # shown, else the live frame shown at its first click (a new operator's frozen t = 24.75 s was
@@ -615,8 +703,10 @@ class ClientPanel:
                 return
             if step.clicks:
                 if self.show_live and self.frozen is not None:
-                    raise WorkflowError("you are looking at the live video: clicks go to the frozen frame. Press Show "
-                                        "frozen (L) to see it, then click")
+                    raise WorkflowError(
+                        "you are looking at the live video: clicks go to the frozen frame. Press Show "
+                        "frozen (L) to see it, then click"
+                    )
                 self.error, self.confirm_pending, self.warning = "", None, ""
                 wf.message = ""
                 wf.click(uv)
@@ -633,10 +723,12 @@ class ClientPanel:
         selected, and read the same refusal three times, not knowing whether a click was taken)."""
         other = self._object_at(uv)
         # when it was (a repeated refusal reads as new: the pixel meant nothing to a new operator)
-        self._double_at = (f"your double click is on {other} as the database draws it: to update {other}, Cancel (Esc), "
-                           "click it to select it, then double-click where it is in the video"
-                           if other not in (None, name) and not self._is_table(other)
-                           else f"double click at {time.strftime('%H:%M:%S')}")
+        self._double_at = (
+            f"your double click is on {other} as the database draws it: to update {other}, Cancel (Esc), "
+            "click it to select it, then double-click where it is in the video"
+            if other not in (None, name) and not self._is_table(other)
+            else f"double click at {time.strftime('%H:%M:%S')}"
+        )
         self.press("find")
 
     def _on_click(self, event, arrival: float | None = None) -> None:
@@ -649,7 +741,9 @@ class ClientPanel:
     def _handle_click(self, event, arrival: float | None = None) -> None:
         if self.view != "video":
             raise WorkflowError("clicks work on the video: switch the view to Video")
-        uv = self._on_image(self.app.pixel_world.pixel_from_ray(np.array(event.ray_origin), np.array(event.ray_direction)))
+        uv = self._on_image(
+            self.app.pixel_world.pixel_from_ray(np.array(event.ray_origin), np.array(event.ray_direction))
+        )
         # the page tells double clicks (_on_double), keeping their second click from the viewer; two clicks
         # that reach the server close in time and place are one too (a page whose script did not run)
         self.on_pixel_click(uv, arrival)
@@ -764,7 +858,9 @@ class ClientPanel:
         try:
             cam = self.client.camera
             dist = abs(float(cam.position[2]))
-            visible = 2.0 * dist * np.tan(float(cam.fov) / 2.0) / self.app.pixel_world.k  # video px across the canvas' height
+            visible = (
+                2.0 * dist * np.tan(float(cam.fov) / 2.0) / self.app.pixel_world.k
+            )  # video px across the canvas' height
             k = visible / float(cam.image_height)
         except (AssertionError, ZeroDivisionError, TypeError, AttributeError, ValueError):
             return 1.0
@@ -834,8 +930,12 @@ class ClientPanel:
         wf = self.session.workflow
         if wf is not self.built_for or (wf is not None and wf.finished and self.controls):
             ended = self.built_for
-            if ended is not None and ended.finished and getattr(ended, "progress", None) is None \
-                    and ended.name in ("calibrate_turret", "model_object", "model_polyhedron", "designate"):
+            if (
+                ended is not None
+                and ended.finished
+                and getattr(ended, "progress", None) is None
+                and ended.name in ("calibrate_turret", "model_object", "model_polyhedron", "designate")
+            ):
                 self.app.site.set_beam(None)  # the range finder's spot of a closed workflow would go stale
             self._rebuild_controls()
         idle = wf is None or wf.finished
@@ -868,8 +968,9 @@ class ClientPanel:
         scale = self._zoom_scale(self.client.camera) if self.view == "video" else None
         self.marks_scale = 1.0 if scale is None else scale
         pw = self.app.pixel_world
-        batch, labels = draw_marks(site.camera, marks, objects, pw.width, pw.height, selected=self.session.selected,
-                                   scale=self.marks_scale)
+        batch, labels = draw_marks(
+            site.camera, marks, objects, pw.width, pw.height, selected=self.session.selected, scale=self.marks_scale
+        )
         labels = spread_labels(labels, self._image_px_per_screen_px())
         self._labels_sent = self.app.send_client_overlay(self.client, batch, labels, self._labels_sent)
         self._update_texts(wf)
@@ -910,8 +1011,13 @@ class ClientPanel:
     def _update_texts(self, wf) -> None:
         selected = self.session.selected
         idle = _idle_text(selected)
-        if wf is not None and wf.finished and self._finished_at is not None and self._finished_at[0] is wf \
-                and self._finished_at[2] != selected:
+        if (
+            wf is not None
+            and wf.finished
+            and self._finished_at is not None
+            and self._finished_at[0] is wf
+            and self._finished_at[2] != selected
+        ):
             # a finished workflow's text goes once the operator selects another object (it stayed on), and does
             # not come back with the selection it finished with (a new operator's Designate "closed" text did)
             self._finished_at = (wf, self._finished_at[1], object())
@@ -940,7 +1046,12 @@ class ClientPanel:
             head = Md("**{}**{}").format(f"{wf.title}: {subject}" if subject else wf.title, state)
             prompt = wf.prompt_text()
             title = head + Md("\n\n") + prompt
-            if wf.message and not wf.finished and not self.warning and wf.message[:40] not in wf.prompt_text(markdown=False):
+            if (
+                wf.message
+                and not wf.finished
+                and not self.warning
+                and wf.message[:40] not in wf.prompt_text(markdown=False)
+            ):
                 title += Md("\n\n_{}_").format(wf.message)  # not said twice, nor above a question being asked
             weak = [w for w in self._weak_now(wf, step) if w not in wf.message]  # not said twice
             if weak and not self.warning:  # said with the result, not first at Accept (a new operator's)
@@ -963,11 +1074,21 @@ class ClientPanel:
         if text and self.gui_copy.value != text:
             self.gui_copy.value = text
         video = self.app.grabber.status()
-        live = Md("Live video (no frame frozen)" if video.live else "**Not live**: the video is lost and the image is "
-                  "its last frame, greyed; no frame frozen (the status below says more)")
-        frame = live + Md(". *Seconds back* freezes an earlier frame.") if self.frozen is None else (
-            Md("Frozen frame: t = {:.2f} s").format(self.frozen.t_s) + Md(" · **live shown**" if self.show_live else "")
-            + Md(". *Seconds back*: a frame that long before the live one."))
+        live = Md(
+            "Live video (no frame frozen)"
+            if video.live
+            else "**Not live**: the video is lost and the image is "
+            "its last frame, greyed; no frame frozen (the status below says more)"
+        )
+        frame = (
+            live + Md(". *Seconds back* freezes an earlier frame.")
+            if self.frozen is None
+            else (
+                Md("Frozen frame: t = {:.2f} s").format(self.frozen.t_s)
+                + Md(" · **live shown**" if self.show_live else "")
+                + Md(". *Seconds back*: a frame that long before the live one.")
+            )
+        )
         _show(self.gui_frame, frame)
         live_label = "Show frozen (L)" if self.show_live and self.frozen is not None else "Show live (L)"
         if self.gui_live.label != live_label:  # says what it does now (it kept "Show live" while live was shown)
@@ -1044,8 +1165,10 @@ def _idle_text(selected: str | None) -> str:
     """What the panel says with no workflow under way."""
     if selected is None:
         return Md("Click an object to select it, or start a workflow below.")
-    return Md("**{}** is selected: double-click where it is in the video to find its pose, start a workflow below "
-              "(Update pose, Track, …), or click another object.").format(selected)
+    return Md(
+        "**{}** is selected: double-click where it is in the video to find its pose, start a workflow below "
+        "(Update pose, Track, …), or click another object."
+    ).format(selected)
 
 
 def _live_shortcuts(controls, applies) -> dict[str, str]:

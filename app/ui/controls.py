@@ -34,8 +34,15 @@ START_BUTTONS: tuple[tuple[str, str], ...] = (
 # Units a result key ends with → (shown unit, decimals): 0.01 px (an RMS of a few hundredths read "0"
 # beside the message's "0.03 px"), 0.1 mm, 0.01°. Lengths kept in metres are shown in mm, as every other
 # length in the panel (a new operator met "Range (m) 1.8688" beside "To surface (mm) 3.2").
-_UNITS = (("_px", "px", 2), ("_mm", "mm", 1), ("_cm", "cm", 2), ("_deg", "°", 2), ("_m", "mm", 1), ("_s", "s", 2),
-          ("_pct", "%", 0))
+_UNITS = (
+    ("_px", "px", 2),
+    ("_mm", "mm", 1),
+    ("_cm", "cm", 2),
+    ("_deg", "°", 2),
+    ("_m", "mm", 1),
+    ("_s", "s", 2),
+    ("_pct", "%", 0),
+)
 _SCALE = {"_m": 1000.0}  # a key's value → the shown unit
 _WORDS = {"rms": "RMS", "std": "σ", "sd": "σ", "sigma": "σ", "uv": "pixel", "x_world": "X (world)", "xyz": "x y z"}
 

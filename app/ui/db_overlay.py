@@ -12,9 +12,10 @@ changes. It runs on the interface's database thread, never in the video frame's 
 from __future__ import annotations
 
 import threading
-from contextlib import nullcontext
+from collections.abc import Callable, Iterable
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
-from typing import Any, Callable, ContextManager, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -53,8 +54,14 @@ class DatabaseOverlay:
     atomic : callable returning a context manager that groups messages (``server.atomic``)
     """
 
-    def __init__(self, scene: Any, pixel_world: PixelWorld, z: float, line_px: float,
-                 atomic: Callable[[], ContextManager] | None = None):
+    def __init__(
+        self,
+        scene: Any,
+        pixel_world: PixelWorld,
+        z: float,
+        line_px: float,
+        atomic: Callable[[], AbstractContextManager] | None = None,
+    ):
         self.scene = scene
         self.pixel_world = pixel_world
         self.z = float(z)
@@ -96,7 +103,7 @@ class DatabaseOverlay:
             gone = [i for i in self._drawn if i not in live]
             for k in range(0, max(len(todo), 1), SEND_CHUNK):
                 with self.atomic():
-                    for obj, key, batch, label, wire, outline in todo[k:k + SEND_CHUNK]:
+                    for obj, key, batch, label, wire, outline in todo[k : k + SEND_CHUNK]:
                         self._send(obj, key, batch, label, wire)
                         self._drawn[obj.id].outline, self._drawn[obj.id].depth = outline
                     if k == 0:
@@ -108,8 +115,10 @@ class DatabaseOverlay:
                 order = [o.id for o in objects if o.id in self._drawn]
                 segs = [self._drawn[i].seg_uv for i in order]
                 owners = [np.full(len(s), self._drawn[i].name, dtype=object) for i, s in zip(order, segs)]
-                self._pick = (np.concatenate(segs) if segs else np.zeros((0, 2, 2)),
-                              np.concatenate(owners) if owners else np.zeros(0, dtype=object))
+                self._pick = (
+                    np.concatenate(segs) if segs else np.zeros((0, 2, 2)),
+                    np.concatenate(owners) if owners else np.zeros(0, dtype=object),
+                )
             return len(todo)
 
     def _send(self, obj: SiteObject, key: tuple, batch, label, wire) -> None:
@@ -123,8 +132,9 @@ class DatabaseOverlay:
             points, colors = batch.world(pw, self.z)
             points = points.astype(np.float32)
             if d.lines is None:
-                d.lines = self.scene.add_line_segments(self.node_name(obj.id), points, colors, thickness=self.line_px,
-                                                       thickness_units="screen")
+                d.lines = self.scene.add_line_segments(
+                    self.node_name(obj.id), points, colors, thickness=self.line_px, thickness_units="screen"
+                )
             else:
                 d.lines.points = points
                 d.lines.colors = colors
@@ -135,8 +145,9 @@ class DatabaseOverlay:
             uv, text = label
             position = tuple(float(v) for v in pw.to_world(uv, self.z))
             if d.label is None:
-                d.label = self.scene.add_label(self.label_name(obj.id), text, position=position,
-                                               anchor="bottom-center", font_screen_scale=0.9)
+                d.label = self.scene.add_label(
+                    self.label_name(obj.id), text, position=position, anchor="bottom-center", font_screen_scale=0.9
+                )
             else:
                 if d.label.text != text:
                     d.label.text = text

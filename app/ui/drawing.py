@@ -8,12 +8,20 @@ the benchmark times them.
 
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 import numpy as np
 
-from app.overlay import (COLORS, STATUS_COLORS, LineBatch, ProjectedWireframe, circle_marker, cross_markers,
-                         dash_segments, project_wireframe)
+from app.overlay import (
+    COLORS,
+    STATUS_COLORS,
+    LineBatch,
+    ProjectedWireframe,
+    circle_marker,
+    cross_markers,
+    dash_segments,
+    project_wireframe,
+)
 from app.workflows.base import Marks
 from app.workflows.site import SiteObject
 from core.camera import Camera
@@ -42,8 +50,9 @@ def label_anchor(pw: ProjectedWireframe, height: int | None = None) -> np.ndarra
     return np.array([0.5 * (lo + hi), P[:, 1].min() - 4.0])
 
 
-def draw_database(camera: Camera, objects: Iterable[SiteObject], width: int, height: int,
-                  hidden: str = "dashed") -> tuple[LineBatch, list[tuple[str, np.ndarray, str]]]:
+def draw_database(
+    camera: Camera, objects: Iterable[SiteObject], width: int, height: int, hidden: str = "dashed"
+) -> tuple[LineBatch, list[tuple[str, np.ndarray, str]]]:
     """Every object's wireframe at its database pose, colour by status.
 
     Returns the batch and labels (name, uv (2,), text).
@@ -59,8 +68,9 @@ def draw_database(camera: Camera, objects: Iterable[SiteObject], width: int, hei
     return batch, labels
 
 
-def draw_object(camera: Camera, obj: SiteObject, width: int, height: int, hidden: str = "dashed"
-                ) -> tuple[LineBatch, tuple[np.ndarray, str] | None, ProjectedWireframe]:
+def draw_object(
+    camera: Camera, obj: SiteObject, width: int, height: int, hidden: str = "dashed"
+) -> tuple[LineBatch, tuple[np.ndarray, str] | None, ProjectedWireframe]:
     """One object's wireframe at its database pose, colour by status: (batch, label (uv (2,), text)
     or None, its projection)."""
     batch = LineBatch()
@@ -74,8 +84,15 @@ def draw_object(camera: Camera, obj: SiteObject, width: int, height: int, hidden
     return batch, label, pw
 
 
-def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], width: int, height: int,
-               selected: str | None = None, scale: float = 1.0) -> tuple[LineBatch, list[tuple[np.ndarray, str]]]:
+def draw_marks(
+    camera: Camera,
+    marks: Marks,
+    objects: dict[str, SiteObject],
+    width: int,
+    height: int,
+    selected: str | None = None,
+    scale: float = 1.0,
+) -> tuple[LineBatch, list[tuple[np.ndarray, str]]]:
     """One operator's marks: the selected object, assigned edges, ghosts, tracked poses and their
     edge points, clicks (raw clicks dashed beside the snapped ones in use), residuals, targets and
     the beam spot. Returns the batch and labels (uv (2,), text).
@@ -90,13 +107,17 @@ def draw_marks(camera: Camera, marks: Marks, objects: dict[str, SiteObject], wid
     name = marks.selected or selected
     if name in objects:
         obj = objects[name]
-        batch.add_wireframe(project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height),
-                            STATUS_COLORS["selected"])
+        batch.add_wireframe(
+            project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height), STATUS_COLORS["selected"]
+        )
     # the chosen ghost last, drawn over the others (a near-identical candidate hid it: a new operator's run)
     for ghost in sorted(marks.ghosts, key=lambda g: bool(g.chosen)):
         pw = project_wireframe(camera, ghost.model, ghost.T_world_obj, width=width, height=height)
-        batch.add_wireframe(pw, COLORS["ghost_chosen"] if ghost.chosen else COLORS["ghost"],
-                            hidden="dashed" if ghost.chosen else "removed")
+        batch.add_wireframe(
+            pw,
+            COLORS["ghost_chosen"] if ghost.chosen else COLORS["ghost"],
+            hidden="dashed" if ghost.chosen else "removed",
+        )
     for ghost in marks.tracked:
         pw = project_wireframe(camera, ghost.model, ghost.T_world_obj, width=width, height=height)
         color = COLORS["tracked"] if ghost.chosen else tuple(int(c * 0.55) for c in COLORS["tracked"])

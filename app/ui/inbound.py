@@ -31,13 +31,20 @@ import threading
 import time
 import types
 import weakref
-from typing import Any, Callable, Literal, Union
+from collections.abc import Callable
+from typing import Any, Literal, Union, get_args, get_origin
 
 import msgspec
-from typing_extensions import get_args, get_origin, get_type_hints
+from typing_extensions import get_type_hints
 
-__all__ = ["InboundGuard", "guard_inbound_messages", "message_problem", "gui_update_problem", "LOG_INTERVAL_S",
-           "MAX_MAGNITUDE"]
+__all__ = [
+    "InboundGuard",
+    "guard_inbound_messages",
+    "message_problem",
+    "gui_update_problem",
+    "LOG_INTERVAL_S",
+    "MAX_MAGNITUDE",
+]
 
 log = logging.getLogger("mcit.ui.inbound")
 
@@ -74,6 +81,7 @@ def _type_name(annotation: Any) -> str:
 
 
 # --------------------------------------------------------------------------- checks by annotation
+
 
 def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
@@ -171,18 +179,24 @@ def _value_problem(value: Any, annotation: Any, path: str) -> str | None:
     return f"{path} is declared {_type_name(annotation)}, which the interface does not take from a browser"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _fields(cls: type) -> tuple[dict[str, Any], frozenset[str]]:
     """(annotation of each field a message of type ``cls`` carries, the names it must carry)."""
     hints = get_type_hints(cls)
     fields = dataclasses.fields(cls)
     annotations = {f.name: hints[f.name] for f in fields if f.name in hints}
-    required = frozenset(f.name for f in fields if f.name in annotations and f.init
-                         and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING)
+    required = frozenset(
+        f.name
+        for f in fields
+        if f.name in annotations
+        and f.init
+        and f.default is dataclasses.MISSING
+        and f.default_factory is dataclasses.MISSING
+    )
     return annotations, required
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _types(message_class: type) -> dict[str, type]:
     return {cls.__name__: cls for cls in message_class.get_subclasses()}
 
@@ -193,8 +207,10 @@ def _pointer_needs(mapping: dict) -> str | None:
     if points == 1 and (mapping["ray_origin"] is None or mapping["ray_direction"] is None):
         return "ScenePointerMessage: a click without its ray (ray_origin and ray_direction are null)"
     if len(mapping["screen_pos"]) != points:
-        return (f"ScenePointerMessage: a {mapping['event_type']} with {len(mapping['screen_pos'])} screen points, "
-                f"expected {points}")
+        return (
+            f"ScenePointerMessage: a {mapping['event_type']} with {len(mapping['screen_pos'])} screen points, "
+            f"expected {points}"
+        )
     return None
 
 
@@ -205,8 +221,10 @@ def _gui_update_needs(mapping: dict) -> str | None:
     return None
 
 
-_NEEDS: dict[str, Callable[[dict], str | None]] = {"ScenePointerMessage": _pointer_needs,
-                                                   "GuiUpdateMessage": _gui_update_needs}
+_NEEDS: dict[str, Callable[[dict], str | None]] = {
+    "ScenePointerMessage": _pointer_needs,
+    "GuiUpdateMessage": _gui_update_needs,
+}
 
 
 def message_problem(mapping: Any, message_class: type) -> str | None:
@@ -239,6 +257,7 @@ def message_problem(mapping: Any, message_class: type) -> str | None:
 
 # --------------------------------------------------------------------------- GUI updates
 
+
 def gui_update_problem(value: Any, handle: Any) -> str | None:
     """Why ``value``, a plain value a GUI update sets, does not fit the input ``handle`` it names, or None."""
     import viser
@@ -266,6 +285,7 @@ def gui_update_problem(value: Any, handle: Any) -> str | None:
 
 
 # --------------------------------------------------------------------------- the hook into viser
+
 
 class InboundGuard:
     """The checks on one viser server's incoming messages; ``dropped`` counts the messages dropped."""
@@ -310,8 +330,10 @@ class InboundGuard:
         if mapping["type"] == "FileTransferStartUpload":
             handle = self.gui_handle(client_id, mapping["source_component_uuid"])
             if handle is not None and not isinstance(handle, viser.GuiUploadButtonHandle):
-                return (f"FileTransferStartUpload names {type(handle).__name__} "
-                        f"{_shown(getattr(handle, 'label', ''))}, not an upload button")
+                return (
+                    f"FileTransferStartUpload names {type(handle).__name__} "
+                    f"{_shown(getattr(handle, 'label', ''))}, not an upload button"
+                )
         return None
 
     def sender(self, client_id: int, websocket) -> str:
@@ -349,8 +371,11 @@ class _CheckingReader:
 
     def close(self) -> None:
         if self.unsaid:
-            log.warning("dropped %d more messages from %s that the interface cannot read, before it left",
-                        self.unsaid, self.sender)
+            log.warning(
+                "dropped %d more messages from %s that the interface cannot read, before it left",
+                self.unsaid,
+                self.sender,
+            )
             self.unsaid = 0
 
     def deserialize(self, raw: Any) -> Any:
@@ -395,7 +420,7 @@ class _TextFramesToReader:
         return getattr(self._websocket, name)
 
 
-_guards: "weakref.WeakKeyDictionary[Any, InboundGuard]" = weakref.WeakKeyDictionary()  # by viser server
+_guards: weakref.WeakKeyDictionary[Any, InboundGuard] = weakref.WeakKeyDictionary()  # by viser server
 _install_lock = threading.Lock()
 
 
@@ -447,8 +472,9 @@ def _why_not_hookable(server) -> str | None:
     if worker is None or not any(_READER in code.co_names for code in _code_objects(worker.__code__)):
         return f"WebsockServer no longer starts {_READER} for each connection"
     ws_server = getattr(server, "_websock_server", None)
-    if not isinstance(getattr(ws_server, "_live_connections", None), dict) or not hasattr(ws_server,
-                                                                                       "disconnect_all_clients"):
+    if not isinstance(getattr(ws_server, "_live_connections", None), dict) or not hasattr(
+        ws_server, "disconnect_all_clients"
+    ):
         return "the websocket layer no longer lists its connections (_live_connections, disconnect_all_clients)"
     if not isinstance(getattr(getattr(server, "gui", None), "_gui_input_handle_from_uuid", None), dict):
         return "the GUI no longer lists its inputs by uuid (_gui_input_handle_from_uuid)"
@@ -468,8 +494,10 @@ def guard_inbound_messages(server, name_of: Callable[[int], str] | None = None) 
     problem = _why_not_hookable(server)
     if problem is not None:
         server.stop()
-        raise RuntimeError(f"viser {viser.__version__}: {problem}, so browser messages could not be checked: "
-                           "refusing to serve (update app/ui/inbound.py)")
+        raise RuntimeError(
+            f"viser {viser.__version__}: {problem}, so browser messages could not be checked: "
+            "refusing to serve (update app/ui/inbound.py)"
+        )
     infra = importlib.import_module(_INFRA)
     with _install_lock:
         if not getattr(getattr(infra, _READER), "mcit_checking", False):

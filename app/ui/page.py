@@ -62,12 +62,12 @@ def _decode88(text: str) -> bytes:
     n, r = divmod(len(digits), 5)
     values = np.zeros(n, np.int64)
     for j in range(5):
-        values = values * 88 + digits[j:n * 5:5]
+        values = values * 88 + digits[j : n * 5 : 5]
     out = (values[:, None] >> np.array([24, 16, 8, 0])) & 255
     tail = b""
     if r:
         v = 0
-        for d in digits[n * 5:]:
+        for d in digits[n * 5 :]:
             v = v * 88 + int(d)
         tail = v.to_bytes(r - 1, "big")
     return out.astype(np.uint8).tobytes() + tail
@@ -87,7 +87,7 @@ class ClientPage:
     csp: str
 
     @classmethod
-    def from_viser(cls, index_html: bytes, script: bytes) -> "ClientPage":
+    def from_viser(cls, index_html: bytes, script: bytes) -> ClientPage:
         """Build from viser's ``index.html``; ValueError when its loader is not the one this module reads."""
         import zstandard
 
@@ -102,21 +102,23 @@ class ClientPage:
         code = data[style_n:]
         code.decode("utf-8")  # the page runs it as text: it must be UTF-8 for the hash to match
         scripts = f"'self' {_sha256(m.group(4))} {_sha256(code)} 'unsafe-eval' 'wasm-unsafe-eval'"
-        csp = "; ".join((
-            "default-src 'none'",
-            f"script-src {scripts}",
-            f"worker-src 'self' blob:",
-            "style-src 'self' 'unsafe-inline'",
-            "img-src 'self' data: blob:",
-            "font-src 'self' data:",
-            "media-src 'self' data: blob:",
-            "connect-src 'self' data: blob:",
-            "frame-src 'none'",
-            "object-src 'none'",
-            "base-uri 'none'",
-            "form-action 'none'",
-            "frame-ancestors 'none'",
-        ))
+        csp = "; ".join(
+            (
+                "default-src 'none'",
+                f"script-src {scripts}",
+                "worker-src 'self' blob:",
+                "style-src 'self' 'unsafe-inline'",
+                "img-src 'self' data: blob:",
+                "font-src 'self' data:",
+                "media-src 'self' data: blob:",
+                "connect-src 'self' data: blob:",
+                "frame-src 'none'",
+                "object-src 'none'",
+                "base-uri 'none'",
+                "form-action 'none'",
+                "frame-ancestors 'none'",
+            )
+        )
         tag = f'<script src="{PAGE_SCRIPT_PATH}" defer></script>'.encode()
         page = index_html.replace(b"</head>", tag + b"</head>", 1)
         return cls(html=page, html_gzip=gzip.compress(page, 6), script=script, csp=csp)
@@ -128,8 +130,13 @@ class ClientPage:
         from websockets.http11 import Response
 
         def answer(body: bytes, content_type: str, gzipped: bool) -> Response:
-            headers = Headers({"Content-Type": content_type, "Content-Length": str(len(body)),
-                               "Content-Encoding": "gzip" if gzipped else "identity"})
+            headers = Headers(
+                {
+                    "Content-Type": content_type,
+                    "Content-Length": str(len(body)),
+                    "Content-Encoding": "gzip" if gzipped else "identity",
+                }
+            )
             return Response(http.HTTPStatus.OK, "OK", headers, body)
 
         async def serve(connection, request):
@@ -164,5 +171,7 @@ def client_page() -> ClientPage:
     try:
         return ClientPage.from_viser(index.read_bytes(), PAGE_SCRIPT.read_bytes())
     except (OSError, ValueError, ImportError) as exc:
-        raise RuntimeError(f"cannot serve viser {viser.__version__}'s page under mcit's Content-Security-Policy "
-                           f"({exc}): refusing to serve (update app/ui/page.py)") from exc
+        raise RuntimeError(
+            f"cannot serve viser {viser.__version__}'s page under mcit's Content-Security-Policy "
+            f"({exc}): refusing to serve (update app/ui/page.py)"
+        ) from exc

@@ -32,39 +32,79 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         "see README 'Security'.",
     )
     p.add_argument("--scene", type=Path, default=None, help="scene folder (default: the bundled workcell)")
-    p.add_argument("--host", default="127.0.0.1",
-                   help="address to listen on (default 127.0.0.1; any other address needs an access token, generated "
-                   "unless --token gives one)")
-    p.add_argument("--allow-origin", action="append", default=[], metavar="URL",
-                   help="also admit pages served from URL (a reverse proxy's public address, e.g. "
-                   "https://mcit.example.org); repeatable")
-    p.add_argument("--token", default=None,
-                   help="access token required to open the interface (open the printed URL, which carries it); "
-                   "default: none on loopback, a generated one otherwise")
-    p.add_argument("--port", type=port_number, default=8080,
-                   help="port, 1 to 65535 (default 8080; the next free one if taken; 0: any free port)")
-    p.add_argument("--video", default=None,
-                   help="video source: camera index (0), video file, image folder, image file or stream URL "
-                   "(default: the scene's video)")
-    p.add_argument("--fps", type=frame_rate, default=None,
-                   help="frame rate for image folders and stills, or to override a file's (above 0, at most 240)")
-    p.add_argument("--intrinsics", type=Path, default=None, metavar="FILE",
-                   help="the camera's intrinsics (K and lens distortion) from this calibration file (mcit "
-                   "calibrate-intrinsics' output, OpenCV .yml, ROS .yaml, ViSP .xml), instead of the scene's: frames are "
-                   "undistorted with its lens, and Calibrate camera can solve the camera's pose alone from 4 points (PnP)")
-    p.add_argument("--camera-name", default=None,
-                   help="with --intrinsics: the camera to read in a file that holds several (ViSP <name>, or a YAML "
-                   "file's camera key or camera_name)")
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to listen on (default 127.0.0.1; any other address needs an access token, generated "
+        "unless --token gives one)",
+    )
+    p.add_argument(
+        "--allow-origin",
+        action="append",
+        default=[],
+        metavar="URL",
+        help="also admit pages served from URL (a reverse proxy's public address, e.g. "
+        "https://mcit.example.org); repeatable",
+    )
+    p.add_argument(
+        "--token",
+        default=None,
+        help="access token required to open the interface (open the printed URL, which carries it); "
+        "default: none on loopback, a generated one otherwise",
+    )
+    p.add_argument(
+        "--port",
+        type=port_number,
+        default=8080,
+        help="port, 1 to 65535 (default 8080; the next free one if taken; 0: any free port)",
+    )
+    p.add_argument(
+        "--video",
+        default=None,
+        help="video source: camera index (0), video file, image folder, image file or stream URL "
+        "(default: the scene's video)",
+    )
+    p.add_argument(
+        "--fps",
+        type=frame_rate,
+        default=None,
+        help="frame rate for image folders and stills, or to override a file's (above 0, at most 240)",
+    )
+    p.add_argument(
+        "--intrinsics",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="the camera's intrinsics (K and lens distortion) from this calibration file (mcit "
+        "calibrate-intrinsics' output, OpenCV .yml, ROS .yaml, ViSP .xml), instead of the scene's: frames are "
+        "undistorted with its lens, and Calibrate camera can solve the camera's pose alone from 4 points (PnP)",
+    )
+    p.add_argument(
+        "--camera-name",
+        default=None,
+        help="with --intrinsics: the camera to read in a file that holds several (ViSP <name>, or a YAML "
+        "file's camera key or camera_name)",
+    )
     p.add_argument("--db", type=Path, default=None, help="database file (default: ~/.local/share/mcit/mcit.sqlite)")
-    p.add_argument("--rangefinder", default=None, help="range finder device path or URL (with --turret); default: emulated")
+    p.add_argument(
+        "--rangefinder", default=None, help="range finder device path or URL (with --turret); default: emulated"
+    )
     p.add_argument("--turret", default=None, help="turret device path or URL (with --rangefinder); default: emulated")
     p.add_argument("--no-devices", action="store_true", help="run without range finder and turret")
-    p.add_argument("--jpeg-quality", type=int, default=80, help="JPEG quality of the frames sent to browsers (default 80)")
-    p.add_argument("--feed-socket", type=Path, default=None, metavar="PATH",
-                   help="publish accepted pose changes and designated targets as JSON lines on this Unix socket, for a "
-                   "robot controller (docs/exchange.md)")
-    p.add_argument("--feed-file", type=Path, default=None, metavar="PATH",
-                   help="append the same JSON lines to this file")
+    p.add_argument(
+        "--jpeg-quality", type=int, default=80, help="JPEG quality of the frames sent to browsers (default 80)"
+    )
+    p.add_argument(
+        "--feed-socket",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="publish accepted pose changes and designated targets as JSON lines on this Unix socket, for a "
+        "robot controller (docs/exchange.md)",
+    )
+    p.add_argument(
+        "--feed-file", type=Path, default=None, metavar="PATH", help="append the same JSON lines to this file"
+    )
     p.set_defaults(func=run_serve)
     return p
 
@@ -101,8 +141,10 @@ def scene_with_intrinsics(scene, path, camera_name: str | None = None):
     path = Path(path).expanduser().resolve()
     intr = read_intrinsics(path, camera_name=camera_name, image_size=(w, h))
     if intr.width is not None and (intr.width, intr.height) != (w, h):
-        raise ValueError(f"--intrinsics {path}: the camera was calibrated on {intr.width}×{intr.height} images but the "
-                         f"scene's camera is {w}×{h}; give the intrinsics for this size")
+        raise ValueError(
+            f"--intrinsics {path}: the camera was calibrated on {intr.width}×{intr.height} images but the "
+            f"scene's camera is {w}×{h}; give the intrinsics for this size"
+        )
     _, T_cam_world = cam.decompose()
     camera = Camera.from_intrinsics(intr.K, T_cam_world, w, h)
     block = {"width": w, "height": h, "intrinsics_file": str(path), "T_world_cam": pose_to_json(invert_T(T_cam_world))}
@@ -119,8 +161,11 @@ def _access_policy(args: argparse.Namespace):
 
     if getattr(args, "token", None) is None and not is_loopback(args.host):
         args.token = generate_token()
-    return AccessPolicy(host=args.host, allow_origins=tuple(getattr(args, "allow_origin", None) or ()),
-                        token=getattr(args, "token", None))
+    return AccessPolicy(
+        host=args.host,
+        allow_origins=tuple(getattr(args, "allow_origin", None) or ()),
+        token=getattr(args, "token", None),
+    )
 
 
 def _check_host(host: str, port: int) -> None:
@@ -132,8 +177,10 @@ def _check_host(host: str, port: int) -> None:
     try:
         infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
     except (socket.gaierror, UnicodeError) as exc:
-        raise ValueError(f"--host {host}: not an address or a name this machine can resolve ({exc}); give one of its "
-                         "addresses, e.g. 127.0.0.1 (this machine only) or 0.0.0.0 (every network)") from None
+        raise ValueError(
+            f"--host {host}: not an address or a name this machine can resolve ({exc}); give one of its "
+            "addresses, e.g. 127.0.0.1 (this machine only) or 0.0.0.0 (every network)"
+        ) from None
     family, kind, proto, _, addr = infos[0]
     with socket.socket(family, kind, proto) as probe:
         probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -141,8 +188,10 @@ def _check_host(host: str, port: int) -> None:
             probe.bind((addr[0], 0))  # the address only: a port in use is viser's to handle
         except OSError as exc:
             if exc.errno in (errno.EADDRNOTAVAIL, errno.EAFNOSUPPORT):
-                raise ValueError(f"--host {host}: not an address of this machine ({exc.strerror}); give one of its "
-                                 "addresses, e.g. 127.0.0.1 (this machine only) or 0.0.0.0 (every network)") from None
+                raise ValueError(
+                    f"--host {host}: not an address of this machine ({exc.strerror}); give one of its "
+                    "addresses, e.g. 127.0.0.1 (this machine only) or 0.0.0.0 (every network)"
+                ) from None
             raise
 
 
@@ -205,9 +254,19 @@ def build_interface(args: argparse.Namespace):
             raise
         site.attach_feed(feed)
         closers.insert(0, feed.close)
-        log.info("live feed of poses and targets on %s", " and ".join(str(x) for x in (args.feed_socket, args.feed_file) if x))
-    server = InterfaceServer(site, grabber, host=args.host, port=args.port, jpeg_quality=args.jpeg_quality,
-                             allow_origins=access.allow_origins, token=access.token)
+        log.info(
+            "live feed of poses and targets on %s",
+            " and ".join(str(x) for x in (args.feed_socket, args.feed_file) if x),
+        )
+    server = InterfaceServer(
+        site,
+        grabber,
+        host=args.host,
+        port=args.port,
+        jpeg_quality=args.jpeg_quality,
+        allow_origins=access.allow_origins,
+        token=access.token,
+    )
     return server, closers
 
 
@@ -240,8 +299,11 @@ def run_serve(args: argparse.Namespace) -> int:
     from app.ui.access import is_loopback
 
     if not is_loopback(args.host):
-        print(f"mcit: listening on {args.host}: only browsers given the token in the address below can open the "
-              "interface, over plain HTTP (use a reverse proxy with HTTPS beyond a trusted network).", flush=True)
+        print(
+            f"mcit: listening on {args.host}: only browsers given the token in the address below can open the "
+            "interface, over plain HTTP (use a reverse proxy with HTTPS beyond a trusted network).",
+            flush=True,
+        )
     print(f"mcit: open {server.url} in a browser (Ctrl-C to stop)", flush=True)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

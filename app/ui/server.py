@@ -65,9 +65,19 @@ class InterfaceServer:
     jpeg_quality : quality of the video frames sent to the browsers.
     """
 
-    def __init__(self, site: Site, grabber: FrameGrabber, *, host: str = "127.0.0.1", port: int = 8080,
-                 k: float = 0.01, jpeg_quality: int = 80, verbose: bool = False,
-                 allow_origins: tuple[str, ...] = (), token: str | None = None):
+    def __init__(
+        self,
+        site: Site,
+        grabber: FrameGrabber,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        k: float = 0.01,
+        jpeg_quality: int = 80,
+        verbose: bool = False,
+        allow_origins: tuple[str, ...] = (),
+        token: str | None = None,
+    ):
         self.site = site
         self.grabber = grabber
         src = grabber.source
@@ -77,7 +87,9 @@ class InterfaceServer:
         quiet_malformed_messages()  # a message a browser sent that cannot be read: one log line, not a traceback
         self.server = open_viser_server(self.access, host=host, port=port, label="mcit", verbose=verbose)
         # each browser message checked against its type before viser dispatches it; a bad one dropped, one log line
-        self.inbound = guard_inbound_messages(self.server, name_of=lambda cid: f"browser-{cid + self.client_number_offset}")
+        self.inbound = guard_inbound_messages(
+            self.server, name_of=lambda cid: f"browser-{cid + self.client_number_offset}"
+        )
         # no Share button: it would open a tunnel to the interface through viser's public relay
         self.server.gui.configure_theme(show_share_button=False)
         self.host = host
@@ -110,8 +122,13 @@ class InterfaceServer:
         # Snapping, matching and tracking work on what the operator sees: the grabber's latest frame.
         site.set_frames(GrabberFrames(grabber))
         if site.camera.width != src.width or site.camera.height != src.height:
-            log.warning("video is %dx%d but the camera is calibrated for %dx%d: calibrate the camera",
-                        src.width, src.height, site.camera.width, site.camera.height)
+            log.warning(
+                "video is %dx%d but the camera is calibrated for %dx%d: calibrate the camera",
+                src.width,
+                src.height,
+                site.camera.width,
+                site.camera.height,
+            )
 
     # ------------------------------------------------------------------ life cycle
     @property
@@ -126,7 +143,7 @@ class InterfaceServer:
         token = "" if self.access.token is None else f"/?token={self.access.token}"
         return f"http://{host}:{self.port}{token}"
 
-    def start(self) -> "InterfaceServer":
+    def start(self) -> InterfaceServer:
         self.grabber.start()
         self._thread.start()
         self._db_thread.start()
@@ -161,11 +178,16 @@ class InterfaceServer:
             return
         with self.clients_lock:
             self.clients[client.client_id] = panel
-        mismatch = self.site.camera.width != self.pixel_world.width or self.site.camera.height != self.pixel_world.height
+        mismatch = (
+            self.site.camera.width != self.pixel_world.width or self.site.camera.height != self.pixel_world.height
+        )
         if mismatch:
-            panel.notify("Camera and video differ",
-                         f"The video is {self.pixel_world.width}×{self.pixel_world.height} but the camera is calibrated for "
-                         f"{self.site.camera.width}×{self.site.camera.height}: run Calibrate camera.", "yellow")
+            panel.notify(
+                "Camera and video differ",
+                f"The video is {self.pixel_world.width}×{self.pixel_world.height} but the camera is calibrated for "
+                f"{self.site.camera.width}×{self.site.camera.height}: run Calibrate camera.",
+                "yellow",
+            )
         self.wake()
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
@@ -180,19 +202,36 @@ class InterfaceServer:
         frame = self.grabber.latest()
         image = frame.image if frame is not None else np.zeros((pw.height, pw.width, 3), np.uint8)
         rw, rh = pw.render_size
-        self.video = self.server.scene.add_image("/video", image, rw, rh, format="jpeg", jpeg_quality=self.jpeg_quality,
-                                                 position=tuple(pw.image_center), cast_shadow=False, receive_shadow=False)
+        self.video = self.server.scene.add_image(
+            "/video",
+            image,
+            rw,
+            rh,
+            format="jpeg",
+            jpeg_quality=self.jpeg_quality,
+            position=tuple(pw.image_center),
+            cast_shadow=False,
+            receive_shadow=False,
+        )
         self.server.scene.world_axes.visible = False
 
     def _send_lines(self, scene_api, name: str, batch: LineBatch, z: float) -> None:
         if len(batch) == 0:
             # Per-vertex colours even when empty: a node first sent with one colour keeps ignoring
             # the per-vertex colours it gets later (they render white in viser 1.1.1).
-            scene_api.add_line_segments(name, np.zeros((1, 2, 3), np.float32), np.zeros((1, 2, 3), np.uint8),
-                                        thickness=LINE_PX, thickness_units="screen", visible=False)
+            scene_api.add_line_segments(
+                name,
+                np.zeros((1, 2, 3), np.float32),
+                np.zeros((1, 2, 3), np.uint8),
+                thickness=LINE_PX,
+                thickness_units="screen",
+                visible=False,
+            )
             return
         points, colors = batch.world(self.pixel_world, z)
-        scene_api.add_line_segments(name, points.astype(np.float32), colors, thickness=LINE_PX, thickness_units="screen")
+        scene_api.add_line_segments(
+            name, points.astype(np.float32), colors, thickness=LINE_PX, thickness_units="screen"
+        )
 
     def send_client_overlay(self, client: viser.ClientHandle, batch: LineBatch, labels: list, sent: dict) -> dict:
         """Draw one client's marks (client-scoped nodes); each label's bottom-left corner at its uv
@@ -202,7 +241,9 @@ class InterfaceServer:
         new: dict = {}
         for i, (uv, text) in enumerate(labels):
             name = f"/overlay/marks_labels/{i}"
-            position = tuple(float(v) for v in self.pixel_world.to_world(np.asarray(uv, float), Z_MARKS))  # spread_labels' corner
+            position = tuple(
+                float(v) for v in self.pixel_world.to_world(np.asarray(uv, float), Z_MARKS)
+            )  # spread_labels' corner
             new[name] = (text, position)
             if sent.get(name) != new[name]:
                 client.scene.add_label(name, text, position=position, anchor="bottom-left", font_screen_scale=0.8)
@@ -324,19 +365,22 @@ class InterfaceServer:
         src = self.grabber.source
         status = self.grabber.status()
         video = Md("**Video** {} · {}×{} · {:.1f} fps (shown {:.1f})").format(
-            src.description, src.width, src.height, src.fps, self.grabber.measured_fps)
+            src.description, src.width, src.height, src.fps, self.grabber.measured_fps
+        )
         if status.live:
             loop = src.duration_s if not src.live else None
             if src.live:
                 video += Md(" · **live**")
             elif loop and (src.frame_count or 0) > 1:  # say it: what moved in it jumps back at every loop
-                video += Md(" · **a recording, replayed every {:.1f} s** (not live: objects jump back when it "
-                            "restarts)").format(loop)
+                video += Md(
+                    " · **a recording, replayed every {:.1f} s** (not live: objects jump back when it restarts)"
+                ).format(loop)
         elif self.grabber.error is not None:
             video += Md("\n\n**Video stopped:** {}").format(self.grabber.error)
         else:  # lost (reconnecting) or waiting: the image shown is not live
             video += Md("\n\n**⚠ Not live: {}.** The image shown is the last frame, greyed{}.").format(
-                status.text, f" (last try: {status.reason})" if status.reason else "")
+                status.text, f" (last try: {status.reason})" if status.reason else ""
+            )
         cam = self.site.camera
         text = video + Md("\n\nCamera {}×{} · {} objects").format(cam.width, cam.height, len(self.site.objects()))
         with self.clients_lock:

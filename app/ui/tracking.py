@@ -72,11 +72,15 @@ class TrackFeeder:
                             pass
                         self.panel.error = f"Tracking paused: {exc}"  # said in the panel (no toast over the video)
                 if wf.lost_count != lost_seen:  # also at the top of the panel; this one stays until closed
-                    lost_seen = wf.lost_count   # (an auto-closing toast vanished under the cursor aiming at it)
+                    lost_seen = wf.lost_count  # (an auto-closing toast vanished under the cursor aiming at it)
                     # short: the panel's instruction says why and what to do (said once, not three times)
-                    lost_note = self.panel.notify("Tracking lost", f"{wf.object_name}: the track stopped on the last "
-                                                  "frame it fitted. The panel says why; Re-initialise or Restart there.",
-                                                  "orange", stays=True)
+                    lost_note = self.panel.notify(
+                        "Tracking lost",
+                        f"{wf.object_name}: the track stopped on the last "
+                        "frame it fitted. The panel says why; Re-initialise or Restart there.",
+                        "orange",
+                        stays=True,
+                    )
                 elif lost_note is not None and not wf.lost:  # following again: the old news goes
                     _remove(lost_note)
                     lost_note = None
@@ -84,8 +88,9 @@ class TrackFeeder:
                 self.panel.app.wake()
         except Exception as exc:  # noqa: BLE001 - say so, keep the server running
             log.exception("tracking %s failed", wf.object_name)
-            self.panel.notify("Tracking failed", f"{type(exc).__name__}: {exc}. Nothing was written; Cancel and Track "
-                              "again.", "red")
+            self.panel.notify(
+                "Tracking failed", f"{type(exc).__name__}: {exc}. Nothing was written; Cancel and Track again.", "red"
+            )
         finally:
             self.grabber.remove_listener(self._on_frame)
             if lost_note is not None:  # the track is over (finished, or another workflow started): its news goes

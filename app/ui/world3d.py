@@ -36,7 +36,9 @@ class World3D:
     def __init__(self, scene: viser.SceneApi, offset: np.ndarray):
         self.scene = scene
         self.offset = np.asarray(offset, float)
-        self.root = scene.add_frame("/world3d", show_axes=False, position=tuple(self.offset), wxyz=_wxyz(R_VIEWER_WORLD))
+        self.root = scene.add_frame(
+            "/world3d", show_axes=False, position=tuple(self.offset), wxyz=_wxyz(R_VIEWER_WORLD)
+        )
         scene.add_grid("/world3d/grid", width=4.0, height=4.0, plane="xy", cell_size=0.1, section_size=0.5)
         self._objects: dict[Any, tuple[tuple, Any, Any]] = {}  # id → ((version, status, name), model, handle)
         self._sensors_key: Any = None
@@ -74,13 +76,22 @@ class World3D:
             if old is not None:
                 self.scene.remove_by_name(name)
             V, F = obj.model.triangles(n_circle=32)
-            handle = self.scene.add_mesh_simple(name, V.astype(np.float32), F.astype(np.uint32), color=color,
-                                                opacity=0.35 if obj.kind == "table" else 0.75, flat_shading=True,
-                                                side="double", position=tuple(T[:3, 3]), wxyz=_wxyz(T[:3, :3]))
+            handle = self.scene.add_mesh_simple(
+                name,
+                V.astype(np.float32),
+                F.astype(np.uint32),
+                color=color,
+                opacity=0.35 if obj.kind == "table" else 0.75,
+                flat_shading=True,
+                side="double",
+                position=tuple(T[:3, 3]),
+                wxyz=_wxyz(T[:3, :3]),
+            )
             E = obj.model.edge_segments(np.eye(4))
             if len(E):
-                self.scene.add_line_segments(f"{name}/edges", E.astype(np.float32), (20, 20, 20), thickness=1.5,
-                                             thickness_units="screen")
+                self.scene.add_line_segments(
+                    f"{name}/edges", E.astype(np.float32), (20, 20, 20), thickness=1.5, thickness_units="screen"
+                )
             self._objects[obj.id] = (key, obj.model, handle)
         for gone in set(self._objects) - seen:
             del self._objects[gone]
@@ -97,12 +108,21 @@ class World3D:
         K, T_cam_world = cam.decompose()
         T_world_cam = invert_T(T_cam_world)
         fov = 2.0 * np.arctan2(cam.height / 2.0, abs(K[1, 1]))
-        self.scene.add_camera_frustum("/world3d/camera", fov=float(fov), aspect=cam.width / cam.height, scale=0.1,
-                                      color=(40, 40, 200), thickness=2.0, thickness_units="screen",
-                                      position=tuple(T_world_cam[:3, 3]), wxyz=_wxyz(T_world_cam[:3, :3]))
+        self.scene.add_camera_frustum(
+            "/world3d/camera",
+            fov=float(fov),
+            aspect=cam.width / cam.height,
+            scale=0.1,
+            color=(40, 40, 200),
+            thickness=2.0,
+            thickness_units="screen",
+            position=tuple(T_world_cam[:3, 3]),
+            wxyz=_wxyz(T_world_cam[:3, :3]),
+        )
         T = site.T_world_turret
-        self.scene.add_frame("/world3d/turret", axes_length=0.12, axes_radius=0.006,
-                             position=tuple(T[:3, 3]), wxyz=_wxyz(T[:3, :3]))
+        self.scene.add_frame(
+            "/world3d/turret", axes_length=0.12, axes_radius=0.006, position=tuple(T[:3, 3]), wxyz=_wxyz(T[:3, :3])
+        )
         self.draw_beam(site)
 
     def draw_beam(self, site: Site) -> None:

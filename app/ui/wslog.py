@@ -56,8 +56,10 @@ def _show_shape_warnings_in_one_line(previous):
     def show(message, category, filename, lineno, file=None, line=None):
         text = str(message)
         if category is UserWarning and text.startswith("[viser]") and _SHAPE_WARNING in text:
-            logging.getLogger("mcit.ui").warning("a client sent a message with a field of the wrong shape (%s); viser "
-                                                 "passed it on as sent", " ".join(text[7:].split())[:200])
+            logging.getLogger("mcit.ui").warning(
+                "a client sent a message with a field of the wrong shape (%s); viser passed it on as sent",
+                " ".join(text[7:].split())[:200],
+            )
             return
         previous(message, category, filename, lineno, file, line)
 

@@ -61,8 +61,9 @@ def _as_point(uv) -> np.ndarray:
 
 
 def _refused(p: np.ndarray, method: str, reason: str, lines: np.ndarray | None = None) -> CornerSnap:
-    return CornerSnap(p.copy(), p.copy(), 0.0, False, method, float("nan"),
-                      np.zeros((0, 2, 2)) if lines is None else lines, reason)
+    return CornerSnap(
+        p.copy(), p.copy(), 0.0, False, method, float("nan"), np.zeros((0, 2, 2)) if lines is None else lines, reason
+    )
 
 
 def snap_corner_edges(
@@ -157,8 +158,9 @@ def snap_corner_edges(
     return CornerSnap(X, p.copy(), moved, True, "edges", float(np.sqrt(np.trace(cov) / 2.0)), lines)
 
 
-def snap_corner_subpix(image: np.ndarray, uv, *, win_px: int = 5, max_move_px: float = 4.0,
-                       min_gradient: float = 8.0) -> CornerSnap:
+def snap_corner_subpix(
+    image: np.ndarray, uv, *, win_px: int = 5, max_move_px: float = 4.0, min_gradient: float = 8.0
+) -> CornerSnap:
     """The corner by OpenCV's ``cornerSubPix`` in a (2 win_px + 1)² window around the click.
 
     Parameters

@@ -49,7 +49,9 @@ class OrientedEdges:
     transform (computed on first access; scoring does not need it).
     """
 
-    def __init__(self, edges_uv: np.ndarray, theta_deg: np.ndarray, shape: tuple[int, int], bin_deg: float, orient_tol_deg: float):
+    def __init__(
+        self, edges_uv: np.ndarray, theta_deg: np.ndarray, shape: tuple[int, int], bin_deg: float, orient_tol_deg: float
+    ):
         self.edges_uv = edges_uv
         self.theta_deg = theta_deg
         self.shape = shape
@@ -66,7 +68,7 @@ class OrientedEdges:
         diff = np.abs((self.theta_deg - b * self.bin_deg + 90.0) % 180.0 - 90.0)
         return diff <= self.orient_tol_deg
 
-    def prepare(self) -> "OrientedEdges":
+    def prepare(self) -> OrientedEdges:
         """Build every bin's k-d tree now (each is otherwise built on its first ``distance``)."""
         from scipy.spatial import cKDTree
 
@@ -111,7 +113,9 @@ class OrientedEdges:
                 sel = self._in_bin(b)
                 src = np.full((H, W), 255, np.uint8)
                 src[self.edges_uv[sel, 1].astype(int), self.edges_uv[sel, 0].astype(int)] = 0
-                dist[b] = cv2.distanceTransform(src, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) if sel.any() else np.float32(1e6)
+                dist[b] = (
+                    cv2.distanceTransform(src, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) if sel.any() else np.float32(1e6)
+                )
             self._dist = dist
         return self._dist
 
@@ -133,7 +137,13 @@ class EdgeDistance:
 
 
 def oriented_edges(
-    image: np.ndarray, *, canny_low: float = 10.0, canny_high: float = 30.0, sigma_px: float = 1.0, orient_tol_deg: float = 30.0, n_bins: int = 12
+    image: np.ndarray,
+    *,
+    canny_low: float = 10.0,
+    canny_high: float = 30.0,
+    sigma_px: float = 1.0,
+    orient_tol_deg: float = 30.0,
+    n_bins: int = 12,
 ) -> OrientedEdges:
     """Canny edges of an image (grey or RGB) split by gradient orientation, to read as distances.
 
@@ -142,8 +152,16 @@ def oriented_edges(
     benchmark's scores share them.
     """
     im = np.ascontiguousarray(image)
-    key = (im.shape, im.dtype.str, zlib.crc32(im.view(np.uint8).reshape(-1)) if im.size else 0,
-           float(canny_low), float(canny_high), float(sigma_px), float(orient_tol_deg), int(n_bins))
+    key = (
+        im.shape,
+        im.dtype.str,
+        zlib.crc32(im.view(np.uint8).reshape(-1)) if im.size else 0,
+        float(canny_low),
+        float(canny_high),
+        float(sigma_px),
+        float(orient_tol_deg),
+        int(n_bins),
+    )
     with _CACHE_LOCK:
         hit = _CACHE.get(key)
         if hit is not None:

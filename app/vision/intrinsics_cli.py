@@ -49,16 +49,24 @@ def add_calibrate_intrinsics_parser(sub) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("frames", help="a folder of images or a video file showing the board in many positions")
-    p.add_argument("--board", choices=("checkerboard", "charuco"), default="checkerboard", help="the board (default checkerboard)")
+    p.add_argument(
+        "--board", choices=("checkerboard", "charuco"), default="checkerboard", help="the board (default checkerboard)"
+    )
     p.add_argument("--cols", type=int, required=True, help="squares along the board's width")
     p.add_argument("--rows", type=int, required=True, help="squares along the board's height")
     p.add_argument("--square-mm", type=float, required=True, help="side of one square, millimetres")
     p.add_argument("--marker-mm", type=float, help="ChArUco: side of one marker, millimetres")
     p.add_argument("--dictionary", default="DICT_5X5_100", help="ChArUco: the ArUco dictionary (default DICT_5X5_100)")
-    p.add_argument("--model", choices=("plumb_bob", "rational"), default="plumb_bob",
-                   help="distortion model: plumb_bob (k1 k2 p1 p2 k3, default) or rational (8 coefficients)")
+    p.add_argument(
+        "--model",
+        choices=("plumb_bob", "rational"),
+        default="plumb_bob",
+        help="distortion model: plumb_bob (k1 k2 p1 p2 k3, default) or rational (8 coefficients)",
+    )
     p.add_argument("--every", type=int, default=1, help="use every N-th frame of a video (default 1)")
-    p.add_argument("--out", default="camera.yml", help="camera file to write (.yml, .yaml, .xml or .json; default camera.yml)")
+    p.add_argument(
+        "--out", default="camera.yml", help="camera file to write (.yml, .yaml, .xml or .json; default camera.yml)"
+    )
     p.set_defaults(func=_cmd)
 
 
@@ -83,20 +91,27 @@ def _checkerboard(cols: int, rows: int, square_m: float):
 
     inner = (cols - 1, rows - 1)
     obj = np.zeros((inner[0] * inner[1], 3), np.float32)
-    obj[:, :2] = np.mgrid[0:inner[0], 0:inner[1]].T.reshape(-1, 2) * square_m
+    obj[:, :2] = np.mgrid[0 : inner[0], 0 : inner[1]].T.reshape(-1, 2) * square_m
 
     def detect(grey):
         # The classic detector refined by cornerSubPix (on synthetic renders through a known lens its
         # corners gave K within 0.05 %, the sector-based detector's 0.2 %); the latter when it fails.
-        ok, corners = cv2.findChessboardCorners(grey, inner, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        ok, corners = cv2.findChessboardCorners(
+            grey, inner, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+        )
         if ok:
             c = corners.reshape(inner[1], inner[0], 2)
-            spacing = min(np.linalg.norm(np.diff(c, axis=0), axis=2).min(), np.linalg.norm(np.diff(c, axis=1), axis=2).min())
+            spacing = min(
+                np.linalg.norm(np.diff(c, axis=0), axis=2).min(), np.linalg.norm(np.diff(c, axis=1), axis=2).min()
+            )
             half = int(np.clip(spacing / 3.0, 2, 11))
-            corners = cv2.cornerSubPix(grey, corners, (half, half), (-1, -1),
-                                       (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4))
+            corners = cv2.cornerSubPix(
+                grey, corners, (half, half), (-1, -1), (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
+            )
         else:
-            ok, corners = cv2.findChessboardCornersSB(grey, inner, flags=cv2.CALIB_CB_ACCURACY | cv2.CALIB_CB_NORMALIZE_IMAGE)
+            ok, corners = cv2.findChessboardCornersSB(
+                grey, inner, flags=cv2.CALIB_CB_ACCURACY | cv2.CALIB_CB_NORMALIZE_IMAGE
+            )
             if not ok:
                 return None
         return obj, corners.reshape(-1, 1, 2).astype(np.float32)
@@ -111,7 +126,9 @@ def charuco_board(cols: int, rows: int, square_m: float, marker_m: float, dictio
     if not hasattr(cv2.aruco, dictionary) or not dictionary.startswith("DICT_"):
         raise ValueError(f"--dictionary {dictionary!r} is not an ArUco dictionary (e.g. DICT_5X5_100, DICT_4X4_50)")
     if not 0 < marker_m < square_m:
-        raise ValueError(f"--marker-mm must be positive and smaller than --square-mm, got {marker_m * 1e3:g} and {square_m * 1e3:g}")
+        raise ValueError(
+            f"--marker-mm must be positive and smaller than --square-mm, got {marker_m * 1e3:g} and {square_m * 1e3:g}"
+        )
     d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
     return cv2.aruco.CharucoBoard((cols, rows), square_m, marker_m, d)
 
@@ -132,9 +149,17 @@ def _charuco(cols: int, rows: int, square_m: float, marker_m: float, dictionary:
     return detect
 
 
-def calibrate_intrinsics(frames, *, board: str = "checkerboard", cols: int, rows: int, square_mm: float,
-                         marker_mm: float | None = None, dictionary: str = "DICT_5X5_100",
-                         model: str = "plumb_bob") -> Calibration:
+def calibrate_intrinsics(
+    frames,
+    *,
+    board: str = "checkerboard",
+    cols: int,
+    rows: int,
+    square_mm: float,
+    marker_mm: float | None = None,
+    dictionary: str = "DICT_5X5_100",
+    model: str = "plumb_bob",
+) -> Calibration:
     """Calibrate from ``frames``, an iterable of (index, image (H, W[, 3]) uint8); see the module docstring.
 
     ValueError (one line: what was found, what to do) when the board is seen in fewer than 3 frames,
@@ -160,8 +185,10 @@ def calibrate_intrinsics(frames, *, board: str = "checkerboard", cols: int, rows
         if size is None:
             size = (grey.shape[1], grey.shape[0])
         elif (grey.shape[1], grey.shape[0]) != size:
-            raise ValueError(f"frame {index} is {grey.shape[1]}×{grey.shape[0]}, the first was {size[0]}×{size[1]}; "
-                             "calibrate on frames of one size")
+            raise ValueError(
+                f"frame {index} is {grey.shape[1]}×{grey.shape[0]}, the first was {size[0]}×{size[1]}; "
+                "calibrate on frames of one size"
+            )
         seen += 1
         found = detect(grey)
         if found is not None:
@@ -171,14 +198,24 @@ def calibrate_intrinsics(frames, *, board: str = "checkerboard", cols: int, rows
     if seen == 0:
         raise ValueError("no frame to read; give a folder of images or a video file")
     if len(used) < 3:
-        raise ValueError(f"the {cols} × {rows} {board} was found in {len(used)} of {seen} frames; at least 3 are needed "
-                         "(check --cols/--rows: they count squares, not inner corners)")
+        raise ValueError(
+            f"the {cols} × {rows} {board} was found in {len(used)} of {seen} frames; at least 3 are needed "
+            "(check --cols/--rows: they count squares, not inner corners)"
+        )
     flags = cv2.CALIB_RATIONAL_MODEL if model == "rational" else 0
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
     rms, K, dist, _, _ = cv2.calibrateCamera(obj_pts, img_pts, size, None, None, flags=flags, criteria=crit)
     n = 8 if model == "rational" else 5
-    return Calibration(np.asarray(K, float), np.asarray(dist, float).ravel()[:n], float(rms), size[0], size[1],
-                       tuple(used), seen, "rational_polynomial" if model == "rational" else "plumb_bob")
+    return Calibration(
+        np.asarray(K, float),
+        np.asarray(dist, float).ravel()[:n],
+        float(rms),
+        size[0],
+        size[1],
+        tuple(used),
+        seen,
+        "rational_polynomial" if model == "rational" else "plumb_bob",
+    )
 
 
 def write_camera_file(cal: Calibration, path: str | Path) -> None:
@@ -208,17 +245,28 @@ def write_camera_file(cal: Calibration, path: str | Path) -> None:
 
 def _cmd(args) -> int:
     try:
-        cal = calibrate_intrinsics(_frames(args.frames, args.every), board=args.board, cols=args.cols, rows=args.rows,
-                                   square_mm=args.square_mm, marker_mm=args.marker_mm, dictionary=args.dictionary,
-                                   model=args.model)
+        cal = calibrate_intrinsics(
+            _frames(args.frames, args.every),
+            board=args.board,
+            cols=args.cols,
+            rows=args.rows,
+            square_mm=args.square_mm,
+            marker_mm=args.marker_mm,
+            dictionary=args.dictionary,
+            model=args.model,
+        )
         write_camera_file(cal, args.out)
     except (ValueError, OSError) as exc:
         print(f"mcit calibrate-intrinsics: {exc}", file=sys.stderr)
         return 2
     K = cal.K
-    print(f"board found in {len(cal.frames_used)} of {cal.frames_seen} frames ({cal.width}×{cal.height}); "
-          f"reprojection RMS {cal.rms_px:.2f} px")
-    print(f"fx {K[0, 0]:.1f} px, fy {K[1, 1]:.1f} px, centre ({K[0, 2]:.1f}, {K[1, 2]:.1f}) px; "
-          f"distortion ({cal.model}) {' '.join(f'{d:.4g}' for d in cal.distortion)}")
+    print(
+        f"board found in {len(cal.frames_used)} of {cal.frames_seen} frames ({cal.width}×{cal.height}); "
+        f"reprojection RMS {cal.rms_px:.2f} px"
+    )
+    print(
+        f"fx {K[0, 0]:.1f} px, fy {K[1, 1]:.1f} px, centre ({K[0, 2]:.1f}, {K[1, 2]:.1f}) px; "
+        f"distortion ({cal.model}) {' '.join(f'{d:.4g}' for d in cal.distortion)}"
+    )
     print(f"wrote {args.out}")
     return 0

@@ -45,13 +45,21 @@ from core.brep import BRep
 from core.camera import Camera
 from core.pose import refine_many
 from core.pose._kernels import MAX_SOLUTIONS, p3l_many
-from core.pose.symmetry import edge_symmetries
 from core.pose.residuals import as_clicks, interpretation_planes
+from core.pose.symmetry import edge_symmetries
 
 from .evaluate import edge_distance, oriented_edges
 from .track import EdgeTracker, VisibleSegments, sample_view
 
-__all__ = ["MatchCandidate", "MatchResult", "TriplePoses", "p3l_all_triples", "match_edges", "same_drawing", "edge_symmetries"]
+__all__ = [
+    "MatchCandidate",
+    "MatchResult",
+    "TriplePoses",
+    "p3l_all_triples",
+    "match_edges",
+    "same_drawing",
+    "edge_symmetries",
+]
 
 _PARALLEL_SIN = 1e-6
 _PRE_STEP_PX = 4.0  # sample spacing (px) of the first image measure of every candidate
@@ -153,7 +161,11 @@ def _model_triples(ends: np.ndarray, symmetries: list[np.ndarray] | None) -> np.
 
 
 def p3l_all_triples(
-    camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray, symmetries: list[np.ndarray] | None = None, triples: np.ndarray | None = None
+    camera: Camera,
+    segs_uv: np.ndarray,
+    edges_obj: np.ndarray,
+    symmetries: list[np.ndarray] | None = None,
+    triples: np.ndarray | None = None,
 ) -> TriplePoses:
     """P3L for every ordered triple of distinct model edges on three clicked segments, in one batch.
 
@@ -192,7 +204,14 @@ def p3l_all_triples(
     B = len(tri)
     T = np.empty((B, MAX_SOLUTIONS, 4, 4))
     valid = np.zeros((B, MAX_SOLUTIONS), dtype=bool)
-    p3l_many(camera.C, np.ascontiguousarray(np.broadcast_to(segs, (B, 3, 2, 2))), np.ascontiguousarray(ends[tri]), T, valid, True)
+    p3l_many(
+        camera.C,
+        np.ascontiguousarray(np.broadcast_to(segs, (B, 3, 2, 2))),
+        np.ascontiguousarray(ends[tri]),
+        T,
+        valid,
+        True,
+    )
     b_idx, k_idx = np.nonzero(valid)
     Rc, tc, edges = T[b_idx, k_idx, :3, :3], T[b_idx, k_idx, :3, 3], tri[b_idx]
     # The base edges' ends in front of the camera: the depth row of C applied to every model
@@ -204,16 +223,31 @@ def p3l_all_triples(
 
 
 def _click_costs(
-    camera: Camera, model: BRep, R: np.ndarray, t: np.ndarray, segs_uv: np.ndarray, incidence: "_Faces", extend: float = 0.0
+    camera: Camera,
+    model: BRep,
+    R: np.ndarray,
+    t: np.ndarray,
+    segs_uv: np.ndarray,
+    incidence: _Faces,
+    extend: float = 0.0,
 ) -> np.ndarray:
     """Cost (N, S, E): Σ of the squared pixel distances of each click's two pixels to each projected
     finite model edge at N poses, the edge lengthened by ``extend`` (a fraction of its length) at
     each end; +inf where the edge is hidden (none of its faces faces the camera) or behind it."""
     out = np.empty((len(R), len(segs_uv), len(model.edges)))
     _click_costs_kernel(
-        camera.C, np.ascontiguousarray(R, dtype=float), np.ascontiguousarray(t, dtype=float), incidence.vertices,
-        incidence.edges, np.ascontiguousarray(segs_uv, dtype=float), incidence.face_normals, incidence.face_centroids,
-        incidence.incidence, float(extend), camera.center, out,
+        camera.C,
+        np.ascontiguousarray(R, dtype=float),
+        np.ascontiguousarray(t, dtype=float),
+        incidence.vertices,
+        incidence.edges,
+        np.ascontiguousarray(segs_uv, dtype=float),
+        incidence.face_normals,
+        incidence.face_centroids,
+        incidence.incidence,
+        float(extend),
+        camera.center,
+        out,
     )
     return out
 
@@ -229,20 +263,24 @@ class _Faces:
     incidence: np.ndarray  # (E, F): 1 where edge k borders face f
 
     @classmethod
-    def of(cls, model: BRep) -> "_Faces":
+    def of(cls, model: BRep) -> _Faces:
         E = len(model.edges)
         incidence = np.zeros((E, len(model.faces)))
         for k in range(E):
             incidence[k, list(model.edge_faces(k))] = 1.0
         return cls(
-            np.ascontiguousarray(model.vertices, dtype=float), np.ascontiguousarray(model.edges, dtype=np.int64),
+            np.ascontiguousarray(model.vertices, dtype=float),
+            np.ascontiguousarray(model.edges, dtype=np.int64),
             np.ascontiguousarray(model.face_normals(), dtype=float).reshape(-1, 3),
-            np.ascontiguousarray(model.face_centroids(), dtype=float).reshape(-1, 3), incidence,
+            np.ascontiguousarray(model.face_centroids(), dtype=float).reshape(-1, 3),
+            incidence,
         )
 
 
 @njit(cache=True, nogil=True)
-def _click_costs_kernel(C, R, t, verts, edge_idx, segs, face_n, face_c, incidence, extend, center, out):  # pragma: no cover - compiled
+def _click_costs_kernel(
+    C, R, t, verts, edge_idx, segs, face_n, face_c, incidence, extend, center, out
+):  # pragma: no cover - compiled
     """``_click_costs`` in loops: per pose, the vertices projected once (depth ≤ 1e-9: no pixel),
     the faces facing the optical centre, then per visible edge and click the distances of the two
     clicked pixels to the (lengthened) projected segment."""
@@ -266,7 +304,12 @@ def _click_costs_kernel(C, R, t, verts, edge_idx, segs, face_n, face_c, incidenc
         c1 = Rn[0, 1] * d0 + Rn[1, 1] * d1 + Rn[2, 1] * d2
         c2 = Rn[0, 2] * d0 + Rn[1, 2] * d1 + Rn[2, 2] * d2
         for f in range(F):
-            facing[f] = face_n[f, 0] * (c0 - face_c[f, 0]) + face_n[f, 1] * (c1 - face_c[f, 1]) + face_n[f, 2] * (c2 - face_c[f, 2]) > 0
+            facing[f] = (
+                face_n[f, 0] * (c0 - face_c[f, 0])
+                + face_n[f, 1] * (c1 - face_c[f, 1])
+                + face_n[f, 2] * (c2 - face_c[f, 2])
+                > 0
+            )
         for e in range(E):
             i, j = edge_idx[e, 0], edge_idx[e, 1]
             visible = F == 0
@@ -300,7 +343,9 @@ def warm_up() -> None:
     match on a frame); ``mcit serve`` calls it in a background thread at start, with
     ``core.pose.warm_up``."""
     box = BRep.box(0.3, 0.2, 0.1)
-    camera = Camera.from_intrinsics(np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]), np.eye(4), 640, 480)
+    camera = Camera.from_intrinsics(
+        np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]), np.eye(4), 640, 480
+    )
     T = np.eye(4)
     T[2, 3] = 2.0
     segs = np.array([[[300.0, 200.0], [340.0, 200.0]]])
@@ -371,7 +416,7 @@ def same_drawing(camera: Camera, model: BRep, T_a: np.ndarray, T_b: np.ndarray, 
     return _same_set(camera.project_obj(T_a, model.vertices), camera.project_obj(T_b, model.vertices), tol_px)
 
 
-def _image_distances(oe, camera: Camera, model: BRep, faces: "_Faces", Ts: np.ndarray, step_px: float) -> np.ndarray:
+def _image_distances(oe, camera: Camera, model: BRep, faces: _Faces, Ts: np.ndarray, step_px: float) -> np.ndarray:
     """``edge_distance(oe, camera, model, T, step_px=step_px).mean_px`` for every pose T in Ts (N, 4, 4).
 
     For a model of straight edges only, all the poses at once: the visible edges of each (those
@@ -387,7 +432,9 @@ def _image_distances(oe, camera: Camera, model: BRep, faces: "_Faces", Ts: np.nd
         return np.array([edge_distance(oe, camera, model, T, step_px=step_px).mean_px for T in Ts])
     E = len(model.edges)
     R, t = Ts[:, :3, :3], Ts[:, :3, 3]
-    c_obj = np.einsum("nj,nji->ni", camera.center[None, :] - t, R)  # (N, 3): (c − t) R, the optical centre seen from the object
+    c_obj = np.einsum(
+        "nj,nji->ni", camera.center[None, :] - t, R
+    )  # (N, 3): (c − t) R, the optical centre seen from the object
     v = c_obj[:, None, :] - faces.face_centroids[None]  # (N, F, 3)
     d = np.einsum("fj,nfj->nf", faces.face_normals, v)
     facing = d > 0
@@ -426,7 +473,12 @@ def _settle(camera, model, image, oe, T, edges, rms_px, segs, incidence, line_ga
         r_img = float(np.sqrt(np.mean(_line_d2(camera, T_img, segs, ends[e_img]))))
         if r_img <= line_gate and _within_edges(camera, model, T_img, segs, e_img, incidence, extent_gate):
             T, edges, rms_px = T_img, e_img, r_img
-    return T, edges, rms_px, float(_image_distances(oe, camera, model, incidence, T[None], 2.0)[0])  # = edge_distance(oe, camera, model, T)
+    return (
+        T,
+        edges,
+        rms_px,
+        float(_image_distances(oe, camera, model, incidence, T[None], 2.0)[0]),
+    )  # = edge_distance(oe, camera, model, T)
 
 
 def match_edges(
@@ -619,7 +671,9 @@ def match_edges(
     if oe is not None and settle is None:
         order = list(distinct)
     elif oe is not None:
-        pre_img = dict(zip(distinct, _image_distances(oe, camera, model, incidence, Ts[distinct], _PRE_STEP_PX).tolist()))
+        pre_img = dict(
+            zip(distinct, _image_distances(oe, camera, model, incidence, Ts[distinct], _PRE_STEP_PX).tolist())
+        )
         pre = {j: fits[j].rms_px + pre_img[j] for j in distinct if np.isfinite(pre_img[j])}
         order = sorted(pre, key=lambda j: pre[j])[: max(int(settle), 0)]
         order = [j for j in order if pre[j] <= pre[order[0]] + _SETTLE_MARGIN_PX]
@@ -629,7 +683,19 @@ def match_edges(
     for j in order:
         if settle is not None and pre[j] - _SETTLE_STOP_PX >= best_settled:
             break  # clearly worse than a settled candidate already: settling it would not change the order
-        settled[j] = _settle(camera, model, image, oe, Ts[j].copy(), E_cur[j].copy(), fits[j].rms_px, segs, incidence, line_gate, extent_gate)
+        settled[j] = _settle(
+            camera,
+            model,
+            image,
+            oe,
+            Ts[j].copy(),
+            E_cur[j].copy(),
+            fits[j].rms_px,
+            segs,
+            incidence,
+            line_gate,
+            extent_gate,
+        )
         if np.isfinite(settled[j][2] + settled[j][3]):
             best_settled = min(best_settled, settled[j][2] + settled[j][3])
     for j in distinct:

@@ -39,8 +39,9 @@ class PnPResult:
     std_angle_rad : σ of its orientation about its worst axis (rad).
     """
 
-    def __init__(self, camera, T_cam_world, rms_px, residuals_px, cov_pose, cov, variance_factor, std_position_m,
-                 std_angle_rad):
+    def __init__(
+        self, camera, T_cam_world, rms_px, residuals_px, cov_pose, cov, variance_factor, std_position_m, std_angle_rad
+    ):
         self.camera = camera
         self.T_cam_world = T_cam_world
         self.rms_px = float(rms_px)
@@ -102,11 +103,15 @@ def solve_pnp(K, X_world, uv, width: int, height: int, *, sigma_px=None) -> PnPR
     if len(uv) != n:
         raise ValueError(f"X_world has {n} points but uv has {len(uv)}: they must pair one to one")
     if n < MIN_PNP_POINTS:
-        raise ValueError(f"{n} points paired; the camera's pose with the lens known needs at least {MIN_PNP_POINTS} "
-                         "(6 unknowns): pair more")
+        raise ValueError(
+            f"{n} points paired; the camera's pose with the lens known needs at least {MIN_PNP_POINTS} "
+            "(6 unknowns): pair more"
+        )
     sv = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
     if sv[1] <= 1e-6 * sv[0]:
-        raise ValueError("the points are on one line: they cannot fix the camera's pose; use corners spread over the scene")
+        raise ValueError(
+            "the points are on one line: they cannot fix the camera's pose; use corners spread over the scene"
+        )
     w = np.ones(n)
     if sigma_px is not None:
         sig = np.asarray(sigma_px, dtype=float).reshape(-1)
@@ -118,6 +123,7 @@ def solve_pnp(K, X_world, uv, width: int, height: int, *, sigma_px=None) -> PnPR
 
     best = None
     for R0, t0 in _starts(K, X, uv):
+
         def residuals(x, R0=R0, t0=t0):
             R, t = _pose(R0, t0, x)
             return ((_project(K, R, t, X)[0] - uv) * w[:, None]).ravel()
@@ -130,7 +136,9 @@ def solve_pnp(K, X_world, uv, width: int, height: int, *, sigma_px=None) -> PnPR
         if best is None or cost < best[0]:
             best = (cost, R, t)
     if best is None:
-        raise ValueError("no camera pose puts every point in front of the camera: check that each click is on its corner")
+        raise ValueError(
+            "no camera pose puts every point in front of the camera: check that each click is on its corner"
+        )
     cost, R, t = best
 
     # The Jacobian at the optimum (central differences about the solution, exact enough for a covariance).
@@ -164,6 +172,14 @@ def solve_pnp(K, X_world, uv, width: int, height: int, *, sigma_px=None) -> PnPR
     camera = Camera(K @ np.column_stack([R, t]), width, height, in_front=X)
     res = _project(K, R, t, X)[0] - uv
     rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
-    return PnPResult(camera, make_T(R, t), rms, res, cov_pose, 0.5 * (cov_C + cov_C.T), factor,
-                     float(np.sqrt(max(np.linalg.eigvalsh(cov_centre)[-1], 0.0))),
-                     float(np.sqrt(max(np.linalg.eigvalsh(cov_pose[:3, :3])[-1], 0.0))))
+    return PnPResult(
+        camera,
+        make_T(R, t),
+        rms,
+        res,
+        cov_pose,
+        0.5 * (cov_C + cov_C.T),
+        factor,
+        float(np.sqrt(max(np.linalg.eigvalsh(cov_centre)[-1], 0.0))),
+        float(np.sqrt(max(np.linalg.eigvalsh(cov_pose[:3, :3])[-1], 0.0))),
+    )

@@ -43,9 +43,15 @@ def to_gray_f32(image: np.ndarray) -> np.ndarray:
     """Grey float32 image (H, W) from a grey (H, W) or RGB (H, W, 3) image of any numeric dtype."""
     im = np.asarray(image)
     if im.ndim == 3 and im.shape[2] in (3, 4):
-        im = cv2.cvtColor(np.ascontiguousarray(im[:, :, :3]), cv2.COLOR_RGB2GRAY) if im.dtype == np.uint8 else im[:, :, :3].mean(axis=2)
+        im = (
+            cv2.cvtColor(np.ascontiguousarray(im[:, :, :3]), cv2.COLOR_RGB2GRAY)
+            if im.dtype == np.uint8
+            else im[:, :, :3].mean(axis=2)
+        )
     if im.ndim != 2 or im.shape[0] < 3 or im.shape[1] < 3:
-        raise ValueError(f"image must be grey (H, W) or RGB (H, W, 3) of at least 3 × 3 pixels, got shape {np.shape(image)}")
+        raise ValueError(
+            f"image must be grey (H, W) or RGB (H, W, 3) of at least 3 × 3 pixels, got shape {np.shape(image)}"
+        )
     return np.ascontiguousarray(im, dtype=np.float32)
 
 
@@ -53,7 +59,9 @@ def smooth(gray: np.ndarray, sigma_px: float) -> np.ndarray:
     """Gaussian smoothing (OpenCV) of a grey float32 image; sigma_px ≤ 0 returns it unchanged."""
     if sigma_px <= 0:
         return gray
-    return cv2.GaussianBlur(gray, (0, 0), sigmaX=float(sigma_px), sigmaY=float(sigma_px), borderType=cv2.BORDER_REPLICATE)
+    return cv2.GaussianBlur(
+        gray, (0, 0), sigmaX=float(sigma_px), sigmaY=float(sigma_px), borderType=cv2.BORDER_REPLICATE
+    )
 
 
 def bilinear(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:

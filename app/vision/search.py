@@ -54,8 +54,8 @@ No candidate fits: ``NoPoseFits`` ("no pose of the parallelepiped fits the image
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable
 
 import cv2
 import numpy as np
@@ -71,8 +71,18 @@ from .evaluate import oriented_edges, sample_distances
 from .profiles import search_along_normals, smooth, to_gray_f32
 from .track import EdgeTracker, sample_visible_edges
 
-__all__ = ["SearchCandidate", "SearchResult", "NoPoseFits", "Cancelled", "EdgeField", "search_pose", "refine_from", "rests_on",
-           "level_on", "heading_period"]
+__all__ = [
+    "SearchCandidate",
+    "SearchResult",
+    "NoPoseFits",
+    "Cancelled",
+    "EdgeField",
+    "search_pose",
+    "refine_from",
+    "rests_on",
+    "level_on",
+    "heading_period",
+]
 
 N_BINS = 8  # orientation bins of the distance transforms (22.5° each; an edge pixel joins its two nearest bins)
 TAU_COARSE, TAU_FINE = 12.0, 3.0  # distance caps (pixels) of the coarse grid and of the last descent step
@@ -111,8 +121,12 @@ RETRY_DEG = 4.0  # _settle_table: a start refused after refinement is refined ag
 # Measured (bench/search.py (b), 150 placements): at 75° 134 right, at 88° 136, the stated σ holding
 # as well (93-98 % of the top poses within 5° / 1 cm inside their 95 % region).
 MEASURE_FACE_DEG = REFINE_FACE_DEG = 88.0
-MISMATCH_CAP_PX = 0.5  # _check: a sample this far from its edge counts as missing (0.3 and 0.7 px ranked no better on bench (b))
-CURVED_MISMATCH_CAP_PX = 1.0  # ... for a sample on a silhouette or rim: twice, as its bias floor is (CURVED_EDGE_BIAS_PX)
+MISMATCH_CAP_PX = (
+    0.5  # _check: a sample this far from its edge counts as missing (0.3 and 0.7 px ranked no better on bench (b))
+)
+CURVED_MISMATCH_CAP_PX = (
+    1.0  # ... for a sample on a silhouette or rim: twice, as its bias floor is (CURVED_EDGE_BIAS_PX)
+)
 
 
 class NoPoseFits(ValueError):
@@ -323,13 +337,21 @@ def _ray_hits(hull: np.ndarray, R: np.ndarray, t: np.ndarray, origin: np.ndarray
     return (lo <= hi) & ~parallel_out
 
 
-def _score(field_: EdgeField, camera: Camera, ms: _ModelSamples, R: np.ndarray, t: np.ndarray, tau: float,
-           chunk: int = 4096, bilinear: bool = False) -> np.ndarray:
+def _score(
+    field_: EdgeField,
+    camera: Camera,
+    ms: _ModelSamples,
+    R: np.ndarray,
+    t: np.ndarray,
+    tau: float,
+    chunk: int = 4096,
+    bilinear: bool = False,
+) -> np.ndarray:
     """Mean capped oriented distance (pixels) of each pose's visible samples; inf with fewer than 8."""
     out = np.empty(len(R))
     C = camera.C
     for a in range(0, len(R), chunk):
-        Rb, tb = R[a:a + chunk], t[a:a + chunk]
+        Rb, tb = R[a : a + chunk], t[a : a + chunk]
         P = (C[:, :3][None] @ Rb).astype(np.float32)  # (N, 3, 3): C·R
         q = (tb @ C[:, :3].T + C[:, 3]).astype(np.float32)  # (N, 3)
         PT = np.transpose(P, (0, 2, 1))
@@ -348,7 +370,7 @@ def _score(field_: EdgeField, camera: Camera, ms: _ModelSamples, R: np.ndarray, 
             V = V & front
             total += (d * V).sum(axis=1)
             count += V.sum(axis=1)
-        out[a:a + chunk] = np.where(count >= 8, total / np.maximum(count, 1), np.inf)
+        out[a : a + chunk] = np.where(count >= 8, total / np.maximum(count, 1), np.inf)
     return out
 
 
@@ -423,8 +445,14 @@ def heading_period(model: BRep, R_old: np.ndarray, up: np.ndarray) -> float:
     orientation R_old, unchanged: 2π/k for a k-fold symmetry (a box lying on a face: π; a square
     face down: π/2), 0 for a solid of revolution standing upright (the heading is not seen)."""
     up_obj = R_old.T @ up
-    if not len(model.edges) and model.solids and all(abs(abs(float(s.axis @ up_obj)) - 1.0) < 1e-6 and
-                                                    np.linalg.norm(np.cross(s.p0, up_obj)) < 1e-9 for s in model.solids):
+    if (
+        not len(model.edges)
+        and model.solids
+        and all(
+            abs(abs(float(s.axis @ up_obj)) - 1.0) < 1e-6 and np.linalg.norm(np.cross(s.p0, up_obj)) < 1e-9
+            for s in model.solids
+        )
+    ):
         return 0.0
     best = 2.0 * np.pi
     for _, S in symmetry_transforms(model):
@@ -458,7 +486,9 @@ class _TableSpace:
         return R, c - R @ centre_obj
 
 
-def _distinct(p: np.ndarray, score: np.ndarray, scale: np.ndarray, k: int, period: np.ndarray | None = None) -> np.ndarray:
+def _distinct(
+    p: np.ndarray, score: np.ndarray, scale: np.ndarray, k: int, period: np.ndarray | None = None
+) -> np.ndarray:
     """Indices of up to k best-scoring parameter vectors at least one step (``scale``) apart."""
     order = np.argsort(score, kind="stable")
     order = order[np.isfinite(score[order])]
@@ -486,7 +516,9 @@ def _descend(evaluate: Callable, p: np.ndarray, step: np.ndarray, taus, iters_pe
     for tau in taus:
         best = evaluate(p, tau)
         for _ in range(iters_per_level):
-            trial = np.concatenate([p[:, None] + sgn * np.diag(step)[None] for sgn in (1.0, -1.0)], axis=1)  # (S, 2k, k)
+            trial = np.concatenate(
+                [p[:, None] + sgn * np.diag(step)[None] for sgn in (1.0, -1.0)], axis=1
+            )  # (S, 2k, k)
             sc = evaluate(trial.reshape(-1, k), tau).reshape(len(p), 2 * k)
             j = np.argmin(sc, axis=1)
             better = sc[np.arange(len(p)), j] < best
@@ -548,7 +580,9 @@ def search_pose(
         raise ValueError(f"the click ({uv[0]:.0f}, {uv[1]:.0f}) is outside the image; click on the object")
     im = np.asarray(image)
     if im.shape[:2] != (camera.height, camera.width):
-        raise ValueError(f"the frame is {im.shape[1]}×{im.shape[0]} px but the camera is {camera.width}×{camera.height}")
+        raise ValueError(
+            f"the frame is {im.shape[1]}×{im.shape[0]} px but the camera is {camera.width}×{camera.height}"
+        )
 
     def check(frac: float, what: str) -> None:
         if cancel is not None and cancel():
@@ -587,8 +621,10 @@ def search_pose(
         s_a, s_b = sorted(((lo_h - hz[0]) / hz[1], (hi_h - hz[0]) / hz[1]))
         s_a = max(s_a, 1e-3)
         if s_b <= s_a:
-            raise NoPoseFits(f"no pose of {the(name)} on the table is on the line of your click (it passes above the "
-                             "object's height or behind the camera): click on the object")
+            raise NoPoseFits(
+                f"no pose of {the(name)} on the table is on the line of your click (it passes above the "
+                "object's height or behind the camera): click on the object"
+            )
         P = origin + np.outer([s_a, s_b], ray)
         f2 = np.column_stack([P @ sp.e1, P @ sp.e2])  # segment ends on the table (x, y)
         depth = float(np.mean(camera.depth(P)))
@@ -689,7 +725,10 @@ def search_pose(
         turns = _near_turns(model, sp, centre_obj, per[2])
         if turns:
             twins = np.concatenate([starts + [0.0, 0.0, a] for a in turns])
-            starts, start_px = np.concatenate([starts, twins]), np.concatenate([start_px, np.repeat(start_px[None], len(turns), 0).ravel()])
+            starts, start_px = (
+                np.concatenate([starts, twins]),
+                np.concatenate([start_px, np.repeat(start_px[None], len(turns), 0).ravel()]),
+            )
     R_top, t_top = to_pose(starts)
     for j in range(len(starts)):
         check(0.7 + 0.3 * j / max(len(starts), 1), f"checking pose {j + 1} of {len(starts)}")
@@ -723,7 +762,9 @@ def search_pose(
         out.append(_replace_T(c, T))
     if not out:
         other = "another object" + (" or the table" if name != "table" else "")
-        raise NoPoseFits(f"no pose of {the(name)} fits the image near your click: click on {the(name)} itself (not on {other})")
+        raise NoPoseFits(
+            f"no pose of {the(name)} fits the image near your click: click on {the(name)} itself (not on {other})"
+        )
     if table is not None and out[0].mismatch > BESIDE_TRIGGER:
         # a click beside the object: poses under it can lie half on the object and half on the floor
         # (the parallelepiped turned 90° and 84 mm off, mismatch 0.48, from a click 15 px left of it: a new
@@ -743,23 +784,26 @@ def search_pose(
             share = _camera_share(camera, model, c.T_world_obj, img_s, space, rims, np.asarray(camera_cov, float))
             # no share (too few edges found at the final pose): σ unknown, said so, rather than the image's alone
             cov = None if share is None or c.cov is None else c.cov + share
-            out[j] = replace(c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1], cov_camera=None if cov is None else share)
+            out[j] = replace(
+                c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1], cov_camera=None if cov is None else share
+            )
     return SearchResult(out, mode, n_scored, len(top), time.perf_counter() - t0, timings)
 
 
-def _centre_height(pts: np.ndarray, centre_obj: np.ndarray, sp: "_TableSpace", table: Plane) -> float:
+def _centre_height(pts: np.ndarray, centre_obj: np.ndarray, sp: _TableSpace, table: Plane) -> float:
     """The height along the table's normal (metres, world) of the model's centre ``centre_obj`` (object
     frame) when its lowest support point (``pts``, object frame) rests on the table, face-down as sp's."""
     return -table.d - float((((pts - centre_obj) @ sp.R_old.T) @ sp.up).min())
 
 
 def the(name: str) -> str:
-    """"the parallelepiped", but "box_1": an object's name as a message says it."""
+    """ "the parallelepiped", but "box_1": an object's name as a message says it."""
     return name if any(ch.isdigit() or ch == "_" for ch in name) else f"the {name}"
 
 
-def refine_from(camera: Camera, model: BRep, T_start: np.ndarray, image: np.ndarray, *,
-                table: Plane | None = None) -> SearchCandidate | None:
+def refine_from(
+    camera: Camera, model: BRep, T_start: np.ndarray, image: np.ndarray, *, table: Plane | None = None
+) -> SearchCandidate | None:
     """The search's last stage from a given pose instead of a searched one: refined on the image's edges
     (on the table: x, y and the heading, its face-down kept; else all six) and checked as the search
     checks its candidates (``_check``). None when the check refuses the refined pose.
@@ -776,8 +820,9 @@ def refine_from(camera: Camera, model: BRep, T_start: np.ndarray, image: np.ndar
         sp = _TableSpace(T_start, table)
         pts = _support_points(model)
         centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
-        space = _OnTable(sp, _centre_height(pts, centre, sp, table), centre,
-                         3 if heading_period(model, sp.R_old, sp.up) > 0 else 2)
+        space = _OnTable(
+            sp, _centre_height(pts, centre, sp, table), centre, 3 if heading_period(model, sp.R_old, sp.up) > 0 else 2
+        )
     else:
         space = _Free(T_start)
     T, cov = _refine(camera, model, T_start, img_s, space, rims)
@@ -789,9 +834,21 @@ BESIDE_MARGIN = 0.15  # ... and a pose beside it is offered when its mismatch is
 BESIDE_SEEDS = 8
 
 
-def _beside(camera: Camera, model: BRep, p: np.ndarray, step: np.ndarray, per: np.ndarray,
-            evaluate: Callable, oe, img_s: np.ndarray, ef: EdgeField, ms: _ModelSamples, sp: _TableSpace, zc: float,
-            centre_obj: np.ndarray) -> SearchCandidate | None:
+def _beside(
+    camera: Camera,
+    model: BRep,
+    p: np.ndarray,
+    step: np.ndarray,
+    per: np.ndarray,
+    evaluate: Callable,
+    oe,
+    img_s: np.ndarray,
+    ef: EdgeField,
+    ms: _ModelSamples,
+    sp: _TableSpace,
+    zc: float,
+    centre_obj: np.ndarray,
+) -> SearchCandidate | None:
     """The best pose on the table near the click that the click's ray misses (the coarse grid's other
     poses, scored, descended and settled as the search's own), or None."""
     sc2 = evaluate(p, TAU_COARSE, under_click=False)
@@ -801,11 +858,12 @@ def _beside(camera: Camera, model: BRep, p: np.ndarray, step: np.ndarray, per: n
     seeds = _distinct(p[ok], sc2[ok], np.where(step > 0, step, 1.0), BESIDE_SEEDS, per)
     if not len(seeds):
         return None
-    q, best = _descend(lambda q_, tau: evaluate(q_, tau, under_click=False), p[ok][seeds], step,
-                       (6.0, TAU_FINE, TAU_FINE))
+    q, best = _descend(
+        lambda q_, tau: evaluate(q_, tau, under_click=False), p[ok][seeds], step, (6.0, TAU_FINE, TAU_FINE)
+    )
     found = []
     for j in np.argsort(best)[:3]:
-        R, t = sp.poses(q[j:j + 1], zc, centre_obj)
+        R, t = sp.poses(q[j : j + 1], zc, centre_obj)
         c = _settle_table(camera, model, make_T(R[0], t[0]), oe, img_s, ef, ms, sp, zc, centre_obj, per, float(best[j]))
         if c is not None:
             found.append(c)
@@ -843,8 +901,16 @@ def _near_turns(model: BRep, sp: _TableSpace, centre_obj: np.ndarray, period: fl
     return out
 
 
-def _polish(T: np.ndarray, ef: EdgeField, camera: Camera, ms: _ModelSamples, sp: _TableSpace, zc: float,
-            centre_obj: np.ndarray, per: np.ndarray) -> np.ndarray:
+def _polish(
+    T: np.ndarray,
+    ef: EdgeField,
+    camera: Camera,
+    ms: _ModelSamples,
+    sp: _TableSpace,
+    zc: float,
+    centre_obj: np.ndarray,
+    per: np.ndarray,
+) -> np.ndarray:
     """T moved on the table (x, y, heading) to the minimum of the bilinear oriented distance
     (τ = 3 px), steps from 4 mm (1°) halved four times."""
     p0 = _OnTable(sp, zc, centre_obj, 3).params(T)[None]
@@ -855,14 +921,31 @@ def _polish(T: np.ndarray, ef: EdgeField, camera: Camera, ms: _ModelSamples, sp:
         R, t = sp.poses(q, zc, centre_obj)
         return _score(ef, camera, ms, R, t, tau, bilinear=True)
 
-    q, _ = _descend(evaluate, p0, np.array([0.004, 0.004, np.radians(1.0) if per[2] > 0 else 0.0]), (TAU_FINE,) * 4,
-                    iters_per_level=3)
+    q, _ = _descend(
+        evaluate,
+        p0,
+        np.array([0.004, 0.004, np.radians(1.0) if per[2] > 0 else 0.0]),
+        (TAU_FINE,) * 4,
+        iters_per_level=3,
+    )
     R, t = sp.poses(q, zc, centre_obj)
     return make_T(R[0], t[0])
 
 
-def _settle_table(camera: Camera, model: BRep, T0: np.ndarray, oe, img_s: np.ndarray, ef: EdgeField, ms: _ModelSamples,
-                  sp: _TableSpace, zc: float, centre_obj: np.ndarray, per: np.ndarray, coarse_px: float) -> SearchCandidate | None:
+def _settle_table(
+    camera: Camera,
+    model: BRep,
+    T0: np.ndarray,
+    oe,
+    img_s: np.ndarray,
+    ef: EdgeField,
+    ms: _ModelSamples,
+    sp: _TableSpace,
+    zc: float,
+    centre_obj: np.ndarray,
+    per: np.ndarray,
+    coarse_px: float,
+) -> SearchCandidate | None:
     """On the table: x, y (and the heading) polished on the oriented distance transforms from T0, then
     refined by Gauss–Newton on the edges found along the samples' normals (sub-pixel); checked on the
     image (``_check``) with the covariance of the refinement. None when the image does not support it.
@@ -878,13 +961,30 @@ def _settle_table(camera: Camera, model: BRep, T0: np.ndarray, oe, img_s: np.nda
     c = _check(camera, model, T, oe, img_s, rims, cov, coarse_px)
     if c is None and k == 3:  # a local minimum a few degrees off (``_heading_profile``): from its heading ± RETRY_DEG
         p = space.params(T)
-        c = _best_refined(camera, model, [p + [0.0, 0.0, np.radians(d)] for d in (-RETRY_DEG, RETRY_DEG)], oe, img_s,
-                          space, rims, coarse_px)
+        c = _best_refined(
+            camera,
+            model,
+            [p + [0.0, 0.0, np.radians(d)] for d in (-RETRY_DEG, RETRY_DEG)],
+            oe,
+            img_s,
+            space,
+            rims,
+            coarse_px,
+        )
     return c
 
 
-def _best_refined(camera: Camera, model: BRep, starts: list, oe, img_s: np.ndarray, space, rims: bool, coarse_px: float,
-                  than: SearchCandidate | None = None) -> SearchCandidate | None:
+def _best_refined(
+    camera: Camera,
+    model: BRep,
+    starts: list,
+    oe,
+    img_s: np.ndarray,
+    space,
+    rims: bool,
+    coarse_px: float,
+    than: SearchCandidate | None = None,
+) -> SearchCandidate | None:
     """Of the poses refined (``_refine``) from the parameter vectors ``starts`` of ``space`` that pass
     ``_check``, the one of lowest mismatch — lower than ``than``'s when given — or None."""
     best = None
@@ -897,8 +997,16 @@ def _best_refined(camera: Camera, model: BRep, starts: list, oe, img_s: np.ndarr
     return best
 
 
-def _heading_profile(camera: Camera, model: BRep, c: SearchCandidate, oe, img_s: np.ndarray, sp: _TableSpace, zc: float,
-                     centre_obj: np.ndarray) -> SearchCandidate | None:
+def _heading_profile(
+    camera: Camera,
+    model: BRep,
+    c: SearchCandidate,
+    oe,
+    img_s: np.ndarray,
+    sp: _TableSpace,
+    zc: float,
+    centre_obj: np.ndarray,
+) -> SearchCandidate | None:
     """A pose on the table with a lower mismatch than c's within ± ``PROFILE_DEG`` of its heading, or None.
 
     The refinement has local minima a few degrees apart in heading: a face seen nearly edge-on turns
@@ -921,8 +1029,16 @@ def _heading_profile(camera: Camera, model: BRep, c: SearchCandidate, oe, img_s:
     return _best_refined(camera, model, [best_p], oe, img_s, space, False, c.coarse_px, than=c)
 
 
-def _slides(camera: Camera, model: BRep, c: SearchCandidate, oe, img_s: np.ndarray, sp: _TableSpace, zc: float,
-            centre_obj: np.ndarray) -> SearchCandidate | None:
+def _slides(
+    camera: Camera,
+    model: BRep,
+    c: SearchCandidate,
+    oe,
+    img_s: np.ndarray,
+    sp: _TableSpace,
+    zc: float,
+    centre_obj: np.ndarray,
+) -> SearchCandidate | None:
     """A pose on the table with a lower mismatch than c's, refined from c slid along its footprint's
     axes by ± ``SLIDE_FRACTIONS`` of its length there, or None.
 
@@ -935,13 +1051,25 @@ def _slides(camera: Camera, model: BRep, c: SearchCandidate, oe, img_s: np.ndarr
     P = (_support_points(model) - centre_obj) @ c.T_world_obj[:3, :3].T
     xy = np.column_stack([P @ sp.e1, P @ sp.e2])
     U = np.linalg.eigh(np.cov(xy.T))[1]  # the footprint's axes on the table (e1, e2), metres along them
-    starts = [p + np.r_[sign * f * float(np.ptp(xy @ axis)) * axis, 0.0]
-              for axis in U.T for f in SLIDE_FRACTIONS for sign in (-1.0, 1.0)]
+    starts = [
+        p + np.r_[sign * f * float(np.ptp(xy @ axis)) * axis, 0.0]
+        for axis in U.T
+        for f in SLIDE_FRACTIONS
+        for sign in (-1.0, 1.0)
+    ]
     return _best_refined(camera, model, starts, oe, img_s, space, False, c.coarse_px, than=c)
 
 
-def _check(camera: Camera, model: BRep, T: np.ndarray, oe, img_s: np.ndarray, rims: bool, cov: np.ndarray | None,
-           coarse_px: float) -> SearchCandidate | None:
+def _check(
+    camera: Camera,
+    model: BRep,
+    T: np.ndarray,
+    oe,
+    img_s: np.ndarray,
+    rims: bool,
+    cov: np.ndarray | None,
+    coarse_px: float,
+) -> SearchCandidate | None:
     """The search's check of a settled pose, made for a partly hidden object; None when it fails.
 
     At the pose the model's visible edges are sampled every 2 px. Each sample reads (1) its oriented
@@ -1013,11 +1141,11 @@ class _OnTable:
         sp, up = self.sp, self.sp.up
         cw = T[:3, :3] @ self.centre + T[:3, 3]
         f = T[:3, :3] @ sp.R_old.T @ sp.e1
-        return np.array([cw @ sp.e1, cw @ sp.e2, float(np.arctan2(np.cross(sp.e1, f) @ up, sp.e1 @ f))])[:self.k]
+        return np.array([cw @ sp.e1, cw @ sp.e2, float(np.arctan2(np.cross(sp.e1, f) @ up, sp.e1 @ f))])[: self.k]
 
     def pose(self, p: np.ndarray) -> np.ndarray:
         q = np.array([0.0, 0.0, self.psi])
-        q[:self.k] = p
+        q[: self.k] = p
         R, t = self.sp.poses(q[None], self.zc, self.centre)
         return make_T(R[0], t[0])
 
@@ -1081,8 +1209,14 @@ def _linearize(camera: Camera, model: BRep, p: np.ndarray, img_s: np.ndarray, sp
     return T, s, r, J, robust_weights(r, "tukey", GN_SCALE_PX)
 
 
-def _own_edges(uv: np.ndarray, normals: np.ndarray, r: np.ndarray, groups: np.ndarray,
-               along_px: float = 1.5, across_px: float = 0.7) -> np.ndarray:
+def _own_edges(
+    uv: np.ndarray,
+    normals: np.ndarray,
+    r: np.ndarray,
+    groups: np.ndarray,
+    along_px: float = 1.5,
+    across_px: float = 0.7,
+) -> np.ndarray:
     """(N,) bool: the samples that keep the image edge they found. Two model edges that draw a few
     pixels apart and parallel (a face seen nearly edge-on, its far edge hidden by shading alike on
     both sides) find the same image edge; that edge is given to the model edge that lies nearer
@@ -1107,8 +1241,17 @@ def _own_edges(uv: np.ndarray, normals: np.ndarray, r: np.ndarray, groups: np.nd
     return keep
 
 
-def _refine(camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space, rims: bool, iters: int = 8,
-            bands: tuple = (3.0, 3.0, 2.0), with_cov: bool = True):
+def _refine(
+    camera: Camera,
+    model: BRep,
+    T: np.ndarray,
+    img_s: np.ndarray,
+    space,
+    rims: bool,
+    iters: int = 8,
+    bands: tuple = (3.0, 3.0, 2.0),
+    with_cov: bool = True,
+):
     """Gauss–Newton (IRLS, Tukey at ``GN_SCALE_PX``) of the pose's parameters (``_OnTable``: x, y, ψ;
     ``_Free``: all six) on the model's visible edge samples and the image's edges found along their
     normals (``profiles.search_along_normals``, sub-pixel), searched ± ``bands[i]`` pixels at iteration i
@@ -1140,8 +1283,9 @@ def _refine(camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space
     return space.pose(p), Gm @ _edge_covariance(J, r, w, groups, floor, k, s.uv, s.normals) @ Gm.T
 
 
-def _camera_share(camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space, rims: bool,
-                  camera_cov: np.ndarray) -> np.ndarray | None:
+def _camera_share(
+    camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space, rims: bool, camera_cov: np.ndarray
+) -> np.ndarray | None:
     """(6, 6) covariance of (δt, δr) that the camera's calibration (``camera_cov``, of C's 12 entries)
     adds to a pose refined on the image's edges: the refinement's solution moves with C by
     dp/dC = −A⁻¹ Jᵀ W ∂(n·uv)/∂C, each sample's projection uv = (C X̃)₀,₁ / (C X̃)₂ differentiated in C."""
@@ -1174,8 +1318,16 @@ def _feature_groups(model: BRep, feature: np.ndarray, n_circle: int = 48, arc: i
     return np.where(f < E, f, E + solid * per_solid + g)
 
 
-def _edge_covariance(J: np.ndarray, r: np.ndarray, w: np.ndarray, groups: np.ndarray, floor: np.ndarray, k: int,
-                     uv: np.ndarray, normals: np.ndarray) -> np.ndarray:
+def _edge_covariance(
+    J: np.ndarray,
+    r: np.ndarray,
+    w: np.ndarray,
+    groups: np.ndarray,
+    floor: np.ndarray,
+    k: int,
+    uv: np.ndarray,
+    normals: np.ndarray,
+) -> np.ndarray:
     """(k, k) covariance of a weighted least-squares step's parameters when the samples' errors are a
     noise of their own plus, per edge, an offset and a tilt shared by its samples (an edge found a
     fraction of a pixel off, or turned a little, is so along its length):
@@ -1206,7 +1358,7 @@ def _edge_covariance(J: np.ndarray, r: np.ndarray, w: np.ndarray, groups: np.nda
     s2 = float(np.sum(w * (r - fit) ** 2) / dof)
     fl = np.zeros(G)
     fl[inv] = np.asarray(floor, float)
-    o2 = np.maximum(float(np.sum(sw * mean ** 2) / float(sw.sum())), fl ** 2)
+    o2 = np.maximum(float(np.sum(sw * mean**2) / float(sw.sum())), fl**2)
     long_ = sll > 1e-6
     t2 = float(np.sum(sw[long_] * tilt[long_] ** 2) / max(float(sw[long_].sum()), 1e-12)) if long_.any() else 0.0
     half = np.sqrt(3.0 * sll / sw)  # an edge's half length (pixels), from the spread of its samples along it
@@ -1215,7 +1367,7 @@ def _edge_covariance(J: np.ndarray, r: np.ndarray, w: np.ndarray, groups: np.nda
     np.add.at(Go, inv, J * w[:, None])
     Gt = np.zeros((G, k))  # Σ_i∈edge w_i ℓ_i J_i
     np.add.at(Gt, inv, J * (w * ell)[:, None])
-    M = s2 * ((J * (w ** 2)[:, None]).T @ J) + (Go * o2[:, None]).T @ Go + (Gt * t2[:, None]).T @ Gt
+    M = s2 * ((J * (w**2)[:, None]).T @ J) + (Go * o2[:, None]).T @ Go + (Gt * t2[:, None]).T @ Gt
     return Ai @ M @ Ai
 
 
@@ -1264,8 +1416,9 @@ def _settle(camera, model, T, image, oe, img_s, coarse_px) -> SearchCandidate | 
     uv = camera.project_obj(T, _support_points(model))
     size_px = float(np.linalg.norm(uv.max(axis=0) - uv.min(axis=0)))  # a small object: denser samples (≥ 20 kept)
     step_px = float(np.clip(size_px / 25.0, 2.0, 5.0))
-    tr = EdgeTracker(camera, model, T, rims=rims, lost_confidence=0.3, max_edge_distance_px=float("inf"),
-                     sample_step_px=step_px)
+    tr = EdgeTracker(
+        camera, model, T, rims=rims, lost_confidence=0.3, max_edge_distance_px=float("inf"), sample_step_px=step_px
+    )
     for _ in range(2):
         res = tr.track(image)
         if res.lost:

@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import csv
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import cv2
 import numpy as np
@@ -32,7 +32,15 @@ from core.transforms import exp_so3, log_so3, make_T
 
 from .track import EdgeTracker, TrackDiagnostics
 
-__all__ = ["read_visp_pose", "read_init_points", "pose_from_points", "iter_frames", "draw_tracking", "TrackedFrame", "track_sequence"]
+__all__ = [
+    "read_visp_pose",
+    "read_init_points",
+    "pose_from_points",
+    "iter_frames",
+    "draw_tracking",
+    "TrackedFrame",
+    "track_sequence",
+]
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")
 
@@ -211,7 +219,17 @@ def track_sequence(
             ms = 1e3 * (time.perf_counter() - t0)
             d = tracker.diagnostics
             out.append(
-                TrackedFrame(index, T, conf, lost, d.rms_px if d else float("nan"), d.n_samples if d else 0, d.n_inliers if d else 0, ms, d.reason if d else "")
+                TrackedFrame(
+                    index,
+                    T,
+                    conf,
+                    lost,
+                    d.rms_px if d else float("nan"),
+                    d.n_samples if d else 0,
+                    d.n_inliers if d else 0,
+                    ms,
+                    d.reason if d else "",
+                )
             )
             if video_out is not None:
                 img = draw_tracking(frame, camera, model, T, d, confidence=conf, lost=lost, label=f"frame {index}")
@@ -242,8 +260,35 @@ def _write_csv(path: Path, frames: list[TrackedFrame]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["frame", "confidence", "lost", "rms_px", "samples", "inliers", "track_ms", "tx_m", "ty_m", "tz_m", "rx_rad", "ry_rad", "rz_rad"])
+        w.writerow(
+            [
+                "frame",
+                "confidence",
+                "lost",
+                "rms_px",
+                "samples",
+                "inliers",
+                "track_ms",
+                "tx_m",
+                "ty_m",
+                "tz_m",
+                "rx_rad",
+                "ry_rad",
+                "rz_rad",
+            ]
+        )
         for f in frames:
             r = log_so3(f.T_world_obj[:3, :3])
-            w.writerow([f.index, f"{f.confidence:.4f}", int(f.lost), f"{f.rms_px:.4f}", f.n_samples, f.n_inliers, f"{f.track_ms:.2f}"]
-                       + [f"{x:.6f}" for x in f.T_world_obj[:3, 3]] + [f"{x:.6f}" for x in r])
+            w.writerow(
+                [
+                    f.index,
+                    f"{f.confidence:.4f}",
+                    int(f.lost),
+                    f"{f.rms_px:.4f}",
+                    f.n_samples,
+                    f.n_inliers,
+                    f"{f.track_ms:.2f}",
+                ]
+                + [f"{x:.6f}" for x in f.T_world_obj[:3, 3]]
+                + [f"{x:.6f}" for x in r]
+            )

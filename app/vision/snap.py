@@ -67,7 +67,9 @@ def _weighted_tls(P: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return c, Vt[0]
 
 
-def fit_line_robust(P: np.ndarray, w: np.ndarray, inlier_px: float, max_pairs: int = 4000, rng_seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def fit_line_robust(
+    P: np.ndarray, w: np.ndarray, inlier_px: float, max_pairs: int = 4000, rng_seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Robust 2D line fit: the pair of points whose line most weight supports, then weighted TLS.
 
     Parameters
@@ -173,14 +175,18 @@ def snap_segment(
     P = S[0] + s[:, None] * u
 
     prior = band_px / 2.0  # the operator clicked near the edge: prefer near edges to strong far ones
-    hits = search_along_normals(roi, P, np.tile(n, (len(P), 1)), band_px, min_strength=min_strength, prior_sigma_px=prior)
+    hits = search_along_normals(
+        roi, P, np.tile(n, (len(P), 1)), band_px, min_strength=min_strength, prior_sigma_px=prior
+    )
     if hits.found.sum() < 2:
         return _refused(seg, "no edge found near the segment")
     pos = hits.strength[hits.found] > 0
     w_pos = hits.strength[hits.found][pos].sum()
     w_neg = -hits.strength[hits.found][~pos].sum()
     polarity = 1 if w_pos >= w_neg else -1
-    hits = search_along_normals(roi, P, np.tile(n, (len(P), 1)), band_px, polarity=polarity, min_strength=min_strength, prior_sigma_px=prior)
+    hits = search_along_normals(
+        roi, P, np.tile(n, (len(P), 1)), band_px, polarity=polarity, min_strength=min_strength, prior_sigma_px=prior
+    )
     if hits.found.sum() < 2:
         return _refused(seg, "no edge of one polarity found near the segment")
     E = hits.points(P, np.tile(n, (len(P), 1)))[hits.found]
@@ -196,7 +202,9 @@ def snap_segment(
         m = max(int(np.floor(abs(a1 - a0))) + 1, 2)
         Q = c + np.linspace(a0, a1, m)[:, None] * v
         N2 = np.tile(nv, (m, 1))
-        hits = search_along_normals(roi, Q, N2, refine_px, polarity=polarity, min_strength=min_strength, prior_sigma_px=refine_px)
+        hits = search_along_normals(
+            roi, Q, N2, refine_px, polarity=polarity, min_strength=min_strength, prior_sigma_px=refine_px
+        )
         if hits.found.sum() < 2:
             return _refused(seg, "the edge fades out along the segment")
         E = hits.points(Q, N2)[hits.found]

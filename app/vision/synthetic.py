@@ -37,7 +37,10 @@ def one_body_scene(
     poses : list of arrays, shape (4, 4), T_world_obj per frame. noise_sigma : sensor noise (grey
     levels); blur_sigma_px : optical blur (pixels); seed : the noise's seed.
     """
-    poses = [np.asarray(T, dtype=float) for T in (poses if isinstance(poses, (list, tuple)) else list(np.asarray(poses).reshape(-1, 4, 4)))]
+    poses = [
+        np.asarray(T, dtype=float)
+        for T in (poses if isinstance(poses, (list, tuple)) else list(np.asarray(poses).reshape(-1, 4, 4)))
+    ]
     if not poses:
         raise ValueError("give at least one pose")
     d = {

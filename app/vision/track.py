@@ -62,8 +62,17 @@ from core.transforms import check_T, pose_error
 
 from .profiles import search_along_normals, to_gray_f32
 
-__all__ = ["TrackResult", "TrackDiagnostics", "EdgeSamples", "EdgeTracker", "sample_visible_edges", "VisibleSegments",
-           "visible_segments", "sample_view", "BandSmoothed"]
+__all__ = [
+    "TrackResult",
+    "TrackDiagnostics",
+    "EdgeSamples",
+    "EdgeTracker",
+    "sample_visible_edges",
+    "VisibleSegments",
+    "visible_segments",
+    "sample_view",
+    "BandSmoothed",
+]
 
 
 class TrackResult(NamedTuple):
@@ -94,7 +103,7 @@ class EdgeSamples:
     def __len__(self) -> int:
         return len(self.uv)
 
-    def subset(self, mask: np.ndarray) -> "EdgeSamples":
+    def subset(self, mask: np.ndarray) -> EdgeSamples:
         return EdgeSamples(self.uv[mask], self.normals[mask], self.X_obj[mask], self.D_obj[mask], self.feature[mask])
 
 
@@ -150,13 +159,17 @@ def _feature_ids(model: BRep, kind: np.ndarray, n_circle: int) -> tuple[np.ndarr
     return ids, solid_rim
 
 
-def _edges_on_faces_seen(model: BRep, T_world_obj: np.ndarray, center_world: np.ndarray, max_angle_deg: float) -> np.ndarray:
+def _edges_on_faces_seen(
+    model: BRep, T_world_obj: np.ndarray, center_world: np.ndarray, max_angle_deg: float
+) -> np.ndarray:
     """(E,) bool: the edge borders a face seen at less than max_angle_deg (edges without faces: True)."""
     c_obj = (np.asarray(center_world) - T_world_obj[:3, 3]) @ T_world_obj[:3, :3]
     v = c_obj - model.face_centroids()
     cos = np.einsum("ij,ij->i", model.face_normals(), v) / np.linalg.norm(v, axis=1)
     seen = cos > np.cos(np.radians(max_angle_deg))
-    return np.array([not fs or bool(seen[list(fs)].any()) for fs in (model.edge_faces(k) for k in range(len(model.edges)))])
+    return np.array(
+        [not fs or bool(seen[list(fs)].any()) for fs in (model.edge_faces(k) for k in range(len(model.edges)))]
+    )
 
 
 def sample_visible_edges(
@@ -190,7 +203,9 @@ def sample_visible_edges(
     """
     T = np.asarray(T_world_obj, dtype=float)
     view = visible_segments(camera, model, T, rims=rims, max_face_angle_deg=max_face_angle_deg, n_circle=n_circle)
-    return sample_view(camera, view, T, step_px=step_px, vertex_margin_px=vertex_margin_px, image_margin_px=image_margin_px)
+    return sample_view(
+        camera, view, T, step_px=step_px, vertex_margin_px=vertex_margin_px, image_margin_px=image_margin_px
+    )
 
 
 @dataclass(frozen=True)
@@ -210,7 +225,13 @@ class VisibleSegments:
 
 
 def visible_segments(
-    camera: Camera, model: BRep, T_world_obj: np.ndarray, *, rims: bool = False, max_face_angle_deg: float = 75.0, n_circle: int = 48
+    camera: Camera,
+    model: BRep,
+    T_world_obj: np.ndarray,
+    *,
+    rims: bool = False,
+    max_face_angle_deg: float = 75.0,
+    n_circle: int = 48,
 ) -> VisibleSegments:
     """The segments ``sample_visible_edges`` samples at pose T_world_obj (object frame; see there)."""
     T = np.asarray(T_world_obj, dtype=float)
@@ -225,7 +246,13 @@ def visible_segments(
 
 
 def sample_view(
-    camera: Camera, view: VisibleSegments, T_world_obj: np.ndarray, *, step_px: float = 6.0, vertex_margin_px: float = 4.0, image_margin_px: float = 2.0
+    camera: Camera,
+    view: VisibleSegments,
+    T_world_obj: np.ndarray,
+    *,
+    step_px: float = 6.0,
+    vertex_margin_px: float = 4.0,
+    image_margin_px: float = 2.0,
 ) -> EdgeSamples:
     """Samples along the segments of ``view`` placed at pose T_world_obj (see ``sample_visible_edges``)."""
     T = np.asarray(T_world_obj, dtype=float)
@@ -237,7 +264,16 @@ def sample_view(
     A, B = A_o @ T[:3, :3].T + T[:3, 3], B_o @ T[:3, :3].T + T[:3, 3]
     sa, sb = camera.depth(A), camera.depth(B)
     front = (sa > 1e-6) & (sb > 1e-6)
-    A, B, A_o, B_o, sa, sb, kinds, fid = A[front], B[front], A_o[front], B_o[front], sa[front], sb[front], kinds[front], fid[front]
+    A, B, A_o, B_o, sa, sb, kinds, fid = (
+        A[front],
+        B[front],
+        A_o[front],
+        B_o[front],
+        sa[front],
+        sb[front],
+        kinds[front],
+        fid[front],
+    )
     if len(A) == 0:
         return empty
     a, b = camera.project(A), camera.project(B)
@@ -250,7 +286,9 @@ def sample_view(
     # Rim chords are short: place their samples every step_px along the chords laid end to end.
     cum_end = np.cumsum(np.where(straight, 0.0, L))
     cum_start = cum_end - np.where(straight, 0.0, L)
-    count = np.where(straight, count, np.floor(cum_end / step_px).astype(int) - np.floor(cum_start / step_px).astype(int))
+    count = np.where(
+        straight, count, np.floor(cum_end / step_px).astype(int) - np.floor(cum_start / step_px).astype(int)
+    )
     count = np.where(L > 1e-9, count, 0)
     seg_idx = np.repeat(np.arange(len(A)), count)
     if len(seg_idx) == 0:
@@ -331,7 +369,9 @@ class BandSmoothed:
         Y0, Y1, X0, X1 = max(0, y0 - m), min(H, y1 + m), max(0, x0 - m), min(W, x1 + m)
         crop = to_gray_f32(self.frame[Y0:Y1, X0:X1])
         if self.sigma_px > 0:
-            crop = cv2.GaussianBlur(crop, (0, 0), sigmaX=self.sigma_px, sigmaY=self.sigma_px, borderType=cv2.BORDER_REPLICATE)
+            crop = cv2.GaussianBlur(
+                crop, (0, 0), sigmaX=self.sigma_px, sigmaY=self.sigma_px, borderType=cv2.BORDER_REPLICATE
+            )
         self.img[y0:y1, x0:x1] = crop[y0 - Y0 : y1 - Y0, x0 - X0 : x1 - X0]
 
 
@@ -352,7 +392,7 @@ class _Pass:
     fit: PointLineFit | None
 
     @classmethod
-    def empty(cls) -> "_Pass":
+    def empty(cls) -> _Pass:
         s = EdgeSamples(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64))
         return cls(s, np.zeros((0, 2)), np.zeros(0, bool), np.zeros(0), np.zeros(0), None)
 
@@ -444,8 +484,10 @@ class EdgeTracker:
         if not 0.0 <= lost_confidence < 1.0:
             raise ValueError(f"lost_confidence must be in [0, 1), got {lost_confidence}")
         if not (max_edge_distance_px > 0 and check_search_px > 0 and check_min_strength > 0):
-            raise ValueError("max_edge_distance_px, check_search_px and check_min_strength must be positive, got "
-                             f"{max_edge_distance_px}, {check_search_px}, {check_min_strength}")
+            raise ValueError(
+                "max_edge_distance_px, check_search_px and check_min_strength must be positive, got "
+                f"{max_edge_distance_px}, {check_search_px}, {check_min_strength}"
+            )
         self.camera = camera
         self.model = model
         self.sample_step_px = float(sample_step_px)
@@ -465,7 +507,9 @@ class EdgeTracker:
         self.check_min_strength = float(check_min_strength)
         self.capture_px = float(capture_px)
         self.start_capture_deg = float(start_capture_deg)
-        self.start_capture_px = tuple(float(px) for px in np.atleast_1d(np.asarray(start_capture_px, float)) if px > self.search_px)
+        self.start_capture_px = tuple(
+            float(px) for px in np.atleast_1d(np.asarray(start_capture_px, float)) if px > self.search_px
+        )
         self.reset(T_world_obj)
 
     # ------------------------------------------------------------------ state
@@ -516,7 +560,13 @@ class EdgeTracker:
         pol = np.array([self._polarity.get(int(f), 0.0) for f in samples.feature]) if self._polarity else None
         img = band.around(samples.uv, _reach(half_range))
         hits = search_along_normals(
-            img, samples.uv, samples.normals, half_range, polarity=pol, min_strength=self.min_strength, prior_sigma_px=half_range / 2.0
+            img,
+            samples.uv,
+            samples.normals,
+            half_range,
+            polarity=pol,
+            min_strength=self.min_strength,
+            prior_sigma_px=half_range / 2.0,
         )
         matched = hits.points(samples.uv, samples.normals)
         found = hits.found
@@ -524,7 +574,13 @@ class EdgeTracker:
         if found.sum() < max(self.min_inliers, 6):
             return _Pass(samples, matched, found, hits.strength, w, None)
         fit = refine_point_to_line(
-            self.camera, T, samples.X_obj[found], samples.D_obj[found], matched[found], loss=self.loss, max_iter=self.max_iter
+            self.camera,
+            T,
+            samples.X_obj[found],
+            samples.D_obj[found],
+            matched[found],
+            loss=self.loss,
+            max_iter=self.max_iter,
         )
         w[found] = fit.weights
         return _Pass(samples, matched, found, hits.strength, w, fit)
@@ -536,10 +592,12 @@ class EdgeTracker:
             return float("inf")
         R = self.check_search_px
         img = band.around(s.uv, _reach(R))
-        hits = search_along_normals(img, s.uv, s.normals, R, min_strength=self.check_min_strength, prior_sigma_px=R / 4.0)
+        hits = search_along_normals(
+            img, s.uv, s.normals, R, min_strength=self.check_min_strength, prior_sigma_px=R / 4.0
+        )
         return float(np.mean(np.where(hits.found, np.minimum(np.abs(hits.offset_px), R), R)))
 
-    def _attempt(self, band: "BandSmoothed", view: VisibleSegments, schedule: tuple[float, ...]):
+    def _attempt(self, band: BandSmoothed, view: VisibleSegments, schedule: tuple[float, ...]):
         """The passes of ``schedule`` from the last good pose, and the lost tests on their answer.
 
         Returns (T, the last pass, reason ("" if tracked), confidence, inliers (bool per sample),
@@ -554,8 +612,10 @@ class EdgeTracker:
                     view = self._view(T)
                 p = self._pass(band, view, T, half_range)
                 if p.fit is None:
-                    reason = (f"the image shows an edge near only {int(p.found.sum())} of the {len(p.samples)} points "
-                              "checked along the model's edges")
+                    reason = (
+                        f"the image shows an edge near only {int(p.found.sum())} of the {len(p.samples)} points "
+                        "checked along the model's edges"
+                    )
                     break
                 T = p.fit.T_world_obj
         except ValueError as exc:  # the pose went behind the camera, or an edge is seen end-on
@@ -570,12 +630,15 @@ class EdgeTracker:
             if n_inl < self.min_inliers:
                 reason = f"only {n_inl} points along the model's edges support the pose (fewer than {self.min_inliers})"
             elif confidence < self.lost_confidence:
-                reason = (f"only {100 * confidence:.0f} % of the model's edges lie on image edges "
-                          f"(fewer than {100 * self.lost_confidence:.0f} %): the pose is not supported by the image")
+                reason = (
+                    f"only {100 * confidence:.0f} % of the model's edges lie on image edges "
+                    f"(fewer than {100 * self.lost_confidence:.0f} %): the pose is not supported by the image"
+                )
             else:
                 # A jump larger than the search band cannot come from edges found within it.
                 jump = np.linalg.norm(
-                    self.camera.project_obj(T, p.samples.X_obj) - self.camera.project_obj(self._T, p.samples.X_obj), axis=1
+                    self.camera.project_obj(T, p.samples.X_obj) - self.camera.project_obj(self._T, p.samples.X_obj),
+                    axis=1,
                 )
                 if np.median(jump) > 2.0 * max(schedule):
                     reason = f"the pose jumped {np.median(jump):.1f} px, more than the search band allows"
@@ -583,8 +646,10 @@ class EdgeTracker:
         if not reason:
             edge_px = self._edge_distance(band, view, T)
             if edge_px > self.max_edge_distance_px:
-                reason = (f"the model's edges lie {edge_px:.1f} px from the image's edges on average (more than "
-                          f"{self.max_edge_distance_px:.1f} px): the pose is not supported by the image")
+                reason = (
+                    f"the model's edges lie {edge_px:.1f} px from the image's edges on average (more than "
+                    f"{self.max_edge_distance_px:.1f} px): the pose is not supported by the image"
+                )
         return T, p, reason, confidence, inl, edge_px
 
     def track(self, frame: np.ndarray) -> TrackResult:
@@ -613,7 +678,13 @@ class EdgeTracker:
         view = self._view(self._T)  # which edges are seen from the start (shared by a retry's first pass)
         T, p, reason, confidence, inl, edge_px = self._attempt(band, view, self._schedule())
         wide = self._capture_schedule()
-        if reason and not self._followed and self.start_capture_px and self.lost_confidence > 0 and np.isfinite(self.max_edge_distance_px):
+        if (
+            reason
+            and not self._followed
+            and self.start_capture_px
+            and self.lost_confidence > 0
+            and np.isfinite(self.max_edge_distance_px)
+        ):
             # The first frame after a given pose: the pose may be degrees or a centimetre off (a
             # stale database pose, clicked edges), beyond the ±search_px band. See start_capture_px.
             tried = [self._attempt(band, view, self._capture_schedule(px)) for px in self.start_capture_px]
@@ -621,10 +692,18 @@ class EdgeTracker:
             if good:
                 X = good[0][1].samples.X_obj
                 uv0 = self.camera.project_obj(good[0][0], X)
-                apart = max((float(np.median(np.linalg.norm(self.camera.project_obj(g[0], X) - uv0, axis=1))) for g in good[1:]), default=0.0)
+                apart = max(
+                    (
+                        float(np.median(np.linalg.norm(self.camera.project_obj(g[0], X) - uv0, axis=1)))
+                        for g in good[1:]
+                    ),
+                    default=0.0,
+                )
                 if apart > self.max_edge_distance_px:
-                    reason = (f"near the given pose the image fits two poses whose edges lie {apart:.1f} px apart, "
-                              "and does not show which is right")
+                    reason = (
+                        f"near the given pose the image fits two poses whose edges lie {apart:.1f} px apart, "
+                        "and does not show which is right"
+                    )
                 else:
                     T, p, reason, confidence, inl, edge_px = good[0]
         elif reason and wide and self._followed and np.isfinite(edge_px) and confidence >= self.lost_confidence:
@@ -640,7 +719,9 @@ class EdgeTracker:
         rms = p.fit.rms_px if p.fit is not None else float("nan")
         matched = np.where(p.found[:, None], p.matched, np.nan)
         cov = None if p.fit is None else p.fit.cov.copy()
-        self.diagnostics = TrackDiagnostics(p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason, cov, edge_px)
+        self.diagnostics = TrackDiagnostics(
+            p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason, cov, edge_px
+        )
         if reason:
             self._lost = True
             return TrackResult(self._T.copy(), float(confidence), True)

@@ -44,27 +44,46 @@ def add_track_parser(sub) -> None:
         epilog="examples:\n" + "\n".join(line for line in __doc__.split("\n\n")[1].splitlines()),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("source", nargs="?", help="a video file or a folder of frames (default: the scene's video with --scene)")
+    p.add_argument(
+        "source", nargs="?", help="a video file or a folder of frames (default: the scene's video with --scene)"
+    )
     p.add_argument("--model", help="the object's model (.cao or a mesh); default: the body's model with --scene")
     cam = p.add_mutually_exclusive_group()
-    cam.add_argument("--intrinsics", help="camera intrinsics (ViSP .xml or OpenCV .yml); the world frame is the camera's")
-    cam.add_argument("--scene", help="a scene folder: its calibrated camera C (and, with --body, model, pose and video)")
-    p.add_argument("--camera-name", help="with --intrinsics: the camera to read in a file that holds several (ViSP <name>, "
-                   "or a YAML file's camera key or camera_name)")
+    cam.add_argument(
+        "--intrinsics", help="camera intrinsics (ViSP .xml or OpenCV .yml); the world frame is the camera's"
+    )
+    cam.add_argument(
+        "--scene", help="a scene folder: its calibrated camera C (and, with --body, model, pose and video)"
+    )
+    p.add_argument(
+        "--camera-name",
+        help="with --intrinsics: the camera to read in a file that holds several (ViSP <name>, "
+        "or a YAML file's camera key or camera_name)",
+    )
     p.add_argument("--body", help="with --scene: the body to track")
     p.add_argument("--pose", help="initial pose file: ViSP .pos (tx ty tz θux θuy θuz) or JSON (4×4 or {xyz, rpy_deg})")
     p.add_argument("--init-points", help="model points clicked to initialise (a ViSP .init file)")
-    p.add_argument("--init-clicks", nargs="+", type=_pixel, metavar="U,V", help="the clicked pixels of --init-points, in order "
-                   "(pixels of the video's frames as recorded; with lens distortion they are undistorted first)")
+    p.add_argument(
+        "--init-clicks",
+        nargs="+",
+        type=_pixel,
+        metavar="U,V",
+        help="the clicked pixels of --init-points, in order "
+        "(pixels of the video's frames as recorded; with lens distortion they are undistorted first)",
+    )
     p.add_argument("--out", default="tracked.mp4", help="overlay video to write (.mp4 or .avi; default tracked.mp4)")
     p.add_argument("--csv", help="also write the per-frame poses and figures to this CSV file")
-    p.add_argument("--pos-out", metavar="PATH",
-                   help="write poses as ViSP .pos (tx ty tz θux θuy θuz, as --pose reads them): PATH with %%d (e.g. "
-                   "poses/obj.%%04d.pos) gets one file per tracked frame, any other PATH the last tracked frame's pose")
+    p.add_argument(
+        "--pos-out",
+        metavar="PATH",
+        help="write poses as ViSP .pos (tx ty tz θux θuy θuz, as --pose reads them): PATH with %%d (e.g. "
+        "poses/obj.%%04d.pos) gets one file per tracked frame, any other PATH the last tracked frame's pose",
+    )
     p.add_argument("--start", type=int, default=0, help="first frame to track (the initial pose is this frame's)")
     p.add_argument("--frames", type=int, help="number of frames to track (default: to the end)")
-    p.add_argument("--fps", type=frame_rate, default=25.0,
-                   help="frame rate of the overlay video (above 0, at most 240)")
+    p.add_argument(
+        "--fps", type=frame_rate, default=25.0, help="frame rate of the overlay video (above 0, at most 240)"
+    )
     p.add_argument("--search-px", type=float, default=8.0, help="search ±this many pixels along the edges' normals")
     p.add_argument("--step-px", type=float, default=5.0, help="spacing of the edge samples (pixels)")
     p.add_argument("--keep-going", action="store_true", help="do not stop at a lost frame (draw the last good pose)")
@@ -130,8 +149,10 @@ def _setup(args):
         h, w = first.shape[:2]
         intr = read_intrinsics(args.intrinsics, camera_name=args.camera_name, image_size=(w, h))
         if intr.width is not None and (intr.width, intr.height) != (w, h):
-            raise ValueError(f"{args.intrinsics}: the camera was calibrated on {intr.width}×{intr.height} images but the "
-                             f"video's frames are {w}×{h}; give the intrinsics for this size")
+            raise ValueError(
+                f"{args.intrinsics}: the camera was calibrated on {intr.width}×{intr.height} images but the "
+                f"video's frames are {w}×{h}; give the intrinsics for this size"
+            )
         K = intr.K
         camera = Camera.from_intrinsics(K, np.eye(4), w, h)
         from app.undistort import lens_of
@@ -147,7 +168,9 @@ def _setup(args):
         if K is None:
             K, T_cam_world = camera.decompose()
             if not np.allclose(T_cam_world, np.eye(4), atol=1e-9):
-                raise ValueError("--init-clicks needs --intrinsics (the camera frame as the world); with --scene give --pose or --body")
+                raise ValueError(
+                    "--init-clicks needs --intrinsics (the camera frame as the world); with --scene give --pose or --body"
+                )
         clicks = np.array(args.init_clicks, dtype=float)
         if lens is not None:
             clicks = lens.undistort(clicks)

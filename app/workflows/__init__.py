@@ -8,18 +8,27 @@ No viser here.
 
 from .base import Cancelled, Ghost, Marks, Workflow, WorkflowError
 from .calibrate_camera import CalibrateCamera
-from .designate import DesignateTarget, Target
-from .session import WORKFLOWS, Session, register
-from .site import RayHit, Site, SiteObject
 from .calibrate_turret import CalibrateTurret
+from .designate import DesignateTarget, Target
 from .history import History
 from .model_object import ModelObject
 from .model_polyhedron import ModelPolyhedron
-from .update_pose import UpdatePose
-from .track import TrackObject
+from .session import WORKFLOWS, Session, register
+from .site import RayHit, Site, SiteObject
 from .snapping import ClickSnap
+from .track import TrackObject
+from .update_pose import UpdatePose
 
-for _cls in (CalibrateCamera, CalibrateTurret, DesignateTarget, History, UpdatePose, ModelObject, ModelPolyhedron, TrackObject):
+for _cls in (
+    CalibrateCamera,
+    CalibrateTurret,
+    DesignateTarget,
+    History,
+    UpdatePose,
+    ModelObject,
+    ModelPolyhedron,
+    TrackObject,
+):
     register(_cls)
 
 __all__ = [

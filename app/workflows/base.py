@@ -22,8 +22,19 @@ from core.brep import BRep
 if TYPE_CHECKING:  # pragma: no cover
     from .site import Site
 
-__all__ = ["WorkflowError", "Cancelled", "Ghost", "Marks", "Workflow", "as_pixel", "Control", "Step", "FrameRef",
-           "CANCEL", "KEY_TEXT"]
+__all__ = [
+    "WorkflowError",
+    "Cancelled",
+    "Ghost",
+    "Marks",
+    "Workflow",
+    "as_pixel",
+    "Control",
+    "Step",
+    "FrameRef",
+    "CANCEL",
+    "KEY_TEXT",
+]
 
 
 class WorkflowError(ValueError):
@@ -184,7 +195,7 @@ class FrameRef:
 
 
 def sigma_over(sd_deg: float, sd_mm: float, max_deg: float, max_mm: float) -> str:
-    """"σ up to 1.17° and 26.4 mm: the position's is above 20 mm" — which of the two exceeds its limit
+    """ "σ up to 1.17° and 26.4 mm: the position's is above 20 mm" — which of the two exceeds its limit
     (a weak result's reason, said so that 1.17° does not read as above 2°)."""
     over = [f"the rotation's is above {max_deg:g}°"] if sd_deg > max_deg else []
     over += [f"the position's is above {max_mm:g} mm"] if sd_mm > max_mm else []
@@ -223,7 +234,7 @@ class Workflow:
     # True: a double click on the video is one click here (its second click is dropped)
     double_click_is_one: ClassVar[bool] = False
 
-    def __init__(self, site: "Site", client: str = "operator"):
+    def __init__(self, site: Site, client: str = "operator"):
         self.site = site
         self.client = client
         self.state = "start"
@@ -254,7 +265,9 @@ class Workflow:
 
     def _check_open(self) -> None:
         if self.finished:
-            raise WorkflowError(f"the {self.title} workflow is {'accepted' if self.accepted else 'cancelled'}; start a new one")
+            raise WorkflowError(
+                f"the {self.title} workflow is {'accepted' if self.accepted else 'cancelled'}; start a new one"
+            )
 
     # ------------------------------------------------------------------ writing a pose
     def _write_pose(self, obj: Any, T_world_obj: np.ndarray, cov: Any, *, todo: str, **record: Any) -> tuple[Any, Any]:
@@ -267,11 +280,14 @@ class Workflow:
 
         try:
             return self.site.update_pose(obj, T_world_obj, cov, client=self.client, **record), obj
-        except ConflictError as exc:
+        except ConflictError as first:
+            conflict = first  # or the second conflict, below
             try:
                 fresh = self.site.object(obj.name)
             except KeyError:
-                raise WorkflowError(f"{obj.name} was removed from the database meanwhile: nothing was written") from None
+                raise WorkflowError(
+                    f"{obj.name} was removed from the database meanwhile: nothing was written"
+                ) from None
             same_model = fresh.model is obj.model or np.array_equal(fresh.model.vertices, obj.model.vertices)
             same_pose = same_model and np.allclose(fresh.T_world_obj, obj.T_world_obj, rtol=0.0, atol=1e-12)
             last = self.site.db.history(obj.name, limit=1)
@@ -280,16 +296,20 @@ class Workflow:
                 # Someone saw it move since this workflow started: maybe again, after the frame clicked on.
                 # Said, not written; a second Accept writes over the fresh snapshot (the operator has looked).
                 self.obj = fresh
-                raise WorkflowError(f"{obj.name} was marked stale{who} since you started: it may have moved after the "
-                                    "frame you clicked on. Nothing was written; check the video, then Accept again to "
-                                    f"write your pose, or {todo[0].lower() + todo[1:]}") from None
+                raise WorkflowError(
+                    f"{obj.name} was marked stale{who} since you started: it may have moved after the "
+                    "frame you clicked on. Nothing was written; check the video, then Accept again to "
+                    f"write your pose, or {todo[0].lower() + todo[1:]}"
+                ) from None
             if same_pose:
                 try:
                     return self.site.update_pose(fresh, T_world_obj, cov, client=self.client, **record), fresh
                 except ConflictError as again:
-                    exc = again
-            raise WorkflowError(f"{obj.name} was moved{who} since you started (version {exc.expected_version} → "
-                                f"{exc.actual_version}): nothing was written. {todo}") from None
+                    conflict = again
+            raise WorkflowError(
+                f"{obj.name} was moved{who} since you started (version {conflict.expected_version} → "
+                f"{conflict.actual_version}): nothing was written. {todo}"
+            ) from None
         except ValueError as exc:
             raise WorkflowError(f"the database refused the pose: {exc}") from None
 
@@ -300,7 +320,7 @@ class Workflow:
             self.frame = frame
 
     def scene_changed(self, uv: Any) -> str:
-        """"" when the live video around the pixels ``uv`` (N, 2) still looks as in the frozen frame
+        """ "" when the live video around the pixels ``uv`` (N, 2) still looks as in the frozen frame
         (or there is no frozen frame or no live one); otherwise why not, as a sentence's start. The
         range finder and the turret measure the site as it is now: a measurement where the site
         changed since the frozen frame lands on something that frame does not show (app.vision.change)."""
@@ -314,8 +334,10 @@ class Workflow:
 
         if changed_share(frame.image, live, np.asarray(uv, float).reshape(-1, 2)) <= CHANGED_SHARE:
             return ""
-        return (f"the live video here differs from the frozen frame (t = {frame.t_s:.1f} s): something moved since, "
-                "and the range finder measures the site as it is now")
+        return (
+            f"the live video here differs from the frozen frame (t = {frame.t_s:.1f} s): something moved since, "
+            "and the range finder measures the site as it is now"
+        )
 
     def moving_share(self, uv: Any) -> float | None:
         """The largest share of changed pixels around the pixels ``uv`` (N, 2) between the frozen frame
@@ -341,8 +363,12 @@ class Workflow:
         return Step("open", "Cancel to close.", frozenset({"cancel"}))
 
     def _finished_step(self) -> Step:
-        return Step("accepted" if self.accepted else "cancelled",
-                    self.message or ("Done." if self.accepted else "Cancelled: nothing was written."), frozenset(), False)
+        return Step(
+            "accepted" if self.accepted else "cancelled",
+            self.message or ("Done." if self.accepted else "Cancelled: nothing was written."),
+            frozenset(),
+            False,
+        )
 
     def control(self, action: str) -> Control | None:
         """This workflow's control for ``action``, or None."""
@@ -372,7 +398,7 @@ class Workflow:
             return _PLACEHOLDER.sub(lambda m: label(m.group(1)), st.prompt)
         parts, pos = [], 0
         for m in _PLACEHOLDER.finditer(st.prompt):
-            parts += [escape(st.prompt[pos:m.start()]), Md("**{}**").format(label(m.group(1)))]
+            parts += [escape(st.prompt[pos : m.start()]), Md("**{}**").format(label(m.group(1)))]
             pos = m.end()
         return Md("").join(parts + [escape(st.prompt[pos:])])
 

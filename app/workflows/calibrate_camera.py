@@ -73,15 +73,39 @@ def known_K(site) -> np.ndarray | None:
 class CalibrateCamera(SnapMixin, Workflow):
     name = "calibrate_camera"
     title = "Calibrate camera"
-    actions = ("click", "choose_point", "choose_vertex", "remove_last", "remove_pair", "solve", "accept", "redo",
-               "cancel", "refuse_snap", "set_snap", "set_method")
+    actions = (
+        "click",
+        "choose_point",
+        "choose_vertex",
+        "remove_last",
+        "remove_pair",
+        "solve",
+        "accept",
+        "redo",
+        "cancel",
+        "refuse_snap",
+        "set_snap",
+        "set_method",
+    )
     controls = (
-        Control("set_method", "Solve by", kind="choice",
-                hint="With the lens known: the camera's pose alone (PnP, 4 points or more) or the full camera matrix "
-                "(DLT, 6 or more)"),
+        Control(
+            "set_method",
+            "Solve by",
+            kind="choice",
+            hint="With the lens known: the camera's pose alone (PnP, 4 points or more) or the full camera matrix "
+            "(DLT, 6 or more)",
+        ),
         Control("solve", "Solve", "R", color="blue", hint="C from the paired points (PnP or DLT, as chosen)"),
-        Control("accept", "Accept", "enter", color="green", hint="Store the new calibration: every overlay is redrawn through it"),
-        Control("refuse_snap", "Refuse snap", "U", hint="Use the last click as clicked, not moved onto the image's corner"),
+        Control(
+            "accept",
+            "Accept",
+            "enter",
+            color="green",
+            hint="Store the new calibration: every overlay is redrawn through it",
+        ),
+        Control(
+            "refuse_snap", "Refuse snap", "U", hint="Use the last click as clicked, not moved onto the image's corner"
+        ),
         Control("remove_last", "Remove last", "backspace", hint="Undo the last click"),
         Control("pair", "Point", kind="choice", hint="A paired point (its residual after Solve)"),
         Control("remove_pair", "Delete point", arg="pair", hint="Delete the point chosen above"),
@@ -89,8 +113,9 @@ class CalibrateCamera(SnapMixin, Workflow):
         CANCEL,
     )
 
-    def __init__(self, site, client: str = "operator", snap: bool = True, sigma_px: float = 1.0,
-                 method: str | None = None):
+    def __init__(
+        self, site, client: str = "operator", snap: bool = True, sigma_px: float = 1.0, method: str | None = None
+    ):
         super().__init__(site, client)
         self._init_snap(snap)
         if not sigma_px > 0:
@@ -187,8 +212,10 @@ class CalibrateCamera(SnapMixin, Workflow):
         if method not in METHODS:
             raise WorkflowError(f"Solve by is one of {', '.join(METHODS)}, not {method!r}")
         if method == "pnp" and self.K is None:
-            raise WorkflowError("the camera's lens is not known here, so only the full camera matrix (DLT, 6 points or "
-                                "more) can be solved; start mcit serve with --intrinsics FILE to solve the pose alone")
+            raise WorkflowError(
+                "the camera's lens is not known here, so only the full camera matrix (DLT, 6 points or "
+                "more) can be solved; start mcit serve with --intrinsics FILE to solve the pose alone"
+            )
 
     def set_method(self, method: str) -> None:
         """What Solve solves: "pnp" (the camera's pose, the lens known: ≥ 4 points) or "dlt" (the full C: ≥ 6)."""
@@ -203,7 +230,9 @@ class CalibrateCamera(SnapMixin, Workflow):
             self.message = f"Solve by: {METHODS[method][0]}."
 
     def _sigmas(self) -> np.ndarray:
-        return np.array([SNAPPED_CORNER_SIGMA_PX if sn is not None and sn.applied else self.sigma_px for sn in self.snaps])
+        return np.array(
+            [SNAPPED_CORNER_SIGMA_PX if sn is not None and sn.applied else self.sigma_px for sn in self.snaps]
+        )
 
     def solve(self):
         """C from the pairs: by PnP with the lens known (≥ 4 points) or by DLT (≥ 6, not coplanar); shows
@@ -214,16 +243,24 @@ class CalibrateCamera(SnapMixin, Workflow):
             text, need, what, how = METHODS[self.method]
             if n < need:
                 unknowns = "6 unknowns: the pose" if self.method == "pnp" else "11 unknowns in C"
-                other = " (4 are enough for the pose alone: choose it in Solve by)" if self.K is not None and self.method == "dlt" else ""
+                other = (
+                    " (4 are enough for the pose alone: choose it in Solve by)"
+                    if self.K is not None and self.method == "dlt"
+                    else ""
+                )
                 raise WorkflowError(f"{n} points paired; {what} needs at least {need} ({unknowns}): pair more{other}")
             w, h = self.site.camera.width, self.site.camera.height
             try:
                 if self.method == "pnp":
                     from app.vision.pnp import solve_pnp
 
-                    self.result = solve_pnp(self.K, np.array(self.X_world), np.array(self.uv), w, h, sigma_px=self._sigmas())
+                    self.result = solve_pnp(
+                        self.K, np.array(self.X_world), np.array(self.uv), w, h, sigma_px=self._sigmas()
+                    )
                 else:
-                    self.result = calibrate_dlt(np.array(self.X_world), np.array(self.uv), w, h, sigma_px=self._sigmas())
+                    self.result = calibrate_dlt(
+                        np.array(self.X_world), np.array(self.uv), w, h, sigma_px=self._sigmas()
+                    )
             except ValueError as exc:
                 raise WorkflowError(f"calibration failed: {exc}") from None
             self.solved_by = self.method
@@ -232,12 +269,14 @@ class CalibrateCamera(SnapMixin, Workflow):
             return self.result
 
     def _solved_text(self) -> str:
-        """"Solved the camera's pose from 5 points with the lens known (PnP): RMS 0.4 px" (or the DLT's)."""
+        """ "Solved the camera's pose from 5 points with the lens known (PnP): RMS 0.4 px" (or the DLT's)."""
         _, _, what, how = METHODS[self.solved_by]
         text = f"Solved {what} from {len(self.uv)} points {how}: RMS {self.result.rms_px:.1f} px"
         if self.solved_by == "pnp":
-            text += (f", position ±{1000 * self.result.std_position_m:.1f} mm, "
-                     f"orientation ±{np.degrees(self.result.std_angle_rad):.2f}°")
+            text += (
+                f", position ±{1000 * self.result.std_position_m:.1f} mm, "
+                f"orientation ±{np.degrees(self.result.std_angle_rad):.2f}°"
+            )
         return text
 
     def accept(self) -> None:
@@ -246,14 +285,21 @@ class CalibrateCamera(SnapMixin, Workflow):
             self._check_open()
             if self.result is None:
                 raise WorkflowError("nothing to accept: solve first")
-            points = {"X_world": np.array(self.X_world).tolist(), "uv": np.array(self.uv).tolist(), "labels": list(self.labels),
-                      # raw and snapped pixels of each point above (None: snapping was off)
-                      "snaps": [None if sn is None else sn.record() for sn in self.snaps],
-                      "frame": self.frame_record(),  # the frozen frame clicked on (None: the site's frame)
-                      "solved_by": self.solved_by}
+            points = {
+                "X_world": np.array(self.X_world).tolist(),
+                "uv": np.array(self.uv).tolist(),
+                "labels": list(self.labels),
+                # raw and snapped pixels of each point above (None: snapping was off)
+                "snaps": [None if sn is None else sn.record() for sn in self.snaps],
+                "frame": self.frame_record(),  # the frozen frame clicked on (None: the site's frame)
+                "solved_by": self.solved_by,
+            }
             if self.solved_by == "pnp":  # the lens it was solved with, and the pose's σ (K taken as exact)
-                points.update(K=np.asarray(self.K).tolist(), std_position_m=self.result.std_position_m,
-                              std_angle_rad=self.result.std_angle_rad)
+                points.update(
+                    K=np.asarray(self.K).tolist(),
+                    std_position_m=self.result.std_position_m,
+                    std_angle_rad=self.result.std_angle_rad,
+                )
             self.site.set_camera(
                 self.result.camera,
                 rms_px=self.result.rms_px,
@@ -266,8 +312,10 @@ class CalibrateCamera(SnapMixin, Workflow):
             self.accepted = True
             self.state = "accepted"
             what = "pose with the lens known (PnP" if self.solved_by == "pnp" else "full camera matrix (DLT"
-            self.message = (f"Camera calibrated from its {what}, RMS {self.result.rms_px:.1f} px): every overlay is now "
-                            "drawn through it.")
+            self.message = (
+                f"Camera calibrated from its {what}, RMS {self.result.rms_px:.1f} px): every overlay is now "
+                "drawn through it."
+            )
 
     def redo(self) -> None:
         """Forget every pair and the result; start again."""
@@ -369,18 +417,32 @@ class CalibrateCamera(SnapMixin, Workflow):
         if self.K is not None:
             has.add("set_method")
         if self.state == "click_image":
-            return Step("click_image", f"Now click where {self.pending_label} (circled) really is in the video; "
-                        "{remove_last} if you picked the wrong corner.", frozenset(has))
+            return Step(
+                "click_image",
+                f"Now click where {self.pending_label} (circled) really is in the video; "
+                "{remove_last} if you picked the wrong corner.",
+                frozenset(has),
+            )
         _, need, what, how = METHODS[self.method]
         if n >= need:
             has.add("solve")
         if self.state == "review" and self.result is not None:
-            return Step("review", f"{self._solved_text()}. {{accept}} to use it, or delete a point with a "
-                        "large residual ({remove_pair}) and {solve} again.", frozenset(has | {"accept"}))
+            return Step(
+                "review",
+                f"{self._solved_text()}. {{accept}} to use it, or delete a point with a "
+                "large residual ({remove_pair}) and {solve} again.",
+                frozenset(has | {"accept"}),
+            )
         more = max(0, need - n)
         tail = f" ({more} more needed for {what} {how})." if more else f", or {{solve}} for {what} {how}."
-        choose = " {set_method} chooses the pose alone (the lens is known) or the full camera matrix." if self.K is not None else ""
-        return Step("pick_model", f"Click a model corner drawn in the overlay (point {n + 1}){tail}{choose}", frozenset(has))
+        choose = (
+            " {set_method} chooses the pose alone (the lens is known) or the full camera matrix."
+            if self.K is not None
+            else ""
+        )
+        return Step(
+            "pick_model", f"Click a model corner drawn in the overlay (point {n + 1}){tail}{choose}", frozenset(has)
+        )
 
     def choice_value(self, action: str) -> Any:
         return self.method if action == "set_method" else None
@@ -392,8 +454,10 @@ class CalibrateCamera(SnapMixin, Workflow):
             return []
         with self.lock:
             err = self.result.errors_px if self.result is not None else None
-            return [(f"{i + 1} {lab}" + (f" · {err[i]:.1f} px" if err is not None and i < len(err) else ""), i)
-                    for i, lab in enumerate(self.labels)]
+            return [
+                (f"{i + 1} {lab}" + (f" · {err[i]:.1f} px" if err is not None and i < len(err) else ""), i)
+                for i, lab in enumerate(self.labels)
+            ]
 
     def weaknesses(self) -> list[str]:
         with self.lock:
@@ -405,21 +469,29 @@ class CalibrateCamera(SnapMixin, Workflow):
             least = MIN_REDUNDANT_PAIRS_PNP if pnp else MIN_REDUNDANT_PAIRS
             if n < least:
                 unknowns = "the pose's 6 unknowns" if pnp else "C's 11 unknowns"
-                out.append(f"only {n} points ({2 * n} coordinates) for {unknowns}: enough to solve, but little "
-                           f"redundancy to catch a wrong click ({least} or more is safer)")
+                out.append(
+                    f"only {n} points ({2 * n} coordinates) for {unknowns}: enough to solve, but little "
+                    f"redundancy to catch a wrong click ({least} or more is safer)"
+                )
             sig = self._sigmas()
             bad = [i for i, (e, sg) in enumerate(zip(self.result.errors_px, sig)) if e > 3 * max(sg, 0.5)]
             chi = float(np.sum((self.result.errors_px / np.maximum(sig, 0.5)) ** 2))
             if pnp and n > 4 and chi > _chi2_999(2 * n - 6):  # the residuals, all told, beyond the clicks' precision
-                out.append(f"the points fit the known lens poorly (RMS {self.result.rms_px:.1f} px): a wrong click, or a "
-                           "lens file that is not this camera's (zoom, focus, image size)? Solve by the full camera "
-                           "matrix to compare")
+                out.append(
+                    f"the points fit the known lens poorly (RMS {self.result.rms_px:.1f} px): a wrong click, or a "
+                    "lens file that is not this camera's (zoom, focus, image size)? Solve by the full camera "
+                    "matrix to compare"
+                )
             for i in bad:
-                out.append(f"point {i + 1} ({self.labels[i]}) is {self.result.errors_px[i]:.1f} px from where C puts it "
-                           "(more than 3σ): a wrong corner?")
+                out.append(
+                    f"point {i + 1} ({self.labels[i]}) is {self.result.errors_px[i]:.1f} px from where C puts it "
+                    "(more than 3σ): a wrong corner?"
+                )
             for i, sn in enumerate(self.snaps):
                 if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
-                    out.append(f"point {i + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)")
+                    out.append(
+                        f"point {i + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
+                    )
             return out
 
     def marks(self) -> Marks:

@@ -36,12 +36,27 @@ class CalibrateTurret(Workflow):
     title = "Calibrate turret"
     actions = ("click", "choose_point", "measure", "remove_last", "remove_measurement", "solve", "accept", "cancel")
     controls = (
-        Control("measure", "Measure", "M", kind="long", color="blue", hint="Aim at the picked point and measure its range"),
-        Control("solve", "Solve", "R", color="blue", hint="The turret pose that puts every measured point on the known surfaces"),
+        Control(
+            "measure", "Measure", "M", kind="long", color="blue", hint="Aim at the picked point and measure its range"
+        ),
+        Control(
+            "solve",
+            "Solve",
+            "R",
+            color="blue",
+            hint="The turret pose that puts every measured point on the known surfaces",
+        ),
         Control("accept", "Accept", "enter", color="green", hint="Store the turret calibration"),
         Control("remove_last", "Remove last", "backspace", hint="Drop the picked point, or else the last measurement"),
-        Control("measurement", "Measurement", kind="choice", hint="A measured point (its distance to the surfaces after Solve)"),
-        Control("remove_measurement", "Delete measurement", arg="measurement", hint="Delete the measurement chosen above"),
+        Control(
+            "measurement",
+            "Measurement",
+            kind="choice",
+            hint="A measured point (its distance to the surfaces after Solve)",
+        ),
+        Control(
+            "remove_measurement", "Delete measurement", arg="measurement", hint="Delete the measurement chosen above"
+        ),
         CANCEL,
     )
 
@@ -95,8 +110,10 @@ class CalibrateTurret(Workflow):
                 origin, ray = cam.rays(p.reshape(1, 2))
                 hit = self.site.raycast(origin, ray[0])
                 if hit is None:
-                    raise WorkflowError("that click is on no known object: click a face of a known object (a cyan "
-                                        "centre, a corner, or anywhere on it)")
+                    raise WorkflowError(
+                        "that click is on no known object: click a face of a known object (a cyan "
+                        "centre, a corner, or anywhere on it)"
+                    )
                 self.pending_X, self.pending_label = hit.X_world.copy(), f"a point on {hit.name}"
                 self.state = "measure"
                 self.message = f"Target: a point on {hit.name}."
@@ -139,8 +156,10 @@ class CalibrateTurret(Workflow):
             uv = self.site.camera.project(X.reshape(1, 3))
         why = self.scene_changed(uv)
         if why:
-            raise WorkflowError(f"{why}: {label} may not be where the frozen frame shows it. Nothing was measured: "
-                                "measure again when the video there looks as frozen, or pick another point")
+            raise WorkflowError(
+                f"{why}: {label} may not be where the frozen frame shows it. Nothing was measured: "
+                "measure again when the video there looks as frozen, or pick another point"
+            )
         with self.lock:
             self._check_open()
             self.cancel_event.clear()
@@ -149,14 +168,18 @@ class CalibrateTurret(Workflow):
             pan_r, tilt_r = devices.turret.move_to(float(pan), float(tilt), wait=True)  # whole steps, as reached
             if self.cancel_event.is_set():
                 raise Cancelled()
-            self.progress, self.progress_text = 0.5, f"point {k} · measuring {self.shots} shot{'s' if self.shots > 1 else ''}"
+            self.progress, self.progress_text = (
+                0.5,
+                f"point {k} · measuring {self.shots} shot{'s' if self.shots > 1 else ''}",
+            )
             m = devices.rangefinder.measure_n(self.shots)
             self.site.set_beam(beam_point(T, pan_r, tilt_r, m.range_m))
             self.progress = 1.0
         except NoTargetError:
             self.progress = None
-            raise WorkflowError(f"no range return from {label}: pick a point on a surface facing the "
-                                "turret, nearer than 10 m") from None
+            raise WorkflowError(
+                f"no range return from {label}: pick a point on a surface facing the turret, nearer than 10 m"
+            ) from None
         except DeviceError as exc:
             self.progress = None
             raise WorkflowError(f"device fault while measuring: {exc}. Check the devices and Measure again") from None
@@ -180,10 +203,12 @@ class CalibrateTurret(Workflow):
             self.message = f"{self.labels[-1]}: {1000 * m.range_m:.1f} mm ({len(self.pan)} measurement{'s' if len(self.pan) != 1 else ''})."
             off = self._off_surface_m(Xm)
             if off > OFF_SURFACE_M:  # said now, not only when Solve leaves it out
-                self.message += (f" It landed {100 * off:.0f} cm from every known surface: the beam missed the object "
-                                 "(aimed by a turret calibration that far off, or something not in the database is in "
-                                 "the way); Solve will leave it out — Delete measurement and pick a point nearer a "
-                                 "face's middle.")
+                self.message += (
+                    f" It landed {100 * off:.0f} cm from every known surface: the beam missed the object "
+                    "(aimed by a turret calibration that far off, or something not in the database is in "
+                    "the way); Solve will leave it out — Delete measurement and pick a point nearer a "
+                    "face's middle."
+                )
             return m
 
     def _off_surface_m(self, X: np.ndarray) -> float:
@@ -216,7 +241,9 @@ class CalibrateTurret(Workflow):
             if self.pending_X is not None:  # the pick only: the measurements, and a solve of them, stand
                 self.pending_X = None
                 self.state = "review" if self.result is not None else "pick"
-                self.message = "The picked point is dropped" + ("; the solve stands." if self.result is not None else ".")
+                self.message = "The picked point is dropped" + (
+                    "; the solve stands." if self.result is not None else "."
+                )
                 return
             for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
                 lst.pop()
@@ -243,28 +270,47 @@ class CalibrateTurret(Workflow):
             _, dist0, _ = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
             used = dist0 <= OFF_SURFACE_M
             off = [f"{i + 1} {self.labels[i]}" for i in np.flatnonzero(~used)]
-            off_text = (f" Left out, more than {100 * OFF_SURFACE_M:.0f} cm from every known surface (did their object "
-                        f"move, or is it not in the database?): {', '.join(off)}." if off else "")
+            off_text = (
+                f" Left out, more than {100 * OFF_SURFACE_M:.0f} cm from every known surface (did their object "
+                f"move, or is it not in the database?): {', '.join(off)}."
+                if off
+                else ""
+            )
             if used.sum() < 6:
-                raise WorkflowError(f"only {int(used.sum())} of {n} measurements landed within {100 * OFF_SURFACE_M:.0f} cm "
-                                    f"of a known surface; measure points well inside faces of known objects.{off_text}")
+                raise WorkflowError(
+                    f"only {int(used.sum())} of {n} measurements landed within {100 * OFF_SURFACE_M:.0f} cm "
+                    f"of a known surface; measure points well inside faces of known objects.{off_text}"
+                )
             for _ in range(max_rounds):
                 # each measured point belongs to the face it is nearest to (re-associated every round)
                 closest, _, tri = mesh.nearest.on_surface(beam_point(T, pan[used], tilt[used], rho[used]))
                 normals = mesh.face_normals[tri]
                 try:
-                    cal = calibrate_turret_planes(pan[used], tilt[used], rho[used], normals,
-                                                  -np.einsum("ij,ij->i", normals, closest), T, self.site.scene.rangefinder)
+                    cal = calibrate_turret_planes(
+                        pan[used],
+                        tilt[used],
+                        rho[used],
+                        normals,
+                        -np.einsum("ij,ij->i", normals, closest),
+                        T,
+                        self.site.scene.rangefinder,
+                    )
                 except ValueError as exc:
                     if "independent normals" in str(exc):
                         groups = _orientation_groups(normals)
                         labels = [self.labels[i] for i in np.flatnonzero(used)]
-                        spread = "; ".join(f"{len(g)} facing {_facing(normals[g[0]])} ({labels[g[0]]}"
-                                           + (f" and {len(g) - 1} more" if len(g) > 1 else "") + ")" for g in groups)
-                        raise WorkflowError(f"the {int(used.sum())} measurements on known surfaces do not fix the turret's "
-                                            f"pose: by the way their faces face, {spread}. It needs points spread over three "
-                                            "directions, two or more on each (the table top and two sides of a box at an "
-                                            f"angle): measure more on the fewest.{off_text}") from None
+                        spread = "; ".join(
+                            f"{len(g)} facing {_facing(normals[g[0]])} ({labels[g[0]]}"
+                            + (f" and {len(g) - 1} more" if len(g) > 1 else "")
+                            + ")"
+                            for g in groups
+                        )
+                        raise WorkflowError(
+                            f"the {int(used.sum())} measurements on known surfaces do not fix the turret's "
+                            f"pose: by the way their faces face, {spread}. It needs points spread over three "
+                            "directions, two or more on each (the table top and two sides of a box at an "
+                            f"angle): measure more on the fewest.{off_text}"
+                        ) from None
                     raise WorkflowError(f"turret calibration failed: {exc}") from None
                 deg, m = pose_error(cal.T_world_turret, T)
                 T = cal.T_world_turret
@@ -281,21 +327,31 @@ class CalibrateTurret(Workflow):
             dropped = f" ({n - int(used.sum())} off the known surfaces, left out: {', '.join(off)})" if off else ""
             # the pose has 6 unknowns: with 6 points the fit is exact, its RMS says nothing (a new operator read
             # "RMS 0.0 mm" as a perfect calibration)
-            exact = " (6 points for 6 unknowns: an exact fit, its RMS checks nothing; measure more)" \
-                if int(used.sum()) <= 6 else ""
-            self.message = (f"RMS {1000 * np.sqrt(np.mean(dist ** 2)):.1f} mm to the surfaces over {int(used.sum())} "
-                            f"points{exact}{dropped}; {deg:.2f}° and {1000 * m:.1f} mm from the current calibration")
+            exact = (
+                " (6 points for 6 unknowns: an exact fit, its RMS checks nothing; measure more)"
+                if int(used.sum()) <= 6
+                else ""
+            )
+            self.message = (
+                f"RMS {1000 * np.sqrt(np.mean(dist**2)):.1f} mm to the surfaces over {int(used.sum())} "
+                f"points{exact}{dropped}; {deg:.2f}° and {1000 * m:.1f} mm from the current calibration"
+            )
             far = self._far_points()
             if far:
                 self.message += f". ⚠ {far}"
             sd_rot_deg, sd_t_m = self._sigmas()
             if sd_rot_deg.max() > POORLY_DEG or sd_t_m.max() > POORLY_M:
                 few = len(self.site.objects()) <= 2
-                self.message += (f". Poorly determined (σ up to {sd_rot_deg.max():.2f}° and {1000 * sd_t_m.max():.1f} mm): "
-                                 "measure faces of other objects, at other distances, before accepting"
-                                 + (" (with only the table and one box known, model another object first: Model object; "
-                                    "it measures with the current calibration, which stays in use until one is accepted)"
-                                    if few else ""))
+                self.message += (
+                    f". Poorly determined (σ up to {sd_rot_deg.max():.2f}° and {1000 * sd_t_m.max():.1f} mm): "
+                    "measure faces of other objects, at other distances, before accepting"
+                    + (
+                        " (with only the table and one box known, model another object first: Model object; "
+                        "it measures with the current calibration, which stays in use until one is accepted)"
+                        if few
+                        else ""
+                    )
+                )
             self.solve_text = self.message
             return cal
 
@@ -312,9 +368,11 @@ class CalibrateTurret(Workflow):
             return ""
         names = ", ".join(f"{i + 1} {self.labels[i]} ({1000 * d:.1f} mm)" for d, i in far)
         one = len(far) == 1
-        return (f"{'this point lies' if one else f'{len(far)} points lie'} more than 3σ ({3000 * sigma:.0f} mm) from "
-                f"{'its' if one else 'their'} surface — a wrong pick, or the object moving when it was measured? {names}: "
-                f"choose {'it' if one else 'each'} under Measurement and Delete measurement, then Solve again")
+        return (
+            f"{'this point lies' if one else f'{len(far)} points lie'} more than 3σ ({3000 * sigma:.0f} mm) from "
+            f"{'its' if one else 'their'} surface — a wrong pick, or the object moving when it was measured? {names}: "
+            f"choose {'it' if one else 'each'} under Measurement and Delete measurement, then Solve again"
+        )
 
     def _sigmas(self) -> tuple[np.ndarray, np.ndarray]:
         """Standard deviations of the solved pose: rotation (3,) degrees, translation (3,) metres (turret axes)."""
@@ -327,11 +385,22 @@ class CalibrateTurret(Workflow):
             self._check_open()
             if self.result is None:
                 raise WorkflowError("nothing to accept: Solve first")
-            rms = float(np.sqrt(np.mean(self.surface_residuals_m ** 2)))
-            self.site.set_turret(self.T_solved, rms_m=rms, residuals_m=self.surface_residuals_m, cov=self.result.cov,
-                                 measurements={"pan_rad": self.pan, "tilt_rad": self.tilt, "range_m": self.range_m,
-                                               "targets": np.array(self.targets), "labels": list(self.labels)},
-                                 client=self.client, method="turret: ranges on known surfaces")
+            rms = float(np.sqrt(np.mean(self.surface_residuals_m**2)))
+            self.site.set_turret(
+                self.T_solved,
+                rms_m=rms,
+                residuals_m=self.surface_residuals_m,
+                cov=self.result.cov,
+                measurements={
+                    "pan_rad": self.pan,
+                    "tilt_rad": self.tilt,
+                    "range_m": self.range_m,
+                    "targets": np.array(self.targets),
+                    "labels": list(self.labels),
+                },
+                client=self.client,
+                method="turret: ranges on known surfaces",
+            )
             self.accepted = True
             self.state = "accepted"
             self.message = f"Turret calibrated: RMS {1000 * rms:.1f} mm."
@@ -350,22 +419,39 @@ class CalibrateTurret(Workflow):
         if n >= 6:
             base.add("solve")
         if self.site.devices is None:
-            return Step("no_devices", "No range finder and turret are connected: restart mcit serve with devices to "
-                        "calibrate the turret.", frozenset(base), clicks=False)
+            return Step(
+                "no_devices",
+                "No range finder and turret are connected: restart mcit serve with devices to calibrate the turret.",
+                frozenset(base),
+                clicks=False,
+            )
         if self.pending_X is not None and self.result is not None:  # solved, and a point picked since: both apply
-            return Step("review", f"Solved: {self.solve_text}. " + "{accept} to use it; or {measure} " + f"{self.pending_label}, "
-                        "the point picked, and {solve} again ({remove_last} drops the pick).",
-                        frozenset(base | {"accept", "measure"}))
+            return Step(
+                "review",
+                f"Solved: {self.solve_text}. " + "{accept} to use it; or {measure} " + f"{self.pending_label}, "
+                "the point picked, and {solve} again ({remove_last} drops the pick).",
+                frozenset(base | {"accept", "measure"}),
+            )
         if self.pending_X is not None:
-            return Step("measure", "{measure} " + f"{self.pending_label} (the turret aims with the current calibration), or "
-                        "click another known point.", frozenset(base | {"measure"}))
+            return Step(
+                "measure",
+                "{measure} " + f"{self.pending_label} (the turret aims with the current calibration), or "
+                "click another known point.",
+                frozenset(base | {"measure"}),
+            )
         if self.result is not None:
-            return Step("review", f"Solved: {self.solve_text}. " + "{accept} to use it, or measure more points and {solve} again.",
-                        frozenset(base | {"accept"}))
+            return Step(
+                "review",
+                f"Solved: {self.solve_text}. " + "{accept} to use it, or measure more points and {solve} again.",
+                frozenset(base | {"accept"}),
+            )
         more = f" ({6 - n} more at least)" if n < 6 else "; {solve} when done"
-        return Step("pick", f"Click a known point — a face centre (cyan), a corner, or anywhere on a known face — "
-                    f"then measure it{more}.",
-                    frozenset(base))
+        return Step(
+            "pick",
+            f"Click a known point — a face centre (cyan), a corner, or anywhere on a known face — "
+            f"then measure it{more}.",
+            frozenset(base),
+        )
 
     def choices(self, action: str) -> list[tuple[str, Any]]:
         if action != "measurement":
@@ -389,8 +475,11 @@ class CalibrateTurret(Workflow):
             out = []
             sd_rot_deg, sd_t_m = self._sigmas()
             if sd_rot_deg.max() > POORLY_DEG or sd_t_m.max() > POORLY_M:
-                out.append("the turret's pose is poorly determined ("
-                           + sigma_over(float(sd_rot_deg.max()), 1000 * float(sd_t_m.max()), POORLY_DEG, 1000 * POORLY_M) + ")")
+                out.append(
+                    "the turret's pose is poorly determined ("
+                    + sigma_over(float(sd_rot_deg.max()), 1000 * float(sd_t_m.max()), POORLY_DEG, 1000 * POORLY_M)
+                    + ")"
+                )
             far = self._far_points()
             if far:
                 out.append(far)
@@ -409,7 +498,9 @@ class CalibrateTurret(Workflow):
             if self.pending_X is not None:
                 m.pending = cam.project(self.pending_X.reshape(1, 3))
             if self.pan:
-                Xm = beam_point(self.site.T_world_turret, np.array(self.pan), np.array(self.tilt), np.array(self.range_m))
+                Xm = beam_point(
+                    self.site.T_world_turret, np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
+                )
                 m.points = cam.project(Xm)
                 m.labels = [(uv, str(i + 1)) for i, uv in enumerate(m.points)]
             return m
@@ -418,7 +509,7 @@ class CalibrateTurret(Workflow):
         with self.lock:
             out: dict[str, Any] = {"measurements": len(self.pan)}
             if self.result is not None:
-                out["rms_mm"] = float(1000 * np.sqrt(np.mean(self.surface_residuals_m ** 2)))
+                out["rms_mm"] = float(1000 * np.sqrt(np.mean(self.surface_residuals_m**2)))
                 sd_rot_deg, sd_t_m = self._sigmas()
                 out["sd_rot_deg"] = [float(v) for v in sd_rot_deg]
                 out["sd_t_mm"] = [float(1000 * v) for v in sd_t_m]
@@ -427,8 +518,10 @@ class CalibrateTurret(Workflow):
                 labels = [lab for lab, u in zip(self.labels, self.used) if u]
                 ranges = [r for r, u in zip(self.range_m, self.used) if u]
                 out["left_out"] = int((~self.used).sum())
-                out["points"] = [{"point": lab, "range_m": r, "to_surface_mm": 1000 * float(d)}
-                                 for lab, r, d in zip(labels, ranges, self.surface_residuals_m)]
+                out["points"] = [
+                    {"point": lab, "range_m": r, "to_surface_mm": 1000 * float(d)}
+                    for lab, r, d in zip(labels, ranges, self.surface_residuals_m)
+                ]
             return out
 
 

@@ -90,8 +90,9 @@ def _xyz(X: np.ndarray) -> str:
     return " ".join(f"{v:.4f}" for v in X)
 
 
-def along_ray_sigma(cov_rf: np.ndarray, X_rf: np.ndarray, ray: np.ndarray, T_world_turret: np.ndarray,
-                    turret_cov: np.ndarray | None) -> tuple[float, float, float]:
+def along_ray_sigma(
+    cov_rf: np.ndarray, X_rf: np.ndarray, ray: np.ndarray, T_world_turret: np.ndarray, turret_cov: np.ndarray | None
+) -> tuple[float, float, float]:
     """σ (metres) of the range finder's point along the ray (unit (3,)): total, the range finder's
     share and the turret calibration's share (0 without a covariance)."""
     from core.calibration import perturbed_turret, principal_steps
@@ -165,16 +166,23 @@ class DesignateTarget(Workflow):
     def _keep(self, t: Target, message: str) -> Target:
         why = self.scene_changed(t.uv)
         if why:
-            warning = (f"Warning: {why}: the target is where the database{' and the range finder' if t.rangefinder_X is not None else ''}"
-                       " put it now, not what the frozen frame shows; look at the live video (L) or freeze a new frame (F)")
+            warning = (
+                f"Warning: {why}: the target is where the database{' and the range finder' if t.rangefinder_X is not None else ''}"
+                " put it now, not what the frozen frame shows; look at the live video (L) or freeze a new frame (F)"
+            )
             t = dataclasses.replace(t, warning=warning)
             message = _sentence(warning)
         elif t.warning and t.rangefinder_X is not None and self.frame is not None:
             now = self.site.time_s()
-            if abs(now - float(self.frame.t_s)) > OLD_FRAME_S:  # a frozen frame's box was where the database had it: the disagreement read
+            if (
+                abs(now - float(self.frame.t_s)) > OLD_FRAME_S
+            ):  # a frozen frame's box was where the database had it: the disagreement read
                 # as false to a new operator, though the site had changed since
-                t = dataclasses.replace(t, warning=f"{t.warning} (the range finder measures the site as it is now, at "
-                                                   f"t = {now:.1f} s; your click was on the frame of t = {self.frame.t_s:.1f} s)")
+                t = dataclasses.replace(
+                    t,
+                    warning=f"{t.warning} (the range finder measures the site as it is now, at "
+                    f"t = {now:.1f} s; your click was on the frame of t = {self.frame.t_s:.1f} s)",
+                )
                 message = _sentence(t.warning)
         with self.lock:
             self.targets.append(t)
@@ -192,8 +200,16 @@ class DesignateTarget(Workflow):
 
         try:
             version = next((o.version for o in self.site.objects() if o.name == t.object), None)
-            self.site.publish(target_event(t, index=index, who=self.client, when=time.time(), version=version,
-                                           camera_centre=self.site.camera.center))
+            self.site.publish(
+                target_event(
+                    t,
+                    index=index,
+                    who=self.client,
+                    when=time.time(),
+                    version=version,
+                    camera_centre=self.site.camera.center,
+                )
+            )
         except Exception:  # noqa: BLE001 - the target stands (shown, copied) even if the feed fails
             import logging
 
@@ -202,8 +218,8 @@ class DesignateTarget(Workflow):
     def _measure(self, cam, T, p, devices, hit):
         """The range finder put on pixel p (outside the lock): (PixelMeasurement, "") or (None, why
         not) when the turret cannot reach it. A device fault → WorkflowError; a cancel → Cancelled."""
-        from app.devices.acquisition import AcquisitionCancelled, measure_at_pixel
         from app.devices import DeviceError, TurretLimitError
+        from app.devices.acquisition import AcquisitionCancelled, measure_at_pixel
         from core.rangefinder import beam_point
 
         def report(prog) -> None:
@@ -214,9 +230,18 @@ class DesignateTarget(Workflow):
 
         guess = float(cam.depth(hit.X_world)) if hit is not None else 2.0
         try:
-            pm = measure_at_pixel(cam, T, p, devices.turret, devices.rangefinder, shots=self.shots,
-                                  spec=self.site.scene.rangefinder, depth_guess_m=guess, progress=report,
-                                  cancel=self.cancel_event)
+            pm = measure_at_pixel(
+                cam,
+                T,
+                p,
+                devices.turret,
+                devices.rangefinder,
+                shots=self.shots,
+                spec=self.site.scene.rangefinder,
+                depth_guess_m=guess,
+                progress=report,
+                cancel=self.cancel_event,
+            )
         except AcquisitionCancelled:
             self.progress = None
             self.site.set_beam(None)  # the spot of an aim stopped half-way marks no target
@@ -225,54 +250,91 @@ class DesignateTarget(Workflow):
             self.progress = None
             self.site.set_beam(None)
             if hit is None:
-                raise WorkflowError(f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object of the database and the range "
-                                    f"finder cannot aim there ({exc}); click on an object or the table") from None
+                raise WorkflowError(
+                    f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object of the database and the range "
+                    f"finder cannot aim there ({exc}); click on an object or the table"
+                ) from None
             return None, f"{NOT_CHECKED}: the turret cannot aim there"
         except DeviceError as exc:
             self.progress = None
             self.site.set_beam(None)
-            raise WorkflowError(f"device fault while checking the target with the range finder: {exc}. Check the "
-                                "devices and click again") from None
+            raise WorkflowError(
+                f"device fault while checking the target with the range finder: {exc}. Check the "
+                "devices and click again"
+            ) from None
         return pm, ""
 
     def _target(self, p, origin, ray, hit, pm, reach: str, T, turret_cov) -> Target:
         """The target from the database's hit (or None) and the range finder's measurement (or None)."""
         if pm is None or not pm.hit:
             if hit is None:
-                raise WorkflowError(f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object of the database and the range "
-                                    "finder got no return there; click on an object or the table")
+                raise WorkflowError(
+                    f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object of the database and the range "
+                    "finder got no return there; click on an object or the table"
+                )
             why = reach or f"{NOT_CHECKED}: it got no return there"
             return Target(p, hit.X_world, hit.name, hit.distance_m, hit.normal, check=why)
         X_rf = np.asarray(pm.X_world, float)
         sigma, s_rf, s_T = along_ray_sigma(pm.cov_world, X_rf, ray, T, turret_cov)
         depth_rf = float((X_rf - origin) @ ray)
         details = {"sigma_rangefinder_m": s_rf, "sigma_turret_m": s_T, "aim_error_px": float(pm.aim.error_px)}
-        off = (f" (the beam landed {pm.aim.error_px:.1f} px from the click)"
-               if np.isfinite(pm.aim.error_px) and pm.aim.error_px > AIM_OFF_PX else "")
+        off = (
+            f" (the beam landed {pm.aim.error_px:.1f} px from the click)"
+            if np.isfinite(pm.aim.error_px) and pm.aim.error_px > AIM_OFF_PX
+            else ""
+        )
         limit = LIMIT_SIGMA * sigma
         if hit is None:
-            warning = (f"Warning: the database has no surface here, but the range finder met one {depth_rf:.2f} m "
-                       f"away, at {_xyz(X_rf)} m: something the database does not have (an object, or the room "
-                       f"behind){off}")
-            return Target(p, X_rf, NOT_IN_DATABASE, float(np.linalg.norm(X_rf - origin)), np.full(3, np.nan),
-                          rangefinder_X=X_rf, sigma_m=sigma, check="the range finder's point: the database has no surface here",
-                          warning=warning, details=details)
+            warning = (
+                f"Warning: the database has no surface here, but the range finder met one {depth_rf:.2f} m "
+                f"away, at {_xyz(X_rf)} m: something the database does not have (an object, or the room "
+                f"behind){off}"
+            )
+            return Target(
+                p,
+                X_rf,
+                NOT_IN_DATABASE,
+                float(np.linalg.norm(X_rf - origin)),
+                np.full(3, np.nan),
+                rangefinder_X=X_rf,
+                sigma_m=sigma,
+                check="the range finder's point: the database has no surface here",
+                warning=warning,
+                details=details,
+            )
         delta = depth_rf - hit.distance_m
         if abs(delta) <= limit:
-            check = (f"the range finder agrees: {1000 * abs(delta):.1f} mm along the line of sight, within "
-                     f"{LIMIT_SIGMA:.0f}σ = {1000 * limit:.1f} mm{off}")
+            check = (
+                f"the range finder agrees: {1000 * abs(delta):.1f} mm along the line of sight, within "
+                f"{LIMIT_SIGMA:.0f}σ = {1000 * limit:.1f} mm{off}"
+            )
             warning = ""
         else:
             check = f"the range finder disagrees by {100 * delta:+.1f} cm along the line of sight ({LIMIT_SIGMA:.0f}σ = {1000 * limit:.1f} mm){off}"
             if delta < 0:
-                warning = (f"Warning: the range finder met a surface {100 * -delta:.1f} cm in front of the database's "
-                           f"{hit.name}, at "
-                           f"{_xyz(X_rf)} m: something not in the database is in the way{off}")
+                warning = (
+                    f"Warning: the range finder met a surface {100 * -delta:.1f} cm in front of the database's "
+                    f"{hit.name}, at "
+                    f"{_xyz(X_rf)} m: something not in the database is in the way{off}"
+                )
             else:
-                warning = (f"Warning: the range finder met no surface at {hit.name} but one {100 * delta:.1f} cm behind "
-                           f"it, at {_xyz(X_rf)} m: {hit.name} is not where the database has it; update its pose{off}")
-        return Target(p, hit.X_world, hit.name, hit.distance_m, hit.normal, rangefinder_X=X_rf,
-                      disagreement_m=float(delta), sigma_m=sigma, check=check, warning=warning, details=details)
+                warning = (
+                    f"Warning: the range finder met no surface at {hit.name} but one {100 * delta:.1f} cm behind "
+                    f"it, at {_xyz(X_rf)} m: {hit.name} is not where the database has it; update its pose{off}"
+                )
+        return Target(
+            p,
+            hit.X_world,
+            hit.name,
+            hit.distance_m,
+            hit.normal,
+            rangefinder_X=X_rf,
+            disagreement_m=float(delta),
+            sigma_m=sigma,
+            check=check,
+            warning=warning,
+            details=details,
+        )
 
     # ------------------------------------------------------------------ other actions
     def clear(self) -> None:
@@ -310,19 +372,29 @@ class DesignateTarget(Workflow):
         if self.finished:
             return self._finished_step()
         if self.progress is not None:
-            return Step("checking", f"Checking the target with the range finder: {self.progress_text}… " + "{cancel} stops it.",
-                        frozenset({"cancel"}), clicks=False)
+            return Step(
+                "checking",
+                f"Checking the target with the range finder: {self.progress_text}… " + "{cancel} stops it.",
+                frozenset({"cancel"}),
+                clicks=False,
+            )
         if self.targets:
             t = self.targets[-1]
             if t.warning:
-                head = (f"Target {len(self.targets)}: {self._copy_point(t)} m, where the range finder met a surface (in "
-                        f"*Target (m)* to copy). {_sentence(t.warning)}")
+                head = (
+                    f"Target {len(self.targets)}: {self._copy_point(t)} m, where the range finder met a surface (in "
+                    f"*Target (m)* to copy). {_sentence(t.warning)}"
+                )
             else:
                 head = f"Target {len(self.targets)}: {t.text()} m on {t.object} (in *Target (m)* to copy)."
-            return Step("targets", f"{head} Click another point, or " + "{accept}.",
-                        frozenset({"clear", "accept", "cancel"}))
-        return Step("click", "Click a point on an object or the table in the video; " + "{accept} closes.",
-                    frozenset({"accept", "cancel"}))
+            return Step(
+                "targets", f"{head} Click another point, or " + "{accept}.", frozenset({"clear", "accept", "cancel"})
+            )
+        return Step(
+            "click",
+            "Click a point on an object or the table in the video; " + "{accept} closes.",
+            frozenset({"accept", "cancel"}),
+        )
 
     def marks(self) -> Marks:
         with self.lock:
@@ -331,10 +403,16 @@ class DesignateTarget(Workflow):
             if self.targets:
                 X = np.array([t.X_world for t in self.targets])
                 m.targets = cam.project(X)
-                m.labels = [(uv, f"T{i + 1}" + (f" ⚠ {_check_word(t)}" if t.warning else ""))
-                            for i, (uv, t) in enumerate(zip(m.targets, self.targets))]
+                m.labels = [
+                    (uv, f"T{i + 1}" + (f" ⚠ {_check_word(t)}" if t.warning else ""))
+                    for i, (uv, t) in enumerate(zip(m.targets, self.targets))
+                ]
                 # the range finder's points where they differ from the target (a disagreement or its only point)
-                rf = [(i, t.rangefinder_X) for i, t in enumerate(self.targets) if t.warning and t.rangefinder_X is not None]
+                rf = [
+                    (i, t.rangefinder_X)
+                    for i, t in enumerate(self.targets)
+                    if t.warning and t.rangefinder_X is not None
+                ]
                 rf = [(i, X) for i, X in rf if cam.depth(X) > 0]
                 if rf:
                     m.points = cam.project(np.array([X for _, X in rf]))
@@ -345,8 +423,7 @@ class DesignateTarget(Workflow):
         with self.lock:
             rows = []
             for i, t in enumerate(self.targets):
-                row = {"target": f"T{i + 1}", "on": t.object, "x y z (m)": self._copy_point(t),
-                       "check": _check_word(t)}
+                row = {"target": f"T{i + 1}", "on": t.object, "x y z (m)": self._copy_point(t), "check": _check_word(t)}
                 if np.isfinite(t.disagreement_m):
                     row["disagreement_mm"] = _mm(t.disagreement_m)
                 rows.append(row)

@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import collections
 import threading
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -43,7 +44,9 @@ class SceneVideoFrames:
         self.lens = lens
         self.path = Path(video.path)
         if not self.path.is_file():
-            raise ValueError(f"the scene's video {self.path} does not exist: render it (mcit render) or give another source")
+            raise ValueError(
+                f"the scene's video {self.path} does not exist: render it (mcit render) or give another source"
+            )
         self._cap = None
         self._lock = threading.Lock()
         self._cache: collections.OrderedDict[int, np.ndarray] = collections.OrderedDict()

@@ -21,8 +21,14 @@ class History(Workflow):
     actions = ("refresh", "undo", "restore", "accept", "cancel")
     controls = (
         Control("change", "Change", kind="choice", hint="A change of the database (newest first)"),
-        Control("undo", "Undo change", "Z", arg="change", color="orange",
-                hint="Bring the object back to its state before the chosen change (the undo is recorded too)"),
+        Control(
+            "undo",
+            "Undo change",
+            "Z",
+            arg="change",
+            color="orange",
+            hint="Bring the object back to its state before the chosen change (the undo is recorded too)",
+        ),
         Control("refresh", "Refresh", hint="Read the latest changes again"),
         Control("accept", "Close", "escape", hint="Close the history"),
     )
@@ -54,8 +60,10 @@ class History(Workflow):
             if which == "undo":
                 later = self._later_changes(int(change_id))
                 if later and later[-1].method == "undo" and later[-1].undoes == int(change_id):
-                    raise WorkflowError(f"change {int(change_id)} is undone already (change {later[-1].id}): nothing to do; "
-                                        f"to bring it back, undo change {later[-1].id}")
+                    raise WorkflowError(
+                        f"change {int(change_id)} is undone already (change {later[-1].id}): nothing to do; "
+                        f"to bring it back, undo change {later[-1].id}"
+                    )
             seen = self._seen_version(int(change_id))
             try:
                 if which == "undo":
@@ -88,9 +96,11 @@ class History(Workflow):
             if later:
                 last = later[-1]
                 when = time.strftime("%H:%M:%S", time.localtime(last.time))
-                return (f"Undoing change #{int(args[0])} brings {last.object_name} back to before it, and so also discards "
-                        f"the {len(later)} later change{'s' if len(later) > 1 else ''} of it (the last by {last.client} at "
-                        f"{when}).")
+                return (
+                    f"Undoing change #{int(args[0])} brings {last.object_name} back to before it, and so also discards "
+                    f"the {len(later)} later change{'s' if len(later) > 1 else ''} of it (the last by {last.client} at "
+                    f"{when})."
+                )
         return super().question(action, *args)
 
     def undo(self, change_id: int):
@@ -114,21 +124,35 @@ class History(Workflow):
         if self.finished:
             return self._finished_step()
         if not self.entries:
-            return Step("empty", "No change is recorded yet. {accept} when done.", frozenset({"refresh", "accept"}), False)
-        return Step("browse", "The last changes, newest first: choose one under Change and {undo} (the undo is "
-                    "recorded too and can be undone); {accept} when done.", frozenset({"change", "undo", "refresh", "accept"}),
-                    clicks=False)
+            return Step(
+                "empty", "No change is recorded yet. {accept} when done.", frozenset({"refresh", "accept"}), False
+            )
+        return Step(
+            "browse",
+            "The last changes, newest first: choose one under Change and {undo} (the undo is "
+            "recorded too and can be undone); {accept} when done.",
+            frozenset({"change", "undo", "refresh", "accept"}),
+            clicks=False,
+        )
 
     def choices(self, action: str) -> list[tuple[str, Any]]:
         if action != "change":
             return []
         with self.lock:
             # a change undone since says so (a new operator saw the chooser stay on one just undone, unmarked)
-            undone = {int(c.undoes): int(c.id) for c in sorted(self.entries, key=lambda c: c.id)
-                      if c.method == "undo" and c.undoes is not None}
-            return [(f"#{c.id} {c.client} {self._sentence(c)} ({time.strftime('%H:%M:%S', time.localtime(c.time))})"
-                     + (f" — undone by #{undone[int(c.id)]}" if undone.get(int(c.id)) not in (None, *undone) else ""),
-                     int(c.id)) for c in self.entries]
+            undone = {
+                int(c.undoes): int(c.id)
+                for c in sorted(self.entries, key=lambda c: c.id)
+                if c.method == "undo" and c.undoes is not None
+            }
+            return [
+                (
+                    f"#{c.id} {c.client} {self._sentence(c)} ({time.strftime('%H:%M:%S', time.localtime(c.time))})"
+                    + (f" — undone by #{undone[int(c.id)]}" if undone.get(int(c.id)) not in (None, *undone) else ""),
+                    int(c.id),
+                )
+                for c in self.entries
+            ]
 
     def _undone(self, c):
         """The record change c undid (from the list when it is there), or None."""
@@ -143,7 +167,13 @@ class History(Workflow):
         with self.lock:
             rows = []
             for c in self.entries:
-                rows.append({"#": c.id, "when": time.strftime("%H:%M:%S", time.localtime(c.time)), "who": c.client,
-                             "what": self._sentence(c),
-                             "how": "redo" if is_redo(c, self._undone(c)) else method_words(c.method)})
+                rows.append(
+                    {
+                        "#": c.id,
+                        "when": time.strftime("%H:%M:%S", time.localtime(c.time)),
+                        "who": c.client,
+                        "what": self._sentence(c),
+                        "how": "redo" if is_redo(c, self._undone(c)) else method_words(c.method),
+                    }
+                )
             return {"changes": rows}

@@ -54,9 +54,12 @@ BOX_SCAN_MARGIN_M = 0.03
 # more than MAX_SNAP_MOVE_PX.
 WEAK_SIGMA_MM = 5.0
 MAX_SNAP_MOVE_PX = 2.0
-CYLINDER_METHODS = {"fused": "fused (all measurements)", "tangential": "tangential planes (camera + range finder)",
-                    "bisecting": "bisecting planes (camera + range finder)",
-                    "rf_tangential": "tangential planes (range finder alone)"}
+CYLINDER_METHODS = {
+    "fused": "fused (all measurements)",
+    "tangential": "tangential planes (camera + range finder)",
+    "bisecting": "bisecting planes (camera + range finder)",
+    "rf_tangential": "tangential planes (range finder alone)",
+}
 
 
 # A clicked side this far from the model's edge (px, 3σ of a 1 px click): the model does not fit the clicks (weak).
@@ -64,7 +67,7 @@ MAX_CLICK_RESIDUAL_PX = 3.0
 
 
 def _placed(r) -> str:
-    """"; placed to ± 4.1 mm": the σ of where a modelled object stands (its frame's origin, or its axis),
+    """ "; placed to ± 4.1 mm": the σ of where a modelled object stands (its frame's origin, or its axis),
     "" when the result has none (a new operator saw a box sit 1 cm off with only its sizes' σ shown)."""
     for k, what in (("position", "placed"), ("axis_position", "axis placed")):
         v = r.sigmas.get(k)
@@ -88,24 +91,62 @@ def table_support(site) -> Plane | None:
 class ModelObject(RangeModelling, SnapMixin, Workflow):
     name = "model_object"
     title = "Model object"
-    actions = ("click", "add_segment", "remove_last", "measure", "scan", "next_face", "solve", "accept", "cancel",
-               "refuse_snap", "set_snap", "set_method")
+    actions = (
+        "click",
+        "add_segment",
+        "remove_last",
+        "measure",
+        "scan",
+        "next_face",
+        "solve",
+        "accept",
+        "cancel",
+        "refuse_snap",
+        "set_snap",
+        "set_method",
+    )
     controls = (
-        Control("measure", "Measure face", "M", kind="long", color="blue",
-                hint="The turret scans range points inside the face's clicked sides"),
-        Control("scan", "Scan profile", "P", kind="long", color="blue",
-                hint="Two horizontal range profiles across the object"),
-        Control("set_method", "Method", kind="choice", hint="How a cylinder or cone is fitted (the paper's three, or fused)"),
+        Control(
+            "measure",
+            "Measure face",
+            "M",
+            kind="long",
+            color="blue",
+            hint="The turret scans range points inside the face's clicked sides",
+        ),
+        Control(
+            "scan",
+            "Scan profile",
+            "P",
+            kind="long",
+            color="blue",
+            hint="Two horizontal range profiles across the object",
+        ),
+        Control(
+            "set_method", "Method", kind="choice", hint="How a cylinder or cone is fitted (the paper's three, or fused)"
+        ),
         Control("solve", "Solve", "R", color="blue", hint="Build the model from the clicks and ranges"),
         Control("accept", "Accept", "enter", color="green", hint="Add the modelled object to the database"),
-        Control("refuse_snap", "Refuse snap", "U", hint="Use the last side as clicked, not moved onto the image's edge"),
+        Control(
+            "refuse_snap", "Refuse snap", "U", hint="Use the last side as clicked, not moved onto the image's edge"
+        ),
         Control("remove_last", "Remove last", "backspace", hint="Undo the last click, measurement or face"),
         CANCEL,
     )
 
-    def __init__(self, site, client: str = "operator", shape: str = "box", vertical: bool = True, on_table: bool = True,
-                 object_name: str | None = None, method: str = "fused", spacing_px: float | None = None,
-                 beams: int = 40, snap: bool = True):
+    def __init__(
+        self,
+        site,
+        client: str = "operator",
+        shape: str = "box",
+        vertical: bool = True,
+        on_table: bool = True,
+        object_name: str | None = None,
+        method: str = "fused",
+        spacing_px: float | None = None,
+        beams: int = 40,
+        snap: bool = True,
+    ):
         super().__init__(site, client)
         self._init_snap(snap)
         if shape not in SHAPES:
@@ -168,7 +209,9 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             self._check_open()
             if self.pending is None:
                 if self.shape != "box" and len(self.silhouettes) == 2:
-                    raise WorkflowError("Both silhouettes are clicked: Scan profile next, or Remove last to click one again.")
+                    raise WorkflowError(
+                        "Both silhouettes are clicked: Scan profile next, or Remove last to click one again."
+                    )
                 if self.shape == "box" and self.faces[-1]["points"] is not None:
                     if len(self.faces) == 3:
                         raise WorkflowError("A box shows at most 3 faces and 3 are measured: Solve now.")
@@ -184,7 +227,9 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             self._segments.append(seg)
             self._snaps.append(snap)
             self.result = None
-            self.message = self._snap_message(f"{'Side' if self.shape == 'box' else 'Silhouette'} {len(self._segments)}", snap)
+            self.message = self._snap_message(
+                f"{'Side' if self.shape == 'box' else 'Silhouette'} {len(self._segments)}", snap
+            )
 
     def add_segment(self, seg_uv) -> None:
         """A clicked segment (2, 2) at once (for scripts)."""
@@ -255,8 +300,13 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
         both, "profile k + 1 of 2 · beam i of m", each beam's point shown as it comes."""
         from app.devices.acquisition import profile_scan
 
-        return profile_scan(devices.turret, devices.rangefinder, progress=self._progress(T, f"profile {k + 1} of 2", k, 2),
-                            cancel=self.cancel_event, **sweep)
+        return profile_scan(
+            devices.turret,
+            devices.rangefinder,
+            progress=self._progress(T, f"profile {k + 1} of 2", k, 2),
+            cancel=self.cancel_event,
+            **sweep,
+        )
 
     def measure(self):
         """Box: range points on the current face, inside its clicked outline (face patch scan)."""
@@ -280,7 +330,9 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             if T_world_turret is not None and f.get("scan") is not None:
                 scan, good = f["scan"], f["good"]
                 X = scan.points(T_world_turret)[good]
-                covs = beam_point_cov(T_world_turret, scan.pan_rad[good], scan.tilt_rad[good], scan.range_m[good], self._spec())
+                covs = beam_point_cov(
+                    T_world_turret, scan.pan_rad[good], scan.tilt_rad[good], scan.range_m[good], self._spec()
+                )
             out.append(BoxFace(X, np.array(f["segs"]).reshape(-1, 2, 2), covs))
         return out
 
@@ -292,8 +344,10 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             self._check_open()
             faces = self.box_faces()
             if not faces:
-                raise WorkflowError("measure the box's faces first (click a face's sides, Measure face): the "
-                                    "profiles are placed across the box they give")
+                raise WorkflowError(
+                    "measure the box's faces first (click a face's sides, Measure face): the "
+                    "profiles are placed across the box they give"
+                )
             devices = self._devices()
             try:
                 box = model_box(self.site.camera, faces, self.support)
@@ -315,8 +369,16 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                 pan0, tilt0, rho0 = aim(T, Tb[:3, :3] @ [0.0, 0.0, frac * h] + Tb[:3, 3])
                 rel = (aim(T, corners)[0] - pan0 + np.pi) % (2 * np.pi) - np.pi
                 pad = float(np.arctan(BOX_SCAN_MARGIN_M / rho0))
-                scans.append(self._profile(devices, k, T, tilt_rad=float(tilt0), pan_start_rad=float(pan0 + rel.min() - pad),
-                                           pan_stop_rad=float(pan0 + rel.max() + pad)))
+                scans.append(
+                    self._profile(
+                        devices,
+                        k,
+                        T,
+                        tilt_rad=float(tilt0),
+                        pan_start_rad=float(pan0 + rel.min() - pad),
+                        pan_stop_rad=float(pan0 + rel.max() + pad),
+                    )
+                )
         with self.lock:
             self.progress = None
             self._clear_live()  # now in self.scans
@@ -351,21 +413,32 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             for k, frac in enumerate((0.3, 0.7)):
                 left, right = sil[0, 0] + frac * (sil[0, 1] - sil[0, 0]), sil[1, 0] + frac * (sil[1, 1] - sil[1, 0])
                 mid = (left + right) / 2
-                m = measure_at_pixel(camera, T, mid, devices.turret, devices.rangefinder,
-                                     depth_guess_m=float(camera.depth(self.support_point(mid))),
-                                     progress=self._progress(T, f"profile {k + 1} of 2", k, 2, aiming=True),
-                                     cancel=self.cancel_event)
+                m = measure_at_pixel(
+                    camera,
+                    T,
+                    mid,
+                    devices.turret,
+                    devices.rangefinder,
+                    depth_guess_m=float(camera.depth(self.support_point(mid))),
+                    progress=self._progress(T, f"profile {k + 1} of 2", k, 2, aiming=True),
+                    cancel=self.cancel_event,
+                )
                 if not m.hit:
-                    raise WorkflowError(f"no range return at the object's centre ({mid[0]:.0f}, {mid[1]:.0f}): check the "
-                                        "silhouettes and the range finder")
+                    raise WorkflowError(
+                        f"no range return at the object's centre ({mid[0]:.0f}, {mid[1]:.0f}): check the "
+                        "silhouettes and the range finder"
+                    )
                 depth = float(camera.depth(m.X_world))
                 XL, XR = camera.backproject(np.array([left, right]), depth)
                 pans = aim(T, np.array([XL, XR]))[0]
                 half = abs(pans[1] - pans[0]) / 2
                 lo, hi = min(pans) - 0.8 * half, max(pans) + 0.8 * half
                 step = max(devices.turret.pan_step_rad, (hi - lo) / self.beams)
-                scans.append(self._profile(devices, k, T, tilt_rad=m.tilt_rad, pan_start_rad=lo, pan_stop_rad=hi,
-                                           pan_step_rad=step))
+                scans.append(
+                    self._profile(
+                        devices, k, T, tilt_rad=m.tilt_rad, pan_start_rad=lo, pan_stop_rad=hi, pan_step_rad=step
+                    )
+                )
         with self.lock:
             self.progress = None
             self._clear_live()  # now in self.scans
@@ -409,8 +482,11 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             self.result = result
             self.state = "review"
             parts = result.details.get("sigma_parts", {})
-            self.message = result.dimension_text("cm") + _placed(result) + (
-                f" (σ include the {' and '.join(k for k in parts if k != 'measurements')})" if parts else "")
+            self.message = (
+                result.dimension_text("cm")
+                + _placed(result)
+                + (f" (σ include the {' and '.join(k for k in parts if k != 'measurements')})" if parts else "")
+            )
             return result
 
     def _builder(self):
@@ -422,13 +498,23 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             faces = [dict(f, segs=list(f["segs"])) for f in self.faces]
             scans = list(self.scans)
             if scans:  # the profiles are fused with the faces and clicks
-                return lambda cam, T: model_box(cam, self.box_faces(T, faces), support, method="fused", scans=scans,
-                                                T_world_turret=T, spec=spec)
+                return lambda cam, T: model_box(
+                    cam, self.box_faces(T, faces), support, method="fused", scans=scans, T_world_turret=T, spec=spec
+                )
             return lambda cam, T: model_box(cam, self.box_faces(T, faces), support)
         sil, scans, method, cone = np.array(self.silhouettes), list(self.scans), self.method, self.shape == "cone"
         axis_dir = np.array([0.0, 0.0, 1.0]) if (self.vertical and support is None) else None
-        return lambda cam, T: model_cylinder(cam, method, silhouettes_uv=sil, scans=scans, T_world_turret=T, spec=spec,
-                                             support=support, axis_dir=axis_dir, cone=cone)
+        return lambda cam, T: model_cylinder(
+            cam,
+            method,
+            silhouettes_uv=sil,
+            scans=scans,
+            T_world_turret=T,
+            spec=spec,
+            support=support,
+            axis_dir=axis_dir,
+            cone=cone,
+        )
 
     def accept(self):
         """Add the modelled object to the database (one transaction, status "modelled")."""
@@ -438,22 +524,34 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                 raise WorkflowError("nothing to accept: Solve first")
             r = self.result
             if self.shape == "box":
-                clicks = {"frame": self.frame_record(), "faces": [np.array(f["segs"]).reshape(-1, 2, 2) for f in self.faces],
-                          # raw and snapped pixels of each side (None: snapping was off)
-                          "snaps": [[None if sn is None else sn.record() for sn in f["snaps"]] for f in self.faces]}
+                clicks = {
+                    "frame": self.frame_record(),
+                    "faces": [np.array(f["segs"]).reshape(-1, 2, 2) for f in self.faces],
+                    # raw and snapped pixels of each side (None: snapping was off)
+                    "snaps": [[None if sn is None else sn.record() for sn in f["snaps"]] for f in self.faces],
+                }
                 measurements = {"faces": [f["points"] for f in self.faces if f["points"] is not None]}
                 if self.scans:
-                    measurements["scans"] = [{"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m}
-                                             for s in self.scans]
+                    measurements["scans"] = [
+                        {"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m} for s in self.scans
+                    ]
             else:
-                clicks = {"frame": self.frame_record(), "silhouettes_uv": np.array(self.silhouettes),
-                          "snaps": [None if sn is None else sn.record() for sn in self.silhouette_snaps]}
-                measurements = {"scans": [{"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m}
-                                          for s in self.scans]}
+                clicks = {
+                    "frame": self.frame_record(),
+                    "silhouettes_uv": np.array(self.silhouettes),
+                    "snaps": [None if sn is None else sn.record() for sn in self.silhouette_snaps],
+                }
+                measurements = {
+                    "scans": [{"pan_rad": s.pan_rad, "tilt_rad": s.tilt_rad, "range_m": s.range_m} for s in self.scans]
+                }
             return self._write_model(
-                r, method=f"model {r.kind} ({r.method})", clicks=clicks, measurements=measurements,
+                r,
+                method=f"model {r.kind} ({r.method})",
+                clicks=clicks,
+                measurements=measurements,
                 note=f"hints: {'vertical' if self.vertical else 'oblique'}{', on the table' if self.on_table else ''}",
-                text=r.dimension_text("cm"))
+                text=r.dimension_text("cm"),
+            )
 
     # ------------------------------------------------------------------ display
     def _step(self) -> Step:
@@ -461,13 +559,22 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
         if done is not None:
             return done
         devices = self.site.devices is not None
-        no_dev = "" if devices else " (No range finder and turret are connected: restart mcit serve with devices to measure.)"
+        no_dev = (
+            ""
+            if devices
+            else " (No range finder and turret are connected: restart mcit serve with devices to measure.)"
+        )
         if self.shape != "box":
             base.add("set_method")
         if self.result is not None:
             again = {"solve"} | ({"scan"} if devices and (self.shape != "box" or self.box_faces()) else set())
-            return Step("review", f"{self.result.dimension_text('cm')}{_placed(self.result)}. " + "{accept} to add it, or add measurements and "
-                        "{solve} again.", frozenset(base | again | {"accept"}))
+            return Step(
+                "review",
+                f"{self.result.dimension_text('cm')}{_placed(self.result)}. "
+                + "{accept} to add it, or add measurements and "
+                "{solve} again.",
+                frozenset(base | again | {"accept"}),
+            )
         if self.pending is not None:
             side = "silhouette" if self.shape != "box" else "side"
             return Step("click_end", f"Click the other end of that {side}.", frozenset(base))
@@ -475,45 +582,79 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             face = self.faces[-1]
             n = len(self.faces)
             # Solve once it can work: two faces measured, or one and the profile scans
-            measured = sum(f["points"] is not None for f in self.faces) >= 2 or (bool(self.scans) and any(
-                f["points"] is not None for f in self.faces))
+            measured = sum(f["points"] is not None for f in self.faces) >= 2 or (
+                bool(self.scans) and any(f["points"] is not None for f in self.faces)
+            )
             solvable = {"solve"} if measured else set()
             if face["points"] is not None:
                 if self.scans:
-                    return Step("scanned", "Profiles scanned: {solve} (fused with the faces and clicks).",
-                                frozenset(base | {"solve", "scan"}))
+                    return Step(
+                        "scanned",
+                        "Profiles scanned: {solve} (fused with the faces and clicks).",
+                        frozenset(base | {"solve", "scan"}),
+                    )
                 if not measured:  # one face does not fix the three sizes: Solve would only refuse (a new operator's)
                     scan = ", or {scan} for the far edges" if devices else ""
-                    return Step("face_measured", f"Face {n} measured. A box needs a second face: click the sides of "
-                                f"another visible face{scan}.", frozenset(base | ({"scan"} if devices else set())))
+                    return Step(
+                        "face_measured",
+                        f"Face {n} measured. A box needs a second face: click the sides of another visible face{scan}.",
+                        frozenset(base | ({"scan"} if devices else set())),
+                    )
                 nxt = "" if n == 3 else "Click the sides of another face for more accuracy, "
                 scan = "{scan} for the far edges, or " if devices else ""
-                return Step("face_measured", f"Face {n} measured. {nxt}{scan}" + "{solve}.",
-                            frozenset(base | {"solve"} | ({"scan"} if devices else set())))
+                return Step(
+                    "face_measured",
+                    f"Face {n} measured. {nxt}{scan}" + "{solve}.",
+                    frozenset(base | {"solve"} | ({"scan"} if devices else set())),
+                )
             tail = " Or {solve} with the faces measured." if measured else ""
             if len(face["segs"]) < 2:
-                return Step("click_sides", f"Face {n}: click two points on each side of one visible face, all four "
-                            f"where you see them (side {len(face['segs']) + 1}).{tail}", frozenset(base | solvable))
+                return Step(
+                    "click_sides",
+                    f"Face {n}: click two points on each side of one visible face, all four "
+                    f"where you see them (side {len(face['segs']) + 1}).{tail}",
+                    frozenset(base | solvable),
+                )
             if not devices:
-                return Step("sides_clicked", f"Face {n}: {len(face['segs'])} sides clicked.{no_dev}{tail}",
-                            frozenset(base | solvable))
+                return Step(
+                    "sides_clicked",
+                    f"Face {n}: {len(face['segs'])} sides clicked.{no_dev}{tail}",
+                    frozenset(base | solvable),
+                )
             # all four: two upright sides alone gave a new operator a box half as deep
             more = "click its other sides (all four fix the box's corners), or " if len(face["segs"]) < 4 else ""
-            return Step("sides_clicked", f"Face {n}: {len(face['segs'])} sides clicked; " + more
-                        + "{measure} (the turret scans inside them)." + tail, frozenset(base | solvable | {"measure"}))
+            return Step(
+                "sides_clicked",
+                f"Face {n}: {len(face['segs'])} sides clicked; "
+                + more
+                + "{measure} (the turret scans inside them)."
+                + tail,
+                frozenset(base | solvable | {"measure"}),
+            )
         if len(self.silhouettes) < 2:
             which = "left" if not self.silhouettes else "right"
-            return Step("click_silhouettes", f"Click the {which} silhouette of the {self.shape} (its outline's {which} "
-                        "side): its bottom end, where it meets the table, then its top end, where it meets the top rim — "
-                        "the clicked ends give the height.", frozenset(base))
+            return Step(
+                "click_silhouettes",
+                f"Click the {which} silhouette of the {self.shape} (its outline's {which} "
+                "side): its bottom end, where it meets the table, then its top end, where it meets the top rim — "
+                "the clicked ends give the height.",
+                frozenset(base),
+            )
         tangential = {"solve"} if self.method == "tangential" else set()
         if not self.scans:
             if not devices:
                 return Step("no_devices", f"Both silhouettes clicked.{no_dev}", frozenset(base | tangential))
-            return Step("scan", "{scan}: the turret sweeps the range finder across the object at two heights.",
-                        frozenset(base | tangential | {"scan"}))
-        return Step("solve", "{solve} " + f"with the method {CYLINDER_METHODS.get(self.method, self.method)}; another "
-                    "{set_method} can be chosen.", frozenset(base | {"solve", "scan"}))
+            return Step(
+                "scan",
+                "{scan}: the turret sweeps the range finder across the object at two heights.",
+                frozenset(base | tangential | {"scan"}),
+            )
+        return Step(
+            "solve",
+            "{solve} " + f"with the method {CYLINDER_METHODS.get(self.method, self.method)}; another "
+            "{set_method} can be chosen.",
+            frozenset(base | {"solve", "scan"}),
+        )
 
     def choice_value(self, action: str) -> Any:
         return self.method if action == "set_method" else None
@@ -528,20 +669,33 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             r = self.result
             if r is None:
                 return []
-            out = [f"the {DIMENSION_WORDS.get(k, k.replace('_', ' '))} is uncertain: σ {1000 * v:.1f} mm (more than "
-                   f"{WEAK_SIGMA_MM:.0f} mm)" for k, v in r.sigmas.items() if np.isfinite(v) and 1000 * v > WEAK_SIGMA_MM]
+            out = [
+                f"the {DIMENSION_WORDS.get(k, k.replace('_', ' '))} is uncertain: σ {1000 * v:.1f} mm (more than "
+                f"{WEAK_SIGMA_MM:.0f} mm)"
+                for k, v in r.sigmas.items()
+                if np.isfinite(v) and 1000 * v > WEAK_SIGMA_MM
+            ]
             res = np.abs(np.asarray(r.residuals.get("clicks_px", []), float))
             if self.shape == "box" and len(res) and res.max() > MAX_CLICK_RESIDUAL_PX:
                 # the box drawn does not run through a side clicked (a new operator's box from two upright sides
                 # per face came out half as deep, σ 3 mm, and was offered without a word)
-                out.append(f"a clicked side is {res.max():.1f} px from the box's edge (more than "
-                           f"{MAX_CLICK_RESIDUAL_PX:.0f} px): the box does not fit your clicks; click all the sides "
-                           "of each face (four), or check them")
-            snaps = [sn for f in self.faces for sn in f["snaps"]] if self.shape == "box" else list(self.silhouette_snaps)
-            out += [f"a snap moved a click {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
-                    for sn in snaps if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX]
+                out.append(
+                    f"a clicked side is {res.max():.1f} px from the box's edge (more than "
+                    f"{MAX_CLICK_RESIDUAL_PX:.0f} px): the box does not fit your clicks; click all the sides "
+                    "of each face (four), or check them"
+                )
+            snaps = (
+                [sn for f in self.faces for sn in f["snaps"]] if self.shape == "box" else list(self.silhouette_snaps)
+            )
+            out += [
+                f"a snap moved a click {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
+                for sn in snaps
+                if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX
+            ]
             if self.shape == "box" and len(self.box_faces()) == 1 and not self.scans:
-                out.append("one face measured: the box's depth rests on the clicks alone (measure a second face, or scan)")
+                out.append(
+                    "one face measured: the box's depth rests on the clicks alone (measure a second face, or scan)"
+                )
         return out + self._overlaps(r)
 
     def marks(self) -> Marks:
@@ -552,7 +706,9 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                 m.segments = np.array(segs)
             if self.pending is not None:
                 m.pending = self.pending.reshape(1, 2)
-            snaps = [sn for f in self.faces for sn in f["snaps"]] if self.shape == "box" else list(self.silhouette_snaps)
+            snaps = (
+                [sn for f in self.faces for sn in f["snaps"]] if self.shape == "box" else list(self.silhouette_snaps)
+            )
             m.raw_segments, _, _, m.labels = snap_marks(snaps)
             cam = self.site.camera
             pts = [f["points"] for f in self.faces if f.get("points") is not None]
@@ -569,19 +725,28 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                 m.ghosts = [Ghost(self.result.model, self.result.T_world_obj, self.object_name, chosen=True)]
                 lo, hi = self.result.model.bounds()
                 # above the middle of its top (a prism's origin may be at a corner of its footprint)
-                top = self.result.T_world_obj[:3, :3] @ np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2]]) \
+                top = (
+                    self.result.T_world_obj[:3, :3] @ np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2]])
                     + self.result.T_world_obj[:3, 3]
+                )
                 if cam.depth(top) > 0:
-                    m.labels = [(cam.project(top) - [0, 14], self.result.dimension_text("cm"))]  # the result, not the snaps
+                    m.labels = [
+                        (cam.project(top) - [0, 14], self.result.dimension_text("cm"))
+                    ]  # the result, not the snaps
             return m
 
     def summary(self) -> dict[str, Any]:
         with self.lock:
-            out: dict[str, Any] = {"name": self.object_name, "shape": self.shape,
-                                   "hints": ("vertical" if self.vertical else "oblique") + (", on the table" if self.on_table else "")}
+            out: dict[str, Any] = {
+                "name": self.object_name,
+                "shape": self.shape,
+                "hints": ("vertical" if self.vertical else "oblique") + (", on the table" if self.on_table else ""),
+            }
             if self.shape == "box":
-                out["faces"] = [{"face": i + 1, "sides": len(f["segs"]),
-                                 "points": 0 if f["points"] is None else len(f["points"])} for i, f in enumerate(self.faces)]
+                out["faces"] = [
+                    {"face": i + 1, "sides": len(f["segs"]), "points": 0 if f["points"] is None else len(f["points"])}
+                    for i, f in enumerate(self.faces)
+                ]
                 if self.scans:
                     out["scans"] = [int(s.hits.sum()) for s in self.scans]
             else:
@@ -591,16 +756,21 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                 r = self.result
                 out["method"] = r.method
                 parts = r.details.get("sigma_parts", {})
-                short = {"measurements": "σ clicks+ranges (cm)", "camera calibration": "σ camera (cm)",
-                         "turret calibration": "σ turret (cm)"}
-                out["dimensions"] = [{"dimension": DIMENSION_WORDS.get(k, k), "value_cm": 100 * v, "sigma_cm": 100 * r.sigmas.get(k, float("nan")),
-                                      **{short.get(src, src): 100 * p.get(k, float("nan")) for src, p in parts.items()}}
-                                     for k, v in r.dimensions.items()]
+                short = {
+                    "measurements": "σ clicks+ranges (cm)",
+                    "camera calibration": "σ camera (cm)",
+                    "turret calibration": "σ turret (cm)",
+                }
+                out["dimensions"] = [
+                    {
+                        "dimension": DIMENSION_WORDS.get(k, k),
+                        "value_cm": 100 * v,
+                        "sigma_cm": 100 * r.sigmas.get(k, float("nan")),
+                        **{short.get(src, src): 100 * p.get(k, float("nan")) for src, p in parts.items()},
+                    }
+                    for k, v in r.dimensions.items()
+                ]
                 for k in ("position", "axis_position"):  # where it stands, with its σ (only the sizes' were shown)
                     if k in r.sigmas:
                         out[f"sigma_{k}_mm"] = 1000 * r.sigmas[k]
             return out
-
-
-
-

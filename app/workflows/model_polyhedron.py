@@ -96,16 +96,27 @@ def _wedge() -> PolyShape:
     L, W, H = 0.20, 0.12, 0.08
     V = np.array([[0, 0, 0], [L, 0, 0], [L, W, 0], [0, W, 0], [L, W, H], [0, W, H]], float) - [L / 2, W / 2, 0]
     faces = [(0, 3, 2, 1), (0, 1, 4, 5), (2, 3, 5, 4), (0, 5, 3), (1, 2, 4)]
-    return PolyShape("wedge", BRep.from_faces(V, faces), 0, parallel_faces=((3, 4),), vertical_faces=(2, 3, 4),
-                     named={"length": (0, 1), "depth": (1, 2), "slope": (1, 4)},
-                     face_words=("bottom", "slope", "back", "end", "end"))
+    return PolyShape(
+        "wedge",
+        BRep.from_faces(V, faces),
+        0,
+        parallel_faces=((3, 4),),
+        vertical_faces=(2, 3, 4),
+        named={"length": (0, 1), "depth": (1, 2), "slope": (1, 4)},
+        face_words=("bottom", "slope", "back", "end", "end"),
+    )
 
 
 def _pyramid() -> PolyShape:
     a = 0.08
     B = BRep.pyramid(np.array([[-a, -a], [a, -a], [a, a], [-a, a]]), np.array([0.0, 0.0, 0.07]))
-    return PolyShape("pyramid", B, 0, named={"side_a": (0, 1), "side_b": (1, 2), "edge": (0, 4)},
-                     face_words=("base", "side", "side", "side", "side"))
+    return PolyShape(
+        "pyramid",
+        B,
+        0,
+        named={"side_a": (0, 1), "side_b": (1, 2), "edge": (0, 4)},
+        face_words=("base", "side", "side", "side", "side"),
+    )
 
 
 POLY_SHAPES: dict[str, PolyShape] = {s.name: s for s in (_wedge(), _pyramid())}
@@ -147,20 +158,46 @@ class _FaceData:
 class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
     name = "model_polyhedron"
     title = "Model polyhedron"
-    actions = ("click", "add_segment", "remove_last", "measure", "next_face", "solve", "accept", "cancel",
-               "refuse_snap", "set_snap")
+    actions = (
+        "click",
+        "add_segment",
+        "remove_last",
+        "measure",
+        "next_face",
+        "solve",
+        "accept",
+        "cancel",
+        "refuse_snap",
+        "set_snap",
+    )
     controls = (
-        Control("measure", "Measure face", "M", kind="long", color="blue",
-                hint="The turret scans range points inside the face's clicked sides"),
+        Control(
+            "measure",
+            "Measure face",
+            "M",
+            kind="long",
+            color="blue",
+            hint="The turret scans range points inside the face's clicked sides",
+        ),
         Control("solve", "Solve", "R", color="blue", hint="Build the model from the clicks and ranges"),
         Control("accept", "Accept", "enter", color="green", hint="Add the modelled object to the database"),
-        Control("refuse_snap", "Refuse snap", "U", hint="Use the last side as clicked, not moved onto the image's edge"),
+        Control(
+            "refuse_snap", "Refuse snap", "U", hint="Use the last side as clicked, not moved onto the image's edge"
+        ),
         Control("remove_last", "Remove last", "backspace", hint="Undo the last click, measurement or face"),
         CANCEL,
     )
 
-    def __init__(self, site, client: str = "operator", shape: str = "wedge", object_name: str | None = None,
-                 spacing_px: float | None = None, snap: bool = True, on_table: bool = True):
+    def __init__(
+        self,
+        site,
+        client: str = "operator",
+        shape: str = "wedge",
+        object_name: str | None = None,
+        spacing_px: float | None = None,
+        snap: bool = True,
+        on_table: bool = True,
+    ):
         super().__init__(site, client)
         self._init_snap(snap)
         if shape not in POLY_SHAPES:
@@ -172,7 +209,9 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
         self.spacing_px = spacing_px
         self.support = table_support(site)
         if self.support is None:
-            raise WorkflowError(f"a {shape} is modelled on the table, and the database has no table: add the table first")
+            raise WorkflowError(
+                f"a {shape} is modelled on the table, and the database has no table: add the table first"
+            )
         taken = {o.name for o in site.objects()}
         if object_name is None:
             i = 1
@@ -211,14 +250,18 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
             if self.pending is None:
                 if self.faces[-1]["points"] is not None:
                     if len(self.faces) == self.max_faces:
-                        raise WorkflowError(f"a {self.shape} shows at most {self.max_faces} faces and "
-                                            f"{self.max_faces} are measured: Solve now.")
+                        raise WorkflowError(
+                            f"a {self.shape} shows at most {self.max_faces} faces and "
+                            f"{self.max_faces} are measured: Solve now."
+                        )
                     self.faces.append(self._new_face())
                     self.result = None
                     self.message = f"Face {len(self.faces)} started: click two points on each of its sides."
                 if len(self.faces[-1]["segs"]) == self.max_sides:
-                    raise WorkflowError(f"a face of a {self.shape} has at most {self.max_sides} sides: Measure face "
-                                        "next, or Remove last.")
+                    raise WorkflowError(
+                        f"a face of a {self.shape} has at most {self.max_sides} sides: Measure face "
+                        "next, or Remove last."
+                    )
                 self.pending = p
                 return
             seg, snap = self._finish_segment(self.pending, p, MIN_SEGMENT_PX)
@@ -277,7 +320,9 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
                 continue
             scan, good = f["scan"], f["good"]
             X = scan.points(T_world_turret)[good]
-            covs = beam_point_cov(T_world_turret, scan.pan_rad[good], scan.tilt_rad[good], scan.range_m[good], self._spec())
+            covs = beam_point_cov(
+                T_world_turret, scan.pan_rad[good], scan.tilt_rad[good], scan.range_m[good], self._spec()
+            )
             out.append(_FaceData(X, covs, np.array(f["segs"], float).reshape(-1, 2, 2)))
         return out
 
@@ -296,8 +341,10 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
                 raise WorkflowError("measure at least one face first (click its sides, then Measure face)")
             unmeasured = [i + 1 for i, f in enumerate(self.faces) if f["points"] is None and f["segs"]]
             if unmeasured:
-                raise WorkflowError(f"face {unmeasured[0]} has sides clicked but is not measured: Measure face, "
-                                    "or Remove last to drop its sides")
+                raise WorkflowError(
+                    f"face {unmeasured[0]} has sides clicked but is not measured: Measure face, "
+                    "or Remove last to drop its sides"
+                )
             cam, T = self.site.camera, self.site.T_world_turret
             camera_cov, turret_cov = self.site.calibration_covs
         # Outside the lock (the overlay keeps drawing): which face and edge is which is decided once,
@@ -315,7 +362,8 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
             self.state = "review"
             parts = result.details.get("sigma_parts", {})
             self.message = self._dimension_text(result) + (
-                f" (σ include the {' and '.join(k for k in parts if k != 'measurements')})" if parts else "")
+                f" (σ include the {' and '.join(k for k in parts if k != 'measurements')})" if parts else ""
+            )
             return result
 
     def _face_readings(self, cam, data: list[_FaceData]) -> list[tuple[float, tuple[int, ...]]]:
@@ -363,8 +411,10 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
         readings = self._face_readings(cam, data)
         if not readings:
             words = ", ".join(sorted(set(self.poly.face_words[1:])))
-            raise ValueError(f"the measured faces do not fit a {self.shape} standing on the table (its faces: {words}); "
-                             "check the shape, or Remove last and measure the faces again")
+            raise ValueError(
+                f"the measured faces do not fit a {self.shape} standing on the table (its faces: {words}); "
+                "check the shape, or Remove last and measure the faces again"
+            )
         best, best_err = None, None
         for cost, perm in readings:
             if cost > readings[0][0] + FACE_COST_SLACK:
@@ -375,7 +425,11 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
             except ValueError as exc:
                 best_err = best_err or exc
                 continue
-            rms = float(np.sqrt(np.mean(np.square(res.residuals["clicks_px"])))) if len(res.residuals["clicks_px"]) else 0.0
+            rms = (
+                float(np.sqrt(np.mean(np.square(res.residuals["clicks_px"]))))
+                if len(res.residuals["clicks_px"])
+                else 0.0
+            )
             if best is None or rms < best[0]:
                 best = (rms, [{"face": f, "edges": e} for f, e in zip(perm, edges)], res)
         if best is None:
@@ -426,15 +480,20 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
             loop = self.poly.faces[f]
             sides = [(min(a, b), max(a, b)) for a, b in zip(loop, loop[1:] + loop[:1])]
             proj = [cam.project(Xw[list(e)]) for e in sides]
-            dist = np.array([[0.5 * (_point_segment_px(s[0], p) + _point_segment_px(s[1], p)) for p in proj]
-                             for s in fd.segs])
-            choice = min(itertools.permutations(range(len(sides)), len(fd.segs)),
-                         key=lambda ch: sum(dist[i, j] for i, j in enumerate(ch)))
+            dist = np.array(
+                [[0.5 * (_point_segment_px(s[0], p) + _point_segment_px(s[1], p)) for p in proj] for s in fd.segs]
+            )
+            choice = min(
+                itertools.permutations(range(len(sides)), len(fd.segs)),
+                key=lambda ch: sum(dist[i, j] for i, j in enumerate(ch)),
+            )
             for i, j in enumerate(choice):
                 if dist[i, j] > MAX_SIDE_DISTANCE_PX:
-                    raise ValueError(f"side {i + 1} of face {k + 1} is {dist[i, j]:.1f} px from every side of the "
-                                     f"{self.shape}'s {self.poly.face_words[f]} it was measured as: click it again "
-                                     "along the face's edge")
+                    raise ValueError(
+                        f"side {i + 1} of face {k + 1} is {dist[i, j]:.1f} px from every side of the "
+                        f"{self.shape}'s {self.poly.face_words[f]} it was measured as: click it again "
+                        "along the face's edge"
+                    )
             out.append([sides[j] for j in choice])
         return out
 
@@ -443,14 +502,23 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
 
         p = self.poly
         try:
-            return model_polyhedron(cam, p.faces, face_points={f: fd.points for fd, f in zip(data, perm)},
-                                    face_point_covs={f: fd.covs for fd, f in zip(data, perm)}, edge_segments=edge_segments,
-                                    support=self.support, support_faces=[p.support_face],
-                                    parallel_faces=p.parallel_faces, vertical_faces=p.vertical_faces)
+            return model_polyhedron(
+                cam,
+                p.faces,
+                face_points={f: fd.points for fd, f in zip(data, perm)},
+                face_point_covs={f: fd.covs for fd, f in zip(data, perm)},
+                edge_segments=edge_segments,
+                support=self.support,
+                support_faces=[p.support_face],
+                parallel_faces=p.parallel_faces,
+                vertical_faces=p.vertical_faces,
+            )
         except ValueError as exc:
             if "not fixed" in str(exc) or "no vertex is fixed" in str(exc):
-                raise ValueError(f"the measured faces and clicked sides do not fix every corner of the {self.shape}: "
-                                 "click every side of each face, and measure another face if you see one") from None
+                raise ValueError(
+                    f"the measured faces and clicked sides do not fix every corner of the {self.shape}: "
+                    "click every side of each face, and measure another face if you see one"
+                ) from None
             raise
 
     def _build(self, cam, data: list[_FaceData], assignment: list[dict]):
@@ -460,8 +528,9 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
         for fd, a in zip(data, assignment):
             for seg, e in zip(fd.segs, a["edges"]):
                 segs.setdefault(tuple(e), []).append(seg)
-        res = self._solve_model(cam, data, tuple(a["face"] for a in assignment),
-                                {e: _merge_segments(s) for e, s in segs.items()})
+        res = self._solve_model(
+            cam, data, tuple(a["face"] for a in assignment), {e: _merge_segments(s) for e, s in segs.items()}
+        )
         dims, sig = {}, {}
         for name, (i, j) in self.poly.named.items():
             key = f"edge_{min(i, j)}_{max(i, j)}"
@@ -484,17 +553,25 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
                 raise WorkflowError("nothing to accept: Solve first")
             r = self.result
             measured = [f for f in self.faces if f["points"] is not None]
-            clicks = {"shape": self.shape,
-                      "faces": [np.array(f["segs"]).reshape(-1, 2, 2) for f in measured],
-                      # each measured face's topology face and each clicked side's edge (vertex pair)
-                      "assignment": [{"face": int(a["face"]), "edges": [list(map(int, e)) for e in a["edges"]]}
-                                     for a in self.assignment],
-                      "snaps": [[None if sn is None else sn.record() for sn in f["snaps"]] for f in measured],
-                      "frame": self.frame_record()}
+            clicks = {
+                "shape": self.shape,
+                "faces": [np.array(f["segs"]).reshape(-1, 2, 2) for f in measured],
+                # each measured face's topology face and each clicked side's edge (vertex pair)
+                "assignment": [
+                    {"face": int(a["face"]), "edges": [list(map(int, e)) for e in a["edges"]]} for a in self.assignment
+                ],
+                "snaps": [[None if sn is None else sn.record() for sn in f["snaps"]] for f in measured],
+                "frame": self.frame_record(),
+            }
             measurements = {"faces": [f["points"] for f in measured]}
-            return self._write_model(r, method=f"model {self.shape} ({r.method})", clicks=clicks,
-                                     measurements=measurements, note=f"shape: {self.shape}, on the table",
-                                     text=self._dimension_text(r))
+            return self._write_model(
+                r,
+                method=f"model {self.shape} ({r.method})",
+                clicks=clicks,
+                measurements=measurements,
+                note=f"shape: {self.shape}, on the table",
+                text=self._dimension_text(r),
+            )
 
     # ------------------------------------------------------------------ display
     def _step(self) -> Step:
@@ -502,8 +579,11 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
         if done is not None:
             return done
         if self.result is not None:
-            return Step("review", f"{self._dimension_text(self.result)}. " + "{accept} to add it, or add faces and "
-                        "{solve} again.", frozenset(base | {"solve", "accept"}))
+            return Step(
+                "review",
+                f"{self._dimension_text(self.result)}. " + "{accept} to add it, or add faces and {solve} again.",
+                frozenset(base | {"solve", "accept"}),
+            )
         if self.pending is not None:
             return Step("click_end", "Click the other end of that side.", frozenset(base))
         face = self.faces[-1]
@@ -511,36 +591,61 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
         measured = any(f["points"] is not None for f in self.faces)
         if face["points"] is not None:
             nxt = "" if n == self.max_faces else "Click the sides of another face for more accuracy, or "
-            return Step("face_measured", f"Face {n} of the {self.shape} measured. {nxt}" + "{solve}.",
-                        frozenset(base | {"solve"}))
+            return Step(
+                "face_measured",
+                f"Face {n} of the {self.shape} measured. {nxt}" + "{solve}.",
+                frozenset(base | {"solve"}),
+            )
         solvable = {"solve"} if measured and not face["segs"] else set()
         tail = " Or {solve} with the faces measured." if solvable else ""
         if len(face["segs"]) < 2:
-            return Step("click_sides", f"Face {n} of the {self.shape}: click two points on each side of one visible "
-                        f"face (side {len(face['segs']) + 1}).{tail}", frozenset(base | solvable))
+            return Step(
+                "click_sides",
+                f"Face {n} of the {self.shape}: click two points on each side of one visible "
+                f"face (side {len(face['segs']) + 1}).{tail}",
+                frozenset(base | solvable),
+            )
         if self.site.devices is None:
-            return Step("sides_clicked", f"Face {n}: {len(face['segs'])} sides clicked. No range finder and turret are "
-                        "connected: restart mcit serve with devices to measure.", frozenset(base))
-        return Step("sides_clicked", f"Face {n}: click its other sides, or " + "{measure} (the turret scans inside them).",
-                    frozenset(base | {"measure"}))
+            return Step(
+                "sides_clicked",
+                f"Face {n}: {len(face['segs'])} sides clicked. No range finder and turret are "
+                "connected: restart mcit serve with devices to measure.",
+                frozenset(base),
+            )
+        return Step(
+            "sides_clicked",
+            f"Face {n}: click its other sides, or " + "{measure} (the turret scans inside them).",
+            frozenset(base | {"measure"}),
+        )
 
     def weaknesses(self) -> list[str]:
         with self.lock:
             r = self.result
             if r is None:
                 return []
-            out = [f"the {DIMENSION_WORDS.get(k, k.replace('_', ' '))} is uncertain: σ {1000 * v:.1f} mm (more than "
-                   f"{WEAK_SIGMA_MM:.0f} mm)" for k, v in r.sigmas.items() if np.isfinite(v) and 1000 * v > WEAK_SIGMA_MM]
+            out = [
+                f"the {DIMENSION_WORDS.get(k, k.replace('_', ' '))} is uncertain: σ {1000 * v:.1f} mm (more than "
+                f"{WEAK_SIGMA_MM:.0f} mm)"
+                for k, v in r.sigmas.items()
+                if np.isfinite(v) and 1000 * v > WEAK_SIGMA_MM
+            ]
             res = np.abs(np.asarray(r.residuals.get("clicks_px", [])))
             if len(res) and res.max() > MAX_CLICK_RESIDUAL_PX:
-                out.append(f"a clicked side is {res.max():.1f} px from the model's edge (more than "
-                           f"{MAX_CLICK_RESIDUAL_PX:.0f} px)")
+                out.append(
+                    f"a clicked side is {res.max():.1f} px from the model's edge (more than "
+                    f"{MAX_CLICK_RESIDUAL_PX:.0f} px)"
+                )
             snaps = [sn for f in self.faces for sn in f["snaps"]]
-            out += [f"a snap moved a click {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
-                    for sn in snaps if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX]
+            out += [
+                f"a snap moved a click {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
+                for sn in snaps
+                if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX
+            ]
             if sum(f["points"] is not None for f in self.faces) == 1:
-                out.append(f"one face measured: the hidden corners rest on the clicks and the {self.shape}'s hints "
-                           "(measure a second face)")
+                out.append(
+                    f"one face measured: the hidden corners rest on the clicks and the {self.shape}'s hints "
+                    "(measure a second face)"
+                )
         return out + self._overlaps(r)
 
     def marks(self) -> Marks:
@@ -572,19 +677,33 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
     def summary(self) -> dict[str, Any]:
         with self.lock:
             out: dict[str, Any] = {"name": self.object_name, "shape": self.shape, "hints": "on the table"}
-            out["faces"] = [{"face": i + 1, "sides": len(f["segs"]),
-                             "points": 0 if f["points"] is None else len(f["points"])} for i, f in enumerate(self.faces)]
+            out["faces"] = [
+                {"face": i + 1, "sides": len(f["segs"]), "points": 0 if f["points"] is None else len(f["points"])}
+                for i, f in enumerate(self.faces)
+            ]
             if self.result is not None:
                 r = self.result
                 out["method"] = r.method
                 words = self.poly.face_words
-                out["faces"] = [dict(row, seen_as=words[a["face"]]) for row, a in
-                                zip([row for row, f in zip(out["faces"], self.faces) if f["points"] is not None],
-                                    self.assignment)]
+                out["faces"] = [
+                    dict(row, seen_as=words[a["face"]])
+                    for row, a in zip(
+                        [row for row, f in zip(out["faces"], self.faces) if f["points"] is not None], self.assignment
+                    )
+                ]
                 parts = r.details.get("sigma_parts", {})
-                short = {"measurements": "σ clicks+ranges (cm)", "camera calibration": "σ camera (cm)",
-                         "turret calibration": "σ turret (cm)"}
-                out["dimensions"] = [{"dimension": k, "value_cm": 100 * v, "sigma_cm": 100 * r.sigmas.get(k, float("nan")),
-                                      **{short.get(src, src): 100 * p.get(k, float("nan")) for src, p in parts.items()}}
-                                     for k, v in r.dimensions.items()]
+                short = {
+                    "measurements": "σ clicks+ranges (cm)",
+                    "camera calibration": "σ camera (cm)",
+                    "turret calibration": "σ turret (cm)",
+                }
+                out["dimensions"] = [
+                    {
+                        "dimension": k,
+                        "value_cm": 100 * v,
+                        "sigma_cm": 100 * r.sigmas.get(k, float("nan")),
+                        **{short.get(src, src): 100 * p.get(k, float("nan")) for src, p in parts.items()},
+                    }
+                    for k, v in r.dimensions.items()
+                ]
             return out

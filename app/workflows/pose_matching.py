@@ -42,7 +42,6 @@ class Match:
     image_px: float
 
 
-
 class AutoMatchMixin:
     """Automatic assignment for Update pose (see the module docstring)."""
 
@@ -56,15 +55,20 @@ class AutoMatchMixin:
         with self.lock:
             self._check_open()
             if not on and sum(e is None for e in self.edge_ids[:-1]):
-                raise WorkflowError("some clicked edges are not assigned: Auto match them, or Remove last, before "
-                                    "assigning by hand")
+                raise WorkflowError(
+                    "some clicked edges are not assigned: Auto match them, or Remove last, before assigning by hand"
+                )
             self.auto = bool(on)
             if self.auto and self.mode == "edge" and self.pending is None:
                 self.state = "click_edge"
             elif not self.auto:
                 self.state = "assign_edge" if self._waiting_for_edge() else "click_edge"
-            self.message = ("Automatic matching: click 3 or more image edges (4 is best), two points each, without "
-                            "assigning them; then Auto match." if self.auto else "Assign each clicked edge by hand.")
+            self.message = (
+                "Automatic matching: click 3 or more image edges (4 is best), two points each, without "
+                "assigning them; then Auto match."
+                if self.auto
+                else "Assign each clicked edge by hand."
+            )
 
     def auto_match(self):
         """Which model edge is each clicked edge? Every assignment is tried on the frame and ranked.
@@ -85,8 +89,10 @@ class AutoMatchMixin:
                 if not self.auto:
                     self.auto_assign(True)
                     return None
-                raise WorkflowError(f"{len(self.segs)} edge{'s' if len(self.segs) != 1 else ''} clicked: automatic "
-                                    "matching needs 3 (4 or more is best); click more image edges")
+                raise WorkflowError(
+                    f"{len(self.segs)} edge{'s' if len(self.segs) != 1 else ''} clicked: automatic "
+                    "matching needs 3 (4 or more is best); click more image edges"
+                )
             if all(e is not None for e in self.edge_ids):
                 raise WorkflowError("every clicked edge is assigned already: Solve or Refine")
             segs = np.array(self.segs)
@@ -106,9 +112,11 @@ class AutoMatchMixin:
                 continue
             kept.append(Match(twin[0], twin[1], float(c.rms_px), float(c.image_px)))
         if not kept:
-            raise WorkflowError(f"no assignment of the {len(segs)} clicked edges to {self.object_name}'s edges fits "
-                                "(with your hand assignments): check the clicks (Remove last), click another edge "
-                                "(4 or more, not all through one point), or assign them by hand")
+            raise WorkflowError(
+                f"no assignment of the {len(segs)} clicked edges to {self.object_name}'s edges fits "
+                "(with your hand assignments): check the clicks (Remove last), click another edge "
+                "(4 or more, not all through one point), or assign them by hand"
+            )
         # With the frame, poses whose whole drawing misses the image's edges fit the clicks only: drop them,
         # unless nothing else is left (then they are shown, with a warning).
         on_image = [mt for mt in kept if mt.image_px <= IMAGE_GATE_PX]
@@ -116,8 +124,10 @@ class AutoMatchMixin:
         if image is not None and on_image:
             kept = on_image
         elif image is not None:
-            warning = (f" None lies on the image's edges (the best is {min(mt.image_px for mt in kept):.1f} px off on "
-                       "average): check the clicks and any hand assignment.")
+            warning = (
+                f" None lies on the image's edges (the best is {min(mt.image_px for mt in kept):.1f} px off on "
+                "average): check the clicks and any hand assignment."
+            )
         with self.lock:  # commit
             self._unchanged_since(generation, "Auto match")
             self.matches = kept
@@ -126,9 +136,11 @@ class AutoMatchMixin:
             self._invalidate()
             self.state = "match"
             self._match_s = res.total_s
-            self.message = (f"{len(kept)} way{'s' if len(kept) > 1 else ''} of pairing your edges with the model's "
-                            f"edges fit{'' if len(kept) > 1 else 's'} ({res.total_s:.1f} s); the best is drawn, each clicked "
-                            "edge labelled with its model edge: Confirm match, or choose another candidate" + warning)
+            self.message = (
+                f"{len(kept)} way{'s' if len(kept) > 1 else ''} of pairing your edges with the model's "
+                f"edges fit{'' if len(kept) > 1 else 's'} ({res.total_s:.1f} s); the best is drawn, each clicked "
+                "edge labelled with its model edge: Confirm match, or choose another candidate" + warning
+            )
             return kept
 
     def confirm_match(self) -> None:
@@ -142,12 +154,17 @@ class AutoMatchMixin:
             self._match_undo.append(list(self.edge_ids))
             self.edge_ids = [int(e) for e in m.edges]
             self._done.append("match")
-            self.match_info = {"candidate": i + 1, "of": len(self.matches), "rms_px": m.rms_px,
-                               "image_px": None if not np.isfinite(m.image_px) else m.image_px,
-                               "edges": [int(e) for e in m.edges]}
+            self.match_info = {
+                "candidate": i + 1,
+                "of": len(self.matches),
+                "rms_px": m.rms_px,
+                "image_px": None if not np.isfinite(m.image_px) else m.image_px,
+                "edges": [int(e) for e in m.edges],
+            }
             self.matches = None
             self._invalidate()
             self.state = "review"
-            self.message = (f"Assignment {i + 1} confirmed: segments {', '.join(f'{j + 1}→e{e}' for j, e in enumerate(self.edge_ids))}."
-                            " Refine, then Accept.")
-
+            self.message = (
+                f"Assignment {i + 1} confirmed: segments {', '.join(f'{j + 1}→e{e}' for j, e in enumerate(self.edge_ids))}."
+                " Refine, then Accept."
+            )

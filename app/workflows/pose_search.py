@@ -83,8 +83,10 @@ class OneClickMixin:
             elif self.pending is not None and not self.segs and not self.points_uv and self.mode == "edge":
                 p = self.pending.copy()
             else:
-                raise WorkflowError(f"click once on {self.object_name} where it is now in the video, then Find "
-                                    "(Find uses that one click, before any edge)")
+                raise WorkflowError(
+                    f"click once on {self.object_name} where it is now in the video, then Find "
+                    "(Find uses that one click, before any edge)"
+                )
             camera, model, T_db, generation = self.site.camera, self.obj.model, self.obj.T_world_obj, self._generation
             camera_cov = self.site.calibration_covs[0]  # a camera calibrated in this database: its σ joins the pose's
             table = table_support(self.site)
@@ -92,7 +94,9 @@ class OneClickMixin:
                 table = None  # it did not lie on the table: the full pose is searched near the old one
         image = self._frame()  # compute, outside the lock: the overlay keeps drawing
         if image is None:
-            raise WorkflowError(f"no video frame to search in ({self._no_frame_reason()}); check the video, then Find again")
+            raise WorkflowError(
+                f"no video frame to search in ({self._no_frame_reason()}); check the video, then Find again"
+            )
 
         def progress(frac: float, what: str) -> None:
             self.progress, self.progress_text = float(frac), what
@@ -103,8 +107,18 @@ class OneClickMixin:
         # edge's point, and the found poses could then not be accepted: a new operator's second double click)
         self.progress, self.progress_text = 0.0, "searching"
         try:
-            res = search_pose(camera, model, T_db, p, image, table=table, name=self.object_name,
-                              cancel=self.cancel_event.is_set, progress=progress, camera_cov=camera_cov)
+            res = search_pose(
+                camera,
+                model,
+                T_db,
+                p,
+                image,
+                table=table,
+                name=self.object_name,
+                cancel=self.cancel_event.is_set,
+                progress=progress,
+                camera_cov=camera_cov,
+            )
         except Cancelled:
             raise WorkflowError("Find cancelled: nothing was written") from None
         except NoPoseFits as exc:
@@ -132,25 +146,40 @@ class OneClickMixin:
             self._invalidate()
             self.state = "found"
             where = "on the table" if res.mode == "table" else "near its old pose"
-            self.search_info = {"click_uv": [float(p[0]), float(p[1])], "mode": res.mode, "candidates": len(res.candidates),
-                                "seconds": round(res.total_s, 3)}
+            self.search_info = {
+                "click_uv": [float(p[0]), float(p[1])],
+                "mode": res.mode,
+                "candidates": len(res.candidates),
+                "seconds": round(res.total_s, 3),
+            }
             best = res.candidates[0]
             n, ties = len(res.candidates), self._near_ties()
-            self.message = (f"{n} pose{'s' if n > 1 else ''} of {self.object_name} fit{'' if n > 1 else 's'} your click "
-                            f"(searched {where} in {res.total_s:.1f} s); the best fits the image's edges within "
-                            f"{best.fit_px:.1f} px" + (f": {ties} other{'s' if ties > 1 else ''} fit{'' if ties > 1 else 's'} "
-                                                       "almost as well, check the white ghost" if ties else
-                                                       ((": the others fit clearly worse" if n > 2 else
-                                                         ": the other fits clearly worse") if n > 1 else "")))
+            self.message = (
+                f"{n} pose{'s' if n > 1 else ''} of {self.object_name} fit{'' if n > 1 else 's'} your click "
+                f"(searched {where} in {res.total_s:.1f} s); the best fits the image's edges within "
+                f"{best.fit_px:.1f} px"
+                + (
+                    f": {ties} other{'s' if ties > 1 else ''} fit{'' if ties > 1 else 's'} "
+                    "almost as well, check the white ghost"
+                    if ties
+                    else (
+                        (": the others fit clearly worse" if n > 2 else ": the other fits clearly worse")
+                        if n > 1
+                        else ""
+                    )
+                )
+            )
             if best.beside_click:
-                self.message += (f". ⚠ The best lies beside your click, not under it: {self.object_name} fits the image "
-                                 "there far better than any pose under the click (check the white ghost)")
+                self.message += (
+                    f". ⚠ The best lies beside your click, not under it: {self.object_name} fits the image "
+                    "there far better than any pose under the click (check the white ghost)"
+                )
             if moving:
                 self.message += f". ⚠ {moving}"
             return self.found
 
     def _moving_at(self, T: np.ndarray, camera, model) -> str:
-        """"" unless the object at pose T changed between the frozen frame and the one shown just before
+        """ "" unless the object at pose T changed between the frozen frame and the one shown just before
         it (``Workflow.moving_share``): then it was moving, and the pose found there is where it passed,
         not where it stays. The pixels: its bounding box's corners, projected, taken inside
         (``app.vision.change.inside``)."""
@@ -165,10 +194,12 @@ class OneClickMixin:
         share = self.moving_share(inside(uv))
         if share is None or share <= CHANGED_SHARE:
             return ""
-        return (f"{self.object_name} was moving in this frame (it differs from the frame {MOTION_GAP_S:.1f} s before): "
-                "the pose found is where it passed, not where it stays; once it has stopped, press Remove last, freeze a frame "
-                "(F; Seconds back reaches one where it had stopped before) and double-click it again, or Accept if it "
-                "stopped there")
+        return (
+            f"{self.object_name} was moving in this frame (it differs from the frame {MOTION_GAP_S:.1f} s before): "
+            "the pose found is where it passed, not where it stays; once it has stopped, press Remove last, freeze a frame "
+            "(F; Seconds back reaches one where it had stopped before) and double-click it again, or Accept if it "
+            "stopped there"
+        )
 
     def _near_ties(self) -> int:
         """How many found poses besides the best match the image almost as well (mismatch within
@@ -181,13 +212,25 @@ class OneClickMixin:
     # ------------------------------------------------------------------ hooks for UpdatePose
     def _found_pending(self) -> bool:
         """Only the found pose is in use (no edge or point clicked since): Accept writes it."""
-        return (self.found is not None and self.pending is None and not self.segs and not self.points_uv
-                and self.mode == "edge" and self.refined is None)
+        return (
+            self.found is not None
+            and self.pending is None
+            and not self.segs
+            and not self.points_uv
+            and self.mode == "edge"
+            and self.refined is None
+        )
 
     def _first_click_pending(self) -> bool:
         """One click made, nothing else: it can be Find's."""
-        return (self.found is None and self.pending is not None and not self.segs and not self.points_uv
-                and self.mode == "edge" and self.matches is None)
+        return (
+            self.found is None
+            and self.pending is not None
+            and not self.segs
+            and not self.points_uv
+            and self.mode == "edge"
+            and self.matches is None
+        )
 
     def search_again(self, uv) -> None:
         """A double click at ``uv`` once poses are found: they go (with the double click's first click, an
@@ -198,8 +241,10 @@ class OneClickMixin:
         with self.lock:
             self._check_open()
             if self.found is None or self.segs or self.points_uv or self.mode != "edge":
-                raise WorkflowError("a double click searches again only while no edge has been clicked since the search: "
-                                    "Remove last the edges first, then double-click")
+                raise WorkflowError(
+                    "a double click searches again only while no edge has been clicked since the search: "
+                    "Remove last the edges first, then double-click"
+                )
             self.found, self.search_info, self.found_moving = None, None, ""
             self.search_click, self.candidates, self.chosen, self.matches = None, [], None, None
             self.pending = p
@@ -224,26 +269,47 @@ class OneClickMixin:
         i = self.chosen or 0
         c = self.found[i]
         n = len(self.found)
-        sd = f"σ {np.max(c.std_t_mm):.1f} mm, {np.max(c.std_r_deg):.2f}°" if np.all(np.isfinite(c.std_t_mm)) else "σ unknown"
+        sd = (
+            f"σ {np.max(c.std_t_mm):.1f} mm, {np.max(c.std_r_deg):.2f}°"
+            if np.all(np.isfinite(c.std_t_mm))
+            else "σ unknown"
+        )
         enabled = set(base) | {"accept", "remove_last"} | (set() if self.search_only else {"start_point"})
         choose = ""
         if n > 1:
             enabled.add("choose_candidate")
             ties = self._near_ties()
             if i > 0:
-                choose = f" Pose 1 matches the image best ({100 * (1 - self.found[0].mismatch):.0f} % against " \
-                         f"{100 * (1 - c.mismatch):.0f} %): " + "pick it back {choose_candidate} unless this one is plainly on the object."
+                choose = (
+                    f" Pose 1 matches the image best ({100 * (1 - self.found[0].mismatch):.0f} % against "
+                    f"{100 * (1 - c.mismatch):.0f} %): "
+                    + "pick it back {choose_candidate} unless this one is plainly on the object."
+                )
             elif ties:
-                choose = (f" {ties + 1} poses fit almost equally (e.g. a box of nearly square footprint turned 90°): look closely, "
-                          "pick another {choose_candidate} if the white one is not on the object.")
+                choose = (
+                    f" {ties + 1} poses fit almost equally (e.g. a box of nearly square footprint turned 90°): look closely, "
+                    "pick another {choose_candidate} if the white one is not on the object."
+                )
             else:
-                choose = f" {n - 1} other pose{'s' if n > 2 else ''} fit{'' if n > 2 else 's'} clearly worse " + "({choose_candidate})."
-        tail = " {accept} to write it" + ("." if self.search_only else f", or click edges of {self.object_name} to refine it.")
-        return Step("found", f"Pose {i + 1} of {n} drawn in white: the model's edges {c.fit_px:.1f} px from the image's, "
-                    f"{sd}." + choose + tail, frozenset(enabled))
+                choose = (
+                    f" {n - 1} other pose{'s' if n > 2 else ''} fit{'' if n > 2 else 's'} clearly worse "
+                    + "({choose_candidate})."
+                )
+        tail = " {accept} to write it" + (
+            "." if self.search_only else f", or click edges of {self.object_name} to refine it."
+        )
+        return Step(
+            "found",
+            f"Pose {i + 1} of {n} drawn in white: the model's edges {c.fit_px:.1f} px from the image's, "
+            f"{sd}." + choose + tail,
+            frozenset(enabled),
+        )
 
     def _found_labels(self) -> list[str]:
-        return [f"#{i + 1} · {100 * (1 - c.mismatch):.0f} % matched" + (" (best)" if i == 0 else "") for i, c in enumerate(self.found)]
+        return [
+            f"#{i + 1} · {100 * (1 - c.mismatch):.0f} % matched" + (" (best)" if i == 0 else "")
+            for i, c in enumerate(self.found)
+        ]
 
     def _found_weaknesses(self) -> list[str]:
         c = self.found[self.chosen or 0]
@@ -252,19 +318,27 @@ class OneClickMixin:
         if not (np.isfinite(sd) and np.isfinite(st)):
             out.append("the pose's uncertainty is unknown; click edges and Refine")
         elif sd > WEAK_FOUND_SIGMA_DEG or st > WEAK_FOUND_SIGMA_MM:
-            out.append(f"the pose is uncertain ({sigma_over(sd, st, WEAK_FOUND_SIGMA_DEG, WEAK_FOUND_SIGMA_MM)}); "
-                       "click an edge of it and Refine")
+            out.append(
+                f"the pose is uncertain ({sigma_over(sd, st, WEAK_FOUND_SIGMA_DEG, WEAK_FOUND_SIGMA_MM)}); "
+                "click an edge of it and Refine"
+            )
         if getattr(c, "beside_click", False):
-            out.append(f"this pose lies beside your click, not under it (there {self.object_name} fits the image far "
-                       "better): check that the white ghost is on the object")
+            out.append(
+                f"this pose lies beside your click, not under it (there {self.object_name} fits the image far "
+                "better): check that the white ghost is on the object"
+            )
         ties = self._near_ties()
         if ties >= MANY_TIES:
-            out.append(f"{ties} other poses fit about as well: the image near your click does not single out one pose "
-                       f"of {self.object_name} (is the click on {self.object_name}, not on another object?); click an edge "
-                       "of it and Refine")
+            out.append(
+                f"{ties} other poses fit about as well: the image near your click does not single out one pose "
+                f"of {self.object_name} (is the click on {self.object_name}, not on another object?); click an edge "
+                "of it and Refine"
+            )
         if 1.0 - c.mismatch < WEAK_FOUND_MATCH:
-            out.append(f"only {100 * (1 - c.mismatch):.0f} % of its outline matches the image (the rest hidden, or not there): "
-                       "check the white ghost where the object is hidden, or click an edge of it and Refine")
+            out.append(
+                f"only {100 * (1 - c.mismatch):.0f} % of its outline matches the image (the rest hidden, or not there): "
+                "check the white ghost where the object is hidden, or click an edge of it and Refine"
+            )
         return out
 
     def _accept_found(self):
@@ -279,11 +353,20 @@ class OneClickMixin:
             clicks = dict(self.search_info or {})
             clicks.update({"chosen": i, "frame": self.frame_record()})
             residuals = {"fit_px": c.fit_px, "support_px": c.support_px, "confidence": c.confidence}
-            rec, self.obj = self._write_pose(self.obj, c.T_world_obj, c.cov, method="search", clicks=clicks,
-                                             residuals=residuals, todo="Cancel, and update the pose again from its new one.")
+            rec, self.obj = self._write_pose(
+                self.obj,
+                c.T_world_obj,
+                c.cov,
+                method="search",
+                clicks=clicks,
+                residuals=residuals,
+                todo="Cancel, and update the pose again from its new one.",
+            )
             self.accepted = True
             self.state = "accepted"
-            self.message = f"{self.object_name} updated (version {rec.version}): found from one click, edges {c.fit_px:.1f} px off"
+            self.message = (
+                f"{self.object_name} updated (version {rec.version}): found from one click, edges {c.fit_px:.1f} px off"
+            )
             return rec
 
     def _refine_found(self, prior, camera, clicks: dict, sigmas, generation: int):
@@ -301,16 +384,23 @@ class OneClickMixin:
         try:
             # the camera calibration's share is an error common to the found pose and the clicks (both
             # measured through C): the two are combined on the image's share alone, and it is added after
-            result = refine_with_prior(camera, T, cov if cov_camera is None else cov - cov_camera, **clicks, sigma_px=sigmas)
+            result = refine_with_prior(
+                camera, T, cov if cov_camera is None else cov - cov_camera, **clicks, sigma_px=sigmas
+            )
         except ValueError as exc:
             raise WorkflowError(f"Refine failed: {exc}") from None
         if cov_camera is not None:
-            result = replace(result, cov=result.cov + cov_camera,
-                             cov_parts={"found pose and clicks": result.cov, "camera calibration": cov_camera})
+            result = replace(
+                result,
+                cov=result.cov + cov_camera,
+                cov_parts={"found pose and clicks": result.cov, "camera calibration": cov_camera},
+            )
         why = plausibility(camera, self.obj.model, result.T_world_obj, result.rms_px, 3.0 * self.sigma_px)
         if why:
-            raise WorkflowError(f"the clicks do not agree with the found pose ({why}): check the edge assignments, or "
-                                "pick another found pose")
+            raise WorkflowError(
+                f"the clicks do not agree with the found pose ({why}): check the edge assignments, or "
+                "pick another found pose"
+            )
         with self.lock:  # commit
             self._unchanged_since(generation, "Refine")
             self.refined = result
@@ -318,20 +408,32 @@ class OneClickMixin:
             deg, m = pose_error(result.T_world_obj, T)
             sig_deg, sig_mm = float(np.max(result.std_r_deg)), 1000 * float(np.max(result.std_t_m))
             n_e, n_p = result.kinds.count("segment"), result.kinds.count("point")
-            what = " and ".join(x for x in (f"{n_e} edge{'s' if n_e != 1 else ''}" if n_e else "",
-                                            f"{n_p} point{'s' if n_p != 1 else ''}" if n_p else "") if x)
-            self.message = (f"found pose {i + 1} refined with {what}: RMS {result.rms_px:.2f} px, moved {deg:.2f}° and "
-                            f"{1000 * m:.1f} mm from the found pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
-                            + (" (camera calibration included)" if result.cov_parts else ""))
+            what = " and ".join(
+                x
+                for x in (
+                    f"{n_e} edge{'s' if n_e != 1 else ''}" if n_e else "",
+                    f"{n_p} point{'s' if n_p != 1 else ''}" if n_p else "",
+                )
+                if x
+            )
+            self.message = (
+                f"found pose {i + 1} refined with {what}: RMS {result.rms_px:.2f} px, moved {deg:.2f}° and "
+                f"{1000 * m:.1f} mm from the found pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
+                + (" (camera calibration included)" if result.cov_parts else "")
+            )
             return result
 
     def _found_summary(self, out: dict[str, Any]) -> None:
         if self.found is None:
             return
         c = self.found[self.chosen or 0]
-        out["found"] = {"candidates": len(self.found), "chosen": (self.chosen or 0) + 1, "fit_px": round(c.fit_px, 1),
-                        # an axis the table holds has σ 0: said as held, not as "0" (read as certain)
-                        "std_t_mm": [round(float(v), 1) if v > 0 else "held by the table" for v in c.std_t_mm],
-                        "std_r_deg": [round(float(v), 2) if v > 0 else "held" for v in c.std_r_deg]}
+        out["found"] = {
+            "candidates": len(self.found),
+            "chosen": (self.chosen or 0) + 1,
+            "fit_px": round(c.fit_px, 1),
+            # an axis the table holds has σ 0: said as held, not as "0" (read as certain)
+            "std_t_mm": [round(float(v), 1) if v > 0 else "held by the table" for v in c.std_t_mm],
+            "std_r_deg": [round(float(v), 2) if v > 0 else "held" for v in c.std_r_deg],
+        }
         deg, m = pose_error(c.T_world_obj, self.obj.T_world_obj)
         out["found"]["change"] = {"deg": round(float(deg), 2), "mm": round(float(1000 * m), 1)}

@@ -31,6 +31,7 @@ def _hull_points(model, T_world_obj: np.ndarray) -> np.ndarray:
     V = model.triangles(16)[0]
     return V @ T_world_obj[:3, :3].T + T_world_obj[:3, 3] if len(V) else np.zeros((0, 3))
 
+
 __all__ = ["RangeModelling"]
 
 
@@ -54,8 +55,10 @@ class RangeModelling:
     def _devices(self):
         devices = self.site.devices
         if devices is None:
-            raise WorkflowError("no range finder and turret are connected: restart mcit serve with devices "
-                                "(emulated by default) to measure")
+            raise WorkflowError(
+                "no range finder and turret are connected: restart mcit serve with devices "
+                "(emulated by default) to measure"
+            )
         return devices
 
     def _report(self, fraction: float, text: str, X: np.ndarray | None = None, keep: bool = True) -> None:
@@ -108,8 +111,8 @@ class RangeModelling:
     def _acquiring(self, doing: str, again: str, refused: str):
         """Around a device acquisition: a cancel → Cancelled, a device fault or a refused request
         (ValueError) → WorkflowError saying what to do; the progress bar is cleared on failure."""
-        from app.devices.acquisition import AcquisitionCancelled
         from app.devices import DeviceError
+        from app.devices.acquisition import AcquisitionCancelled
 
         try:
             yield
@@ -159,16 +162,26 @@ class RangeModelling:
             self._clear_live()
             self.progress, self.progress_text = 0.0, "face patch · aiming"
         with self._acquiring("measuring", "Measure again", "cannot measure this face"):
-            scan = face_patch_scan(camera, T, devices.turret, devices.rangefinder, polygon_uv=poly, spacing_px=spacing,
-                                   depth_guess_m=float(camera.depth(self.support_point(centre))),
-                                   progress=self._progress(T, "face patch"), cancel=self.cancel_event)
+            scan = face_patch_scan(
+                camera,
+                T,
+                devices.turret,
+                devices.rangefinder,
+                polygon_uv=poly,
+                spacing_px=spacing,
+                depth_guess_m=float(camera.depth(self.support_point(centre))),
+                progress=self._progress(T, "face patch"),
+                cancel=self.cancel_event,
+            )
         with self.lock:
             self.progress = None
             self._clear_live()  # kept in the face below, or dropped with it
             good = scan.hits & np.asarray(scan.meta.get("inside", scan.hits), bool)
             if good.sum() < 3:
-                raise WorkflowError(f"only {int(good.sum())} of {len(scan)} beams came back from the face: no range "
-                                    "return; click the face's sides again (larger), or check the range finder")
+                raise WorkflowError(
+                    f"only {int(good.sum())} of {len(scan)} beams came back from the face: no range "
+                    "return; click the face's sides again (larger), or check the range finder"
+                )
             X = scan.points(T)[good]
             spec = self._spec()
             covs = beam_point_cov(T, scan.pan_rad[good], scan.tilt_rad[good], scan.range_m[good], spec)
@@ -179,9 +192,11 @@ class RangeModelling:
             doubt = _patch_doubts(X, covs, len(scan))
             if doubt:
                 # said now, not as a wrong face blamed at Solve (a new operator's patch fell half off its face)
-                self.message += (f" ⚠ {doubt}: part of the patch may lie off face {len(self.faces)} (on another "
-                                 "surface, or beyond it). Remove last drops these points; click all of the face's "
-                                 "visible sides, then Measure face again.")
+                self.message += (
+                    f" ⚠ {doubt}: part of the patch may lie off face {len(self.faces)} (on another "
+                    "surface, or beyond it). Remove last drops these points; click all of the face's "
+                    "visible sides, then Measure face again."
+                )
             return scan
 
     def _refuse_if_changed(self, uv: np.ndarray, what: str, inside: bool = False) -> None:
@@ -197,8 +212,10 @@ class RangeModelling:
             uv = inward(uv)
         why = self.scene_changed(uv)
         if why:
-            raise WorkflowError(f"{why}: {what} may not be where the frozen frame shows it. Nothing was measured: "
-                                "measure again when the video there looks as frozen, or Cancel and start on a new frame")
+            raise WorkflowError(
+                f"{why}: {what} may not be where the frozen frame shows it. Nothing was measured: "
+                "measure again when the video there looks as frozen, or Cancel and start on a new frame"
+            )
 
     def support_point(self, uv: np.ndarray) -> np.ndarray:
         """The table point seen at pixel uv (a depth guess for aiming), else a point 2 m away."""
@@ -229,8 +246,10 @@ class RangeModelling:
                 continue
             share = max(hull_overlap(mine, theirs), hull_overlap(theirs, mine))
             if share >= OVERLAP_SHARE:
-                out.append(f"it overlaps {obj.name} ({100 * share:.0f} % of the smaller one's volume): is it in the "
-                           "database already? (Accept anyway adds a second object)")
+                out.append(
+                    f"it overlaps {obj.name} ({100 * share:.0f} % of the smaller one's volume): is it in the "
+                    "database already? (Accept anyway adds a second object)"
+                )
         return out
 
     def _write_model(self, r, *, method: str, clicks: Any, measurements: Any, note: str, text: str):
@@ -238,10 +257,20 @@ class RangeModelling:
         the workflow (the lock held). Shared by the polyhedra's workflow."""
         try:
             rec = self.site.add_object(
-                self.object_name, r.kind, r.model, r.T_world_obj, dims=r.dimensions,
-                sigmas={k: v for k, v in r.sigmas.items() if np.isfinite(v)}, status="modelled", method=method,
-                client=self.client, clicks=clicks, measurements=measurements,
-                residuals={k: np.asarray(v) for k, v in r.residuals.items()}, note=note)
+                self.object_name,
+                r.kind,
+                r.model,
+                r.T_world_obj,
+                dims=r.dimensions,
+                sigmas={k: v for k, v in r.sigmas.items() if np.isfinite(v)},
+                status="modelled",
+                method=method,
+                client=self.client,
+                clicks=clicks,
+                measurements=measurements,
+                residuals={k: np.asarray(v) for k, v in r.residuals.items()},
+                note=note,
+            )
         except ValueError as exc:
             raise WorkflowError(f"the database refused the object: {exc}") from None
         self.accepted = True
@@ -255,8 +284,12 @@ class RangeModelling:
         if self.finished:
             return self._finished_step(), set()
         if self.progress is not None:
-            return Step("measuring", f"Measuring… {self.progress_text}. " + "{cancel} stops it.", frozenset({"cancel"}),
-                        clicks=False), set()
+            return Step(
+                "measuring",
+                f"Measuring… {self.progress_text}. " + "{cancel} stops it.",
+                frozenset({"cancel"}),
+                clicks=False,
+            ), set()
         base = {"cancel"} | ({"remove_last"} if self._has_something() else set())
         snap, _ = self._last_snap()
         if snap is not None and snap.applied and self.pending is None:
@@ -266,6 +299,7 @@ class RangeModelling:
 
 def _cross2(a: np.ndarray, b: np.ndarray) -> float:
     return float(a[0] * b[1] - a[1] * b[0])
+
 
 def _convex_hull(P: np.ndarray) -> np.ndarray:
     """Convex hull (K, 2) of pixels (N, 2), counter-clockwise (monotone chain)."""

@@ -17,9 +17,10 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -115,8 +116,14 @@ def _is_undo(rec: Any) -> bool:
 
 def is_redo(rec: Any, undone: Any) -> bool:
     """``rec`` undoes ``undone`` (the record it names), itself an undo: a redo of the change first undone."""
-    return (rec.undoes is not None and undone is not None and int(undone.id) == int(rec.undoes) and _is_undo(rec)
-            and _is_undo(undone) and undone.undoes is not None)
+    return (
+        rec.undoes is not None
+        and undone is not None
+        and int(undone.id) == int(rec.undoes)
+        and _is_undo(rec)
+        and _is_undo(undone)
+        and undone.undoes is not None
+    )
 
 
 def _change_sentence(rec: Any, undone: Any = None) -> str:
@@ -137,8 +144,9 @@ def _change_sentence(rec: Any, undone: Any = None) -> str:
     if rec.action == "remove":
         return f"removed {name}"
     if redo:
-        return f"redid change #{undone.undoes}" + (f" ({name}; undid undo #{rec.undoes})" if rec.object_name
-                                                   else f" (undid undo #{rec.undoes})")
+        return f"redid change #{undone.undoes}" + (
+            f" ({name}; undid undo #{rec.undoes})" if rec.object_name else f" (undid undo #{rec.undoes})"
+        )
     if rec.action == "undo" and undone is not None and int(undone.id) == int(rec.undoes) and undone.action == "add":
         return f"removed {name} (undid change #{rec.undoes}, its addition)"
     if rec.action == "undo":
@@ -146,8 +154,12 @@ def _change_sentence(rec: Any, undone: Any = None) -> str:
     if rec.action == "restore":
         return f"brought {name} back to change #{rec.undoes}"
     before, after = rec.before or {}, rec.after or {}
-    differs = lambda k: k in after and not np.array_equal(np.asarray(before.get(k), dtype=object),  # noqa: E731
-                                                           np.asarray(after.get(k), dtype=object))
+
+    def differs(k: str) -> bool:
+        return k in after and not np.array_equal(
+            np.asarray(before.get(k), dtype=object), np.asarray(after.get(k), dtype=object)
+        )
+
     if differs("T_world_obj"):
         return f"moved {name}"
     if differs("model_id") or differs("kind") or differs("dims"):
@@ -194,8 +206,14 @@ class Site:
         clicked); the interface installs its video grabber (``set_frames``).
     """
 
-    def __init__(self, scene: Scene, db: Any, devices: Any = None, clock: Callable[[], float] | None = None,
-                 frames: Any = "scene"):
+    def __init__(
+        self,
+        scene: Scene,
+        db: Any,
+        devices: Any = None,
+        clock: Callable[[], float] | None = None,
+        frames: Any = "scene",
+    ):
         self.scene = scene
         self.db = db
         self.devices = devices
@@ -233,7 +251,9 @@ class Site:
                 self._frames = SceneVideoFrames(video, lens=getattr(scene, "lens", None))
         elif frames is not None:
             if not callable(frames):
-                raise ValueError(f"frames must be 'scene', None or a callable frames(t_s) -> image, got {type(frames).__name__}")
+                raise ValueError(
+                    f"frames must be 'scene', None or a callable frames(t_s) -> image, got {type(frames).__name__}"
+                )
             self._frames = frames
 
     # ------------------------------------------------------------------ video frames
@@ -344,8 +364,11 @@ class Site:
         cam = self.db.latest_calibration("camera")
         if cam is not None and self._cal_ids.get("camera") != cam.id:
             d = cam.data
-            self._camera = Camera(np.asarray(d["C"], float), int(d.get("width", self.scene.camera.width)),
-                                  int(d.get("height", self.scene.camera.height)))
+            self._camera = Camera(
+                np.asarray(d["C"], float),
+                int(d.get("width", self.scene.camera.width)),
+                int(d.get("height", self.scene.camera.height)),
+            )
             self._camera_cov = None if d.get("cov") is None else np.asarray(d["cov"], float)
             self._cal_ids["camera"] = cam.id
             changed = True
@@ -357,8 +380,17 @@ class Site:
             changed = True
         return changed
 
-    def set_camera(self, camera: Camera, *, rms_px: float, residuals_px: np.ndarray, points: dict, client: str,
-                   method: str = "dlt", cov: np.ndarray | None = None) -> None:
+    def set_camera(
+        self,
+        camera: Camera,
+        *,
+        rms_px: float,
+        residuals_px: np.ndarray,
+        points: dict,
+        client: str,
+        method: str = "dlt",
+        cov: np.ndarray | None = None,
+    ) -> None:
         """Store a new camera calibration (one transaction) and use it from now on.
         cov : (12, 12) covariance of ``camera.C.ravel()`` (``calibrate_dlt(...).cov``), or None."""
         data = {"C": camera.C, "width": camera.width, "height": camera.height, "rms_px": float(rms_px), **points}
@@ -372,11 +404,24 @@ class Site:
             self.revision += 1
         self._feed_after_write()
 
-    def set_turret(self, T_world_turret: np.ndarray, *, rms_m: float, residuals_m: np.ndarray, cov: np.ndarray,
-                   measurements: dict, client: str, method: str = "turret calibration") -> None:
+    def set_turret(
+        self,
+        T_world_turret: np.ndarray,
+        *,
+        rms_m: float,
+        residuals_m: np.ndarray,
+        cov: np.ndarray,
+        measurements: dict,
+        client: str,
+        method: str = "turret calibration",
+    ) -> None:
         """Store a new turret calibration (one transaction) and use it from now on."""
-        data = {"T_world_turret": np.asarray(T_world_turret, float), "rms_m": float(rms_m),
-                "cov": np.asarray(cov, float), **measurements}
+        data = {
+            "T_world_turret": np.asarray(T_world_turret, float),
+            "rms_m": float(rms_m),
+            "cov": np.asarray(cov, float),
+            **measurements,
+        }
         rec = self.db.add_calibration("turret", data, np.asarray(residuals_m, float), method=method, client=client)
         with self.lock:
             self._T_world_turret = np.asarray(T_world_turret, float).copy()
@@ -406,27 +451,74 @@ class Site:
 
             logging.getLogger("mcit.site").warning("the change feed will catch up at the next poll: %s", exc)
 
-    def update_pose(self, obj: SiteObject, T_world_obj: np.ndarray, cov: np.ndarray | None, *, method: str,
-                    client: str, clicks: Any = None, measurements: Any = None, residuals: Any = None,
-                    status: str = "known") -> Any:
+    def update_pose(
+        self,
+        obj: SiteObject,
+        T_world_obj: np.ndarray,
+        cov: np.ndarray | None,
+        *,
+        method: str,
+        client: str,
+        clicks: Any = None,
+        measurements: Any = None,
+        residuals: Any = None,
+        status: str = "known",
+    ) -> Any:
         """Write a new pose of ``obj`` (the snapshot the workflow started from: its ``version`` is
         checked) with its covariance; its status becomes ``status``. T_world_obj : (4, 4). cov :
         (6, 6) or None. clicks, measurements, residuals : what the estimate used, kept in the
         history. Returns the new ``app.db.ObjectRecord``."""
-        rec = self.db.update_pose(obj.id, T_world_obj, cov, expected_version=obj.version, method=method, client=client,
-                                  clicks=clicks, measurements=measurements, residuals=residuals, status=status)
+        rec = self.db.update_pose(
+            obj.id,
+            T_world_obj,
+            cov,
+            expected_version=obj.version,
+            method=method,
+            client=client,
+            clicks=clicks,
+            measurements=measurements,
+            residuals=residuals,
+            status=status,
+        )
         self._wrote()
         return rec
 
-    def add_object(self, name: str, kind: str, model: BRep, T_world_obj: np.ndarray, *, method: str, client: str,
-                   cov: np.ndarray | None = None, dims: dict | None = None, sigmas: dict | None = None,
-                   status: str = "modelled", clicks: Any = None, measurements: Any = None, residuals: Any = None,
-                   note: str | None = None) -> Any:
+    def add_object(
+        self,
+        name: str,
+        kind: str,
+        model: BRep,
+        T_world_obj: np.ndarray,
+        *,
+        method: str,
+        client: str,
+        cov: np.ndarray | None = None,
+        dims: dict | None = None,
+        sigmas: dict | None = None,
+        status: str = "modelled",
+        clicks: Any = None,
+        measurements: Any = None,
+        residuals: Any = None,
+        note: str | None = None,
+    ) -> Any:
         """Add a new object (``app.db.Database.add_object``; ValueError if the name is taken).
         T_world_obj : (4, 4), object → world. dims, sigmas : name → metres. Returns its record."""
-        rec = self.db.add_object(name, kind, model, T_world_obj, cov=cov, dims=dims, sigmas=sigmas, status=status,
-                                 method=method, client=client, clicks=clicks, measurements=measurements,
-                                 residuals=residuals, note=note)
+        rec = self.db.add_object(
+            name,
+            kind,
+            model,
+            T_world_obj,
+            cov=cov,
+            dims=dims,
+            sigmas=sigmas,
+            status=status,
+            method=method,
+            client=client,
+            clicks=clicks,
+            measurements=measurements,
+            residuals=residuals,
+            note=note,
+        )
         self._wrote()
         return rec
 
@@ -464,7 +556,7 @@ class Site:
         with self._feed_lock:
             return self._feed_seq
 
-    def changes_since(self, seq: int) -> list["Change"]:
+    def changes_since(self, seq: int) -> list[Change]:
         """The changes after ``seq`` (a ``Change.seq`` or ``change_seq``), oldest first: those made
         through this site, and those of other processes once ``poll()`` has seen them."""
         with self._feed_lock:
@@ -486,8 +578,15 @@ class Site:
         each object's change out on the attached live feed (``attach_feed``)."""
         with self._feed_lock:
             for rec in self.db.history_since(self._feed_seq):
-                self._feed.append(Change(int(rec.id), str(rec.client), _change_sentence(rec, self.undone(rec)), rec.object_name,
-                                         float(rec.time)))
+                self._feed.append(
+                    Change(
+                        int(rec.id),
+                        str(rec.client),
+                        _change_sentence(rec, self.undone(rec)),
+                        rec.object_name,
+                        float(rec.time),
+                    )
+                )
                 self._feed_seq = int(rec.id)
                 if self.feed is not None:
                     self._publish_change(rec)
@@ -584,9 +683,13 @@ class Site:
             casters = {}
             for obj in objects:
                 hit = cached.get(obj.id)
-                casters[obj.id] = hit if hit is not None and hit[0] == obj.version else (obj.version, BodyCaster(obj.model))
+                casters[obj.id] = (
+                    hit if hit is not None and hit[0] == obj.version else (obj.version, BodyCaster(obj.model))
+                )
             self._ray_casters = casters
-        h = SceneCaster(objects, [obj.T_world_obj for obj in objects], [casters[obj.id][1] for obj in objects]).cast(o, d[None])
+        h = SceneCaster(objects, [obj.T_world_obj for obj in objects], [casters[obj.id][1] for obj in objects]).cast(
+            o, d[None]
+        )
         k = int(h.body[0])
         if k < 0:
             return None

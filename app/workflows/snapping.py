@@ -23,8 +23,14 @@ import numpy as np
 
 from .base import WorkflowError
 
-__all__ = ["ClickSnap", "SnapMixin", "vertex_edge_directions", "snap_marks", "SNAPPED_CORNER_SIGMA_PX",
-           "SNAPPED_SEGMENT_SIGMA_PX"]
+__all__ = [
+    "ClickSnap",
+    "SnapMixin",
+    "vertex_edge_directions",
+    "snap_marks",
+    "SNAPPED_CORNER_SIGMA_PX",
+    "SNAPPED_SEGMENT_SIGMA_PX",
+]
 
 # The precision of a corner snapped to the image, pixels: bench/corner_snapping.py measured a mean
 # error of 0.13 px (95 % within 0.29 px) on the workcell's frames; a raw click is the operator's σ.
@@ -75,13 +81,21 @@ class ClickSnap:
 
     def record(self) -> dict[str, Any]:
         """JSON-ready history entry: raw and snapped coordinates, whether the snap is used."""
-        return {"kind": self.kind, "raw_uv": np.asarray(self.raw).tolist(),
-                "snapped_uv": None if self.snapped is None else np.asarray(self.snapped).tolist(),
-                "snapped": self.applied, "refused": self.refused, "moved_px": float(self.moved_px),
-                "method": self.method, "reason": self.reason}
+        return {
+            "kind": self.kind,
+            "raw_uv": np.asarray(self.raw).tolist(),
+            "snapped_uv": None if self.snapped is None else np.asarray(self.snapped).tolist(),
+            "snapped": self.applied,
+            "refused": self.refused,
+            "moved_px": float(self.moved_px),
+            "method": self.method,
+            "reason": self.reason,
+        }
 
 
-def vertex_edge_directions(camera: Any, model: Any, T_world_obj: np.ndarray, vertex: int) -> tuple[np.ndarray, np.ndarray]:
+def vertex_edge_directions(
+    camera: Any, model: Any, T_world_obj: np.ndarray, vertex: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Image directions (K, 2) and projected lengths (K,) (pixels) of the model edges that leave
     ``vertex`` and are visible at ``T_world_obj`` (convex hidden-line removal), through ``camera``."""
     if not len(model.edges) or not 0 <= int(vertex) < len(model.vertices):
@@ -118,8 +132,12 @@ def snap_marks(snaps: list[ClickSnap | None]) -> tuple[np.ndarray, np.ndarray, n
             if len(s.lines_uv):
                 lines.extend(s.lines_uv)
         labels.append((anchor, s.text()))
-    return (np.array(raw_segs).reshape(-1, 2, 2), np.array(raw_pts).reshape(-1, 2), np.array(lines).reshape(-1, 2, 2),
-            labels)
+    return (
+        np.array(raw_segs).reshape(-1, 2, 2),
+        np.array(raw_pts).reshape(-1, 2),
+        np.array(lines).reshape(-1, 2, 2),
+        labels,
+    )
 
 
 class SnapMixin:
@@ -139,8 +157,11 @@ class SnapMixin:
         """Snap the next clicks to the image's edges and corners (on), or use them as clicked (off)."""
         with self.lock:
             self.snap = bool(on)
-            self.message = "Clicks will be snapped to the image's edges and corners." if self.snap else \
-                "Clicks will be used as clicked (snapping off)."
+            self.message = (
+                "Clicks will be snapped to the image's edges and corners."
+                if self.snap
+                else "Clicks will be used as clicked (snapping off)."
+            )
 
     def _frame(self) -> np.ndarray | None:
         """The frame the clicks were made on: the workflow's frozen frame, else the site's now."""
@@ -167,14 +188,18 @@ class SnapMixin:
             self.click(seg[0])
             self.click(seg[1])
 
-    def _finish_segment(self, first: np.ndarray, second: np.ndarray, min_px: float) -> tuple[np.ndarray, ClickSnap | None]:
+    def _finish_segment(
+        self, first: np.ndarray, second: np.ndarray, min_px: float
+    ) -> tuple[np.ndarray, ClickSnap | None]:
         """The segment of two clicks on an image edge, snapped: (the segment to use (2, 2), its
         snap or None); WorkflowError when the clicks are closer than ``min_px``."""
         seg = np.array([first, second], dtype=float)
         gap = float(np.linalg.norm(seg[1] - seg[0]))
         if gap < min_px:
-            raise WorkflowError(f"the two clicks are {gap:.1f} px apart: click the edge's other end, at least "
-                                f"{min_px:.0f} px away along it (second click again)")
+            raise WorkflowError(
+                f"the two clicks are {gap:.1f} px apart: click the edge's other end, at least "
+                f"{min_px:.0f} px away along it (second click again)"
+            )
         snap = self._snap_segment(seg)
         return (seg if snap is None else snap.used), snap
 
@@ -193,11 +218,14 @@ class SnapMixin:
         except ValueError as exc:
             return ClickSnap("segment", seg.copy(), None, reason=str(exc))
         if not res.ok:
-            return ClickSnap("segment", seg.copy(), None, moved_px=float(res.moved_px), method="edge", reason=res.reason)
+            return ClickSnap(
+                "segment", seg.copy(), None, moved_px=float(res.moved_px), method="edge", reason=res.reason
+            )
         return ClickSnap("segment", seg.copy(), res.seg_uv.copy(), float(res.moved_px), "edge")
 
-    def _snap_corner(self, uv: np.ndarray, model: Any = None, T_world_obj: np.ndarray | None = None,
-                     vertex: int | None = None) -> ClickSnap | None:
+    def _snap_corner(
+        self, uv: np.ndarray, model: Any = None, T_world_obj: np.ndarray | None = None, vertex: int | None = None
+    ) -> ClickSnap | None:
         """Snap a clicked image point (2,) of a model vertex (if known) to the image's corner; None
         when snapping is off or the site has no video frames."""
         if not self.snap or not (self.site.has_frames or getattr(self, "frame", None) is not None):
@@ -234,10 +262,14 @@ class SnapMixin:
             self._check_open()
             snap, put_back = self._last_snap()
             if snap is None:
-                raise WorkflowError("the last click was not snapped (snapping is off, there is no video frame, or there is "
-                                    "no click to change since the last step): nothing to refuse")
+                raise WorkflowError(
+                    "the last click was not snapped (snapping is off, there is no video frame, or there is "
+                    "no click to change since the last step): nothing to refuse"
+                )
             if not snap.applied:
-                raise WorkflowError(f"the last click is already used as clicked ({'refused' if snap.refused else snap.reason})")
+                raise WorkflowError(
+                    f"the last click is already used as clicked ({'refused' if snap.refused else snap.reason})"
+                )
             snap.refused = True
             put_back(snap.raw.copy())
             self._after_refuse()

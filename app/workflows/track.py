@@ -29,8 +29,8 @@ from core.pose import nearest_twin, plausibility
 from core.transforms import pose_error
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
-from .snapping import ClickSnap, SnapMixin, snap_marks
 from .pose_matching import SNAPPED_SIGMA_PX
+from .snapping import ClickSnap, SnapMixin, snap_marks
 from .update_pose import MIN_SEGMENT_PX
 
 __all__ = ["TrackObject"]
@@ -40,22 +40,49 @@ class TrackObject(SnapMixin, Workflow):
     name = "track"
     title = "Track"
     options = ("object_name",)
-    actions = ("step", "pause", "resume", "restart", "click", "add_segment", "remove_last", "reinit", "accept",
-               "cancel", "refuse_snap", "set_snap")
+    actions = (
+        "step",
+        "pause",
+        "resume",
+        "restart",
+        "click",
+        "add_segment",
+        "remove_last",
+        "reinit",
+        "accept",
+        "cancel",
+        "refuse_snap",
+        "set_snap",
+    )
     controls = (
         Control("pause", "Pause", "space", hint="Stop following the video (the tracked pose stays)"),
         Control("resume", "Resume", "space", hint="Follow the video again"),
-        Control("reinit", "Re-initialise", "I", kind="long", color="blue",
-                hint="Find the pose from the clicked edges on this frame, then track on"),
+        Control(
+            "reinit",
+            "Re-initialise",
+            "I",
+            kind="long",
+            color="blue",
+            hint="Find the pose from the clicked edges on this frame, then track on",
+        ),
         Control("restart", "Restart", "T", hint="Track on from the last good pose"),
         Control("accept", "Accept", "enter", color="green", hint="Write the tracked pose to the database"),
-        Control("refuse_snap", "Refuse snap", "U", hint="Use the last edge as clicked, not moved onto the image's edge"),
+        Control(
+            "refuse_snap", "Refuse snap", "U", hint="Use the last edge as clicked, not moved onto the image's edge"
+        ),
         Control("remove_last", "Remove last", "backspace", hint="Undo the last click"),
         CANCEL,
     )
 
-    def __init__(self, site, client: str = "operator", object_name: str | None = None, snap: bool = True,
-                 sigma_px: float = 1.0, **tracker_options: Any):
+    def __init__(
+        self,
+        site,
+        client: str = "operator",
+        object_name: str | None = None,
+        snap: bool = True,
+        sigma_px: float = 1.0,
+        **tracker_options: Any,
+    ):
         from app.vision.track import EdgeTracker
 
         super().__init__(site, client)
@@ -112,8 +139,10 @@ class TrackObject(SnapMixin, Workflow):
         with self.lock:  # snapshot
             self._check_open()
             if self.lost:
-                raise WorkflowError(f"tracking is lost ({self.reason}): click three or more edges of {self.object_name} "
-                                    "and Re-initialise, or Restart from the last good pose")
+                raise WorkflowError(
+                    f"tracking is lost ({self.reason}): click three or more edges of {self.object_name} "
+                    "and Re-initialise, or Restart from the last good pose"
+                )
             if self.paused:
                 raise WorkflowError("tracking is paused: Resume first")
             generation = self._generation
@@ -142,13 +171,17 @@ class TrackObject(SnapMixin, Workflow):
                 self.lost_count += 1
                 self.reason = self.diagnostics.reason if self.diagnostics is not None else "lost"
                 if jumped:
-                    self.reason += (" — the video jumped back in time (a recording restarting, or a stream that "
-                                    "reconnected): the object is where that frame shows it")
+                    self.reason += (
+                        " — the video jumped back in time (a recording restarting, or a stream that "
+                        "reconnected): the object is where that frame shows it"
+                    )
                 self.state = "lost"
                 self.t_lost = t
-                self.message = (f"Lost at t = {t:.2f} s: {self.reason}. Nothing is written while lost: click three or "
-                                f"more edges of {self.object_name} (two clicks each) and Re-initialise, or Restart "
-                                "from the last good pose" + (", or Accept that pose." if self.t_good is not None else "."))
+                self.message = (
+                    f"Lost at t = {t:.2f} s: {self.reason}. Nothing is written while lost: click three or "
+                    f"more edges of {self.object_name} (two clicks each) and Re-initialise, or Restart "
+                    "from the last good pose" + (", or Accept that pose." if self.t_good is not None else ".")
+                )
             else:
                 self.t_good, self.confidence_good = t, float(res.confidence)
                 self.T_world_obj = res.T_world_obj.copy()
@@ -231,13 +264,20 @@ class TrackObject(SnapMixin, Workflow):
         with self.lock:
             self._check_open()
             if len(self.segs) < 3:
-                raise WorkflowError(f"{len(self.segs)} edges clicked: click three or more edges of {self.object_name} "
-                                    "(4 is best), two clicks each, then Re-initialise")
+                raise WorkflowError(
+                    f"{len(self.segs)} edges clicked: click three or more edges of {self.object_name} "
+                    "(4 is best), two clicks each, then Re-initialise"
+                )
             image = self._frame()
             snapped = all(s is not None and s.applied for s in self.seg_snaps)
             try:
-                res = match_edges(self.site.camera, self.obj.model, np.array(self.segs), image=image,
-                                  sigma_px=SNAPPED_SIGMA_PX if snapped else self.sigma_px)
+                res = match_edges(
+                    self.site.camera,
+                    self.obj.model,
+                    np.array(self.segs),
+                    image=image,
+                    sigma_px=SNAPPED_SIGMA_PX if snapped else self.sigma_px,
+                )
             except ValueError as exc:
                 raise WorkflowError(f"cannot re-initialise: {exc}") from None
             for c in res.candidates:
@@ -245,12 +285,20 @@ class TrackObject(SnapMixin, Workflow):
                 if twin is not None and not plausibility(self.site.camera, self.obj.model, twin[0]):
                     break
             else:
-                raise WorkflowError(f"no pose of {self.object_name} fits the {len(self.segs)} clicked edges: check them "
-                                    "(Remove last), click another edge (4 or more, not all through one point)")
+                raise WorkflowError(
+                    f"no pose of {self.object_name} fits the {len(self.segs)} clicked edges: check them "
+                    "(Remove last), click another edge (4 or more, not all through one point)"
+                )
             T, edges = twin
-            self.reinits.append({"t_s": self.site.time_s(), "segs_uv": np.array(self.segs).tolist(),
-                                 "edges": [int(e) for e in edges], "rms_px": float(c.rms_px),
-                                 "snaps": [None if s is None else s.record() for s in self.seg_snaps]})
+            self.reinits.append(
+                {
+                    "t_s": self.site.time_s(),
+                    "segs_uv": np.array(self.segs).tolist(),
+                    "edges": [int(e) for e in edges],
+                    "rms_px": float(c.rms_px),
+                    "snaps": [None if s is None else s.record() for s in self.seg_snaps],
+                }
+            )
             self.tracker.reset(T)
             self._generation += 1
             self.T_world_obj = T.copy()
@@ -259,8 +307,10 @@ class TrackObject(SnapMixin, Workflow):
             self.lost = self.paused = False
             self.reason = ""
             self.state = "tracking"
-            self.message = (f"Re-initialised from {len(edges)} edges (model edges {', '.join(f'e{e}' for e in edges)}, "
-                            f"RMS {c.rms_px:.2f} px): tracking again.")
+            self.message = (
+                f"Re-initialised from {len(edges)} edges (model edges {', '.join(f'e{e}' for e in edges)}, "
+                f"RMS {c.rms_px:.2f} px): tracking again."
+            )
             return T
 
     # ------------------------------------------------------------------ accept
@@ -271,8 +321,10 @@ class TrackObject(SnapMixin, Workflow):
         with self.lock:
             self._check_open()
             if self.lost and self.t_good is None:
-                raise WorkflowError(f"the track is lost ({self.reason}) and no frame was tracked before: nothing written. "
-                                    "Re-initialise (click edges) or Restart, or Cancel")
+                raise WorkflowError(
+                    f"the track is lost ({self.reason}) and no frame was tracked before: nothing written. "
+                    "Re-initialise (click edges) or Restart, or Cancel"
+                )
             if self.frames == 0:
                 raise WorkflowError("no frame has been tracked yet: wait for the video (or step), then Accept")
             clicks = {"reinit": self.reinits} if self.reinits else None
@@ -284,20 +336,32 @@ class TrackObject(SnapMixin, Workflow):
             if d is not None:
                 residuals.update(n_samples=int(d.n_samples), n_inliers=int(d.n_inliers))
             T, cov = self.T_world_obj.copy(), None if self.cov is None else self.cov.copy()
-            rec, self.obj = self._write_pose(self.obj, T, cov, method="tracking", clicks=clicks, measurements=measurements,
-                                             residuals=residuals, todo="Cancel, and Track again from its new pose.")
+            rec, self.obj = self._write_pose(
+                self.obj,
+                T,
+                cov,
+                method="tracking",
+                clicks=clicks,
+                measurements=measurements,
+                residuals=residuals,
+                todo="Cancel, and Track again from its new pose.",
+            )
             self.accepted = True
             self.state = "accepted"
-            self.message = (f"{self.object_name} updated from tracking (version {rec.version}): {self.frames} frames, "
-                            f"confidence {100 * (self.confidence_good or 0):.0f} %"
-                            + (f"; its last good pose, at t = {self.t_good:.2f} s (lost after)" if self.lost else ""))
+            self.message = (
+                f"{self.object_name} updated from tracking (version {rec.version}): {self.frames} frames, "
+                f"confidence {100 * (self.confidence_good or 0):.0f} %"
+                + (f"; its last good pose, at t = {self.t_good:.2f} s (lost after)" if self.lost else "")
+            )
             return rec
 
     def weaknesses(self) -> list[str]:
         with self.lock:
             if self.lost and self.t_good is not None and not self.finished:
-                return [f"the track was lost at t = {self.t_lost:.2f} s ({self.reason}): Accept writes its last good "
-                        f"pose, tracked at t = {self.t_good:.2f} s; where {self.object_name} is since, the track cannot say"]
+                return [
+                    f"the track was lost at t = {self.t_lost:.2f} s ({self.reason}): Accept writes its last good "
+                    f"pose, tracked at t = {self.t_good:.2f} s; where {self.object_name} is since, the track cannot say"
+                ]
             return []
 
     # ------------------------------------------------------------------ display
@@ -316,21 +380,41 @@ class TrackObject(SnapMixin, Workflow):
         if self.lost:
             more = f" ({n} clicked)" if n else ""
             acc = {"accept"} if self.t_good is not None else set()
-            last = (" from the last good pose, or {accept} that pose" + f" (t = {self.t_good:.2f} s)." if acc
-                    else " from the last good pose.")
-            return Step("lost", f"Lost: {self.reason}. Click three or more edges of {self.object_name}, two clicks each{more}, "
-                        f"{then}; or " + "{restart}" + last, frozenset(base | reinit | acc | {"restart"}))
+            last = (
+                " from the last good pose, or {accept} that pose" + f" (t = {self.t_good:.2f} s)."
+                if acc
+                else " from the last good pose."
+            )
+            return Step(
+                "lost",
+                f"Lost: {self.reason}. Click three or more edges of {self.object_name}, two clicks each{more}, "
+                f"{then}; or " + "{restart}" + last,
+                frozenset(base | reinit | acc | {"restart"}),
+            )
         if self.paused:
             acc = {"accept"} if self.frames else set()
-            return Step("paused", "Paused: {resume}, " + ("{accept} the tracked pose, " if acc else "")
-                        + f"or click three or more edges and {'{reinit}' if reinit else 'Re-initialise'}.",
-                        frozenset(base | acc | reinit | {"resume"}))
+            return Step(
+                "paused",
+                "Paused: {resume}, "
+                + ("{accept} the tracked pose, " if acc else "")
+                + f"or click three or more edges and {'{reinit}' if reinit else 'Re-initialise'}.",
+                frozenset(base | acc | reinit | {"resume"}),
+            )
         if self.frames == 0:
-            return Step("waiting", f"Tracking {self.object_name} from its database pose: waiting for the next frame "
-                        "({pause} stops).", frozenset(base | {"pause"}), clicks=False)
-        return Step("tracking", f"Tracking {self.object_name}: confidence {100 * (self.confidence or 0):.0f} %{self._fit_text()}. "
-                    "A tracked pose can be wrong where the image does not show it: check the wireframe, then "
-                    "{accept} writes the tracked pose; {pause} to stop.", frozenset(base | {"accept", "pause"}), clicks=False)
+            return Step(
+                "waiting",
+                f"Tracking {self.object_name} from its database pose: waiting for the next frame ({{pause}} stops).",
+                frozenset(base | {"pause"}),
+                clicks=False,
+            )
+        return Step(
+            "tracking",
+            f"Tracking {self.object_name}: confidence {100 * (self.confidence or 0):.0f} %{self._fit_text()}. "
+            "A tracked pose can be wrong where the image does not show it: check the wireframe, then "
+            "{accept} writes the tracked pose; {pause} to stop.",
+            frozenset(base | {"accept", "pause"}),
+            clicks=False,
+        )
 
     def _fit_text(self) -> str:
         """How well the last tracked pose fits the frame: its edges' mean distance from the image's and
@@ -349,15 +433,20 @@ class TrackObject(SnapMixin, Workflow):
         with self.lock:
             m = Marks(selected=self.object_name)
             label = "LOST" if self.lost else (f"{100 * self.confidence:.0f} %" if self.confidence is not None else "")
-            m.tracked = [Ghost(self.obj.model, self.T_world_obj, f"{self.object_name} {label}".strip(), chosen=not self.lost)]
+            m.tracked = [
+                Ghost(self.obj.model, self.T_world_obj, f"{self.object_name} {label}".strip(), chosen=not self.lost)
+            ]
             d = self.diagnostics
             if d is not None and len(d.matched_uv):
                 found = np.all(np.isfinite(d.matched_uv), axis=1)
                 m.found_points = d.matched_uv[found & (d.weights >= 0.5)]
                 m.rejected_points = d.matched_uv[found & (d.weights < 0.5)]
             cam = self.site.camera
-            X = self.obj.model.vertices @ self.T_world_obj[:3, :3].T + self.T_world_obj[:3, 3] if len(self.obj.model.vertices) \
+            X = (
+                self.obj.model.vertices @ self.T_world_obj[:3, :3].T + self.T_world_obj[:3, 3]
+                if len(self.obj.model.vertices)
                 else self.T_world_obj[:3, 3].reshape(1, 3)
+            )
             X = X[cam.depth(X) > 0]
             if len(X) and label:
                 uv = cam.project(X)
@@ -373,10 +462,21 @@ class TrackObject(SnapMixin, Workflow):
 
     def summary(self) -> dict[str, Any]:
         with self.lock:
-            out: dict[str, Any] = {"object": self.object_name,
-                                   "state": ("accepted" if self.accepted else "cancelled" if self.cancelled else "lost"
-                                             if self.lost else "paused" if self.paused else "tracking"),
-                                   "frames": self.frames}
+            out: dict[str, Any] = {
+                "object": self.object_name,
+                "state": (
+                    "accepted"
+                    if self.accepted
+                    else "cancelled"
+                    if self.cancelled
+                    else "lost"
+                    if self.lost
+                    else "paused"
+                    if self.paused
+                    else "tracking"
+                ),
+                "frames": self.frames,
+            }
             if self.confidence is not None:
                 out["confidence"] = self.confidence
             if np.isfinite(self.rms_px):

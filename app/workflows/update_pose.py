@@ -58,7 +58,7 @@ MAX_CANDIDATES = 8
 
 
 def _counted(n_edges: int, n_points: int) -> str:
-    """"4 edges", "3 edges and 1 point", "no click": what a refinement used, or what was snapped."""
+    """ "4 edges", "3 edges and 1 point", "no click": what a refinement used, or what was snapped."""
     parts = [f"{n} {w}{'s' if n != 1 else ''}" for n, w in ((n_edges, "edge"), (n_points, "point")) if n]
     return " and ".join(parts) or "no click"
 
@@ -67,29 +67,73 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
     name = "update_pose"
     title = "Update pose"
     options = ("object_name",)
-    actions = ("click", "assign_edge", "add_segment", "add_point", "start_point", "remove_last", "remove_click", "solve",
-               "choose_candidate", "refine", "accept", "cancel", "refuse_snap", "set_snap", "auto_assign",
-               "auto_match", "confirm_match", "find")
+    actions = (
+        "click",
+        "assign_edge",
+        "add_segment",
+        "add_point",
+        "start_point",
+        "remove_last",
+        "remove_click",
+        "solve",
+        "choose_candidate",
+        "refine",
+        "accept",
+        "cancel",
+        "refuse_snap",
+        "set_snap",
+        "auto_assign",
+        "auto_match",
+        "confirm_match",
+        "find",
+    )
     controls = (
-        Control("find", "Find", "G", kind="long", color="blue",
-                hint="Find the object's pose from your one click on it (where it is now in the video)"),
-        Control("auto_match", "Auto match", "M", kind="long", color="blue",
-                hint="Find which model edge each clicked image edge is (3 or more edges, 4 is best)"),
+        Control(
+            "find",
+            "Find",
+            "G",
+            kind="long",
+            color="blue",
+            hint="Find the object's pose from your one click on it (where it is now in the video)",
+        ),
+        Control(
+            "auto_match",
+            "Auto match",
+            "M",
+            kind="long",
+            color="blue",
+            hint="Find which model edge each clicked image edge is (3 or more edges, 4 is best)",
+        ),
         Control("confirm_match", "Confirm match", "C", color="blue", hint="Adopt the assignment shown"),
         Control("solve", "Solve", "P", color="blue", hint="Large motion: the three-line solver's candidate poses"),
         Control("choose_candidate", "Candidate", kind="choice", hint="The candidate pose drawn in white"),
-        Control("refine", "Refine", "R", color="blue", hint="Least squares on every click, from the candidate or the database pose"),
+        Control(
+            "refine",
+            "Refine",
+            "R",
+            color="blue",
+            hint="Least squares on every click, from the candidate or the database pose",
+        ),
         Control("accept", "Accept", "enter", color="green", hint="Write the refined pose to the database"),
         Control("start_point", "Add point", "V", hint="Next clicks: a model corner, then where it is in the video"),
-        Control("refuse_snap", "Refuse snap", "U", hint="Use the last click as clicked, not moved onto the image's edge"),
+        Control(
+            "refuse_snap", "Refuse snap", "U", hint="Use the last click as clicked, not moved onto the image's edge"
+        ),
         Control("remove_last", "Remove last", "backspace", hint="Undo the last click or assignment"),
         Control("click_row", "Click", kind="choice", hint="A clicked edge or point (its residual after Refine)"),
         Control("remove_click", "Delete click", arg="click_row", hint="Delete the click chosen above"),
         CANCEL,
     )
 
-    def __init__(self, site, client: str = "operator", object_name: str | None = None, loss: str = "l2",
-                 snap: bool = True, sigma_px: float = 1.0):
+    def __init__(
+        self,
+        site,
+        client: str = "operator",
+        object_name: str | None = None,
+        loss: str = "l2",
+        snap: bool = True,
+        sigma_px: float = 1.0,
+    ):
         super().__init__(site, client)
         self._init_snap(snap)
         if not sigma_px > 0:
@@ -105,7 +149,9 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         # its outline), not from clicked edges
         self.search_only = not len(self.obj.model.edges)
         if self.search_only and not self.obj.model.solids:
-            raise WorkflowError(f"{object_name} has neither straight edges nor an outline to find: model it again instead")
+            raise WorkflowError(
+                f"{object_name} has neither straight edges nor an outline to find: model it again instead"
+            )
         self.object_name = object_name
         self.loss = loss
         self.segs: list[np.ndarray] = []
@@ -174,8 +220,10 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 if self.pending_vertex is None:
                     k, dist = self._nearest_vertex(p)
                     if dist > PICK_RADIUS_PX:
-                        raise WorkflowError(f"no vertex of {self.object_name} within {PICK_RADIUS_PX:.0f} px "
-                                            f"(nearest {dist:.0f} px); click a corner of its wireframe")
+                        raise WorkflowError(
+                            f"no vertex of {self.object_name} within {PICK_RADIUS_PX:.0f} px "
+                            f"(nearest {dist:.0f} px); click a corner of its wireframe"
+                        )
                     self.pending_vertex = k
                     self.state = "click_point_image"
                 else:
@@ -184,8 +232,10 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             if not self.auto and self.edge_ids and self.edge_ids[-1] is None:
                 k, dist = self._nearest_edge(p)
                 if dist > PICK_RADIUS_PX:
-                    raise WorkflowError(f"no edge of {self.object_name} within {PICK_RADIUS_PX:.0f} px of the click "
-                                        f"(nearest {dist:.0f} px); click on its wireframe in the overlay")
+                    raise WorkflowError(
+                        f"no edge of {self.object_name} within {PICK_RADIUS_PX:.0f} px of the click "
+                        f"(nearest {dist:.0f} px); click on its wireframe in the overlay"
+                    )
                 self._assign(k)
                 return
             if self.pending is None or (self.search_only and self.found is None):
@@ -193,8 +243,10 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 self.state = "click_edge_end"
                 return
             if self.search_only:
-                raise WorkflowError(f"{self.object_name} has no straight edges to click: Accept the found pose, pick another, "
-                                    "or Remove last and double-click it again")
+                raise WorkflowError(
+                    f"{self.object_name} has no straight edges to click: Accept the found pose, pick another, "
+                    "or Remove last and double-click it again"
+                )
             seg, snap = self._finish_segment(self.pending, p, MIN_SEGMENT_PX)
             self.pending = None
             self.segs.append(seg)
@@ -235,7 +287,9 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
     def _assign_last(self, k: int) -> None:
         """Assign model edge k to the last clicked segment (hand assignment, also in automatic mode)."""
         if not self.edge_ids or self.edge_ids[-1] is not None:
-            raise WorkflowError("no clicked segment is waiting for its model edge: click two points on an image edge first")
+            raise WorkflowError(
+                "no clicked segment is waiting for its model edge: click two points on an image edge first"
+            )
         self._assign(k)
 
     def start_point(self) -> None:
@@ -254,7 +308,9 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         with self.lock:
             self._check_open()
             if not 0 <= int(vertex) < len(self.obj.model.vertices):
-                raise WorkflowError(f"{self.object_name} has vertices 0..{len(self.obj.model.vertices) - 1}, not {vertex}")
+                raise WorkflowError(
+                    f"{self.object_name} has vertices 0..{len(self.obj.model.vertices) - 1}, not {vertex}"
+                )
             self._add_point(p, int(vertex))
 
     def remove_last(self) -> None:
@@ -309,25 +365,33 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         for triple in itertools.islice(itertools.combinations(range(len(segs)), 3), MAX_TRIPLES):
             idx = list(triple)
             try:
-                cands = p3l(camera, segs[idx], edges[idx], pts_uv if len(pts_uv) else None,
-                            pts_obj if len(pts_obj) else None)
+                cands = p3l(
+                    camera, segs[idx], edges[idx], pts_uv if len(pts_uv) else None, pts_obj if len(pts_obj) else None
+                )
             except ConcurrentEdgesError:
-                errors.append(f"edges {', '.join(str(i + 1) for i in idx)} meet at one corner of {self.object_name}: they "
-                              "give its turn but not its distance; click a fourth edge that does not pass through that "
-                              "corner, or Add point on another corner")
+                errors.append(
+                    f"edges {', '.join(str(i + 1) for i in idx)} meet at one corner of {self.object_name}: they "
+                    "give its turn but not its distance; click a fourth edge that does not pass through that "
+                    "corner, or Add point on another corner"
+                )
                 continue
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
                 # a degenerate triple (or a numerical failure in it): try the next triple
                 errors.append(f"edges {', '.join(str(i + 1) for i in idx)}: {exc}")
                 continue
             if not cands:
-                errors.append(f"edges {', '.join(str(i + 1) for i in idx)}: no pose puts the object in front of the camera")
+                errors.append(
+                    f"edges {', '.join(str(i + 1) for i in idx)}: no pose puts the object in front of the camera"
+                )
                 continue
             triples += 1
             found += [np.asarray(T, float) for T in cands]
         if not found:
-            raise WorkflowError("no pose fits these edges: " + "; ".join(errors[:3]) +
-                                ". Check the edge assignments (Remove last) or click other edges")
+            raise WorkflowError(
+                "no pose fits these edges: "
+                + "; ".join(errors[:3])
+                + ". Check the edge assignments (Remove last) or click other edges"
+            )
         clicks = as_clicks(segs, edges, pts_uv if len(pts_uv) else None, pts_obj if len(pts_obj) else None)
         cost = [pose_distance_cost(camera, T, clicks) for T in found]
         ranked: list[np.ndarray] = []
@@ -345,9 +409,11 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             self._invalidate()
             self.state = "review"
             every = f"all {len(segs)} edges" if len(segs) > 3 else "the 3 edges"
-            self.message = (f"{len(ranked)} candidate pose{'s' if len(ranked) > 1 else ''} from {triples} triple"
-                            f"{'s' if triples > 1 else ''} of edges, ranked by how well each fits {every}; the best "
-                            "is selected")
+            self.message = (
+                f"{len(ranked)} candidate pose{'s' if len(ranked) > 1 else ''} from {triples} triple"
+                f"{'s' if triples > 1 else ''} of edges, ranked by how well each fits {every}; the best "
+                "is selected"
+            )
             return self.candidates
 
     def _unchanged_since(self, generation: int, again: str) -> None:
@@ -379,7 +445,9 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         with self.lock:  # snapshot
             self._check_open()
             if self.matches is not None:
-                raise WorkflowError("confirm the automatic assignment first (Confirm match), or assign the edges by hand")
+                raise WorkflowError(
+                    "confirm the automatic assignment first (Confirm match), or assign the edges by hand"
+                )
             segs, edges = self._assigned()
             pts_uv, pts_obj = self._points()
             starts: list[tuple[int | None, np.ndarray]] = [(None, self.obj.T_world_obj)]
@@ -395,13 +463,21 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 c = self.found[self.chosen or 0]
                 if c.cov is not None:
                     prior = (self.chosen or 0, c.T_world_obj, c.cov, c.cov_camera)
-        clicks = dict(segs_uv=segs if len(segs) else None, edges_obj=edges if len(edges) else None,
-                      points_uv=pts_uv if len(pts_uv) else None, points_obj=pts_obj if len(pts_obj) else None)
+        clicks = dict(
+            segs_uv=segs if len(segs) else None,
+            edges_obj=edges if len(edges) else None,
+            points_uv=pts_uv if len(pts_uv) else None,
+            points_obj=pts_obj if len(pts_obj) else None,
+        )
         if prior is not None:
             return self._refine_found(prior, camera, clicks, sigmas, generation)
         failures = []  # compute, outside the lock: the overlay keeps drawing
         for i, start in starts:
-            what = "from the database pose" if i is None else ("from the last refined pose" if i == -1 else f"candidate {i + 1}")
+            what = (
+                "from the database pose"
+                if i is None
+                else ("from the last refined pose" if i == -1 else f"candidate {i + 1}")
+            )
             try:
                 result = refine(camera, start, **clicks, loss=self.loss, sigma_px=sigmas)
             except ValueError as exc:
@@ -435,14 +511,16 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             deg, m = pose_error(result.T_world_obj, self.obj.T_world_obj)
             sig_deg, sig_mm = float(np.max(result.std_r_deg)), 1000 * float(np.max(result.std_t_m))
             used = _counted(list(result.kinds).count("segment"), list(result.kinds).count("point"))
-            self.message = (f"{note}RMS {result.rms_px:.2f} px over {used}; moved {deg:.2f}° and "
-                            f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
-                            + (" (camera calibration included)" if result.cov_parts else "")
-                            + (f". ⚠ {unseen}" if unseen else ""))
+            self.message = (
+                f"{note}RMS {result.rms_px:.2f} px over {used}; moved {deg:.2f}° and "
+                f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
+                + (" (camera calibration included)" if result.cov_parts else "")
+                + (f". ⚠ {unseen}" if unseen else "")
+            )
             return result
 
     def _unseen_outline(self, camera, T: np.ndarray) -> str:
-        """"" unless little of the model's visible outline at pose T lies on the frame's edges (less
+        """ "" unless little of the model's visible outline at pose T lies on the frame's edges (less
         than ``MIN_OUTLINE_SEEN``, samples within 1.5 px of an edge of their orientation): then why
         the pose is suspect. The clicks can fit a wrong pose exactly — edges assigned as in a mirror,
         4 edges for 6 unknowns — while its drawing misses the object (a new operator: RMS 0.45 px, the
@@ -458,9 +536,11 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         seen = float(np.mean(d.distances_px <= 1.5))
         if seen >= MIN_OUTLINE_SEEN:
             return ""
-        return (f"only {100 * seen:.0f} % of the refined pose's outline lies on the image's edges, though the clicks fit: "
-                "an edge assigned to the wrong model edge (a mirror image)? Compare the white ghost with the video, "
-                "and Remove last to assign again")
+        return (
+            f"only {100 * seen:.0f} % of the refined pose's outline lies on the image's edges, though the clicks fit: "
+            "an edge assigned to the wrong model edge (a mirror image)? Compare the white ghost with the video, "
+            "and Remove last to assign again"
+        )
 
     def accept(self):
         """Write the refined pose and covariance (one transaction); ConflictError → nothing written.
@@ -481,23 +561,39 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             segs, edges = self._assigned()
             pts_uv, _ = self._points()
             used = [j for j, e in enumerate(self.edge_ids) if e is not None]
-            clicks = {"segs_uv": segs, "edge_ids": [self.edge_ids[j] for j in used],
-                      "points_uv": pts_uv, "vertex_ids": list(self.vertex_ids),
-                      "candidates": len(self.candidates), "chosen": self.chosen,
-                      # raw and snapped pixels of each segment and point above (None: snapping was off)
-                      "snaps": [None if self.seg_snaps[j] is None else self.seg_snaps[j].record() for j in used],
-                      "point_snaps": [None if s is None else s.record() for s in self.point_snaps],
-                      "assignment": "automatic" if self.match_info is not None else "hand",
-                      "frame": self.frame_record()}  # the frozen frame the edges were clicked on
+            clicks = {
+                "segs_uv": segs,
+                "edge_ids": [self.edge_ids[j] for j in used],
+                "points_uv": pts_uv,
+                "vertex_ids": list(self.vertex_ids),
+                "candidates": len(self.candidates),
+                "chosen": self.chosen,
+                # raw and snapped pixels of each segment and point above (None: snapping was off)
+                "snaps": [None if self.seg_snaps[j] is None else self.seg_snaps[j].record() for j in used],
+                "point_snaps": [None if s is None else s.record() for s in self.point_snaps],
+                "assignment": "automatic" if self.match_info is not None else "hand",
+                "frame": self.frame_record(),
+            }  # the frozen frame the edges were clicked on
             if self.match_info is not None:
                 clicks["match"] = self.match_info
             residuals = {"rms_px": r.rms_px, "click_residuals_px": r.click_residuals_px, "kinds": list(r.kinds)}
-            method = "match+refine" if self.match_info is not None else ("p3l+refine" if self.chosen is not None else "refine")
+            method = (
+                "match+refine"
+                if self.match_info is not None
+                else ("p3l+refine" if self.chosen is not None else "refine")
+            )
             if self.found is not None:
                 method = "search+refine"
                 clicks["search"] = self.search_info
-            rec, self.obj = self._write_pose(self.obj, r.T_world_obj, r.cov, method=method, clicks=clicks,
-                                             residuals=residuals, todo="Cancel, and update the pose again from its new one.")
+            rec, self.obj = self._write_pose(
+                self.obj,
+                r.T_world_obj,
+                r.cov,
+                method=method,
+                clicks=clicks,
+                residuals=residuals,
+                todo="Cancel, and update the pose again from its new one.",
+            )
             self.accepted = True
             self.state = "accepted"
             self.message = f"{self.object_name} updated (version {rec.version}): RMS {r.rms_px:.2f} px"
@@ -509,8 +605,9 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         if not 0 <= k < E:
             raise WorkflowError(f"{self.object_name} has edges 0..{E - 1}, not {k}")
         if k in self.edge_ids:
-            raise WorkflowError(f"model edge {k} is already assigned to segment {self.edge_ids.index(k) + 1}; "
-                                "click another model edge")
+            raise WorkflowError(
+                f"model edge {k} is already assigned to segment {self.edge_ids.index(k) + 1}; click another model edge"
+            )
         self.edge_ids[-1] = k
         self._done.append("assign")
         self._clicks_changed()
@@ -550,6 +647,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
     def _click_sigmas(self) -> np.ndarray:
         """σ of each click in refine's order (assigned segments, then points), pixels: a click snapped
         to the image has the snap's measured precision, a raw or refused one the operator's σ."""
+
         def sigma(snap: ClickSnap | None, snapped_sigma: float) -> float:
             return snapped_sigma if snap is not None and snap.applied else self.sigma_px
 
@@ -612,23 +710,35 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 del self.points_uv[j], self.point_snaps[j], self.vertex_ids[j]
                 what = f"Point {j + 1}"
             # What Remove last undoes, rebuilt in click order (a confirmed match's undo is dropped).
-            self._done = [d for j2, e in enumerate(self.edge_ids) for d in (("segment", "assign") if e is not None else ("segment",))]
+            self._done = [
+                d
+                for j2, e in enumerate(self.edge_ids)
+                for d in (("segment", "assign") if e is not None else ("segment",))
+            ]
             self._done += ["point"] * len(self.points_uv)
             self._match_undo = []
             self._clicks_changed()
             self.state = "assign_edge" if self._waiting_for_edge() else "click_edge"
-            self.message = f"{what} deleted; {'Refine' if self.refined is None and self.candidates else 'click or Refine'} again."
+            self.message = (
+                f"{what} deleted; {'Refine' if self.refined is None and self.candidates else 'click or Refine'} again."
+            )
 
     # ------------------------------------------------------------------ display
     def _step(self) -> Step:
         if self.finished:
             return self._finished_step()
         if self.progress is not None:  # Find under way (its click was taken: not "click a second point")
-            return Step("searching", f"Searching for the pose of {self.object_name} from your click… "
-                        + "{cancel} stops the search.", frozenset({"cancel"}), clicks=False)
+            return Step(
+                "searching",
+                f"Searching for the pose of {self.object_name} from your click… " + "{cancel} stops the search.",
+                frozenset({"cancel"}),
+                clicks=False,
+            )
         n = sum(e is not None for e in self.edge_ids)
         k = len(self.segs)
-        where = "on the white ghost" if (self.chosen is not None or self.last_refined is not None) else "on its wireframe"
+        where = (
+            "on the white ghost" if (self.chosen is not None or self.last_refined is not None) else "on its wireframe"
+        )
         base = {"cancel"}
         if self.pending is not None or self.mode == "point" or self._done or self.matches is not None:
             base.add("remove_last")
@@ -637,41 +747,74 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             base.add("refuse_snap")
         if self.mode == "point":
             if self.pending_vertex is None:
-                return Step("click_point_model", f"Click a corner of {self.object_name} {where} (the model vertex).",
-                            frozenset(base))
-            return Step("click_point_image", f"Now click where vertex {self.pending_vertex} (circled) really is in the video.",
-                        frozenset(base))
+                return Step(
+                    "click_point_model",
+                    f"Click a corner of {self.object_name} {where} (the model vertex).",
+                    frozenset(base),
+                )
+            return Step(
+                "click_point_image",
+                f"Now click where vertex {self.pending_vertex} (circled) really is in the video.",
+                frozenset(base),
+            )
         found = self._found_step(base)
         if found is not None:
             return found
         if self._first_click_pending():
             if self.search_only:
-                return Step("click_edge_end", "{find} the pose of " + f"{self.object_name} from this click (or double-click "
-                            "it).", frozenset(base | {"find"}))
-            return Step("click_edge_end", "{find} the pose of " + f"{self.object_name} from this one click (or double-click "
-                        f"it), or click a second point on the same image edge (edge {k + 1}).", frozenset(base | {"find"}))
+                return Step(
+                    "click_edge_end",
+                    "{find} the pose of " + f"{self.object_name} from this click (or double-click it).",
+                    frozenset(base | {"find"}),
+                )
+            return Step(
+                "click_edge_end",
+                "{find} the pose of " + f"{self.object_name} from this one click (or double-click "
+                f"it), or click a second point on the same image edge (edge {k + 1}).",
+                frozenset(base | {"find"}),
+            )
         if self.search_only:
-            return Step("click_edge", f"Double-click {self.object_name} where it is now in the video to find its pose "
-                        "(it has no straight edges to click).", frozenset(base))
+            return Step(
+                "click_edge",
+                f"Double-click {self.object_name} where it is now in the video to find its pose "
+                "(it has no straight edges to click).",
+                frozenset(base),
+            )
         if self.pending is not None:
-            return Step("click_edge_end", f"Click a second point on the same image edge (edge {k + 1}).", frozenset(base))
+            return Step(
+                "click_edge_end", f"Click a second point on the same image edge (edge {k + 1}).", frozenset(base)
+            )
         rows = {"click_row", "remove_click"} if self._click_rows() else set()
         if self.matches is not None:
             e0 = int(self.matches[self.chosen or 0].edges[0])
-            return Step("match", f"Assignment {(self.chosen or 0) + 1} of {len(self.matches)} shown (1→e{e0}: clicked edge 1 is "
-                        f"model edge {e0}): " + "{confirm_match}, choose another {choose_candidate}, or {remove_last} to assign "
-                        "by hand.",
-                        frozenset(base | {"confirm_match", "choose_candidate"}))
+            return Step(
+                "match",
+                f"Assignment {(self.chosen or 0) + 1} of {len(self.matches)} shown (1→e{e0}: clicked edge 1 is "
+                f"model edge {e0}): "
+                + "{confirm_match}, choose another {choose_candidate}, or {remove_last} to assign "
+                "by hand.",
+                frozenset(base | {"confirm_match", "choose_candidate"}),
+            )
         more = base | rows | {"start_point"}
         if self._waiting_for_edge():
-            return Step("assign_edge", f"Which model edge is it? Click that edge of {self.object_name} {where}.",
-                        frozenset(base | rows))
+            return Step(
+                "assign_edge",
+                f"Which model edge is it? Click that edge of {self.object_name} {where}.",
+                frozenset(base | rows),
+            )
         if self.auto and (n < k or not (self.segs or self.points_uv)):  # automatic assignment: say so from the start
             if k < 3:
-                return Step("auto_click", f"Automatic matching: click two points along an edge of {self.object_name} "
-                            f"(edge {k + 1}; 3 or more, 4 is best).", frozenset(base | rows))
-            return Step("auto_ready", f"{k} edges clicked: " + "{auto_match}, or click another edge (4 or more is best).",
-                        frozenset(base | rows | {"auto_match"}))
+                return Step(
+                    "auto_click",
+                    f"Automatic matching: click two points along an edge of {self.object_name} "
+                    f"(edge {k + 1}; 3 or more, 4 is best).",
+                    frozenset(base | rows),
+                )
+            return Step(
+                "auto_ready",
+                f"{k} edges clicked: " + "{auto_match}, or click another edge (4 or more is best).",
+                frozenset(base | rows | {"auto_match"}),
+            )
         constraints = 2 * (n + len(self.points_uv))
         if constraints >= 6 or (self.found is not None and constraints >= 2):  # with a found pose one edge is enough
             more.add("refine")
@@ -683,37 +826,67 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             tail = " Or {refine} from the database pose (a small motion)." if "refine" in more else ""
             if self.found is not None and "refine" in more:
                 tail = " Or {refine}: the clicks fit together with the found pose (one edge is enough)."
-            one = (f"Double-click {self.object_name} where it is now in the video to find its pose from that point; or c"
-                   if not self.segs and not self.points_uv and self.found is None else "C")
+            one = (
+                f"Double-click {self.object_name} where it is now in the video to find its pose from that point; or c"
+                if not self.segs and not self.points_uv and self.found is None
+                else "C"
+            )
             spread = ", not all three through one corner" if n == 2 else ""
-            return Step("click_edge", one + f"lick two points along an edge of {self.object_name} in the video (edge {n + 1} of 3"
-                        f"{spread}), then click which model edge it is; " + "or {auto_match} to skip saying which is which." + tail
-                        if "auto_match" in more else
-                        f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3{spread})." + tail,
-                        frozenset(more))
+            return Step(
+                "click_edge",
+                one + f"lick two points along an edge of {self.object_name} in the video (edge {n + 1} of 3"
+                f"{spread}), then click which model edge it is; "
+                + "or {auto_match} to skip saying which is which."
+                + tail
+                if "auto_match" in more
+                else f"Click two points along an edge of {self.object_name} in the video (edge {n + 1} of 3{spread})."
+                + tail,
+                frozenset(more),
+            )
         if self.last_refined is not None and self.refined is None:
-            return Step("refine_again", "Clicks changed since Refine (the white ghost is the last refined pose): "
-                        "{refine} again to use them, then Accept.", frozenset(more - {"solve"} | {"refine"}))
+            return Step(
+                "refine_again",
+                "Clicks changed since Refine (the white ghost is the last refined pose): "
+                "{refine} again to use them, then Accept.",
+                frozenset(more - {"solve"} | {"refine"}),
+            )
         if self.candidates and self.refined is None and len(self.candidates) == 1:  # no other to pick
-            return Step("candidates", "The pose is drawn in white: add edges if it looks off, then {refine} — it uses "
-                        "every click and often corrects a pose that looks off.", frozenset(more))
+            return Step(
+                "candidates",
+                "The pose is drawn in white: add edges if it looks off, then {refine} — it uses "
+                "every click and often corrects a pose that looks off.",
+                frozenset(more),
+            )
         if self.candidates and self.refined is None:
-            return Step("candidates", f"Candidate {(self.chosen or 0) + 1} of {len(self.candidates)} is drawn in white: pick "
-                        "another {choose_candidate} if it is clearly wrong, add edges, then {refine} — it uses every click and "
-                        "often corrects a candidate that looks off.",
-                        frozenset(more | {"choose_candidate"}))
+            return Step(
+                "candidates",
+                f"Candidate {(self.chosen or 0) + 1} of {len(self.candidates)} is drawn in white: pick "
+                "another {choose_candidate} if it is clearly wrong, add edges, then {refine} — it uses every click and "
+                "often corrects a candidate that looks off.",
+                frozenset(more | {"choose_candidate"}),
+            )
         if self.refined is None:
             corner = self._one_corner()
             if corner is not None and not self.points_uv:  # said now, not after Solve
-                return Step("ready", f"Edges {', '.join(str(i + 1) for i in corner)} meet at one corner of "
-                            f"{self.object_name}: they give its turn but not its distance. Click a fourth edge that does not "
-                            "pass through that corner, or {start_point} on another corner; or {refine} from the database "
-                            "pose for a small motion.", frozenset(more - {"solve"}))
-            return Step("ready", "{solve} for a large motion, or {refine} from the database pose for a small one; or click "
-                        "more edges.", frozenset(more))
+                return Step(
+                    "ready",
+                    f"Edges {', '.join(str(i + 1) for i in corner)} meet at one corner of "
+                    f"{self.object_name}: they give its turn but not its distance. Click a fourth edge that does not "
+                    "pass through that corner, or {start_point} on another corner; or {refine} from the database "
+                    "pose for a small motion.",
+                    frozenset(more - {"solve"}),
+                )
+            return Step(
+                "ready",
+                "{solve} for a large motion, or {refine} from the database pose for a small one; or click more edges.",
+                frozenset(more),
+            )
         extra = {"choose_candidate"} if self.candidates else set()
-        return Step("review", f"Refined: RMS {self.refined.rms_px:.2f} px. " + "{accept} to write it, or add clicks and "
-                    "{refine} again.", frozenset(more | extra | {"accept"}))
+        return Step(
+            "review",
+            f"Refined: RMS {self.refined.rms_px:.2f} px. " + "{accept} to write it, or add clicks and {refine} again.",
+            frozenset(more | extra | {"accept"}),
+        )
 
     def _one_corner(self) -> list[int] | None:
         """The clicked edges (indices) when exactly three are assigned and their model edges share one
@@ -760,24 +933,35 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             out = []
             sd, st = float(np.max(r.std_r_deg)), float(np.max(r.std_t_m)) * 1000
             if sd > WEAK_SIGMA_DEG or st > WEAK_SIGMA_MM:
-                out.append(f"the pose is uncertain ({sigma_over(sd, st, WEAK_SIGMA_DEG, WEAK_SIGMA_MM)}); click more edges")
+                out.append(
+                    f"the pose is uncertain ({sigma_over(sd, st, WEAK_SIGMA_DEG, WEAK_SIGMA_MM)}); click more edges"
+                )
             sig = self._click_sigmas()
-            names = [f"edge {j + 1}" for j, e in enumerate(self.edge_ids) if e is not None] + \
-                    [f"point {j + 1}" for j in range(len(self.points_uv))]
+            names = [f"edge {j + 1}" for j, e in enumerate(self.edge_ids) if e is not None] + [
+                f"point {j + 1}" for j in range(len(self.points_uv))
+            ]
             for name, res, sg in zip(names, r.click_residuals_px, sig):
                 if res > 3 * max(sg, 0.3):
-                    out.append(f"{name} is {res:.1f} px from the refined model (more than 3σ): a wrong click or assignment?")
+                    out.append(
+                        f"{name} is {res:.1f} px from the refined model (more than 3σ): a wrong click or assignment?"
+                    )
             for j, sn in enumerate(self.seg_snaps):
                 if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
-                    out.append(f"edge {j + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)")
+                    out.append(
+                        f"edge {j + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
+                    )
             for j, sn in enumerate(self.point_snaps):
                 if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
-                    out.append(f"point {j + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)")
+                    out.append(
+                        f"point {j + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
+                    )
             if getattr(self, "refined_unseen", ""):
                 out.append(self.refined_unseen)
             if len(r.kinds) * 2 <= 6 and self.found is None:  # with a found pose the image's edges are the redundancy
-                out.append("no redundant click: the clicks fix the pose's 6 unknowns exactly, so a wrong one cannot show; "
-                           "click a fourth edge")
+                out.append(
+                    "no redundant click: the clicks fix the pose's 6 unknowns exactly, so a wrong one cannot show; "
+                    "click a fourth edge"
+                )
             return out
 
     def candidate_labels(self) -> list[str]:
@@ -794,8 +978,13 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             if self.segs:
                 m.segments = np.array(self.segs)
                 ids = self.edge_ids if shown is None else [int(e) for e in shown.edges]
-                m.labels = [((s[0] + s[1]) / 2, f"{i + 1}" + (f"→e{e}" if e is not None else "?") + ("?" if shown is not None else ""))
-                            for i, (s, e) in enumerate(zip(self.segs, ids))]
+                m.labels = [
+                    (
+                        (s[0] + s[1]) / 2,
+                        f"{i + 1}" + (f"→e{e}" if e is not None else "?") + ("?" if shown is not None else ""),
+                    )
+                    for i, (s, e) in enumerate(zip(self.segs, ids))
+                ]
             if self.pending is not None:
                 m.pending = self.pending.reshape(1, 2)
             if self.search_click is not None:  # the one click Find used
@@ -820,7 +1009,9 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             elif self.last_refined is not None:  # clicks added since Refine: the estimate they are assigned on
                 m.ghosts = [Ghost(model, self.last_refined, "last refined", chosen=True)]
             else:
-                m.ghosts = [Ghost(model, T, f"#{i + 1}", chosen=(i == self.chosen)) for i, T in enumerate(self.candidates)]
+                m.ghosts = [
+                    Ghost(model, T, f"#{i + 1}", chosen=(i == self.chosen)) for i, T in enumerate(self.candidates)
+                ]
             if self._waiting_for_edge():  # which model edge is it: each visible one labelled where it is drawn
                 cam = self.site.camera
                 T = self.T_current
@@ -841,8 +1032,12 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             # edges clicked, and of them assigned to a model edge (an auto match assigns them all at once: it
             # showed "Edges: 0" beside "Clicked edges: 4")
             assigned = sum(e is not None for e in self.edge_ids)
-            out: dict[str, Any] = {"object": self.object_name, "edges clicked": len(self.segs),
-                                   "edges assigned": assigned, "points": len(self.points_uv)}
+            out: dict[str, Any] = {
+                "object": self.object_name,
+                "edges clicked": len(self.segs),
+                "edges assigned": assigned,
+                "points": len(self.points_uv),
+            }
             snaps = [s for s in self.seg_snaps + self.point_snaps if s is not None]
             if snaps:
                 n_seg = sum(1 for s in self.seg_snaps if s is not None)
@@ -852,8 +1047,15 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 out["candidates"] = len(self.candidates)
                 out["chosen"] = (self.chosen or 0) + 1
             if self.matches is not None:
-                out["assignments"] = [{"candidate": i + 1, "edges": " ".join(f"e{int(e)}" for e in mt.edges),
-                                       "rms_px": mt.rms_px, "image_px": mt.image_px} for i, mt in enumerate(self.matches)]
+                out["assignments"] = [
+                    {
+                        "candidate": i + 1,
+                        "edges": " ".join(f"e{int(e)}" for e in mt.edges),
+                        "rms_px": mt.rms_px,
+                        "image_px": mt.image_px,
+                    }
+                    for i, mt in enumerate(self.matches)
+                ]
             r = self.refined
             if r is not None:
                 out["rms_px"] = r.rms_px
@@ -861,8 +1063,11 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 out["std_r_deg"] = [float(v) for v in r.std_r_deg]
                 deg, m = pose_error(r.T_world_obj, self.obj.T_world_obj)
                 out["change"] = {"deg": float(deg), "mm": float(1000 * m)}
-                names = [f"edge {i + 1}" for i in range(r.kinds.count("segment"))] + \
-                        [f"point {i + 1}" for i in range(r.kinds.count("point"))]
-                out["clicks"] = [{"click": n, "residual_px": float(v), "weight": float(w)}
-                                 for n, v, w in zip(names, r.click_residuals_px, r.weights)]
+                names = [f"edge {i + 1}" for i in range(r.kinds.count("segment"))] + [
+                    f"point {i + 1}" for i in range(r.kinds.count("point"))
+                ]
+                out["clicks"] = [
+                    {"click": n, "residual_px": float(v), "weight": float(w)}
+                    for n, v, w in zip(names, r.click_residuals_px, r.weights)
+                ]
             return out

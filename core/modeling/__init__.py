@@ -30,9 +30,15 @@ if TYPE_CHECKING:
 # The names below load their module on first use (PEP 562): the interface imports
 # ``core.modeling.result`` at start-up, and the solvers' modules need not load before its first page.
 _WHERE = {
-    "BoxFace": "box", "model_box": "box", "METHODS": "cylinder", "model_cylinder": "cylinder",
-    "PlaneObs": "observations", "fit_face_plane": "observations", "interpretation_plane_obs": "observations",
-    "model_polyhedron": "polyhedron", "ModelResult": "result",
+    "BoxFace": "box",
+    "model_box": "box",
+    "METHODS": "cylinder",
+    "model_cylinder": "cylinder",
+    "PlaneObs": "observations",
+    "fit_face_plane": "observations",
+    "interpretation_plane_obs": "observations",
+    "model_polyhedron": "polyhedron",
+    "ModelResult": "result",
 }
 
 

@@ -12,8 +12,8 @@ transitions put the silhouette's vertical edges on the turret's tangent planes).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -191,7 +191,12 @@ def model_box(
         if not isinstance(f, BoxFace):
             raise ValueError(f"faces[{k}] must be a BoxFace, got {type(f).__name__}")
         fit = fit_face_plane(
-            f.points_world, covs=f.point_covs, sigma_m=sigma_point_m, method=plane_fit, robust=robust, label=f"face {k + 1}"
+            f.points_world,
+            covs=f.point_covs,
+            sigma_m=sigma_point_m,
+            method=plane_fit,
+            robust=robust,
+            label=f"face {k + 1}",
         )
         cen = np.asarray(f.points_world, dtype=float)[fit.inliers].mean(axis=0)
         p = fit.obs.plane
@@ -311,8 +316,19 @@ def model_box(
         if scans:
             box_scans = reduce_box_scans(scans, T_world_turret, spec, R, t, dims, jump_m=jump_m)
         R, t, dims, cov_p, details_fused = _fused_box(
-            camera, faces, fits, labels, segments, None if sup is None else sup.plane, R, t, dims, sigma_px,
-            box_scans, T_world_turret, edge_margin_m,
+            camera,
+            faces,
+            fits,
+            labels,
+            segments,
+            None if sup is None else sup.plane,
+            R,
+            t,
+            dims,
+            sigma_px,
+            box_scans,
+            T_world_turret,
+            edge_margin_m,
         )
 
     corners = t + _corner_offsets(dims) @ R.T
@@ -431,8 +447,19 @@ def _face_index(key: tuple[int, int]) -> int:
 
 
 def _fused_box(
-    camera, faces, fits, labels, segments, support, R0, t0, dims0, sigma_px,
-    scans: BoxScans | None = None, T_world_turret=None, edge_margin_m: float = 0.005,
+    camera,
+    faces,
+    fits,
+    labels,
+    segments,
+    support,
+    R0,
+    t0,
+    dims0,
+    sigma_px,
+    scans: BoxScans | None = None,
+    T_world_turret=None,
+    edge_margin_m: float = 0.005,
 ):
     """Maximum-likelihood box from the raw range points, clicks and profile scans, starting at the planes' box.
 
@@ -488,7 +515,9 @@ def _fused_box(
             "X": np.vstack([X_faces, scans.points_world[used]]),
             "C": np.concatenate([C_faces, scans.covs[used]]),
             "k": np.concatenate([k_faces, 2 * ax[used] + (sd[used] > 0)]),
-            "assoc": assoc, "sig_t": np.array([a.sigma_m for a in assoc]), "used": used,
+            "assoc": assoc,
+            "sig_t": np.array([a.sigma_m for a in assoc]),
+            "used": used,
             "id": (used.tobytes(), ax[used].tobytes(), sd[used].tobytes(), tuple(a.edge for a in assoc)),
         }
 
@@ -535,8 +564,9 @@ def _fused_box(
         # the faces: N6[f] = s_f R[:, f // 2], d6 = −N6·t − far(dims)
         N6, d6 = _face_planes(R, t, dims)
         dN6 = np.repeat(np.transpose(dR, (0, 2, 1)), 2, axis=1) * _FACE_SIDES[None]  # (n, 6, 3)
-        dfar = np.column_stack([ddims[:, 0] / 2, ddims[:, 0] / 2, ddims[:, 1] / 2, ddims[:, 1] / 2,
-                                np.zeros(n_th), ddims[:, 2]])
+        dfar = np.column_stack(
+            [ddims[:, 0] / 2, ddims[:, 0] / 2, ddims[:, 1] / 2, ddims[:, 1] / 2, np.zeros(n_th), ddims[:, 2]]
+        )
         dd6 = -(dN6 @ t) - dt @ N6.T - dfar
         k = pts["k"]
         N, dN = N6[k], dN6[:, k]
@@ -552,17 +582,30 @@ def _fused_box(
         corners = t + Cb @ R.T
         dcorners = dt[:, None, :] + np.einsum("nij,kj->nki", dR, Cb) + (_CORNER_UNIT[None] * ddims[:, None, :]) @ R.T
         if pts["assoc"]:
-            rows.append((tangent_distances_jacobian(pts["assoc"], corners, dcorners, T_world_turret[:3, 3]) / pts["sig_t"][None]).T)
+            rows.append(
+                (
+                    tangent_distances_jacobian(pts["assoc"], corners, dcorners, T_world_turret[:3, 3])
+                    / pts["sig_t"][None]
+                ).T
+            )
         else:
             rows.append(np.zeros((0, n_th)))
         # the clicked ends' distances to the lines through their edge's projected corners
         P = corners @ C[:, :3].T + C[:, 3]
         uv = P[:, :2] / P[:, 2:3]
-        duv = np.einsum("kab,nkb->nka", (C[None, :2, :3] - uv[:, :, None] * C[None, 2:3, :3]) / P[:, 2, None, None], dcorners)
+        duv = np.einsum(
+            "kab,nkb->nka", (C[None, :2, :3] - uv[:, :, None] * C[None, 2:3, :3]) / P[:, 2, None, None], dcorners
+        )
         a, b, da, db = uv[vi], uv[vj], duv[:, vi], duv[:, vj]
         l = np.column_stack([a[:, 1] - b[:, 1], b[:, 0] - a[:, 0], a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]])
-        dl = np.stack([da[..., 1] - db[..., 1], db[..., 0] - da[..., 0],
-                       da[..., 0] * b[:, 1] + a[:, 0] * db[..., 1] - da[..., 1] * b[:, 0] - a[:, 1] * db[..., 0]], axis=-1)
+        dl = np.stack(
+            [
+                da[..., 1] - db[..., 1],
+                db[..., 0] - da[..., 0],
+                da[..., 0] * b[:, 1] + a[:, 0] * db[..., 1] - da[..., 1] * b[:, 0] - a[:, 1] * db[..., 0],
+            ],
+            axis=-1,
+        )
         nrm = np.hypot(l[:, 0], l[:, 1])
         dnrm = (l[:, 0] * dl[..., 0] + l[:, 1] * dl[..., 1]) / nrm
         dl = dl / nrm[:, None] - l[None] * (dnrm / nrm**2)[..., None]  # (n, S, 3)
@@ -610,9 +653,14 @@ def _fused_box(
             "points_used": pts["used"],
             "passes": passes,
             "tangents": [
-                {"scan": a.tangent.scan_index, "side": a.tangent.side, "pan_rad": a.tangent.pan_rad,
-                 "edge": (_corner_name(signs[a.edge[0]]), _corner_name(signs[a.edge[1]])),
-                 "sigma_m": a.sigma_m, "distance_m": float(e)}
+                {
+                    "scan": a.tangent.scan_index,
+                    "side": a.tangent.side,
+                    "pan_rad": a.tangent.pan_rad,
+                    "edge": (_corner_name(signs[a.edge[0]]), _corner_name(signs[a.edge[1]])),
+                    "sigma_m": a.sigma_m,
+                    "distance_m": float(e),
+                }
                 for a, e in zip(pts["assoc"], edges_m)
             ],
         }

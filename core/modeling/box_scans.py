@@ -21,8 +21,8 @@ corner index = (x > 0) + 2 (y > 0) + 4 (z > 0), faces keyed (axis, ±1).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -215,7 +215,9 @@ def _closest_on_edges(A: np.ndarray, B: np.ndarray, O: np.ndarray, D: np.ndarray
     return A + s[:, None] * e, s
 
 
-def associate_tangents(data: BoxScans, T_world_turret: np.ndarray, corners: np.ndarray, R: np.ndarray) -> list[EdgeTangent]:
+def associate_tangents(
+    data: BoxScans, T_world_turret: np.ndarray, corners: np.ndarray, R: np.ndarray
+) -> list[EdgeTangent]:
     """Tie each scan's two transitions to the box's vertical edges of least and greatest azimuth.
 
     corners : (8, 3) the current box's corners (world), R : (3, 3) its axes.
@@ -283,8 +285,9 @@ def tangent_distances(assoc: Sequence[EdgeTangent], corners: np.ndarray, origin:
     return np.einsum("ij,ij->i", Q - origin, N)
 
 
-def tangent_distances_jacobian(assoc: Sequence[EdgeTangent], corners: np.ndarray, d_corners: np.ndarray,
-                               origin: np.ndarray) -> np.ndarray:
+def tangent_distances_jacobian(
+    assoc: Sequence[EdgeTangent], corners: np.ndarray, d_corners: np.ndarray, origin: np.ndarray
+) -> np.ndarray:
     """Derivatives (n, M) of ``tangent_distances`` given the corners' derivatives d_corners (n, 8, 3)
     with respect to n parameters (the tangent planes are fixed: they are measured)."""
     n = len(d_corners)

@@ -23,8 +23,8 @@ tangent-beam angles and the front plane's fit.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -327,6 +327,7 @@ def _solve_paper(z: np.ndarray, ctx: _Ctx) -> dict:
     e1, e2 = axis_basis(a)
     centres, radii = [], []
     for t in ctx.t_sections:
+
         def L(p):
             return _section_line(p, ctx.X0, a, e1, e2, t)
 
@@ -377,7 +378,9 @@ def _finish(ctx: _Ctx, sil, Xa, a, r_ref, k) -> dict:
         )
     h = t_top - t_base
     if not h > 0:
-        raise ValueError(f"the clicked silhouette ends give a height of {h * 1000:.1f} mm: click each contour from its bottom end to its top end")
+        raise ValueError(
+            f"the clicked silhouette ends give a height of {h * 1000:.1f} mm: click each contour from its bottom end to its top end"
+        )
     r0, r1 = r_ref + k * t_base, r_ref + k * t_top
     if min(r0, r1) < 0:
         raise ValueError("the fitted cone's radius is negative at an end: the data do not bound a cone")
@@ -640,8 +643,15 @@ def model_cylinder(
         raise ValueError(f"method {method!r} needs the two silhouettes (silhouettes_uv, shape (2, 2, 2))")
     sigma_px = positive_scale(sigma_px, "sigma_px", " px")
     data = reduce_cylinder_data(
-        camera, silhouettes_uv=silhouettes_uv, scans=scans, T_world_turret=T_world_turret, spec=spec,
-        support=support, axis_dir=axis_dir, cone=cone, jump_m=jump_m,
+        camera,
+        silhouettes_uv=silhouettes_uv,
+        scans=scans,
+        T_world_turret=T_world_turret,
+        spec=spec,
+        support=support,
+        axis_dir=axis_dir,
+        cone=cone,
+        jump_m=jump_m,
     )
     if method == "fused":
         from .fused import fit_fused
@@ -732,7 +742,9 @@ def _model_paper(data: CylinderData, method: str, sigma_px: float) -> ModelResul
     return build_result(data, method, sol, cov_q, residuals, details)
 
 
-def build_result(data: CylinderData, method: str, sol: dict, cov_q: np.ndarray, residuals: dict, details: dict, notes=()) -> ModelResult:
+def build_result(
+    data: CylinderData, method: str, sol: dict, cov_q: np.ndarray, residuals: dict, details: dict, notes=()
+) -> ModelResult:
     """Assemble the ModelResult from the solid and the covariance of (radii, h, mid-point, a)."""
     a = sol["a"]
     cone = data.cone

@@ -158,7 +158,9 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
         dh[i] = 1.0
         return dp0, da, dr0, dr1, dh
 
-    th0 = np.concatenate([np.zeros(2) if free_axis else [], np.zeros(2), [] if on_support else [0.0], radii0, [init["h"]]])
+    th0 = np.concatenate(
+        [np.zeros(2) if free_axis else [], np.zeros(2), [] if on_support else [0.0], radii0, [init["h"]]]
+    )
     ret_all = data.returns
     beams = data.tangents
     T = data.T_world_turret
@@ -175,8 +177,10 @@ def fit_fused(data: CylinderData, *, sigma_px: float = 1.0):
         dD_pan = np.column_stack([-ct * sp, ct * cp, np.zeros_like(pan)]) @ T[:3, :3].T
         dD_tilt = np.column_stack([-st * cp, -st * sp, ct]) @ T[:3, :3].T
         dg_dD = beam_gap_direction_jacobian(O, Dm, p0i, ai, r0i, (r1i - r0i) / hi)
-        sig_gap = np.hypot(np.einsum("ij,ij->i", dg_dD, dD_pan) * [tb.sigma_pan_rad for tb in beams],
-                           np.einsum("ij,ij->i", dg_dD, dD_tilt) * [tb.sigma_tilt_rad for tb in beams])
+        sig_gap = np.hypot(
+            np.einsum("ij,ij->i", dg_dD, dD_pan) * [tb.sigma_pan_rad for tb in beams],
+            np.einsum("ij,ij->i", dg_dD, dD_tilt) * [tb.sigma_tilt_rad for tb in beams],
+        )
     sig_gap = np.maximum(sig_gap, 1e-9)
 
     # Which generator and which end each clicked silhouette end is (fixed from the start).

@@ -7,7 +7,7 @@ analytic: a plain loop is several times faster than scipy's general ``least_squa
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -78,7 +78,7 @@ def levenberg_marquardt(
     cost = _cost(r, huber)
     lam = 1e-3
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 - the count of iterations, returned
         J = jac(x)
         w = huber_weights(r, huber)
         H = J.T @ (w[:, None] * J)

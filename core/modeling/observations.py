@@ -111,7 +111,9 @@ def fit_face_plane(
     if X.ndim != 2 or X.shape[1] != 3:
         raise ValueError(f"face {label!r}: range points must have shape (N, 3), got {X.shape}")
     if len(X) < 3:
-        raise ValueError(f"face {label!r}: a face plane needs at least 3 range points, got {len(X)}; aim the range finder at more points of the face")
+        raise ValueError(
+            f"face {label!r}: a face plane needs at least 3 range points, got {len(X)}; aim the range finder at more points of the face"
+        )
     X = finite_array(X, (None, 3), f"face {label!r} range points", max_abs=MAX_M, unit=" m")
     if covs is not None:
         covs = np.asarray(covs, dtype=float)
@@ -176,5 +178,7 @@ def fit_face_plane(
     else:
         chosen = tls
     if not np.isfinite(chosen.cov).all():
-        raise ValueError(f"face {label!r}: the range points give no finite plane covariance; aim at points spread over the face")
+        raise ValueError(
+            f"face {label!r}: the range points give no finite plane covariance; aim at points spread over the face"
+        )
     return FaceFit(PlaneObs(chosen.plane, chosen.cov, label), {"ols": ols, "tls": tls}, inl, method)

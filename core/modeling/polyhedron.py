@@ -20,7 +20,7 @@ face fits, the clicks and the support.
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -284,7 +284,9 @@ def model_polyhedron(
             used_planes |= {r[1] for r in refs if r[0] == "m"}
         h_p = np.zeros(pvec0.size)  # only the planes the recipe reads move the derived vertices
         h_p[[4 * i + c for i in sorted(used_planes) for c in range(4)]] = 1e-7
-        Jp = numeric_jacobian(lambda p: replay(x1, p.reshape(pvec0.shape)), pvec0.reshape(-1), h_p, central=True)[:, : 4 * P]
+        Jp = numeric_jacobian(lambda p: replay(x1, p.reshape(pvec0.shape)), pvec0.reshape(-1), h_p, central=True)[
+            :, : 4 * P
+        ]
         Jd = Jx @ J1 + Jp
         for k, v in enumerate(derived):
             J_all[3 * v : 3 * v + 3] = Jd[3 * k : 3 * k + 3]

@@ -89,8 +89,19 @@ def fit_profile(ret: Returns, a: np.ndarray, *, cone: bool = False, groups: np.n
     again (read-only arrays).
     """
     h = hashlib.blake2b(digest_size=20)
-    for x in (ret.origin, ret.dirs, ret.range_m, ret.e_pan, ret.e_tilt, ret.sigma_pan_rad, ret.sigma_tilt_rad,
-              [ret.sigma_range_m], a, [float(cone)], np.zeros(0) if groups is None else groups):
+    for x in (
+        ret.origin,
+        ret.dirs,
+        ret.range_m,
+        ret.e_pan,
+        ret.e_tilt,
+        ret.sigma_pan_rad,
+        ret.sigma_tilt_rad,
+        [ret.sigma_range_m],
+        a,
+        [float(cone)],
+        np.zeros(0) if groups is None else groups,
+    ):
         x = np.ascontiguousarray(x, dtype=float)
         h.update(repr(x.shape).encode())
         h.update(x.tobytes())
@@ -197,7 +208,9 @@ def front_plane(fit: ProfileFit, origin_world: np.ndarray, t: float, params: np.
     return Plane(n, float(-n @ X_front))
 
 
-def front_plane_jacobian(fit: ProfileFit, origin_world: np.ndarray, t: float, params: np.ndarray | None = None) -> np.ndarray:
+def front_plane_jacobian(
+    fit: ProfileFit, origin_world: np.ndarray, t: float, params: np.ndarray | None = None
+) -> np.ndarray:
     """Derivative (4, len(params)) of ``front_plane(fit, origin_world, t, params).as_vector()`` — (n, d) —
     with respect to the profile's parameters (analytic).
 

@@ -24,9 +24,16 @@ __all__ = ["ModelResult"]
 
 
 # How the operator reads a dimension's key (a box's sides along its own x and y, its height along z).
-DIMENSION_WORDS = {"size_x": "side x", "size_y": "side y", "size_z": "height", "radius": "radius",
-                   "radius_bottom": "bottom radius", "radius_top": "top radius", "height": "height",
-                   "axis_position": "axis position"}
+DIMENSION_WORDS = {
+    "size_x": "side x",
+    "size_y": "side y",
+    "size_z": "height",
+    "radius": "radius",
+    "radius_bottom": "bottom radius",
+    "radius_top": "top radius",
+    "height": "height",
+    "axis_position": "axis position",
+}
 
 
 @dataclass(frozen=True)
@@ -82,12 +89,19 @@ class ModelResult:
     details: dict[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
 
-    def check_finite(self) -> "ModelResult":
+    def check_finite(self) -> ModelResult:
         """The result itself when its pose, dimensions, σ, vertices and covariance are finite; else
         ValueError (the measurements were too degenerate for a model: nothing NaN leaves the core)."""
-        bad = [k for k, v in {**self.dimensions, **{f"σ {k}": s for k, s in self.sigmas.items()}}.items() if not np.isfinite(v)]
-        bad += [k for k, a in (("pose", self.T_world_obj), ("vertices", self.vertices_world), ("covariance", self.cov))
-                if not np.isfinite(a).all()]
+        bad = [
+            k
+            for k, v in {**self.dimensions, **{f"σ {k}": s for k, s in self.sigmas.items()}}.items()
+            if not np.isfinite(v)
+        ]
+        bad += [
+            k
+            for k, a in (("pose", self.T_world_obj), ("vertices", self.vertices_world), ("covariance", self.cov))
+            if not np.isfinite(a).all()
+        ]
         if bad:
             raise ValueError(
                 f"the measurements give no finite {self.kind} (not finite: {', '.join(bad[:4])}); they are too "

@@ -62,14 +62,22 @@ class Returns:
         """The returns as world points (N, 3)."""
         return self.origin + self.range_m[:, None] * self.dirs
 
-    def subset(self, m: np.ndarray) -> "Returns":
+    def subset(self, m: np.ndarray) -> Returns:
         return Returns(
-            self.origin, self.dirs[m], self.range_m[m], self.e_pan[m], self.e_tilt[m], self.sigma_range_m,
-            self.sigma_pan_rad[m], self.sigma_tilt_rad[m],
+            self.origin,
+            self.dirs[m],
+            self.range_m[m],
+            self.e_pan[m],
+            self.e_tilt[m],
+            self.sigma_range_m,
+            self.sigma_pan_rad[m],
+            self.sigma_tilt_rad[m],
         )
 
 
-def make_returns(T_world_turret: np.ndarray, pan_rad, tilt_rad, range_m, sigma_range_m: float, sigma_angle_rad: float) -> Returns:
+def make_returns(
+    T_world_turret: np.ndarray, pan_rad, tilt_rad, range_m, sigma_range_m: float, sigma_angle_rad: float
+) -> Returns:
     """Returns from turret angles (N,) and ranges (N,) (all finite) for a turret at ``T_world_turret``."""
     T = np.asarray(T_world_turret, dtype=float)
     R = T[:3, :3]
@@ -80,7 +88,16 @@ def make_returns(T_world_turret: np.ndarray, pan_rad, tilt_rad, range_m, sigma_r
     ep = np.stack([-ct * sp, ct * cp, np.zeros_like(p)], axis=-1) @ R.T
     et = np.stack([-st * cp, -st * sp, ct], axis=-1) @ R.T
     n = len(p)
-    return Returns(T[:3, 3].copy(), d, np.asarray(range_m, dtype=float), ep, et, float(sigma_range_m), np.full(n, sigma_angle_rad), np.full(n, sigma_angle_rad))
+    return Returns(
+        T[:3, 3].copy(),
+        d,
+        np.asarray(range_m, dtype=float),
+        ep,
+        et,
+        float(sigma_range_m),
+        np.full(n, sigma_angle_rad),
+        np.full(n, sigma_angle_rad),
+    )
 
 
 def concat_returns(parts: list[Returns]) -> Returns:
@@ -112,7 +129,9 @@ def _geometry(O, D, p0, a, r0, k):
     return w, t0, wp, tau, Dp, A, B, C
 
 
-def surface_gradient(X: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float) -> tuple[np.ndarray, np.ndarray]:
+def surface_gradient(
+    X: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Derivatives of F(X) = ρ(X) − r0 − k t(X) at points X (N, 3) (ρ: distance to the axis).
 
     Returns ∇_X F (N, 3) and ∂F/∂(p0, a, r0, k) (N, 8) (a treated as a free 3-vector; the caller
@@ -136,13 +155,15 @@ def beam_gap_jacobian(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarra
     (envelope theorem) its derivative is F's at that point, over the same √(1 + k²)."""
     _, X = beam_gap(O, D, p0, a, r0, k)
     _, J = surface_gradient(X, p0, a, r0, k)
-    g = (np.linalg.norm((X - p0) - ((X - p0) @ a)[:, None] * a, axis=1) - r0 - k * ((X - p0) @ a))
+    g = np.linalg.norm((X - p0) - ((X - p0) @ a)[:, None] * a, axis=1) - r0 - k * ((X - p0) @ a)
     J[:, 7] = J[:, 7] / np.sqrt(1 + k * k) - g * k / (1 + k * k) ** 1.5
     J[:, :7] /= np.sqrt(1 + k * k)
     return J
 
 
-def beam_gap_direction_jacobian(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float) -> np.ndarray:
+def beam_gap_direction_jacobian(
+    O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float
+) -> np.ndarray:
     """∂(beam_gap)/∂D, shape (M, 3), for unit directions D (M, 3): at the beam's point X = O + s D
     nearest the surface the gap is stationary along the beam, so (envelope theorem) moving D moves
     X by s dD and the gap by s ∇F(X)·dD, over √(1 + k²)."""
@@ -152,7 +173,9 @@ def beam_gap_direction_jacobian(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a:
     return s[:, None] * grad_x / np.sqrt(1.0 + k * k)
 
 
-def beam_gap(O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float) -> tuple[np.ndarray, np.ndarray]:
+def beam_gap(
+    O: np.ndarray, D: np.ndarray, p0: np.ndarray, a: np.ndarray, r0: float, k: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Least signed distance (M,) from the lateral surface along each beam line, and where (M, 3).
 
     Surface: axis through p0 along unit a, radius r0 + k t (t = (X − p0)·a). Zero for a beam
@@ -201,7 +224,9 @@ def range_residuals(ret: Returns, p0: np.ndarray, a: np.ndarray, r0: float, k: f
     radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-12)
     n = (radial - k * a) / np.sqrt(1 + k * k)
     cos = np.minimum(np.abs(np.einsum("ij,ij->i", n, D)), 1.0)
-    lat2 = (np.einsum("ij,ij->i", n, ret.e_pan) * ret.sigma_pan_rad) ** 2 + (np.einsum("ij,ij->i", n, ret.e_tilt) * ret.sigma_tilt_rad) ** 2
+    lat2 = (np.einsum("ij,ij->i", n, ret.e_pan) * ret.sigma_pan_rad) ** 2 + (
+        np.einsum("ij,ij->i", n, ret.e_tilt) * ret.sigma_tilt_rad
+    ) ** 2
     sig_eff = np.sqrt(ret.sigma_range_m**2 + s * s * lat2 / np.maximum(cos * cos, 1e-12))
     res = (ret.range_m - s) / sig_eff
     if jac:

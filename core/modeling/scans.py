@@ -39,7 +39,9 @@ class TangentBeam:
     distance_m: float
     scan_index: int
 
-    def direction(self, T_world_turret: np.ndarray, pan_rad: float | None = None, tilt_rad: float | None = None) -> np.ndarray:
+    def direction(
+        self, T_world_turret: np.ndarray, pan_rad: float | None = None, tilt_rad: float | None = None
+    ) -> np.ndarray:
         """Unit world direction (3,) of the beam (optionally at perturbed angles)."""
         pan = self.pan_rad if pan_rad is None else pan_rad
         tilt = self.tilt_rad if tilt_rad is None else tilt_rad
@@ -114,5 +116,7 @@ def segment_scan(
                 scan_index,
             )
         )
-    ret = make_returns(T_world_turret, scan.pan_rad[a:b], scan.tilt_rad[a:b], scan.range_m[a:b], spec.sigma_range_m, spec.sigma_angle)
+    ret = make_returns(
+        T_world_turret, scan.pan_rad[a:b], scan.tilt_rad[a:b], scan.range_m[a:b], spec.sigma_range_m, spec.sigma_angle
+    )
     return ScanSegment(X[a:b], covs, ret.dirs, ret, tuple(tangents), (a, b))

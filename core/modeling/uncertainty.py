@@ -18,8 +18,8 @@ calibrated from different data, so their shares add.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
-from typing import Callable
 
 import numpy as np
 
@@ -35,8 +35,10 @@ def result_vector(result: ModelResult, reference: ModelResult) -> np.ndarray:
     """The quantities of ``reference.cov_names`` read from ``result`` (which must be the same kind
     of model, built from the same measurements through moved calibrations)."""
     if result.kind != reference.kind or result.cov_names != reference.cov_names:
-        raise ValueError(f"cannot compare a {result.kind} ({len(result.cov_names)} quantities) with a "
-                         f"{reference.kind} ({len(reference.cov_names)})")
+        raise ValueError(
+            f"cannot compare a {result.kind} ({len(result.cov_names)} quantities) with a "
+            f"{reference.kind} ({len(reference.cov_names)})"
+        )
     names = reference.cov_names
     if result.kind == "box":
         # Sizes along the reference's axes (a moved calibration cannot swap them, but the box frame
@@ -50,9 +52,17 @@ def result_vector(result: ModelResult, reference: ModelResult) -> np.ndarray:
         R_aligned = R[:, perm] * np.sign(M[np.arange(3), perm])  # each axis signed like the reference's: ≈ Rr
         rot = log_so3(Rr.T @ R_aligned)
         # The box frame's origin is the bottom face's centre: the same point whatever the axes' order.
-        q = {"size_x": sizes[0], "size_y": sizes[1], "size_z": sizes[2], "x": result.T_world_obj[0, 3],
-             "y": result.T_world_obj[1, 3], "z": result.T_world_obj[2, 3], "rot_x": rot[0], "rot_y": rot[1],
-             "rot_z": rot[2]}
+        q = {
+            "size_x": sizes[0],
+            "size_y": sizes[1],
+            "size_z": sizes[2],
+            "x": result.T_world_obj[0, 3],
+            "y": result.T_world_obj[1, 3],
+            "z": result.T_world_obj[2, 3],
+            "rot_x": rot[0],
+            "rot_y": rot[1],
+            "rot_z": rot[2],
+        }
         return np.array([q[n] for n in names], dtype=float)
     if result.kind in ("cylinder", "cone"):
         a = result.axis.direction
@@ -123,12 +133,14 @@ def with_calibration_uncertainty(
     shares: dict[str, tuple[np.ndarray, dict[str, float]]] = {}
     if camera_cov is not None:
         steps = principal_steps(check_covariance(camera_cov, 12, "camera_cov (of C's entries)"))
-        shares["camera calibration"] = _share(lambda d: build(perturbed_camera(camera, d), T_world_turret), steps, base,
-                                              "the camera")
+        shares["camera calibration"] = _share(
+            lambda d: build(perturbed_camera(camera, d), T_world_turret), steps, base, "the camera"
+        )
     if turret_cov is not None:
         steps = principal_steps(check_covariance(turret_cov, 6, "turret_cov (of the turret's pose)"))
-        shares["turret calibration"] = _share(lambda d: build(camera, perturbed_turret(T_world_turret, d)), steps, base,
-                                              "the turret")
+        shares["turret calibration"] = _share(
+            lambda d: build(camera, perturbed_turret(T_world_turret, d)), steps, base, "the turret"
+        )
     cov = base.cov + sum(c for c, _ in shares.values())
     parts = {"measurements": dict(base.sigmas)}
     var = {k: v**2 for k, v in base.sigmas.items()}
@@ -154,8 +166,10 @@ def _share(build_at: Callable[[np.ndarray], ModelResult], steps: np.ndarray, bas
             dq = 0.5 * (result_vector(plus, base) - result_vector(minus, base))
             qp, qm = _sigma_quantities(plus, base), _sigma_quantities(minus, base)
         except ValueError as exc:
-            raise ValueError(f"the model cannot be rebuilt with {what}'s calibration moved by 1σ ({exc}): that "
-                             f"calibration is too uncertain for this model; calibrate {what} again") from exc
+            raise ValueError(
+                f"the model cannot be rebuilt with {what}'s calibration moved by 1σ ({exc}): that "
+                f"calibration is too uncertain for this model; calibrate {what} again"
+            ) from exc
         share += np.outer(dq, dq)
         for k in var:
             var[k] += float(np.sum((0.5 * (qp[k] - qm[k])) ** 2))

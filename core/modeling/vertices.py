@@ -9,7 +9,7 @@ so the vertices are correlated: the covariance returned is the joint one, to fir
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

@@ -11,10 +11,10 @@ thread at start-up). Conventions: DESIGN.md §Frames; perturbations and covarian
 (δt, δr) in the world frame about the object's origin (``core.pose.residuals``).
 """
 
+from ._lazy import warm_up
 from .estimate import PoseCandidate, PoseEstimate, estimate_pose
 from .p3l import ConcurrentEdgesError, p3l, p3l_batch
 from .plausibility import plausibility
-from ._lazy import warm_up
 from .refine import RefineResult, refine, refine_many, refine_with_prior
 from .symmetry import edge_symmetries, nearest_twin, symmetry_transforms
 

@@ -652,8 +652,10 @@ def p3l_solve(C, segs, edges, pts_uv, pts_obj, T, cost, concurrent_ok=False):
     for i in range(3):
         for j in range(3):
             scale = max(scale, abs(A[i, j]))
-    det = n[0, 0] * (n[1, 1] * n[2, 2] - n[1, 2] * n[2, 1]) - n[0, 1] * (n[1, 0] * n[2, 2] - n[1, 2] * n[2, 0]) + n[0, 2] * (
-        n[1, 0] * n[2, 1] - n[1, 1] * n[2, 0]
+    det = (
+        n[0, 0] * (n[1, 1] * n[2, 2] - n[1, 2] * n[2, 1])
+        - n[0, 1] * (n[1, 0] * n[2, 2] - n[1, 2] * n[2, 0])
+        + n[0, 2] * (n[1, 0] * n[2, 1] - n[1, 1] * n[2, 0])
     )
     if (not concurrent_ok and _concurrent(Ao, Vo, scale)) or abs(det) <= 1e-9:
         for k in range(count):
@@ -741,7 +743,9 @@ def residuals(C, R, t, edges, segs, pts_obj, pts_uv, want_J, r, J):
         for s in range(S):
             for e in range(2):
                 for i in range(3):
-                    H[s, e, i] = MR[i, 0] * edges[s, e, 0] + MR[i, 1] * edges[s, e, 1] + MR[i, 2] * edges[s, e, 2] + b[i]
+                    H[s, e, i] = (
+                        MR[i, 0] * edges[s, e, 0] + MR[i, 1] * edges[s, e, 1] + MR[i, 2] * edges[s, e, 2] + b[i]
+                    )
             hA, hB = H[s, 0], H[s, 1]
             L[s, 0] = hA[1] * hB[2] - hA[2] * hB[1]
             L[s, 1] = hA[2] * hB[0] - hA[0] * hB[2]
@@ -972,7 +976,9 @@ def _inverse6(H, out):
 
 
 @_jit
-def refine_one(C, T0, edges, segs, pts_obj, pts_uv, b, huber, huber_px, max_iterations, extent, T, r, J, w, w_unit, H, free):
+def refine_one(
+    C, T0, edges, segs, pts_obj, pts_uv, b, huber, huber_px, max_iterations, extent, T, r, J, w, w_unit, H, free
+):
     """Levenberg–Marquardt on the pixel residuals from T0 (``refine``'s module docstring).
 
     Fills T (4, 4), r (m,), J (m, 6), w (m,), w_unit (2 S + P,) at the solution and H (6, 6) =
@@ -1067,8 +1073,29 @@ def refine_one(C, T0, edges, segs, pts_obj, pts_uv, b, huber, huber_px, max_iter
 
 
 @_jit
-def refine_many(C, T0, edges, segs, pts_obj, pts_uv, b, huber, huber_px, max_iterations, extent,
-                T, r, w_unit, cov, free, status, iterations, converged, score, summary):
+def refine_many(
+    C,
+    T0,
+    edges,
+    segs,
+    pts_obj,
+    pts_uv,
+    b,
+    huber,
+    huber_px,
+    max_iterations,
+    extent,
+    T,
+    r,
+    w_unit,
+    cov,
+    free,
+    status,
+    iterations,
+    converged,
+    score,
+    summary,
+):
     """``refine_one`` from each start T0 (K, 4, 4) with the model edges edges (K, S, 2, 3) (one
     assignment per start) and the clicked features' extent (K,); outputs gain a leading axis K: T, r, w_unit, cov = (Jᵀ W J)⁻¹, free,
     status, iterations, converged; score (K,): the RMS pixel distance of the clicks to the
@@ -1084,8 +1111,26 @@ def refine_many(C, T0, edges, segs, pts_obj, pts_uv, b, huber, huber_px, max_ite
     w = np.empty(m)
     H = np.empty((6, 6))
     for k in range(K):
-        st, it, cv = refine_one(C, T0[k], edges[k], segs, pts_obj, pts_uv, b, huber, huber_px, max_iterations,
-                                extent[k], T[k], r[k], J, w, w_unit[k], H, free[k])
+        st, it, cv = refine_one(
+            C,
+            T0[k],
+            edges[k],
+            segs,
+            pts_obj,
+            pts_uv,
+            b,
+            huber,
+            huber_px,
+            max_iterations,
+            extent[k],
+            T[k],
+            r[k],
+            J,
+            w,
+            w_unit[k],
+            H,
+            free[k],
+        )
         status[k], iterations[k], converged[k] = st, it, cv
         score[k] = np.inf
         if st != REFINED:
@@ -1165,8 +1210,11 @@ def pose_ok(T, max_m):
             d = T[0, i] * T[0, j] + T[1, i] * T[1, j] + T[2, i] * T[2, j] - (1.0 if i == j else 0.0)
             if not abs(d) < 1e-9:
                 return False
-    det = T[0, 0] * (T[1, 1] * T[2, 2] - T[1, 2] * T[2, 1]) - T[0, 1] * (T[1, 0] * T[2, 2] - T[1, 2] * T[2, 0]) + T[0, 2] * (
-        T[1, 0] * T[2, 1] - T[1, 1] * T[2, 0])
+    det = (
+        T[0, 0] * (T[1, 1] * T[2, 2] - T[1, 2] * T[2, 1])
+        - T[0, 1] * (T[1, 0] * T[2, 2] - T[1, 2] * T[2, 0])
+        + T[0, 2] * (T[1, 0] * T[2, 1] - T[1, 1] * T[2, 0])
+    )
     return det > 0.0
 
 
@@ -1174,8 +1222,12 @@ def warm_up() -> None:
     """Load (or, the first time on a machine, compile: ~30 s) every kernel, with the argument types
     core.pose passes: call it in a background thread at start-up so that no click waits for it."""
     C = np.array([[500.0, 0.0, 320.0, 0.0], [0.0, 500.0, 240.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
-    segs = np.array([[[100.0, 100.0], [200.0, 110.0]], [[300.0, 120.0], [310.0, 300.0]], [[120.0, 300.0], [400.0, 250.0]]])
-    edges = np.array([[[0.0, 0.0, 2.0], [0.3, 0.0, 2.0]], [[0.3, 0.0, 2.0], [0.3, 0.2, 2.1]], [[0.0, 0.2, 2.0], [0.0, 0.2, 2.3]]])
+    segs = np.array(
+        [[[100.0, 100.0], [200.0, 110.0]], [[300.0, 120.0], [310.0, 300.0]], [[120.0, 300.0], [400.0, 250.0]]]
+    )
+    edges = np.array(
+        [[[0.0, 0.0, 2.0], [0.3, 0.0, 2.0]], [[0.3, 0.0, 2.0], [0.3, 0.2, 2.1]], [[0.0, 0.2, 2.0], [0.0, 0.2, 2.3]]]
+    )
     no_uv, no_X = np.zeros((0, 2)), np.zeros((0, 3))
     T, cost = np.empty((MAX_SOLUTIONS, 4, 4)), np.empty(MAX_SOLUTIONS)
     p3l_solve(C, segs, edges, no_uv, no_X, T, cost)
@@ -1190,6 +1242,26 @@ def warm_up() -> None:
     T0[2, 3] = 0.0
     pose_ok(T0, 1e6)
     m, S, P = 6, 3, 0
-    refine_many(C, T0[None].copy(), edges[None].copy(), segs, no_X, no_uv, np.ones(m), False, 3.0, 100, np.ones(1),
-                np.empty((1, 4, 4)), np.empty((1, m)), np.empty((1, 2 * S + P)), np.empty((1, 6, 6)), np.empty((1, 6)),
-                np.empty(1, np.int64), np.empty(1, np.int64), np.empty(1, np.bool_), np.empty(1), np.empty((1, 2 * (S + P) + 2)))
+    refine_many(
+        C,
+        T0[None].copy(),
+        edges[None].copy(),
+        segs,
+        no_X,
+        no_uv,
+        np.ones(m),
+        False,
+        3.0,
+        100,
+        np.ones(1),
+        np.empty((1, 4, 4)),
+        np.empty((1, m)),
+        np.empty((1, 2 * S + P)),
+        np.empty((1, 6, 6)),
+        np.empty((1, 6)),
+        np.empty(1, np.int64),
+        np.empty(1, np.int64),
+        np.empty(1, np.bool_),
+        np.empty(1),
+        np.empty((1, 2 * (S + P) + 2)),
+    )

@@ -28,6 +28,7 @@ from .residuals import as_clicks
 
 __all__ = ["PoseCandidate", "PoseEstimate", "estimate_pose"]
 
+
 @dataclass(frozen=True)
 class PoseCandidate:
     """One candidate pose, before and after refinement.
@@ -164,7 +165,12 @@ def estimate_pose(
     skipped: list[tuple[tuple[int, int, int], str]] = []
     candidates: list[PoseCandidate] = []
     sigma = click_sigmas(sigma_px, clicks)  # one σ per residual row (checks a per-click array's length)
-    refine_args = (loss, float(huber_px), float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, float), 100)
+    refine_args = (
+        loss,
+        float(huber_px),
+        float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, float),
+        100,
+    )
     if S >= 3:
         pts = (clicks.points_uv, clicks.points_obj) if clicks.n_points else (None, None)
         fit_px = 3.0 * float(np.sqrt(np.mean(sigma**2))) if fit_rms_px is None else float(fit_rms_px)

@@ -57,12 +57,15 @@ _k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded
 __all__ = ["p3l", "p3l_batch", "p3l_rotations", "ConcurrentEdgesError"]
 
 
-
 class ConcurrentEdgesError(ValueError):
     """The three edges' interpretation planes share a line of sight: the depth along it is unknown."""
 
 
-_SEGS_PAIR = {1: (0, 1), 2: (0, 2), 3: (1, 2)}  # _kernels.SEGS_01, SEGS_02, SEGS_12 (tests/core/pose/test_p3l.py checks)
+_SEGS_PAIR = {
+    1: (0, 1),
+    2: (0, 2),
+    3: (1, 2),
+}  # _kernels.SEGS_01, SEGS_02, SEGS_12 (tests/core/pose/test_p3l.py checks)
 
 
 def _raise_for(status: int) -> None:
@@ -114,7 +117,7 @@ def p3l_rotations(n_world: np.ndarray, ray_world: np.ndarray, V_obj: np.ndarray)
 
 def _common_point(A: np.ndarray, V: np.ndarray):
     """The point where three model lines A_i + s V_i meet, or None (some V_i ∦ V_j)."""
-    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):  # noqa: B007 - k is the third line, used after the loop
         c = np.cross(V[i], V[j])
         cc = float(c @ c)
         if cc > 1e-18:
@@ -151,7 +154,9 @@ def _translations_from_points(camera: Camera, R: np.ndarray, n, d, A, clicks: Cl
     A_all = np.concatenate([n, rows])
     sv = np.linalg.svd(A_all, compute_uv=False)
     scale = max(1.0, float(np.abs(A).max()))
-    off_vertex = common is None or bool(np.any(np.linalg.norm(clicks.points_obj - np.array(common), axis=1) > 1e-9 * scale))
+    off_vertex = common is None or bool(
+        np.any(np.linalg.norm(clicks.points_obj - np.array(common), axis=1) > 1e-9 * scale)
+    )
     if not off_vertex or sv[-1] <= 1e-9 * sv[0]:
         raise ConcurrentEdgesError(
             message + "; the clicked point(s) do not fix it either (the common vertex lies on that "

@@ -17,8 +17,9 @@ from ..checks import finite_array
 __all__ = ["plausibility"]
 
 
-def plausibility(camera: Camera, model: BRep, T_world_obj: np.ndarray, rms_px: float | None = None,
-                 max_rms_px: float = np.inf) -> str:
+def plausibility(
+    camera: Camera, model: BRep, T_world_obj: np.ndarray, rms_px: float | None = None, max_rms_px: float = np.inf
+) -> str:
     """Why the pose cannot be the answer, in one phrase ("" when it can).
 
     camera : the camera the clicks were made in. model : the object (object frame; a model without

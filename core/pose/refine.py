@@ -31,6 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from ..camera import Camera
 from ..checks import MAX_M, MAX_SCALE, MIN_SCALE, finite_array, positive_scale
 from ..transforms import check_T
@@ -274,35 +275,68 @@ def refine_many(
     S, P = clicks.n_segments, clicks.n_points
     T0 = np.ascontiguousarray(T_starts, dtype=float)
     K = len(T0)
-    edges = np.ascontiguousarray(np.broadcast_to(clicks.edges_obj, (K, S, 2, 3)) if edges_obj is None else edges_obj, dtype=float)
+    edges = np.ascontiguousarray(
+        np.broadcast_to(clicks.edges_obj, (K, S, 2, 3)) if edges_obj is None else edges_obj, dtype=float
+    )
     # Scale of the problem for the step test: the clicked features' extent about the origin.
     extent = np.full(K, max(1e-3, float(np.abs(clicks.points_obj).max()) if P else 0.0))
     if S:
         extent = np.maximum(extent, np.abs(edges).reshape(K, -1).max(axis=1))
     b = 1.0 / click_sigmas(sigma_px, clicks) ** 2  # ML weight of each residual row
     n = S + P
-    T, r, w_unit, cov, free = np.empty((K, 4, 4)), np.empty((K, m)), np.empty((K, 2 * S + P)), np.empty((K, 6, 6)), np.empty((K, 6))
+    T, r, w_unit, cov, free = (
+        np.empty((K, 4, 4)),
+        np.empty((K, m)),
+        np.empty((K, 2 * S + P)),
+        np.empty((K, 6, 6)),
+        np.empty((K, 6)),
+    )
     status, iterations, converged = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.bool_)
     score, summary = np.empty(K), np.empty((K, 2 * n + 2))
     _k.refine_many(
-        camera.C, T0, edges, clicks.segs_uv, clicks.points_obj, clicks.points_uv, b, loss == "huber", float(huber_px),
-        int(max_iterations), extent, T, r, w_unit, cov, free, status, iterations, converged, score, summary,
+        camera.C,
+        T0,
+        edges,
+        clicks.segs_uv,
+        clicks.points_obj,
+        clicks.points_uv,
+        b,
+        loss == "huber",
+        float(huber_px),
+        int(max_iterations),
+        extent,
+        T,
+        r,
+        w_unit,
+        cov,
+        free,
+        status,
+        iterations,
+        converged,
+        score,
+        summary,
     )
     sigma_out = float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, dtype=float).copy()
     kinds = clicks.kinds
     out: list[tuple[RefineResult | str, float]] = []
     for k, st in enumerate(status.tolist()):
         if st == _k.BEHIND:
-            out.append((
-                "the starting pose puts a clicked model edge or point behind the camera; start from a "
-                "pose that shows the object in the image", np.inf,
-            ))
+            out.append(
+                (
+                    "the starting pose puts a clicked model edge or point behind the camera; start from a "
+                    "pose that shows the object in the image",
+                    np.inf,
+                )
+            )
             continue
         if st == _k.SINGULAR:
-            out.append((
-                "the clicks do not fix the pose at the refined pose (singular normal equations); click more "
-                "edges with other directions, or a vertex", np.inf,
-            ))
+            out.append(
+                (
+                    "the clicks do not fix the pose at the refined pose (singular normal equations); click more "
+                    "edges with other directions, or a vertex",
+                    np.inf,
+                )
+            )
             continue
         if st == _k.UNOBSERVABLE:
             out.append((_unobservable(free[k], float(extent[k])), np.inf))
@@ -380,13 +414,15 @@ def refine_with_prior(
 
         return np.concatenate([T_[:3, 3] - T0[:3, 3], log_so3(T_[:3, :3] @ T0[:3, :3].T)])
 
-    for it in range(1, max_iterations + 1):
+    for it in range(1, max_iterations + 1):  # noqa: B007 - the count of iterations, returned
         e = err(T)
         H, g = Lam.copy(), Lam @ e
         if clicks.n_residuals:
             r, J, feasible = residuals(camera, T[:3, :3], T[:3, 3], clicks, jacobian=True)
             if not feasible:
-                raise ValueError("a clicked model edge or point is behind the camera at the prior pose: check the assignments")
+                raise ValueError(
+                    "a clicked model edge or point is behind the camera at the prior pose: check the assignments"
+                )
             H += (J * b[:, None]).T @ J
             g += (J * b[:, None]).T @ r
         step = -np.linalg.solve(H, g)
@@ -400,14 +436,31 @@ def refine_with_prior(
         H += (J * b[:, None]).T @ J
         n = clicks.n_segments + clicks.n_points
         S = clicks.n_segments
-        per_click = np.concatenate([np.max(np.abs(r[: 2 * S].reshape(-1, 2)), axis=1),
-                                    np.linalg.norm(r[2 * S:].reshape(-1, 2), axis=1)]) if n else np.zeros(0)
+        per_click = (
+            np.concatenate(
+                [np.max(np.abs(r[: 2 * S].reshape(-1, 2)), axis=1), np.linalg.norm(r[2 * S :].reshape(-1, 2), axis=1)]
+            )
+            if n
+            else np.zeros(0)
+        )
         rms = float(np.sqrt(np.mean(r * r)))
     else:
         r, per_click, rms, n = np.zeros(0), np.zeros(0), 0.0, 0
     cov = np.linalg.inv(H)
     cov = 0.5 * (cov + cov.T)
     sigma_out = float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, dtype=float).copy()
-    return RefineResult(T_world_obj=T, cov=cov, rms_px=rms, residuals_px=r, iterations=it, converged=converged,
-                        kinds=clicks.kinds, click_residuals_px=per_click, weights=np.ones(n), downweighted=(),
-                        sigma_px=sigma_out, sigma_est_px=float("nan"), loss="l2")
+    return RefineResult(
+        T_world_obj=T,
+        cov=cov,
+        rms_px=rms,
+        residuals_px=r,
+        iterations=it,
+        converged=converged,
+        kinds=clicks.kinds,
+        click_residuals_px=per_click,
+        weights=np.ones(n),
+        downweighted=(),
+        sigma_px=sigma_out,
+        sigma_est_px=float("nan"),
+        loss="l2",
+    )

@@ -36,7 +36,15 @@ from ._lazy import kernels
 
 _k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded before mcit serve's first page)
 
-__all__ = ["Clicks", "as_clicks", "interpretation_planes", "residuals", "perturb", "distance_cost", "pose_distance_cost"]
+__all__ = [
+    "Clicks",
+    "as_clicks",
+    "interpretation_planes",
+    "residuals",
+    "perturb",
+    "distance_cost",
+    "pose_distance_cost",
+]
 
 
 @dataclass(frozen=True)
@@ -94,18 +102,32 @@ def as_clicks(segs_uv=None, edges_obj=None, points_uv=None, points_obj=None) -> 
         pobj = _NO_X if points_obj is None else np.asarray(points_obj, dtype=float)
         if (
             (points_uv is None) == (points_obj is None)
-            and segs.ndim == 3 and segs.shape[1:] == (2, 2) and edges.ndim == 3 and edges.shape[1:] == (2, 3)
-            and len(segs) == len(edges) and puv.ndim == 2 and puv.shape[1] == 2 and pobj.ndim == 2
-            and pobj.shape[1] == 3 and len(puv) == len(pobj)
+            and segs.ndim == 3
+            and segs.shape[1:] == (2, 2)
+            and edges.ndim == 3
+            and edges.shape[1:] == (2, 3)
+            and len(segs) == len(edges)
+            and puv.ndim == 2
+            and puv.shape[1] == 2
+            and pobj.ndim == 2
+            and pobj.shape[1] == 3
+            and len(puv) == len(pobj)
             and _k.clicks_ok(
-                np.ascontiguousarray(segs), np.ascontiguousarray(edges), np.ascontiguousarray(puv), np.ascontiguousarray(pobj), MAX_PX, MAX_M
+                np.ascontiguousarray(segs),
+                np.ascontiguousarray(edges),
+                np.ascontiguousarray(puv),
+                np.ascontiguousarray(pobj),
+                MAX_PX,
+                MAX_M,
             )
         ):
             return Clicks(segs, edges, puv, pobj)
     if (segs_uv is None) != (edges_obj is None):
         raise ValueError("segs_uv and edges_obj go together: give both (one model edge per clicked segment) or neither")
     if (points_uv is None) != (points_obj is None):
-        raise ValueError("points_uv and points_obj go together: give both (one model point per clicked point) or neither")
+        raise ValueError(
+            "points_uv and points_obj go together: give both (one model point per clicked point) or neither"
+        )
     if segs_uv is None:
         segs, edges = _NO_SEGS, _NO_EDGES
     else:
@@ -120,7 +142,9 @@ def as_clicks(segs_uv=None, edges_obj=None, points_uv=None, points_obj=None) -> 
         if edges.ndim != 3 or edges.shape[1:] != (2, 3):
             raise ValueError(f"edges_obj must have shape (N, 2, 3) (two 3D endpoints per edge), got {edges.shape}")
         if len(segs) != len(edges):
-            raise ValueError(f"got {len(segs)} clicked segments but {len(edges)} model edges: match each segment to one edge")
+            raise ValueError(
+                f"got {len(segs)} clicked segments but {len(edges)} model edges: match each segment to one edge"
+            )
         if not (np.abs(segs).max(initial=0.0) <= MAX_PX and np.abs(edges).max(initial=0.0) <= MAX_M):
             finite_array(segs, (None, 2, 2), "segs_uv", max_abs=MAX_PX, unit=" px")
             finite_array(edges, (None, 2, 3), "edges_obj", max_abs=MAX_M, unit=" m")
@@ -152,7 +176,9 @@ def as_clicks(segs_uv=None, edges_obj=None, points_uv=None, points_obj=None) -> 
         if pobj.ndim != 2 or pobj.shape[1] != 3:
             raise ValueError(f"points_obj must have shape (N, 3), got {pobj.shape}")
         if len(puv) != len(pobj):
-            raise ValueError(f"got {len(puv)} clicked points but {len(pobj)} model points: match each click to one point")
+            raise ValueError(
+                f"got {len(puv)} clicked points but {len(pobj)} model points: match each click to one point"
+            )
         if not (np.abs(puv).max(initial=0.0) <= MAX_PX and np.abs(pobj).max(initial=0.0) <= MAX_M):
             finite_array(puv, (None, 2), "points_uv", max_abs=MAX_PX, unit=" px")
             finite_array(pobj, (None, 3), "points_obj", max_abs=MAX_M, unit=" m")
@@ -304,8 +330,15 @@ def distance_cost(C, R, t, edges, segs, points_obj, points_uv) -> float | None:
     edge with one endpoint behind the camera is measured to its infinite image line.
     """
     f = lambda x, *shape: np.ascontiguousarray(np.asarray(x, dtype=float).reshape(shape))  # noqa: E731
-    cost = _k.distance_cost(f(C, 3, 4), f(R, 3, 3), f(t, 3), f(edges, -1, 2, 3), f(segs, -1, 2, 2),
-                            f(points_obj, -1, 3), f(points_uv, -1, 2))
+    cost = _k.distance_cost(
+        f(C, 3, 4),
+        f(R, 3, 3),
+        f(t, 3),
+        f(edges, -1, 2, 3),
+        f(segs, -1, 2, 2),
+        f(points_obj, -1, 3),
+        f(points_uv, -1, 2),
+    )
     return None if cost < 0.0 else float(cost)  # the kernel's −1: a clicked feature behind the camera
 
 
@@ -313,6 +346,8 @@ def pose_distance_cost(camera: Camera, T_world_obj: np.ndarray, clicks: Clicks) 
     """RMS pixel distance of the clicks to the projected finite model segments and points at a
     pose (``distance_cost``), inf when a clicked feature is behind the camera."""
     T = np.asarray(T_world_obj, dtype=float)
-    cost = distance_cost(camera.C, T[:3, :3], T[:3, 3], clicks.edges_obj, clicks.segs_uv, clicks.points_obj, clicks.points_uv)
+    cost = distance_cost(
+        camera.C, T[:3, :3], T[:3, 3], clicks.edges_obj, clicks.segs_uv, clicks.points_obj, clicks.points_uv
+    )
     n = 2 * clicks.n_segments + clicks.n_points
     return float("inf") if cost is None else float(np.sqrt(cost / max(n, 1)))

@@ -76,8 +76,9 @@ def symmetry_transforms(model: BRep) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(p, kabsch(mids, mids[p]) if len(mids) >= 3 else np.eye(4)) for p in edge_symmetries(model)]
 
 
-def nearest_twin(model: BRep, T_world_obj: np.ndarray, edges: np.ndarray, T_ref: np.ndarray,
-                 hand: dict[int, int] | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+def nearest_twin(
+    model: BRep, T_world_obj: np.ndarray, edges: np.ndarray, T_ref: np.ndarray, hand: dict[int, int] | None = None
+) -> tuple[np.ndarray, np.ndarray] | None:
     """Of the poses that draw the same picture as ``T_world_obj`` (the model's symmetries), the one
     that keeps every hand assignment and turns least from ``T_ref``.
 
@@ -94,7 +95,9 @@ def nearest_twin(model: BRep, T_world_obj: np.ndarray, edges: np.ndarray, T_ref:
         raise ValueError(f"edges must be model edge indices in [0, {E}), got {e[:6].tolist()}")
     edges = e.astype(int)
     if not all(isinstance(j, (int, np.integer)) and 0 <= j < len(edges) for j in hand):
-        raise ValueError(f"hand must map clicked segment indices in [0, {len(edges)}) to model edges, got {hand!r:.100}")
+        raise ValueError(
+            f"hand must map clicked segment indices in [0, {len(edges)}) to model edges, got {hand!r:.100}"
+        )
     best, best_deg = None, np.inf
     for p, S in symmetry_transforms(model):
         e2 = p[edges]  # under T S⁻¹, edge p[k] lies where edge k lay under T

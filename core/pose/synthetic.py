@@ -62,7 +62,9 @@ def paper_box_pose(rng: np.random.Generator) -> np.ndarray:
     x ∈ [−0.2, 0.4], y ∈ [0.3, 0.6] m: ~1.9–2.2 m from ``paper_camera``."""
     yaw = rng.uniform(0.0, 2.0 * np.pi)
     c, s = np.cos(yaw), np.sin(yaw)
-    return make_T(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), [rng.uniform(-0.2, 0.4), rng.uniform(0.3, 0.6), 0.0])
+    return make_T(
+        np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), [rng.uniform(-0.2, 0.4), rng.uniform(0.3, 0.6), 0.0]
+    )
 
 
 def random_camera(rng: np.random.Generator, width: int = 640, height: int = 480) -> Camera:

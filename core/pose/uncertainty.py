@@ -48,8 +48,15 @@ def with_camera_uncertainty(
         return result
     steps = principal_steps(check_covariance(camera_cov, 12, "camera_cov (of C's entries)"))
     T0 = result.T_world_obj
-    kw = dict(segs_uv=segs_uv, edges_obj=edges_obj, points_uv=points_uv, points_obj=points_obj, loss=result.loss,
-              huber_px=huber_px, sigma_px=result.sigma_px)
+    kw = dict(
+        segs_uv=segs_uv,
+        edges_obj=edges_obj,
+        points_uv=points_uv,
+        points_obj=points_obj,
+        loss=result.loss,
+        huber_px=huber_px,
+        sigma_px=result.sigma_px,
+    )
     share = np.zeros((6, 6))
     for d in steps:
         plus = refine(perturbed_camera(camera, d), T0, **kw).T_world_obj

@@ -51,8 +51,11 @@ def pose_edges(site, obj, T_true) -> list[int]:
     vis = sorted(visible(T_true) & visible(obj.T_world_obj))
     V, E = obj.model.vertices, obj.model.edges
     axis = {k: int(np.abs(V[E[k][1]] - V[E[k][0]]).argmax()) for k in vis}
-    triple = next(t for t in itertools.combinations(vis, 3)
-                  if len({axis[k] for k in t}) == 3 and not set(E[t[0]]) & set(E[t[1]]) & set(E[t[2]]))
+    triple = next(
+        t
+        for t in itertools.combinations(vis, 3)
+        if len({axis[k] for k in t}) == 3 and not set(E[t[0]]) & set(E[t[1]]) & set(E[t[2]])
+    )
     return list(triple) + [k for k in vis if k not in triple][:2]
 
 
@@ -87,9 +90,13 @@ def main() -> int:
 
     scene = load_scene(default_scene_path())
     fast = dataclasses.replace(scene, turret=dataclasses.replace(scene.turret, speed_steps_s=1e5))
-    devices = open_devices(fast, clock=lambda: FRAME_T_S,
-                           site_options=dict(rangefinder_baud=0, turret_baud=0, measure_delay_s=0.002, delay_per_m_s=0.0,
-                                             no_target_delay_s=0.0))
+    devices = open_devices(
+        fast,
+        clock=lambda: FRAME_T_S,
+        site_options=dict(
+            rangefinder_baud=0, turret_baud=0, measure_delay_s=0.002, delay_per_m_s=0.0, no_target_delay_s=0.0
+        ),
+    )
     frame = render_frame(scene, FRAME_T_S)
     frame = np.repeat(frame[:, :, None], 3, axis=2) if frame.ndim == 2 else frame
     ui = Interface(scene, frame, Path(tempfile.mkdtemp(prefix="mcit-shots-")) / "site.sqlite", devices=devices)
@@ -209,8 +216,10 @@ def main() -> int:
                 for a, b in zip(f, f[1:] + f[:1]):
                     uv = cam.project(model.vertices[[a, b]] @ Tb[:3, :3].T + Tb[:3, 3])
                     if np.linalg.norm(uv[1] - uv[0]) > 12:
-                        wf.add_segment(np.array([uv[0] + 0.2 * (uv[1] - uv[0]), uv[0] + 0.8 * (uv[1] - uv[0])])
-                                       + rng.normal(0, 0.7, (2, 2)))
+                        wf.add_segment(
+                            np.array([uv[0] + 0.2 * (uv[1] - uv[0]), uv[0] + 0.8 * (uv[1] - uv[0])])
+                            + rng.normal(0, 0.7, (2, 2))
+                        )
                 wf.measure()
                 if i < len(faces) - 1:
                     wf.next_face()

@@ -18,7 +18,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-import tests.e2e.harness as harness  # noqa: E402
 from tests.e2e.harness import close_webgl_notice, free_port, launch, wait_for_panel, wait_until  # noqa: E402
 
 OUT = ROOT / "docs" / "img" / "stream_lost.png"
@@ -33,12 +32,32 @@ def main() -> int:
 
     port = free_port()
     url = f"http://127.0.0.1:{port}/video.mjpg"
-    ffmpeg = subprocess.Popen(["ffmpeg", "-hide_banner", "-nostdin", "-loglevel", "error", "-re", "-stream_loop", "-1",
-                               "-i", str(ROOT / "scenes" / "workcell" / "video.avi"), "-f", "mpjpeg", "-q:v", "3",
-                               "-listen", "1", url])
+    ffmpeg = subprocess.Popen(
+        [
+            "ffmpeg",
+            "-hide_banner",
+            "-nostdin",
+            "-loglevel",
+            "error",
+            "-re",
+            "-stream_loop",
+            "-1",
+            "-i",
+            str(ROOT / "scenes" / "workcell" / "video.avi"),
+            "-f",
+            "mpjpeg",
+            "-q:v",
+            "3",
+            "-listen",
+            "1",
+            url,
+        ]
+    )
     time.sleep(1.0)
     db = Path(tempfile.mkdtemp(prefix="mcit-stream-")) / "site.sqlite"
-    args = build_parser().parse_args(["serve", "--video", url, "--db", str(db), "--no-devices", "--port", str(free_port())])
+    args = build_parser().parse_args(
+        ["serve", "--video", url, "--db", str(db), "--no-devices", "--port", str(free_port())]
+    )
     server, closers = build_interface(args)
     server.start()
     try:

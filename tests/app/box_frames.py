@@ -24,10 +24,13 @@ def box_frames(tmp_path_factory):
     write_cao(box, d / "box.cao")
     T0 = poses[0]
     (d / "box.pos").write_text("\n".join(f"{x:.12f}" for x in np.r_[T0[:3, 3], log_so3(T0[:3, :3])]))
-    model = ("<model><type>perspectiveProjWithoutDistortion</type><px>{f}</px><py>{f}</py><u0>159.5</u0><v0>119.5</v0></model>")
+    model = "<model><type>perspectiveProjWithoutDistortion</type><px>{f}</px><py>{f}</py><u0>159.5</u0><v0>119.5</v0></model>"
     (d / "rig.xml").write_text(
         "<root>"
-        + "".join(f"<camera><name>{n}</name><image_width>{w}</image_width><image_height>{h}</image_height>{model.format(f=f)}</camera>"
-                  for n, w, h, f in (("wide", 320, 240, 300.0), ("tele", 320, 240, 420.0), ("tele", 640, 480, 840.0)))
-        + "</root>")
+        + "".join(
+            f"<camera><name>{n}</name><image_width>{w}</image_width><image_height>{h}</image_height>{model.format(f=f)}</camera>"
+            for n, w, h, f in (("wide", 320, 240, 300.0), ("tele", 320, 240, 420.0), ("tele", 640, 480, 840.0))
+        )
+        + "</root>"
+    )
     return d

@@ -16,8 +16,10 @@ import socket
 import struct
 import threading
 
-SDP = ("v=0\r\no=- 0 0 IN IP4 127.0.0.1\r\ns=mcit test stream\r\nc=IN IP4 0.0.0.0\r\nt=0 0\r\n"
-       "a=control:*\r\nm=video 0 RTP/AVP 26\r\na=control:trackID=0\r\n")
+SDP = (
+    "v=0\r\no=- 0 0 IN IP4 127.0.0.1\r\ns=mcit test stream\r\nc=IN IP4 0.0.0.0\r\nt=0 0\r\n"
+    "a=control:*\r\nm=video 0 RTP/AVP 26\r\na=control:trackID=0\r\n"
+)
 
 
 class RtspRelay:
@@ -31,7 +33,7 @@ class RtspRelay:
         self._sockets: list[socket.socket] = []
         self._stop = threading.Event()
 
-    def start(self) -> "RtspRelay":
+    def start(self) -> RtspRelay:
         listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         listener.bind(("127.0.0.1", self.port))
@@ -101,14 +103,14 @@ class RtspRelay:
                     size = struct.unpack(">H", buffer[2:4])[0]
                     if len(buffer) < 4 + size:
                         break
-                    buffer = buffer[4 + size:]
+                    buffer = buffer[4 + size :]
             head, buffer = buffer.split(b"\r\n\r\n", 1)
             lines = head.decode("latin-1").split("\r\n")
             method = lines[0].split(" ")[0]
             headers = {k.strip().lower(): v.strip() for k, _, v in (line.partition(":") for line in lines[1:])}
             body_len = int(headers.get("content-length", "0"))
             buffer = buffer[body_len:]
-            reply = [f"RTSP/1.0 200 OK", f"CSeq: {headers.get('cseq', '0')}"]
+            reply = ["RTSP/1.0 200 OK", f"CSeq: {headers.get('cseq', '0')}"]
             body = ""
             if method == "OPTIONS":
                 reply.append("Public: OPTIONS, DESCRIBE, SETUP, PLAY, GET_PARAMETER, TEARDOWN")

@@ -76,8 +76,11 @@ roi:
 """
 
 
-@pytest.mark.parametrize("text", [OST_YAML, OST_OPENCV, ROS2_INFO, ROS2_INFO.replace("\nd:", "\nD:").replace("\nk:", "\nK:")],
-                         ids=["ost.yaml", "ost-opencv", "ros2-camera-info", "ros1-camera-info"])
+@pytest.mark.parametrize(
+    "text",
+    [OST_YAML, OST_OPENCV, ROS2_INFO, ROS2_INFO.replace("\nd:", "\nD:").replace("\nk:", "\nK:")],
+    ids=["ost.yaml", "ost-opencv", "ros2-camera-info", "ros1-camera-info"],
+)
 def test_ros_camera_info(tmp_path, text):
     f = tmp_path / "ost.yaml"
     f.write_text(text)
@@ -103,9 +106,21 @@ def test_opencv_tutorial_keys(tmp_path, suffix):
     K = np.array([[657.467, 0.0, 319.5], [0.0, 657.467, 239.5], [0.0, 0.0, 1.0]])
     D = np.array([[-0.418], [0.507], [0.0], [0.0], [-0.578]])
     f = tmp_path / f"out_camera_data{suffix}"
-    _write_fs(f, calibration_Time="Sat Dec  1 10:00:00 2026", nr_of_frames=25, image_Width=640, image_Height=480,
-              board_Width=9, board_Height=6, square_Size=50.0, FixAspectRatio=1.0, flags=2, Camera_Matrix=K,
-              Distortion_Coefficients=D, Avg_Reprojection_Error=0.39)
+    _write_fs(
+        f,
+        calibration_Time="Sat Dec  1 10:00:00 2026",
+        nr_of_frames=25,
+        image_Width=640,
+        image_Height=480,
+        board_Width=9,
+        board_Height=6,
+        square_Size=50.0,
+        FixAspectRatio=1.0,
+        flags=2,
+        Camera_Matrix=K,
+        Distortion_Coefficients=D,
+        Avg_Reprojection_Error=0.39,
+    )
     intr = read_intrinsics(f)
     np.testing.assert_array_equal(intr.K, K)
     np.testing.assert_array_equal(intr.distortion, D.ravel())
@@ -156,17 +171,23 @@ def test_visp_file_of_several_cameras(tmp_path):
     assert big.K[0, 0] == 600 and not big.has_distortion  # the model without distortion is preferred
     with pytest.raises(ValueError, match=r"no camera named 'Camera' for 800×600 images; it has: Camera 640×480"):
         read_intrinsics(f, camera_name="Camera", image_size=(800, 600))
-    with pytest.raises(ValueError, match=r"no camera named 'Right'; it has: Camera 640×480; Camera 320×240; CameraLeft"):
+    with pytest.raises(
+        ValueError, match=r"no camera named 'Right'; it has: Camera 640×480; Camera 320×240; CameraLeft"
+    ):
         read_intrinsics(f, camera_name="Right")
 
 
 def test_yaml_file_of_several_cameras(tmp_path):
     f = tmp_path / "rig.yaml"
-    f.write_text("cam0:\n  camera_name: left\n  camera_matrix: {rows: 3, cols: 3, data: [500, 0, 320, 0, 500, 240, 0, 0, 1]}\n"
-                 "  image_width: 640\n  image_height: 480\n"
-                 "cam1:\n  camera_name: right\n  camera_matrix: {rows: 3, cols: 3, data: [510, 0, 321, 0, 510, 241, 0, 0, 1]}\n"
-                 "  resolution: [800, 600]\n")
-    with pytest.raises(ValueError, match=r"rig\.yaml: 2 cameras in the file \(cam0, cam1\); choose one with --camera-name"):
+    f.write_text(
+        "cam0:\n  camera_name: left\n  camera_matrix: {rows: 3, cols: 3, data: [500, 0, 320, 0, 500, 240, 0, 0, 1]}\n"
+        "  image_width: 640\n  image_height: 480\n"
+        "cam1:\n  camera_name: right\n  camera_matrix: {rows: 3, cols: 3, data: [510, 0, 321, 0, 510, 241, 0, 0, 1]}\n"
+        "  resolution: [800, 600]\n"
+    )
+    with pytest.raises(
+        ValueError, match=r"rig\.yaml: 2 cameras in the file \(cam0, cam1\); choose one with --camera-name"
+    ):
         read_intrinsics(f)
     right = read_intrinsics(f, camera_name="right")
     assert right.K[0, 0] == 510 and (right.width, right.height) == (800, 600) and right.name == "right"
@@ -188,7 +209,11 @@ BAD = [
     ("cam.yaml", "camera_matrix: {rows: 3, cols: 3}\n", "a matrix needs 'data'"),
     ("cam.yaml", "camera_matrix: {rows: 3, cols: 3, data: [1, 2, 3]}\n", "does not fill 3×3 numbers"),
     ("cam.yaml", "K: [500, 0, 320, 0, 500, 240]\n", "9 numbers expected (3×3), got 6"),
-    ("cam.yaml", "camera_matrix: {rows: 3, cols: 3, data: [500, 0, 320, 0, -5, 240, 0, 0, 1]}\n", "focal lengths must be positive"),
+    (
+        "cam.yaml",
+        "camera_matrix: {rows: 3, cols: 3, data: [500, 0, 320, 0, -5, 240, 0, 0, 1]}\n",
+        "focal lengths must be positive",
+    ),
     ("cam.yaml", _K9 + "image_width: 640\n", "states the image width but not the height"),
     ("cam.yaml", _K9 + "image_width: 640.5\nimage_height: 480\n", "'image_width' is not a whole number of pixels"),
     ("cam.yaml", _K9 + "image_width: 0\nimage_height: 480\n", "the image width must be a positive number of pixels"),
@@ -220,8 +245,18 @@ def test_mcit_track_camera_name(box_frames, capsys):
     from app.cli import main
 
     d = box_frames
-    args = ["track", str(d / "frames"), "--model", str(d / "box.cao"), "--pose", str(d / "box.pos"), "--out", str(d / "t.avi"),
-            "--intrinsics", str(d / "rig.xml")]
+    args = [
+        "track",
+        str(d / "frames"),
+        "--model",
+        str(d / "box.cao"),
+        "--pose",
+        str(d / "box.pos"),
+        "--out",
+        str(d / "t.avi"),
+        "--intrinsics",
+        str(d / "rig.xml"),
+    ]
     assert main(args) == 2
     err = capsys.readouterr().err
     assert "rig.xml: 2 cameras for 320×240 images (wide 320×240; tele 320×240); choose one with --camera-name" in err
@@ -232,10 +267,15 @@ def test_mcit_track_camera_name(box_frames, capsys):
     assert main(args + ["--camera-name", "zoom"]) == 2
     assert "rig.xml: no camera named 'zoom'" in capsys.readouterr().err
     # a file calibrated on other images than the video's is refused, naming both sizes
-    (d / "big.yaml").write_text("image_width: 640\nimage_height: 480\ncamera_name: tele\n"
-                                "camera_matrix: {rows: 3, cols: 3, data: [840, 0, 319.5, 0, 840, 239.5, 0, 0, 1]}\n")
+    (d / "big.yaml").write_text(
+        "image_width: 640\nimage_height: 480\ncamera_name: tele\n"
+        "camera_matrix: {rows: 3, cols: 3, data: [840, 0, 319.5, 0, 840, 239.5, 0, 0, 1]}\n"
+    )
     assert main(args[:-1] + [str(d / "big.yaml")]) == 2
-    assert "big.yaml: the camera was calibrated on 640×480 images but the video's frames are 320×240" in capsys.readouterr().err
+    assert (
+        "big.yaml: the camera was calibrated on 640×480 images but the video's frames are 320×240"
+        in capsys.readouterr().err
+    )
     # --camera-name without --intrinsics says what it is for
     assert main(["track", str(d / "frames"), "--scene", "x", "--camera-name", "tele"]) == 2
     assert "--camera-name chooses a camera in the --intrinsics file" in capsys.readouterr().err
@@ -246,12 +286,20 @@ def test_scene_camera_name(box_frames):
 
     d = box_frames
     pose = {"xyz": [0, 0, 0], "rpy_deg": [0, 0, 0]}
-    cam = _camera({"intrinsics_file": "rig.xml", "camera_name": "tele", "width": 640, "height": 480, "T_world_cam": pose}, d, "camera")
+    cam = _camera(
+        {"intrinsics_file": "rig.xml", "camera_name": "tele", "width": 640, "height": 480, "T_world_cam": pose},
+        d,
+        "camera",
+    )
     assert cam.width == 640 and cam.decompose()[0][0, 0] == pytest.approx(840.0)
     with pytest.raises(SceneError, match="3 cameras in the file"):
         _camera({"intrinsics_file": "rig.xml", "T_world_cam": pose}, d, "camera")
     with pytest.raises(SceneError, match="camera.camera_name: names a camera in 'intrinsics_file'"):
-        _camera({"K": np.eye(3).tolist(), "camera_name": "tele", "width": 640, "height": 480, "T_world_cam": pose}, d, "camera")
+        _camera(
+            {"K": np.eye(3).tolist(), "camera_name": "tele", "width": 640, "height": 480, "T_world_cam": pose},
+            d,
+            "camera",
+        )
 
 
 @pytest.mark.parametrize("name", ["cam.yaml", "cam.xml"])
@@ -267,29 +315,41 @@ def test_an_unreadable_file_is_one_line(tmp_path, name, monkeypatch):
 
     monkeypatch.setattr(pathlib.Path, "read_bytes", denied)  # as chmod 0 would (the tests may run as root)
     monkeypatch.setattr(ET, "parse", denied)
-    with pytest.raises(ValueError, match=r"cam\.(yaml|xml): cannot be read \(Permission denied\); check the file's permissions"):
+    with pytest.raises(
+        ValueError, match=r"cam\.(yaml|xml): cannot be read \(Permission denied\); check the file's permissions"
+    ):
         read_intrinsics(f)
 
 
 # --- a lens or camera matrix no camera has (attack review): refused, saying which number and why ---
+
 
 def _camera_file(tmp_path, fmt: str, fx: float = 700.0, k1: float = 0.0):
     """A 640×480 camera with focal length fx and radial distortion k1 (ViSP: kud), as each tool writes it."""
     K = [fx, 0, 320, 0, fx, 240, 0, 0, 1]
     if fmt == "visp":
         f = tmp_path / "camera.xml"
-        f.write_text(f"<root><camera><name>Camera</name><image_width>640</image_width><image_height>480</image_height>"
-                     f"<model><type>perspectiveProjWithDistortion</type><px>{fx!r}</px><py>{fx!r}</py>"
-                     f"<u0>320</u0><v0>240</v0><kud>{k1!r}</kud><kdu>0</kdu></model></camera></root>")
+        f.write_text(
+            f"<root><camera><name>Camera</name><image_width>640</image_width><image_height>480</image_height>"
+            f"<model><type>perspectiveProjWithDistortion</type><px>{fx!r}</px><py>{fx!r}</py>"
+            f"<u0>320</u0><v0>240</v0><kud>{k1!r}</kud><kdu>0</kdu></model></camera></root>"
+        )
     elif fmt == "opencv":
         f = tmp_path / "calib.yml"
-        _write_fs(f, image_width=640, image_height=480, camera_matrix=np.array(K, float).reshape(3, 3),
-                  distortion_coefficients=np.array([[k1, 0, 0, 0, 0]], float))
+        _write_fs(
+            f,
+            image_width=640,
+            image_height=480,
+            camera_matrix=np.array(K, float).reshape(3, 3),
+            distortion_coefficients=np.array([[k1, 0, 0, 0, 0]], float),
+        )
     else:
         f = tmp_path / "ost.yaml"
-        f.write_text(f"image_width: 640\nimage_height: 480\ncamera_name: cam\ncamera_matrix: {{rows: 3, cols: 3, data: "
-                     f"{[float(v) for v in K]}}}\ndistortion_model: plumb_bob\ndistortion_coefficients: {{rows: 1, cols: 5, "
-                     f"data: [{k1!r}, 0, 0, 0, 0]}}\n")
+        f.write_text(
+            f"image_width: 640\nimage_height: 480\ncamera_name: cam\ncamera_matrix: {{rows: 3, cols: 3, data: "
+            f"{[float(v) for v in K]}}}\ndistortion_model: plumb_bob\ndistortion_coefficients: {{rows: 1, cols: 5, "
+            f"data: [{k1!r}, 0, 0, 0, 0]}}\n"
+        )
     return f
 
 
@@ -303,8 +363,10 @@ def test_a_huge_k1_is_refused_as_a_lens_that_leaves_the_frame_black(tmp_path, fm
         read_intrinsics(f)
     msg = str(info.value)
     name = "kud" if fmt == "visp" else "k1"
-    assert msg.startswith(f"the lens distortion in {f} ({name}=1e+06) stretches the image so far that undistorted frames "
-                          "would show it in only "), msg
+    assert msg.startswith(
+        f"the lens distortion in {f} ({name}=1e+06) stretches the image so far that undistorted frames "
+        "would show it in only "
+    ), msg
     assert msg.endswith("of their area: check the file's distortion coefficients") and "\n" not in msg, msg
 
 
@@ -319,7 +381,9 @@ def test_a_lens_that_folds_within_the_image_is_refused(tmp_path, fmt, k1):
     msg = str(info.value)
     assert "\n" not in msg and msg.startswith(f"the lens distortion in {f} ("), msg
     if k1 != -1e300:  # a fold so sharp that nearly every pixel leaves the frame is said as such
-        assert msg.endswith("folds the image over itself within the image: check the file's distortion coefficients"), msg
+        assert msg.endswith("folds the image over itself within the image: check the file's distortion coefficients"), (
+            msg
+        )
 
 
 @pytest.mark.parametrize("fmt", FORMATS)
@@ -332,8 +396,10 @@ def test_real_lenses_load_and_their_border_undistorts_and_round_trips(tmp_path, 
         assert not intr.has_distortion
         return
     lens = lens_of(intr)
-    border = np.array([[u, v] for u in np.linspace(0, 639, 17) for v in (0.0, 479.0)]
-                      + [[u, v] for v in np.linspace(0, 479, 13) for u in (0.0, 639.0)])
+    border = np.array(
+        [[u, v] for u in np.linspace(0, 639, 17) for v in (0.0, 479.0)]
+        + [[u, v] for v in np.linspace(0, 479, 13) for u in (0.0, 639.0)]
+    )
     ideal = lens.undistort(border)
     assert np.isfinite(ideal).all()
     np.testing.assert_allclose(lens.distort(ideal), border, atol=1e-5)
@@ -360,11 +426,17 @@ def test_an_absurd_focal_length_without_an_image_size(tmp_path):
         read_intrinsics(f, image_size=(640, 480))
 
 
-@pytest.mark.parametrize("data, says", [
-    ("[700, 0, 1e300, 0, 700, 240, 0, 0, 1]", "the principal point (u0, v0) = (1e+300, 240) px lies far outside 640×480 images"),
-    ("[700, 0, 320, 0, 700, -5000, 0, 0, 1]", "the principal point (u0, v0) = (320, -5000) px lies far outside"),
-    ("[700, 1e300, 320, 0, 700, 240, 0, 0, 1]", "the skew K[0, 1]=1e+300 is larger than the focal lengths"),
-])
+@pytest.mark.parametrize(
+    "data, says",
+    [
+        (
+            "[700, 0, 1e300, 0, 700, 240, 0, 0, 1]",
+            "the principal point (u0, v0) = (1e+300, 240) px lies far outside 640×480 images",
+        ),
+        ("[700, 0, 320, 0, 700, -5000, 0, 0, 1]", "the principal point (u0, v0) = (320, -5000) px lies far outside"),
+        ("[700, 1e300, 320, 0, 700, 240, 0, 0, 1]", "the skew K[0, 1]=1e+300 is larger than the focal lengths"),
+    ],
+)
 def test_an_absurd_principal_point_or_skew_is_refused_as_such(tmp_path, data, says):
     f = tmp_path / "cam.yaml"
     f.write_text(f"image_width: 640\nimage_height: 480\ncamera_matrix: {{rows: 3, cols: 3, data: {data}}}\n")
@@ -380,8 +452,10 @@ def test_serve_intrinsics_with_an_absurd_focal_length_names_it(tmp_path):
     scene = load_scene(default_scene_path())
     f = tmp_path / "cam.yaml"
     w, h = scene.camera.width, scene.camera.height
-    f.write_text(f"image_width: {w}\nimage_height: {h}\ncamera_matrix: {{rows: 3, cols: 3, data: [1e300, 0, {w / 2}, 0, "
-                 f"1e300, {h / 2}, 0, 0, 1]}}\n")
+    f.write_text(
+        f"image_width: {w}\nimage_height: {h}\ncamera_matrix: {{rows: 3, cols: 3, data: [1e300, 0, {w / 2}, 0, "
+        f"1e300, {h / 2}, 0, 0, 1]}}\n"
+    )
     with pytest.raises(ValueError) as info:
         scene_with_intrinsics(scene, f)
     assert "fx=1e+300 px is not a focal length" in str(info.value) and "coplanar" not in str(info.value)

@@ -9,7 +9,9 @@ from app.camera_io import read_intrinsics, read_opencv_yml, read_visp_xml
 def test_visp_tracker_settings_of_the_real_cube(shared_data):
     K = read_visp_xml(shared_data("visp-cube", "cube.xml"))
     # The values printed in ../shared/data/README.md.
-    np.testing.assert_allclose(K, [[547.7367575, 0, 338.7036994], [0, 542.0744058, 234.5083345], [0, 0, 1]], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        K, [[547.7367575, 0, 338.7036994], [0, 542.0744058, 234.5083345], [0, 0, 1]], rtol=0, atol=1e-9
+    )
     intr = read_intrinsics(shared_data("visp-cube", "cube.xml"))
     assert intr.width is None and intr.height is None and not intr.has_distortion
 

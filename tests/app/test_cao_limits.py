@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from app.models_io import CaoError, cao_text, read_cao, save_model, load_model
+from app.models_io import CaoError, cao_text, load_model, read_cao, save_model
 from app.models_io import cao as cao_module
 
 TRIANGLE = "V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n1\n3 0 1 2\n0\n0\n"
@@ -126,7 +126,9 @@ def test_self_include_is_a_cycle(tmp_path):
         read_cao(f)
 
 
-@pytest.mark.parametrize("links", [{"a.cao": "b.cao", "b.cao": "a.cao"}, {"a.cao": "a.cao"}], ids=["two links", "one link"])
+@pytest.mark.parametrize(
+    "links", [{"a.cao": "b.cao", "b.cao": "a.cao"}, {"a.cao": "a.cao"}], ids=["two links", "one link"]
+)
 def test_an_include_through_a_symlink_loop_is_said_as_such(tmp_path, links):
     for name, target in links.items():
         (tmp_path / name).symlink_to(target)
@@ -135,15 +137,19 @@ def test_an_include_through_a_symlink_loop_is_said_as_such(tmp_path, links):
     loop = tmp_path / "a.cao"
     with pytest.raises(CaoError) as info:
         read_cao(top)
-    assert _one_line(info) == (f"{top}:2: {loop} is a loop of symbolic links that never reaches a file; point the link "
-                               "at the model file")
+    assert _one_line(info) == (
+        f"{top}:2: {loop} is a loop of symbolic links that never reaches a file; point the link at the model file"
+    )
     with pytest.raises(CaoError) as info:  # the model itself
         read_cao(loop)
-    assert _one_line(info) == f"{loop} is a loop of symbolic links that never reaches a file; point the link at the model file"
+    assert (
+        _one_line(info)
+        == f"{loop} is a loop of symbolic links that never reaches a file; point the link at the model file"
+    )
     init = tmp_path / "top.init"
     init.write_text('load("a.init")\n')
     (tmp_path / "a.init").symlink_to("a.init")
-    with pytest.raises(CaoError, match=rf"top\.init:1: .*a\.init is a loop of symbolic links"):
+    with pytest.raises(CaoError, match=r"top\.init:1: .*a\.init is a loop of symbolic links"):
         cao_module.read_init(init)
 
 
@@ -157,8 +163,10 @@ def test_mcit_db_import_of_a_symlink_loop_is_one_line_not_a_bug(tmp_path, capsys
     db = tmp_path / "site.sqlite"
     assert main(["db", "import", str(top), "--db", str(db)]) == 1
     err = capsys.readouterr().err
-    assert err == (f"mcit db import: error: {top}:2: {tmp_path / 'a.cao'} is a loop of symbolic links that never reaches "
-                   "a file; point the link at the model file\n")
+    assert err == (
+        f"mcit db import: error: {top}:2: {tmp_path / 'a.cao'} is a loop of symbolic links that never reaches "
+        "a file; point the link at the model file\n"
+    )
     assert not db.exists()
 
 
@@ -168,7 +176,11 @@ HUGE_COUNTS = [
     ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n1000000000\n3 0 1 2\n", 7, "number of faces from lines"),
     ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n1000000000\n3 0 1 2\n", 8, "number of faces from points"),
     ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n100000000000000\n3 0 1 2\n", 8, "number of faces from points"),
-    ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n1\n100000000000000 0 1 2\n", 9, "face 0: expected 100000000000001 numbers, got 4"),
+    (
+        "V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n1\n100000000000000 0 1 2\n",
+        9,
+        "face 0: expected 100000000000001 numbers, got 4",
+    ),
     ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n1\n1000000000 0 1 2\n", 9, "face 0: expected 1000000001 numbers, got 4"),
     ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n1\n3 0 1 2\n1000000000\n", 10, "number of cylinders"),
     ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n1\n3 0 1 2\n0\n1000000000\n1 0 1 2\n", 11, "number of circles"),
@@ -197,7 +209,11 @@ DEGENERATE = [
     ("V1\n4\n0 0 0\n1 0 0\n1 1 0\n1 0 0\n0\n0\n1\n4 0 1 2 3\n", 10, "face 0: its points 1 and 3 are at the same place"),
     ("V1\n3\n0 0 0\n1 0 0\n2 0 0\n0\n0\n1\n3 0 1 2\n", 9, "face 0 has no area"),
     ("V1\n3\n0 0 0\n1 0 0\n2 1e-12 0\n0\n0\n1\n3 0 1 2\n", 9, "face 0 has no area"),
-    ("V1\n4\n0 0 0\n1 1 0\n1 0 0\n0 1 0\n0\n0\n1\n4 0 1 2 3\n", 10, "face 0 has no area"),  # a bow tie folds over itself
+    (
+        "V1\n4\n0 0 0\n1 1 0\n1 0 0\n0 1 0\n0\n0\n1\n4 0 1 2 3\n",
+        10,
+        "face 0 has no area",
+    ),  # a bow tie folds over itself
     ("V1\n3\n0 0 0\n1 0 0\n2 0 0\n3\n0 1\n1 2\n2 0\n1\n3 0 1 2\n0\n0\n", 11, "face 0 has no area"),  # from lines
     ("V1\n2\n0 0 0\n0 0 0\n1\n0 1\n0\n0\n", 6, "line 0: its points 0 and 1 are at the same place"),
     ("V1\n3\n0 0 0\n1e300 0 0\n0 1e300 0\n0\n0\n1\n3 0 1 2\n", 4, "point 1 is beyond ±1e+06 m"),
@@ -210,7 +226,11 @@ DEGENERATE = [
     ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n0\n0\n1\n1e300 0 1 2\n", 11, "circle 0: the radius is beyond"),
     ('V1\nload("t.cao", t=[1e300; 0; 0])\n0\n0\n0\n0\n', 2, "value 1 of t=[...] is not finite or beyond"),
     ('V1\nload("t.cao", tu=[0; nan; 0])\n0\n0\n0\n0\n', 2, "value 2 of tu=[...] is not finite"),
-    ('V1\nload("t.cao", t=[999999.5; 0; 0])\n0\n0\n0\n0\n', 2, "the included model, placed by its t= and rotation, reaches beyond"),
+    (
+        'V1\nload("t.cao", t=[999999.5; 0; 0])\n0\n0\n0\n0\n',
+        2,
+        "the included model, placed by its t= and rotation, reaches beyond",
+    ),
 ]
 
 
@@ -234,12 +254,18 @@ def test_thin_but_real_faces_load_export_and_read_back(tmp_path, suffix):
     assert len(m.faces) == 2
     save_model(m, tmp_path / f"out{suffix}")
     back = load_model(tmp_path / f"out{suffix}")
-    assert back == m if suffix == ".cao" else (len(back.vertices) == 4 and np.allclose(back.bounds(), m.bounds(), atol=1e-7))
+    assert (
+        back == m
+        if suffix == ".cao"
+        else (len(back.vertices) == 4 and np.allclose(back.bounds(), m.bounds(), atol=1e-7))
+    )
 
 
 def test_a_model_1000_km_away_loads_and_round_trips(tmp_path):
     f = tmp_path / "far.cao"
-    f.write_text("V1\n4\n999999 0 0\n1000000 0 0\n999999 1 0\n999999 0 -1e6\n1\n0 3\n0\n1\n3 0 1 2\n1\n0 2 0.1\n1\n0.5 0 1 2\n")
+    f.write_text(
+        "V1\n4\n999999 0 0\n1000000 0 0\n999999 1 0\n999999 0 -1e6\n1\n0 3\n0\n1\n3 0 1 2\n1\n0 2 0.1\n1\n0.5 0 1 2\n"
+    )
     m = read_cao(f)
     save_model(m, tmp_path / "out.cao")
     assert _same(read_cao(tmp_path / "out.cao"), m)
@@ -249,10 +275,13 @@ def _same(a, b) -> bool:
     """Equal models; a circle's normal to rounding (the writer stores it as two points on the rim)."""
     polyhedra = np.array_equal(a.vertices, b.vertices) and np.array_equal(a.edges, b.edges) and a.faces == b.faces
     solids = len(a.solids) == len(b.solids) and all(
-        np.array_equal(s.p0, t.p0) and np.array_equal(s.p1, t.p1) and (s.r0, s.r1) == (t.r0, t.r1) for s, t in zip(a.solids, b.solids)
+        np.array_equal(s.p0, t.p0) and np.array_equal(s.p1, t.p1) and (s.r0, s.r1) == (t.r0, t.r1)
+        for s, t in zip(a.solids, b.solids)
     )
     circles = len(a.circles) == len(b.circles) and all(
-        np.array_equal(c.centre, d.centre) and c.radius == d.radius and np.allclose(c.normal, d.normal, rtol=0, atol=1e-9)
+        np.array_equal(c.centre, d.centre)
+        and c.radius == d.radius
+        and np.allclose(c.normal, d.normal, rtol=0, atol=1e-9)
         for c, d in zip(a.circles, b.circles)
     )
     return polyhedra and solids and circles
@@ -300,12 +329,31 @@ def test_an_include_naming_a_system_file_does_not_echo_it(tmp_path):
         msg = _one_line(info)
         assert msg.startswith(f"{target}:1: not a .cao model"), msg
         first = target.read_bytes().split(b"\n")[0].decode("utf-8", "replace")
-        assert SECRET not in msg and first not in msg and first.split(":")[0] + ":" not in msg.replace(f"{target}:", ""), msg
+        assert (
+            SECRET not in msg and first not in msg and first.split(":")[0] + ":" not in msg.replace(f"{target}:", "")
+        ), msg
 
 
 # --- fuzz: random .cao text, structured enough to reach every block ---
 
-_TOKENS = ["0", "1", "-1", "2", "3", "0.5", "1e-12", "1e300", "nan", "-inf", "1000001", "4294967296", "x", SECRET, "3.5", "-0"]
+_TOKENS = [
+    "0",
+    "1",
+    "-1",
+    "2",
+    "3",
+    "0.5",
+    "1e-12",
+    "1e300",
+    "nan",
+    "-inf",
+    "1000001",
+    "4294967296",
+    "x",
+    SECRET,
+    "3.5",
+    "-0",
+]
 
 
 @st.composite
@@ -318,9 +366,17 @@ def cao_texts(draw):
     idx_l = st.integers(0, max(len(lines) - 1, 0)).map(str)
     fl = [" ".join([str(k)] + [draw(idx_l) for _ in range(k)]) for k in draw(st.lists(st.integers(3, 4), max_size=2))]
     fp = [" ".join([str(k)] + [draw(idx) for _ in range(k)]) for k in draw(st.lists(st.integers(3, 5), max_size=3))]
-    cyl = [f"{draw(idx)} {draw(idx)} {draw(st.sampled_from(['0.1', '1', '-1', '0']))}" for _ in range(draw(st.integers(0, 2)))]
-    circ = [f"{draw(st.sampled_from(['0.1', '2']))} {draw(idx)} {draw(idx)} {draw(idx)}" for _ in range(draw(st.integers(0, 2)))]
-    loads = [f'load("t.cao", t=[{draw(coord)}; 0; 0], tu=[0; {draw(coord)}deg; 0])' for _ in range(draw(st.integers(0, 2)))]
+    cyl = [
+        f"{draw(idx)} {draw(idx)} {draw(st.sampled_from(['0.1', '1', '-1', '0']))}"
+        for _ in range(draw(st.integers(0, 2)))
+    ]
+    circ = [
+        f"{draw(st.sampled_from(['0.1', '2']))} {draw(idx)} {draw(idx)} {draw(idx)}"
+        for _ in range(draw(st.integers(0, 2)))
+    ]
+    loads = [
+        f'load("t.cao", t=[{draw(coord)}; 0; 0], tu=[0; {draw(coord)}deg; 0])' for _ in range(draw(st.integers(0, 2)))
+    ]
     out = ["V1"] + loads
     for block in (points, lines, fl, fp, cyl, circ):
         out += [str(len(block))] + block

@@ -23,7 +23,9 @@ def box(tmp_path):
 
 def test_a_file_of_load_lines_only_loads(tmp_path, box):
     f = tmp_path / "square.cao"
-    f.write_text('V1\n# two boxes\nload("parts/box.cao")\nload("parts/box.cao", t=[2; 0; 0], tu=[0; 0; 90 deg]) # placed\n')
+    f.write_text(
+        'V1\n# two boxes\nload("parts/box.cao")\nload("parts/box.cao", t=[2; 0; 0], tu=[0; 0; 90 deg]) # placed\n'
+    )
     m = read_cao(f)
     assert len(m.vertices) == 16 and len(m.faces) == 12
     assert np.allclose(m.vertices[8:], box.vertices @ exp_so3([0, 0, np.pi / 2]).T + [2, 0, 0])
@@ -60,15 +62,18 @@ def test_a_rotation_written_with_few_digits_is_made_exact(tmp_path):
     assert np.allclose(edge_lengths, 1.0, atol=1e-12)  # no shear, no scale
 
 
-@pytest.mark.parametrize("params, problem", [
-    ("R=[1; 0; 0; 0; 1; 0]", "R=[...] needs 9 values"),
-    ("R=[1; 0; 0; 0; 1; 0; 0; 0; -1]", "is not a rotation"),
-    ("R=[2; 0; 0; 0; 2; 0; 0; 0; 2]", "is not a rotation"),
-    ("R=[1; 0; 0; 0; 1; 0; 0; 0; x]", "a value of R=[...] is not a number"),
-    ("R=[1; 0; 0; 0; 1; 0; 0; 0; nan]", "is not a rotation"),
-    ("tu=[0; 0; 1], R=[1; 0; 0; 0; 1; 0; 0; 0; 1]", "one rotation, tu= or R="),
-    ("t=[0; 0; 1], t=[0; 0; 2]", "give t= once"),
-])
+@pytest.mark.parametrize(
+    "params, problem",
+    [
+        ("R=[1; 0; 0; 0; 1; 0]", "R=[...] needs 9 values"),
+        ("R=[1; 0; 0; 0; 1; 0; 0; 0; -1]", "is not a rotation"),
+        ("R=[2; 0; 0; 0; 2; 0; 0; 0; 2]", "is not a rotation"),
+        ("R=[1; 0; 0; 0; 1; 0; 0; 0; x]", "a value of R=[...] is not a number"),
+        ("R=[1; 0; 0; 0; 1; 0; 0; 0; nan]", "is not a rotation"),
+        ("tu=[0; 0; 1], R=[1; 0; 0; 0; 1; 0; 0; 0; 1]", "one rotation, tu= or R="),
+        ("t=[0; 0; 1], t=[0; 0; 2]", "give t= once"),
+    ],
+)
 def test_bad_rotations_are_refused_with_file_and_line(tmp_path, params, problem):
     (tmp_path / "parts").mkdir()
     (tmp_path / "parts" / "box.cao").write_text(BOX)
@@ -116,6 +121,7 @@ def test_degenerate_faces_are_still_refused(tmp_path):
 
 # --- .init files ---
 
+
 def test_init_files_as_before(tmp_path):
     f = tmp_path / "box.init"
     f.write_text("# clicked points\n4\n0 0 0 # corner\n1 0 0\n1 1 0\n0 1 1\n")
@@ -133,14 +139,17 @@ def test_init_files_with_load_lines(tmp_path):
     assert np.allclose(read_init(only), [[0, 0, 0], [-1, 0, 0]])
 
 
-@pytest.mark.parametrize("text, line, problem", [
-    ("", 0, "ends where the number of points"),
-    ("4\n0 0 0\n1 0 0\n", 1, "number of points is more than the 2 lines left"),
-    ("2\n0 0 0\n1 x 0\n", 3, "point 1: value 2 is not a number"),
-    ("2\n0 0 0\n1 1e300 0\n", 3, "point 1 is beyond"),
-    ('load("self.init")\n', 1, "cyclic include"),
-    ('load("nowhere.init")\n', 1, "included file not found"),
-])
+@pytest.mark.parametrize(
+    "text, line, problem",
+    [
+        ("", 0, "ends where the number of points"),
+        ("4\n0 0 0\n1 0 0\n", 1, "number of points is more than the 2 lines left"),
+        ("2\n0 0 0\n1 x 0\n", 3, "point 1: value 2 is not a number"),
+        ("2\n0 0 0\n1 1e300 0\n", 3, "point 1 is beyond"),
+        ('load("self.init")\n', 1, "cyclic include"),
+        ('load("nowhere.init")\n', 1, "included file not found"),
+    ],
+)
 def test_bad_init_files_name_file_and_line(tmp_path, text, line, problem):
     f = tmp_path / "self.init"
     f.write_text(text)
@@ -168,6 +177,7 @@ def test_init_fan_out_is_bounded(tmp_path):
 
 
 # --- every real ViSP file there is ---
+
 
 def _real_files(suffix):
     root = Path(__file__).resolve().parents[2].parent / "shared" / "data"
@@ -219,7 +229,14 @@ def test_name_and_lod_options_survive_import_and_export(tmp_path):
     f = tmp_path / "named.cao"
     f.write_text(NAMED)
     m, opts = read_cao_options(f)
-    pole = tuple(sorted(int(i) for i in np.flatnonzero(np.all(m.vertices == [[0, 0, 0]], axis=1) | np.all(m.vertices == [[0, 0, 1]], axis=1))))
+    pole = tuple(
+        sorted(
+            int(i)
+            for i in np.flatnonzero(
+                np.all(m.vertices == [[0, 0, 0]], axis=1) | np.all(m.vertices == [[0, 0, 1]], axis=1)
+            )
+        )
+    )
     assert opts.edges == {pole: "name=pole useLod=true minLineLengthThreshold=40"}
     assert opts.faces == {0: "name=floor useLod=false minPolygonAreaThreshold=2500"}
     assert opts.cylinders == {0: "name=shaft"} and opts.circles == {0: "name=rim"}
@@ -238,13 +255,21 @@ def test_options_of_included_files_follow_their_records(tmp_path):
 
     (tmp_path / "named.cao").write_text(NAMED)
     top = tmp_path / "two.cao"
-    top.write_text('V1\nload("named.cao")\nload("named.cao", t=[5; 0; 0])\n2\n0 0 0\n0 0 9\n1\n0 1 name=mast\n0\n0\n0\n0\n')
+    top.write_text(
+        'V1\nload("named.cao")\nload("named.cao", t=[5; 0; 0])\n2\n0 0 0\n0 0 9\n1\n0 1 name=mast\n0\n0\n0\n0\n'
+    )
     m, opts = read_cao_options(top)
     floor = "name=floor useLod=false minPolygonAreaThreshold=2500"
     assert opts.faces == {0: floor, 1: floor}
     assert sorted(opts.cylinders) == [0, 1] and sorted(opts.circles) == [0, 1]
-    named_edges = {tuple(tuple(float(x) for x in m.vertices[i]) for i in k): v.split()[0] for k, v in opts.edges.items()}
-    assert named_edges == {((0, 0, 0), (0, 0, 1)): "name=pole", ((5, 0, 0), (5, 0, 1)): "name=pole", ((0, 0, 0), (0, 0, 9)): "name=mast"}
+    named_edges = {
+        tuple(tuple(float(x) for x in m.vertices[i]) for i in k): v.split()[0] for k, v in opts.edges.items()
+    }
+    assert named_edges == {
+        ((0, 0, 0), (0, 0, 1)): "name=pole",
+        ((5, 0, 0), (5, 0, 1)): "name=pole",
+        ((0, 0, 0), (0, 0, 9)): "name=mast",
+    }
     out = tmp_path / "out.cao"
     write_cao(m, out, options=opts)
     m2, opts2 = read_cao_options(out)

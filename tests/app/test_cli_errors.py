@@ -54,8 +54,14 @@ CASES = [
     ("serve", "--scene {tmp}/no-scene"),
     ("serve", "--video {tmp}/no-video.mp4 --no-devices --db {db} --port 0"),
     ("serve", "--no-devices --db {notes} --port 0"),
-    ("serve", "--host 999.1.1.1 --no-devices --db {tmp}/unwritten.sqlite --port 0"),  # hung before: viser waits for a thread that failed to bind
-    ("serve", "--host 192.0.2.1 --no-devices --db {tmp}/unwritten.sqlite --port 0"),  # TEST-NET-1: no address of this machine
+    (
+        "serve",
+        "--host 999.1.1.1 --no-devices --db {tmp}/unwritten.sqlite --port 0",
+    ),  # hung before: viser waits for a thread that failed to bind
+    (
+        "serve",
+        "--host 192.0.2.1 --no-devices --db {tmp}/unwritten.sqlite --port 0",
+    ),  # TEST-NET-1: no address of this machine
     ("render", "--scene {tmp}/no-scene"),
     ("script", "--scene {tmp}/no-scene"),
     ("track", "{tmp}/no-video.mp4 --scene scenes/workcell --body parallelepiped"),
@@ -86,7 +92,9 @@ def files(tmp_path_factory):
 @pytest.mark.parametrize("command, arguments", CASES, ids=[f"{c} {a.split(' ')[0]}".strip() for c, a in CASES])
 def test_a_failure_is_one_line(files, command, arguments):
     argv = command.split() + [a.format(**files) for a in arguments.split()]
-    run = subprocess.run([sys.executable, "-m", "app.cli", *argv], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    run = subprocess.run(
+        [sys.executable, "-m", "app.cli", *argv], capture_output=True, text=True, cwd=ROOT, timeout=300
+    )
     err = run.stderr
     assert run.returncode != 0, (argv, run.stdout, err)
     assert err.count("\n") == 1 and "Traceback" not in err, err
@@ -107,7 +115,11 @@ def _with_render_raising(monkeypatch, func) -> None:
     "exc, status, says",
     [
         (ValueError("the scene has no video\nrender it first"), 1, "the scene has no video render it first"),
-        (FileNotFoundError(2, "No such file or directory", "/x/y.cao"), 1, "/x/y.cao: No such file or directory; check the path"),
+        (
+            FileNotFoundError(2, "No such file or directory", "/x/y.cao"),
+            1,
+            "/x/y.cao: No such file or directory; check the path",
+        ),
         (PermissionError(13, "Permission denied", "/x"), 1, "check its permissions"),
         (OSError(28, "No space left on device", "/x"), 1, "free some space"),
         (RuntimeError("cursor gone"), 70, "internal error (RuntimeError: cursor gone); this is a bug in mcit"),
@@ -132,25 +144,35 @@ def test_a_traceback_on_request(monkeypatch, capsys):
     monkeypatch.setenv("MCIT_TRACEBACK", "1")
     assert cli.main(["render"]) == 70
     err = capsys.readouterr().err
-    assert "Traceback" in err and "ZeroDivisionError" in err and err.rstrip().splitlines()[-1].startswith("mcit render: error")
+    assert (
+        "Traceback" in err
+        and "ZeroDivisionError" in err
+        and err.rstrip().splitlines()[-1].startswith("mcit render: error")
+    )
 
 
-@pytest.mark.parametrize("argv, says", [
-    ("serve --fps nan", "argument --fps: expected a frame rate above 0 and at most 240 frames per second, got 'nan'"),
-    ("serve --fps inf", "got 'inf'"),
-    ("serve --fps=-inf", "got '-inf'"),
-    ("serve --fps 0", "got '0'"),
-    ("serve --fps -25", "got '-25'"),
-    ("serve --fps 240.5", "got '240.5'"),
-    ("serve --fps 1e400", "got '1e400'"),
-    ("serve --fps fast", "argument --fps: expected frames per second (a number), got 'fast'"),
-    ("serve --port 70000", "argument --port: expected a TCP port from 1 to 65535 (0: any free port), got '70000'"),
-    ("serve --port 65536", "got '65536'"),
-    ("serve --port -1", "got '-1'"),
-    ("serve --port 80.5", "argument --port: expected a TCP port number, got '80.5'"),
-    ("track video.mp4 --fps nan", "argument --fps: expected a frame rate above 0"),
-    ("track video.mp4 --fps 0", "argument --fps: expected a frame rate above 0"),
-])
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (
+            "serve --fps nan",
+            "argument --fps: expected a frame rate above 0 and at most 240 frames per second, got 'nan'",
+        ),
+        ("serve --fps inf", "got 'inf'"),
+        ("serve --fps=-inf", "got '-inf'"),
+        ("serve --fps 0", "got '0'"),
+        ("serve --fps -25", "got '-25'"),
+        ("serve --fps 240.5", "got '240.5'"),
+        ("serve --fps 1e400", "got '1e400'"),
+        ("serve --fps fast", "argument --fps: expected frames per second (a number), got 'fast'"),
+        ("serve --port 70000", "argument --port: expected a TCP port from 1 to 65535 (0: any free port), got '70000'"),
+        ("serve --port 65536", "got '65536'"),
+        ("serve --port -1", "got '-1'"),
+        ("serve --port 80.5", "argument --port: expected a TCP port number, got '80.5'"),
+        ("track video.mp4 --fps nan", "argument --fps: expected a frame rate above 0"),
+        ("track video.mp4 --fps 0", "argument --fps: expected a frame rate above 0"),
+    ],
+)
 def test_a_rate_or_port_out_of_range_is_refused_by_the_parser(capsys, argv, says):
     with pytest.raises(SystemExit) as exit_:
         cli.build_parser().parse_args(argv.split())
@@ -160,11 +182,19 @@ def test_a_rate_or_port_out_of_range_is_refused_by_the_parser(capsys, argv, says
     assert says in err, err
 
 
-@pytest.mark.parametrize("argv, name, value", [
-    ("serve --fps 240", "fps", 240.0), ("serve --fps 0.5", "fps", 0.5), ("serve", "fps", None),
-    ("serve --port 1", "port", 1), ("serve --port 65535", "port", 65535), ("serve", "port", 8080),
-    ("serve --port 0", "port", 0),  # any free port: viser binds port 0 and reports the one the system chose
-    ("track video.mp4 --fps 60", "fps", 60.0), ("track video.mp4", "fps", 25.0),
-])
+@pytest.mark.parametrize(
+    "argv, name, value",
+    [
+        ("serve --fps 240", "fps", 240.0),
+        ("serve --fps 0.5", "fps", 0.5),
+        ("serve", "fps", None),
+        ("serve --port 1", "port", 1),
+        ("serve --port 65535", "port", 65535),
+        ("serve", "port", 8080),
+        ("serve --port 0", "port", 0),  # any free port: viser binds port 0 and reports the one the system chose
+        ("track video.mp4 --fps 60", "fps", 60.0),
+        ("track video.mp4", "fps", 25.0),
+    ],
+)
 def test_rates_and_ports_in_range_are_kept(argv, name, value):
     assert getattr(cli.build_parser().parse_args(argv.split()), name) == value

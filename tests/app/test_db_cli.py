@@ -22,7 +22,9 @@ def _mcit(capsys, *argv):
 def test_real_models_round_trip_through_the_database(shared_data, tmp_path, capsys, folder, name):
     src = shared_data(folder, name)
     db = str(tmp_path / "site.sqlite")
-    code, out, err = _mcit(capsys, "db", "import", str(src), "--db", db, "--xyz", "0.1", "0.2", "0.0", "--rpy-deg", "0", "0", "30")
+    code, out, err = _mcit(
+        capsys, "db", "import", str(src), "--db", db, "--xyz", "0.1", "0.2", "0.0", "--rpy-deg", "0", "0", "30"
+    )
     assert code == 0, err
     stem = src.stem
     for suffix in (".cao", ".obj", ".glb"):
@@ -59,14 +61,19 @@ def test_init_list_show_history_undo(tmp_path, capsys):
         rec = d.get("parallelepiped")
         T = np.array(rec.T_world_obj)
         T[:3, 3] += [0.05, 0.0, 0.0]
-        change = d.update_pose(rec, T, np.eye(6) * 1e-6, expected_version=rec.version, method="p3l+refine", client="viser:1")
+        change = d.update_pose(
+            rec, T, np.eye(6) * 1e-6, expected_version=rec.version, method="p3l+refine", client="viser:1"
+        )
     code, out, _ = _mcit(capsys, "db", "history", "parallelepiped", "--db", db)
     assert code == 0 and "p3l+refine" in out and "viser:1" in out
     last = Database.open(db).history()[-1].id
     code, out, _ = _mcit(capsys, "db", "undo", str(last), "--db", db)
     assert code == 0 and f"before change #{last}" in out
     with Database.open(db) as d:
-        assert np.array_equal(d.get("parallelepiped").T_world_obj, rec.T_world_obj) and d.get("parallelepiped").version == 3
+        assert (
+            np.array_equal(d.get("parallelepiped").T_world_obj, rec.T_world_obj)
+            and d.get("parallelepiped").version == 3
+        )
     code, out, _ = _mcit(capsys, "db", "undo", str(last), "--restore", "--db", db)
     with Database.open(db) as d:
         assert np.array_equal(d.get("parallelepiped").T_world_obj, change.T_world_obj)
@@ -136,7 +143,10 @@ def test_export_on_a_full_disk_leaves_out_as_it_was(tmp_path, capsys, monkeypatc
     monkeypatch.setattr(models_io, name, _disk_full_after(100, getattr(models_io, name)))
     code, stdout, err = _mcit(capsys, "db", "export", "parallelepiped", str(out), "--db", db)
     assert code == 1 and stdout == ""
-    assert err == f"mcit db export: error: {out}: No space left on device (nothing was written); free some space and try again\n"
+    assert (
+        err
+        == f"mcit db export: error: {out}: No space left on device (nothing was written); free some space and try again\n"
+    )
     assert [p.name for p in folder.iterdir()] == ([] if existing is None else [out.name])  # no temporary left
     if existing is not None:
         assert out.read_bytes() == existing
@@ -171,9 +181,12 @@ def test_export_errors_name_the_file_not_its_temporary(tmp_path, capsys):
         d.add_object("wire", "polyhedron", read_cao(edges), np.eye(4))
     out = tmp_path / "wire.stl"
     code, _, err = _mcit(capsys, "db", "export", "wire", str(out), "--db", db)
-    assert code == 1 and err == (f"mcit db export: error: {out}: the model has no surface to export (edges or circles only); "
-                                 "export it as .cao\n")
+    assert code == 1 and err == (
+        f"mcit db export: error: {out}: the model has no surface to export (edges or circles only); export it as .cao\n"
+    )
     code, _, err = _mcit(capsys, "db", "export", "wire", str(tmp_path / "no-folder" / "wire.cao"), "--db", db)
-    assert code == 1 and err == (f"mcit db export: error: {tmp_path / 'no-folder' / 'wire.cao'}: No such file or directory "
-                                 "(nothing was written); check the path\n")
+    assert code == 1 and err == (
+        f"mcit db export: error: {tmp_path / 'no-folder' / 'wire.cao'}: No such file or directory "
+        "(nothing was written); check the path\n"
+    )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["edges.cao", "site.sqlite"]

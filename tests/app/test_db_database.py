@@ -72,7 +72,11 @@ def test_seed_from_the_bundled_scene(db):
 
 def test_dimensions_of_shapes():
     assert dimensions_of(BRep.cylinder(0.05, 0.2), "cylinder") == {"radius": 0.05, "height": 0.2}
-    assert dimensions_of(BRep.cone(0.05, 0.02, 0.2), "cone") == {"radius_bottom": 0.05, "radius_top": 0.02, "height": 0.2}
+    assert dimensions_of(BRep.cone(0.05, 0.02, 0.2), "cone") == {
+        "radius_bottom": 0.05,
+        "radius_top": 0.02,
+        "height": 0.2,
+    }
     assert dimensions_of(BRep.box(0.1, 0.2, 0.3), "box") == pytest.approx({"size_x": 0.1, "size_y": 0.2, "size_z": 0.3})
     assert dimensions_of(BRep.box(0.1, 0.2, 0.3), "polyhedron") == {}
 
@@ -81,12 +85,24 @@ def test_add_get_and_records_are_read_only(db):
     rng = np.random.default_rng(0)
     T = _pose(rng)
     cov = np.diag(np.arange(1.0, 7.0)) * 1e-6
-    rec = db.add_object("box1", "box", BRep.box(0.1, 0.2, 0.3), T, cov=cov, dims={"size_x": 0.1}, sigmas={"size_x": 0.002},
-                        status="modelled", clicks=np.zeros((3, 2)), measurements={"range_m": [1.0, np.nan]})
+    rec = db.add_object(
+        "box1",
+        "box",
+        BRep.box(0.1, 0.2, 0.3),
+        T,
+        cov=cov,
+        dims={"size_x": 0.1},
+        sigmas={"size_x": 0.002},
+        status="modelled",
+        clicks=np.zeros((3, 2)),
+        measurements={"range_m": [1.0, np.nan]},
+    )
     assert isinstance(rec, ObjectRecord) and rec.version == 1 and rec.status == "modelled"
     for got in (db.get("box1"), db.get(rec.id), db.objects()[0]):
         assert np.array_equal(got.T_world_obj, T) and np.array_equal(got.cov, cov)
-        assert got.model == BRep.box(0.1, 0.2, 0.3) and got.sigmas["size_x"] == 0.002 and got.dimensions["size_x"] == 0.1
+        assert (
+            got.model == BRep.box(0.1, 0.2, 0.3) and got.sigmas["size_x"] == 0.002 and got.dimensions["size_x"] == 0.1
+        )
     with pytest.raises(ValueError):
         rec.T_world_obj[0, 0] = 2.0
     with pytest.raises(TypeError):
@@ -143,11 +159,26 @@ def test_update_pose_records_what_the_method_used(db):
     rng = np.random.default_rng(1)
     rec = db.add_object("box1", "box", BRep.box(0.1, 0.2, 0.3), np.eye(4), status="stale")
     T = _pose(rng)
-    new = db.update_pose(rec.id, T, np.eye(6) * 1e-6, expected_version=rec.version, method="p3l+refine", client="viser:7",
-                         clicks={"segments_uv": np.ones((3, 2, 2))}, residuals=np.array([0.5, -0.25]), note="after the robot moved it")
+    new = db.update_pose(
+        rec.id,
+        T,
+        np.eye(6) * 1e-6,
+        expected_version=rec.version,
+        method="p3l+refine",
+        client="viser:7",
+        clicks={"segments_uv": np.ones((3, 2, 2))},
+        residuals=np.array([0.5, -0.25]),
+        note="after the robot moved it",
+    )
     assert new.version == 2 and new.status == "known" and np.array_equal(new.T_world_obj, T)
     h = db.history(rec.id)[-1]
-    assert (h.action, h.method, h.client, h.version, h.note) == ("update", "p3l+refine", "viser:7", 2, "after the robot moved it")
+    assert (h.action, h.method, h.client, h.version, h.note) == (
+        "update",
+        "p3l+refine",
+        "viser:7",
+        2,
+        "after the robot moved it",
+    )
     assert np.array_equal(h.before["T_world_obj"], np.eye(4)) and np.array_equal(h.after["T_world_obj"], T)
     assert h.before["status"] == "stale" and h.after["status"] == "known"
     assert np.array_equal(h.clicks["segments_uv"], np.ones((3, 2, 2))) and h.residuals == [0.5, -0.25]
@@ -224,7 +255,16 @@ def test_undo_and_restore_any_earlier_pose(db):
     assert db.objects() == []
     db.undo(db.history()[-1].id)  # undo the undo: it is back, with its last pose
     assert np.array_equal(db.get("box1").T_world_obj, poses[2])
-    assert [h.action for h in db.history("box1")] == ["add", "update", "update", "update", "undo", "restore", "undo", "undo"]
+    assert [h.action for h in db.history("box1")] == [
+        "add",
+        "update",
+        "update",
+        "update",
+        "undo",
+        "restore",
+        "undo",
+        "undo",
+    ]
     with pytest.raises(ConflictError):
         db.undo(changes[0], expected_version=1)
     with pytest.raises(NotFoundError, match="no change #999"):
@@ -243,8 +283,14 @@ def test_undo_of_a_removal_refuses_a_taken_name(db):
 
 def test_update_several_fields_and_status(db):
     rec = db.add_object("c", "cylinder", BRep.cylinder(0.05, 0.2), np.eye(4), dims={"radius": 0.05, "height": 0.2})
-    new = db.update(rec, expected_version=1, method="remodel", model=BRep.cylinder(0.051, 0.19), dims={"radius": 0.051, "height": 0.19},
-                    sigmas={"radius": 0.001, "height": 0.002})
+    new = db.update(
+        rec,
+        expected_version=1,
+        method="remodel",
+        model=BRep.cylinder(0.051, 0.19),
+        dims={"radius": 0.051, "height": 0.19},
+        sigmas={"radius": 0.001, "height": 0.002},
+    )
     assert new.model == BRep.cylinder(0.051, 0.19) and new.model_id != rec.model_id and new.sigmas["height"] == 0.002
     stale = db.set_status("c", "stale", note="moved in the video")
     assert stale.status == "stale" and stale.version == 3

@@ -28,8 +28,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from app.db import Database, DatabaseUnavailable, seed_from_scene
-from app.db import storage
+from app.db import Database, DatabaseUnavailable, seed_from_scene, storage
 from app.scene import default_scene_path, load_scene
 from app.ui.client import ClientPanel
 from app.workflows import History, Session, Site, TrackObject
@@ -179,8 +178,13 @@ def test_a_read_only_database_writes_nothing(db, monkeypatch):
 
     target = str(db.path.resolve())
     real_access = os.access
-    monkeypatch.setattr(os, "access", lambda p, mode, *a, **k: False if (mode & os.W_OK and str(Path(p).resolve()) == target)
-                        else real_access(p, mode, *a, **k))
+    monkeypatch.setattr(
+        os,
+        "access",
+        lambda p, mode, *a, **k: (
+            False if (mode & os.W_OK and str(Path(p).resolve()) == target) else real_access(p, mode, *a, **k)
+        ),
+    )
     with pytest.raises(DatabaseUnavailable) as info:
         db.set_status(BOX, "stale")
     said = str(info.value)
@@ -192,12 +196,15 @@ def test_a_read_only_database_writes_nothing(db, monkeypatch):
     assert db.set_status(BOX, "stale").status == "stale"
 
 
-@pytest.mark.parametrize("code, words", [
-    (errno.ENOSPC, "is full, so nothing was written; free some space"),
-    (errno.EROFS, "read-only file system"),
-    (errno.EACCES, "could not be written (permission denied)"),
-    (errno.EIO, "reported an error"),
-])
+@pytest.mark.parametrize(
+    "code, words",
+    [
+        (errno.ENOSPC, "is full, so nothing was written; free some space"),
+        (errno.EROFS, "read-only file system"),
+        (errno.EACCES, "could not be written (permission denied)"),
+        (errno.EIO, "reported an error"),
+    ],
+)
 def test_the_system_s_storage_errors_are_said_in_the_same_words(tmp_path, code, words):
     path = tmp_path / "site.sqlite"
     path.touch()

@@ -61,7 +61,9 @@ def test_a_corrupt_database_is_refused_and_left_alone(tmp_path):
     with Database.open(f) as db:
         with db.transaction():
             for i in range(60):
-                db.add_object(f"o{i}", "box", BRep.box(*rng.uniform(0.1, 1, 3)), np.eye(4), residuals=rng.normal(size=200))
+                db.add_object(
+                    f"o{i}", "box", BRep.box(*rng.uniform(0.1, 1, 3)), np.eye(4), residuals=rng.normal(size=200)
+                )
     conn = sqlite3.connect(f)  # fold the WAL into the file, then damage pages in its middle
     conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
     page = conn.execute("PRAGMA page_size").fetchone()[0]
@@ -104,10 +106,16 @@ def _v1_database(path):
     conn.execute(
         "INSERT INTO history (time, client, method, action, object_id, version, before, after) VALUES "
         "(1.0, 'old', 'seed', 'add', 1, 1, NULL, ?), (2.0, 'old', 'p3l', 'update', 1, 2, ?, ?)",
-        (json.dumps({"T_world_obj": np.eye(4).tolist()}), json.dumps({"T_world_obj": np.eye(4).tolist()}), json.dumps({"T_world_obj": T.tolist()})),
+        (
+            json.dumps({"T_world_obj": np.eye(4).tolist()}),
+            json.dumps({"T_world_obj": np.eye(4).tolist()}),
+            json.dumps({"T_world_obj": T.tolist()}),
+        ),
     )
-    conn.execute("INSERT INTO calibrations (kind, data, residuals, time, client, method) VALUES ('camera', ?, '[0.5]', 1.0, 'old', 'dlt')",
-                 (json.dumps({"C": np.hstack([np.eye(3), np.zeros((3, 1))]).tolist(), "width": 512, "height": 256}),))
+    conn.execute(
+        "INSERT INTO calibrations (kind, data, residuals, time, client, method) VALUES ('camera', ?, '[0.5]', 1.0, 'old', 'dlt')",
+        (json.dumps({"C": np.hstack([np.eye(3), np.zeros((3, 1))]).tolist(), "width": 512, "height": 256}),),
+    )
     conn.close()
 
 

@@ -24,8 +24,7 @@ import numpy as np
 import pytest
 
 from app.cli import main
-from app.db import Database, DatabaseUnavailable
-from app.db import storage
+from app.db import Database, DatabaseUnavailable, storage
 from core.brep import BRep
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -71,7 +70,9 @@ def _read_only(path: Path):
             path.chmod(mode)
         return
     if not shutil.which("chattr") or subprocess.run(["chattr", "+i", str(path)], capture_output=True).returncode:
-        pytest.skip("as root a read-only file needs the immutable attribute (chattr +i), which this file system refuses")
+        pytest.skip(
+            "as root a read-only file needs the immutable attribute (chattr +i), which this file system refuses"
+        )
     try:
         assert not os.access(path, os.W_OK)
         yield
@@ -121,8 +122,13 @@ def _unshare(script: str) -> subprocess.CompletedProcess:
     probe = subprocess.run(["unshare", "--user", "--map-root-user", "--mount", "true"], capture_output=True)
     if probe.returncode:
         pytest.skip(f"user namespaces are not allowed here ({probe.stderr.decode().strip()})")
-    return subprocess.run(["unshare", "--user", "--map-root-user", "--mount", "sh", "-c", script], capture_output=True,
-                          text=True, cwd=ROOT, timeout=120)
+    return subprocess.run(
+        ["unshare", "--user", "--map-root-user", "--mount", "sh", "-c", script],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
 
 
 def _mcit_sh(*argv) -> str:
@@ -136,13 +142,16 @@ def test_a_read_only_mount_is_read_and_never_written(tmp_path):
     mnt = tmp_path / "mnt"
     mnt.mkdir()
     ro = mnt / path.name
-    script = " && ".join([
-        f"mount --bind '{path.parent}' '{mnt}'", f"mount -o remount,ro,bind '{mnt}'",
-        f"{_mcit_sh('db', 'list', '--db', ro)} > '{tmp_path}/list.out' 2> '{tmp_path}/list.err'",
-        f"{_mcit_sh('db', 'history', '--db', ro)} > /dev/null",
-        f"! {_mcit_sh('db', 'undo', '1', '--db', ro)} 2> '{tmp_path}/undo.err'",
-        f"! {_mcit_sh('db', 'init', '--db', mnt / 'new.sqlite')} 2> '{tmp_path}/init.err'",
-    ])
+    script = " && ".join(
+        [
+            f"mount --bind '{path.parent}' '{mnt}'",
+            f"mount -o remount,ro,bind '{mnt}'",
+            f"{_mcit_sh('db', 'list', '--db', ro)} > '{tmp_path}/list.out' 2> '{tmp_path}/list.err'",
+            f"{_mcit_sh('db', 'history', '--db', ro)} > /dev/null",
+            f"! {_mcit_sh('db', 'undo', '1', '--db', ro)} 2> '{tmp_path}/undo.err'",
+            f"! {_mcit_sh('db', 'init', '--db', mnt / 'new.sqlite')} 2> '{tmp_path}/init.err'",
+        ]
+    )
     run = _unshare(script)
     if run.returncode and "mount" in run.stderr and not (tmp_path / "list.out").exists():
         pytest.skip(f"cannot make a read-only bind mount here: {run.stderr.strip()}")
@@ -172,7 +181,9 @@ def test_a_read_only_mount_simulated(tmp_path, capsys, monkeypatch):
             self.f_flag = st.f_flag | os.ST_RDONLY
 
     monkeypatch.setattr(os, "access", access)
-    monkeypatch.setattr(os, "statvfs", lambda p: ReadOnlyStat(real_statvfs(p)) if str(p).startswith(folder) else real_statvfs(p))
+    monkeypatch.setattr(
+        os, "statvfs", lambda p: ReadOnlyStat(real_statvfs(p)) if str(p).startswith(folder) else real_statvfs(p)
+    )
     _check_reads_work_and_writes_refused(capsys, path, tmp_path, "read-only file system")
 
 
@@ -212,22 +223,26 @@ def test_a_full_disk_changes_nothing(tmp_path):
     disk = tmp_path / "disk"
     disk.mkdir()
     path = disk / "site.sqlite"
-    script = " && ".join([
-        f"mount -t tmpfs -o size=400k tmpfs '{disk}'",
-        f"{_mcit_sh('db', 'init', '--db', path)} > /dev/null",
-        f"sha256sum '{path}' > '{tmp_path}/before'",
-        f"head -c 250000 /dev/zero > '{disk}/filler'",
-        f"! {_mcit_sh('db', 'import', big, '--db', path)} 2> '{tmp_path}/import.err'",
-        f"sha256sum '{path}' > '{tmp_path}/after'",
-        f"ls -a '{disk}' > '{tmp_path}/ls'",
-        f"rm '{disk}/filler'",
-        f"{_mcit_sh('db', 'list', '--db', path)} > '{tmp_path}/list.out'",
-    ])
+    script = " && ".join(
+        [
+            f"mount -t tmpfs -o size=400k tmpfs '{disk}'",
+            f"{_mcit_sh('db', 'init', '--db', path)} > /dev/null",
+            f"sha256sum '{path}' > '{tmp_path}/before'",
+            f"head -c 250000 /dev/zero > '{disk}/filler'",
+            f"! {_mcit_sh('db', 'import', big, '--db', path)} 2> '{tmp_path}/import.err'",
+            f"sha256sum '{path}' > '{tmp_path}/after'",
+            f"ls -a '{disk}' > '{tmp_path}/ls'",
+            f"rm '{disk}/filler'",
+            f"{_mcit_sh('db', 'list', '--db', path)} > '{tmp_path}/list.out'",
+        ]
+    )
     run = _unshare(script)
     if run.returncode and not (tmp_path / "before").exists():
         pytest.skip(f"cannot mount a small tmpfs here: {run.stderr.strip()}")
     assert run.returncode == 0, (run.stdout, run.stderr)
-    _one_line_error(1, (tmp_path / "import.err").read_text(), "is full", "nothing was written", "free some space, then try again")
+    _one_line_error(
+        1, (tmp_path / "import.err").read_text(), "is full", "nothing was written", "free some space, then try again"
+    )
     assert (tmp_path / "before").read_text() == (tmp_path / "after").read_text()
     assert (tmp_path / "ls").read_text().split() == [".", "..", "filler", "site.sqlite"]  # no -wal/-shm left
     listed = (tmp_path / "list.out").read_text()
@@ -261,8 +276,13 @@ def test_a_write_error_from_the_disk_changes_nothing(tmp_path):
         "from app.cli import main\n"
         "sys.exit(main(sys.argv[1:]))\n"
     )
-    run = subprocess.run([sys.executable, "-c", code, "db", "import", str(big), "--db", str(path)], capture_output=True,
-                         text=True, cwd=ROOT, timeout=120)
+    run = subprocess.run(
+        [sys.executable, "-c", code, "db", "import", str(big), "--db", str(path)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     _one_line_error(run.returncode, run.stderr, "reported an error", "nothing was written", "check the disk")
     assert _files(path.parent) == before
 
@@ -280,13 +300,18 @@ conn.execute("ROLLBACK")
 
 def test_a_database_locked_by_another_writer(tmp_path, capsys):
     path = _site(tmp_path / "site")
-    holder = subprocess.Popen([sys.executable, "-c", HOLDER, str(path), "lock-holder-marker"], stdin=subprocess.PIPE,
-                              stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLDER, str(path), "lock-holder-marker"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "locked"
         code, _, err = _mcit(capsys, "db", "undo", "1", "--db", str(path), "--wait-s", "0.2")
-        _one_line_error(code, err, "is locked by another program", f"pid {holder.pid}", "still after 0.2 s",
-                        "try again")
+        _one_line_error(
+            code, err, "is locked by another program", f"pid {holder.pid}", "still after 0.2 s", "try again"
+        )
         holders = storage.lock_holders(path)
         assert len(holders) == 1 and holders[0].startswith(f"pid {holder.pid}: python") and "-c" in holders[0], holders
         code, out, err = _mcit(capsys, "db", "list", "--db", str(path))  # reads do not wait for the writer
@@ -297,7 +322,9 @@ def test_a_database_locked_by_another_writer(tmp_path, capsys):
         holder.wait(30)
     assert storage.lock_holders(path) == []
     with Database.open(path) as db:
-        assert [h.action for h in db.history()][-1] == "calibration" and len(db.history()) == 4  # the undo was not written
+        assert [h.action for h in db.history()][-1] == "calibration" and len(
+            db.history()
+        ) == 4  # the undo was not written
     code, _, err = _mcit(capsys, "db", "undo", "1", "--db", str(path))
     assert code == 0, err
 

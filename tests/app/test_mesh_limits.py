@@ -30,12 +30,14 @@ def _surface(n_faces: int) -> tuple[np.ndarray, np.ndarray]:
     z = 0.01 * np.sin(7.0 * x + 40.0 * y)
     i = np.arange(k - 1) * 2
     F = np.stack([np.c_[i, i + 2, i + 1], np.c_[i + 1, i + 2, i + 3]], axis=1).reshape(-1, 3)
-    return np.c_[x, y, z][:n_faces + 2], F[:n_faces]
+    return np.c_[x, y, z][: n_faces + 2], F[:n_faces]
 
 
 def _obj(path: Path, V, F) -> Path:
-    path.write_text("".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in V)
-                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F))
+    path.write_text(
+        "".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in V)
+        + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F)
+    )
     return path
 
 
@@ -48,17 +50,23 @@ def _stl_binary(path: Path, V, F, count: int | None = None) -> Path:
 
 
 def _stl_ascii(path: Path, V, F) -> Path:
-    facets = "".join("facet normal 0 0 1\nouter loop\n" + "".join(f"vertex {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in V[f])
-                     + "endloop\nendfacet\n" for f in F)
+    facets = "".join(
+        "facet normal 0 0 1\nouter loop\n"
+        + "".join(f"vertex {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in V[f])
+        + "endloop\nendfacet\n"
+        for f in F
+    )
     path.write_text(f"solid strip\n{facets}endsolid strip\n")
     return path
 
 
 def _ply(path: Path, V, F, ascii: bool, n_vertices: int | None = None, n_faces: int | None = None) -> Path:
-    header = (f"ply\nformat {'ascii' if ascii else 'binary_little_endian'} 1.0\ncomment mesh bomb test\n"
-              f"element vertex {len(V) if n_vertices is None else n_vertices}\nproperty float x\nproperty float y\n"
-              f"property float z\nelement face {len(F) if n_faces is None else n_faces}\n"
-              f"property list uchar int vertex_indices\nend_header\n").encode()
+    header = (
+        f"ply\nformat {'ascii' if ascii else 'binary_little_endian'} 1.0\ncomment mesh bomb test\n"
+        f"element vertex {len(V) if n_vertices is None else n_vertices}\nproperty float x\nproperty float y\n"
+        f"property float z\nelement face {len(F) if n_faces is None else n_faces}\n"
+        f"property list uchar int vertex_indices\nend_header\n"
+    ).encode()
     if ascii:
         data = "".join(f"{x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in V) + "".join(f"3 {a} {b} {c}\n" for a, b, c in F)
         path.write_bytes(header + data.encode())
@@ -75,12 +83,26 @@ def _gltf_tree(V, F, n_nodes: int = 1, **accessor_counts) -> tuple[dict, bytes]:
     tree = {
         "asset": {"version": "2.0"},
         "buffers": [{"byteLength": len(binary)}],
-        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 12 * len(V)},
-                        {"buffer": 0, "byteOffset": 12 * len(V), "byteLength": 12 * len(F)}],
-        "accessors": [{"bufferView": 0, "componentType": 5126, "count": accessor_counts.get("vertices", len(V)),
-                       "type": "VEC3", "min": V.min(0).tolist(), "max": V.max(0).tolist()},
-                      {"bufferView": 1, "componentType": 5125, "count": accessor_counts.get("indices", 3 * len(F)),
-                       "type": "SCALAR"}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 12 * len(V)},
+            {"buffer": 0, "byteOffset": 12 * len(V), "byteLength": 12 * len(F)},
+        ],
+        "accessors": [
+            {
+                "bufferView": 0,
+                "componentType": 5126,
+                "count": accessor_counts.get("vertices", len(V)),
+                "type": "VEC3",
+                "min": V.min(0).tolist(),
+                "max": V.max(0).tolist(),
+            },
+            {
+                "bufferView": 1,
+                "componentType": 5125,
+                "count": accessor_counts.get("indices", 3 * len(F)),
+                "type": "SCALAR",
+            },
+        ],
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
         "nodes": [{"mesh": 0, "translation": [0.0, 0.0, 0.1 * i]} for i in range(n_nodes)],
         "scenes": [{"nodes": list(range(n_nodes))}],
@@ -93,8 +115,13 @@ def _glb(path: Path, tree: dict, binary: bytes) -> Path:
     text = json.dumps(tree).encode()
     text += b" " * (-len(text) % 4)
     binary += b"\0" * (-len(binary) % 4)
-    path.write_bytes(struct.pack("<4sII", b"glTF", 2, 28 + len(text) + len(binary))
-                     + struct.pack("<I4s", len(text), b"JSON") + text + struct.pack("<I4s", len(binary), b"BIN\0") + binary)
+    path.write_bytes(
+        struct.pack("<4sII", b"glTF", 2, 28 + len(text) + len(binary))
+        + struct.pack("<I4s", len(text), b"JSON")
+        + text
+        + struct.pack("<I4s", len(binary), b"BIN\0")
+        + binary
+    )
     return path
 
 
@@ -210,8 +237,10 @@ def test_binary_stl_whose_header_disagrees_with_its_size_is_refused(tmp_path, tr
     with pytest.raises(MeshError) as info:
         read_mesh(path, max_faces=10**9)
     msg = _one_line(info, path)
-    assert f"the binary STL's header declares {count:,} triangles, which take {84 + 50 * count:,} bytes, " \
-           f"but the file holds 584: it is truncated" in msg, msg
+    assert (
+        f"the binary STL's header declares {count:,} triangles, which take {84 + 50 * count:,} bytes, "
+        f"but the file holds 584: it is truncated" in msg
+    ), msg
     assert trimesh_reads == []
 
 
@@ -222,7 +251,9 @@ def test_ply_whose_header_declares_more_than_its_bytes_is_refused(tmp_path, trim
         with pytest.raises(MeshError) as info:
             read_mesh(path)
         msg = _one_line(info, path)
-        assert "the PLY header declares 100,000 vertex, 100,000 face" in msg and "truncated or its header is wrong" in msg, msg
+        assert (
+            "the PLY header declares 100,000 vertex, 100,000 face" in msg and "truncated or its header is wrong" in msg
+        ), msg
     # a face list said to hold 255 vertices: the file is too short for it (trimesh takes the first as every face's)
     path = _ply(tmp_path / "long-list.ply", V, F, ascii=False)
     data = bytearray(path.read_bytes())
@@ -249,9 +280,11 @@ def test_ascii_ply_with_more_lines_or_bytes_than_text_is_refused(tmp_path, trime
 def test_ply_polygon_counts_its_triangles(tmp_path, trimesh_reads, ascii):
     V, _ = _surface(200)
     path = tmp_path / "polygon.ply"
-    header = (f"ply\nformat {'ascii' if ascii else 'binary_little_endian'} 1.0\nelement vertex {len(V)}\n"
-              f"property float x\nproperty float y\nproperty float z\nelement face 1\n"
-              f"property list uchar int vertex_indices\nend_header\n").encode()
+    header = (
+        f"ply\nformat {'ascii' if ascii else 'binary_little_endian'} 1.0\nelement vertex {len(V)}\n"
+        f"property float x\nproperty float y\nproperty float z\nelement face 1\n"
+        f"property list uchar int vertex_indices\nend_header\n"
+    ).encode()
     ring = np.r_[np.arange(0, len(V), 2), np.arange(len(V) - 1, 0, -2)][:103]  # one polygon of 103 vertices
     if ascii:
         data = "".join(f"{x} {y} {z}\n" for x, y, z in V) + f"{len(ring)} " + " ".join(map(str, ring)) + "\n"
@@ -286,7 +319,9 @@ def test_glb_accessor_that_overruns_its_buffer_or_has_no_data_is_refused(tmp_pat
     liar = _glb(tmp_path / "liar.glb", *_gltf_tree(V, F, indices=3000))
     with pytest.raises(MeshError) as info:
         read_mesh(liar)
-    assert "accessor 1 declares 3,000 items, which take 12,000 bytes, but its buffer view 1 holds 120" in _one_line(info, liar)
+    assert "accessor 1 declares 3,000 items, which take 12,000 bytes, but its buffer view 1 holds 120" in _one_line(
+        info, liar
+    )
     # an accessor without a buffer view: trimesh fills it with zeros (here 12 GB)
     tree, binary = _gltf_tree(V, F)
     tree["accessors"].append({"componentType": 5126, "count": 10**9, "type": "VEC3"})
@@ -366,12 +401,19 @@ def test_import_refuses_a_mesh_over_the_limit_and_max_faces_raises_it(tmp_path, 
     path = _stl_binary(tmp_path / "part.stl", V, F)
     code, out, err = _mcit(capsys, "db", "import", str(path), "--db", db)
     assert code == 1 and out == "" and err.count("\n") == 1, err
-    assert err.startswith(f"mcit db import: error: {path}: the binary STL holds 200,002 triangles, beyond mcit's limits "
-                          f"for one mesh (200,000 triangles, 600,000 vertices, 64 MB)") and "--max-faces N" in err, err
+    assert (
+        err.startswith(
+            f"mcit db import: error: {path}: the binary STL holds 200,002 triangles, beyond mcit's limits "
+            f"for one mesh (200,000 triangles, 600,000 vertices, 64 MB)"
+        )
+        and "--max-faces N" in err
+    ), err
     assert not Path(db).exists()  # refused before the database was opened
     small = _obj(tmp_path / "small.obj", *_surface(12))
     code, _, err = _mcit(capsys, "db", "import", str(small), "--db", db, "--max-faces", "11")
-    assert code == 1 and "the file holds 12 faces (f lines), beyond mcit's limits for one mesh (11 triangles" in err, err
+    assert code == 1 and "the file holds 12 faces (f lines), beyond mcit's limits for one mesh (11 triangles" in err, (
+        err
+    )
     code, out, err = _mcit(capsys, "db", "import", str(small), "--db", db, "--max-faces", "12")
     assert code == 0 and "added #" in out, err
     with Database.open(db) as d:

@@ -65,9 +65,15 @@ def test_the_overlay_draws_a_mesh_cylinders_side_lines_on_the_analytic_ones(site
     mesh = _mesh(trimesh.creation.cylinder(0.05, 0.2, sections=500))  # 2,000 triangles
     pw = project_wireframe(cam, mesh, T)
     sil = pw.seg_uv[pw.kind == "silhouette"]
-    assert len(sil) == 2 and np.all(pw.visible[pw.kind == "silhouette"]) and np.all(pw.edge_index[pw.kind == "silhouette"] == -1)
+    assert (
+        len(sil) == 2
+        and np.all(pw.visible[pw.kind == "silhouette"])
+        and np.all(pw.edge_index[pw.kind == "silhouette"] == -1)
+    )
     assert (pw.kind == "edge").sum() >= 900  # the rims (1,000 sides, a few hidden ones clipped or not)
-    true = project_wireframe(cam, BRep(np.zeros((0, 3)), np.zeros((0, 2), int), (), (Revolution([0, 0, -0.1], [0, 0, 0.1], 0.05, 0.05),)), T)
+    true = project_wireframe(
+        cam, BRep(np.zeros((0, 3)), np.zeros((0, 2), int), (), (Revolution([0, 0, -0.1], [0, 0, 0.1], 0.05, 0.05),)), T
+    )
     lines = true.seg_uv[true.kind == "silhouette"]
     assert len(lines) == 2
     for s in sil:
@@ -111,8 +117,11 @@ def test_a_mesh_with_nothing_to_draw_warns_naming_the_file(tmp_path):
     flat.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 3\n")
     with pytest.warns(MeshWarning, match=rf"^{flat.resolve()}: this mesh gives nothing to draw"):
         read_mesh(flat)
-    for name, m in (("ball.obj", trimesh.creation.icosphere(3, 0.1)), ("pill.stl", trimesh.creation.capsule(0.2, 0.05)),
-                    ("can.ply", trimesh.creation.cylinder(0.05, 0.2))):
+    for name, m in (
+        ("ball.obj", trimesh.creation.icosphere(3, 0.1)),
+        ("pill.stl", trimesh.creation.capsule(0.2, 0.05)),
+        ("can.ply", trimesh.creation.cylinder(0.05, 0.2)),
+    ):
         m.export(str(tmp_path / name))
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # a sphere, a capsule, a cylinder: drawn by their outlines
@@ -120,12 +129,15 @@ def test_a_mesh_with_nothing_to_draw_warns_naming_the_file(tmp_path):
         assert len(model.faces)
 
 
-@pytest.mark.parametrize("name,mesh", [
-    ("sphere", trimesh.creation.icosphere(3, 0.1)),
-    ("cylinder", trimesh.creation.cylinder(0.05, 0.2, sections=64)),
-    ("cone", trimesh.creation.cone(0.05, 0.2, sections=64)),
-    ("capsule", trimesh.creation.capsule(0.2, 0.05, count=[16, 16])),
-])
+@pytest.mark.parametrize(
+    "name,mesh",
+    [
+        ("sphere", trimesh.creation.icosphere(3, 0.1)),
+        ("cylinder", trimesh.creation.cylinder(0.05, 0.2, sections=64)),
+        ("cone", trimesh.creation.cone(0.05, 0.2, sections=64)),
+        ("capsule", trimesh.creation.capsule(0.2, 0.05, count=[16, 16])),
+    ],
+)
 def test_a_meshs_cao_keeps_its_faces_and_reads_back(tmp_path, name, mesh):
     model = _mesh(mesh)
     text = cao_text(model)
@@ -137,5 +149,7 @@ def test_a_meshs_cao_keeps_its_faces_and_reads_back(tmp_path, name, mesh):
     # the sharp edges stay edges; a .cao face's sides are all edges, so the smooth sides become edges too
     sides = {(min(a, b), max(a, b)) for f in model.faces for a, b in zip(f, f[1:] + f[:1])}
     edges = {tuple(e) for e in back.edges.tolist()}
-    assert {tuple(e) for e in model.edges.tolist()} <= edges and edges == sides | {tuple(e) for e in model.edges.tolist()}
+    assert {tuple(e) for e in model.edges.tolist()} <= edges and edges == sides | {
+        tuple(e) for e in model.edges.tolist()
+    }
     assert text.count("\n") == 1 + 2 + len(model.vertices) + 2 + 2 + 2 + len(model.faces) + 2 + 2  # no lines left over

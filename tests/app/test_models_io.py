@@ -1,14 +1,13 @@
 """Model import and export: ViSP .cao (every block, includes, errors) and meshes through trimesh."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from app.models_io import CaoError, MeshError, cao_text, load_model, read_cao, save_model
 from app.scene import MODEL_LOADERS, load_scene, scenes_dir
-from core.brep import BRep, Circle
+from core.brep import BRep
 from core.transforms import exp_so3, make_T
 
 REAL_MODELS = [("visp-teabox", "teabox.cao", 8, 12, 6, 0), ("visp-cube", "cube_and_cylinder.cao", 8, 12, 6, 1)]
@@ -88,8 +87,13 @@ def test_every_block_of_the_format(tmp_path):
     assert len(m.vertices) == 4  # points 4 and 5 define no edge: not vertices
     # lines 2, 1, 0 = (2, 0), (1, 2), (0, 1) chain into the loop 0 → 2 → 1
     assert m.faces == ((0, 2, 1), (0, 3, 2))
-    assert _edge_set(m) == {((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)), ((1.0, 0.0, 0.0), (1.0, 1.0, 0.0)), ((0.0, 1.0, 0.0), (1.0, 1.0, 0.0)),
-                            ((0.0, 0.0, 0.0), (1.0, 1.0, 0.0)), ((0.0, 0.0, 0.0), (0.0, 1.0, 0.0))}
+    assert _edge_set(m) == {
+        ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)),
+        ((1.0, 0.0, 0.0), (1.0, 1.0, 0.0)),
+        ((0.0, 1.0, 0.0), (1.0, 1.0, 0.0)),
+        ((0.0, 0.0, 0.0), (1.0, 1.0, 0.0)),
+        ((0.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+    }
     assert len(m.solids) == 1 and m.solids[0].r0 == 0.1 and np.allclose(m.solids[0].p1, [0, 0, 1])
     assert len(m.circles) == 1 and m.circles[0].radius == 0.5 and np.allclose(m.circles[0].normal, [0, 0, 1])
     # round trip through the writer: same geometry (circles to rounding of their plane normal)
@@ -207,8 +211,14 @@ def test_malformed_obj_names_file_line_and_problem(tmp_path, text, line, problem
     assert str(info.value).startswith(f"{f}:{line}:")
 
 
-@pytest.mark.parametrize("name, data, problem", [("bad.ply", b"", "cannot read the mesh"), ("bad.stl", b"solid x\nfacet normal 0 0 1\n", "no triangles"),
-                                                 ("bad.glb", b"glTF\x02\x00\x00\x00garbage", "cannot read the mesh")])
+@pytest.mark.parametrize(
+    "name, data, problem",
+    [
+        ("bad.ply", b"", "cannot read the mesh"),
+        ("bad.stl", b"solid x\nfacet normal 0 0 1\n", "no triangles"),
+        ("bad.glb", b"glTF\x02\x00\x00\x00garbage", "cannot read the mesh"),
+    ],
+)
 def test_malformed_binary_meshes_name_the_file(tmp_path, name, data, problem):
     f = tmp_path / name
     f.write_bytes(data)

@@ -15,8 +15,21 @@ from app.names import check_object_name
 from app.scene import SceneError, scene_from_dict
 from core.brep import BRep
 
-BAD = ["<img src=x onerror=alert(1)>", "<script>x</script>", "[x](javascript:alert(1))", "a\nb", "", " x", "x ",
-       "_x", "a" * 65, "box/1", 'say "hi"', None, 3]
+BAD = [
+    "<img src=x onerror=alert(1)>",
+    "<script>x</script>",
+    "[x](javascript:alert(1))",
+    "a\nb",
+    "",
+    " x",
+    "x ",
+    "_x",
+    "a" * 65,
+    "box/1",
+    'say "hi"',
+    None,
+    3,
+]
 GOOD = ["table", "box_1", "Cylinder (2)", "crate-7.b", "boîte", "箱", "a" * 64, "part+1"]
 
 

@@ -29,8 +29,13 @@ def db(tmp_path):
     d.add_object("box1", "box", BRep.box(0.2, 0.1, 0.05), T_BOX, cov=COV, status="known", method="seed", client="test")
     d.add_object("cyl", "polyhedron", BRep.box(0.1, 0.1, 0.3), T_CYL, status="modelled", method="seed", client="test")
     d.update_pose("box1", T_BOX, COV, expected_version=1, method="p3l+refine", client="viser:2")
-    d.add_calibration("camera", {"C": Camera.from_intrinsics(K, invert_T(T_WORLD_CAM), 640, 480).C, "width": 640, "height": 480},
-                      None, method="dlt", client="test")
+    d.add_calibration(
+        "camera",
+        {"C": Camera.from_intrinsics(K, invert_T(T_WORLD_CAM), 640, 480).C, "width": 640, "height": 480},
+        None,
+        method="dlt",
+        client="test",
+    )
     yield d
     d.close()
 
@@ -124,8 +129,10 @@ def _disk_full_on(n_write: int, monkeypatch):
     monkeypatch.setattr(pathlib.Path, "write_text", write_text)
 
 
-@pytest.mark.parametrize("out, n_write, failed", [("poses.json", 1, "poses.json"), ("poses.csv", 1, "poses.csv"),
-                                                  ("{name}.pos", 2, "cyl.pos")])
+@pytest.mark.parametrize(
+    "out, n_write, failed",
+    [("poses.json", 1, "poses.json"), ("poses.csv", 1, "poses.csv"), ("{name}.pos", 2, "cyl.pos")],
+)
 def test_a_full_disk_writes_nothing_and_leaves_no_temporary(db, tmp_path, monkeypatch, out, n_write, failed):
     folder = tmp_path / "out"
     folder.mkdir()
@@ -144,7 +151,9 @@ def test_mcit_db_export_poses(db, tmp_path, capsys):
     path = str(db.path)
     assert main(["db", "export-poses", str(tmp_path / "p.json"), "--db", path]) == 0
     assert f"wrote {tmp_path / 'p.json'}" in capsys.readouterr().out
-    assert main(["db", "export-poses", str(tmp_path / "b.pos"), "--object", "box1", "--frame", "world", "--db", path]) == 0
+    assert (
+        main(["db", "export-poses", str(tmp_path / "b.pos"), "--object", "box1", "--frame", "world", "--db", path]) == 0
+    )
     np.testing.assert_allclose(read_visp_pose(tmp_path / "b.pos"), T_BOX, atol=1e-9)
     assert main(["db", "export-poses", str(tmp_path / "b.pos"), "--db", path]) == 1
     err = capsys.readouterr().err
@@ -153,19 +162,36 @@ def test_mcit_db_export_poses(db, tmp_path, capsys):
 
 def test_mcit_track_pos_out(box_frames, tmp_path, capsys):
     d = box_frames
-    args = ["track", str(d / "frames"), "--model", str(d / "box.cao"), "--pose", str(d / "box.pos"),
-            "--intrinsics", str(d / "rig.xml"), "--camera-name", "tele", "--out", str(tmp_path / "t.avi"),
-            "--csv", str(tmp_path / "t.csv")]
+    args = [
+        "track",
+        str(d / "frames"),
+        "--model",
+        str(d / "box.cao"),
+        "--pose",
+        str(d / "box.pos"),
+        "--intrinsics",
+        str(d / "rig.xml"),
+        "--camera-name",
+        "tele",
+        "--out",
+        str(tmp_path / "t.avi"),
+        "--csv",
+        str(tmp_path / "t.csv"),
+    ]
     assert main(args + ["--pos-out", str(tmp_path / "pos" / "box.%04d.pos")]) == 0
     assert "3 .pos files" in capsys.readouterr().out
     rows = list(csv.DictReader(open(tmp_path / "t.csv")))
     for k, row in enumerate(rows):
         T = read_visp_pose(tmp_path / "pos" / f"box.{k:04d}.pos")  # ViSP cMo: the camera is the world here
         np.testing.assert_allclose(T[:3, 3], [float(row[c]) for c in ("tx_m", "ty_m", "tz_m")], atol=1e-6)
-        np.testing.assert_allclose(log_so3(T[:3, :3]), [float(row[c]) for c in ("rx_rad", "ry_rad", "rz_rad")], atol=1e-6)
+        np.testing.assert_allclose(
+            log_so3(T[:3, :3]), [float(row[c]) for c in ("rx_rad", "ry_rad", "rz_rad")], atol=1e-6
+        )
     # a plain path: the last tracked frame's pose, which restarts tracking (--pose reads it)
     assert main(args + ["--pos-out", str(tmp_path / "last.pos")]) == 0
     assert "pose of frame 2" in capsys.readouterr().out
-    np.testing.assert_allclose(read_visp_pose(tmp_path / "last.pos"), read_visp_pose(tmp_path / "pos" / "box.0002.pos"), atol=1e-9)
+    np.testing.assert_allclose(
+        read_visp_pose(tmp_path / "last.pos"), read_visp_pose(tmp_path / "pos" / "box.0002.pos"), atol=1e-9
+    )
     assert main(args + ["--pos-out", str(tmp_path / "bad.%s.%d.pos")]) == 2
     assert "one %d (e.g. %04d) for the frame number expected" in capsys.readouterr().err

@@ -8,20 +8,30 @@ import pytest
 from app.operator.generate import still_windows
 from app.scene import SceneError, default_scene_path, load_scene, parse_pose, pose_to_json, scene_from_dict
 from core.rangefinder import aim
-from core.transforms import pose_error, random_rotation, make_T
+from core.transforms import make_T, pose_error, random_rotation
 
 
 def minimal() -> dict:
     return {
         "format": "mcit-scene/1",
         "name": "tiny",
-        "camera": {"width": 64, "height": 48, "K": [[50, 0, 31.5], [0, 50, 23.5], [0, 0, 1]],
-                   "T_world_cam": {"xyz": [0, -2, 0.5], "rpy_deg": [-100, 0, 0]}},
+        "camera": {
+            "width": 64,
+            "height": 48,
+            "K": [[50, 0, 31.5], [0, 50, 23.5], [0, 0, 1]],
+            "T_world_cam": {"xyz": [0, -2, 0.5], "rpy_deg": [-100, 0, 0]},
+        },
         "turret": {"T_world_turret": {"xyz": [0.2, -2, 0.5], "rpy_deg": [0, 0, 90]}},
         "bodies": [
             {"name": "table", "kind": "table", "model": {"box": [1, 1, 0.05]}, "pose": {"xyz": [0, 0, -0.05]}},
-            {"name": "box", "kind": "box", "status": "unknown", "model": {"box": [0.1, 0.1, 0.1]}, "pose": {"xyz": [0, 0, 0]},
-             "motion": [{"t": 1.0, "pose": {"xyz": [0.1, 0, 0], "rpy_deg": [0, 0, 30]}}]},
+            {
+                "name": "box",
+                "kind": "box",
+                "status": "unknown",
+                "model": {"box": [0.1, 0.1, 0.1]},
+                "pose": {"xyz": [0, 0, 0]},
+                "motion": [{"t": 1.0, "pose": {"xyz": [0.1, 0, 0], "rpy_deg": [0, 0, 30]}}],
+            },
         ],
         "video": {"file": "video.mp4", "fps": 10, "duration_s": 2},
     }
@@ -46,8 +56,14 @@ def test_minimal_scene_loads_from_a_file(tmp_path):
 @pytest.mark.parametrize(
     "mutate, match",
     [
-        (lambda d: d["bodies"][1].update(pose={"xyz": [0, 0], "rpy_deg": [0, 0, 0]}), r"bodies\[1\] \(box\)\.pose\.xyz"),
-        (lambda d: d["bodies"][1].update(pose=[[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]), r"bodies\[1\] \(box\)\.pose"),
+        (
+            lambda d: d["bodies"][1].update(pose={"xyz": [0, 0], "rpy_deg": [0, 0, 0]}),
+            r"bodies\[1\] \(box\)\.pose\.xyz",
+        ),
+        (
+            lambda d: d["bodies"][1].update(pose=[[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
+            r"bodies\[1\] \(box\)\.pose",
+        ),
         (lambda d: d["bodies"][1].update(pose={"xyz": [0, 0, 0], "ypr": [0, 0, 0]}), "unknown pose keys"),
         (lambda d: d["bodies"][1].update(model={"sphere": [0.1]}), r"unknown model kind 'sphere'"),
         (lambda d: d["bodies"][1].update(model={"box": [0.1, -0.1, 0.1]}), r"model\.box.*\[1\]: must be >"),
@@ -55,7 +71,10 @@ def test_minimal_scene_loads_from_a_file(tmp_path):
         (lambda d: d["bodies"][1].update(model={"cao": "absent.cao"}), "file not found"),
         (lambda d: d.pop("camera"), "missing field 'camera'"),
         (lambda d: d["bodies"][1].update(name="table"), r"bodies\[1\]\.name: duplicate body name 'table'"),
-        (lambda d: d["bodies"][1]["motion"].append({"t": 0.5, "pose": {}}), r"motion\[1\]\.t: keyframe times must increase"),
+        (
+            lambda d: d["bodies"][1]["motion"].append({"t": 0.5, "pose": {}}),
+            r"motion\[1\]\.t: keyframe times must increase",
+        ),
         (lambda d: d["bodies"][1]["motion"][0].update(t=0.0), r"motion\[0\]\.t"),
         (lambda d: d["bodies"][1].update(moton=[]), r"unknown field\(s\) \['moton'\]"),
         (lambda d: d.update(bodys=[]), r"unknown field\(s\) \['bodys'\]"),
@@ -108,7 +127,12 @@ def test_camera_from_C_and_from_an_intrinsics_file(tmp_path, shared_data):
     np.testing.assert_allclose(scene_from_dict(d, tmp_path).camera.C, s.camera.C, atol=1e-12)
     xml = shared_data("visp-cube", "cube.xml")
     d = minimal()
-    d["camera"] = {"width": 640, "height": 480, "intrinsics_file": str(xml), "T_world_cam": minimal()["camera"]["T_world_cam"]}
+    d["camera"] = {
+        "width": 640,
+        "height": 480,
+        "intrinsics_file": str(xml),
+        "T_world_cam": minimal()["camera"]["T_world_cam"],
+    }
     K, _ = scene_from_dict(d, tmp_path).camera.decompose()
     np.testing.assert_allclose(K, [[547.7367575, 0, 338.7036994], [0, 542.0744058, 234.5083345], [0, 0, 1]], atol=1e-6)
     del d["camera"]["width"]
@@ -176,11 +200,18 @@ def test_workcell_is_the_papers_set_up(workcell):
     assert dims("parallelepiped") == [0.132, 0.231, 0.35] and s.body("parallelepiped").status == "known"
     assert dims("unknown_box") == [0.09, 0.094, 0.14] and s.body("unknown_box").status == "unknown"
     cyl = s.body("unknown_cylinder")
-    assert cyl.status == "unknown" and cyl.model.solids[0].r0 == 0.051 and abs(cyl.model.solids[0].height - 0.166) < 1e-12
+    assert (
+        cyl.status == "unknown" and cyl.model.solids[0].r0 == 0.051 and abs(cyl.model.solids[0].height - 0.166) < 1e-12
+    )
     baseline = np.linalg.norm(s.turret.T_world_turret[:3, 3] - s.camera.center)
     assert 0.15 <= baseline <= 0.25
     assert {b.name for b in s.scenery} == {"floor", "back_wall"}
-    assert s.video is not None and s.video.path.name == "video.avi" and 10 <= s.video.fps <= 15 and 20 <= s.video.duration_s <= 30
+    assert (
+        s.video is not None
+        and s.video.path.name == "video.avi"
+        and 10 <= s.video.fps <= 15
+        and 20 <= s.video.duration_s <= 30
+    )
 
 
 def test_workcell_distances_view_and_reach(workcell):
@@ -216,7 +247,11 @@ def test_workcell_objects_never_overlap_on_the_table(workcell):
             foot.append((T[:2, 3], 0.5 * np.linalg.norm(P[1, :2] - P[0, :2])))  # bounding circle on the table
         for i in range(len(foot)):
             for j in range(i + 1, len(foot)):
-                assert np.linalg.norm(foot[i][0] - foot[j][0]) > foot[i][1] + foot[j][1] + 0.02, (objs[i].name, objs[j].name, time_s)
+                assert np.linalg.norm(foot[i][0] - foot[j][0]) > foot[i][1] + foot[j][1] + 0.02, (
+                    objs[i].name,
+                    objs[j].name,
+                    time_s,
+                )
 
 
 def test_workcell_known_box_makes_one_large_then_small_motions(workcell):

@@ -65,8 +65,8 @@ def test_an_undistorted_image_puts_a_distorted_dot_back_where_C_sees_it():
         cv2.circle(img, tuple(int(round(c * 16)) for c in p), 5 * 16, 255.0, -1, cv2.LINE_AA, 4)
     img = cv2.GaussianBlur(img, (0, 0), 1.0)
     out = lens.undistort_image(img)
-    for (u, v) in ideal:
-        win = out[int(v) - 12:int(v) + 13, int(u) - 12:int(u) + 13]
+    for u, v in ideal:
+        win = out[int(v) - 12 : int(v) + 13, int(u) - 12 : int(u) + 13]
         yy, xx = np.mgrid[-12:13, -12:13]
         c = np.array([(win * xx).sum(), (win * yy).sum()]) / win.sum() + [int(u), int(v)]
         assert np.linalg.norm(c - [u, v]) < 0.35, (u, v, c)  # a dot's centroid (not exactly its centre's image)
@@ -103,7 +103,8 @@ def test_lens_of_intrinsics_files(tmp_path):
     assert lens.model == "fisheye" and (lens.width, lens.height) == (640, 480)
     (tmp_path / "c.xml").write_text(
         "<root><camera><name>c</name><model><type>perspectiveProjWithDistortion</type><px>600</px><py>605</py>"
-        "<u0>319.5</u0><v0>239.5</v0><kud>-0.2</kud><kdu>0.21</kdu></model></camera></root>")
+        "<u0>319.5</u0><v0>239.5</v0><kud>-0.2</kud><kdu>0.21</kdu></model></camera></root>"
+    )
     with pytest.raises(ValueError, match=r"c\.xml: states lens distortion but not the image size"):
         lens_of(read_intrinsics(tmp_path / "c.xml"))
     assert lens_of(read_intrinsics(tmp_path / "c.xml"), 640, 480).model == "visp"
@@ -140,8 +141,10 @@ def test_mcit_track_with_a_distorting_camera(tmp_path, capsys):
     cam = Camera.from_intrinsics(Ks, np.eye(4), 320, 240)
     box = BRep.box(0.2, 0.13, 0.08)
     R0 = exp_so3([2.2, 0.4, 0.3])
-    truth = [make_T(exp_so3(np.radians(0.8) * k * np.array([0.0, 1.0, 0.3])) @ R0, [0.06 + 0.003 * k, 0.03, 0.8])
-             for k in range(4)]
+    truth = [
+        make_T(exp_so3(np.radians(0.8) * k * np.array([0.0, 1.0, 0.3])) @ R0, [0.06 + 0.003 * k, 0.03, 0.8])
+        for k in range(4)
+    ]
     scene = one_body_scene(cam, box, truth)
     r = Renderer(scene, cam, lens=lens)
     (tmp_path / "frames").mkdir()
@@ -150,16 +153,30 @@ def test_mcit_track_with_a_distorting_camera(tmp_path, capsys):
     write_cao(box, tmp_path / "box.cao")
     (tmp_path / "box.pos").write_text("\n".join(f"{x:.12f}" for x in np.r_[truth[0][:3, 3], log_so3(truth[0][:3, :3])]))
     _write_cam(tmp_path / "cam.yml", D, "plumb_bob", (320, 240), Ks)
-    args = ["track", str(tmp_path / "frames"), "--model", str(tmp_path / "box.cao"), "--intrinsics",
-            str(tmp_path / "cam.yml"), "--pose", str(tmp_path / "box.pos"), "--out", str(tmp_path / "t.avi")]
+    args = [
+        "track",
+        str(tmp_path / "frames"),
+        "--model",
+        str(tmp_path / "box.cao"),
+        "--intrinsics",
+        str(tmp_path / "cam.yml"),
+        "--pose",
+        str(tmp_path / "box.pos"),
+        "--out",
+        str(tmp_path / "t.avi"),
+    ]
     assert main(args + ["--csv", str(tmp_path / "t.csv")]) == 0, capsys.readouterr().err
     import csv
 
     def errors(csv_path):
         rows = list(csv.DictReader(open(csv_path)))
         assert len(rows) == 4
-        return np.array([[abs(float(row[k]) - T[i, 3]) for i, k in enumerate(("tx_m", "ty_m", "tz_m"))]
-                         for row, T in zip(rows, truth)])
+        return np.array(
+            [
+                [abs(float(row[k]) - T[i, 3]) for i, k in enumerate(("tx_m", "ty_m", "tz_m"))]
+                for row, T in zip(rows, truth)
+            ]
+        )
 
     assert errors(tmp_path / "t.csv").max() < 2e-3
     # the same frames taken as distortion-free: the depth is several millimetres off
@@ -172,12 +189,22 @@ def test_mcit_track_with_a_distorting_camera(tmp_path, capsys):
     X = X[cam.depth(X @ truth[0][:3, :3].T + truth[0][:3, 3]) > 0]
     (tmp_path / "box.init").write_text(f"{len(X)}\n" + "\n".join(" ".join(str(c) for c in x) for x in X))
     clicks = lens.distort(cam.project_obj(truth[0], X))
-    from app.vision.track_cli import _setup
     import argparse
 
-    ns = argparse.Namespace(source=str(tmp_path / "frames"), model=str(tmp_path / "box.cao"), scene=None, body=None,
-                            intrinsics=str(tmp_path / "cam.yml"), camera_name=None, pose=None, start=0,
-                            init_points=str(tmp_path / "box.init"), init_clicks=[tuple(c) for c in clicks])
+    from app.vision.track_cli import _setup
+
+    ns = argparse.Namespace(
+        source=str(tmp_path / "frames"),
+        model=str(tmp_path / "box.cao"),
+        scene=None,
+        body=None,
+        intrinsics=str(tmp_path / "cam.yml"),
+        camera_name=None,
+        pose=None,
+        start=0,
+        init_points=str(tmp_path / "box.init"),
+        init_clicks=[tuple(c) for c in clicks],
+    )
     T = _setup(ns)[3]
     assert pose_error(T, truth[0])[0] < 0.05 and np.linalg.norm(T[:3, 3] - truth[0][:3, 3]) < 1e-3
 
@@ -204,8 +231,20 @@ def test_mcit_serve_undistorts_the_video_of_a_scene_whose_camera_file_has_distor
     rng = np.random.default_rng(1)
     raw = cv2.GaussianBlur(rng.integers(0, 255, (256, 512, 3), dtype=np.uint8), (0, 0), 2.0)
     cv2.imwrite(str(tmp_path / "frames" / "f0.png"), raw)
-    args = build_parser().parse_args(["serve", "--scene", str(tmp_path), "--video", str(tmp_path / "frames"),
-                                      "--db", str(tmp_path / "site.sqlite"), "--no-devices", "--port", str(free_port())])
+    args = build_parser().parse_args(
+        [
+            "serve",
+            "--scene",
+            str(tmp_path),
+            "--video",
+            str(tmp_path / "frames"),
+            "--db",
+            str(tmp_path / "site.sqlite"),
+            "--no-devices",
+            "--port",
+            str(free_port()),
+        ]
+    )
     server, closers = build_interface(args)
     try:
         src = server.grabber.source

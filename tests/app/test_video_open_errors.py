@@ -58,8 +58,13 @@ def test_each_unopenable_source_says_why_and_what_to_do(tmp_path, no_camera):
 def test_serve_on_an_unopenable_video_is_one_line(tmp_path, no_camera, name):
     spec, says = _bad_sources(tmp_path)[name]
     db = tmp_path / "site.sqlite"
-    run = subprocess.run([sys.executable, "-m", "app.cli", "serve", "--video", spec, "--no-devices", "--db", str(db),
-                          "--port", "0"], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    run = subprocess.run(
+        [sys.executable, "-m", "app.cli", "serve", "--video", spec, "--no-devices", "--db", str(db), "--port", "0"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert run.returncode != 0
     assert run.stderr.count("\n") == 1 and "Traceback" not in run.stderr, run.stderr  # FFmpeg's lines silenced too
     assert run.stderr.startswith("mcit serve: ") and says in run.stderr, run.stderr

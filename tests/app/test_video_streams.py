@@ -29,9 +29,10 @@ from app.video import CaptureSource, FrameGrabber, VideoError, open_video
 from tests.app.rtsp_relay import RtspRelay
 from tests.e2e.harness import free_port
 
-pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None,
-                                reason="Debian's ffmpeg is not installed (apt-get install ffmpeg): these tests serve "
-                                "the stream with it")
+pytestmark = pytest.mark.skipif(
+    shutil.which("ffmpeg") is None,
+    reason="Debian's ffmpeg is not installed (apt-get install ffmpeg): these tests serve the stream with it",
+)
 
 W, H, N, FPS = 160, 120, 20, 20
 BITS = 8
@@ -45,7 +46,7 @@ def clip_frame(i: int) -> np.ndarray:
     image[:24] = 128
     for b in range(BITS):
         x0 = b * (W // BITS)
-        image[2:22, x0 + 2:x0 + W // BITS - 2] = 255 if (i >> b) & 1 else 0
+        image[2:22, x0 + 2 : x0 + W // BITS - 2] = 255 if (i >> b) & 1 else 0
     y, x = np.mgrid[24:H, 0:W]
     image[24:, :, 0] = (x * 255 // W + 12 * i) % 256
     image[24:, :, 1] = (y * 2 + 7 * i) % 256
@@ -120,11 +121,32 @@ class HttpStream:
         self.url = f"http://127.0.0.1:{self.port}/video.mjpg"
         self.proc: subprocess.Popen | None = None
 
-    def start(self) -> "HttpStream":
+    def start(self) -> HttpStream:
         self.proc = subprocess.Popen(
-            ["ffmpeg", "-hide_banner", "-nostdin", "-loglevel", "error", "-re", "-stream_loop", "-1", "-framerate",
-             str(FPS), "-i", str(self.clip / "%03d.png"), "-f", "mpjpeg", "-q:v", "2", "-listen", "1", self.url],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            [
+                "ffmpeg",
+                "-hide_banner",
+                "-nostdin",
+                "-loglevel",
+                "error",
+                "-re",
+                "-stream_loop",
+                "-1",
+                "-framerate",
+                str(FPS),
+                "-i",
+                str(self.clip / "%03d.png"),
+                "-f",
+                "mpjpeg",
+                "-q:v",
+                "2",
+                "-listen",
+                "1",
+                self.url,
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         wait_until(lambda: listening(self.port) or self.proc.poll() is not None, 10.0, "ffmpeg to listen")
         assert self.proc.poll() is None, "ffmpeg exited instead of serving the stream"
         return self
@@ -135,7 +157,7 @@ class HttpStream:
             self.proc.kill()
             self.proc.wait(timeout=5)
 
-    def __enter__(self) -> "HttpStream":
+    def __enter__(self) -> HttpStream:
         return self.start()
 
     def __exit__(self, *exc) -> None:
@@ -153,14 +175,38 @@ class RtspStream:
         self.url = self.relay.url
         self.proc: subprocess.Popen | None = None
 
-    def start(self) -> "RtspStream":
+    def start(self) -> RtspStream:
         self.relay = RtspRelay(self.port, self.rtp_port).start()
         # -huffman default: RTP/JPEG (RFC 2435) carries only the standard Huffman tables
         self.proc = subprocess.Popen(
-            ["ffmpeg", "-hide_banner", "-nostdin", "-loglevel", "error", "-re", "-stream_loop", "-1", "-framerate",
-             str(FPS), "-i", str(self.clip / "%03d.png"), "-c:v", "mjpeg", "-pix_fmt", "yuvj420p", "-q:v", "2",
-             "-huffman", "default", "-f", "rtp", f"rtp://127.0.0.1:{self.rtp_port}?rtcpport={self.rtp_port + 1}"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            [
+                "ffmpeg",
+                "-hide_banner",
+                "-nostdin",
+                "-loglevel",
+                "error",
+                "-re",
+                "-stream_loop",
+                "-1",
+                "-framerate",
+                str(FPS),
+                "-i",
+                str(self.clip / "%03d.png"),
+                "-c:v",
+                "mjpeg",
+                "-pix_fmt",
+                "yuvj420p",
+                "-q:v",
+                "2",
+                "-huffman",
+                "default",
+                "-f",
+                "rtp",
+                f"rtp://127.0.0.1:{self.rtp_port}?rtcpport={self.rtp_port + 1}",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         return self
 
     def kill(self) -> None:
@@ -169,7 +215,7 @@ class RtspStream:
             self.proc.wait(timeout=5)
         self.relay.stop()
 
-    def __enter__(self) -> "RtspStream":
+    def __enter__(self) -> RtspStream:
         return self.start()
 
     def __exit__(self, *exc) -> None:
@@ -185,8 +231,10 @@ def _free_udp_pair() -> int:
             a.bind(("127.0.0.1", 0))
             port = a.getsockname()[1] & ~1
         try:
-            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as a, socket.socket(socket.AF_INET,
-                                                                                      socket.SOCK_DGRAM) as b:
+            with (
+                socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as a,
+                socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as b,
+            ):
                 a.bind(("127.0.0.1", port))
                 b.bind(("127.0.0.1", port + 1))
             return port
@@ -255,8 +303,10 @@ def test_lost_http_stream_is_said_and_resumes_when_served_again(clip):
         wait_until(lambda: grabber.latest().index >= resumed.index + 5, 10.0, "5 more frames")
         assert_is_clip_frame(grabber.latest().image)
         assert grabber.losses == 1 and grabber.error is None
-        print(f"\nHTTP stream: loss said {t_lost - t_kill:.2f} s after ffmpeg was killed; live again "
-              f"{t_live - t_served:.2f} s after it served again (tries {status.tries}+, delays 0.1/0.2/0.4 s)")
+        print(
+            f"\nHTTP stream: loss said {t_lost - t_kill:.2f} s after ffmpeg was killed; live again "
+            f"{t_live - t_served:.2f} s after it served again (tries {status.tries}+, delays 0.1/0.2/0.4 s)"
+        )
     finally:
         grabber.stop()
         stream.kill()
@@ -273,8 +323,7 @@ def test_a_stream_that_hangs_is_said_lost_while_its_read_waits_then_reconnects(c
         stream.proc.send_signal(signal.SIGSTOP)
         status = wait_until(lambda: not_live(grabber), 10.0, "the stall to be said")
         assert status.text.startswith("video lost at ") and "waiting for it" in status.text, status.text
-        status = wait_until(lambda: not_live(grabber, LOST), 15.0,
-                            "the read to time out and reconnection to start")
+        status = wait_until(lambda: not_live(grabber, LOST), 15.0, "the read to time out and reconnection to start")
         assert grabber.losses == 1 and grabber.error is None
     finally:
         grabber.stop()
@@ -325,7 +374,7 @@ class _Panel:
 
 def _is_stamped(image: np.ndarray) -> bool:
     """The not-live marking: a red band across the top, the frame below it grey."""
-    top, body = image[:4].astype(int), image[40:H - 10, 10:W - 10].astype(int)
+    top, body = image[:4].astype(int), image[40 : H - 10, 10 : W - 10].astype(int)
     red_band = np.mean((top[..., 0] > 150) & (top[..., 2] < 80)) > 0.8
     grey = np.all(body.max(axis=2) - body.min(axis=2) <= 1)
     return bool(red_band and grey)
@@ -336,8 +385,18 @@ def test_mcit_serve_on_a_lost_stream_shows_it_not_live_and_live_again(clip, tmp_
     from app.ui.serve import build_interface
 
     stream = HttpStream(clip).start()
-    args = build_parser().parse_args(["serve", "--video", stream.url, "--db", str(tmp_path / "site.sqlite"),
-                                      "--no-devices", "--port", str(free_port())])
+    args = build_parser().parse_args(
+        [
+            "serve",
+            "--video",
+            stream.url,
+            "--db",
+            str(tmp_path / "site.sqlite"),
+            "--no-devices",
+            "--port",
+            str(free_port()),
+        ]
+    )
     server, closers = build_interface(args)
     panel = _Panel()
     server.clients[-1] = panel
@@ -354,15 +413,23 @@ def test_mcit_serve_on_a_lost_stream_shows_it_not_live_and_live_again(clip, tmp_
         shown = server.video.image
         assert shown.shape == (H, W, 3) and _is_stamped(shown)
         assert LOST.match(server._video_stamp), server._video_stamp
-        status = wait_until(lambda: next((t for t in reversed(panel.statuses) if "Not live" in t), None), 5.0,
-                            "the panel's status to say it")
-        assert re.search(r"\*\*⚠ Not live: video lost at \d\d:\d\d:\d\d, reconnecting \(try \d+\)\.\*\* The image "
-                         r"shown is the last frame, greyed", status), status
+        status = wait_until(
+            lambda: next((t for t in reversed(panel.statuses) if "Not live" in t), None),
+            5.0,
+            "the panel's status to say it",
+        )
+        assert re.search(
+            r"\*\*⚠ Not live: video lost at \d\d:\d\d:\d\d, reconnecting \(try \d+\)\.\*\* The image "
+            r"shown is the last frame, greyed",
+            status,
+        ), status
         assert panel.redraws_changed >= 1  # the panels' texts were redrawn when it was lost
         assert server.frames_sent == sent  # no live frame was sent meanwhile
 
         stream = HttpStream(clip, port=stream.port).start()
-        wait_until(lambda: server._video_stamp is None and server.frames_sent > sent, 15.0, "the video to be live again")
+        wait_until(
+            lambda: server._video_stamp is None and server.frames_sent > sent, 15.0, "the video to be live again"
+        )
         assert not _is_stamped(server.video.image)
         assert_is_clip_frame(server.video.image)
         wait_until(lambda: "· **live**" in panel.statuses[-1], 5.0, "the panel's status to say live")
@@ -409,8 +476,10 @@ def test_lost_rtsp_stream_is_said_and_resumes_when_served_again(clip):
         assert grabber.latest().index > last.index and grabber.status().text == "live"
         assert_is_clip_frame(grabber.latest().image)
         assert grabber.losses == 1 and grabber.error is None
-        print(f"\nRTSP stream: loss said {t_lost - t_kill:.2f} s after the server went; live again "
-              f"{t_live - t_served:.2f} s after it served again ({status.text})")
+        print(
+            f"\nRTSP stream: loss said {t_lost - t_kill:.2f} s after the server went; live again "
+            f"{t_live - t_served:.2f} s after it served again ({status.text})"
+        )
     finally:
         grabber.stop()
         stream.kill()

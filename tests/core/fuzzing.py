@@ -32,7 +32,9 @@ def mutated(draw, base, kinds=KINDS) -> np.ndarray:
         elif kind == "shape":
             a = a.reshape(-1)[: draw(st.integers(0, max(a.size - 1, 0)))]
         elif kind == "jitter":
-            a = a + draw(st.sampled_from([1e-300, 1e-12, 1e-6])) * np.random.default_rng(draw(st.integers(0, 9))).normal(size=a.shape)
+            a = a + draw(st.sampled_from([1e-300, 1e-12, 1e-6])) * np.random.default_rng(
+                draw(st.integers(0, 9))
+            ).normal(size=a.shape)
     return a
 
 

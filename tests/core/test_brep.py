@@ -101,7 +101,9 @@ def test_no_silhouette_from_inside_and_rims_visibility():
 
 
 def test_serialisation_round_trip_and_equality():
-    model = BRep.from_faces(BRep.box(1, 2, 3).vertices, BRep.box(1, 2, 3).faces, (Revolution([0, 0, 0], [0, 0, 1], 0.1, 0.05),))
+    model = BRep.from_faces(
+        BRep.box(1, 2, 3).vertices, BRep.box(1, 2, 3).faces, (Revolution([0, 0, 0], [0, 0, 1], 0.1, 0.05),)
+    )
     again = BRep.from_dict(model.to_dict())
     assert again == model
     assert again != BRep.box(1, 2, 3)

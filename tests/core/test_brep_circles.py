@@ -17,7 +17,9 @@ def test_circle_polyline_lies_on_the_circle():
     assert np.allclose(P[0], P[-1])
 
 
-@pytest.mark.parametrize("bad", [dict(normal=[0, 0, 0], radius=1.0), dict(normal=[0, 0, 1], radius=0.0), dict(normal=[0, 0, 1], radius=-1.0)])
+@pytest.mark.parametrize(
+    "bad", [dict(normal=[0, 0, 0], radius=1.0), dict(normal=[0, 0, 1], radius=0.0), dict(normal=[0, 0, 1], radius=-1.0)]
+)
 def test_circle_rejects_bad_input(bad):
     with pytest.raises(ValueError):
         Circle([0, 0, 0], **bad)

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from core.calibration import calibrate_dlt, calibrate_turret, dlt, kabsch
+from core.calibration import calibrate_dlt, calibrate_turret, kabsch
 from core.camera import Camera
 from core.geometry import signed_distance
 from core.rangefinder import RangeFinderSpec, aim, beam_point
@@ -123,8 +123,10 @@ def test_vgg_house_interpretation_planes_contain_the_3d_lines(shared_data):
             l = Camera.image_line(seg2)
             px.append(np.abs(np.column_stack([cam.project(seg3), np.ones(2)]) @ l).max())
     angles, offsets, px = map(np.array, (angles, offsets, px))
-    print(f"\n{len(angles)} matched lines: median angle line/plane {np.median(angles):.3f}°, "
-          f"median endpoint offset {np.median(offsets):.4f} (house units), median image distance {np.median(px):.3f} px")
+    print(
+        f"\n{len(angles)} matched lines: median angle line/plane {np.median(angles):.3f}°, "
+        f"median endpoint offset {np.median(offsets):.4f} (house units), median image distance {np.median(px):.3f} px"
+    )
     assert np.median(px) < 0.6
     assert np.median(angles) < 0.5
 
@@ -166,7 +168,9 @@ def test_turret_calibration_exact_and_noisy():
         cal = calibrate_turret(pan, tilt, rho, X, spec)
         errs_ref.append(cal.T_world_turret[:3, 3] - T[:3, 3])
         covs.append(cal.cov)
-        lin = kabsch(rho[:, None] * np.column_stack([np.cos(tilt) * np.cos(pan), np.cos(tilt) * np.sin(pan), np.sin(tilt)]), X)
+        lin = kabsch(
+            rho[:, None] * np.column_stack([np.cos(tilt) * np.cos(pan), np.cos(tilt) * np.sin(pan), np.sin(tilt)]), X
+        )
         errs_lin.append(lin[:3, 3] - T[:3, 3])
     errs_ref, errs_lin = np.array(errs_ref), np.array(errs_lin)
     assert np.mean(np.sum(errs_ref**2, 1)) <= 1.05 * np.mean(np.sum(errs_lin**2, 1))

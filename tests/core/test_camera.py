@@ -99,8 +99,13 @@ def test_image_line_is_pixel_distance():
 @settings(max_examples=40, deadline=None)
 def test_from_intrinsics_decompose_round_trip(seed):
     rng = np.random.default_rng(seed)
-    K = np.array([[rng.uniform(300, 900), rng.uniform(-20, 20), rng.uniform(200, 400)],
-                  [0.0, rng.uniform(300, 900), rng.uniform(100, 300)], [0.0, 0.0, 1.0]])
+    K = np.array(
+        [
+            [rng.uniform(300, 900), rng.uniform(-20, 20), rng.uniform(200, 400)],
+            [0.0, rng.uniform(300, 900), rng.uniform(100, 300)],
+            [0.0, 0.0, 1.0],
+        ]
+    )
     cam, T_world_cam = random_camera(rng, K)
     K2, T_cam_world = Camera(-7.0 * cam.C, 512, 256).decompose()
     np.testing.assert_allclose(K2, K, rtol=1e-9, atol=1e-7)

@@ -31,8 +31,9 @@ def _valid_camera(cam) -> None:
 
 
 @FAST
-@given(mutated(CAM.C), st.one_of(scalar, st.just(512)), st.one_of(scalar, st.just(256)),
-       st.one_of(st.none(), mutated(X)))
+@given(
+    mutated(CAM.C), st.one_of(scalar, st.just(512)), st.one_of(scalar, st.just(256)), st.one_of(st.none(), mutated(X))
+)
 def test_camera(C, width, height, in_front):
     cam = call(Camera, C, width, height, in_front=in_front)
     if cam is not None:

@@ -27,10 +27,17 @@ TABLE_N = np.array([0.0, 0.0, 1.0])
 # The paper's box on the table (tests/core/modeling/conftest.py's box_scene).
 CAM, T_WT = look_at_setup(np.array([0.0, 0.0, 0.07]), 1.4)
 T_BOX = make_T(rot_z(np.radians(35.0)), [0.0, 0.0, 0.0])
-FACES = simulate_box(CAM, SimWorld(T_WT, boxes=((T_BOX, (0.09, 0.094, 0.14)),)), T_BOX, np.array([0.09, 0.094, 0.14]),
-                     np.random.default_rng(0), step_quantize=False)
-BOX_SCANS = simulate_box_scans(SimWorld(T_WT, boxes=((T_BOX, (0.09, 0.094, 0.14)),)), T_BOX, (0.09, 0.094, 0.14),
-                               np.random.default_rng(4))
+FACES = simulate_box(
+    CAM,
+    SimWorld(T_WT, boxes=((T_BOX, (0.09, 0.094, 0.14)),)),
+    T_BOX,
+    np.array([0.09, 0.094, 0.14]),
+    np.random.default_rng(0),
+    step_quantize=False,
+)
+BOX_SCANS = simulate_box_scans(
+    SimWorld(T_WT, boxes=((T_BOX, (0.09, 0.094, 0.14)),)), T_BOX, (0.09, 0.094, 0.14), np.random.default_rng(4)
+)
 # A cylinder (conftest.cylinder_scene).
 CAM_C, T_WT_C = look_at_setup(np.array([0.0, 0.0, 0.083]), 1.3)
 SOL = Revolution(np.zeros(3), np.array([0.0, 0.0, 0.166]), 0.051, 0.051)
@@ -52,8 +59,14 @@ def _result(res) -> None:
 
 
 @FAST
-@given(st.integers(0, len(FACES) - 1), mutated(FACES[0].points_world), mutated(FACES[0].edges_uv), support,
-       st.one_of(st.just(1.0), scalar), st.sampled_from(["planes", "fused"]))
+@given(
+    st.integers(0, len(FACES) - 1),
+    mutated(FACES[0].points_world),
+    mutated(FACES[0].edges_uv),
+    support,
+    st.one_of(st.just(1.0), scalar),
+    st.sampled_from(["planes", "fused"]),
+)
 def test_model_box(k, points, edges, sup, sigma_px, method):
     faces = list(FACES)
     faces[k] = BoxFace(points, edges, None)
@@ -63,8 +76,13 @@ def test_model_box(k, points, edges, sup, sigma_px, method):
 
 
 @FAST
-@given(st.integers(0, len(BOX_SCANS) - 1), mutated(BOX_SCANS[0].range_m), mutated(BOX_SCANS[0].pan_rad), mutated(T_WT),
-       st.booleans())
+@given(
+    st.integers(0, len(BOX_SCANS) - 1),
+    mutated(BOX_SCANS[0].range_m),
+    mutated(BOX_SCANS[0].pan_rad),
+    mutated(T_WT),
+    st.booleans(),
+)
 def test_model_box_with_scans(k, rho, pan, T_wt, with_support):
     scans = list(BOX_SCANS)
     n = min(len(rho), len(pan))
@@ -78,16 +96,32 @@ def test_model_box_with_scans(k, rho, pan, T_wt, with_support):
 
 
 @FAST
-@given(mutated(SIL), st.integers(0, len(SCANS) - 1), mutated(SCANS[0].range_m), support,
-       st.one_of(st.none(), mutated(TABLE_N)), st.one_of(st.just(1.0), scalar),
-       st.sampled_from(["tangential", "bisecting", "rf_tangential", "fused"]), mutated(T_WT_C))
+@given(
+    mutated(SIL),
+    st.integers(0, len(SCANS) - 1),
+    mutated(SCANS[0].range_m),
+    support,
+    st.one_of(st.none(), mutated(TABLE_N)),
+    st.one_of(st.just(1.0), scalar),
+    st.sampled_from(["tangential", "bisecting", "rf_tangential", "fused"]),
+    mutated(T_WT_C),
+)
 def test_model_cylinder(sil, k, rho, sup, axis, sigma_px, method, T_wt):
     scans = list(SCANS)
     scans[k] = call(RangeScan, scans[k].pan_rad[: len(rho)], scans[k].tilt_rad[: len(rho)], rho)
     if scans[k] is None:
         return
-    res = call(model_cylinder, CAM_C, method, silhouettes_uv=sil, scans=scans, T_world_turret=T_wt, support=sup,
-               axis_dir=axis, sigma_px=sigma_px)
+    res = call(
+        model_cylinder,
+        CAM_C,
+        method,
+        silhouettes_uv=sil,
+        scans=scans,
+        T_world_turret=T_wt,
+        support=sup,
+        axis_dir=axis,
+        sigma_px=sigma_px,
+    )
     if res is not None:
         _result(res)
 
@@ -100,19 +134,36 @@ def test_model_polyhedron(face, edge, sup, sigma_px, data):
     es = dict(ES)
     es[edge] = data.draw(mutated(ES[edge]))
     fc = {f: c for f, c in FC.items() if f != face}
-    res = call(model_polyhedron, CAM_P, PRISM.faces, face_points=fp, face_point_covs=fc, edge_segments=es,
-               support=sup, support_faces=[0] if sup is not None else (), vertical_faces=[2, 3, 4], sigma_px=sigma_px)
+    res = call(
+        model_polyhedron,
+        CAM_P,
+        PRISM.faces,
+        face_points=fp,
+        face_point_covs=fc,
+        edge_segments=es,
+        support=sup,
+        support_faces=[0] if sup is not None else (),
+        vertical_faces=[2, 3, 4],
+        sigma_px=sigma_px,
+    )
     if res is not None:
         _result(res)
 
 
 @FAST
-@given(mutated(FACES[0].points_world), st.one_of(st.none(), scalar), st.sampled_from(["tls", "ols"]), st.booleans(),
-       st.one_of(st.none(), scalar))
+@given(
+    mutated(FACES[0].points_world),
+    st.one_of(st.none(), scalar),
+    st.sampled_from(["tls", "ols"]),
+    st.booleans(),
+    st.one_of(st.none(), scalar),
+)
 def test_fit_face_plane(points, sigma_m, method, robust, threshold_m):
     fit = call(fit_face_plane, points, sigma_m=sigma_m, method=method, robust=robust, threshold_m=threshold_m)
     if fit is not None:
-        assert finite(fit.obs.plane.n) and finite(fit.obs.plane.d) and finite(fit.obs.cov) and fit.obs.cov.shape == (4, 4)
+        assert (
+            finite(fit.obs.plane.n) and finite(fit.obs.plane.d) and finite(fit.obs.cov) and fit.obs.cov.shape == (4, 4)
+        )
 
 
 @FAST

@@ -60,8 +60,14 @@ def test_p3l_batch(segs, edges):
 
 
 @FAST
-@given(mutated(SEGS), mutated(EDGES), mutated(T_START), sigma, st.one_of(st.just(3.0), scalar),
-       st.sampled_from(["l2", "huber"]))
+@given(
+    mutated(SEGS),
+    mutated(EDGES),
+    mutated(T_START),
+    sigma,
+    st.one_of(st.just(3.0), scalar),
+    st.sampled_from(["l2", "huber"]),
+)
 def test_refine(segs, edges, T0, sigma_px, huber_px, loss):
     r = call(refine, CAM, T0, segs_uv=segs, edges_obj=edges, sigma_px=sigma_px, huber_px=huber_px, loss=loss)
     if r is not None:
@@ -70,13 +76,27 @@ def test_refine(segs, edges, T0, sigma_px, huber_px, loss):
 
 
 @FAST
-@given(mutated(SEGS[:5]), mutated(EDGES[:5]), st.one_of(st.none(), mutated(T_START)), sigma,
-       st.one_of(st.none(), scalar), st.one_of(st.just(50), scalar))
+@given(
+    mutated(SEGS[:5]),
+    mutated(EDGES[:5]),
+    st.one_of(st.none(), mutated(T_START)),
+    sigma,
+    st.one_of(st.none(), scalar),
+    st.one_of(st.just(50), scalar),
+)
 def test_estimate_pose(segs, edges, prior, sigma_px, fit_rms_px, max_triples):
     if np.ndim(sigma_px) == 1:
         sigma_px = sigma_px[:5]
-    est = call(estimate_pose, CAM, segs, edges, T_prior=prior, sigma_px=sigma_px, fit_rms_px=fit_rms_px,
-               max_triples=max_triples)
+    est = call(
+        estimate_pose,
+        CAM,
+        segs,
+        edges,
+        T_prior=prior,
+        sigma_px=sigma_px,
+        fit_rms_px=fit_rms_px,
+        max_triples=max_triples,
+    )
     if est is not None:
         _pose(est.T_world_obj if hasattr(est, "T_world_obj") else est.best.T_world_obj)
         assert finite(est.result.cov) and finite(est.result.rms_px)
@@ -108,8 +128,12 @@ def test_symmetries(size, rel_tol):
 
 
 @FAST
-@given(mutated(T_TRUE), mutated(np.array([0.0, 3.0, 5.0])), mutated(T_START),
-       st.one_of(st.none(), st.dictionaries(st.integers(-2, 4), st.integers(-2, 20), max_size=2)))
+@given(
+    mutated(T_TRUE),
+    mutated(np.array([0.0, 3.0, 5.0])),
+    mutated(T_START),
+    st.one_of(st.none(), st.dictionaries(st.integers(-2, 4), st.integers(-2, 20), max_size=2)),
+)
 def test_nearest_twin(T, edges, T_ref, hand):
     out = call(nearest_twin, BOX, T, edges, T_ref, hand)
     if out is not None:

@@ -23,7 +23,6 @@ from core.geometry import (
     project_onto_plane,
     signed_distance,
 )
-from core.transforms import random_rotation
 
 finite = st.floats(-5.0, 5.0, allow_nan=False)
 vec3 = st.lists(finite, min_size=3, max_size=3).map(np.array)

@@ -40,13 +40,18 @@ def test_converges_to_the_exact_pose_from_a_small_motion():
         T_true = _true_pose(rng)
         X, D, uv = _samples(rng, T_true, cam)
         axis = rng.normal(size=3)
-        T0 = make_T(exp_so3(np.radians(5.0) * axis / np.linalg.norm(axis)) @ T_true[:3, :3], T_true[:3, 3] + [0.01, -0.015, 0.02])
+        T0 = make_T(
+            exp_so3(np.radians(5.0) * axis / np.linalg.norm(axis)) @ T_true[:3, :3],
+            T_true[:3, 3] + [0.01, -0.015, 0.02],
+        )
         fit = refine_point_to_line(cam, T0, X, D, uv, loss="l2", max_iter=20, tol_px=1e-10)
         rot_deg, trans_m = pose_error(fit.T_world_obj, T_true)
         assert rot_deg < 1e-7 and trans_m < 1e-9
         assert np.max(np.abs(fit.residuals_px)) < 1e-6
         assert fit.converged
-        assert fit.T_world_obj.shape == (4, 4) and fit.residuals_px.shape == (len(X),) and fit.weights.shape == (len(X),)
+        assert (
+            fit.T_world_obj.shape == (4, 4) and fit.residuals_px.shape == (len(X),) and fit.weights.shape == (len(X),)
+        )
         assert fit.cov.shape == (6, 6) and np.allclose(fit.cov, fit.cov.T)
 
 

@@ -16,7 +16,7 @@ from core.rangefinder import (
     beam_ray,
     quantize_angle,
 )
-from core.transforms import invert_T, make_T, random_rotation, rot_x, rot_z
+from core.transforms import invert_T, make_T, rot_x, rot_z
 
 T_WORLD_TURRET = make_T(rot_z(np.pi / 2), [0.2, -1.45, 0.75])  # the workcell's: looking along world +y
 
@@ -25,7 +25,9 @@ def test_axes_convention():
     np.testing.assert_allclose(beam_direction(0.0, 0.0), [1, 0, 0], atol=1e-15)  # forward
     np.testing.assert_allclose(beam_direction(np.pi / 2, 0.0), [0, 1, 0], atol=1e-15)  # pan + = left
     np.testing.assert_allclose(beam_direction(0.0, np.pi / 2), [0, 0, 1], atol=1e-15)  # tilt + = up
-    np.testing.assert_allclose(beam_direction(0.3, -0.2), [np.cos(-0.2) * np.cos(0.3), np.cos(-0.2) * np.sin(0.3), np.sin(-0.2)])
+    np.testing.assert_allclose(
+        beam_direction(0.3, -0.2), [np.cos(-0.2) * np.cos(0.3), np.cos(-0.2) * np.sin(0.3), np.sin(-0.2)]
+    )
 
 
 @given(st.floats(-3.0, 3.0), st.floats(-1.5, 1.5), st.floats(0.1, 10.0))
@@ -65,13 +67,16 @@ def test_vectorised_beams_and_misses():
         aim(T_WORLD_TURRET, T_WORLD_TURRET[:3, 3])
 
 
-@pytest.mark.parametrize("X, says", [
-    ([np.nan, 1.0, 1.0], r"X_world must be finite, got shape \(3,\) with 1 NaN/inf value\(s\)"),
-    ([[1.0, 2.0, 0.5], [np.inf, 0.0, 0.0]], r"X_world must be finite, got shape \(2, 3\) with 1 NaN/inf"),
-    ([[1.0, 2.0, -np.inf]], r"X_world must be finite"),
-    ([1.0, 2.0], r"X_world must have shape \(3,\), got \(2,\)"),
-    (np.ones((2, 2, 3)), r"X_world must have shape \(N, 3\), got \(2, 2, 3\)"),
-])
+@pytest.mark.parametrize(
+    "X, says",
+    [
+        ([np.nan, 1.0, 1.0], r"X_world must be finite, got shape \(3,\) with 1 NaN/inf value\(s\)"),
+        ([[1.0, 2.0, 0.5], [np.inf, 0.0, 0.0]], r"X_world must be finite, got shape \(2, 3\) with 1 NaN/inf"),
+        ([[1.0, 2.0, -np.inf]], r"X_world must be finite"),
+        ([1.0, 2.0], r"X_world must have shape \(3,\), got \(2,\)"),
+        (np.ones((2, 2, 3)), r"X_world must have shape \(N, 3\), got \(2, 2, 3\)"),
+    ],
+)
 def test_aim_refuses_points_that_are_not_finite(X, says):
     with pytest.raises(ValueError, match=says):
         aim(T_WORLD_TURRET, X)
@@ -91,7 +96,9 @@ def test_aim_of_one_point_and_of_several_agree():
     pan, tilt, rho = aim(T_WORLD_TURRET, X)
     assert pan.shape == tilt.shape == rho.shape == (5,)
     for k in range(5):
-        np.testing.assert_allclose([v for v in aim(T_WORLD_TURRET, X[k])], [pan[k], tilt[k], rho[k]], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            [v for v in aim(T_WORLD_TURRET, X[k])], [pan[k], tilt[k], rho[k]], rtol=0, atol=1e-12
+        )
     np.testing.assert_allclose(beam_point(T_WORLD_TURRET, pan, tilt, rho), X, atol=1e-12)
 
 
@@ -135,6 +142,7 @@ def _table_camera():
 
 def _measure_plane(n, d, T_world_turret, sigma=0.0, rng=None):
     """A range finder that sees only the plane n·X + d = 0."""
+
     def measure(pan, tilt):
         o, u = beam_ray(T_world_turret, pan, tilt)
         denom = n @ u
@@ -144,6 +152,7 @@ def _measure_plane(n, d, T_world_turret, sigma=0.0, rng=None):
         if rho <= 0:
             return None
         return rho + (sigma * rng.normal() if sigma else 0.0)
+
     return measure
 
 
@@ -154,8 +163,15 @@ def test_aim_at_pixel_converges_despite_parallax(quantized):
     spec = RangeFinderSpec()
     measure = _measure_plane(n, d, T_WORLD_TURRET)
     for uv in ([256.0, 128.0], [60.0, 40.0], [450.0, 220.0]):
-        res = aim_at_pixel(cam, T_WORLD_TURRET, uv, measure, depth_guess_m=1.0,
-                           step_rad=spec.step_rad if quantized else None, tol_px=0.05)
+        res = aim_at_pixel(
+            cam,
+            T_WORLD_TURRET,
+            uv,
+            measure,
+            depth_guess_m=1.0,
+            step_rad=spec.step_rad if quantized else None,
+            tol_px=0.05,
+        )
         assert res.converged
         tol = 0.6 if quantized else 0.05  # one turret step ≈ 1.8 mm ≈ 0.4 px at 2 m
         assert res.error_px < tol

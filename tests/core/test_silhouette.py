@@ -71,7 +71,11 @@ def test_cylinder_mesh_shows_its_two_side_lines_on_the_analytic_tangent_lines(se
     b, sil = _mesh_silhouette(trimesh.creation.cylinder(r, h, sections=sections))
     assert len(sil) == 2 and len(b.edges) == 2 * sections  # the two side lines; the rims stay feature edges
     true = _project(Revolution([0, 0, -h / 2], [0, 0, h / 2], r, r).silhouette(C_OBJ))
-    inner = _project(Revolution([0, 0, -h / 2], [0, 0, h / 2], r * np.cos(np.pi / sections), r * np.cos(np.pi / sections)).silhouette(C_OBJ))
+    inner = _project(
+        Revolution(
+            [0, 0, -h / 2], [0, 0, h / 2], r * np.cos(np.pi / sections), r * np.cos(np.pi / sections)
+        ).silhouette(C_OBJ)
+    )
     tol = _to_lines(_dense(inner), true).max()  # the tessellation's own tolerance
     err = _to_lines(_dense(sil), true)
     assert err.max() <= tol + 1e-9, (err.max(), tol)
@@ -129,8 +133,11 @@ def test_sphere_mesh_outline_is_the_analytic_outline(subdivisions):
     if subdivisions == 4:  # 5,120 faces
         assert len(mesh.faces) == 5120 and max(err_out, err_in) <= 0.5
     # a closed outline: every vertex of the contour is on two of its sides
-    _, counts = np.unique(contour_segments(b.vertices, SmoothSides.of(b.vertices, b.faces, b.edges), C_OBJ).reshape(-1, 3),
-                          axis=0, return_counts=True)
+    _, counts = np.unique(
+        contour_segments(b.vertices, SmoothSides.of(b.vertices, b.faces, b.edges), C_OBJ).reshape(-1, 3),
+        axis=0,
+        return_counts=True,
+    )
     assert np.all(counts == 2)
 
 
@@ -140,8 +147,10 @@ def test_capsule_mesh_has_an_outline_and_no_sharp_edge():
     assert len(b.edges) == 0 and len(sil) > 10
     # the outline lies on the capsule's outline: within the tessellation's sag of the two
     # hemispheres' and the cylinder's analytic outlines
-    parts = np.concatenate([_sphere_outline(np.array([0, 0, z]), 0.05) for z in (-0.1, 0.1)]
-                           + [_project(Revolution([0, 0, -0.1], [0, 0, 0.1], 0.05, 0.05).silhouette(C_OBJ))])
+    parts = np.concatenate(
+        [_sphere_outline(np.array([0, 0, z]), 0.05) for z in (-0.1, 0.1)]
+        + [_project(Revolution([0, 0, -0.1], [0, 0, 0.1], 0.05, 0.05).silhouette(C_OBJ))]
+    )
     assert _to_segments(_dense(sil), parts).max() < 1.0
 
 

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from core.transforms import (
@@ -70,7 +70,9 @@ def test_rotation_angle_and_pose_error():
     assert rotation_angle(np.eye(3), R) == pytest.approx(0.3)
     # Accurate for tiny angles and up to π (arccos of the trace alone saturates near 1e-8 rad).
     for angle in (1e-12, 1e-9, 1e-6, np.pi - 1e-9, np.pi):
-        assert rotation_angle(np.eye(3), exp_so3(angle * np.array([0.6, 0.0, 0.8]))) == pytest.approx(angle, rel=1e-6, abs=1e-15)
+        assert rotation_angle(np.eye(3), exp_so3(angle * np.array([0.6, 0.0, 0.8]))) == pytest.approx(
+            angle, rel=1e-6, abs=1e-15
+        )
     deg, m = pose_error(make_T(R, [1, 2, 3]), make_T(np.eye(3), [1, 2, 3.5]))
     assert deg == pytest.approx(np.degrees(0.3))
     assert m == pytest.approx(0.5)

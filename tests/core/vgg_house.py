@@ -14,7 +14,11 @@ N_VIEWS = 10
 
 
 def _matches(path: Path) -> np.ndarray:
-    rows = [[-1 if tok == "*" else int(tok) for tok in line.split()] for line in path.read_text().splitlines() if line.strip()]
+    rows = [
+        [-1 if tok == "*" else int(tok) for tok in line.split()]
+        for line in path.read_text().splitlines()
+        if line.strip()
+    ]
     return np.array(rows, dtype=int)
 
 

@@ -14,8 +14,15 @@ import time
 import numpy as np
 
 CHROMIUM = os.environ.get("MCIT_CHROMIUM", "/usr/bin/chromium")
-ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync", "--no-first-run"]
+ARGS = [
+    "--no-sandbox",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
 FRAME_T_S = 16.0  # the known box has moved (12 s → 15 s) and stays there
 VIEWPORT = {"width": 1200, "height": 700}
 
@@ -56,9 +63,11 @@ def panel_state(panel) -> str:
     """What a client's panel shows: its workflow and step, error, warning, message, selection."""
     wf = panel.session.workflow
     step = None if wf is None else wf.current_step().name
-    return (f"workflow={getattr(wf, 'name', None)}:{getattr(wf, 'object_name', None)} step={step} "
-            f"finished={getattr(wf, 'finished', None)} error={panel.error!r} warning={panel.warning!r} "
-            f"message={getattr(wf, 'message', '')!r} selected={panel.session.selected!r}")
+    return (
+        f"workflow={getattr(wf, 'name', None)}:{getattr(wf, 'object_name', None)} step={step} "
+        f"finished={getattr(wf, 'finished', None)} error={panel.error!r} warning={panel.warning!r} "
+        f"message={getattr(wf, 'message', '')!r} selected={panel.session.selected!r}"
+    )
 
 
 def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float = 0.6) -> None:
@@ -68,8 +77,14 @@ def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float = 0.6
 
     def state():
         cam = panel.client.camera
-        return (panel.fitted_aspect is not None, tuple(np.round(cam.position, 6)), tuple(np.round(cam.wxyz, 6)),
-                round(float(cam.fov), 6), int(cam.image_width), int(cam.image_height))
+        return (
+            panel.fitted_aspect is not None,
+            tuple(np.round(cam.position, 6)),
+            tuple(np.round(cam.wxyz, 6)),
+            round(float(cam.fov), 6),
+            int(cam.image_width),
+            int(cam.image_height),
+        )
 
     deadline = time.monotonic() + timeout_s
     last, since = None, time.monotonic()
@@ -147,8 +162,10 @@ def close_notifications(page, timeout_s: float = 20.0, required: bool = True) ->
         time.sleep(0.2)
     if roots.count() and required:  # (not required: the next steps click the panel, not the video under them)
         texts = [t.strip()[:80] for t in roots.all_inner_texts()]
-        raise AssertionError(f"{roots.count()} notification(s) still open after {timeout_s} s: {texts}"
-                             + (f" (last click: {last_error})" if last_error else ""))
+        raise AssertionError(
+            f"{roots.count()} notification(s) still open after {timeout_s} s: {texts}"
+            + (f" (last click: {last_error})" if last_error else "")
+        )
 
 
 def launch(playwright):
@@ -208,8 +225,10 @@ def assert_prompt_controls(page, timeout_s: float = 15.0) -> list[str]:
         if not missing and prompt_controls(page.panel) == labels:  # the step did not change meanwhile
             return labels
         if time.monotonic() > deadline:
-            raise AssertionError(f"the instruction names {missing[0] if missing else labels!r} but the page shows "
-                                 "no such enabled control")
+            raise AssertionError(
+                f"the instruction names {missing[0] if missing else labels!r} but the page shows "
+                "no such enabled control"
+            )
         time.sleep(0.1)
 
 
@@ -229,14 +248,17 @@ class Interface:
     the interface) or opened devices. busy_timeout_s : how long a write waits for another program
     holding the database (the database's default when None)."""
 
-    def __init__(self, scene, frame, db_path, devices=None, frame_t_s: float = FRAME_T_S,
-                 busy_timeout_s: float | None = None):
+    def __init__(
+        self, scene, frame, db_path, devices=None, frame_t_s: float = FRAME_T_S, busy_timeout_s: float | None = None
+    ):
         from app.db import Database, seed_from_scene
         from app.ui.server import InterfaceServer
         from app.video import FrameGrabber, StillSource
         from app.workflows import Site
 
-        self.db = Database.open(db_path) if busy_timeout_s is None else Database.open(db_path, busy_timeout_s=busy_timeout_s)
+        self.db = (
+            Database.open(db_path) if busy_timeout_s is None else Database.open(db_path, busy_timeout_s=busy_timeout_s)
+        )
         seed_from_scene(self.db, scene)
         self._own_devices = None
         if devices == "fast":
@@ -255,8 +277,13 @@ class Interface:
         software-WebGL notice closed."""
         before = set(self.server.clients)
         page = browser.new_page(viewport=viewport or VIEWPORT)
-        page.on("console", lambda m: self.csp_refusals.append(m.text[:300]) if "Content Security Policy" in m.text else None)
-        page.on("pageerror", lambda e: self.csp_refusals.append(str(e)[:300]) if "Content Security Policy" in str(e) else None)
+        page.on(
+            "console", lambda m: self.csp_refusals.append(m.text[:300]) if "Content Security Policy" in m.text else None
+        )
+        page.on(
+            "pageerror",
+            lambda e: self.csp_refusals.append(str(e)[:300]) if "Content Security Policy" in str(e) else None,
+        )
         page.goto(self.url)
         panel = wait_for_panel(self.server, before)
         # the database drawn as it is now (its own thread; slow on a loaded machine): clicks that
@@ -293,7 +320,6 @@ class Interface:
             self._own_devices.close()
         self.db.close()
         if self.csp_refusals:
-            raise AssertionError(f"the page's Content-Security-Policy refused {len(self.csp_refusals)} thing(s): "
-                                 f"{self.csp_refusals[:3]}")
-
-
+            raise AssertionError(
+                f"the page's Content-Security-Policy refused {len(self.csp_refusals)} thing(s): {self.csp_refusals[:3]}"
+            )

@@ -47,7 +47,9 @@ def unguarded_browser(browser):
     server's origin check stands in the way (without it this page connects: checked when written)."""
     from .harness import ARGS, CHROMIUM
 
-    b = browser.browser_type.launch(executable_path=CHROMIUM, args=ARGS + ["--disable-features=LocalNetworkAccessChecks"])
+    b = browser.browser_type.launch(
+        executable_path=CHROMIUM, args=ARGS + ["--disable-features=LocalNetworkAccessChecks"]
+    )
     yield b
     b.close()
 
@@ -58,17 +60,26 @@ def test_a_page_from_another_site_cannot_open_the_websocket(unguarded_browser, s
     page = unguarded_browser.new_page()
     try:
         # the hostile page, as the browser would load it from http://evil.example
-        page.route("http://evil.example/**", lambda route: route.fulfill(status=200, content_type="text/html", body=f"""
+        page.route(
+            "http://evil.example/**",
+            lambda route: route.fulfill(
+                status=200,
+                content_type="text/html",
+                body=f"""
             <html><body><script>
               const ws = new WebSocket("ws://127.0.0.1:{port}", ["viser-v{viser.__version__}"]);
               ws.onopen = () => {{ window.result = "open"; }};
               ws.onclose = () => {{ window.result = window.result || "closed"; }};
-            </script></body></html>"""))
+            </script></body></html>""",
+            ),
+        )
         with caplog.at_level(logging.WARNING, logger="mcit.access"):
             page.goto("http://evil.example/")
             page.wait_for_function("window.result !== undefined", timeout=15000)
         assert page.evaluate("window.result") == "closed"
-        assert any("http://evil.example" in r.getMessage() for r in caplog.records), "the server saw no refused handshake"
+        assert any("http://evil.example" in r.getMessage() for r in caplog.records), (
+            "the server saw no refused handshake"
+        )
         assert handshakes == []
     finally:
         page.close()

@@ -32,8 +32,10 @@ def lens_interface(scene, frame, tmp_path):
     from app.vision.intrinsics_cli import Calibration, write_camera_file
 
     cam = scene.camera
-    write_camera_file(Calibration(cam.decompose()[0], np.zeros(5), 0.06, cam.width, cam.height, (0, 1, 2), 3,
-                                  "plumb_bob"), tmp_path / "cam.yml")
+    write_camera_file(
+        Calibration(cam.decompose()[0], np.zeros(5), 0.06, cam.width, cam.height, (0, 1, 2), 3, "plumb_bob"),
+        tmp_path / "cam.yml",
+    )
     ui = Interface(scene_with_intrinsics(scene, tmp_path / "cam.yml"), frame, tmp_path / "site.sqlite")
     yield ui
     ui.close()
@@ -66,7 +68,9 @@ def test_calibrate_camera_by_pnp_from_5_points(browser, lens_interface, scene):
         if j == 0:
             op.choose("Solve by", "Pose, lens known (PnP)")
             wait_until(lambda: wf.method == "pnp", what="PnP chosen")
-        _pair_corner(op, page, wf, corner, wrong, true_cam)  # where the overlay draws it (the stale C), then in the video
+        _pair_corner(
+            op, page, wf, corner, wrong, true_cam
+        )  # where the overlay draws it (the stale C), then in the video
     op.key("r")  # Solve (R)
     wait_until(lambda: wf.result is not None, what="the solution")
     assert_prompt_controls(page)
@@ -92,9 +96,11 @@ def test_calibrate_camera_by_pnp_from_5_points(browser, lens_interface, scene):
     assert ui.db.history()[-1].method == "pnp" and ui.db.history()[-1].client.startswith("browser-")
     stored = Camera(np.asarray(cal.data["C"], float), true_cam.width, true_cam.height)
     err = np.linalg.norm(stored.project(truth) - true_cam.project(truth), axis=1)
-    print(f"  stored C vs true C at {len(truth)} body corners: max {err.max():.2f} px, RMS {np.sqrt(np.mean(err ** 2)):.2f} px "
-          f"(before {err_before:.1f} px); 5 points, RMS {wf.result.rms_px:.2f} px; centre "
-          f"{1000 * np.linalg.norm(stored.center - true_cam.center):.1f} mm off")
+    print(
+        f"  stored C vs true C at {len(truth)} body corners: max {err.max():.2f} px, RMS {np.sqrt(np.mean(err**2)):.2f} px "
+        f"(before {err_before:.1f} px); 5 points, RMS {wf.result.rms_px:.2f} px; centre "
+        f"{1000 * np.linalg.norm(stored.center - true_cam.center):.1f} mm off"
+    )
     assert err.max() < 1.5
     page.close()
     assert report

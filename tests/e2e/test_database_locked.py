@@ -59,14 +59,19 @@ def test_accept_while_another_program_locks_the_database(browser, quick_interfac
     op.press("Track")
     wait_until(lambda: page.panel.session.workflow is not None, what="the workflow")
     wf = page.panel.session.workflow
-    wait_until(lambda: wf.frames >= 10 and pose_error(wf.T_world_obj, T_true)[0] < 0.5, timeout_s=30,
-               what="the tracker to converge", panel=page.panel)
+    wait_until(
+        lambda: wf.frames >= 10 and pose_error(wf.T_world_obj, T_true)[0] < 0.5,
+        timeout_s=30,
+        what="the tracker to converge",
+        panel=page.panel,
+    )
     op.key("Space")  # Pause: the tracked pose stays as it is between the two Accepts
     wait_until(lambda: wf.paused, what="the pause", panel=page.panel)
     T_tracked = wf.T_world_obj.copy()
 
-    holder = subprocess.Popen([sys.executable, "-c", HOLDER, str(ui.db.path)], stdin=subprocess.PIPE,
-                              stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLDER, str(ui.db.path)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
     try:
         assert holder.stdout.readline().strip() == "locked"
         op.press("Accept")

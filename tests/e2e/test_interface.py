@@ -39,7 +39,7 @@ def _drawn_along(ui, page, shot, seg_uv, color="green", n=9) -> float:
     hits = 0
     for t in np.linspace(0.15, 0.85, n):
         x, y = ui.screen_of(page, seg_uv[0] + t * (seg_uv[1] - seg_uv[0]))
-        patch = shot[int(round(y)) - 1:int(round(y)) + 2, int(round(x)) - 1:int(round(x)) + 2].reshape(-1, 3)
+        patch = shot[int(round(y)) - 1 : int(round(y)) + 2, int(round(x)) - 1 : int(round(x)) + 2].reshape(-1, 3)
         hits += any(_is_overlay(p, color) for p in patch)
     return hits / n
 
@@ -61,7 +61,9 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     smooth = cv2.blur(frame.mean(axis=2).astype(np.float32), (5, 5))
     rng = np.random.default_rng(0)
     uv = rng.uniform([8, 8], [503, 232], size=(300, 2))  # above the table's label (under its front edge)
-    shown = np.array([shot[int(y) - 3:int(y) + 4, int(x) - 3:int(x) + 4].mean() for x, y in (ui.screen_of(page, p) for p in uv)])
+    shown = np.array(
+        [shot[int(y) - 3 : int(y) + 4, int(x) - 3 : int(x) + 4].mean() for x, y in (ui.screen_of(page, p) for p in uv)]
+    )
     truth = np.array([smooth[int(round(v)), int(round(u))] for u, v in uv])
     ui.screenshot(page, "/tmp/mcit-e2e-render.png")
     assert np.corrcoef(shown, truth)[0, 1] > 0.9
@@ -72,8 +74,11 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     visible = [int(k) for k, v in zip(wf.edge_index, wf.visible) if v and k >= 0]
     long_edges = [k for k in visible if np.linalg.norm(segs[k, 1] - segs[k, 0]) > 100]
     assert long_edges
-    _wait(lambda: min(_drawn_along(ui, page, ui.screenshot(page), segs[k]) for k in long_edges) >= 0.7, timeout_s=15,
-          what="the table's edges drawn in green where C projects them")
+    _wait(
+        lambda: min(_drawn_along(ui, page, ui.screenshot(page), segs[k]) for k in long_edges) >= 0.7,
+        timeout_s=15,
+        what="the table's edges drawn in green where C projects them",
+    )
     # error paths: each shows a notification saying what to do, and nothing is written
     versions = [(o.name, o.version) for o in ui.db.objects()]
     n_changes, n_cal = len(ui.db.history()), len(ui.db.calibrations())
@@ -112,7 +117,9 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     # a narrower window: the view is fitted again, the whole image inside the canvas
     aspect = page.panel.fitted_aspect
     page.set_viewport_size({"width": 900, "height": 700})
-    _wait(lambda: page.panel.fitted_aspect is not None and abs(page.panel.fitted_aspect - aspect) > 0.05, what="the refit")
+    _wait(
+        lambda: page.panel.fitted_aspect is not None and abs(page.panel.fitted_aspect - aspect) > 0.05, what="the refit"
+    )
 
     def fitted() -> bool:  # the whole image inside the canvas, fitted to its width
         corners = [ui.screen_of(page, uv) for uv in ([-0.5, -0.5], [511.5, 255.5])]
@@ -140,7 +147,9 @@ def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
     drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
     true = cam.project(obj.model.edge_segments(T_true).reshape(-1, 3)).reshape(-1, 2, 2)
     # select the box by clicking its wireframe
-    select_by_click(page, "parallelepiped", lambda: op.click(drawn[_visible_box_edges(site, obj.T_world_obj)[0]].mean(axis=0)))
+    select_by_click(
+        page, "parallelepiped", lambda: op.click(drawn[_visible_box_edges(site, obj.T_world_obj)[0]].mean(axis=0))
+    )
     op.press("Update pose")
     _wait(lambda: page.panel.session.workflow is not None, what="the workflow")
     wf = page.panel.session.workflow
@@ -150,8 +159,11 @@ def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
     vis = [k for k in _visible_box_edges(site, T_true) if k in _visible_box_edges(site, obj.T_world_obj)]
     V, E = obj.model.vertices, obj.model.edges
     axis = {k: int(np.abs(V[E[k][1]] - V[E[k][0]]).argmax()) for k in vis}
-    triple = next(t for t in itertools.combinations(vis, 3)
-                  if len({axis[k] for k in t}) == 3 and not set(E[t[0]]) & set(E[t[1]]) & set(E[t[2]]))
+    triple = next(
+        t
+        for t in itertools.combinations(vis, 3)
+        if len({axis[k] for k in t}) == 3 and not set(E[t[0]]) & set(E[t[1]]) & set(E[t[2]])
+    )
     edges = list(triple) + [k for k in vis if k not in triple][:3]
     assert len(edges) == 6
     for k in edges:
@@ -172,7 +184,7 @@ def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
     # the operator looks at another candidate's white ghost (off the box), then picks the one on it
     labels = wf.candidate_labels()
     other = next(i for i in range(len(labels)) if i != best)
-    for i in ((other, best) if best == wf.chosen else (best,)):
+    for i in (other, best) if best == wf.chosen else (best,):
         op.choose("Candidate", labels[i])
         _wait(lambda: wf.chosen == i, what=f"candidate {i + 1} chosen")
         op.check()
@@ -202,8 +214,10 @@ def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
     assert ui.db.history("parallelepiped")[-1].method == "p3l+refine"
     op.report("update pose by hand-assigned edges")
     # the overlay (the box is still selected: drawn yellow over green) now lies on the box in the video
-    _wait(lambda: np.mean([_drawn_along(ui, page, ui.screenshot(page), true[k], "any") for k in edges]) >= 0.6,
-          what="the overlay to lie on the box in the video")
+    _wait(
+        lambda: np.mean([_drawn_along(ui, page, ui.screenshot(page), true[k], "any") for k in edges]) >= 0.6,
+        what="the overlay to lie on the box in the video",
+    )
     ui.screenshot(page, "/tmp/mcit-e2e-pose.png")
     page.close()
 
@@ -225,12 +239,16 @@ def test_two_browsers_share_the_database_and_keep_their_own_state(browser, inter
     rec = other.update_pose(obj.id, T_true, None, expected_version=obj.version, method="test", client="other")
     other.close()
     # the server notices (it polls the database every second) and redraws for everyone
-    _wait(lambda: ui.site.object("parallelepiped").version == rec.version and ui.server._db_revision == ui.site.revision,
-          what="the server to see the change")
+    _wait(
+        lambda: ui.site.object("parallelepiped").version == rec.version and ui.server._db_revision == ui.site.revision,
+        what="the server to see the change",
+    )
     true = ui.site.camera.project(obj.model.edge_segments(T_true).reshape(-1, 3)).reshape(-1, 2, 2)
     edges = _visible_box_edges(ui.site, T_true)
     for page in (a, b):
-        _wait(lambda: np.mean([_drawn_along(ui, page, ui.screenshot(page), true[k], "any") for k in edges]) >= 0.6,
-              what="every browser to draw the box where the other writer put it")
+        _wait(
+            lambda: np.mean([_drawn_along(ui, page, ui.screenshot(page), true[k], "any") for k in edges]) >= 0.6,
+            what="every browser to draw the box where the other writer put it",
+        )
     a.close()
     b.close()

@@ -47,8 +47,10 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     assert panel.frozen is not None
     looked_at = panel.frozen
     page.get_by_role("button", name="Calibrate camera").click()
-    wait_until(lambda: panel.session.workflow is not None and panel.frozen_by is panel.session.workflow,
-               what="the workflow's own frozen frame")
+    wait_until(
+        lambda: panel.session.workflow is not None and panel.frozen_by is panel.session.workflow,
+        what="the workflow's own frozen frame",
+    )
     wf = panel.session.workflow
     assert wf.frame is panel.frozen  # clicks, snapping and solving use it ...
     assert panel.frozen is looked_at  # ... the frame frozen before the start (a new operator lost it to the newest)

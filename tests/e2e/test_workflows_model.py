@@ -95,8 +95,10 @@ class Operator:
         time.sleep(0.1)  # the redraw loop sends the new step's controls
 
     def summary(self, name: str, t_start: float) -> str:
-        return (f"{name}: {self.clicks + self.controls} operator actions ({self.clicks} canvas clicks, {self.controls} "
-                f"controls/keys), {time.monotonic() - t_start:.1f} s; steps {' → '.join(self.steps)}")
+        return (
+            f"{name}: {self.clicks + self.controls} operator actions ({self.clicks} canvas clicks, {self.controls} "
+            f"controls/keys), {time.monotonic() - t_start:.1f} s; steps {' → '.join(self.steps)}"
+        )
 
 
 def _project(cam, X):
@@ -155,8 +157,10 @@ def _start_model_object(op, shape: str) -> float:
         op.choose("Shape", shape)
     t = time.monotonic()
     op.press("Model object")
-    wait_until(lambda: op.wf is not None and op.wf.name == "model_object" and op.page.panel.built_for is op.wf,
-               what="the Model object workflow")
+    wait_until(
+        lambda: op.wf is not None and op.wf.name == "model_object" and op.page.panel.built_for is op.wf,
+        what="the Model object workflow",
+    )
     assert op.wf.shape == shape
     op.check()
     return t
@@ -189,8 +193,11 @@ def test_model_a_box_by_clicking_two_faces_and_scanning(browser, device_interfac
     t_start = _start_model_object(op, "box")
     wf = op.wf
     # the two lit vertical faces (the top face alone would leave the box's turn open)
-    faces = [k for k in _facing_faces(cam, body.model, T_true)
-             if abs((T_true[:3, :3] @ body.model.face_normals()[k])[2]) < 0.5]
+    faces = [
+        k
+        for k in _facing_faces(cam, body.model, T_true)
+        if abs((T_true[:3, :3] @ body.model.face_normals()[k])[2]) < 0.5
+    ]
     assert len(faces) == 2
     for i, k in enumerate(faces):
         sides = _face_sides_uv(cam, body.model, T_true, k)
@@ -210,7 +217,11 @@ def test_model_a_box_by_clicking_two_faces_and_scanning(browser, device_interfac
         assert wf.faces[-1]["points"] is not None and len(wf.faces[-1]["points"]) >= 10, page.panel.error
         op.check()
         if i == 0:  # the next face is reachable: the instruction says to click its sides
-            assert "another visible face" in wf.next_step and "solve" not in wf.current_step().enabled and wf.current_step().clicks
+            assert (
+                "another visible face" in wf.next_step
+                and "solve" not in wf.current_step().enabled
+                and wf.current_step().clicks
+            )
     assert len(wf.box_faces()) == 2
     seen: set = set()
     op.press("Scan profile")
@@ -228,13 +239,14 @@ def test_model_a_box_by_clicking_two_faces_and_scanning(browser, device_interfac
     assert len(ui.db.objects()) == n_objects  # nothing written before Accept
     weak = _accept(op, "the box written")
     rec = ui.db.get(wf.object_name)
-    print("\n" + op.summary("box", t_start), "| weak:", weak or "none", "| progress seen:",
-          sorted(seen))
+    print("\n" + op.summary("box", t_start), "| weak:", weak or "none", "| progress seen:", sorted(seen))
     assert rec.kind == "box" and rec.status == "modelled"
     assert ui.db.history(rec.name)[-1].client.startswith("browser-")
     derr, sig, deg, dist = _box_against_truth(rec, body, T_true)
-    print(f"box: |error| width/depth/height {np.abs(derr) * 1000} mm, σ {sig * 1000} mm; pose {deg:.2f}°, "
-          f"centre {dist * 1000:.1f} mm")
+    print(
+        f"box: |error| width/depth/height {np.abs(derr) * 1000} mm, σ {sig * 1000} mm; pose {deg:.2f}°, "
+        f"centre {dist * 1000:.1f} mm"
+    )
     assert np.all(np.abs(derr) <= 3 * sig) and np.all(np.abs(derr) < 0.004)
     assert deg < 2.0 and dist < 0.005
     page.close()
@@ -286,15 +298,16 @@ def test_model_a_cylinder_by_clicking_its_silhouettes(browser, device_interface,
     assert len(ui.db.objects()) == n_objects
     weak = _accept(op, "the cylinder written")
     rec = ui.db.get(wf.object_name)
-    print("\n" + op.summary("cylinder", t_start), "| weak:", weak or "none", "| progress seen:",
-          sorted(seen))
+    print("\n" + op.summary("cylinder", t_start), "| weak:", weak or "none", "| progress seen:", sorted(seen))
     assert rec.kind == "cylinder" and rec.status == "modelled" and "fused" in ui.db.history(rec.name)[-1].method
     dr, dh = rec.dims["radius"] - solid.r0, rec.dims["height"] - solid.height
     sr, sh = rec.sigmas["radius"], rec.sigmas["height"]
     axis = float(np.linalg.norm(rec.T_world_obj[:2, 3] - T_true[:2, 3]))
-    print(f"cylinder: radius {rec.dims['radius'] * 100:.2f} cm (error {dr * 1000:.1f} mm, σ {sr * 1000:.1f} mm; "
-          f"tangential {r_tangential * 100:.2f} cm), height {rec.dims['height'] * 100:.2f} cm "
-          f"(error {dh * 1000:.1f} mm, σ {sh * 1000:.1f} mm), axis {axis * 1000:.1f} mm off")
+    print(
+        f"cylinder: radius {rec.dims['radius'] * 100:.2f} cm (error {dr * 1000:.1f} mm, σ {sr * 1000:.1f} mm; "
+        f"tangential {r_tangential * 100:.2f} cm), height {rec.dims['height'] * 100:.2f} cm "
+        f"(error {dh * 1000:.1f} mm, σ {sh * 1000:.1f} mm), axis {axis * 1000:.1f} mm off"
+    )
     assert abs(dr) <= 3 * sr and abs(dh) <= 3 * sh
     assert abs(dr) < 0.004 and abs(dh) < 0.01 and axis < 0.006
     # the cylinder just modelled is selected (Update pose, Track … apply to it next)

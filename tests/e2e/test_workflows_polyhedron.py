@@ -38,8 +38,15 @@ def _wedge_scene(scene):
     L, W, H = WEDGE
     V = np.array([[0, 0, 0], [L, 0, 0], [L, W, 0], [0, W, 0], [L, W, H], [0, W, H]], float) - [L / 2, W / 2, 0]
     model = BRep.from_faces(V, POLY_SHAPES["wedge"].faces)
-    body = Body("ramp", "polyhedron", "unknown", model, make_T(rot_z(np.radians(35.0)), [-0.03, -0.2, 0.0]), (),
-                Appearance(albedo=0.7, texture=0.02, texture_scale_m=0.03))
+    body = Body(
+        "ramp",
+        "polyhedron",
+        "unknown",
+        model,
+        make_T(rot_z(np.radians(35.0)), [-0.03, -0.2, 0.0]),
+        (),
+        Appearance(albedo=0.7, texture=0.02, texture_scale_m=0.03),
+    )
     return dataclasses.replace(scene, bodies=scene.bodies + (body,))
 
 
@@ -49,7 +56,9 @@ def wedge_interface(scene, tmp_path):
 
     variant = _wedge_scene(scene)
     # 16 samples per edge pixel (the bundled video's 89 cost ~4× the time): edges placed to ~1/16 px.
-    img = render_frame(dataclasses.replace(variant, render=dataclasses.replace(variant.render, aa_samples=16)), FRAME_T_S)
+    img = render_frame(
+        dataclasses.replace(variant, render=dataclasses.replace(variant.render, aa_samples=16)), FRAME_T_S
+    )
     frame = np.repeat(img[:, :, None], 3, axis=2) if img.ndim == 2 else img
     ui = Interface(variant, frame, tmp_path / "site.sqlite", devices="fast")
     yield ui
@@ -59,7 +68,9 @@ def wedge_interface(scene, tmp_path):
 def _facing(cam, model, T):
     normals, cents = model.face_normals(), model.face_centroids()
     c_obj = (cam.center - T[:3, 3]) @ T[:3, :3]
-    return [k for k in range(len(model.faces)) if normals[k] @ (c_obj - cents[k]) > 1e-3 * np.linalg.norm(c_obj - cents[k])]
+    return [
+        k for k in range(len(model.faces)) if normals[k] @ (c_obj - cents[k]) > 1e-3 * np.linalg.norm(c_obj - cents[k])
+    ]
 
 
 def test_model_a_wedge_by_clicking_its_faces(browser, wedge_interface):
@@ -74,8 +85,14 @@ def test_model_a_wedge_by_clicking_its_faces(browser, wedge_interface):
     close_notifications(page)
     op.choose("Shape", "wedge")
     op.press("Model object")
-    wait_until(lambda: (wf := page.panel.session.workflow) is not None and wf.name == "model_polyhedron"
-               and page.panel.built_for is wf, what="the Model polyhedron workflow")
+    wait_until(
+        lambda: (
+            (wf := page.panel.session.workflow) is not None
+            and wf.name == "model_polyhedron"
+            and page.panel.built_for is wf
+        ),
+        what="the Model polyhedron workflow",
+    )
     wf = page.panel.session.workflow
     assert wf.shape == "wedge"
     time.sleep(0.3)

@@ -13,7 +13,6 @@ pick is one action):
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
@@ -79,8 +78,10 @@ def test_update_pose_by_auto_match(browser, interface, scene):
     op.check()
     errors = [pose_error(m.T_world_obj, T_true) for m in wf.matches]
     best = int(np.argmin([d for d, _ in errors]))
-    print(f"auto match: {len(wf.matches)} assignment(s), the truth's is #{best + 1} "
-          f"({errors[best][0]:.3f}° / {1000 * errors[best][1]:.2f} mm), #{(wf.chosen or 0) + 1} shown")
+    print(
+        f"auto match: {len(wf.matches)} assignment(s), the truth's is #{best + 1} "
+        f"({errors[best][0]:.3f}° / {1000 * errors[best][1]:.2f} mm), #{(wf.chosen or 0) + 1} shown"
+    )
     if best != (wf.chosen or 0):  # the operator sees the labels off the box and picks the one on it
         op.choose("Candidate", wf.candidate_labels()[best])
         wait_until(lambda: wf.chosen == best, what="the chosen assignment")
@@ -133,8 +134,11 @@ def test_track_pause_resume_accept(browser, interface, scene):
     wf = page.panel.session.workflow
     op.check()
     # the still frame comes again and again: the tracker converges on it, frame after frame
-    wait_until(lambda: wf.frames >= 10 and pose_error(wf.T_world_obj, T_true)[0] < 0.5, timeout_s=30,
-               what="the tracker to converge")
+    wait_until(
+        lambda: wf.frames >= 10 and pose_error(wf.T_world_obj, T_true)[0] < 0.5,
+        timeout_s=30,
+        what="the tracker to converge",
+    )
     assert not wf.lost
     op.check()
     op.key("Space")  # Pause (Space)

@@ -35,8 +35,13 @@ def _with_cylinder(ui, browser, scene, off_m: float):
 
     body = scene.body("unknown_cylinder")
     T_true = body.pose_at(ui.frame_t_s)
-    ui.db.add_object("cylinder_1", "cylinder", body.model, make_T(T_true[:3, :3], T_true[:3, 3] + [off_m, 0.0, 0.0]),
-                     status="modelled")
+    ui.db.add_object(
+        "cylinder_1",
+        "cylinder",
+        body.model,
+        make_T(T_true[:3, :3], T_true[:3, 3] + [off_m, 0.0, 0.0]),
+        status="modelled",
+    )
     page = ui.open(browser)
     op = Operator(ui, page)
     wait_until(lambda: "cylinder_1" in {o.name for o in ui.site.objects()}, what="the cylinder in the database")
@@ -87,13 +92,18 @@ def test_update_pose_from_one_click(browser, interface, scene):
     # A click on the table: no pose fits, said in the panel; nothing written.
     n_changes = len(ui.db.history(BOX))
     op.press("Update pose")
-    wait_until(lambda: page.panel.session.workflow is not wf and page.panel.session.workflow is not None, what="a new workflow")
+    wait_until(
+        lambda: page.panel.session.workflow is not wf and page.panel.session.workflow is not None, what="a new workflow"
+    )
     wf2 = page.panel.session.workflow
     op.click(cam.project(np.array([[0.3, -0.3, 0.0]]))[0])
     wait_until(lambda: wf2.current_step().name == "click_edge_end", what="the click on the table")
     op.press("Find")
-    wait_until(lambda: "no pose of the parallelepiped fits the image near your click" in page.panel.error.lower(), timeout_s=30,
-               what="the refusal")
+    wait_until(
+        lambda: "no pose of the parallelepiped fits the image near your click" in page.panel.error.lower(),
+        timeout_s=30,
+        what="the refusal",
+    )
     assert len(ui.db.history(BOX)) == n_changes and wf2.found is None
     op.press("Cancel")
     page.close()
@@ -132,7 +142,9 @@ def test_update_pose_from_one_click_and_one_edge(browser, interface, scene):
     print(f"written: {deg:.3f}° / {1000 * m:.2f} mm from the truth")
     assert deg < 1.0 and m < 0.005
     text = op.report("update pose from one click and one edge")
-    assert op.actions - _missed(op) <= 8, text  # select, Update pose, double click, 2 clicks, the model edge, Refine, Accept
+    assert op.actions - _missed(op) <= 8, (
+        text
+    )  # select, Update pose, double click, 2 clicks, the model edge, Refine, Accept
     page.close()
 
 
@@ -189,8 +201,12 @@ def test_update_pose_by_a_double_click_on_the_selected_object(browser, interface
     wait_until(lambda: page.panel.frozen is not None, what="the frame frozen")
     looked_at = page.panel.frozen
     op.double_click(on_table[len(on_table) // 2])
-    wait_until(lambda: page.panel.session.workflow is not None and page.panel.session.workflow.found is not None,
-               timeout_s=30, what="Update pose started and the found poses", panel=page.panel)
+    wait_until(
+        lambda: page.panel.session.workflow is not None and page.panel.session.workflow.found is not None,
+        timeout_s=30,
+        what="Update pose started and the found poses",
+        panel=page.panel,
+    )
     wf = page.panel.session.workflow
     assert wf.name == "update_pose" and wf.object_name == BOX
     assert wf.frame is looked_at  # not the newest frame (a new operator's frozen frame was replaced)
@@ -235,8 +251,12 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
 
     panel._click_worker.submit = take_then_hold
     op.double_click(cam.project(T_true[:3, 3][None])[0])  # on the box where the frame shows it
-    wait_until(lambda: panel.session.workflow is not None and panel.session.workflow.found is not None,
-               timeout_s=30, what="Update pose started and the found poses", panel=page.panel)
+    wait_until(
+        lambda: panel.session.workflow is not None and panel.session.workflow.found is not None,
+        timeout_s=30,
+        what="Update pose started and the found poses",
+        panel=page.panel,
+    )
     assert len(held) == 2 and held[1] - held[0] >= 1.4  # the second click did reach the server late
     wf = panel.session.workflow
     assert wf.name == "update_pose" and wf.object_name == BOX
@@ -244,8 +264,9 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
     # operator's was split into two edge points, and Accept went)
     first, other = wf.found, cam.project_obj(T_true, obj.model.vertices).mean(axis=0) + [3.0, -2.0]
     op.double_click(other)
-    wait_until(lambda: wf.found is not None and wf.found is not first, timeout_s=30, what="the poses found again",
-               panel=panel)
+    wait_until(
+        lambda: wf.found is not None and wf.found is not first, timeout_s=30, what="the poses found again", panel=panel
+    )
     assert np.linalg.norm(wf.search_click - other) < 2.0 and not wf.segs and wf.pending is None
     op.accept(wf)
     deg, m = pose_error(ui.db.get(BOX).T_world_obj, T_true)
@@ -253,8 +274,9 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
     page.close()
 
 
-def test_a_click_while_find_searches_is_refused_and_the_found_poses_stay_acceptable(browser, interface, scene,
-                                                                                      monkeypatch):
+def test_a_click_while_find_searches_is_refused_and_the_found_poses_stay_acceptable(
+    browser, interface, scene, monkeypatch
+):
     """A click while Find searches (here slowed to 3 s) is refused and said; it had become an edge's point,
     and the found poses could then not be accepted (a new operator double-clicked again during a search)."""
     import app.vision.search as search
@@ -271,12 +293,16 @@ def test_a_click_while_find_searches_is_refused_and_the_found_poses_stay_accepta
     cam = ui.site.camera
     on_box = cam.project_obj(T_true, obj.model.vertices).mean(axis=0)
     op.double_click(on_box)
-    wait_until(lambda: panel.session.workflow is not None and panel.worker is not None and panel.worker.is_alive(),
-               what="Find searching")
+    wait_until(
+        lambda: panel.session.workflow is not None and panel.worker is not None and panel.worker.is_alive(),
+        what="Find searching",
+    )
     wf = panel.session.workflow
     op.click(on_box + [20.0, 0.0])
-    page.get_by_text("Clicks are not taken now. Searching for the pose of parallelepiped from your click… Cancel stops "
-                     "the search", exact=False).first.wait_for(timeout=5000)
+    page.get_by_text(
+        "Clicks are not taken now. Searching for the pose of parallelepiped from your click… Cancel stops the search",
+        exact=False,
+    ).first.wait_for(timeout=5000)
     wait_until(lambda: wf.found is not None, timeout_s=30, what="the found poses")
     assert wf.pending is None and not wf.segs and "accept" in wf.current_step().enabled
     op.accept(wf)
@@ -295,8 +321,15 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     cam = ui.site.camera
     panel = page.panel
     # nothing selected, on the table away from every wireframe: said, nothing started
-    empty = next(uv for uv in (cam.project(np.array([[x, y, 0.0]]))[0] for x in np.linspace(-0.3, 0.3, 13)
-                                for y in np.linspace(-0.5, 0.2, 15)) if panel._object_at(uv) is None)
+    empty = next(
+        uv
+        for uv in (
+            cam.project(np.array([[x, y, 0.0]]))[0]
+            for x in np.linspace(-0.3, 0.3, 13)
+            for y in np.linspace(-0.5, 0.2, 15)
+        )
+        if panel._object_at(uv) is None
+    )
     for _ in range(3):  # a loaded machine's page may miss its very first click: one single click taken first
         ui.click_pixel(page, empty)
         try:
@@ -306,8 +339,11 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
             continue
     time.sleep(1.0)  # not part of the double click below
     op.double_click(empty)
-    wait_until(lambda: "a double click finds the pose of the selected object" in panel.error.lower(), what="the hint",
-               panel=panel)
+    wait_until(
+        lambda: "a double click finds the pose of the selected object" in panel.error.lower(),
+        what="the hint",
+        panel=panel,
+    )
     assert panel.session.workflow is None
     # the box selected, a double click on the cylinder's wireframe: the box's search refused, the cylinder named
     from .test_workflows_pose import _select
@@ -315,10 +351,16 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     _select(op, page, ui.site.object(BOX), cam)
     outline = longest.mean(axis=0)
     op.double_click(outline)
-    wait_until(lambda: "is on cylinder_1 as the database draws it: to update cylinder_1" in panel.error, timeout_s=30,
-               what="the refusal naming the cylinder", panel=panel)
+    wait_until(
+        lambda: "is on cylinder_1 as the database draws it: to update cylinder_1" in panel.error,
+        timeout_s=30,
+        what="the refusal naming the cylinder",
+        panel=panel,
+    )
     assert panel.session.workflow.object_name == BOX and panel.session.workflow.found is None
-    page.get_by_text("Your double click is on cylinder_1 as the database draws it", exact=False).first.wait_for(timeout=5000)
+    page.get_by_text("Your double click is on cylinder_1 as the database draws it", exact=False).first.wait_for(
+        timeout=5000
+    )
     op.key("Escape")  # Cancel (the refused click was dropped: nothing to lose, no question)
     wait_until(lambda: panel.session.workflow.finished, what="the cancel")
     # nothing selected (a click away from every wireframe), then a double click on the cylinder's outline:
@@ -326,8 +368,16 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     op.click(empty)
     wait_until(lambda: panel.session.selected is None, what="the selection cleared")
     op.double_click(outline)
-    wait_until(lambda: panel.session.workflow is not None and not panel.session.workflow.finished
-               and panel.session.workflow.found is not None, timeout_s=30, what="the cylinder's pose found", panel=panel)
+    wait_until(
+        lambda: (
+            panel.session.workflow is not None
+            and not panel.session.workflow.finished
+            and panel.session.workflow.found is not None
+        ),
+        timeout_s=30,
+        what="the cylinder's pose found",
+        panel=panel,
+    )
     assert panel.session.workflow.object_name == "cylinder_1"
     op.key("Escape")  # Cancel: the found poses would be thrown away, so it asks once more ...
     wait_until(lambda: panel.asking == "cancel", what="the question")
@@ -359,7 +409,8 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     op.click(table_edge)
     wait_until(lambda: panel.session.selected == "table", what="the table selected")
     op.double_click(face)
-    wait_until(lambda: panel.session.workflow is not None and not panel.session.workflow.finished,
-               what="Update pose started")
+    wait_until(
+        lambda: panel.session.workflow is not None and not panel.session.workflow.finished, what="Update pose started"
+    )
     assert panel.session.workflow.object_name == BOX
     page.close()

@@ -68,15 +68,23 @@ class Operator:
         return self.clicks + self.presses + self.keys + self.choices
 
     def report(self) -> str:
-        line = (f"{self.name}: {self.actions} operator actions ({self.clicks} video clicks, {self.presses} buttons, "
-                f"{self.keys} keys, {self.choices} choices) in {time.monotonic() - self.t0:.1f} s")
+        line = (
+            f"{self.name}: {self.actions} operator actions ({self.clicks} video clicks, {self.presses} buttons, "
+            f"{self.keys} keys, {self.choices} choices) in {time.monotonic() - self.t0:.1f} s"
+        )
         print(line)
         return line
 
 
 def _workflow(page, name: str):
-    wait_until(lambda: page.panel.session.workflow is not None and page.panel.session.workflow.name == name
-               and page.panel.built_for is page.panel.session.workflow, what=f"the {name} workflow's controls")
+    wait_until(
+        lambda: (
+            page.panel.session.workflow is not None
+            and page.panel.session.workflow.name == name
+            and page.panel.built_for is page.panel.session.workflow
+        ),
+        what=f"the {name} workflow's controls",
+    )
     return page.panel.session.workflow
 
 
@@ -102,10 +110,17 @@ def _miscalibrated(ui, scene):
     """Setup: the site's camera set to ``_wrong_camera``; returns (true camera, wrong camera, the table's,
     parallelepiped's and box's corners in the world at the frame's time), the overlay checked visibly off."""
     true_cam = scene.camera
-    ui.site.set_camera(_wrong_camera(true_cam), rms_px=0.0, residuals_px=np.zeros((0, 2)), points={}, client="test setup")
+    ui.site.set_camera(
+        _wrong_camera(true_cam), rms_px=0.0, residuals_px=np.zeros((0, 2)), points={}, client="test setup"
+    )
     t = ui.frame_t_s
-    corners = np.vstack([b.model.vertices @ b.pose_at(t)[:3, :3].T + b.pose_at(t)[:3, 3]
-                         for b in scene.bodies if b.name in ("table", "parallelepiped", "unknown_box")])
+    corners = np.vstack(
+        [
+            b.model.vertices @ b.pose_at(t)[:3, :3].T + b.pose_at(t)[:3, 3]
+            for b in scene.bodies
+            if b.name in ("table", "parallelepiped", "unknown_box")
+        ]
+    )
     wrong = ui.site.camera
     assert np.linalg.norm(wrong.project(corners) - true_cam.project(corners), axis=1).max() > 4  # the overlay is off
     return true_cam, wrong, corners
@@ -124,8 +139,12 @@ def _visible_corners(site, cam: Camera):
             ray = V[k] - cam.center
             dist = float(np.linalg.norm(ray))
             hit = site.raycast(cam.center, ray / dist)
-            uv = cam.project(V[k:k + 1])[0]
-            if (hit is None or hit.distance_m >= dist - 1e-3) and 4 <= uv[0] <= cam.width - 5 and 4 <= uv[1] <= cam.height - 5:
+            uv = cam.project(V[k : k + 1])[0]
+            if (
+                (hit is None or hit.distance_m >= dist - 1e-3)
+                and 4 <= uv[0] <= cam.width - 5
+                and 4 <= uv[1] <= cam.height - 5
+            ):
                 out.append((obj.name, k, V[k]))
     return out
 
@@ -161,7 +180,9 @@ def test_calibrate_camera_by_clicks(browser, interface, scene):
     corners = [c for c in corners if c[0] == "table"] + box[::2]
     assert len(corners) >= 9
     for corner in corners:
-        _pair_corner(op, page, wf, corner, wrong, true_cam)  # where the overlay draws it (the wrong C), then in the video
+        _pair_corner(
+            op, page, wf, corner, wrong, true_cam
+        )  # where the overlay draws it (the wrong C), then in the video
     op.key("r")  # Solve (R)
     wait_until(lambda: wf.result is not None, what="the solution")
     assert_prompt_controls(page)
@@ -188,12 +209,16 @@ def test_calibrate_camera_by_clicks(browser, interface, scene):
     assert len(cals) == n_cal + 1
     stored = Camera(np.asarray(cals[-1].data["C"], float), true_cam.width, true_cam.height)
     err = np.linalg.norm(stored.project(bodies) - true_cam.project(bodies), axis=1)
-    print(f"  stored C vs true C at {len(bodies)} body corners: max {err.max():.2f} px, RMS {np.sqrt(np.mean(err ** 2)):.2f} px"
-          f" (before {err_before:.1f} px); {len(corners) - 1} points, RMS {wf.result.rms_px:.2f} px")
+    print(
+        f"  stored C vs true C at {len(bodies)} body corners: max {err.max():.2f} px, RMS {np.sqrt(np.mean(err**2)):.2f} px"
+        f" (before {err_before:.1f} px); {len(corners) - 1} points, RMS {wf.result.rms_px:.2f} px"
+    )
     assert err.max() < 1.0
     assert ui.db.history()[-1].client.startswith("browser-")
     frame = cals[-1].data["frame"]  # the frozen frame the clicks were made on, recorded with the calibration
-    assert frame["source"] == "live" and frame["index"] >= 0 and frame["index"] == wf.frame.index  # (the panel shows live video again once accepted)
+    assert (
+        frame["source"] == "live" and frame["index"] >= 0 and frame["index"] == wf.frame.index
+    )  # (the panel shows live video again once accepted)
     page.close()
     assert report
 
@@ -207,7 +232,9 @@ def _turret_targets(site, cam):
     X, names = CalibrateTurret(site)._candidates()
     out = []
     for x, n in zip(X, names):
-        keep = n.endswith("centre") or any(n == f"{o} vertex {k}" for o in ("parallelepiped", "unknown_box") for k in range(4))
+        keep = n.endswith("centre") or any(
+            n == f"{o} vertex {k}" for o in ("parallelepiped", "unknown_box") for k in range(4)
+        )
         uv = cam.project(x[None])[0]
         if not (keep and 4 <= uv[0] <= cam.width - 5 and 4 <= uv[1] <= cam.height - 5):
             continue
@@ -224,8 +251,15 @@ def test_calibrate_turret_by_clicks(browser, device_interface, scene):
     _true_box_in_database(ui, scene)
     # Faces far apart make a well-posed problem (tests/app/workflows/test_calibrate_turret.py): the
     # other box is in the database as a known object too.
-    ui.db.add_object("unknown_box", "box", scene.body("unknown_box").model, scene.body("unknown_box").pose_at(ui.frame_t_s),
-                     status="known", method="test setup", client="setup")
+    ui.db.add_object(
+        "unknown_box",
+        "box",
+        scene.body("unknown_box").model,
+        scene.body("unknown_box").pose_at(ui.frame_t_s),
+        status="known",
+        method="test setup",
+        client="setup",
+    )
     site.poll()
     T_true = scene.turret.T_world_turret
     T_wrong = T_true @ make_T(exp_so3(np.radians([0.6, -0.5, 1.2])), [0.02, -0.015, 0.01])
@@ -264,9 +298,11 @@ def test_calibrate_turret_by_clicks(browser, device_interface, scene):
     after = pose_error(stored, T_true)
     sd_rot_deg = np.degrees(np.sqrt(np.diag(cal.cov)[:3]))
     sd_t_m = np.sqrt(np.diag(cal.cov)[3:])
-    print(f"  {len(targets)} points; turret pose error before {before[0]:.2f}° {1000 * before[1]:.1f} mm, "
-          f"after {after[0]:.2f}° {1000 * after[1]:.1f} mm (σ {np.linalg.norm(sd_rot_deg):.2f}°, "
-          f"{1000 * np.linalg.norm(sd_t_m):.1f} mm)")
+    print(
+        f"  {len(targets)} points; turret pose error before {before[0]:.2f}° {1000 * before[1]:.1f} mm, "
+        f"after {after[0]:.2f}° {1000 * after[1]:.1f} mm (σ {np.linalg.norm(sd_rot_deg):.2f}°, "
+        f"{1000 * np.linalg.norm(sd_t_m):.1f} mm)"
+    )
     # the headless test's tolerance: the error at least halved, and within 4σ of the stated covariance
     assert after[0] < before[0] / 2 and after[1] < before[1] / 2
     assert after[0] < 4 * np.linalg.norm(sd_rot_deg) and after[1] < 4 * np.linalg.norm(sd_t_m)
@@ -295,8 +331,11 @@ def test_designate_known_and_unknown_by_clicks(browser, device_interface, scene)
     X_table = T[:3, :3] @ np.array([0.25, -0.3, top]) + T[:3, 3]
     # by a double click, as habit has it: one target (a new operator's made two at the same point)
     op.double_click(cam.project(X_table[None])[0])
-    wait_until(lambda: len(wf.targets) == 1 and wf.progress is None and page.panel._last_click is None, timeout_s=15,
-               what="the first target, and the double click's second click dropped")
+    wait_until(
+        lambda: len(wf.targets) == 1 and wf.progress is None and page.panel._last_click is None,
+        timeout_s=15,
+        what="the first target, and the double click's second click dropped",
+    )
     assert len(wf.targets) == 1
     t = wf.targets[0]
     assert t.object == "table" and not t.warning and "agrees" in t.check
@@ -374,8 +413,11 @@ def _update_pose_until_refined(op, ui, scene):
     vis = [k for k in _visible_edges(site, T_true) if k in _visible_edges(site, obj.T_world_obj)]
     V, E = obj.model.vertices, obj.model.edges
     axis = {k: int(np.abs(V[E[k][1]] - V[E[k][0]]).argmax()) for k in vis}
-    triple = next(t for t in itertools.combinations(vis, 3)
-                  if len({axis[k] for k in t}) == 3 and not set(E[t[0]]) & set(E[t[1]]) & set(E[t[2]]))
+    triple = next(
+        t
+        for t in itertools.combinations(vis, 3)
+        if len({axis[k] for k in t}) == 3 and not set(E[t[0]]) & set(E[t[1]]) & set(E[t[2]])
+    )
     for k in list(triple) + [k for k in vis if k not in triple][:1]:
         a, b = true[k]
         op.click(a + 0.3 * (b - a))
@@ -432,7 +474,9 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     undo = ui.db.history("parallelepiped")[-1]
     assert undo.action == "undo" and undo.undoes == change.id and undo.client == who_a
     assert ui.db.get("parallelepiped").status == "known"  # the status only: the pose is as it was
-    a.get_by_text(f"Undid change #{change.id} (parallelepiped), recorded as change #", exact=False).first.wait_for(timeout=5000)
+    a.get_by_text(f"Undid change #{change.id} (parallelepiped), recorded as change #", exact=False).first.wait_for(
+        timeout=5000
+    )
     assert_prompt_controls(a)
     assert any(v == undo.id for _, v in wf.choices("change"))  # the undo is listed: it can be undone too
     op_a.key("Escape")  # Close (Esc)
@@ -441,8 +485,10 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     from .test_workflows_pose import _select
 
     _select(op_a, a, ui.site.object("table"), ui.site.camera)  # another object selected: the closed text goes too
-    wait_until(lambda: "History" not in a.panel.gui_title.content and "**table** is selected" in a.panel.gui_title.content,
-               what="the closed history's text gone")
+    wait_until(
+        lambda: "History" not in a.panel.gui_title.content and "**table** is selected" in a.panel.gui_title.content,
+        what="the closed history's text gone",
+    )
     op_a.report()
     _announced(b, f"{who_a} undid change #{change.id}")
     # Meanwhile another writer (here a second connection, as `mcit db` would be) moves the box: B's

@@ -82,7 +82,9 @@ class RangeFinderError(DeviceError):
     def __init__(self, message: str | None = None, *, code: int | None = None, command: str | None = None):
         if code is not None:
             self.code = int(code)
-        super().__init__(message or f"range finder error {self.code}: {self.meaning}", device="rangefinder", command=command)
+        super().__init__(
+            message or f"range finder error {self.code}: {self.meaning}", device="rangefinder", command=command
+        )
 
 
 class CommandSyntaxError(RangeFinderError):

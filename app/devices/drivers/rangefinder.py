@@ -44,7 +44,9 @@ from .transport import NOISE, LineDriver, clip, deadline_after
 __all__ = ["RangeFinder", "RangeMeasurement"]
 
 EOL = "\r\n"
-_OWN_LINE = re.compile(r"g\d(?:\?|@E\d{3}|[a-z]{1,3}[+-]\d{8}(?:\+\d)?|[a-z]{1,3}\?)$")  # any DLS reply, at a line's end
+_OWN_LINE = re.compile(
+    r"g\d(?:\?|@E\d{3}|[a-z]{1,3}[+-]\d{8}(?:\+\d)?|[a-z]{1,3}\?)$"
+)  # any DLS reply, at a line's end
 
 
 @dataclass(frozen=True)
@@ -142,7 +144,9 @@ class RangeFinder(LineDriver):
         code = int(m.group(1))
         if code in RANGEFINDER_ERRORS:
             raise rangefinder_error(code, command)
-        raise ProtocolError(f"rangefinder: unknown error code in {clip(line)} (garbled?)", device=self.device, command=command)
+        raise ProtocolError(
+            f"rangefinder: unknown error code in {clip(line)} (garbled?)", device=self.device, command=command
+        )
 
     def _parse_ready(self, command: str):
         def parse(line: str):
@@ -163,7 +167,9 @@ class RangeFinder(LineDriver):
                 return int(m.group(1)) * scale
             self._check_error(line, command)
             if tag in line or f"g{self.device_id}@" in line:
-                raise ProtocolError(f"rangefinder: malformed reply {clip(line)} to {command!r}", device=self.device, command=command)
+                raise ProtocolError(
+                    f"rangefinder: malformed reply {clip(line)} to {command!r}", device=self.device, command=command
+                )
             return NOISE
 
         return parse
@@ -215,7 +221,9 @@ class RangeFinder(LineDriver):
             value = self._request(command, self._parse_value("g", command, 1e-4), deadline, EOL)
             if not lo <= value <= hi:
                 raise ProtocolError(
-                    f"rangefinder: implausible distance {value} m (outside {lo}-{hi} m; garbled?)", device=self.device, command=command
+                    f"rangefinder: implausible distance {value} m (outside {lo}-{hi} m; garbled?)",
+                    device=self.device,
+                    command=command,
                 )
             self._no_second_reply(self._re_value["g"], command, deadline)
             return float(value)
@@ -244,7 +252,9 @@ class RangeFinder(LineDriver):
         deadline = deadline_after(timeout_s)
         return self._transact(checked, what=command, idempotent=True, deadline=deadline)
 
-    def measure_n(self, n: int, *, outlier_m: float = 0.05, timeout_s: float | None = None, confirm: bool | None = None) -> RangeMeasurement:
+    def measure_n(
+        self, n: int, *, outlier_m: float = 0.05, timeout_s: float | None = None, confirm: bool | None = None
+    ) -> RangeMeasurement:
         """n shots at the current pointing: their median, spread and outliers (see RangeMeasurement).
 
         A shot with error 255 counts as a miss (NaN); other device errors are raised. A shot
@@ -261,12 +271,16 @@ class RangeFinder(LineDriver):
         for i in range(int(n)):
             left = None if deadline is None else max(deadline - time.monotonic(), 1e-3)
             try:
-                shots[i] = self.measure(timeout_s=left, confirm=n < 3 if confirm is None else confirm)  # 3 or more: the median outvotes a stray
+                shots[i] = self.measure(
+                    timeout_s=left, confirm=n < 3 if confirm is None else confirm
+                )  # 3 or more: the median outvotes a stray
             except NoTargetError:
                 pass
         valid = np.isfinite(shots)
         if not valid.any():
-            raise NoTargetError(f"range finder error 255: none of {n} shots returned a distance", command=self._command("g"))
+            raise NoTargetError(
+                f"range finder error 255: none of {n} shots returned a distance", command=self._command("g")
+            )
         median_all = float(np.median(shots[valid]))
         outliers = valid & (np.abs(shots - median_all) > outlier_m)
         kept = shots[valid & ~outliers]
@@ -290,7 +304,9 @@ class RangeFinder(LineDriver):
         def ask(deadline: float) -> float:
             value = self._request(command, self._parse_value("t", command, 0.1), deadline, EOL)
             if not -40.0 <= value <= 85.0:
-                raise ProtocolError(f"rangefinder: implausible temperature {value} °C (garbled?)", device=self.device, command=command)
+                raise ProtocolError(
+                    f"rangefinder: implausible temperature {value} °C (garbled?)", device=self.device, command=command
+                )
             return float(value)
 
         return self._transact(ask, what=command, idempotent=True, deadline=deadline_after(timeout_s))

@@ -21,12 +21,20 @@ import termios
 import threading
 import time
 from collections import Counter
-from typing import Callable, TypeVar
+from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 import serial
 
-from .errors import DeviceDisconnected, DeviceError, DeviceTimeout, MotionUnconfirmedError, NoisyLineError, ProtocolError
+from .errors import (
+    DeviceDisconnected,
+    DeviceError,
+    DeviceTimeout,
+    MotionUnconfirmedError,
+    NoisyLineError,
+    ProtocolError,
+)
 
 __all__ = [
     "PORT_ERRORS",
@@ -276,7 +284,9 @@ class LineDriver:
             )
         if int(retries) < 0:
             raise ValueError(f"retries must be >= 0, got {retries}")
-        self._line = SerialLine(url, device=self.device, baudrate=baudrate, bytesize=bytesize, parity=parity, stopbits=stopbits)
+        self._line = SerialLine(
+            url, device=self.device, baudrate=baudrate, bytesize=bytesize, parity=parity, stopbits=stopbits
+        )
         self.attempt_timeout_s = float(attempt_timeout_s)
         self.retries = int(retries)
         self.reconnect_timeout_s = float(reconnect_timeout_s)
@@ -297,7 +307,9 @@ class LineDriver:
     def connect(self, timeout_s: float | None = None) -> None:
         """Open the port (retrying with back-off) and run the handshake, within timeout_s."""
         with self._lock:
-            deadline = time.monotonic() + (self.reconnect_timeout_s + 2 * self.attempt_timeout_s if timeout_s is None else timeout_s)
+            deadline = time.monotonic() + (
+                self.reconnect_timeout_s + 2 * self.attempt_timeout_s if timeout_s is None else timeout_s
+            )
             self._line.open_with_backoff(deadline)
             self._noise = [0, 0, ""]
             self._transact(self._handshake, what="handshake", idempotent=True, deadline=deadline, reopen=False)
@@ -343,8 +355,11 @@ class LineDriver:
             partial = ""
         if not (lines or dropped or partial):
             return None
-        got = (f"{lines} unreadable line(s), {nbytes + dropped} bytes" if lines
-               else f"{dropped + len(partial)} bytes without a line end")
+        got = (
+            f"{lines} unreadable line(s), {nbytes + dropped} bytes"
+            if lines
+            else f"{dropped + len(partial)} bytes without a line end"
+        )
         return NoisyLineError(
             f"the {self.display_name}'s line is noisy ({got} during {what}"
             + (f", the last {clip(sample, 40)}" if lines else "")
@@ -468,7 +483,9 @@ class LineDriver:
         if isinstance(last, NoisyLineError):
             raise last
         kind = type(last)
-        raise kind(f"{last} — gave up on {what} after {attempt + 1} attempt(s)", device=self.device, command=last.command) from last
+        raise kind(
+            f"{last} — gave up on {what} after {attempt + 1} attempt(s)", device=self.device, command=last.command
+        ) from last
 
     def _step(self, fn: Callable[[float], T], timeout_s: float | None = None) -> T:
         """One idempotent step of a longer operation (a query, an absolute set-point), retried on its own.

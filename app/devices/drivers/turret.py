@@ -201,17 +201,27 @@ class Turret(LineDriver):
                 bang = line.find("!")
                 message = line[bang + 1 :].strip() if bang >= 0 else ""
                 if bang >= 0 and not line[:bang].strip() and _MESSAGE.match(message):
-                    cls = TurretLimitError if ("position" in message.lower() or "limit" in message.lower()) else TurretError
+                    cls = (
+                        TurretLimitError
+                        if ("position" in message.lower() or "limit" in message.lower())
+                        else TurretError
+                    )
                     raise cls(f"turret refused {command!r}: {message}", command=command)
-                raise ProtocolError(f"turret: garbled reply {clip(line)} to {command!r}", device=self.device, command=command)
+                raise ProtocolError(
+                    f"turret: garbled reply {clip(line)} to {command!r}", device=self.device, command=command
+                )
             rest = line[star + 1 :].strip()
             if expect == "ack":
                 if rest:
-                    raise ProtocolError(f"turret: expected '*' for {command!r}, got {clip(line)}", device=self.device, command=command)
+                    raise ProtocolError(
+                        f"turret: expected '*' for {command!r}, got {clip(line)}", device=self.device, command=command
+                    )
                 return None
             pattern = _INT if expect == "int" else _FLOAT
             if not pattern.match(rest):
-                raise ProtocolError(f"turret: malformed answer {clip(line)} to {command!r}", device=self.device, command=command)
+                raise ProtocolError(
+                    f"turret: malformed answer {clip(line)} to {command!r}", device=self.device, command=command
+                )
             return int(rest) if expect == "int" else float(rest)
 
         return parse
@@ -231,7 +241,9 @@ class Turret(LineDriver):
             if last is not None and value == last:
                 return value
             last = value
-        raise ProtocolError(f"turret: {tries} answers to {command!r} never agreed twice in a row", device=self.device, command=command)
+        raise ProtocolError(
+            f"turret: {tries} answers to {command!r} never agreed twice in a row", device=self.device, command=command
+        )
 
     # ------------------------------------------------------- handshake, resync
     def _handshake(self, deadline: float) -> None:
@@ -240,7 +252,9 @@ class Turret(LineDriver):
         res_p = self._ask_agreed("PR", "float", deadline)
         res_t = self._ask_agreed("TR", "float", deadline)
         if not (0.0 < res_p < 3600.0 and 0.0 < res_t < 3600.0):
-            raise ProtocolError(f"turret: implausible resolution {res_p}, {res_t} arc-seconds a step", device=self.device)
+            raise ProtocolError(
+                f"turret: implausible resolution {res_p}, {res_t} arc-seconds a step", device=self.device
+            )
         limits = tuple(self._ask_agreed(c, "int", deadline) for c in ("PN", "PX", "TN", "TX"))
         if not (limits[0] < limits[1] and limits[2] < limits[3]):
             raise ProtocolError(f"turret: implausible limits {limits}", device=self.device)
@@ -292,7 +306,11 @@ class Turret(LineDriver):
                 continue
             v = self._ask_step(cmd, "int")
             if not lo <= v <= hi:
-                raise ProtocolError(f"turret: position {v} from {cmd!r} is outside the limits {lo}..{hi} (garbled?)", device=self.device, command=cmd)
+                raise ProtocolError(
+                    f"turret: position {v} from {cmd!r} is outside the limits {lo}..{hi} (garbled?)",
+                    device=self.device,
+                    command=cmd,
+                )
             pos.append(v)
         return pos[0], pos[1]
 
@@ -311,13 +329,17 @@ class Turret(LineDriver):
             if all(abs(c - p) <= (v * (t - t_prev + 0.005) + 1 if v else 0) for c, p, v in zip(cur, prev, speeds)):
                 return cur
             prev, t_prev = cur, t
-        raise ProtocolError(f"turret: {tries} position reads never agreed (last {prev})", device=self.device, command="PP")
+        raise ProtocolError(
+            f"turret: {tries} position reads never agreed (last {prev})", device=self.device, command="PP"
+        )
 
     def position_steps(self, timeout_s: float | None = None) -> tuple[int, int]:
         """Current (pan, tilt) in steps (while moving: where the axes are now); read twice to be sure."""
         self._need_connected()
         self._ensure_speed_known()
-        return self._transact(self._read_position, what="position query", idempotent=True, deadline=self._deadline(timeout_s))
+        return self._transact(
+            self._read_position, what="position query", idempotent=True, deadline=self._deadline(timeout_s)
+        )
 
     def still_at(self, pan: int, tilt: int, timeout_s: float | None = None) -> bool:
         """True when one read of both axes gives (pan, tilt) steps: the head stayed there (e.g. during a
@@ -364,7 +386,9 @@ class Turret(LineDriver):
         self._transact(send, what="speed setting", idempotent=True, deadline=self._deadline(timeout_s))
         self._speed_set = self._speed_known = (int(pan), int(tilt))
 
-    def set_speed_deg_s(self, pan_deg_s: float, tilt_deg_s: float | None = None, timeout_s: float | None = None) -> None:
+    def set_speed_deg_s(
+        self, pan_deg_s: float, tilt_deg_s: float | None = None, timeout_s: float | None = None
+    ) -> None:
         """Set the speeds in degrees/s (rounded to whole steps/s)."""
         tilt_deg_s = _finite(pan_deg_s if tilt_deg_s is None else tilt_deg_s, "tilt_deg_s")
         pan_deg_s = _finite(pan_deg_s, "pan_deg_s")
@@ -416,7 +440,9 @@ class Turret(LineDriver):
         self._need_connected()
         deadline_after(timeout_s)  # NaN or negative: ValueError
         self._ensure_speed_known()
-        budget = self.attempt_timeout_s + self._full_travel_s() + self.motion_margin_s if timeout_s is None else timeout_s
+        budget = (
+            self.attempt_timeout_s + self._full_travel_s() + self.motion_margin_s if timeout_s is None else timeout_s
+        )
         self._transact(
             lambda dl: self._ask("A", "ack", time.monotonic() + budget),
             what="wait for motion end",
@@ -425,7 +451,9 @@ class Turret(LineDriver):
         )
         self._maybe_moving = False
 
-    def move_to_steps(self, pan: int | None = None, tilt: int | None = None, *, wait: bool = True, timeout_s: float | None = None) -> tuple[int, int]:
+    def move_to_steps(
+        self, pan: int | None = None, tilt: int | None = None, *, wait: bool = True, timeout_s: float | None = None
+    ) -> tuple[int, int]:
         """Absolute move (steps); None keeps an axis at its last commanded position.
 
         Returns (pan, tilt): with wait, where the head is (both axes read back, equal to the
@@ -444,7 +472,9 @@ class Turret(LineDriver):
         self.check_limits(pan, tilt)
         self._ensure_speed_known()
         motion_s = self._motion_time_s(pan, tilt)
-        budget = 5 * (self.retries + 1) * self.attempt_timeout_s + (motion_s + self.motion_margin_s if wait else 0.0)  # one attempt's worst case
+        budget = 5 * (self.retries + 1) * self.attempt_timeout_s + (
+            motion_s + self.motion_margin_s if wait else 0.0
+        )  # one attempt's worst case
 
         def move(_deadline: float) -> tuple[int, int]:
             asked = (pan, tilt)
@@ -485,7 +515,14 @@ class Turret(LineDriver):
         self._target = result
         return result
 
-    def move_to(self, pan_rad: float | None = None, tilt_rad: float | None = None, *, wait: bool = True, timeout_s: float | None = None) -> tuple[float, float]:
+    def move_to(
+        self,
+        pan_rad: float | None = None,
+        tilt_rad: float | None = None,
+        *,
+        wait: bool = True,
+        timeout_s: float | None = None,
+    ) -> tuple[float, float]:
         """Absolute move in radians (rounded to whole steps); returns the angles commanded or reached."""
         self._need_connected()
         pan = None if pan_rad is None else int(np.round(_finite(pan_rad, "pan_rad") / self.pan_step_rad))
@@ -493,14 +530,26 @@ class Turret(LineDriver):
         p, t = self.move_to_steps(pan, tilt, wait=wait, timeout_s=timeout_s)
         return (None if p is None else p * self.pan_step_rad, None if t is None else t * self.tilt_step_rad)
 
-    def move_to_deg(self, pan_deg: float | None = None, tilt_deg: float | None = None, *, wait: bool = True, timeout_s: float | None = None):
+    def move_to_deg(
+        self,
+        pan_deg: float | None = None,
+        tilt_deg: float | None = None,
+        *,
+        wait: bool = True,
+        timeout_s: float | None = None,
+    ):
         """Absolute move in degrees (rounded to whole steps); returns the angles in degrees."""
         p, t = self.move_to(
-            None if pan_deg is None else math.radians(pan_deg), None if tilt_deg is None else math.radians(tilt_deg), wait=wait, timeout_s=timeout_s
+            None if pan_deg is None else math.radians(pan_deg),
+            None if tilt_deg is None else math.radians(tilt_deg),
+            wait=wait,
+            timeout_s=timeout_s,
         )
         return (None if p is None else math.degrees(p), None if t is None else math.degrees(t))
 
-    def move_by_steps(self, pan: int = 0, tilt: int = 0, *, wait: bool = True, timeout_s: float | None = None) -> tuple[int, int]:
+    def move_by_steps(
+        self, pan: int = 0, tilt: int = 0, *, wait: bool = True, timeout_s: float | None = None
+    ) -> tuple[int, int]:
         """Relative move (steps). Never retried: a lost confirmation raises MotionUnconfirmedError.
 
         The current position is read first (to refuse a move beyond the limits); returns the new
@@ -531,7 +580,9 @@ class Turret(LineDriver):
             return self.position_steps(timeout_s)
         return target
 
-    def move_by_deg(self, pan_deg: float = 0.0, tilt_deg: float = 0.0, *, wait: bool = True, timeout_s: float | None = None):
+    def move_by_deg(
+        self, pan_deg: float = 0.0, tilt_deg: float = 0.0, *, wait: bool = True, timeout_s: float | None = None
+    ):
         """Relative move in degrees (rounded to whole steps); returns the new angles in degrees."""
         pan_deg, tilt_deg = _finite(pan_deg, "pan_deg"), _finite(tilt_deg, "tilt_deg")
         p, t = self.move_by_steps(

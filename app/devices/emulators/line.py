@@ -22,7 +22,7 @@ import math
 import os
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from ..faults import FaultInjector
 from .ports import InProcessPort, PtyPort

@@ -18,8 +18,8 @@ import select
 import threading
 import time
 import tty
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import serial
 
@@ -28,11 +28,11 @@ __all__ = ["URL_SCHEME", "InProcessPort", "PtyPort", "inprocess_port"]
 URL_SCHEME = "mcit"
 
 # --------------------------------------------------------------------------------- device side
-_INPROCESS: dict[str, "InProcessPort"] = {}
+_INPROCESS: dict[str, InProcessPort] = {}
 _INPROCESS_LOCK = threading.Lock()
 
 
-def inprocess_port(name: str) -> "InProcessPort":
+def inprocess_port(name: str) -> InProcessPort:
     """The registered in-process port called ``name``; serial.SerialException when there is none."""
     with _INPROCESS_LOCK:
         port = _INPROCESS.get(name)

@@ -182,7 +182,9 @@ class TurretEmulator(LineEmulator):
             self.terse = cmd == "FT"
             return self.reply("*", t)
         if cmd == "V":
-            return self.reply(self._answer("mcit PTU-D46 emulator v1", "Pan-Tilt Controller emulator (mcit), PTU-D46"), t)
+            return self.reply(
+                self._answer("mcit PTU-D46 emulator v1", "Pan-Tilt Controller emulator (mcit), PTU-D46"), t
+            )
         if cmd == "A":
             end = max(t, self.mount.motion_end())
             self._busy_until = end

@@ -22,7 +22,12 @@ def _state(scene, t, objects=(), text=""):
 
 
 def test_state_at_is_the_last_state_at_or_before_t(scene):
-    tl = [_state(scene, 0.0, text="a"), _state(scene, 1.0, text="b"), _state(scene, 1.0, text="c"), _state(scene, 2.5, text="d")]
+    tl = [
+        _state(scene, 0.0, text="a"),
+        _state(scene, 1.0, text="b"),
+        _state(scene, 1.0, text="c"),
+        _state(scene, 2.5, text="d"),
+    ]
     assert [state_at(tl, t).text for t in (-1.0, 0.0, 0.99, 1.0, 2.0, 2.5, 9.0)] == ["a", "a", "a", "c", "c", "d", "d"]
 
 
@@ -39,7 +44,7 @@ def test_wireframe_drawn_where_the_camera_projects_it(scene):
     wf = body.model.wireframe(scene.camera.center, body.pose_at(0.0))
     mids = scene.camera.project(wf.segments[wf.visible].mean(axis=1))
     px = np.round((mids + 0.5) * 2 - 0.5).astype(int)
-    near = [np.abs(img[v - 1:v + 2, u - 1:u + 2].astype(int) - green).sum(axis=2).min() for u, v in px]
+    near = [np.abs(img[v - 1 : v + 2, u - 1 : u + 2].astype(int) - green).sum(axis=2).min() for u, v in px]
     assert np.median(near) < 60
     far = np.round((uv.mean(axis=0) + [0, 60] + 0.5) * 2 - 0.5).astype(int)  # below the box, on the bare frame
     assert np.all(img[far[1], far[0]] == 60)

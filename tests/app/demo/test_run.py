@@ -31,10 +31,17 @@ def script(scene):
 def short_script(script):
     """The camera calibration, the box's and the cylinder's modelling and the large-motion pose update."""
     runs = script.runs()
-    picked = [runs[0], *(r for r in runs if r.workflow == "model_object"), next(r for r in runs if r.workflow == "update_pose")]
+    picked = [
+        runs[0],
+        *(r for r in runs if r.workflow == "model_object"),
+        next(r for r in runs if r.workflow == "update_pose"),
+    ]
     assert [(r.workflow, r.object_name) for r in picked] == [
-        ("calibrate_camera", None), ("model_object", "unknown_box"), ("model_object", "unknown_cylinder"),
-        ("update_pose", "parallelepiped")]
+        ("calibrate_camera", None),
+        ("model_object", "unknown_box"),
+        ("model_object", "unknown_cylinder"),
+        ("update_pose", "parallelepiped"),
+    ]
     return script.with_runs(picked)
 
 
@@ -71,7 +78,9 @@ def test_cylinder_by_every_method_against_the_truth(outcome, scene):
     (cyl,) = outcome.results.cylinders
     solid = scene.body("unknown_cylinder").model.solids[0]
     assert (cyl.radius_true, cyl.height_true) == (solid.r0, solid.height) and cyl.method == "fused"
-    assert 1.0 < cyl.distance_turret_m < 1.4 and min(cyl.hits) >= 10 and all(h <= b for h, b in zip(cyl.hits, cyl.beams))
+    assert (
+        1.0 < cyl.distance_turret_m < 1.4 and min(cyl.hits) >= 10 and all(h <= b for h, b in zip(cyl.hits, cyl.beams))
+    )
     # The depth's RMS error in the full demo's simulation at 1.2 m (its report): 0.4 mm fused and range
     # finder alone, 1.3 mm tangential planes, 6.9 mm bisecting planes; allowed: about 4 of those.
     depth_tol = {"fused": 0.002, "rf_tangential": 0.002, "tangential": 0.005, "bisecting": 0.025}
@@ -126,8 +135,16 @@ def test_database_holds_the_models_and_the_history(outcome):
 
 def test_report_shows_the_runs_numbers(outcome):
     text = outcome.report.read_text()
-    for heading in ("## Main results", "Table III.1", "Table III.2", "Figure III.6", "Table V.1", "Figure V.1", "Figure V.2",
-                    "## Set-up and noise"):
+    for heading in (
+        "## Main results",
+        "Table III.1",
+        "Table III.2",
+        "Figure III.6",
+        "Table V.1",
+        "Figure V.1",
+        "Figure V.2",
+        "## Set-up and noise",
+    ):
         assert heading in text
     (box,) = outcome.results.boxes
     e = np.abs(box.error) * 100

@@ -9,12 +9,14 @@ import numpy as np
 import pytest
 
 from app.devices.drivers.rangefinder import RangeFinder
-from app.devices.site import EmulatedSite
 from app.devices.drivers.turret import Turret
+from app.devices.site import EmulatedSite
 from app.scene import default_scene_path, load_scene
 from core.rangefinder import aim
 
-FAST_SITE = dict(measure_delay_s=0.002, delay_per_m_s=0.0, no_target_delay_s=0.01, rangefinder_baud=0, turret_baud=0, seed=0)
+FAST_SITE = dict(
+    measure_delay_s=0.002, delay_per_m_s=0.0, no_target_delay_s=0.01, rangefinder_baud=0, turret_baud=0, seed=0
+)
 FAST_DRIVER = dict(attempt_timeout_s=0.25, retries=2, reconnect_timeout_s=1.0)
 
 
@@ -25,7 +27,11 @@ def workcell():
 
 def exact_scene(scene, sigma_m: float = 0.0, speed_steps_s: float = 4000.0):
     """The scene with a noiseless (or given σ) range finder and a fast turret."""
-    return replace(scene, rangefinder=replace(scene.rangefinder, sigma_range_m=sigma_m), turret=replace(scene.turret, speed_steps_s=speed_steps_s))
+    return replace(
+        scene,
+        rangefinder=replace(scene.rangefinder, sigma_range_m=sigma_m),
+        turret=replace(scene.turret, speed_steps_s=speed_steps_s),
+    )
 
 
 @pytest.fixture

@@ -4,13 +4,19 @@ Noise as the scene says (σ_ρ = 5 mm), the turret's real step (0.0514°), the w
 """
 
 import threading
-import time
 
 import numpy as np
 import pytest
 import trimesh
 
-from app.devices.acquisition import AcquisitionCancelled, face_patch_scan, grid_in_polygon, inside_polygon, measure_at_pixel, profile_scan
+from app.devices.acquisition import (
+    AcquisitionCancelled,
+    face_patch_scan,
+    grid_in_polygon,
+    inside_polygon,
+    measure_at_pixel,
+    profile_scan,
+)
 from app.devices.drivers.errors import DeviceDisconnected
 from core.geometry import fit_plane_tls
 from core.rangefinder import aim
@@ -54,8 +60,15 @@ def test_profile_scan_of_the_box_lies_on_its_true_faces(workcell, noisy):
     C, n, _ = facing_face(workcell)
     pan, tilt, _ = aim(workcell.turret.T_world_turret, C)
     progress = []
-    scan = profile_scan(tu, rf, tilt_rad=float(tilt), pan_start_rad=float(pan) - 0.06, pan_stop_rad=float(pan) + 0.06,
-                        pan_step_rad=2 * tu.pan_step_rad, progress=progress.append)
+    scan = profile_scan(
+        tu,
+        rf,
+        tilt_rad=float(tilt),
+        pan_start_rad=float(pan) - 0.06,
+        pan_stop_rad=float(pan) + 0.06,
+        pan_step_rad=2 * tu.pan_step_rad,
+        progress=progress.append,
+    )
     assert len(scan) == len(progress) == progress[-1].total and progress[-1].done == len(scan)
     assert np.all(np.diff(scan.meta["pan_steps"]) == 2) and np.all(scan.tilt_rad == scan.tilt_rad[0])
     # each report carries the beam just measured: the caller can draw the spot and the points as they come
@@ -76,8 +89,15 @@ def test_face_patch_scan_fits_the_true_face_plane(workcell, noisy):
     site, rf, tu = noisy
     poly, C, n = face_polygon_uv(workcell)
     progress = []
-    scan = face_patch_scan(workcell.camera, workcell.turret.T_world_turret, tu, rf, polygon_uv=poly, spacing_px=3.0,
-                           progress=progress.append)
+    scan = face_patch_scan(
+        workcell.camera,
+        workcell.turret.T_world_turret,
+        tu,
+        rf,
+        polygon_uv=poly,
+        spacing_px=3.0,
+        progress=progress.append,
+    )
     aiming = [p for p in progress if p.done == 0]
     assert aiming and all("aiming" in p.message and p.beam is not None for p in aiming)  # the centroid's iteration
     beams = np.array([p.beam for p in progress if p.done > 0])
@@ -98,14 +118,16 @@ def test_measure_at_a_clicked_pixel_puts_the_beam_there(workcell, noisy):
     C, n, _ = facing_face(workcell)
     uv = workcell.camera.project(C[None])[0]
     progress = []
-    pm = measure_at_pixel(workcell.camera, workcell.turret.T_world_turret, uv, tu, rf, shots=5, progress=progress.append)
+    pm = measure_at_pixel(
+        workcell.camera, workcell.turret.T_world_turret, uv, tu, rf, shots=5, progress=progress.append
+    )
     assert progress[-1].beam == (pm.pan_rad, pm.tilt_rad, pm.range_m)  # the final beam: the spot to show
     assert pm.hit and pm.aim.converged and pm.measurement.n_valid == 5
     assert np.linalg.norm(pm.X_world - C) < 0.015
     assert pm.X_world.shape == (3,) and pm.cov_world.shape == (3, 3)
     assert np.all(np.linalg.eigvalsh(pm.cov_world) > 0)
     assert np.sqrt(float(n @ pm.cov_world @ n)) < 0.01  # about σ_ρ along a beam nearly normal to the face
-    assert (tu.position_rad() == pytest.approx((pm.pan_rad, pm.tilt_rad)))
+    assert tu.position_rad() == pytest.approx((pm.pan_rad, pm.tilt_rad))
 
 
 def test_misses_are_nan_and_device_faults_surface(workcell, noisy):
@@ -128,7 +150,15 @@ def test_scans_can_be_cancelled_and_keep_what_they_measured(workcell, noisy):
             cancel.set()
 
     with pytest.raises(AcquisitionCancelled, match="after 3 of") as info:
-        profile_scan(tu, rf, tilt_rad=float(tilt), pan_start_rad=float(pan), pan_stop_rad=float(pan) + 0.05, progress=progress, cancel=cancel)
+        profile_scan(
+            tu,
+            rf,
+            tilt_rad=float(tilt),
+            pan_start_rad=float(pan),
+            pan_stop_rad=float(pan) + 0.05,
+            progress=progress,
+            cancel=cancel,
+        )
     assert len(info.value.partial) == 3 and info.value.partial.hits.all()
     poly, _, _ = face_polygon_uv(workcell)
     cancel.set()
@@ -144,7 +174,12 @@ def test_grid_in_polygon():
     assert np.all(np.diff(g[:4, 0]) > 0) and np.all(np.diff(g[4:8, 0]) < 0)  # serpentine rows
     tri = grid_in_polygon(np.array([[0.0, 0.0], [40.0, 0.0], [0.0, 40.0]]), 4.0)
     assert np.all(tri.sum(axis=1) < 40.0)
-    assert list(inside_polygon(square, [[20.0, 20.0], [10.0, 20.0], [31.0, 20.0], [20.0, 10.0 + 1e-3]])) == [True, False, False, True]
+    assert list(inside_polygon(square, [[20.0, 20.0], [10.0, 20.0], [31.0, 20.0], [20.0, 10.0 + 1e-3]])) == [
+        True,
+        False,
+        False,
+        True,
+    ]
     concave = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [5.0, 2.0], [0.0, 10.0]])
     assert list(inside_polygon(concave, [[5.0, 1.0], [5.0, 5.0], [2.0, 3.0]])) == [True, False, True]
     with pytest.raises(ValueError, match="3 vertices"):

@@ -89,18 +89,34 @@ def run_trial(kind: str, seed: int, workcell, make_site, drivers, timed: bool = 
     try:
         if kind == "profile":
             pan, tilt, _ = aim(T, C)
-            scan = profile_scan(tu, rf, tilt_rad=float(tilt), pan_start_rad=float(pan) - 0.05, pan_stop_rad=float(pan) + 0.05,
-                                pan_step_rad=8 * tu.pan_step_rad, progress=progress)
+            scan = profile_scan(
+                tu,
+                rf,
+                tilt_rad=float(tilt),
+                pan_start_rad=float(pan) - 0.05,
+                pan_stop_rad=float(pan) + 0.05,
+                pan_step_rad=8 * tu.pan_step_rad,
+                progress=progress,
+            )
             beams = list(zip(scan.pan_rad, scan.tilt_rad, scan.range_m))
         elif kind == "face_patch":
             uv = workcell.camera.project(C[None])[0]
-            scan = face_patch_scan(workcell.camera, T, tu, rf, center_uv=uv, half_size_px=6.0, spacing_px=4.0, progress=progress)
+            scan = face_patch_scan(
+                workcell.camera, T, tu, rf, center_uv=uv, half_size_px=6.0, spacing_px=4.0, progress=progress
+            )
             beams = list(zip(scan.pan_rad, scan.tilt_rad, scan.range_m))
         else:
             uv = workcell.camera.project(C[None])[0] + rng.uniform(-5, 5, 2)
             got = []
-            pm = measure_at_pixel(workcell.camera, T, uv, tu, rf, shots=3,
-                                  progress=lambda p: (got.append(p.beam) if p.beam is not None else None, progress(p)))
+            pm = measure_at_pixel(
+                workcell.camera,
+                T,
+                uv,
+                tu,
+                rf,
+                shots=3,
+                progress=lambda p: (got.append(p.beam) if p.beam is not None else None, progress(p)),
+            )
             beams = [b for b in got if b is not None] + [(pm.pan_rad, pm.tilt_rad, pm.range_m)]
         error = None
     except DeviceError as exc:
@@ -124,10 +140,14 @@ def test_an_unplug_mid_scan_never_gives_a_wrong_beam(kind, timed, workcell, make
         total += len(beams)
         wrong += [(seed, *w) for w in wrong_beams(workcell, raycaster, beams)]
     bad_scans = len({w[0] for w in wrong})
-    print(f"\n{kind}, unplug {'during a shot' if timed else 'at a reply'}: {TRIALS} scans, {unplugged} unplugs, {errors} DeviceErrors, {len(wrong)} wrong beams of {total} "
-          f"(in {bad_scans} scans)")
+    print(
+        f"\n{kind}, unplug {'during a shot' if timed else 'at a reply'}: {TRIALS} scans, {unplugged} unplugs, {errors} DeviceErrors, {len(wrong)} wrong beams of {total} "
+        f"(in {bad_scans} scans)"
+    )
     assert unplugged >= TRIALS - 2  # the fault really happened (a scan may end before the last reply it matches)
-    assert not wrong, f"{len(wrong)} of {total} beams reported where the head was not (seed, pan°, tilt°, range, true): {wrong[:5]}"
+    assert not wrong, (
+        f"{len(wrong)} of {total} beams reported where the head was not (seed, pan°, tilt°, range, true): {wrong[:5]}"
+    )
 
 
 def test_a_head_that_reports_another_position_stops_the_scan(workcell, make_site, drivers, monkeypatch):
@@ -150,4 +170,6 @@ def test_a_head_that_reports_another_position_stops_the_scan(workcell, make_site
     calls[0] = 0
     uv = workcell.camera.project(C[None])[0]
     with pytest.raises(DeviceError, match="instead of"):
-        face_patch_scan(workcell.camera, workcell.turret.T_world_turret, tu, rf, center_uv=uv, half_size_px=6.0, spacing_px=4.0)
+        face_patch_scan(
+            workcell.camera, workcell.turret.T_world_turret, tu, rf, center_uv=uv, half_size_px=6.0, spacing_px=4.0
+        )

@@ -6,10 +6,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from app.devices.drivers.transport import SerialLine
 from app.devices.emulators.rangefinder import RangeFinderEmulator, format_distance
 from app.devices.emulators.turret import MountState
 from app.render.raycast import BeamCaster
-from app.devices.drivers.transport import SerialLine
 from core.rangefinder import aim
 
 from .conftest import facing_face
@@ -24,8 +24,16 @@ def emulator(workcell):
         mount = MountState(workcell.turret.step_rad)
         spec = replace(workcell.rangefinder, **({"sigma_range_m": 0.0} | (spec or {})))
         emu = RangeFinderEmulator(
-            BeamCaster(workcell), spec, workcell.turret.T_world_turret, mount.angles_rad,
-            baudrate=baudrate, measure_delay_s=measure_delay_s, delay_per_m_s=0.0, no_target_delay_s=0.01, rng=0, **options,
+            BeamCaster(workcell),
+            spec,
+            workcell.turret.T_world_turret,
+            mount.angles_rad,
+            baudrate=baudrate,
+            measure_delay_s=measure_delay_s,
+            delay_per_m_s=0.0,
+            no_target_delay_s=0.01,
+            rng=0,
+            **options,
         )
         made.append(emu)
         emu.boot_time_s = 0.2  # time to open the port before the device's power-on line

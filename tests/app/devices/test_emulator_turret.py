@@ -4,8 +4,8 @@ import time
 
 import pytest
 
-from app.devices.emulators.turret import MountState, TurretEmulator
 from app.devices.drivers.transport import SerialLine
+from app.devices.emulators.turret import MountState, TurretEmulator
 
 from .conftest import exact_scene
 

@@ -19,8 +19,8 @@ from app.devices.drivers.errors import (
     ProtocolError,
     SignalTooStrongError,
 )
-from app.devices.faults import Fault
 from app.devices.drivers.rangefinder import RangeFinder
+from app.devices.faults import Fault
 
 from .conftest import FAST_DRIVER, aim_steps, box_point, facing_face
 
@@ -79,7 +79,9 @@ def test_a_late_reply_is_never_taken_for_the_next_measurement(workcell, rf_bench
     site.rangefinder.faults.push(Fault("late", match=b"g0g", delay_s=0.5))
     assert rf.measure() == pytest.approx(first, abs=1e-9)
     table = workcell.body("table")
-    top_centre = box_point(workcell, "table", table.model.bounds()[1] * [0, 0, 1] + table.model.bounds().mean(axis=0) * [1, 1, 0])
+    top_centre = box_point(
+        workcell, "table", table.model.bounds()[1] * [0, 0, 1] + table.model.bounds().mean(axis=0) * [1, 1, 0]
+    )
     tu.move_to_steps(*aim_steps(workcell, top_centre))  # somewhere else: another range
     second = round(site.rangefinder.true_range(time.monotonic())[0], 4)
     assert abs(second - first) > 0.05
@@ -197,13 +199,19 @@ def test_bad_arguments_are_refused():
 
 
 def test_through_a_real_pty_with_faults_and_a_replug(workcell, make_site, drivers, tmp_path):
-    site, rf_path, tu_path = make_site(transport="pty", links=(tmp_path / "rf", tmp_path / "tu"), rangefinder_baud=19200, turret_baud=9600)
+    site, rf_path, tu_path = make_site(
+        transport="pty", links=(tmp_path / "rf", tmp_path / "tu"), rangefinder_baud=19200, turret_baud=9600
+    )
     assert rf_path == str(tmp_path / "rf")
     rf, tu = drivers(rf_path, tu_path)
     tu.move_to_steps(*aim_steps(workcell, facing_face(workcell)[0]))
     expected = round(site.rangefinder.true_range(time.monotonic())[0], 4)
     assert rf.measure() == pytest.approx(expected, abs=1e-9)
-    site.rangefinder.faults.push(Fault("junk", match=b"g0g"), Fault("unplug", match=b"g0g", delay_s=0.2), Fault("garble", match=b"g0g", at=5, data=b"x"))
+    site.rangefinder.faults.push(
+        Fault("junk", match=b"g0g"),
+        Fault("unplug", match=b"g0g", delay_s=0.2),
+        Fault("garble", match=b"g0g", at=5, data=b"x"),
+    )
     for _ in range(3):
         assert rf.measure() == pytest.approx(expected, abs=1e-9)
     assert rf.stats["reconnects"] >= 1 and (tmp_path / "rf").is_symlink()

@@ -32,7 +32,9 @@ def test_a_beam_into_the_sky_misses(workcell):
 
 def test_moving_bodies_are_cast_at_the_asked_time():
     start = make_T(np.eye(3), [0.0, 0.0, 0.0])
-    moving = Body("crate", "box", "known", BRep.box(0.2, 0.2, 0.1), start, ((2.0, make_T(rot_z(0.3), [0.5, 0.0, 0.0])),))
+    moving = Body(
+        "crate", "box", "known", BRep.box(0.2, 0.2, 0.1), start, ((2.0, make_T(rot_z(0.3), [0.5, 0.0, 0.0])),)
+    )
     rc = BeamCaster([moving])
     origin, down = np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])
     assert rc.cast(origin, down, 0.0) == (pytest.approx(0.9, abs=1e-9), "crate")
@@ -78,8 +80,12 @@ def test_same_hits_as_the_trimesh_caster_it_replaces(workcell):
     rc = BeamCaster(bodies)
     rng = np.random.default_rng(7)
     origins = [workcell.turret.T_world_turret[:3, 3], np.array([0.3, 0.2, 1.5]), np.array([0.35, 0.25, 0.95])]
-    origins += [(b.pose_at(0.0) @ np.r_[b.model.bounds().mean(axis=0), 1.0])[:3] for b in workcell.bodies]  # inside each
-    origins.append((bodies[-1].pose_at(0.0) @ np.r_[0.05, 0.05, 0.05, 1.0])[:3])  # inside the L (its box centre is on its notch)
+    origins += [
+        (b.pose_at(0.0) @ np.r_[b.model.bounds().mean(axis=0), 1.0])[:3] for b in workcell.bodies
+    ]  # inside each
+    origins.append(
+        (bodies[-1].pose_at(0.0) @ np.r_[0.05, 0.05, 0.05, 1.0])[:3]
+    )  # inside the L (its box centre is on its notch)
     hits = same = cylinder = 0
     for origin in origins:
         for d in rng.normal(size=(60, 3)):
@@ -114,9 +120,13 @@ def test_designation_casts_with_the_same_caster_and_finds_the_old_hits(workcell,
         meshes = []
         for obj in objects:
             V, F = obj.model.triangles()
-            meshes.append((obj.name, trimesh.Trimesh(V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3], F, process=False)))
+            meshes.append(
+                (obj.name, trimesh.Trimesh(V @ obj.T_world_obj[:3, :3].T + obj.T_world_obj[:3, 3], F, process=False))
+            )
         rng = np.random.default_rng(3)
-        uv = np.column_stack([rng.uniform(0, workcell.camera.width - 1, 300), rng.uniform(0, workcell.camera.height - 1, 300)])
+        uv = np.column_stack(
+            [rng.uniform(0, workcell.camera.width - 1, 300), rng.uniform(0, workcell.camera.height - 1, 300)]
+        )
         o, D = workcell.camera.rays(uv)
         hits = 0
         for d in D:

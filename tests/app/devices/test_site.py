@@ -19,7 +19,9 @@ from .conftest import FAST_DRIVER, FAST_SITE, exact_scene, facing_face
 
 def test_open_devices_emulates_both_when_no_url_is_given(workcell):
     scene = exact_scene(workcell)
-    with open_devices(scene, clock=lambda: 0.0, site_options=FAST_SITE, rangefinder_options=FAST_DRIVER, turret_options=FAST_DRIVER) as dev:
+    with open_devices(
+        scene, clock=lambda: 0.0, site_options=FAST_SITE, rangefinder_options=FAST_DRIVER, turret_options=FAST_DRIVER
+    ) as dev:
         assert dev.emulated and all(u.startswith("mcit://") for u in dev.urls)
         assert np.allclose(dev.T_world_turret, scene.turret.T_world_turret)
         C, _, rho = facing_face(scene)
@@ -39,7 +41,14 @@ def test_open_devices_on_real_paths_and_over_ptys(workcell, tmp_path):
             assert not dev.emulated and dev.urls == (rf_path, tu_path)
             assert dev.turret.move_to_steps(50, -50) == (50, -50)
             assert site.mount.steps_at() == (50, -50)
-    with open_devices(scene, clock=lambda: 0.0, transport="pty", site_options=FAST_SITE, rangefinder_options=FAST_DRIVER, turret_options=FAST_DRIVER) as dev:
+    with open_devices(
+        scene,
+        clock=lambda: 0.0,
+        transport="pty",
+        site_options=FAST_SITE,
+        rangefinder_options=FAST_DRIVER,
+        turret_options=FAST_DRIVER,
+    ) as dev:
         assert dev.urls[0].startswith("/dev/") and dev.rangefinder.temperature_c() == pytest.approx(24.0)
 
 
@@ -51,11 +60,23 @@ def test_open_devices_refuses_half_a_pair(workcell):
 
 
 def test_the_clock_decides_where_moving_bodies_are(workcell):
-    crate = Body("crate", "box", "known", BRep.box(0.3, 0.3, 0.3), make_T(np.eye(3), [0.0, 0.0, 0.0]),
-                 ((1.0, make_T(np.eye(3), [0.0, 0.0, 0.0])), (2.0, make_T(np.eye(3), [2.0, 0.0, 0.0]))))
+    crate = Body(
+        "crate",
+        "box",
+        "known",
+        BRep.box(0.3, 0.3, 0.3),
+        make_T(np.eye(3), [0.0, 0.0, 0.0]),
+        ((1.0, make_T(np.eye(3), [0.0, 0.0, 0.0])), (2.0, make_T(np.eye(3), [2.0, 0.0, 0.0]))),
+    )
     scene = replace(exact_scene(workcell), bodies=(crate,))
     now = {"t": 0.0}
-    with open_devices(scene, clock=lambda: now["t"], site_options=FAST_SITE, rangefinder_options=FAST_DRIVER, turret_options=FAST_DRIVER) as dev:
+    with open_devices(
+        scene,
+        clock=lambda: now["t"],
+        site_options=FAST_SITE,
+        rangefinder_options=FAST_DRIVER,
+        turret_options=FAST_DRIVER,
+    ) as dev:
         pan, tilt, rho = aim(dev.T_world_turret, np.array([0.0, 0.0, 0.15]))
         dev.turret.move_to(float(pan), float(tilt))
         assert dev.rangefinder.measure() < float(rho)  # the crate's near face, in front of its centre

@@ -17,8 +17,8 @@ from app.devices.drivers.errors import (
     TurretError,
     TurretLimitError,
 )
-from app.devices.faults import Fault
 from app.devices.drivers.turret import Turret
+from app.devices.faults import Fault
 
 from .conftest import FAST_DRIVER
 
@@ -61,7 +61,9 @@ def test_absolute_moves_in_steps_radians_and_degrees(bench):
     assert tu.move_to_deg(10.0, 5.0) == (pytest.approx(10.0, abs=0.03), pytest.approx(5.0, abs=0.03))
     assert tu.position_deg() == (pytest.approx(10.0, abs=0.03), pytest.approx(5.0, abs=0.03))
     mount_pan, mount_tilt = site.turret.mount.angles_rad()
-    assert math.degrees(mount_pan) == pytest.approx(10.0, abs=0.03) and math.degrees(mount_tilt) == pytest.approx(5.0, abs=0.03)
+    assert math.degrees(mount_pan) == pytest.approx(10.0, abs=0.03) and math.degrees(mount_tilt) == pytest.approx(
+        5.0, abs=0.03
+    )
     tu.move_to_steps(tilt=100)  # one axis only
     assert emulated_steps(site)[1] == 100 and emulated_steps(site)[0] == tu.rad_to_steps(math.radians(10.0), 0)[0]
 

@@ -2,9 +2,6 @@
 
 import dataclasses
 
-import numpy as np
-import pytest
-
 from app.operator.script import load_script
 from app.scene import default_scene_path, load_scene
 from core.transforms import pose_error

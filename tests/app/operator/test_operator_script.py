@@ -35,12 +35,18 @@ def test_committed_script_is_what_the_generator_writes(scene, script, tmp_path):
 def test_script_covers_the_session(script):
     runs = script.runs()
     kinds = [(r.workflow, r.object_name) for r in runs]
-    assert kinds[:4] == [("calibrate_camera", None), ("calibrate_turret", None),
-                         ("model_object", "unknown_box"), ("model_object", "unknown_cylinder")]
+    assert kinds[:4] == [
+        ("calibrate_camera", None),
+        ("calibrate_turret", None),
+        ("model_object", "unknown_box"),
+        ("model_object", "unknown_cylinder"),
+    ]
     assert kinds[4:] == [("update_pose", "parallelepiped")] * 4
     for r in runs:
         assert r.actions[0].action == "start" and r.actions[-1].action == "accept"
-    ends = [[a.action for a in r.actions if a.action in ("solve", "refine")] for r in runs if r.workflow == "update_pose"]
+    ends = [
+        [a.action for a in r.actions if a.action in ("solve", "refine")] for r in runs if r.workflow == "update_pose"
+    ]
     assert ends == [["solve", "refine"], ["refine"], ["refine"], ["refine"]]  # P3L after the large motion only
     assert [r.actions[0].truth["motion"] for r in runs[4:]] == ["large", "small", "small", "small"]
     box = [a.action for a in runs[2].actions if a.action not in ("click",)]
@@ -48,7 +54,11 @@ def test_script_covers_the_session(script):
     cyl = [a.action for a in runs[3].actions]
     assert cyl == ["start"] + ["click"] * 4 + ["scan", "solve", "accept"]
     steps = script.steps()
-    assert all("truth" not in s for s in steps) and steps[0] == {"t": 0.3, "workflow": "calibrate_camera", "action": "start"}
+    assert all("truth" not in s for s in steps) and steps[0] == {
+        "t": 0.3,
+        "workflow": "calibrate_camera",
+        "action": "start",
+    }
 
 
 def _line_distance(uv, A_uv, B_uv):
@@ -111,7 +121,8 @@ def test_cylinder_silhouettes_are_clicked_at_their_ends_bottom_first(scene, scri
         assert first.truth["silhouette"] == second.truth["silhouette"]
         ends = sil[first.truth["silhouette"]]
         assert {tuple(np.round(first.truth["X_world"], 5)), tuple(np.round(second.truth["X_world"], 5))} == {
-            tuple(np.round(e, 5)) for e in ends}
+            tuple(np.round(e, 5)) for e in ends
+        }
         assert first.truth["uv_true"][1] > second.truth["uv_true"][1]  # the bottom end (lower in the image) first
     us = [np.mean([c.truth["uv_true"][0] for c in pair]) for pair in (clicks[:2], clicks[2:])]
     assert us[0] < us[1]  # left silhouette, then right
@@ -180,7 +191,10 @@ def test_box_faces_are_clicked_side_by_side_then_measured(scene, script):
         assert len(clicks) == 8  # two clicks on each of the face's four sides
         assert {c.truth["face"] for c in clicks} == {f}
         loop = box.model.faces[f]
-        sides = {int(np.flatnonzero(((E == [a, b]) | (E == [b, a])).all(axis=1))[0]) for a, b in zip(loop, loop[1:] + loop[:1])}
+        sides = {
+            int(np.flatnonzero(((E == [a, b]) | (E == [b, a])).all(axis=1))[0])
+            for a, b in zip(loop, loop[1:] + loop[:1])
+        }
         assert {c.truth["edge"] for c in clicks} == sides
 
 
@@ -249,12 +263,22 @@ def _base() -> dict:
         (lambda d: d["actions"][3].update(seg_uv=[[1, 2]]), r"actions\[3\]\.seg_uv: two pixels"),
         (lambda d: d["actions"][3].update(seg_uv=[[1, 2], [3]]), r"actions\[3\]\.seg_uv\[1\]: a list of 2 numbers"),
         (lambda d: d["actions"][3].update(edge=True), r"actions\[3\]\.edge: an integer"),
-        (lambda d: d["actions"][1].update(workflow="calibrate_everything"), r"actions\[1\]\.workflow: unknown workflow"),
-        (lambda d: d["actions"][1].update(action="teleport"), r"actions\[1\]\.action: update_pose has no action 'teleport'"),
+        (
+            lambda d: d["actions"][1].update(workflow="calibrate_everything"),
+            r"actions\[1\]\.workflow: unknown workflow",
+        ),
+        (
+            lambda d: d["actions"][1].update(action="teleport"),
+            r"actions\[1\]\.action: update_pose has no action 'teleport'",
+        ),
         (lambda d: d["actions"][1].pop("t"), r"actions\[1\]: missing field 't'"),
         (lambda d: d["actions"].pop(0), r"actions\[0\]: a script begins with a workflow's 'start'"),
-        (lambda d: d["actions"].__setitem__(2, {"t": 0.2, "workflow": "calibrate_camera", "action": "click", "uv": [1, 2]}),
-         "without a 'start'"),
+        (
+            lambda d: d["actions"].__setitem__(
+                2, {"t": 0.2, "workflow": "calibrate_camera", "action": "click", "uv": [1, 2]}
+            ),
+            "without a 'start'",
+        ),
         (lambda d: d.update(format="v0"), "'format' must be"),
         (lambda d: d.update(actions=[]), "non-empty list"),
         (lambda d: d.update(extra=1), "unknown top-level field"),

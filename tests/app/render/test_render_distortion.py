@@ -44,8 +44,10 @@ def test_overlay_on_a_distorted_rendered_video_lies_on_the_true_edges(workcell, 
     assert len(edges) >= 15
     on = np.array([np.mean(edge_offsets(frame, uv)) for _, _, uv in edges])
     off = np.array([np.mean(edge_offsets(raw_frame, uv, half_px=4.0)) for _, _, uv in edges])
-    print(f"{len(edges)} edges: undistorted within {np.abs(on).max():.3f} px (mean |offset| {np.abs(on).mean():.3f}); "
-          f"not undistorted up to {np.nanmax(np.abs(off)):.2f} px")
+    print(
+        f"{len(edges)} edges: undistorted within {np.abs(on).max():.3f} px (mean |offset| {np.abs(on).mean():.3f}); "
+        f"not undistorted up to {np.nanmax(np.abs(off)):.2f} px"
+    )
     assert np.abs(on).max() < 0.2, on
     assert np.nanmax(np.abs(off)) > 1.5  # without undistortion the overlay misses the edges
 

@@ -93,10 +93,11 @@ def test_agrees_with_trimesh_on_the_workcell():
     o, d = scene.camera.rays(uv)
     ours = sc.cast(o, d)
     best = np.full(len(d), np.inf)
-    for name, V, F in scene.truth_meshes(0.0):
+    for _name, V, F in scene.truth_meshes(0.0):
         mesh = trimesh.Trimesh(V, F, process=False)
         loc, ray_idx, _ = trimesh.ray.ray_triangle.RayMeshIntersector(mesh).intersects_location(
-            np.tile(o, (len(d), 1)), d, multiple_hits=False)
+            np.tile(o, (len(d), 1)), d, multiple_hits=False
+        )
         dist = np.linalg.norm(loc - o, axis=1)
         best[ray_idx] = np.minimum(best[ray_idx], dist)
     cyl = ours.body == [b.name for b in scene.bodies].index("unknown_cylinder")

@@ -54,7 +54,9 @@ def test_mcit_render_command(tmp_path, small_scene_dict):
     import cv2
 
     assert cv2.imread(str(tmp_path / "f.png"), cv2.IMREAD_GRAYSCALE).shape == (64, 96)
-    assert main(["script", "--scene", str(default_scene_path()), "--out", str(tmp_path / "op.json"), "--seed", "3"]) == 0
+    assert (
+        main(["script", "--scene", str(default_scene_path()), "--out", str(tmp_path / "op.json"), "--seed", "3"]) == 0
+    )
     assert json.loads((tmp_path / "op.json").read_text())["generator"]["seed"] == 3
 
 

@@ -67,11 +67,21 @@ def _top_down_scene(yaw_deg: float, x_edge: float) -> dict:
     """A camera looking straight down at a box whose left edge is at world x = x_edge (at yaw 0)."""
     return {
         "format": "mcit-scene/1",
-        "camera": {"width": 40, "height": 30, "K": [[100, 0, 19.5], [0, 100, 14.5], [0, 0, 1]],
-                   "T_world_cam": {"xyz": [0, 0, 2.0], "rpy_deg": [180, 0, 0]}},
+        "camera": {
+            "width": 40,
+            "height": 30,
+            "K": [[100, 0, 19.5], [0, 100, 14.5], [0, 0, 1]],
+            "T_world_cam": {"xyz": [0, 0, 2.0], "rpy_deg": [180, 0, 0]},
+        },
         "turret": {"T_world_turret": {"xyz": [0.2, 0, 2.0]}},
-        "bodies": [{"name": "box", "model": {"box": [1.0, 1.0, 0.1]},
-                    "pose": {"xyz": [x_edge + 0.5, 0, 0], "rpy_deg": [0, 0, yaw_deg]}, "appearance": {"albedo": 0.8}}],
+        "bodies": [
+            {
+                "name": "box",
+                "model": {"box": [1.0, 1.0, 0.1]},
+                "pose": {"xyz": [x_edge + 0.5, 0, 0], "rpy_deg": [0, 0, yaw_deg]},
+                "appearance": {"albedo": 0.8},
+            }
+        ],
         "render": {"ambient": 1.0, "sky": 0.1, "gain": 200.0, "noise_sigma": 0.0, "blur_sigma_px": 0.0},
     }
 
@@ -104,7 +114,9 @@ def test_measurements_on_a_synthetic_step():
     img[:, 11:] = 100.0
     img[:, 10] = 100.0 * 0.2  # an edge at u = 10.3: pixel 10 is 20 % bright
     np.testing.assert_allclose(edge_offsets(img, [[10.3, 2.0], [10.3, 18.0]]), 0.0, atol=1e-12)
-    np.testing.assert_allclose(edge_offsets(img, [[10.0, 2.0], [10.0, 18.0]]), -0.3, atol=1e-12)  # edge right of p0→p1 down
+    np.testing.assert_allclose(
+        edge_offsets(img, [[10.0, 2.0], [10.0, 18.0]]), -0.3, atol=1e-12
+    )  # edge right of p0→p1 down
     cover = polygon_coverage([[10.3, -5.0], [40.0, -5.0], [40.0, 40.0], [10.3, 40.0]], 30, 20)
     np.testing.assert_allclose(cover, img / 100.0, atol=1e-12)
     tri = polygon_coverage([[0.0, 0.0], [4.0, 0.0], [0.0, 4.0]], 6, 6)
@@ -117,7 +129,7 @@ def test_rendered_edges_lie_where_C_projects_the_true_edges(workcell, workcell_t
     edges = list(visible_edges(workcell, r, 16.0))
     assert len(edges) >= 15
     worst_clean, worst_frame = 0.0, 0.0
-    for name, k, uv in edges:
+    for _name, _k, uv in edges:
         o_clean = edge_offsets(clean, uv)
         o_frame = edge_offsets(frame, uv)
         worst_clean = max(worst_clean, abs(o_clean.mean()))

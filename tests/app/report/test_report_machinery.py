@@ -74,7 +74,9 @@ def test_figures_and_report_writer(tmp_path):
     np.testing.assert_allclose(ax.lines[0].get_ydata(), depth_errors_cm("tangential_vc_rf_cm"))
     with pytest.raises(ValueError, match="unknown method"):
         plot_depth_errors({"magic_cm": ([1.0], [0.0])})
-    fig2 = plot_pose_errors({"large": ([0.012, 0.02], [0.3, 0.2]), "small": ([0.004, 0.005], [0.1, 0.08])}, labels=["1", "2"])
+    fig2 = plot_pose_errors(
+        {"large": ([0.012, 0.02], [0.3, 0.2]), "small": ([0.004, 0.005], [0.1, 0.08])}, labels=["1", "2"]
+    )
     ax_t, ax_r = fig2.axes
     np.testing.assert_allclose(ax_t.lines[0].get_ydata(), [1.2, 2.0])  # cm
     assert len(ax_r.lines) == 2 + 2  # two methods, two of the paper's bounds in degrees

@@ -43,9 +43,14 @@ class Served:
         127.0.0.1:port); returns None when connected, else the refusal's HTTP status."""
         sock = socket.create_connection(("127.0.0.1", self.port), timeout=10)
         try:
-            with websockets.sync.client.connect(f"ws://{host or f'127.0.0.1:{self.port}'}{path}", sock=sock,
-                                                origin=origin, additional_headers=headers,
-                                                subprotocols=[SUBPROTOCOL], open_timeout=10):
+            with websockets.sync.client.connect(
+                f"ws://{host or f'127.0.0.1:{self.port}'}{path}",
+                sock=sock,
+                origin=origin,
+                additional_headers=headers,
+                subprotocols=[SUBPROTOCOL],
+                open_timeout=10,
+            ):
                 assert self.connected.wait(10), "viser created no client for an admitted connection"
                 self.connected.clear()
             return None
@@ -122,7 +127,9 @@ def test_with_a_token_no_token_or_a_wrong_one_is_refused(serve):
     assert s.ws(origin=own, headers={"Cookie": "mcit_000000000000=" + TOKEN}) == 403  # another server's cookie
     assert s.get("/").status == 403
     assert b"?token=" in s.get("/").body  # the refusal says what to open
-    assert s.ws(origin="http://evil.example", path=f"/?token={TOKEN}") == 403  # the token does not lift the origin check
+    assert (
+        s.ws(origin="http://evil.example", path=f"/?token={TOKEN}") == 403
+    )  # the token does not lift the origin check
     assert s.clients == []
     assert s.ws(origin=own, path=f"/?token={TOKEN}") is None
     assert len(s.clients) == 1
@@ -151,8 +158,9 @@ def test_serve_flags_give_a_token_beyond_loopback_and_none_on_it():
     exposed = p.parse_args(["serve", "--host", "0.0.0.0"])
     token = _access_policy(exposed).token
     assert token is not None and len(token) >= 16 and exposed.token == token
-    given = p.parse_args(["serve", "--token", TOKEN, "--allow-origin", "https://a.example",
-                          "--allow-origin", "https://b.example:8443"])
+    given = p.parse_args(
+        ["serve", "--token", TOKEN, "--allow-origin", "https://a.example", "--allow-origin", "https://b.example:8443"]
+    )
     policy = _access_policy(given)
     assert policy.token == TOKEN and policy.allow_origins == ("https://a.example", "https://b.example:8443")
     with pytest.raises(ValueError, match="token"):
@@ -217,8 +225,11 @@ def test_the_cookie_is_secure_when_a_proxy_says_the_page_came_over_https(serve):
 
 def test_a_non_ascii_origin_or_host_is_refused_with_403(serve):
     s = serve()
-    for headers in ({"Origin": "http://\u00e9vil.example"}, {"Host": f"\u00e9vil.example:{s.port}"},
-                    {"Origin": f"http://127.0.0.1:{s.port}/\u00e9"}):
+    for headers in (
+        {"Origin": "http://\u00e9vil.example"},
+        {"Host": f"\u00e9vil.example:{s.port}"},
+        {"Origin": f"http://127.0.0.1:{s.port}/\u00e9"},
+    ):
         conn = socket.create_connection(("127.0.0.1", s.port), timeout=10)
         lines = ["GET / HTTP/1.1"] + [f"{k}: {v}" for k, v in headers.items()]
         if "Host" not in headers:

@@ -76,7 +76,9 @@ def _overlay(site):
 
 def _nudge(site, name, dx=0.01):
     obj = site.object(name)
-    return site.update_pose(obj, obj.T_world_obj @ make_T(np.eye(3), [dx, 0.0, 0.0]), None, method="test", client="test")
+    return site.update_pose(
+        obj, obj.T_world_obj @ make_T(np.eye(3), [dx, 0.0, 0.0]), None, method="test", client="test"
+    )
 
 
 def test_a_change_to_one_object_resends_only_that_objects_nodes(site):
@@ -117,8 +119,11 @@ def test_a_removed_objects_nodes_go_and_a_new_camera_redraws_all(site, db):
     assert lines.removed and label.removed
     assert overlay.object_at(site.camera.project(box.vertices_world()).mean(axis=0), 1e6) != "parallelepiped"
     cam = site.camera
-    moved = Camera(cam.C * np.array([[1.0], [1.0], [1.0]]) + np.array([[0, 0, 0, 2.0], [0, 0, 0, 0], [0, 0, 0, 0]]),
-                   cam.width, cam.height)
+    moved = Camera(
+        cam.C * np.array([[1.0], [1.0], [1.0]]) + np.array([[0, 0, 0, 2.0], [0, 0, 0, 0], [0, 0, 0, 0]]),
+        cam.width,
+        cam.height,
+    )
     assert overlay.sync(moved, site.objects()) == len(site.objects())  # a new C: every object again
     assert overlay.sync(moved, site.objects()) == 0
 
@@ -157,16 +162,28 @@ def test_a_click_inside_an_objects_outline_picks_it_the_nearest_first_not_the_ta
     # on the table, away from every wireframe: nothing (the table is picked by its wireframe only)
     table = site.object("table")
     top = float(table.model.vertices[:, 2].max())
-    far = next(uv for uv in (cam.project(np.array([[x, y, top]]))[0] for x in np.linspace(-0.3, 0.3, 7)
-                             for y in np.linspace(-0.5, 0.2, 8)) if overlay.object_at(uv, 15.0) is None)
+    far = next(
+        uv
+        for uv in (
+            cam.project(np.array([[x, y, top]]))[0]
+            for x in np.linspace(-0.3, 0.3, 7)
+            for y in np.linspace(-0.5, 0.2, 8)
+        )
+        if overlay.object_at(uv, 15.0) is None
+    )
     assert overlay.object_at(far, 15.0) is None
     # inside the box's outline, by the table's edge drawn across it: the box, not the table (a new operator's
     # click on the box's top selected the table)
     segs, owners = overlay._pick
     grid = np.stack(np.meshgrid(np.arange(0, cam.width, 1.0), np.arange(0, cam.height, 1.0)), axis=-1).reshape(-1, 2)
     hull = cv2.convexHull(cam.project(box.vertices_world()).astype(np.float32))
-    by_table = [uv for uv in grid if cv2.pointPolygonTest(hull, (float(uv[0]), float(uv[1])), False) > 0
-                and owners[nearest_segment(segs, uv)[0]] == "table" and nearest_segment(segs, uv)[1] < 8.0]
+    by_table = [
+        uv
+        for uv in grid
+        if cv2.pointPolygonTest(hull, (float(uv[0]), float(uv[1])), False) > 0
+        and owners[nearest_segment(segs, uv)[0]] == "table"
+        and nearest_segment(segs, uv)[1] < 8.0
+    ]
     assert by_table and all(overlay.object_at(uv, 8.0) == "parallelepiped" for uv in by_table)
     # a second box of the same size, 0.3 m nearer the camera along the view: both outlines hold its centre
     ray = box.T_world_obj[:3, 3] - cam.center

@@ -43,10 +43,16 @@ def test_marks_draw_selection_ghosts_clicks_targets_beam(site):
     obj = site.object("parallelepiped")
     moved = obj.T_world_obj.copy()
     moved[:3, 3] += [0.05, 0.0, 0.0]
-    m = Marks(points=np.array([[100.0, 100.0]]), pending=np.array([[50.0, 60.0]]),
-              segments=np.array([[[10.0, 10.0], [60.0, 20.0]]]), targets=np.array([[200.0, 150.0]]),
-              ghosts=[Ghost(obj.model, moved, "#1", chosen=True), Ghost(obj.model, obj.T_world_obj, "#2")],
-              highlight=[("parallelepiped", 0)], beam_uv=np.array([300.0, 120.0]), labels=[((5.0, 5.0), "1")])
+    m = Marks(
+        points=np.array([[100.0, 100.0]]),
+        pending=np.array([[50.0, 60.0]]),
+        segments=np.array([[[10.0, 10.0], [60.0, 20.0]]]),
+        targets=np.array([[200.0, 150.0]]),
+        ghosts=[Ghost(obj.model, moved, "#1", chosen=True), Ghost(obj.model, obj.T_world_obj, "#2")],
+        highlight=[("parallelepiped", 0)],
+        beam_uv=np.array([300.0, 120.0]),
+        labels=[((5.0, 5.0), "1")],
+    )
     objects = {o.name: o for o in site.objects()}
     batch, labels = draw_marks(site.camera, m, objects, 512, 256, selected="parallelepiped")
     cols = _colors(batch)
@@ -63,8 +69,13 @@ def test_marks_draw_selection_ghosts_clicks_targets_beam(site):
 
 
 def test_report_markdown_lists_scalars_and_tables():
-    text = report_markdown({"rms_px": 0.51234, "std_t_mm": [1.0, 2.0, 3.0],
-                            "clicks": [{"click": "edge 1", "residual_px": 0.2}, {"click": "edge 2", "residual_px": 0.7}]})
+    text = report_markdown(
+        {
+            "rms_px": 0.51234,
+            "std_t_mm": [1.0, 2.0, 3.0],
+            "clicks": [{"click": "edge 1", "residual_px": 0.2}, {"click": "edge 2", "residual_px": 0.7}],
+        }
+    )
     assert "**RMS (px)**: 0.51\n" in text and "1.0, 2.0, 3.0" in text  # rounded to what it means: 0.01 px, 0.1 mm
     assert "| Click | Residual (px) |" in text and "| edge 2 | 0.70 |" in text
     assert "**RMS (px)**: 0.03" in report_markdown({"rms_px": 0.031})  # not "0" beside the message's 0.03 px
@@ -72,8 +83,12 @@ def test_report_markdown_lists_scalars_and_tables():
     # σ stays σ (its capital Σ reads as a sum: the panel showed "Σ t (mm)"); coordinates stay lower case
     heads = report_markdown({"std_t_mm": 1.0, "sd_rot_deg": 0.1, "sigma_cm": 2.0, "x_y_z_m": 1.0, "t_s": 3.0})
     assert "**σ translation (mm)**" in heads and "**σ rotation (°)**" in heads and "**σ (cm)**" in heads
-    assert "**Change**: 49.04°, 224.8 mm" in report_markdown({"change": {"deg": 49.04, "cm": 22.48}})  # as the messages say it
-    nested = report_markdown({"found": {"candidates": 1, "fit_px": 0.31, "std_t_mm": [0.1, 0.8], "change": {"deg": 53.01, "cm": 21.9}}})
+    assert "**Change**: 49.04°, 224.8 mm" in report_markdown(
+        {"change": {"deg": 49.04, "cm": 22.48}}
+    )  # as the messages say it
+    nested = report_markdown(
+        {"found": {"candidates": 1, "fit_px": 0.31, "std_t_mm": [0.1, 0.8], "change": {"deg": 53.01, "cm": 21.9}}}
+    )
     assert "- **Found**\n  - **Candidates**: 1\n  - **Fit (px)**: 0.31\n  - **σ translation (mm)**: 0.1, 0.8" in nested
     assert "  - **Change**: 53.01°, 219.0 mm" in nested and "{" not in nested and "[" not in nested
     assert "**x y z (mm)**" in heads and "**t (s)**" in heads and "Σ" not in heads and "Sd" not in heads
@@ -88,7 +103,9 @@ def test_spread_labels_lifts_a_label_off_the_one_it_would_cover():
     from app.ui.drawing import LABEL_LINE_PX, LABEL_OFFSET_PX, spread_labels
 
     corner = np.array([200.0, 150.0])
-    out = spread_labels([(corner, "3→e2"), (corner + [2.0, 1.0], "snapped 2.6 px"), (np.array([400.0, 150.0]), "R1")], 0.5)
+    out = spread_labels(
+        [(corner, "3→e2"), (corner + [2.0, 1.0], "snapped 2.6 px"), (np.array([400.0, 150.0]), "R1")], 0.5
+    )
     (a, _), (b, text), (c, _) = out
     assert text == "snapped 2.6 px"
     assert np.allclose(a, corner + [LABEL_OFFSET_PX * 0.5, -LABEL_OFFSET_PX * 0.5])  # just right of and above its point

@@ -11,7 +11,19 @@ def test_help_is_shipped_and_names_every_workflow_and_action():
         assert label in text, f"the Help does not explain {label!r}"
     # The actions an operator must know to finish each workflow are named as the workflows' controls say.
     labels = {c.label for cls in WORKFLOWS.values() for c in cls.controls}
-    for essential in ("Solve", "Refine", "Accept", "Cancel", "Auto match", "Confirm match", "Measure face",
-                      "Scan profile", "Refuse snap", "Re-initialise", "Freeze", "Delete click"):
+    for essential in (
+        "Solve",
+        "Refine",
+        "Accept",
+        "Cancel",
+        "Auto match",
+        "Confirm match",
+        "Measure face",
+        "Scan profile",
+        "Refuse snap",
+        "Re-initialise",
+        "Freeze",
+        "Delete click",
+    ):
         assert essential in labels or essential == "Freeze", f"no control {essential!r}: update the Help and this test"
         assert essential in text, f"the Help does not name the {essential!r} control"

@@ -19,8 +19,18 @@ def test_defaults_listen_on_loopback_with_emulated_devices():
 def test_build_interface_seeds_a_new_database_and_serves(tmp_path):
     for i in range(3):
         cv2.imwrite(str(tmp_path / f"f{i}.png"), np.full((256, 512), 60 * i, np.uint8))
-    args = build_parser().parse_args(["serve", "--video", str(tmp_path), "--db", str(tmp_path / "site.sqlite"),
-                                      "--no-devices", "--port", str(free_port())])
+    args = build_parser().parse_args(
+        [
+            "serve",
+            "--video",
+            str(tmp_path),
+            "--db",
+            str(tmp_path / "site.sqlite"),
+            "--no-devices",
+            "--port",
+            str(free_port()),
+        ]
+    )
     server, closers = build_interface(args)
     try:
         server.start()
@@ -35,7 +45,9 @@ def test_build_interface_seeds_a_new_database_and_serves(tmp_path):
     # a second start on the same file keeps the site (no second seeding)
     server, closers = build_interface(args)
     try:
-        assert len(server.site.db.history()) == len([c for c in server.site.db.history() if c.method.startswith("seed")])
+        assert len(server.site.db.history()) == len(
+            [c for c in server.site.db.history() if c.method.startswith("seed")]
+        )
     finally:
         server.server.stop()
         for close in closers:

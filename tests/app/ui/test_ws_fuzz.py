@@ -34,20 +34,41 @@ MODIFIERS = ("cmd/ctrl", "alt", "shift", "cmd/ctrl+alt", "cmd/ctrl+shift", "alt+
 
 def camera(**changes) -> dict:
     """A ViewerCameraMessage looking at the video plane from in front of it, as the page sends."""
-    return dict(dict(type="ViewerCameraMessage", wxyz=[1.0, 0.0, 0.0, 0.0], position=[2.56, 1.28, -4.0], fov=1.0,
-                     near=0.01, far=1000.0, image_height=720, image_width=1280, look_at=[2.56, 1.28, 0.0],
-                     up_direction=[0.0, -1.0, 0.0]), **changes)
+    return dict(
+        dict(
+            type="ViewerCameraMessage",
+            wxyz=[1.0, 0.0, 0.0, 0.0],
+            position=[2.56, 1.28, -4.0],
+            fov=1.0,
+            near=0.01,
+            far=1000.0,
+            image_height=720,
+            image_width=1280,
+            look_at=[2.56, 1.28, 0.0],
+            up_direction=[0.0, -1.0, 0.0],
+        ),
+        **changes,
+    )
 
 
 def click(**changes) -> dict:
-    return dict(dict(type="ScenePointerMessage", event_type="click", ray_origin=[2.56, 1.28, -4.0],
-                     ray_direction=[0.0, 0.0, 1.0], screen_pos=[[0.5, 0.5]], modifier=None), **changes)
+    return dict(
+        dict(
+            type="ScenePointerMessage",
+            event_type="click",
+            ray_origin=[2.56, 1.28, -4.0],
+            ray_direction=[0.0, 0.0, 1.0],
+            screen_pos=[[0.5, 0.5]],
+            modifier=None,
+        ),
+        **changes,
+    )
 
 
 def _decoded(frame: bytes) -> list[dict]:
     """The messages of one server → browser frame (viser's wire format: two lengths, zstd MessagePack, buffers)."""
     size, compressed = int.from_bytes(frame[:8], "little"), int.from_bytes(frame[8:16], "little")
-    inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + compressed], max_output_size=size)
+    inner = zstandard.ZstdDecompressor().decompress(frame[16 : 16 + compressed], max_output_size=size)
     return msgspec.msgpack.decode(inner)["messages"]
 
 
@@ -55,8 +76,13 @@ class Page:
     """One websocket to the interface, as its page opens it; a thread reads and decodes what the server sends."""
 
     def __init__(self, port: int):
-        self.ws = websockets.sync.client.connect(f"ws://127.0.0.1:{port}/", subprotocols=[SUBPROTOCOL],
-                                                 origin=f"http://127.0.0.1:{port}", open_timeout=10, max_size=None)
+        self.ws = websockets.sync.client.connect(
+            f"ws://127.0.0.1:{port}/",
+            subprotocols=[SUBPROTOCOL],
+            origin=f"http://127.0.0.1:{port}",
+            open_timeout=10,
+            max_size=None,
+        )
         self.video_updates = 0
         self.notifications: list[str] = []
         self.closed = threading.Event()
@@ -87,8 +113,10 @@ class Page:
         """True once ``n`` more video frames arrived (False at the timeout, or when the connection closed)."""
         with self._seen:
             goal = self.video_updates + n
-            return self._seen.wait_for(lambda: self.video_updates >= goal or self.closed.is_set(), timeout_s) \
+            return (
+                self._seen.wait_for(lambda: self.video_updates >= goal or self.closed.is_set(), timeout_s)
                 and self.video_updates >= goal
+            )
 
     def close(self) -> None:
         self.ws.close()
@@ -145,8 +173,13 @@ class Served:
         return [r for r in self.caplog.records if r.name == "mcit.ui.inbound"]
 
     def assert_no_failure(self, page: Page | None = None) -> None:
-        bad = [r for r in self.caplog.records if r.exc_info or "Traceback" in r.getMessage()
-               or (r.levelno >= logging.WARNING and r.name != "mcit.ui.inbound")]
+        bad = [
+            r
+            for r in self.caplog.records
+            if r.exc_info
+            or "Traceback" in r.getMessage()
+            or (r.levelno >= logging.WARNING and r.name != "mcit.ui.inbound")
+        ]
         assert not bad, "\n".join(logging.Formatter("%(levelname)s %(name)s: %(message)s").format(r) for r in bad[:5])
         assert not [n for n in self.notified if n[0] == "Internal error"], self.notified
         if page is not None:
@@ -165,11 +198,15 @@ def served(site, caplog, monkeypatch):
 
 # --------------------------------------------------------------------------- the three shapes found by review
 
-@pytest.mark.parametrize("message, said", [
-    (click(ray_origin=None), "a click without its ray"),
-    (click(ray_origin=[2.56, 1.28]), "ScenePointerMessage.ray_origin has 2 items, expected 3"),
-    (click(event_type="hover"), "ScenePointerMessage.event_type is 'hover', not one of 'click', 'rect-select'"),
-])
+
+@pytest.mark.parametrize(
+    "message, said",
+    [
+        (click(ray_origin=None), "a click without its ray"),
+        (click(ray_origin=[2.56, 1.28]), "ScenePointerMessage.ray_origin has 2 items, expected 3"),
+        (click(event_type="hover"), "ScenePointerMessage.event_type is 'hover', not one of 'click', 'rect-select'"),
+    ],
+)
 def test_a_pointer_message_of_the_wrong_shape_is_dropped_with_one_line(served, capfd, message, said):
     page, panel = served.page()
     page.send(message)
@@ -232,30 +269,68 @@ class Fuzz:
         rng = self.rng
         if kind == 0:  # a camera a page can have: in front of the video plane (z = 0), looking at a point on it
             q = rng.normal(size=4)
-            return camera(wxyz=[float(v) for v in q / np.linalg.norm(q)], fov=float(rng.uniform(0.2, 2.0)),
-                          position=self.vector(2) + [float(-rng.uniform(0.5, 50.0))], look_at=self.vector(2) + [0.0],
-                          image_height=int(rng.integers(100, 4000)), image_width=int(rng.integers(100, 4000)),
-                          up_direction=self.vector(3))
+            return camera(
+                wxyz=[float(v) for v in q / np.linalg.norm(q)],
+                fov=float(rng.uniform(0.2, 2.0)),
+                position=self.vector(2) + [float(-rng.uniform(0.5, 50.0))],
+                look_at=self.vector(2) + [0.0],
+                image_height=int(rng.integers(100, 4000)),
+                image_width=int(rng.integers(100, 4000)),
+                up_direction=self.vector(3),
+            )
         if kind == 1:
-            return click(ray_origin=self.vector(3), ray_direction=self.vector(3), screen_pos=[self.vector(2)],
-                         modifier=self.modifier())
+            return click(
+                ray_origin=self.vector(3),
+                ray_direction=self.vector(3),
+                screen_pos=[self.vector(2)],
+                modifier=self.modifier(),
+            )
         if kind == 2:
-            return click(event_type="rect-select", ray_origin=None, ray_direction=None,
-                         screen_pos=[[float(v) for v in rng.random(2)] for _ in range(2)], modifier=self.modifier())
+            return click(
+                event_type="rect-select",
+                ray_origin=None,
+                ray_direction=None,
+                screen_pos=[[float(v) for v in rng.random(2)] for _ in range(2)],
+                modifier=self.modifier(),
+            )
         if kind == 3:
-            return dict(type="SceneNodeClickMessage", name=self.name(), instance_index=None, ray_origin=self.vector(3),
-                        ray_direction=self.vector(3), screen_pos=self.vector(2), modifier=self.modifier())
+            return dict(
+                type="SceneNodeClickMessage",
+                name=self.name(),
+                instance_index=None,
+                ray_origin=self.vector(3),
+                ray_direction=self.vector(3),
+                screen_pos=self.vector(2),
+                modifier=self.modifier(),
+            )
         if kind == 4:
-            return dict(type="SceneNodeDragMessage", phase=str(rng.choice(["start", "update", "end"])),
-                        name=self.name(), instance_index=int(rng.integers(0, 5)), start_position=self.vector(3),
-                        start_screen_pos=self.vector(2), end_position=self.vector(3), end_screen_pos=self.vector(2),
-                        button=str(rng.choice(["left", "middle", "right"])), modifier=self.modifier(), owner="")
+            return dict(
+                type="SceneNodeDragMessage",
+                phase=str(rng.choice(["start", "update", "end"])),
+                name=self.name(),
+                instance_index=int(rng.integers(0, 5)),
+                start_position=self.vector(3),
+                start_screen_pos=self.vector(2),
+                end_position=self.vector(3),
+                end_screen_pos=self.vector(2),
+                button=str(rng.choice(["left", "middle", "right"])),
+                modifier=self.modifier(),
+                owner="",
+            )
         if kind == 5:
-            return dict(type="TransformControlsUpdateMessage", name=self.name(), wxyz=self.vector(4),
-                        position=self.vector(3), owner="")
+            return dict(
+                type="TransformControlsUpdateMessage",
+                name=self.name(),
+                wxyz=self.vector(4),
+                position=self.vector(3),
+                owner="",
+            )
         if kind == 6:
-            return dict(type=str(rng.choice(["TransformControlsDragStartMessage", "TransformControlsDragEndMessage"])),
-                        name=self.name(), owner="")
+            return dict(
+                type=str(rng.choice(["TransformControlsDragStartMessage", "TransformControlsDragEndMessage"])),
+                name=self.name(),
+                owner="",
+            )
         if kind == 7:
             update = self.valid_input_update()
             if update is not None:
@@ -265,12 +340,22 @@ class Fuzz:
         if kind == 9:
             return dict(type=str(rng.choice(["GuiFormSubmitMessage", "GuiFormDirtyMessage"])), uuid=self.some_uuid())
         if kind == 10:
-            return dict(type="FileTransferStartUpload", source_component_uuid=str(uuid.uuid4()),
-                        transfer_uuid=str(uuid.uuid4()), filename="a.txt", mime_type="text/plain",
-                        part_count=int(rng.integers(0, 3)),
-                        size_bytes=int(rng.integers(0, 100)))
-        return dict(type="FileTransferPart", source_component_uuid=None, transfer_uuid=str(uuid.uuid4()),
-                    part_index=int(rng.integers(0, 3)), content=bytes(rng.integers(0, 256, 16, dtype=np.uint8)))
+            return dict(
+                type="FileTransferStartUpload",
+                source_component_uuid=str(uuid.uuid4()),
+                transfer_uuid=str(uuid.uuid4()),
+                filename="a.txt",
+                mime_type="text/plain",
+                part_count=int(rng.integers(0, 3)),
+                size_bytes=int(rng.integers(0, 100)),
+            )
+        return dict(
+            type="FileTransferPart",
+            source_component_uuid=None,
+            transfer_uuid=str(uuid.uuid4()),
+            part_index=int(rng.integers(0, 3)),
+            content=bytes(rng.integers(0, 256, 16, dtype=np.uint8)),
+        )
 
     def some_uuid(self) -> str:
         known = list(self.inputs) + self.commands
@@ -322,8 +407,10 @@ class Fuzz:
         if kind == 6:
             return dict(click(), event_type=pick(["hover", "CLICK", "", 1, None])), "an unknown event_type"
         if kind == 7:
-            return dict(click(), ray_origin=pick([None, [1.0, 2.0], [1.0, 2.0, 3.0, 4.0], [math.nan, 0.0, 0.0],
-                                                  ["1", "2", "3"], 1.0])), "a bad click ray"
+            return dict(
+                click(),
+                ray_origin=pick([None, [1.0, 2.0], [1.0, 2.0, 3.0, 4.0], [math.nan, 0.0, 0.0], ["1", "2", "3"], 1.0]),
+            ), "a bad click ray"
         if kind == 8:
             points = pick([[], [[0.5, 0.5], [0.6, 0.6]], [[0.5]], [0.5, 0.5]])
             return dict(click(), screen_pos=points), "bad screen points"
@@ -338,12 +425,25 @@ class Fuzz:
             return dict(camera(), **{pick(["image_height", "image_width"]): pick(BAD_INTEGERS)}), "a bad camera size"
         if kind == 12:
             if rng.random() < 0.2:
-                return dict(type="FileTransferStartUpload", source_component_uuid=pick(list(self.inputs)),
-                            transfer_uuid="t", filename="a.txt", mime_type="text/plain", part_count=0,
-                            size_bytes=1), "an upload to an input that takes none"
+                return dict(
+                    type="FileTransferStartUpload",
+                    source_component_uuid=pick(list(self.inputs)),
+                    transfer_uuid="t",
+                    filename="a.txt",
+                    mime_type="text/plain",
+                    part_count=0,
+                    size_bytes=1,
+                ), "an upload to an input that takes none"
             return self.broken_input_update(), "a bad input update"
-        return dict(type="SceneNodeClickMessage", name=pick(BAD_TEXTS), instance_index=None, ray_origin=[0.0] * 3,
-                    ray_direction=[0.0, 0.0, 1.0], screen_pos=[0.5, 0.5], modifier=None), "a bad node name"
+        return dict(
+            type="SceneNodeClickMessage",
+            name=pick(BAD_TEXTS),
+            instance_index=None,
+            ray_origin=[0.0] * 3,
+            ray_direction=[0.0, 0.0, 1.0],
+            screen_pos=[0.5, 0.5],
+            modifier=None,
+        ), "a bad node name"
 
     def broken_input_update(self) -> dict:
         rng = self.rng
@@ -368,8 +468,9 @@ class Fuzz:
 def test_a_fuzzing_page_gets_no_traceback_no_internal_error_and_the_server_serves_on(served, capfd):
     page, panel = served.page()
     gui = served.server.server.get_clients()[panel.client.client_id].gui
-    fuzz = Fuzz(np.random.default_rng(FUZZ_SEED), dict(gui._gui_input_handle_from_uuid),
-                list(gui._command_handle_from_uuid))
+    fuzz = Fuzz(
+        np.random.default_rng(FUZZ_SEED), dict(gui._gui_input_handle_from_uuid), list(gui._command_handle_from_uuid)
+    )
     sent = broken = 0
     kinds: dict[str, int] = {}
     start = time.monotonic()
@@ -425,11 +526,26 @@ def test_a_flood_is_logged_once_a_second_with_a_count(served):
 EXAMPLES = {  # one message of each type viser handles, as the page sends it (ShareUrl*: no fields)
     "ViewerCameraMessage": camera(),
     "ScenePointerMessage": click(),
-    "SceneNodeClickMessage": dict(name="/video", instance_index=None, ray_origin=[0.0, 0.0, -1.0],
-                                  ray_direction=[0.0, 0.0, 1.0], screen_pos=[0.5, 0.5], modifier="shift", owner=""),
-    "SceneNodeDragMessage": dict(phase="start", name="/video", instance_index=2, start_position=[0, 0, 0],
-                                 start_screen_pos=[0, 0], end_position=[1.0, 1.0, 1.0], end_screen_pos=[1, 1],
-                                 button="left", modifier=None),
+    "SceneNodeClickMessage": dict(
+        name="/video",
+        instance_index=None,
+        ray_origin=[0.0, 0.0, -1.0],
+        ray_direction=[0.0, 0.0, 1.0],
+        screen_pos=[0.5, 0.5],
+        modifier="shift",
+        owner="",
+    ),
+    "SceneNodeDragMessage": dict(
+        phase="start",
+        name="/video",
+        instance_index=2,
+        start_position=[0, 0, 0],
+        start_screen_pos=[0, 0],
+        end_position=[1.0, 1.0, 1.0],
+        end_screen_pos=[1, 1],
+        button="left",
+        modifier=None,
+    ),
     "TransformControlsUpdateMessage": dict(name="/t", wxyz=[1, 0, 0, 0], position=[0, 0, 0], owner=""),
     "TransformControlsDragStartMessage": dict(name="/t", owner=""),
     "TransformControlsDragEndMessage": dict(name="/t"),
@@ -437,8 +553,14 @@ EXAMPLES = {  # one message of each type viser handles, as the page sends it (Sh
     "GuiButtonHoldMessage": dict(uuid="u", frequency=10),
     "GuiFormSubmitMessage": dict(uuid="u"),
     "GuiFormDirtyMessage": dict(uuid="u"),
-    "FileTransferStartUpload": dict(source_component_uuid="u", transfer_uuid="t", filename="a.txt",
-                                    mime_type="text/plain", part_count=1, size_bytes=3),
+    "FileTransferStartUpload": dict(
+        source_component_uuid="u",
+        transfer_uuid="t",
+        filename="a.txt",
+        mime_type="text/plain",
+        part_count=1,
+        size_bytes=3,
+    ),
     "FileTransferPart": dict(source_component_uuid=None, transfer_uuid="t", part_index=0, content=b"abc"),
     "CommandTriggerMessage": dict(uuid="u"),
     "GetRenderResponseMessage": dict(payload=b"", render_uuid="r"),
@@ -455,8 +577,11 @@ def test_every_message_type_viser_handles_is_checked_and_the_page_s_own_pass(ser
 
     page, panel = served.page()
     client = served.server.server.get_clients()[panel.client.client_id]
-    handled = {cls.__name__ for handler in (served.server.server._websock_server, client._websock_connection)
-               for cls in handler._incoming_handlers}
+    handled = {
+        cls.__name__
+        for handler in (served.server.server._websock_server, client._websock_connection)
+        for cls in handler._incoming_handlers
+    }
     assert handled <= EXAMPLES.keys(), f"viser handles types the checks were not shown: {handled - EXAMPLES.keys()}"
     for name, example in EXAMPLES.items():
         assert inbound.message_problem(dict(example, type=name), _messages.Message) is None, name

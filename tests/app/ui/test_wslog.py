@@ -18,8 +18,18 @@ from app.ui.wslog import MalformedMessageFilter, quiet_malformed_messages
 from tests.e2e.harness import free_port
 
 SUBPROTOCOL = f"viser-v{viser.__version__}"
-CAMERA = dict(type="ViewerCameraMessage", wxyz=[1.0, 0.0, 0.0, 0.0], position=[0.0, 0.0, 0.0], fov=1.0, near=0.1,
-              far=10.0, image_height=10, image_width=10, look_at=[0.0, 0.0, 0.0], up_direction=[0.0, 0.0, 1.0])
+CAMERA = dict(
+    type="ViewerCameraMessage",
+    wxyz=[1.0, 0.0, 0.0, 0.0],
+    position=[0.0, 0.0, 0.0],
+    fov=1.0,
+    near=0.1,
+    far=10.0,
+    image_height=10,
+    image_width=10,
+    look_at=[0.0, 0.0, 0.0],
+    up_direction=[0.0, 0.0, 1.0],
+)
 MALFORMED = {
     "not MessagePack": b"\x00garbage",
     "empty": b"",
@@ -114,5 +124,7 @@ def test_a_server_fault_keeps_its_traceback():
         raise RuntimeError("the producer broke")
     except RuntimeError:
         exc_info = sys.exc_info()
-    record = logging.LogRecord("websockets.server", logging.ERROR, __file__, 1, "connection handler failed", (), exc_info)
+    record = logging.LogRecord(
+        "websockets.server", logging.ERROR, __file__, 1, "connection handler failed", (), exc_info
+    )
     assert MalformedMessageFilter().filter(record) and record.exc_info is exc_info and record.levelno == logging.ERROR

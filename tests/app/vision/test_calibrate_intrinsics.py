@@ -21,7 +21,20 @@ def _views():
     """Board poses (R, t) in the camera frame that cover the image, corners included."""
     rng = np.random.default_rng(5)
     out = []
-    for cx, cy in [(-1, -1), (1, -1), (-1, 1), (1, 1), (0, 0), (0, -1), (0, 1), (-1, 0), (1, 0), (0, 0), (-1, -1), (1, 1)]:
+    for cx, cy in [
+        (-1, -1),
+        (1, -1),
+        (-1, 1),
+        (1, 1),
+        (0, 0),
+        (0, -1),
+        (0, 1),
+        (-1, 0),
+        (1, 0),
+        (0, 0),
+        (-1, -1),
+        (1, 1),
+    ]:
         z = rng.uniform(0.42, 0.55)
         R = exp_so3(rng.uniform(-0.45, 0.45, 3) * [1, 1, 0.4])
         centre = np.array([cx * 0.23 * z, cy * 0.15 * z, z])
@@ -87,8 +100,10 @@ def _check(path, capsys):
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     rms = fs.getNode("rms_px").real()
     fs.release()
-    print(f"K within {100 * rel.max():.3f} %; rays land within {lens_px:.3f} px (inner 3/4 of the image; whole image: "
-          f"median {np.median(whole):.3f}, max {whole.max():.2f} px); RMS {rms:.3f} px")
+    print(
+        f"K within {100 * rel.max():.3f} %; rays land within {lens_px:.3f} px (inner 3/4 of the image; whole image: "
+        f"median {np.median(whole):.3f}, max {whole.max():.2f} px); RMS {rms:.3f} px"
+    )
     assert rel.max() < 0.005, (Ke, K)  # K within 0.5 %
     assert rms < 0.1, rms  # the corners reprojected within 0.1 px (RMS)
     # A ray lands within 0.5 px, not 0.1: most of it is the principal point's 0.2 px and the k2/k3 trade-off
@@ -101,8 +116,23 @@ def test_checkerboard_frames_give_K_and_the_lens(tmp_path, lens_samples, capsys)
     for k, img in enumerate(_render(lens_samples, _checker, _views())):
         cv2.imwrite(str(tmp_path / "frames" / f"f{k:02d}.png"), img)
     out = tmp_path / "cam.yml"
-    assert main(["calibrate-intrinsics", str(tmp_path / "frames"), "--cols", str(COLS), "--rows", str(ROWS),
-                 "--square-mm", "30", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "calibrate-intrinsics",
+                str(tmp_path / "frames"),
+                "--cols",
+                str(COLS),
+                "--rows",
+                str(ROWS),
+                "--square-mm",
+                "30",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     said = capsys.readouterr().out
     assert "board found in 12 of 12 frames (640×480)" in said and f"wrote {out}" in said
     intr = read_intrinsics(out)
@@ -128,8 +158,20 @@ def test_charuco_frames_give_K_and_the_lens(tmp_path, lens_samples, capsys):
     for k, img in enumerate(_render(lens_samples, value, _views(), seed=1)):
         cv2.imwrite(str(tmp_path / "frames" / f"f{k:02d}.png"), img)
     out = tmp_path / "cam.yml"
-    args = ["calibrate-intrinsics", str(tmp_path / "frames"), "--board", "charuco", "--cols", str(COLS), "--rows",
-            str(ROWS), "--square-mm", "30", "--out", str(out)]
+    args = [
+        "calibrate-intrinsics",
+        str(tmp_path / "frames"),
+        "--board",
+        "charuco",
+        "--cols",
+        str(COLS),
+        "--rows",
+        str(ROWS),
+        "--square-mm",
+        "30",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 2 and "needs --marker-mm" in capsys.readouterr().err
     assert main(args + ["--marker-mm", "22"]) == 0
     assert "board found in 12 of 12 frames" in capsys.readouterr().out
@@ -141,11 +183,45 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys):
     for k in range(3):
         cv2.imwrite(str(tmp_path / "frames" / f"f{k}.png"), np.full((48, 64), 128, np.uint8))
     out = tmp_path / "cam.yml"
-    assert main(["calibrate-intrinsics", str(tmp_path / "frames"), "--cols", "9", "--rows", "6", "--square-mm", "25",
-                 "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "calibrate-intrinsics",
+                str(tmp_path / "frames"),
+                "--cols",
+                "9",
+                "--rows",
+                "6",
+                "--square-mm",
+                "25",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert "the 9 × 6 checkerboard was found in 0 of 3 frames; at least 3 are needed" in err and err.count("\n") == 1
     assert not out.exists()
-    assert main(["calibrate-intrinsics", str(tmp_path / "frames"), "--board", "charuco", "--cols", "9", "--rows", "6",
-                 "--square-mm", "25", "--marker-mm", "18", "--dictionary", "DICT_NOPE"]) == 2
+    assert (
+        main(
+            [
+                "calibrate-intrinsics",
+                str(tmp_path / "frames"),
+                "--board",
+                "charuco",
+                "--cols",
+                "9",
+                "--rows",
+                "6",
+                "--square-mm",
+                "25",
+                "--marker-mm",
+                "18",
+                "--dictionary",
+                "DICT_NOPE",
+            ]
+        )
+        == 2
+    )
     assert "--dictionary 'DICT_NOPE' is not an ArUco dictionary" in capsys.readouterr().err

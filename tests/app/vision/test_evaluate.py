@@ -50,7 +50,7 @@ def test_distances_read_around_the_samples_equal_the_whole_frame_transforms():
     img = render_poses(cam, box, [T], noise_sigma=2.0)[0]
     oe = oriented_edges(img)
     rng = np.random.default_rng(1)
-    for k in range(6):
+    for _k in range(6):
         Tk = make_T(exp_so3(rng.normal(0.0, 0.05, 3)) @ T[:3, :3], T[:3, 3] + rng.normal(0.0, 0.01, 3))
         d = edge_distance(oe, cam, box, Tk, max_px=10.0)
         s = sample_visible_edges(cam, box, Tk, step_px=2.0)

@@ -108,7 +108,9 @@ def test_bad_input():
         match_edges(K, box, segs)
     with pytest.raises(ValueError, match="meet in one point"):
         # three segments through one pixel
-        star = np.array([[[100.0, 100.0], [150.0, 100.0]], [[100.0, 100.0], [100.0, 150.0]], [[100.0, 100.0], [150.0, 150.0]]])
+        star = np.array(
+            [[[100.0, 100.0], [150.0, 100.0]], [[100.0, 100.0], [100.0, 150.0]], [[100.0, 100.0], [150.0, 150.0]]]
+        )
         match_edges(cam, box, star)
 
 
@@ -121,8 +123,12 @@ def test_image_distances_of_many_poses_are_edge_distances():
     cam = _camera()
     box = BRep.box(*BOX)
     oe = oriented_edges(render_poses(cam, box, [T_TRUE], noise_sigma=2.0)[0])
-    Ts = [T_TRUE] + [make_T(exp_so3(rng.normal(0.0, 1.5, 3)), [rng.uniform(-0.15, 0.15), rng.uniform(-0.1, 0.1), rng.uniform(1.5, 2.5)])
-                     for _ in range(12)]
+    Ts = [T_TRUE] + [
+        make_T(
+            exp_so3(rng.normal(0.0, 1.5, 3)), [rng.uniform(-0.15, 0.15), rng.uniform(-0.1, 0.1), rng.uniform(1.5, 2.5)]
+        )
+        for _ in range(12)
+    ]
     Ts.append(make_T(np.eye(3), [0.0, 0.0, -2.0]))  # behind the camera: nothing measured
     Ts = np.array(Ts)
     for step in (2.0, 4.0):
@@ -155,14 +161,21 @@ def test_only_the_best_candidates_settle_on_the_image(monkeypatch):
     n_every = len(calls)
     calls.clear()
     some = match_edges(cam, box, segs, image=img, sigma_px=1.0)
-    assert len(calls) <= 4 and len(calls) < n_every and n_every >= len(every.candidates) >= 5 and len(some.candidates) >= 5
-    assert np.array_equal(some.candidates[0].edges, every.candidates[0].edges) and _right(box, some.candidates[0].edges, pick)
+    assert (
+        len(calls) <= 4 and len(calls) < n_every and n_every >= len(every.candidates) >= 5 and len(some.candidates) >= 5
+    )
+    assert np.array_equal(some.candidates[0].edges, every.candidates[0].edges) and _right(
+        box, some.candidates[0].edges, pick
+    )
     np.testing.assert_allclose(some.candidates[0].T_world_obj, every.candidates[0].T_world_obj, atol=1e-12)
     calls.clear()
     match_edges(cam, box, segs, image=img, sigma_px=1.0, settle=0)
     assert not calls
     # those not settled are measured where the clicks put them (every 4 px), the settled every 2 px
-    at4 = [abs(c.image_px - edge_distance(img, cam, box, c.T_world_obj, step_px=4.0).mean_px) < 1e-9 for c in some.candidates]
+    at4 = [
+        abs(c.image_px - edge_distance(img, cam, box, c.T_world_obj, step_px=4.0).mean_px) < 1e-9
+        for c in some.candidates
+    ]
     at2 = [abs(c.image_px - edge_distance(img, cam, box, c.T_world_obj).mean_px) < 1e-9 for c in some.candidates]
     assert sum(at4) >= len(some.candidates) - 4 and all(a or b for a, b in zip(at4, at2))
     assert all(c.score_px == pytest.approx(c.rms_px + c.image_px) for c in some.candidates)

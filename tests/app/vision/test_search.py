@@ -100,8 +100,15 @@ def test_bad_input_and_cancel(scene, table):
     with pytest.raises(ValueError, match="camera is 512×256"):
         search_pose(scene.camera, box.model, box.pose_at(0.0), [100.0, 100.0], image[:100], table=table)
     with pytest.raises(Cancelled):
-        search_pose(scene.camera, box.model, box.pose_at(0.0), centre_pixel(scene, box, box.pose_at(t)), image, table=table,
-                    cancel=lambda: True)
+        search_pose(
+            scene.camera,
+            box.model,
+            box.pose_at(0.0),
+            centre_pixel(scene, box, box.pose_at(t)),
+            image,
+            table=table,
+            cancel=lambda: True,
+        )
 
 
 def test_heading_period_follows_the_model_symmetries_about_the_vertical():
@@ -119,7 +126,9 @@ def test_a_rendered_cylinder_moved_on_the_table_is_found(scene, table):
     cyl = scene.body("unknown_cylinder")
     T_old = cyl.pose_at(0.0)
     T_new = make_T(np.eye(3), [0.25, -0.35, 0.0])
-    bodies = tuple(dataclasses.replace(b, T_world_obj=T_new, motion=()) if b.name == cyl.name else b for b in scene.bodies)
+    bodies = tuple(
+        dataclasses.replace(b, T_world_obj=T_new, motion=()) if b.name == cyl.name else b for b in scene.bodies
+    )
     sc = dataclasses.replace(scene, bodies=bodies, render=dataclasses.replace(scene.render, aa_samples=4))
     image = Renderer(sc).render(0.0, 3)
     uv = scene.camera.project_obj(T_new, np.array([[0.01, 0.0, 0.09]]))[0]
@@ -138,21 +147,27 @@ def test_a_partly_hidden_parallelepiped_is_found_on_the_table_with_a_true_sigma(
 
     box = scene.body("parallelepiped")
     T_new = make_T(rot_z(np.radians(40.0)), [0.05, -0.3, 0.0])
-    bodies = tuple(dataclasses.replace(b, T_world_obj=T_new, motion=()) if b.name == box.name else b for b in scene.bodies)
+    bodies = tuple(
+        dataclasses.replace(b, T_world_obj=T_new, motion=()) if b.name == box.name else b for b in scene.bodies
+    )
     sc = dataclasses.replace(scene, bodies=bodies, render=dataclasses.replace(scene.render, aa_samples=4))
     image = np.array(Renderer(sc).render(0.0, 5))
     uv = scene.camera.project_obj(T_new, box.model.vertices)
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     cut = int(lo[1] + 0.33 * (hi[1] - lo[1]))
-    image[: cut + 3, int(lo[0]) - 3:int(hi[0]) + 3] = 120  # the board: from above the object to a third of it
+    image[: cut + 3, int(lo[0]) - 3 : int(hi[0]) + 3] = 120  # the board: from above the object to a third of it
     click = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (cut + hi[1])])
     res = search_pose(scene.camera, box.model, box.pose_at(0.0), click, image, table=table, name="parallelepiped")
     best = res.candidates[0]
-    deg, m = min((pose_error(best.T_world_obj @ S, T_new) for S in (np.eye(4), make_T(rot_z(np.pi), [0, 0, 0]))),
-                 key=lambda e: e[0])
+    deg, m = min(
+        (pose_error(best.T_world_obj @ S, T_new) for S in (np.eye(4), make_T(rot_z(np.pi), [0, 0, 0]))),
+        key=lambda e: e[0],
+    )
     assert deg < 1.0 and m < 0.005, (deg, m)
     assert best.confidence < 0.9  # part of it is hidden indeed
-    err_mm = 1000.0 * np.abs(best.T_world_obj[:3, 3] - T_new[:3, 3])  # the pose is the truth's, not its twin's (deg < 1)
+    err_mm = 1000.0 * np.abs(
+        best.T_world_obj[:3, 3] - T_new[:3, 3]
+    )  # the pose is the truth's, not its twin's (deg < 1)
     assert np.all(err_mm[:2] <= 3.0 * np.maximum(best.std_t_mm[:2], 1e-3)), (err_mm, best.std_t_mm)
     mism = [c.mismatch for c in res.candidates]
     assert mism == sorted(mism) and 0.0 <= mism[0] < 0.7
@@ -173,7 +188,9 @@ def test_the_camera_calibration_share_of_a_found_pose_matches_a_perturbed_camera
     plain = search_pose(scene.camera, box.model, T_old, uv, image, table=table).candidates[0]
     C = scene.camera.C
     d = np.random.default_rng(0).normal(size=12) * 1e-3 * np.abs(C).ravel()
-    with_cam = search_pose(scene.camera, box.model, T_old, uv, image, table=table, camera_cov=np.outer(d, d)).candidates[0]
+    with_cam = search_pose(
+        scene.camera, box.model, T_old, uv, image, table=table, camera_cov=np.outer(d, d)
+    ).candidates[0]
     assert np.max(with_cam.std_t_mm) > np.max(plain.std_t_mm)
     # the linearised share against the refinement redone with C + d
     sp = S._TableSpace(S.level_on(box.model, T_old, table), table)
@@ -200,8 +217,15 @@ def test_a_camera_share_that_cannot_be_computed_leaves_the_sigma_unknown(scene, 
     box = scene.body("parallelepiped")
     image, t = frame(scene, 16.5)
     monkeypatch.setattr(S, "_camera_share", lambda *a, **k: None)
-    c = search_pose(scene.camera, box.model, box.pose_at(0.0), centre_pixel(scene, box, box.pose_at(t)), image,
-                    table=table, camera_cov=np.eye(12) * 1e-8).candidates[0]
+    c = search_pose(
+        scene.camera,
+        box.model,
+        box.pose_at(0.0),
+        centre_pixel(scene, box, box.pose_at(t)),
+        image,
+        table=table,
+        camera_cov=np.eye(12) * 1e-8,
+    ).candidates[0]
     assert c.cov is None and np.all(np.isnan(c.std_t_mm)) and np.all(np.isnan(c.std_r_deg))
 
 
@@ -236,12 +260,18 @@ def test_a_box_with_a_face_seen_edge_on_and_a_third_hidden_is_found_on_the_table
 
     box = scene.body("unknown_box")
     T_new = make_T(rot_z(np.radians(102.14)), [-0.1198, -0.496, 0.0])
-    bodies = tuple(dataclasses.replace(b, T_world_obj=T_new, motion=()) if b.name == box.name else
-                   dataclasses.replace(b, T_world_obj=b.pose_at(0.0), motion=()) for b in scene.bodies)
+    bodies = tuple(
+        dataclasses.replace(b, T_world_obj=T_new, motion=())
+        if b.name == box.name
+        else dataclasses.replace(b, T_world_obj=b.pose_at(0.0), motion=())
+        for b in scene.bodies
+    )
     sc = dataclasses.replace(scene, bodies=bodies, render=dataclasses.replace(scene.render, aa_samples=8, seed=1))
     image = np.array(Renderer(sc).render(0.0, 0))
     image[111:189, 211:232] = 102  # the board over the box's right third (rows and columns from the bench's case)
-    res = search_pose(scene.camera, box.model, box.pose_at(0.0), np.array([207.6, 121.1]), image, table=table, name="box")
+    res = search_pose(
+        scene.camera, box.model, box.pose_at(0.0), np.array([207.6, 121.1]), image, table=table, name="box"
+    )
     deg, m = pose_error(res.candidates[0].T_world_obj, T_new)
     assert deg < 1.0 and m < 0.005, (deg, m)
 
@@ -258,16 +288,28 @@ def test_a_long_box_with_one_end_behind_a_board_is_not_found_slid_to_the_board(s
 
     box = scene.body("parallelepiped")
     T_new = make_T(rot_z(np.radians(10.126)), [0.086406, 0.240628, 0.0])
-    bodies = tuple(dataclasses.replace(b, T_world_obj=T_new, motion=()) if b.name == box.name else
-                   dataclasses.replace(b, T_world_obj=b.pose_at(0.0), motion=()) for b in scene.bodies)
-    sc = dataclasses.replace(scene, bodies=bodies, render=dataclasses.replace(scene.render, aa_samples=8, seed=109730574))
+    bodies = tuple(
+        dataclasses.replace(b, T_world_obj=T_new, motion=())
+        if b.name == box.name
+        else dataclasses.replace(b, T_world_obj=b.pose_at(0.0), motion=())
+        for b in scene.bodies
+    )
+    sc = dataclasses.replace(
+        scene, bodies=bodies, render=dataclasses.replace(scene.render, aa_samples=8, seed=109730574)
+    )
     image = np.array(Renderer(sc).render(0.0, 23))  # the bench's frame
-    image[18:84, 224:261] = np.clip(60 + np.random.default_rng(0).normal(0, 2.0, (66, 37)), 0, 255).astype(np.uint8)  # the board
+    image[18:84, 224:261] = np.clip(60 + np.random.default_rng(0).normal(0, 2.0, (66, 37)), 0, 255).astype(
+        np.uint8
+    )  # the board
 
     def err(T):
-        return min((pose_error(T @ S_, T_new) for S_ in (np.eye(4), make_T(rot_z(np.pi), [0, 0, 0]))), key=lambda e: e[0])
+        return min(
+            (pose_error(T @ S_, T_new) for S_ in (np.eye(4), make_T(rot_z(np.pi), [0, 0, 0]))), key=lambda e: e[0]
+        )
 
-    c = search_pose(scene.camera, box.model, box.pose_at(0.0), np.array([305.8848, 54.0240]), image, table=table).candidates[0]
+    c = search_pose(
+        scene.camera, box.model, box.pose_at(0.0), np.array([305.8848, 54.0240]), image, table=table
+    ).candidates[0]
     deg, m = err(c.T_world_obj)
     assert deg < 1.0 and m < 0.005, (deg, m)
     # the pose the bench offered: slid 85 mm along the box's length, its left end on the board's border

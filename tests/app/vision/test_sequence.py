@@ -19,7 +19,9 @@ BOX = (0.2, 0.13, 0.08)
 
 def _poses(n):
     R0 = exp_so3([2.2, 0.4, 0.3])
-    return [make_T(exp_so3(np.radians(0.8) * k * np.array([0.0, 1.0, 0.3])) @ R0, [0.003 * k, 0.0, 0.9]) for k in range(n)]
+    return [
+        make_T(exp_so3(np.radians(0.8) * k * np.array([0.0, 1.0, 0.3])) @ R0, [0.003 * k, 0.0, 0.9]) for k in range(n)
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +113,10 @@ def test_track_sequence_writes_the_overlay_video_and_poses(rendered, tmp_path):
 def test_mcit_track_command(rendered, tmp_path, capsys):
     d = rendered[0]
     args = ["track", str(d / "frames"), "--model", str(d / "box.cao"), "--intrinsics", str(d / "cam.xml")]
-    assert main(args + ["--pose", str(d / "box.pos"), "--out", str(tmp_path / "t.avi"), "--csv", str(tmp_path / "t.csv")]) == 0
+    assert (
+        main(args + ["--pose", str(d / "box.pos"), "--out", str(tmp_path / "t.avi"), "--csv", str(tmp_path / "t.csv")])
+        == 0
+    )
     out = capsys.readouterr().out
     assert "tracked 5 frames" in out and (tmp_path / "t.avi").stat().st_size > 0
     # a pose far from the truth: lost on the first frame, exit status 3, and says how to restart
@@ -123,7 +128,13 @@ def test_mcit_track_command(rendered, tmp_path, capsys):
     X = box.vertices[[4, 5, 6, 7]]
     (tmp_path / "box.init").write_text("4\n" + "\n".join(" ".join(str(c) for c in x) for x in X))
     clicks = [f"{u:.2f},{v:.2f}" for u, v in cam.project_obj(truth[0], X) + 0.7]
-    assert main(args + ["--init-points", str(tmp_path / "box.init"), "--init-clicks", *clicks, "--out", str(tmp_path / "c.avi")]) == 0
+    assert (
+        main(
+            args
+            + ["--init-points", str(tmp_path / "box.init"), "--init-clicks", *clicks, "--out", str(tmp_path / "c.avi")]
+        )
+        == 0
+    )
     # missing pieces are one-line errors
     assert main(["track", str(d / "frames"), "--model", str(d / "box.cao"), "--intrinsics", str(d / "cam.xml")]) == 2
     assert "initial pose" in capsys.readouterr().err

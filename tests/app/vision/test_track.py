@@ -87,7 +87,11 @@ def test_tracks_a_rendered_moving_box_to_its_true_pose():
         rot_deg, trans_m = pose_error(T, T_true)
         assert rot_deg < 0.5 and trans_m < 2e-3
         d = tracker.diagnostics
-        assert d.n_samples == len(d.samples) and d.matched_uv.shape == (d.n_samples, 2) and d.weights.shape == (d.n_samples,)
+        assert (
+            d.n_samples == len(d.samples)
+            and d.matched_uv.shape == (d.n_samples, 2)
+            and d.weights.shape == (d.n_samples,)
+        )
         assert d.rms_px < 0.5 and d.reason == ""
     assert np.allclose(tracker.T_world_obj, T)
 
@@ -135,9 +139,13 @@ def test_a_wrongly_converged_pose_is_flagged_lost_and_a_right_one_is_not():
         assert lost and tracker.lost and np.allclose(T, T_start)  # the wrong pose is not reported
         assert "not supported by the image" in tracker.diagnostics.reason
         if not low_conf:  # the support check caught it
-            assert tracker.diagnostics.edge_distance_px > 1.5 and "px from the image's edges" in tracker.diagnostics.reason
+            assert (
+                tracker.diagnostics.edge_distance_px > 1.5 and "px from the image's edges" in tracker.diagnostics.reason
+            )
 
-    right = EdgeTracker(cam, box, truth @ make_T(exp_so3(np.radians(1.0) * np.array([1.0, 0.0, 0.0])), [0.003, 0.0, 0.0]))
+    right = EdgeTracker(
+        cam, box, truth @ make_T(exp_so3(np.radians(1.0) * np.array([1.0, 0.0, 0.0])), [0.003, 0.0, 0.0])
+    )
     T, conf, lost = right.track(img)
     assert not lost and conf > 0.9 and pose_error(T, truth)[0] < 0.5
     assert right.diagnostics.edge_distance_px < 0.5
@@ -248,8 +256,8 @@ def test_real_visp_cube_every_third_frame_is_followed_coarse_to_fine(shared_data
 @pytest.fixture(scope="module")
 def visp_cube_ref():
     """visp-cube's model, camera, first 141 frames (grey) and the tracker's own poses from ViSP's pose."""
-    from tests.conftest import shared_data_path
     from app.models_io import read_cao
+    from tests.conftest import shared_data_path
 
     folder = shared_data_path("visp-cube")
     model = read_cao(folder / "cube_and_cylinder.cao")

@@ -25,8 +25,16 @@ SIGMA_PX = 0.5
 
 
 def _write_lens(path, K, w, h, distortion=None):
-    cal = Calibration(np.asarray(K, float), np.zeros(5) if distortion is None else np.asarray(distortion, float), 0.06,
-                      w, h, (0, 1, 2), 3, "plumb_bob")
+    cal = Calibration(
+        np.asarray(K, float),
+        np.zeros(5) if distortion is None else np.asarray(distortion, float),
+        0.06,
+        w,
+        h,
+        (0, 1, 2),
+        3,
+        "plumb_bob",
+    )
     write_camera_file(cal, path)
     return path
 
@@ -80,13 +88,15 @@ def test_pnp_pose_within_its_stated_sigma(scene, n):
         worst_px.append(err.max())
         ratios.append(np.max(err / _projected_sigma(r, K, V)))
         assert r.cov.shape == (12, 12) and np.all(np.isfinite(r.cov))
-        assert r.residuals_px.shape == (n, 2) and np.isclose(r.rms_px, np.sqrt(np.mean(r.errors_px ** 2)))
+        assert r.residuals_px.shape == (n, 2) and np.isclose(r.rms_px, np.sqrt(np.mean(r.errors_px**2)))
         # C = K [R | t], normalised as Camera does
         assert np.allclose(r.camera.C, K @ r.T_cam_world[:3], atol=1e-9)
     chis = np.array(chis)
-    print(f"\nPnP from {n} points: χ² median {np.median(chis):.1f} (6 dof: 5.3), "
-          f"{np.mean(chis < chi2.ppf(0.95, 6)):.0%} under the 95 % quantile; all corners reprojected within "
-          f"median {np.median(worst_px):.2f} px, max {np.max(worst_px):.2f} px")
+    print(
+        f"\nPnP from {n} points: χ² median {np.median(chis):.1f} (6 dof: 5.3), "
+        f"{np.mean(chis < chi2.ppf(0.95, 6)):.0%} under the 95 % quantile; all corners reprojected within "
+        f"median {np.median(worst_px):.2f} px, max {np.max(worst_px):.2f} px"
+    )
     assert np.mean(chis < chi2.ppf(0.95, 6)) >= 0.85
     assert np.sum(chis > chi2.ppf(0.999, 6)) <= 1
     # every true corner reprojected within 4 of its stated σ (through C's covariance) in ≥ 90 % of draws
@@ -135,8 +145,13 @@ def lens_site(scene, tmp_path):
     seed_from_scene(db, sc)
     site = Site(sc, db, clock=lambda: T_S, frames=None)
     H = np.array([[1.01, 0.0, 6.0], [0.0, 0.99, -4.0], [0.0, 0.0, 1.0]])  # a stale C, as in test_calibrate_camera.py
-    site.set_camera(Camera(H @ scene.camera.C, scene.camera.width, scene.camera.height), rms_px=0.0,
-                    residuals_px=np.zeros((0, 2)), points={}, client="test")
+    site.set_camera(
+        Camera(H @ scene.camera.C, scene.camera.width, scene.camera.height),
+        rms_px=0.0,
+        residuals_px=np.zeros((0, 2)),
+        points={},
+        client="test",
+    )
     yield site
     db.close()
 
@@ -243,7 +258,10 @@ def test_without_the_lens_only_the_dlt_is_offered(site, scene):
         wf.set_method("pnp")
     V = _true_corners(scene)
     _click_pairs(wf, site, scene.camera, V[:5], np.random.default_rng(2))
-    with pytest.raises(WorkflowError, match=r"5 points paired; the full camera matrix needs at least 6 \(11 unknowns in C\): pair more$"):
+    with pytest.raises(
+        WorkflowError,
+        match=r"5 points paired; the full camera matrix needs at least 6 \(11 unknowns in C\): pair more$",
+    ):
         wf.solve()
     assert "1 more needed for the full camera matrix (DLT)" in wf.next_step
 
@@ -255,14 +273,17 @@ def test_serve_takes_the_lens_file(scene, tmp_path):
 
     K, T = scene.camera.decompose()
     w, h = scene.camera.width, scene.camera.height
-    args = build_parser().parse_args(["serve", "--intrinsics", str(_write_lens(tmp_path / "c.yml", K, w, h)),
-                                      "--camera-name", "x"])
+    args = build_parser().parse_args(
+        ["serve", "--intrinsics", str(_write_lens(tmp_path / "c.yml", K, w, h)), "--camera-name", "x"]
+    )
     assert args.intrinsics.name == "c.yml" and args.camera_name == "x"
     # a lens with distortion: the scene's frames are undistorted with it; the pose stays the scene's
     dist = [-0.2, 0.05, 0.001, -0.001, 0.0]
     sc = scene_with_intrinsics(scene, _write_lens(tmp_path / "d.yml", K * [[1.01], [1.01], [1]], w, h, dist))
     assert sc.lens is not None and sc.raw["camera"]["intrinsics_file"].endswith("d.yml")
-    assert np.allclose(sc.camera.decompose()[1], T, atol=1e-9) and np.isclose(sc.camera.decompose()[0][0, 0], 1.01 * K[0, 0])
+    assert np.allclose(sc.camera.decompose()[1], T, atol=1e-9) and np.isclose(
+        sc.camera.decompose()[0][0, 0], 1.01 * K[0, 0]
+    )
     assert scene.lens is None and "K" in scene.raw["camera"]  # the scene itself is unchanged
     with pytest.raises(ValueError, match=r"calibrated on 640×480 images but the scene's camera is 512×256"):
         scene_with_intrinsics(scene, _write_lens(tmp_path / "big.yml", K, 640, 480))

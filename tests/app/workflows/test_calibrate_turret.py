@@ -95,8 +95,11 @@ def test_one_orientation_is_not_enough(device_site):
     for x, y in ((-0.3, 0.5), (-0.2, 0.45), (-0.35, 0.3), (0.35, 0.55), (-0.3, -0.4), (0.3, -0.5)):
         wf.choose_point(T[:3, :3] @ [x, y, 0.04] + T[:3, 3])
         wf.measure()
-    with pytest.raises(WorkflowError, match=r"the 6 measurements on known surfaces do not fix the turret's pose: by the way "
-                                            r"their faces face, 6 facing up \(.* and 5 more\)\. It needs points spread") as e:
+    with pytest.raises(
+        WorkflowError,
+        match=r"the 6 measurements on known surfaces do not fix the turret's pose: by the way "
+        r"their faces face, 6 facing up \(.* and 5 more\)\. It needs points spread",
+    ) as e:
         wf.solve()
     assert "Left out" not in str(e.value)  # none was: nothing to name
     with pytest.raises(WorkflowError, match="Solve first"):
@@ -129,7 +132,12 @@ def test_measure_says_which_point_and_moves_the_beam_spot(device_site, devices):
     wf.measure()
     wf.choose_point(X)
     wf.measure()
-    assert texts == ["point 1 · aiming", "point 1 · measuring 3 shots", "point 2 · aiming", "point 2 · measuring 3 shots"]
+    assert texts == [
+        "point 1 · aiming",
+        "point 1 · measuring 3 shots",
+        "point 2 · aiming",
+        "point 2 · measuring 3 shots",
+    ]
     assert wf.progress is None and np.linalg.norm(site.beam_X_world - X) < 0.02
     devices.site.rangefinder.faults.push(*[Fault("error", data=b"g0@E255\r\n")] * 10)  # no return
     wf.choose_point(X)

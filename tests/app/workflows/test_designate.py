@@ -25,7 +25,9 @@ def test_table_then_nothing(site):
     wf = DesignateTarget(site)
     table = site.object("table")
     lo, hi = table.model.bounds()
-    X = table.T_world_obj[:3, :3] @ np.array([0.8 * lo[0], 0.8 * hi[1], hi[2]]) + table.T_world_obj[:3, 3]  # a far corner
+    X = (
+        table.T_world_obj[:3, :3] @ np.array([0.8 * lo[0], 0.8 * hi[1], hi[2]]) + table.T_world_obj[:3, 3]
+    )  # a far corner
     assert wf.click(site.camera.project(X)).object == "table"
     assert np.allclose(wf.targets[-1].X_world, X, atol=1e-6)
     with pytest.raises(WorkflowError, match="sees no object"):
@@ -159,7 +161,9 @@ def test_the_turret_calibrations_share_of_sigma(device_site):
     plain = wf.click(uv)
     assert plain.details["sigma_turret_m"] == 0.0
     cov = np.diag([np.radians(0.3)] * 3 + [0.003] * 3) ** 2
-    site.set_turret(site.T_world_turret, rms_m=0.001, residuals_m=np.zeros((1, 3)), cov=cov, measurements={}, client="test")
+    site.set_turret(
+        site.T_world_turret, rms_m=0.001, residuals_m=np.zeros((1, 3)), cov=cov, measurements={}, client="test"
+    )
     t = wf.click(uv)
     assert t.sigma_m > plain.sigma_m and t.details["sigma_turret_m"] > 0.003
     assert t.sigma_m == pytest.approx(np.hypot(t.details["sigma_rangefinder_m"], t.details["sigma_turret_m"]))
@@ -246,6 +250,8 @@ def test_a_disagreement_found_from_an_old_frozen_frame_says_when_the_frame_was(d
         wf.use_frame(FrameRef(image, t_s))
         t = wf.click(uv)
         assert "something not in the database is in the way" in t.warning
-        assert ("(the range finder measures the site as it is now, at t = 0.0 s; your click was on the frame of "
-                "t = -2.5 s)" in t.warning) == said
+        assert (
+            "(the range finder measures the site as it is now, at t = 0.0 s; your click was on the frame of "
+            "t = -2.5 s)" in t.warning
+        ) == said
         assert ("measures the site as it is now" in wf.message) == said

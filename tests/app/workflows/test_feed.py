@@ -45,8 +45,14 @@ class Reader:
     """A second process; ``next()`` is its next line as a dict (None when it ended)."""
 
     def __init__(self, args):
-        self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
-                                     env={**os.environ, "PYTHONPATH": str(ROOT)})
+        self.proc = subprocess.Popen(
+            args,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            cwd=ROOT,
+            env={**os.environ, "PYTHONPATH": str(ROOT)},
+        )
         self.q: queue.Queue = queue.Queue()
         threading.Thread(target=_lines, args=(self.proc.stdout, self.q), daemon=True).start()
 
@@ -103,7 +109,13 @@ def test_a_second_process_reads_pose_changes_and_targets_from_the_socket(site, s
         ev = reader.next()
         _check_pose_line(ev, T_new)
         assert (ev["object"], ev["version"], ev["who"], ev["method"], ev["action"], ev["moved"]) == (
-            "parallelepiped", rec.version, "viser:7", "p3l+refine", "update", True)
+            "parallelepiped",
+            rec.version,
+            "viser:7",
+            "p3l+refine",
+            "update",
+            True,
+        )
         assert ev["seq"] == site.change_seq
         np.testing.assert_allclose(ev["sigma"]["xyz_m"], [2e-3, 2e-3, 1e-3])
         np.testing.assert_allclose(ev["sigma"]["rot_rad"], [1e-2, 1e-2, 2e-2])
@@ -124,7 +136,9 @@ def test_a_second_process_reads_pose_changes_and_targets_from_the_socket(site, s
         np.testing.assert_allclose(ev["T"][0][3], X[0], atol=1e-6)
         z = np.array(ev["T"])[:3, 2]
         np.testing.assert_allclose(z, -t.normal, atol=1e-9)
-        np.testing.assert_allclose(Rotation.from_quat(ev["quat_xyzw"]).as_matrix(), np.array(ev["T"])[:3, :3], atol=1e-12)
+        np.testing.assert_allclose(
+            Rotation.from_quat(ev["quat_xyzw"]).as_matrix(), np.array(ev["T"])[:3, :3], atol=1e-12
+        )
         # an object removed
         site.db.remove("table", client="cli")
         site.poll()  # another process's change (here the database directly) joins the feed when polled
@@ -140,7 +154,21 @@ def test_mcit_db_feed_publishes_to_a_file_another_process_writes_the_database(db
     """The publisher is the second process here: ``mcit db feed`` follows the database that this
     process writes, and this process reads the file as a controller would."""
     out = tmp_path / "feed.jsonl"
-    pub = Reader([sys.executable, "-m", "app.cli", "db", "feed", "--db", str(db.path), "--file", str(out), "--interval-s", "0.05"])
+    pub = Reader(
+        [
+            sys.executable,
+            "-m",
+            "app.cli",
+            "db",
+            "feed",
+            "--db",
+            str(db.path),
+            "--file",
+            str(out),
+            "--interval-s",
+            "0.05",
+        ]
+    )
     try:
         assert "publishing the changes of" in pub.raw()
         lines = follow(out, timeout_s=WAIT_S)
@@ -164,8 +192,14 @@ def test_mcit_db_feed_publishes_to_a_file_another_process_writes_the_database(db
 def test_change_events_of_every_kind(db):
     from core.brep import BRep
 
-    rec = db.add_object("crate", "box", BRep.box(0.3, 0.2, 0.1), make_T(np.eye(3), [1.0, 2.0, 0.0]), method="model_box",
-                        client="viser:1")
+    rec = db.add_object(
+        "crate",
+        "box",
+        BRep.box(0.3, 0.2, 0.1),
+        make_T(np.eye(3), [1.0, 2.0, 0.0]),
+        method="model_box",
+        client="viser:1",
+    )
     ev = change_event(db.history(rec.id)[-1])
     assert (ev["type"], ev["action"], ev["moved"], ev["version"], ev["status"]) == ("pose", "add", True, 1, "modelled")
     db.add_calibration("turret", {"T_world_turret": np.eye(4)}, None, method="t")
@@ -202,8 +236,20 @@ def test_mcit_serve_feed_flags(tmp_path, sock_path, capsys):
     from tests.e2e.harness import free_port
 
     cv2.imwrite(str(tmp_path / "f0.png"), np.full((240, 320), 90, np.uint8))
-    argv = ["serve", "--video", str(tmp_path), "--db", str(tmp_path / "site.sqlite"), "--no-devices",
-            "--port", str(free_port()), "--feed-socket", str(sock_path), "--feed-file", str(tmp_path / "feed.jsonl")]
+    argv = [
+        "serve",
+        "--video",
+        str(tmp_path),
+        "--db",
+        str(tmp_path / "site.sqlite"),
+        "--no-devices",
+        "--port",
+        str(free_port()),
+        "--feed-socket",
+        str(sock_path),
+        "--feed-file",
+        str(tmp_path / "feed.jsonl"),
+    ]
     server, closers = build_interface(build_parser().parse_args(argv))
     try:
         assert server.site.feed is not None
@@ -218,7 +264,9 @@ def test_mcit_serve_feed_flags(tmp_path, sock_path, capsys):
         server.server.stop()
         for close in closers:
             close()
-    assert [json.loads(x)["action"] for x in (tmp_path / "feed.jsonl").read_text().splitlines()] == ["current"] * len(names)
+    assert [json.loads(x)["action"] for x in (tmp_path / "feed.jsonl").read_text().splitlines()] == ["current"] * len(
+        names
+    )
 
 
 def test_a_failing_feed_never_fails_a_write_or_a_target(site, caplog):

@@ -15,10 +15,11 @@ def test_calibration_and_pose_update_name_the_frozen_frame(site, scene, db):
     cam = site.camera
     wf = CalibrateCamera(site, client="alice", snap=False)
     wf.use_frame(frame)
-    table, box = site.object("table"), site.object("parallelepiped")
+    table = site.object("table")
     X = np.vstack([table.vertices_world()[np.argsort(table.vertices_world()[:, 2])[-4:]]])
-    for name, k in [("table", int(k)) for k in np.argsort(table.vertices_world()[:, 2])[-4:]] + \
-            [("parallelepiped", k) for k in range(8)]:
+    for name, k in [("table", int(k)) for k in np.argsort(table.vertices_world()[:, 2])[-4:]] + [
+        ("parallelepiped", k) for k in range(8)
+    ]:
         wf.choose_vertex(name, k)
         wf.click(cam.project(site.object(name).vertices_world()[k]) + [0.2, -0.1])
     wf.solve()

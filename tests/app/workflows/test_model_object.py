@@ -147,8 +147,15 @@ def _record_progress(wf):
     def hook(*args, **kwargs):
         report(*args, **kwargs)
         beam = wf.site.beam_X_world
-        seen.append((wf.progress, wf.progress_text, None if beam is None else beam.copy(), len(wf.live_points_world),
-                     len(wf.marks().live_points)))
+        seen.append(
+            (
+                wf.progress,
+                wf.progress_text,
+                None if beam is None else beam.copy(),
+                len(wf.live_points_world),
+                len(wf.marks().live_points),
+            )
+        )
 
     wf._report = hook
     return seen
@@ -277,11 +284,14 @@ def test_calibrated_site_states_the_calibrations_share(device_site, fast_scene, 
     # a camera calibration from 13 known points clicked at 0.5 px, a turret calibration with a 3 mm / 0.3° σ
     X = np.column_stack([rng.uniform(-0.3, 0.3, 13), rng.uniform(1.0, 1.6, 13), rng.uniform(0.0, 0.3, 13)])
     cam = site.camera
-    dlt = calibrate_dlt(X, cam.project(X) + rng.normal(0, 0.5, (13, 2)), cam.width, cam.height, sigma_px=np.full(13, 0.5))
+    dlt = calibrate_dlt(
+        X, cam.project(X) + rng.normal(0, 0.5, (13, 2)), cam.width, cam.height, sigma_px=np.full(13, 0.5)
+    )
     site.set_camera(cam, rms_px=dlt.rms_px, residuals_px=dlt.residuals_px, points={}, client="test", cov=dlt.cov)
     turret_cov = np.diag([np.radians(0.3)] * 3 + [0.003] * 3) ** 2
-    site.set_turret(site.T_world_turret, rms_m=0.001, residuals_m=np.zeros((1, 3)), cov=turret_cov, measurements={},
-                    client="test")
+    site.set_turret(
+        site.T_world_turret, rms_m=0.001, residuals_m=np.zeros((1, 3)), cov=turret_cov, measurements={}, client="test"
+    )
     r = wf.solve()
     parts = r.details["sigma_parts"]
     assert set(parts) == {"measurements", "camera calibration", "turret calibration"}
@@ -291,7 +301,9 @@ def test_calibrated_site_states_the_calibrations_share(device_site, fast_scene, 
     assert parts["turret calibration"]["position"] > parts["measurements"]["position"]  # 3 mm, ~2 m away
     assert "calibration" in wf.message
     row = wf.summary()["dimensions"][0]  # the panel's table splits each σ by source
-    assert row["dimension"] == "side x" and row["σ turret (cm)"] == pytest.approx(100 * parts["turret calibration"]["size_x"])
+    assert row["dimension"] == "side x" and row["σ turret (cm)"] == pytest.approx(
+        100 * parts["turret calibration"]["size_x"]
+    )
     # a new Site on this database finds both covariances
     cam_cov, tur_cov = Site(fast_scene, db, clock=lambda: 0.0, frames=None).calibration_covs
     assert np.allclose(cam_cov, dlt.cov) and np.allclose(tur_cov, turret_cov)

@@ -32,8 +32,15 @@ def pyramid_brep(a, h) -> BRep:
 
 
 def _variant(fast_scene, name, model, xy, yaw_deg):
-    body = Body(name, "polyhedron", "unknown", model, make_T(rot_z(np.radians(yaw_deg)), [xy[0], xy[1], 0.0]), (),
-                Appearance(albedo=0.7, texture=0.02, texture_scale_m=0.03))
+    body = Body(
+        name,
+        "polyhedron",
+        "unknown",
+        model,
+        make_T(rot_z(np.radians(yaw_deg)), [xy[0], xy[1], 0.0]),
+        (),
+        Appearance(albedo=0.7, texture=0.02, texture_scale_m=0.03),
+    )
     return dataclasses.replace(fast_scene, bodies=fast_scene.bodies + (body,))
 
 
@@ -56,7 +63,9 @@ def poly_site(request, fast_scene, tmp_path):
 def _facing(cam, model, T):
     normals, cents = model.face_normals(), model.face_centroids()
     c_obj = (cam.center - T[:3, 3]) @ T[:3, :3]
-    return [k for k in range(len(model.faces)) if normals[k] @ (c_obj - cents[k]) > 1e-3 * np.linalg.norm(c_obj - cents[k])]
+    return [
+        k for k in range(len(model.faces)) if normals[k] @ (c_obj - cents[k]) > 1e-3 * np.linalg.norm(c_obj - cents[k])
+    ]
 
 
 def _click_sides(wf, cam, model, T, k, rng, order=None, walk=None):
@@ -113,15 +122,23 @@ def test_wedge_from_its_visible_faces_is_added(poly_site):
     assert r.kind == "polyhedron"
     assert [a["face"] for a in wf.assignment] == faces
     true_edges = [[tuple(sorted(s)) for s in zip(f, f[1:] + f[:1])] for f in (body.model.faces[k] for k in faces)]
-    assert [a["edges"] for a in wf.assignment] == [[e[i] for i in o] for e, o in zip(true_edges, ([2, 0, 3, 1], [1, 2, 0]))]
+    assert [a["edges"] for a in wf.assignment] == [
+        [e[i] for i in o] for e, o in zip(true_edges, ([2, 0, 3, 1], [1, 2, 0]))
+    ]
     _check(r, body.model, POLY_SHAPES["wedge"].named)
     assert np.abs(r.vertices_world - body.model.transformed(T).vertices).max() < 0.01
     assert "length" in wf.next_step and "±" in wf.next_step and len(wf.marks().ghosts) == 1
     assert "wedge_1" not in [o.name for o in site.db.objects()]  # nothing written before Accept
     rec = wf.accept()
     walk.check(wf)
-    assert walk.seen["model_polyhedron"] == {"click_sides", "click_end", "sides_clicked", "face_measured", "review",
-                                             "accepted"}
+    assert walk.seen["model_polyhedron"] == {
+        "click_sides",
+        "click_end",
+        "sides_clicked",
+        "face_measured",
+        "review",
+        "accepted",
+    }
     assert rec.status == "modelled" and rec.kind == "polyhedron"
     got = site.db.get("wedge_1")
     assert got.dims["length"] == pytest.approx(r.dimensions["length"]) and got.sigmas["height"] > 0

@@ -123,9 +123,17 @@ def test_an_object_that_stands_still_is_not_changed_by_the_box_moving_beside_it(
     site = video_site
     body = scene.body(name)
     T = body.pose_at(0.0)
-    pts = body.model.vertices if len(body.model.vertices) else np.array(
-        [[r * np.cos(a), r * np.sin(a), z] for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)
-         for r, z in ((0.051, 0.0), (0.051, 0.166))])
+    pts = (
+        body.model.vertices
+        if len(body.model.vertices)
+        else np.array(
+            [
+                [r * np.cos(a), r * np.sin(a), z]
+                for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)
+                for r, z in ((0.051, 0.0), (0.051, 0.166))
+            ]
+        )
+    )
     outline = site.camera.project_obj(T, pts)
     wf = ModelObject(site, client="alice", shape="box", vertical=True, on_table=True)
     for t_frozen in (FROZEN_T, 20.0, 26.8):

@@ -28,8 +28,16 @@ def test_every_write_through_the_site_is_announced_with_who_and_what(site, db):
     assert site.revision > rev and rec.version == obj.version + 1
     assert np.allclose(site.object("parallelepiped").T_world_obj, moved(obj, 0.05))
     site.set_status("parallelepiped", "stale", client="bob")
-    site.add_object("box_1", "box", BRep.box(0.1, 0.2, 0.3), np.eye(4), method="test", client="alice",
-                    dims={"x": 0.1}, sigmas={"x": 0.001})
+    site.add_object(
+        "box_1",
+        "box",
+        BRep.box(0.1, 0.2, 0.3),
+        np.eye(4),
+        method="test",
+        client="alice",
+        dims={"x": 0.1},
+        sigmas={"x": 0.001},
+    )
     site.set_camera(site.camera, rms_px=0.3, residuals_px=np.zeros(4), points={}, client="carol")
     undo = site.undo(rec.id, client="bob")
     changes = site.changes_since(seq0)
@@ -38,7 +46,11 @@ def test_every_write_through_the_site_is_announced_with_who_and_what(site, db):
         ("bob", "marked parallelepiped stale", "parallelepiped"),
         ("alice", "added box_1", "box_1"),
         ("carol", "calibrated the camera", None),
-        ("bob", f"removed parallelepiped (undid change #{rec.id}, its addition)", "parallelepiped"),  # change #{rec.id}: the seed's add
+        (
+            "bob",
+            f"removed parallelepiped (undid change #{rec.id}, its addition)",
+            "parallelepiped",
+        ),  # change #{rec.id}: the seed's add
     ]
     assert [c.seq for c in changes] == [h.id for h in db.history()[-5:]]
     assert site.change_seq == undo.id == changes[-1].seq
@@ -63,14 +75,22 @@ def test_another_process_changes_are_announced_once_polled(site, db):
     try:
         seq0 = site.change_seq
         obj = other.get("parallelepiped")
-        other.update_pose(obj.id, moved(site.object("parallelepiped"), 0.03), None, expected_version=obj.version,
-                          method="command line", client="dave")
+        other.update_pose(
+            obj.id,
+            moved(site.object("parallelepiped"), 0.03),
+            None,
+            expected_version=obj.version,
+            method="command line",
+            client="dave",
+        )
         undo = other.undo(other.history()[-1].id, client="dave")
         assert site.changes_since(seq0) == []  # not seen yet
         assert site.poll()
         changes = site.changes_since(seq0)
-        assert [(c.who, c.what) for c in changes] == [("dave", "moved parallelepiped"),
-                                                      ("dave", f"undid change #{undo.undoes} (parallelepiped)")]
+        assert [(c.who, c.what) for c in changes] == [
+            ("dave", "moved parallelepiped"),
+            ("dave", f"undid change #{undo.undoes} (parallelepiped)"),
+        ]
         assert not site.poll() and site.changes_since(seq0) == changes  # read once
     finally:
         other.close()
@@ -80,8 +100,9 @@ def test_undoing_a_calibration_is_announced_and_used(site, db):
     cam0 = site.camera
     C1 = cam0.C * 1.0
     C1[0, 3] += 1e-3
-    site.set_camera(type(cam0)(C1, cam0.width, cam0.height), rms_px=0.3, residuals_px=np.zeros(4), points={},
-                    client="carol")
+    site.set_camera(
+        type(cam0)(C1, cam0.width, cam0.height), rms_px=0.3, residuals_px=np.zeros(4), points={}, client="carol"
+    )
     site.set_camera(cam0, rms_px=0.2, residuals_px=np.zeros(4), points={}, client="carol")
     last = db.history()[-1]
     site.undo(last.id, client="alice")

@@ -43,8 +43,14 @@ def test_poll_rebuilds_only_the_changed_object(site, db, tmp_path, monkeypatch):
     built = _count_rebuilds(monkeypatch)
     other = Database.open(db.path)  # another process's connection, as `mcit db` would be
     obj = before["parallelepiped"]
-    other.update_pose(obj.id, obj.T_world_obj @ make_T(np.eye(3), [0.02, 0, 0]), None, expected_version=obj.version,
-                      method="test", client="other")
+    other.update_pose(
+        obj.id,
+        obj.T_world_obj @ make_T(np.eye(3), [0.02, 0, 0]),
+        None,
+        expected_version=obj.version,
+        method="test",
+        client="other",
+    )
     other.close()
     revision = site.revision
     assert site.poll() is True and site.revision == revision + 1

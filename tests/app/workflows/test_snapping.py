@@ -79,14 +79,20 @@ def test_update_pose_snaps_clicked_edges_shows_raw_refuses_and_records(video_sit
     applied = np.array([s.applied for s in wf.seg_snaps])
     np.testing.assert_allclose(refined.sigma_px, np.where(applied, SNAPPED_SEGMENT_SIGMA_PX, wf.sigma_px))
     deg, m_err = pose_error(refined.T_world_obj, T_true)
-    assert np.degrees(np.sqrt(refined.cov[3:, 3:].trace())) > deg / 3 and np.sqrt(refined.cov[:3, :3].trace()) > m_err / 3
+    assert (
+        np.degrees(np.sqrt(refined.cov[3:, 3:].trace())) > deg / 3 and np.sqrt(refined.cov[:3, :3].trace()) > m_err / 3
+    )
     rec = wf.accept()
     change = db.history("parallelepiped")[-1]
     assert change.method == "p3l+refine" and change.client == "alice" and rec.version == obj.version + 1
     snaps = change.clicks["snaps"]
     assert len(snaps) == len(edges)
     assert [s["snapped"] for s in snaps] == [s.applied for s in wf.seg_snaps]
-    assert snaps[-1]["refused"] and np.allclose(snaps[-1]["raw_uv"], last.raw) and np.allclose(snaps[-1]["snapped_uv"], last.snapped)
+    assert (
+        snaps[-1]["refused"]
+        and np.allclose(snaps[-1]["raw_uv"], last.raw)
+        and np.allclose(snaps[-1]["snapped_uv"], last.snapped)
+    )
     assert np.allclose(change.clicks["segs_uv"], np.array(wf.segs))
 
 
@@ -105,9 +111,14 @@ def test_snapping_off_and_without_frames_uses_clicks_as_clicked(video_site, site
     with pytest.raises(WorkflowError, match="not snapped"):
         wf.refuse_snap()
     session.set_snap(True)  # from now on, in the workflow under way too
-    wf.add_segment(clicks_on(visible_edges(video_site.camera, obj.model, scene.body("parallelepiped").pose_at(T_MOVED))[1][1],
-                             np.random.default_rng(1), 1.5), visible_edges(video_site.camera, obj.model,
-                                                                          scene.body("parallelepiped").pose_at(T_MOVED))[1][0])
+    wf.add_segment(
+        clicks_on(
+            visible_edges(video_site.camera, obj.model, scene.body("parallelepiped").pose_at(T_MOVED))[1][1],
+            np.random.default_rng(1),
+            1.5,
+        ),
+        visible_edges(video_site.camera, obj.model, scene.body("parallelepiped").pose_at(T_MOVED))[1][0],
+    )
     assert wf.seg_snaps[-1] is not None
     # a site without frames never snaps (nothing to snap to)
     wf2 = UpdatePose(site, object_name="parallelepiped")
@@ -124,8 +135,14 @@ def test_calibrate_camera_snaps_corners_and_stores_raw_and_snapped(video_site, s
     wf = CalibrateCamera(site, client="alice")
     rng = np.random.default_rng(5)
     wfv = box.model.wireframe(cam.center, box.T_world_obj)
-    seen = sorted({int(v) for k, vis, kind in zip(wfv.edge_index, wfv.visible, wfv.kind) if vis and kind == "edge"
-                   for v in box.model.edges[int(k)]})
+    seen = sorted(
+        {
+            int(v)
+            for k, vis, kind in zip(wfv.edge_index, wfv.visible, wfv.kind)
+            if vis and kind == "edge"
+            for v in box.model.edges[int(k)]
+        }
+    )
     raw_err, snap_err = [], []
     for k in seen:
         wf.choose_vertex("parallelepiped", k)

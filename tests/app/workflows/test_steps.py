@@ -11,8 +11,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.workflows import (WORKFLOWS, CalibrateCamera, CalibrateTurret, DesignateTarget, History, ModelObject,
-                           TrackObject, UpdatePose, WorkflowError)
+from app.workflows import (
+    WORKFLOWS,
+    CalibrateCamera,
+    CalibrateTurret,
+    DesignateTarget,
+    History,
+    ModelObject,
+    TrackObject,
+    UpdatePose,
+    WorkflowError,
+)
 from app.workflows.base import CANCEL, Control, Step
 
 from .test_model_object import _click_face, _facing_faces
@@ -86,13 +95,14 @@ def test_calibrate_camera_states(site, scene, walk):
     table, box = site.object("table"), site.object("parallelepiped")
     wfv = box.model.wireframe(cam.center, box.T_world_obj)
     E = np.asarray(box.model.edges)
-    vis = sorted({int(v) for k, v_, kind in zip(wfv.edge_index, wfv.visible, wfv.kind) if v_ and kind == "edge"
-                  for v in E[k]})
+    vis = sorted(
+        {int(v) for k, v_, kind in zip(wfv.edge_index, wfv.visible, wfv.kind) if v_ and kind == "edge" for v in E[k]}
+    )
     top = np.argsort(table.vertices_world()[:, 2])[-4:]
     X = np.vstack([box.vertices_world()[vis], table.vertices_world()[top]])
     with pytest.raises(WorkflowError, match="no click to remove"):
         wf.remove_last()
-    for i, x in enumerate(X):
+    for _i, x in enumerate(X):
         wf.click(cam.project(x))
         walk.check(wf)
         wf.click(cam.project(x) + [0.3, -0.2])
@@ -119,8 +129,10 @@ def test_calibrate_camera_states_with_the_lens_known(scene, tmp_path, walk):
     from app.workflows import Site
 
     cam = scene.camera
-    write_camera_file(Calibration(cam.decompose()[0], np.zeros(5), 0.1, cam.width, cam.height, (0,), 1, "plumb_bob"),
-                      tmp_path / "cam.yml")
+    write_camera_file(
+        Calibration(cam.decompose()[0], np.zeros(5), 0.1, cam.width, cam.height, (0,), 1, "plumb_bob"),
+        tmp_path / "cam.yml",
+    )
     sc = scene_with_intrinsics(scene, tmp_path / "cam.yml")
     db = Database.open(tmp_path / "lens.sqlite")
     seed_from_scene(db, sc)
@@ -206,8 +218,20 @@ def test_update_pose_states_by_hand_and_by_auto_match(site, walk):
     assert walk.check(wf2).name == "review"
     wf2.cancel()
     walk.check(wf2)
-    assert {"click_edge", "click_edge_end", "assign_edge", "candidates", "review", "refine_again", "click_point_model",
-            "auto_click", "auto_ready", "match", "accepted", "cancelled"} <= walk.seen["update_pose"]
+    assert {
+        "click_edge",
+        "click_edge_end",
+        "assign_edge",
+        "candidates",
+        "review",
+        "refine_again",
+        "click_point_model",
+        "auto_click",
+        "auto_ready",
+        "match",
+        "accepted",
+        "cancelled",
+    } <= walk.seen["update_pose"]
 
 
 def test_model_object_states_box_and_cylinder(device_site, fast_scene, walk):
@@ -250,8 +274,18 @@ def test_model_object_states_box_and_cylinder(device_site, fast_scene, walk):
     walk.check(wf)
     wf.solve()
     assert walk.check(wf).name == "review"
-    assert {"click_sides", "sides_clicked", "face_measured", "scanned", "review", "click_silhouettes", "scan",
-            "solve", "click_end", "cancelled"} <= walk.seen["model_object"]
+    assert {
+        "click_sides",
+        "sides_clicked",
+        "face_measured",
+        "scanned",
+        "review",
+        "click_silhouettes",
+        "scan",
+        "solve",
+        "click_end",
+        "cancelled",
+    } <= walk.seen["model_object"]
 
 
 def test_calibrate_turret_designate_history_track_states(device_site, site, walk):

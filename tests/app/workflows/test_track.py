@@ -69,14 +69,21 @@ def test_a_lost_track_says_what_to_do_writes_nothing_and_reinitialises_from_clic
     T_true = scene.body("parallelepiped").pose_at(16.0)
     model = obj.model
     wfe = model.wireframe(site.camera.center, T_true)
-    edges = [int(k) for k, v, kind in zip(wfe.edge_index, wfe.visible, wfe.kind)
-             if v and kind == "edge" and np.linalg.norm(np.diff(site.camera.project(model.edge_segments(T_true)[int(k)]), axis=0)) > 20][:4]
+    edges = [
+        int(k)
+        for k, v, kind in zip(wfe.edge_index, wfe.visible, wfe.kind)
+        if v
+        and kind == "edge"
+        and np.linalg.norm(np.diff(site.camera.project(model.edge_segments(T_true)[int(k)]), axis=0)) > 20
+    ][:4]
     rng = np.random.default_rng(3)
     with pytest.raises(WorkflowError, match="click three or more"):
         wf.reinit()
     for k in edges:
         uv = site.camera.project(model.edge_segments(T_true)[k])
-        wf.add_segment(np.array([uv[0] + 0.3 * (uv[1] - uv[0]), uv[0] + 0.7 * (uv[1] - uv[0])]) + rng.normal(0, 1.0, (2, 2)))
+        wf.add_segment(
+            np.array([uv[0] + 0.3 * (uv[1] - uv[0]), uv[0] + 0.7 * (uv[1] - uv[0])]) + rng.normal(0, 1.0, (2, 2))
+        )
     assert len(wf.marks().segments) == 4 and all(s.applied for s in wf.seg_snaps)
     wf.reinit()
     assert not wf.lost and wf.following and "Re-initialised" in wf.message and not wf.segs

@@ -195,8 +195,11 @@ def test_auto_match_finds_the_assignment_on_the_frame_and_writes_it(video_site, 
     wf = session.start("update_pose")
     assert wf.auto_match() is None and wf.auto  # too few edges: automatic assignment switched on
     assert wf.current_step().name == "auto_click" and wf.next_step.startswith("Automatic matching")  # said at once
-    edges = [k for k in _visible_edges(site, obj.model, T_true)
-             if np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[k]), axis=0)) > 20][:4]
+    edges = [
+        k
+        for k in _visible_edges(site, obj.model, T_true)
+        if np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[k]), axis=0)) > 20
+    ][:4]
     assert len(edges) == 4
     for i, seg in enumerate(_true_segments(site, obj.model, T_true, edges, np.random.default_rng(7), 1.0)):
         wf.click(seg[0])
@@ -232,8 +235,11 @@ def test_auto_match_keeps_hand_assignments_and_remove_last_undoes_a_match(video_
     obj = site.object("parallelepiped")
     T_true = scene.body("parallelepiped").pose_at(T_MOVED)
     wf = UpdatePose(site, object_name="parallelepiped")
-    edges = [k for k in _visible_edges(site, obj.model, T_true)
-             if np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[k]), axis=0)) > 20][:4]
+    edges = [
+        k
+        for k in _visible_edges(site, obj.model, T_true)
+        if np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[k]), axis=0)) > 20
+    ][:4]
     segs = _true_segments(site, obj.model, T_true, edges, np.random.default_rng(8), 1.0)
     wf.add_segment(segs[0], edges[0])  # assigned by hand
     for seg in segs[1:]:
@@ -408,7 +414,7 @@ def test_three_edges_through_one_corner_are_refused_in_the_operators_words(site)
 
 
 def test_a_weak_sigma_says_which_limit_it_exceeds():
-    """"σ up to 1.17° and 26.4 mm (more than 2° or 20 mm)" read as if 1.17° were above 2° (a new
+    """ "σ up to 1.17° and 26.4 mm (more than 2° or 20 mm)" read as if 1.17° were above 2° (a new
     operator): the reason names the one that exceeds its limit."""
     from app.workflows.base import sigma_over
 

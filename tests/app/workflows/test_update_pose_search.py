@@ -70,8 +70,11 @@ def test_a_click_on_the_table_finds_nothing_and_writes_nothing(video_site, scene
     wf = _start(site)
     n = len(db.history(BOX))
     wf.click(site.camera.project(np.array([[0.3, -0.3, 0.0]]))[0])
-    with pytest.raises(WorkflowError, match=f"no pose of the {BOX} fits the image near your click.*or update it by "
-                       "clicking its edges. Nothing was written, and the click was dropped"):
+    with pytest.raises(
+        WorkflowError,
+        match=f"no pose of the {BOX} fits the image near your click.*or update it by "
+        "clicking its edges. Nothing was written, and the click was dropped",
+    ):
         wf.find()
     # the click that found nothing is dropped: the next click (or double click) starts afresh
     assert wf.current_step().name == "click_edge" and wf.found is None and wf.pending is None
@@ -90,8 +93,11 @@ def test_remove_last_drops_the_found_poses_and_edges_refine_from_the_found_pose(
     wf.find()
     T_found = wf.candidates[0]
     obj = wf.obj
-    edges = [k for k in _visible_edges(site, obj.model, T_true)
-             if np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[k]), axis=0)) > 20][:3]
+    edges = [
+        k
+        for k in _visible_edges(site, obj.model, T_true)
+        if np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[k]), axis=0)) > 20
+    ][:3]
     for seg, k in zip(_true_segments(site, obj.model, T_true, edges, np.random.default_rng(2), 0.5), edges):
         wf.click(seg[0])
         wf.click(seg[1])
@@ -118,13 +124,20 @@ def test_one_clicked_edge_refines_together_with_the_found_pose(video_site, scene
     c = wf.found[0]
     off = perturb(c.T_world_obj, np.r_[0.0, 0.0, 0.0, 0.0, 0.0, np.radians(2.0)])
     scale = (2.0 / float(np.max(c.std_r_deg))) ** 2  # the found pose's σ: 2° in heading
-    c = dataclasses.replace(c, T_world_obj=off, cov=c.cov * scale, std_t_mm=c.std_t_mm * np.sqrt(scale),
-                            std_r_deg=c.std_r_deg * np.sqrt(scale))
+    c = dataclasses.replace(
+        c,
+        T_world_obj=off,
+        cov=c.cov * scale,
+        std_t_mm=c.std_t_mm * np.sqrt(scale),
+        std_r_deg=c.std_r_deg * np.sqrt(scale),
+    )
     wf.found[0] = c
     wf.candidates[0] = off
     obj = wf.obj
-    k = max(_visible_edges(site, obj.model, T_true),
-            key=lambda e: np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[e]), axis=0)))
+    k = max(
+        _visible_edges(site, obj.model, T_true),
+        key=lambda e: np.linalg.norm(np.diff(site.camera.project(obj.model.edge_segments(T_true)[e]), axis=0)),
+    )
     seg = _true_segments(site, obj.model, T_true, [k], np.random.default_rng(3), 0.5)[0]
     wf.click(seg[0])
     wf.click(seg[1])
@@ -155,7 +168,9 @@ def test_a_refine_after_find_keeps_the_camera_calibration_share_of_the_sigma(vid
     wf, _, T_true = _found(site, scene)
     c = wf.found[0]
     share = c.cov_camera
-    assert share is not None and np.all(np.linalg.eigvalsh(c.cov - share) > -1e-12)  # the image's share stays a covariance
+    assert share is not None and np.all(
+        np.linalg.eigvalsh(c.cov - share) > -1e-12
+    )  # the image's share stays a covariance
     obj = wf.obj
     rng = np.random.default_rng(4)
     for k in sorted(_visible_edges(site, obj.model, T_true))[:3]:
@@ -182,8 +197,13 @@ def test_a_cylinder_is_updated_from_one_double_click(video_site, scene, db):
     site.t["t"] = T_MOVED
     body = scene.body("unknown_cylinder")
     T_true = body.pose_at(T_MOVED)
-    db.add_object("cylinder_1", "cylinder", body.model, make_T(T_true[:3, :3], T_true[:3, 3] + [0.08, 0.0, 0.0]),
-                  status="modelled")
+    db.add_object(
+        "cylinder_1",
+        "cylinder",
+        body.model,
+        make_T(T_true[:3, :3], T_true[:3, 3] + [0.08, 0.0, 0.0]),
+        status="modelled",
+    )
     session = Session(site, client="alice")
     session.select("cylinder_1")
     wf = session.start("update_pose")
@@ -198,7 +218,10 @@ def test_a_cylinder_is_updated_from_one_double_click(video_site, scene, db):
     wf.accept()
     rec = db.get("cylinder_1")
     axis_deg = np.degrees(np.arccos(np.clip(rec.T_world_obj[:3, 2] @ T_true[:3, 2], -1, 1)))
-    assert axis_deg < 1.0 and np.linalg.norm(rec.T_world_obj[:3, 3] - T_true[:3, 3]) < 0.005, (axis_deg, rec.T_world_obj[:3, 3])
+    assert axis_deg < 1.0 and np.linalg.norm(rec.T_world_obj[:3, 3] - T_true[:3, 3]) < 0.005, (
+        axis_deg,
+        rec.T_world_obj[:3, 3],
+    )
     assert db.history("cylinder_1")[-1].method == "search" and len(found) >= 1
 
 
@@ -288,6 +311,7 @@ def test_while_find_searches_the_step_says_so(video_site, scene, db, monkeypatch
         def spy(frac, what):
             progress(frac, what)
             seen.append((wf.current_step().name, wf.current_step().prompt, wf.current_step().clicks))
+
         return real(*args, progress=spy, **kwargs)
 
     monkeypatch.setattr(ps, "search_pose", watched)

@@ -40,10 +40,12 @@ def _workflow(site, assign=True):
     return wf
 
 
-@pytest.mark.parametrize("action, solver_module, solver", [("refine", update_pose, "refine"),
-                                                           ("solve", update_pose, "p3l")])
-def test_a_solve_runs_outside_the_lock_and_is_dropped_when_the_clicks_changed(site, monkeypatch, action, solver_module,
-                                                                             solver):
+@pytest.mark.parametrize(
+    "action, solver_module, solver", [("refine", update_pose, "refine"), ("solve", update_pose, "p3l")]
+)
+def test_a_solve_runs_outside_the_lock_and_is_dropped_when_the_clicks_changed(
+    site, monkeypatch, action, solver_module, solver
+):
     wf = _workflow(site)
     real, seen = getattr(solver_module, solver), {"free": [], "calls": 0}
 

@@ -24,6 +24,10 @@ def cylinder_scene(distance_m=1.3, r0=0.051, r1=0.051, h=0.166, offset=(0.0, 0.0
     """Camera and turret looking at a solid of revolution standing at ``offset`` on the table."""
     cam, T_wt = look_at_setup(np.array([0.0, 0.0, h / 2]), distance_m)
     p0 = np.array([offset[0], offset[1], 0.0])
-    a = np.array([0.0, 0.0, 1.0]) if tilt_axis is None else np.asarray(tilt_axis, dtype=float) / np.linalg.norm(tilt_axis)
+    a = (
+        np.array([0.0, 0.0, 1.0])
+        if tilt_axis is None
+        else np.asarray(tilt_axis, dtype=float) / np.linalg.norm(tilt_axis)
+    )
     sol = Revolution(p0, p0 + h * a, r0, r1)
     return cam, T_wt, sol, SimWorld(T_wt, solids=(sol,))

@@ -27,7 +27,12 @@ def test_box_noise_free_exact(yaw_deg, with_support, method):
     est, true, _ = _sizes_in_true_axes(res, T_obj)
     assert np.abs(est - true).max() < 1e-6
     corners_true = np.array(
-        [T_obj[:3, :3] @ [sx * BOX_SIZE[0] / 2, sy * BOX_SIZE[1] / 2, sz * BOX_SIZE[2]] + T_obj[:3, 3] for sx in (-1, 1) for sy in (-1, 1) for sz in (0, 1)]
+        [
+            T_obj[:3, :3] @ [sx * BOX_SIZE[0] / 2, sy * BOX_SIZE[1] / 2, sz * BOX_SIZE[2]] + T_obj[:3, 3]
+            for sx in (-1, 1)
+            for sy in (-1, 1)
+            for sz in (0, 1)
+        ]
     )
     d = np.linalg.norm(res.vertices_world[:, None] - corners_true[None], axis=2).min(axis=1)
     assert d.max() < 1e-6
@@ -49,7 +54,9 @@ def test_box_model_world_matches_vertices(box_scene):
     d = np.linalg.norm(W[:, None] - res.vertices_world[None], axis=2).min(axis=1)
     assert d.max() < 1e-12
     text = res.dimension_text("cm")
-    assert text.startswith(f"side x {100 * res.dimensions['size_x']:.2f} ± ") and text.count("±") == 3 and "height" in text
+    assert (
+        text.startswith(f"side x {100 * res.dimensions['size_x']:.2f} ± ") and text.count("±") == 3 and "height" in text
+    )
 
 
 def test_box_sigmas_match_scatter_over_500_trials(box_scene):

@@ -150,12 +150,17 @@ def test_box_entry_and_return_assignment():
     cam, T_wt = look_at_setup(np.array([0.0, 0.0, 0.07]), 1.4)
     T_obj = make_T(rot_z(np.radians(35.0)), [0.0, 0.0, 0.0])
     world = SimWorld(T_wt, boxes=((T_obj, tuple(BOX_SIZE)),))
-    data = reduce_box_scans(simulate_box_scans(world, T_obj, BOX_SIZE, None), T_wt, RangeFinderSpec(),
-                            T_obj[:3, :3], T_obj[:3, 3], BOX_SIZE)
+    data = reduce_box_scans(
+        simulate_box_scans(world, T_obj, BOX_SIZE, None), T_wt, RangeFinderSpec(), T_obj[:3, :3], T_obj[:3, 3], BOX_SIZE
+    )
     used, axis, side = assign_returns(data, T_obj[:3, :3], T_obj[:3, 3], BOX_SIZE, edge_margin_m=0.005)
     # Every return used lies on the face it was given to; the ones left out are near a border.
     n = side[used, None] * T_obj[:3, :3][:, axis[used]].T
-    face_pt = T_obj[:3, 3] + T_obj[:3, :3] @ [0.0, 0.0, 0.07] + n * np.where(axis[used] < 2, BOX_SIZE[axis[used]] / 2, 0.07)[:, None]
+    face_pt = (
+        T_obj[:3, 3]
+        + T_obj[:3, :3] @ [0.0, 0.0, 0.07]
+        + n * np.where(axis[used] < 2, BOX_SIZE[axis[used]] / 2, 0.07)[:, None]
+    )
     assert np.abs(np.einsum("ij,ij->i", data.points_world[used] - face_pt, n)).max() < 1e-9
     assert 0 < (~used).sum() < 0.2 * len(used)
     assert set(zip(axis[used], side[used])) <= {(0, -1), (0, 1), (1, -1), (1, 1)}  # side faces only

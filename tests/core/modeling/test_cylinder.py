@@ -77,8 +77,16 @@ def test_cylinder_sigmas_match_scatter_over_500_trials():
             e = mid - true_mid
             e -= (e @ res.axis.direction) * res.axis.direction
             s = res.sigmas
-            out[m].append([res.dimensions["radius"] - 0.051, res.dimensions["height"] - 0.166, e @ e,
-                           s["radius"] ** 2, s["height"] ** 2, s["axis_position"] ** 2])
+            out[m].append(
+                [
+                    res.dimensions["radius"] - 0.051,
+                    res.dimensions["height"] - 0.166,
+                    e @ e,
+                    s["radius"] ** 2,
+                    s["height"] ** 2,
+                    s["axis_position"] ** 2,
+                ]
+            )
     for m in methods:
         v = np.array(out[m])
         rms = np.sqrt([np.mean(v[:, 0] ** 2), np.mean(v[:, 1] ** 2), np.mean(v[:, 2])])

@@ -74,27 +74,39 @@ def test_so3_right_jacobian(w):
     assert np.allclose(_so3_right_jacobian(w), Jn, atol=1e-7)
 
 
-@pytest.mark.parametrize("case", ["cylinder on the support", "cone on the support", "tilted cylinder, axis given",
-                                  "cone, axis given"])
+@pytest.mark.parametrize(
+    "case", ["cylinder on the support", "cone on the support", "tilted cylinder, axis given", "cone, axis given"]
+)
 def test_paper_construction_jacobian_matches_differences(case):
     """The paper's three constructions differentiated analytically (known axis direction) give the
     central differences of the construction itself, every input (clicks, tangent beams' angles,
     the front plane), every output (radii, height, mid-point, axis)."""
     import core.modeling.cylinder as cyl
+    from core.brep import Revolution
     from core.geometry import Plane
     from core.modeling.simulate import SimWorld, simulate_revolution
-    from core.brep import Revolution
     from core.rangefinder import RangeFinderSpec
 
     table = Plane(np.array([0.0, 0.0, 1.0]), 0.0)
     cone = "cone" in case
-    tilt = np.array([0.2, 0.1, 1.0]) / np.linalg.norm([0.2, 0.1, 1.0]) if "tilted" in case else np.array([0.0, 0.0, 1.0])
+    tilt = (
+        np.array([0.2, 0.1, 1.0]) / np.linalg.norm([0.2, 0.1, 1.0]) if "tilted" in case else np.array([0.0, 0.0, 1.0])
+    )
     cam, T_wt = look_at_setup(np.array([0.0, 0.0, 0.083]), 1.3)
     sol = Revolution(np.zeros(3), 0.166 * tilt, 0.06 if cone else 0.051, 0.04 if cone else 0.051)
     sil, scans = simulate_revolution(cam, SimWorld(T_wt, solids=(sol,)), sol, np.random.default_rng(5), sigma_px=1.0)
     support = table if "support" in case else None
-    data = cyl.reduce_cylinder_data(cam, silhouettes_uv=sil, scans=scans, T_world_turret=T_wt, spec=RangeFinderSpec(),
-                                    support=support, axis_dir=None if support else tilt, cone=cone, jump_m=0.05)
+    data = cyl.reduce_cylinder_data(
+        cam,
+        silhouettes_uv=sil,
+        scans=scans,
+        T_world_turret=T_wt,
+        spec=RangeFinderSpec(),
+        support=support,
+        axis_dir=None if support else tilt,
+        cone=cone,
+        jump_m=0.05,
+    )
     for method in ("tangential", "bisecting", "rf_tangential"):
         ctx = cyl._stage_one(data, method)
         parts = [sil.reshape(-1)] + [[tb.pan_rad, tb.tilt_rad] for tb in data.tangents]
@@ -130,7 +142,9 @@ def test_silhouette_ends_and_their_jacobian_at_random_solids():
             continue
         assert np.allclose(ends, ref, atol=1e-12)
         x = np.concatenate([p0, a, [r0, r1, h]])
-        Jn = numeric_jacobian(lambda x: silhouette_ends(x[:3], x[3:6], x[6], x[7], x[8], c)[0].reshape(-1), x, 1e-6, central=True)
+        Jn = numeric_jacobian(
+            lambda x: silhouette_ends(x[:3], x[3:6], x[6], x[7], x[8], c)[0].reshape(-1), x, 1e-6, central=True
+        )
         assert _rel_err(J.reshape(12, 9), Jn) <= 1e-6
         checked += 1
     assert checked >= 20

@@ -12,7 +12,10 @@ SHAPES = {
     "box_parallel": (BRep.box(0.09, 0.094, 0.14), dict(parallel_faces=[(0, 1), (2, 4), (3, 5)])),
     "box_vertical": (BRep.box(0.09, 0.094, 0.14), dict(vertical_faces=[2, 3, 4, 5])),
     "prism": (BRep.prism(np.array([[0, 0], [0.12, 0.0], [0.03, 0.10]]), 0.08), dict(vertical_faces=[2, 3, 4])),
-    "pyramid": (BRep.pyramid(np.array([[-0.08, -0.08], [0.08, -0.08], [0.08, 0.08], [-0.08, 0.08]]), np.array([0, 0, 0.06])), {}),
+    "pyramid": (
+        BRep.pyramid(np.array([[-0.08, -0.08], [0.08, -0.08], [0.08, 0.08], [-0.08, 0.08]]), np.array([0, 0, 0.06])),
+        {},
+    ),
 }
 
 
@@ -27,7 +30,9 @@ def test_polyhedron_noise_free_exact(name):
     brep, hints = SHAPES[name]
     cam, T_wt, Bw, world = _setup(brep)
     fp, fc, es = simulate_polyhedron(cam, world, Bw, None)
-    res = model_polyhedron(cam, brep.faces, face_points=fp, face_point_covs=fc, edge_segments=es, support=TABLE, support_faces=[0], **hints)
+    res = model_polyhedron(
+        cam, brep.faces, face_points=fp, face_point_covs=fc, edge_segments=es, support=TABLE, support_faces=[0], **hints
+    )
     assert np.abs(res.vertices_world - Bw.vertices).max() < 1e-6
     assert np.abs(res.model_world().vertices - Bw.vertices).max() < 1e-6
     for a, b in brep.edges:
@@ -47,7 +52,13 @@ def test_hidden_vertices_need_a_hint_and_the_hint_completes_them():
     top = 1
     loop = brep.faces[top]
     top_edges = {(min(a, b), max(a, b)) for a, b in zip(loop, loop[1:] + loop[:1])}
-    kw = dict(face_points={top: fp[top]}, face_point_covs={top: fc[top]}, edge_segments={e: es[e] for e in top_edges}, support=TABLE, support_faces=[0])
+    kw = dict(
+        face_points={top: fp[top]},
+        face_point_covs={top: fc[top]},
+        edge_segments={e: es[e] for e in top_edges},
+        support=TABLE,
+        support_faces=[0],
+    )
     # The top face and its outline fix the top; nothing says where the bottom corners are.
     with pytest.raises(ValueError, match="not fixed"):
         model_polyhedron(cam, brep.faces, **kw)
@@ -64,7 +75,17 @@ def test_polyhedron_sigmas_match_scatter():
     errs, sig = [], []
     for _ in range(500):
         fp, fc, es = simulate_polyhedron(cam, world, Bw, rng)
-        res = model_polyhedron(cam, brep.faces, face_points=fp, face_point_covs=fc, edge_segments=es, support=TABLE, support_faces=[0], support_sigma_m=1e-6, **hints)
+        res = model_polyhedron(
+            cam,
+            brep.faces,
+            face_points=fp,
+            face_point_covs=fc,
+            edge_segments=es,
+            support=TABLE,
+            support_faces=[0],
+            support_sigma_m=1e-6,
+            **hints,
+        )
         errs.append(res.vertices_world - Bw.vertices)
         sig.append(np.sqrt(np.diag(res.cov)).reshape(-1, 3))
     # The scatter about the mean matches σ; the intersections of planes seen at grazing angles

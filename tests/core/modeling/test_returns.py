@@ -57,8 +57,10 @@ def test_beam_gap_is_distance_minus_radius_and_its_jacobian():
     for j in range(8):
         e = np.zeros(8)
         e[j] = 1e-7
-        fd = (beam_gap(ret.origin, ret.dirs, (th + e)[:3], (th + e)[3:6], (th + e)[6], (th + e)[7])[0]
-              - beam_gap(ret.origin, ret.dirs, th[:3], th[3:6], th[6], th[7])[0]) / 1e-7
+        fd = (
+            beam_gap(ret.origin, ret.dirs, (th + e)[:3], (th + e)[3:6], (th + e)[6], (th + e)[7])[0]
+            - beam_gap(ret.origin, ret.dirs, th[:3], th[3:6], th[6], th[7])[0]
+        ) / 1e-7
         assert np.allclose(J[:, j], fd, atol=1e-5)
 
 

@@ -4,7 +4,15 @@ import pytest
 from core.brep import BRep, Revolution
 from core.geometry import Plane
 from core.modeling.scans import segment_scan
-from core.modeling.simulate import SimWorld, look_at_setup, ray_box, ray_convex, ray_plane, ray_revolution, simulate_revolution
+from core.modeling.simulate import (
+    SimWorld,
+    look_at_setup,
+    ray_box,
+    ray_convex,
+    ray_plane,
+    ray_revolution,
+    simulate_revolution,
+)
 from core.modeling.small import image_line, interp_plane
 from core.rangefinder import RangeFinderSpec, RangeScan
 from core.transforms import make_T, rot_z
@@ -52,7 +60,9 @@ def test_simulated_scan_is_segmented_with_tangents_between_last_hit_and_first_mi
     assert [t.side for t in seg.tangents] == [-1, 1]
     lo = seg.tangents[0]
     assert scans[0].pan_rad[a - 1] < lo.pan_rad < scans[0].pan_rad[a]
-    assert lo.sigma_pan_rad == pytest.approx(np.hypot(RangeFinderSpec().step_rad / np.sqrt(12), RangeFinderSpec().sigma_angle))
+    assert lo.sigma_pan_rad == pytest.approx(
+        np.hypot(RangeFinderSpec().step_rad / np.sqrt(12), RangeFinderSpec().sigma_angle)
+    )
     assert seg.hits_world.shape == (b - a, 3) and seg.covs.shape == (b - a, 3, 3)
     with pytest.raises(ValueError, match="no return"):
         segment_scan(RangeScan([0.0, 0.1], [0.0, 0.0], [np.nan, np.nan]), T_wt, RangeFinderSpec())

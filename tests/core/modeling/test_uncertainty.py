@@ -53,10 +53,12 @@ def test_dlt_covariance_predicts_the_scatter_of_projections():
         J.append((perturbed_camera(cam, e).project(Y).ravel() - p0) / h)
     pred = np.sqrt(np.diag(np.array(J).T @ r.cov @ np.array(J)))
     uv0 = cam.project(X)
-    samples = np.array([
-        calibrate_dlt(X, uv0 + rng.normal(0, 1.0, uv0.shape), cam.width, cam.height).camera.project(Y).ravel()
-        for _ in range(500)
-    ])
+    samples = np.array(
+        [
+            calibrate_dlt(X, uv0 + rng.normal(0, 1.0, uv0.shape), cam.width, cam.height).camera.project(Y).ravel()
+            for _ in range(500)
+        ]
+    )
     ratio = samples.std(axis=0) / pred
     assert np.all(np.abs(ratio - 1) < 0.15), ratio
 
@@ -108,7 +110,11 @@ def test_turret_share_of_a_cylinder_matches_the_scatter():
         d = (np.eye(3) - np.outer(a, a)) @ (mid - mid0)
         out.append([m.dimensions["radius"], m.dimensions["height"], *d])
     out = np.array(out)
-    observed = {"radius": out[:, 0].std(), "height": out[:, 1].std(), "axis_position": np.sqrt(out[:, 2:].var(axis=0).sum())}
+    observed = {
+        "radius": out[:, 0].std(),
+        "height": out[:, 1].std(),
+        "axis_position": np.sqrt(out[:, 2:].var(axis=0).sum()),
+    }
     for k, v in observed.items():
         assert v == pytest.approx(share[k], rel=0.2), (k, v, share[k])
     # the turret moves the whole object: the axis position, far more than the sizes
@@ -128,8 +134,14 @@ def test_camera_share_of_a_box_matches_the_scatter(box_scene):
 
     r = with_calibration_uncertainty(build, cam, T_wt, camera_cov=ccov)
     share = r.details["sigma_parts"]["camera calibration"]
-    out = np.array([result_vector(build(perturbed_camera(cam, rng.multivariate_normal(np.zeros(12), ccov, check_valid="ignore")), T_wt), r)
-                    for _ in range(300)])
+    out = np.array(
+        [
+            result_vector(
+                build(perturbed_camera(cam, rng.multivariate_normal(np.zeros(12), ccov, check_valid="ignore")), T_wt), r
+            )
+            for _ in range(300)
+        ]
+    )
     names = list(r.cov_names)
     for k in ("size_x", "size_y", "size_z"):
         assert out[:, names.index(k)].std() == pytest.approx(share[k], rel=0.2), k
@@ -158,9 +170,9 @@ def test_bad_covariances_are_refused(box_scene):
     with pytest.raises(ValueError, match="turret_cov .* must be a finite symmetric"):
         with_calibration_uncertainty(lambda c, T: model_box(c, faces, TABLE), cam, T_wt, turret_cov=np.eye(3))
     with pytest.raises(ValueError, match="camera_cov .* must be a finite symmetric"):
-        with_calibration_uncertainty(lambda c, T: model_box(c, faces, TABLE), cam, T_wt,
-                                     camera_cov=np.full((12, 12), np.nan))
-
+        with_calibration_uncertainty(
+            lambda c, T: model_box(c, faces, TABLE), cam, T_wt, camera_cov=np.full((12, 12), np.nan)
+        )
 
 
 def test_turret_share_of_a_polyhedron_matches_the_scatter():
@@ -177,8 +189,9 @@ def test_turret_share_of_a_polyhedron_matches_the_scatter():
         M = T @ np.linalg.inv(T_wt)
         pts = {f: P @ M[:3, :3].T + M[:3, 3] for f, P in fp.items()}
         covs = {f: M[:3, :3] @ S @ M[:3, :3].T for f, S in fc.items()}
-        return model_polyhedron(c, brep.faces, face_points=pts, face_point_covs=covs, edge_segments=es, support=TABLE,
-                                support_faces=[0])
+        return model_polyhedron(
+            c, brep.faces, face_points=pts, face_point_covs=covs, edge_segments=es, support=TABLE, support_faces=[0]
+        )
 
     r = with_calibration_uncertainty(build, cam, T_wt, turret_cov=cov)
     share = r.details["sigma_parts"]["turret calibration"]

@@ -36,7 +36,9 @@ def test_a_degenerate_first_triple_is_skipped():
     """Three edges through one vertex first (no depth from lines): P3L moves on to the next triple."""
     pb = paper_problem(20)
     ends = [_ends(e) for e in pb.edges_obj]
-    first = next((i, j, k) for i in range(9) for j in range(i + 1, 9) for k in range(j + 1, 9) if ends[i] & ends[j] & ends[k])
+    first = next(
+        (i, j, k) for i in range(9) for j in range(i + 1, 9) for k in range(j + 1, 9) if ends[i] & ends[j] & ends[k]
+    )
     order = list(first) + [q for q in range(9) if q not in first]
     est = estimate_pose(pb.camera, pb.segs_uv[order], pb.edges_obj[order])
     assert est.skipped_triples[0][0] == (0, 1, 2) and "meet in one vertex" in est.skipped_triples[0][1]

@@ -9,9 +9,9 @@ import itertools
 import numpy as np
 import pytest
 
+from core.brep import BRep
 from core.pose import ConcurrentEdgesError, p3l
 from core.pose.residuals import as_clicks, interpretation_planes, pose_distance_cost
-from core.brep import BRep
 from core.pose.synthetic import PAPER_BOX_M, box_problem, paper_problems, random_camera, random_lines_problem
 from core.transforms import make_T, rot_x, rot_y, rot_z
 
@@ -35,7 +35,9 @@ def edges_in_front(camera, T, edges_obj) -> bool:
 
 
 def same_pose(A, B, tol=1e-6) -> bool:
-    return np.abs(A[:3, :3] - B[:3, :3]).max() < tol and np.abs(A[:3, 3] - B[:3, 3]).max() < tol * (1 + np.abs(B[:3, 3]).max())
+    return np.abs(A[:3, :3] - B[:3, :3]).max() < tol and np.abs(A[:3, 3] - B[:3, 3]).max() < tol * (
+        1 + np.abs(B[:3, 3]).max()
+    )
 
 
 def test_truth_among_candidates_and_constraints_hold_on_random_problems():
@@ -63,7 +65,11 @@ def test_same_solution_set_as_poselib_p3ll_on_1000_instances():
     for i in range(1000):
         pb = random_lines_problem(rng, 3, sigma_px=0.5 if i % 2 else 0.0)
         mine = p3l(pb.camera, pb.segs_uv, pb.edges_obj)
-        theirs = [T for T in poselib_solutions(pb.camera, pb.segs_uv, pb.edges_obj) if edges_in_front(pb.camera, T, pb.edges_obj)]
+        theirs = [
+            T
+            for T in poselib_solutions(pb.camera, pb.segs_uv, pb.edges_obj)
+            if edges_in_front(pb.camera, T, pb.edges_obj)
+        ]
         assert len(mine) == len(theirs), i
         assert all(any(same_pose(a, b) for b in theirs) for a in mine), i
         counts[len(mine)] += 1
@@ -79,14 +85,20 @@ def test_noise_free_box_truth_ranked_first_by_distance_to_the_clicked_points():
     _, T_cam_world = camera.decompose()
     first = total = 0
     for _ in range(60):
-        T_cam_obj = make_T(rot_x(rng.uniform(-2, 2)) @ rot_y(rng.uniform(-2, 2)) @ rot_z(rng.uniform(0, 6.3)), [0, 0, 2.0])
+        T_cam_obj = make_T(
+            rot_x(rng.uniform(-2, 2)) @ rot_y(rng.uniform(-2, 2)) @ rot_z(rng.uniform(0, 6.3)), [0, 0, 2.0]
+        )
         T = np.linalg.inv(T_cam_world) @ T_cam_obj
         try:
             pb = box_problem(rng, camera, T, (0.35, 0.231, 0.132), fractions=(0.1, 0.9))
         except ValueError:
             continue
         dirs = np.argmax(np.abs(pb.edges_obj[:, 1] - pb.edges_obj[:, 0]), axis=1)
-        triples = [t for t in itertools.product(*(np.flatnonzero(dirs == k) for k in range(3))) if not _concurrent(pb.edges_obj[list(t)])]
+        triples = [
+            t
+            for t in itertools.product(*(np.flatnonzero(dirs == k) for k in range(3)))
+            if not _concurrent(pb.edges_obj[list(t)])
+        ]
         if not triples:
             continue
         idx = list(triples[0])  # one edge per direction, not through one vertex
@@ -153,7 +165,9 @@ def test_parallel_pair_is_solved_by_reordering_and_three_parallel_edges_raise():
         edges = pb.edges_obj.copy()
         edges[1, 1] = edges[1, 0] + (edges[0, 1] - edges[0, 0])  # L2 ∥ L1
         T = pb.T_world_obj
-        segs = pb.camera.project_obj(T, (edges[:, :1] + np.array([0.2, 0.8])[None, :, None] * (edges[:, 1:] - edges[:, :1])).reshape(-1, 3)).reshape(3, 2, 2)
+        segs = pb.camera.project_obj(
+            T, (edges[:, :1] + np.array([0.2, 0.8])[None, :, None] * (edges[:, 1:] - edges[:, :1])).reshape(-1, 3)
+        ).reshape(3, 2, 2)
         sols = p3l(pb.camera, segs, edges)
         assert min(np.abs(S - T).max() for S in sols) < 1e-7
     edges[2, 1] = edges[2, 0] + 2.0 * (edges[0, 1] - edges[0, 0])
@@ -194,7 +208,11 @@ def test_concurrent_edges_need_an_off_vertex_point():
 
 @pytest.mark.parametrize(
     "segs_shape, edges_shape, match",
-    [((2, 2, 2), (2, 2, 3), "exactly 3 clicked"), ((3, 2, 2), (4, 2, 3), "match each segment"), ((3, 3, 2), (3, 2, 3), r"\(N, 2, 2\)")],
+    [
+        ((2, 2, 2), (2, 2, 3), "exactly 3 clicked"),
+        ((3, 2, 2), (4, 2, 3), "match each segment"),
+        ((3, 3, 2), (3, 2, 3), r"\(N, 2, 2\)"),
+    ],
 )
 def test_bad_shapes_raise(segs_shape, edges_shape, match):
     camera = random_camera(np.random.default_rng(8))
@@ -267,7 +285,16 @@ class _Setup:
     def __init__(self, n, ray, V):
         self.X, self.Mo, self.E = np.empty((3, 3)), np.empty((3, 3)), np.empty((2, 3, 3))
         self.minors, self.coef = np.empty((3, 5)), np.empty(9)
-        _k.setup(np.asarray(n, float), np.asarray(ray, float), np.asarray(V, float), self.X, self.Mo, self.E, self.minors, self.coef)
+        _k.setup(
+            np.asarray(n, float),
+            np.asarray(ray, float),
+            np.asarray(V, float),
+            self.X,
+            self.Mo,
+            self.E,
+            self.minors,
+            self.coef,
+        )
 
 
 def _setup(camera, segs, edges):
@@ -499,4 +526,6 @@ def test_importing_core_pose_loads_no_numba():
     import sys
 
     code = "import sys, core.pose; core.pose.p3l; assert 'numba' not in sys.modules, 'numba loaded on import'"
-    subprocess.run([sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).resolve().parents[3]))
+    subprocess.run(
+        [sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).resolve().parents[3])
+    )

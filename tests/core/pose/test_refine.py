@@ -96,7 +96,10 @@ def test_huber_downweights_a_wrong_click():
 
 def test_sigma_estimate_reflects_the_click_noise():
     rng = np.random.default_rng(5)
-    est = [refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_uv, edges_obj=pb.edges_obj).sigma_est_px for pb in paper_problems(rng, 40, sigma_px=2.0)]
+    est = [
+        refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_uv, edges_obj=pb.edges_obj).sigma_est_px
+        for pb in paper_problems(rng, 40, sigma_px=2.0)
+    ]
     assert 1.7 < np.sqrt(np.mean(np.square(est))) < 2.3
 
 
@@ -104,7 +107,11 @@ def test_three_concurrent_edges_leave_the_depth_free():
     rng = np.random.default_rng(6)
     pb = paper_problems(rng, 1)[0]
     ends = [set(map(tuple, np.round(e, 9))) for e in pb.edges_obj]
-    triple = next(t for t in np.array(np.meshgrid(*[range(9)] * 3)).reshape(3, -1).T if len({*t}) == 3 and ends[t[0]] & ends[t[1]] & ends[t[2]])
+    triple = next(
+        t
+        for t in np.array(np.meshgrid(*[range(9)] * 3)).reshape(3, -1).T
+        if len({*t}) == 3 and ends[t[0]] & ends[t[1]] & ends[t[2]]
+    )
     idx = list(triple)
     with pytest.raises(ValueError, match="translation along"):
         refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_uv[idx], edges_obj=pb.edges_obj[idx])
@@ -182,4 +189,10 @@ def test_per_click_sigma_must_match_the_clicks():
     with pytest.raises(ValueError, match="one per click"):
         refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_true_uv, edges_obj=pb.edges_obj, sigma_px=np.ones(2))
     with pytest.raises(ValueError, match="positive"):
-        refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_true_uv, edges_obj=pb.edges_obj, sigma_px=np.zeros(len(pb.segs_true_uv)))
+        refine(
+            pb.camera,
+            pb.T_world_obj,
+            segs_uv=pb.segs_true_uv,
+            edges_obj=pb.edges_obj,
+            sigma_px=np.zeros(len(pb.segs_true_uv)),
+        )

@@ -16,7 +16,7 @@ def table_cov(T, sd_xy=0.005, sd_psi_deg=3.0):
     G = np.zeros((6, 3))
     G[0, 0] = G[1, 1] = 1.0
     G[3:, 2] = [0.0, 0.0, 1.0]
-    return G @ np.diag([sd_xy ** 2, sd_xy ** 2, np.radians(sd_psi_deg) ** 2]) @ G.T
+    return G @ np.diag([sd_xy**2, sd_xy**2, np.radians(sd_psi_deg) ** 2]) @ G.T
 
 
 def test_without_clicks_the_prior_is_returned_with_its_covariance():
@@ -58,8 +58,9 @@ def test_with_many_clicks_and_a_loose_prior_it_is_the_plain_refinement():
         assert np.allclose(joint.cov, plain.cov, rtol=1e-3, atol=1e-12)
 
 
-@pytest.mark.parametrize("cov, match", [(np.eye(5), "6, 6"), (np.full((6, 6), np.nan), "finite"),
-                                        (-np.eye(6), "positive semi-definite")])
+@pytest.mark.parametrize(
+    "cov, match", [(np.eye(5), "6, 6"), (np.full((6, 6), np.nan), "finite"), (-np.eye(6), "positive semi-definite")]
+)
 def test_bad_prior_is_refused(cov, match):
     pb = paper_problems(np.random.default_rng(3), 1)[0]
     with pytest.raises(ValueError, match=match):

@@ -20,7 +20,9 @@ def _problem(seed, n_edges=5, n_points=3):
 def test_zero_at_the_truth_and_shapes():
     pb, P, uv = _problem(0)
     T = pb.T_world_obj
-    r, J, feasible = residuals(pb.camera, T[:3, :3], T[:3, 3], as_clicks(pb.segs_uv, pb.edges_obj, uv, P), jacobian=True)
+    r, J, feasible = residuals(
+        pb.camera, T[:3, :3], T[:3, 3], as_clicks(pb.segs_uv, pb.edges_obj, uv, P), jacobian=True
+    )
     assert r.shape == (2 * 5 + 2 * 3,) and J.shape == (16, 6) and feasible
     assert np.abs(r).max() < 1e-8
 

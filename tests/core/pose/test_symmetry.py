@@ -25,7 +25,9 @@ def test_a_box_has_four_symmetries_a_cube_twenty_four_and_each_maps_edge_k_onto_
 
 
 def test_a_model_without_faces_has_only_the_identity():
-    assert [p.tolist() for p in edge_symmetries(BRep.cylinder(0.05, 0.2))] == [list(range(len(BRep.cylinder(0.05, 0.2).edges)))]
+    assert [p.tolist() for p in edge_symmetries(BRep.cylinder(0.05, 0.2))] == [
+        list(range(len(BRep.cylinder(0.05, 0.2).edges)))
+    ]
 
 
 def test_nearest_twin_turns_a_symmetric_pose_back_to_the_reference_and_keeps_hand_assignments():

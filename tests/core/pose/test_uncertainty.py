@@ -32,8 +32,20 @@ def test_camera_share_of_a_pose_matches_the_scatter():
     assert np.allclose(out.cov, out.cov_parts["clicks"] + out.cov_parts["camera calibration"])
     assert np.array_equal(out.T_world_obj, r.T_world_obj)  # the pose itself does not change
     share = out.cov_parts["camera calibration"]
-    d = np.array([pose_delta(refine(perturbed_camera(cam, rng.multivariate_normal(np.zeros(12), cov, check_valid="ignore")),
-                                    r.T_world_obj, **kw, sigma_px=0.15).T_world_obj, r.T_world_obj) for _ in range(300)])
+    d = np.array(
+        [
+            pose_delta(
+                refine(
+                    perturbed_camera(cam, rng.multivariate_normal(np.zeros(12), cov, check_valid="ignore")),
+                    r.T_world_obj,
+                    **kw,
+                    sigma_px=0.15,
+                ).T_world_obj,
+                r.T_world_obj,
+            )
+            for _ in range(300)
+        ]
+    )
     observed = np.array([np.sqrt(d[:, :3].var(axis=0).sum()), np.sqrt(d[:, 3:].var(axis=0).sum())])
     predicted = np.sqrt([np.trace(share[:3, :3]), np.trace(share[3:, 3:])])
     assert observed == pytest.approx(predicted, rel=0.2)

@@ -30,7 +30,9 @@ def test_recover_a_random_rigid_motion_of_the_house_in_every_view(shared_data):
         est = estimate_pose(camera, segs, edges_obj)
         deg, dist = pose_error(est.T_world_obj, T)
         p3l_deg, p3l_dist = pose_error(p3l(camera, segs[list(est.triple)], edges_obj[list(est.triple)])[0], T)
-        report.append((v, len(segs), p3l_deg, p3l_dist / extent, deg, dist / extent, est.rms_px, np.sqrt(np.mean(r_true**2))))
+        report.append(
+            (v, len(segs), p3l_deg, p3l_dist / extent, deg, dist / extent, est.rms_px, np.sqrt(np.mean(r_true**2)))
+        )
         # Refined with every matched line: fits the data at least as well as the truth does, and
         # lands within the reconstruction's own accuracy.
         assert est.rms_px <= np.sqrt(np.mean(r_true**2)) + 1e-9
