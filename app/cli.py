@@ -10,10 +10,11 @@ own errors, ``ValueError``, ``OSError``), 70 for a bug in mcit (the line says so
 from __future__ import annotations
 
 import argparse
-import errno
 import os
 import sys
 import traceback
+
+from app.oserrors import os_error_advice
 
 
 class _Parser(argparse.ArgumentParser):
@@ -50,25 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-_ERRNO_ADVICE = {
-    errno.ENOENT: "check the path",
-    errno.EACCES: "check its permissions",
-    errno.EPERM: "check its permissions",
-    errno.ENOSPC: "free some space and try again",
-    errno.EROFS: "it is on a read-only file system: choose another place",
-    errno.EISDIR: "give a file, not a folder",
-    errno.ENOTDIR: "check the path",
-}
-
-
 def _one_line(text: str, limit: int = 1000) -> str:
     text = " ".join(part.strip() for part in str(text).splitlines() if part.strip())
     return text if len(text) <= limit else text[: limit - 1] + "…"
-
-
-def os_error_advice(exc: OSError) -> str:
-    """What to do about a failed file operation, by its errno ("free some space and try again")."""
-    return _ERRNO_ADVICE.get(exc.errno, "check the file or device named and try again")
 
 
 def explain(exc: BaseException) -> tuple[str, int]:

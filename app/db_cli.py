@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 from app.argtypes import number
+from app.oserrors import os_error_advice
 
 __all__ = ["add_db_parser"]
 
@@ -86,7 +87,8 @@ def _cmd_import(args) -> int:
         )
         print(
             f"{db.path}: added #{rec.id} {rec.name!r} ({rec.kind}, {rec.status}): {len(model.vertices)} vertices, "
-            f"{len(model.edges)} edges, {len(model.faces)} faces, {len(model.solids)} solids, {len(model.circles)} circles"
+            f"{len(model.edges)} edges, {len(model.faces)} faces, "
+            f"{len(model.solids)} solids, {len(model.circles)} circles"
         )
     return 0
 
@@ -101,7 +103,8 @@ def _cmd_list(args) -> int:
         for o in objs:
             x, y, z = o.T_world_obj[:3, 3]
             print(
-                f"{o.id:>4}  {o.name:<20} {o.kind:<12} {o.status:<9} {o.version:>4}  {x:8.4f} {y:8.4f} {z:8.4f}  {_when(o.updated_at)}"
+                f"{o.id:>4}  {o.name:<20} {o.kind:<12} {o.status:<9} {o.version:>4}"
+                f"  {x:8.4f} {y:8.4f} {z:8.4f}  {_when(o.updated_at)}"
             )
     return 0
 
@@ -135,13 +138,13 @@ def _cmd_show(args) -> int:
                 f"  pose σ (sqrt of the covariance's diagonal): {np.array2string(np.sqrt(np.diag(o.cov)), precision=5)}"
             )
         print(
-            f"  created {_when(o.created_at)}, updated {_when(o.updated_at)}, {len(db.history(o.id))} changes in the history"
+            f"  created {_when(o.created_at)}, updated {_when(o.updated_at)}, "
+            f"{len(db.history(o.id))} changes in the history"
         )
     return 0
 
 
 def _cmd_export(args) -> int:
-    from app.cli import os_error_advice
     from app.db.export import write_atomically
     from app.models_io import save_model
 
@@ -203,7 +206,8 @@ def _cmd_history(args) -> int:
             what = c.object_name or (f"calibration #{c.calibration_id}" if c.calibration_id else "")
             extra = f" (of #{c.undoes})" if c.undoes else ""
             print(
-                f"{c.id:>5}  {_when(c.time)}  {c.client:<10} {c.action + extra:<14} {what:<20} {c.version or '':>4}  {c.method}"
+                f"{c.id:>5}  {_when(c.time)}  {c.client:<10} {c.action + extra:<14} {what:<20}"
+                f" {c.version or '':>4}  {c.method}"
             )
     return 0
 
@@ -229,7 +233,7 @@ def _run(func):
         except OSError as exc:  # a file named on the command line: say which and why, in one line
             where = f"{exc.filename}: " if exc.filename else ""
             print(
-                f"mcit db {args.db_command}: error: {where}{exc.strerror or exc}; check the path and its permissions",
+                f"mcit db {args.db_command}: error: {where}{exc.strerror or exc}; {os_error_advice(exc)}",
                 file=sys.stderr,
             )
             return 1

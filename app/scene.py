@@ -51,7 +51,6 @@ typo), raises ``SceneError`` (a ``ValueError``) naming the file and the field. K
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -78,16 +77,11 @@ __all__ = [
     "pose_to_json",
     "scenes_dir",
     "default_scene_path",
-    "MODEL_LOADERS",
     "STATUSES",
 ]
 
 FORMAT = "mcit-scene/1"
 STATUSES = ("known", "unknown", "scenery")
-
-# Readers for file-based models ("cao", "mesh"): name → fn(path: Path) -> BRep. The model-import
-# module registers itself here so this module does not depend on it.
-MODEL_LOADERS: dict[str, Callable[[Path], BRep]] = {}
 
 
 class SceneError(ValueError):
@@ -517,13 +511,8 @@ def _model(d: Any, root: Path, where: str) -> BRep:
         path = (root / value).resolve()
         if not path.is_file():
             raise SceneError(f"{w}: file not found: {path}")
-        if kind not in MODEL_LOADERS:
-            try:
-                import app.models_io  # noqa: F401  (registers the readers)
-            except ImportError:
-                pass
-        if kind not in MODEL_LOADERS:
-            raise SceneError(f"{w}: no reader for {kind!r} models is installed (app.models_io registers them)")
+        from app.models_io import MODEL_LOADERS  # the readers (trimesh) load when a scene names a file
+
         return MODEL_LOADERS[kind](path)
     except SceneError:
         raise

@@ -15,15 +15,11 @@ import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
 
-from .storage import DatabaseUnavailable, read_uri
+from .storage import DatabaseRefused, DatabaseUnavailable, read_uri
 
 __all__ = ["APPLICATION_ID", "LATEST_VERSION", "MIGRATIONS", "DatabaseRefused", "FileState", "inspect_file", "migrate"]
 
 APPLICATION_ID = 0x4D434954  # "MCIT"
-
-
-class DatabaseRefused(RuntimeError):
-    """The file is not one mcit may open (not SQLite, corrupt, not mcit's, newer); left untouched."""
 
 
 # Version 1: the first schema.

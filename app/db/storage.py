@@ -23,7 +23,16 @@ import os
 import sqlite3
 from pathlib import Path
 
-__all__ = ["DatabaseUnavailable", "read_uri", "can_write", "check_writable", "explain", "lock_holders", "side_files"]
+__all__ = [
+    "DatabaseRefused",
+    "DatabaseUnavailable",
+    "read_uri",
+    "can_write",
+    "check_writable",
+    "explain",
+    "lock_holders",
+    "side_files",
+]
 
 _WAL_WRITE_LOCK_BYTE = 120  # os_unix.c: UNIX_SHM_BASE, the first of the -shm file's lock bytes
 _SIDE_SUFFIXES = ("-wal", "-shm", "-journal")
@@ -32,6 +41,10 @@ _SIDE_SUFFIXES = ("-wal", "-shm", "-journal")
 class DatabaseUnavailable(RuntimeError):
     """The database cannot be read or written now (read-only, disk full, locked by another writer,
     I/O error, missing for a read); nothing was written. The message says what to do."""
+
+
+class DatabaseRefused(RuntimeError):
+    """The file is not one mcit may open (not SQLite, corrupt, not mcit's, newer); left untouched."""
 
 
 def side_files(path: Path) -> list[Path]:
@@ -222,8 +235,6 @@ def explain(exc: Exception, path: Path, wait_s: float) -> Exception:
             f"{path} cannot be opened ({detail}); check that it and its folder exist and are readable"
         )
     if code.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB")):
-        from .schema import DatabaseRefused
-
         return DatabaseRefused(
             f"{path} is damaged ({detail}); nothing was written. Restore a backup, or recover it with "
             "the sqlite3 shell's .recover, then open the copy"

@@ -1,12 +1,13 @@
 """Model files in and out: ViSP ``.cao`` and meshes (OBJ, STL, PLY, glTF/GLB) ⇄ ``core.brep.BRep``.
 
 ``load_model(path)`` and ``save_model(model, path)`` choose the format by the file's suffix.
-Importing this package registers the readers in ``app.scene.MODEL_LOADERS`` (``"cao"`` and
-``"mesh"``), so scene files can reference model files.
+``MODEL_LOADERS`` names the reader of each kind of model file a scene may reference (``"cao"``,
+``"mesh"``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from core.brep import BRep
@@ -25,6 +26,7 @@ from .cao import (
 from .mesh import MAX_MESH_BYTES, MAX_MESH_FACES, MESH_SUFFIXES, MeshError, MeshWarning, read_mesh, write_mesh
 
 __all__ = [
+    "MODEL_LOADERS",
     "CaoError",
     "CaoWarning",
     "CaoOptions",
@@ -70,11 +72,5 @@ def save_model(model: BRep, path: str | Path, comment: str = "") -> None:
         raise ValueError(f"{path}: unknown model type {suffix!r}; use one of {', '.join(MODEL_SUFFIXES)}")
 
 
-def _register() -> None:
-    from app.scene import MODEL_LOADERS
-
-    MODEL_LOADERS.setdefault("cao", read_cao)
-    MODEL_LOADERS.setdefault("mesh", read_mesh)
-
-
-_register()
+# The reader of each kind of model file a scene file may name: kind → fn(path) -> BRep.
+MODEL_LOADERS: dict[str, Callable[[Path], BRep]] = {"cao": read_cao, "mesh": read_mesh}

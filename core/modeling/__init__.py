@@ -22,10 +22,11 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from .box import BoxFace, model_box
-    from .cylinder import METHODS, model_cylinder
+    from .cylinder import METHODS
     from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs
     from .polyhedron import model_polyhedron
     from .result import ModelResult
+    from .revolution import model_cylinder
 
 # The names below load their module on first use (PEP 562): the interface imports
 # ``core.modeling.result`` at start-up, and the solvers' modules need not load before its first page.
@@ -33,7 +34,7 @@ _WHERE = {
     "BoxFace": "box",
     "model_box": "box",
     "METHODS": "cylinder",
-    "model_cylinder": "cylinder",
+    "model_cylinder": "revolution",
     "PlaneObs": "observations",
     "fit_face_plane": "observations",
     "interpretation_plane_obs": "observations",

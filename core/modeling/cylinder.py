@@ -30,7 +30,6 @@ import numpy as np
 
 from ..brep import BRep, Revolution
 from ..camera import Camera, as_segment
-from ..checks import positive_scale
 from ..geometry import Line, Plane, bisecting_planes, make_plane
 from ..rangefinder import RangeFinderSpec, RangeScan
 from ..transforms import check_T, make_T
@@ -41,7 +40,7 @@ from .returns import Returns, concat_returns
 from .scans import segment_scan
 from .small import image_line, interp_plane, interp_plane_jacobian
 
-__all__ = ["METHODS", "model_cylinder", "CylinderData", "reduce_cylinder_data"]
+__all__ = ["METHODS", "CylinderData", "reduce_cylinder_data", "model_paper"]
 
 METHODS = ("tangential", "bisecting", "rf_tangential", "fused")
 
@@ -379,7 +378,8 @@ def _finish(ctx: _Ctx, sil, Xa, a, r_ref, k) -> dict:
     h = t_top - t_base
     if not h > 0:
         raise ValueError(
-            f"the clicked silhouette ends give a height of {h * 1000:.1f} mm: click each contour from its bottom end to its top end"
+            f"the clicked silhouette ends give a height of {h * 1000:.1f} mm: "
+            "click each contour from its bottom end to its top end"
         )
     r0, r1 = r_ref + k * t_base, r_ref + k * t_top
     if min(r0, r1) < 0:
@@ -589,77 +589,6 @@ def _solid_vector(s: dict, cone: bool) -> np.ndarray:
     return np.concatenate([radii, [s["h"]], mid, s["a"]])
 
 
-def model_cylinder(
-    camera: Camera,
-    method: str,
-    *,
-    silhouettes_uv: np.ndarray | None = None,
-    scans: Sequence[RangeScan] = (),
-    T_world_turret: np.ndarray | None = None,
-    spec: RangeFinderSpec = RangeFinderSpec(),
-    support: Plane | None = None,
-    axis_dir: np.ndarray | None = None,
-    cone: bool = False,
-    sigma_px: float = 1.0,
-    jump_m: float = 0.05,
-) -> ModelResult:
-    """Model a cylinder (or, with ``cone=True``, a cone/frustum) by one of ``METHODS``.
-
-    Parameters
-    ----------
-    camera : Camera
-    method : "tangential", "bisecting", "rf_tangential" or "fused"
-    silhouettes_uv : array, shape (2, 2, 2), optional
-        The two contour generators as clicked segments, each from one end of the contour to the
-        other (its ends give the height). Needed by "tangential" and "bisecting".
-    scans : sequence of RangeScan
-        Horizontal scans across the object, in sweep order, misses (NaN) kept; at least one
-        (two for an oblique axis with "bisecting"/"rf_tangential", two heights for a cone).
-    T_world_turret : array, shape (4, 4)
-    spec : RangeFinderSpec (σ_ρ, step, pointing noise)
-    support : Plane, optional
-        The object stands on it: its axis is the support's normal and its base lies on it.
-    axis_dir : array, shape (3,), optional
-        The axis direction when known otherwise ("vertical": (0, 0, 1)); default: from the support,
-        else found from the data (cylinders only).
-    cone : bool
-        Fit two radii (bottom, top).
-    sigma_px : float
-        Click noise, pixels per coordinate.
-    jump_m : float
-        A range jump larger than this between neighbouring beams separates the object from the
-        background in a scan.
-
-    Returns
-    -------
-    ModelResult
-        kind "cylinder" or "cone"; ``model`` = ``BRep.cylinder`` / ``BRep.cone`` in the object frame
-        (base centre, z along the axis); ``axis``; dimensions {"radius", "height"} or
-        {"radius_bottom", "radius_top", "height"} with sigmas, plus sigma "axis_position".
-    """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    if method in ("tangential", "bisecting") and silhouettes_uv is None:
-        raise ValueError(f"method {method!r} needs the two silhouettes (silhouettes_uv, shape (2, 2, 2))")
-    sigma_px = positive_scale(sigma_px, "sigma_px", " px")
-    data = reduce_cylinder_data(
-        camera,
-        silhouettes_uv=silhouettes_uv,
-        scans=scans,
-        T_world_turret=T_world_turret,
-        spec=spec,
-        support=support,
-        axis_dir=axis_dir,
-        cone=cone,
-        jump_m=jump_m,
-    )
-    if method == "fused":
-        from .fused import fit_fused
-
-        return fit_fused(data, sigma_px=sigma_px).check_finite()
-    return _model_paper(data, method, sigma_px).check_finite()
-
-
 def _stage_one(data: CylinderData, method: str) -> _Ctx:
     """Directions, cross-sections and (for the tangential methods) the profile's front plane."""
     hits = data.hits
@@ -701,7 +630,7 @@ def solve_paper(data: CylinderData, method: str) -> dict:
     return _solve_paper(np.concatenate([np.asarray(p, dtype=float).reshape(-1) for p in z_parts]), ctx)
 
 
-def _model_paper(data: CylinderData, method: str, sigma_px: float) -> ModelResult:
+def model_paper(data: CylinderData, method: str, sigma_px: float) -> ModelResult:
     ctx = _stage_one(data, method)
     z_parts, var_parts = [], []
     if data.silhouettes_uv is not None:
