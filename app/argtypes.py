@@ -6,9 +6,10 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-__all__ = ["MAX_FPS", "number", "frame_rate", "port_number"]
+__all__ = ["MAX_FPS", "MAX_COORD_M", "number", "frame_rate", "port_number", "coordinate_m", "angle_deg", "percent"]
 
 MAX_FPS = 240.0  # the fastest rate a command replays, renders or writes at (frames per second)
+MAX_COORD_M = 1e6  # |coordinate| of a site, metres (as model files: app.models_io.cao.MAX_COORD_M)
 
 
 def number(convert: Callable[[str], float], ok: Callable[[float], bool], *, kind: str, expected: str):
@@ -36,3 +37,13 @@ frame_rate = number(
 port_number = number(
     int, lambda v: 0 <= v <= 65535, kind="a TCP port number", expected="a TCP port from 1 to 65535 (0: any free port)"
 )
+coordinate_m = number(
+    float,
+    lambda v: abs(v) <= MAX_COORD_M,
+    kind="metres (a number)",
+    expected=f"a finite coordinate within ±{MAX_COORD_M:g} m",
+)
+angle_deg = number(
+    float, lambda v: abs(v) <= 3600.0, kind="degrees (a number)", expected="a finite angle within ±3600 degrees"
+)
+percent = number(int, lambda v: 1 <= v <= 100, kind="a whole number from 1 to 100", expected="1 to 100")

@@ -87,6 +87,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"mcit {args.command}: stopped (Ctrl-C)", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader of the output left (``mcit db history | head``): nothing to say
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # so that Python's exit flush is quiet
+        return 141
     except Exception as exc:  # noqa: BLE001 - the one place a command's failure becomes its line
         if os.environ.get("MCIT_TRACEBACK"):
             traceback.print_exc()

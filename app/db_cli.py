@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from app.argtypes import number
+from app.argtypes import angle_deg, coordinate_m, number
 from app.oserrors import os_error_advice
 
 __all__ = ["add_db_parser"]
@@ -146,9 +146,15 @@ def _cmd_show(args) -> int:
 
 def _cmd_export(args) -> int:
     from app.db.export import write_atomically
-    from app.models_io import save_model
+    from app.models_io import MODEL_SUFFIXES, save_model
 
     out = Path(args.out)
+    if out.is_dir() or (out.exists() and not out.is_file()):
+        raise ValueError(f"{out} is not a file: give the file to write, ending in one of {', '.join(MODEL_SUFFIXES)}")
+    if out.suffix.lower() not in MODEL_SUFFIXES:
+        raise ValueError(
+            f"{out}: unknown model type {out.suffix!r}; end the file's name in one of {', '.join(MODEL_SUFFIXES)}"
+        )
     with _open(args, readonly=True) as db:
         o = db.get(int(args.name) if args.name.isdigit() else args.name)
         model = o.model.transformed(o.T_world_obj) if args.world else o.model
@@ -227,6 +233,8 @@ def _run(func):
 
         try:
             return func(args)
+        except BrokenPipeError:
+            raise  # the reader of the output left (``| head``): app.cli ends quietly
         except (ValueError, NotFoundError, ConflictError, DatabaseRefused, DatabaseUnavailable) as exc:
             print(f"mcit db {args.db_command}: error: {exc}", file=sys.stderr)
             return 1
@@ -275,12 +283,12 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--kind", default="polyhedron", help="box, cylinder, polyhedron, ... (default polyhedron)")
     p.add_argument("--status", default="known", choices=("known", "modelled", "stale"))
     p.add_argument(
-        "--xyz", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"), help="position, metres"
+        "--xyz", nargs=3, type=coordinate_m, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"), help="position, metres"
     )
     p.add_argument(
         "--rpy-deg",
         nargs=3,
-        type=float,
+        type=angle_deg,
         default=(0.0, 0.0, 0.0),
         metavar=("R", "P", "Y"),
         help="orientation R = Rz(yaw) Ry(pitch) Rx(roll), degrees",

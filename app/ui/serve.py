@@ -21,7 +21,7 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
 def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    from app.argtypes import frame_rate, port_number
+    from app.argtypes import frame_rate, percent, port_number
 
     p = sub.add_parser(
         "serve",
@@ -92,7 +92,7 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument("--turret", default=None, help="turret device path or URL (with --rangefinder); default: emulated")
     p.add_argument("--no-devices", action="store_true", help="run without range finder and turret")
     p.add_argument(
-        "--jpeg-quality", type=int, default=80, help="JPEG quality of the frames sent to browsers (default 80)"
+        "--jpeg-quality", type=percent, default=80, help="JPEG quality of the frames sent to browsers (default 80)"
     )
     p.add_argument(
         "--feed-socket",

@@ -171,13 +171,21 @@ def test_a_traceback_on_request(monkeypatch, capsys):
         ("serve --port 80.5", "argument --port: expected a TCP port number, got '80.5'"),
         ("track video.mp4 --fps nan", "argument --fps: expected a frame rate above 0"),
         ("track video.mp4 --fps 0", "argument --fps: expected a frame rate above 0"),
+        ("serve --jpeg-quality 0", "argument --jpeg-quality: expected 1 to 100, got '0'"),
+        ("serve --jpeg-quality 101", "got '101'"),
+        (
+            "db import m.cao --xyz 1e300 0 0",
+            "argument --xyz: expected a finite coordinate within ±1e+06 m, got '1e300'",
+        ),
+        ("db import m.cao --xyz nan 0 0", "got 'nan'"),
+        ("db import m.cao --rpy-deg inf 0 0", "argument --rpy-deg: expected a finite angle within ±3600 degrees"),
     ],
 )
 def test_a_rate_or_port_out_of_range_is_refused_by_the_parser(capsys, argv, says):
     with pytest.raises(SystemExit) as exit_:
         cli.build_parser().parse_args(argv.split())
     err = capsys.readouterr().err
-    command = argv.split()[0]
+    command = " ".join(argv.split()[:2]) if argv.startswith("db ") else argv.split()[0]
     assert exit_.value.code == 2 and err.count("\n") == 1 and err.startswith(f"mcit {command}: error: "), err
     assert says in err, err
 
@@ -198,3 +206,33 @@ def test_a_rate_or_port_out_of_range_is_refused_by_the_parser(capsys, argv, says
 )
 def test_rates_and_ports_in_range_are_kept(argv, name, value):
     assert getattr(cli.build_parser().parse_args(argv.split()), name) == value
+
+
+def test_output_cut_short_by_its_reader_ends_quietly(tmp_path):
+    """``mcit db history | head -1``: the reader leaves; no error line, no traceback (exit 141, as a shell's)."""
+    db = tmp_path / "site.sqlite"
+    run = [sys.executable, "-m", "app.cli"]
+    subprocess.run([*run, "db", "init", "--db", str(db)], cwd=ROOT, check=True, capture_output=True, timeout=120)
+    for _ in range(3):
+        subprocess.run([*run, "db", "undo", "1", "--db", str(db)], cwd=ROOT, capture_output=True, timeout=120)
+    done = subprocess.run(
+        f"{sys.executable} -m app.cli db history --db {db} | head -c 10",
+        shell=True,
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        executable="/bin/bash",
+    )
+    assert done.stderr == "" and len(done.stdout) == 10, done.stderr
+
+
+@pytest.mark.parametrize("out, says", [("{tmp}", "is not a file"), ("{tmp}/noext", "unknown model type ''")])
+def test_db_export_names_a_bad_output_before_writing(tmp_path, capsys, out, says):
+    db = tmp_path / "site.sqlite"
+    assert cli.main(["db", "init", "--db", str(db)]) == 0
+    capsys.readouterr()
+    assert cli.main(["db", "export", "table", out.format(tmp=tmp_path), "--db", str(db)]) == 1
+    err = capsys.readouterr().err
+    assert says in err and err.count("\n") == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["site.sqlite"]  # nothing written
