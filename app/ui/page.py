@@ -27,6 +27,7 @@ import hashlib
 import html
 import http
 import inspect
+import logging
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -140,6 +141,7 @@ class ClientPage:
             return Response(http.HTTPStatus.OK, "OK", headers, body)
 
         async def serve(connection, request):
+            _quiet_http_answers(connection)
             response = None
             if request.headers.get("Upgrade", "").lower() != "websocket":
                 path = request.path.partition("?")[0]
@@ -159,6 +161,21 @@ class ClientPage:
             return response
 
         return serve
+
+
+class _HttpAnswerNoise(logging.Filter):
+    """websockets logs every plain HTTP answer of a websocket server as a failed handshake ("connection
+    rejected (200 OK)"): true, and noise for a server whose page is served that way (viser drops the
+    same two lines for the answers it makes itself)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.getMessage() not in ("opening handshake failed", "connection rejected (200 OK)")
+
+
+def _quiet_http_answers(connection) -> None:
+    logger = getattr(getattr(connection, "logger", None), "logger", None)
+    if logger is not None and not any(isinstance(f, _HttpAnswerNoise) for f in logger.filters):
+        logger.addFilter(_HttpAnswerNoise())
 
 
 @functools.lru_cache(maxsize=1)
