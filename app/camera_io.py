@@ -290,7 +290,8 @@ def _read_visp(path: Path, camera_name: str | None, image_size: tuple[int, int] 
     cameras = [root] if root.tag == "camera" else root.findall("camera")
     if not cameras:
         raise ValueError(
-            f"{where}: no <camera> element; expected a ViSP camera file (<root><camera>…) or tracker settings (<conf><camera>…)"
+            f"{where}: no <camera> element; expected a ViSP camera file "
+            "(<root><camera>…) or tracker settings (<conf><camera>…)"
         )
     cam = _pick_visp(cameras, where, camera_name, image_size)
     name = (cam.findtext("name") or "").strip() or None

@@ -56,7 +56,8 @@ CLICK_SIGMA_PX = 1.0
 
 
 def calibration_corners(scene):
-    """The script's camera-calibration pairs: (object, vertex, time, X_world (3,), true uv (2,), script's click (2,))."""
+    """The script's camera-calibration pairs: (object, vertex, time, X_world (3,), true uv (2,),
+    script's click (2,))."""
     actions = json.loads((Path(scene.root) / "operator.json").read_text())["actions"]
     out, pending = [], None
     for a in actions:
@@ -164,7 +165,8 @@ def main() -> int:
         f"the operator script's {len(prepared)} calibration corners on the frames of their clicks;"
     )
     print(
-        f"  {args.trials} trials of clicks with σ = {CLICK_SIGMA_PX:.0f} px per coordinate, seed {args.seed}: {n} clicks"
+        f"  {args.trials} trials of clicks with σ = {CLICK_SIGMA_PX:.0f} px "
+        f"per coordinate, seed {args.seed}: {n} clicks"
     )
     print()
     print("  corner error (px, distance to the true corner), over the snaps that succeeded")
@@ -186,20 +188,22 @@ def main() -> int:
     print()
     print("  DLT on the 13 pairs: calibrated C vs the true C at the bodies' corners; optical centre")
     print(
-        f"  {'':14s}{'RMS px mean':>12s}{'median':>8s}{'max px mean':>12s}{'median':>8s}{'95 %':>8s}{'centre cm mean':>15s}{'median':>8s}{'95 %':>8s}"
+        f"  {'':14s}{'RMS px mean':>12s}{'median':>8s}{'max px mean':>12s}"
+        f"{'median':>8s}{'95 %':>8s}{'centre cm mean':>15s}{'median':>8s}{'95 %':>8s}"
     )
     for key, name in (("raw", "raw clicks"), ("workflow", "snapped"), ("weighted", "snapped, 1/σ")):
         d = np.array(dlt[key])
         print(
-            f"  {name:14s}{d[:, 0].mean():12.2f}{np.median(d[:, 0]):8.2f}{d[:, 1].mean():12.2f}{np.median(d[:, 1]):8.2f}"
-            f"{np.percentile(d[:, 1], 95):8.2f}{100 * d[:, 2].mean():15.2f}{100 * np.median(d[:, 2]):8.2f}"
-            f"{100 * np.percentile(d[:, 2], 95):8.2f}"
+            f"  {name:14s}{d[:, 0].mean():12.2f}{np.median(d[:, 0]):8.2f}{d[:, 1].mean():12.2f}"
+            f"{np.median(d[:, 1]):8.2f}{np.percentile(d[:, 1], 95):8.2f}{100 * d[:, 2].mean():15.2f}"
+            f"{100 * np.median(d[:, 2]):8.2f}{100 * np.percentile(d[:, 2], 95):8.2f}"
         )
     print(
         f"  the recorded script's clicks (seed 8, as mcit demo replays them): raw {demo['raw'][0]:.2f} px RMS, "
         f"{demo['raw'][1]:.2f} px max, centre {100 * demo['raw'][2]:.1f} cm; snapped {demo['workflow'][0]:.2f} px RMS, "
-        f"{demo['workflow'][1]:.2f} px max, centre {100 * demo['workflow'][2]:.1f} cm; snapped, 1/σ {demo['weighted'][0]:.2f} px "
-        f"RMS, {demo['weighted'][1]:.2f} px max, centre {100 * demo['weighted'][2]:.1f} cm"
+        f"{demo['workflow'][1]:.2f} px max, centre {100 * demo['workflow'][2]:.1f} cm; "
+        f"snapped, 1/σ {demo['weighted'][0]:.2f} px RMS, {demo['weighted'][1]:.2f} px "
+        f"max, centre {100 * demo['weighted'][2]:.1f} cm"
     )
     print()
     s = 1e3 * np.asarray(times)

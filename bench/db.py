@@ -94,8 +94,8 @@ def main() -> int:
     path = tmp / "site.sqlite"
     n = args.objects
     print(
-        f"# bench/db.py: {n} objects (boxes, one model each), SQLite {sqlite3.sqlite_version}, Python {platform.python_version()}, "
-        f"{os.cpu_count()} CPUs; database {path} ({os.statvfs(tmp).f_bsize} B blocks)"
+        f"# bench/db.py: {n} objects (boxes, one model each), SQLite {sqlite3.sqlite_version}, Python "
+        f"{platform.python_version()}, {os.cpu_count()} CPUs; database {path} ({os.statvfs(tmp).f_bsize} B blocks)"
     )
     t_fill = populate(path, n, rng)
     print(f"# filling: {n} add_object in one transaction: {t_fill:.2f} s ({t_fill / n * 1e3:.2f} ms each)\n")
@@ -164,7 +164,8 @@ def main() -> int:
         )
 
     print(
-        f"{'measurement (Database.objects(), ' + str(n) + ' objects)':<62} {'n':>5} {'median ms':>10} {'p95 ms':>8} {'max ms':>8}  target"
+        f"{'measurement (Database.objects(), ' + str(n) + ' objects)':<62}"
+        f" {'n':>5} {'median ms':>10} {'p95 ms':>8} {'max ms':>8}  target"
     )
     for name, count, med, p95, mx in rows:
         verdict = (
@@ -176,7 +177,8 @@ def main() -> int:
 
     print()
     print(
-        f"{'updates (update_pose: version check + history row, 1 transaction each)':<72} {'n':>5} {'per s':>7} {'median ms':>10} {'p95 ms':>8}"
+        f"{'updates (update_pose: version check + history row, 1 transaction each)':<72}"
+        f" {'n':>5} {'per s':>7} {'median ms':>10} {'p95 ms':>8}"
     )
     for label, sync in (
         ("synchronous=FULL (mcit's setting: survives a power cut)", "FULL"),
@@ -197,7 +199,8 @@ def main() -> int:
         print(f"{label:<72} {args.updates:>5} {rate:>7.0f} {med:>10.3f} {p95:>8.3f}")
     writer._conn().execute("PRAGMA synchronous = FULL")
     print(
-        f"\n# file size after the run: {path.stat().st_size / 1e6:.1f} MB (+ WAL); the machine is shared, so rerun for spread"
+        f"\n# file size after the run: {path.stat().st_size / 1e6:.1f} MB "
+        "(+ WAL); the machine is shared, so rerun for spread"
     )
     reader.close()
     writer.close()

@@ -268,7 +268,8 @@ def bench_scans(scene, target, beams, tmp, seed, full=False):
             chain.close()
     print(f"\nProfile scan across the unknown box ({beams} beams, 2 steps = 0.103° apart, 1 shot each), beams/s")
     print(
-        f"{'RF baud':>7} {'PTU baud':>8} {'delay':>6} {'faults':>6} {'model':>7} {'measured':>8} {'faults/resyncs':>14} {'hits':>7} {'max |d|/σ':>9}"
+        f"{'RF baud':>7} {'PTU baud':>8} {'delay':>6} {'faults':>6} {'model':>7}"
+        f" {'measured':>8} {'faults/resyncs':>14} {'hits':>7} {'max |d|/σ':>9}"
     )
     for rb, tb, d, fr, model, meas, fx, hits, worst in rows:
         print(f"{rb!s:>7} {tb!s:>8} {d:>6} {fr:>6} {model:7.2f} {meas:8.2f} {fx:>14} {hits:>7} {worst:9.2f}")
@@ -446,7 +447,9 @@ def main() -> int:
     target = face_target(scene)
     print(__doc__.split("\n\n", 2)[2])
     print(
-        f"\nmachine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start; σ_ρ = {scene.rangefinder.sigma_range_m * 1e3:.0f} mm; target at {np.linalg.norm(target - scene.turret.T_world_turret[:3, 3]):.3f} m"
+        f"\nmachine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at "
+        f"start; σ_ρ = {scene.rangefinder.sigma_range_m * 1e3:.0f} mm; target at "
+        f"{np.linalg.norm(target - scene.turret.T_world_turret[:3, 3]):.3f} m"
     )
     wrong = bench_fault_matrix(
         replace(scene, turret=replace(scene.turret, speed_steps_s=4000.0)), args.trials, args.seed

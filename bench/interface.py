@@ -355,13 +355,15 @@ def stall_table(sizes, seconds: float, change_every_s: float, clicks: int) -> No
     for r in rows:
         target = "gap ≤ 100 ms, ≥ 28 frames/s" if r["objects"] == max(sizes) else "—"
         print(
-            f"| {r['objects']} | {r['changes']} in {r['seconds']:.1f} s | {r['gap_ms']:.0f} | {r['fps']:.1f} | {target} |"
+            f"| {r['objects']} | {r['changes']} in {r['seconds']:.1f} s | "
+            f"{r['gap_ms']:.0f} | {r['fps']:.1f} | {target} |"
         )
     lat = rows[-1]["clicks_ms"]
     if len(lat):
         print(
-            f"| click → overlay (select by clicking), {rows[-1]['objects']} objects: p50 / p95 / max (n = {len(lat)}) | | "
-            f"{np.percentile(lat, 50):.1f} / {np.percentile(lat, 95):.1f} / {lat.max():.1f} ms | | p95 ≤ 50 ms |"
+            f"| click → overlay (select by clicking), {rows[-1]['objects']} objects: "
+            f"p50 / p95 / max (n = {len(lat)}) | | {np.percentile(lat, 50):.1f} / "
+            f"{np.percentile(lat, 95):.1f} / {lat.max():.1f} ms | | p95 ≤ 50 ms |"
         )
 
 
@@ -451,9 +453,9 @@ def undistort_table(seconds: float) -> None:
         )
     load = os.getloadavg()[0]
     print(
-        f"mcit interface with lens distortion — a 30 frames/s video (8 smooth-noise images in turn), 50 objects, one browser-like "
-        f"client (a websocket reader, its own process), {seconds:.0f} s each; machine: {os.cpu_count()} cores, load "
-        f"average {load:.1f}"
+        "mcit interface with lens distortion — a 30 frames/s video (8 smooth-noise images in "
+        "turn), 50 objects, one browser-like client (a websocket reader, its own process), "
+        f"{seconds:.0f} s each; machine: {os.cpu_count()} cores, load average {load:.1f}"
     )
     print()
     print(
@@ -510,10 +512,12 @@ def main() -> int:
         db.close()
     load = os.getloadavg()[0]
     print(
-        f"mcit interface benchmark — {len(site.objects())} objects in the database, video: {video}, JPEG q{server.jpeg_quality}"
+        f"mcit interface benchmark — {len(site.objects())} objects in "
+        f"the database, video: {video}, JPEG q{server.jpeg_quality}"
     )
     print(
-        f"one headless chromium (swiftshader), viewport 1200×700; machine: {os.cpu_count()} cores, load average {load:.1f}"
+        "one headless chromium (swiftshader), viewport 1200×700; "
+        f"machine: {os.cpu_count()} cores, load average {load:.1f}"
     )
     print()
     print("| metric | measured | target |")

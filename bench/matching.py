@@ -5,9 +5,10 @@ Run: .venv/bin/python bench/matching.py [--trials 100] [--seed 0] [--edges 4] [-
 Setup (DESIGN.md's simulation): camera 512 × 256 px, f = 500 px; the paper's box
 35 × 23.1 × 13.2 cm at 2 m, uniformly random orientation (every visible face seen at less than 75°
 from its normal, as in bench/snapping.py: no face is a sliver whose two long edges lie a pixel or
-two apart), offset ±10 cm / ±5 cm, whole box in the image. The operator clicks 4 distinct edges chosen at random among the visible edges at least
-30 px long that have contrast in the rendered frame (≥ 10 grey levels); on each, two points, one in
-the first third and one in the last third of the edge, then:
+two apart), offset ±10 cm / ±5 cm, whole box in the image. The operator clicks 4 distinct edges
+chosen at random among the visible edges at least 30 px long that have contrast in the rendered
+frame (≥ 10 grey levels); on each, two points, one in the first third and one in the last third
+of the edge, then:
 
 * exact: the points as they are (no noise);
 * σ = 1 px: plus Gaussian noise σ = 1 px per coordinate (the paper's operator);
@@ -182,30 +183,36 @@ def main() -> int:
     n = args.trials
     print("Automatic edge matching (bench/matching.py)")
     print(
-        f"  camera {W}×{H} px, f = {F:.0f} px; box {BOX[0] * 100:.1f} × {BOX[1] * 100:.1f} × {BOX[2] * 100:.1f} cm at 2 m; "
-        f"{n} random poses, {args.edges} clicked edges each, seed {args.seed}; the box has {len(sym)} proper symmetries"
+        f"  camera {W}×{H} px, f = {F:.0f} px; box "
+        f"{BOX[0] * 100:.1f} × {BOX[1] * 100:.1f} × {BOX[2] * 100:.1f} cm at 2 m; {n} random poses, "
+        f"{args.edges} clicked edges each, seed {args.seed}; the box has {len(sym)} proper symmetries"
     )
     print(
-        f"  one process pinned to one core; load average {load0:.2f} before the trials, {os.getloadavg()[0]:.2f} after, on {os.cpu_count()} cores"
+        f"  one process pinned to one core; load average {load0:.2f} before "
+        f"the trials, {os.getloadavg()[0]:.2f} after, on {os.cpu_count()} cores"
     )
     print(
-        f"  {'clicks':26s}{'right (top 1)':>15s}{'among cands':>13s}{'no cand.':>10s}{'ms/call med':>13s}{'ms 95 %':>9s}{'target':>9s}{'wall 95 %':>11s}"
+        f"  {'clicks':26s}{'right (top 1)':>15s}{'among cands':>13s}{'no cand.':>10s}"
+        f"{'ms/call med':>13s}{'ms 95 %':>9s}{'target':>9s}{'wall 95 %':>11s}"
     )
     for m in modes:
         st = stats[m]
         ms = np.asarray(st["ms"])
         print(
-            f"  {m:26s}{100 * st['top'] / n:14.1f} %{100 * st['among'] / n:12.1f} %{st['none']:10d}{np.median(ms):13.0f}"
-            f"{np.percentile(ms, 95):9.0f}{'≤ 35':>9s}{np.percentile(st['wall'], 95):11.0f}"
+            f"  {m:26s}{100 * st['top'] / n:14.1f} %{100 * st['among'] / n:12.1f} %{st['none']:10d}"
+            f"{np.median(ms):13.0f}{np.percentile(ms, 95):9.0f}{'≤ 35':>9s}{np.percentile(st['wall'], 95):11.0f}"
         )
     print(
-        f"  target: right assignment for ≥ {100 * TARGET:.0f} % of random box poses from 4 clicked edges; issue 16: p95 ≤ 35 ms on 4-6 edges"
+        f"  target: right assignment for ≥ {100 * TARGET:.0f} % of random "
+        "box poses from 4 clicked edges; issue 16: p95 ≤ 35 ms on 4-6 edges"
     )
     print(
-        "  ms: CPU time per call (time.process_time; 'wall 95 %': wall clock, which the load inflates); with the image each"
+        "  ms: CPU time per call (time.process_time; 'wall 95 %': "
+        "wall clock, which the load inflates); with the image each"
     )
     print(
-        "  call computes its frame's edges (the frame cache cleared), as on a new frame; ', ready': the frame's edges computed"
+        "  call computes its frame's edges (the frame cache cleared), "
+        "as on a new frame; ', ready': the frame's edges computed"
     )
     print(
         "  before the call, as the interface does in the background when Update pose freezes its frame (seconds before"
@@ -254,7 +261,8 @@ def batched_p3l(camera, box, trial) -> int:
     print(f"  {'core.pose.p3l.p3l_rotations (random)':42s}{B:9d}{1e6 * best_rot / B:11.1f}")
     print("  target: ≤ 15 µs per triple in batches of 1,000")
     print(
-        f"  ({platform.processor() or platform.machine()}, Python {platform.python_version()}, numpy {np.__version__}, one thread)"
+        f"  ({platform.processor() or platform.machine()}, Python "
+        f"{platform.python_version()}, numpy {np.__version__}, one thread)"
     )
     return 0
 

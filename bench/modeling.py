@@ -467,7 +467,8 @@ def main(argv=None) -> int:
             v = res[m]
             sp = np.sqrt(np.mean(v[:, 4:] ** 2, axis=0))
             cells.append(
-                f"{1000 * rms(v[:, 1]):4.2f}[{1000 * sp[0]:4.2f}] {1000 * rms(v[:, 2]):5.2f}[{1000 * sp[1]:5.2f}] {1000 * rms(v[:, 3]):4.2f}[{1000 * sp[2]:4.2f}] {t[m]:3.0f}"
+                f"{1000 * rms(v[:, 1]):4.2f}[{1000 * sp[0]:4.2f}] {1000 * rms(v[:, 2]):5.2f}[{1000 * sp[1]:5.2f}] "
+                f"{1000 * rms(v[:, 3]):4.2f}[{1000 * sp[2]:4.2f}] {t[m]:3.0f}"
             )
         print(f"  {d:.1f}  | " + " | ".join(cells))
     worst_r = max(1000 * rms(res["fused"][:, 1]) for res, _ in rows.values())
@@ -498,8 +499,10 @@ def main(argv=None) -> int:
                     else f"{cover_m:5.1f} % → {cover_a:5.1f} %"
                 )
                 print(
-                    f"    {lab:14s} {1000 * rms(e):6.2f} | {1000 * np.mean(sig_m[:, i]):5.2f} → {1000 * sig_all[i]:5.2f} "
-                    f"[{1000 * parts['camera calibration'][i]:4.2f}, {1000 * parts['turret calibration'][i]:4.2f}] | {cover}"
+                    f"    {lab:14s} {1000 * rms(e):6.2f} | "
+                    f"{1000 * np.mean(sig_m[:, i]):5.2f} → {1000 * sig_all[i]:5.2f}"
+                    f" [{1000 * parts['camera calibration'][i]:4.2f}, "
+                    f"{1000 * parts['turret calibration'][i]:4.2f}] | {cover}"
                 )
     return 0
 

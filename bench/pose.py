@@ -290,8 +290,8 @@ def main(argv=None) -> int:
     anchor = PoseLibAnchor(paper_camera())
     print(__doc__.split("\n\n")[1].replace("\n", " "))
     print(
-        f"{args.n} instances per σ, seed {args.seed}; {pinned}; Python {sys.version.split()[0]}, NumPy {np.__version__};"
-        f" load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores at the start.\n"
+        f"{args.n} instances per σ, seed {args.seed}; {pinned}; Python {sys.version.split()[0]}, NumPy "
+        f"{np.__version__}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores at the start.\n"
     )
     head = (
         f"{'σ px':>4} {'step':<8} | {'rot° med':>8} {'p95':>7} {'mean±std':>13} {'RMS':>7} {'CRB':>6} | "
@@ -320,16 +320,19 @@ def main(argv=None) -> int:
                 else ("same solutions" if step == "P3L" else "")
             )
             print(
-                f"{sigma:>4.1f} {step:<8} | {fmt(s['deg'][0]):>8} {fmt(s['deg'][1]):>7} {fmt(s['deg'][2]) + '±' + fmt(s['deg'][3]):>13} "
-                f"{fmt(s['deg'][4]):>7} {crb[0]:>6} | {fmt(s['cm'][0]):>12} {fmt(s['cm'][1]):>6} "
-                f"{fmt(s['cm'][2]) + '±' + fmt(s['cm'][3]):>11} {fmt(s['cm'][4]):>6} {crb[1]:>5} | "
-                f"{f'{pd}±{psd} ; {100 * pm:.2f}±{100 * psm:.2f}':>19} | {pls:>18} | {np.median(t_ours):>7.0f} {np.median(t_pl):>7.1f}"
+                f"{sigma:>4.1f} {step:<8} | "
+                f"{fmt(s['deg'][0]):>8} {fmt(s['deg'][1]):>7} {fmt(s['deg'][2]) + '±' + fmt(s['deg'][3]):>13}"
+                f" {fmt(s['deg'][4]):>7} {crb[0]:>6} | "
+                f"{fmt(s['cm'][0]):>12} {fmt(s['cm'][1]):>6} {fmt(s['cm'][2]) + '±' + fmt(s['cm'][3]):>11}"
+                f" {fmt(s['cm'][4]):>6} {crb[1]:>5} | {f'{pd}±{psd} ; {100 * pm:.2f}±{100 * psm:.2f}':>19} | "
+                f"{pls:>18} | {np.median(t_ours):>7.0f} {np.median(t_pl):>7.1f}"
             )
     print(
         "\nµs: P3L row = core.pose.p3l vs poselib.p3ll (from Python); refined row = core.pose.refine (9 edges, from the"
     )
     print(
-        "candidate estimate_pose kept) vs poselib.refine_absolute_pose_pnpl from the same start. PoseLib RMS: p3ll + its"
+        "candidate estimate_pose kept) vs poselib.refine_absolute_pose_pnpl "
+        "from the same start. PoseLib RMS: p3ll + its"
     )
     print("refinement of every in-front solution, lowest cost kept. Paper V.1: real operator clicks on real images.\n")
 
@@ -338,9 +341,9 @@ def main(argv=None) -> int:
     e0 = np.max(r0["refined"], axis=0)
     print("Targets:")
     print(
-        f"  noise-free: truth among the P3L candidates {r0['truth_among_p3l']}/{n}, P3L ranks it first {r0['p3l_first']}/{n}"
-        f" (three edges can tie), estimate_pose returns it first {r0['refined_first']}/{n}; max error {e0[0]:.1e}° and {e0[1]:.1e} m"
-        f" (target < 1e-5°, < 1e-7 m)"
+        f"  noise-free: truth among the P3L candidates {r0['truth_among_p3l']}/{n}, P3L ranks it first "
+        f"{r0['p3l_first']}/{n} (three edges can tie), estimate_pose returns it first "
+        f"{r0['refined_first']}/{n}; max error {e0[0]:.1e}° and {e0[1]:.1e} m (target < 1e-5°, < 1e-7 m)"
     )
     for sigma in SIGMAS_PX:
         r = results[sigma]
@@ -353,12 +356,13 @@ def main(argv=None) -> int:
     crb_deg = np.degrees(np.sqrt(np.mean(r1["crb"][:, 0])))
     crb_cm = 100 * np.sqrt(np.mean(r1["crb"][:, 1]))
     print(
-        f"  σ = 1 px, 9 edges: RMS error / CRB = {rms_deg / crb_deg:.3f} (rotation), {rms_cm / crb_cm:.3f} (translation)"
-        " (target within 10 %)"
+        f"  σ = 1 px, 9 edges: RMS error / CRB = {rms_deg / crb_deg:.3f} (rotation), "
+        f"{rms_cm / crb_cm:.3f} (translation) (target within 10 %)"
     )
     print(
-        f"  time: p3l median {np.median(r1['t_p3l']):.0f} µs (target ≤ 150), refine 9 edges median {np.median(r1['t_refine']) / 1e3:.2f} ms"
-        f" (target ≤ 2), estimate_pose median {np.median(r1['t_estimate']) / 1e3:.2f} ms"
+        f"  time: p3l median {np.median(r1['t_p3l']):.0f} µs (target ≤ 150), "
+        f"refine 9 edges median {np.median(r1['t_refine']) / 1e3:.2f} ms (target ≤ 2), "
+        f"estimate_pose median {np.median(r1['t_estimate']) / 1e3:.2f} ms"
     )
     for sigma in SIGMAS_PX:
         r = results[sigma]
@@ -383,14 +387,15 @@ def main(argv=None) -> int:
     segs_b, edges_b = np.array([b[0] for b in batch]), np.array([b[1] for b in batch])
     t_batch = cpu_us(lambda: p3l_batch(paper_camera(), segs_b, edges_b), repeats=5) / 1000  # best of 5
     print(
-        f"  p3l_batch: {t_batch:.1f} µs per triple in batches of 1000, best of 5 (the σ = 1 px problems' first triples: three"
-        " orthogonal box edges; issue 9's target ≤ 15)"
+        f"  p3l_batch: {t_batch:.1f} µs per triple in batches of 1000, best of 5 (the "
+        "σ = 1 px problems' first triples: three orthogonal box edges; issue 9's target ≤ 15)"
     )
     print(f"  (load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores after the timings)")
 
     nb = max(50, n // 2)
     print(
-        f"\nBasin of the refinement (σ = 1 px, 9 edges, {nb} instances): start = truth rotated about a random axis through"
+        f"\nBasin of the refinement (σ = 1 px, 9 edges, {nb} instances): "
+        "start = truth rotated about a random axis through"
     )
     print(
         "the object's origin and shifted in a random direction; success = reaches the estimate refined from the truth"

@@ -149,7 +149,8 @@ def main() -> int:
     print("## Time per frame (CPU s, one thread)")
     print(markdown_table(["t (s)", "render (s)", "label changes"], rows_t))
     print(
-        f"## Edge offsets from the projected true edges (px), all edges at t = {', '.join(f'{t:g}' for t in args.times)} s"
+        "## Edge offsets from the projected true edges (px), all "
+        f"edges at t = {', '.join(f'{t:g}' for t in args.times)} s"
     )
     rows_e = [
         [name, len(v), float(np.median(v)), float(np.percentile(v, 95)), float(np.max(v))]

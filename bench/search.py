@@ -9,8 +9,9 @@ Cases:
     move, the frame one of 3 in the rest after it, the click a random pixel of the moved object (5 per
     frame); the truth is the scene's.
 (b) random placements on the table of the scene's unknown box, parallelepiped and cylinder (anywhere
-    in view, whole object in the image, clear of the other objects on the table and in the image), rendered with the workcell by
-    app.render (noise σ 2 grey levels, blur 0.5 px, 8 anti-aliasing samples) and partly hidden by a
+    in view, whole object in the image, clear of the other objects on the table and in the image),
+    rendered with the workcell by app.render (noise σ 2 grey levels, blur 0.5 px, 8 anti-aliasing
+    samples) and partly hidden by a
     grey rectangle over 20-35 % of the object's image from one side; the old pose is the object's
     pose in the scene file; the click a random pixel of the object not hidden.
 (c) the real ViSP cube sequence (../shared/data/visp-cube, skipped when absent): every 10th frame; the
@@ -474,8 +475,8 @@ def table_rows(title: str, groups: dict[str, list[Case]], target: float, total: 
     print(title)
     every: list = []
     print(
-        f"  {'case':34s}{'n':>4s}{'right top':>11s}{'among':>8s}{'none':>6s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}{'σ ok':>7s}{'silent':>7s}"
-        f"{'|  auto match n':>16s}{'right':>8s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}"
+        f"  {'case':34s}{'n':>4s}{'right top':>11s}{'among':>8s}{'none':>6s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}"
+        f"{'σ ok':>7s}{'silent':>7s}{'|  auto match n':>16s}{'right':>8s}{'s p50':>7s}{'s p95':>7s}{'actions':>9s}"
     )
     for name, cases in groups.items():
         if not cases:
@@ -513,8 +514,8 @@ def table_rows(title: str, groups: dict[str, list[Case]], target: float, total: 
             close = int(np.sum((e[:, 0] <= 3.0) & (e[:, 1] <= 0.01)))
             turned = int(np.sum((e[:, 0] >= 45.0) & (e[:, 1] <= 0.01)))
             print(
-                f"      misses: {refused} refused, {close} within 3° / 1 cm, {turned} turned in place (a near-symmetry), "
-                f"{len(bad) - refused - close - turned} elsewhere"
+                f"      misses: {refused} refused, {close} within 3° / 1 cm, {turned} turned "
+                f"in place (a near-symmetry), {len(bad) - refused - close - turned} elsewhere"
             )
         for nm, e in bad[:4]:
             print(
@@ -551,7 +552,8 @@ def main() -> int:
     load0 = os.getloadavg()[0]
     print("One-click pose search (bench/search.py, issue 17) beside auto match")
     print(
-        f"  {pinned}, one BLAS/OpenCV thread; load average {load0:.2f} at start, on {os.cpu_count()} cores; seed {args.seed}"
+        f"  {pinned}, one BLAS/OpenCV thread; load average {load0:.2f} at "
+        f"start, on {os.cpu_count()} cores; seed {args.seed}"
     )
     print(
         f"  success: the top candidate within {OK_DEG:.0f}° and {1000 * OK_M:.0f} mm of the truth (up to symmetries); "

@@ -110,12 +110,14 @@ def main() -> int:
     print()
     print(
         "| model | triangles | smooth sides | silhouette sides (median) | smooth sides found, once per model (ms) "
-        "| contour at one pose (ms) | one object's redraw (ms) | same without mesh silhouettes (ms) | first redraw (ms) |"
+        "| contour at one pose (ms) | one object's redraw (ms) | "
+        "same without mesh silhouettes (ms) | first redraw (ms) |"
     )
     print("|---|---|---|---|---|---|---|---|---|")
     for name, tris, ns, nsil, pre, contour, with_sil, without, first in rows:
         print(
-            f"| {name} | {tris} | {ns} | {nsil} | {pre:.2f} | {contour:.3f} | {with_sil:.2f} | {without:.2f} | {first:.1f} |"
+            f"| {name} | {tris} | {ns} | {nsil} | {pre:.2f} | "
+            f"{contour:.3f} | {with_sil:.2f} | {without:.2f} | {first:.1f} |"
         )
     return 0
 

@@ -157,13 +157,14 @@ def main() -> int:
     n = len(err["raw"])
     print("Edge snapping on rendered frames with known edges (bench/snapping.py)")
     print(
-        f"  camera {W}×{H} px, f = {F:.0f} px; box {BOX[0] * 100:.1f} × {BOX[1] * 100:.1f} × {BOX[2] * 100:.1f} cm at 2 m, "
-        f"{args.trials} random poses (faces seen at < 75°), seed {args.seed}"
+        f"  camera {W}×{H} px, f = {F:.0f} px; box {BOX[0] * 100:.1f} × {BOX[1] * 100:.1f} × {BOX[2] * 100:.1f} cm "
+        f"at 2 m, {args.trials} random poses (faces seen at < 75°), seed {args.seed}"
     )
     print(
-        f"  frames by app.render (exact ray casting, area-coverage edges; {render_s:.0f} s): blur σ = {BLUR_PX} px, noise σ = "
-        f"{NOISE_GREY:.0f} grey levels; clicks at 10 %/90 % of each visible edge ≥ 30 px with contrast ≥ {MIN_CONTRAST:.0f} grey levels, σ = {CLICK_SIGMA_PX:.0f} px per "
-        f"coordinate; band ±{BAND_PX:.0f} px"
+        f"  frames by app.render (exact ray casting, area-coverage edges; {render_s:.0f} s): "
+        f"blur σ = {BLUR_PX} px, noise σ = {NOISE_GREY:.0f} grey levels; clicks at 10 %/90 % "
+        f"of each visible edge ≥ 30 px with contrast ≥ {MIN_CONTRAST:.0f} grey levels, "
+        f"σ = {CLICK_SIGMA_PX:.0f} px per coordinate; band ±{BAND_PX:.0f} px"
     )
     print(
         f"  {n} segments; snaps refused: {refused} ({100 * refused / n:.1f} %, raw clicks kept); "
@@ -180,23 +181,25 @@ def main() -> int:
     ):
         e = np.asarray(err[key])
         print(
-            f"  {name:16s}{e.mean():8.3f}{np.median(e):8.3f}{np.percentile(e, 90):8.3f}{np.percentile(e, 95):8.3f}{e.max():8.3f}   "
-            f"{100 * np.mean(e <= 0.3):8.1f} %"
+            f"  {name:16s}{e.mean():8.3f}{np.median(e):8.3f}{np.percentile(e, 90):8.3f}"
+            f"{np.percentile(e, 95):8.3f}{e.max():8.3f}   {100 * np.mean(e <= 0.3):8.1f} %"
         )
     print("  target: snapped segments within 0.3 px")
     print()
     pr, ps = np.asarray(pose_raw), np.asarray(pose_snap)
     print(
-        f"  pose error from all clicked edges of a frame ({len(pr)} frames with ≥ 4 edges; core.pose.refine from the true pose)"
+        f"  pose error from all clicked edges of a frame ({len(pr)} frames "
+        "with ≥ 4 edges; core.pose.refine from the true pose)"
     )
     print(f"  {'':16s}{'rot mean °':>12s}{'rot med °':>11s}{'trans mean mm':>15s}{'trans med mm':>14s}")
     for name, p in (("raw clicks", pr), ("snapped", ps)):
         print(
-            f"  {name:16s}{p[:, 0].mean():12.3f}{np.median(p[:, 0]):11.3f}{1e3 * p[:, 1].mean():15.2f}{1e3 * np.median(p[:, 1]):14.2f}"
+            f"  {name:16s}{p[:, 0].mean():12.3f}{np.median(p[:, 0]):11.3f}"
+            f"{1e3 * p[:, 1].mean():15.2f}{1e3 * np.median(p[:, 1]):14.2f}"
         )
     print(
-        f"  ratio snapped/raw (mean): rotation {ps[:, 0].mean() / pr[:, 0].mean():.3f}, translation {ps[:, 1].mean() / pr[:, 1].mean():.3f}"
-        "   target ≤ 0.333"
+        f"  ratio snapped/raw (mean): rotation {ps[:, 0].mean() / pr[:, 0].mean():.3f}, "
+        f"translation {ps[:, 1].mean() / pr[:, 1].mean():.3f}   target ≤ 0.333"
     )
     print()
     s = np.asarray(snap_ms)

@@ -93,7 +93,8 @@ def import_table(db: Path, timeout_s: float, top: int = 15) -> None:
             self_us, pkg = int(fields[0]), fields[2].strip().split(".")[0]
             per[pkg] = per.get(pkg, 0) + self_us
     print(
-        f"\nimports of mcit serve before its first page ({t:.2f} s with -X importtime; self time per top-level package):"
+        f"\nimports of mcit serve before its first page ({t:.2f} s "
+        "with -X importtime; self time per top-level package):"
     )
     print("| package | ms |\n|:---|---:|")
     for pkg, us in sorted(per.items(), key=lambda kv: -kv[1])[:top]:

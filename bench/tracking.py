@@ -128,10 +128,12 @@ def real_sequences(repeat: int) -> None:
     cube = DATA / "visp-cube"
     tea = DATA / "visp-teabox"
     print(
-        "  sequence              frames       lost  conf   conf   dist    dist    dist    held    held    ms/f    ms/f  frames/s  cpu ms/f  ≤1.5 px,"
+        "  sequence              frames       lost  conf   conf   dist    dist    dist    held    held    "
+        "ms/f    ms/f  frames/s  cpu ms/f  ≤1.5 px,"
     )
     print(
-        "                        tracked             min    mean   mean   median   max     mean    max     mean    95 %    (mean)    mean    not lost"
+        "                        tracked             min    mean   mean   median   max     mean    max     "
+        "mean    95 %    (mean)    mean    not lost"
     )
     if cube.is_dir():
         model = read_cao(cube / "cube_and_cylinder.cao")
@@ -195,10 +197,12 @@ def workcell_sequence(repeat: int) -> None:
     lost = "never" if lost_at is None else f"frame {lost_at}"
     print(
         f"  workcell video (app.render, Motion-JPEG), {W}×{H}, the parallelepiped at ~2 m, {len(frames)} frames at "
-        f"{scene.video.fps:.0f} fps; motion per frame up to {steps[:, 0].max():.2f}° and {1e3 * steps[:, 1].max():.1f} mm"
+        f"{scene.video.fps:.0f} fps; motion per frame up to "
+        f"{steps[:, 0].max():.2f}° and {1e3 * steps[:, 1].max():.1f} mm"
     )
     print(
-        f"  {'':22s}{'tracked':>9s}{'lost':>8s}{'rot mean °':>12s}{'rot max °':>11s}{'trans mean mm':>15s}{'trans max mm':>14s}{'ms/f':>8s}{'frames/s':>10s}"
+        f"  {'':22s}{'tracked':>9s}{'lost':>8s}{'rot mean °':>12s}{'rot max °':>11s}"
+        f"{'trans mean mm':>15s}{'trans max mm':>14s}{'ms/f':>8s}{'frames/s':>10s}"
     )
     print(
         f"  {'workcell':22s}{len(poses):>5d}/{len(frames):<3d}{lost:>8s}{err[:, 0].mean():12.3f}{err[:, 0].max():11.3f}"
@@ -300,7 +304,8 @@ def as_run_rows(frames, camera, model, truth, starts) -> None:
                 tracked += 1
                 wrong_tracked += deg > WRONG_DEG or m > WRONG_M
         print(
-            f"    {name:42s}{tracked:>9d}{wrong_tracked:>15d}   runs lost at the first frame {lost_first}, later {lost_later}"
+            f"    {name:42s}{tracked:>9d}{wrong_tracked:>15d}   runs "
+            f"lost at the first frame {lost_first}, later {lost_later}"
         )
 
 
@@ -308,8 +313,8 @@ def confusion_tables(repeat_seed: int = 0, skip_rendered: bool = False) -> None:
     """Wrong-but-tracked and right-but-lost, old and new lost rule, on sequences with true poses."""
     rng = np.random.default_rng(repeat_seed)
     print(
-        f"Lost or tracked (seed {repeat_seed}): from perturbed starts, a frame is wrong when its pose is more than {WRONG_DEG:.0f}° or "
-        f"{100 * WRONG_M:.0f} cm from the truth"
+        f"Lost or tracked (seed {repeat_seed}): from perturbed starts, a frame is wrong when "
+        f"its pose is more than {WRONG_DEG:.0f}° or {100 * WRONG_M:.0f} cm from the truth"
     )
     print("  as run (a run stops at its first lost frame): frames reported as tracked, of them wrong (wrong but")
     print("  tracked), runs stopped on a right frame (right but lost) or on a wrong one; per frame, over all")
@@ -393,15 +398,17 @@ def capture_range(n_runs: int = 10, n_frames: int = 40, seeds: tuple[int, ...] =
     ref_tracker = EdgeTracker(camera, model, read_visp_pose(cube / "cube.0.pos"))
     ref = [ref_tracker.track(f).T_world_obj for f in frames]
     print(
-        f"Capture range: visp-cube from {n_runs} starts 5° and 1 cm off (reference: tracked from ViSP's pose), {n_frames} frames each; "
-        f"whole = never lost and every frame within {WRONG_DEG:.0f}° / {100 * WRONG_M:.0f} cm of the reference"
+        f"Capture range: visp-cube from {n_runs} starts 5° and 1 cm off (reference: "
+        f"tracked from ViSP's pose), {n_frames} frames each; whole = never lost and "
+        f"every frame within {WRONG_DEG:.0f}° / {100 * WRONG_M:.0f} cm of the reference"
     )
     print(
-        "  anchors (issue 16, measured outside this bench on seed 0's kind of draw): ViSP's edge tracker 3 of 10 whole with its "
-        "default band, 7 of 10 with a 16 px band; target ≥ 8 of 10"
+        "  anchors (issue 16, measured outside this bench on seed 0's kind of draw): ViSP's edge "
+        "tracker 3 of 10 whole with its default band, 7 of 10 with a 16 px band; target ≥ 8 of 10"
     )
     print(
-        f"    {'seed':>4s}  {'tracker':52s}{'whole':>9s}{'tracked':>9s}{'wrong+tracked':>15s}{'lost at 1st':>13s}{'1st frame cpu ms':>18s}"
+        f"    {'seed':>4s}  {'tracker':52s}{'whole':>9s}{'tracked':>9s}"
+        f"{'wrong+tracked':>15s}{'lost at 1st':>13s}{'1st frame cpu ms':>18s}"
     )
     for seed in seeds:
         rng = np.random.default_rng(seed)
@@ -455,17 +462,20 @@ def main() -> int:
     pin = pin_one_core()
     print("Model-based edge tracking (bench/tracking.py)")
     print(
-        f"  one core, one thread ({pin}; {platform.processor() or platform.machine()}, Python {platform.python_version()}, "
-        f"OpenCV {cv2.__version__})"
+        f"  one core, one thread ({pin}; {platform.processor() or platform.machine()}, "
+        f"Python {platform.python_version()}, OpenCV {cv2.__version__})"
     )
     print(
-        "  dist = mean oriented-chamfer distance (px) of the projected model edges to Canny edges, per frame; held = initial pose kept"
+        "  dist = mean oriented-chamfer distance (px) of the projected "
+        "model edges to Canny edges, per frame; held = initial pose kept"
     )
     print(
-        f"  targets: visp-cube every frame: dist ≤ {TARGET_PX} px on every frame, never lost; ≥ {TARGET_FPS:.0f} frames/s at 640×480;"
+        f"  targets: visp-cube every frame: dist ≤ {TARGET_PX} px on "
+        f"every frame, never lost; ≥ {TARGET_FPS:.0f} frames/s at 640×480;"
     )
     print(
-        f"  issue 16: every 3rd frame too, and ≤ {TARGET_MS:.0f} ms mean per frame (ms/f: wall clock, one core; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores at the start)"
+        f"  issue 16: every 3rd frame too, and ≤ {TARGET_MS:.0f} ms mean per frame (ms/f: wall clock, "
+        f"one core; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores at the start)"
     )
     print()
     if args.only == "sequences":
@@ -492,16 +502,18 @@ def main() -> int:
         err = np.array([pose_error(T, Tt) for T, Tt in zip(poses, truth)])
         print()
         print(
-            f"  rendered box (app.render) 20 × 13 × 8 cm at 0.8–1.0 m, 640×480, f = 600 px, blur 0.5 px, noise σ = 2, {len(frames)} frames;"
-            f" motion per frame up to {max(step_deg):.2f}° and {max(step_mm):.1f} mm"
+            "  rendered box (app.render) 20 × 13 × 8 cm at 0.8–1.0 m, 640×480, f = 600 px, blur 0.5 px, noise "
+            f"σ = 2, {len(frames)} frames; motion per frame up to {max(step_deg):.2f}° and {max(step_mm):.1f} mm"
         )
         print(
-            f"  {'':22s}{'tracked':>9s}{'lost':>8s}{'rot mean °':>12s}{'rot max °':>11s}{'trans mean mm':>15s}{'trans max mm':>14s}{'ms/f':>8s}{'frames/s':>10s}"
+            f"  {'':22s}{'tracked':>9s}{'lost':>8s}{'rot mean °':>12s}{'rot max °':>11s}"
+            f"{'trans mean mm':>15s}{'trans max mm':>14s}{'ms/f':>8s}{'frames/s':>10s}"
         )
         lost = "never" if lost_at is None else f"frame {lost_at}"
         print(
-            f"  {'rendered box':22s}{len(poses):>5d}/{len(frames):<3d}{lost:>8s}{err[:, 0].mean():12.3f}{err[:, 0].max():11.3f}"
-            f"{1e3 * err[:, 1].mean():15.2f}{1e3 * err[:, 1].max():14.2f}{np.mean(ms):8.1f}{1e3 / np.mean(ms):10.0f}"
+            f"  {'rendered box':22s}{len(poses):>5d}/{len(frames):<3d}{lost:>8s}"
+            f"{err[:, 0].mean():12.3f}{err[:, 0].max():11.3f}{1e3 * err[:, 1].mean():15.2f}"
+            f"{1e3 * err[:, 1].max():14.2f}{np.mean(ms):8.1f}{1e3 / np.mean(ms):10.0f}"
         )
     print()
     capture_range(seeds=tuple(int(k) for k in args.capture_seeds.split(",")))

@@ -292,7 +292,8 @@ def calibrate_turret(
     pan, tilt, rho = (np.asarray(a, dtype=float).reshape(-1) for a in (pan_rad, tilt_rad, range_m))
     if not (len(pan) == len(tilt) == len(rho) == len(X_world)):
         raise ValueError(
-            f"pan, tilt, range and X_world must pair one to one, got {len(pan)}, {len(tilt)}, {len(rho)}, {len(X_world)}"
+            "pan, tilt, range and X_world must pair one to one, got "
+            f"{len(pan)}, {len(tilt)}, {len(rho)}, {len(X_world)}"
         )
     if not (np.all(np.isfinite(pan)) and np.all(np.isfinite(tilt)) and np.all(np.isfinite(rho))):
         raise ValueError("a measurement is NaN or inf (a missed shot?): measure every point")

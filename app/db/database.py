@@ -238,8 +238,8 @@ class Database:
         if state.version < LATEST_VERSION:  # upgraded once, by a writable open
             if not can_write(path.resolve()):
                 raise DatabaseUnavailable(
-                    f"{path} was written by an older mcit (schema version {state.version}) and is read-only, so it cannot "
-                    "be upgraded to be read; make it writable once, or read it with the mcit that wrote it"
+                    f"{path} was written by an older mcit (schema version {state.version}) and is read-only, so it "
+                    "cannot be upgraded to be read; make it writable once, or read it with the mcit that wrote it"
                 )
             cls.open(path, client=client, busy_timeout_s=busy_timeout_s, quick_check=False).close()
         db = cls(path, client, busy_timeout_s, readonly=True)
@@ -558,8 +558,8 @@ class Database:
             now = time.time()
             try:
                 cur = conn.execute(
-                    "INSERT INTO objects (name, kind, model_id, dims, sigmas, T_world_obj, cov, status, source, created_at, updated_at) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    "INSERT INTO objects (name, kind, model_id, dims, sigmas, T_world_obj, cov, "
+                    "status, source, created_at, updated_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (name, kind, model_id, D, S, T, C, status, source, now, now),
                 )
             except sqlite3.IntegrityError:
@@ -758,8 +758,9 @@ class Database:
         )
 
     _HISTORY_SELECT = (
-        "SELECT h.id, h.time, h.client, h.method, h.action, h.object_id, h.calibration_id, h.version, h.before, h.after, "
-        "h.clicks, h.measurements, h.residuals, h.note, h.undoes, o.name FROM history h LEFT JOIN objects o ON o.id = h.object_id"
+        "SELECT h.id, h.time, h.client, h.method, h.action, h.object_id, h.calibration_id, "
+        "h.version, h.before, h.after, h.clicks, h.measurements, h.residuals, h.note, "
+        "h.undoes, o.name FROM history h LEFT JOIN objects o ON o.id = h.object_id"
     )
 
     def _change_record(self, conn, change_id: int) -> ChangeRecord:
@@ -890,7 +891,8 @@ class Database:
         """The most recent calibration of this kind, or None."""
         with self._read() as conn:
             row = conn.execute(
-                "SELECT id, kind, data, residuals, time, client, method FROM calibrations WHERE kind = ? ORDER BY id DESC LIMIT 1",
+                "SELECT id, kind, data, residuals, time, client, method "
+                "FROM calibrations WHERE kind = ? ORDER BY id DESC LIMIT 1",
                 (kind,),
             ).fetchone()
         return None if row is None else self._calibration_from_row(row)

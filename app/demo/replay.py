@@ -57,7 +57,10 @@ class DemoStepError(RuntimeError):
         self.index = index
         self.action = action
         args = {k: v for k, v in action.items() if k not in ("t", "workflow", "action")}
-        where = f"actions[{index}] at t = {action.get('t', float('nan')):.2f} s: {action.get('workflow')}.{action.get('action')}"
+        where = (
+            f"actions[{index}] at t = {action.get('t', float('nan')):.2f} s: "
+            f"{action.get('workflow')}.{action.get('action')}"
+        )
         super().__init__(f"{where}{' ' + str(args) if args else ''}: {message}")
 
 

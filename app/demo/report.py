@@ -131,11 +131,11 @@ def summary_table(results: DemoResults) -> str:
     if np.isfinite(cal.camera_rms_px):
         rows.append(
             [
-                f"camera calibration (DLT, {cal.camera_points} points): RMS; calibrated vs true C at the bodies' corners; "
-                "optical centre",
+                f"camera calibration (DLT, {cal.camera_points} points): RMS; "
+                "calibrated vs true C at the bodies' corners; optical centre",
                 "—",
-                f"{cal.camera_rms_px:.2f} px; {cal.camera_reprojection_rms_px:.2f} px RMS, {cal.camera_reprojection_max_px:.2f} px "
-                f"max; {cal.camera_centre_error_m * CM:.1f} cm off",
+                f"{cal.camera_rms_px:.2f} px; {cal.camera_reprojection_rms_px:.2f} px RMS, "
+                f"{cal.camera_reprojection_max_px:.2f} px max; {cal.camera_centre_error_m * CM:.1f} cm off",
             ]
         )
     if np.isfinite(cal.turret_rms_mm):
@@ -161,10 +161,11 @@ def _setup(
     rf = scene.rangefinder
     w.heading("Set-up and noise")
     w.paragraph(
-        f"Scene `{scene.name}` ({scene.root}): camera {scene.camera.width} × {scene.camera.height} px, f = {abs(K[0, 0]):.0f} px; "
-        f"range finder σ_ρ = {rf.sigma_range_m * 1000:.1f} mm, {rf.min_range_m:g}–{rf.max_range_m:g} m, on a turret of "
-        f"{step_deg:.4f}° steps. The video is the scene's committed recording (`{scene.video.path.name if scene.video else '—'}`), "
-        "its frames drawn over, never re-rendered."
+        f"Scene `{scene.name}` ({scene.root}): camera {scene.camera.width} × {scene.camera.height} px, "
+        f"f = {abs(K[0, 0]):.0f} px; range finder σ_ρ = {rf.sigma_range_m * 1000:.1f} mm, "
+        f"{rf.min_range_m:g}–{rf.max_range_m:g} m, on a turret of {step_deg:.4f}° steps. The video is "
+        f"the scene's committed recording (`{scene.video.path.name if scene.video else '—'}`), its "
+        "frames drawn over, never re-rendered."
     )
     w.paragraph(
         f"Operator script: {len(script.actions)} recorded actions in {len(script.runs())} workflow runs "
@@ -183,10 +184,11 @@ def _setup(
     if sims is not None:
         s = sims.setup
         w.paragraph(
-            f"Simulation (labelled so wherever it appears; seed {sims.seed}): the same solvers on simulated measurements "
-            f"(`core.modeling.simulate`, `core.pose.synthetic`): camera {s.width} × {s.height} px, f = {s.f_px:.0f} px, "
-            f"{s.elevation_deg:.1f}° down (the scene's), range finder {s.baseline_m * 100:.1f} cm to its right; clicks "
-            f"σ = {s.sigma_px:g} px; range σ_ρ = {rf.sigma_range_m * 1000:.0f} mm; whole turret steps of {step_deg:.4f}° with a "
+            f"Simulation (labelled so wherever it appears; seed {sims.seed}): the same solvers on "
+            "simulated measurements (`core.modeling.simulate`, `core.pose.synthetic`): camera "
+            f"{s.width} × {s.height} px, f = {s.f_px:.0f} px, {s.elevation_deg:.1f}° down (the scene's), "
+            f"range finder {s.baseline_m * 100:.1f} cm to its right; clicks σ = {s.sigma_px:g} px; range "
+            f"σ_ρ = {rf.sigma_range_m * 1000:.0f} mm; whole turret steps of {step_deg:.4f}° with a "
             "uniform ±½-step pointing error. Distances are camera → object centre."
         )
     times = ", ".join(f"{k} {v:.1f} s" for k, v in wall_s.items())
@@ -284,8 +286,8 @@ def _box(w: ReportWriter, results: DemoResults, sims: Simulations | None) -> Non
                 "error with the true camera (cm)",
             ],
             rows,
-            caption=f"{b.name}: {b.distance_turret_m:.2f} m from the range finder, {b.distance_camera_m:.2f} m from the camera; "
-            f"range points per face {list(b.points)}.",
+            caption=f"{b.name}: {b.distance_turret_m:.2f} m from the range finder, "
+            f"{b.distance_camera_m:.2f} m from the camera; range points per face {list(b.points)}.",
         )
         worst = int(np.argmax(np.abs(b.error) / np.maximum(b.sigma, 1e-12)))
         if b.sigma_parts:
@@ -299,17 +301,17 @@ def _box(w: ReportWriter, results: DemoResults, sims: Simulations | None) -> Non
                 "(core.modeling.uncertainty).",
             )
         w.paragraph(
-            "The last column of the first table re-runs the same construction on the same clicks and range points through "
-            "the scene's *true* camera instead of the calibrated one (a diagnostic only an emulated site allows): the "
-            "part of each error that it removes comes from the camera calibration"
+            "The last column of the first table re-runs the same construction on the same clicks and range "
+            "points through the scene's *true* camera instead of the calibrated one (a diagnostic only an "
+            "emulated site allows): the part of each error that it removes comes from the camera calibration"
             + (
                 ", whose share of σ is in the table above"
                 if b.sigma_parts
                 else ", whose uncertainty these σ do not include"
             )
             + f". Here the largest error relative to σ is the {('width', 'height', 'length')[worst]}: "
-            f"{_signed(b.error[worst] * CM)} cm with the calibrated camera, {_signed((b.true_camera[0][worst] - b.truth[worst]) * CM)} cm "
-            "with the true one."
+            f"{_signed(b.error[worst] * CM)} cm with the calibrated camera, "
+            f"{_signed((b.true_camera[0][worst] - b.truth[worst]) * CM)} cm with the true one."
         )
 
 
@@ -461,8 +463,9 @@ def _pose(w: ReportWriter, results: DemoResults, sims: Simulations | None) -> No
         w.paragraph(
             f"In the simulation the refinement starts from P3L's first candidate and from the next ones while its "
             f"RMS exceeds 3 σ (an operator choosing another ghost); {int(np.sum(sim.candidates_tried > 1))} of "
-            f"{len(sim.refined)} problems needed another candidate, {gross} ended more than 10° off, and in {sim.refine_failed} no candidate "
-            f"could be refined. P3L found no solution in {sim.failed} of {sim.trials}."
+            f"{len(sim.refined)} problems needed another candidate, {gross} ended "
+            f"more than 10° off, and in {sim.refine_failed} no candidate could be "
+            f"refined. P3L found no solution in {sim.failed} of {sim.trials}."
         )
     rows = []
     for i, p in enumerate(poses, 1):
@@ -496,20 +499,20 @@ def _pose(w: ReportWriter, results: DemoResults, sims: Simulations | None) -> No
         rows,
         caption="Each update against the true pose at its time. P3L: the candidate the operator's Solve chose "
         '("workflow"), or — for an update refined from the database pose, as the small motions are — P3L on the '
-        'same clicks computed for this report ("same clicks"). Predicted σ: the refinement\'s, of the rotation angle and '
-        "the position (root sum of squares over the axes), from each click's σ (0.15 px snapped, the operator's σ raw) "
-        "and the camera calibration's share (core.pose.uncertainty). "
+        'same clicks computed for this report ("same clicks"). Predicted σ: the refinement\'s, of the '
+        "rotation angle and the position (root sum of squares over the axes), from each click's σ (0.15 px "
+        "snapped, the operator's σ raw) and the camera calibration's share (core.pose.uncertainty). "
         '"Refined, true camera": the same refinement through the scene\'s true camera instead of the '
-        "calibrated one (a diagnostic: the difference is the camera calibration's share). Last column: P3L's first candidate on the "
-        "same edges clicked without noise (each clicked point of the script's truth, on its model edge at the "
-        "true pose, through the true camera) — Figure V.1's noise-free test.",
+        "calibrated one (a diagnostic: the difference is the camera calibration's share). Last column: "
+        "P3L's first candidate on the same edges clicked without noise (each clicked point of the script's "
+        "truth, on its model edge at the true pose, through the true camera) — Figure V.1's noise-free test.",
     )
     if sim is not None and len(sim.noise_free):
         nf = sim.noise_free
         w.paragraph(
             f"Noise-free P3L in simulation ({len(nf)} problems, first-ranked candidate): rotation error median "
-            f"{np.median(nf[:, 0]):.1e}°, max {nf[:, 0].max():.1e}°; translation median {np.median(nf[:, 1]):.1e} m, max "
-            f"{nf[:, 1].max():.1e} m (the paper: 1e-4° and 1e-6 m)."
+            f"{np.median(nf[:, 0]):.1e}°, max {nf[:, 0].max():.1e}°; translation median "
+            f"{np.median(nf[:, 1]):.1e} m, max {nf[:, 1].max():.1e} m (the paper: 1e-4° and 1e-6 m)."
         )
 
 
@@ -595,6 +598,7 @@ def write_report(
                 errs, labels=labels, claims="V.2", title="Figure V.2 — pose error of each update (this run)"
             ),
             "figure_V_2",
-            "Translation and rotation error of each update against the scene's truth, with the bounds the paper states.",
+            "Translation and rotation error of each update against "
+            "the scene's truth, with the bounds the paper states.",
         )
     return w.write()

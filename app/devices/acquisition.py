@@ -135,8 +135,8 @@ def _beam(
         if turret.still_at(*got):
             return got, m
     raise DeviceError(
-        f"turret: the head left {pan_steps}, {tilt_steps} steps during the measurement twice (is its power or cable loose?); "
-        "the scan stopped so that no beam is recorded at the wrong place",
+        f"turret: the head left {pan_steps}, {tilt_steps} steps during the measurement twice (is "
+        "its power or cable loose?); the scan stopped so that no beam is recorded at the wrong place",
         device="turret",
     )
 

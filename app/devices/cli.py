@@ -120,7 +120,8 @@ def run_emulate(args: argparse.Namespace) -> int:
         scene_arg = f" --scene {args.scene}" if args.scene else ""
         print(f"scene: {scene.name} ({scene.root})")
         print(
-            f"range finder (Dimetix DLS, {args.rangefinder_baud} baud modelled): {rf_path} -> {site.rangefinder.port.device}"
+            f"range finder (Dimetix DLS, {args.rangefinder_baud} baud "
+            f"modelled): {rf_path} -> {site.rangefinder.port.device}"
         )
         print(f"turret (FLIR PTU-D46, {args.turret_baud} baud modelled): {turret_path} -> {site.turret.port.device}")
         if rates:

@@ -583,7 +583,8 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
                 # ViSP parses such a circle; its plane is unknown, so there is nothing true to draw.
                 warnings.warn(
                     CaoWarning(
-                        f"{path}:{number}: circle {k} is left out: its centre and two points are on one line, so its plane is unknown"
+                        f"{path}:{number}: circle {k} is left out: its centre "
+                        "and two points are on one line, so its plane is unknown"
                     ),
                     stacklevel=2,
                 )
@@ -723,7 +724,8 @@ def cao_text(model: BRep, comment: str = "", options: CaoOptions | None = None) 
     for s in model.solids:
         if not s.is_cylinder:
             raise ValueError(
-                f"a .cao model has cylinders only; this model has a cone (radii {s.r0}, {s.r1}): export it as glTF or OBJ"
+                "a .cao model has cylinders only; this model has a "
+                f"cone (radii {s.r0}, {s.r1}): export it as glTF or OBJ"
             )
     faces = list(enumerate(model.faces))  # every face, a mesh's smooth triangles too (see the module docstring)
     covered = {(min(a, b), max(a, b)) for f in model.faces for a, b in zip(f, f[1:] + f[:1])}

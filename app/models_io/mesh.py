@@ -101,9 +101,9 @@ class _Limits:
 
     def refuse(self, where: str, holds: str) -> MeshError:
         return MeshError(
-            f"{where}: {holds}, beyond mcit's limits for one mesh ({self.faces:,} triangles, {self.vertices:,} vertices, "
-            f"{self.bytes / 2**20:g} MB); simplify the mesh in its CAD program, or raise the limits with "
-            f"`mcit db import --max-faces N`"
+            f"{where}: {holds}, beyond mcit's limits for one mesh ({self.faces:,} triangles, "
+            f"{self.vertices:,} vertices, {self.bytes / 2**20:g} MB); simplify the mesh in "
+            "its CAD program, or raise the limits with `mcit db import --max-faces N`"
         )
 
 
@@ -687,7 +687,8 @@ def read_mesh(path: str | Path, angle_deg: float = 30.0, *, max_faces: int = MAX
         warnings.warn(
             MeshWarning(
                 f"{path}: this mesh gives nothing to draw on the overlay (no sharp edge and no curved surface with an "
-                f"outline, e.g. each triangle given twice); export the object again from its CAD program as a closed surface"
+                "outline, e.g. each triangle given twice); export the "
+                "object again from its CAD program as a closed surface"
             ),
             stacklevel=2,
         )

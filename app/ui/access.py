@@ -198,7 +198,10 @@ class AccessPolicy:
 
     def refuse_text(self, reason: str) -> str:
         if "token" in reason:
-            return f"mcit refused this request: {reason}. Open the address that mcit serve printed (it ends with ?token=...).\n"
+            return (
+                f"mcit refused this request: {reason}. Open the address "
+                "that mcit serve printed (it ends with ?token=...).\n"
+            )
         return f"mcit refused this request: {reason}.\n"
 
     def note_refusal(self, reason: str, remote) -> None:

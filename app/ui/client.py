@@ -719,8 +719,8 @@ class ClientPanel:
 
     def _find_from_double_click(self, uv: np.ndarray, name: str | None) -> None:
         """Find, pressed by a double click at uv; a refusal says where the click was and, when it lies on
-        another object as the database draws it, that object (a new operator double-clicked box_1 with the parallelepiped
-        selected, and read the same refusal three times, not knowing whether a click was taken)."""
+        another object as the database draws it, that object (a new operator double-clicked box_1 with the
+        parallelepiped selected, and read the same refusal three times, not knowing whether a click was taken)."""
         other = self._object_at(uv)
         # when it was (a repeated refusal reads as new: the pixel meant nothing to a new operator)
         self._double_at = (

@@ -10,7 +10,8 @@ and OpenCV's 5 coefficients (``--model rational`` for 8), and the file holds ``i
 used. Examples::
 
     mcit calibrate-intrinsics frames/ --board checkerboard --cols 9 --rows 6 --square-mm 25 --out cam.yml
-    mcit calibrate-intrinsics calib.mp4 --every 10 --board charuco --cols 7 --rows 5 --square-mm 30 --marker-mm 22 --out cam.yml
+    mcit calibrate-intrinsics calib.mp4 --every 10 --board charuco --cols 7 --rows 5 --square-mm 30 \
+--marker-mm 22 --out cam.yml
 """
 
 from __future__ import annotations

@@ -12,8 +12,8 @@ Each frame (the "moving edges" tracker of Comport, Marchand et al., 2006, as in 
    found points to their projected edges (``core.point_line_pose.refine_point_to_line``);
 4. steps 1–3 are repeated once at the refined pose with a narrower search (``refine_search_px``);
 5. if the answer fails the support check below while its confidence is good (motion beyond the
-   band), after at least one frame followed, the frame is tried once more from the same start, coarse to fine (``capture_px``, then
-   the two bands above), before the object is declared lost;
+   band), after at least one frame followed, the frame is tried once more from the same start,
+   coarse to fine (``capture_px``, then the two bands above), before the object is declared lost;
 6. the first frame after a pose is given (which may be degrees or a centimetre off) that fails,
    whatever its confidence, is tried again from the same start coarse to fine from each of
    ``start_capture_px`` (±24 and ±16 px): two hypotheses, each kept only if it passes every lost
@@ -321,8 +321,9 @@ class BandSmoothed:
     the given sample points that are not smoothed yet (one OpenCV call per run of tiles along a
     row, each read with a margin of the kernel's radius, and the frame's edges replicated as the
     whole-frame blur does), so the smoothed values are those of the whole frame's blur (to float
-    rounding: 1 ulp, 2e-5 grey levels, measured), computed in bands around the projected model only. ``img`` is the (H, W) float32 grey image; outside
-    the smoothed tiles its values are undefined.
+    rounding: 1 ulp, 2e-5 grey levels, measured), computed in bands around the projected model
+    only. ``img`` is the (H, W) float32 grey image; outside the smoothed tiles its values are
+    undefined.
     """
 
     def __init__(self, frame: np.ndarray, sigma_px: float, tile_px: int = 32):

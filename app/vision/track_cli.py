@@ -169,7 +169,8 @@ def _setup(args):
             K, T_cam_world = camera.decompose()
             if not np.allclose(T_cam_world, np.eye(4), atol=1e-9):
                 raise ValueError(
-                    "--init-clicks needs --intrinsics (the camera frame as the world); with --scene give --pose or --body"
+                    "--init-clicks needs --intrinsics (the camera frame "
+                    "as the world); with --scene give --pose or --body"
                 )
         clicks = np.array(args.init_clicks, dtype=float)
         if lens is not None:

@@ -200,7 +200,10 @@ class CalibrateTurret(Workflow):
             self.state = "pick"
             Xm = beam_point(self.site.T_world_turret, pan_r, tilt_r, m.range_m)
             self.site.set_beam(Xm)
-            self.message = f"{self.labels[-1]}: {1000 * m.range_m:.1f} mm ({len(self.pan)} measurement{'s' if len(self.pan) != 1 else ''})."
+            self.message = (
+                f"{self.labels[-1]}: {1000 * m.range_m:.1f} mm "
+                f"({len(self.pan)} measurement{'s' if len(self.pan) != 1 else ''})."
+            )
             off = self._off_surface_m(Xm)
             if off > OFF_SURFACE_M:  # said now, not only when Solve leaves it out
                 self.message += (

@@ -145,7 +145,8 @@ class DesignateTarget(Workflow):
             hit = self.site.raycast(origin, ray)
             if hit is None and devices is None:
                 raise WorkflowError(
-                    f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object of the database; click on an object or the table"
+                    f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object "
+                    "of the database; click on an object or the table"
                 )
             if devices is not None:
                 self.cancel_event.clear()
@@ -167,8 +168,9 @@ class DesignateTarget(Workflow):
         why = self.scene_changed(t.uv)
         if why:
             warning = (
-                f"Warning: {why}: the target is where the database{' and the range finder' if t.rangefinder_X is not None else ''}"
-                " put it now, not what the frozen frame shows; look at the live video (L) or freeze a new frame (F)"
+                f"Warning: {why}: the target is where the "
+                f"database{' and the range finder' if t.rangefinder_X is not None else ''} put it now, "
+                "not what the frozen frame shows; look at the live video (L) or freeze a new frame (F)"
             )
             t = dataclasses.replace(t, warning=warning)
             message = _sentence(warning)
@@ -310,7 +312,10 @@ class DesignateTarget(Workflow):
             )
             warning = ""
         else:
-            check = f"the range finder disagrees by {100 * delta:+.1f} cm along the line of sight ({LIMIT_SIGMA:.0f}σ = {1000 * limit:.1f} mm){off}"
+            check = (
+                f"the range finder disagrees by {100 * delta:+.1f} cm along the "
+                f"line of sight ({LIMIT_SIGMA:.0f}σ = {1000 * limit:.1f} mm){off}"
+            )
             if delta < 0:
                 warning = (
                     f"Warning: the range finder met a surface {100 * -delta:.1f} cm in front of the database's "

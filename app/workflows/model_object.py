@@ -169,8 +169,8 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
         elif object_name in taken:
             raise WorkflowError(f"an object named {object_name!r} already exists; choose another name")
         self.object_name = object_name
-        # box: one entry per face {"segs": [...], "snaps": [...], "points": (N, 3), "covs": (N, 3, 3), "scan": RangeScan,
-        # "good": (len(scan),) the beams that gave "points"}
+        # box: one entry per face {"segs": [...], "snaps": [...], "points": (N, 3), "covs": (N, 3, 3),
+        # "scan": RangeScan, "good": (len(scan),) the beams that gave "points"}
         self.faces: list[dict[str, Any]] = [self._new_face()]
         self.silhouettes: list[np.ndarray] = []
         self.silhouette_snaps: list = []
@@ -385,7 +385,10 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             self.scans = scans
             self.result = None
             hits = [int(s.hits.sum()) for s in scans]
-            self.message = f"2 profiles across the box: {hits[0]} and {hits[1]} returns of {len(scans[0])} and {len(scans[1])} beams"
+            self.message = (
+                f"2 profiles across the box: {hits[0]} and {hits[1]} returns "
+                f"of {len(scans[0])} and {len(scans[1])} beams"
+            )
             return scans
 
     def scan(self) -> list[RangeScan]:

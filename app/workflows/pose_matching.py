@@ -165,6 +165,6 @@ class AutoMatchMixin:
             self._invalidate()
             self.state = "review"
             self.message = (
-                f"Assignment {i + 1} confirmed: segments {', '.join(f'{j + 1}→e{e}' for j, e in enumerate(self.edge_ids))}."
-                " Refine, then Accept."
+                f"Assignment {i + 1} confirmed: segments "
+                f"{', '.join(f'{j + 1}→e{e}' for j, e in enumerate(self.edge_ids))}. Refine, then Accept."
             )

@@ -196,9 +196,9 @@ class OneClickMixin:
             return ""
         return (
             f"{self.object_name} was moving in this frame (it differs from the frame {MOTION_GAP_S:.1f} s before): "
-            "the pose found is where it passed, not where it stays; once it has stopped, press Remove last, freeze a frame "
-            "(F; Seconds back reaches one where it had stopped before) and double-click it again, or Accept if it "
-            "stopped there"
+            "the pose found is where it passed, not where it stays; once it has stopped, "
+            "press Remove last, freeze a frame (F; Seconds back reaches one where it had "
+            "stopped before) and double-click it again, or Accept if it stopped there"
         )
 
     def _near_ties(self) -> int:
@@ -287,7 +287,8 @@ class OneClickMixin:
                 )
             elif ties:
                 choose = (
-                    f" {ties + 1} poses fit almost equally (e.g. a box of nearly square footprint turned 90°): look closely, "
+                    f" {ties + 1} poses fit almost equally (e.g. a box of "
+                    "nearly square footprint turned 90°): look closely, "
                     "pick another {choose_candidate} if the white one is not on the object."
                 )
             else:
@@ -336,8 +337,8 @@ class OneClickMixin:
             )
         if 1.0 - c.mismatch < WEAK_FOUND_MATCH:
             out.append(
-                f"only {100 * (1 - c.mismatch):.0f} % of its outline matches the image (the rest hidden, or not there): "
-                "check the white ghost where the object is hidden, or click an edge of it and Refine"
+                f"only {100 * (1 - c.mismatch):.0f} % of its outline matches the image (the rest hidden, or not "
+                "there): check the white ghost where the object is hidden, or click an edge of it and Refine"
             )
         return out
 

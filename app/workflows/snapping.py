@@ -250,7 +250,10 @@ class SnapMixin:
         if s is None:
             return ""
         if s.applied:
-            return f"{what} snapped {s.moved_px:.1f} px to the image's {'edge' if s.kind == 'segment' else 'corner'} (Refuse snap keeps your click)."
+            return (
+                f"{what} snapped {s.moved_px:.1f} px to the image's "
+                f"{'edge' if s.kind == 'segment' else 'corner'} (Refuse snap keeps your click)."
+            )
         return f"{what} kept as clicked: {s.reason}."
 
     def _last_snap(self) -> tuple[ClickSnap | None, Any]:  # pragma: no cover - per workflow

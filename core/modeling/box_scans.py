@@ -262,8 +262,9 @@ def associate_tangents(
             if not 0.0 <= s[0] <= 1.0:
                 raise ValueError(
                     f"scan {k} crosses the line of the box's {where}-pan vertical edge "
-                    f"{'above' if (s[0] > 1.0) == bool(R[:, m] @ z > 0) else 'below'} the box: its ends bracket the top or "
-                    "bottom face's border, not a vertical edge; scan across the box's sides, between its bottom and top"
+                    f"{'above' if (s[0] > 1.0) == bool(R[:, m] @ z > 0) else 'below'} the "
+                    "box: its ends bracket the top or bottom face's border, not a vertical "
+                    "edge; scan across the box's sides, between its bottom and top"
                 )
             out.append(EdgeTangent(tb, (i, j), n, d, rho_h * tb.sigma_pan_rad))
     return out

@@ -112,7 +112,8 @@ def fit_face_plane(
         raise ValueError(f"face {label!r}: range points must have shape (N, 3), got {X.shape}")
     if len(X) < 3:
         raise ValueError(
-            f"face {label!r}: a face plane needs at least 3 range points, got {len(X)}; aim the range finder at more points of the face"
+            f"face {label!r}: a face plane needs at least 3 range points, "
+            f"got {len(X)}; aim the range finder at more points of the face"
         )
     X = finite_array(X, (None, 3), f"face {label!r} range points", max_abs=MAX_M, unit=" m")
     if covs is not None:

@@ -1097,12 +1097,13 @@ def refine_many(
     summary,
 ):
     """``refine_one`` from each start T0 (K, 4, 4) with the model edges edges (K, S, 2, 3) (one
-    assignment per start) and the clicked features' extent (K,); outputs gain a leading axis K: T, r, w_unit, cov = (Jᵀ W J)⁻¹, free,
-    status, iterations, converged; score (K,): the RMS pixel distance of the clicks to the
-    projected finite model features at the result (``distance_cost``), inf when a clicked feature
-    is behind the camera or the refinement failed; summary (K, 2 (S + P) + 2): per click its
-    residual (a segment's larger |distance|, a point's distance), then per click its smallest
-    robust weight, then the RMS of r and the a-posteriori σ (NaN without redundancy)."""
+    assignment per start) and the clicked features' extent (K,); outputs gain a leading axis K:
+    T, r, w_unit, cov = (Jᵀ W J)⁻¹, free, status, iterations, converged; score (K,): the RMS pixel
+    distance of the clicks to the projected finite model features at the result
+    (``distance_cost``), inf when a clicked feature is behind the camera or the refinement failed;
+    summary (K, 2 (S + P) + 2): per click its residual (a segment's larger |distance|, a point's
+    distance), then per click its smallest robust weight, then the RMS of r and the a-posteriori σ
+    (NaN without redundancy)."""
     K, S = edges.shape[0], edges.shape[1]
     P = pts_obj.shape[0]
     m = 2 * (S + P)

@@ -24,7 +24,10 @@ def box_frames(tmp_path_factory):
     write_cao(box, d / "box.cao")
     T0 = poses[0]
     (d / "box.pos").write_text("\n".join(f"{x:.12f}" for x in np.r_[T0[:3, 3], log_so3(T0[:3, :3])]))
-    model = "<model><type>perspectiveProjWithoutDistortion</type><px>{f}</px><py>{f}</py><u0>159.5</u0><v0>119.5</v0></model>"
+    model = (
+        "<model><type>perspectiveProjWithoutDistortion</type><px>"
+        "{f}</px><py>{f}</py><u0>159.5</u0><v0>119.5</v0></model>"
+    )
     (d / "rig.xml").write_text(
         "<root>"
         + "".join(

@@ -32,8 +32,14 @@ VP_CAMERA = """<?xml version="1.0"?>
   </camera>
 </root>
 """
-NO_DIST = """<model><type>perspectiveProjWithoutDistortion</type><px>600.5</px><py>601.5</py><u0>320.25</u0><v0>240.75</v0></model>"""
-DIST = """<model><type>perspectiveProjWithDistortion</type><px>610</px><py>611</py><u0>321</u0><v0>241</v0><kud>-0.1</kud><kdu>0.1</kdu></model>"""
+NO_DIST = (
+    "<model><type>perspectiveProjWithoutDistortion</type>"
+    "<px>600.5</px><py>601.5</py><u0>320.25</u0><v0>240.75</v0></model>"
+)
+DIST = (
+    "<model><type>perspectiveProjWithDistortion</type>"
+    "<px>610</px><py>611</py><u0>321</u0><v0>241</v0><kud>-0.1</kud><kdu>0.1</kdu></model>"
+)
 
 
 def test_visp_camera_parser_layout_prefers_the_model_without_distortion(tmp_path):

@@ -10,7 +10,10 @@ import pytest
 from app.models_io import CaoError, CaoWarning, cao_text, read_cao, read_init
 from core.transforms import exp_so3
 
-BOX = "V1\n8\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n1 0 1\n1 1 1\n0 1 1\n0\n0\n6\n4 0 3 2 1\n4 4 5 6 7\n4 0 1 5 4\n4 1 2 6 5\n4 2 3 7 6\n4 3 0 4 7\n0\n0\n"
+BOX = (
+    "V1\n8\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n1 0 1\n1 1 1\n0 1 1\n0\n0\n6\n"
+    "4 0 3 2 1\n4 4 5 6 7\n4 0 1 5 4\n4 1 2 6 5\n4 2 3 7 6\n4 3 0 4 7\n0\n0\n"
+)
 RZ90_ROWS = "0; -1; 0; 1; 0; 0; 0; 0; 1"  # rotation of +90° about z, row by row
 
 

@@ -143,9 +143,8 @@ def test_export_on_a_full_disk_leaves_out_as_it_was(tmp_path, capsys, monkeypatc
     monkeypatch.setattr(models_io, name, _disk_full_after(100, getattr(models_io, name)))
     code, stdout, err = _mcit(capsys, "db", "export", "parallelepiped", str(out), "--db", db)
     assert code == 1 and stdout == ""
-    assert (
-        err
-        == f"mcit db export: error: {out}: No space left on device (nothing was written); free some space and try again\n"
+    assert err == (
+        f"mcit db export: error: {out}: No space left on device (nothing was written); free some space and try again\n"
     )
     assert [p.name for p in folder.iterdir()] == ([] if existing is None else [out.name])  # no temporary left
     if existing is not None:

@@ -99,7 +99,8 @@ def _v1_database(path):
     T = np.eye(4)
     T[:3, 3] = [0.1, 0.2, 0.0]
     conn.execute(
-        "INSERT INTO objects (id, name, kind, model_id, dims, sigmas, T_world_obj, cov, status, version, created_at, updated_at) "
+        "INSERT INTO objects (id, name, kind, model_id, dims, sigmas, "
+        "T_world_obj, cov, status, version, created_at, updated_at) "
         "VALUES (1, 'parallelepiped', 'box', 1, '{\"size_x\": 0.35}', '{}', ?, NULL, 'known', 2, 1.0, 2.0)",
         (json.dumps(T.tolist()),),
     )
@@ -113,7 +114,8 @@ def _v1_database(path):
         ),
     )
     conn.execute(
-        "INSERT INTO calibrations (kind, data, residuals, time, client, method) VALUES ('camera', ?, '[0.5]', 1.0, 'old', 'dlt')",
+        "INSERT INTO calibrations (kind, data, residuals, time, client, "
+        "method) VALUES ('camera', ?, '[0.5]', 1.0, 'old', 'dlt')",
         (json.dumps({"C": np.hstack([np.eye(3), np.zeros((3, 1))]).tolist(), "width": 512, "height": 256}),),
     )
     conn.close()

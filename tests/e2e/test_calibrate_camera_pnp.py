@@ -97,9 +97,9 @@ def test_calibrate_camera_by_pnp_from_5_points(browser, lens_interface, scene):
     stored = Camera(np.asarray(cal.data["C"], float), true_cam.width, true_cam.height)
     err = np.linalg.norm(stored.project(truth) - true_cam.project(truth), axis=1)
     print(
-        f"  stored C vs true C at {len(truth)} body corners: max {err.max():.2f} px, RMS {np.sqrt(np.mean(err**2)):.2f} px "
-        f"(before {err_before:.1f} px); 5 points, RMS {wf.result.rms_px:.2f} px; centre "
-        f"{1000 * np.linalg.norm(stored.center - true_cam.center):.1f} mm off"
+        f"  stored C vs true C at {len(truth)} body corners: max {err.max():.2f} px, RMS "
+        f"{np.sqrt(np.mean(err**2)):.2f} px (before {err_before:.1f} px); 5 points, RMS "
+        f"{wf.result.rms_px:.2f} px; centre {1000 * np.linalg.norm(stored.center - true_cam.center):.1f} mm off"
     )
     assert err.max() < 1.5
     page.close()

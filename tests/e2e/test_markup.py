@@ -109,7 +109,8 @@ def _no_markup_ran(page, ui, canary, evil) -> None:
         scripts: [...document.querySelectorAll('script')].filter(s => s.textContent.includes(CANARY)).length,
         jslinks: [...document.querySelectorAll('a')].filter(a => (a.getAttribute('href') || '').trim()
                                                                  .toLowerCase().startsWith('javascript')).length,
-        images: [...document.querySelectorAll('img')].filter(i => (i.getAttribute('src') || '').includes(CANARY)).length,
+        images: [...document.querySelectorAll('img')].filter(i => (i.getAttribute('src') || '')"""
+        """.includes(CANARY)).length,
     })""".replace("CANARY", repr(f":{canary.port}/"))
     )
     assert planted == dict(iframes=0, handlers=0, svgs=0, scripts=0, jslinks=0, images=0), planted

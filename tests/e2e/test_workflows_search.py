@@ -5,7 +5,8 @@ pose fits, nothing is written. Prints the operator actions and seconds (run with
 
 Measured (2 cores, 1200×700; a canvas click, a double click or a button is one action): 4 actions —
 select, Update pose, double click, Accept — in 1.1 s at load 1 (with a click and Find instead of the
-double click: 5 actions, 2.9-6.2 s at load 8-16); written 0.05° / 0.5 mm from the truth. The whole test (with the refused click on the table) runs in about 30 s.
+double click: 5 actions, 2.9-6.2 s at load 8-16); written 0.05° / 0.5 mm from the truth. The whole
+test (with the refused click on the table) runs in about 30 s.
 """
 
 from __future__ import annotations

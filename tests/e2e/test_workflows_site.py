@@ -210,8 +210,9 @@ def test_calibrate_camera_by_clicks(browser, interface, scene):
     stored = Camera(np.asarray(cals[-1].data["C"], float), true_cam.width, true_cam.height)
     err = np.linalg.norm(stored.project(bodies) - true_cam.project(bodies), axis=1)
     print(
-        f"  stored C vs true C at {len(bodies)} body corners: max {err.max():.2f} px, RMS {np.sqrt(np.mean(err**2)):.2f} px"
-        f" (before {err_before:.1f} px); {len(corners) - 1} points, RMS {wf.result.rms_px:.2f} px"
+        f"  stored C vs true C at {len(bodies)} body corners: max {err.max():.2f} px, "
+        f"RMS {np.sqrt(np.mean(err**2)):.2f} px (before {err_before:.1f} px); "
+        f"{len(corners) - 1} points, RMS {wf.result.rms_px:.2f} px"
     )
     assert err.max() < 1.0
     assert ui.db.history()[-1].client.startswith("browser-")

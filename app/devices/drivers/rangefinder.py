@@ -22,8 +22,9 @@ Robustness (no checksum on the wire):
   arriving then (a complete reply pushed in ahead of the real one) voids the exchange, which is
   measured again after a resynchronisation; a distance that jumps more than ``jump_sigmas`` × σ
   (``sigma_m``) from the median of the last ones (and the first one, with none before it) is
-  measured a second time and kept only when two consecutive readings agree — a garbled digit that still parses, or a stray reply, is not
-  returned as the distance. ``stats["jumps"]``, ``stats["two_replies"]`` count them;
+  measured a second time and kept only when two consecutive readings agree — a garbled digit
+  that still parses, or a stray reply, is not returned as the distance. ``stats["jumps"]``,
+  ``stats["two_replies"]`` count them;
 * a line that brings only garbage (noise, a wrong baud rate) ends in ``NoisyLineError``: the
   range finder's line is noisy, check the cable and the baud rate;
 * ``measure_n`` takes the median of several shots for precision and flags outliers.

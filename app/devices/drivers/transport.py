@@ -280,7 +280,8 @@ class LineDriver:
     ):
         if not (attempt_timeout_s > 0 and reconnect_timeout_s >= 0):  # NaN fails too
             raise ValueError(
-                f"timeouts must be positive, got attempt_timeout_s={attempt_timeout_s}, reconnect_timeout_s={reconnect_timeout_s}"
+                f"timeouts must be positive, got attempt_timeout_s={attempt_timeout_s}, "
+                f"reconnect_timeout_s={reconnect_timeout_s}"
             )
         if int(retries) < 0:
             raise ValueError(f"retries must be >= 0, got {retries}")

@@ -260,7 +260,8 @@ class Turret(LineDriver):
             raise ProtocolError(f"turret: implausible limits {limits}", device=self.device)
         if self.resolution_arcsec is not None and (res_p, res_t) != self.resolution_arcsec:
             raise DeviceError(
-                f"turret: after reconnecting, the resolution is {res_p, res_t}, was {self.resolution_arcsec}: another unit?",
+                "turret: after reconnecting, the resolution is "
+                f"{res_p, res_t}, was {self.resolution_arcsec}: another unit?",
                 device=self.device,
             )
         self.resolution_arcsec = (res_p, res_t)

@@ -141,8 +141,8 @@ def test_an_unplug_mid_scan_never_gives_a_wrong_beam(kind, timed, workcell, make
         wrong += [(seed, *w) for w in wrong_beams(workcell, raycaster, beams)]
     bad_scans = len({w[0] for w in wrong})
     print(
-        f"\n{kind}, unplug {'during a shot' if timed else 'at a reply'}: {TRIALS} scans, {unplugged} unplugs, {errors} DeviceErrors, {len(wrong)} wrong beams of {total} "
-        f"(in {bad_scans} scans)"
+        f"\n{kind}, unplug {'during a shot' if timed else 'at a reply'}: {TRIALS} scans, {unplugged} unplugs, "
+        f"{errors} DeviceErrors, {len(wrong)} wrong beams of {total} (in {bad_scans} scans)"
     )
     assert unplugged >= TRIALS - 2  # the fault really happened (a scan may end before the last reply it matches)
     assert not wrong, (

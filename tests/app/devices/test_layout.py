@@ -19,7 +19,8 @@ def test_the_drivers_load_no_emulator_and_no_fault_injection():
     """A host that drives real devices imports no emulator, port or fault code."""
     code = (
         "import sys; import app.devices.drivers.rangefinder, app.devices.drivers.turret; "
-        "print(sorted(m for m in sys.modules if m.startswith('app.devices.') and not m.startswith('app.devices.drivers')))"
+        "print(sorted(m for m in sys.modules if m.startswith('app.devices.') "
+        "and not m.startswith('app.devices.drivers')))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "[]", out

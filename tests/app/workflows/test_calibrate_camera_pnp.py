@@ -48,7 +48,8 @@ def _true_corners(scene, t_s=T_S):
 
 
 def _pose_error(T_est, T_true):
-    """The truth's offset from the estimate in the solver's perturbation (δω, δt): R_true = exp(δω) R̂, t_true = t̂ + δt."""
+    """The truth's offset from the estimate in the solver's perturbation (δω, δt):
+    R_true = exp(δω) R̂, t_true = t̂ + δt."""
     return np.r_[log_so3(T_true[:3, :3] @ T_est[:3, :3].T), T_true[:3, 3] - T_est[:3, 3]]
 
 

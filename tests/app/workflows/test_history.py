@@ -38,9 +38,9 @@ def test_undo_brings_the_old_pose_back_and_is_recorded(site, db):
     assert np.allclose(site.object("parallelepiped").T_world_obj, T_new)
     what = f"redid change #{last_id} (parallelepiped; undid undo #{rec.id})"
     assert wf.summary()["changes"][0]["what"] == what and wf.summary()["changes"][0]["how"] == "redo"
-    assert (
-        wf.message
-        == f"Redid change #{last_id} (parallelepiped; undid undo #{rec.id}), recorded as change #{redo.id} (it can be undone in turn)"
+    assert wf.message == (
+        f"Redid change #{last_id} (parallelepiped; undid undo #{rec.id}), "
+        f"recorded as change #{redo.id} (it can be undone in turn)"
     )
     assert any(text.startswith(f"#{redo.id} alice {what}") for text, _ in wf.choices("change"))
     assert [c.what for c in site.changes_since(rec.id)] == [what]

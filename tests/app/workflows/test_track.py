@@ -33,7 +33,8 @@ def test_track_follows_the_moving_box_and_accept_writes_the_tracked_pose(video_s
     marks = wf.marks()
     assert len(marks.tracked) == 1 and marks.tracked[0].chosen and len(marks.found_points) > 20
     assert wf.summary()["frames"] == 13 and wf.summary()["state"] == "tracking"
-    # the instruction says how well the tracked pose fits the frame, and that it can be wrong where the image does not show it
+    # the instruction says how well the tracked pose fits the frame, and that it can be wrong where
+    # the image does not show it
     import re
 
     fit = re.search(r"edges (\d+\.\d) px off, σ (\d+\.\d) mm / (\d+\.\d\d)°", wf.prompt_text())
