@@ -5,8 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from app.models_io import CaoError, MeshError, cao_text, load_model, read_cao, save_model
-from app.models_io import MODEL_LOADERS
+from app.models_io import MODEL_LOADERS, CaoError, MeshError, cao_text, load_model, read_cao, save_model
 from app.scene import load_scene, scenes_dir
 from core.brep import BRep
 from core.transforms import exp_so3, make_T
