@@ -440,8 +440,36 @@ def _paper_jacobian(z: np.ndarray, ctx: _Ctx, sol: dict) -> np.ndarray | None:
     if a is None:
         return None
     n = len(z)
-    cam = d.camera
     sil, angles, _ = _unpack(z, ctx)
+    planes = _planes_jacobian(z, ctx, sil, angles, a)
+    e1, e2 = axis_basis(a)
+    sections = [_section_jacobian(ctx, planes, a, e1, e2, t) for t in ctx.t_sections]
+    Xa, dXa, r_ref, dr_ref, k, dk = _axis_jacobian(ctx, sections, e1, e2, n)
+    # _finish: the generators seen from the camera, the clicked ends' heights on them, the support.
+    dt_base = dt_top = None
+    if sil is not None:
+        dt_base, dt_top = _end_heights_jacobian(ctx, sil, Xa, dXa, a, r_ref, dr_ref, k, dk, n)
+    if d.support is not None:
+        dt_base = -(d.support.n @ dXa) / (d.support.n @ a)
+    if dt_top is None or dt_base is None:
+        return None
+    t_base_v = (sol["p0"] - Xa) @ a
+    h = sol["h"]
+    dh = dt_top - dt_base
+    dr0, dr1 = dr_ref + t_base_v * dk + k * dt_base, dr_ref + (t_base_v + h) * dk + k * dt_top
+    dp0 = dXa + np.outer(a, dt_base)
+    dmid = dp0 + 0.5 * np.outer(a, dh)
+    dradii = [dr0, dr1] if d.cone else [0.5 * (dr0 + dr1)]
+    return np.vstack([*dradii, dh, dmid, np.zeros((3, n))])
+
+
+def _planes_jacobian(z: np.ndarray, ctx: _Ctx, sil, angles: np.ndarray, a: np.ndarray) -> dict:
+    """The planes the method cuts the cross-sections with, each (4,) with its derivative (4, n):
+    "P1", "P2" (the silhouettes'), "p3" (the front plane), "lat-1", "lat1" (the range finder's
+    lateral planes), and for "bisecting" "bis_cam", "bis_rf" (the two bisecting planes)."""
+    d = ctx.data
+    n = len(z)
+    cam = d.camera
     i_ang = 8 if sil is not None else 0
     nb = len(d.tangents)
     planes = {}
@@ -459,44 +487,54 @@ def _paper_jacobian(z: np.ndarray, ctx: _Ctx, sol: dict) -> np.ndarray | None:
         for s in (-1, 1):
             idx = [i for i, tb in enumerate(d.tangents) if tb.side == s]
             planes[f"lat{s}"] = _lateral_plane_jacobian(ctx, idx, angles, a, i_ang, n)
-    e1, e2 = axis_basis(a)
-
-    def line(name, t):
-        (v, dv) = planes[name]
-        u_raw, du_raw = np.array([v[:3] @ e1, v[:3] @ e2]), np.array([e1 @ dv[:3], e2 @ dv[:3]])
-        g_raw, dg_raw = v[:3] @ ctx.X0 + t * (v[:3] @ a) + v[3], (ctx.X0 + t * a) @ dv[:3] + dv[3]
-        s_ = np.linalg.norm(u_raw)
-        ds = u_raw @ du_raw / s_
-        return u_raw / s_, du_raw / s_ - np.outer(u_raw, ds) / s_**2, g_raw / s_, dg_raw / s_ - g_raw * ds / s_**2
-
     if ctx.method == "bisecting":
         for pair, name in ((("P1", "P2"), "bis_cam"), (("lat-1", "lat1"), "bis_rf")):
             (v1, dv1), (v2, dv2) = planes[pair[0]], planes[pair[1]]
             planes[name] = _unit_plane_jacobian(v1 - v2, dv1 - dv2)
-    centres, dcentres, radii, dradii = [], [], [], []
-    for t in ctx.t_sections:
-        if ctx.method == "bisecting":
-            (u1, du1, g1, dg1), (u2, du2, g2, dg2) = line("bis_cam", t), line("bis_rf", t)
-            A = np.array([u1, u2])
-            y = np.linalg.solve(A, -np.array([g1, g2]))
-            dy = np.linalg.solve(A, -np.array([dg1, dg2]) - np.array([y @ du1, y @ du2]))
-            ls = [line("lat-1", t), line("lat1", t)]
-            r = np.mean([u @ y + g for u, _, g, _ in ls])
-            dr = np.mean([y @ du + u @ dy + dg for u, du, _, dg in ls], axis=0)
-        else:
-            names = ("P1", "P2", "p3") if ctx.method == "tangential" else ("lat-1", "lat1", "p3")
-            ls = [line(nm, t) for nm in names]
-            A = np.array([[u[0], u[1], -1.0] for u, _, _, _ in ls])
-            x, *_ = np.linalg.lstsq(A, -np.array([g for _, _, g, _ in ls]), rcond=None)
-            rhs = -np.array([dg for _, _, _, dg in ls]) - np.array([x[:2] @ du for _, du, _, _ in ls])
-            dx = np.linalg.pinv(A) @ rhs
-            y, dy, r, dr = x[:2], dx[:2], x[2], dx[2]
-        centres.append(y)
-        dcentres.append(dy)
-        radii.append(r)
-        dradii.append(dr)
+    return planes
+
+
+def _section_line_jacobian(v: np.ndarray, dv: np.ndarray, X0, a, e1, e2, t):
+    """``_section_line`` of the plane v (4,) and its derivatives: (u (2,), du (2, n), g, dg (n,))."""
+    u_raw, du_raw = np.array([v[:3] @ e1, v[:3] @ e2]), np.array([e1 @ dv[:3], e2 @ dv[:3]])
+    g_raw, dg_raw = v[:3] @ X0 + t * (v[:3] @ a) + v[3], (X0 + t * a) @ dv[:3] + dv[3]
+    s_ = np.linalg.norm(u_raw)
+    ds = u_raw @ du_raw / s_
+    return u_raw / s_, du_raw / s_ - np.outer(u_raw, ds) / s_**2, g_raw / s_, dg_raw / s_ - g_raw * ds / s_**2
+
+
+def _section_jacobian(ctx: _Ctx, planes: dict, a, e1, e2, t: float):
+    """The cross-section at t: its centre y (2,) and radius r with their derivatives (dy (2, n), dr (n,))."""
+
+    def line(name):
+        return _section_line_jacobian(*planes[name], ctx.X0, a, e1, e2, t)
+
+    if ctx.method == "bisecting":
+        (u1, du1, g1, dg1), (u2, du2, g2, dg2) = line("bis_cam"), line("bis_rf")
+        A = np.array([u1, u2])
+        y = np.linalg.solve(A, -np.array([g1, g2]))
+        dy = np.linalg.solve(A, -np.array([dg1, dg2]) - np.array([y @ du1, y @ du2]))
+        ls = [line("lat-1"), line("lat1")]
+        r = np.mean([u @ y + g for u, _, g, _ in ls])
+        dr = np.mean([y @ du + u @ dy + dg for u, du, _, dg in ls], axis=0)
+        return y, dy, r, dr
+    names = ("P1", "P2", "p3") if ctx.method == "tangential" else ("lat-1", "lat1", "p3")
+    ls = [line(nm) for nm in names]
+    A = np.array([[u[0], u[1], -1.0] for u, _, _, _ in ls])
+    x, *_ = np.linalg.lstsq(A, -np.array([g for _, _, g, _ in ls]), rcond=None)
+    rhs = -np.array([dg for _, _, _, dg in ls]) - np.array([x[:2] @ du for _, du, _, _ in ls])
+    dx = np.linalg.pinv(A) @ rhs
+    return x[:2], dx[:2], x[2], dx[2]
+
+
+def _axis_jacobian(ctx: _Ctx, sections: list, e1, e2, n: int):
+    """``_axis_from_sections`` with derivatives: (Xa (3,), dXa (3, n), r_ref, dr_ref (n,), k, dk (n,))."""
+    centres = [y for y, _, _, _ in sections]
+    dcentres = [dy for _, dy, _, _ in sections]
+    radii = [r for _, _, r, _ in sections]
+    dradii = [dr for _, _, _, dr in sections]
     dy = np.mean(dcentres, axis=0)
-    if d.cone:
+    if ctx.data.cone:
         X = np.column_stack([ctx.t_sections, np.ones(len(ctx.t_sections))])
         dk, dr_ref = np.linalg.pinv(X) @ np.array(dradii)
         k, r_ref = np.linalg.pinv(X) @ np.array(radii)
@@ -504,83 +542,83 @@ def _paper_jacobian(z: np.ndarray, ctx: _Ctx, sol: dict) -> np.ndarray | None:
         k, dk, r_ref, dr_ref = 0.0, np.zeros(n), float(np.mean(radii)), np.mean(dradii, axis=0)
     Xa = ctx.X0 + np.mean(centres, axis=0) @ np.array([e1, e2])
     dXa = np.outer(e1, dy[0]) + np.outer(e2, dy[1])
-    # _finish: the generators seen from the camera, the clicked ends' heights on them, the support.
+    return Xa, dXa, r_ref, dr_ref, k, dk
+
+
+def _end_heights_jacobian(ctx: _Ctx, sil, Xa, dXa, a, r_ref, dr_ref, k, dk, n: int):
+    """Derivatives (n,) of the base's and the top's axial coordinates from the clicked silhouette ends
+    (``_finish``: the contour generators, then ``_click_heights``)."""
+    cam = ctx.data.camera
     t_lo, t_hi = float(ctx.t_sections.min()), float(ctx.t_sections.max())
-    dt_base = dt_top = None
-    if sil is not None:
-        span = max(t_hi - t_lo, 0.05)
-        tl, th = t_lo - 0.1 * span, t_hi + 0.1 * span
-        gens = _generators(cam, Xa, a, r_ref, k, tl, th)
-        # Revolution.silhouette from c: e = (κ/D) ŵ ± √(1 − (κ/D)²) (a × ŵ), the generator
-        # (p0 + r_lo e) → (p1 + r_hi e).
-        c = cam.center
-        r_lo, r_hi, dr_lo, dr_hi = r_ref + k * tl, r_ref + k * th, dr_ref + tl * dk, dr_ref + th * dk
-        q = c - (Xa + tl * a)
-        q_a, dq_a = q @ a, -(a @ dXa)
-        w, dw = q - q_a * a, -dXa - np.outer(a, dq_a)
-        D = np.linalg.norm(w)
-        w_hat = w / D
-        dD = w_hat @ dw
-        dw_hat = (dw - np.outer(w_hat, dD)) / D
-        b_hat, db_hat = np.cross(a, w_hat), np.cross(a, dw_hat, axisa=0, axisb=0, axisc=0)
-        kap = r_lo - (r_lo - r_hi) * q_a / (th - tl)
-        dkap = dr_lo - ((dr_lo - dr_hi) * q_a + (r_lo - r_hi) * dq_a) / (th - tl)
-        cc, dcc = kap / D, dkap / D - kap * dD / D**2
-        sq = np.sqrt(max(0.0, 1.0 - cc * cc))
-        dsq = -cc * dcc / sq
-        dgens = []
-        for sign in (1.0, -1.0):
-            e = cc * w_hat + sign * sq * b_hat
-            de = np.outer(w_hat, dcc) + cc * dw_hat + sign * (np.outer(b_hat, dsq) + sq * db_hat)
-            P0, P1 = Xa + tl * a + r_lo * e, Xa + th * a + r_hi * e
-            dP0 = dXa + np.outer(e, dr_lo) + r_lo * de
-            dP1 = dXa + np.outer(e, dr_hi) + r_hi * de
-            L = np.linalg.norm(P1 - P0)
-            u = (P1 - P0) / L
-            dgens.append((P0, dP0, u, (np.eye(3) - np.outer(u, u)) @ (dP1 - dP0) / L))
-        # _click_heights
-        Minv = np.linalg.inv(cam.C[:, :3])
-        lines = [image_line(*cam.project(np.array([P, P + 0.1 * u]))) for P, u in gens]
-        ends = []
-        for si, seg in enumerate(sil):
-            H = np.column_stack([seg, np.ones(2)])
-            g = int(np.argmin([np.abs(H @ l).sum() for l in lines]))
-            P, dP, u, du = dgens[g]
-            ts, dts = [], []
-            for j in range(2):
-                ray_raw = Minv @ H[j]
-                dray_raw = np.zeros((3, n))
-                dray_raw[:, 4 * si + 2 * j : 4 * si + 2 * j + 2] = Minv[:, :2]
-                nr = np.linalg.norm(ray_raw)
-                ray = ray_raw / nr
-                dray = (dray_raw - np.outer(ray, ray @ dray_raw)) / nr
-                wv, dwv = P - c, dP
-                b, db = ray @ u, u @ dray + ray @ du
-                rw, drw = ray @ wv, wv @ dray + ray @ dwv
-                wu, dwu = wv @ u, u @ dwv + wv @ du
-                den = 1 - b * b
-                dden = -2 * b * db if den > 1e-12 else np.zeros(n)
-                den = max(den, 1e-12)
-                num, dnum = b * rw - wu, db * rw + b * drw - dwu
-                s_g, ds_g = num / den, dnum / den - num * dden / den**2
-                ts.append((P - Xa) @ a + s_g * (u @ a))
-                dts.append(a @ (dP - dXa) + ds_g * (u @ a) + s_g * (a @ du))
-            lo = int(np.argmin(ts))
-            ends.append((dts[lo], dts[1 - lo]))
-        dt_top = np.mean([hi for _, hi in ends], axis=0)
-        dt_base = np.mean([lo for lo, _ in ends], axis=0)
-    if d.support is not None:
-        dt_base = -(d.support.n @ dXa) / (d.support.n @ a)
-    if dt_top is None or dt_base is None:
-        return None
-    t_base_v = (sol["p0"] - Xa) @ a
-    h = sol["h"]
-    dh = dt_top - dt_base
-    dr0, dr1 = dr_ref + t_base_v * dk + k * dt_base, dr_ref + (t_base_v + h) * dk + k * dt_top
-    dp0 = dXa + np.outer(a, dt_base)
-    dmid = dp0 + 0.5 * np.outer(a, dh)
-    dradii = [dr0, dr1] if d.cone else [0.5 * (dr0 + dr1)]
-    return np.vstack([*dradii, dh, dmid, np.zeros((3, n))])
+    span = max(t_hi - t_lo, 0.05)
+    tl, th = t_lo - 0.1 * span, t_hi + 0.1 * span
+    gens = _generators(cam, Xa, a, r_ref, k, tl, th)
+    r_lo, r_hi, dr_lo, dr_hi = r_ref + k * tl, r_ref + k * th, dr_ref + tl * dk, dr_ref + th * dk
+    dgens = _generators_jacobian(cam.center, Xa, dXa, a, tl, th, r_lo, r_hi, dr_lo, dr_hi)
+    Minv = np.linalg.inv(cam.C[:, :3])
+    lines = [image_line(*cam.project(np.array([P, P + 0.1 * u]))) for P, u in gens]
+    ends = []
+    for si, seg in enumerate(sil):
+        H = np.column_stack([seg, np.ones(2)])
+        g = int(np.argmin([np.abs(H @ l).sum() for l in lines]))
+        ts, dts = [], []
+        for j in range(2):
+            dray_raw = np.zeros((3, n))
+            dray_raw[:, 4 * si + 2 * j : 4 * si + 2 * j + 2] = Minv[:, :2]
+            t, dt = _click_height_jacobian(cam.center, Minv @ H[j], dray_raw, *dgens[g], Xa, dXa, a)
+            ts.append(t)
+            dts.append(dt)
+        lo = int(np.argmin(ts))
+        ends.append((dts[lo], dts[1 - lo]))
+    return np.mean([lo for lo, _ in ends], axis=0), np.mean([hi for _, hi in ends], axis=0)
+
+
+def _generators_jacobian(c, Xa, dXa, a, tl, th, r_lo, r_hi, dr_lo, dr_hi) -> list:
+    """The two contour generators seen from c with derivatives, as (P0, dP0, u, du): their base end and
+    unit direction. ``Revolution.silhouette``: e = (κ/D) ŵ ± √(1 − (κ/D)²) (a × ŵ), the generator
+    (p0 + r_lo e) → (p1 + r_hi e)."""
+    q = c - (Xa + tl * a)
+    q_a, dq_a = q @ a, -(a @ dXa)
+    w, dw = q - q_a * a, -dXa - np.outer(a, dq_a)
+    D = np.linalg.norm(w)
+    w_hat = w / D
+    dD = w_hat @ dw
+    dw_hat = (dw - np.outer(w_hat, dD)) / D
+    b_hat, db_hat = np.cross(a, w_hat), np.cross(a, dw_hat, axisa=0, axisb=0, axisc=0)
+    kap = r_lo - (r_lo - r_hi) * q_a / (th - tl)
+    dkap = dr_lo - ((dr_lo - dr_hi) * q_a + (r_lo - r_hi) * dq_a) / (th - tl)
+    cc, dcc = kap / D, dkap / D - kap * dD / D**2
+    sq = np.sqrt(max(0.0, 1.0 - cc * cc))
+    dsq = -cc * dcc / sq
+    dgens = []
+    for sign in (1.0, -1.0):
+        e = cc * w_hat + sign * sq * b_hat
+        de = np.outer(w_hat, dcc) + cc * dw_hat + sign * (np.outer(b_hat, dsq) + sq * db_hat)
+        P0, P1 = Xa + tl * a + r_lo * e, Xa + th * a + r_hi * e
+        dP0 = dXa + np.outer(e, dr_lo) + r_lo * de
+        dP1 = dXa + np.outer(e, dr_hi) + r_hi * de
+        L = np.linalg.norm(P1 - P0)
+        u = (P1 - P0) / L
+        dgens.append((P0, dP0, u, (np.eye(3) - np.outer(u, u)) @ (dP1 - dP0) / L))
+    return dgens
+
+
+def _click_height_jacobian(c, ray_raw, dray_raw, P, dP, u, du, Xa, dXa, a):
+    """The axial coordinate of a clicked end (its ray ray_raw from c, unnormalised, with derivative
+    dray_raw (3, n)) on the generator (P, u): the generator's point closest to the ray; with its derivative."""
+    nr = np.linalg.norm(ray_raw)
+    ray = ray_raw / nr
+    dray = (dray_raw - np.outer(ray, ray @ dray_raw)) / nr
+    wv, dwv = P - c, dP
+    b, db = ray @ u, u @ dray + ray @ du
+    rw, drw = ray @ wv, wv @ dray + ray @ dwv
+    wu, dwu = wv @ u, u @ dwv + wv @ du
+    den = 1 - b * b
+    dden = -2 * b * db if den > 1e-12 else np.zeros(len(db))
+    den = max(den, 1e-12)
+    num, dnum = b * rw - wu, db * rw + b * drw - dwu
+    s_g, ds_g = num / den, dnum / den - num * dden / den**2
+    return (P - Xa) @ a + s_g * (u @ a), a @ (dP - dXa) + ds_g * (u @ a) + s_g * (a @ du)
 
 
 def _solid_vector(s: dict, cone: bool) -> np.ndarray:

@@ -172,28 +172,8 @@ def estimate_pose(
         100,
     )
     if S >= 3:
-        pts = (clicks.points_uv, clicks.points_obj) if clicks.n_points else (None, None)
         fit_px = 3.0 * float(np.sqrt(np.mean(sigma**2))) if fit_rms_px is None else float(fit_rms_px)
-        for tri in itertools.islice(itertools.combinations(range(S), 3), max_triples):
-            idx = list(tri)
-            try:
-                sols = p3l(camera, clicks.segs_uv[idx], clicks.edges_obj[idx], *pts)
-            except ValueError as exc:
-                skipped.append((tri, str(exc)))
-                continue
-            found = _refined_all(camera, clicks, "p3l", sols, refine_args, tri)
-            refined = [c.refined for c in found if c.refined is not None]
-            if not refined:
-                reason = "; ".join(sorted({c.error for c in found if c.error})) or "no solution in front of the camera"
-                skipped.append((tri, reason))
-                continue
-            candidates += found
-            triple = triple or tri
-            if min(r.rms_px for r in refined) <= fit_px:
-                break
-            # Every candidate of this triple refined to a poor fit (a local minimum): add the next
-            # triple's candidates too.
-            skipped.append((tri, f"its candidates refine to RMS ≥ {min(r.rms_px for r in refined):.2f} px"))
+        triple, skipped, candidates = _p3l_candidates(camera, clicks, refine_args, max_triples, fit_px)
         if triple is None and prior is None:
             raise ValueError(f"no triple of clicked edges gives a pose: {skipped[0][1]}")
     if prior is not None:
@@ -205,6 +185,40 @@ def estimate_pose(
     # rank first, so a merged candidate keeps the start closest to it.
     candidates.sort(key=lambda c: (round(c.score_px, 6), c.p3l_rank if c.p3l_rank >= 0 else np.inf))
     return PoseEstimate(_merge(candidates, clicks), triple, tuple(skipped))
+
+
+def _p3l_candidates(camera, clicks, refine_args, max_triples: int, fit_px: float):
+    """P3L on the triples in click order, each solution refined with every click, until a triple's
+    best candidate fits (RMS ≤ fit_px).
+
+    Returns (the first triple whose candidates were refined, or None; the triples skipped and why;
+    the refined candidates of every triple tried).
+    """
+    triple = None
+    skipped: list[tuple[tuple[int, int, int], str]] = []
+    candidates: list[PoseCandidate] = []
+    pts = (clicks.points_uv, clicks.points_obj) if clicks.n_points else (None, None)
+    for tri in itertools.islice(itertools.combinations(range(clicks.n_segments), 3), max_triples):
+        idx = list(tri)
+        try:
+            sols = p3l(camera, clicks.segs_uv[idx], clicks.edges_obj[idx], *pts)
+        except ValueError as exc:
+            skipped.append((tri, str(exc)))
+            continue
+        found = _refined_all(camera, clicks, "p3l", sols, refine_args, tri)
+        refined = [c.refined for c in found if c.refined is not None]
+        if not refined:
+            reason = "; ".join(sorted({c.error for c in found if c.error})) or "no solution in front of the camera"
+            skipped.append((tri, reason))
+            continue
+        candidates += found
+        triple = triple or tri
+        if min(r.rms_px for r in refined) <= fit_px:
+            break
+        # Every candidate of this triple refined to a poor fit (a local minimum): add the next
+        # triple's candidates too.
+        skipped.append((tri, f"its candidates refine to RMS ≥ {min(r.rms_px for r in refined):.2f} px"))
+    return triple, skipped, candidates
 
 
 def _refined_all(camera, clicks, source: str, starts: list, refine_args, triple=None) -> list[PoseCandidate]:
