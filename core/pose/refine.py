@@ -316,6 +316,16 @@ def refine_many(
         score,
         summary,
     )
+    return _start_results(
+        status, free, extent, summary, (T, cov, r, iterations, converged, score), clicks, sigma_px, loss
+    )
+
+
+def _start_results(status, free, extent, summary, outputs, clicks: Clicks, sigma_px, loss: str):
+    """``refine_many``'s answer per start from the compiled call's outputs: a RefineResult and its score,
+    or the reason the start could not be refined and inf."""
+    T, cov, r, iterations, converged, score = outputs
+    n = clicks.n_segments + clicks.n_points
     sigma_out = float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, dtype=float).copy()
     kinds = clicks.kinds
     out: list[tuple[RefineResult | str, float]] = []
@@ -395,15 +405,7 @@ def refine_with_prior(
     P = np.asarray(cov_prior, dtype=float)
     if P.shape != (6, 6) or not np.all(np.isfinite(P)):
         raise ValueError(f"cov_prior must be a finite (6, 6) covariance of (δt, δr), got shape {P.shape}")
-    P = 0.5 * (P + P.T)
-    w, U = np.linalg.eigh(P)
-    if w.min() < -1e-9 * max(float(w.max()), 1e-300):
-        raise ValueError("cov_prior must be positive semi-definite")
-    scale = np.concatenate([np.full(3, fixed_std[0]), np.full(3, fixed_std[1])])  # δ's units per direction
-    big = np.array([1.0 / float(np.sum((U[:, j] * scale) ** 2)) for j in range(6)])  # 1/σ² of a fixed direction
-    keep = w > 1e-12 * max(float(w.max()), 1e-300)
-    lam = np.where(keep, 1.0 / np.where(keep, w, 1.0), big)
-    Lam = (U * lam) @ U.T
+    Lam = _prior_information(P, fixed_std)
     clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
     b = 1.0 / click_sigmas(sigma_px, clicks) ** 2 if clicks.n_residuals else np.zeros(0)
     T = T0.copy()
@@ -464,3 +466,17 @@ def refine_with_prior(
         sigma_est_px=float("nan"),
         loss="l2",
     )
+
+
+def _prior_information(P: np.ndarray, fixed_std: tuple[float, float]) -> np.ndarray:
+    """The prior's information Λ (6, 6): pinv(P) on the range of the covariance P, 1/``fixed_std``² along
+    the directions P leaves at zero variance. ValueError when P is not positive semi-definite."""
+    P = 0.5 * (P + P.T)
+    w, U = np.linalg.eigh(P)
+    if w.min() < -1e-9 * max(float(w.max()), 1e-300):
+        raise ValueError("cov_prior must be positive semi-definite")
+    scale = np.concatenate([np.full(3, fixed_std[0]), np.full(3, fixed_std[1])])  # δ's units per direction
+    big = np.array([1.0 / float(np.sum((U[:, j] * scale) ** 2)) for j in range(6)])  # 1/σ² of a fixed direction
+    keep = w > 1e-12 * max(float(w.max()), 1e-300)
+    lam = np.where(keep, 1.0 / np.where(keep, w, 1.0), big)
+    return (U * lam) @ U.T
