@@ -20,14 +20,17 @@ from typing import Any
 __all__ = ["Md", "escape", "as_markdown"]
 
 # HTML's three (an element, an entity), and every character that starts Markdown inline syntax
-# (emphasis, code, links and images, tables, strike-through, headings), and ``@`` of GitHub's e-mail
-# autolinks. A line break would start a new block (a heading, a list, a table row): it becomes a space.
+# (emphasis, code, links and images, tables, strike-through, headings). A line break would start a
+# new block (a heading, a list, a table row): it becomes a space.
 _ESCAPES = str.maketrans(
     {"&": "&amp;", "<": "&lt;", ">": "&gt;", "\n": " ", "\r": " ", "\t": " ", "\x00": ""}
-    | {c: "\\" + c for c in "\\`*_[]|~#!@"}
+    | {c: "\\" + c for c in "\\`*_[]|~#!"}
 )
-# The rest of GitHub's autolinks of bare addresses: ``scheme://…``, ``www.…``, ``mailto:``, ``xmpp:``.
-_AUTOLINK = re.compile(r"(://|\bwww\.|\bmailto:|\bxmpp:)", re.IGNORECASE)
+# GitHub's autolinks of bare addresses (``scheme://…``, ``www.…``, ``name@host``, ``mailto:``,
+# ``xmpp:``) are found in the text once its escapes are read, so a backslash does not stop them: an
+# invisible word joiner (U+2060) inside each breaks the pattern and shows the same.
+_AUTOLINK = re.compile(r"(:(?=//)|\bwww(?=\.)|@|\bmailto(?=:)|\bxmpp(?=:))", re.IGNORECASE)
+WORD_JOINER = "\u2060"
 
 
 class Md(str):
@@ -63,9 +66,9 @@ def escape(text: Any) -> Md:
 
 
 def _break_autolink(m: re.Match) -> str:
-    """``://`` → ``\\://``; ``www.`` → ``www\\.``; ``mailto:`` → ``mailto\\:``: shown the same, linked no more."""
+    """``:`` of ``://``, ``www``, ``mailto``, ``xmpp`` followed by a word joiner; ``@`` preceded by one."""
     found = m.group(1)
-    return "\\://" if found == "://" else found[:-1] + "\\" + found[-1]
+    return WORD_JOINER + found if found == "@" else found + WORD_JOINER
 
 
 def as_markdown(content: Any) -> str:

@@ -388,10 +388,10 @@ class DesignateTarget(Workflow):
             if t.warning:
                 head = (
                     f"Target {len(self.targets)}: {self._copy_point(t)} m, where the range finder met a surface (in "
-                    f"*Target (m)* to copy). {_sentence(t.warning)}"
+                    f"the Target (m) box to copy). {_sentence(t.warning)}"
                 )
             else:
-                head = f"Target {len(self.targets)}: {t.text()} m on {t.object} (in *Target (m)* to copy)."
+                head = f"Target {len(self.targets)}: {t.text()} m on {t.object} (in the Target (m) box to copy)."
             return Step(
                 "targets", f"{head} Click another point, or " + "{accept}.", frozenset({"clear", "accept", "cancel"})
             )

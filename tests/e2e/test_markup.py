@@ -64,6 +64,7 @@ def payloads(canary: Canary) -> dict[str, str]:
         "svg": f'<svg onload="{fetch(canary.url("svg"))}"></svg>',
         "link": f"[open](javascript:{fetch(canary.url('link'))})",
         "image": f"![x]({canary.url('md-image')})",
+        "autolink": f"see {canary.url('autolink')} or www.example.org or x@example.org",  # bare addresses
     }
 
 
@@ -87,14 +88,17 @@ def _plant(ui, evil: dict[str, str], monkeypatch) -> list[str]:
             text, "box", box.model, T, method=evil["img"], client=evil["svg"], status="modelled", note=evil["iframe"]
         )
         names.append(text)
-    ui.site.set_status(names[0], "stale", client=evil["link"], method=evil["script"])
+    ui.site.set_status(names[0], "stale", client=evil["autolink"], method=evil["script"])
     monkeypatch.undo()
     return names
 
 
 def _shows(page, text: str, timeout_s: float = 10.0) -> None:
     """Wait until the page's text shows ``text`` verbatim."""
-    wait_until(lambda: text in page.locator("body").inner_text(), timeout_s, f"the page to show {text!r}")
+    # (app.markup puts an invisible word joiner into bare addresses so that they are not made links)
+    wait_until(
+        lambda: text in page.locator("body").inner_text().replace("\u2060", ""), timeout_s, f"the page to show {text!r}"
+    )
 
 
 def _no_markup_ran(page, ui, canary, evil) -> None:
@@ -107,13 +111,15 @@ def _no_markup_ran(page, ui, canary, evil) -> None:
         handlers: document.querySelectorAll('[onerror], [onload]').length,
         svgs: [...document.querySelectorAll('svg')].filter(s => s.getAttribute('onload') !== null).length,
         scripts: [...document.querySelectorAll('script')].filter(s => s.textContent.includes(CANARY)).length,
+        links: [...document.querySelectorAll('a')].map(a => a.getAttribute('href') || '')
+                   .filter(h => h.includes('example.org') || h.includes('127.0.0.1')).length,
         jslinks: [...document.querySelectorAll('a')].filter(a => (a.getAttribute('href') || '').trim()
                                                                  .toLowerCase().startsWith('javascript')).length,
         images: [...document.querySelectorAll('img')].filter(i => (i.getAttribute('src') || '')"""
         """.includes(CANARY)).length,
     })""".replace("CANARY", repr(f":{canary.port}/"))
     )
-    assert planted == dict(iframes=0, handlers=0, svgs=0, scripts=0, jslinks=0, images=0), planted
+    assert planted == dict(iframes=0, handlers=0, svgs=0, scripts=0, links=0, jslinks=0, images=0), planted
 
 
 def test_names_methods_operators_and_notes_with_markup_are_shown_as_text(browser, interface, canary, monkeypatch):
@@ -153,8 +159,8 @@ def test_names_methods_operators_and_notes_with_markup_are_shown_as_text(browser
     )
     result = page.get_by_text("Changes", exact=True).first
     result.wait_for(timeout=10000)
-    shown = page.locator("body").inner_text()
-    assert evil["svg"] in shown and evil["link"] in shown  # operators' names, verbatim
+    shown = page.locator("body").inner_text().replace("\u2060", "")  # the word joiners of bare addresses
+    assert evil["svg"] in shown and evil["autolink"] in shown  # operators, verbatim
     assert evil["img"] in shown or evil["img"][:20] in shown  # a method, as its words
     _no_markup_ran(page, ui, canary, evil)
     press(page, "Close")
