@@ -250,6 +250,7 @@ def _run(func):
 
 
 _wait_s = number(float, lambda v: 0.0 <= v <= 3600.0, kind="seconds (a number)", expected="0 to 3600 seconds")
+_limit = number(int, lambda v: 1 <= v <= 10**9, kind="a whole number of changes", expected="1 to 10⁹ changes")
 _max_faces = number(int, lambda v: v >= 1, kind="a whole number of triangles", expected="at least 1 triangle")
 
 
@@ -319,7 +320,7 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
 
     p = sub.add_parser("history", parents=[common], help="every change (of one object): when, who, how")
     p.add_argument("name", nargs="?", help="object name or id (default: all)")
-    p.add_argument("--limit", type=int, default=None, help="only the last N changes")
+    p.add_argument("--limit", type=_limit, default=None, help="only the last N changes")
     p.set_defaults(func=_run(_cmd_history))
 
     p = sub.add_parser(

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 from http.cookies import CookieError, SimpleCookie
 from urllib.parse import parse_qs, urlsplit
 
-from .page import client_page
+from .page import SECURITY_HEADERS, client_page
 
 __all__ = ["AccessPolicy", "normalize_origin", "generate_token", "is_loopback", "open_viser_server", "LOOPBACK_NAMES"]
 
@@ -217,7 +217,11 @@ class AccessPolicy:
             reason, set_cookie = self.check(request.path, request.headers)
             if reason is not None:
                 self.note_refusal(reason, getattr(connection, "remote_address", None))
-                return connection.respond(http.HTTPStatus.FORBIDDEN, self.refuse_text(reason))
+                refusal = connection.respond(http.HTTPStatus.FORBIDDEN, self.refuse_text(reason))
+                refusal.headers["Content-Security-Policy"] = "default-src 'none'; frame-ancestors 'none'"
+                for name, value in SECURITY_HEADERS.items():
+                    refusal.headers[name] = value
+                return refusal
             response = None
             if inner is not None:
                 response = inner(connection, request)

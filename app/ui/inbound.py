@@ -221,7 +221,22 @@ def _gui_update_needs(mapping: dict) -> str | None:
     return None
 
 
+def _camera_needs(mapping: dict) -> str | None:
+    # the panel fits and zooms through this camera: a field of view within (0°, 180°), an image of pixels,
+    # a look-at point apart from the position, planes in front of it
+    if not 0.0 < mapping["fov"] < math.pi:
+        return f"ViewerCameraMessage: a field of view of {mapping['fov']!r} rad, not within (0, π)"
+    if not (1 <= mapping["image_width"] <= 100_000 and 1 <= mapping["image_height"] <= 100_000):
+        return f"ViewerCameraMessage: an image of {mapping['image_width']!r}×{mapping['image_height']!r} pixels"
+    if not 0.0 < mapping["near"] < mapping["far"]:
+        return f"ViewerCameraMessage: near {mapping['near']!r} and far {mapping['far']!r} planes"
+    if all(abs(a - b) < 1e-12 for a, b in zip(mapping["position"], mapping["look_at"])):
+        return "ViewerCameraMessage: a look-at point at the camera's position"
+    return None
+
+
 _NEEDS: dict[str, Callable[[dict], str | None]] = {
+    "ViewerCameraMessage": _camera_needs,
     "ScenePointerMessage": _pointer_needs,
     "GuiUpdateMessage": _gui_update_needs,
 }

@@ -31,6 +31,7 @@ import logging
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 
@@ -38,7 +39,6 @@ __all__ = ["ClientPage", "PAGE_SCRIPT_PATH", "SECURITY_HEADERS", "client_page"]
 
 PAGE_SCRIPT = Path(__file__).resolve().parents[2] / "static" / "wheel.js"
 PAGE_SCRIPT_PATH = "/mcit/page.js"
-_PAGE_PATHS = ("/", "/index.html")
 
 # Sent with every answer of the interface's HTTP server.
 SECURITY_HEADERS = {
@@ -140,15 +140,17 @@ class ClientPage:
             )
             return Response(http.HTTPStatus.OK, "OK", headers, body)
 
+        _quiet_http_answers()
+
         async def serve(connection, request):
             _quiet_http_answers(connection)
             response = None
-            if request.headers.get("Upgrade", "").lower() != "websocket":
-                path = request.path.partition("?")[0]
-                if path in _PAGE_PATHS:
+            if request.headers.get("Upgrade") != "websocket":  # as viser tells a handshake from a file
+                path = _file_path(request.path)
+                if path == "index.html":
                     gzipped = "gzip" in request.headers.get("Accept-Encoding", "")
                     response = answer(self.html_gzip if gzipped else self.html, "text/html; charset=utf-8", gzipped)
-                elif path == PAGE_SCRIPT_PATH:
+                elif path == PAGE_SCRIPT_PATH.lstrip("/"):
                     response = answer(self.script, "application/javascript; charset=utf-8", False)
             if response is None and inner is not None:
                 response = inner(connection, request)
@@ -163,6 +165,14 @@ class ClientPage:
         return serve
 
 
+def _file_path(target: str) -> str:
+    """The file a request asks for, read as viser reads it (query dropped, percent-decoded, backslashes
+    as slashes, empty and "." segments dropped; the page when nothing is left), so that every address
+    viser would answer with its page gets mcit's."""
+    segments = [s for s in unquote(target.partition("?")[0]).replace("\\", "/").split("/") if s and s != "."]
+    return "/".join(segments) or "index.html"
+
+
 class _HttpAnswerNoise(logging.Filter):
     """websockets logs every plain HTTP answer of a websocket server as a failed handshake ("connection
     rejected (200 OK)"): true, and noise for a server whose page is served that way (viser drops the
@@ -172,9 +182,11 @@ class _HttpAnswerNoise(logging.Filter):
         return record.getMessage() not in ("opening handshake failed", "connection rejected (200 OK)")
 
 
-def _quiet_http_answers(connection) -> None:
-    logger = getattr(getattr(connection, "logger", None), "logger", None)
-    if logger is not None and not any(isinstance(f, _HttpAnswerNoise) for f in logger.filters):
+def _quiet_http_answers(connection=None) -> None:
+    """Install ``_HttpAnswerNoise`` on the websockets server's logger (a request it cannot take, a HEAD
+    before any page was served, logs the same way)."""
+    logger = getattr(getattr(connection, "logger", None), "logger", None) or logging.getLogger("websockets.server")
+    if not any(isinstance(f, _HttpAnswerNoise) for f in logger.filters):
         logger.addFilter(_HttpAnswerNoise())
 
 

@@ -179,6 +179,8 @@ def test_a_traceback_on_request(monkeypatch, capsys):
         ),
         ("db import m.cao --xyz nan 0 0", "got 'nan'"),
         ("db import m.cao --rpy-deg inf 0 0", "argument --rpy-deg: expected a finite angle within ±3600 degrees"),
+        ("db history --limit 99999999999999999999999", "argument --limit: expected 1 to 10⁹ changes"),
+        ("db history --limit -1", "got '-1'"),
     ],
 )
 def test_a_rate_or_port_out_of_range_is_refused_by_the_parser(capsys, argv, says):

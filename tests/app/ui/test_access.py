@@ -258,4 +258,14 @@ def test_every_answer_carries_the_content_security_policy(serve):
         assert rules["frame-ancestors"] == "'none'"
     page = s.get("/").body
     assert b'<script src="/mcit/page.js" defer></script></head>' in page
+    # every address viser answers with its page gets mcit's (and its script)
+    for path in ("//index.html", "/%69ndex.html", "/index.html/", "/./", "/?x=1"):
+        assert s.get(path).body == page, path
+    assert s.get("/", {"Upgrade": "WebSocket"}).body == page
+    refused = s.get("/", {"Origin": "http://evil.example"})
+    assert (
+        refused.status == 403
+        and refused.getheader("Content-Security-Policy") == "default-src 'none'; frame-ancestors 'none'"
+    )
+    assert refused.getheader("X-Content-Type-Options") == "nosniff"
     assert b"mcit-dblclick" in s.get("/mcit/page.js").body

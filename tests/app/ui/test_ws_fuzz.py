@@ -235,6 +235,28 @@ def test_a_request_to_share_through_viser_s_relay_is_dropped(served, capfd):
     page.close()
 
 
+@pytest.mark.parametrize(
+    "change, said",
+    [
+        (dict(fov=0.0), "a field of view of 0.0 rad"),
+        (dict(fov=3.5), "a field of view of 3.5 rad"),
+        (dict(image_width=-5), "an image of -5×"),
+        (dict(near=2.0, far=1.0), "near 2.0 and far 1.0"),
+    ],
+)
+def test_a_camera_the_panel_cannot_fit_through_is_dropped(served, capfd, change, said):
+    """A camera of a valid type that no page has (a zero field of view, a negative image) raised in the
+    panel's fit and zoom, once per redraw, unbounded."""
+    page, panel = served.page()
+    page.send(dict(EXAMPLES["ViewerCameraMessage"], type="ViewerCameraMessage", **change))
+    served.settle(page, panel)
+    (line,) = served.inbound_lines()
+    assert said in line.getMessage(), line.getMessage()
+    served.assert_no_failure(page)
+    assert "Traceback" not in capfd.readouterr().err
+    page.close()
+
+
 # --------------------------------------------------------------------------- the fuzzer
 
 BAD_NUMBERS = (None, "1.5", math.nan, math.inf, -math.inf, 1e300, -2e9, [1.0], {"x": 1.0}, True, b"\x01")
