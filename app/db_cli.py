@@ -23,6 +23,7 @@ from pathlib import Path
 
 from app.argtypes import angle_deg, coordinate_m, number
 from app.oserrors import os_error_advice
+from app.terminal import safe_output
 
 __all__ = ["add_db_parser"]
 
@@ -229,24 +230,30 @@ def _cmd_undo(args) -> int:
 
 def _run(func):
     def wrapped(args) -> int:
-        from app.db import ConflictError, DatabaseRefused, DatabaseUnavailable, NotFoundError
-
-        try:
-            return func(args)
-        except BrokenPipeError:
-            raise  # the reader of the output left (``| head``): app.cli ends quietly
-        except (ValueError, NotFoundError, ConflictError, DatabaseRefused, DatabaseUnavailable) as exc:
-            print(f"mcit db {args.db_command}: error: {exc}", file=sys.stderr)
-            return 1
-        except OSError as exc:  # a file named on the command line: say which and why, in one line
-            where = f"{exc.filename}: " if exc.filename else ""
-            print(
-                f"mcit db {args.db_command}: error: {where}{exc.strerror or exc}; {os_error_advice(exc)}",
-                file=sys.stderr,
-            )
-            return 1
+        with safe_output():  # the database's text may hold terminal escapes: shown as codes
+            return _answer(func, args)
 
     return wrapped
+
+
+def _answer(func, args) -> int:
+    """``func(args)``, its failures as one line on stderr (status 1)."""
+    from app.db import ConflictError, DatabaseRefused, DatabaseUnavailable, NotFoundError
+
+    try:
+        return func(args)
+    except BrokenPipeError:
+        raise  # the reader of the output left (``| head``): app.cli ends quietly
+    except (ValueError, NotFoundError, ConflictError, DatabaseRefused, DatabaseUnavailable) as exc:
+        print(f"mcit db {args.db_command}: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # a file named on the command line: say which and why, in one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(
+            f"mcit db {args.db_command}: error: {where}{exc.strerror or exc}; {os_error_advice(exc)}",
+            file=sys.stderr,
+        )
+        return 1
 
 
 _wait_s = number(float, lambda v: 0.0 <= v <= 3600.0, kind="seconds (a number)", expected="0 to 3600 seconds")

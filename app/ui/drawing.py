@@ -8,6 +8,7 @@ the benchmark times them.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable
 
 import numpy as np
@@ -25,6 +26,8 @@ from app.overlay import (
 from app.workflows.base import Marks
 from app.workflows.site import SiteObject
 from core.camera import Camera
+
+log = logging.getLogger("mcit.ui")
 
 __all__ = ["label_anchor", "draw_database", "draw_object", "draw_marks", "spread_labels"]
 
@@ -60,12 +63,27 @@ def draw_database(
     batch = LineBatch()
     labels = []
     for obj in objects:
-        one, label, _ = draw_object(camera, obj, width, height, hidden)
+        try:
+            one, label, _ = draw_object(camera, obj, width, height, hidden)
+        except ValueError as exc:  # a pose no camera can project (an old or hostile row): the others still draw
+            _say_undrawable(obj, exc)
+            continue
         batch.segments += one.segments
         batch.colors += one.colors
         if label is not None:
             labels.append((obj.name, *label))
     return batch, labels
+
+
+_SAID: set[tuple[str, int | None]] = set()
+
+
+def _say_undrawable(obj: SiteObject, exc: Exception) -> None:
+    """One log line per object version that cannot be drawn (the overlay is redrawn many times a second)."""
+    key = (obj.name, getattr(obj, "version", None))
+    if key not in _SAID:
+        _SAID.add(key)
+        log.warning("%s is not drawn: %s; update its pose, or undo the change that put it there", obj.name, exc)
 
 
 def draw_object(

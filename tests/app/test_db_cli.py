@@ -189,3 +189,20 @@ def test_export_errors_name_the_file_not_its_temporary(tmp_path, capsys):
         "(nothing was written); check the path\n"
     )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["edges.cao", "site.sqlite"]
+
+
+def test_terminal_escapes_in_the_database_are_printed_as_codes(tmp_path, capsys):
+    """A name or operator holding terminal control (an old or hostile database) would retitle or clear
+    the user's terminal: db list and history print it as \\x1b codes."""
+    db = str(tmp_path / "site.sqlite")
+    assert main(["db", "init", "--db", db]) == 0
+    with sqlite3.connect(db) as conn:
+        conn.execute("UPDATE objects SET name = ? WHERE name = 'table'", ("t\x1b]0;pwned\x07\x1b[2J",))
+        conn.execute("UPDATE history SET client = ?", ("op\x1b[7m",))
+    capsys.readouterr()
+    for command in (["db", "list"], ["db", "history"]):
+        assert main([*command, "--db", db]) == 0
+        out = capsys.readouterr().out
+        assert "\x1b" not in out and "\x07" not in out, out
+    assert main(["db", "list", "--db", db]) == 0
+    assert "t\\x1b]0;pwned\\x07\\x1b[2J" in capsys.readouterr().out

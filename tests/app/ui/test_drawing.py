@@ -119,3 +119,19 @@ def test_spread_labels_lifts_a_label_off_the_one_it_would_cover():
     # near the image's top a label is moved down instead, off the image no more
     top = spread_labels([(np.array([100.0, 12.0]), "1→e3"), (np.array([101.0, 12.0]), "snapped 1.4 px")], 1.0)
     assert top[1][0][1] - LABEL_LINE_PX >= 0.0 and top[1][0][1] - top[0][0][1] >= LABEL_LINE_PX - 1e-9
+
+
+def test_an_object_no_camera_can_project_is_left_out_and_said_once(site, caplog):
+    """A row at 1e308 m (an old or hostile database) raised in every redraw, and nothing was drawn."""
+    import dataclasses
+
+    objs = site.objects()
+    far = objs[1].T_world_obj.copy()
+    far[0, 3] = 1e308
+    bad = dataclasses.replace(objs[1], T_world_obj=far)
+    with caplog.at_level("WARNING", logger="mcit.ui"):
+        batch, labels = draw_database(site.camera, [objs[0], bad, *objs[2:]], 512, 256)
+        draw_database(site.camera, [bad], 512, 256)
+    assert {name for name, *_ in labels} == {o.name for o in objs} - {bad.name}
+    said = [r for r in caplog.records if bad.name in r.getMessage()]
+    assert len(said) == 1 and "is not drawn" in said[0].getMessage()
