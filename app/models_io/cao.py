@@ -43,6 +43,10 @@ exhausts memory, and so that whatever loads can also be exported and read back:
   reading 9 files.
 * every count (points, lines, faces, a face's points, cylinders, circles) is checked against the
   lines or numbers left in the file before anything is allocated.
+* one model holds at most what a mesh file may (``MAX_COUNTS``, from ``mesh.MAX_MESH_FACES``): 600,000
+  points, 600,000 lines, 200,000 faces, 600,000 points or lines in all the faces' lists, 200,000
+  cylinders and 200,000 circles, every file read counted (includes and repeats too), each count
+  checked when it is read, before its records are.
 * coordinates, radii and include translations are finite and within ±1e6 m (``MAX_COORD_M``,
   1000 km; a model placed by its includes too, and a circle's rim and a cylinder's side, so that
   what is read is written back readable); a line's ends, two points of a face or a
@@ -75,6 +79,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from app.models_io.files import resolve_file
+from app.models_io.mesh import MAX_MESH_FACES
 from app.names import NAME_RULE, check_object_name
 from core.brep import BRep, Circle, Revolution
 from core.transforms import exp_so3, make_T
@@ -97,7 +102,17 @@ __all__ = [
 ]
 
 _PARAM = re.compile(r"(name|useLod|minLineLengthThreshold|minPolygonAreaThreshold)=(\"[^\"]*\"|\S+)")
-_MAX_COUNT = 1_000_000
+# what one model may hold (every file read, includes and repeats counted), as a mesh file may (mesh.py):
+# a .cao of 999,996 faces took 10 min and 854 MB to read, one face of 10^6 points 3 min and 1.2 GB
+MAX_COUNTS = {
+    "points": 3 * MAX_MESH_FACES,  # 600,000: a mesh's vertex limit
+    "lines": 3 * MAX_MESH_FACES,  # 600,000: every side of every triangle once
+    "faces": MAX_MESH_FACES,  # 200,000, from lines and from points together
+    "face indices": 3 * MAX_MESH_FACES,  # 600,000 points or lines in all the faces' lists
+    "cylinders": MAX_MESH_FACES,
+    "circles": MAX_MESH_FACES,
+}
+_SHORT_LINE = 2**16  # a face line this short is split to say how few numbers it holds
 MAX_INCLUDE_DEPTH = 8  # levels of load() below the file named
 MAX_FILES = 256  # files read for one model, every include counted (repeats too)
 MAX_TOTAL_BYTES = 64 * 1024 * 1024  # text read for one model, repeats counted
@@ -256,8 +271,9 @@ def _check_params(lines: _Lines, number: int, rest: str) -> str:
     return " ".join(f"{key}={raw}" for key, raw in found)
 
 
-def _count(lines: _Lines, what: str) -> int:
-    """A block's count, refused before anything is allocated when the file cannot hold that many records."""
+def _count(lines: _Lines, what: str, reading: _Reading, kind: str | None = None) -> int:
+    """A block's count, refused before anything is allocated when the file cannot hold that many records
+    or when the model would hold more than ``MAX_COUNTS[kind]`` (``what`` when not given)."""
     number, line = lines.next(f"the number of {what}")
     (n,), _ = _numbers(lines, number, line, 1, "i", f"number of {what}")
     if n < 0:
@@ -266,9 +282,16 @@ def _count(lines: _Lines, what: str) -> int:
         raise lines.error(
             number, f"the number of {what} is more than the {lines.left()} lines left in the file (one line each)"
         )
-    if n > _MAX_COUNT:
-        raise lines.error(number, f"the number of {what} is more than {_MAX_COUNT:,}, mcit's limit")
+    reading.add(lines, number, kind or what, n, what)
     return n
+
+
+def _over_limit(lines: _Lines, number: int, kind: str, total: int, what: str) -> CaoError:
+    return lines.error(
+        number,
+        f"the {what} make the model hold {total:,} {kind}, more than {MAX_COUNTS[kind]:,}, mcit's limit for one "
+        f"model (as for a mesh file, includes counted); simplify the model in its CAD program",
+    )
 
 
 def _index(lines: _Lines, number: int, i: int, n: int, what: str) -> int:
@@ -421,20 +444,34 @@ class _Reading:
     def __init__(self, parse=None, what: str = "a .cao model"):
         self.files = 0
         self.bytes = 0
-        self.parsed: dict[Path, tuple[BRep | None, int, int]] = {}  # model, files, bytes
+        self.parsed: dict[Path, tuple[BRep | None, int, int, dict]] = {}  # model, files, bytes, counts
         self.parse = parse or _parse  # (path, text, stack, reading) → the file's content
         self.options: dict[Path, CaoOptions] = {}  # each parsed file's ViSP options, by record of its model
         self.what = what
+        self.counts = dict.fromkeys(MAX_COUNTS, 0)  # what the model holds so far, includes and repeats counted
+
+    def add(self, lines: _Lines, number: int, kind: str, n: int, what: str) -> None:
+        """Count ``n`` more ``kind`` in the model, refused beyond ``MAX_COUNTS`` (before they are read)."""
+        self.counts[kind] += n
+        if self.counts[kind] > MAX_COUNTS[kind]:
+            raise _over_limit(lines, number, kind, self.counts[kind], what)
 
     def read(self, path: Path, where: str, stack: tuple[Path, ...]) -> BRep | None:
         """Parse ``path`` (``where``: the file, or the ``file:line`` of the load() naming it), within the limits."""
         if len(stack) > MAX_INCLUDE_DEPTH + 1:
             raise CaoError(f"{where}: includes are nested more than {MAX_INCLUDE_DEPTH} levels deep; {_limits()}")
         if path in self.parsed:
-            model, files, size = self.parsed[path]
+            model, files, size, counts = self.parsed[path]
             self._add(files, size, where)
+            for kind, n in counts.items():  # the file again: what it holds counts again
+                self.counts[kind] += n
+                if self.counts[kind] > MAX_COUNTS[kind]:
+                    raise CaoError(
+                        f"{where}: the model holds {self.counts[kind]:,} {kind} with this include, more than "
+                        f"{MAX_COUNTS[kind]:,}, mcit's limit for one model (as for a mesh file, includes counted)"
+                    )
             return model
-        files0, bytes0 = self.files, self.bytes
+        files0, bytes0, counts0 = self.files, self.bytes, dict(self.counts)
         try:
             st = path.stat()
             if not stat.S_ISREG(st.st_mode):
@@ -451,7 +488,8 @@ class _Reading:
         except UnicodeDecodeError:
             raise CaoError(f"{path}:1: not {self.what} (not a text file)") from None
         model = self.parse(path, text, stack, self)
-        self.parsed[path] = (model, self.files - files0, self.bytes - bytes0)
+        counts = {kind: n - counts0[kind] for kind, n in self.counts.items()}
+        self.parsed[path] = (model, self.files - files0, self.bytes - bytes0, counts)
         return model
 
     def _add(self, files: int, size: int, where: str) -> None:
@@ -493,7 +531,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
     if lines.peek() is None and n_loads:  # a file of load() lines only (ViSP ≥ 3.7 reads it too)
         reading.options[path] = CaoOptions.concat(parts, part_options)
         return concat_breps(parts) if parts else None
-    n_points = _count(lines, "points")
+    n_points = _count(lines, "points", reading)
     n_num = 5 if version == 2 else 3
     P = np.zeros((n_points, 3))
     for k in range(n_points):
@@ -501,7 +539,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
         values, _ = _numbers(lines, number, line, n_num, "fffii"[:n_num], f"point {k}")
         _within(lines, number, values[:3], f"point {k}")
         P[k] = values[:3]
-    n_lines = _count(lines, "lines")
+    n_lines = _count(lines, "lines", reading)
     segs: list[tuple[int, int]] = []
     seg_options: list[str] = []
     loop_options: list[str] = []
@@ -519,7 +557,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
         segs.append((i, j))
     loops: list[list[int]] = []
     for what, by_lines in (("faces from lines", True), ("faces from points", False)):
-        n_faces = _count(lines, what)
+        n_faces = _count(lines, what, reading, "faces")
         for k in range(n_faces):
             number, line = lines.next(f"face {k} of the {what}")
             (n,), _ = _numbers(lines, number, line, 1, "i", f"face {k}")
@@ -527,7 +565,17 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
                 raise lines.error(
                     number, f"face {k} has {n} {'lines' if by_lines else 'points'}; a face needs at least 3"
                 )
-            values, rest = _numbers(lines, number, line, n + 1, "i", f"face {k}")
+            over = reading.counts["face indices"] + n > MAX_COUNTS["face indices"]
+            if over and len(line) > _SHORT_LINE:  # refused before its numbers are split
+                raise _over_limit(
+                    lines,
+                    number,
+                    "face indices",
+                    reading.counts["face indices"] + n,
+                    f"{'lines' if by_lines else 'points'} of face {k}",
+                )
+            values, rest = _numbers(lines, number, line, n + 1, "i", f"face {k}")  # a short line: few numbers
+            reading.add(lines, number, "face indices", n, f"{'lines' if by_lines else 'points'} of face {k}")
             options = _check_params(lines, number, rest)
             if by_lines:
                 idx = [_index(lines, number, i, n_lines, "line") for i in values[1:]]
@@ -543,7 +591,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
     circles: list[Circle] = []
     dropped_circles = 0
     if lines.peek() is not None:
-        for k in range(_count(lines, "cylinders")):
+        for k in range(_count(lines, "cylinders", reading)):
             number, line = lines.next(f"cylinder {k}")
             (i, j, r), rest = _numbers(lines, number, line, 3, "iif", f"cylinder {k}")
             i, j = _index(lines, number, i, n_points, "point"), _index(lines, number, j, n_points, "point")
@@ -566,7 +614,7 @@ def _parse(path: Path, text: str, stack: tuple[Path, ...], reading: _Reading) ->
             solids.append(Revolution(P[i], P[j], r, r))
             cylinder_options.append(options)
     if lines.peek() is not None:
-        for k in range(_count(lines, "circles")):
+        for k in range(_count(lines, "circles", reading)):
             number, line = lines.next(f"circle {k}")
             (r, c, i, j), rest = _numbers(lines, number, line, 4, "fiii", f"circle {k}")
             c, i, j = (_index(lines, number, v, n_points, "point") for v in (c, i, j))
@@ -677,7 +725,7 @@ def _parse_init(path: Path, text: str, stack: tuple[Path, ...], reading: _Readin
                 )
             parts.append(placed)
     if lines.peek() is not None:
-        n = _count(lines, "points")
+        n = _count(lines, "points", reading)
         P = np.zeros((n, 3))
         for k in range(n):
             number, line = lines.next(f"point {k} of {n}")

@@ -138,69 +138,129 @@ def _file_size(path: Path, limits: _Limits, what: str = "the file") -> int:
 
 # --- OBJ -----------------------------------------------------------------------------------------
 
-# a v or f line (indented too) and the lines it continues with a backslash at its end
-_OBJ_RECORD = re.compile(rb"^[ \t]*[vf][ \t](?:[^\n]*\\\r?\n)*[^\n]*", re.M)
-_OBJ_CONTINUATION = re.compile(rb"\\\r?\n")
+# a line that trimesh reads as a vertex ("v " at the start of a line) or a face (any line starting with "f":
+# trimesh splits its face chunks at "^f", so "f1 2 3" is a face too); indented ones too, as a superset
+_OBJ_RECORD = re.compile(r"^[ \t]*(?:v[ \t]|f)[^\n]*", re.M)
+_OBJ_CONTINUATION = "\\\n"
+# characters that str.splitlines breaks at besides "\n": trimesh's fallback for uneven vertex rows makes a
+# vertex of each piece, so one "v" line holding them could make any number of vertices
+_OBJ_ODD_BREAKS = "\r\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"
+MAX_OBJ_MATERIALS = 1_000  # usemtl lines: trimesh makes a mesh for each, in time growing as their square
+
+
+def _obj_text(path: Path, data: bytes) -> tuple[str, str, int]:
+    """The OBJ's text as trimesh's loader sees it: decoded as it decodes it, stripped, CRLF made LF, a
+    backslash-newline removed (the line continues), a newline added at each end; with the text before the
+    continuations were removed and the newlines stripped from its start (for line numbers)."""
+    from trimesh.util import decode_text
+
+    try:
+        text = decode_text(data)
+    except Exception as exc:  # charset detection failed: trimesh could not read it either
+        raise _unreadable(path, f"its text encoding is unknown ({type(exc).__name__})") from None
+    stripped = text.strip()
+    lead = text[: len(text) - len(text.lstrip())].count("\n")
+    joined = stripped.replace("\r\n", "\n")
+    return "\n" + joined.replace(_OBJ_CONTINUATION, "") + "\n", joined, lead
+
+
+def _obj_line(text: str, joined: str, lead: int, pos: int) -> int:
+    """The file's line number of position ``pos`` in trimesh's text (each removed continuation had a newline)."""
+    removed = 0
+    for k, match in enumerate(re.finditer(re.escape(_OBJ_CONTINUATION), joined)):
+        if match.start() - 2 * k + 1 >= pos:  # its place in the text ("\n" added before it)
+            break
+        removed += 1
+    return lead + text.count("\n", 0, pos) + removed
 
 
 def _check_obj(path: Path, limits: _Limits) -> None:
-    """Bound an OBJ's counts (its ``v``/``vn``/``vt``/``f`` lines counted in its bytes), then check its
-    vertices and faces, so an error names its line, counting the triangles as trimesh makes them (a
-    polygon of n vertices makes n - 2; a line ending in a backslash continues on the next). Only
-    the v and f records are split, so a file of comments costs no Python loop per line."""
-    data = path.read_bytes()
+    """Bound an OBJ's counts in the text trimesh reads (``_obj_text``): its ``v``/``vn``/``vt`` lines, its
+    face lines (any line starting with ``f``) and its ``usemtl`` groups; then check its vertices and
+    faces, so an error names its line, counting the triangles as trimesh makes them (a polygon of n
+    vertices makes n - 2). Only the v and f records are split, so a file of comments costs no Python
+    loop per line."""
+    text, joined, lead = _obj_text(path, path.read_bytes())
     keys = {
         "v": ("vertices (v lines)", limits.vertices),
         "vn": ("normals (vn lines)", limits.vertices),
         "vt": ("texture coordinates (vt lines)", limits.vertices),
-        "f": ("faces (f lines)", limits.faces),
     }
     for key, (what, limit) in keys.items():
-        n = sum(data.count(f"\n{key}{space}".encode()) + data.startswith(f"{key}{space}".encode()) for space in " \t")
+        n = text.count(f"\n{key} ") + text.count(f"\n{key}\t")
         if n > limit:
             raise limits.refuse(str(path), f"the file holds {n:,} {what}")
+    n = text.count("\nf")
+    if n > limits.faces:
+        raise limits.refuse(str(path), f"the file holds {n:,} faces (f lines)")
+    n = text.count("usemtl")  # trimesh splits its faces at every "usemtl ", wherever it is
+    if n > MAX_OBJ_MATERIALS:
+        raise MeshError(
+            f"{path}: the file holds {n:,} material groups (usemtl), beyond mcit's limit of {MAX_OBJ_MATERIALS:,} "
+            "(trimesh builds a mesh for each, in time growing as their square); merge the materials in its CAD program"
+        )
+    odd = [c for c in _OBJ_ODD_BREAKS if c in text]
+    if odd:
+        pos = min(text.index(c) for c in odd)
+        raise MeshError(
+            f"{path}:{_obj_line(text, joined, lead, pos)}: a line break other than LF or CRLF "
+            f"({odd[0]!r}), which trimesh reads inconsistently; save the file with LF or CRLF line ends"
+        )
     n_vertices = 0
     n_triangles = 0
-    number, counted_to = 1, 0
-    for match in _OBJ_RECORD.finditer(data):
-        number += data.count(b"\n", counted_to, match.start())
-        counted_to = match.start()
+    for match in _OBJ_RECORD.finditer(text):
         if match.end() - match.start() > _MAX_OBJ_RECORD:
+            number = _obj_line(text, joined, lead, match.start())
             raise _unreadable(
                 path, f"line {number} is longer than {_MAX_OBJ_RECORD // 2**20} MB (with the lines it continues)"
             )
-        record = _OBJ_CONTINUATION.sub(b"", match.group())
-        tokens = record.split(b"#", 1)[0].split()
-        shown = record.decode("utf-8", "replace").strip()
-        if tokens[0] == b"v":
+        record = match.group().lstrip(" \t")
+        body = record[1:]  # after the v or f
+        if record[0] == "v":
+            tokens = body.split("#", 1)[0].split()
             try:
-                xyz = [float(t) for t in tokens[1:4]]
+                xyz = [float(t) for t in tokens[:3]]
             except ValueError:
-                raise MeshError(f"{path}:{number}: vertex coordinates must be numbers, got {shown!r}") from None
+                raise MeshError(
+                    f"{path}:{_obj_line(text, joined, lead, match.start())}: vertex coordinates must be numbers, "
+                    f"got {record.strip()!r}"
+                ) from None
             if len(xyz) < 3 or not np.all(np.isfinite(xyz)):
-                raise MeshError(f"{path}:{number}: a vertex needs 3 finite coordinates, got {shown!r}")
+                raise MeshError(
+                    f"{path}:{_obj_line(text, joined, lead, match.start())}: a vertex needs 3 finite coordinates, "
+                    f"got {record.strip()!r}"
+                )
             n_vertices += 1
             if n_vertices > limits.vertices:
-                raise limits.refuse(f"{path}:{number}", f"the file holds more than {limits.vertices:,} vertices")
+                raise limits.refuse(
+                    f"{path}:{_obj_line(text, joined, lead, match.start())}",
+                    f"the file holds more than {limits.vertices:,} vertices",
+                )
         else:
-            if len(tokens) < 4:
-                raise MeshError(f"{path}:{number}: a face needs at least 3 vertices, got {shown!r}")
-            n_triangles += len(tokens) - 3
+            # trimesh splits the whole line (a comment too) at white space: count its triangles from all of it
+            tokens = body.split("#", 1)[0].split()
+            if len(tokens) < 3:
+                raise MeshError(
+                    f"{path}:{_obj_line(text, joined, lead, match.start())}: a face needs at least 3 vertices, "
+                    f"got {record.strip()!r}"
+                )
+            n_triangles += max(len(body.split()), len(tokens)) - 2
             if n_triangles > limits.faces:
                 raise limits.refuse(
-                    f"{path}:{number}",
+                    f"{path}:{_obj_line(text, joined, lead, match.start())}",
                     f"the faces up to this line make {n_triangles:,} triangles (a polygon of n vertices makes n - 2)",
                 )
-            for ref in tokens[1:]:
+            for ref in tokens:
                 try:
-                    i = int(ref.split(b"/")[0])
+                    i = int(ref.split("/")[0])
                 except ValueError:
                     raise MeshError(
-                        f"{path}:{number}: face vertex {ref.decode('utf-8', 'replace')!r} is not an index"
+                        f"{path}:{_obj_line(text, joined, lead, match.start())}: face vertex {ref!r} is not an index"
                     ) from None
                 if i == 0 or i > n_vertices or -i > n_vertices:
                     raise MeshError(
-                        f"{path}:{number}: face vertex index {i} refers to no vertex (1..{n_vertices} defined so far)"
+                        f"{path}:{_obj_line(text, joined, lead, match.start())}: face vertex index {i} refers to "
+                        f"no vertex (1..{n_vertices} defined so far)"
                     )
 
 

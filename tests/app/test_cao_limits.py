@@ -2,6 +2,7 @@
 allocating, degenerate geometry refused with file:line, no file content quoted (issue 14, item 4)."""
 
 import os
+import time
 import tracemalloc
 import warnings
 from pathlib import Path
@@ -426,3 +427,69 @@ def test_fuzz_any_text_loads_cleanly_or_is_refused_in_one_line(tmp_path, text):
     g = tmp_path / "again.cao"
     g.write_text(cao_text(m))
     assert _same(read_cao(g), m)
+
+
+@pytest.fixture
+def faces_checked(monkeypatch):
+    """The faces the parser built (checked) during the test."""
+    calls = []
+    real = cao_module._check_face
+
+    def counting(lines, number, k, P, loop):
+        calls.append(k)
+        return real(lines, number, k, P, loop)
+
+    monkeypatch.setattr(cao_module, "_check_face", counting)
+    return calls
+
+
+SQUARE = "V1\n4\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n0\n0\n"
+
+
+@pytest.mark.parametrize(
+    "text, line, problem",
+    [
+        # 999,996 faces over 4 points (8 MB) took 10 min and 854 MB
+        (SQUARE + "200001\n" + "3 0 1 2\n" * 200_001, 9, "the faces from points make the model hold 200,001 faces"),
+        (SQUARE[:-2] + "200001\n" + "3 0 1 2\n" * 200_001, 8, "the faces from lines make the model hold 200,001 faces"),
+        # one face over 10^6 points (34 MB) took 3 min and 1.23 GB
+        (
+            "V1\n1000000\n" + "0 0 0\n" * 1_000_000 + "0\n0\n1\n1000000 " + " ".join(map(str, range(10**6))) + "\n",
+            2,
+            "the points make the model hold 1,000,000 points, more than 600,000",
+        ),
+        (
+            SQUARE + "1\n600001 " + "0 1 2 3 " * 150_001 + "\n",
+            10,
+            "the points of face 0 make the model hold 600,001 face indices, more than 600,000",
+        ),
+        ("V1\n3\n0 0 0\n1 0 0\n0 1 0\n600001\n" + "0 1\n" * 600_001, 6, "hold 600,001 lines, more than 600,000"),
+    ],
+    ids=["faces from points", "faces from lines", "points", "one face's points", "lines"],
+)
+def test_a_model_beyond_the_mesh_limits_is_refused_when_its_count_is_read(tmp_path, faces_checked, text, line, problem):
+    f = tmp_path / "big.cao"
+    f.write_text(text)
+    start = time.monotonic()
+    with pytest.raises(CaoError) as info:
+        read_cao(f)
+    assert time.monotonic() - start < 2.0
+    msg = _one_line(info)
+    assert msg.startswith(f"{f}:{line}: ") and problem in msg and "mcit's limit for one model" in msg, msg
+    assert faces_checked == []
+
+
+def test_the_limits_count_every_file_of_the_model_includes_and_repeats_too(tmp_path, monkeypatch):
+    monkeypatch.setitem(cao_module.MAX_COUNTS, "faces", 3)
+    (tmp_path / "t.cao").write_text(TRIANGLE)  # one face
+    top = tmp_path / "top.cao"
+    top.write_text("V1\n" + 'load("t.cao")\n' * 3 + "0\n0\n0\n0\n")
+    assert len(read_cao(top).faces) == 3
+    top.write_text("V1\n" + 'load("t.cao")\n' * 4 + "0\n0\n0\n0\n")
+    with pytest.raises(CaoError) as info:
+        read_cao(top)
+    assert _one_line(info).startswith(f"{top}:5: the model holds 4 faces with this include, more than 3")
+    top.write_text("V1\n" + 'load("t.cao")\n' * 3 + "3\n0 0 0\n1 0 0\n0 1 0\n0\n0\n1\n3 0 1 2\n")
+    with pytest.raises(CaoError) as info:
+        read_cao(top)
+    assert _one_line(info).startswith(f"{top}:11: the faces from points make the model hold 4 faces, more than 3")

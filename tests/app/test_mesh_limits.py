@@ -442,3 +442,74 @@ def test_a_mesh_through_a_loop_of_symbolic_links_is_said_as_such(tmp_path):
     b.symlink_to(a)
     with pytest.raises(MeshError, match=r"a\.stl is a loop of symbolic links that never reaches a file"):
         read_mesh(a)
+
+
+def _obj_groups(path: Path, n: int) -> Path:
+    """4 vertices, then n faces each in its own material group (``usemtl m<i>``)."""
+    path.write_text(
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n" + "".join(f"usemtl m{i}\nf {1 + i % 2} 3 4\n" for i in range(n))
+    )
+    return path
+
+
+def test_obj_of_many_material_groups_is_refused_before_trimesh_reads_it(tmp_path, trimesh_reads):
+    # trimesh builds a mesh for each usemtl group, in time growing as their square: 20,000 took 95 s
+    over = _obj_groups(tmp_path / "groups.obj", mesh_module.MAX_OBJ_MATERIALS + 1)
+    start = time.monotonic()
+    with pytest.raises(MeshError) as info:
+        read_mesh(over)
+    assert time.monotonic() - start < 2.0
+    msg = _one_line(info, over)
+    assert "the file holds 1,001 material groups (usemtl), beyond mcit's limit of 1,000" in msg, msg
+    assert trimesh_reads == []
+    at = _obj_groups(tmp_path / "at.obj", mesh_module.MAX_OBJ_MATERIALS)  # at the limit: read (0.5 s)
+    assert len(read_mesh(at).vertices) == 4 and len(trimesh_reads) == 1
+
+
+def test_obj_faces_without_a_space_and_continued_vertices_are_counted_as_trimesh_reads_them(tmp_path, trimesh_reads):
+    # trimesh reads "f1 2 3" as a face and joins "v\" + newline + " x y z" into a vertex: counted before it reads
+    V, F = _surface(100)
+    verts = "".join(f"v\\\n {x} {y} {z}\n" for x, y, z in V)
+    lines = [f"f{a + 1} {b + 1} {c + 1}\n" for a, b, c in F]
+    lines[0], lines[-1] = "f " + lines[0][1:], "f " + lines[-1][1:]  # trimesh reads from the first to the last "f "
+    faces = "".join(lines)
+    at = tmp_path / "at.obj"
+    at.write_text(verts + faces)
+    model = read_mesh(at, max_faces=100)  # trimesh reads every vertex and face
+    assert len(trimesh_reads) == 1 and np.allclose(np.sort(model.vertices, axis=0), np.sort(V, axis=0), atol=1e-6)
+    over = tmp_path / "over.obj"
+    over.write_text(verts + "f1 2 3\n" + faces)
+    with pytest.raises(MeshError) as info:
+        read_mesh(over, max_faces=100)
+    assert "the file holds 101 faces (f lines), beyond mcit's limits for one mesh (100 triangles" in _one_line(
+        info, over
+    )
+    many = tmp_path / "many.obj"
+    many.write_text("v\\\n 0 0 0\n" * 301 + "f 1 2 3\n")
+    with pytest.raises(MeshError) as info:
+        read_mesh(many, max_faces=100)
+    assert "the file holds 301 vertices (v lines), beyond mcit's limits for one mesh (100 triangles" in _one_line(
+        info, many
+    )
+    # at the default limits, as the 63 MB file that reached 1.14 GB and 30 s in trimesh before being refused
+    big = tmp_path / "big.obj"
+    big.write_text("v\\\n 0 0 0\nv\\\n 1 0 0\nv\\\n 0 1 0\n" + "f1 2 3\n" * MAX_MESH_FACES + "f 1 2 3\n")
+    start = time.monotonic()
+    with pytest.raises(MeshError) as info:
+        read_mesh(big)
+    assert time.monotonic() - start < 2.0
+    assert "the file holds 200,001 faces (f lines)" in _one_line(info, big)
+    assert len(trimesh_reads) == 1  # only the file at the limit
+
+
+def test_obj_line_numbers_count_the_continued_lines_and_odd_line_breaks_are_refused(tmp_path, trimesh_reads):
+    path = tmp_path / "bad.obj"
+    path.write_text("\n\nv\\\n 0 0 0\nv 1 0 \\\n 0\nv 0 1 0\nf1 2 4\n")
+    with pytest.raises(MeshError) as info:
+        read_mesh(path)
+    assert _one_line(info, path).startswith(f"{path}:8: face vertex index 4 refers to no vertex (1..3")
+    path.write_bytes(b"v 0 0 0\nv 1 0 0\rv 2 0 0\nv 0 1 0\nf 1 2 3\n")  # a lone CR: trimesh may read 2 vertices
+    with pytest.raises(MeshError) as info:
+        read_mesh(path)
+    assert _one_line(info, path).startswith(f"{path}:2: a line break other than LF or CRLF ('\\r')")
+    assert trimesh_reads == []
