@@ -18,9 +18,10 @@ a 10^6-triangle mesh takes 20 s and 1.2 GB; at the limit it takes 3.5 s and 0.3 
   and ``3 * max_faces`` vertices (a triangle soup's three corners per triangle);
 * at most 64 MB (``MAX_MESH_BYTES``; more in proportion when ``max_faces`` is raised): the file
   and a glTF's buffer files (each reference counted), checked first, from the file system;
-* the counts are taken before reading: OBJ, its ``v``/``vn``/``vt``/``f`` lines counted in the
-  bytes, then each line checked (a polygon of n vertices is n - 2 triangles; a record is at most
-  1 MB); STL, the binary header's count, which must match the file's size, or an ASCII file's
+* the counts are taken before reading: OBJ, on the text as trimesh reads it (continuation lines
+  joined, every line starting with ``f`` a face, a polygon of n vertices n - 2 triangles, a record
+  at most 1 MB, at most ``MAX_OBJ_MATERIALS`` ``usemtl`` groups: trimesh's time grows as their
+  square); STL, the binary header's count, which must match the file's size, or an ASCII file's
   ``vertex`` lines; PLY, the header's elements, which must match the bytes that follow (binary)
   or the lines (ASCII); glTF/GLB, the accessors, which must fit in their buffers, the meshes'
   triangles, each placed node counted, at most ``max_faces / 20`` primitives and nodes (trimesh
@@ -55,7 +56,16 @@ from core.brep import BRep
 from core.mesh_features import brep_from_mesh
 from core.silhouette import SmoothSides
 
-__all__ = ["MeshError", "MeshWarning", "MESH_SUFFIXES", "MAX_MESH_FACES", "MAX_MESH_BYTES", "read_mesh", "write_mesh"]
+__all__ = [
+    "MeshError",
+    "MeshWarning",
+    "MESH_SUFFIXES",
+    "MAX_MESH_FACES",
+    "MAX_MESH_BYTES",
+    "MAX_OBJ_MATERIALS",
+    "read_mesh",
+    "write_mesh",
+]
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".gltf", ".glb")
 
