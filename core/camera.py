@@ -160,8 +160,8 @@ class Camera:
         use ``depth`` to tell them apart.
         """
         X = np.asarray(X_world, dtype=float)
-        h = X @ self._C[:, :3].T + self._C[:, 3]
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a point too far is said below
+            h = X @ self._C[:, :3].T + self._C[:, 3]
             uv = h[..., :2] / h[..., 2:3]
         if not np.isfinite(uv).all():
             _no_pixel(X, "X_world")
