@@ -298,14 +298,24 @@ class Interface:
         """Screen position (x, y) in the canvas of video pixel uv, from the page's viewer camera."""
         return screen_of(self.server, page.panel, uv)
 
-    def click_pixel(self, page, uv):
+    def on_canvas(self, page, uv) -> tuple[float, float]:
+        """Canvas position of video pixel uv; when it falls off the canvas (the page's camera was moving
+        when it was read, on a loaded machine), once the camera has settled."""
         x, y = self.screen_of(page, uv)
+        cam = page.panel.client.camera
+        if not (0 <= x < cam.image_width and 0 <= y < cam.image_height):
+            wait_for_steady_camera(page.panel)
+            x, y = self.screen_of(page, uv)
+        return x, y
+
+    def click_pixel(self, page, uv):
+        x, y = self.on_canvas(page, uv)
         page.locator("canvas").nth(1).click(position={"x": x, "y": y})
         time.sleep(0.05)
 
     def double_click_pixel(self, page, uv):
         """A double click on video pixel uv (one gesture)."""
-        x, y = self.screen_of(page, uv)
+        x, y = self.on_canvas(page, uv)
         page.locator("canvas").nth(1).dblclick(position={"x": x, "y": y})
 
     def screenshot(self, page, path=None) -> np.ndarray:
