@@ -581,6 +581,19 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
     meshes = _items(tree, "meshes", path, limits.parts, limits)
     nodes = _items(tree, "nodes", path, limits.parts, limits)
 
+    held = _gltf_buffers(path, limits, buffers, chunks, size)
+    view_bytes = _gltf_views(path, views, held)
+    counts = _gltf_accessors(path, limits, accessors, views, view_bytes)
+    mesh_size = _gltf_mesh_sizes(path, limits, meshes, counts)
+    read = [sum(t for t, _ in mesh_size), sum(v for _, v in mesh_size)]
+    placed = _gltf_placed(path, limits, tree, nodes, mesh_size)
+    for (triangles, vertices), how in ((read, "its meshes hold"), (placed, "its scene places at least")):
+        if triangles > limits.faces or vertices > limits.vertices:
+            raise limits.refuse(str(path), f"{how} {triangles:,} triangles and {vertices:,} vertices")
+
+
+def _gltf_buffers(path: Path, limits: _Limits, buffers: list, chunks: list, size: int) -> list[int]:
+    """The bytes each buffer holds; a .gltf's buffer files counted towards the file's bytes."""
     held, total = [], size
     for b, buffer in enumerate(buffers):  # trimesh reads a buffer's uri if it has one, else the next BIN chunk
         uri = buffer.get("uri")
@@ -599,6 +612,11 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
                     str(path), f"the file and its buffer files hold {total:,} bytes ({total / 2**20:,.1f} MB)"
                 )
 
+    return held
+
+
+def _gltf_views(path: Path, views: list, held: list[int]) -> list[int]:
+    """Each buffer view's length, once it is checked to end inside its buffer."""
     view_bytes = []
     for v, view in enumerate(views):
         b = _nat(view.get("buffer"), path, f"buffer view {v}'s buffer")
@@ -611,6 +629,12 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
             )
         view_bytes.append(length)
 
+    return view_bytes
+
+
+def _gltf_accessors(path: Path, limits: _Limits, accessors: list, views: list, view_bytes: list[int]) -> list[int]:
+    """Each accessor's count, once its items are checked to fit in its buffer view (or, without one,
+    counted as the zeros trimesh would make)."""
     counts, placeholders = [], 0
     for a, accessor in enumerate(accessors):
         count = _nat(accessor.get("count"), path, f"accessor {a}'s count")
@@ -640,6 +664,12 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
                 )
         counts.append(count)
 
+    return counts
+
+
+def _gltf_mesh_sizes(path: Path, limits: _Limits, meshes: list, counts: list[int]) -> list[tuple[int, int]]:
+    """(triangles, vertices) of each mesh, from its primitives' accessors."""
+
     def count_of(index, what: str) -> int:
         if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < len(counts):
             raise _unreadable(path, f"{what} names no accessor")
@@ -665,8 +695,12 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
             triangles += n_corners // 3 if mode == 4 else max(n_corners - 2, 0) if mode == 5 else 0
             vertices += n_vertices
         mesh_size.append((triangles, vertices))
-    read = [sum(t for t, _ in mesh_size), sum(v for _, v in mesh_size)]
+    return mesh_size
 
+
+def _gltf_placed(path: Path, limits: _Limits, tree: dict, nodes: list, mesh_size: list) -> list[int]:
+    """[triangles, vertices] that the chosen scene places (each mesh once per link that reaches it), the
+    walk stopped once beyond the limits."""
     # trimesh walks the nodes from the chosen scene's roots, each (parent, child) link once, and places
     # a mesh at each link (a node reached twice makes a DAG, not the tree the format asks for)
     scenes = tree.get("scenes") if isinstance(tree.get("scenes"), list) else []
@@ -695,9 +729,7 @@ def _check_gltf(path: Path, limits: _Limits, size: int) -> None:
             placed[0] += mesh_size[m][0]
             placed[1] += mesh_size[m][1]
         stack.extend((n, c) for c in children[n])
-    for (triangles, vertices), how in ((read, "its meshes hold"), (placed, "its scene places at least")):
-        if triangles > limits.faces or vertices > limits.vertices:
-            raise limits.refuse(str(path), f"{how} {triangles:,} triangles and {vertices:,} vertices")
+    return placed
 
 
 def _check_limits(path: Path, suffix: str, limits: _Limits) -> None:

@@ -310,10 +310,12 @@ class Interface:
 
     def click_pixel(self, page, uv):
         x, y = self.on_canvas(page, uv)
+        from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
         canvas = page.locator("canvas").nth(1)
         try:
             canvas.click(position={"x": x, "y": y}, timeout=10_000)
-        except Exception:  # noqa: BLE001 - playwright's hit test kept finding the page, not the canvas, there
+        except PlaywrightTimeout:  # playwright's hit test kept finding the page, not the canvas, there
             # (seen on loaded fresh clones only): the mouse clicks the point as an operator's would; a click
             # that reaches nothing is made again by the callers that wait for its effect (select_by_click)
             box = canvas.bounding_box()
