@@ -57,6 +57,8 @@ LIVE_WORKFLOWS = ("track", "history")
 GLOBAL_KEYS = {"f", "l", "h"}  # the panel's own shortcuts (Freeze, Show live, Fit view), live in every workflow
 DOUBLE_CLICK_S = 0.6  # two clicks this close in time and place are a double click
 DOUBLE_CLICK_PX = 4.0
+LATE_FIRST_CLICK_S = 3.0  # a click by a page-told double click soon after it is its first click, arriving late
+LATE_FIRST_CLICK_PX = 12.0  # the page tells a double within 5 screen px: more image px when the view is zoomed out
 WHEEL_FIELD = "mcit-wheel"  # the hidden text field static/wheel.js writes the wheel into
 DOUBLE_FIELD = "mcit-dblclick"  # the hidden text field static/wheel.js writes a double click into
 WHEEL_ZOOM_PER_DELTA = 0.0015  # a wheel notch (deltaY 100) zooms by 14 %
@@ -100,6 +102,7 @@ class ClientPanel:
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
         self.seen_change = app.site.change_seq
         self._double_at: str | None = None  # where the double click that pressed Find was, for its refusal
+        self._last_double: tuple | None = None  # (arrival, uv) of a told double click whose first click is awaited
         self._build_gui()
         self._foreign_keys(None)
         # Clicks are handled one at a time, in the order they arrive (viser runs plain callbacks
@@ -649,6 +652,21 @@ class ClientPanel:
         time and place at the server."""
         wf = self.session.workflow
         now, last = (time.monotonic() if at is None else float(at)), getattr(self, "_last_click", None)
+        told = self._last_double
+        if not double and told is not None and 0 <= now - told[0] <= LATE_FIRST_CLICK_S:
+            if np.linalg.norm(uv - told[1]) <= LATE_FIRST_CLICK_PX:
+                # the double click's own first click, arriving after the double that the page told (on a loaded
+                # machine the two messages can swap): it was taken as part of the double, not as a new click
+                # (as an edge's first point it hid the found poses' Accept)
+                self._last_double = None
+                return
+        if double:  # its first click expected still when none came before it at that point
+            first_seen = (
+                last is not None
+                and now - last[0] <= LATE_FIRST_CLICK_S
+                and np.linalg.norm(uv - last[1]) <= LATE_FIRST_CLICK_PX
+            )
+            self._last_double = None if first_seen else (now, np.asarray(uv, float).copy())
         if double is None:
             double = (
                 last is not None and now - last[0] <= DOUBLE_CLICK_S and np.linalg.norm(uv - last[1]) <= DOUBLE_CLICK_PX

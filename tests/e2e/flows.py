@@ -65,7 +65,9 @@ class Operator:
         self.log.append(f"{chooser}: {option}")
 
     def accept(self, wf, timeout_s: float = 10.0) -> None:
-        """Accept; if the panel asks about a weak result ("Accept anyway"), press again."""
+        """Accept; if the panel asks about a weak result ("Accept anyway"), press again. Pressed once the
+        workflow's step offers it (a search under way on a loaded machine can take a while)."""
+        wait_until(lambda: "accept" in wf.current_step().enabled, 60.0, "Accept to be offered", panel=self.page.panel)
         self.press("Accept")
         wait_until(lambda: wf.accepted or self.page.panel.asking == "accept", timeout_s, "the accept or its question")
         if not wf.accepted:

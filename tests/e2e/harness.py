@@ -62,9 +62,10 @@ def wait_until(predicate, timeout_s: float = 20.0, what: str = "condition", pane
 def panel_state(panel) -> str:
     """What a client's panel shows: its workflow and step, error, warning, message, selection."""
     wf = panel.session.workflow
-    step = None if wf is None else wf.current_step().name
+    step = None if wf is None else wf.current_step()
     return (
-        f"workflow={getattr(wf, 'name', None)}:{getattr(wf, 'object_name', None)} step={step} "
+        f"workflow={getattr(wf, 'name', None)}:{getattr(wf, 'object_name', None)} "
+        f"step={getattr(step, 'name', None)} offers={sorted(getattr(step, 'enabled', ()))} "
         f"finished={getattr(wf, 'finished', None)} error={panel.error!r} warning={panel.warning!r} "
         f"message={getattr(wf, 'message', '')!r} selected={panel.session.selected!r}"
     )
@@ -128,6 +129,21 @@ def select_by_click(page, name: str, click) -> int:
         click()
         try:
             wait_until(lambda: page.panel.session.selected == name, timeout_s, "the selection")
+            return attempt
+        except AssertionError:
+            if attempt == 2:
+                raise
+    return 2
+
+
+def key_until(page, key: str, predicate, what: str, panel=None) -> int:
+    """Press ``key`` and wait for ``predicate()``. On a loaded machine a key can arrive before the page's
+    shortcuts take it, and nothing happens, as an operator would see: it is pressed once more, as they
+    would. Returns the number of presses (1 or 2)."""
+    for attempt, timeout_s in ((1, 6.0), (2, 20.0)):
+        page.keyboard.press(key)
+        try:
+            wait_until(predicate, timeout_s, what, panel=panel)
             return attempt
         except AssertionError:
             if attempt == 2:
@@ -236,8 +252,15 @@ def press(page, label: str, timeout_ms: int = 15000) -> None:
     """Click the visible button whose name starts with ``label`` (e.g. "Solve" for "Solve (R)")."""
     import re
 
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
     button = page.get_by_role("button", name=re.compile("^" + re.escape(label))).first
-    button.wait_for(state="visible", timeout=timeout_ms)
+    try:
+        button.wait_for(state="visible", timeout=timeout_ms)
+    except PlaywrightTimeout:
+        panel = getattr(page, "panel", None)
+        said = "" if panel is None else f"; the panel: {panel_state(panel)}"
+        raise AssertionError(f"no visible button {label!r} after {timeout_ms / 1000:.0f} s{said}") from None
     button.click()
 
 

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from .harness import press, select_by_click, wait_until
+from .harness import key_until, press, select_by_click, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -40,16 +40,7 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     page = ui.open(browser)
     panel = page.panel
     # with no workflow under way, Freeze (F) freezes a frame to look at; it stays (it was undone at once)
-    # (a page's first key can arrive before its shortcuts are ready on a loaded machine: nothing happens,
-    # as an operator would see, and the key is pressed once more, as they would)
-    for attempt, timeout_s in ((1, 6.0), (2, 20.0)):
-        page.keyboard.press("f")
-        try:
-            wait_until(lambda: panel.frozen is not None and panel.frozen_by is None, timeout_s, "a frame frozen")
-            break
-        except AssertionError:
-            if attempt == 2:
-                raise
+    key_until(page, "f", lambda: panel.frozen is not None and panel.frozen_by is None, "a frame frozen to look at")
     page.get_by_text("Frozen frame: t =").first.wait_for(timeout=5000)
     time.sleep(0.5)
     assert panel.frozen is not None
