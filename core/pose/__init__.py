@@ -1,21 +1,22 @@
 """Pose of a known object from clicked image edges and points (source paper §IV).
 
 ``p3l`` (large motion: the paper's geometric three-line solver on the global camera model C),
-``refine`` (small motion: the paper's linearised least squares, iterated to the pixel
-maximum-likelihood estimate, with covariance and per-click residuals), ``estimate_pose`` (both, as
-the operator uses them), ``p3l_batch`` (P3L vectorised over many triples), ``plausibility`` (can a
+``refine`` (small motion: the paper's linearised least squares, iterated to the pixel maximum-
+likelihood estimate, with covariance and per-click residuals), ``estimate_pose`` (both, as the
+operator uses them), ``p3l_batch`` (P3L vectorised over many triples), ``plausibility`` (can a
 fitted pose be the answer), ``edge_symmetries`` / ``nearest_twin`` (poses that draw the same
 picture, and the one nearest a reference), ``refine_many`` (refinement from many starts in one
-call), ``warm_up`` (load the compiled kernels, ``core.pose._kernels``: call it in a background
-thread at start-up). Conventions: DESIGN.md §Frames; perturbations and covariances are
-(δt, δr) in the world frame about the object's origin (``core.pose.residuals``).
+call), ``refine_views`` (one pose from clicks in several views), ``warm_up`` (load the compiled
+kernels, ``core.pose._kernels``: call it in a background thread at start-up). Conventions: DESIGN.md
+§Frames; perturbations and covariances are (δt, δr) in the world frame about the object's origin
+(``core.pose.residuals``).
 """
 
 from ._lazy import warm_up
 from .estimate import PoseCandidate, PoseEstimate, estimate_pose
 from .p3l import ConcurrentEdgesError, p3l, p3l_batch
 from .plausibility import plausibility
-from .refine import RefineResult, refine, refine_many, refine_with_prior
+from .refine import RefineResult, ViewClicks, refine, refine_many, refine_views, refine_with_prior
 from .symmetry import edge_symmetries, nearest_twin, symmetry_transforms
 
 __all__ = [
@@ -24,6 +25,8 @@ __all__ = [
     "refine",
     "refine_many",
     "refine_with_prior",
+    "refine_views",
+    "ViewClicks",
     "warm_up",
     "estimate_pose",
     "RefineResult",

@@ -594,6 +594,20 @@ def distance_cost(C, R, t, edges, segs, pts_obj, pts_uv):
 
 
 @_jit
+def distance_cost_views(Cs, seg_off, pt_off, R, t, edges, segs, pts_obj, pts_uv):
+    """``distance_cost`` summed over the views of ``residuals`` (Cs, seg_off, pt_off); −1 when a
+    clicked feature is behind its camera."""
+    cost = 0.0
+    for v in range(Cs.shape[0]):
+        s0, s1, p0, p1 = seg_off[v], seg_off[v + 1], pt_off[v], pt_off[v + 1]
+        c = distance_cost(Cs[v], R, t, edges[s0:s1], segs[s0:s1], pts_obj[p0:p1], pts_uv[p0:p1])
+        if c < 0.0:
+            return -1.0
+        cost += c
+    return cost
+
+
+@_jit
 def p3l_solve(C, segs, edges, pts_uv, pts_obj, T, cost, concurrent_ok=False):
     """Every pose putting three model edges (3, 2, 3) on three clicked segments (3, 2, 2).
 
@@ -721,17 +735,9 @@ def rotations_many(n, ray, V, R, valid):
 
 # ------------------------------------------------------------------------------------ refinement
 @_jit
-def residuals(C, R, t, edges, segs, pts_obj, pts_uv, want_J, r, J):
-    """``core.pose.residuals.residuals`` (its docstring) into r (m,) and, when want_J, J (m, 6);
-    returns feasible."""
-    MR = np.empty((3, 3))
-    b = np.empty(3)
-    for i in range(3):
-        for j in range(3):
-            MR[i, j] = C[i, 0] * R[0, j] + C[i, 1] * R[1, j] + C[i, 2] * R[2, j]
-        b[i] = C[i, 0] * t[0] + C[i, 1] * t[1] + C[i, 2] * t[2] + C[i, 3]
+def _segment_residuals(C, R, MR, b, edges, segs, want_J, r, J):
+    """The rows 0 … 2 S of r (and J) of one view's clicked segments (``residuals``); returns feasible."""
     S = edges.shape[0]
-    P = pts_obj.shape[0]
     feasible = True
     if S:
         H = np.empty((S, 2, 3))
@@ -792,6 +798,14 @@ def residuals(C, R, t, edges, segs, pts_obj, pts_uv, want_J, r, J):
                         J[row, 3] += x1 * a2 - x2 * a1
                         J[row, 4] += x2 * a0 - x0 * a2
                         J[row, 5] += x0 * a1 - x1 * a0
+    return feasible
+
+
+@_jit
+def _point_residuals(C, R, MR, b, pts_obj, pts_uv, want_J, r, J):
+    """The rows 0 … 2 P of r (and J) of one view's clicked points (``residuals``); returns feasible."""
+    P = pts_obj.shape[0]
+    feasible = True
     for p in range(P):
         h0 = MR[0, 0] * pts_obj[p, 0] + MR[0, 1] * pts_obj[p, 1] + MR[0, 2] * pts_obj[p, 2] + b[0]
         h1 = MR[1, 0] * pts_obj[p, 0] + MR[1, 1] * pts_obj[p, 1] + MR[1, 2] * pts_obj[p, 2] + b[1]
@@ -800,7 +814,7 @@ def residuals(C, R, t, edges, segs, pts_obj, pts_uv, want_J, r, J):
             feasible = False
             s_ = np.nan
         u, v = h0 / s_, h1 / s_
-        row = 2 * S + 2 * p
+        row = 2 * p
         r[row] = u - pts_uv[p, 0]
         r[row + 1] = v - pts_uv[p, 1]
         if want_J:
@@ -816,6 +830,38 @@ def residuals(C, R, t, edges, segs, pts_obj, pts_uv, want_J, r, J):
                 J[row + k, 3] = x1 * a2 - x2 * a1
                 J[row + k, 4] = x2 * a0 - x0 * a2
                 J[row + k, 5] = x0 * a1 - x1 * a0
+    return feasible
+
+
+@_jit
+def _pose_in_view(C, R, t, MR, b):
+    """MR = C[:, :3] R and b = C[:, :3] t + C[:, 3]: a posed object point X projects to MR X + b."""
+    for i in range(3):
+        for j in range(3):
+            MR[i, j] = C[i, 0] * R[0, j] + C[i, 1] * R[1, j] + C[i, 2] * R[2, j]
+        b[i] = C[i, 0] * t[0] + C[i, 1] * t[1] + C[i, 2] * t[2] + C[i, 3]
+
+
+@_jit
+def residuals(Cs, seg_off, pt_off, R, t, edges, segs, pts_obj, pts_uv, want_J, r, J):
+    """``core.pose.residuals.residuals`` (its docstring) into r (m,) and, when want_J, J (m, 6), for
+    clicks in V views: Cs (V, 3, 4); view v's segments are seg_off[v] … seg_off[v + 1], its points
+    pt_off[v] … pt_off[v + 1] (rows: every segment's two, then every point's two). Returns feasible."""
+    S = edges.shape[0]
+    MR = np.empty((3, 3))
+    b = np.empty(3)
+    feasible = True
+    for v in range(Cs.shape[0]):
+        C = Cs[v]
+        _pose_in_view(C, R, t, MR, b)
+        s0, s1, p0, p1 = seg_off[v], seg_off[v + 1], pt_off[v], pt_off[v + 1]
+        if s1 > s0 and not _segment_residuals(
+            C, R, MR, b, edges[s0:s1], segs[s0:s1], want_J, r[2 * s0 : 2 * s1], J[2 * s0 : 2 * s1]
+        ):
+            feasible = False
+        q0, q1 = 2 * S + 2 * p0, 2 * S + 2 * p1
+        if p1 > p0 and not _point_residuals(C, R, MR, b, pts_obj[p0:p1], pts_uv[p0:p1], want_J, r[q0:q1], J[q0:q1]):
+            feasible = False
     return feasible
 
 
@@ -977,9 +1023,29 @@ def _inverse6(H, out):
 
 @_jit
 def refine_one(
-    C, T0, edges, segs, pts_obj, pts_uv, b, huber, huber_px, max_iterations, extent, T, r, J, w, w_unit, H, free
+    Cs,
+    seg_off,
+    pt_off,
+    T0,
+    edges,
+    segs,
+    pts_obj,
+    pts_uv,
+    b,
+    huber,
+    huber_px,
+    max_iterations,
+    extent,
+    T,
+    r,
+    J,
+    w,
+    w_unit,
+    H,
+    free,
 ):
-    """Levenberg–Marquardt on the pixel residuals from T0 (``refine``'s module docstring).
+    """Levenberg–Marquardt on the pixel residuals from T0 (``refine``'s module docstring), the clicks
+    in the views of ``residuals`` (Cs, seg_off, pt_off).
 
     Fills T (4, 4), r (m,), J (m, 6), w (m,), w_unit (2 S + P,) at the solution and H (6, 6) =
     Jᵀ W J there; returns (status, iterations, converged). status BEHIND: the start puts a clicked
@@ -989,7 +1055,7 @@ def refine_one(
     S = edges.shape[0]
     R = T0[:3, :3].copy()
     t = T0[:3, 3].copy()
-    if not residuals(C, R, t, edges, segs, pts_obj, pts_uv, True, r, J):
+    if not residuals(Cs, seg_off, pt_off, R, t, edges, segs, pts_obj, pts_uv, True, r, J):
         return BEHIND, 0, False
     # Observability: JᵀJ scaled to unit diagonal, smallest eigenvalue below 1e-16 of the largest.
     ones = np.ones(m)
@@ -1038,7 +1104,7 @@ def refine_one(
                 lam = np.inf  # the Gauss–Newton step itself is negligible: at the minimum
                 break
             _perturb(R, t, delta, R_new, t_new)
-            if residuals(C, R_new, t_new, edges, segs, pts_obj, pts_uv, True, r_new, J_new):
+            if residuals(Cs, seg_off, pt_off, R_new, t_new, edges, segs, pts_obj, pts_uv, True, r_new, J_new):
                 cost_new = robust(r_new, S, huber, huber_px, b, w_new, wu_new)
                 if cost_new <= cost:
                     break
@@ -1074,7 +1140,9 @@ def refine_one(
 
 @_jit
 def refine_many(
-    C,
+    Cs,
+    seg_off,
+    pt_off,
     T0,
     edges,
     segs,
@@ -1113,7 +1181,9 @@ def refine_many(
     H = np.empty((6, 6))
     for k in range(K):
         st, it, cv = refine_one(
-            C,
+            Cs,
+            seg_off,
+            pt_off,
             T0[k],
             edges[k],
             segs,
@@ -1139,7 +1209,7 @@ def refine_many(
         if not _inverse6(H, cov[k]):
             status[k] = SINGULAR
             continue
-        c = distance_cost(C, T[k, :3, :3], T[k, :3, 3], edges[k], segs, pts_obj, pts_uv)
+        c = distance_cost_views(Cs, seg_off, pt_off, T[k, :3, :3], T[k, :3, 3], edges[k], segs, pts_obj, pts_uv)
         if c >= 0.0:
             score[k] = math.sqrt(c / max(n, 1))
         rk, wu = r[k], w_unit[k]
@@ -1244,7 +1314,9 @@ def warm_up() -> None:
     pose_ok(T0, 1e6)
     m, S, P = 6, 3, 0
     refine_many(
-        C,
+        C[None].copy(),
+        np.array([0, S]),
+        np.array([0, P]),
         T0[None].copy(),
         edges[None].copy(),
         segs,

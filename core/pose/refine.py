@@ -28,6 +28,7 @@ origin (radians): ``R ← exp([δr]×) R``, ``t ← t + δt`` (perturbation on t
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,11 +37,20 @@ from ..camera import Camera
 from ..checks import MAX_M, MAX_SCALE, MIN_SCALE, finite_array, positive_scale
 from ..transforms import check_T
 from ._lazy import kernels
-from .residuals import Clicks, as_clicks
+from .residuals import Clicks, as_clicks, stack_views, view_matrices
 
 _k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded before mcit serve's first page)
 
-__all__ = ["RefineResult", "refine", "refine_many", "refine_with_prior", "huber_weights", "click_sigmas"]
+__all__ = [
+    "RefineResult",
+    "ViewClicks",
+    "refine",
+    "refine_views",
+    "refine_many",
+    "refine_with_prior",
+    "huber_weights",
+    "click_sigmas",
+]
 
 _LOSSES = ("l2", "huber")
 
@@ -69,6 +79,8 @@ class RefineResult:
     cov_parts : dict, name → (6, 6): what ``cov`` is made of when more than the clicks went in
         ("clicks", "camera calibration": ``core.pose.uncertainty.with_camera_uncertainty``);
         empty when ``cov`` is the clicks' alone.
+    views : tuple of int, one per click as ``kinds``: the view it was clicked in (``refine_views``;
+        all 0 for one view).
     """
 
     T_world_obj: np.ndarray
@@ -85,6 +97,7 @@ class RefineResult:
     sigma_est_px: float = float("nan")
     loss: str = "l2"
     cov_parts: dict = field(default_factory=dict)
+    views: tuple[int, ...] = ()
 
     @property
     def n_segments(self) -> int:
@@ -236,6 +249,68 @@ def refine(
     return _refine(camera, T, clicks, loss, float(huber_px), sigma_px, int(max_iterations))
 
 
+@dataclass(frozen=True)
+class ViewClicks:
+    """The clicks made in one view (``refine_views``): its camera, the clicked segments and points with
+    their matched model features (as ``refine`` takes them) and their noise σ (one, or one per click of
+    this view, segments first)."""
+
+    camera: Camera
+    segs_uv: np.ndarray | None = None
+    edges_obj: np.ndarray | None = None
+    points_uv: np.ndarray | None = None
+    points_obj: np.ndarray | None = None
+    sigma_px: float | np.ndarray = 1.0
+
+
+def refine_views(
+    views: Sequence[ViewClicks],
+    T_world_obj: np.ndarray,
+    *,
+    loss: str = "l2",
+    huber_px: float = 3.0,
+    max_iterations: int = 100,
+) -> RefineResult:
+    """``refine`` from clicks made in several views at once: one pose fits them all (its residuals in
+    each view's pixels, weighted by that view's σ). A second view sees along the first view's line of
+    sight, where one view's clicks fix the pose worst (``bench/views.py`` measures it).
+
+    The result's ``kinds`` and ``views`` order the clicks: every view's segments, in view order, then
+    every view's points. ValueError as ``refine``, naming the view whose clicks are wrong."""
+    views = list(views)
+    if not views:
+        raise ValueError("no view's clicks: give the clicks of at least one view")
+    per_view, seg_sigma, pt_sigma = [], [], []
+    for i, v in enumerate(views):
+        if not isinstance(v, ViewClicks):
+            raise ValueError(f"view {i + 1} must be a ViewClicks, got {type(v).__name__}")
+        try:
+            check_options(v.camera, loss, huber_px, v.sigma_px)
+            c = as_clicks(v.segs_uv, v.edges_obj, v.points_uv, v.points_obj)
+            sigma = click_sigmas(v.sigma_px, c)[::2]  # one per click of this view, segments first
+        except ValueError as exc:
+            raise ValueError(f"view {i + 1}: {exc}") from None
+        per_view.append(c)
+        seg_sigma.append(sigma[: c.n_segments])
+        pt_sigma.append(sigma[c.n_segments :])
+    clicks = stack_views(per_view)
+    sigma_px = np.concatenate(seg_sigma + pt_sigma)
+    if np.all(sigma_px == sigma_px[0]):
+        sigma_px = float(sigma_px[0]) if len(sigma_px) else 1.0
+    out = refine_many(
+        [v.camera for v in views],
+        _as_pose(T_world_obj)[None],
+        clicks,
+        loss,
+        float(huber_px),
+        sigma_px,
+        int(max_iterations),
+    )[0][0]
+    if isinstance(out, str):
+        raise ValueError(out)
+    return out
+
+
 def _refine(
     camera: Camera, T: np.ndarray, clicks: Clicks, loss: str, huber_px: float, sigma_px, max_iterations: int
 ) -> RefineResult:
@@ -246,7 +321,7 @@ def _refine(
 
 
 def refine_many(
-    camera: Camera,
+    camera: Camera | Sequence[Camera],
     T_starts: np.ndarray,
     clicks: Clicks,
     loss: str = "l2",
@@ -256,7 +331,8 @@ def refine_many(
     edges_obj: np.ndarray | None = None,
 ) -> list[tuple[RefineResult | str, float]]:
     """``refine`` from many starts at once (one compiled call): the P3L candidates of a triple,
-    or the assignments the matcher tries.
+    or the assignments the matcher tries. ``camera``: one, or one per view of stacked clicks
+    (``residuals.stack_views``).
 
     T_starts (K, 4, 4) rigid transforms (validated by the caller); clicks as ``as_clicks`` made
     them; edges_obj (K, S, 2, 3): each start's own model edges (default: the clicks' for every
@@ -293,8 +369,11 @@ def refine_many(
     )
     status, iterations, converged = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.bool_)
     score, summary = np.empty(K), np.empty((K, 2 * n + 2))
+    seg_off, pt_off = clicks.offsets
     _k.refine_many(
-        camera.C,
+        view_matrices(camera, clicks),
+        seg_off,
+        pt_off,
         T0,
         edges,
         clicks.segs_uv,
@@ -367,6 +446,7 @@ def _start_results(status, free, extent, summary, outputs, clicks: Clicks, sigma
             sigma_px=sigma_out,
             sigma_est_px=float(sk[2 * n + 1]),
             loss=loss,
+            views=clicks.views,
         )
         out.append((res, float(score[k])))
     return out

@@ -25,6 +25,7 @@ vector in world axes about the object's origin (radians)::
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -39,6 +40,8 @@ _k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded
 __all__ = [
     "Clicks",
     "as_clicks",
+    "stack_views",
+    "view_matrices",
     "interpretation_planes",
     "residuals",
     "perturb",
@@ -61,6 +64,29 @@ class Clicks:
     edges_obj: np.ndarray
     points_uv: np.ndarray
     points_obj: np.ndarray
+    seg_off: tuple[int, ...] | None = None
+    pt_off: tuple[int, ...] | None = None
+
+    @property
+    def n_views(self) -> int:
+        """The views the clicks were made in (``stack_views``); 1 unless stacked."""
+        return 1 if self.seg_off is None else len(self.seg_off) - 1
+
+    @cached_property
+    def offsets(self) -> tuple[np.ndarray, np.ndarray]:
+        """(seg_off, pt_off), int64 (V + 1,): view v's segments are seg_off[v] … seg_off[v + 1], its
+        points pt_off[v] … pt_off[v + 1]."""
+        if self.seg_off is None:
+            return np.array([0, len(self.segs_uv)]), np.array([0, len(self.points_uv)])
+        return np.array(self.seg_off, dtype=np.int64), np.array(self.pt_off, dtype=np.int64)
+
+    @property
+    def views(self) -> tuple[int, ...]:
+        """The view of each click, as ``kinds`` orders them (segments first)."""
+        seg_off, pt_off = self.offsets
+        return tuple(np.repeat(np.arange(self.n_views), np.diff(seg_off)).tolist()) + tuple(
+            np.repeat(np.arange(self.n_views), np.diff(pt_off)).tolist()
+        )
 
     @cached_property
     def segs_h(self) -> np.ndarray:
@@ -183,6 +209,33 @@ def as_clicks(segs_uv=None, edges_obj=None, points_uv=None, points_obj=None) -> 
             finite_array(puv, (None, 2), "points_uv", max_abs=MAX_PX, unit=" px")
             finite_array(pobj, (None, 3), "points_obj", max_abs=MAX_M, unit=" m")
     return Clicks(segs, edges, puv, pobj)
+
+
+def stack_views(per_view: Sequence[Clicks]) -> Clicks:
+    """One Clicks of the clicks made in several views (each validated by ``as_clicks``): every view's
+    segments, in view order, then every view's points; the offsets say which view each came from."""
+    if not per_view:
+        raise ValueError("no view's clicks: give the clicks of at least one view")
+    seg_off = tuple(np.cumsum([0] + [c.n_segments for c in per_view]).tolist())
+    pt_off = tuple(np.cumsum([0] + [c.n_points for c in per_view]).tolist())
+    return Clicks(
+        np.concatenate([c.segs_uv for c in per_view]),
+        np.concatenate([c.edges_obj for c in per_view]),
+        np.concatenate([c.points_uv for c in per_view]),
+        np.concatenate([c.points_obj for c in per_view]),
+        seg_off,
+        pt_off,
+    )
+
+
+def view_matrices(cameras: Camera | Sequence[Camera], clicks: Clicks) -> np.ndarray:
+    """The views' matrices C, (V, 3, 4), one camera per view of the clicks; ValueError otherwise."""
+    cams = [cameras] if isinstance(cameras, Camera) else list(cameras)
+    if not all(isinstance(c, Camera) for c in cams):
+        raise ValueError("each view needs a core.camera.Camera")
+    if len(cams) != clicks.n_views:
+        raise ValueError(f"{len(cams)} camera(s) for clicks in {clicks.n_views} view(s): give one camera per view")
+    return np.ascontiguousarray(np.stack([c.C for c in cams]), dtype=float)
 
 
 def interpretation_planes(camera: Camera, segs_uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

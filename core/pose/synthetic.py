@@ -19,6 +19,7 @@ __all__ = [
     "LineProblem",
     "PAPER_BOX_M",
     "paper_camera",
+    "side_camera",
     "paper_box_pose",
     "random_camera",
     "random_pose_in_view",
@@ -55,6 +56,16 @@ def paper_camera() -> Camera:
     c, s = np.cos(np.radians(25.0)), np.sin(np.radians(25.0))
     R_world_cam = np.array([[1.0, 0.0, 0.0], [0.0, -s, c], [0.0, -c, -s]])  # x right, y down, z forward
     return Camera.from_intrinsics(K, invert_T(make_T(R_world_cam, [0.0, -1.45, 0.75])), 512, 256)
+
+
+def side_camera() -> Camera:
+    """A second view of the paper's table (the camera of ``paper_camera`` turned 90° about the table's
+    vertical axis): 2.0 m to the right of the table's origin at the same height, looking along −x, 25°
+    down; it sees along ``paper_camera``'s image rows, across its line of sight."""
+    K = np.array([[500.0, 0.0, 255.5], [0.0, 500.0, 127.5], [0.0, 0.0, 1.0]])
+    c, s = np.cos(np.radians(25.0)), np.sin(np.radians(25.0))
+    R_world_cam = np.array([[0.0, s, -c], [1.0, 0.0, 0.0], [0.0, -c, -s]])  # x right, y down, z forward
+    return Camera.from_intrinsics(K, invert_T(make_T(R_world_cam, [2.0, 0.45, 0.75])), 512, 256)
 
 
 def paper_box_pose(rng: np.random.Generator) -> np.ndarray:
