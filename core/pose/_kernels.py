@@ -594,12 +594,15 @@ def distance_cost(C, R, t, edges, segs, pts_obj, pts_uv):
 
 
 @_jit
-def distance_cost_views(Cs, seg_off, pt_off, R, t, edges, segs, pts_obj, pts_uv):
-    """``distance_cost`` summed over the views of ``residuals`` (Cs, seg_off, pt_off); −1 when a
-    clicked feature is behind its camera."""
+def distance_cost_views(Cs, seg_view, pt_view, R, t, edges, segs, pts_obj, pts_uv):
+    """``distance_cost`` summed over the views of ``residuals`` (Cs, seg_view, pt_view: each view's clicks
+    one after the other); −1 when a clicked feature is behind its camera."""
+    if Cs.shape[0] == 1:
+        return distance_cost(Cs[0], R, t, edges, segs, pts_obj, pts_uv)
     cost = 0.0
     for v in range(Cs.shape[0]):
-        s0, s1, p0, p1 = seg_off[v], seg_off[v + 1], pt_off[v], pt_off[v + 1]
+        s0, s1 = np.searchsorted(seg_view, v), np.searchsorted(seg_view, v + 1)
+        p0, p1 = np.searchsorted(pt_view, v), np.searchsorted(pt_view, v + 1)
         c = distance_cost(Cs[v], R, t, edges[s0:s1], segs[s0:s1], pts_obj[p0:p1], pts_uv[p0:p1])
         if c < 0.0:
             return -1.0
@@ -735,9 +738,20 @@ def rotations_many(n, ray, V, R, valid):
 
 # ------------------------------------------------------------------------------------ refinement
 @_jit
-def _segment_residuals(C, R, MR, b, edges, segs, want_J, r, J):
-    """The rows 0 … 2 S of r (and J) of one view's clicked segments (``residuals``); returns feasible."""
+def residuals(Cs, seg_view, pt_view, R, t, edges, segs, pts_obj, pts_uv, want_J, r, J):
+    """``core.pose.residuals.residuals`` (its docstring) into r (m,) and, when want_J, J (m, 6), for
+    clicks in V views: Cs (V, 3, 4), seg_view (S,) and pt_view (P,) the view of each clicked segment
+    and point; returns feasible."""
+    V = Cs.shape[0]
+    MRs = np.empty((V, 3, 3))
+    bs = np.empty((V, 3))
+    for vw in range(V):
+        for i in range(3):
+            for j in range(3):
+                MRs[vw, i, j] = Cs[vw, i, 0] * R[0, j] + Cs[vw, i, 1] * R[1, j] + Cs[vw, i, 2] * R[2, j]
+            bs[vw, i] = Cs[vw, i, 0] * t[0] + Cs[vw, i, 1] * t[1] + Cs[vw, i, 2] * t[2] + Cs[vw, i, 3]
     S = edges.shape[0]
+    P = pts_obj.shape[0]
     feasible = True
     if S:
         H = np.empty((S, 2, 3))
@@ -747,10 +761,14 @@ def _segment_residuals(C, R, MR, b, edges, segs, want_J, r, J):
         gmin = np.inf
         zmin = np.inf
         for s in range(S):
+            vw = seg_view[s]
             for e in range(2):
                 for i in range(3):
                     H[s, e, i] = (
-                        MR[i, 0] * edges[s, e, 0] + MR[i, 1] * edges[s, e, 1] + MR[i, 2] * edges[s, e, 2] + b[i]
+                        MRs[vw, i, 0] * edges[s, e, 0]
+                        + MRs[vw, i, 1] * edges[s, e, 1]
+                        + MRs[vw, i, 2] * edges[s, e, 2]
+                        + bs[vw, i]
                     )
             hA, hB = H[s, 0], H[s, 1]
             L[s, 0] = hA[1] * hB[2] - hA[2] * hB[1]
@@ -768,6 +786,7 @@ def _segment_residuals(C, R, MR, b, edges, segs, want_J, r, J):
                 if not (g[s] > 1e-12 * lrow and (H[s, 0, 2] > 0 or H[s, 1, 2] > 0)):
                     g[s] = np.nan
         for s in range(S):
+            vw = seg_view[s]
             l0, l1, l2 = L[s, 0] / g[s], L[s, 1] / g[s], L[s, 2] / g[s]
             for k in range(2):
                 q0, q1 = segs[s, k, 0], segs[s, k, 1]
@@ -786,9 +805,9 @@ def _segment_residuals(C, R, MR, b, edges, segs, want_J, r, J):
                         c0 = sg * (o[1] * p2 - o[2] * p1)
                         c1 = sg * (o[2] * p0 - o[0] * p2)
                         c2 = sg * (o[0] * p1 - o[1] * p0)
-                        a0 = c0 * C[0, 0] + c1 * C[1, 0] + c2 * C[2, 0]
-                        a1 = c0 * C[0, 1] + c1 * C[1, 1] + c2 * C[2, 1]
-                        a2 = c0 * C[0, 2] + c1 * C[1, 2] + c2 * C[2, 2]
+                        a0 = c0 * Cs[vw, 0, 0] + c1 * Cs[vw, 1, 0] + c2 * Cs[vw, 2, 0]
+                        a1 = c0 * Cs[vw, 0, 1] + c1 * Cs[vw, 1, 1] + c2 * Cs[vw, 2, 1]
+                        a2 = c0 * Cs[vw, 0, 2] + c1 * Cs[vw, 1, 2] + c2 * Cs[vw, 2, 2]
                         x0 = R[0, 0] * edges[s, e, 0] + R[0, 1] * edges[s, e, 1] + R[0, 2] * edges[s, e, 2]
                         x1 = R[1, 0] * edges[s, e, 0] + R[1, 1] * edges[s, e, 1] + R[1, 2] * edges[s, e, 2]
                         x2 = R[2, 0] * edges[s, e, 0] + R[2, 1] * edges[s, e, 1] + R[2, 2] * edges[s, e, 2]
@@ -798,23 +817,16 @@ def _segment_residuals(C, R, MR, b, edges, segs, want_J, r, J):
                         J[row, 3] += x1 * a2 - x2 * a1
                         J[row, 4] += x2 * a0 - x0 * a2
                         J[row, 5] += x0 * a1 - x1 * a0
-    return feasible
-
-
-@_jit
-def _point_residuals(C, R, MR, b, pts_obj, pts_uv, want_J, r, J):
-    """The rows 0 … 2 P of r (and J) of one view's clicked points (``residuals``); returns feasible."""
-    P = pts_obj.shape[0]
-    feasible = True
     for p in range(P):
-        h0 = MR[0, 0] * pts_obj[p, 0] + MR[0, 1] * pts_obj[p, 1] + MR[0, 2] * pts_obj[p, 2] + b[0]
-        h1 = MR[1, 0] * pts_obj[p, 0] + MR[1, 1] * pts_obj[p, 1] + MR[1, 2] * pts_obj[p, 2] + b[1]
-        s_ = MR[2, 0] * pts_obj[p, 0] + MR[2, 1] * pts_obj[p, 1] + MR[2, 2] * pts_obj[p, 2] + b[2]
+        vw = pt_view[p]
+        h0 = MRs[vw, 0, 0] * pts_obj[p, 0] + MRs[vw, 0, 1] * pts_obj[p, 1] + MRs[vw, 0, 2] * pts_obj[p, 2] + bs[vw, 0]
+        h1 = MRs[vw, 1, 0] * pts_obj[p, 0] + MRs[vw, 1, 1] * pts_obj[p, 1] + MRs[vw, 1, 2] * pts_obj[p, 2] + bs[vw, 1]
+        s_ = MRs[vw, 2, 0] * pts_obj[p, 0] + MRs[vw, 2, 1] * pts_obj[p, 1] + MRs[vw, 2, 2] * pts_obj[p, 2] + bs[vw, 2]
         if not s_ > 0:
             feasible = False
             s_ = np.nan
         u, v = h0 / s_, h1 / s_
-        row = 2 * p
+        row = 2 * S + 2 * p
         r[row] = u - pts_uv[p, 0]
         r[row + 1] = v - pts_uv[p, 1]
         if want_J:
@@ -823,45 +835,13 @@ def _point_residuals(C, R, MR, b, pts_obj, pts_uv, want_J, r, J):
             x2 = R[2, 0] * pts_obj[p, 0] + R[2, 1] * pts_obj[p, 1] + R[2, 2] * pts_obj[p, 2]
             for k in range(2):
                 uk = u if k == 0 else v
-                a0 = (C[k, 0] - uk * C[2, 0]) / s_
-                a1 = (C[k, 1] - uk * C[2, 1]) / s_
-                a2 = (C[k, 2] - uk * C[2, 2]) / s_
+                a0 = (Cs[vw, k, 0] - uk * Cs[vw, 2, 0]) / s_
+                a1 = (Cs[vw, k, 1] - uk * Cs[vw, 2, 1]) / s_
+                a2 = (Cs[vw, k, 2] - uk * Cs[vw, 2, 2]) / s_
                 J[row + k, 0], J[row + k, 1], J[row + k, 2] = a0, a1, a2
                 J[row + k, 3] = x1 * a2 - x2 * a1
                 J[row + k, 4] = x2 * a0 - x0 * a2
                 J[row + k, 5] = x0 * a1 - x1 * a0
-    return feasible
-
-
-@_jit
-def _pose_in_view(C, R, t, MR, b):
-    """MR = C[:, :3] R and b = C[:, :3] t + C[:, 3]: a posed object point X projects to MR X + b."""
-    for i in range(3):
-        for j in range(3):
-            MR[i, j] = C[i, 0] * R[0, j] + C[i, 1] * R[1, j] + C[i, 2] * R[2, j]
-        b[i] = C[i, 0] * t[0] + C[i, 1] * t[1] + C[i, 2] * t[2] + C[i, 3]
-
-
-@_jit
-def residuals(Cs, seg_off, pt_off, R, t, edges, segs, pts_obj, pts_uv, want_J, r, J):
-    """``core.pose.residuals.residuals`` (its docstring) into r (m,) and, when want_J, J (m, 6), for
-    clicks in V views: Cs (V, 3, 4); view v's segments are seg_off[v] … seg_off[v + 1], its points
-    pt_off[v] … pt_off[v + 1] (rows: every segment's two, then every point's two). Returns feasible."""
-    S = edges.shape[0]
-    MR = np.empty((3, 3))
-    b = np.empty(3)
-    feasible = True
-    for v in range(Cs.shape[0]):
-        C = Cs[v]
-        _pose_in_view(C, R, t, MR, b)
-        s0, s1, p0, p1 = seg_off[v], seg_off[v + 1], pt_off[v], pt_off[v + 1]
-        if s1 > s0 and not _segment_residuals(
-            C, R, MR, b, edges[s0:s1], segs[s0:s1], want_J, r[2 * s0 : 2 * s1], J[2 * s0 : 2 * s1]
-        ):
-            feasible = False
-        q0, q1 = 2 * S + 2 * p0, 2 * S + 2 * p1
-        if p1 > p0 and not _point_residuals(C, R, MR, b, pts_obj[p0:p1], pts_uv[p0:p1], want_J, r[q0:q1], J[q0:q1]):
-            feasible = False
     return feasible
 
 
@@ -1024,8 +1004,8 @@ def _inverse6(H, out):
 @_jit
 def refine_one(
     Cs,
-    seg_off,
-    pt_off,
+    seg_view,
+    pt_view,
     T0,
     edges,
     segs,
@@ -1045,7 +1025,7 @@ def refine_one(
     free,
 ):
     """Levenberg–Marquardt on the pixel residuals from T0 (``refine``'s module docstring), the clicks
-    in the views of ``residuals`` (Cs, seg_off, pt_off).
+    in the views of ``residuals`` (Cs, seg_view, pt_view).
 
     Fills T (4, 4), r (m,), J (m, 6), w (m,), w_unit (2 S + P,) at the solution and H (6, 6) =
     Jᵀ W J there; returns (status, iterations, converged). status BEHIND: the start puts a clicked
@@ -1055,7 +1035,7 @@ def refine_one(
     S = edges.shape[0]
     R = T0[:3, :3].copy()
     t = T0[:3, 3].copy()
-    if not residuals(Cs, seg_off, pt_off, R, t, edges, segs, pts_obj, pts_uv, True, r, J):
+    if not residuals(Cs, seg_view, pt_view, R, t, edges, segs, pts_obj, pts_uv, True, r, J):
         return BEHIND, 0, False
     # Observability: JᵀJ scaled to unit diagonal, smallest eigenvalue below 1e-16 of the largest.
     ones = np.ones(m)
@@ -1104,7 +1084,7 @@ def refine_one(
                 lam = np.inf  # the Gauss–Newton step itself is negligible: at the minimum
                 break
             _perturb(R, t, delta, R_new, t_new)
-            if residuals(Cs, seg_off, pt_off, R_new, t_new, edges, segs, pts_obj, pts_uv, True, r_new, J_new):
+            if residuals(Cs, seg_view, pt_view, R_new, t_new, edges, segs, pts_obj, pts_uv, True, r_new, J_new):
                 cost_new = robust(r_new, S, huber, huber_px, b, w_new, wu_new)
                 if cost_new <= cost:
                     break
@@ -1141,8 +1121,8 @@ def refine_one(
 @_jit
 def refine_many(
     Cs,
-    seg_off,
-    pt_off,
+    seg_view,
+    pt_view,
     T0,
     edges,
     segs,
@@ -1182,8 +1162,8 @@ def refine_many(
     for k in range(K):
         st, it, cv = refine_one(
             Cs,
-            seg_off,
-            pt_off,
+            seg_view,
+            pt_view,
             T0[k],
             edges[k],
             segs,
@@ -1209,7 +1189,7 @@ def refine_many(
         if not _inverse6(H, cov[k]):
             status[k] = SINGULAR
             continue
-        c = distance_cost_views(Cs, seg_off, pt_off, T[k, :3, :3], T[k, :3, 3], edges[k], segs, pts_obj, pts_uv)
+        c = distance_cost_views(Cs, seg_view, pt_view, T[k, :3, :3], T[k, :3, 3], edges[k], segs, pts_obj, pts_uv)
         if c >= 0.0:
             score[k] = math.sqrt(c / max(n, 1))
         rk, wu = r[k], w_unit[k]
@@ -1313,10 +1293,12 @@ def warm_up() -> None:
     T0[2, 3] = 0.0
     pose_ok(T0, 1e6)
     m, S, P = 6, 3, 0
+    Cs = C[None].copy()
+    Cs.setflags(write=False)  # as core.pose.residuals.view_matrices passes it
     refine_many(
-        C[None].copy(),
-        np.array([0, S]),
-        np.array([0, P]),
+        Cs,
+        np.zeros(S, np.int64),
+        np.zeros(P, np.int64),
         T0[None].copy(),
         edges[None].copy(),
         segs,

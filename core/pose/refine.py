@@ -369,11 +369,11 @@ def refine_many(
     )
     status, iterations, converged = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.bool_)
     score, summary = np.empty(K), np.empty((K, 2 * n + 2))
-    seg_off, pt_off = clicks.offsets
+    seg_view, pt_view = clicks.view_index
     _k.refine_many(
         view_matrices(camera, clicks),
-        seg_off,
-        pt_off,
+        seg_view,
+        pt_view,
         T0,
         edges,
         clicks.segs_uv,

@@ -72,21 +72,23 @@ class Clicks:
         """The views the clicks were made in (``stack_views``); 1 unless stacked."""
         return 1 if self.seg_off is None else len(self.seg_off) - 1
 
-    @cached_property
-    def offsets(self) -> tuple[np.ndarray, np.ndarray]:
-        """(seg_off, pt_off), int64 (V + 1,): view v's segments are seg_off[v] … seg_off[v + 1], its
-        points pt_off[v] … pt_off[v + 1]."""
-        if self.seg_off is None:
-            return np.array([0, len(self.segs_uv)]), np.array([0, len(self.points_uv)])
-        return np.array(self.seg_off, dtype=np.int64), np.array(self.pt_off, dtype=np.int64)
+    @property
+    def view_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """(seg_view (S,), pt_view (P,)), int64: the view of each clicked segment and point."""
+        if self.seg_off is None:  # one view: the shared zeros (the kernels only read them)
+            S, P = len(self.segs_uv), len(self.points_uv)
+            zeros = _ZEROS if max(S, P) <= len(_ZEROS) else np.zeros(max(S, P), np.int64)
+            return zeros[:S], zeros[:P]
+        views = np.arange(self.n_views)
+        return np.repeat(views, np.diff(self.seg_off)), np.repeat(views, np.diff(self.pt_off))
 
     @property
     def views(self) -> tuple[int, ...]:
         """The view of each click, as ``kinds`` orders them (segments first)."""
-        seg_off, pt_off = self.offsets
-        return tuple(np.repeat(np.arange(self.n_views), np.diff(seg_off)).tolist()) + tuple(
-            np.repeat(np.arange(self.n_views), np.diff(pt_off)).tolist()
-        )
+        if self.seg_off is None:
+            return (0,) * (len(self.segs_uv) + len(self.points_uv))
+        seg_view, pt_view = self.view_index
+        return tuple(seg_view.tolist()) + tuple(pt_view.tolist())
 
     @cached_property
     def segs_h(self) -> np.ndarray:
@@ -112,6 +114,7 @@ class Clicks:
         return ("segment",) * len(self.segs_uv) + ("point",) * len(self.points_uv)
 
 
+_ZEROS = np.zeros(256, np.int64)  # Clicks.view_index of one view
 _NO_SEGS, _NO_EDGES, _NO_UV, _NO_X = (np.zeros(shape) for shape in ((0, 2, 2), (0, 2, 3), (0, 2), (0, 3)))
 for _a in (_NO_SEGS, _NO_EDGES, _NO_UV, _NO_X):
     _a.setflags(write=False)
@@ -229,13 +232,18 @@ def stack_views(per_view: Sequence[Clicks]) -> Clicks:
 
 
 def view_matrices(cameras: Camera | Sequence[Camera], clicks: Clicks) -> np.ndarray:
-    """The views' matrices C, (V, 3, 4), one camera per view of the clicks; ValueError otherwise."""
+    """The views' matrices C, (V, 3, 4), read-only as ``Camera.C`` is (the kernels are compiled for that
+    type), one camera per view of the clicks; ValueError otherwise."""
+    if isinstance(cameras, Camera) and clicks.seg_off is None:
+        return cameras.C[None]
     cams = [cameras] if isinstance(cameras, Camera) else list(cameras)
     if not all(isinstance(c, Camera) for c in cams):
         raise ValueError("each view needs a core.camera.Camera")
     if len(cams) != clicks.n_views:
         raise ValueError(f"{len(cams)} camera(s) for clicks in {clicks.n_views} view(s): give one camera per view")
-    return np.ascontiguousarray(np.stack([c.C for c in cams]), dtype=float)
+    Cs = np.ascontiguousarray(np.stack([c.C for c in cams]), dtype=float)
+    Cs.setflags(write=False)
+    return Cs
 
 
 def interpretation_planes(camera: Camera, segs_uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
