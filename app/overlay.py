@@ -69,19 +69,24 @@ COLORS: dict[str, tuple[int, int, int]] = {
 
 @dataclass(frozen=True)
 class PixelWorld:
-    """Pixel ↔ viser-world mapping for one image size: (u, v) ↔ (u·k, v·k, z).
+    """Pixel ↔ viser-world mapping for one image size: (u, v) ↔ (x0 + u·k, v·k, z).
 
-    k : world units per pixel. width, height : image size in pixels.
+    k : world units per pixel. width, height : image size in pixels. x0 : where the image's left edge
+    lies along x (world units): each camera's image has its own place, side by side.
     """
 
     width: int
     height: int
     k: float = 0.01
+    x0: float = 0.0
 
     def to_world(self, uv: np.ndarray, z: float = 0.0) -> np.ndarray:
         """World points (..., 3) of pixels (..., 2) on the plane z."""
         uv = np.asarray(uv, dtype=float)
-        return np.concatenate([uv * self.k, np.full(uv.shape[:-1] + (1,), float(z))], axis=-1)
+        xy = uv * self.k
+        if self.x0:
+            xy = xy + np.array([self.x0, 0.0])
+        return np.concatenate([xy, np.full(uv.shape[:-1] + (1,), float(z))], axis=-1)
 
     def pixel_from_ray(self, origin: np.ndarray, direction: np.ndarray) -> np.ndarray | None:
         """The pixel (2,) where a viewer ray meets the image plane z = 0, or None if it does not."""
@@ -93,12 +98,16 @@ class PixelWorld:
         if t <= 0:
             return None
         p = o + t * d
-        return p[:2] / self.k
+        return np.array([p[0] - self.x0, p[1]]) / self.k
+
+    def holds(self, uv: np.ndarray | None) -> bool:
+        """True when pixel uv (2,) lies on this image."""
+        return uv is not None and -0.5 <= uv[0] <= self.width - 0.5 and -0.5 <= uv[1] <= self.height - 0.5
 
     @property
     def image_center(self) -> np.ndarray:
         """World position (3,) of the image plane's centre (pixel centres span 0..size − 1)."""
-        return np.array([(self.width - 1) / 2.0 * self.k, (self.height - 1) / 2.0 * self.k, 0.0])
+        return np.array([self.x0 + (self.width - 1) / 2.0 * self.k, (self.height - 1) / 2.0 * self.k, 0.0])
 
     @property
     def render_size(self) -> tuple[float, float]:

@@ -51,6 +51,7 @@ typo), raises ``SceneError`` (a ``ValueError``) naming the file and the field. K
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -71,6 +72,8 @@ __all__ = [
     "VideoSpec",
     "RenderSpec",
     "Scene",
+    "SceneView",
+    "DEFAULT_VIEW",
     "load_scene",
     "scene_from_dict",
     "parse_pose",
@@ -294,6 +297,17 @@ class VideoSpec:
 
 
 @dataclass(frozen=True)
+class SceneView:
+    """One camera of the site (a view): its name, the global model C, its lens (or None) and its
+    prerecorded video (or None)."""
+
+    name: str
+    camera: Camera
+    lens: Any = field(default=None, compare=False)
+    video: VideoSpec | None = None
+
+
+@dataclass(frozen=True)
 class RenderSpec:
     """Renderer settings (app.render): light, sensor noise, blur, anti-aliasing.
 
@@ -339,6 +353,38 @@ class Scene:
     # The camera's lens distortion (app.undistort.LensDistortion) from an intrinsics file, or None: the
     # video is undistorted on arrival (C holds in the undistorted image); the renderer renders through it.
     lens: Any = field(default=None, compare=False)
+    # Every camera of the site, the first one's being camera, lens and video above (a scene with one
+    # "camera" block has one view, named "main").
+    views: tuple[SceneView, ...] = ()
+
+    def __post_init__(self) -> None:
+        v = self.views[0] if self.views else None
+        if v is None or v.camera is not self.camera or v.lens is not self.lens or v.video is not self.video:
+            # the first view is camera, lens and video (a scene made or replaced field by field keeps to it)
+            first = SceneView(DEFAULT_VIEW if v is None else v.name, self.camera, self.lens, self.video)
+            object.__setattr__(self, "views", (first, *self.views[1:]))
+
+    def view(self, name: str | None = None) -> SceneView:
+        """The view named ``name`` (the first for None); SceneError naming the views otherwise."""
+        if name is None:
+            return self.views[0]
+        for v in self.views:
+            if v.name == name:
+                return v
+        raise SceneError(f"scene {self.name!r} has no camera named {name!r}; its cameras: {self.view_names}")
+
+    def camera_block(self, view: str | None = None) -> dict:
+        """One camera's block as the scene file gives it (the first camera for None), {} when the scene
+        was not read from a file."""
+        raw = self.raw or {}
+        if "cameras" not in raw:
+            return dict(raw.get("camera") or {}) if view in (None, self.views[0].name) else {}
+        name = self.view(view).name
+        return next((dict(c) for c in raw["cameras"] if isinstance(c, dict) and c.get("name") == name), {})
+
+    @property
+    def view_names(self) -> tuple[str, ...]:
+        return tuple(v.name for v in self.views)
 
     def body(self, name: str) -> Body:
         for b in self.bodies:
@@ -376,7 +422,20 @@ _BODY_KEYS = ("name", "kind", "status", "model", "pose", "motion", "appearance")
 _APPEARANCE_KEYS = ("albedo", "texture", "texture_scale_m")
 _VIDEO_KEYS = ("file", "fps", "duration_s")
 _RENDER_KEYS = ("light_dir", "ambient", "gain", "sky", "noise_sigma", "blur_sigma_px", "seed", "aa_samples")
-_TOP_KEYS = ("format", "name", "description", "camera", "turret", "rangefinder", "bodies", "video", "render")
+_TOP_KEYS = (
+    "format",
+    "name",
+    "description",
+    "camera",
+    "cameras",
+    "turret",
+    "rangefinder",
+    "bodies",
+    "video",
+    "render",
+)
+VIEW_NAME = re.compile(r"[A-Za-z0-9_-]{1,32}")  # a camera's name: it is typed in --video NAME=SOURCE
+DEFAULT_VIEW = "main"  # the name of the one view of a scene with a "camera" block
 _MODEL_KINDS = ("box", "cylinder", "cone", "brep", "cao", "mesh")
 
 
@@ -600,6 +659,38 @@ def _render(r: Any, where: str) -> RenderSpec:
     )
 
 
+def _views(d: dict, root: Path, bodies: list[Body], where: str) -> tuple[SceneView, ...]:
+    """The scene's cameras: a "cameras" list (each a camera block with a "name" and its own "video"), or
+    one "camera" block (and the top-level "video") named ``DEFAULT_VIEW``."""
+    if "cameras" in d:
+        if "camera" in d or "video" in d:
+            raise SceneError(
+                f"{where}: give either 'cameras' (a list, each camera with its own 'video') or 'camera' and "
+                "'video', not both"
+            )
+        cams = d["cameras"]
+        if not isinstance(cams, list) or not cams:
+            raise SceneError(f"{where}: cameras: a non-empty list of camera blocks expected")
+        views: list[SceneView] = []
+        for i, c in enumerate(cams):
+            at = f"{where}: cameras[{i}]"
+            if not isinstance(c, dict):
+                raise SceneError(f"{at}: expected an object {{...}}, got {type(c).__name__}")
+            name = _need(c, "name", at)
+            if not isinstance(name, str) or not VIEW_NAME.fullmatch(name):
+                raise SceneError(f"{at}.name: 1 to 32 letters, digits, '-' or '_' expected, got {name!r}")
+            if name in (v.name for v in views):
+                raise SceneError(f"{at}.name: {name!r} names two cameras; give each its own name")
+            block = {k: v for k, v in c.items() if k not in ("name", "video")}
+            camera, lens = _camera_and_lens(block, root, at)
+            video = _video(c["video"], root, bodies, f"{at}.video") if "video" in c else None
+            views.append(SceneView(name, camera, lens, video))
+        return tuple(views)
+    camera, lens = _camera_and_lens(_need(d, "camera", where), root, f"{where}: camera")
+    video = _video(d["video"], root, bodies, f"{where}: video") if "video" in d else None
+    return (SceneView(DEFAULT_VIEW, camera, lens, video),)
+
+
 def scene_from_dict(d: Any, root: str | Path, where: str = "scene.json") -> Scene:
     """Validate a scene description (the parsed JSON) whose files live in the folder ``root``."""
     root = Path(root)
@@ -609,7 +700,6 @@ def scene_from_dict(d: Any, root: str | Path, where: str = "scene.json") -> Scen
     if fmt != FORMAT:
         raise SceneError(f"{where}: 'format' must be {FORMAT!r}, got {fmt!r}")
     _keys(d, _TOP_KEYS, where)
-    camera, lens = _camera_and_lens(_need(d, "camera", where), root, f"{where}: camera")
     turret = _turret(_need(d, "turret", where), f"{where}: turret")
     spec = _rangefinder(d.get("rangefinder", {}), turret.step_rad, f"{where}: rangefinder")
     raw_bodies = _need(d, "bodies", where)
@@ -617,24 +707,26 @@ def scene_from_dict(d: Any, root: str | Path, where: str = "scene.json") -> Scen
         raise SceneError(f"{where}: bodies: a non-empty list of bodies expected")
     names: set[str] = set()
     bodies = [_body(b, i, root, names, where) for i, b in enumerate(raw_bodies)]
-    video = _video(d["video"], root, bodies, f"{where}: video") if "video" in d else None
+    views = _views(d, root, bodies, where)
     render = _render(d.get("render", {}), f"{where}: render")
     for key in ("name", "description"):
         if key in d and not isinstance(d[key], str):
             raise SceneError(f"{where}: '{key}' must be a string, got {d[key]!r}")
+    first = views[0]
     return Scene(
         str(d.get("name", root.name)),
         root,
-        camera,
+        first.camera,
         turret,
         spec,
         tuple(bodies),
-        video.path if video else None,
+        first.video.path if first.video else None,
         str(d.get("description", "")),
         d,
-        video,
+        first.video,
         render,
-        lens,
+        first.lens,
+        views,
     )
 
 

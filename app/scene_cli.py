@@ -14,12 +14,13 @@ from pathlib import Path
 __all__ = ["add_scene_parsers", "cli_render", "cli_script", "progress_bar"]
 
 
-def progress_bar(label: str = "frames", stream=sys.stderr) -> Callable[[int, int], None]:
-    """A text progress bar: ``show(done, total)``.
+def progress_bar(label: str = "frames", stream=None) -> Callable[[int, int], None]:
+    """A text progress bar: ``show(done, total)``, on ``stream`` (default: standard error as it is now).
 
     On a terminal it redraws one line in place; otherwise (a log file, CI) it writes a plain line
     at each tenth of the way, so logs stay readable.
     """
+    stream = sys.stderr if stream is None else stream
     start = time.monotonic()
     live = bool(getattr(stream, "isatty", lambda: False)())
     last_tenth = -1
@@ -53,7 +54,13 @@ def add_scene_parsers(subparsers) -> None:
         "Same scene, same bytes.",
     )
     p.add_argument("--scene", default=None, help="scene folder (default: the bundled workcell)")
-    p.add_argument("--out", default=None, help="output file (default: the scene's video.file)")
+    p.add_argument(
+        "--camera",
+        default=None,
+        metavar="NAME",
+        help="render this camera's video (default: every camera of the scene that has a video block)",
+    )
+    p.add_argument("--out", default=None, help="output file (default: the camera's video.file)")
     p.add_argument("--frames", type=int, default=None, help="render only the first N frames")
     p.add_argument("--frame", type=float, default=None, metavar="T_S", help="write one PNG frame at time T_S instead")
     p.set_defaults(func=cli_render)
@@ -81,19 +88,25 @@ def cli_render(args) -> int:
     from app.scene import default_scene_path, load_scene
 
     scene = load_scene(args.scene or default_scene_path())
+    view = scene.view(args.camera)  # SceneError naming the cameras for an unknown one
     if args.frame is not None:
         import cv2
 
-        out = Path(args.out or f"{scene.name}_t{args.frame:g}.png")
-        k = scene.video.frame_index(args.frame) if scene.video else 0
-        cv2.imwrite(str(out), Renderer(scene).render(args.frame, k))
+        out = Path(args.out or f"{scene.name}_{view.name}_t{args.frame:g}.png")
+        k = view.video.frame_index(args.frame) if view.video else 0
+        cv2.imwrite(str(out), Renderer(scene, camera=view.camera, lens=view.lens).render(args.frame, k))
         print(f"wrote {out}")
         return 0
-    info = render_video(scene, args.out, frames=args.frames, progress=progress_bar())
-    size_mb = info.path.stat().st_size / 1e6
-    print(
-        f"wrote {info.path}: {info.frame_count} frames, {info.width}×{info.height}, {info.fps:g} fps, {size_mb:.2f} MB"
-    )
+    names = [args.camera] if args.camera else [v.name for v in scene.views if v.video is not None] or [view.name]
+    if args.out and len(names) > 1:
+        raise ValueError(f"--out writes one video and the scene has {len(names)}: add --camera NAME")
+    for name in names:
+        info = render_video(scene, args.out, frames=args.frames, progress=progress_bar(f"{name} frames"), view=name)
+        size_mb = info.path.stat().st_size / 1e6
+        print(
+            f"wrote {info.path} ({name}): {info.frame_count} frames, {info.width}×{info.height}, {info.fps:g} fps, "
+            f"{size_mb:.2f} MB"
+        )
     return 0
 
 

@@ -877,7 +877,7 @@ class Database:
             raise ValueError(f"kind must be a non-empty string ('camera', 'turret'), got {kind!r}")
         if not isinstance(data, Mapping):
             raise ValueError(f"data must be a mapping, got {type(data).__name__}")
-        if kind == "camera":
+        if kind == "camera" or kind.startswith("camera:"):  # "camera:NAME": a site's other cameras
             C = np.asarray(data.get("C"), dtype=float) if "C" in data else None
             if C is None or C.shape != (3, 4) or not np.all(np.isfinite(C)):
                 raise ValueError("a camera calibration needs data['C'], a finite 3×4 matrix")

@@ -87,8 +87,10 @@ def render_video(
     video: VideoSpec | None = None,
     frames: int | None = None,
     progress: Callable[[int, int], None] | None = None,
+    view: str | None = None,
 ) -> VideoInfo:
-    """Render the scene's video to ``path`` (default: the scene's ``video.file``).
+    """Render one camera's video (``view``: its name, default the first camera) to ``path`` (default:
+    that camera's ``video.file``).
 
     video : timing (fps, duration) to use instead of the scene's. frames : render only the first
     ``frames`` frames (quick previews and tests). progress : called as ``progress(done, total)``.
@@ -96,10 +98,12 @@ def render_video(
     """
     import cv2
 
-    spec = video or scene.video
+    v = scene.view(view)
+    spec = video or v.video
     if spec is None:
         raise SceneError(
-            f'scene {scene.name!r} has no \'video\' block: add {{"file": "video.mp4", "fps": 12, "duration_s": 20}}'
+            f"scene {scene.name!r}'s camera {v.name!r} has no 'video' block: add "
+            '{"file": "video.mp4", "fps": 12, "duration_s": 20}'
         )
     out = Path(path) if path is not None else spec.path
     fourcc = CODECS.get(out.suffix.lower())
@@ -108,8 +112,8 @@ def render_video(
     total = spec.frame_count if frames is None else min(int(frames), spec.frame_count)
     if total < 1:
         raise ValueError(f"nothing to render: {total} frames")
-    renderer = Renderer(scene)
-    w, h = scene.camera.width, scene.camera.height
+    renderer = Renderer(scene, camera=v.camera, lens=v.lens)
+    w, h = v.camera.width, v.camera.height
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.stem + ".part" + out.suffix)
     writer = cv2.VideoWriter(str(tmp), cv2.CAP_FFMPEG, cv2.VideoWriter_fourcc(*fourcc), float(spec.fps), (w, h))

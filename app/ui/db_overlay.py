@@ -48,10 +48,11 @@ class DatabaseOverlay:
     Parameters
     ----------
     scene : viser.SceneApi (or anything with ``add_line_segments``, ``add_label``)
-    pixel_world : PixelWorld
+    pixel_world : PixelWorld (the camera's image, where it lies)
     z : the overlay plane (world units, in front of the image)
     line_px : line thickness, screen pixels
     atomic : callable returning a context manager that groups messages (``server.atomic``)
+    prefix : the start of the nodes' names ("/overlay": ``/overlay/db/<id>``)
     """
 
     def __init__(
@@ -61,8 +62,10 @@ class DatabaseOverlay:
         z: float,
         line_px: float,
         atomic: Callable[[], AbstractContextManager] | None = None,
+        prefix: str = "/overlay",
     ):
         self.scene = scene
+        self.prefix = prefix  # the nodes' names start so (each camera's overlay has its own)
         self.pixel_world = pixel_world
         self.z = float(z)
         self.line_px = float(line_px)
@@ -75,12 +78,12 @@ class DatabaseOverlay:
         self.removed: list[Any] = []  # ids whose nodes the last sync removed
 
     @staticmethod
-    def node_name(obj_id: Any) -> str:
-        return f"/overlay/db/{obj_id}"
+    def node_name(obj_id: Any, prefix: str = "/overlay") -> str:
+        return f"{prefix}/db/{obj_id}"
 
     @staticmethod
-    def label_name(obj_id: Any) -> str:
-        return f"/overlay/db_labels/{obj_id}"
+    def label_name(obj_id: Any, prefix: str = "/overlay") -> str:
+        return f"{prefix}/db_labels/{obj_id}"
 
     # ------------------------------------------------------------------ sync
     def sync(self, camera: Camera, objects: Iterable[SiteObject]) -> int:
@@ -133,7 +136,11 @@ class DatabaseOverlay:
             points = points.astype(np.float32)
             if d.lines is None:
                 d.lines = self.scene.add_line_segments(
-                    self.node_name(obj.id), points, colors, thickness=self.line_px, thickness_units="screen"
+                    self.node_name(obj.id, self.prefix),
+                    points,
+                    colors,
+                    thickness=self.line_px,
+                    thickness_units="screen",
                 )
             else:
                 d.lines.points = points
@@ -146,7 +153,11 @@ class DatabaseOverlay:
             position = tuple(float(v) for v in pw.to_world(uv, self.z))
             if d.label is None:
                 d.label = self.scene.add_label(
-                    self.label_name(obj.id), text, position=position, anchor="bottom-center", font_screen_scale=0.9
+                    self.label_name(obj.id, self.prefix),
+                    text,
+                    position=position,
+                    anchor="bottom-center",
+                    font_screen_scale=0.9,
                 )
             else:
                 if d.label.text != text:

@@ -13,7 +13,7 @@ import sys
 import threading
 from pathlib import Path
 
-__all__ = ["add_serve_parser", "run_serve", "build_interface", "scene_with_intrinsics"]
+__all__ = ["add_serve_parser", "run_serve", "build_interface", "scene_with_intrinsics", "video_specs"]
 
 log = logging.getLogger("mcit.serve")
 
@@ -60,9 +60,12 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     )
     p.add_argument(
         "--video",
-        default=None,
-        help="video source: camera index (0), video file, image folder, image file or stream URL "
-        "(default: the scene's video)",
+        action="append",
+        default=[],
+        metavar="[NAME=]SOURCE",
+        help="video source: camera index (0), video file, image folder, image file or stream URL (default: the "
+        "scene's video). NAME=SOURCE feeds the scene's camera NAME (repeat for each camera); SOURCE alone feeds "
+        "the first camera",
     )
     p.add_argument(
         "--fps",
@@ -109,14 +112,43 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     return p
 
 
-def _video_source(spec, scene, fps):
+def video_specs(values, scene) -> dict[str, str]:
+    """{camera name: source} of the --video values: NAME=SOURCE for the scene's camera NAME, SOURCE alone
+    for the first camera. ValueError for a camera the scene does not have or one given twice."""
+    from app.scene import VIEW_NAME
+
+    out: dict[str, str] = {}
+    for value in values or ():
+        name, sep, rest = str(value).partition("=")
+        if sep and name in scene.view_names:
+            camera, source = name, rest
+        elif sep and VIEW_NAME.fullmatch(name) and not Path(value).exists() and "://" not in value:
+            raise ValueError(
+                f"--video {value}: the scene has no camera named {name!r}; its cameras: {', '.join(scene.view_names)}"
+            )
+        else:
+            camera, source = scene.view_names[0], str(value)
+        if camera in out:
+            raise ValueError(f"--video: camera {camera!r} is given two sources; give one --video per camera")
+        if not source:
+            raise ValueError(f"--video {value}: no source after '='; give NAME=SOURCE")
+        out[camera] = source
+    return out
+
+
+def _video_source(spec, scene, fps, view=None):
+    """The video source of one camera (the first for None): ``spec`` when given, else the scene's video
+    of that camera, else (the first camera only: no recording yet) one frame rendered from the scene's
+    truth at t = 0 (a still); None for another camera with no video."""
     from app.video import StillSource, open_video
 
+    v = scene.view(view)
     if spec is not None:
         return open_video(spec, fps)
-    if scene.video_path is not None and Path(scene.video_path).is_file():
-        return open_video(str(scene.video_path), fps)
-    # No recording yet: one frame rendered from the scene's truth at t = 0 (a still).
+    if v.video is not None and Path(v.video.path).is_file():
+        return open_video(str(v.video.path), fps)
+    if v is not scene.views[0]:
+        return None
     from app.render.renderer import render_frame
 
     log.warning("scene %s has no video file: showing a frame rendered from the scene", scene.name)
@@ -150,7 +182,13 @@ def scene_with_intrinsics(scene, path, camera_name: str | None = None):
     block = {"width": w, "height": h, "intrinsics_file": str(path), "T_world_cam": pose_to_json(invert_T(T_cam_world))}
     if camera_name is not None:
         block["camera_name"] = camera_name
-    raw = {**(scene.raw or {}), "camera": block}
+    raw = dict(scene.raw or {})
+    if "cameras" in raw:  # the first camera's block, its name and video kept
+        first = raw["cameras"][0]
+        block.update({k: first[k] for k in ("name", "video") if k in first})
+        raw["cameras"] = [block, *raw["cameras"][1:]]
+    else:
+        raw["camera"] = block
     return dataclasses.replace(scene, camera=camera, lens=lens_of(intr, w, h), raw=raw)
 
 
@@ -211,14 +249,28 @@ def build_interface(args: argparse.Namespace):
     if getattr(args, "intrinsics", None):
         scene = scene_with_intrinsics(scene, args.intrinsics, args.camera_name)
         log.info("camera intrinsics from %s: Calibrate camera can solve the pose alone (PnP)", args.intrinsics)
-    source = _video_source(args.video, scene, args.fps)
-    if scene.lens is not None:  # every frame undistorted once on arrival: C, clicks and the overlay hold in it
-        from app.undistort import UndistortedSource
+    videos = args.video if isinstance(args.video, list) else [args.video] if args.video else []
+    specs = video_specs(videos, scene)
+    grabbers: dict = {}
+    closers = []
+    try:
+        for view in scene.views:
+            source = _video_source(specs.get(view.name), scene, args.fps, view.name)
+            if source is None:
+                log.info("camera %s has no video: give --video %s=SOURCE to see it", view.name, view.name)
+                continue
+            if view.lens is not None:  # every frame undistorted once on arrival: C, clicks and the overlay hold in it
+                from app.undistort import UndistortedSource
 
-        source = UndistortedSource(source, scene.lens)
-        log.info("frames undistorted: %s", scene.lens.describe())
-    grabber = FrameGrabber(source).start()
-    closers = [grabber.stop]
+                source = UndistortedSource(source, view.lens)
+                log.info("camera %s: frames undistorted: %s", view.name, view.lens.describe())
+            grabbers[view.name] = FrameGrabber(source).start()
+            closers.append(grabbers[view.name].stop)
+    except Exception:
+        for close in closers:
+            close()
+        raise
+    grabber = grabbers[scene.views[0].name]
 
     def clock() -> float:
         frame = grabber.latest()
@@ -260,7 +312,7 @@ def build_interface(args: argparse.Namespace):
         )
     server = InterfaceServer(
         site,
-        grabber,
+        grabbers,
         host=args.host,
         port=args.port,
         jpeg_quality=args.jpeg_quality,

@@ -23,6 +23,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -51,13 +53,33 @@ Z_MARKS = -0.002
 LINE_PX = 2.0
 
 
+VIEW_GAP_PX = 40  # between two cameras' images, side by side in the pixel world
+
+
+@dataclass
+class ViewFeed:
+    """One camera's video in the interface: its grabber, where its image lies in the pixel world, its
+    database overlay and its recent frames; ``video`` its image node once the scene is set up."""
+
+    name: str
+    grabber: FrameGrabber
+    pixel_world: PixelWorld
+    overlay: DatabaseOverlay
+    recent: RecentFrames
+    video: Any = None
+    frame_index: int = -1
+    stamp: str | None = None  # the not-live text stamped on the shown frame, or None
+    frames_sent: int = 0
+
+
 class InterfaceServer:
-    """The operator interface on one site and one video source.
+    """The operator interface on one site and its cameras' video sources.
 
     Parameters
     ----------
     site : Site
-    grabber : FrameGrabber (started or not; started here)
+    grabber : FrameGrabber of the site's first camera, or {camera name: FrameGrabber} for several (in the
+        site's order; started here). Each camera's image lies beside the previous one's.
     host, port : where to listen (127.0.0.1 by default)
     allow_origins : page origins admitted besides the interface's own (a reverse proxy's public address)
     token : access token every request must carry (``?token=`` or its cookie), or None (app/ui/access.py)
@@ -79,9 +101,13 @@ class InterfaceServer:
         token: str | None = None,
     ):
         self.site = site
-        self.grabber = grabber
-        src = grabber.source
-        self.pixel_world = PixelWorld(src.width, src.height, k)
+        grabbers = grabber if isinstance(grabber, Mapping) else {site.views[0]: grabber}
+        unknown = [name for name in grabbers if name not in site.views]
+        if unknown or site.views[0] not in grabbers:
+            raise ValueError(
+                f"video for camera(s) {unknown or [site.views[0]]} but the site's cameras are {list(site.views)}: "
+                "give the first camera's video and name each other one as the scene does"
+            )
         self.jpeg_quality = int(jpeg_quality)
         self.access = AccessPolicy(host=host, allow_origins=tuple(allow_origins), token=token)
         quiet_malformed_messages()  # a message a browser sent that cannot be read: one log line, not a traceback
@@ -104,31 +130,40 @@ class InterfaceServer:
         self._beam_key: Any = None
         self._frame_index = -1
         self._panels_revision = -1  # the site revision the clients' panels last saw
-        self.db_overlay = DatabaseOverlay(self.server.scene, self.pixel_world, Z_DB, LINE_PX, atomic=self.server.atomic)
+        self.views: dict[str, ViewFeed] = {}
+        x0 = 0.0
+        for name in (v for v in site.views if v in grabbers):
+            g = grabbers[name]
+            pw = PixelWorld(g.source.width, g.source.height, k, x0)
+            first = not self.views
+            prefix = "/overlay" if first else f"/views/{name}/overlay"
+            overlay = DatabaseOverlay(self.server.scene, pw, Z_DB, LINE_PX, atomic=self.server.atomic, prefix=prefix)
+            # the recent frames, for each operator's frozen frame and its scrubber (app/ui/recent.py)
+            self.views[name] = ViewFeed(name, g, pw, overlay, RecentFrames(g, seconds=12.0, max_frames=120))
+            x0 += (g.source.width + VIEW_GAP_PX) * k
+        first = self.views[site.views[0]]  # the first camera's, by their old names
+        self.grabber, self.pixel_world, self.db_overlay, self.recent = (
+            first.grabber,
+            first.pixel_world,
+            first.overlay,
+            first.recent,
+        )
         self._db_wake = threading.Event()
         self._db_thread = threading.Thread(target=self._db_loop, name="mcit-database", daemon=True)
         self.frames_sent = 0
         self.redraws = 0
-        self._video_stamp: str | None = None  # the not-live text stamped on the shown frame, or None
         self._last_status_t = 0.0
         self.world3d = World3D(self.server.scene, offset=np.array([-60.0, 0.0, 0.0]))
         self._setup_scene()
         self.server.on_client_connect(self._on_connect)
         self.server.on_client_disconnect(self._on_disconnect)
         self._thread = threading.Thread(target=self._loop, name="mcit-redraw", daemon=True)
-        grabber.add_listener(lambda _frame: self._wake.set())  # a new frame: redraw now
-        # The recent frames, for each operator's frozen frame and its scrubber (app/ui/recent.py).
-        self.recent = RecentFrames(grabber, seconds=12.0, max_frames=120)
-        # Snapping, matching and tracking work on what the operator sees: the grabber's latest frame.
-        site.set_frames(GrabberFrames(grabber))
-        if site.camera.width != src.width or site.camera.height != src.height:
-            log.warning(
-                "video is %dx%d but the camera is calibrated for %dx%d: calibrate the camera",
-                src.width,
-                src.height,
-                site.camera.width,
-                site.camera.height,
-            )
+        for feed in self.views.values():
+            feed.grabber.add_listener(lambda _frame: self._wake.set())  # a new frame: redraw now
+            # Snapping, matching and tracking work on what the operator sees: the grabber's latest frame.
+            site.set_frames(GrabberFrames(feed.grabber), view=feed.name)
+            if self.size_mismatch(feed.name):
+                log.warning("camera %s: %s", feed.name, self.size_mismatch(feed.name))
 
     # ------------------------------------------------------------------ life cycle
     @property
@@ -143,8 +178,27 @@ class InterfaceServer:
         token = "" if self.access.token is None else f"/?token={self.access.token}"
         return f"http://{host}:{self.port}{token}"
 
+    def size_mismatch(self, view: str) -> str:
+        """ "" when the camera ``view`` is calibrated for its video's size, else a sentence saying so."""
+        cam, pw = self.site.camera_of(view), self.views[view].pixel_world
+        if (cam.width, cam.height) == (pw.width, pw.height):
+            return ""
+        return (
+            f"the video is {pw.width}×{pw.height} but the camera is calibrated for {cam.width}×{cam.height}: "
+            "run Calibrate camera"
+        )
+
+    def view_at(self, origin: np.ndarray, direction: np.ndarray) -> tuple[str, np.ndarray] | None:
+        """(camera name, pixel) of the image a viewer ray meets, or None when it meets none."""
+        for feed in self.views.values():
+            uv = feed.pixel_world.pixel_from_ray(origin, direction)
+            if feed.pixel_world.holds(uv):
+                return feed.name, uv
+        return None
+
     def start(self) -> InterfaceServer:
-        self.grabber.start()
+        for feed in self.views.values():
+            feed.grabber.start()
         self._thread.start()
         self._db_thread.start()
         return self
@@ -156,7 +210,8 @@ class InterfaceServer:
         for thread in (self._thread, self._db_thread):
             if thread.is_alive():
                 thread.join(timeout=3.0)
-        self.grabber.stop()
+        for feed in self.views.values():
+            feed.grabber.stop()
         self.server.stop()
 
     def wake(self) -> None:
@@ -164,10 +219,11 @@ class InterfaceServer:
         self._wake.set()
         self._db_wake.set()
 
-    def object_at(self, uv: np.ndarray, radius_px: float) -> str | None:
-        """The object whose drawn wireframe passes nearest to pixel ``uv`` (2,), within ``radius_px``
-        pixels, or None: picked on the projections the database overlay keeps (no projection here)."""
-        return self.db_overlay.object_at(uv, radius_px)
+    def object_at(self, uv: np.ndarray, radius_px: float, view: str | None = None) -> str | None:
+        """The object whose drawn wireframe passes nearest to pixel ``uv`` (2,) of camera ``view`` (the
+        first for None), within ``radius_px`` pixels, or None: picked on the projections the database
+        overlay keeps (no projection here)."""
+        return self.views[view or self.site.views[0]].overlay.object_at(uv, radius_px)
 
     # ------------------------------------------------------------------ clients
     def _on_connect(self, client: viser.ClientHandle) -> None:
@@ -178,16 +234,11 @@ class InterfaceServer:
             return
         with self.clients_lock:
             self.clients[client.client_id] = panel
-        mismatch = (
-            self.site.camera.width != self.pixel_world.width or self.site.camera.height != self.pixel_world.height
-        )
-        if mismatch:
-            panel.notify(
-                "Camera and video differ",
-                f"The video is {self.pixel_world.width}×{self.pixel_world.height} but the camera is calibrated for "
-                f"{self.site.camera.width}×{self.site.camera.height}: run Calibrate camera.",
-                "yellow",
-            )
+        for name in self.views:
+            if self.size_mismatch(name):
+                said = self.size_mismatch(name)
+                where = f"Camera {name}: t" if len(self.views) > 1 else "T"
+                panel.notify("Camera and video differ", f"{where}{said[1:]}.", "yellow")
         self.wake()
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
@@ -198,21 +249,23 @@ class InterfaceServer:
 
     # ------------------------------------------------------------------ scene
     def _setup_scene(self) -> None:
-        pw = self.pixel_world
-        frame = self.grabber.latest()
-        image = frame.image if frame is not None else np.zeros((pw.height, pw.width, 3), np.uint8)
-        rw, rh = pw.render_size
-        self.video = self.server.scene.add_image(
-            "/video",
-            image,
-            rw,
-            rh,
-            format="jpeg",
-            jpeg_quality=self.jpeg_quality,
-            position=tuple(pw.image_center),
-            cast_shadow=False,
-            receive_shadow=False,
-        )
+        for i, feed in enumerate(self.views.values()):
+            pw = feed.pixel_world
+            frame = feed.grabber.latest()
+            image = frame.image if frame is not None else np.zeros((pw.height, pw.width, 3), np.uint8)
+            rw, rh = pw.render_size
+            feed.video = self.server.scene.add_image(
+                "/video" if i == 0 else f"/views/{feed.name}/video",
+                image,
+                rw,
+                rh,
+                format="jpeg",
+                jpeg_quality=self.jpeg_quality,
+                position=tuple(pw.image_center),
+                cast_shadow=False,
+                receive_shadow=False,
+            )
+        self.video = self.views[self.site.views[0]].video
         self.server.scene.world_axes.visible = False
 
     def _send_lines(self, scene_api, name: str, batch: LineBatch, z: float) -> None:
@@ -262,7 +315,9 @@ class InterfaceServer:
         site = self.site
         revision = site.revision
         objects = site.objects()
-        n = self.db_overlay.sync(site.camera, objects)
+        n = 0
+        for feed in self.views.values():
+            n = max(n, feed.overlay.sync(site.camera_of(feed.name), objects))
         self.world3d.sync(site, objects)
         site.surfaces()  # build the ray-casting index now, not on the operator's next click
         self._db_revision = revision
@@ -288,7 +343,7 @@ class InterfaceServer:
     def _loop(self) -> None:
         # Woken by each new frame and by every callback; the timeout only keeps a stalled video
         # from freezing the rest (status, polling the database).
-        period = 1.0 / max(1.0, min(60.0, self.grabber.source.fps))
+        period = 1.0 / max(1.0, min(60.0, max(f.grabber.source.fps for f in self.views.values())))
         while not self._stop.is_set():
             self._wake.wait(max(period, 0.1))
             self._wake.clear()
@@ -325,26 +380,11 @@ class InterfaceServer:
                 time.sleep(0.2)
 
     def redraw(self) -> None:
-        """One pass of the frame loop: the new video frame (sent at once, on its own), then each
+        """One pass of the frame loop: each camera's new video frame (sent at once, on its own), then each
         client's marks. The database overlay is the database thread's (``sync_database``)."""
-        frame = self.grabber.latest()
-        status = self.grabber.status()
-        was_stamped = self._video_stamp is not None
-        if not status.live and frame is not None:
-            # The video is lost: its last frame stays, but greyed with what happened stamped on it
-            # (never a frozen image that looks live); the panels say it too, at once.
-            if self._video_stamp != status.text:
-                self.video.image = stamp_not_live(frame.image, status.text)
-                self._video_stamp = status.text
-        elif frame is not None and (frame.index != self._frame_index or was_stamped):
-            self._video_stamp = None
-            self._frame_index = frame.index
-            src = self.grabber.source
-            loop = None if src.live or (src.frame_count or 0) <= 1 else src.duration_s
-            # a looping recording says where it is on the video itself: what moved in it jumps back at each restart
-            self.video.image = frame.image if not loop else stamp_replay_time(frame.image, float(frame.t_s), loop)
-            self.frames_sent += 1
-        video_changed = was_stamped != (self._video_stamp is not None)  # lost, or live again
+        video_changed = False
+        for feed in self.views.values():
+            video_changed |= self._send_frame(feed)
         if video_changed:
             self._update_status()
         revision = self.site.revision
@@ -361,12 +401,44 @@ class InterfaceServer:
                     log.exception("redraw of client %s failed", panel.client.client_id)
         self.redraws += 1
 
+    def _send_frame(self, feed: ViewFeed) -> bool:
+        """Send one camera's newest frame if it is new; True when its video was lost or came back."""
+        frame = feed.grabber.latest()
+        status = feed.grabber.status()
+        was_stamped = feed.stamp is not None
+        if not status.live and frame is not None:
+            # The video is lost: its last frame stays, but greyed with what happened stamped on it
+            # (never a frozen image that looks live); the panels say it too, at once.
+            if feed.stamp != status.text:
+                feed.video.image = stamp_not_live(frame.image, status.text)
+                feed.stamp = status.text
+        elif frame is not None and (frame.index != feed.frame_index or was_stamped):
+            feed.stamp = None
+            feed.frame_index = frame.index
+            src = feed.grabber.source
+            loop = None if src.live or (src.frame_count or 0) <= 1 else src.duration_s
+            # a looping recording says where it is on the video itself: what moved in it jumps back at each restart
+            feed.video.image = frame.image if not loop else stamp_replay_time(frame.image, float(frame.t_s), loop)
+            feed.frames_sent += 1
+            self.frames_sent += 1
+        return was_stamped != (feed.stamp is not None)  # lost, or live again
+
     def _update_status(self) -> None:
-        src = self.grabber.source
-        status = self.grabber.status()
+        parts = [self._video_status(feed) for feed in self.views.values()]
+        text = Md("\n\n").join(parts) + Md("\n\n{} objects").format(len(self.site.objects()))
+        with self.clients_lock:
+            panels = list(self.clients.values())
+        for panel in panels:
+            panel.set_status(text)
+
+    def _video_status(self, feed: ViewFeed) -> Md:
+        """What the panel says of one camera's video and calibration."""
+        src, status = feed.grabber.source, feed.grabber.status()
         video = Md("**Video** {} · {}×{} · {:.1f} fps (shown {:.1f})").format(
-            src.description, src.width, src.height, src.fps, self.grabber.measured_fps
+            src.description, src.width, src.height, src.fps, feed.grabber.measured_fps
         )
+        if len(self.views) > 1:
+            video = Md("**Camera {}** · ").format(feed.name) + video
         if status.live:
             loop = src.duration_s if not src.live else None
             if src.live:
@@ -375,18 +447,14 @@ class InterfaceServer:
                 video += Md(
                     " · **a recording, replayed every {:.1f} s** (not live: objects jump back when it restarts)"
                 ).format(loop)
-        elif self.grabber.error is not None:
-            video += Md("\n\n**Video stopped:** {}").format(self.grabber.error)
+        elif feed.grabber.error is not None:
+            video += Md("\n\n**Video stopped:** {}").format(feed.grabber.error)
         else:  # lost (reconnecting) or waiting: the image shown is not live
             video += Md("\n\n**⚠ Not live: {}.** The image shown is the last frame, greyed{}.").format(
                 status.text, f" (last try: {status.reason})" if status.reason else ""
             )
-        cam = self.site.camera
-        text = video + Md("\n\nCamera {}×{} · {} objects").format(cam.width, cam.height, len(self.site.objects()))
-        with self.clients_lock:
-            panels = list(self.clients.values())
-        for panel in panels:
-            panel.set_status(text)
+        cam = self.site.camera_of(feed.name)
+        return video + Md(" · calibrated for {}×{}").format(cam.width, cam.height)
 
 
 def _last_browser_number(db) -> int:

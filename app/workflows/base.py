@@ -234,9 +234,13 @@ class Workflow:
     # True: a double click on the video is one click here (its second click is dropped)
     double_click_is_one: ClassVar[bool] = False
 
-    def __init__(self, site: Site, client: str = "operator"):
+    def __init__(self, site: Site, client: str = "operator", view: str | None = None):
         self.site = site
         self.client = client
+        try:  # the camera (view) it works in: its clicks, frame and calibration are that view's
+            self.view = site.view_name(view)
+        except ValueError as exc:
+            raise WorkflowError(str(exc)) from None
         self.state = "start"
         self.accepted = False
         self.cancelled = False
@@ -244,6 +248,11 @@ class Workflow:
         self.lock = threading.RLock()
         self.cancel_event = threading.Event()
         self.frame: FrameRef | None = None  # the frozen frame (None: the site's frame at the scene time)
+
+    @property
+    def camera(self):
+        """The current calibration of the workflow's camera (``view``): the global model C."""
+        return self.site.camera_of(self.view)
 
     # ------------------------------------------------------------------ common actions
     @property
@@ -327,7 +336,7 @@ class Workflow:
         frame = self.frame
         if frame is None:
             return ""
-        live = self.site.frame_at(None)
+        live = self.site.frame_at(None, self.view)
         if live is None or live is frame.image or np.shape(live) != np.shape(frame.image):
             return ""
         from app.vision.change import CHANGED_SHARE, changed_share

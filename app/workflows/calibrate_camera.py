@@ -58,15 +58,14 @@ def _chi2_999(dof: int) -> float:
     return float(chi2.ppf(0.999, dof))
 
 
-def known_K(site) -> np.ndarray | None:
-    """The camera's intrinsics K (3, 3) when a calibration file gives them (the scene's camera block
+def known_K(site, view: str | None = None) -> np.ndarray | None:
+    """One camera's intrinsics K (3, 3) when a calibration file gives them (its block in the scene
     names an ``intrinsics_file``; ``mcit serve --intrinsics FILE`` puts the file there), else None: a
     scene's inline K or C is its nominal start-up camera, which this workflow corrects as a whole."""
     scene = getattr(site, "scene", None)
-    block = (getattr(scene, "raw", None) or {}).get("camera")
-    if not isinstance(block, dict) or "intrinsics_file" not in block:
+    if scene is None or "intrinsics_file" not in scene.camera_block(view):
         return None
-    cam: Camera = scene.camera
+    cam: Camera = scene.view(view).camera
     return cam.decompose()[0]
 
 
@@ -114,14 +113,20 @@ class CalibrateCamera(SnapMixin, Workflow):
     )
 
     def __init__(
-        self, site, client: str = "operator", snap: bool = True, sigma_px: float = 1.0, method: str | None = None
+        self,
+        site,
+        client: str = "operator",
+        view: str | None = None,
+        snap: bool = True,
+        sigma_px: float = 1.0,
+        method: str | None = None,
     ):
-        super().__init__(site, client)
+        super().__init__(site, client, view)
         self._init_snap(snap)
         if not sigma_px > 0:
             raise WorkflowError(f"sigma_px (the clicks' noise, pixels) must be positive, got {sigma_px}")
         self.sigma_px = float(sigma_px)
-        self.K = known_K(site)  # the lens, when a calibration file gives it (PnP offered), else None
+        self.K = known_K(site, self.view)  # the lens, when a calibration file gives it (PnP offered), else None
         self.method = "pnp" if self.K is not None else "dlt"
         self.solved_by: str | None = None  # the method of ``result``
         if method is not None:
@@ -249,7 +254,7 @@ class CalibrateCamera(SnapMixin, Workflow):
                     else ""
                 )
                 raise WorkflowError(f"{n} points paired; {what} needs at least {need} ({unknowns}): pair more{other}")
-            w, h = self.site.camera.width, self.site.camera.height
+            w, h = self.camera.width, self.camera.height
             try:
                 if self.method == "pnp":
                     from app.vision.pnp import solve_pnp
@@ -308,6 +313,7 @@ class CalibrateCamera(SnapMixin, Workflow):
                 points=points,
                 client=self.client,
                 method=self.solved_by,
+                view=self.view,
             )
             self.accepted = True
             self.state = "accepted"
@@ -368,7 +374,7 @@ class CalibrateCamera(SnapMixin, Workflow):
     def _nearest_vertex(self, p: np.ndarray) -> tuple[str, int, np.ndarray, float]:
         """The nearest model vertex to pixel p that the camera sees: in front of it, on an edge its
         object shows (convex hidden-line removal) and not behind another database surface."""
-        cam = self.site.camera
+        cam = self.camera
         cands = []
         for obj in self.site.objects():
             V = obj.vertices_world()
@@ -395,7 +401,7 @@ class CalibrateCamera(SnapMixin, Workflow):
 
     def _unoccluded(self, X: np.ndarray) -> bool:
         """True when no database surface lies between the optical centre and X (1 mm tolerance)."""
-        c = self.site.camera.center
+        c = self.camera.center
         ray = X - c
         dist = float(np.linalg.norm(ray))
         try:
@@ -496,7 +502,7 @@ class CalibrateCamera(SnapMixin, Workflow):
 
     def marks(self) -> Marks:
         with self.lock:
-            cam = self.site.camera
+            cam = self.camera
             m = Marks(points=np.array(self.uv).reshape(-1, 2))
             m.labels = [(uv, str(i + 1)) for i, uv in enumerate(self.uv)]
             m.raw_segments, m.raw_points, m.snap_lines, snap_labels = snap_marks(self.snaps)

@@ -60,8 +60,8 @@ class CalibrateTurret(Workflow):
         CANCEL,
     )
 
-    def __init__(self, site, client: str = "operator", shots: int = 3):
-        super().__init__(site, client)
+    def __init__(self, site, client: str = "operator", view: str | None = None, shots: int = 3):
+        super().__init__(site, client, view)
         self.shots = int(shots)
         self.pending_X: np.ndarray | None = None
         self.pending_label = ""
@@ -79,7 +79,7 @@ class CalibrateTurret(Workflow):
     # ------------------------------------------------------------------ picking
     def _candidates(self) -> tuple[np.ndarray, list[str]]:
         """Known points: every object's vertices and the centres of its faces that face the camera."""
-        cam = self.site.camera
+        cam = self.camera
         X, names = [], []
         for obj in self.site.objects():
             T = obj.T_world_obj
@@ -101,7 +101,7 @@ class CalibrateTurret(Workflow):
         with self.lock:
             self._check_open()
             X, names = self._candidates()
-            cam = self.site.camera
+            cam = self.camera
             d = np.linalg.norm(cam.project(X) - p, axis=1) if len(X) else np.zeros(0)
             if len(X):
                 d[cam.depth(X) <= 0] = np.inf
@@ -153,7 +153,7 @@ class CalibrateTurret(Workflow):
             T = self.site.T_world_turret
             pan, tilt, _ = aim(T, X)
             k = len(self.pan) + 1
-            uv = self.site.camera.project(X.reshape(1, 3))
+            uv = self.camera.project(X.reshape(1, 3))
         why = self.scene_changed(uv)
         if why:
             raise WorkflowError(
@@ -492,7 +492,7 @@ class CalibrateTurret(Workflow):
 
     def marks(self) -> Marks:
         with self.lock:
-            cam = self.site.camera
+            cam = self.camera
             m = Marks()
             X, names = self._candidates()
             centres = np.array([x for x, nm in zip(X, names) if nm.endswith("centre")]).reshape(-1, 3)

@@ -119,8 +119,8 @@ class DesignateTarget(Workflow):
         CANCEL,
     )
 
-    def __init__(self, site, client: str = "operator", shots: int = 3):
-        super().__init__(site, client)
+    def __init__(self, site, client: str = "operator", view: str | None = None, shots: int = 3):
+        super().__init__(site, client, view)
         if not (isinstance(shots, (int, np.integer)) and shots >= 1):
             raise WorkflowError(f"shots must be a positive whole number, got {shots!r}")
         self.shots = int(shots)
@@ -136,7 +136,7 @@ class DesignateTarget(Workflow):
         p = as_pixel(uv)
         with self.lock:  # a snapshot: the measurement below runs without the lock
             self._check_open()
-            cam = self.site.camera
+            cam = self.camera
             T = self.site.T_world_turret
             _, turret_cov = self.site.calibration_covs
             devices = self.site.devices
@@ -209,7 +209,7 @@ class DesignateTarget(Workflow):
                     who=self.client,
                     when=time.time(),
                     version=version,
-                    camera_centre=self.site.camera.center,
+                    camera_centre=self.camera.center,
                 )
             )
         except Exception:  # noqa: BLE001 - the target stands (shown, copied) even if the feed fails
@@ -403,7 +403,7 @@ class DesignateTarget(Workflow):
 
     def marks(self) -> Marks:
         with self.lock:
-            cam = self.site.camera
+            cam = self.camera
             m = Marks()
             if self.targets:
                 X = np.array([t.X_world for t in self.targets])

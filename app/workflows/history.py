@@ -33,8 +33,10 @@ class History(Workflow):
         Control("accept", "Close", "escape", hint="Close the history"),
     )
 
-    def __init__(self, site, client: str = "operator", limit: int = 30, object_name: str | None = None):
-        super().__init__(site, client)
+    def __init__(
+        self, site, client: str = "operator", view: str | None = None, limit: int = 30, object_name: str | None = None
+    ):
+        super().__init__(site, client, view)
         self.limit = int(limit)
         self.object_name = object_name
         self.entries: list = []

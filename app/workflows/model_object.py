@@ -138,6 +138,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
         self,
         site,
         client: str = "operator",
+        view: str | None = None,
         shape: str = "box",
         vertical: bool = True,
         on_table: bool = True,
@@ -147,7 +148,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
         beams: int = 40,
         snap: bool = True,
     ):
-        super().__init__(site, client)
+        super().__init__(site, client, view)
         self._init_snap(snap)
         if shape not in SHAPES:
             raise WorkflowError(f"shape must be one of {', '.join(SHAPES)}, got {shape!r}")
@@ -350,13 +351,13 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                 )
             devices = self._devices()
             try:
-                box = model_box(self.site.camera, faces, self.support)
+                box = model_box(self.camera, faces, self.support)
             except ValueError as exc:
                 raise WorkflowError(f"cannot place the profiles: the measured faces give no box yet ({exc})") from None
             T = self.site.T_world_turret
             Tb, h = box.T_world_obj, box.dimensions["size_z"]
             corners = box.vertices_world
-            camera = self.site.camera
+            camera = self.camera
         self._refuse_if_changed(camera.project(corners[camera.depth(corners) > 0]), "the box", inside=True)
         with self.lock:
             self._check_open()
@@ -403,7 +404,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             if len(self.silhouettes) < 2:
                 raise WorkflowError(f"click both silhouettes first ({len(self.silhouettes)} clicked)")
             devices = self._devices()
-            camera, T = self.site.camera, self.site.T_world_turret
+            camera, T = self.camera, self.site.T_world_turret
             sil = np.array(self.silhouettes)
         self._refuse_if_changed(sil.reshape(-1, 2), f"the {self.shape}", inside=True)
         with self.lock:
@@ -462,8 +463,8 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
 
         with self.lock:
             self._check_open()
-            cam, T = self.site.camera, self.site.T_world_turret
-            camera_cov, turret_cov = self.site.calibration_covs
+            cam, T = self.camera, self.site.T_world_turret
+            camera_cov, turret_cov = self.site.camera_cov(self.view), self.site.calibration_covs[1]
             if self.shape == "box" and not self.box_faces():
                 raise WorkflowError("measure at least one face first (click its sides, then Measure face)")
             if self.shape != "box":
@@ -713,7 +714,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                 [sn for f in self.faces for sn in f["snaps"]] if self.shape == "box" else list(self.silhouette_snaps)
             )
             m.raw_segments, _, _, m.labels = snap_marks(snaps)
-            cam = self.site.camera
+            cam = self.camera
             pts = [f["points"] for f in self.faces if f.get("points") is not None]
             T = self.site.T_world_turret
             pts += [s.points(T)[s.hits] for s in self.scans]

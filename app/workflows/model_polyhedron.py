@@ -192,13 +192,14 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
         self,
         site,
         client: str = "operator",
+        view: str | None = None,
         shape: str = "wedge",
         object_name: str | None = None,
         spacing_px: float | None = None,
         snap: bool = True,
         on_table: bool = True,
     ):
-        super().__init__(site, client)
+        super().__init__(site, client, view)
         self._init_snap(snap)
         if shape not in POLY_SHAPES:
             raise WorkflowError(f"the polyhedron is one of {', '.join(POLY_SHAPES)}, not {shape!r}")
@@ -345,8 +346,8 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
                     f"face {unmeasured[0]} has sides clicked but is not measured: Measure face, "
                     "or Remove last to drop its sides"
                 )
-            cam, T = self.site.camera, self.site.T_world_turret
-            camera_cov, turret_cov = self.site.calibration_covs
+            cam, T = self.camera, self.site.T_world_turret
+            camera_cov, turret_cov = self.site.camera_cov(self.view), self.site.calibration_covs[1]
         # Outside the lock (the overlay keeps drawing): which face and edge is which is decided once,
         # on the nominal calibrations; the σ shares rebuild with that assignment.
         try:
@@ -657,7 +658,7 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
             if self.pending is not None:
                 m.pending = self.pending.reshape(1, 2)
             m.raw_segments, _, _, m.labels = snap_marks([sn for f in self.faces for sn in f["snaps"]])
-            cam = self.site.camera
+            cam = self.camera
             pts = [f["points"] for f in self.faces if f["points"] is not None]
             if pts:
                 X = np.concatenate(pts)

@@ -99,7 +99,7 @@ class AutoMatchMixin:
             snapped = all(s is not None and s.applied for s in self.seg_snaps)
             sigma = SNAPPED_SIGMA_PX if snapped else self.sigma_px
             hand = {j: e for j, e in enumerate(self.edge_ids) if e is not None}  # kept: only agreeing assignments count
-            camera, model, T_db, generation = self.site.camera, self.obj.model, self.obj.T_world_obj, self._generation
+            camera, model, T_db, generation = self.camera, self.obj.model, self.obj.T_world_obj, self._generation
         image = self._frame()  # compute, outside the lock: the overlay keeps drawing
         try:
             res = match_edges(camera, model, segs, image=image, sigma_px=sigma)

@@ -87,8 +87,8 @@ class OneClickMixin:
                     f"click once on {self.object_name} where it is now in the video, then Find "
                     "(Find uses that one click, before any edge)"
                 )
-            camera, model, T_db, generation = self.site.camera, self.obj.model, self.obj.T_world_obj, self._generation
-            camera_cov = self.site.calibration_covs[0]  # a camera calibrated in this database: its σ joins the pose's
+            camera, model, T_db, generation = self.camera, self.obj.model, self.obj.T_world_obj, self._generation
+            camera_cov = self.site.camera_cov(self.view)  # a camera calibrated in this database: its σ joins the pose's
             table = table_support(self.site)
             if table is not None and not rests_on(model, T_db, table):
                 table = None  # it did not lie on the table: the full pose is searched near the old one

@@ -154,7 +154,7 @@ class RangeModelling:
             q = np.roll(poly, -1, axis=0)
             area = 0.5 * abs(float(np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])))  # shoelace
             spacing = self.spacing_px or max(2.0, float(np.sqrt(area / 25.0)))
-            camera, T = self.site.camera, self.site.T_world_turret
+            camera, T = self.camera, self.site.T_world_turret
         self._refuse_if_changed(np.vstack([ends, centre]), "this face", inside=True)
         with self.lock:
             self._check_open()
@@ -219,7 +219,7 @@ class RangeModelling:
 
     def support_point(self, uv: np.ndarray) -> np.ndarray:
         """The table point seen at pixel uv (a depth guess for aiming), else a point 2 m away."""
-        cam = self.site.camera
+        cam = self.camera
         o, d = cam.rays(np.asarray(uv, float).reshape(1, 2))
         hit = self.site.raycast(o, d[0])
         return hit.X_world if hit is not None else o + 2.0 * d[0]

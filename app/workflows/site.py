@@ -133,7 +133,7 @@ def _change_sentence(rec: Any, undone: Any = None) -> str:
     name = rec.object_name or "an object"
     redo = is_redo(rec, undone)
     if rec.action == "calibration":
-        kind = (rec.after or {}).get("kind", "")
+        kind = (rec.after or {}).get("kind", "").replace("camera:", "camera ")  # "camera:side": camera side
         if redo:
             return f"redid change #{undone.undoes} ({kind} calibration; undid undo #{rec.undoes})"
         if rec.undoes is not None:
@@ -228,9 +228,11 @@ class Site:
         self._triangles: dict[Any, tuple[tuple, np.ndarray, np.ndarray]] = {}  # id → (key, V_world, F) for surfaces()
         self._meshes: dict[str, Any] = {}
         self._cal_ids: dict[str, Any] = {}
-        self._camera = scene.camera
-        # The calibrations' covariances (None for the scene's nominal values, until calibrated here).
-        self._camera_cov: np.ndarray | None = None
+        # Each view's camera, the scene's until calibrated here, and its calibration's covariance (None
+        # for the scene's nominal values); the first view's is ``camera``.
+        self._views = tuple(v.name for v in scene.views) or ("main",)
+        self._cameras: dict[str, Camera] = {v.name: v.camera for v in scene.views} or {"main": scene.camera}
+        self._camera_covs: dict[str, np.ndarray | None] = dict.fromkeys(self._views)
         self._turret_cov: np.ndarray | None = None
         self._T_world_turret = np.asarray(scene.turret.T_world_turret, float).copy()
         self.beam_X_world: np.ndarray | None = None  # the range finder's last measured point (shown)
@@ -240,39 +242,49 @@ class Site:
         self._feed_lock = threading.Lock()  # one reader of the history at a time (no change read twice)
         self.feed: Any = None  # an app.feed.FeedPublisher the changes and targets go out on (attach_feed)
         self._load_calibrations()
-        self._frames: Callable[[float], Any] | None = None
+        self._frames: dict[str, Callable[[float], Any]] = {}  # each view's frame provider
         if isinstance(frames, str):
             if frames != "scene":
                 raise ValueError(f"frames must be 'scene', None or a callable frames(t_s) -> image, got {frames!r}")
-            video = getattr(scene, "video", None)
-            if video is not None and Path(video.path).is_file():
-                from .frames import SceneVideoFrames
+            for view in scene.views:
+                if view.video is not None and Path(view.video.path).is_file():
+                    from .frames import SceneVideoFrames
 
-                self._frames = SceneVideoFrames(video, lens=getattr(scene, "lens", None))
+                    self._frames[view.name] = SceneVideoFrames(view.video, lens=view.lens)
         elif frames is not None:
             if not callable(frames):
                 raise ValueError(
                     f"frames must be 'scene', None or a callable frames(t_s) -> image, got {type(frames).__name__}"
                 )
-            self._frames = frames
+            self._frames[self._views[0]] = frames
 
     # ------------------------------------------------------------------ video frames
-    def set_frames(self, frames: Callable[[float], Any] | None) -> None:
-        """Use another frame provider (the interface's grabber), or None for none."""
+    def set_frames(self, frames: Callable[[float], Any] | None, view: str | None = None) -> None:
+        """Use another frame provider for one view (the first for None; the interface's grabber), or
+        None for none."""
         if frames is not None and not callable(frames):
             raise ValueError(f"frames must be a callable frames(t_s) -> image, or None; got {type(frames).__name__}")
+        name = self.view_name(view)
         with self.lock:
-            self._frames = frames
+            if frames is None:
+                self._frames.pop(name, None)
+            else:
+                self._frames[name] = frames
+
+    def has_frames_of(self, view: str | None = None) -> bool:
+        """True when the site can show workflows the frame the operator clicked on in this view."""
+        return self.view_name(view) in self._frames
 
     @property
     def has_frames(self) -> bool:
-        """True when the site can show workflows the frame the operator clicked on."""
-        return self._frames is not None
+        """True when the site can show workflows the frame the operator clicked on (first view)."""
+        return self.has_frames_of(None)
 
-    def frame_at(self, t_s: float | None = None) -> np.ndarray | None:
-        """The video frame showing scene time ``t_s`` (default: now, ``time_s()``) — RGB or grey
-        uint8, (H, W, 3) or (H, W) — or None when the site has no frames or the source has none."""
-        frames = self._frames
+    def frame_at(self, t_s: float | None = None, view: str | None = None) -> np.ndarray | None:
+        """One view's video frame (the first view's for None) showing scene time ``t_s`` (default: now,
+        ``time_s()``) — RGB or grey uint8, (H, W, 3) or (H, W) — or None when the site has no frames
+        of that view or the source has none."""
+        frames = self._frames.get(self.view_name(view))
         if frames is None:
             return None
         image = frames(self.time_s() if t_s is None else float(t_s))
@@ -280,10 +292,29 @@ class Site:
 
     # ------------------------------------------------------------------ reading
     @property
-    def camera(self) -> Camera:
-        """The current camera calibration (the global model C)."""
+    def views(self) -> tuple[str, ...]:
+        """The names of the site's cameras (views), the first one's being ``camera``."""
+        return self._views
+
+    def view_name(self, view: str | None) -> str:
+        """``view``, or the first view's name for None; ValueError for a camera the site does not have."""
+        if view is None:
+            return self._views[0]
+        if view not in self._cameras:
+            raise ValueError(f"the site has no camera named {view!r}; its cameras: {', '.join(self._views)}")
+        return view
+
+    def camera_of(self, view: str | None = None) -> Camera:
+        """The current calibration (the global model C) of one view's camera (the first for None)."""
+        name = self.view_name(view)
         with self.lock:
-            return self._camera
+            return self._cameras[name]
+
+    @property
+    def camera(self) -> Camera:
+        """The current calibration (the global model C) of the first view's camera."""
+        with self.lock:
+            return self._cameras[self._views[0]]
 
     @property
     def T_world_turret(self) -> np.ndarray:
@@ -293,10 +324,17 @@ class Site:
 
     @property
     def calibration_covs(self) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """(camera_cov (12, 12), turret_cov (6, 6)) of the current calibrations; None for one that is
-        the scene's nominal value (not calibrated in this database) or was stored without one."""
+        """(camera_cov (12, 12) of the first view, turret_cov (6, 6)) of the current calibrations; None
+        for one that is the scene's nominal value (not calibrated in this database) or was stored
+        without one (``camera_cov`` for another view)."""
         with self.lock:
-            return self._camera_cov, self._turret_cov
+            return self._camera_covs[self._views[0]], self._turret_cov
+
+    def camera_cov(self, view: str | None = None) -> np.ndarray | None:
+        """The (12, 12) covariance of one view's calibration, None as ``calibration_covs`` says."""
+        name = self.view_name(view)
+        with self.lock:
+            return self._camera_covs[name]
 
     def time_s(self) -> float:
         """The scene time, seconds (the video's position)."""
@@ -358,20 +396,29 @@ class Site:
             self.revision += 1
 
     # ------------------------------------------------------------------ calibrations
+    def calibration_kind(self, view: str | None = None) -> str:
+        """The database's calibration kind of one view's camera: "camera" for the first view (as
+        databases of one camera have it), "camera:NAME" for the others (each undone on its own)."""
+        name = self.view_name(view)
+        return "camera" if name == self._views[0] else f"camera:{name}"
+
     def _load_calibrations(self) -> bool:
-        """Adopt the database's latest camera and turret calibrations; True if either changed."""
+        """Adopt the database's latest calibrations of every view's camera and of the turret; True if
+        one changed."""
         changed = False
-        cam = self.db.latest_calibration("camera")
-        if cam is not None and self._cal_ids.get("camera") != cam.id:
-            d = cam.data
-            self._camera = Camera(
-                np.asarray(d["C"], float),
-                int(d.get("width", self.scene.camera.width)),
-                int(d.get("height", self.scene.camera.height)),
-            )
-            self._camera_cov = None if d.get("cov") is None else np.asarray(d["cov"], float)
-            self._cal_ids["camera"] = cam.id
-            changed = True
+        for name in self._views:
+            kind = self.calibration_kind(name)
+            cam = self.db.latest_calibration(kind)
+            if cam is not None and self._cal_ids.get(kind) != cam.id:
+                d, nominal = cam.data, self.scene.view(name).camera if self.scene.views else self.scene.camera
+                self._cameras[name] = Camera(
+                    np.asarray(d["C"], float),
+                    int(d.get("width", nominal.width)),
+                    int(d.get("height", nominal.height)),
+                )
+                self._camera_covs[name] = None if d.get("cov") is None else np.asarray(d["cov"], float)
+                self._cal_ids[kind] = cam.id
+                changed = True
         tur = self.db.latest_calibration("turret")
         if tur is not None and self._cal_ids.get("turret") != tur.id:
             self._T_world_turret = np.asarray(tur.data["T_world_turret"], float).copy()
@@ -390,17 +437,20 @@ class Site:
         client: str,
         method: str = "dlt",
         cov: np.ndarray | None = None,
+        view: str | None = None,
     ) -> None:
-        """Store a new camera calibration (one transaction) and use it from now on.
-        cov : (12, 12) covariance of ``camera.C.ravel()`` (``calibrate_dlt(...).cov``), or None."""
+        """Store a new calibration of one view's camera (the first for None; one transaction) and use it
+        from now on. cov : (12, 12) covariance of ``camera.C.ravel()`` (``calibrate_dlt(...).cov``), or None."""
+        name, kind = self.view_name(view), self.calibration_kind(view)
         data = {"C": camera.C, "width": camera.width, "height": camera.height, "rms_px": float(rms_px), **points}
+        data["view"] = name
         if cov is not None:
             data["cov"] = np.asarray(cov, float)
-        rec = self.db.add_calibration("camera", data, np.asarray(residuals_px, float), method=method, client=client)
+        rec = self.db.add_calibration(kind, data, np.asarray(residuals_px, float), method=method, client=client)
         with self.lock:
-            self._camera = camera
-            self._camera_cov = None if cov is None else np.asarray(cov, float).copy()
-            self._cal_ids["camera"] = rec.id
+            self._cameras[name] = camera
+            self._camera_covs[name] = None if cov is None else np.asarray(cov, float).copy()
+            self._cal_ids[kind] = rec.id
             self.revision += 1
         self._feed_after_write()
 

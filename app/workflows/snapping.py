@@ -169,7 +169,7 @@ class SnapMixin:
         if frame is not None:
             return frame.image
         try:
-            return self.site.frame_at()
+            return self.site.frame_at(None, self.view)
         except Exception as exc:  # noqa: BLE001 - a broken video must not stop the click: it is kept raw
             self._frame_error = f"the video frame could not be read ({exc})"
             return None
@@ -206,7 +206,7 @@ class SnapMixin:
     def _snap_segment(self, seg: np.ndarray) -> ClickSnap | None:
         """Snap a finished segment (2, 2) on the current frame; None when snapping is off or the
         site has no video frames."""
-        if not self.snap or not (self.site.has_frames or getattr(self, "frame", None) is not None):
+        if not self.snap or not (self.site.has_frames_of(self.view) or getattr(self, "frame", None) is not None):
             return None
         from app.vision.snap import snap_segment
 
@@ -228,7 +228,7 @@ class SnapMixin:
     ) -> ClickSnap | None:
         """Snap a clicked image point (2,) of a model vertex (if known) to the image's corner; None
         when snapping is off or the site has no video frames."""
-        if not self.snap or not (self.site.has_frames or getattr(self, "frame", None) is not None):
+        if not self.snap or not (self.site.has_frames_of(self.view) or getattr(self, "frame", None) is not None):
             return None
         from app.vision.corner import snap_corner
 
@@ -237,7 +237,7 @@ class SnapMixin:
             return ClickSnap("corner", uv.copy(), None, reason=self._no_frame_reason())
         D = L = None
         if model is not None and vertex is not None and T_world_obj is not None:
-            D, L = vertex_edge_directions(self.site.camera, model, np.asarray(T_world_obj, float), int(vertex))
+            D, L = vertex_edge_directions(self.camera, model, np.asarray(T_world_obj, float), int(vertex))
         try:
             res = snap_corner(image, uv, D, L)
         except ValueError as exc:

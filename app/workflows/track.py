@@ -78,6 +78,7 @@ class TrackObject(SnapMixin, Workflow):
         self,
         site,
         client: str = "operator",
+        view: str | None = None,
         object_name: str | None = None,
         snap: bool = True,
         sigma_px: float = 1.0,
@@ -85,7 +86,7 @@ class TrackObject(SnapMixin, Workflow):
     ):
         from app.vision.track import EdgeTracker
 
-        super().__init__(site, client)
+        super().__init__(site, client, view)
         self._init_snap(snap)
         if object_name is None:
             raise WorkflowError("Track: select the object first")
@@ -96,7 +97,7 @@ class TrackObject(SnapMixin, Workflow):
         self.object_name = object_name
         self.sigma_px = float(sigma_px)
         try:
-            self.tracker = EdgeTracker(site.camera, self.obj.model, self.obj.T_world_obj, **tracker_options)
+            self.tracker = EdgeTracker(self.camera, self.obj.model, self.obj.T_world_obj, **tracker_options)
         except (TypeError, ValueError) as exc:
             raise WorkflowError(f"Track: cannot track {object_name}: {exc}") from None
         self.T_world_obj = self.obj.T_world_obj.copy()  # the last good pose
@@ -148,7 +149,7 @@ class TrackObject(SnapMixin, Workflow):
             generation = self._generation
             worker = copy.copy(self.tracker)  # track() replaces its state (pose, polarities), never mutates it
         t = self.site.time_s() if t_s is None else float(t_s)
-        image = self.site.frame_at(t) if frame is None else np.asarray(frame)
+        image = self.site.frame_at(t, self.view) if frame is None else np.asarray(frame)
         if image is None:
             raise WorkflowError(f"no video frame at t = {t:.2f} s: tracking needs the video")
         try:  # compute, unlocked
@@ -272,7 +273,7 @@ class TrackObject(SnapMixin, Workflow):
             snapped = all(s is not None and s.applied for s in self.seg_snaps)
             try:
                 res = match_edges(
-                    self.site.camera,
+                    self.camera,
                     self.obj.model,
                     np.array(self.segs),
                     image=image,
@@ -282,7 +283,7 @@ class TrackObject(SnapMixin, Workflow):
                 raise WorkflowError(f"cannot re-initialise: {exc}") from None
             for c in res.candidates:
                 twin = nearest_twin(self.obj.model, c.T_world_obj, c.edges, self.T_world_obj)
-                if twin is not None and not plausibility(self.site.camera, self.obj.model, twin[0]):
+                if twin is not None and not plausibility(self.camera, self.obj.model, twin[0]):
                     break
             else:
                 raise WorkflowError(
@@ -441,7 +442,7 @@ class TrackObject(SnapMixin, Workflow):
                 found = np.all(np.isfinite(d.matched_uv), axis=1)
                 m.found_points = d.matched_uv[found & (d.weights >= 0.5)]
                 m.rejected_points = d.matched_uv[found & (d.weights < 0.5)]
-            cam = self.site.camera
+            cam = self.camera
             X = (
                 self.obj.model.vertices @ self.T_world_obj[:3, :3].T + self.T_world_obj[:3, 3]
                 if len(self.obj.model.vertices)

@@ -129,12 +129,13 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         self,
         site,
         client: str = "operator",
+        view: str | None = None,
         object_name: str | None = None,
         loss: str = "l2",
         snap: bool = True,
         sigma_px: float = 1.0,
     ):
-        super().__init__(site, client)
+        super().__init__(site, client, view)
         self._init_snap(snap)
         if not sigma_px > 0:
             raise WorkflowError(f"sigma_px (the clicks' noise, pixels) must be positive, got {sigma_px}")
@@ -360,7 +361,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             if len(segs) < 3:
                 raise WorkflowError(f"{len(segs)} edges assigned; the three-line solver needs 3 (click more edges)")
             pts_uv, pts_obj = self._points()
-            camera, generation = self.site.camera, self._generation
+            camera, generation = self.camera, self._generation
         errors, found, triples = [], [], 0  # compute, outside the lock: the overlay keeps drawing
         for triple in itertools.islice(itertools.combinations(range(len(segs)), 3), MAX_TRIPLES):
             idx = list(triple)
@@ -456,7 +457,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 starts = [(i, self.candidates[i]) for i in order]
             if self.last_refined is not None:  # clicks added since the last Refine: go on from there
                 starts = [(-1, self.last_refined)] + starts
-            camera, camera_cov, sigmas = self.site.camera, self.site.calibration_covs[0], self._click_sigmas()
+            camera, camera_cov, sigmas = self.camera, self.site.camera_cov(self.view), self._click_sigmas()
             generation = self._generation
             prior = None
             if self.found is not None:  # found from one click: the clicks refine it, together
@@ -660,7 +661,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         return np.array(self.points_uv), self.obj.model.vertices[self.vertex_ids]
 
     def _projected_edges(self) -> np.ndarray:
-        cam = self.site.camera
+        cam = self.camera
         S = self.obj.model.edge_segments(self.T_current)
         uv = cam.project(S.reshape(-1, 3)).reshape(-1, 2, 2)
         behind = np.any(cam.depth(S.reshape(-1, 3)).reshape(-1, 2) <= 0, axis=1)
@@ -680,7 +681,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         return int(idx[i]), d
 
     def _nearest_vertex(self, p: np.ndarray) -> tuple[int, float]:
-        cam = self.site.camera
+        cam = self.camera
         T = self.T_current
         V = self.obj.model.vertices @ T[:3, :3].T + T[:3, 3]
         d = np.linalg.norm(cam.project(V) - p, axis=1)
@@ -999,7 +1000,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 T = self.T_current  # the assigned model edges, orange, where the estimate draws them
                 m.highlight = [(self.object_name, e, T) for e in self.edge_ids if e is not None]
             else:  # the matched model edges, labelled where the shown candidate draws them
-                cam = self.site.camera
+                cam = self.camera
                 S = model.edge_segments(shown.T_world_obj)[shown.edges]
                 front = np.all(cam.depth(S.reshape(-1, 3)).reshape(-1, 2) > 0, axis=1)
                 mids = cam.project(S.reshape(-1, 3)).reshape(-1, 2, 2).mean(axis=1)
@@ -1013,7 +1014,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                     Ghost(model, T, f"#{i + 1}", chosen=(i == self.chosen)) for i, T in enumerate(self.candidates)
                 ]
             if self._waiting_for_edge():  # which model edge is it: each visible one labelled where it is drawn
-                cam = self.site.camera
+                cam = self.camera
                 T = self.T_current
                 wfm = model.wireframe(cam.center, T)
                 vis = [int(k) for k, v, kind in zip(wfm.edge_index, wfm.visible, wfm.kind) if v and kind == "edge"]
@@ -1024,7 +1025,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             if self.mode == "point" and self.pending_vertex is not None:
                 T = self.T_current
                 X = T[:3, :3] @ model.vertices[self.pending_vertex] + T[:3, 3]
-                m.pending = self.site.camera.project(X.reshape(1, 3))
+                m.pending = self.camera.project(X.reshape(1, 3))
             return m
 
     def summary(self) -> dict[str, Any]:

@@ -221,11 +221,11 @@ def test_mcit_serve_undistorts_the_video_of_a_scene_whose_camera_file_has_distor
     from tests.e2e.harness import free_port
 
     d = json.loads((default_scene_path() / "scene.json").read_text())
-    Kw = np.array(d["camera"]["K"])
+    front = d["cameras"][0]
+    Kw = np.array(front["K"])
     D = [-0.3, 0.12, 0.001, -0.0015, -0.02]
     _write_cam(tmp_path / "cam.yml", D, "plumb_bob", (512, 256), Kw)
-    d["camera"] = {"intrinsics_file": "cam.yml", "T_world_cam": d["camera"]["T_world_cam"]}
-    d.pop("video")
+    d["cameras"] = [{"name": "front", "intrinsics_file": "cam.yml", "T_world_cam": front["T_world_cam"]}]
     (tmp_path / "scene.json").write_text(json.dumps(d))
     (tmp_path / "frames").mkdir()
     rng = np.random.default_rng(1)

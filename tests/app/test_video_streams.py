@@ -403,16 +403,16 @@ def test_mcit_serve_on_a_lost_stream_shows_it_not_live_and_live_again(clip, tmp_
     server.grabber._delays = (0.1, 0.2, 0.4)  # quicker than mcit's own, for the test's few seconds
     try:
         server.start()
-        wait_until(lambda: server.frames_sent >= 3, 10.0, "3 frames sent")
+        wait_until(lambda: server.views["front"].frames_sent >= 3, 10.0, "3 frames sent")
         assert not _is_stamped(server.video.image)
         assert_is_clip_frame(server.video.image)
-        sent = server.frames_sent
+        sent = server.views["front"].frames_sent
 
         stream.kill()
-        wait_until(lambda: server._video_stamp is not None, 10.0, "the video to be marked not live")
+        wait_until(lambda: server.views["front"].stamp is not None, 10.0, "the video to be marked not live")
         shown = server.video.image
         assert shown.shape == (H, W, 3) and _is_stamped(shown)
-        assert LOST.match(server._video_stamp), server._video_stamp
+        assert LOST.match(server.views["front"].stamp), server.views["front"].stamp
         status = wait_until(
             lambda: next((t for t in reversed(panel.statuses) if "Not live" in t), None),
             5.0,
@@ -424,11 +424,13 @@ def test_mcit_serve_on_a_lost_stream_shows_it_not_live_and_live_again(clip, tmp_
             status,
         ), status
         assert panel.redraws_changed >= 1  # the panels' texts were redrawn when it was lost
-        assert server.frames_sent == sent  # no live frame was sent meanwhile
+        assert server.views["front"].frames_sent == sent  # no live frame was sent meanwhile
 
         stream = HttpStream(clip, port=stream.port).start()
         wait_until(
-            lambda: server._video_stamp is None and server.frames_sent > sent, 15.0, "the video to be live again"
+            lambda: server.views["front"].stamp is None and server.views["front"].frames_sent > sent,
+            15.0,
+            "the video to be live again",
         )
         assert not _is_stamped(server.video.image)
         assert_is_clip_frame(server.video.image)

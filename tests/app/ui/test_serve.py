@@ -13,7 +13,7 @@ from tests.e2e.harness import free_port
 def test_defaults_listen_on_loopback_with_emulated_devices():
     args = build_parser().parse_args(["serve"])
     assert args.host == "127.0.0.1" and args.port == 8080
-    assert args.video is None and args.db is None and args.rangefinder is None and not args.no_devices
+    assert args.video == [] and args.db is None and args.rangefinder is None and not args.no_devices
 
 
 def test_build_interface_seeds_a_new_database_and_serves(tmp_path):

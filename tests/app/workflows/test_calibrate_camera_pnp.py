@@ -281,11 +281,11 @@ def test_serve_takes_the_lens_file(scene, tmp_path):
     # a lens with distortion: the scene's frames are undistorted with it; the pose stays the scene's
     dist = [-0.2, 0.05, 0.001, -0.001, 0.0]
     sc = scene_with_intrinsics(scene, _write_lens(tmp_path / "d.yml", K * [[1.01], [1.01], [1]], w, h, dist))
-    assert sc.lens is not None and sc.raw["camera"]["intrinsics_file"].endswith("d.yml")
+    assert sc.lens is not None and sc.camera_block()["intrinsics_file"].endswith("d.yml")
     assert np.allclose(sc.camera.decompose()[1], T, atol=1e-9) and np.isclose(
         sc.camera.decompose()[0][0, 0], 1.01 * K[0, 0]
     )
-    assert scene.lens is None and "K" in scene.raw["camera"]  # the scene itself is unchanged
+    assert scene.lens is None and "K" in scene.camera_block()  # the scene itself is unchanged
     with pytest.raises(ValueError, match=r"calibrated on 640×480 images but the scene's camera is 512×256"):
         scene_with_intrinsics(scene, _write_lens(tmp_path / "big.yml", K, 640, 480))
     with pytest.raises(ValueError, match="nope.yml"):

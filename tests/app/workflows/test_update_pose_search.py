@@ -164,7 +164,7 @@ def test_a_refine_after_find_keeps_the_camera_calibration_share_of_the_sigma(vid
     site = video_site
     C = site.camera.C
     d = np.random.default_rng(0).normal(size=12) * 2e-3 * np.abs(C).ravel()
-    monkeypatch.setattr(type(site), "calibration_covs", property(lambda self: (np.outer(d, d), None)))
+    monkeypatch.setattr(type(site), "camera_cov", lambda self, view=None: np.outer(d, d))
     wf, _, T_true = _found(site, scene)
     c = wf.found[0]
     share = c.cov_camera
