@@ -54,7 +54,7 @@ Z_FROZEN = -0.0005  # the frozen frame: in front of the live video, behind the o
 FROZEN_MAX_SIDE = 2048  # the frozen frame is upscaled (nearest neighbour) up to this many pixels a side
 # Workflows that do not take a frozen frame: tracking follows the live video; history has no clicks.
 LIVE_WORKFLOWS = ("track", "history")
-GLOBAL_KEYS = {"f", "l", "h"}  # the panel's own shortcuts (Freeze, Show live, Fit view), live in every workflow
+GLOBAL_KEYS = {"f", "l", "h", "n"}  # the panel's own shortcuts (Freeze, Show live, Fit view, Next camera), always live
 DOUBLE_CLICK_S = 0.6  # two clicks this close in time and place are a double click
 DOUBLE_CLICK_PX = 4.0
 LATE_FIRST_CLICK_S = 3.0  # a click by a page-told double click soon after it is its first click, arriving late
@@ -73,6 +73,7 @@ class ClientPanel:
         self.session = Session(app.site, client=f"browser-{client.client_id + getattr(app, 'client_number_offset', 0)}")
         self.lock = threading.RLock()
         self.view = "video"
+        self.camera_view = app.site.views[0]  # the camera whose image this page shows (and is clicked in)
         self.dirty = True
         self.need_fit = True
         self.fitted_aspect: float | None = None
@@ -118,6 +119,26 @@ class ClientPanel:
         client.scene.on_click()(on_click)
         self._rect_cb = client.scene.on_rect_select()(self._guard(self._on_rect))
         client.camera.on_update(self._on_camera)
+
+    @property
+    def feed(self):
+        """The shown camera's video in the interface (app.ui.server.ViewFeed)."""
+        return self.app.views[self.camera_view]
+
+    def show_camera(self, name: str | None = None) -> None:
+        """Show camera ``name`` (the next one for None): its image fitted, its clicks taken."""
+        names = list(self.app.views)
+        if name is None:
+            name = names[(names.index(self.camera_view) + 1) % len(names)]
+        if name not in self.app.views:
+            raise WorkflowError(f"no camera named {name!r} here; the cameras: {', '.join(names)}")
+        if name == self.camera_view:
+            return
+        if self.frozen is not None and self.frozen_by is None:
+            self._unfreeze()  # a frame frozen to look at belongs to the camera it was frozen in
+        self.camera_view, self.zoom_rect, self.need_fit, self.dirty = name, None, True, True
+        if getattr(self, "gui_camera", None) is not None and self.gui_camera.value != name:
+            self.gui_camera.value = name
 
     @property
     def asking(self) -> str | None:
@@ -234,8 +255,14 @@ class ClientPanel:
                 hint="Look at the live video (clicks still go to the frozen frame: switch back to click)",
             )
             self.gui_live.on_click(self._guard(lambda _e: self._toggle_live()))
-            self.gui_scrub = gui.add_slider("Seconds back", 0.0, float(self.app.recent.seconds), 0.5, 0.0)
+            self.gui_scrub = gui.add_slider("Seconds back", 0.0, float(self.feed.recent.seconds), 0.5, 0.0)
             self.gui_scrub.on_update(self._guard(self._on_scrub))
+            self.gui_camera = None
+            if len(self.app.views) > 1:  # which camera's image is shown and clicked in (N: the next one)
+                self.gui_camera = gui.add_dropdown(
+                    "Camera (N)", tuple(self.app.views), initial_value=self.camera_view, hint="The camera shown"
+                )
+                self.gui_camera.on_update(self._guard(lambda _e: self.show_camera(str(self.gui_camera.value))))
             self.gui_view = gui.add_button_group("View", ("Video", "3D world"))
             self.gui_view.on_click(self._guard(self._on_view))
             self.gui_fit = gui.add_button(
@@ -274,6 +301,7 @@ class ClientPanel:
             ("Freeze", "F", lambda: self._freeze_back(0)),
             ("Show live / frozen", "L", self._toggle_live),
             ("Fit view", "H", self._request_fit),
+            *((("Next camera", "N", self.show_camera),) if len(self.app.views) > 1 else ()),
         ):  # GLOBAL_KEYS
             cmd = gui.add_command(label, hotkey=key)
             cmd.on_trigger(self._guard(lambda _e, fn=fn: fn()))
@@ -371,9 +399,9 @@ class ClientPanel:
             self.feeder.stop()
             self.feeder = None
         self.error = ""
-        wf = self.session.start(name, **options)
+        wf = self.session.start(name, view=self.camera_view, **options)
         if name == "track":
-            self.feeder = TrackFeeder(self, wf, self.app.grabber)
+            self.feeder = TrackFeeder(self, wf, self.feed.grabber)
         if (
             name not in LIVE_WORKFLOWS
             and frame is None
@@ -386,7 +414,7 @@ class ClientPanel:
             self._adopt_frozen(wf)
             return
         if name not in LIVE_WORKFLOWS:
-            self._freeze(frame if frame is not None else self.app.grabber.latest(), "live")
+            self._freeze(frame if frame is not None else self.feed.grabber.latest(), "live")
         else:
             self._unfreeze()
         if self.gui_scrub.value != 0.0:  # the newest frame is frozen: the scrubber says 0 s back
@@ -527,9 +555,14 @@ class ClientPanel:
         if frame is None:
             self.frozen = None
             return
-        earlier = self.app.recent.before(frame, MOTION_GAP_S)  # to see whether what is clicked on was moving
+        earlier = self.feed.recent.before(frame, MOTION_GAP_S)  # to see whether what is clicked on was moving
         self.frozen = FrameRef(
-            frame.image, float(frame.t_s), int(frame.index), source, previous=None if earlier is None else earlier.image
+            frame.image,
+            float(frame.t_s),
+            int(frame.index),
+            source,
+            previous=None if earlier is None else earlier.image,
+            view=self.camera_view,
         )
         self.show_live = False
         wf = self.session.workflow
@@ -575,7 +608,7 @@ class ClientPanel:
                 "your clicks were made on the frozen frame: every click of a workflow uses one frame. "
                 "Remove them (Remove last) or Cancel before freezing another frame"
             )
-        frame = self.app.recent.seconds_back(seconds) if seconds > 0 else self.app.grabber.latest()
+        frame = self.feed.recent.seconds_back(seconds) if seconds > 0 else self.feed.grabber.latest()
         if frame is None:
             raise WorkflowError("no video frame has arrived yet: check the video source")
         self._freeze(frame, "scrubbed" if seconds > 0 else "live")
@@ -600,7 +633,7 @@ class ClientPanel:
             self._unfreeze()
             self.dirty = True
         elif not following and self.frozen is None:
-            self._freeze(self.app.grabber.latest(), "live")
+            self._freeze(self.feed.grabber.latest(), "live")
             self.dirty = True
 
     def _on_scrub(self, event) -> None:
@@ -624,7 +657,7 @@ class ClientPanel:
             return
         import cv2
 
-        pw = self.app.pixel_world
+        pw = self.app.views.get(self.frozen.view, self.feed).pixel_world  # on its own camera's image
         image = self.frozen.image
         if image.ndim == 2:
             image = np.repeat(image[:, :, None], 3, axis=2)
@@ -673,7 +706,7 @@ class ClientPanel:
             )
         # the frame shown at this click: a double click that starts Update pose freezes it (the newest, a
         # moment later, showed a moving box elsewhere: a new operator's run)
-        self._last_click = (now, np.asarray(uv, float).copy(), self.session.selected, self.app.grabber.latest())
+        self._last_click = (now, np.asarray(uv, float).copy(), self.session.selected, self.feed.grabber.latest())
         if (wf is None or wf.finished) and double:
             # no workflow, a double click: the object's pose is found from that point — Update pose started
             # and Find pressed at once. The object is the one selected before the double click, even when its
@@ -682,7 +715,7 @@ class ClientPanel:
             # click selected (a new operator's double click with nothing selected only selected it)
             self._last_click = None
             if last is None:  # its first click not seen (told by the page alone): as if made here
-                last = (now, uv, self.session.selected, self.app.grabber.latest())
+                last = (now, uv, self.session.selected, self.feed.grabber.latest())
             name = last[2] if last[2] is not None else self.session.selected
             on = self._object_at(uv)
             if name is not None and on not in (None, name) and self._is_table(name):
@@ -704,6 +737,11 @@ class ClientPanel:
             self._find_from_double_click(uv, name)
             return
         if wf is not None and not wf.finished and "click" in wf.actions:
+            if wf.view != self.camera_view:
+                raise WorkflowError(
+                    f"{wf.title} works in camera {wf.view}: show it ({self._camera_keys()}) to click, or Cancel and "
+                    f"start it again in camera {self.camera_view}"
+                )
             step = wf.current_step()
             if double and wf.double_click_is_one:  # its first click was the click: the second is dropped
                 self._last_click = None
@@ -759,18 +797,29 @@ class ClientPanel:
     def _handle_click(self, event, arrival: float | None = None) -> None:
         if self.view != "video":
             raise WorkflowError("clicks work on the video: switch the view to Video")
-        uv = self._on_image(
-            self.app.pixel_world.pixel_from_ray(np.array(event.ray_origin), np.array(event.ray_direction))
-        )
+        uv = self._pixel_of_ray(np.array(event.ray_origin), np.array(event.ray_direction))
         # the page tells double clicks (_on_double), keeping their second click from the viewer; two clicks
         # that reach the server close in time and place are one too (a page whose script did not run)
         self.on_pixel_click(uv, arrival)
+
+    def _camera_keys(self) -> str:
+        return "the Camera chooser, or N"
+
+    def _pixel_of_ray(self, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        """The pixel a click's ray meets: on the shown camera's image, or on another camera's (seen beside
+        it when zoomed out), which is then the camera shown; a WorkflowError when it meets no image."""
+        hit = self.app.view_at(origin, direction)
+        if hit is not None and hit[0] != self.camera_view:
+            self.camera_view = hit[0]  # the view stays where the operator put it
+            if self.gui_camera is not None and self.gui_camera.value != hit[0]:
+                self.gui_camera.value = hit[0]
+        return self._on_image(None if hit is None else hit[1])
 
     def _on_image(self, uv: np.ndarray | None) -> np.ndarray:
         """uv, a clicked pixel, if it lies on the image; else a WorkflowError that says so."""
         if uv is None:
             raise WorkflowError("that click missed the image: click on the video")
-        w, h = self.app.pixel_world.width, self.app.pixel_world.height
+        w, h = self.feed.pixel_world.width, self.feed.pixel_world.height
         if not (-0.5 <= uv[0] <= w - 0.5 and -0.5 <= uv[1] <= h - 0.5):
             raise WorkflowError(f"that click is outside the {w}×{h} image: click on the video")
         return uv
@@ -785,10 +834,10 @@ class ClientPanel:
         if not (np.isfinite(sx) and np.isfinite(sy)) or self.view != "video":
             return
         try:
-            uv = self._screen_to_pixel(self.client.camera, (sx, sy))
+            ray = self._screen_ray(self.client.camera, (sx, sy))
         except (AssertionError, ZeroDivisionError):  # no camera reported yet
             return
-        self.on_pixel_click(self._on_image(uv), arrival, double=True)
+        self.on_pixel_click(self._pixel_of_ray(*ray), arrival, double=True)
         self.click_t = arrival
 
     def _on_rect(self, event) -> None:
@@ -805,12 +854,18 @@ class ClientPanel:
         self.zoom_rect = (min(u0, u1), min(v0, v1), max(u0, u1), max(v0, v1))
         self.need_fit = True
 
-    def _screen_to_pixel(self, cam, screen_xy) -> np.ndarray | None:
+    @staticmethod
+    def _screen_ray(cam, screen_xy) -> tuple[np.ndarray, np.ndarray]:
+        """The viewer ray (origin, direction) through screen point (x, y) in 0..1 of the canvas."""
         R = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix()
         t = np.tan(cam.fov / 2.0)
         sx, sy = screen_xy
         d_cam = np.array([(2 * sx - 1) * t * cam.aspect, (2 * sy - 1) * t, 1.0])
-        return self.app.pixel_world.pixel_from_ray(np.asarray(cam.position), R @ d_cam)
+        return np.asarray(cam.position), R @ d_cam
+
+    def _screen_to_pixel(self, cam, screen_xy) -> np.ndarray | None:
+        """The shown camera's pixel at screen point (x, y) in 0..1 of the canvas."""
+        return self.feed.pixel_world.pixel_from_ray(*self._screen_ray(cam, screen_xy))
 
     def _on_wheel(self, _event) -> None:
         """Zoom about the point under the cursor: "x y deltaY n" from static/wheel.js (x, y in 0..1)."""
@@ -836,7 +891,7 @@ class ClientPanel:
             X = position + np.linalg.norm(look_at - position) * ray / np.linalg.norm(ray)
         f = float(np.clip(np.exp(dy * WHEEL_ZOOM_PER_DELTA), 0.5, 2.0))
         if self.view == "video":  # between 200× in and a little beyond the whole image
-            fit = abs(float(self.app.pixel_world.fit_camera(aspect, cam.fov)[0][2]))
+            fit = abs(float(self.feed.pixel_world.fit_camera(aspect, cam.fov)[0][2]))
             dist = abs(float(position[2]))
             if not dist > 1e-9:  # a camera in the image's plane (a page can report one): nothing to zoom about
                 return
@@ -866,7 +921,7 @@ class ClientPanel:
             fov, aspect = cam.fov, cam.aspect
         except (AssertionError, ZeroDivisionError, TypeError):
             return None
-        pw = self.app.pixel_world
+        pw = self.feed.pixel_world
         fit_pos, _, _ = pw.fit_camera(aspect, fov)
         fit = abs(float(fit_pos[2]))
         return float(np.clip(dist / fit, 0.02, 4.0)) if fit > 0 else None
@@ -877,7 +932,7 @@ class ClientPanel:
             cam = self.client.camera
             dist = abs(float(cam.position[2]))
             visible = (
-                2.0 * dist * np.tan(float(cam.fov) / 2.0) / self.app.pixel_world.k
+                2.0 * dist * np.tan(float(cam.fov) / 2.0) / self.feed.pixel_world.k
             )  # video px across the canvas' height
             k = visible / float(cam.image_height)
         except (AssertionError, ZeroDivisionError, TypeError, AttributeError, ValueError):
@@ -887,7 +942,7 @@ class ClientPanel:
     # ------------------------------------------------------------------ helpers
     def _object_at(self, uv: np.ndarray) -> str | None:
         """The object a click at uv picks (the overlay's own projections: nothing projected here)."""
-        return self.app.object_at(uv, self.select_radius_px())
+        return self.app.object_at(uv, self.select_radius_px(), self.camera_view)
 
     def _is_table(self, name: str) -> bool:
         """The object ``name`` is the site's table (what the others stand on)."""
@@ -909,7 +964,7 @@ class ClientPanel:
             return  # the browser has not reported its camera yet
         self.need_fit = False
         self.fitted_aspect = aspect
-        pw = self.app.pixel_world
+        pw = self.feed.pixel_world
         if self.view == "video":
             rect = self.zoom_rect
             self.zoom_rect = None
@@ -980,17 +1035,19 @@ class ClientPanel:
         if self.gui_object.value != selected:
             self.gui_object.value = selected
         marks = wf.marks() if wf is not None and not wf.finished else Marks()
+        # a workflow's marks are drawn on its camera's image; the selection and the beam on the shown one's
+        where = wf.view if wf is not None and not wf.finished and wf.view in self.app.views else self.camera_view
+        camera, pw = site.camera_of(where), self.app.views[where].pixel_world
         X = site.beam_X_world  # the range finder's last spot, for everyone
-        if marks.beam_uv is None and X is not None and np.all(np.isfinite(X)) and site.camera.depth(X) > 0:
-            marks.beam_uv = site.camera.project(np.asarray(X, float))
+        if marks.beam_uv is None and X is not None and np.all(np.isfinite(X)) and camera.depth(X) > 0:
+            marks.beam_uv = camera.project(np.asarray(X, float))
         scale = self._zoom_scale(self.client.camera) if self.view == "video" else None
         self.marks_scale = 1.0 if scale is None else scale
-        pw = self.app.pixel_world
         batch, labels = draw_marks(
-            site.camera, marks, objects, pw.width, pw.height, selected=self.session.selected, scale=self.marks_scale
+            camera, marks, objects, pw.width, pw.height, selected=self.session.selected, scale=self.marks_scale
         )
         labels = spread_labels(labels, self._image_px_per_screen_px())
-        self._labels_sent = self.app.send_client_overlay(self.client, batch, labels, self._labels_sent)
+        self._labels_sent = self.app.send_client_overlay(self.client, batch, labels, self._labels_sent, pw)
         self._update_texts(wf)
         if self.click_t is not None:
             self.click_latencies_s.append(time.monotonic() - self.click_t)
@@ -1091,7 +1148,7 @@ class ClientPanel:
         self.gui_copy.visible = bool(text)
         if text and self.gui_copy.value != text:
             self.gui_copy.value = text
-        video = self.app.grabber.status()
+        video = self.feed.grabber.status()
         live = Md(
             "Live video (no frame frozen)"
             if video.live

@@ -268,7 +268,7 @@ class InterfaceServer:
         self.video = self.views[self.site.views[0]].video
         self.server.scene.world_axes.visible = False
 
-    def _send_lines(self, scene_api, name: str, batch: LineBatch, z: float) -> None:
+    def _send_lines(self, scene_api, name: str, batch: LineBatch, z: float, pw: PixelWorld | None = None) -> None:
         if len(batch) == 0:
             # Per-vertex colours even when empty: a node first sent with one colour keeps ignoring
             # the per-vertex colours it gets later (they render white in viser 1.1.1).
@@ -281,22 +281,23 @@ class InterfaceServer:
                 visible=False,
             )
             return
-        points, colors = batch.world(self.pixel_world, z)
+        points, colors = batch.world(pw or self.pixel_world, z)
         scene_api.add_line_segments(
             name, points.astype(np.float32), colors, thickness=LINE_PX, thickness_units="screen"
         )
 
-    def send_client_overlay(self, client: viser.ClientHandle, batch: LineBatch, labels: list, sent: dict) -> dict:
-        """Draw one client's marks (client-scoped nodes); each label's bottom-left corner at its uv
-        (``drawing.spread_labels``). ``sent`` holds the labels this client was
-        sent last (name → (text, position)); only changed ones are sent again. Returns the new dict."""
-        self._send_lines(client.scene, "/overlay/marks", batch, Z_MARKS)
+    def send_client_overlay(
+        self, client: viser.ClientHandle, batch: LineBatch, labels: list, sent: dict, pw: PixelWorld | None = None
+    ) -> dict:
+        """Draw one client's marks (client-scoped nodes) on the image ``pw`` (default: the first camera's);
+        each label's bottom-left corner at its uv (``drawing.spread_labels``). ``sent`` holds the labels this
+        client was sent last (name → (text, position)); only changed ones are sent again. Returns the new dict."""
+        pw = pw or self.pixel_world
+        self._send_lines(client.scene, "/overlay/marks", batch, Z_MARKS, pw)
         new: dict = {}
         for i, (uv, text) in enumerate(labels):
             name = f"/overlay/marks_labels/{i}"
-            position = tuple(
-                float(v) for v in self.pixel_world.to_world(np.asarray(uv, float), Z_MARKS)
-            )  # spread_labels' corner
+            position = tuple(float(v) for v in pw.to_world(np.asarray(uv, float), Z_MARKS))  # spread_labels' corner
             new[name] = (text, position)
             if sent.get(name) != new[name]:
                 client.scene.add_label(name, text, position=position, anchor="bottom-left", font_screen_scale=0.8)

@@ -179,7 +179,8 @@ class FrameRef:
     """The video frame a workflow's clicks, snapping and solving use (frozen when it starts).
 
     image : (H, W, 3) or (H, W) uint8. t_s : its scene time (seconds). index : its frame number in
-    the source (-1 when unknown). source : where it came from ("live", "scrubbed", "scene video").
+    the source (-1 when unknown). source : where it came from ("live", "scrubbed", "scene video"). view :
+    the camera it came from.
     previous : the frame shown about ``MOTION_GAP_S`` before it, when the interface kept one (to see
     whether what was clicked on was moving: ``Workflow.moving_share``), else None."""
 
@@ -188,10 +189,12 @@ class FrameRef:
     index: int = -1
     source: str = "live"
     previous: np.ndarray | None = field(default=None, compare=False, repr=False)
+    view: str = ""  # the camera it came from ("": not said, the site's first)
 
     def record(self) -> dict[str, Any]:
         """JSON-ready: which frame was used (for the history)."""
-        return {"t_s": round(float(self.t_s), 3), "index": int(self.index), "source": self.source}
+        out = {"t_s": round(float(self.t_s), 3), "index": int(self.index), "source": self.source}
+        return {**out, "view": self.view} if self.view else out
 
 
 def sigma_over(sd_deg: float, sd_mm: float, max_deg: float, max_mm: float) -> str:

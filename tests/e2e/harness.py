@@ -38,7 +38,7 @@ def screen_of(server, panel, uv) -> tuple[float, float]:
     import viser
 
     cam = panel.client.camera
-    X = server.pixel_world.to_world(np.asarray(uv, float))
+    X = server.views[panel.camera_view].pixel_world.to_world(np.asarray(uv, float))  # on the camera it shows
     R = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix()
     p = R.T @ (X - np.asarray(cam.position))
     t = np.tan(cam.fov / 2.0)
@@ -289,7 +289,10 @@ class Interface:
             devices = self._own_devices = open_fast_devices(scene, frame_t_s)
         self.scene = scene
         self.site = Site(scene, self.db, devices=devices, clock=lambda: frame_t_s)
-        self.server = InterfaceServer(self.site, FrameGrabber(StillSource(frame, fps=20)), port=free_port()).start()
+        # one still per camera ({camera name: image}), or the first camera's alone
+        frames = frame if isinstance(frame, dict) else {scene.views[0].name: frame}
+        grabbers = {name: FrameGrabber(StillSource(image, fps=20)) for name, image in frames.items()}
+        self.server = InterfaceServer(self.site, grabbers, port=free_port()).start()
         self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
         self.frame_t_s = frame_t_s
         # What the page's Content-Security-Policy refused (app/ui/page.py): every browser test fails on one.
