@@ -737,10 +737,9 @@ class ClientPanel:
             self._find_from_double_click(uv, name)
             return
         if wf is not None and not wf.finished and "click" in wf.actions:
-            if wf.view != self.camera_view:
+            if double and wf.view != self.camera_view:
                 raise WorkflowError(
-                    f"{wf.title} works in camera {wf.view}: show it ({self._camera_keys()}) to click, or Cancel and "
-                    f"start it again in camera {self.camera_view}"
+                    f"a double click finds the pose in camera {wf.view}, where {wf.title} started: double-click there"
                 )
             step = wf.current_step()
             if double and wf.double_click_is_one:  # its first click was the click: the second is dropped
@@ -765,7 +764,7 @@ class ClientPanel:
                     )
                 self.error, self.confirm_pending, self.warning = "", None, ""
                 wf.message = ""
-                wf.click(uv)
+                wf.click_in(self.camera_view, uv)  # the workflow says whether it takes clicks in this camera
                 return
             if wf.name != "track":
                 raise WorkflowError(f"clicks are not taken now. {wf.prompt_text(markdown=False)}")
@@ -801,9 +800,6 @@ class ClientPanel:
         # the page tells double clicks (_on_double), keeping their second click from the viewer; two clicks
         # that reach the server close in time and place are one too (a page whose script did not run)
         self.on_pixel_click(uv, arrival)
-
-    def _camera_keys(self) -> str:
-        return "the Camera chooser, or N"
 
     def _pixel_of_ray(self, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """The pixel a click's ray meets: on the shown camera's image, or on another camera's (seen beside
@@ -1034,10 +1030,9 @@ class ClientPanel:
         selected = self.session.selected or NO_SELECTION
         if self.gui_object.value != selected:
             self.gui_object.value = selected
-        marks = wf.marks() if wf is not None and not wf.finished else Marks()
-        # a workflow's marks are drawn on its camera's image; the selection and the beam on the shown one's
-        where = wf.view if wf is not None and not wf.finished and wf.view in self.app.views else self.camera_view
-        camera, pw = site.camera_of(where), self.app.views[where].pixel_world
+        # what the workflow draws on the shown camera's image (nothing there for one working in another camera)
+        marks = wf.marks_in(self.camera_view) if wf is not None and not wf.finished else Marks()
+        camera, pw = site.camera_of(self.camera_view), self.feed.pixel_world
         X = site.beam_X_world  # the range finder's last spot, for everyone
         if marks.beam_uv is None and X is not None and np.all(np.isfinite(X)) and camera.depth(X) > 0:
             marks.beam_uv = camera.project(np.asarray(X, float))

@@ -257,6 +257,25 @@ class Workflow:
         """The current calibration of the workflow's camera (``view``): the global model C."""
         return self.site.camera_of(self.view)
 
+    click_view: str | None = None  # the camera of the click being handled (a workflow taking several: its own)
+
+    def _click_camera(self):
+        """The calibration of the camera the click being handled was made in."""
+        return self.site.camera_of(self.click_view or self.view)
+
+    def click_in(self, view: str, uv) -> None:
+        """A click at pixel uv of camera ``view``: this workflow's clicks are in its own camera only."""
+        if view != self.view:
+            raise WorkflowError(
+                f"{self.title} works in camera {self.view}: show it (the Camera chooser, or N) to click, or Cancel "
+                f"and start it again in camera {view}"
+            )
+        self.click(uv)
+
+    def marks_in(self, view: str) -> Marks:
+        """What to draw on camera ``view``'s image: ``marks()`` on the workflow's own camera, nothing elsewhere."""
+        return self.marks() if view == self.view else Marks()
+
     # ------------------------------------------------------------------ common actions
     @property
     def finished(self) -> bool:

@@ -83,6 +83,11 @@ class AutoMatchMixin:
 
         with self.lock:
             self._check_open()
+            if any(v != self.view for v in getattr(self, "seg_views", ())):
+                raise WorkflowError(
+                    f"automatic matching works on camera {self.view}'s frame alone: say which model edge each edge "
+                    "clicked in another camera is (click it on the wireframe), or Remove last"
+                )
             if self.pending is not None or self.mode == "point":
                 raise WorkflowError("finish the click under way first (or Remove last)")
             if len(self.segs) < 3:

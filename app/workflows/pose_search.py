@@ -81,6 +81,10 @@ class OneClickMixin:
                 if self.pending is not None or self.segs or self.points_uv or self.mode != "edge":
                     raise WorkflowError("Find uses one click on the object and no others: Remove last first")
             elif self.pending is not None and not self.segs and not self.points_uv and self.mode == "edge":
+                if getattr(self, "pending_view", None) not in (None, self.view):
+                    raise WorkflowError(
+                        f"Find searches camera {self.view}'s frame: click {self.object_name} there (Remove last)"
+                    )
                 p = self.pending.copy()
             else:
                 raise WorkflowError(
@@ -247,7 +251,7 @@ class OneClickMixin:
                 )
             self.found, self.search_info, self.found_moving = None, None, ""
             self.search_click, self.candidates, self.chosen, self.matches = None, [], None, None
-            self.pending = p
+            self.pending, self.pending_view = p, None
             self._invalidate()
             self.state = "click_edge_end"
 

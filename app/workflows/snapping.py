@@ -165,6 +165,13 @@ class SnapMixin:
 
     def _frame(self) -> np.ndarray | None:
         """The frame the clicks were made on: the workflow's frozen frame, else the site's now."""
+        click_view = getattr(self, "click_view", None)
+        if click_view is not None and click_view != self.view:  # a click in another camera: its newest frame
+            try:
+                return self.site.frame_at(None, click_view)
+            except Exception as exc:  # noqa: BLE001 - as below
+                self._frame_error = f"the video frame could not be read ({exc})"
+                return None
         frame = getattr(self, "frame", None)
         if frame is not None:
             return frame.image
@@ -237,7 +244,7 @@ class SnapMixin:
             return ClickSnap("corner", uv.copy(), None, reason=self._no_frame_reason())
         D = L = None
         if model is not None and vertex is not None and T_world_obj is not None:
-            D, L = vertex_edge_directions(self.camera, model, np.asarray(T_world_obj, float), int(vertex))
+            D, L = vertex_edge_directions(self._click_camera(), model, np.asarray(T_world_obj, float), int(vertex))
         try:
             res = snap_corner(image, uv, D, L)
         except ValueError as exc:

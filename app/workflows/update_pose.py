@@ -57,6 +57,53 @@ MAX_TRIPLES = 20  # Solve tries at most this many triples of the assigned edges 
 MAX_CANDIDATES = 8
 
 
+def refine_in_views(cameras: dict, start: np.ndarray, clicks: dict, sigmas: np.ndarray, views: tuple, loss: str):
+    """``core.pose.refine_views`` on clicks made in several cameras ({name: Camera}, in order): ``clicks``
+    as ``refine`` takes them, ``sigmas`` one per click (segments, then points), ``views`` (segment
+    cameras, point cameras). The result's per-click arrays follow the clicks' order, as ``refine``'s."""
+    import dataclasses
+
+    from core.pose import ViewClicks, refine_views
+
+    seg_views, pt_views = views
+    S = len(seg_views)
+    segs, edges = clicks.get("segs_uv"), clicks.get("edges_obj")
+    pts, pobj = clicks.get("points_uv"), clicks.get("points_obj")
+    per_view, order_s, order_p = [], [], []
+    for name, camera in cameras.items():
+        si = [i for i, v in enumerate(seg_views) if v == name]
+        pi = [i for i, v in enumerate(pt_views) if v == name]
+        if not si and not pi:
+            continue
+        per_view.append(
+            ViewClicks(
+                camera,
+                segs[si] if si else None,
+                edges[si] if si else None,
+                pts[pi] if pi else None,
+                pobj[pi] if pi else None,
+                sigma_px=np.concatenate([sigmas[si], sigmas[[S + i for i in pi]]]),
+            )
+        )
+        order_s += si
+        order_p += pi
+    result = refine_views(per_view, start, loss=loss)
+    perm = np.array(order_s + [S + i for i in order_p], int)  # result's click k is the clicks' perm[k]
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(len(perm))
+    rows = np.stack([2 * inv, 2 * inv + 1], axis=1).reshape(-1)
+    return dataclasses.replace(
+        result,
+        residuals_px=result.residuals_px[rows],
+        kinds=tuple(result.kinds[k] for k in inv),
+        click_residuals_px=result.click_residuals_px[inv],
+        weights=result.weights[inv],
+        downweighted=tuple(int(perm[k]) for k in result.downweighted),
+        views=tuple(result.views[k] for k in inv),
+        sigma_px=result.sigma_px if np.ndim(result.sigma_px) == 0 else np.asarray(result.sigma_px)[inv],
+    )
+
+
 def _counted(n_edges: int, n_points: int) -> str:
     """ "4 edges", "3 edges and 1 point", "no click": what a refinement used, or what was snapped."""
     parts = [f"{n} {w}{'s' if n != 1 else ''}" for n, w in ((n_edges, "edge"), (n_points, "point")) if n]
@@ -159,7 +206,11 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         self.edge_ids: list[int | None] = []
         self.points_uv: list[np.ndarray] = []
         self.vertex_ids: list[int] = []
+        # the camera each segment and point was clicked in (the workflow's own, or another: one pose fits all)
+        self.seg_views: list[str] = []
+        self.point_views: list[str] = []
         self.pending: np.ndarray | None = None
+        self.pending_view: str | None = None
         self.mode = "edge"
         self.pending_vertex: int | None = None
         self.candidates: list[np.ndarray] = []
@@ -212,6 +263,43 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         self._clicks_changed()
 
     # ------------------------------------------------------------------ actions
+    def click_in(self, view: str, uv) -> None:
+        """A click in camera ``view``: edges and points clicked in another camera than the workflow's
+        join its own in one refinement (``core.pose.refine_views``): a second view fixes the distance
+        along the first one's line of sight."""
+        with self.lock:
+            self._check_open()
+            try:
+                view = self.site.view_name(view)
+            except ValueError as exc:
+                raise WorkflowError(str(exc)) from None
+            if view != self.view:
+                if self.search_only or self._found_pending() or self.progress is not None:
+                    raise WorkflowError(
+                        f"the pose found from one click is camera {self.view}'s: click in camera {self.view}, or "
+                        f"click edges of {self.object_name} in camera {self.view} first"
+                    )
+                if not len(self.obj.model.edges):
+                    raise WorkflowError(f"{self.object_name} has no edges to click in camera {view}")
+            if self.pending is not None and self.pending_view not in (None, view):
+                raise WorkflowError(
+                    f"the edge under way was started in camera {self.pending_view}: click its second point there "
+                    "(or Remove last)"
+                )
+            if self._waiting_for_edge() and self.seg_views[-1] != view:
+                raise WorkflowError(
+                    f"edge {len(self.segs)} was clicked in camera {self.seg_views[-1]}: say which model edge it is "
+                    "there (or Remove last)"
+                )
+            self.click_view = view
+            try:
+                self.click(uv)
+            finally:
+                self.click_view = None
+
+    def _in_view(self) -> str:
+        return self.click_view or self.view
+
     def click(self, uv) -> None:
         """A click on the video; what it means depends on the step (see ``next_step``)."""
         p = as_pixel(uv)
@@ -241,6 +329,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 return
             if self.pending is None or (self.search_only and self.found is None):
                 self.pending = p  # with no edges to click, a new click replaces the one waiting for Find
+                self.pending_view = self._in_view()
                 self.state = "click_edge_end"
                 return
             if self.search_only:
@@ -253,6 +342,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             self.segs.append(seg)
             self.seg_snaps.append(snap)
             self.edge_ids.append(None)
+            self.seg_views.append(self._in_view())
             self._done.append("segment")
             self._clicks_changed()
             self.state = "click_edge" if self.auto else "assign_edge"
@@ -338,10 +428,12 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                     self.segs.pop()
                     self.seg_snaps.pop()
                     self.edge_ids.pop()
+                    self.seg_views.pop()
                 else:
                     self.points_uv.pop()
                     self.point_snaps.pop()
                     self.vertex_ids.pop()
+                    self.point_views.pop()
             self._clicks_changed()
             self.state = "assign_edge" if self._waiting_for_edge() else "click_edge"
 
@@ -358,10 +450,20 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         with self.lock:  # snapshot
             self._check_open()
             segs, edges = self._assigned()
-            if len(segs) < 3:
-                raise WorkflowError(f"{len(segs)} edges assigned; the three-line solver needs 3 (click more edges)")
             pts_uv, pts_obj = self._points()
-            camera, generation = self.camera, self._generation
+            seg_views, pt_views = self._click_views()
+            # the three-line solver works in one camera: the one with the most assigned edges (its own first)
+            view = max(dict.fromkeys([self.view, *seg_views]), key=seg_views.count)
+            keep = np.array([v == view for v in seg_views], bool)
+            segs, edges = segs[keep] if len(segs) else segs, edges[keep] if len(edges) else edges
+            keep = np.array([v == view for v in pt_views], bool)
+            pts_uv, pts_obj = (pts_uv[keep], pts_obj[keep]) if len(pts_uv) else (pts_uv, pts_obj)
+            if len(segs) < 3:
+                raise WorkflowError(
+                    f"{len(segs)} edges assigned in camera {view}; the three-line solver needs 3 in one camera "
+                    "(click more edges)"
+                )
+            camera, generation = self.site.camera_of(view), self._generation
         errors, found, triples = [], [], 0  # compute, outside the lock: the overlay keeps drawing
         for triple in itertools.islice(itertools.combinations(range(len(segs)), 3), MAX_TRIPLES):
             idx = list(triple)
@@ -459,8 +561,10 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 starts = [(-1, self.last_refined)] + starts
             camera, camera_cov, sigmas = self.camera, self.site.camera_cov(self.view), self._click_sigmas()
             generation = self._generation
+            views = self._click_views()
+            several = any(v != self.view for v in views[0] + views[1])  # clicks in another camera too
             prior = None
-            if self.found is not None:  # found from one click: the clicks refine it, together
+            if self.found is not None and not several:  # found from one click: the clicks refine it, together
                 c = self.found[self.chosen or 0]
                 if c.cov is not None:
                     prior = (self.chosen or 0, c.T_world_obj, c.cov, c.cov_camera)
@@ -480,7 +584,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 else ("from the last refined pose" if i == -1 else f"candidate {i + 1}")
             )
             try:
-                result = refine(camera, start, **clicks, loss=self.loss, sigma_px=sigmas)
+                result = self._refine_at(start, clicks, sigmas, views)
             except ValueError as exc:
                 failures.append(f"{what}: {exc}")
                 continue
@@ -497,7 +601,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             if i is None:
                 advice += "; for a large motion Solve first"
             raise WorkflowError("no plausible pose: " + "; ".join(failures) + f". {advice}")
-        if camera_cov is not None:  # the camera calibrated in this database: its share joins the clicks'
+        if camera_cov is not None and not several:  # the camera calibrated in this database: its share joins
             result = with_camera_uncertainty(result, camera, camera_cov, **clicks)
         unseen = self._unseen_outline(camera, result.T_world_obj)
         with self.lock:  # commit
@@ -512,10 +616,17 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             deg, m = pose_error(result.T_world_obj, self.obj.T_world_obj)
             sig_deg, sig_mm = float(np.max(result.std_r_deg)), 1000 * float(np.max(result.std_t_m))
             used = _counted(list(result.kinds).count("segment"), list(result.kinds).count("point"))
+            if several:
+                used += f" in cameras {', '.join(dict.fromkeys([self.view, *views[0], *views[1]]))}"
             self.message = (
                 f"{note}RMS {result.rms_px:.2f} px over {used}; moved {deg:.2f}° and "
                 f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
                 + (" (camera calibration included)" if result.cov_parts else "")
+                + (
+                    " (the cameras' calibration σ not included)"
+                    if several and any(self.site.camera_cov(v) is not None for v in (*views[0], *views[1]))
+                    else ""
+                )
                 + (f". ⚠ {unseen}" if unseen else "")
             )
             return result
@@ -573,6 +684,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 "snaps": [None if self.seg_snaps[j] is None else self.seg_snaps[j].record() for j in used],
                 "point_snaps": [None if s is None else s.record() for s in self.point_snaps],
                 "assignment": "automatic" if self.match_info is not None else "hand",
+                "views": [self.seg_views[j] for j in used] + list(self.point_views),
                 "frame": self.frame_record(),
             }  # the frozen frame the edges were clicked on
             if self.match_info is not None:
@@ -621,6 +733,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         self.points_uv.append(p if snap is None else snap.used)
         self.point_snaps.append(snap)
         self.vertex_ids.append(vertex)
+        self.point_views.append(self._in_view())
         self.mode, self.pending_vertex = "edge", None
         self._done.append("point")
         self._clicks_changed()
@@ -645,6 +758,25 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         model = self.obj.model
         return np.array([s for s, _ in pairs]), np.array([model.vertices[model.edges[e]] for _, e in pairs])
 
+    def _click_views(self) -> tuple[list[str], list[str]]:
+        """The camera of each assigned segment and of each point, in refine's order."""
+        return [v for v, e in zip(self.seg_views, self.edge_ids) if e is not None], list(self.point_views)
+
+    def _refine_at(self, start: np.ndarray, clicks: dict, sigmas: np.ndarray, views: tuple[list, list]):
+        """``core.pose.refine`` from ``start`` on the clicks, or ``refine_views`` when some were made in
+        another camera (its result's per-click arrays put back in the clicks' order)."""
+        seg_views, pt_views = views
+        if all(v == self.view for v in seg_views + pt_views):
+            return refine(self.camera, start, **clicks, loss=self.loss, sigma_px=sigmas)
+        return refine_in_views(
+            {v: self.site.camera_of(v) for v in dict.fromkeys([self.view, *seg_views, *pt_views])},
+            start,
+            clicks,
+            sigmas,
+            views,
+            self.loss,
+        )
+
     def _click_sigmas(self) -> np.ndarray:
         """σ of each click in refine's order (assigned segments, then points), pixels: a click snapped
         to the image has the snap's measured precision, a raw or refused one the operator's σ."""
@@ -661,7 +793,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         return np.array(self.points_uv), self.obj.model.vertices[self.vertex_ids]
 
     def _projected_edges(self) -> np.ndarray:
-        cam = self.camera
+        cam = self._click_camera()
         S = self.obj.model.edge_segments(self.T_current)
         uv = cam.project(S.reshape(-1, 3)).reshape(-1, 2, 2)
         behind = np.any(cam.depth(S.reshape(-1, 3)).reshape(-1, 2) <= 0, axis=1)
@@ -681,7 +813,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         return int(idx[i]), d
 
     def _nearest_vertex(self, p: np.ndarray) -> tuple[int, float]:
-        cam = self.camera
+        cam = self._click_camera()
         T = self.T_current
         V = self.obj.model.vertices @ T[:3, :3].T + T[:3, 3]
         d = np.linalg.norm(cam.project(V) - p, axis=1)
@@ -705,10 +837,10 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 raise WorkflowError("finish the click under way first (or Remove last)")
             kind, j = rows[i]
             if kind == "segment":
-                del self.segs[j], self.seg_snaps[j], self.edge_ids[j]
+                del self.segs[j], self.seg_snaps[j], self.edge_ids[j], self.seg_views[j]
                 what = f"Edge {j + 1}"
             else:
-                del self.points_uv[j], self.point_snaps[j], self.vertex_ids[j]
+                del self.points_uv[j], self.point_snaps[j], self.vertex_ids[j], self.point_views[j]
                 what = f"Point {j + 1}"
             # What Remove last undoes, rebuilt in click order (a confirmed match's undo is dropped).
             self._done = [
@@ -971,36 +1103,48 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             return self._found_labels()
         return [f"#{i + 1}" + (" (best)" if i == 0 else "") for i in range(len(self.candidates))]
 
-    def marks(self) -> Marks:
+    def marks_in(self, view: str) -> Marks:
+        """What to draw on camera ``view``'s image: the clicks made in it, the estimate through its camera."""
+        return self.marks(view)
+
+    def marks(self, view: str | None = None) -> Marks:
+        """What to draw on camera ``view``'s image (the workflow's own for None)."""
         with self.lock:
+            view = view or self.view
+            own = view == self.view
             m = Marks(selected=self.object_name)
             model = self.obj.model
             shown = None if self.matches is None else self.matches[self.chosen or 0]  # assignment awaiting confirmation
-            if self.segs:
-                m.segments = np.array(self.segs)
+            here = [i for i, v in enumerate(self.seg_views) if v == view]  # the segments clicked in this camera
+            pts_here = [i for i, v in enumerate(self.point_views) if v == view]
+            if here:
+                m.segments = np.array([self.segs[i] for i in here])
                 ids = self.edge_ids if shown is None else [int(e) for e in shown.edges]
                 m.labels = [
                     (
-                        (s[0] + s[1]) / 2,
-                        f"{i + 1}" + (f"→e{e}" if e is not None else "?") + ("?" if shown is not None else ""),
+                        (self.segs[i][0] + self.segs[i][1]) / 2,
+                        f"{i + 1}"
+                        + (f"→e{ids[i]}" if ids[i] is not None else "?")
+                        + ("?" if shown is not None else ""),
                     )
-                    for i, (s, e) in enumerate(zip(self.segs, ids))
+                    for i in here
                 ]
-            if self.pending is not None:
+            if self.pending is not None and (self.pending_view or self.view) == view:
                 m.pending = self.pending.reshape(1, 2)
-            if self.search_click is not None:  # the one click Find used
+            if self.search_click is not None and own:  # the one click Find used
                 m.circles = self.search_click.reshape(1, 2)
                 m.labels.append((self.search_click + [8.0, -8.0], "click"))
-            if self.points_uv:
-                m.points = np.array(self.points_uv)
-                m.labels += [(p, f"v{k}") for p, k in zip(self.points_uv, self.vertex_ids)]
-            m.raw_segments, m.raw_points, m.snap_lines, snap_labels = snap_marks(self.seg_snaps + self.point_snaps)
+            if pts_here:
+                m.points = np.array([self.points_uv[i] for i in pts_here])
+                m.labels += [(self.points_uv[i], f"v{self.vertex_ids[i]}") for i in pts_here]
+            snaps = [self.seg_snaps[i] for i in here] + [self.point_snaps[i] for i in pts_here]
+            m.raw_segments, m.raw_points, m.snap_lines, snap_labels = snap_marks(snaps)
             m.labels += snap_labels
             if shown is None:
                 T = self.T_current  # the assigned model edges, orange, where the estimate draws them
                 m.highlight = [(self.object_name, e, T) for e in self.edge_ids if e is not None]
             else:  # the matched model edges, labelled where the shown candidate draws them
-                cam = self.camera
+                cam = self.site.camera_of(view)
                 S = model.edge_segments(shown.T_world_obj)[shown.edges]
                 front = np.all(cam.depth(S.reshape(-1, 3)).reshape(-1, 2) > 0, axis=1)
                 mids = cam.project(S.reshape(-1, 3)).reshape(-1, 2, 2).mean(axis=1)
@@ -1013,8 +1157,8 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 m.ghosts = [
                     Ghost(model, T, f"#{i + 1}", chosen=(i == self.chosen)) for i, T in enumerate(self.candidates)
                 ]
-            if self._waiting_for_edge():  # which model edge is it: each visible one labelled where it is drawn
-                cam = self.camera
+            if self._waiting_for_edge() and self.seg_views[-1] == view:  # which model edge: each visible one labelled
+                cam = self.site.camera_of(view)
                 T = self.T_current
                 wfm = model.wireframe(cam.center, T)
                 vis = [int(k) for k, v, kind in zip(wfm.edge_index, wfm.visible, wfm.kind) if v and kind == "edge"]
@@ -1025,7 +1169,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             if self.mode == "point" and self.pending_vertex is not None:
                 T = self.T_current
                 X = T[:3, :3] @ model.vertices[self.pending_vertex] + T[:3, 3]
-                m.pending = self.camera.project(X.reshape(1, 3))
+                m.pending = self.site.camera_of(view).project(X.reshape(1, 3))
             return m
 
     def summary(self) -> dict[str, Any]:

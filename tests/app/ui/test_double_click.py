@@ -18,7 +18,10 @@ class _Workflow:
     def current_step(self):
         return SimpleNamespace(clicks=True, enabled=frozenset())
 
-    def click(self, uv):
+    view = "front"
+
+    def click_in(self, view, uv):
+        assert view == self.view
         self.clicks.append(tuple(np.round(uv, 1)))
 
 
@@ -28,6 +31,8 @@ def _panel():
         session=SimpleNamespace(workflow=wf, selected="box_1"),
         app=SimpleNamespace(grabber=SimpleNamespace(latest=lambda: None)),
         _last_double=None,
+        camera_view="front",
+        feed=SimpleNamespace(grabber=SimpleNamespace(latest=lambda: None)),
         show_live=False,
         frozen=None,
         error="",
