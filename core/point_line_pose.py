@@ -24,13 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import Camera
+from .robust import LOSSES, robust_weights
 from .transforms import check_T, exp_so3, make_T
 
 __all__ = ["PointLineFit", "point_line_residuals", "robust_weights", "refine_point_to_line"]
 
-_LOSSES = ("l2", "huber", "tukey")
-_HUBER_K = 1.345  # 95 % efficiency under Gaussian noise
-_TUKEY_C = 4.685  # 95 % efficiency under Gaussian noise
+_LOSSES = LOSSES
 
 
 @dataclass(frozen=True)
@@ -123,19 +122,6 @@ def point_line_residuals(
     a = n[:, :1] * Ju + n[:, 1:] * Jv  # ∂(n·π)/∂X, shape (N, 3)
     J = -np.hstack([a, np.cross(Xw - t, a)])
     return r, J, n
-
-
-def robust_weights(r: np.ndarray, loss: str, scale_px: float) -> np.ndarray:
-    """IRLS weights (N,) in [0, 1] of residuals r (pixels) for a loss at a scale (pixels)."""
-    if loss == "l2":
-        return np.ones_like(r)
-    a = np.abs(r) / scale_px
-    if loss == "huber":
-        return np.minimum(1.0, _HUBER_K / np.maximum(a, 1e-12))
-    if loss == "tukey":
-        z = a / _TUKEY_C
-        return np.where(z < 1.0, (1.0 - z * z) ** 2, 0.0)
-    raise ValueError(f"loss must be one of {_LOSSES}, got {loss!r}")
 
 
 def _mad_scale(r: np.ndarray) -> float:

@@ -63,8 +63,8 @@ import numpy as np
 from core.brep import BRep
 from core.camera import Camera
 from core.geometry import Plane
-from core.point_line_pose import robust_weights
 from core.pose.symmetry import symmetry_transforms
+from core.robust import robust_weights
 from core.transforms import exp_so3, make_T, pose_error
 
 from .evaluate import oriented_edges, sample_distances

@@ -11,13 +11,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..robust import huber_weights
+
 __all__ = ["huber_weights", "levenberg_marquardt", "numeric_jacobian"]
-
-
-def huber_weights(r: np.ndarray, c: float) -> np.ndarray:
-    """IRLS weights (N,) of the Huber loss with threshold c (residuals in σ): 1 inside, c/|r| outside."""
-    a = np.abs(r)
-    return np.where(a <= c, 1.0, c / np.maximum(a, 1e-300))
 
 
 def numeric_jacobian(

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..checks import MAX_M, MAX_SCALE, MIN_SCALE, finite_array, positive_scale
+from ..robust import huber_weights
 from ..transforms import check_T
 from ._lazy import kernels
 from .residuals import Clicks, as_clicks, stack_views, view_matrices
@@ -129,11 +130,6 @@ def _unit_distances(r: np.ndarray, n_seg: int) -> np.ndarray:
     seg = np.abs(r[: 2 * n_seg])
     pts = r[2 * n_seg :].reshape(-1, 2)
     return np.concatenate([seg, np.sqrt((pts * pts).sum(axis=1))])
-
-
-def huber_weights(dist_px: np.ndarray, huber_px: float) -> np.ndarray:
-    """IRLS weights min(1, huber_px / d) of pixel distances d (any shape)."""
-    return np.minimum(1.0, huber_px / np.maximum(dist_px, 1e-300))
 
 
 def check_options(camera, loss: str, huber_px: float, sigma_px) -> None:
