@@ -2,12 +2,13 @@
 
 Run: .venv/bin/python bench/views.py [--n 200] [--seed 0]
 
-Set-up: the workcell's geometry (``core.pose.synthetic``): camera 1 is the paper's camera
-(``paper_camera``, 512 × 256 px, f = 500 px, 1.45 m behind the table, 25° down), camera 2 a side view of
-the same table (``side_camera``, the same lens 2.0 m to the right, looking across camera 1's line of
-sight). The paper's box 35 × 23.1 × 13.2 cm lies on the table with a random yaw, ~2 m from each camera.
-Every visible edge (whole in the image) is clicked twice in each view, at random points along it, with
-Gaussian noise σ on each pixel coordinate. Refinement starts from the truth moved 2 cm (σ per axis).
+Set-ups: "paper" (``core.pose.synthetic``): camera 1 is the paper's camera (``paper_camera``, 512 × 256
+px, f = 500 px, 1.45 m behind the table, 25° down), camera 2 a side view of the same table
+(``side_camera``, the same lens 2.0 m to the right, looking across camera 1's line of sight);
+"workcell": the bundled scene's front and side cameras (scenes/workcell/scene.json). The paper's box 35
+× 23.1 × 13.2 cm lies on the table with a random yaw, ~2 m from each camera. Every visible edge (whole
+in the image) is clicked twice in each view, at random points along it, with Gaussian noise σ on each
+pixel coordinate. Refinement starts from the truth moved 2 cm (σ per axis).
 
 Rows, on the same placements and clicks:
 * one view: camera 1's clicks alone (``refine_views`` with one view is ``refine``);
@@ -42,15 +43,26 @@ SIGMAS_PX = (0.5, 1.0, 2.0)
 ROWS = ("one view", "two views", "two views, half")
 
 
-def placements(rng: np.random.Generator, n: int, sigma_px: float) -> list:
+def cameras(site: str) -> tuple:
+    """(camera 1, camera 2) of a set-up: "paper" (``paper_camera`` and ``side_camera``) or "workcell" (the
+    bundled scene's front and side cameras, scenes/workcell/scene.json)."""
+    if site == "paper":
+        return paper_camera(), side_camera()
+    from app.scene import default_scene_path, load_scene
+
+    scene = load_scene(default_scene_path())
+    return scene.view("front").camera, scene.view("side").camera
+
+
+def placements(rng: np.random.Generator, n: int, sigma_px: float, cams: tuple) -> list:
     """n placements clicked in both views: (T_true, camera 1's problem, camera 2's), the same random
     fractions along the edges noisy and exact (the exact ones for the bound)."""
     out = []
     while len(out) < n:
         T = paper_box_pose(rng)
         try:
-            a = box_problem(rng, paper_camera(), T, PAPER_BOX_M, sigma_px)
-            b = box_problem(rng, side_camera(), T, PAPER_BOX_M, sigma_px)
+            a = box_problem(rng, cams[0], T, PAPER_BOX_M, sigma_px)
+            b = box_problem(rng, cams[1], T, PAPER_BOX_M, sigma_px)
         except ValueError:  # not whole in one of the images
             continue
         out.append((T, a, b))
@@ -75,10 +87,10 @@ def views_of(row: str, a, b, exact: bool = False) -> list[ViewClicks]:
     ]
 
 
-def run(rng: np.random.Generator, n: int, sigma_px: float) -> dict:
-    cam1 = paper_camera()
+def run(rng: np.random.Generator, n: int, sigma_px: float, cams: tuple) -> dict:
+    cam1 = cams[0]
     out = {row: {"los": [], "sd": [], "crb": [], "across": [], "deg": [], "edges": []} for row in ROWS}
-    for T, a, b in placements(rng, n, sigma_px):
+    for T, a, b in placements(rng, n, sigma_px, cams):
         d = T[:3, 3] - cam1.center
         d /= np.linalg.norm(d)
         across = np.linalg.svd(d[None])[2][1:]  # two unit directions across the line of sight
@@ -102,6 +114,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=200, help="placements per noise level (default 200)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--site", choices=("paper", "workcell", "both"), default="both", help="the cameras (default: both set-ups)"
+    )
     args = ap.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     print(__doc__.split("\n\n")[1].replace("\n", " "))
@@ -110,10 +125,17 @@ def main(argv=None) -> int:
         f"{'σ px':>4} {'clicks in':<16} {'edges':>5} | {'line of sight: RMS mm':>21} {'σ med':>6} {'CRB':>6} "
         f"{'≤2σ':>5} | {'across RMS mm':>13} | {'rot RMS °':>9}"
     )
+    for site in ("paper", "workcell") if args.site == "both" else (args.site,):
+        print(f"\n{site}: " + ("paper_camera + side_camera" if site == "paper" else "the scene's front + side cameras"))
+        table(rng, args.n, cameras(site), head)
+    return 0
+
+
+def table(rng: np.random.Generator, n: int, cams: tuple, head: str) -> None:
     print(head)
     print("-" * len(head))
     for sigma in SIGMAS_PX:
-        res = run(rng, args.n, sigma)
+        res = run(rng, n, sigma, cams)
         base = np.sqrt(np.mean(res["one view"]["los"] ** 2))
         for row in ROWS:
             r = res[row]
@@ -126,7 +148,6 @@ def main(argv=None) -> int:
                 f"{1000 * np.sqrt(np.mean(r['crb'])):>6.2f} {100 * np.mean(np.abs(r['los']) <= 2 * r['sd']):>4.0f}% | "
                 f"{1000 * np.sqrt(np.mean(r['across'])):>13.2f} | {np.sqrt(np.mean(r['deg'] ** 2)):>9.3f}"
             )
-    return 0
 
 
 if __name__ == "__main__":
