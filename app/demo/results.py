@@ -17,7 +17,6 @@ the scene's ground truth; nothing writes. The measures are the paper's:
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -28,7 +27,7 @@ from core.camera import Camera
 from core.geometry import Line, distance_point_line
 from core.modeling import METHODS, ModelResult, model_box, model_cylinder
 from core.modeling.uncertainty import with_calibration_uncertainty
-from core.pose import p3l, refine
+from core.pose import p3l_candidates, refine
 from core.transforms import pose_error
 
 from .replay import Replay, RunRecord
@@ -89,17 +88,16 @@ def cylinder_depth_m(result: ModelResult, origin_world: np.ndarray, front_distan
 def first_p3l(
     camera: Camera, segs_uv: np.ndarray, edges_obj: np.ndarray
 ) -> tuple[list[np.ndarray], tuple[int, ...] | None]:
-    """P3L on the first workable triple of clicked edges, in click order (as the Update pose
-    workflow's Solve does). Returns (candidates, best first; the triple's indices), or ([], None)."""
-    for triple in itertools.combinations(range(len(segs_uv)), 3):
-        idx = list(triple)
-        try:
-            cands = p3l(camera, segs_uv[idx], edges_obj[idx])
-        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
-            continue
-        if cands:
-            return [np.asarray(T, float) for T in cands], triple
-    return [], None
+    """P3L on the first workable triple of clicked edges, in click order (the paper's large-motion step,
+    ``core.pose.p3l_candidates`` with ``first_only``). Returns (candidates, best first; the triple's
+    indices), or ([], None)."""
+    if len(segs_uv) < 3:
+        return [], None
+    try:
+        res = p3l_candidates(camera, segs_uv, edges_obj, first_only=True, max_triples=10**6)
+    except ValueError:  # clicks no line goes through (two coinciding pixels): no candidate
+        return [], None
+    return (res.poses, res.triples[0]) if res.poses else ([], None)
 
 
 # ---------------------------------------------------------------------- calibrations

@@ -25,13 +25,11 @@ Beyond the paper (docs/beyond.md):
 
 from __future__ import annotations
 
-import itertools
 from typing import Any
 
 import numpy as np
 
-from core.pose import nearest_twin, p3l, plausibility, refine
-from core.pose.p3l import ConcurrentEdgesError
+from core.pose import nearest_twin, p3l_candidates, plausibility, refine
 from core.pose.uncertainty import with_camera_uncertainty
 from core.transforms import pose_error
 
@@ -445,8 +443,6 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         ``MAX_TRIPLES``), its candidates ranked by how far all the clicks (every edge and point, not
         only the triple's) lie from the projected model (``core.pose.residuals.pose_distance_cost``),
         near-duplicates merged, the best ``MAX_CANDIDATES`` kept."""
-        from core.pose.residuals import as_clicks, pose_distance_cost
-
         with self.lock:  # snapshot
             self._check_open()
             segs, edges = self._assigned()
@@ -459,51 +455,31 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             keep = np.array([v == view for v in pt_views], bool)
             pts_uv, pts_obj = (pts_uv[keep], pts_obj[keep]) if len(pts_uv) else (pts_uv, pts_obj)
             if len(segs) < 3:
+                several = len(set(seg_views)) > 1
                 raise WorkflowError(
-                    f"{len(segs)} edges assigned in camera {view}; the three-line solver needs 3 in one camera "
-                    "(click more edges)"
+                    f"{len(segs)} edges assigned{f' in camera {view}' if several else ''}; the three-line solver "
+                    f"needs 3{' in one camera' if several else ''} (click more edges)"
                 )
             camera, generation = self.site.camera_of(view), self._generation
-        errors, found, triples = [], [], 0  # compute, outside the lock: the overlay keeps drawing
-        for triple in itertools.islice(itertools.combinations(range(len(segs)), 3), MAX_TRIPLES):
-            idx = list(triple)
-            try:
-                cands = p3l(
-                    camera, segs[idx], edges[idx], pts_uv if len(pts_uv) else None, pts_obj if len(pts_obj) else None
-                )
-            except ConcurrentEdgesError:
-                errors.append(
-                    f"edges {', '.join(str(i + 1) for i in idx)} meet at one corner of {self.object_name}: they "
-                    "give its turn but not its distance; click a fourth edge that does not pass through that "
-                    "corner, or Add point on another corner"
-                )
-                continue
-            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-                # a degenerate triple (or a numerical failure in it): try the next triple
-                errors.append(f"edges {', '.join(str(i + 1) for i in idx)}: {exc}")
-                continue
-            if not cands:
-                errors.append(
-                    f"edges {', '.join(str(i + 1) for i in idx)}: no pose puts the object in front of the camera"
-                )
-                continue
-            triples += 1
-            found += [np.asarray(T, float) for T in cands]
-        if not found:
+        try:  # compute, outside the lock: the overlay keeps drawing
+            res = p3l_candidates(
+                camera,
+                segs,
+                edges,
+                pts_uv if len(pts_uv) else None,
+                pts_obj if len(pts_obj) else None,
+                max_triples=MAX_TRIPLES,
+                max_candidates=MAX_CANDIDATES,
+            )
+        except ValueError as exc:
+            raise WorkflowError(f"Solve: {exc}") from None
+        if not res.poses:
             raise WorkflowError(
                 "no pose fits these edges: "
-                + "; ".join(errors[:3])
+                + "; ".join(self._skipped_words(tri, kind, why) for tri, kind, why in res.skipped[:3])
                 + ". Check the edge assignments (Remove last) or click other edges"
             )
-        clicks = as_clicks(segs, edges, pts_uv if len(pts_uv) else None, pts_obj if len(pts_obj) else None)
-        cost = [pose_distance_cost(camera, T, clicks) for T in found]
-        ranked: list[np.ndarray] = []
-        for i in np.argsort(cost, kind="stable"):
-            T = found[int(i)]
-            if all(pose_error(T, U)[0] > 0.5 or pose_error(T, U)[1] > 0.005 for U in ranked):
-                ranked.append(T)
-            if len(ranked) == MAX_CANDIDATES:
-                break
+        ranked, triples = res.poses, len(res.triples)
         with self.lock:  # commit
             self._unchanged_since(generation, "Solve")
             self.candidates = ranked
@@ -518,6 +494,16 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 "is selected"
             )
             return self.candidates
+
+    def _skipped_words(self, triple: tuple, kind: str, why: str) -> str:
+        """Why a triple of clicked edges gave no pose, as the operator reads it."""
+        edges = ", ".join(str(i + 1) for i in triple)
+        if kind == "concurrent":
+            return (
+                f"edges {edges} meet at one corner of {self.object_name}: they give its turn but not its distance; "
+                "click a fourth edge that does not pass through that corner, or Add point on another corner"
+            )
+        return f"edges {edges}: {why}"
 
     def _unchanged_since(self, generation: int, again: str) -> None:
         """Before committing a result computed outside the lock (held): WorkflowError, nothing

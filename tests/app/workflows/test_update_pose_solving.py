@@ -41,7 +41,7 @@ def _workflow(site, assign=True):
 
 
 @pytest.mark.parametrize(
-    "action, solver_module, solver", [("refine", update_pose, "refine"), ("solve", update_pose, "p3l")]
+    "action, solver_module, solver", [("refine", update_pose, "refine"), ("solve", update_pose, "p3l_candidates")]
 )
 def test_a_solve_runs_outside_the_lock_and_is_dropped_when_the_clicks_changed(
     site, monkeypatch, action, solver_module, solver
