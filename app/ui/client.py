@@ -556,6 +556,15 @@ class ClientPanel:
             self.frozen = None
             return
         earlier = self.feed.recent.before(frame, MOTION_GAP_S)  # to see whether what is clicked on was moving
+        # the other cameras' frames shown at the same moment: clicks made in them use these
+        at = self.feed.recent.arrival(frame)
+        at = time.monotonic() if at is None else at
+        others = {}
+        for name, feed in self.app.views.items():
+            hit = None if name == self.camera_view else feed.recent.nearest(at)
+            if hit is not None:
+                f, arrived = hit
+                others[name] = FrameRef(f.image, float(f.t_s), int(f.index), source, view=name, gap_s=arrived - at)
         self.frozen = FrameRef(
             frame.image,
             float(frame.t_s),
@@ -563,6 +572,7 @@ class ClientPanel:
             source,
             previous=None if earlier is None else earlier.image,
             view=self.camera_view,
+            others=others,
         )
         self.show_live = False
         wf = self.session.workflow
@@ -648,7 +658,11 @@ class ClientPanel:
 
     def _send_frozen(self) -> None:
         """Show this client's frozen frame (sharp, upscaled) over the live video, or hide it."""
-        key = None if (self.frozen is None or self.show_live or self.view != "video") else id(self.frozen)
+        # the frozen frame of the camera shown: its own, or the one frozen with it in another camera
+        ref = None if self.frozen is None else self.frozen.others.get(self.camera_view, self.frozen)
+        if ref is not None and ref.view and ref.view != self.camera_view:
+            ref = None  # no frame of the shown camera was frozen with it: its live video shows
+        key = None if (ref is None or self.show_live or self.view != "video") else id(ref)
         if key == self._frozen_sent:
             return
         self._frozen_sent = key
@@ -657,8 +671,8 @@ class ClientPanel:
             return
         import cv2
 
-        pw = self.app.views.get(self.frozen.view, self.feed).pixel_world  # on its own camera's image
-        image = self.frozen.image
+        pw = self.app.views.get(ref.view, self.feed).pixel_world  # on its own camera's image
+        image = ref.image
         if image.ndim == 2:
             image = np.repeat(image[:, :, None], 3, axis=2)
         up = max(1, min(4, FROZEN_MAX_SIDE // max(image.shape[:2])))

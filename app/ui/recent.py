@@ -67,6 +67,19 @@ class RecentFrames:
             older = [(f, a) for f, a in self._frames if a <= at - 0.5 * float(seconds) and f.index != frame.index]
             return min(older, key=lambda fa: abs(at - float(seconds) - fa[1]))[0] if older else None
 
+    def arrival(self, frame: Any) -> float | None:
+        """When ``frame`` arrived (time.monotonic), None when it is not kept."""
+        with self._lock:
+            return next((a for f, a in self._frames if f.index == frame.index), None)
+
+    def nearest(self, arrival: float) -> tuple[Any, float] | None:
+        """(the kept frame that arrived nearest to ``arrival`` (time.monotonic), when it arrived); None when
+        empty: another camera's frame shown at the moment one camera's was frozen."""
+        with self._lock:
+            if not self._frames:
+                return None
+            return min(self._frames, key=lambda fa: abs(fa[1] - float(arrival)))
+
     def __len__(self) -> int:
         with self._lock:
             return len(self._frames)

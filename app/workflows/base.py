@@ -190,6 +190,9 @@ class FrameRef:
     source: str = "live"
     previous: np.ndarray | None = field(default=None, compare=False, repr=False)
     view: str = ""  # the camera it came from ("": not said, the site's first)
+    # the other cameras' frames shown at the same moment (camera name → FrameRef): clicks in them use these
+    others: dict = field(default_factory=dict, compare=False, repr=False)
+    gap_s: float = 0.0  # for one of ``others``: how long after the frozen frame it arrived (seconds)
 
     def record(self) -> dict[str, Any]:
         """JSON-ready: which frame was used (for the history)."""
@@ -262,6 +265,13 @@ class Workflow:
     def _click_camera(self):
         """The calibration of the camera the click being handled was made in."""
         return self.site.camera_of(self.click_view or self.view)
+
+    def frame_in(self, view: str) -> FrameRef | None:
+        """The frame the clicks in camera ``view`` use: the frozen frame in its own, the other cameras'
+        frames frozen with it in theirs; None when none was frozen."""
+        if self.frame is None:
+            return None
+        return self.frame if view == self.view else self.frame.others.get(view)
 
     def click_in(self, view: str, uv) -> None:
         """A click at pixel uv of camera ``view``: this workflow's clicks are in its own camera only."""

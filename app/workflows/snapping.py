@@ -166,7 +166,10 @@ class SnapMixin:
     def _frame(self) -> np.ndarray | None:
         """The frame the clicks were made on: the workflow's frozen frame, else the site's now."""
         click_view = getattr(self, "click_view", None)
-        if click_view is not None and click_view != self.view:  # a click in another camera: its newest frame
+        if click_view is not None and click_view != self.view:  # a click in another camera: its frame frozen
+            ref = self.frame_in(click_view)  # with the workflow's, else its newest one
+            if ref is not None:
+                return ref.image
             try:
                 return self.site.frame_at(None, click_view)
             except Exception as exc:  # noqa: BLE001 - as below

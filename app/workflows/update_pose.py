@@ -51,6 +51,7 @@ MAX_SNAP_MOVE_PX = 2.0
 # may fit a wrong assignment): the one-click search's own floor (app.vision.search.MIN_NEAR), which the right
 # poses of 150 rendered placements, a fifth to a third of them hidden, all passed.
 MIN_OUTLINE_SEEN = 0.40
+MAX_VIEW_GAP_S = 0.5  # clicks in two cameras are of one moment when their frames arrived this close
 MAX_TRIPLES = 20  # Solve tries at most this many triples of the assigned edges (6 edges: all 20)
 MAX_CANDIDATES = 8
 
@@ -279,6 +280,13 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                     )
                 if not len(self.obj.model.edges):
                     raise WorkflowError(f"{self.object_name} has no edges to click in camera {view}")
+            ref = self.frame_in(view) if view != self.view else None
+            if ref is not None and abs(ref.gap_s) > MAX_VIEW_GAP_S:
+                raise WorkflowError(
+                    f"camera {view}'s frame nearest the frozen one arrived {abs(ref.gap_s):.1f} s "
+                    f"{'after' if ref.gap_s > 0 else 'before'} it: an object that moved would be in two places. "
+                    f"Freeze again (F) while both cameras show the video, or click in camera {self.view} alone"
+                )
             if self.pending is not None and self.pending_view not in (None, view):
                 raise WorkflowError(
                     f"the edge under way was started in camera {self.pending_view}: click its second point there "
@@ -672,6 +680,11 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 "assignment": "automatic" if self.match_info is not None else "hand",
                 "views": [self.seg_views[j] for j in used] + list(self.point_views),
                 "frame": self.frame_record(),
+                "view_frames": {
+                    v: self.frame_in(v).record()
+                    for v in dict.fromkeys(self.seg_views + self.point_views)
+                    if v != self.view and self.frame_in(v) is not None
+                },
             }  # the frozen frame the edges were clicked on
             if self.match_info is not None:
                 clicks["match"] = self.match_info
@@ -703,9 +716,11 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         E = len(self.obj.model.edges)
         if not 0 <= k < E:
             raise WorkflowError(f"{self.object_name} has edges 0..{E - 1}, not {k}")
-        if k in self.edge_ids:
+        view = self.seg_views[-1] if self.seg_views else self.view
+        taken = [i for i, (e, v) in enumerate(zip(self.edge_ids, self.seg_views)) if e == k and v == view]
+        if taken:  # in this camera (the same edge clicked in another camera is another measurement of it)
             raise WorkflowError(
-                f"model edge {k} is already assigned to segment {self.edge_ids.index(k) + 1}; click another model edge"
+                f"model edge {k} is already assigned to segment {taken[0] + 1}; click another model edge"
             )
         self.edge_ids[-1] = k
         self._done.append("assign")
@@ -791,7 +806,9 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
 
         uv = self._projected_edges()
         ok = np.all(np.isfinite(uv.reshape(len(uv), -1)), axis=1)
-        free = np.array([k not in self.edge_ids for k in range(len(uv))])
+        view = self._in_view()
+        used = {e for e, v in zip(self.edge_ids, self.seg_views) if v == view}
+        free = np.array([k not in used for k in range(len(uv))])
         idx = np.nonzero(ok & free)[0]
         if not len(idx):
             return -1, float("inf")
