@@ -60,19 +60,21 @@ def test_mcit_render_command(tmp_path, small_scene_dict):
     assert json.loads((tmp_path / "op.json").read_text())["generator"]["seed"] == 3
 
 
-def test_the_workcell_video_is_committed_and_current():
+@pytest.mark.parametrize("camera", ["front", "side"])
+def test_the_workcell_video_is_committed_and_current(camera):
     scene = load_scene(default_scene_path())
-    path = scene.video.path
-    assert path.is_file(), "render it with: mcit render --scene scenes/workcell"
+    view = scene.view(camera)
+    path = view.video.path
+    assert path.is_file(), f"render it with: mcit render --scene scenes/workcell --camera {camera}"
     assert path.stat().st_size < 3e6
     info = read_video_info(path)
-    assert info.frame_count == scene.video.frame_count
-    assert (info.width, info.height) == (512, 256) and info.fps == pytest.approx(scene.video.fps)
+    assert info.frame_count == view.video.frame_count
+    assert (info.width, info.height) == (512, 256) and info.fps == pytest.approx(view.video.fps)
     # It shows the current scene: a frame in the middle of the large motion matches a fresh render,
     # up to the codec (which smooths part of the sensor noise away) ...
-    k = scene.video.frame_index(13.5)
-    renderer = Renderer(scene)
-    t = scene.video.frame_time(k)
+    k = view.video.frame_index(13.5)
+    renderer = Renderer(scene, camera=view.camera, lens=view.lens)
+    t = view.video.frame_time(k)
     fresh = renderer.render(t, k).astype(float)
     decoded = read_frame(path, k).astype(float)
     assert np.abs(decoded - fresh).mean() < 2.2
