@@ -900,8 +900,11 @@ class ClientPanel:
         else:  # the 3D world: the point under the cursor at the distance of the orbit's centre
             X = position + np.linalg.norm(look_at - position) * ray / np.linalg.norm(ray)
         f = float(np.clip(np.exp(dy * WHEEL_ZOOM_PER_DELTA), 0.5, 2.0))
-        if self.view == "video":  # between 200× in and a little beyond the whole image
-            fit = abs(float(self.feed.pixel_world.fit_camera(aspect, cam.fov)[0][2]))
+        if self.view == "video":  # between 200× in and a little beyond the whole image (every camera's)
+            fit = max(
+                abs(float(self.feed.pixel_world.fit_camera(aspect, cam.fov)[0][2])),
+                abs(float(self.app.all_images.fit_camera(aspect, cam.fov)[0][2])) / 2.0,
+            )
             dist = abs(float(position[2]))
             if not dist > 1e-9:  # a camera in the image's plane (a page can report one): nothing to zoom about
                 return
@@ -1128,6 +1131,10 @@ class ClientPanel:
             state = f" ({done}{at})" if wf.accepted else (f" (cancelled{at})" if wf.cancelled else "")
             subject = wf.object_name
             head = Md("**{}**{}").format(f"{wf.title}: {subject}" if subject else wf.title, state)
+            if len(self.app.views) > 1:  # which camera it works in, and which is shown
+                head += Md(" · in camera **{}**").format(wf.view)
+                if wf.view != self.camera_view:
+                    head += Md(" (camera {} shown)").format(self.camera_view)
             prompt = wf.prompt_text()
             title = head + Md("\n\n") + prompt
             if (

@@ -141,6 +141,10 @@ class InterfaceServer:
             # the recent frames, for each operator's frozen frame and its scrubber (app/ui/recent.py)
             self.views[name] = ViewFeed(name, g, pw, overlay, RecentFrames(g, seconds=12.0, max_frames=120))
             x0 += (g.source.width + VIEW_GAP_PX) * k
+        # every camera's image together (zoomed out that far, the operator sees them side by side)
+        self.all_images = PixelWorld(
+            int(round(x0 / k)) - VIEW_GAP_PX, max(f.pixel_world.height for f in self.views.values()), k
+        )
         first = self.views[site.views[0]]  # the first camera's, by their old names
         self.grabber, self.pixel_world, self.db_overlay, self.recent = (
             first.grabber,

@@ -96,29 +96,33 @@ class World3D:
         for gone in set(self._objects) - seen:
             del self._objects[gone]
             self.scene.remove_by_name(f"/world3d/objects/{gone}")
-        cam = site.camera
-        sensors = (cam.C.tobytes(), cam.width, cam.height, site.T_world_turret.tobytes())
+        cams = [site.camera_of(v) for v in site.views]
+        sensors = (*((c.C.tobytes(), c.width, c.height) for c in cams), site.T_world_turret.tobytes())
         if sensors != self._sensors_key:
             self._sensors_key = sensors
             self._draw_sensors(site)
         return len(self.redrawn)
 
     def _draw_sensors(self, site: Site) -> None:
-        cam = site.camera
-        K, T_cam_world = cam.decompose()
-        T_world_cam = invert_T(T_cam_world)
-        fov = 2.0 * np.arctan2(cam.height / 2.0, abs(K[1, 1]))
-        self.scene.add_camera_frustum(
-            "/world3d/camera",
-            fov=float(fov),
-            aspect=cam.width / cam.height,
-            scale=0.1,
-            color=(40, 40, 200),
-            thickness=2.0,
-            thickness_units="screen",
-            position=tuple(T_world_cam[:3, 3]),
-            wxyz=_wxyz(T_world_cam[:3, :3]),
-        )
+        for i, name in enumerate(site.views):  # every camera's frustum, named when there are several
+            cam = site.camera_of(name)
+            K, T_cam_world = cam.decompose()
+            T_world_cam = invert_T(T_cam_world)
+            fov = 2.0 * np.arctan2(cam.height / 2.0, abs(K[1, 1]))
+            node = "/world3d/camera" if i == 0 else f"/world3d/cameras/{name}"
+            self.scene.add_camera_frustum(
+                node,
+                fov=float(fov),
+                aspect=cam.width / cam.height,
+                scale=0.1,
+                color=(40, 40, 200),
+                thickness=2.0,
+                thickness_units="screen",
+                position=tuple(T_world_cam[:3, 3]),
+                wxyz=_wxyz(T_world_cam[:3, :3]),
+            )
+            if len(site.views) > 1:
+                self.scene.add_label(f"{node}_label", name, position=tuple(T_world_cam[:3, 3]))
         T = site.T_world_turret
         self.scene.add_frame(
             "/world3d/turret", axes_length=0.12, axes_radius=0.006, position=tuple(T[:3, 3]), wxyz=_wxyz(T[:3, :3])

@@ -954,7 +954,7 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
         constraints = 2 * (n + len(self.points_uv))
         if constraints >= 6 or (self.found is not None and constraints >= 2):  # with a found pose one edge is enough
             more.add("refine")
-        if n >= 3:
+        if self._most_in_one_camera() >= 3:  # the three-line solver works in one camera
             more.add("solve")
         if not self.auto and k < 3:
             more.add("auto_match")
@@ -1012,6 +1012,13 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                     "pose for a small motion.",
                     frozenset(more - {"solve"}),
                 )
+            if "solve" not in more:  # edges in several cameras, fewer than 3 in any one
+                return Step(
+                    "ready",
+                    "{refine} from the database pose fits every camera's edges at once (a small motion); for a "
+                    "large one, click 3 edges in one camera, then Solve.",
+                    frozenset(more),
+                )
             return Step(
                 "ready",
                 "{solve} for a large motion, or {refine} from the database pose for a small one; or click more edges.",
@@ -1023,6 +1030,11 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             f"Refined: RMS {self.refined.rms_px:.2f} px. " + "{accept} to write it, or add clicks and {refine} again.",
             frozenset(more | extra | {"accept"}),
         )
+
+    def _most_in_one_camera(self) -> int:
+        """The most assigned edges clicked in one camera."""
+        views = self._click_views()[0]
+        return max((views.count(v) for v in set(views)), default=0)
 
     def _one_corner(self) -> list[int] | None:
         """The clicked edges (indices) when exactly three are assigned and their model edges share one
@@ -1045,12 +1057,14 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                 res = list(self.refined.click_residuals_px)
             out, r = [], 0
             for kind, j in self._click_rows():
+                several = len(set(self.seg_views + self.point_views)) > 1
                 if kind == "segment":
                     e = self.edge_ids[j]
                     text = f"edge {j + 1}" + (f" → e{e}" if e is not None else " (unassigned)")
+                    text += f" ({self.seg_views[j]})" if several else ""
                     used = e is not None
                 else:
-                    text = f"point {j + 1} (v{self.vertex_ids[j]})"
+                    text = f"point {j + 1} (v{self.vertex_ids[j]}" + (f", {self.point_views[j]})" if several else ")")
                     used = True
                 if res is not None and used and r < len(res):
                     text += f" · {res[r]:.1f} px"
