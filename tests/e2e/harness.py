@@ -99,7 +99,7 @@ def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float = 0.6
     raise AssertionError("timed out waiting for the page's fitted camera to settle")
 
 
-def wait_for_panel(server, before: set, timeout_s: float = 20.0):
+def wait_for_panel(server, before: set, timeout_s: float = 60.0):
     """The panel of the client that connected after ``before`` (a set of client ids), once fitted."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
