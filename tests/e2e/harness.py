@@ -139,7 +139,8 @@ def select_by_click(page, name: str, click) -> int:
 def key_until(page, key: str, predicate, what: str, panel=None) -> int:
     """Press ``key`` and wait for ``predicate()``. On a loaded machine a key can arrive before the page's
     shortcuts take it, and nothing happens, as an operator would see: it is pressed once more, as they
-    would. Returns the number of presses (1 or 2)."""
+    would. Returns the number of presses (1 or 2). Not for a key whose second press undoes or goes past
+    the first (N, Escape): press those once and wait on the page."""
     for attempt, timeout_s in ((1, 6.0), (2, 20.0)):
         page.keyboard.press(key)
         try:

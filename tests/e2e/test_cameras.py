@@ -9,7 +9,7 @@ import pytest
 from core.camera import Camera
 
 from .flows import Operator
-from .harness import FRAME_T_S, Interface, assert_prompt_controls, key_until, select_by_click, wait_until
+from .harness import FRAME_T_S, Interface, assert_prompt_controls, select_by_click, wait_until
 from .test_workflows_site import _pair_corner, _true_box_in_database, _visible_corners, _workflow, _wrong_camera
 
 pytestmark = pytest.mark.e2e
@@ -34,7 +34,9 @@ def two_cameras(scene, frame, side_frame, tmp_path):
 
 def _show_side(page):
     panel = page.panel
-    key_until(page, "n", lambda: panel.camera_view == "side" and not panel.need_fit, "the side camera shown")
+    # pressed once: N cycles the cameras, a second press after a slow first would show the front one again
+    page.keyboard.press("n")
+    wait_until(lambda: panel.camera_view == "side" and not panel.need_fit, 60.0, "the side camera shown", panel=panel)
     wait_until(lambda: page.get_by_text("Camera (N)").first.is_visible(), what="the Camera chooser")
 
 
