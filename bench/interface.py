@@ -311,14 +311,14 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
         latencies = []
         if clicks:
             cam = site.camera
-            run_click = panel._guard(panel._on_click)
+            run_click = panel.guard(panel._on_click)
             boxes = [o for o in movable if len(o.model.edges)]
             for _ in range(clicks):
                 obj = site.object(boxes[int(rng.integers(len(boxes)))].name)
                 E = obj.model.edge_segments(obj.T_world_obj)
                 uv = cam.project(E[int(rng.integers(len(E)))].mean(axis=0))
                 n0 = len(panel.click_latencies_s)
-                panel._click_worker.submit(run_click, click_event(server, uv))
+                panel.click_worker.submit(run_click, click_event(server, uv))
                 wait_until(lambda: len(panel.click_latencies_s) > n0, timeout_s=60, what="the click's redraw")
                 latencies.append(panel.click_latencies_s[-1] * 1000.0)
                 time.sleep(0.1)

@@ -34,6 +34,7 @@ __all__ = [
     "FrameRef",
     "CANCEL",
     "KEY_TEXT",
+    "AS_CLICK",
 ]
 
 
@@ -148,6 +149,8 @@ class Control:
 
 CANCEL = Control("cancel", "Cancel", "escape", color="red", hint="Abandon this workflow: nothing is written")
 
+AS_CLICK = "click"  # Workflow.on_double_click: the second click is one more click
+
 _PLACEHOLDER = re.compile(r"\{([a-z_]+)\}")
 
 
@@ -199,6 +202,32 @@ class FrameRef:
         out = {"t_s": round(float(self.t_s), 3), "index": int(self.index), "source": self.source}
         return {**out, "view": self.view} if self.view else out
 
+    def changed_in(self, live: np.ndarray | None, uv: Any) -> str:
+        """ "" when the ``live`` image around the pixels ``uv`` (N, 2) still looks as in this frame (or
+        there is no live image); otherwise why not, as a sentence's start. The range finder and the
+        turret measure the site as it is now: a measurement where the site changed since this frame lands
+        on something it does not show (app.vision.change)."""
+        if live is None or live is self.image or np.shape(live) != np.shape(self.image):
+            return ""
+        from app.vision.change import CHANGED_SHARE, changed_share
+
+        if changed_share(self.image, live, np.asarray(uv, float).reshape(-1, 2)) <= CHANGED_SHARE:
+            return ""
+        return (
+            f"the live video here differs from the frozen frame (t = {self.t_s:.1f} s): something moved since, "
+            "and the range finder measures the site as it is now"
+        )
+
+    def moving_share(self, uv: Any) -> float | None:
+        """The largest share of changed pixels around the pixels ``uv`` (N, 2) between ``previous`` and this
+        frame (``app.vision.change.changed_share``): above ``CHANGED_SHARE`` what lies there was moving when
+        the frame was taken. None when no earlier frame is known."""
+        if self.previous is None or np.shape(self.previous) != np.shape(self.image):
+            return None
+        from app.vision.change import changed_share
+
+        return changed_share(self.previous, self.image, np.asarray(uv, float).reshape(-1, 2))
+
 
 def sigma_over(sd_deg: float, sd_mm: float, max_deg: float, max_mm: float) -> str:
     """ "σ up to 1.17° and 26.4 mm: the position's is above 20 mm" — which of the two exceeds its limit
@@ -237,8 +266,10 @@ class Workflow:
     progress: float | None = None  # a measurement under way: 0..1 (the panel's progress bar), else None
     progress_text: str = ""
     snapping: ClassVar[bool] = False  # True: takes a ``snap`` option (clicks snapped to the image)
-    # True: a double click on the video is one click here (its second click is dropped)
-    double_click_is_one: ClassVar[bool] = False
+    form: ClassVar[tuple[str, ...]] = ()  # the Start form's options it takes (shape, vertical, on_table)
+    follows_video: ClassVar[bool] = False  # True: the interface feeds it the live video while it runs
+    shows_beam: ClassVar[bool] = False  # True: the range finder's spot it showed goes when it ends
+    selects_result: ClassVar[bool] = False  # True: the object it made is selected once accepted
 
     def __init__(self, site: Site, client: str = "operator", view: str | None = None):
         self.site = site
@@ -282,6 +313,19 @@ class Workflow:
             )
         self.click(uv)
 
+    def on_double_click(self, view: str, uv) -> str | None:
+        """The second click of a double click at pixel uv of camera ``view`` (its first came as a click):
+        the action it presses, ``AS_CLICK`` to take it as one more click, or None to drop it."""
+        return AS_CLICK
+
+    def follows_live(self) -> str:
+        """Why it works on the live video now and takes no frozen frame, as a sentence ("": it takes one)."""
+        return ""
+
+    def has_work(self) -> bool:
+        """Cancel would throw work away (clicks, measurements): the panel asks once more first."""
+        return "remove_last" in self.current_step().enabled
+
     def marks_in(self, view: str) -> Marks:
         """What to draw on camera ``view``'s image: ``marks()`` on the workflow's own camera, nothing elsewhere."""
         return self.marks() if view == self.view else Marks()
@@ -310,50 +354,6 @@ class Workflow:
                 f"the {self.title} workflow is {'accepted' if self.accepted else 'cancelled'}; start a new one"
             )
 
-    # ------------------------------------------------------------------ writing a pose
-    def _write_pose(self, obj: Any, T_world_obj: np.ndarray, cov: Any, *, todo: str, **record: Any) -> tuple[Any, Any]:
-        """``site.update_pose`` from the snapshot ``obj`` the workflow started on. When the object
-        changed meanwhile but not its pose or model (e.g. an undo of a status), the new pose is as
-        valid as before: it is written over the fresh snapshot. Marked stale meanwhile: said, nothing
-        written, and ``self.obj`` becomes the fresh snapshot (a second Accept writes). Moved: nothing
-        is written and WorkflowError says who moved it and ``todo``. Returns (record, snapshot used)."""
-        from app.db import ConflictError
-
-        try:
-            return self.site.update_pose(obj, T_world_obj, cov, client=self.client, **record), obj
-        except ConflictError as first:
-            conflict = first  # or the second conflict, below
-            try:
-                fresh = self.site.object(obj.name)
-            except KeyError:
-                raise WorkflowError(
-                    f"{obj.name} was removed from the database meanwhile: nothing was written"
-                ) from None
-            same_model = fresh.model is obj.model or np.array_equal(fresh.model.vertices, obj.model.vertices)
-            same_pose = same_model and np.allclose(fresh.T_world_obj, obj.T_world_obj, rtol=0.0, atol=1e-12)
-            last = self.site.db.history(obj.name, limit=1)
-            who = f" by {last[-1].client}" if last else ""
-            if same_pose and fresh.status == "stale" and obj.status != "stale":
-                # Someone saw it move since this workflow started: maybe again, after the frame clicked on.
-                # Said, not written; a second Accept writes over the fresh snapshot (the operator has looked).
-                self.obj = fresh
-                raise WorkflowError(
-                    f"{obj.name} was marked stale{who} since you started: it may have moved after the "
-                    "frame you clicked on. Nothing was written; check the video, then Accept again to "
-                    f"write your pose, or {todo[0].lower() + todo[1:]}"
-                ) from None
-            if same_pose:
-                try:
-                    return self.site.update_pose(fresh, T_world_obj, cov, client=self.client, **record), fresh
-                except ConflictError as again:
-                    conflict = again
-            raise WorkflowError(
-                f"{obj.name} was moved{who} since you started (version {conflict.expected_version} → "
-                f"{conflict.actual_version}): nothing was written. {todo}"
-            ) from None
-        except ValueError as exc:
-            raise WorkflowError(f"the database refused the pose: {exc}") from None
-
     # ------------------------------------------------------------------ the frame used
     def use_frame(self, frame: FrameRef | None) -> None:
         """Work on ``frame`` from now on (the panel freezes one when the workflow starts)."""
@@ -361,36 +361,12 @@ class Workflow:
             self.frame = frame
 
     def scene_changed(self, uv: Any) -> str:
-        """ "" when the live video around the pixels ``uv`` (N, 2) still looks as in the frozen frame
-        (or there is no frozen frame or no live one); otherwise why not, as a sentence's start. The
-        range finder and the turret measure the site as it is now: a measurement where the site
-        changed since the frozen frame lands on something that frame does not show (app.vision.change)."""
-        frame = self.frame
-        if frame is None:
-            return ""
-        live = self.site.frame_at(None, self.view)
-        if live is None or live is frame.image or np.shape(live) != np.shape(frame.image):
-            return ""
-        from app.vision.change import CHANGED_SHARE, changed_share
-
-        if changed_share(frame.image, live, np.asarray(uv, float).reshape(-1, 2)) <= CHANGED_SHARE:
-            return ""
-        return (
-            f"the live video here differs from the frozen frame (t = {frame.t_s:.1f} s): something moved since, "
-            "and the range finder measures the site as it is now"
-        )
+        """``FrameRef.changed_in`` of the frozen frame against the live video of the workflow's camera."""
+        return "" if self.frame is None else self.frame.changed_in(self.site.frame_at(None, self.view), uv)
 
     def moving_share(self, uv: Any) -> float | None:
-        """The largest share of changed pixels around the pixels ``uv`` (N, 2) between the frozen frame
-        and the one shown ``MOTION_GAP_S`` before it (``app.vision.change.changed_share``): above
-        ``CHANGED_SHARE`` what lies there was moving when the frame was taken. None when no earlier
-        frame is known."""
-        frame = self.frame
-        if frame is None or frame.previous is None or np.shape(frame.previous) != np.shape(frame.image):
-            return None
-        from app.vision.change import changed_share
-
-        return changed_share(frame.previous, frame.image, np.asarray(uv, float).reshape(-1, 2))
+        """``FrameRef.moving_share`` of the frozen frame (None: no frame frozen)."""
+        return None if self.frame is None else self.frame.moving_share(uv)
 
     def frame_record(self) -> dict[str, Any] | None:
         """Which frame the clicks were made on, for the history (None: the site's frame at the time)."""

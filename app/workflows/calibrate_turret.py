@@ -34,6 +34,7 @@ POORLY_DEG, POORLY_M = 0.5, 0.01  # σ beyond which the operator is told to meas
 class CalibrateTurret(Workflow):
     name = "calibrate_turret"
     title = "Calibrate turret"
+    shows_beam = True
     actions = ("click", "choose_point", "measure", "remove_last", "remove_measurement", "solve", "accept", "cancel")
     controls = (
         Control(

@@ -111,7 +111,7 @@ def along_ray_sigma(
 class DesignateTarget(Workflow):
     name = "designate"
     title = "Designate target"
-    double_click_is_one = True  # a habitual double click had designated the same point twice
+    shows_beam = True
     actions = ("click", "clear", "accept", "cancel")
     controls = (
         Control("clear", "Clear", "X", hint="Forget the targets designated so far"),
@@ -342,6 +342,13 @@ class DesignateTarget(Workflow):
         )
 
     # ------------------------------------------------------------------ other actions
+    def on_double_click(self, view: str, uv) -> None:
+        """Dropped: its first click designated the point (a habitual double click designated it twice)."""
+        return None
+
+    def has_work(self) -> bool:
+        return bool(self.targets) or super().has_work()  # nothing written, but the list of targets goes
+
     def clear(self) -> None:
         """Forget the targets designated so far."""
         with self.lock:

@@ -122,6 +122,9 @@ class History(Workflow):
             self.state = "closed"
             self.message = "History closed."
 
+    def follows_live(self) -> str:
+        return f"{self.title} follows the live video: nothing to freeze"
+
     def _step(self) -> Step:
         if self.finished:
             return self._finished_step()

@@ -90,6 +90,7 @@ def table_support(site) -> Plane | None:
 
 class ModelObject(RangeModelling, SnapMixin, Workflow):
     name = "model_object"
+    form = ("shape", "vertical", "on_table")
     title = "Model object"
     actions = (
         "click",

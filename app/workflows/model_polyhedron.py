@@ -157,6 +157,7 @@ class _FaceData:
 
 class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
     name = "model_polyhedron"
+    form = ("shape", "on_table")
     title = "Model polyhedron"
     actions = (
         "click",

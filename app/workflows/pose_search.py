@@ -24,6 +24,7 @@ import numpy as np
 from core.transforms import pose_error
 
 from .base import MOTION_GAP_S, Step, WorkflowError, as_pixel, sigma_over
+from .writing import write_pose
 
 __all__ = ["OneClickMixin", "WEAK_FOUND_SIGMA_DEG", "WEAK_FOUND_SIGMA_MM", "WEAK_FOUND_MATCH", "NEAR_TIE_MISMATCH"]
 
@@ -358,7 +359,8 @@ class OneClickMixin:
             clicks = dict(self.search_info or {})
             clicks.update({"chosen": i, "frame": self.frame_record()})
             residuals = {"fit_px": c.fit_px, "support_px": c.support_px, "confidence": c.confidence}
-            rec, self.obj = self._write_pose(
+            rec, self.obj = write_pose(
+                self,
                 self.obj,
                 c.T_world_obj,
                 c.cov,

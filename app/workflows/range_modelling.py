@@ -38,6 +38,9 @@ __all__ = ["RangeModelling"]
 class RangeModelling:
     """Range-finder measurements and the model's write for a modelling workflow (module docstring)."""
 
+    shows_beam = True
+    selects_result = True  # the object just modelled is selected: Update pose, Track … apply to it next
+
     def _init_acquisition(self) -> None:
         """The acquisition's state: progress (0..1 or None), its text, and the range points measured so
         far (world, metres; one per returned beam, appended from the acquiring thread under their own

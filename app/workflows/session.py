@@ -8,6 +8,10 @@ script. Both start workflows by name and call their actions::
     session.perform("click", uv=[120.0, 80.5])      # == wf.click([120.0, 80.5])
     session.perform("solve"); session.perform("accept")
 
+The interface sends the operator's intents and the session decides what they mean: ``click`` and
+``double_click`` (a click in a named camera: the workflow's, or a selection; a double click with no
+workflow under way starts Update pose on the object and finds its pose from that point), ``start``.
+
 A script action is ``{"workflow": name, "action": name, **arguments}``: ``run_action`` starts the
 workflow when it is not the current one (an action named "start" passes its arguments to it).
 """
@@ -15,9 +19,12 @@ workflow when it is not the current one (an action named "start" passes its argu
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from typing import Any
 
-from .base import Workflow, WorkflowError
+import numpy as np
+
+from .base import AS_CLICK, Workflow, WorkflowError
 from .site import Site
 
 __all__ = ["WORKFLOWS", "register", "Session"]
@@ -41,6 +48,8 @@ class Session:
         self.workflow: Workflow | None = None
         self.snap = True  # snap clicks to the image (the panel's "Snap clicks"); passed to workflows that snap
         self.lock = threading.RLock()
+        # called with each workflow started and the frame it is to work on (None: the interface's choice)
+        self.on_start: Callable[[Workflow, Any], None] | None = None
 
     def select(self, name: str | None) -> None:
         """Select an object by name (None clears); WorkflowError if there is no such object."""
@@ -52,9 +61,18 @@ class Session:
                     raise WorkflowError(str(exc.args[0])) from None
             self.selected = name
 
-    def start(self, name: str, **options: Any) -> Workflow:
-        """Start workflow ``name`` (cancelling an unfinished one); options go to its constructor."""
+    def start(self, name: str, frame: Any = None, form: dict | None = None, **options: Any) -> Workflow:
+        """Start workflow ``name`` (cancelling an unfinished one); options go to its constructor, with those of
+        the Start ``form`` it takes (``Workflow.form``); ``frame`` (the frame shown when the operator asked)
+        goes to ``on_start``. A model object of a polyhedral shape (wedge, pyramid) is its own workflow,
+        faces identified and sides assigned to edges."""
+        form = form or {}
+        if name == "model_object" and (form.get("shape") or options.get("shape")) in ("wedge", "pyramid"):
+            name = "model_polyhedron"
+            options.pop("vertical", None)
         cls = WORKFLOWS.get(name)
+        if cls is not None:
+            options = {**{k: v for k, v in form.items() if k in cls.form}, **options}
         if cls is None:
             raise WorkflowError(f"no workflow {name!r}; there are {', '.join(sorted(WORKFLOWS))}")
         with self.lock:
@@ -70,7 +88,70 @@ class Session:
                 self.workflow = cls(self.site, client=self.client, **options)
             except TypeError as exc:
                 raise WorkflowError(f"{cls.title}: bad options {sorted(options)}: {exc}") from None
-            return self.workflow
+            wf = self.workflow
+        if self.on_start is not None:
+            self.on_start(wf, frame)
+        return wf
+
+    def click(self, view: str, uv: np.ndarray, *, on: str | None = None, live_shown: bool = False) -> None:
+        """A click at pixel uv of camera ``view``: the workflow's while it takes clicks, else it selects ``on``
+        (the object drawn there, or None). ``live_shown``: the operator looks at the live video over a frozen
+        frame, where the workflow's clicks would not land on what they see."""
+        wf = self.workflow
+        if wf is not None and not wf.finished and "click" in wf.actions:
+            if wf.current_step().clicks:
+                if live_shown:
+                    raise WorkflowError(
+                        "you are looking at the live video: clicks go to the frozen frame. Press Show "
+                        "frozen (L) to see it, then click"
+                    )
+                wf.message = ""
+                wf.click_in(view, uv)  # the workflow says whether it takes clicks in this camera
+                return
+            if not wf.follows_live():
+                raise WorkflowError(f"clicks are not taken now. {wf.prompt_text(markdown=False)}")
+        self.select(on)
+
+    def double_click(
+        self, view: str, uv: np.ndarray, *, before: str | None, on: str | None, frame: Any = None, live_shown=False
+    ) -> str | None:
+        """The second click of a double click at pixel uv of camera ``view`` (its first came as a click):
+        the action it presses (Find), or None. ``before``: the object selected before its first click;
+        ``on``: the object drawn at uv; ``frame``: the frame shown at its first click.
+
+        With no workflow under way it finds the selected object's pose from that point: Update pose starts
+        on ``frame`` and Find is pressed. The object is the one selected before the double click, even
+        when its first click selected another whose wireframe runs there (the table's edge across the
+        moved box); with none selected before, the one its first click selected; the table selected and
+        the double click on another object, that object."""
+        wf = self.workflow
+        if wf is None or wf.finished:
+            name = before if before is not None else self.selected
+            if name is not None and on not in (None, name) and self.is_table(name):
+                name = on
+            if name is None:
+                raise WorkflowError(
+                    "a double click finds the pose of the selected object: select it by a click where the "
+                    "database draws it, then double-click where it is in the video"
+                )
+            self.select(name)
+            self.start("update_pose", frame=frame, view=view).click(uv)
+            return "find"
+        if "click" not in wf.actions:
+            self.select(on)
+            return None
+        press = wf.on_double_click(view, uv)
+        if press == AS_CLICK:
+            self.click(view, uv, on=on, live_shown=live_shown)
+            return None
+        return press
+
+    def is_table(self, name: str) -> bool:
+        """The object ``name`` is the site's table (what the others stand on)."""
+        try:
+            return self.site.object(name).kind == "table"
+        except (KeyError, ValueError):  # gone from the database meanwhile
+            return False
 
     def set_snap(self, on: bool) -> None:
         """Snap clicks to the image (on) or not, from now on: in the workflow under way too."""

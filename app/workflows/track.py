@@ -32,6 +32,7 @@ from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, 
 from .pose_matching import SNAPPED_SIGMA_PX
 from .snapping import ClickSnap, SnapMixin, snap_marks
 from .update_pose import MIN_SEGMENT_PX
+from .writing import write_pose
 
 __all__ = ["TrackObject"]
 
@@ -39,6 +40,7 @@ __all__ = ["TrackObject"]
 class TrackObject(SnapMixin, Workflow):
     name = "track"
     title = "Track"
+    follows_video = True
     options = ("object_name",)
     actions = (
         "step",
@@ -127,6 +129,9 @@ class TrackObject(SnapMixin, Workflow):
     def following(self) -> bool:
         """True while frames are followed (not paused, not lost, not finished)."""
         return not (self.paused or self.lost or self.finished)
+
+    def follows_live(self) -> str:
+        return f"{self.title} follows the live video: nothing to freeze (Pause it first)" if self.following else ""
 
     def step(self, frame=None, t_s: float | None = None):
         """Follow the object into one frame: ``frame`` (an image of the camera's size) or the site's
@@ -337,7 +342,8 @@ class TrackObject(SnapMixin, Workflow):
             if d is not None:
                 residuals.update(n_samples=int(d.n_samples), n_inliers=int(d.n_inliers))
             T, cov = self.T_world_obj.copy(), None if self.cov is None else self.cov.copy()
-            rec, self.obj = self._write_pose(
+            rec, self.obj = write_pose(
+                self,
                 self.obj,
                 T,
                 cov,

@@ -25,6 +25,8 @@ Beyond the paper (docs/beyond.md):
 
 from __future__ import annotations
 
+import logging
+import threading
 from typing import Any
 
 import numpy as np
@@ -33,10 +35,11 @@ from core.pose import nearest_twin, p3l_candidates, plausibility, refine
 from core.pose.uncertainty import with_camera_uncertainty
 from core.transforms import pose_error
 
-from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel, sigma_over
+from .base import AS_CLICK, CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel, sigma_over
 from .pose_matching import AutoMatchMixin, Match
 from .pose_search import OneClickMixin
 from .snapping import SNAPPED_CORNER_SIGMA_PX, SNAPPED_SEGMENT_SIGMA_PX, ClickSnap, SnapMixin, snap_marks
+from .writing import write_pose
 
 __all__ = ["UpdatePose", "Match", "plausibility", "nearest_twin"]
 
@@ -697,7 +700,8 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             if self.found is not None:
                 method = "search+refine"
                 clicks["search"] = self.search_info
-            rec, self.obj = self._write_pose(
+            rec, self.obj = write_pose(
+                self,
                 self.obj,
                 r.T_world_obj,
                 r.cov,
@@ -1120,6 +1124,24 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
             return self._found_labels()
         return [f"#{i + 1}" + (" (best)" if i == 0 else "") for i in range(len(self.candidates))]
 
+    def on_double_click(self, view: str, uv) -> str | None:
+        """A double click on the moved object finds its pose from that point (Find); found poses there, a
+        double click again (a better point) searches again from it; otherwise it is one more click."""
+        if view != self.view:
+            raise WorkflowError(
+                f"a double click finds the pose in camera {self.view}, where {self.title} started: double-click there"
+            )
+        if self.found is not None:
+            self.search_again(uv)
+            return "find"
+        return "find" if "find" in self.current_step().enabled else AS_CLICK
+
+    def use_frame(self, frame) -> None:
+        """Work on ``frame``; its oriented edges (auto match and search read them) are computed meanwhile."""
+        super().use_frame(frame)
+        if frame is not None:
+            threading.Thread(target=_prepare_frame, args=(frame.image,), daemon=True, name="mcit-frame-edges").start()
+
     def marks_in(self, view: str) -> Marks:
         """What to draw on camera ``view``'s image: the clicks made in it, the estimate through its camera."""
         return self.marks(view)
@@ -1233,3 +1255,13 @@ class UpdatePose(OneClickMixin, AutoMatchMixin, SnapMixin, Workflow):
                     for n, v, w in zip(names, r.click_residuals_px, r.weights)
                 ]
             return out
+
+
+def _prepare_frame(image) -> None:
+    """The frame's oriented edges, computed in the background (app.vision.evaluate.prepare_frame)."""
+    try:
+        from app.vision.evaluate import prepare_frame
+
+        prepare_frame(image)
+    except Exception:  # noqa: BLE001 - only a head start: the workflow computes them when it needs them
+        logging.getLogger("mcit.workflows").debug("could not prepare the frame's edges", exc_info=True)

@@ -308,7 +308,7 @@ def test_the_panel_says_a_locked_database_in_one_sentence_and_keeps_the_workflow
         wf.step()
     wf.pause()
     panel = _Panel(session)
-    accept = ClientPanel._guard(panel, lambda: wf.perform("accept"))
+    accept = ClientPanel.guard(panel, lambda: wf.perform("accept"))
     version = db.get(BOX).version
     other = sqlite3.connect(db.path, isolation_level=None)
     other.execute("BEGIN EXCLUSIVE")

@@ -55,8 +55,8 @@ def test_md_keeps_its_own_markup_and_escapes_what_it_is_combined_with():
 
 
 def test_the_panels_texts_escape_names():
-    from app.ui.client import _idle_text
     from app.ui.controls import report_markdown
+    from app.ui.panel_text import idle_text as _idle_text
 
     assert _idle_text("<img src=x onerror=alert(1)>").startswith("**&lt;img src=x onerror=alert(1)&gt;** is selected")
     table = report_markdown({"changes": [{"who": "[x](javascript:alert(1))", "what": "a|b"}]})

@@ -79,7 +79,7 @@ def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float = 0.6
     def state():
         cam = panel.client.camera
         return (
-            panel.fitted_aspect is not None,
+            panel.viewport.fitted_aspect is not None,
             tuple(np.round(cam.position, 6)),
             tuple(np.round(cam.wxyz, 6)),
             round(float(cam.fov), 6),
@@ -106,7 +106,7 @@ def wait_for_panel(server, before: set, timeout_s: float = 60.0):
         new = set(server.clients) - before
         if new:
             panel = server.clients[new.pop()]
-            if panel.fitted_aspect is not None and not panel.need_fit:
+            if panel.viewport.fitted_aspect is not None and not panel.viewport.need_fit:
                 return panel
         time.sleep(0.05)
     raise AssertionError("the page did not connect and fit its view")

@@ -36,7 +36,9 @@ def _show_side(page):
     panel = page.panel
     # pressed once: N cycles the cameras, a second press after a slow first would show the front one again
     page.keyboard.press("n")
-    wait_until(lambda: panel.camera_view == "side" and not panel.need_fit, 60.0, "the side camera shown", panel=panel)
+    wait_until(
+        lambda: panel.camera_view == "side" and not panel.viewport.need_fit, 60.0, "the side camera shown", panel=panel
+    )
     wait_until(lambda: page.get_by_text("Camera (N)").first.is_visible(), what="the Camera chooser")
 
 

@@ -85,7 +85,10 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     page.get_by_role("button", name="Update pose").click()  # nothing selected
     page.get_by_text("select an object first").first.wait_for(timeout=5000)
     page.get_by_role("button", name="Calibrate camera").click()
-    _wait(lambda: page.panel.session.workflow is not None and page.panel.controls, what="the workflow's controls")
+    _wait(
+        lambda: page.panel.session.workflow is not None and page.panel.workflow_controls.handles,
+        what="the workflow's controls",
+    )
     assert not page.get_by_role("button", name="Solve").is_visible()  # no points paired: Solve is not offered
     time.sleep(0.5)
     page.keyboard.press("r")  # its shortcut says why
@@ -115,10 +118,13 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     page.get_by_role("button", name="Fit view").click()
     _wait(lambda: abs(np.linalg.norm(cam.position - cam.look_at) - far) < 1e-3 * far, what="the fit")
     # a narrower window: the view is fitted again, the whole image inside the canvas
-    aspect = page.panel.fitted_aspect
+    aspect = page.panel.viewport.fitted_aspect
     page.set_viewport_size({"width": 900, "height": 700})
     _wait(
-        lambda: page.panel.fitted_aspect is not None and abs(page.panel.fitted_aspect - aspect) > 0.05, what="the refit"
+        lambda: (
+            page.panel.viewport.fitted_aspect is not None and abs(page.panel.viewport.fitted_aspect - aspect) > 0.05
+        ),
+        what="the refit",
     )
 
     def fitted() -> bool:  # the whole image inside the canvas, fitted to its width

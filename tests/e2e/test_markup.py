@@ -140,7 +140,10 @@ def test_names_methods_operators_and_notes_with_markup_are_shown_as_text(browser
     # a workflow on it: its title names it; Cancel
     op.press("Update pose")
     wait_until(
-        lambda: page.panel.session.workflow is not None and page.panel.built_for is page.panel.session.workflow,
+        lambda: (
+            page.panel.session.workflow is not None
+            and page.panel.workflow_controls.built_for is page.panel.session.workflow
+        ),
         what="Update pose's controls",
     )
     _shows(page, f"Update pose: {names[-1]}")
@@ -153,7 +156,7 @@ def test_names_methods_operators_and_notes_with_markup_are_shown_as_text(browser
         lambda: (
             page.panel.session.workflow is not None
             and page.panel.session.workflow.name == "history"
-            and page.panel.built_for is page.panel.session.workflow
+            and page.panel.workflow_controls.built_for is page.panel.session.workflow
         ),
         what="History's controls",
     )

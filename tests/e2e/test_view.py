@@ -40,14 +40,16 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     page = ui.open(browser)
     panel = page.panel
     # with no workflow under way, Freeze (F) freezes a frame to look at; it stays (it was undone at once)
-    key_until(page, "f", lambda: panel.frozen is not None and panel.frozen_by is None, "a frame frozen to look at")
+    key_until(
+        page, "f", lambda: panel.frozen is not None and panel.frozen_frames.by is None, "a frame frozen to look at"
+    )
     page.get_by_text("Frozen frame: t =").first.wait_for(timeout=5000)
     time.sleep(0.5)
     assert panel.frozen is not None
     looked_at = panel.frozen
     page.get_by_role("button", name="Calibrate camera").click()
     wait_until(
-        lambda: panel.session.workflow is not None and panel.frozen_by is panel.session.workflow,
+        lambda: panel.session.workflow is not None and panel.frozen_frames.by is panel.session.workflow,
         what="the workflow's own frozen frame",
     )
     wf = panel.session.workflow
@@ -55,7 +57,7 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     assert panel.frozen is looked_at  # ... the frame frozen before the start (a new operator lost it to the newest)
     page.get_by_text("Frozen frame: t =").first.wait_for(timeout=5000)
     page.keyboard.press("l")  # Show live
-    wait_until(lambda: panel.show_live, what="the live view")
+    wait_until(lambda: panel.frozen_frames.show_live, what="the live view")
     page.get_by_text("live shown").first.wait_for(timeout=5000)
     table = ui.site.object("table")
     corner = ui.site.camera.project(table.vertices_world()[np.argmax(table.vertices_world()[:, 2])])
@@ -63,7 +65,7 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     page.get_by_text("you are looking at the live video", exact=False).first.wait_for(timeout=5000)
     assert wf.pending_X is None  # the click was refused
     press(page, "Show frozen")  # back to the frozen frame (the button says so while live is shown)
-    wait_until(lambda: not panel.show_live, what="the frozen view")
+    wait_until(lambda: not panel.frozen_frames.show_live, what="the frozen view")
     ui.click_pixel(page, corner)
     wait_until(lambda: wf.pending_X is not None, what="the corner picked on the frozen frame")
     page.keyboard.press("f")  # another frame cannot be frozen once clicked
@@ -77,7 +79,7 @@ def test_marks_keep_their_screen_size_when_zoomed(browser, interface):
     panel = page.panel
     cam = panel.client.camera
     # the marks' scale follows the fitted view at the next redraw (late on a loaded machine)
-    wait_until(lambda: abs(panel.marks_scale - 1.0) < 0.05, what="the marks at their size in the fitted view")
+    wait_until(lambda: abs(panel.viewport.marks_scale - 1.0) < 0.05, what="the marks at their size in the fitted view")
     box = page.locator("canvas").nth(1).bounding_box()
     x, y = ui.screen_of(page, [256.0, 128.0])
     page.mouse.move(box["x"] + x, box["y"] + y)
@@ -86,7 +88,7 @@ def test_marks_keep_their_screen_size_when_zoomed(browser, interface):
         page.mouse.wheel(0, -200)
         time.sleep(0.1)
     wait_until(lambda: abs(float(cam.position[2])) < 0.3 * d0, what="the zoom")
-    wait_until(lambda: panel.marks_scale < 0.35, what="the marks redrawn smaller in image pixels")
+    wait_until(lambda: panel.viewport.marks_scale < 0.35, what="the marks redrawn smaller in image pixels")
     page.close()
 
 
@@ -102,7 +104,7 @@ def test_double_and_rapid_clicks_are_taken_in_order_or_refused_with_the_state_in
     drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
     select_by_click(page, "parallelepiped", lambda: ui.click_pixel(page, drawn[1].mean(axis=0)))
     page.get_by_role("button", name="Update pose").click()
-    wait_until(lambda: panel.session.workflow is not None and panel.controls, what="the workflow")
+    wait_until(lambda: panel.session.workflow is not None and panel.workflow_controls.handles, what="the workflow")
     wf = panel.session.workflow
     press(page, "Auto match")  # Auto match first: clicked edges wait for the match
     wait_until(lambda: wf.auto, what="automatic assignment")

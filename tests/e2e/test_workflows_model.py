@@ -158,7 +158,9 @@ def _start_model_object(op, shape: str) -> float:
     t = time.monotonic()
     op.press("Model object")
     wait_until(
-        lambda: op.wf is not None and op.wf.name == "model_object" and op.page.panel.built_for is op.wf,
+        lambda: (
+            op.wf is not None and op.wf.name == "model_object" and op.page.panel.workflow_controls.built_for is op.wf
+        ),
         what="the Model object workflow",
     )
     assert op.wf.shape == shape

@@ -89,7 +89,7 @@ def test_model_a_wedge_by_clicking_its_faces(browser, wedge_interface):
         lambda: (
             (wf := page.panel.session.workflow) is not None
             and wf.name == "model_polyhedron"
-            and page.panel.built_for is wf
+            and page.panel.workflow_controls.built_for is wf
         ),
         what="the Model polyhedron workflow",
     )

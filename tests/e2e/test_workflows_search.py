@@ -242,7 +242,7 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
     ui = interface
     page, op, panel, obj, T_true = _box_selected(ui, browser, scene)
     cam = ui.site.camera
-    submit, held = panel._click_worker.submit, []
+    submit, held = panel.click_worker.submit, []
 
     def take_then_hold(fn, *args):  # called in the server's event loop as each click arrives
         held.append(args[-1])  # its arrival
@@ -250,7 +250,7 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
             time.sleep(1.5)
         return submit(fn, *args)
 
-    panel._click_worker.submit = take_then_hold
+    panel.click_worker.submit = take_then_hold
     op.double_click(cam.project(T_true[:3, 3][None])[0])  # on the box where the frame shows it
     wait_until(
         lambda: panel.session.workflow is not None and panel.session.workflow.found is not None,

@@ -81,7 +81,7 @@ def _workflow(page, name: str):
         lambda: (
             page.panel.session.workflow is not None
             and page.panel.session.workflow.name == name
-            and page.panel.built_for is page.panel.session.workflow
+            and page.panel.workflow_controls.built_for is page.panel.session.workflow
         ),
         what=f"the {name} workflow's controls",
     )
@@ -191,7 +191,7 @@ def test_calibrate_camera_by_clicks(browser, interface, scene):
     worst = int(np.argmax(wf.result.errors_px))
     text = dict((v, t) for t, v in wf.choices("pair"))[worst]
     op.choose("Point", text)
-    wait_until(lambda: page.panel.choice_values.get("pair") == worst, what="the worst point chosen")
+    wait_until(lambda: page.panel.workflow_controls.choice_values.get("pair") == worst, what="the worst point chosen")
     op.press("Delete point")
     wait_until(lambda: len(wf.uv) == len(corners) - 1 and wf.result is None, what="the point deleted")
     assert_prompt_controls(page)
@@ -333,7 +333,7 @@ def test_designate_known_and_unknown_by_clicks(browser, device_interface, scene)
     # by a double click, as habit has it: one target (a new operator's made two at the same point)
     op.double_click(cam.project(X_table[None])[0])
     wait_until(
-        lambda: len(wf.targets) == 1 and wf.progress is None and page.panel._last_click is None,
+        lambda: len(wf.targets) == 1 and wf.progress is None and page.panel.clicks.last is None,
         timeout_s=15,
         what="the first target, and the double click's second click dropped",
     )
@@ -469,7 +469,7 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     assert_prompt_controls(a)
     text = next(t for t, v in wf.choices("change") if v == change.id)
     op_a.choose("Change", text)
-    wait_until(lambda: a.panel.choice_values.get("change") == change.id, what="the change chosen")
+    wait_until(lambda: a.panel.workflow_controls.choice_values.get("change") == change.id, what="the change chosen")
     op_a.key("z")  # Undo change (Z), right after the chooser: the key must reach the shortcut, not the chooser
     wait_until(lambda: ui.db.get("parallelepiped").status == "known", what="the undo")
     undo = ui.db.history("parallelepiped")[-1]
@@ -544,7 +544,9 @@ def test_history_a_question_about_one_change_does_not_carry_over_to_another(brow
     wf = _workflow(page, "history")
     text = {v: t for t, v in wf.choices("change")}
     op.choose("Change", text[c1.id])
-    wait_until(lambda: page.panel.choice_values.get("change") == c1.id, what="the first change chosen")
+    wait_until(
+        lambda: page.panel.workflow_controls.choice_values.get("change") == c1.id, what="the first change chosen"
+    )
     op.press("Undo change")
     page.get_by_text(f"Undoing change #{c1.id}", exact=False).first.wait_for(timeout=5000)
     assert page.panel.asking == "undo"

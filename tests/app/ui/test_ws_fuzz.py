@@ -167,7 +167,7 @@ class Served:
         for _ in range(pool._max_workers):
             pool.submit(barrier.wait, 15)
         barrier.wait(15)
-        panel._click_worker.submit(lambda: None).result(15)  # the panel's clicks, one at a time
+        panel.click_worker.submit(lambda: None).result(15)  # the panel's clicks, one at a time
 
     def inbound_lines(self) -> list[logging.LogRecord]:
         return [r for r in self.caplog.records if r.name == "mcit.ui.inbound"]

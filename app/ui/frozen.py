@@ -1,0 +1,199 @@
+"""A page's frozen frame: the video frame a workflow's clicks, snapping and solving use.
+
+The newest frame is frozen when a workflow that takes a frozen frame starts (or by Freeze, or by the
+scrubber over the recent frames), together with every other camera's frame shown at that moment, and each
+is shown over its camera's live video, sharp (nearest-neighbour upscaled PNG) so that zooming shows
+pixels; "Show live" looks at the live video meanwhile. A frame frozen with no workflow under way is there
+to look at: it stays until Show live, until a workflow adopts it, or until another camera is shown.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from app.markup import Md
+from app.workflows import WorkflowError
+from app.workflows.base import MOTION_GAP_S, FrameRef
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .client import ClientPanel
+
+__all__ = ["FrozenFrames"]
+
+Z_FROZEN = -0.0005  # the frozen frame: in front of the live video, behind the overlays
+FROZEN_MAX_SIDE = 2048  # the frozen frame is upscaled (nearest neighbour) up to this many pixels a side
+
+
+class FrozenFrames:
+    """The frozen frame of one page (``ClientPanel``): ``frame`` (None: live), the workflow it is for
+    (``by``; None: frozen to look at it) and whether the live video is shown over it."""
+
+    def __init__(self, panel: ClientPanel):
+        self.panel = panel
+        self.frame: FrameRef | None = None
+        self.by: Any = None
+        self.show_live = False
+        self._sent: dict[str, Any] = {}  # camera → the frame shown over its video (its id)
+
+    @property
+    def looked_at(self) -> bool:
+        """A frame frozen to look at (no workflow) is on screen."""
+        return self.frame is not None and self.by is None and not self.show_live
+
+    def freeze(self, frame: Any, source: str) -> None:
+        """Freeze ``frame`` (a grabbed frame of the shown camera) and the other cameras' of that moment."""
+        panel = self.panel
+        if frame is None:
+            self.frame = None
+            return
+        feed = panel.feed
+        earlier = feed.recent.before(frame, MOTION_GAP_S)  # to see whether what is clicked on was moving
+        at = feed.recent.arrival(frame)
+        at = time.monotonic() if at is None else at
+        others = {}
+        for name, other in panel.app.views.items():
+            hit = None if name == panel.camera_view else other.recent.nearest(at)
+            if hit is not None:
+                f, arrived = hit
+                others[name] = FrameRef(f.image, float(f.t_s), int(f.index), source, view=name, gap_s=arrived - at)
+        self.frame = FrameRef(
+            frame.image,
+            float(frame.t_s),
+            int(frame.index),
+            source,
+            previous=None if earlier is None else earlier.image,
+            view=panel.camera_view,
+            others=others,
+        )
+        self.show_live = False
+        self.adopt(panel.session.workflow)
+
+    def adopt(self, wf) -> None:
+        """The frozen frame becomes ``wf``'s (None or finished: frozen to look at it)."""
+        self.by = wf if wf is not None and not wf.finished else None
+        if self.by is not None:
+            wf.use_frame(self.frame)
+
+    def unfreeze(self) -> None:
+        self.frame, self.by, self.show_live = None, None, False
+
+    def started(self, wf, frame: Any) -> None:
+        """A workflow started: on the live video if it follows it, else on the frame the operator froze to
+        look at, else on ``frame`` (the frame shown when it was asked for), else on the newest."""
+        panel = self.panel
+        if wf.follows_live():
+            self.unfreeze()
+        elif self.looked_at:
+            # a frame the operator froze (F, Seconds back) before starting, or double-clicked on: the workflow's
+            # clicks use it (a new operator froze t = 3.4 s, started a workflow, and found the newest frozen)
+            self.adopt(wf)
+            return
+        else:
+            self.freeze(frame if frame is not None else panel.feed.grabber.latest(), "live")
+        panel.reset_scrubber()
+
+    def freeze_back(self, seconds: float) -> None:
+        """Freeze the frame shown ``seconds`` before the newest (0: the newest)."""
+        panel = self.panel
+        wf = panel.session.workflow
+        if wf is not None and not wf.finished and wf.follows_live():
+            raise WorkflowError(wf.follows_live())
+        panel.moved_on(wf)
+        if wf is not None and not wf.finished and "remove_last" in wf.current_step().enabled:
+            raise WorkflowError(
+                "your clicks were made on the frozen frame: every click of a workflow uses one frame. "
+                "Remove them (Remove last) or Cancel before freezing another frame"
+            )
+        feed = panel.feed
+        frame = feed.recent.seconds_back(seconds) if seconds > 0 else feed.grabber.latest()
+        if frame is None:
+            raise WorkflowError("no video frame has arrived yet: check the video source")
+        self.freeze(frame, "scrubbed" if seconds > 0 else "live")
+        panel.error = ""
+
+    def follow(self, wf) -> bool:
+        """A finished workflow's frozen frame goes (back to the live video); a workflow that follows the live
+        video now lets its frame go, and one that takes a frozen frame (Track paused or lost) freezes the
+        newest. True when that changed what is shown."""
+        if wf is None or wf.finished:
+            if self.frame is not None and self.by is not None:
+                self.unfreeze()
+                self.panel.reset_scrubber()  # back to the live video: the scrubber says so (it kept "4")
+                return True
+            return False
+        live = bool(wf.follows_live())
+        if live and self.frame is not None:
+            wf.use_frame(None)
+            self.unfreeze()
+            return True
+        if not live and self.frame is None:
+            self.freeze(self.panel.feed.grabber.latest(), "live")
+            return self.frame is not None
+        return False
+
+    def toggle_live(self) -> None:
+        if self.frame is None:
+            raise WorkflowError("no frame is frozen: the live video is shown")
+        self.show_live = not self.show_live
+
+    def send(self) -> None:
+        """Show each camera's frozen frame over its live video (the shown camera's and those frozen with
+        it, seen beside it when zoomed out), or hide them."""
+        panel = self.panel
+        refs = {}
+        if self.frame is not None and not self.show_live and panel.viewport.view == "video":
+            refs = {self.frame.view or panel.camera_view: self.frame, **self.frame.others}
+        for name in panel.app.views:
+            ref = refs.get(name)
+            key = None if ref is None else id(ref)
+            if key == self._sent.get(name):
+                continue
+            self._sent[name] = key
+            node = f"/frozen/{name}"
+            if ref is None:
+                panel.client.scene.remove_by_name(node)
+            else:
+                _add_image(panel.client.scene, node, ref.image, panel.app.views[name].pixel_world)
+
+    def text(self, live: bool) -> Md:
+        """What the panel says of the frame shown (``live``: the video is live, not lost)."""
+        if self.frame is None:
+            head = Md(
+                "Live video (no frame frozen)"
+                if live
+                else "**Not live**: the video is lost and the image is its last frame, greyed; no frame frozen "
+                "(the status below says more)"
+            )
+            return head + Md(". *Seconds back* freezes an earlier frame.")
+        return (
+            Md("Frozen frame: t = {:.2f} s").format(self.frame.t_s)
+            + Md(" · **live shown**" if self.show_live else "")
+            + Md(". *Seconds back*: a frame that long before the live one.")
+        )
+
+
+def _add_image(scene, node: str, image: np.ndarray, pw) -> None:
+    """``image`` over its camera's image in the pixel world ``pw``, upscaled (nearest neighbour: zoomed in, the
+    operator sees pixels, not blur)."""
+    import cv2
+
+    if image.ndim == 2:
+        image = np.repeat(image[:, :, None], 3, axis=2)
+    up = max(1, min(4, FROZEN_MAX_SIDE // max(image.shape[:2])))
+    if up > 1:
+        image = cv2.resize(image, None, fx=up, fy=up, interpolation=cv2.INTER_NEAREST)
+    rw, rh = pw.render_size
+    cx, cy, _ = pw.image_center
+    scene.add_image(
+        node,
+        image,
+        rw,
+        rh,
+        format="png",
+        position=(float(cx), float(cy), Z_FROZEN),
+        cast_shadow=False,
+        receive_shadow=False,
+    )

@@ -1,0 +1,220 @@
+"""A page's view: the video (every camera's image in one pixel world, z = 0) or the 3D world, and how the
+browser's camera looks at it — fitted, zoomed onto a dragged rectangle, zoomed by the wheel about the
+cursor — and which camera pixel a click's ray meets."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import viser
+
+from app.workflows import WorkflowError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .client import ClientPanel
+
+__all__ = ["Viewport", "WHEEL_ZOOM_PER_DELTA"]
+
+WHEEL_ZOOM_PER_DELTA = 0.0015  # a wheel notch (deltaY 100) zooms by 14 %
+
+
+class Viewport:
+    """``view``: "video" or "3d"; ``need_fit``: the browser's camera is to be fitted at the next redraw;
+    ``marks_scale``: the marks are drawn this much smaller than at the fitted view (constant on screen)."""
+
+    def __init__(self, panel: ClientPanel):
+        self.panel = panel
+        self.client = panel.client
+        self.view = "video"
+        self.need_fit = True
+        self.fitted_aspect: float | None = None
+        self.zoom_rect: tuple | None = None
+        self.marks_scale = 1.0
+        self._rect_cb = self.client.scene.on_rect_select()(panel.guard(self.on_rect))
+        self.client.camera.on_update(self.on_camera)
+
+    @property
+    def pixel_world(self):
+        return self.panel.feed.pixel_world
+
+    def request_fit(self) -> None:
+        self.zoom_rect = None
+        self.need_fit = True
+
+    def set_view(self, view: str) -> None:
+        self.view, self.need_fit = view, True
+
+    # ------------------------------------------------------------------ from the screen to the image
+    @staticmethod
+    def screen_ray(cam, screen_xy) -> tuple[np.ndarray, np.ndarray]:
+        """The viewer ray (origin, direction) through screen point (x, y) in 0..1 of the canvas."""
+        R = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix()
+        t = np.tan(cam.fov / 2.0)
+        sx, sy = screen_xy
+        d_cam = np.array([(2 * sx - 1) * t * cam.aspect, (2 * sy - 1) * t, 1.0])
+        return np.asarray(cam.position), R @ d_cam
+
+    def pixel_of_ray(self, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        """The pixel a click's ray meets: on the shown camera's image, or on another camera's (seen beside
+        it when zoomed out), which is then the camera shown; a WorkflowError when it meets no image."""
+        hit = self.panel.app.view_at(origin, direction)
+        if hit is not None and hit[0] != self.panel.camera_view:
+            self.panel.show_camera(hit[0], keep_view=True)
+        if hit is None:
+            raise WorkflowError("that click missed the image: click on the video")
+        uv, pw = hit[1], self.pixel_world
+        if not (-0.5 <= uv[0] <= pw.width - 0.5 and -0.5 <= uv[1] <= pw.height - 0.5):
+            raise WorkflowError(f"that click is outside the {pw.width}×{pw.height} image: click on the video")
+        return uv
+
+    def pixel_at(self, screen_xy) -> np.ndarray | None:
+        """The camera pixel under screen point (x, y) in 0..1 of the canvas (None: the page has not
+        reported its camera yet); switches to the camera whose image it is on."""
+        try:
+            ray = self.screen_ray(self.client.camera, screen_xy)
+        except (AssertionError, ZeroDivisionError):
+            return None
+        return self.pixel_of_ray(*ray)
+
+    def on_rect(self, event) -> None:
+        """A left drag on the video zooms to the dragged rectangle (and never rotates the view)."""
+        if self.view != "video":
+            return
+        cam = self.client.camera
+        corners = [
+            self.pixel_world.pixel_from_ray(*self.screen_ray(cam, s)) for s in (event.screen_min, event.screen_max)
+        ]
+        if any(c is None for c in corners):
+            return
+        (u0, v0), (u1, v1) = corners
+        if abs(u1 - u0) < 4 or abs(v1 - v0) < 4:
+            return
+        self.zoom_rect = (min(u0, u1), min(v0, v1), max(u0, u1), max(v0, v1))
+        self.need_fit = True
+
+    # ------------------------------------------------------------------ zoom
+    def on_wheel(self, value: str) -> None:
+        """Zoom about the point under the cursor: "x y deltaY n" from static/wheel.js (x, y in 0..1)."""
+        try:
+            sx, sy, dy = (float(v) for v in value.split()[:3])
+        except ValueError:
+            return  # not a wheel message (cleared, or typed): ignore
+        if not (np.isfinite(sx) and np.isfinite(sy) and np.isfinite(dy)):
+            return
+        cam = self.client.camera
+        try:
+            position, look_at = np.asarray(cam.position, float), np.asarray(cam.look_at, float)
+            R = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix()
+            t, aspect = np.tan(cam.fov / 2.0), cam.aspect
+        except (AssertionError, ZeroDivisionError):
+            return
+        ray = R @ np.array([(2 * sx - 1) * t * aspect, (2 * sy - 1) * t, 1.0])
+        if self.view == "video":  # the point of the image plane (z = 0) under the cursor
+            if abs(ray[2]) < 1e-9:
+                return
+            X = position + (-position[2] / ray[2]) * ray
+        else:  # the 3D world: the point under the cursor at the distance of the orbit's centre
+            X = position + np.linalg.norm(look_at - position) * ray / np.linalg.norm(ray)
+        f = float(np.clip(np.exp(dy * WHEEL_ZOOM_PER_DELTA), 0.5, 2.0))
+        if self.view == "video":  # between 200× in and a little beyond the whole image (every camera's)
+            fit = max(
+                abs(float(self.pixel_world.fit_camera(aspect, cam.fov)[0][2])),
+                abs(float(self.panel.app.all_images.fit_camera(aspect, cam.fov)[0][2])) / 2.0,
+            )
+            dist = abs(float(position[2]))
+            if not dist > 1e-9:  # a camera in the image's plane (a page can report one): nothing to zoom about
+                return
+            f = float(np.clip(f, 0.005 * fit / dist, 2.0 * fit / dist))
+        with self.client.atomic():
+            place_camera(cam, X + f * (position - X), X + f * (look_at - X))
+        self.panel.dirty = True
+
+    def on_camera(self, cam) -> None:
+        try:
+            aspect = cam.aspect
+        except (AssertionError, ZeroDivisionError):
+            return
+        if self.fitted_aspect is None or abs(aspect - self.fitted_aspect) > 1e-3:
+            self.need_fit = True
+            self.panel.app.wake()
+            return
+        scale = self.zoom_scale()
+        if scale is not None and abs(np.log(scale / self.marks_scale)) > 0.1:  # zoomed: marks keep their screen size
+            self.panel.dirty = True
+            self.panel.app.wake()
+
+    def zoom_scale(self) -> float | None:
+        """Image pixels per screen pixel now, relative to the fitted view (1 at fit, 0.1 at 10× zoom)."""
+        cam = self.client.camera
+        try:
+            dist = abs(float(cam.position[2]))  # the image plane is z = 0 in the pixel world
+            fov, aspect = cam.fov, cam.aspect
+        except (AssertionError, ZeroDivisionError, TypeError):
+            return None
+        fit = abs(float(self.pixel_world.fit_camera(aspect, fov)[0][2]))
+        return float(np.clip(dist / fit, 0.02, 4.0)) if fit > 0 else None
+
+    def image_px_per_screen_px(self) -> float:
+        """Video pixels per screen pixel in this client's view now (1 when it is not known)."""
+        try:
+            cam = self.client.camera
+            dist = abs(float(cam.position[2]))
+            visible = 2.0 * dist * np.tan(float(cam.fov) / 2.0) / self.pixel_world.k  # video px across the height
+            k = visible / float(cam.image_height)
+        except (AssertionError, ZeroDivisionError, TypeError, AttributeError, ValueError):
+            return 1.0
+        return k if np.isfinite(k) and k > 0 else 1.0
+
+    def update_marks_scale(self) -> float:
+        """The marks' scale for the view now (1 in the 3D world)."""
+        scale = self.zoom_scale() if self.view == "video" else None
+        self.marks_scale = 1.0 if scale is None else scale
+        return self.marks_scale
+
+    # ------------------------------------------------------------------ fit
+    def fit(self) -> None:
+        """Fit the browser's camera to the shown camera's image (or the dragged rectangle), or to the 3D world."""
+        cam = self.client.camera
+        try:
+            aspect, fov = cam.aspect, cam.fov
+        except (AssertionError, ZeroDivisionError):
+            return  # the browser has not reported its camera yet
+        self.need_fit = False
+        self.fitted_aspect = aspect
+        pw = self.pixel_world
+        if self.view == "video":
+            rect, self.zoom_rect = self.zoom_rect, None
+            if rect is not None:
+                u0, v0, u1, v1 = rect
+                sub = type(pw)(int(round(u1 - u0)) + 1, int(round(v1 - v0)) + 1, pw.k)
+                position, look_at, up = sub.fit_camera(aspect, fov, margin=1.0)
+                shift = np.array([u0 * pw.k, v0 * pw.k, 0.0])
+                position, look_at = position + shift, look_at + shift
+            else:
+                position, look_at, up = pw.fit_camera(aspect, fov)
+        else:
+            position, look_at, up = self.panel.app.world3d_view()
+        self._rect_select(self.view == "video")
+        with self.client.atomic():
+            cam.near = 0.05
+            cam.far = 2000.0
+            cam.up_direction = up
+            place_camera(cam, position, look_at)
+        self.panel.dirty = True
+
+    def _rect_select(self, on: bool) -> None:
+        """A left drag zooms on the video; in the 3D world it orbits (viser's own)."""
+        registered = self._rect_cb is not None
+        if on and not registered:
+            self._rect_cb = self.client.scene.on_rect_select()(self.panel.guard(self.on_rect))
+        elif not on and registered:
+            self.client.scene.remove_rect_select_callback(self._rect_cb)
+            self._rect_cb = None
+
+
+def place_camera(cam, position: np.ndarray, look_at: np.ndarray) -> None:
+    """Move a client's camera. The position first: viser moves the look-at point with it, and refuses a
+    look-at point equal to the position the camera has at that moment (whatever the page reported)."""
+    cam.position = position
+    cam.look_at = look_at
