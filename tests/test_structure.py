@@ -119,3 +119,60 @@ def test_ruff(args):
         pytest.skip("ruff is not installed (it comes with the test extras: pip install -e '.[test]')")
     done = subprocess.run([ruff, *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, (done.stdout + done.stderr)[-3000:]
+
+
+MAX_PANEL_LINES = 450  # issue 24: the panel class
+MAX_UPDATE_POSE_LINES = 500  # issue 24: Update pose with its app-side base classes
+
+
+def _class_lines(path: Path) -> dict[str, tuple[int, list[str]]]:
+    """Each top-level class of ``path``: (its lines, the names of its bases)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    return {
+        n.name: (n.end_lineno - n.lineno + 1, [ast.unparse(b).rpartition(".")[2] for b in n.bases])
+        for n in tree.body
+        if isinstance(n, ast.ClassDef)
+    }
+
+
+def _app_classes() -> dict[str, tuple[int, list[str]]]:
+    found: dict[str, tuple[int, list[str]]] = {}
+    for path in sorted(ROOT.glob("app/**/*.py")):
+        found.update(_class_lines(path))
+    return found
+
+
+def _with_bases(name: str, classes: dict) -> int:
+    """Lines of class ``name`` and of every app-side class it derives from, each counted once."""
+    seen, todo, total = set(), [name], 0
+    while todo:
+        c = todo.pop()
+        if c in seen or c not in classes:
+            continue
+        seen.add(c)
+        lines, bases = classes[c]
+        total += lines
+        todo += bases
+    return total
+
+
+def test_the_panel_is_short():
+    lines = _class_lines(ROOT / "app/ui/client.py")["ClientPanel"][0]
+    assert lines <= MAX_PANEL_LINES, f"ClientPanel is {lines} lines (at most {MAX_PANEL_LINES})"
+
+
+def test_update_pose_with_its_bases_is_short():
+    lines = _with_bases("UpdatePose", _app_classes())
+    assert lines <= MAX_UPDATE_POSE_LINES, f"UpdatePose with its app-side bases is {lines} lines"
+
+
+def test_the_panel_knows_no_workflow_by_name():
+    """The panel sends intents and draws what it is given: no branch on a workflow's or step's name, no probe
+    of a workflow's attributes."""
+    said = []
+    for path in sorted(ROOT.glob("app/ui/*.py")):
+        for k, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            code = line.split("#", 1)[0]
+            if any(s in code for s in ("wf.name", "getattr(wf", "hasattr(wf", "step.name ==", ".name in (")):
+                said.append(f"{path.relative_to(ROOT)}:{k}: {line.strip()}")
+    assert said == []

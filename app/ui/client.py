@@ -127,7 +127,7 @@ class ClientPanel:
         if not keep_view:
             if self.frozen is not None and self.frozen_frames.by is None:
                 self.frozen_frames.unfreeze()  # a frame frozen to look at belongs to the camera it was frozen in
-            self.viewport.request_fit()
+            self.viewport.request_fit(again=False)
         self.camera_view, self.dirty = name, True
         if self.gui_camera is not None and self.gui_camera.value != name:
             self.gui_camera.value = name

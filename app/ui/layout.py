@@ -78,7 +78,9 @@ def build_panel(panel: ClientPanel) -> None:
         view = gui.add_button_group("View", ("Video", "3D world"))
         view.on_click(guard(lambda e: viewport.set_view("3d" if e.target.value == "3D world" else "video")))
         fit = gui.add_button(
-            "Fit view (H)", icon=viser.Icon.ZOOM_RESET, hint="Show the whole image (a left drag zooms onto a rectangle)"
+            "Fit view (H)",
+            icon=viser.Icon.ZOOM_RESET,
+            hint="Show the whole image; again: every camera's (a left drag zooms onto a rectangle)",
         )
         fit.on_click(guard(lambda _e: viewport.request_fit()))
     with gui.add_folder("Object"):

@@ -31,6 +31,8 @@ class Viewport:
         self.fitted_aspect: float | None = None
         self.zoom_rect: tuple | None = None
         self.marks_scale = 1.0
+        self.all_cameras = False  # the fit shows every camera's image side by side (Fit view pressed again)
+        self._fitted_at: np.ndarray | None = None  # where the last fit put the browser's camera
         self._rect_cb = self.client.scene.on_rect_select()(panel.guard(self.on_rect))
         self.client.camera.on_update(self.on_camera)
 
@@ -38,7 +40,16 @@ class Viewport:
     def pixel_world(self):
         return self.panel.feed.pixel_world
 
-    def request_fit(self) -> None:
+    def request_fit(self, again: bool = True) -> None:
+        """Fit the shown camera's image; ``again`` (Fit view pressed) with the view still where the last fit
+        put it and several cameras: every camera's image side by side."""
+        try:
+            at, fitted = np.asarray(self.client.camera.position, float), self._fitted_at
+            # as the page reports it back (float32): a thousandth of the distance to the image is "unmoved"
+            unmoved = fitted is not None and np.linalg.norm(at - fitted) <= 1e-3 * abs(float(fitted[2]))
+        except (AssertionError, ZeroDivisionError, TypeError):
+            unmoved = False
+        self.all_cameras = again and unmoved and not self.all_cameras and len(self.panel.app.views) > 1
         self.zoom_rect = None
         self.need_fit = True
 
@@ -185,6 +196,7 @@ class Viewport:
         pw = self.pixel_world
         if self.view == "video":
             rect, self.zoom_rect = self.zoom_rect, None
+            self.all_cameras = self.all_cameras and rect is None
             if rect is not None:
                 u0, v0, u1, v1 = rect
                 sub = type(pw)(int(round(u1 - u0)) + 1, int(round(v1 - v0)) + 1, pw.k)
@@ -192,7 +204,7 @@ class Viewport:
                 shift = np.array([u0 * pw.k, v0 * pw.k, 0.0])
                 position, look_at = position + shift, look_at + shift
             else:
-                position, look_at, up = pw.fit_camera(aspect, fov)
+                position, look_at, up = (self.panel.app.all_images if self.all_cameras else pw).fit_camera(aspect, fov)
         else:
             position, look_at, up = self.panel.app.world3d_view()
         self._rect_select(self.view == "video")
@@ -201,6 +213,7 @@ class Viewport:
             cam.far = 2000.0
             cam.up_direction = up
             place_camera(cam, position, look_at)
+        self._fitted_at = np.asarray(position, float).copy()
         self.panel.dirty = True
 
     def _rect_select(self, on: bool) -> None:

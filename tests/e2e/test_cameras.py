@@ -63,6 +63,55 @@ def test_the_side_camera_is_shown_by_its_key_and_clicked_in(browser, two_cameras
     page.close()
 
 
+def test_both_cameras_frozen_fitted_side_by_side_and_clicked_in(browser, two_cameras, scene):
+    """F freezes every camera's frame of that moment, each shown over its own video (the camera not shown
+    played live beside a frozen one); Fit view on a fitted view shows both images; a click on the side
+    camera's image there selects in the side camera."""
+    import viser
+
+    ui = two_cameras
+    page = ui.open(browser)
+    panel = page.panel
+    _true_box_in_database(ui, scene)
+    wait_until(lambda: ui.server.database_drawn, what="the moved box drawn")
+    page.keyboard.press("f")
+    frozen = panel.frozen_frames
+    wait_until(lambda: frozen.frame is not None and set(frozen.frame.others) == {"side"}, what="both frames frozen")
+    wait_until(
+        lambda: all(frozen._sent.get(v) is not None for v in ("front", "side")), what="each camera's frozen image"
+    )
+    # the page opened fitted on the front camera's image: Fit view, the view unmoved, shows every camera's
+    page.keyboard.press("h")
+    every = ui.server.all_images
+    wait_until(
+        lambda: (
+            panel.viewport.all_cameras
+            and not panel.viewport.need_fit
+            and abs(float(panel.client.camera.look_at[0]) - every.image_center[0]) < 0.02 * every.render_size[0]
+        ),
+        what="both images fitted side by side",
+        panel=panel,
+    )
+    assert panel.camera_view == "front"
+    side = ui.site.camera_of("side")
+    V = ui.site.object("parallelepiped").vertices_world()
+    uv = side.project(V[np.argsort(V[:, 2])[-4:][:2]]).mean(axis=0)  # a top edge as the side camera sees it
+    cam = panel.client.camera
+    X = ui.server.views["side"].pixel_world.to_world(uv)
+    p = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix().T @ (X - np.asarray(cam.position))
+    t = np.tan(cam.fov / 2.0)
+    x = (0.5 + p[0] / p[2] / (2 * t * cam.aspect)) * cam.image_width
+    y = (0.5 + p[1] / p[2] / (2 * t)) * cam.image_height
+    page.locator("canvas").nth(1).click(position={"x": float(x), "y": float(y)})
+    wait_until(
+        lambda: panel.camera_view == "side" and panel.session.selected == "parallelepiped",
+        what="the box selected in the side camera",
+        panel=panel,
+    )
+    assert frozen.frame is not None and panel.viewport.all_cameras  # the view and the frozen frames stay
+    page.close()
+
+
 def test_calibrate_the_side_camera_by_clicks(browser, two_cameras, scene):
     ui = two_cameras
     _true_box_in_database(ui, scene)
