@@ -58,7 +58,7 @@ class Operator:
     def choose(self, chooser: str, option: str) -> None:
         """Pick ``option`` in the chooser labelled ``chooser`` (a Mantine select: click it, click the option)."""
         box = self.page.get_by_label(chooser, exact=True)
-        box.wait_for(state="visible", timeout=5000)
+        box.wait_for(state="visible", timeout=60_000)
         box.click()
         self.page.get_by_role("option", name=option, exact=True).click()
         self.actions += 1
@@ -71,7 +71,7 @@ class Operator:
         self.press("Accept")
         wait_until(lambda: wf.accepted or self.page.panel.asking == "accept", timeout_s, "the accept or its question")
         if not wf.accepted:
-            self.page.get_by_role("button", name=re.compile("^Accept anyway")).wait_for(state="visible", timeout=5000)
+            self.page.get_by_role("button", name=re.compile("^Accept anyway")).wait_for(state="visible", timeout=60_000)
             self.check()
             self.press("Accept anyway")
             wait_until(lambda: wf.accepted, timeout_s, "the accept")

@@ -47,7 +47,7 @@ def screen_of(server, panel, uv) -> tuple[float, float]:
     return float(x), float(y)
 
 
-def wait_until(predicate, timeout_s: float = 20.0, what: str = "condition", panel=None) -> None:
+def wait_until(predicate, timeout_s: float = 60.0, what: str = "condition", panel=None) -> None:
     """Poll ``predicate()`` until it is true; AssertionError naming ``what`` after timeout_s (and, given a
     client ``panel``, what its panel said then)."""
     deadline = time.monotonic() + timeout_s
@@ -249,7 +249,7 @@ def assert_prompt_controls(page, timeout_s: float = 15.0) -> list[str]:
         time.sleep(0.1)
 
 
-def press(page, label: str, timeout_ms: int = 15000) -> None:
+def press(page, label: str, timeout_ms: int = 60_000) -> None:
     """Click the visible button whose name starts with ``label`` (e.g. "Solve" for "Solve (R)")."""
     import re
 
@@ -341,7 +341,7 @@ class Interface:
 
         canvas = page.locator("canvas").nth(1)
         try:
-            canvas.click(position={"x": x, "y": y}, timeout=10_000)
+            canvas.click(position={"x": x, "y": y}, timeout=60_000)
         except PlaywrightTimeout:  # playwright's hit test kept finding the page, not the canvas, there
             # (seen on loaded fresh clones only): the mouse clicks the point as an operator's would; a click
             # that reaches nothing is made again by the callers that wait for its effect (select_by_click)

@@ -75,7 +75,7 @@ def test_a_page_from_another_site_cannot_open_the_websocket(unguarded_browser, s
         )
         with caplog.at_level(logging.WARNING, logger="mcit.access"):
             page.goto("http://evil.example/")
-            page.wait_for_function("window.result !== undefined", timeout=15000)
+            page.wait_for_function("window.result !== undefined", timeout=60_000)
         assert page.evaluate("window.result") == "closed"
         assert any("http://evil.example" in r.getMessage() for r in caplog.records), (
             "the server saw no refused handshake"

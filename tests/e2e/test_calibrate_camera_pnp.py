@@ -78,14 +78,14 @@ def test_calibrate_camera_by_pnp_from_5_points(browser, lens_interface, scene):
     solved = wf.message
     print(f"  after Solve the panel said: {solved}")
     said = page.get_by_text("Solved the camera's pose from 5 points with the lens known (PnP)").first
-    said.wait_for(timeout=5000)  # the panel says which was solved
+    said.wait_for(timeout=60_000)  # the panel says which was solved
     assert len(ui.db.calibrations("camera")) == n_cal  # nothing written before Accept
     # the weakness is said with the result, before Accept is pressed
-    page.get_by_text("Check before accepting:", exact=False).first.wait_for(timeout=5000)
+    page.get_by_text("Check before accepting:", exact=False).first.wait_for(timeout=60_000)
     op.press("Accept")
     wait_until(lambda: wf.accepted or page.panel.asking == "accept", what="the accept or its question")
     assert not wf.accepted and len(ui.db.calibrations("camera")) == n_cal  # 5 points: weak, asked once more
-    page.get_by_role("button", name="Accept anyway").wait_for(timeout=5000)
+    page.get_by_role("button", name="Accept anyway").wait_for(timeout=60_000)
     op.press("Accept anyway")
     wait_until(lambda: wf.accepted, what="the accept")
     report = op.report()

@@ -229,7 +229,7 @@ def test_update_pose_from_edges_clicked_in_both_cameras(browser, two_cameras, sc
     # one of them an edge already clicked in the front camera: it is that model edge again, in this camera
     again = [k for k in seen if k in triple][:1]
     _click_edges(op, page, wf, side, model, T_true, (again + [k for k in seen if k not in triple])[:3])
-    page.get_by_text("in camera front (camera side shown)").first.wait_for(timeout=10_000)
+    page.get_by_text("in camera front (camera side shown)").first.wait_for(timeout=60_000)
     assert wf.seg_views == ["front"] * 3 + ["side"] * 3
     op.press("Refine")
     wait_until(lambda: wf.refined is not None, what="the refinement over both cameras", panel=page.panel)

@@ -61,7 +61,7 @@ def test_accept_while_another_program_locks_the_database(browser, quick_interfac
     wf = page.panel.session.workflow
     wait_until(
         lambda: wf.frames >= 10 and pose_error(wf.T_world_obj, T_true)[0] < 0.5,
-        timeout_s=30,
+        timeout_s=60,
         what="the tracker to converge",
         panel=page.panel,
     )
@@ -76,7 +76,7 @@ def test_accept_while_another_program_locks_the_database(browser, quick_interfac
         assert holder.stdout.readline().strip() == "locked"
         op.press("Accept")
         said = page.get_by_text("is locked by another program", exact=False).first
-        said.wait_for(state="visible", timeout=15_000)
+        said.wait_for(state="visible", timeout=60_000)
         text = said.inner_text()
         assert f"pid {holder.pid}" in text and "nothing was written" in text and "try again" in text, text
         assert "Your work in Track is kept" in text, text
@@ -97,6 +97,6 @@ def test_accept_while_another_program_locks_the_database(browser, quick_interfac
     assert rec.version == obj.version + 1 and (rec.T_world_obj == T_tracked).all()
     entry = ui.db.history(BOX)[-1]
     assert entry.method == "tracking" and entry.client.startswith("browser-")
-    page.get_by_text("is locked by another program").first.wait_for(state="hidden", timeout=5000)
+    page.get_by_text("is locked by another program").first.wait_for(state="hidden", timeout=60_000)
     op.report("track, Accept refused by a lock, Accept")
     page.close()

@@ -17,7 +17,7 @@ from .harness import close_notifications, select_by_click
 pytestmark = pytest.mark.e2e
 
 
-def _wait(predicate, timeout_s=8.0, what="condition"):
+def _wait(predicate, timeout_s=60.0, what="condition"):
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if predicate():
@@ -53,20 +53,27 @@ def _visible_box_edges(site, T):
 def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interface, frame):
     ui = interface
     page = ui.open(browser)
-    shot = ui.screenshot(page)
     # the video: the shown image correlates with the frame at the pixels the camera maps them to
-    # (local means: the frame's sensor noise and the JPEG transport decorrelate single pixels)
+    # (local means: the frame's sensor noise and the JPEG transport decorrelate single pixels); a loaded
+    # machine's page shows the first frame a while after it connects
     import cv2
 
     smooth = cv2.blur(frame.mean(axis=2).astype(np.float32), (5, 5))
     rng = np.random.default_rng(0)
     uv = rng.uniform([8, 8], [503, 232], size=(300, 2))  # above the table's label (under its front edge)
-    shown = np.array(
-        [shot[int(y) - 3 : int(y) + 4, int(x) - 3 : int(x) + 4].mean() for x, y in (ui.screen_of(page, p) for p in uv)]
-    )
     truth = np.array([smooth[int(round(v)), int(round(u))] for u, v in uv])
+    corr = []
+
+    def shown_is_the_frame() -> bool:
+        shot = ui.screenshot(page)
+        at = [ui.screen_of(page, p) for p in uv]
+        shown = np.array([shot[int(y) - 3 : int(y) + 4, int(x) - 3 : int(x) + 4].mean() for x, y in at])
+        corr.append(float(np.corrcoef(shown, truth)[0, 1]))
+        return corr[-1] > 0.9
+
+    _wait(shown_is_the_frame, what="the video frame on the page")
     ui.screenshot(page, "/tmp/mcit-e2e-render.png")
-    assert np.corrcoef(shown, truth)[0, 1] > 0.9
+    assert corr[-1] > 0.9, corr
     # the overlay: the database's table edges are drawn in green where C projects them
     table = ui.site.object("table")
     segs = ui.site.camera.project(table.model.edge_segments(table.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
@@ -76,14 +83,14 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     assert long_edges
     _wait(
         lambda: min(_drawn_along(ui, page, ui.screenshot(page), segs[k]) for k in long_edges) >= 0.7,
-        timeout_s=15,
+        timeout_s=60,
         what="the table's edges drawn in green where C projects them",
     )
     # error paths: each shows a notification saying what to do, and nothing is written
     versions = [(o.name, o.version) for o in ui.db.objects()]
     n_changes, n_cal = len(ui.db.history()), len(ui.db.calibrations())
     page.get_by_role("button", name="Update pose").click()  # nothing selected
-    page.get_by_text("select an object first").first.wait_for(timeout=5000)
+    page.get_by_text("select an object first").first.wait_for(timeout=60_000)
     page.get_by_role("button", name="Calibrate camera").click()
     _wait(
         lambda: page.panel.session.workflow is not None and page.panel.workflow_controls.handles,
@@ -92,9 +99,9 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     assert not page.get_by_role("button", name="Solve").is_visible()  # no points paired: Solve is not offered
     time.sleep(0.5)
     page.keyboard.press("r")  # its shortcut says why
-    page.get_by_text("Solve does not apply now").first.wait_for(timeout=5000)
+    page.get_by_text("Solve does not apply now").first.wait_for(timeout=60_000)
     ui.click_pixel(page, [3.0, 3.0])  # far from every model corner
-    page.get_by_text("No visible model corner within").first.wait_for(timeout=5000)
+    page.get_by_text("No visible model corner within").first.wait_for(timeout=60_000)
     assert [(o.name, o.version) for o in ui.db.objects()] == versions
     assert len(ui.db.history()) == n_changes and len(ui.db.calibrations()) == n_cal
     assert ui.server._thread.is_alive()  # the server lives on

@@ -161,7 +161,7 @@ def test_names_methods_operators_and_notes_with_markup_are_shown_as_text(browser
         what="History's controls",
     )
     result = page.get_by_text("Changes", exact=True).first
-    result.wait_for(timeout=10000)
+    result.wait_for(timeout=60_000)
     shown = page.locator("body").inner_text().replace("\u2060", "")  # the word joiners of bare addresses
     assert evil["svg"] in shown and evil["autolink"] in shown  # operators, verbatim
     assert evil["img"] in shown or evil["img"][:20] in shown  # a method, as its words
@@ -170,7 +170,7 @@ def test_names_methods_operators_and_notes_with_markup_are_shown_as_text(browser
 
     # another operator's change while the page is open: the notification names them and the object
     ui.site.set_status(names[1], "stale", client=evil["link"], method="operator")
-    page.locator(".mantine-Notification-root", has_text="Changed by another operator").first.wait_for(timeout=15000)
+    page.locator(".mantine-Notification-root", has_text="Changed by another operator").first.wait_for(timeout=60_000)
 
     # the 3D world: the objects' labels
     page.get_by_role("button", name="3D world", exact=True).click()

@@ -43,7 +43,7 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     key_until(
         page, "f", lambda: panel.frozen is not None and panel.frozen_frames.by is None, "a frame frozen to look at"
     )
-    page.get_by_text("Frozen frame: t =").first.wait_for(timeout=5000)
+    page.get_by_text("Frozen frame: t =").first.wait_for(timeout=60_000)
     time.sleep(0.5)
     assert panel.frozen is not None
     looked_at = panel.frozen
@@ -55,21 +55,21 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     wf = panel.session.workflow
     assert wf.frame is panel.frozen  # clicks, snapping and solving use it ...
     assert panel.frozen is looked_at  # ... the frame frozen before the start (a new operator lost it to the newest)
-    page.get_by_text("Frozen frame: t =").first.wait_for(timeout=5000)
+    page.get_by_text("Frozen frame: t =").first.wait_for(timeout=60_000)
     page.keyboard.press("l")  # Show live
     wait_until(lambda: panel.frozen_frames.show_live, what="the live view")
-    page.get_by_text("live shown").first.wait_for(timeout=5000)
+    page.get_by_text("live shown").first.wait_for(timeout=60_000)
     table = ui.site.object("table")
     corner = ui.site.camera.project(table.vertices_world()[np.argmax(table.vertices_world()[:, 2])])
     ui.click_pixel(page, corner)
-    page.get_by_text("you are looking at the live video", exact=False).first.wait_for(timeout=5000)
+    page.get_by_text("you are looking at the live video", exact=False).first.wait_for(timeout=60_000)
     assert wf.pending_X is None  # the click was refused
     press(page, "Show frozen")  # back to the frozen frame (the button says so while live is shown)
     wait_until(lambda: not panel.frozen_frames.show_live, what="the frozen view")
     ui.click_pixel(page, corner)
     wait_until(lambda: wf.pending_X is not None, what="the corner picked on the frozen frame")
     page.keyboard.press("f")  # another frame cannot be frozen once clicked
-    page.get_by_text("every click of a workflow uses one frame", exact=False).first.wait_for(timeout=5000)
+    page.get_by_text("every click of a workflow uses one frame", exact=False).first.wait_for(timeout=60_000)
     page.close()
 
 
@@ -115,7 +115,7 @@ def test_double_and_rapid_clicks_are_taken_in_order_or_refused_with_the_state_in
     wait_until(lambda: len(wf.segs) == 1, what="the first edge")
     x, y = ui.screen_of(page, [200.0, 120.0])
     page.locator("canvas").nth(1).dblclick(position={"x": x, "y": y})
-    page.get_by_text("px apart", exact=False).first.wait_for(timeout=5000)
+    page.get_by_text("px apart", exact=False).first.wait_for(timeout=60_000)
     assert wf.pending is not None and len(wf.segs) == 1  # the first click waits; the second was refused
     press(page, "Remove last")
     wait_until(lambda: wf.pending is None, what="the pending click removed")

@@ -174,8 +174,8 @@ def _accept(op, what: str) -> list[str]:
     weak = wf.weaknesses()
     op.press("Accept")
     if weak:
-        op.page.get_by_role("button", name="Accept anyway").wait_for(state="visible", timeout=5000)
-        op.page.get_by_text("Weak result", exact=False).first.wait_for(timeout=5000)
+        op.page.get_by_role("button", name="Accept anyway").wait_for(state="visible", timeout=60_000)
+        op.page.get_by_text("Weak result", exact=False).first.wait_for(timeout=60_000)
         assert not wf.accepted  # asked once more: nothing written yet
         op.press("Accept anyway")
     wait_until(lambda: wf.accepted, 10.0, what)
@@ -232,12 +232,12 @@ def test_model_a_box_by_clicking_two_faces_and_scanning(browser, device_interfac
     op.check()
     # Measure face's shortcut now (both faces measured, its button hidden): refused, said, nothing written
     page.keyboard.press("m")
-    page.get_by_text("Measure face does not apply now").first.wait_for(timeout=5000)
+    page.get_by_text("Measure face does not apply now").first.wait_for(timeout=60_000)
     assert len(ui.db.objects()) == n_objects and len(wf.box_faces()) == 2 and wf.progress is None
     op.key("r")  # Solve
     op.wait(lambda: wf.result is not None, "the box")
     op.check()
-    page.get_by_role("button", name=re.compile("^Accept")).wait_for(state="visible", timeout=5000)
+    page.get_by_role("button", name=re.compile("^Accept")).wait_for(state="visible", timeout=60_000)
     assert len(ui.db.objects()) == n_objects  # nothing written before Accept
     weak = _accept(op, "the box written")
     rec = ui.db.get(wf.object_name)
