@@ -89,12 +89,6 @@ class BRep:
         return self._parts[0]
 
     @property
-    def edges_only(self) -> bool:
-        """True when everything the model draws is one of its straight edges (no solid, no circle, no
-        curved region of a mesh): its outline does not depend on the view."""
-        return len(self.parts) == 1 and not len(self.polyhedron.smooth_sides())
-
-    @property
     def parts(self) -> tuple[Primitive, ...]:
         """Every primitive of the model: the polyhedral part first (possibly empty), the solids, the circles."""
         return self._parts
@@ -236,22 +230,32 @@ class BRep:
             tuple(parts[1 + len(self.solids) :]),
         )
 
-    def outline(self, center_obj: np.ndarray, n_circle: int = 48) -> Outline:
-        """Every part's outline seen from a point (3,) in the object frame, one after the other."""
-        c = np.asarray(center_obj, dtype=float).reshape(3)
-        return join_outlines([p.outline(c, n_circle) for p in self.parts])
+    def outline(self, center_obj: np.ndarray, n_circle: int = 48, contours: bool = True) -> Outline:
+        """Every part's outline seen from a point (3,) in the object frame, one after the other.
 
-    def wireframe(self, center_world: np.ndarray, T_world_obj: np.ndarray, n_circle: int = 48) -> Wireframe:
+        contours : False leaves out the contour generators of a mesh's smooth regions (sides of its
+        tessellation, not edges of the object): the polyhedral part then gives its edges alone.
+        """
+        c = np.asarray(center_obj, dtype=float).reshape(3)
+        outlines = [p.outline(c, n_circle) for p in self.parts]
+        if not contours:
+            outlines[0] = outlines[0].subset(outlines[0].edge >= 0)
+        return join_outlines(outlines)
+
+    def wireframe(
+        self, center_world: np.ndarray, T_world_obj: np.ndarray, n_circle: int = 48, contours: bool = True
+    ) -> Wireframe:
         """Segments to draw from an optical centre (3,), world frame, with their visibility.
 
         Each part's outline (``Primitive.outline``) in turn: polyhedral edges (visible when a
         bordering face faces the centre; edges with no face always) and the contours of a mesh's
-        smooth regions; solids' silhouettes (visible) and rims (each piece visible when its cap or
-        the lateral surface next to it faces the centre); free circles, always visible.
+        smooth regions (unless ``contours`` is False); solids' silhouettes (visible) and rims (each
+        piece visible when its cap or the lateral surface next to it faces the centre); free
+        circles, always visible.
         """
         T = np.asarray(T_world_obj, dtype=float)
         c_obj = (np.asarray(center_world, dtype=float) - T[:3, 3]) @ T[:3, :3]
-        o = self.outline(c_obj, n_circle)
+        o = self.outline(c_obj, n_circle, contours)
         S = transform_points(T, o.segments.reshape(-1, 3)).reshape(-1, 2, 3)
         return Wireframe(S, o.visible, o.edge, o.kind, o.feature, o.chord)
 

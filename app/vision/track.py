@@ -219,7 +219,8 @@ def visible_segments(
 ) -> VisibleSegments:
     """The segments ``sample_visible_edges`` samples at pose T_world_obj (object frame; see there)."""
     T = np.asarray(T_world_obj, dtype=float)
-    wf = model.wireframe(camera.center, T, n_circle=n_circle)
+    # a mesh's smooth-region contours are sides of its tessellation, not edges of the object: not tracked
+    wf = model.wireframe(camera.center, T, n_circle=n_circle, contours=False)
     keep = wf.visible & (rims | (wf.kind != "rim"))
     if len(model.faces) and max_face_angle_deg < 90.0:
         edge = wf.edge_index >= 0

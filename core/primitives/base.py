@@ -56,6 +56,18 @@ class Outline:
     chord: np.ndarray
     n_features: int
 
+    def subset(self, mask: np.ndarray) -> Outline:
+        """The segments where mask (K,) is True; the ids keep their meaning (n_features unchanged)."""
+        return Outline(
+            self.segments[mask],
+            self.visible[mask],
+            self.kind[mask],
+            self.edge[mask],
+            self.feature[mask],
+            self.chord[mask],
+            self.n_features,
+        )
+
     @classmethod
     def empty(cls, n_features: int = 0) -> Outline:
         return cls(
@@ -191,6 +203,8 @@ def join_outlines(outlines: list[Outline]) -> Outline:
     """Several outlines as one: features offset so each keeps its own ids (n_features summed)."""
     if not outlines:
         return Outline.empty()
+    if len(outlines) == 1:
+        return outlines[0]
     offsets = np.cumsum([0] + [o.n_features for o in outlines])
     return Outline(
         np.concatenate([o.segments.reshape(-1, 2, 3) for o in outlines]),

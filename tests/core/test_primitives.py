@@ -200,3 +200,26 @@ def test_stored_forms_of_the_first_kinds_carry_no_tag():
         "circles": [{"centre": [0.0, 0.0, 0.1], "normal": [0.0, 0.0, 1.0], "radius": 0.03}],
     }
     assert BRep.from_dict(stored).to_dict() == stored
+
+
+def test_a_meshs_contours_are_drawn_and_can_be_left_out():
+    import trimesh
+
+    from core.mesh_features import brep_from_mesh
+
+    mesh = trimesh.creation.cylinder(0.05, 0.2, sections=64)
+    model = brep_from_mesh(mesh.vertices, mesh.faces)
+    c = np.array([0.3, -0.9, 0.2])
+    wf = model.wireframe(c, np.eye(4))
+    bare = model.wireframe(c, np.eye(4), contours=False)
+    sil = wf.kind == "silhouette"
+    assert 2 <= sil.sum() <= 4 and np.all(wf.edge_index[sil] == -1) and np.all(wf.feature[sil] >= len(model.edges))
+    assert set(bare.kind) == {"edge"} and np.array_equal(bare.feature, wf.feature[~sil])
+    # the contour sides are the mesh's generators nearest the analytic ones (tangent plane through c):
+    # at angles φ ± arccos(r / |c⊥|), within one of the 64 sections
+    X = wf.segments[sil].reshape(-1, 3)
+    phi = np.arctan2(c[1], c[0])
+    true = phi + np.array([1.0, -1.0]) * np.arccos(0.05 / np.hypot(c[0], c[1]))
+    ang = np.arctan2(X[:, 1], X[:, 0])
+    off = np.abs(np.angle(np.exp(1j * (ang[:, None] - true[None]))))
+    assert np.all(off.min(axis=1) <= 2 * np.pi / 64) and set(off.argmin(axis=1)) == {0, 1}
