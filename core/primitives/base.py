@@ -201,6 +201,7 @@ def no_hits(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def join_outlines(outlines: list[Outline]) -> Outline:
     """Several outlines as one: features offset so each keeps its own ids (n_features summed)."""
+    outlines = [o for o in outlines if o.n_features]  # no ids: no segments and no offset
     if not outlines:
         return Outline.empty()
     if len(outlines) == 1:

@@ -298,7 +298,7 @@ class Polyhedron:
         edge = np.concatenate([np.arange(E), np.full(m, -1)]).astype(np.int64)
         return Outline(
             self.vertices[np.concatenate([self.edges, smooth.sides[idx]]) if m else self.edges].reshape(-1, 2, 3),
-            np.concatenate([self._edge_visibility(c), np.ones(m, bool)]),
+            np.concatenate([self._edge_visibility(c) if E else np.zeros(0, bool), np.ones(m, bool)]),
             np.concatenate([np.full(E, "edge", dtype="<U10"), np.full(m, "silhouette", dtype="<U10")]),
             edge,
             np.concatenate([np.arange(E), E + idx]).astype(np.int64),

@@ -9,6 +9,7 @@ generators whose tangent plane passes through it (``silhouette``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, ClassVar
 
 import numpy as np
@@ -61,13 +62,15 @@ class Revolution:
     def n_labels(self) -> int:
         return 3
 
-    @property
+    @cached_property
     def axis(self) -> np.ndarray:
-        """Unit axis direction p0 → p1, shape (3,)."""
+        """Unit axis direction p0 → p1, shape (3,), read-only."""
         a = self.p1 - self.p0
-        return a / np.linalg.norm(a)
+        a = a / np.linalg.norm(a)
+        a.setflags(write=False)
+        return a
 
-    @property
+    @cached_property
     def height(self) -> float:
         """Length of the axis, metres."""
         return float(np.linalg.norm(self.p1 - self.p0))
@@ -77,6 +80,17 @@ class Revolution:
         return abs(self.r0 - self.r1) <= 1e-12
 
     def _radial_basis(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._basis
+
+    @cached_property
+    def _axis_cross(self) -> np.ndarray:
+        """The matrix (3, 3) of a × ·."""
+        a = self.axis
+        return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+    @cached_property
+    def _basis(self) -> tuple[np.ndarray, np.ndarray]:
+        """Two unit vectors spanning the plane normal to the axis (computed once: drawn every frame)."""
         return circle_basis(self.axis)
 
     def _caps(self) -> tuple[tuple[np.ndarray, float, np.ndarray], ...]:
@@ -107,7 +121,7 @@ class Revolution:
         k = self.r0 - (self.r0 - self.r1) * q_a / self.height
         ok = (D > np.abs(k)) & (D >= 1e-12)
         w_hat = w / np.where(ok, D, 1.0)[:, None]
-        b_hat = np.cross(a, w_hat)
+        b_hat = w_hat @ self._axis_cross.T  # a × ŵ
         c = np.where(ok, k / np.where(ok, D, 1.0), 0.0)
         s = np.sqrt(np.maximum(0.0, 1.0 - c * c))
         return c[:, None] * w_hat + s[:, None] * b_hat, c[:, None] * w_hat - s[:, None] * b_hat, ok
