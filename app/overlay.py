@@ -6,8 +6,9 @@ benchmark.
 Projection is done here, in Python, with the camera's 3×4 matrix C (viser's own camera has no
 principal point or skew). Segments are first clipped in 3D to the half-space in front of the
 camera (depth ≥ ``min_depth_m``), then projected and clipped to the image rectangle. Hidden edges
-(``BRep.wireframe``'s visibility: exact for convex objects) are dashed. A mesh's curved regions are
-drawn by their silhouettes at the current pose (``model_wireframe``, ``core.silhouette``).
+(``BRep.wireframe``'s visibility: exact for convex objects) are dashed. Curved surfaces — solids
+and a mesh's curved regions — are drawn by their silhouettes at the current pose (each primitive's
+``outline``).
 
 The pixel world (DESIGN.md §"The operator interface"): pixel (u, v) ↔ world (u·k, v·k, 0) of the
 viser scene; the video frame is a textured plane on z = 0 and the viewer's camera looks along +z
@@ -17,14 +18,12 @@ the zoom or pan.
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.brep import BRep, Wireframe
+from core.brep import BRep
 from core.camera import Camera
-from core.silhouette import SmoothSides, contour_segments
 
 __all__ = [
     "PixelWorld",
@@ -34,8 +33,6 @@ __all__ = [
     "clip_segments_rect",
     "dash_segments",
     "ProjectedWireframe",
-    "smooth_sides",
-    "model_wireframe",
     "project_wireframe",
     "LineBatch",
     "cross_markers",
@@ -225,49 +222,6 @@ class ProjectedWireframe:
     kind: np.ndarray
 
 
-_SMOOTH: dict[int, tuple[weakref.ref, SmoothSides]] = {}  # id(model) → (the model, its smooth sides)
-
-
-def smooth_sides(model: BRep) -> SmoothSides:
-    """The smooth sides of a model's faces (``core.silhouette``), computed once per model object.
-
-    The database keeps one ``BRep`` per stored model, so a mesh's sides are found once, not at
-    every redraw (a 5,120-triangle sphere: a few ms; its contour at a new pose: about 0.1 ms).
-    """
-    key = id(model)
-    hit = _SMOOTH.get(key)
-    if hit is not None and hit[0]() is model:
-        return hit[1]
-    sides = SmoothSides.of(model.vertices, model.faces, model.edges)
-    _SMOOTH[key] = (weakref.ref(model, lambda _ref, key=key: _SMOOTH.pop(key, None)), sides)
-    return sides
-
-
-def model_wireframe(model: BRep, center_world: np.ndarray, T_world_obj: np.ndarray, n_circle: int = 48) -> Wireframe:
-    """``BRep.wireframe`` plus the silhouettes of the model's smooth regions (a mesh's curved parts).
-
-    The mesh silhouettes (``core.silhouette``: the smooth sides between a face that faces the
-    centre and one that faces away) come after everything ``BRep.wireframe`` lists, as
-    "silhouette" segments, visible, edge index −1.
-    """
-    wf = model.wireframe(center_world, T_world_obj, n_circle=n_circle)
-    if len(model.faces) < 2:
-        return wf
-    T = np.asarray(T_world_obj, dtype=float)
-    c_obj = (np.asarray(center_world, dtype=float) - T[:3, 3]) @ T[:3, :3]
-    sil = contour_segments(model.vertices, smooth_sides(model), c_obj)
-    if len(sil) == 0:
-        return wf
-    sil = sil @ T[:3, :3].T + T[:3, 3]
-    m = len(sil)
-    return Wireframe(
-        np.concatenate([wf.segments.reshape(-1, 2, 3), sil]),
-        np.concatenate([wf.visible, np.ones(m, bool)]),
-        np.concatenate([wf.edge_index, np.full(m, -1, np.int64)]),
-        np.concatenate([wf.kind.astype("<U10"), np.full(m, "silhouette", dtype="<U10")]),
-    )
-
-
 def project_wireframe(
     camera: Camera,
     model: BRep,
@@ -281,7 +235,7 @@ def project_wireframe(
 
     width, height : the image to clip to (default: the camera's).
     """
-    wf = model_wireframe(model, camera.center, T_world_obj, n_circle=n_circle)
+    wf = model.wireframe(camera.center, T_world_obj, n_circle=n_circle)
     S, idx = clip_segments_depth(camera, wf.segments)
     uv = camera.project(S.reshape(-1, 3)).reshape(-1, 2, 2) if len(S) else np.zeros((0, 2, 2))
     uv, idx2 = clip_segments_rect(uv, width or camera.width, height or camera.height)

@@ -2,10 +2,11 @@
 
 Run: .venv/bin/python bench/silhouette.py [--poses 30] [--repeat 3]
 
-For each model: the smooth sides found once per model (``app.overlay.smooth_sides``: what a new
+For each model: the smooth sides found once per model (``Polyhedron.smooth_sides``: what a new
 or remodelled object costs once), the contour at one pose (``SmoothSides.contour``), and one
 object's redraw on the database overlay's thread (``app.ui.drawing.draw_object``: wireframe,
-silhouettes, projection, clipping, dashing), with the mesh silhouettes and without them, at
+silhouettes, projection, clipping, dashing), with the mesh silhouettes and without them (the same
+edges with no faces: no smooth side, every edge drawn as visible), at
 ``--poses`` random poses in view of a 640×480, 800 px camera; medians over the poses, best of
 ``--repeat`` runs (the machine is shared: the anchor rows — a box and an analytic cylinder, which
 have no smooth side — show the load in the same run). "First redraw" is one object's redraw with
@@ -19,6 +20,7 @@ import argparse
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +30,6 @@ sys.path.insert(0, str(ROOT))
 
 import trimesh  # noqa: E402
 
-import app.overlay as overlay  # noqa: E402
 from app.ui.drawing import draw_object  # noqa: E402
 from app.workflows.site import SiteObject  # noqa: E402
 from core.brep import BRep  # noqa: E402
@@ -91,15 +92,12 @@ def main() -> int:
             t = time.perf_counter()
             sides = SmoothSides.of(model.vertices, model.faces, model.edges)
             pre = 1000.0 * (time.perf_counter() - t)
-            overlay.smooth_sides(model)
+            model.polyhedron.smooth_sides()
             contour = _median_ms(sides.contour, centres)
             with_sil = _median_ms(lambda o: draw_object(cam, o, 640, 480), objs)
-            original = overlay.model_wireframe
-            overlay.model_wireframe = lambda m, c, T, n_circle=48: m.wireframe(c, T, n_circle=n_circle)
-            try:
-                without = _median_ms(lambda o: draw_object(cam, o, 640, 480), objs)
-            finally:
-                overlay.model_wireframe = original
+            bare = BRep(model.vertices, model.edges, (), model.solids, model.circles)
+            bare_objs = [replace(o, model=bare) for o in objs]
+            without = _median_ms(lambda o: draw_object(cam, o, 640, 480), bare_objs)
             best = [min(a, b) for a, b in zip(best, (pre, contour, with_sil, without, first))]
         n_sil = int(np.median([len(sides.contour(c)) for c in centres]))
         rows.append((name, sum(len(f) == 3 for f in model.faces), len(sides), n_sil, *best))

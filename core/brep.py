@@ -1,12 +1,15 @@
 """The B-Rep model of an object: what the database stores, the overlay draws and the solvers use.
 
-A model lives in its own frame ``obj`` (metres); its pose in the site is ``T_world_obj``.
+A model lives in its own frame ``obj`` (metres); its pose in the site is ``T_world_obj``. It is a
+list of primitives (``core.primitives``), each of which draws, casts rays, tessellates, samples its
+edges and writes itself; the model loops over them (``parts``) and never asks their kind:
 
-* ``vertices`` (V, 3), ``edges`` (E, 2) vertex indices, ``faces``: vertex loops, counter-clockwise
-  seen from outside (their right-hand normal points out).
-* ``solids``: analytic solids of revolution (``Revolution``: a cylinder, or a cone/frustum with two
-  radii) given by their axis endpoints and radii. Their silhouette lines depend on the view and
-  are computed per camera (``Revolution.silhouette``).
+* its polyhedral part (``Polyhedron``): ``vertices`` (V, 3), ``edges`` (E, 2) vertex indices,
+  ``faces``: vertex loops, counter-clockwise seen from outside (their right-hand normal points out).
+  An imported mesh is this part too: its curved regions are faces whose sides are not edges.
+* ``solids``: analytic solids — solids of revolution (``Revolution``: a cylinder, or a cone/frustum
+  with two radii) and spheres (``Sphere``). Their silhouettes depend on the view and are computed
+  per camera.
 * ``circles``: free circular edges (``Circle``: centre, plane normal, radius), e.g. the ViSP
   ``.cao`` circles block. They are edges only (no surface) and are always drawn.
 
@@ -16,163 +19,15 @@ this is what ``wireframe`` computes (exact for convex objects, back-face culling
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .geometry import as_points
+from .primitives import Circle, Outline, Polyhedron, Primitive, Revolution, Sphere, join_outlines, primitive_from_dict
 from .transforms import transform_points
 
-__all__ = ["Revolution", "Circle", "BRep", "Wireframe"]
-
-
-@dataclass(frozen=True)
-class Revolution:
-    """A cylinder or cone (frustum) in the object frame.
-
-    p0, p1 : array, shape (3,), axis endpoints (metres). r0, r1 : radii at p0 and p1 (metres);
-    equal for a cylinder, one may be 0 for a full cone.
-    """
-
-    p0: np.ndarray
-    p1: np.ndarray
-    r0: float
-    r1: float
-
-    def __post_init__(self):
-        p0 = np.asarray(self.p0, dtype=float).reshape(3)
-        p1 = np.asarray(self.p1, dtype=float).reshape(3)
-        if not (np.all(np.isfinite(p0)) and np.all(np.isfinite(p1))):
-            raise ValueError("a solid of revolution's axis endpoints must be finite")
-        if np.linalg.norm(p1 - p0) <= 1e-12:
-            raise ValueError("a solid of revolution needs two distinct axis endpoints")
-        if not (self.r0 >= 0 and self.r1 >= 0) or self.r0 + self.r1 <= 0:
-            raise ValueError(f"radii must be non-negative and not both zero, got {self.r0}, {self.r1}")
-        object.__setattr__(self, "p0", p0)
-        object.__setattr__(self, "p1", p1)
-        object.__setattr__(self, "r0", float(self.r0))
-        object.__setattr__(self, "r1", float(self.r1))
-
-    @property
-    def axis(self) -> np.ndarray:
-        """Unit axis direction p0 → p1, shape (3,)."""
-        a = self.p1 - self.p0
-        return a / np.linalg.norm(a)
-
-    @property
-    def height(self) -> float:
-        """Length of the axis, metres."""
-        return float(np.linalg.norm(self.p1 - self.p0))
-
-    @property
-    def is_cylinder(self) -> bool:
-        return abs(self.r0 - self.r1) <= 1e-12
-
-    def _radial_basis(self) -> tuple[np.ndarray, np.ndarray]:
-        a = self.axis
-        e1 = np.cross(a, np.eye(3)[int(np.argmin(np.abs(a)))])
-        e1 /= np.linalg.norm(e1)
-        return e1, np.cross(a, e1)
-
-    def rim(self, which: int, n: int = 48) -> np.ndarray:
-        """Closed polyline (n + 1, 3) of the rim circle at p0 (which=0) or p1 (which=1), obj frame."""
-        e1, e2 = self._radial_basis()
-        th = np.linspace(0.0, 2.0 * np.pi, n + 1)
-        centre, r = (self.p0, self.r0) if which == 0 else (self.p1, self.r1)
-        return centre + r * (np.cos(th)[:, None] * e1 + np.sin(th)[:, None] * e2)
-
-    def silhouette(self, center_obj: np.ndarray) -> np.ndarray:
-        """The two contour generators seen from an optical centre (3,) in the object frame.
-
-        Returns array, shape (2, 2, 3): two segments (from the p0 rim to the p1 rim), or shape
-        (0, 2, 3) when the centre is inside the surface's extension (no silhouette).
-        The lateral surface's outward normal at angle θ is ``h·e(θ) + (r0 − r1)·a``; a generator
-        is on the contour when its tangent plane passes through the centre: ``e·w = k`` with
-        w the centre's radial offset and ``k = r0 − (r0 − r1)·q_a / h``.
-        """
-        a = self.axis
-        h = self.height
-        q = np.asarray(center_obj, dtype=float) - self.p0
-        q_a = float(q @ a)
-        w = q - q_a * a
-        D = float(np.linalg.norm(w))
-        k = self.r0 - (self.r0 - self.r1) * q_a / h
-        if D <= abs(k) or D < 1e-12:
-            return np.zeros((0, 2, 3))
-        w_hat = w / D
-        b_hat = np.cross(a, w_hat)
-        c = k / D
-        s = np.sqrt(max(0.0, 1.0 - c * c))
-        out = []
-        for sign in (1.0, -1.0):
-            e = c * w_hat + sign * s * b_hat
-            out.append([self.p0 + self.r0 * e, self.p1 + self.r1 * e])
-        return np.array(out)
-
-    def lateral_normal(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Radial unit vectors e(θ) (N, 3) and outward lateral normals (N, 3) (unnormalised)."""
-        e1, e2 = self._radial_basis()
-        e = np.cos(theta)[:, None] * e1 + np.sin(theta)[:, None] * e2
-        return e, self.height * e + (self.r0 - self.r1) * self.axis
-
-    def triangles(self, n: int = 48) -> tuple[np.ndarray, np.ndarray]:
-        """Closed triangle mesh (vertices (2n + 2, 3), triangles (4n, 3)), outward-facing."""
-        e1, e2 = self._radial_basis()
-        th = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
-        ring = np.cos(th)[:, None] * e1 + np.sin(th)[:, None] * e2
-        V = np.vstack([self.p0 + self.r0 * ring, self.p1 + self.r1 * ring, self.p0, self.p1])
-        i = np.arange(n)
-        j = (i + 1) % n
-        c0, c1 = 2 * n, 2 * n + 1
-        side = np.vstack([np.column_stack([i, j, n + j]), np.column_stack([i, n + j, n + i])])
-        bottom = np.column_stack([np.full(n, c0), j, i])
-        top = np.column_stack([np.full(n, c1), n + i, n + j])
-        return V, np.vstack([side, bottom, top]).astype(np.int64)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"p0": self.p0.tolist(), "p1": self.p1.tolist(), "r0": self.r0, "r1": self.r1}
-
-
-@dataclass(frozen=True)
-class Circle:
-    """A circular edge in the object frame.
-
-    centre : array, shape (3,), metres. normal : array, shape (3,), unit normal of the circle's
-    plane (normalised on construction). radius : metres, > 0.
-    """
-
-    centre: np.ndarray
-    normal: np.ndarray
-    radius: float
-
-    def __post_init__(self):
-        c = np.asarray(self.centre, dtype=float).reshape(3)
-        n = np.asarray(self.normal, dtype=float).reshape(3)
-        norm = float(np.linalg.norm(n))
-        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(n))) or norm <= 1e-12:
-            raise ValueError(f"a circle needs a finite centre and a non-zero normal, got {c}, {n}")
-        if not (np.isfinite(self.radius) and self.radius > 0):
-            raise ValueError(f"a circle's radius must be positive, got {self.radius}")
-        object.__setattr__(self, "centre", c)
-        object.__setattr__(self, "normal", n / norm)
-        object.__setattr__(self, "radius", float(self.radius))
-
-    def basis(self) -> tuple[np.ndarray, np.ndarray]:
-        """Two unit vectors (3,), (3,) spanning the circle's plane (e1 × e2 = normal)."""
-        n = self.normal
-        e1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
-        e1 /= np.linalg.norm(e1)
-        return e1, np.cross(n, e1)
-
-    def polyline(self, n: int = 48) -> np.ndarray:
-        """Closed polyline (n + 1, 3) on the circle, object frame."""
-        e1, e2 = self.basis()
-        th = np.linspace(0.0, 2.0 * np.pi, n + 1)
-        return self.centre + self.radius * (np.cos(th)[:, None] * e1 + np.sin(th)[:, None] * e2)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"centre": self.centre.tolist(), "normal": self.normal.tolist(), "radius": self.radius}
+__all__ = ["Revolution", "Circle", "Sphere", "Polyhedron", "BRep", "Wireframe"]
 
 
 @dataclass(frozen=True)
@@ -181,13 +36,18 @@ class Wireframe:
 
     segments : array, shape (K, 2, 3), world points. visible : array, shape (K,), bool.
     edge_index : array, shape (K,), the model edge each segment is (−1 for silhouettes and rims).
-    kind : array, shape (K,), of str: "edge", "silhouette" or "rim".
+    kind : array, shape (K,), of str: "edge", "silhouette", "rim" (a solid's cap) or "circle" (a free
+    circle). feature : array, shape (K,), int, an id stable across views (``Outline.feature``, the
+    parts' ids one after the other). chord : array, shape (K,), int, −1 for a straight segment, else
+    its index along its closed curve (``Outline.chord``).
     """
 
     segments: np.ndarray
     visible: np.ndarray
     edge_index: np.ndarray
     kind: np.ndarray
+    feature: np.ndarray
+    chord: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -195,8 +55,9 @@ class BRep:
     """Boundary representation of an object in its own frame (metres).
 
     vertices : array, shape (V, 3). edges : array, shape (E, 2), int. faces : tuple of vertex
-    loops (tuples of int), counter-clockwise seen from outside. solids : tuple of Revolution.
-    circles : tuple of Circle (free circular edges).
+    loops (tuples of int), counter-clockwise seen from outside. solids : tuple of solid primitives
+    (``Revolution``, ``Sphere``: primitives with a surface). circles : tuple of edge-only primitives
+    (``Circle``).
     """
 
     vertices: np.ndarray
@@ -204,44 +65,33 @@ class BRep:
     faces: tuple = ()
     solids: tuple = ()
     circles: tuple = ()
-    _edge_faces: tuple = field(default=(), repr=False, compare=False)
 
     def __post_init__(self):
-        V = np.asarray(self.vertices, dtype=float).reshape(-1, 3)
-        if len(V):
-            as_points(V, "vertices")
-        E = np.asarray(self.edges, dtype=np.int64).reshape(-1, 2)
-        if len(E) and (E.min() < 0 or E.max() >= len(V)):
-            raise ValueError(f"edge vertex index out of range 0..{len(V) - 1}")
-        if np.any(E[:, 0] == E[:, 1]):
-            raise ValueError("an edge joins a vertex to itself")
-        faces = tuple(tuple(int(i) for i in f) for f in self.faces)
-        for k, f in enumerate(faces):
-            if len(f) < 3:
-                raise ValueError(f"face {k} has {len(f)} vertices; a face needs at least 3")
-            if min(f) < 0 or max(f) >= len(V):
-                raise ValueError(f"face {k} has a vertex index out of range 0..{len(V) - 1}")
+        poly = Polyhedron(self.vertices, self.edges, self.faces)
         solids = tuple(self.solids)
-        if not all(isinstance(s, Revolution) for s in solids):
-            raise ValueError("solids must be Revolution instances")
+        if not all(isinstance(s, Primitive) and s.surface for s in solids):
+            raise ValueError("solids must be primitives with a surface (Revolution, Sphere)")
         circles = tuple(self.circles)
-        if not all(isinstance(c, Circle) for c in circles):
-            raise ValueError("circles must be Circle instances")
-        if len(V) == 0 and not solids and not circles:
-            raise ValueError("a model needs vertices, a solid of revolution or a circle")
-        V.setflags(write=False)
-        E.setflags(write=False)
-        object.__setattr__(self, "vertices", V)
-        object.__setattr__(self, "edges", E)
-        object.__setattr__(self, "faces", faces)
+        if not all(isinstance(c, Primitive) and not c.surface for c in circles):
+            raise ValueError("circles must be edge primitives (Circle)")
+        if len(poly.vertices) == 0 and not solids and not circles:
+            raise ValueError("a model needs vertices, a solid or a circle")
+        object.__setattr__(self, "vertices", poly.vertices)
+        object.__setattr__(self, "edges", poly.edges)
+        object.__setattr__(self, "faces", poly.faces)
         object.__setattr__(self, "solids", solids)
         object.__setattr__(self, "circles", circles)
-        # Which faces each edge borders (for hidden-line removal).
-        lookup: dict[tuple[int, int], list[int]] = {}
-        for k, f in enumerate(faces):
-            for a, b in zip(f, f[1:] + f[:1]):
-                lookup.setdefault((min(a, b), max(a, b)), []).append(k)
-        object.__setattr__(self, "_edge_faces", tuple(tuple(lookup.get((min(a, b), max(a, b)), ())) for a, b in E))
+        object.__setattr__(self, "_parts", (poly, *solids, *circles))
+
+    @property
+    def polyhedron(self) -> Polyhedron:
+        """The polyhedral part (vertices, edges, faces; empty for a model of solids alone)."""
+        return self._parts[0]
+
+    @property
+    def parts(self) -> tuple[Primitive, ...]:
+        """Every primitive of the model: the polyhedral part first (possibly empty), the solids, the circles."""
+        return self._parts
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -326,172 +176,94 @@ class BRep:
 
     def edge_faces(self, k: int) -> tuple[int, ...]:
         """Indices of the faces that edge k borders."""
-        return self._edge_faces[k]
-
-    def _cached(self, name: str, compute):
-        """A pose-independent array computed once per model (the model is immutable)."""
-        value = self.__dict__.get(name)
-        if value is None:
-            value = compute()
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
-        return value
+        return self.polyhedron.edge_faces()[k]
 
     def face_normals(self) -> np.ndarray:
-        """Outward unit normals (F, 3) by Newell's method (robust for non-planar loops)."""
-        return self._cached("_face_normals", self._compute_face_normals).copy()
-
-    def _compute_face_normals(self) -> np.ndarray:
-        out = np.zeros((len(self.faces), 3))
-        tri = np.fromiter((len(f) == 3 for f in self.faces), dtype=bool, count=len(self.faces))
-        if tri.any():  # a mesh's triangles at once, summed and normalised as the loop below does
-            P = self.vertices[np.array([f for f, t in zip(self.faces, tri) if t], dtype=np.int64)]
-            Q = np.roll(P, -1, axis=1)
-            n = np.stack(
-                [
-                    (P[..., 1] - Q[..., 1]) * (P[..., 2] + Q[..., 2]),
-                    (P[..., 2] - Q[..., 2]) * (P[..., 0] + Q[..., 0]),
-                    (P[..., 0] - Q[..., 0]) * (P[..., 1] + Q[..., 1]),
-                ],
-                axis=-1,
-            ).sum(axis=1)
-            out[tri] = [v / max(np.linalg.norm(v), 1e-300) for v in n]
-        for k in np.flatnonzero(~tri):
-            f = self.faces[k]
-            P = self.vertices[list(f)]
-            Q = np.roll(P, -1, axis=0)
-            n = np.array(
-                [
-                    np.sum((P[:, 1] - Q[:, 1]) * (P[:, 2] + Q[:, 2])),
-                    np.sum((P[:, 2] - Q[:, 2]) * (P[:, 0] + Q[:, 0])),
-                    np.sum((P[:, 0] - Q[:, 0]) * (P[:, 1] + Q[:, 1])),
-                ]
-            )
-            out[k] = n / max(np.linalg.norm(n), 1e-300)
-        return out
+        """Outward unit normals (F, 3) by Newell's method (robust for non-planar loops); a copy."""
+        return self.polyhedron.face_normals().copy()
 
     def face_centroids(self) -> np.ndarray:
-        """Centroids (F, 3) of the faces' vertex loops."""
-        return self._cached("_face_centroids", self._compute_face_centroids).copy()
-
-    def _compute_face_centroids(self) -> np.ndarray:
-        out = np.zeros((len(self.faces), 3))
-        tri = np.fromiter((len(f) == 3 for f in self.faces), dtype=bool, count=len(self.faces))
-        if tri.any():
-            out[tri] = self.vertices[np.array([f for f, t in zip(self.faces, tri) if t], dtype=np.int64)].mean(axis=1)
-        for k in np.flatnonzero(~tri):
-            out[k] = self.vertices[list(self.faces[k])].mean(axis=0)
-        return out
-
-    def _edge_face_pairs(self) -> np.ndarray:
-        """(M, 2) int: every (edge, face it borders) pair, edges in order (for vectorised visibility)."""
-
-        def compute():
-            pairs = [(k, f) for k, fs in enumerate(self._edge_faces) for f in fs]
-            return np.array(pairs, dtype=np.int64).reshape(-1, 2)
-
-        return self._cached("_edge_face_pairs_", compute)
+        """Centroids (F, 3) of the faces' vertex loops; a copy."""
+        return self.polyhedron.face_centroids().copy()
 
     def bounds(self) -> np.ndarray:
-        """Axis-aligned bounds (2, 3) in the object frame: (min, max)."""
-        pts = [self.vertices] + [np.vstack([s.rim(0, 16), s.rim(1, 16)]) for s in self.solids]
-        pts += [c.polyline(16) for c in self.circles]
-        P = np.vstack([p for p in pts if len(p)])
-        return np.array([P.min(axis=0), P.max(axis=0)])
+        """Axis-aligned bounds (2, 3) in the object frame: (min, max), exact for every part."""
+        B = np.array([b for b in (p.bounds() for p in self.parts) if b is not None])
+        return np.array([B[:, 0].min(axis=0), B[:, 1].max(axis=0)])
+
+    def support_points(self, n: int = 48, min_radius: float = 0.0) -> np.ndarray:
+        """Points (P, 3), object frame, whose convex hull is the model's (``Primitive.support_points``)."""
+        pts = [p.support_points(n, min_radius) for p in self.parts]
+        return np.vstack([q for q in pts if len(q)]) if any(len(q) for q in pts) else np.zeros((0, 3))
+
+    def plane_normals(self) -> np.ndarray:
+        """Outward normals (F, 3) of the model's flat faces and caps (what it can rest on)."""
+        return np.vstack([p.plane_normals() for p in self.parts])
+
+    def turn_invariant(self, axis_obj: np.ndarray) -> bool:
+        """True when a turn about the line through the origin along ``axis_obj`` (3,), unit, leaves the
+        model unchanged (an upright cylinder about its axis)."""
+        return all(p.turn_invariant(axis_obj) for p in self.parts)
 
     def triangles(self, n_circle: int = 48) -> tuple[np.ndarray, np.ndarray]:
         """Triangle mesh of the whole model in the object frame: vertices (M, 3), triangles (T, 3).
 
-        Faces are fan-triangulated (convex faces); solids are tessellated with ``n_circle`` sides.
+        Faces are fan-triangulated (convex faces); curved surfaces are tessellated with ``n_circle`` sides.
         """
-        Vs = [self.vertices]
-        Ts = []
-        for f in self.faces:
-            Ts += [(f[0], f[i], f[i + 1]) for i in range(1, len(f) - 1)]
-        Ts = [np.array(Ts, dtype=np.int64).reshape(-1, 3)]
-        offset = len(self.vertices)
-        for s in self.solids:
-            V, T = s.triangles(n_circle)
-            Vs.append(V)
-            Ts.append(T + offset)
-            offset += len(V)
+        Vs, Ts = [], []
+        offset = 0
+        for p in self.parts:
+            V, T = p.triangles(n_circle)
+            Vs.append(np.asarray(V, dtype=float).reshape(-1, 3))
+            Ts.append(np.asarray(T, dtype=np.int64).reshape(-1, 3) + offset)
+            offset += len(Vs[-1])
         return np.vstack(Vs), np.vstack(Ts)
 
     def transformed(self, T_new_obj: np.ndarray) -> BRep:
-        """The same model with its vertices mapped by ``T_new_obj`` (e.g. to bake a pose)."""
-        R, t = T_new_obj[:3, :3], T_new_obj[:3, 3]
-        solids = tuple(Revolution(R @ s.p0 + t, R @ s.p1 + t, s.r0, s.r1) for s in self.solids)
-        circles = tuple(Circle(R @ c.centre + t, R @ c.normal, c.radius) for c in self.circles)
-        V = transform_points(T_new_obj, self.vertices) if len(self.vertices) else self.vertices
-        return BRep(V, self.edges, self.faces, solids, circles)
+        """The same model with its parts mapped by ``T_new_obj`` (e.g. to bake a pose)."""
+        poly, *_ = parts = [p.transformed(T_new_obj) for p in self.parts]
+        return BRep(
+            poly.vertices,
+            poly.edges,
+            poly.faces,
+            tuple(parts[1 : 1 + len(self.solids)]),
+            tuple(parts[1 + len(self.solids) :]),
+        )
 
-    def wireframe(self, center_world: np.ndarray, T_world_obj: np.ndarray, n_circle: int = 48) -> Wireframe:
+    def outline(self, center_obj: np.ndarray, n_circle: int = 48, contours: bool = True) -> Outline:
+        """Every part's outline seen from a point (3,) in the object frame, one after the other.
+
+        contours : False leaves out the contour generators of a mesh's smooth regions (sides of its
+        tessellation, not edges of the object): the polyhedral part then gives its edges alone.
+        """
+        c = np.asarray(center_obj, dtype=float).reshape(3)
+        outlines = [p.outline(c, n_circle) for p in self.parts]
+        if not contours:
+            outlines[0] = outlines[0].subset(outlines[0].edge >= 0)
+        return join_outlines(outlines)
+
+    def wireframe(
+        self, center_world: np.ndarray, T_world_obj: np.ndarray, n_circle: int = 48, contours: bool = True
+    ) -> Wireframe:
         """Segments to draw from an optical centre (3,), world frame, with their visibility.
 
-        Polyhedral edges: visible when a bordering face faces the centre (edges with no face
-        are always visible). Solids: the two silhouette generators (visible) and the rim
-        circles, each piece visible when its cap or the lateral surface next to it faces the centre.
-        Free circles (``circles``) are drawn as "rim" segments, always visible (they bound no face).
+        Each part's outline (``Primitive.outline``) in turn: polyhedral edges (visible when a
+        bordering face faces the centre; edges with no face always) and the contours of a mesh's
+        smooth regions (unless ``contours`` is False); solids' silhouettes (visible) and rims (each
+        piece visible when its cap or the lateral surface next to it faces the centre); free
+        circles, always visible.
         """
         T = np.asarray(T_world_obj, dtype=float)
         c_obj = (np.asarray(center_world, dtype=float) - T[:3, 3]) @ T[:3, :3]
-        segs, vis, idx, kind = [], [], [], []
-        if len(self.edges):
-            if len(self.faces):
-                normals = self._cached("_face_normals", self._compute_face_normals)
-                cents = self._cached("_face_centroids", self._compute_face_centroids)
-                facing = np.einsum("ij,ij->i", normals, c_obj - cents) > 0
-            else:
-                facing = np.zeros(0, bool)
-            # an edge is visible when it borders no face or one of its faces faces the centre
-            pairs = self._edge_face_pairs()
-            has_face = np.bincount(pairs[:, 0], minlength=len(self.edges)) > 0
-            seen = np.bincount(pairs[:, 0], weights=facing[pairs[:, 1]], minlength=len(self.edges)) > 0
-            vis += (~has_face | seen).tolist()
-            segs.append(self.edge_segments())
-            idx += list(range(len(self.edges)))
-            kind += ["edge"] * len(self.edges)
-        for s in self.solids:
-            sil = s.silhouette(c_obj)
-            if len(sil):
-                segs.append(sil)
-                vis += [True] * len(sil)
-                idx += [-1] * len(sil)
-                kind += ["silhouette"] * len(sil)
-            th = np.linspace(0.0, 2.0 * np.pi, n_circle + 1)
-            e, lat_n = s.lateral_normal(th)
-            for _which, (centre, r, cap_n) in enumerate(((s.p0, s.r0, -s.axis), (s.p1, s.r1, s.axis))):
-                if r <= 0:
-                    continue
-                P = centre + r * e
-                cap_facing = float(cap_n @ (c_obj - centre)) > 0
-                lat_facing = np.einsum("ij,ij->i", lat_n, c_obj - P) > 0
-                seg = np.stack([P[:-1], P[1:]], axis=1)
-                segs.append(seg)
-                vis += list(cap_facing | (lat_facing[:-1] & lat_facing[1:]))
-                idx += [-1] * len(seg)
-                kind += ["rim"] * len(seg)
-        for c in self.circles:
-            P = c.polyline(n_circle)
-            segs.append(np.stack([P[:-1], P[1:]], axis=1))
-            vis += [True] * n_circle
-            idx += [-1] * n_circle
-            kind += ["rim"] * n_circle
-        if not segs:
-            return Wireframe(np.zeros((0, 2, 3)), np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, dtype="<U10"))
-        S = np.vstack(segs)
-        S = transform_points(T, S.reshape(-1, 3)).reshape(-1, 2, 3)
-        return Wireframe(S, np.array(vis, bool), np.array(idx, np.int64), np.array(kind, dtype="<U10"))
+        o = self.outline(c_obj, n_circle, contours)
+        S = transform_points(T, o.segments.reshape(-1, 3)).reshape(-1, 2, 3)
+        return Wireframe(S, o.visible, o.edge, o.kind, o.feature, o.chord)
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description (lists of floats and ints); "circles" only when there are some."""
-        d = {
-            "vertices": self.vertices.tolist(),
-            "edges": self.edges.tolist(),
-            "faces": [list(f) for f in self.faces],
-            "solids": [s.to_dict() for s in self.solids],
-        }
+        d = self.polyhedron.to_dict()
+        d["solids"] = [s.to_dict() for s in self.solids]
         if self.circles:
             d["circles"] = [c.to_dict() for c in self.circles]
         return d
@@ -500,35 +272,16 @@ class BRep:
     def from_dict(cls, d: dict[str, Any]) -> BRep:
         """Inverse of ``to_dict``; ValueError naming the field on bad input."""
         try:
-            solids = tuple(Revolution(s["p0"], s["p1"], s["r0"], s["r1"]) for s in d.get("solids", []))
-            circles = tuple(Circle(c["centre"], c["normal"], c["radius"]) for c in d.get("circles", []))
-            return cls(
-                np.asarray(d.get("vertices", []), dtype=float).reshape(-1, 3),
-                np.asarray(d.get("edges", []), dtype=np.int64).reshape(-1, 2),
-                tuple(tuple(f) for f in d.get("faces", [])),
-                solids,
-                circles,
-            )
-        except (KeyError, TypeError) as exc:
+            poly = Polyhedron.from_dict(d)
+            solids = tuple(primitive_from_dict(s, Revolution.kind) for s in d.get("solids", []))
+            circles = tuple(primitive_from_dict(c, Circle.kind) for c in d.get("circles", []))
+            return cls(poly.vertices, poly.edges, poly.faces, solids, circles)
+        except (KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f"malformed model description: {exc!r}") from exc
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, BRep):
             return NotImplemented
-        return (
-            np.array_equal(self.vertices, other.vertices)
-            and np.array_equal(self.edges, other.edges)
-            and self.faces == other.faces
-            and len(self.solids) == len(other.solids)
-            and all(
-                np.array_equal(a.p0, b.p0) and np.array_equal(a.p1, b.p1) and a.r0 == b.r0 and a.r1 == b.r1
-                for a, b in zip(self.solids, other.solids)
-            )
-            and len(self.circles) == len(other.circles)
-            and all(
-                np.array_equal(a.centre, b.centre) and np.array_equal(a.normal, b.normal) and a.radius == b.radius
-                for a, b in zip(self.circles, other.circles)
-            )
-        )
+        return len(self.parts) == len(other.parts) and all(a == b for a, b in zip(self.parts, other.parts))
 
     __hash__ = None  # mutable-looking arrays: not hashable

@@ -427,10 +427,14 @@ def concat_breps(models: list[BRep]) -> BRep:
 
 
 def _reach_m(model: BRep) -> float:
-    """The largest |coordinate| of a model's points (vertices, axis ends, circle centres and rims)."""
-    values = [np.abs(model.vertices).max(initial=0.0)]
-    values += [max(np.abs(s.p0).max(), np.abs(s.p1).max()) + max(s.r0, s.r1) for s in model.solids]
-    values += [np.abs(c.centre).max() + c.radius for c in model.circles]
+    """The largest |coordinate| the reader checks in a model's written form: its points, and each
+    cylinder's axis ends and circle's centre plus their radius (``_within`` at each record)."""
+    values = [0.0]
+    for rec in (p.cao_part() for p in model.parts):
+        P = np.abs(np.asarray(rec.points, dtype=float).reshape(-1, 3)).max(axis=1)
+        values += P.tolist()
+        values += [max(P[i], P[j]) + r for i, j, r in rec.cylinders]
+        values += [P[c] + r for r, c, _, _ in rec.circles]
     return float(max(values))
 
 
@@ -758,7 +762,8 @@ def _fmt(x: float) -> str:
 
 
 def cao_text(model: BRep, comment: str = "", options: CaoOptions | None = None) -> str:
-    """The ``.cao`` (V1) text of a model; see the module docstring. ValueError for cones.
+    """The ``.cao`` (V1) text of a model (each primitive's ``cao_part``, in the model's order); see the
+    module docstring. ValueError for a primitive the format has no form for (a cone, a sphere).
 
     options : the ViSP options of the model's records (``read_cao_options``), written after each
     record's numbers. A line's options are written when the edge is written as a line (an edge
@@ -769,25 +774,15 @@ def cao_text(model: BRep, comment: str = "", options: CaoOptions | None = None) 
     def tail(text: str | None) -> str:
         return f" {text}" if text else ""
 
-    for s in model.solids:
-        if not s.is_cylinder:
-            raise ValueError(
-                "a .cao model has cylinders only; this model has a "
-                f"cone (radii {s.r0}, {s.r1}): export it as glTF or OBJ"
-            )
-    faces = list(enumerate(model.faces))  # every face, a mesh's smooth triangles too (see the module docstring)
-    covered = {(min(a, b), max(a, b)) for f in model.faces for a, b in zip(f, f[1:] + f[:1])}
-    lines = [(a, b) for a, b in map(tuple, model.edges.tolist()) if (a, b) not in covered]
-    points = [tuple(p) for p in model.vertices.tolist()]
-    cylinders = []
-    for s in model.solids:
-        cylinders.append((len(points), len(points) + 1, s.r0))
-        points += [tuple(s.p0), tuple(s.p1)]
-    circles = []
-    for c in model.circles:
-        e1, e2 = c.basis()
-        circles.append((c.radius, len(points), len(points) + 1, len(points) + 2))
-        points += [tuple(c.centre), tuple(c.centre + c.radius * e1), tuple(c.centre + c.radius * e2)]
+    records = [p.cao_part() for p in model.parts]  # ValueError for a primitive the format has no form for
+    points, lines, faces, cylinders, circles = [], [], [], [], []
+    for rec in records:
+        k = len(points)
+        points += [tuple(p) for p in np.asarray(rec.points, dtype=float).reshape(-1, 3).tolist()]
+        lines += [(a + k, b + k) for a, b in np.asarray(rec.lines, dtype=np.int64).reshape(-1, 2).tolist()]
+        faces += [tuple(v + k for v in f) for f in rec.faces]
+        cylinders += [(i + k, j + k, r) for i, j, r in rec.cylinders]
+        circles += [(r, c + k, i + k, j + k) for r, c, i, j in rec.circles]
     out = ["V1"]
     if comment:
         out += [f"# {line}" for line in comment.splitlines()]
@@ -798,7 +793,7 @@ def cao_text(model: BRep, comment: str = "", options: CaoOptions | None = None) 
     ]
     out += ["# Faces from 3D lines", "0"]
     out += ["# Faces from 3D points", str(len(faces))]
-    out += [" ".join(str(v) for v in (len(f),) + tuple(f)) + tail(options.faces.get(k)) for k, f in faces]
+    out += [" ".join(str(v) for v in (len(f),) + tuple(f)) + tail(options.faces.get(k)) for k, f in enumerate(faces)]
     out += ["# 3D cylinders", str(len(cylinders))] + [
         f"{i} {j} {_fmt(r)}" + tail(options.cylinders.get(k)) for k, (i, j, r) in enumerate(cylinders)
     ]

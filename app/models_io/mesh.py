@@ -3,7 +3,7 @@
 Reading merges duplicate vertices (an STL is a triangle soup) and reduces the triangles to their
 feature edges with ``core.mesh_features.brep_from_mesh``: a triangulated planar face adds no
 false edge. A curved region keeps its triangles as faces whose sides are not edges; the overlay
-draws its silhouette at each pose (``core.silhouette``, ``app.overlay.model_wireframe``): a
+draws its silhouette at each pose (``core.silhouette``, ``BRep.wireframe``): a
 cylinder's two side lines, a sphere's outline. A glTF scene's meshes are placed by their node
 transforms and merged into one model. Bad input raises ``MeshError`` naming the file (and, for
 OBJ, the line) and the problem; a mesh that gives nothing to draw (no sharp edge and no curved
@@ -54,7 +54,6 @@ import numpy as np
 from app.models_io.files import resolve_file
 from core.brep import BRep
 from core.mesh_features import brep_from_mesh
-from core.silhouette import SmoothSides
 
 __all__ = [
     "MeshError",
@@ -785,7 +784,7 @@ def read_mesh(path: str | Path, angle_deg: float = 30.0, *, max_faces: int = MAX
         model = brep_from_mesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces), angle_deg=angle_deg)
     except ValueError as exc:
         raise MeshError(f"{path}: {exc}") from None
-    if not len(model.edges) and not len(SmoothSides.of(model.vertices, model.faces, model.edges)):
+    if not len(model.edges) and not len(model.polyhedron.smooth_sides()):
         warnings.warn(
             MeshWarning(
                 f"{path}: this mesh gives nothing to draw on the overlay (no sharp edge and no curved surface with an "

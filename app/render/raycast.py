@@ -1,12 +1,10 @@
 """Exact ray casting of a scene's bodies, for the renderer and for visibility questions.
 
-Each body's B-Rep is cast analytically, in its own frame, part by part:
-
-* a convex polyhedron (every vertex on the inner side of every face plane; boxes, prisms,
-  pyramids) by clipping the ray against its face planes (Kay–Kajiya slabs generalised);
-* a solid of revolution (cylinder, cone, frustum) by the quadric of its lateral surface and the
-  discs of its caps, so silhouettes are exact rather than tessellated;
-* any other faced model by its triangles (Möller–Trumbore), all triangles at once.
+Each body's B-Rep is cast analytically, in its own frame, primitive by primitive
+(``core.primitives``: each primitive's ``ray_cast``): a convex polyhedron by its face planes, any
+other faced model (a mesh) by its triangles, a solid of revolution by the quadric of its lateral
+surface and the discs of its caps, a sphere by its quadric — so silhouettes are exact rather than
+tessellated. The nearest hit over the primitives wins.
 
 A ray from inside a body meets its surface on the way out (the exit face), as a mesh's would.
 This is the one ray caster of mcit: the renderer, the range-finder emulator (``BeamCaster``: one
@@ -17,8 +15,10 @@ Rays are ``X = origin + t · d`` with d of any length; ``t`` is returned in thos
 camera's unnormalised ray directions ``d = M⁻¹ (u, v, 1)`` (C = [M | p₄], normalised), t is the
 depth s of the hit (metres along the optical axis). Misses have t = +inf, body = −1.
 
-Face labels: polyhedral faces keep their B-Rep face index; a solid of revolution k of the model
-takes labels ``LABEL_SOLID + 3k`` (lateral), ``+1`` (cap at p0), ``+2`` (cap at p1).
+Face labels: the polyhedral part's faces keep their B-Rep face index; the model's other primitives
+follow from ``LABEL_SOLID`` on, each taking as many labels as it has (``Primitive.n_labels``): a
+model of solids of revolution alone gives solid k the labels ``LABEL_SOLID + 3k`` (lateral),
+``+1`` (cap at p0), ``+2`` (cap at p1).
 """
 
 from __future__ import annotations
@@ -27,12 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.brep import BRep, Revolution
+from core.brep import BRep
 
 __all__ = ["Hits", "BodyCaster", "SceneCaster", "BeamCaster", "LABEL_SOLID"]
 
 LABEL_SOLID = 1000
-_EPS = 1e-12
 
 
 @dataclass(frozen=True)
@@ -52,154 +51,25 @@ class Hits:
     X_obj: np.ndarray
 
 
-def _is_convex(model: BRep, normals: np.ndarray, offsets: np.ndarray) -> bool:
-    scale = max(float(np.ptp(model.vertices, axis=0).max()), 1e-9)
-    return bool(np.all(model.vertices @ normals.T + offsets <= 1e-9 * scale))
-
-
 class BodyCaster:
     """Ray caster of one B-Rep model in its own frame (see the module docstring)."""
 
     def __init__(self, model: BRep):
         self.model = model
-        self.solids: tuple[Revolution, ...] = tuple(model.solids)
-        self.planes_n = np.zeros((0, 3))
-        self.planes_d = np.zeros(0)
-        self.triangles = np.zeros((0, 3, 3))
-        self.triangle_face = np.zeros(0, dtype=np.int64)
-        if model.faces:
-            n = model.face_normals()
-            d = -np.einsum("ij,ij->i", n, model.face_centroids())
-            if _is_convex(model, n, d):
-                self.planes_n, self.planes_d = n, d
-            else:
-                tris, owner = [], []
-                for k, f in enumerate(model.faces):
-                    for i in range(1, len(f) - 1):
-                        tris.append(model.vertices[[f[0], f[i], f[i + 1]]])
-                        owner.append(k)
-                self.triangles = np.array(tris)
-                self.triangle_face = np.array(owner, dtype=np.int64)
-        pts = [model.vertices] + [np.vstack([s.rim(0, 16), s.rim(1, 16)]) for s in self.solids]
-        P = np.vstack([p for p in pts if len(p)]) if any(len(p) for p in pts) else np.zeros((1, 3))
-        self.center = 0.5 * (P.min(axis=0) + P.max(axis=0))
-        # Rims sampled at 16 points lie inside the true circle's bounding radius by < 2 %: pad.
-        self.radius = float(np.linalg.norm(P - self.center, axis=1).max()) * 1.03 + 1e-9
-        self.has_surface = bool(len(self.planes_n) or len(self.triangles) or self.solids)
+        # the polyhedral part (parts[0]) labels by its face indices; the others from LABEL_SOLID on
+        self._casts = [(model.parts[0], 0)]
+        label = LABEL_SOLID
+        for p in model.parts[1:]:
+            self._casts.append((p, label))
+            label += p.n_labels
+        self._casts = [(p, first) for p, first in self._casts if p.n_labels]
+        lo, hi = model.bounds()
+        self.center = 0.5 * (lo + hi)
+        P = model.support_points(16)
+        # Curves sampled at 16 points lie inside the true curve's bounding radius by < 2 %: pad.
+        self.radius = float(np.linalg.norm(P - self.center, axis=1).max()) * 1.03 + 1e-9 if len(P) else 1e-9
+        self.has_surface = bool(self._casts)
 
-    # ---------------------------------------------------------------- parts
-    def _convex(self, o: np.ndarray, d: np.ndarray):
-        num = -(self.planes_n @ o + self.planes_d)  # (F,): n·(o + t d) + c ≤ 0  ⇔  t·den ≤ num
-        den = d @ self.planes_n.T  # (N, F)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = num / den
-        entering = den < -_EPS
-        exiting = den > _EPS
-        parallel_out = (~entering & ~exiting) & (num < 0)[None, :]
-        t_in_all = np.where(entering, t, -np.inf)
-        t_enter = t_in_all.max(axis=1)
-        face = t_in_all.argmax(axis=1)
-        t_out_all = np.where(exiting, t, np.inf)
-        t_exit = t_out_all.min(axis=1)
-        ok = (t_enter <= t_exit) & (t_exit > 0) & ~parallel_out.any(axis=1)
-        # from outside the first surface met is the entry face; from inside (t_enter <= 0) the exit face
-        inside = t_enter <= 0
-        face = np.where(inside, t_out_all.argmin(axis=1), face)
-        t_hit = np.where(ok, np.where(inside, t_exit, t_enter), np.inf)
-        return t_hit, face, self.planes_n[face]
-
-    def _triangles(self, o: np.ndarray, d: np.ndarray):
-        """Möller–Trumbore against every triangle at once (rays from one origin o), in blocks of rays.
-
-        With s = o − A, q = s × e1: det = d·(e2 × e1), u = d·(e2 × s)/det, v = d·q/det, t = (q·e2)/det,
-        so each is one (rays × triangles) product. Ties go to the lower triangle index.
-        """
-        n = len(d)
-        best = np.full(n, np.inf)
-        face = np.full(n, -1, dtype=np.int64)
-        normal = np.zeros((n, 3))
-        A = self.triangles[:, 0]
-        e1 = self.triangles[:, 1] - A
-        e2 = self.triangles[:, 2] - A
-        s = o - A
-        q = np.cross(s, e1)
-        w_det = np.cross(e2, e1)
-        w_u = np.cross(e2, s)
-        t_num = np.einsum("ij,ij->i", q, e2)
-        nk = np.cross(e1, e2)
-        nk = nk / np.maximum(np.linalg.norm(nk, axis=1, keepdims=True), 1e-300)
-        block = max(1, 2_000_000 // max(len(A), 1))
-        for lo in range(0, n, block):
-            dd = d[lo : lo + block]
-            det = dd @ w_det.T  # (m, T)
-            ok = np.abs(det) > _EPS
-            inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-            u = (dd @ w_u.T) * inv
-            v = (dd @ q.T) * inv
-            t = t_num * inv
-            hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
-            t = np.where(hit, t, np.inf)
-            k = t.argmin(axis=1)
-            tk = t[np.arange(len(dd)), k]
-            got = np.isfinite(tk)
-            best[lo : lo + block] = tk
-            face[lo : lo + block] = np.where(got, self.triangle_face[k], -1)
-            normal[lo : lo + block] = np.where(got[:, None], nk[k], 0.0)
-        return best, face, normal
-
-    @staticmethod
-    def _revolution(s: Revolution, label: int, o: np.ndarray, d: np.ndarray):
-        a = s.axis
-        H = s.height
-        k = (s.r1 - s.r0) / H
-        q = o - s.p0
-        qa = float(q @ a)
-        da = d @ a
-        qp = q - qa * a
-        dp = d - da[:, None] * a
-        # |qp + t dp|² = (r0 + k (qa + t da))²
-        rq = s.r0 + k * qa
-        A = np.einsum("ij,ij->i", dp, dp) - (k * da) ** 2
-        B = 2.0 * (dp @ qp - rq * k * da)
-        Cc = float(qp @ qp) - rq**2
-        n = len(d)
-        best = np.full(n, np.inf)
-        face = np.full(n, -1, dtype=np.int64)
-        disc = B * B - 4 * A * Cc
-        good = (np.abs(A) > _EPS) & (disc >= 0)
-        sq = np.sqrt(np.where(good, disc, 0.0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            roots = [(-B - sq) / (2 * A), (-B + sq) / (2 * A)]
-        for t in roots:
-            h = qa + t * da
-            hit = good & (t > 0) & (h >= 0) & (h <= H) & (rq + k * t * da >= 0) & (t < best)
-            best = np.where(hit, t, best)
-            face = np.where(hit, label, face)
-        for cap, (_centre, r, hval) in enumerate(((s.p0, s.r0, 0.0), (s.p1, s.r1, H))):
-            if r <= 0:
-                continue
-            ok = np.abs(da) > _EPS
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t = (hval - qa) / da
-            X = (q - hval * a) + t[:, None] * d
-            rad2 = np.einsum("ij,ij->i", X, X)
-            hit = ok & (t > 0) & (rad2 <= r * r) & (t < best)
-            best = np.where(hit, t, best)
-            face = np.where(hit, label + 1 + cap, face)
-        # Normals: caps ±a; lateral h·e + (r0 − r1)·a (outward), e the radial unit vector.
-        normal = np.zeros((n, 3))
-        lat = face == label
-        if np.any(lat):
-            X = q + best[lat, None] * d[lat]
-            radial = X - (X @ a)[:, None] * a
-            e = radial / np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-300)
-            nl = H * e + (s.r0 - s.r1) * a
-            normal[lat] = nl / np.linalg.norm(nl, axis=1, keepdims=True)
-        normal[face == label + 1] = -a
-        normal[face == label + 2] = a
-        return best, face, normal
-
-    # ---------------------------------------------------------------- public
     def cast(self, o_obj: np.ndarray, d_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Nearest hits of rays from one origin, in the object frame.
 
@@ -212,20 +82,11 @@ class BodyCaster:
         best = np.full(n, np.inf)
         face = np.full(n, -1, dtype=np.int64)
         normal = np.zeros((n, 3))
-        parts = []
-        if len(self.planes_n):
-            parts.append(self._convex)
-        if len(self.triangles):
-            parts.append(self._triangles)
-        parts += [
-            (lambda oo, dd, s=s, k=k: self._revolution(s, LABEL_SOLID + 3 * k, oo, dd))
-            for k, s in enumerate(self.solids)
-        ]
-        for part in parts:
-            t, f, nrm = part(o, d)
+        for part, first in self._casts:
+            t, f, nrm = part.ray_cast(o, d)
             closer = t < best
             best = np.where(closer, t, best)
-            face = np.where(closer, f, face)
+            face = np.where(closer, first + f, face)
             normal[closer] = nrm[closer]
         return best, face, normal
 

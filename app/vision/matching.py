@@ -423,12 +423,13 @@ def _image_distances(oe, camera: Camera, model: BRep, faces: _Faces, Ts: np.ndar
     bordering a face that faces the camera, seen at less than 75°: ``track.visible_segments``'s
     rule on a polyhedron) placed in the world and sampled in one ``sample_view``, and each
     orientation bin's distances read once for all (the same samples and distances as one
-    ``edge_distance`` per pose). Models with solids of revolution or circles: one call per pose.
+    ``edge_distance`` per pose). Models with primitives beside their polyhedral part (solids,
+    circles): one call per pose.
     """
     N = len(Ts)
     if N == 0:
         return np.zeros(0)
-    if model.solids or model.circles or len(model.faces) == 0:
+    if len(model.parts) > 1 or len(model.faces) == 0:
         return np.array([edge_distance(oe, camera, model, T, step_px=step_px).mean_px for T in Ts])
     E = len(model.edges)
     R, t = Ts[:, :3, :3], Ts[:, :3, 3]

@@ -69,7 +69,7 @@ from core.transforms import exp_so3, make_T, pose_error
 
 from .evaluate import oriented_edges, sample_distances
 from .profiles import search_along_normals, smooth, to_gray_f32
-from .track import EdgeTracker, sample_visible_edges
+from .track import EdgeSamples, EdgeTracker, sample_visible_edges
 
 __all__ = [
     "SearchCandidate",
@@ -242,84 +242,27 @@ class EdgeField:
 
 # ---------------------------------------------------------------------------------------------- model
 class _ModelSamples:
-    """The model as points to score: polyhedral edges, rims and silhouette generators, all batched."""
+    """The model as points to score: each primitive's edge samples (``Primitive.edge_samples``:
+    polyhedral edges, rims, silhouette generators), all poses of a batch at once."""
 
     def __init__(self, model: BRep, per_edge: int, n_rim: int = 24):
         self.model = model
-        s = (np.arange(per_edge) + 0.5) / per_edge * 0.84 + 0.08  # away from the vertices
-        E = len(model.edges)
-        if E:
-            A, B = model.vertices[model.edges[:, 0]], model.vertices[model.edges[:, 1]]
-            self.edge_X = A[:, None] + s[None, :, None] * (B - A)[:, None]  # (E, m, 3)
-            self.edge_D = np.broadcast_to((B - A)[:, None], self.edge_X.shape)
-            F = len(model.faces)
-            inc = np.zeros((E, F), bool)
-            for k in range(E):
-                inc[k, list(model.edge_faces(k))] = True
-            self.incidence = inc
-            self.has_face = inc.any(axis=1)
-            self.face_n = model.face_normals().reshape(-1, 3)
-            self.face_c = model.face_centroids().reshape(-1, 3)
-        self.E = E
-        self.solids = list(model.solids)
         self.per_edge = per_edge
-        th = np.linspace(0.0, 2.0 * np.pi, n_rim, endpoint=False)
-        self.rim_cs = np.column_stack([np.cos(th), np.sin(th)])
+        self.n_rim = n_rim
 
     def groups(self, R: np.ndarray, t: np.ndarray, center: np.ndarray):
         """Per group of samples: object-frame points X ((M, 3) shared, or (N, M, 3)), tangents D
         (same shape) and visibility (N, M) at poses (R, t)."""
-        N = len(R)
         c_obj = np.einsum("nji,nj->ni", R, center[None] - t)  # optical centre in each object frame
-        out = []
-        if self.E:
-            if self.incidence.shape[1]:
-                facing = (c_obj @ self.face_n.T - np.einsum("fi,fi->f", self.face_n, self.face_c)[None]) > 0
-                vis = (facing.astype(np.float32) @ self.incidence.T.astype(np.float32) > 0) | ~self.has_face[None]
-            else:
-                vis = np.ones((N, self.E), bool)
-            out.append((self.edge_X.reshape(-1, 3), self.edge_D.reshape(-1, 3), np.repeat(vis, self.per_edge, axis=1)))
-        for sol in self.solids:
-            a = sol.axis
-            u = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-            u /= np.linalg.norm(u)
-            v = np.cross(a, u)
-            dirs = self.rim_cs[:, :1] * u + self.rim_cs[:, 1:] * v  # (K, 3) radial directions
-            tang = -self.rim_cs[:, 1:] * u + self.rim_cs[:, :1] * v
-            for centre, r, cap_sign in ((sol.p0, sol.r0, -1.0), (sol.p1, sol.r1, 1.0)):
-                if r <= 0:
-                    continue
-                P = centre + r * dirs  # (K, 3)
-                cap = ((c_obj - centre) @ (cap_sign * a)) > 0  # (N,)
-                lat = (c_obj @ dirs.T - np.einsum("kj,kj->k", dirs, P)[None]) > 0
-                out.append((P, tang, cap[:, None] | lat))
-            # silhouettes: the generators tangent to the lateral surface seen from the centre
-            w = c_obj - sol.p0
-            w = w - (w @ a)[:, None] * a
-            dw = np.linalg.norm(w, axis=1)
-            rm = max(0.5 * (sol.r0 + sol.r1), 1e-9)
-            ok = dw > rm * 1.0001
-            wu = w / np.maximum(dw, 1e-12)[:, None]
-            wv = np.cross(a, wu)
-            ang = np.arccos(np.clip(rm / np.maximum(dw, 1e-12), -1, 1))
-            m = max(self.per_edge, 4)
-            s = (np.arange(m) + 0.5) / m
-            for sign in (1.0, -1.0):
-                d = np.cos(ang)[:, None] * wu + sign * np.sin(ang)[:, None] * wv  # (N, 3)
-                P0 = sol.p0 + sol.r0 * d
-                P1 = sol.p1 + sol.r1 * d
-                X = P0[:, None] + s[None, :, None] * (P1 - P0)[:, None]
-                out.append((X, np.broadcast_to((P1 - P0)[:, None], X.shape), np.broadcast_to(ok[:, None], (N, m))))
-        return out
+        return [g for p in self.model.parts for g in p.edge_samples(c_obj, self.per_edge, self.n_rim)]
 
 
 def _hull(model: BRep) -> np.ndarray:
     """Half-spaces (F, 4) a·x + b ≤ 0 of the model's convex hull (object frame)."""
     from scipy.spatial import ConvexHull
 
-    pts = [_support_points(model, n=32, min_radius=1e-6)]  # a cone's apex as a small ring: a hull with volume
-    pts += [c.polyline(32) for c in model.circles]
-    return ConvexHull(np.vstack(pts)).equations
+    # a cone's apex as a small ring: a hull with volume
+    return ConvexHull(model.support_points(32, min_radius=1e-6)).equations
 
 
 def _ray_hits(hull: np.ndarray, R: np.ndarray, t: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -384,14 +327,9 @@ def rests_on(model: BRep, T_world_obj: np.ndarray, table: Plane) -> bool:
     if abs(float(h.min())) > MAX_ON_TABLE_GAP_M:
         return False
     n_obj = T_world_obj[:3, :3].T @ table.n  # the table's up in the object frame
-    normals = []
-    if len(model.faces):
-        normals.append(model.face_normals().reshape(-1, 3))
-    for sol in model.solids:
-        normals.append(np.array([sol.axis, -sol.axis]))
-    if not normals:
+    Nn = model.plane_normals()
+    if not len(Nn):
         return False
-    Nn = np.vstack(normals)
     return bool(np.max(Nn @ -n_obj) >= np.cos(np.radians(MAX_ON_TABLE_TILT_DEG)))
 
 
@@ -400,11 +338,10 @@ def level_on(model: BRep, T_world_obj: np.ndarray, table: Plane) -> np.ndarray:
     then moved along the table's normal so that its lowest point lies on it."""
     up = table.n / np.linalg.norm(table.n)
     R = T_world_obj[:3, :3]
-    normals = [model.face_normals().reshape(-1, 3)] if len(model.faces) else []
-    normals += [np.array([sol.axis, -sol.axis]) for sol in model.solids]
-    if not normals:
+    normals = model.plane_normals()
+    if not len(normals):
         return T_world_obj.copy()
-    Nw = np.vstack(normals) @ R.T
+    Nw = normals @ R.T
     w = Nw[int(np.argmax(Nw @ -up))]
     axis = np.cross(w, -up)
     s, c = np.linalg.norm(axis), float(w @ -up)
@@ -418,19 +355,15 @@ def level_on(model: BRep, T_world_obj: np.ndarray, table: Plane) -> np.ndarray:
     return make_T(R2, t2 - gap * up)
 
 
-def _support_points(model: BRep, n: int = 48, min_radius: float = 0.0) -> np.ndarray:
-    """The model's vertices and ``n`` points on each rim of its solids (radius at least
-    ``min_radius``), object frame, (P, 3): what its outline and its hull are made of."""
-    th = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
-    pts = [model.vertices] if len(model.vertices) else []
-    for sol in model.solids:
-        a = sol.axis
-        u = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-        u /= np.linalg.norm(u)
-        v = np.cross(a, u)
-        ring = np.cos(th)[:, None] * u + np.sin(th)[:, None] * v
-        pts += [sol.p0 + max(sol.r0, min_radius) * ring, sol.p1 + max(sol.r1, min_radius) * ring]
-    return np.vstack(pts) if pts else np.zeros((0, 3))
+def _support_points(model: BRep, n: int = 48) -> np.ndarray:
+    """What the model's outline and hull are made of, (P, 3) object frame (``BRep.support_points``)."""
+    return model.support_points(n)
+
+
+def _rims(model: BRep) -> bool:
+    """Whether to sample the solids' cap rims: when the model has no straight edge (a cylinder alone),
+    its rims are what hold its height and position along its axis."""
+    return not len(model.edges)
 
 
 def _rot_about(n: np.ndarray, psi: np.ndarray) -> np.ndarray:
@@ -445,14 +378,7 @@ def heading_period(model: BRep, R_old: np.ndarray, up: np.ndarray) -> float:
     orientation R_old, unchanged: 2π/k for a k-fold symmetry (a box lying on a face: π; a square
     face down: π/2), 0 for a solid of revolution standing upright (the heading is not seen)."""
     up_obj = R_old.T @ up
-    if (
-        not len(model.edges)
-        and model.solids
-        and all(
-            abs(abs(float(s.axis @ up_obj)) - 1.0) < 1e-6 and np.linalg.norm(np.cross(s.p0, up_obj)) < 1e-9
-            for s in model.solids
-        )
-    ):
+    if model.turn_invariant(up_obj):
         return 0.0
     best = 2.0 * np.pi
     for _, S in symmetry_transforms(model):
@@ -739,7 +665,7 @@ def search_pose(
             cand = _settle(camera, model, T, im, oe, img_s, float(start_px[j]))
         if cand is not None:
             found.append(cand)
-    if table is not None and per[2] > 0 and not (bool(model.solids) and not len(model.edges)):
+    if table is not None and per[2] > 0 and len(model.edges):  # with no straight edge there is no heading to step
         found.sort(key=lambda c: c.mismatch)
         check(0.95, "stepping the best poses' headings")
         for c in _firsts(found, PROFILE_TOP):
@@ -778,7 +704,7 @@ def search_pose(
             out = [replace(_replace_T(near, T), beside_click=not under)] + out
     out = out[:max_candidates]
     if camera_cov is not None:  # the camera's calibration uncertainty joins each pose's σ
-        rims = bool(model.solids) and not len(model.edges)
+        rims = _rims(model)
         for j, c in enumerate(out):
             space = _OnTable(sp, z0, centre_obj, 3 if per[2] > 0 else 2) if table is not None else _Free(c.T_world_obj)
             share = _camera_share(camera, model, c.T_world_obj, img_s, space, rims, np.asarray(camera_cov, float))
@@ -814,7 +740,7 @@ def refine_from(
     im = np.asarray(image)
     oe = oriented_edges(im)
     img_s = smooth(to_gray_f32(im), 1.0)
-    rims = bool(model.solids) and not len(model.edges)
+    rims = _rims(model)
     T_start = np.asarray(T_start, float)
     if table is not None:
         sp = _TableSpace(T_start, table)
@@ -953,7 +879,7 @@ def _settle_table(
     The edge tracker is not used here: with a fifth to a third of the object hidden it pulled poses
     started at the truth 6-15 mm off (bench/search.py (b)); the table's three unknowns do not let
     the occluder's outline pull the pose out of the plane."""
-    rims = bool(model.solids) and not len(model.edges)
+    rims = _rims(model)
     k = 3 if per[2] > 0 else 2
     space = _OnTable(sp, zc, centre_obj, k)
     T = _polish(T0, ef, camera, ms, sp, zc, centre_obj, per)
@@ -1122,7 +1048,7 @@ def _measure(camera: Camera, model: BRep, T: np.ndarray, oe, img_s: np.ndarray, 
     hits = search_along_normals(img_s, s.uv, s.normals, 3.0, prior_sigma_px=1.5)
     f = np.flatnonzero(hits.found)
     counted = np.ones(len(s), bool)  # an image edge found by a nearer parallel model edge counts for that one only
-    counted[f] = _own_edges(s.uv[f], s.normals[f], hits.offset_px[f], _feature_groups(model, s.feature[f]))
+    counted[f] = _own_edges(s.uv[f], s.normals[f], hits.offset_px[f], _feature_groups(s.subset(f)))
     cap = np.where(s.feature < len(model.edges), MISMATCH_CAP_PX, CURVED_MISMATCH_CAP_PX)
     off = (np.where(hits.found, np.abs(hits.offset_px), np.inf) / cap)[counted]
     return d, float(np.mean(d <= 1.5)), float(np.median(d)), float(np.mean(np.minimum(off, 1.0) ** 2))
@@ -1195,7 +1121,7 @@ def _linearize(camera: Camera, model: BRep, p: np.ndarray, img_s: np.ndarray, sp
     if f.sum() <= k + 2:
         return None
     s, r = s.subset(f), hits.offset_px[f]
-    own = _own_edges(s.uv, s.normals, r, _feature_groups(model, s.feature))
+    own = _own_edges(s.uv, s.normals, r, _feature_groups(s))
     if own.sum() <= k + 2:
         return None
     s, r = s.subset(own), r[own]
@@ -1277,7 +1203,7 @@ def _refine(
     if last is None or not with_cov:
         return space.pose(p), None
     T, s, r, J, w = last  # the covariance of the last step, from its linearisation
-    groups = _feature_groups(model, s.feature)
+    groups = _feature_groups(s)
     floor = np.where(groups < len(model.edges), EDGE_BIAS_PX, CURVED_EDGE_BIAS_PX)
     Gm = space.G(T)
     return space.pose(p), Gm @ _edge_covariance(J, r, w, groups, floor, k, s.uv, s.normals) @ Gm.T
@@ -1305,17 +1231,15 @@ def _camera_share(
     return Gm @ D @ camera_cov @ D.T @ Gm.T
 
 
-def _feature_groups(model: BRep, feature: np.ndarray, n_circle: int = 48, arc: int = 8) -> np.ndarray:
-    """Which edge each sample lies on (``track.EdgeSamples.feature``), as group ids: a straight edge
-    or a silhouette is one group, a rim an arc of ``arc`` chords (60°). ``n_circle`` must be the rims'
-    chord count the samples were drawn with (``track.sample_visible_edges``' default, 48)."""
-    E = len(model.edges)
-    f = np.asarray(feature, np.int64)
-    per_solid = 2 + 2 * n_circle
-    local = (f - E) % per_solid
-    solid = (f - E) // per_solid
-    g = np.where(local < 2, local, 2 + (local - 2) // arc)
-    return np.where(f < E, f, E + solid * per_solid + g)
+def _feature_groups(s: EdgeSamples, arc: int = 8) -> np.ndarray:
+    """Which edge each sample lies on, as group ids: a straight edge or a silhouette line is one group
+    (its feature), a curve (a rim, a circle, a sphere's outline) arcs of ``arc`` chords (60° of 48):
+    the curve's chords have consecutive features from ``feature − chord`` (``Wireframe.chord``)."""
+    f = np.asarray(s.feature, np.int64)
+    if s.chord is None:
+        return f
+    chord = np.asarray(s.chord, np.int64)
+    return np.where(chord < 0, f, f - chord + chord // arc)
 
 
 def _edge_covariance(
@@ -1412,7 +1336,7 @@ def _settle(camera, model, T, image, oe, img_s, coarse_px) -> SearchCandidate | 
     the samples lie within 1.5 px of an edge of their orientation and the median is at most
     ``MAX_MEDIAN_PX`` (0.6 px; measured: right poses 0.2-0.4 px median, wrong ones 0.5-0.9 px).
     """
-    rims = bool(model.solids) and not len(model.edges)
+    rims = _rims(model)
     uv = camera.project_obj(T, _support_points(model))
     size_px = float(np.linalg.norm(uv.max(axis=0) - uv.min(axis=0)))  # a small object: denser samples (≥ 20 kept)
     step_px = float(np.clip(size_px / 25.0, 2.0, 5.0))

@@ -91,7 +91,9 @@ class EdgeSamples:
     projected edge direction turned +90° on the screen). X_obj : array, shape (N, 3), metres, the
     samples on the model (object frame). D_obj : array, shape (N, 3), the edge directions there
     (object frame). feature : array, shape (N,), int, which wireframe feature each sample is on
-    (stable across frames: model edge k → k; silhouettes, rims and circles numbered after them).
+    (stable across frames, ``Wireframe.feature``: model edge k → k; the other outlines numbered after
+    them). chord : array, shape (N,), int, the feature's ``Wireframe.chord`` (−1 on a straight one);
+    None: all straight.
     """
 
     uv: np.ndarray
@@ -99,12 +101,16 @@ class EdgeSamples:
     X_obj: np.ndarray
     D_obj: np.ndarray
     feature: np.ndarray
+    chord: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.uv)
 
     def subset(self, mask: np.ndarray) -> EdgeSamples:
-        return EdgeSamples(self.uv[mask], self.normals[mask], self.X_obj[mask], self.D_obj[mask], self.feature[mask])
+        chord = None if self.chord is None else self.chord[mask]
+        return EdgeSamples(
+            self.uv[mask], self.normals[mask], self.X_obj[mask], self.D_obj[mask], self.feature[mask], chord
+        )
 
 
 @dataclass(frozen=True)
@@ -130,33 +136,6 @@ class TrackDiagnostics:
     reason: str = ""
     cov: np.ndarray | None = None
     edge_distance_px: float = float("nan")
-
-
-def _feature_ids(model: BRep, kind: np.ndarray, n_circle: int) -> tuple[np.ndarray, np.ndarray]:
-    """Stable ids of the wireframe's segments, and which are rims of solids of revolution.
-
-    The wireframe's order is: edges, then per solid its silhouettes (0 or 2) and rims, then the
-    free circles; silhouettes may be absent, so the solids' blocks are walked.
-    """
-    E = len(model.edges)
-    ids = np.empty(len(kind), np.int64)
-    solid_rim = np.zeros(len(kind), bool)
-    ids[:E] = np.arange(E)
-    pos = E
-    base = E
-    for s in model.solids:
-        j = 0
-        while pos < len(kind) and kind[pos] == "silhouette":
-            ids[pos] = base + j
-            pos += 1
-            j += 1
-        n_rims = (s.r0 > 0) + (s.r1 > 0)
-        ids[pos : pos + n_rims * n_circle] = base + 2 + np.arange(n_rims * n_circle)
-        solid_rim[pos : pos + n_rims * n_circle] = True
-        pos += n_rims * n_circle
-        base += 2 + 2 * n_circle
-    ids[pos:] = base + np.arange(len(kind) - pos)
-    return ids, solid_rim
 
 
 def _edges_on_faces_seen(
@@ -186,11 +165,12 @@ def sample_visible_edges(
 ) -> EdgeSamples:
     """Samples every ``step_px`` along the model's visible edges, as projected through C.
 
-    Straight edges and silhouettes are sampled between ``vertex_margin_px`` from each end (near a
-    vertex the neighbouring edge spoils the search); rims and circles (polygons of short chords)
-    every ``step_px`` along their chords laid end to end. Only samples in front of the camera and inside the
-    image (by ``image_margin_px``) are kept. Positions along a segment are mapped to the model by
-    perspective-correct interpolation, so each sample's X_obj projects exactly on its pixel.
+    Straight edges and silhouette lines are sampled between ``vertex_margin_px`` from each end (near a
+    vertex the neighbouring edge spoils the search); curves (rims, circles, a sphere's outline:
+    polygons of short chords) every ``step_px`` along their chords laid end to end. Only samples in
+    front of the camera and inside the image (by ``image_margin_px``) are kept. Positions along a
+    segment are mapped to the model by perspective-correct interpolation, so each sample's X_obj
+    projects exactly on its pixel.
 
     rims : also sample the rim circles of solids of revolution. Off by default, as in ViSP, whose
         ``.cao`` cylinders are tracked by their silhouettes only: a modelled cylinder's caps are
@@ -213,7 +193,10 @@ class VisibleSegments:
     """The model's visible segments seen from one pose, in the object frame.
 
     segments : array, shape (M, 2, 3), metres (object frame). kinds : array, shape (M,), str
-    ("edge", "silhouette", "rim"). feature : array, shape (M,), int, stable ids (``EdgeSamples``).
+    ("edge", "silhouette", "rim", "circle"). feature : array, shape (M,), int, stable ids
+    (``EdgeSamples``). chord : array, shape (M,), int, −1 for a straight segment, else its index
+    along its closed curve (``BRep.Wireframe.chord``): curves are sampled along their chords laid end
+    to end. Default: all straight.
     The tracker computes them once per pass and samples them again at the pass's refined pose for
     the support check (a cylinder's silhouette generators, taken from the pass's starting pose,
     move by r·δ²/2 along the line of sight: 6 µm for r = 4 cm and δ = 1°).
@@ -222,6 +205,7 @@ class VisibleSegments:
     segments: np.ndarray
     kinds: np.ndarray
     feature: np.ndarray
+    chord: np.ndarray | None = None
 
 
 def visible_segments(
@@ -235,14 +219,15 @@ def visible_segments(
 ) -> VisibleSegments:
     """The segments ``sample_visible_edges`` samples at pose T_world_obj (object frame; see there)."""
     T = np.asarray(T_world_obj, dtype=float)
-    wf = model.wireframe(camera.center, T, n_circle=n_circle)
-    fid, solid_rim = _feature_ids(model, wf.kind, n_circle)
-    keep = wf.visible & (rims | ~solid_rim)
+    # a mesh's smooth-region contours are sides of its tessellation, not edges of the object: not tracked
+    wf = model.wireframe(camera.center, T, n_circle=n_circle, contours=False)
+    keep = wf.visible & (rims | (wf.kind != "rim"))
     if len(model.faces) and max_face_angle_deg < 90.0:
-        keep[: len(model.edges)] &= _edges_on_faces_seen(model, T, camera.center, max_face_angle_deg)
+        edge = wf.edge_index >= 0
+        keep[edge] &= _edges_on_faces_seen(model, T, camera.center, max_face_angle_deg)[wf.edge_index[edge]]
     S = wf.segments[keep]
     S_obj = (S - T[:3, 3]) @ T[:3, :3] if len(S) else np.zeros((0, 2, 3))
-    return VisibleSegments(S_obj, wf.kind[keep], fid[keep])
+    return VisibleSegments(S_obj, wf.kind[keep], wf.feature[keep], wf.chord[keep])
 
 
 def sample_view(
@@ -256,7 +241,8 @@ def sample_view(
 ) -> EdgeSamples:
     """Samples along the segments of ``view`` placed at pose T_world_obj (see ``sample_visible_edges``)."""
     T = np.asarray(T_world_obj, dtype=float)
-    kinds, fid = view.kinds, view.feature
+    fid = view.feature
+    chord = view.chord if view.chord is not None else np.full(len(fid), -1, np.int64)
     empty = EdgeSamples(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64))
     if len(view.segments) == 0:
         return empty
@@ -264,14 +250,14 @@ def sample_view(
     A, B = A_o @ T[:3, :3].T + T[:3, 3], B_o @ T[:3, :3].T + T[:3, 3]
     sa, sb = camera.depth(A), camera.depth(B)
     front = (sa > 1e-6) & (sb > 1e-6)
-    A, B, A_o, B_o, sa, sb, kinds, fid = (
+    A, B, A_o, B_o, sa, sb, chord, fid = (
         A[front],
         B[front],
         A_o[front],
         B_o[front],
         sa[front],
         sb[front],
-        kinds[front],
+        chord[front],
         fid[front],
     )
     if len(A) == 0:
@@ -279,7 +265,7 @@ def sample_view(
     a, b = camera.project(A), camera.project(B)
     d = b - a
     L = np.linalg.norm(d, axis=1)
-    straight = kinds != "rim"
+    straight = chord < 0
     margin = np.where(straight, vertex_margin_px, 0.0)
     usable = L - 2.0 * margin
     count = np.where(straight, np.floor(np.maximum(usable, 0.0) / step_px).astype(int) + (usable >= 0), 0)
@@ -311,7 +297,9 @@ def sample_view(
     normals = np.column_stack([-dirs[:, 1], dirs[:, 0]])
     inside = camera.in_image(uv, image_margin_px)
     D_obj = (B_o - A_o)[seg_idx]
-    return EdgeSamples(uv[inside], normals[inside], X_obj[inside], D_obj[inside], fid[seg_idx][inside])
+    return EdgeSamples(
+        uv[inside], normals[inside], X_obj[inside], D_obj[inside], fid[seg_idx][inside], chord[seg_idx][inside]
+    )
 
 
 class BandSmoothed:

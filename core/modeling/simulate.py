@@ -87,50 +87,14 @@ def ray_box(origin: np.ndarray, dirs: np.ndarray, T_world_obj: np.ndarray, size)
 
 def ray_revolution(origin: np.ndarray, dirs: np.ndarray, solid: Revolution) -> np.ndarray:
     """Distance (N,) along unit rays to a closed cylinder/cone (lateral surface and caps); NaN for a miss."""
-    a, h = solid.axis, solid.height
-    k = (solid.r1 - solid.r0) / h
-    w0 = origin - solid.p0
-    t0 = float(w0 @ a)
-    w = w0 - t0 * a
-    tau = dirs @ a
-    dp = dirs - tau[:, None] * a
-    A = np.einsum("ij,ij->i", dp, dp) - (k * tau) ** 2
-    rb = solid.r0 + k * t0
-    B = dp @ w - k * tau * rb
-    Cq = w @ w - rb**2
-    best = np.full(len(dirs), np.inf)
-    disc = B**2 - A * Cq
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
-        for sgn in (-1.0, 1.0):
-            s = (-B + sgn * sq) / A
-            t = t0 + s * tau
-            ok = (s > 1e-9) & (t >= 0) & (t <= h) & (solid.r0 + k * t >= 0)
-            best = np.where(ok & (s < best), s, best)
-        for tc, rc in ((0.0, solid.r0), (h, solid.r1)):
-            s = (tc - t0) / tau
-            P = w0 + s[:, None] * dirs - tc * a
-            rad = np.linalg.norm(P - (P @ a)[:, None] * a, axis=1)
-            ok = (s > 1e-9) & (rad <= rc)
-            best = np.where(ok & (s < best), s, best)
-    return np.where(np.isfinite(best), best, np.nan)
+    t = solid.ray_cast(origin, dirs)[0]
+    return np.where(np.isfinite(t) & (t > 1e-9), t, np.nan)
 
 
 def ray_convex(origin: np.ndarray, dirs: np.ndarray, brep_world) -> np.ndarray:
     """Distance (N,) along unit rays to a convex polyhedron (a BRep in world coordinates); NaN for a miss."""
-    V = brep_world.vertices
-    N = brep_world.face_normals()
-    d = -np.einsum("ij,ij->i", N, brep_world.face_centroids())
-    den = dirs @ N.T  # (R, F)
-    num = -(origin @ N.T + d)  # (F,)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = num / den
-    enter = np.where(den < 0, s, -np.inf).max(axis=1)
-    leave = np.where(den > 0, s, np.inf).min(axis=1)
-    outside_parallel = np.any((np.abs(den) < 1e-15) & (num < 0), axis=1)
-    ok = (enter <= leave) & (enter > 1e-9) & ~outside_parallel
-    del V
-    return np.where(ok, enter, np.nan)
+    t = brep_world.polyhedron.ray_cast(origin, dirs)[0]
+    return np.where(np.isfinite(t) & (t > 1e-9), t, np.nan)
 
 
 @dataclass

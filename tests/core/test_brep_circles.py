@@ -30,7 +30,7 @@ def test_model_of_circles_alone_draws_them_and_round_trips():
     m = BRep(np.zeros((0, 3)), np.zeros((0, 2)), circles=(Circle([0, 0, 0.1], [0, 1, 0], 0.04),))
     T = make_T(random_rotation(rng), rng.normal(size=3))
     wf = m.wireframe(np.array([0.0, -3.0, 0.0]), T, n_circle=24)
-    assert wf.segments.shape == (24, 2, 3) and wf.visible.all() and set(wf.kind) == {"rim"}
+    assert wf.segments.shape == (24, 2, 3) and wf.visible.all() and set(wf.kind) == {"circle"}
     world = m.transformed(T)
     cw = world.circles[0]
     assert np.allclose(cw.centre, T[:3, :3] @ [0, 0, 0.1] + T[:3, 3]) and np.allclose(cw.normal, T[:3, 1])

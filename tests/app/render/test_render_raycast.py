@@ -12,7 +12,7 @@ from core.transforms import make_T, rot_z
 def test_box_hits_at_the_analytic_distance_on_the_right_face():
     box = BRep.box(0.4, 0.2, 0.1)
     caster = BodyCaster(box)
-    assert len(caster.planes_n) == 6 and len(caster.triangles) == 0  # convex: cast by its planes
+    assert box.polyhedron.convex  # cast by its planes
     rng = np.random.default_rng(0)
     o = np.array([0.05, -1.0, 0.5])
     # points on the top face (z = 0.1) and on the −y face (y = −0.1)
@@ -60,7 +60,7 @@ def test_non_convex_model_is_cast_by_its_triangles():
     # An L-shaped prism: the notch must not be filled in.
     L = BRep.prism(np.array([[0, 0], [0.2, 0], [0.2, 0.1], [0.1, 0.1], [0.1, 0.2], [0, 0.2]]), 0.1)
     caster = BodyCaster(L)
-    assert len(caster.planes_n) == 0 and len(caster.triangles) > 0
+    assert not L.polyhedron.convex  # cast by its triangles
     o = np.array([0.15, 0.15, 1.0])  # above the notch: falls through to nothing
     t, f, _ = caster.cast(o, np.array([[0.0, 0.0, -1.0], [-0.1, -0.1, -1.0]]))
     assert np.isinf(t[0])
