@@ -119,6 +119,14 @@ class VideoSource:
     def _read(self) -> np.ndarray | None:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    def skip(self, n: int) -> None:
+        """Pass over the next ``n`` frames unseen (a prerecorded source played behind its clock)."""
+        for _ in range(max(0, int(n))):
+            if self._read() is None:
+                raise VideoError(f"{self.description}: no frame could be read (the source ended or failed)")
+            self._index += 1
+            self._position += 1
+
     @property
     def duration_s(self) -> float | None:
         """Length of a prerecorded source in seconds (None for live sources)."""
@@ -470,8 +478,11 @@ def stamp_replay_time(image: np.ndarray, t_s: float, duration_s: float) -> np.nd
 class FrameGrabber:
     """Reads a source on a background thread and keeps the latest frame.
 
-    Prerecorded sources are paced at their frame rate (real-time playback); live sources are read
-    as fast as they deliver. ``latest()`` never blocks. ``measured_fps`` is the delivered rate over
+    Prerecorded sources are paced at their frame rate on a clock (real-time playback): frame k is shown
+    at ``start_at + k / fps`` (monotonic; default: when the grabber starts), and frames due while a slow
+    decode held the thread go unseen, so that grabbers given one ``start_at`` (a scene's cameras) show
+    frames of the same moment however long each decode takes. Live sources are read as fast as they
+    deliver. ``latest()`` never blocks. ``measured_fps`` is the delivered rate over
     the last second or so. ``status()`` says whether the video is live (see ``VideoStatus``).
 
     A read error of a live source that can be reopened (a stream, a camera: ``source.reconnects``)
@@ -490,8 +501,10 @@ class FrameGrabber:
         on_frame: Callable[[Frame], None] | None = None,
         stall_s: float | None = None,
         reconnect_delays_s: tuple[float, ...] = RECONNECT_DELAYS_S,
+        start_at: float | None = None,
     ):
         self.source = source
+        self.start_at = start_at
         self._listeners: list[Callable[[Frame], None]] = [on_frame] if on_frame is not None else []
         self._lock = threading.Lock()
         self._latest: Frame | None = None
@@ -523,7 +536,8 @@ class FrameGrabber:
 
     def _read_loop(self) -> None:
         period = 1.0 / self.source.fps
-        next_t = time.monotonic()
+        if self.start_at is None:
+            self.start_at = time.monotonic()
         while not self._stop.is_set():
             try:
                 frame = self.source.read()
@@ -546,12 +560,12 @@ class FrameGrabber:
             for listener in list(self._listeners):
                 listener(frame)
             if not self.source.live:
-                next_t += period
-                delay = next_t - time.monotonic()
-                if delay < -period:  # fell behind (a slow decode): do not try to catch up in a burst
-                    next_t = time.monotonic()
-                elif delay > 0:
-                    self._stop.wait(delay)
+                due = self.start_at + (frame.index + 1) * period  # when the next frame is to be shown
+                late = int((time.monotonic() - due) / period)
+                if late >= 1:  # fell behind (a slow decode): the frames due meanwhile go unseen, no burst
+                    self.source.skip(late)
+                else:
+                    self._stop.wait(max(0.0, due - time.monotonic()))
 
     def _reconnect(self, exc: Exception) -> None:
         """The live source failed: reopen it with growing delays until it opens (its frames then clear

@@ -168,8 +168,10 @@ class FrozenFrames:
                 "(the status below says more)"
             )
             return head + Md(". *Seconds back* freezes an earlier frame.")
+        others = Md("").join(Md(" · {} t = {:.2f} s").format(name, f.t_s) for name, f in self.frame.others.items())
         return (
             Md("Frozen frame: t = {:.2f} s").format(self.frame.t_s)
+            + others
             + Md(" · **live shown**" if self.show_live else "")
             + Md(". *Seconds back*: a frame that long before the live one.")
         )

@@ -11,6 +11,7 @@ import logging
 import signal
 import sys
 import threading
+import time
 from pathlib import Path
 
 __all__ = ["add_serve_parser", "run_serve", "build_interface", "scene_with_intrinsics", "video_specs"]
@@ -252,6 +253,7 @@ def build_interface(args: argparse.Namespace):
     videos = args.video if isinstance(args.video, list) else [args.video] if args.video else []
     specs = video_specs(videos, scene)
     grabbers: dict = {}
+    start_at = time.monotonic()  # one clock for every camera's recording: their frames show one moment
     closers = []
     try:
         for view in scene.views:
@@ -264,7 +266,7 @@ def build_interface(args: argparse.Namespace):
 
                 source = UndistortedSource(source, view.lens)
                 log.info("camera %s: frames undistorted: %s", view.name, view.lens.describe())
-            grabbers[view.name] = FrameGrabber(source).start()
+            grabbers[view.name] = FrameGrabber(source, start_at=start_at).start()
             closers.append(grabbers[view.name].stop)
     except Exception:
         for close in closers:
