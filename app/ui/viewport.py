@@ -45,8 +45,8 @@ class Viewport:
         put it and several cameras: every camera's image side by side."""
         try:
             at, fitted = np.asarray(self.client.camera.position, float), self._fitted_at
-            # as the page reports it back (float32): a thousandth of the distance to the image is "unmoved"
-            unmoved = fitted is not None and np.linalg.norm(at - fitted) <= 1e-3 * abs(float(fitted[2]))
+            # as the page reports it back (its own camera controls settle it): 2 % of the distance is "unmoved"
+            unmoved = fitted is not None and np.linalg.norm(at - fitted) <= 0.02 * abs(float(fitted[2]))
         except (AssertionError, ZeroDivisionError, TypeError):
             unmoved = False
         self.all_cameras = again and unmoved and not self.all_cameras and len(self.panel.app.views) > 1
@@ -102,7 +102,7 @@ class Viewport:
         if abs(u1 - u0) < 4 or abs(v1 - v0) < 4:
             return
         self.zoom_rect = (min(u0, u1), min(v0, v1), max(u0, u1), max(v0, v1))
-        self.need_fit = True
+        self.need_fit, self.all_cameras = True, False
 
     # ------------------------------------------------------------------ zoom
     def on_wheel(self, value: str) -> None:
@@ -139,6 +139,7 @@ class Viewport:
             f = float(np.clip(f, 0.005 * fit / dist, 2.0 * fit / dist))
         with self.client.atomic():
             place_camera(cam, X + f * (position - X), X + f * (look_at - X))
+        self._fitted_at = None  # zoomed: Fit view fits the shown image first
         self.panel.dirty = True
 
     def on_camera(self, cam) -> None:
