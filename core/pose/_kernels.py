@@ -962,6 +962,77 @@ def _norm3(v, o):
     return math.sqrt(v[o] * v[o] + v[o + 1] * v[o + 1] + v[o + 2] * v[o + 2])
 
 
+@_jit
+def _log3(E, phi):
+    """phi (3,) = log(E), the rotation vector of a rotation matrix E (``core.transforms.log_so3``)."""
+    w0, w1, w2 = E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]  # 2 sin θ · axis
+    c = min(1.0, max(-1.0, 0.5 * (E[0, 0] + E[1, 1] + E[2, 2] - 1.0)))
+    th = math.atan2(0.5 * math.sqrt(w0 * w0 + w1 * w1 + w2 * w2), c)
+    if th < 1e-6:
+        f = 0.5
+    elif math.pi - th > 1e-3:
+        f = th / (2.0 * math.sin(th))
+    else:  # near π: the axis from the symmetric part, its sign from the antisymmetric one
+        k, best = 0, -1.0
+        for i in range(3):
+            a = (E[i, i] - c) / (1.0 - c)
+            if a > best:
+                k, best = i, a
+        n = 0.0
+        for i in range(3):
+            phi[i] = (0.5 * (E[i, k] + E[k, i]) - (c if i == k else 0.0)) / (1.0 - c)
+            n += phi[i] * phi[i]
+        n = math.sqrt(n)
+        sgn = 1.0 if phi[0] * w0 + phi[1] * w1 + phi[2] * w2 >= 0.0 else -1.0
+        for i in range(3):
+            phi[i] *= sgn * th / n
+        return
+    phi[0], phi[1], phi[2] = f * w0, f * w1, f * w2
+
+
+@_jit
+def _prior_terms(R, t, prior_T, Lam, H, g):
+    """Add a pose prior to the normal equations H (6, 6), g (6,) at (R, t) and return its cost
+    ½ eᵀ Λ e, e = (t − t₀, log(R R₀ᵀ)) (``refine.PosePrior``); e's Jacobian in δ is diag(I, J_l⁻¹(e_r))."""
+    e = np.empty(6)
+    E = np.empty((3, 3))
+    for i in range(3):
+        e[i] = t[i] - prior_T[i, 3]
+        for j in range(3):
+            E[i, j] = R[i, 0] * prior_T[j, 0] + R[i, 1] * prior_T[j, 1] + R[i, 2] * prior_T[j, 2]
+    phi = np.empty(3)
+    _log3(E, phi)
+    e[3], e[4], e[5] = phi[0], phi[1], phi[2]
+    # J_l⁻¹(φ) = I − ½ [φ]× + (1/θ² − (1 + cos θ) / (2 θ sin θ)) [φ]×²
+    th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+    th = math.sqrt(th2)
+    q = 1.0 / 12.0 if th < 1e-4 else 1.0 / th2 - (1.0 + math.cos(th)) / (2.0 * th * math.sin(th))
+    K = np.zeros((3, 3))
+    K[0, 1], K[0, 2], K[1, 2] = -phi[2], phi[1], -phi[0]
+    K[1, 0], K[2, 0], K[2, 1] = phi[2], -phi[1], phi[0]
+    Je = np.zeros((6, 6))
+    for i in range(3):
+        Je[i, i] = 1.0
+        for j in range(3):
+            Je[3 + i, 3 + j] = (
+                (1.0 if i == j else 0.0)
+                - 0.5 * K[i, j]
+                + q * (K[i, 0] * K[0, j] + K[i, 1] * K[1, j] + K[i, 2] * K[2, j])
+            )
+    LJ = Lam @ Je
+    Le = Lam @ e
+    cost = 0.0
+    for i in range(6):
+        cost += 0.5 * e[i] * Le[i]
+        for j in range(6):
+            g[i] += Je[j, i] * Le[j]
+            h = 0.0
+            for k in range(6):
+                h += Je[k, i] * LJ[k, j]
+            H[i, j] += h
+    return cost
+
+
 # refine statuses
 REFINED, BEHIND, UNOBSERVABLE, SINGULAR = 0, 1, 2, 3
 
@@ -1014,6 +1085,9 @@ def refine_one(
     b,
     huber,
     huber_px,
+    has_prior,
+    prior_T,
+    Lam,
     max_iterations,
     extent,
     T,
@@ -1025,21 +1099,27 @@ def refine_one(
     free,
 ):
     """Levenberg–Marquardt on the pixel residuals from T0 (``refine``'s module docstring), the clicks
-    in the views of ``residuals`` (Cs, seg_view, pt_view).
+    in the views of ``residuals`` (Cs, seg_view, pt_view); with ``has_prior``, plus the pose prior
+    ½ eᵀ Λ e about prior_T (4, 4) with information Lam (6, 6) (``_prior_terms``).
 
     Fills T (4, 4), r (m,), J (m, 6), w (m,), w_unit (2 S + P,) at the solution and H (6, 6) =
-    Jᵀ W J there; returns (status, iterations, converged). status BEHIND: the start puts a clicked
-    feature behind the camera; UNOBSERVABLE: the clicks leave a motion free (free (6,): it, δt in
-    m, δr in rad)."""
+    Jᵀ W J (+ the prior's Λ) there; returns (status, iterations, converged). status BEHIND: the start
+    puts a clicked feature behind the camera; UNOBSERVABLE: the clicks (and the prior) leave a motion
+    free (free (6,): it, δt in m, δr in rad)."""
     m = r.shape[0]
     S = edges.shape[0]
     R = T0[:3, :3].copy()
     t = T0[:3, 3].copy()
     if not residuals(Cs, seg_view, pt_view, R, t, edges, segs, pts_obj, pts_uv, True, r, J):
         return BEHIND, 0, False
-    # Observability: JᵀJ scaled to unit diagonal, smallest eigenvalue below 1e-16 of the largest.
-    ones = np.ones(m)
-    _normal_equations(J, ones, r, H, free)
+    # Observability: JᵀJ scaled to unit diagonal, smallest eigenvalue below 1e-16 of the largest
+    # (with a prior: Jᵀ B J + Λ, the information of clicks and prior together).
+    if has_prior:
+        _normal_equations(J, b, r, H, free)
+        _prior_terms(R, t, prior_T, Lam, H, free)
+    else:
+        ones = np.ones(m)
+        _normal_equations(J, ones, r, H, free)
     sc = np.empty(6)
     for i in range(6):
         sc[i] = math.sqrt(H[i, i]) if H[i, i] > 0.0 else 1.0
@@ -1053,6 +1133,9 @@ def refine_one(
             free[i] = vec[i, 0] / sc[i]
         return UNOBSERVABLE, 0, False
     cost = robust(r, S, huber, huber_px, b, w, w_unit)
+    H_scratch, g_scratch = np.zeros((6, 6)), np.zeros(6)  # _prior_terms' sums when only its cost is wanted
+    if has_prior:
+        cost += _prior_terms(R, t, prior_T, Lam, H_scratch, g_scratch)
     r_new = np.empty(m)
     J_new = np.empty((m, 6))
     w_new = np.empty(m)
@@ -1072,6 +1155,8 @@ def refine_one(
             converged = True
             break
         _normal_equations(J, w, r, H, g)
+        if has_prior:
+            _prior_terms(R, t, prior_T, Lam, H, g)
         for i in range(6):
             neg[i] = -g[i]
         while True:
@@ -1086,6 +1171,8 @@ def refine_one(
             _perturb(R, t, delta, R_new, t_new)
             if residuals(Cs, seg_view, pt_view, R_new, t_new, edges, segs, pts_obj, pts_uv, True, r_new, J_new):
                 cost_new = robust(r_new, S, huber, huber_px, b, w_new, wu_new)
+                if has_prior:
+                    cost_new += _prior_terms(R_new, t_new, prior_T, Lam, H_scratch, g_scratch)
                 if cost_new <= cost:
                     break
             lam *= 10.0
@@ -1109,6 +1196,8 @@ def refine_one(
             break
     robust(r, S, huber, huber_px, b, w, w_unit)
     _normal_equations(J, w, r, H, g)
+    if has_prior:
+        _prior_terms(R, t, prior_T, Lam, H, g)
     for i in range(4):
         for j in range(4):
             T[i, j] = 0.0
@@ -1131,6 +1220,9 @@ def refine_many(
     b,
     huber,
     huber_px,
+    has_prior,
+    prior_T,
+    Lam,
     max_iterations,
     extent,
     T,
@@ -1146,8 +1238,8 @@ def refine_many(
 ):
     """``refine_one`` from each start T0 (K, 4, 4) with the model edges edges (K, S, 2, 3) (one
     assignment per start) and the clicked features' extent (K,); outputs gain a leading axis K:
-    T, r, w_unit, cov = (Jᵀ W J)⁻¹, free, status, iterations, converged; score (K,): the RMS pixel
-    distance of the clicks to the projected finite model features at the result
+    T, r, w_unit, cov = (Jᵀ W J + Λ)⁻¹ (Λ = 0 without a prior), free, status, iterations,
+    converged; score (K,): the RMS pixel distance of the clicks to the projected finite model features at the result
     (``distance_cost``), inf when a clicked feature is behind the camera or the refinement failed;
     summary (K, 2 (S + P) + 2): per click its residual (a segment's larger |distance|, a point's
     distance), then per click its smallest robust weight, then the RMS of r and the a-posteriori σ
@@ -1172,6 +1264,9 @@ def refine_many(
             b,
             huber,
             huber_px,
+            has_prior,
+            prior_T,
+            Lam,
             max_iterations,
             extent[k],
             T[k],
@@ -1206,7 +1301,7 @@ def refine_many(
         for i in range(m):
             ss += rk[i] * rk[i]
             wss += w[i] / b[i] * rk[i] * rk[i]
-        summary[k, 2 * (S + P)] = math.sqrt(ss / m)
+        summary[k, 2 * (S + P)] = math.sqrt(ss / m) if m > 0 else 0.0
         summary[k, 2 * (S + P) + 1] = math.sqrt(wss / (m - 6)) if m > 6 else np.nan
 
 
@@ -1307,6 +1402,9 @@ def warm_up() -> None:
         np.ones(m),
         False,
         3.0,
+        False,
+        np.eye(4),
+        np.zeros((6, 6)),
         100,
         np.ones(1),
         np.empty((1, 4, 4)),

@@ -29,7 +29,7 @@ origin (radians): ``R ← exp([δr]×) R``, ``t ← t + δt`` (perturbation on t
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -45,6 +45,7 @@ _k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded
 __all__ = [
     "RefineResult",
     "ViewClicks",
+    "PosePrior",
     "refine",
     "refine_views",
     "refine_many",
@@ -249,7 +250,11 @@ def refine(
 class ViewClicks:
     """The clicks made in one view (``refine_views``): its camera, the clicked segments and points with
     their matched model features (as ``refine`` takes them) and their noise σ (one, or one per click of
-    this view, segments first)."""
+    this view, segments first).
+
+    seg_index, point_index : optional, where each of this view's segments (points) stands among all the
+    views' segments (points): the caller's click order, which ``refine_views``' result then follows. Give
+    them for every view or for none (then every view's segments in view order, then every view's points)."""
 
     camera: Camera
     segs_uv: np.ndarray | None = None
@@ -257,6 +262,40 @@ class ViewClicks:
     points_uv: np.ndarray | None = None
     points_obj: np.ndarray | None = None
     sigma_px: float | np.ndarray = 1.0
+    seg_index: Sequence[int] | None = None
+    point_index: Sequence[int] | None = None
+
+
+@dataclass(frozen=True)
+class PosePrior:
+    """A pose measured already, refined together with the clicks (``refine_views``' ``prior``): the
+    maximum a posteriori pose of the clicks and the prior.
+
+    T_world_obj : (4, 4) the measured pose (e.g. the one-click search's). cov : (6, 6) its covariance of
+    (δt, δr) (module docstring); directions it leaves at zero variance (a pose held on the table: its
+    height and tilt) are held at ``fixed_std`` (metres, radians). shared_cov : (6, 6), optional, the share
+    of ``cov`` the clicks have too (the camera calibration's, both being measured through one C): the two
+    are combined without it, and it is added to the result. name : what the result's ``cov_parts`` calls
+    the prior ("found pose": "found pose and clicks")."""
+
+    T_world_obj: np.ndarray
+    cov: np.ndarray
+    fixed_std: tuple[float, float] = (1e-4, 1e-4)
+    shared_cov: np.ndarray | None = None
+    name: str = "prior"
+
+    def information(self) -> np.ndarray:
+        """Λ (6, 6): pinv of (cov − shared_cov) on its range, 1/fixed_std² along the directions it
+        leaves at zero variance. ValueError when a covariance is not a finite PSD (6, 6) matrix."""
+        P = np.asarray(self.cov, dtype=float)
+        if P.shape != (6, 6) or not np.all(np.isfinite(P)):
+            raise ValueError(f"cov_prior must be a finite (6, 6) covariance of (δt, δr), got shape {P.shape}")
+        if self.shared_cov is not None:
+            Q = np.asarray(self.shared_cov, dtype=float)
+            if Q.shape != (6, 6) or not np.all(np.isfinite(Q)):
+                raise ValueError(f"the prior's shared_cov must be a finite (6, 6) covariance, got shape {Q.shape}")
+            P = P - Q
+        return _prior_information(P, self.fixed_std)
 
 
 def refine_views(
@@ -266,33 +305,39 @@ def refine_views(
     loss: str = "l2",
     huber_px: float = 3.0,
     max_iterations: int = 100,
+    prior: PosePrior | None = None,
 ) -> RefineResult:
     """``refine`` from clicks made in several views at once: one pose fits them all (its residuals in
     each view's pixels, weighted by that view's σ). A second view sees along the first view's line of
     sight, where one view's clicks fix the pose worst (``bench/views.py`` measures it).
 
-    The result's ``kinds`` and ``views`` order the clicks: every view's segments, in view order, then
-    every view's points. ValueError as ``refine``, naming the view whose clicks are wrong."""
+    The result's per-click arrays (``kinds``, ``views``, residuals, weights, σ) follow the clicks' order:
+    the views' ``seg_index`` / ``point_index`` when given, else every view's segments in view order, then
+    every view's points. ``prior``: a pose measured already (``PosePrior``), fitted together with the
+    clicks (any number of them: none returns the prior); ``cov`` is then ``(Jᵀ W J + Λ)⁻¹`` plus the
+    prior's ``shared_cov``. ValueError as ``refine``, naming the view whose clicks are wrong."""
     views = list(views)
     if not views:
         raise ValueError("no view's clicks: give the clicks of at least one view")
-    per_view, seg_sigma, pt_sigma = [], [], []
+    per_view, order = [], []
     for i, v in enumerate(views):
         if not isinstance(v, ViewClicks):
             raise ValueError(f"view {i + 1} must be a ViewClicks, got {type(v).__name__}")
         try:
             check_options(v.camera, loss, huber_px, v.sigma_px)
             c = as_clicks(v.segs_uv, v.edges_obj, v.points_uv, v.points_obj)
-            sigma = click_sigmas(v.sigma_px, c)[::2]  # one per click of this view, segments first
+            click_sigmas(v.sigma_px, c)  # one σ, or one per click of this view
         except ValueError as exc:
             raise ValueError(f"view {i + 1}: {exc}") from None
         per_view.append(c)
-        seg_sigma.append(sigma[: c.n_segments])
-        pt_sigma.append(sigma[c.n_segments :])
-    clicks = stack_views(per_view)
-    sigma_px = np.concatenate(seg_sigma + pt_sigma)
-    if np.all(sigma_px == sigma_px[0]):
-        sigma_px = float(sigma_px[0]) if len(sigma_px) else 1.0
+        order.append((v.seg_index, v.point_index))
+    given = [o[0] is not None or o[1] is not None for o in order]
+    if any(given) and not all(given):
+        raise ValueError("give seg_index / point_index for every view or for none")
+    if all(given):  # a view without segments (points) places none
+        order = [(() if si is None else si, () if pi is None else pi) for si, pi in order]
+    clicks = stack_views(per_view, order if all(given) else None)
+    sigma_px = _sigma_in_order(views, per_view, clicks)
     out = refine_many(
         [v.camera for v in views],
         _as_pose(T_world_obj)[None],
@@ -301,10 +346,27 @@ def refine_views(
         float(huber_px),
         sigma_px,
         int(max_iterations),
+        prior=prior,
     )[0][0]
     if isinstance(out, str):
         raise ValueError(out)
     return out
+
+
+def _sigma_in_order(views: list[ViewClicks], per_view: list[Clicks], clicks: Clicks):
+    """σ of each click of the stacked ``clicks`` (segments, then points, in their order): one float when
+    all are equal, else an array."""
+    seg_sigma = np.empty(clicks.n_segments)
+    pt_sigma = np.empty(clicks.n_points)
+    seg_view, pt_view = clicks.view_index
+    for i, (v, c) in enumerate(zip(views, per_view)):
+        sigma = click_sigmas(v.sigma_px, c)[::2]  # one per click of this view, segments first
+        seg_sigma[seg_view == i] = sigma[: c.n_segments]
+        pt_sigma[pt_view == i] = sigma[c.n_segments :]
+    sigma_px = np.concatenate([seg_sigma, pt_sigma])
+    if not len(sigma_px):
+        return 1.0
+    return float(sigma_px[0]) if np.all(sigma_px == sigma_px[0]) else sigma_px
 
 
 def _refine(
@@ -325,6 +387,7 @@ def refine_many(
     sigma_px=1.0,
     max_iterations: int = 100,
     edges_obj: np.ndarray | None = None,
+    prior: PosePrior | None = None,
 ) -> list[tuple[RefineResult | str, float]]:
     """``refine`` from many starts at once (one compiled call): the P3L candidates of a triple,
     or the assignments the matcher tries. ``camera``: one, or one per view of stacked clicks
@@ -332,14 +395,18 @@ def refine_many(
 
     T_starts (K, 4, 4) rigid transforms (validated by the caller); clicks as ``as_clicks`` made
     them; edges_obj (K, S, 2, 3): each start's own model edges (default: the clicks' for every
-    start). Returns per start (RefineResult, or the reason it could not be refined, and score):
-    the RMS pixel distance of the clicks to the projected finite model features at the refined
-    pose (``residuals.pose_distance_cost``), inf when refinement failed.
+    start). prior : a pose measured already, fitted together with the clicks (``refine_views``).
+    Returns per start (RefineResult, or the reason it could not be refined, and score): the RMS pixel
+    distance of the clicks to the projected finite model features at the refined pose
+    (``residuals.pose_distance_cost``), inf when refinement failed.
     """
     m = clicks.n_residuals
     if len(T_starts) == 0:
         return []
-    if m < 6:
+    Lam = None if prior is None else prior.information()
+    if prior is not None and m == 0:
+        return [(_prior_alone(prior, Lam, clicks), 0.0) for _ in range(len(T_starts))]
+    if m < 6 and prior is None:
         raise ValueError(
             f"{clicks.n_segments} segment(s) and {clicks.n_points} point(s) give {m} residuals; "
             "a pose has 6 degrees of freedom: click at least 3 edges (or 2 edges and a vertex)"
@@ -378,6 +445,9 @@ def refine_many(
         b,
         loss == "huber",
         float(huber_px),
+        prior is not None,
+        np.eye(4) if prior is None else _as_pose(prior.T_world_obj),
+        np.zeros((6, 6)) if Lam is None else Lam,
         int(max_iterations),
         extent,
         T,
@@ -391,9 +461,33 @@ def refine_many(
         score,
         summary,
     )
-    return _start_results(
+    out = _start_results(
         status, free, extent, summary, (T, cov, r, iterations, converged, score), clicks, sigma_px, loss
     )
+    if prior is None or prior.shared_cov is None:
+        return out
+    return [(res, sc) if isinstance(res, str) else (_with_shared(res, prior), sc) for res, sc in out]
+
+
+def _with_shared(res: RefineResult, prior: PosePrior) -> RefineResult:
+    """``res`` with the prior's shared covariance added back (``PosePrior.shared_cov``)."""
+    shared = np.asarray(prior.shared_cov, dtype=float)
+    parts = {f"{prior.name} and clicks": res.cov, "camera calibration": shared}
+    return replace(res, cov=res.cov + shared, cov_parts=parts)
+
+
+def _prior_alone(prior: PosePrior, Lam: np.ndarray, clicks: Clicks) -> RefineResult:
+    """The prior with no click: its pose, cov = Λ⁻¹ (+ its shared share)."""
+    cov = np.linalg.inv(Lam)
+    res = RefineResult(
+        T_world_obj=_as_pose(prior.T_world_obj),
+        cov=0.5 * (cov + cov.T),
+        rms_px=0.0,
+        residuals_px=np.zeros(0),
+        iterations=0,
+        converged=True,
+    )
+    return res if prior.shared_cov is None else _with_shared(res, prior)
 
 
 def _start_results(status, free, extent, summary, outputs, clicks: Clicks, sigma_px, loss: str):
@@ -462,7 +556,8 @@ def refine_with_prior(
     max_iterations: int = 30,
 ) -> RefineResult:
     """Refine a pose known already (a pose found on the image, with its covariance) together with
-    clicked edges and points: the maximum a posteriori pose of the clicks and the prior.
+    clicked edges and points: the maximum a posteriori pose of the clicks and the prior
+    (``refine_views`` with a ``PosePrior``, in one view).
 
     Minimises Σ (r_click / σ)² + eᵀ Λ e, e = (t − t_prior, log(R R_priorᵀ)) (the module's δ), Λ the
     prior's information: ``pinv(cov_prior)`` on the range of ``cov_prior`` and, along the
@@ -473,75 +568,11 @@ def refine_with_prior(
     Returns RefineResult: the pose, cov = (Jᵀ W J + Λ)⁻¹ (the prior included), the clicks' residuals
     and diagnostics. ValueError for bad input.
     """
-    from .residuals import perturb, residuals
-
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
     T0 = _as_pose(T_prior)
-    P = np.asarray(cov_prior, dtype=float)
-    if P.shape != (6, 6) or not np.all(np.isfinite(P)):
-        raise ValueError(f"cov_prior must be a finite (6, 6) covariance of (δt, δr), got shape {P.shape}")
-    Lam = _prior_information(P, fixed_std)
-    clicks = as_clicks(segs_uv, edges_obj, points_uv, points_obj)
-    b = 1.0 / click_sigmas(sigma_px, clicks) ** 2 if clicks.n_residuals else np.zeros(0)
-    T = T0.copy()
-    it, converged = 0, False
-
-    def err(T_):
-        from ..transforms import log_so3
-
-        return np.concatenate([T_[:3, 3] - T0[:3, 3], log_so3(T_[:3, :3] @ T0[:3, :3].T)])
-
-    for it in range(1, max_iterations + 1):  # noqa: B007 - the count of iterations, returned
-        e = err(T)
-        H, g = Lam.copy(), Lam @ e
-        if clicks.n_residuals:
-            r, J, feasible = residuals(camera, T[:3, :3], T[:3, 3], clicks, jacobian=True)
-            if not feasible:
-                raise ValueError(
-                    "a clicked model edge or point is behind the camera at the prior pose: check the assignments"
-                )
-            H += (J * b[:, None]).T @ J
-            g += (J * b[:, None]).T @ r
-        step = -np.linalg.solve(H, g)
-        T = perturb(T, step)
-        if np.max(np.abs(step[:3])) < 1e-9 and np.max(np.abs(step[3:])) < 1e-9:
-            converged = True
-            break
-    H = Lam.copy()
-    if clicks.n_residuals:
-        r, J, _ = residuals(camera, T[:3, :3], T[:3, 3], clicks, jacobian=True)
-        H += (J * b[:, None]).T @ J
-        n = clicks.n_segments + clicks.n_points
-        S = clicks.n_segments
-        per_click = (
-            np.concatenate(
-                [np.max(np.abs(r[: 2 * S].reshape(-1, 2)), axis=1), np.linalg.norm(r[2 * S :].reshape(-1, 2), axis=1)]
-            )
-            if n
-            else np.zeros(0)
-        )
-        rms = float(np.sqrt(np.mean(r * r)))
-    else:
-        r, per_click, rms, n = np.zeros(0), np.zeros(0), 0.0, 0
-    cov = np.linalg.inv(H)
-    cov = 0.5 * (cov + cov.T)
-    sigma_out = float(sigma_px) if np.ndim(sigma_px) == 0 else np.asarray(sigma_px, dtype=float).copy()
-    return RefineResult(
-        T_world_obj=T,
-        cov=cov,
-        rms_px=rms,
-        residuals_px=r,
-        iterations=it,
-        converged=converged,
-        kinds=clicks.kinds,
-        click_residuals_px=per_click,
-        weights=np.ones(n),
-        downweighted=(),
-        sigma_px=sigma_out,
-        sigma_est_px=float("nan"),
-        loss="l2",
-    )
+    view = ViewClicks(camera, segs_uv, edges_obj, points_uv, points_obj, sigma_px)
+    return refine_views([view], T0, prior=PosePrior(T0, cov_prior, fixed_std), max_iterations=max_iterations)
 
 
 def _prior_information(P: np.ndarray, fixed_std: tuple[float, float]) -> np.ndarray:

@@ -64,31 +64,30 @@ class Clicks:
     edges_obj: np.ndarray
     points_uv: np.ndarray
     points_obj: np.ndarray
-    seg_off: tuple[int, ...] | None = None
-    pt_off: tuple[int, ...] | None = None
+    seg_view: np.ndarray | None = None  # (S,) int64: the view each segment was clicked in (None: one view)
+    pt_view: np.ndarray | None = None  # (P,) int64: the view of each point
+    view_count: int = 1
 
     @property
     def n_views(self) -> int:
         """The views the clicks were made in (``stack_views``); 1 unless stacked."""
-        return 1 if self.seg_off is None else len(self.seg_off) - 1
+        return self.view_count
 
     @property
     def view_index(self) -> tuple[np.ndarray, np.ndarray]:
         """(seg_view (S,), pt_view (P,)), int64: the view of each clicked segment and point."""
-        if self.seg_off is None:  # one view: the shared zeros (the kernels only read them)
+        if self.seg_view is None:  # one view: the shared zeros (the kernels only read them)
             S, P = len(self.segs_uv), len(self.points_uv)
             zeros = _ZEROS if max(S, P) <= len(_ZEROS) else np.zeros(max(S, P), np.int64)
             return zeros[:S], zeros[:P]
-        views = np.arange(self.n_views)
-        return np.repeat(views, np.diff(self.seg_off)), np.repeat(views, np.diff(self.pt_off))
+        return self.seg_view, self.pt_view
 
     @property
     def views(self) -> tuple[int, ...]:
         """The view of each click, as ``kinds`` orders them (segments first)."""
-        if self.seg_off is None:
+        if self.seg_view is None:
             return (0,) * (len(self.segs_uv) + len(self.points_uv))
-        seg_view, pt_view = self.view_index
-        return tuple(seg_view.tolist()) + tuple(pt_view.tolist())
+        return tuple(self.seg_view.tolist()) + tuple(self.pt_view.tolist())
 
     @cached_property
     def segs_h(self) -> np.ndarray:
@@ -214,27 +213,50 @@ def as_clicks(segs_uv=None, edges_obj=None, points_uv=None, points_obj=None) -> 
     return Clicks(segs, edges, puv, pobj)
 
 
-def stack_views(per_view: Sequence[Clicks]) -> Clicks:
-    """One Clicks of the clicks made in several views (each validated by ``as_clicks``): every view's
-    segments, in view order, then every view's points; the offsets say which view each came from."""
+def stack_views(
+    per_view: Sequence[Clicks], order: Sequence[tuple[Sequence[int], Sequence[int]]] | None = None
+) -> Clicks:
+    """One Clicks of the clicks made in several views (each validated by ``as_clicks``), each click
+    keeping the view it came from.
+
+    order : per view, (the positions of its segments, the positions of its points) among all the
+    views' segments and among all their points: the caller's click order, whatever the view each click
+    was made in. Default: every view's segments, in view order, then every view's points. ValueError
+    when the positions are not each click's exactly once."""
     if not per_view:
         raise ValueError("no view's clicks: give the clicks of at least one view")
-    seg_off = tuple(np.cumsum([0] + [c.n_segments for c in per_view]).tolist())
-    pt_off = tuple(np.cumsum([0] + [c.n_points for c in per_view]).tolist())
-    return Clicks(
-        np.concatenate([c.segs_uv for c in per_view]),
-        np.concatenate([c.edges_obj for c in per_view]),
-        np.concatenate([c.points_uv for c in per_view]),
-        np.concatenate([c.points_obj for c in per_view]),
-        seg_off,
-        pt_off,
-    )
+    if order is None:
+        seg_at = np.arange(sum(c.n_segments for c in per_view))
+        pt_at = np.arange(sum(c.n_points for c in per_view))
+    else:
+        if len(order) != len(per_view):
+            raise ValueError(f"order gives the positions of {len(order)} view(s)' clicks for {len(per_view)} view(s)")
+        seg_at = np.concatenate([np.asarray(o[0], np.int64).reshape(-1) for o in order])
+        pt_at = np.concatenate([np.asarray(o[1], np.int64).reshape(-1) for o in order])
+    views = np.arange(len(per_view))
+    seg_view = np.repeat(views, [c.n_segments for c in per_view])
+    pt_view = np.repeat(views, [c.n_points for c in per_view])
+    S, P = len(seg_view), len(pt_view)
+    if not (np.array_equal(np.sort(seg_at), np.arange(S)) and np.array_equal(np.sort(pt_at), np.arange(P))):
+        raise ValueError(
+            f"order must place each of the {S} segment(s) and {P} point(s) exactly once (positions 0..{S - 1} "
+            f"and 0..{P - 1})"
+        )
+    segs, edges = np.empty((S, 2, 2)), np.empty((S, 2, 3))
+    puv, pobj = np.empty((P, 2)), np.empty((P, 3))
+    seg_out, pt_out = np.empty(S, np.int64), np.empty(P, np.int64)
+    segs[seg_at] = np.concatenate([c.segs_uv for c in per_view])
+    edges[seg_at] = np.concatenate([c.edges_obj for c in per_view])
+    puv[pt_at] = np.concatenate([c.points_uv for c in per_view])
+    pobj[pt_at] = np.concatenate([c.points_obj for c in per_view])
+    seg_out[seg_at], pt_out[pt_at] = seg_view, pt_view
+    return Clicks(segs, edges, puv, pobj, seg_out, pt_out, len(per_view))
 
 
 def view_matrices(cameras: Camera | Sequence[Camera], clicks: Clicks) -> np.ndarray:
     """The views' matrices C, (V, 3, 4), read-only as ``Camera.C`` is (the kernels are compiled for that
     type), one camera per view of the clicks; ValueError otherwise."""
-    if isinstance(cameras, Camera) and clicks.seg_off is None:
+    if isinstance(cameras, Camera) and clicks.seg_view is None:
         return cameras.C[None]
     cams = [cameras] if isinstance(cameras, Camera) else list(cameras)
     if not all(isinstance(c, Camera) for c in cams):
