@@ -9,8 +9,10 @@ usual. The first ``auto_match()`` with fewer than three edges switches to automa
 assignments that draw the same picture (a symmetric model) the one nearest the database pose is
 kept (``core.pose.nearest_twin``).
 
-A mixin of ``UpdatePose`` (app/workflows/update_pose.py): it uses its clicks (``segs``,
-``edge_ids``, ``seg_snaps``), its candidates and its snapshot/commit discipline.
+``AutoMatch`` is that session, a collaborator of ``UpdatePose`` (app/workflows/update_pose.py): it is given
+the clicks (``core.pose.PoseClicks``) and the frame, runs the matcher (the pose pipeline's automatic-matching
+source: P3L on every assignment's triples, refined with every click by ``core.pose.refine_many``) outside
+the workflow's lock, keeps the assignments shown and says what it found; the workflow commits.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from core.pose import nearest_twin, plausibility
 
 from .base import WorkflowError
 
-__all__ = ["AutoMatchMixin", "Match", "SNAPPED_SIGMA_PX", "IMAGE_GATE_PX"]
+__all__ = ["AutoMatch", "Match", "SNAPPED_SIGMA_PX", "IMAGE_GATE_PX"]
 
 SNAPPED_SIGMA_PX = 0.3  # the click noise automatic matching assumes when every segment is snapped
 IMAGE_GATE_PX = 3.0  # a matched pose whose edges lie farther than this from the image's (mean) fits the clicks only
@@ -42,77 +44,73 @@ class Match:
     image_px: float
 
 
-class AutoMatchMixin:
+class AutoMatch:
     """Automatic assignment for Update pose (see the module docstring)."""
 
-    matches: list[Match] | None
-    match_info: dict[str, Any] | None
+    def __init__(self, object_name: str):
+        self.object_name = object_name
+        self.matches: list[Match] | None = None  # automatic assignments awaiting confirmation
+        self.info: dict[str, Any] | None = None  # the confirmed one, for the history
 
-    # ------------------------------------------------------------------ automatic matching
-    def auto_assign(self, on: bool = True) -> None:
-        """Automatic assignment on: clicked edges wait for ``auto_match`` instead of a model edge
-        (off: back to assigning each by hand)."""
-        with self.lock:
-            self._check_open()
-            if not on and sum(e is None for e in self.edge_ids[:-1]):
-                raise WorkflowError(
-                    "some clicked edges are not assigned: Auto match them, or Remove last, before assigning by hand"
-                )
-            self.auto = bool(on)
-            if self.auto and self.mode == "edge" and self.pending is None:
-                self.state = "click_edge"
-            elif not self.auto:
-                self.state = "assign_edge" if self._waiting_for_edge() else "click_edge"
-            self.message = (
-                "Automatic matching: click 3 or more image edges (4 is best), two points each, without "
-                "assigning them; then Auto match."
-                if self.auto
-                else "Assign each clicked edge by hand."
+    def check_confirmed(self) -> None:
+        """WorkflowError while automatic assignments await confirmation (Refine needs one assignment)."""
+        if self.matches is not None:
+            raise WorkflowError("confirm the automatic assignment first (Confirm match), or assign the edges by hand")
+
+    @staticmethod
+    def check(clicks, view: str) -> bool:
+        """Can the clicks be matched now? True: yes; False: fewer than 3 edges, automatic assignment is to
+        be switched on; WorkflowError otherwise (an edge in another camera, a click under way, every edge
+        assigned, too few edges with automatic assignment on)."""
+        if any(v != view for v in clicks.seg_views):
+            raise WorkflowError(
+                f"automatic matching works on camera {view}'s frame alone: say which model edge each edge "
+                "clicked in another camera is (click it on the wireframe), or Remove last"
             )
+        if clicks.pending is not None or clicks.mode == "point":
+            raise WorkflowError("finish the click under way first (or Remove last)")
+        n = len(clicks.segs)
+        if n < 3:
+            if not clicks.auto:
+                return False
+            raise WorkflowError(
+                f"{n} edge{'s' if n != 1 else ''} clicked: automatic matching needs 3 (4 or more is best); "
+                "click more image edges"
+            )
+        if all(e is not None for e in clicks.edge_ids):
+            raise WorkflowError("every clicked edge is assigned already: Solve or Refine")
+        return True
 
-    def auto_match(self):
-        """Which model edge is each clicked edge? Every assignment is tried on the frame and ranked.
+    @staticmethod
+    def job(clicks, camera, obj, sigma_px: float) -> dict[str, Any]:
+        """What the matcher needs, taken under the workflow's lock: the clicked segments, the click noise
+        (``SNAPPED_SIGMA_PX`` when every segment is snapped), the hand assignments (kept: only assignments
+        agreeing with them count), the camera, the model and the database pose."""
+        snapped = all(s is not None and s.applied for s in clicks.seg_snaps)
+        return dict(
+            segs=np.array(clicks.segs),
+            sigma=SNAPPED_SIGMA_PX if snapped else sigma_px,
+            hand={j: e for j, e in enumerate(clicks.edge_ids) if e is not None},
+            camera=camera,
+            model=obj.model,
+            T_db=obj.T_world_obj,
+        )
 
-        With fewer than 3 clicked edges: switches to automatic assignment (``auto_assign``) and
-        says what to click. Otherwise ``app.vision.matching.match_edges`` on all clicked edges (hand
-        assignments are kept: only assignments agreeing with them count) and the frame the operator
-        clicked on; the plausible assignments become the candidates, the best shown; the operator
-        confirms one (``confirm_match``). Returns the list of ``Match`` (or None when switching).
-        """
+    def run(self, job: dict[str, Any], image) -> tuple[list[Match], str]:
+        """``app.vision.matching.match_edges`` on the clicks and the frame (outside the lock): the plausible
+        assignments, each as the twin nearest the database pose (``core.pose.nearest_twin``), those whose
+        drawing misses the frame's edges dropped unless nothing else is left; and what to tell the operator.
+        WorkflowError when none fits."""
         from app.vision.matching import match_edges
 
-        with self.lock:
-            self._check_open()
-            if any(v != self.view for v in getattr(self, "seg_views", ())):
-                raise WorkflowError(
-                    f"automatic matching works on camera {self.view}'s frame alone: say which model edge each edge "
-                    "clicked in another camera is (click it on the wireframe), or Remove last"
-                )
-            if self.pending is not None or self.mode == "point":
-                raise WorkflowError("finish the click under way first (or Remove last)")
-            if len(self.segs) < 3:
-                if not self.auto:
-                    self.auto_assign(True)
-                    return None
-                raise WorkflowError(
-                    f"{len(self.segs)} edge{'s' if len(self.segs) != 1 else ''} clicked: automatic "
-                    "matching needs 3 (4 or more is best); click more image edges"
-                )
-            if all(e is not None for e in self.edge_ids):
-                raise WorkflowError("every clicked edge is assigned already: Solve or Refine")
-            segs = np.array(self.segs)
-            snapped = all(s is not None and s.applied for s in self.seg_snaps)
-            sigma = SNAPPED_SIGMA_PX if snapped else self.sigma_px
-            hand = {j: e for j, e in enumerate(self.edge_ids) if e is not None}  # kept: only agreeing assignments count
-            camera, model, T_db, generation = self.camera, self.obj.model, self.obj.T_world_obj, self._generation
-        image = self._frame()  # compute, outside the lock: the overlay keeps drawing
+        camera, model, segs = job["camera"], job["model"], job["segs"]
         try:
-            res = match_edges(camera, model, segs, image=image, sigma_px=sigma)
+            res = match_edges(camera, model, segs, image=image, sigma_px=job["sigma"])
         except ValueError as exc:
             raise WorkflowError(f"automatic matching failed: {exc}") from None
         kept: list[Match] = []
         for c in res.candidates:
-            twin = nearest_twin(model, c.T_world_obj, np.asarray(c.edges), T_db, hand)
+            twin = nearest_twin(model, c.T_world_obj, np.asarray(c.edges), job["T_db"], job["hand"])
             if twin is None or plausibility(camera, model, twin[0]):
                 continue
             kept.append(Match(twin[0], twin[1], float(c.rms_px), float(c.image_px)))
@@ -133,43 +131,27 @@ class AutoMatchMixin:
                 f" None lies on the image's edges (the best is {min(mt.image_px for mt in kept):.1f} px off on "
                 "average): check the clicks and any hand assignment."
             )
-        with self.lock:  # commit
-            self._unchanged_since(generation, "Auto match")
-            self.matches = kept
-            self.candidates = [m.T_world_obj for m in kept]
-            self.chosen = 0
-            self._invalidate()
-            self.state = "match"
-            self._match_s = res.total_s
-            self.message = (
-                f"{len(kept)} way{'s' if len(kept) > 1 else ''} of pairing your edges with the model's "
-                f"edges fit{'' if len(kept) > 1 else 's'} ({res.total_s:.1f} s); the best is drawn, each clicked "
-                "edge labelled with its model edge: Confirm match, or choose another candidate" + warning
-            )
-            return kept
+        n = len(kept)
+        return kept, (
+            f"{n} way{'s' if n > 1 else ''} of pairing your edges with the model's "
+            f"edges fit{'' if n > 1 else 's'} ({res.total_s:.1f} s); the best is drawn, each clicked "
+            "edge labelled with its model edge: Confirm match, or choose another candidate" + warning
+        )
 
-    def confirm_match(self) -> None:
-        """Adopt the shown automatic assignment (the chosen candidate's): then Refine and Accept."""
-        with self.lock:
-            self._check_open()
-            if not self.matches:
-                raise WorkflowError("no automatic assignment to confirm: click 3 or more edges and Auto match first")
-            i = self.chosen or 0
-            m = self.matches[i]
-            self._match_undo.append(list(self.edge_ids))
-            self.edge_ids = [int(e) for e in m.edges]
-            self._done.append("match")
-            self.match_info = {
-                "candidate": i + 1,
-                "of": len(self.matches),
-                "rms_px": m.rms_px,
-                "image_px": None if not np.isfinite(m.image_px) else m.image_px,
-                "edges": [int(e) for e in m.edges],
-            }
-            self.matches = None
-            self._invalidate()
-            self.state = "review"
-            self.message = (
-                f"Assignment {i + 1} confirmed: segments "
-                f"{', '.join(f'{j + 1}→e{e}' for j, e in enumerate(self.edge_ids))}. Refine, then Accept."
-            )
+    def confirm(self, chosen: int) -> tuple[list[int], str]:
+        """Adopt assignment ``chosen``: (its model edge per clicked segment, what to tell the operator);
+        WorkflowError when none is shown."""
+        if not self.matches:
+            raise WorkflowError("no automatic assignment to confirm: click 3 or more edges and Auto match first")
+        m = self.matches[chosen]
+        edges = [int(e) for e in m.edges]
+        self.info = {
+            "candidate": chosen + 1,
+            "of": len(self.matches),
+            "rms_px": m.rms_px,
+            "image_px": None if not np.isfinite(m.image_px) else m.image_px,
+            "edges": edges,
+        }
+        self.matches = None
+        pairs = ", ".join(f"{j + 1}→e{e}" for j, e in enumerate(edges))
+        return edges, f"Assignment {chosen + 1} confirmed: segments {pairs}. Refine, then Accept."

@@ -10,9 +10,13 @@ method "search" and the click in the history. Edges clicked afterwards are assig
 and Refine fits them together with it (the found pose and its covariance as the prior: one edge already
 helps; method "search+refine").
 
-The search runs outside the workflow's lock (the overlay keeps drawing), reports its progress
-(``progress``, ``progress_text``) and stops when the workflow is cancelled; it commits only if the
-clicks did not change meanwhile. A mixin of ``UpdatePose`` (app/workflows/update_pose.py).
+``OneClickSearch`` is that session, a collaborator of ``UpdatePose`` (app/workflows/update_pose.py): which
+click the search uses, the search itself (``run``, outside the workflow's lock: the overlay keeps drawing;
+it reports its progress and stops when cancelled), the poses found, and what is said of them (the step,
+the chooser's labels, weaknesses, the summary, the history's record). The workflow commits its result only
+if the clicks did not change meanwhile. Refine hands the chosen found pose to the pose pipeline as a start
+that is also a measurement (``start``: ``core.pose.PosePrior``, its covariance less the camera's share,
+which the clicks share).
 """
 
 from __future__ import annotations
@@ -21,12 +25,20 @@ from typing import Any
 
 import numpy as np
 
+from core.pose import PosePrior
+from core.pose.pipeline import Start
 from core.transforms import pose_error
 
 from .base import MOTION_GAP_S, Step, WorkflowError, as_pixel, sigma_over
-from .writing import write_pose
 
-__all__ = ["OneClickMixin", "WEAK_FOUND_SIGMA_DEG", "WEAK_FOUND_SIGMA_MM", "WEAK_FOUND_MATCH", "NEAR_TIE_MISMATCH"]
+__all__ = [
+    "OneClickSearch",
+    "NothingFound",
+    "WEAK_FOUND_SIGMA_DEG",
+    "WEAK_FOUND_SIGMA_MM",
+    "WEAK_FOUND_MATCH",
+    "NEAR_TIE_MISMATCH",
+]
 
 # A found pose is weak (Accept asks once more) above these σ: the accuracy a one-click update is held to
 # (bench/search.py: within 1° and 5 mm). Its σ then says the image alone does not pin the pose (a small
@@ -50,153 +62,186 @@ MANY_TIES = 4  # this many other poses or more fitting almost as well: the click
 # (bench/search.py (b), seed 0: right poses had at most 3 such; the box's model clicked on the cylinder, 5)
 
 
-class OneClickMixin:
-    """Find from one click (see the module docstring)."""
+class NothingFound(WorkflowError):
+    """No pose fits the image near the click (the click goes: the next one starts afresh)."""
 
-    found: list | None
-    search_click: np.ndarray | None
-    search_info: dict[str, Any] | None
 
-    def _init_found(self) -> None:
-        self.found = None  # the search's candidates (app.vision.search.SearchCandidate), best first
-        self.search_click = None  # the pixel the search used
-        self.search_info = None  # what the history keeps of the search
-        self.found_moving = ""  # said when the object was moving in the frame the pose was found in
+class OneClickSearch:
+    """Find from one click (see the module docstring): the search and the poses it found for one object."""
 
-    # ------------------------------------------------------------------ action
-    def find(self, uv=None):
-        """Find the object's pose from one click on it: the pending first click (or ``uv``).
+    def __init__(self, object_name: str, model):
+        self.object_name = object_name
+        # no straight edges (a cylinder, a cone): its pose can only be found from one click, not from edges
+        self.search_only = not len(model.edges)
+        self.found: list | None = None  # the search's candidates (app.vision.search.SearchCandidate), best first
+        self.click: np.ndarray | None = None  # the pixel the search used
+        self.info: dict[str, Any] | None = None  # what the history keeps of the search
+        self.moving = ""  # said when the object was moving in the frame the pose was found in
+        self.progress: float | None = None  # a search under way: 0..1 (the workflow's progress bar), else None
+        self.progress_text = ""
 
-        Searches outside the lock on the workflow's frame; WorkflowError, nothing changed, when no
-        pose fits ("no pose of the parallelepiped fits the image near your click"), when cancelled,
-        or when the clicks changed meanwhile. Returns the candidates (best first).
-        """
-        from app.vision.search import Cancelled, NoPoseFits, rests_on, search_pose
+    def clear(self, clicks=None) -> None:
+        """The found poses go, and the click they came from (pending in ``clicks``, if given)."""
+        self.found, self.click, self.info, self.moving = None, None, None, ""
+        if clicks is not None:
+            clicks.pending = None
+
+    def alone(self, clicks, refined) -> bool:
+        """Only the found pose is in use (no edge or point in ``clicks`` since, nothing ``refined``): Accept
+        writes it as found."""
+        c = clicks
+        return self.found is not None and c.pending is None and c.empty and c.mode == "edge" and refined is None
+
+    # ------------------------------------------------------------------ the search
+    def click_for(self, uv, clicks, view: str) -> np.ndarray:
+        """The pixel Find uses: ``uv``, or the pending first click (``clicks``: the workflow's
+        ``core.pose.PoseClicks``); WorkflowError when there are other clicks, or none."""
+        if uv is not None:
+            if clicks.pending is not None or not clicks.empty or clicks.mode != "edge":
+                raise WorkflowError("Find uses one click on the object and no others: Remove last first")
+            return as_pixel(uv)
+        if clicks.pending is not None and clicks.empty and clicks.mode == "edge":
+            if clicks.pending_view not in (None, view):
+                raise WorkflowError(
+                    f"Find searches camera {view}'s frame: click {self.object_name} there (Remove last)"
+                )
+            return clicks.pending.copy()
+        raise WorkflowError(
+            f"click once on {self.object_name} where it is now in the video, then Find "
+            "(Find uses that one click, before any edge)"
+        )
+
+    def check_camera(self, view: str, own: str, in_use: bool) -> None:
+        """WorkflowError for a click in camera ``view`` other than the workflow's ``own`` while the search is
+        the way (no straight edges, the found pose in use alone — ``in_use`` —, or a search under way)."""
+        if view != own and (self.search_only or in_use or self.progress is not None):
+            raise WorkflowError(
+                f"the pose found from one click is camera {own}'s: click in camera {own}, or click edges of "
+                f"{self.object_name} in camera {own} first"
+            )
+
+    def double_click(self, view: str, own: str) -> bool:
+        """A double click in camera ``view``: True when poses are found already (it searches again from its
+        point); WorkflowError in another camera than the workflow's ``own`` (it finds the pose there)."""
+        if view != own:
+            raise WorkflowError(
+                f"a double click finds the pose in camera {own}, where Update pose started: double-click there"
+            )
+        return self.found is not None
+
+    def again(self, clicks, p: np.ndarray) -> None:
+        """A double click at pixel p once poses are found: they go (with the double click's first click, an
+        edge's first point in ``clicks`` by then), and p waits for Find as the first click of a new search.
+        WorkflowError, nothing changed, once edges or points were clicked after the search."""
+        if self.found is None or not clicks.empty or clicks.mode != "edge":
+            raise WorkflowError(
+                "a double click searches again only while no edge has been clicked since the search: "
+                "Remove last the edges first, then double-click"
+            )
+        self.clear()
+        clicks.pending, clicks.pending_view = p, None
+
+    @staticmethod
+    def job(site, view: str, obj) -> dict[str, Any]:
+        """What the search needs, taken under the workflow's lock: the camera (and its calibration's
+        covariance, whose σ joins the pose's), the model, the database pose, and the table when the
+        object rests on it (else the full pose is searched near the old one)."""
+        from app.vision.search import rests_on
 
         from .model_object import table_support
 
-        with self.lock:  # snapshot
-            self._check_open()
-            if uv is not None:
-                p = as_pixel(uv)
-                if self.pending is not None or self.segs or self.points_uv or self.mode != "edge":
-                    raise WorkflowError("Find uses one click on the object and no others: Remove last first")
-            elif self.pending is not None and not self.segs and not self.points_uv and self.mode == "edge":
-                if getattr(self, "pending_view", None) not in (None, self.view):
-                    raise WorkflowError(
-                        f"Find searches camera {self.view}'s frame: click {self.object_name} there (Remove last)"
-                    )
-                p = self.pending.copy()
-            else:
-                raise WorkflowError(
-                    f"click once on {self.object_name} where it is now in the video, then Find "
-                    "(Find uses that one click, before any edge)"
-                )
-            camera, model, T_db, generation = self.camera, self.obj.model, self.obj.T_world_obj, self._generation
-            camera_cov = self.site.camera_cov(self.view)  # a camera calibrated in this database: its σ joins the pose's
-            table = table_support(self.site)
-            if table is not None and not rests_on(model, T_db, table):
-                table = None  # it did not lie on the table: the full pose is searched near the old one
-        image = self._frame()  # compute, outside the lock: the overlay keeps drawing
+        table = table_support(site)
+        if table is not None and not rests_on(obj.model, obj.T_world_obj, table):
+            table = None
+        cam = site.camera_of(view)
+        return dict(camera=cam, model=obj.model, T_db=obj.T_world_obj, table=table, camera_cov=site.camera_cov(view))
+
+    def run(self, job: dict, p: np.ndarray, frames, cancel):
+        """``app.vision.search.search_pose`` from pixel p on the workflow's frame (``frames``: its
+        ``Snapper``), outside the lock, ``progress`` and ``progress_text`` saying how far it is; WorkflowError
+        when there is no frame, when cancelled or failed; ``NothingFound`` when no pose fits."""
+        from app.vision.search import Cancelled, NoPoseFits, search_pose
+
+        image = frames.frame()
         if image is None:
-            raise WorkflowError(
-                f"no video frame to search in ({self._no_frame_reason()}); check the video, then Find again"
-            )
+            why = frames.no_frame_reason()
+            raise WorkflowError(f"no video frame to search in ({why}); check the video, then Find again")
 
         def progress(frac: float, what: str) -> None:
             self.progress, self.progress_text = float(frac), what
 
-        if not self.finished:
-            self.cancel_event.clear()  # a search stopped before (stop_measurement) does not stop this one
-        # under way from now (its step refuses clicks: one made before the first progress report had become an
+        # under way from now: the step refuses clicks (one made before the first progress report had become an
         # edge's point, and the found poses could then not be accepted: a new operator's second double click)
         self.progress, self.progress_text = 0.0, "searching"
         try:
-            res = search_pose(
-                camera,
-                model,
-                T_db,
+            return search_pose(
+                job["camera"],
+                job["model"],
+                job["T_db"],
                 p,
                 image,
-                table=table,
+                table=job["table"],
                 name=self.object_name,
-                cancel=self.cancel_event.is_set,
+                cancel=cancel,
                 progress=progress,
-                camera_cov=camera_cov,
+                camera_cov=job["camera_cov"],
             )
         except Cancelled:
             raise WorkflowError("Find cancelled: nothing was written") from None
         except NoPoseFits as exc:
-            with self.lock:  # the click found nothing: it goes (the next click or double click starts afresh)
-                if self._generation == generation and self.pending is not None and np.allclose(self.pending, p):
-                    self.pending = None
-                    self._invalidate()
-                    self.state = "click_edge"
             advice = "" if self.search_only else ", or update it by clicking its edges"
-            raise WorkflowError(f"{exc}{advice}. Nothing was written, and the click was dropped") from None
+            raise NothingFound(f"{exc}{advice}. Nothing was written, and the click was dropped") from None
         except ValueError as exc:
             raise WorkflowError(f"Find failed: {exc}") from None
         finally:
             self.progress, self.progress_text = None, ""
-        moving = self._moving_at(res.candidates[0].T_world_obj, camera, model)
-        with self.lock:  # commit
-            self._unchanged_since(generation, "Find")
-            self.found_moving = moving
-            self.pending = None  # the click was the search's, not an edge's start
-            self.search_click = p
-            self.found = list(res.candidates)
-            self.candidates = [c.T_world_obj for c in res.candidates]
-            self.chosen = 0
-            self.matches = None
-            self._invalidate()
-            self.state = "found"
-            where = "on the table" if res.mode == "table" else "near its old pose"
-            self.search_info = {
-                "click_uv": [float(p[0]), float(p[1])],
-                "mode": res.mode,
-                "candidates": len(res.candidates),
-                "seconds": round(res.total_s, 3),
-            }
-            best = res.candidates[0]
-            n, ties = len(res.candidates), self._near_ties()
-            self.message = (
-                f"{n} pose{'s' if n > 1 else ''} of {self.object_name} fit{'' if n > 1 else 's'} your click "
-                f"(searched {where} in {res.total_s:.1f} s); the best fits the image's edges within "
-                f"{best.fit_px:.1f} px"
-                + (
-                    f": {ties} other{'s' if ties > 1 else ''} fit{'' if ties > 1 else 's'} "
-                    "almost as well, check the white ghost"
-                    if ties
-                    else (
-                        (": the others fit clearly worse" if n > 2 else ": the other fits clearly worse")
-                        if n > 1
-                        else ""
-                    )
-                )
-            )
-            if best.beside_click:
-                self.message += (
-                    f". ⚠ The best lies beside your click, not under it: {self.object_name} fits the image "
-                    "there far better than any pose under the click (check the white ghost)"
-                )
-            if moving:
-                self.message += f". ⚠ {moving}"
-            return self.found
 
-    def _moving_at(self, T: np.ndarray, camera, model) -> str:
+    def adopt(self, res, p: np.ndarray, moving: str) -> str:
+        """Keep the search's result (found from pixel p; ``moving``: said if the object was moving); what
+        to tell the operator."""
+        self.found, self.click, self.moving = list(res.candidates), p, moving
+        self.info = {
+            "click_uv": [float(p[0]), float(p[1])],
+            "mode": res.mode,
+            "candidates": len(res.candidates),
+            "seconds": round(res.total_s, 3),
+        }
+        best, n, ties = res.candidates[0], len(res.candidates), self.near_ties()
+        where = "on the table" if res.mode == "table" else "near its old pose"
+        if ties:
+            others = f"{ties} other{'s' if ties > 1 else ''} fit{'' if ties > 1 else 's'}"
+            rest = f": {others} almost as well, check the white ghost"
+        elif n > 1:
+            rest = ": the others fit clearly worse" if n > 2 else ": the other fits clearly worse"
+        else:
+            rest = ""
+        message = (
+            f"{n} pose{'s' if n > 1 else ''} of {self.object_name} fit{'' if n > 1 else 's'} your click "
+            f"(searched {where} in {res.total_s:.1f} s); the best fits the image's edges within "
+            f"{best.fit_px:.1f} px" + rest
+        )
+        if best.beside_click:
+            message += (
+                f". ⚠ The best lies beside your click, not under it: {self.object_name} fits the image "
+                "there far better than any pose under the click (check the white ghost)"
+            )
+        return message + (f". ⚠ {moving}" if moving else "")
+
+    def moving_at(self, T: np.ndarray, job: dict, moving_share) -> str:
         """ "" unless the object at pose T changed between the frozen frame and the one shown just before
-        it (``Workflow.moving_share``): then it was moving, and the pose found there is where it passed,
-        not where it stays. The pixels: its bounding box's corners, projected, taken inside
-        (``app.vision.change.inside``)."""
+        it (``moving_share``: ``Workflow.moving_share``; ``job``: the search's): then it was moving, and the
+        pose found there is where it passed, not where it stays. The pixels: its bounding box's corners,
+        projected, taken inside (``app.vision.change.inside``)."""
         from app.vision.change import CHANGED_SHARE, inside
 
+        camera, model = job["camera"], job["model"]
         lo, hi = model.bounds()
         box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         X = box @ T[:3, :3].T + T[:3, 3]
         uv = camera.project(X[camera.depth(X) > 0])
         if not len(uv):
             return ""
-        share = self.moving_share(inside(uv))
+        share = moving_share(inside(uv))
         if share is None or share <= CHANGED_SHARE:
             return ""
         return (
@@ -206,7 +251,7 @@ class OneClickMixin:
             "stopped before) and double-click it again, or Accept if it stopped there"
         )
 
-    def _near_ties(self) -> int:
+    def near_ties(self) -> int:
         """How many found poses besides the best match the image almost as well (mismatch within
         ``NEAR_TIE_MISMATCH`` of the best's): the ambiguity the operator is told of."""
         if not self.found:
@@ -214,66 +259,31 @@ class OneClickMixin:
         m0 = self.found[0].mismatch
         return sum(c.mismatch <= m0 + NEAR_TIE_MISMATCH for c in self.found[1:])
 
-    # ------------------------------------------------------------------ hooks for UpdatePose
-    def _found_pending(self) -> bool:
-        """Only the found pose is in use (no edge or point clicked since): Accept writes it."""
-        return (
-            self.found is not None
-            and self.pending is None
-            and not self.segs
-            and not self.points_uv
-            and self.mode == "edge"
-            and self.refined is None
-        )
-
-    def _first_click_pending(self) -> bool:
-        """One click made, nothing else: it can be Find's."""
-        return (
-            self.found is None
-            and self.pending is not None
-            and not self.segs
-            and not self.points_uv
-            and self.mode == "edge"
-            and self.matches is None
-        )
-
-    def search_again(self, uv) -> None:
-        """A double click at ``uv`` once poses are found: they go (with the double click's first click, an
-        edge's first point by then), and ``uv`` waits for Find, as the first click of a new search (a new
-        operator double-clicked again to retry at a better point: it was split into two edge points).
-        WorkflowError, nothing changed, once edges or points were clicked after the search."""
-        p = as_pixel(uv)
-        with self.lock:
-            self._check_open()
-            if self.found is None or self.segs or self.points_uv or self.mode != "edge":
-                raise WorkflowError(
-                    "a double click searches again only while no edge has been clicked since the search: "
-                    "Remove last the edges first, then double-click"
-                )
-            self.found, self.search_info, self.found_moving = None, None, ""
-            self.search_click, self.candidates, self.chosen, self.matches = None, [], None, None
-            self.pending, self.pending_view = p, None
-            self._invalidate()
-            self.state = "click_edge_end"
-
-    def _drop_found(self) -> bool:
-        """Remove last on the found poses alone: they go, and the click (or double click) they came from
-        with them — back to the start, as one Remove last undoes one double click. True if dropped."""
-        if not self._found_pending():
-            return False
-        self.found, self.search_info, self.found_moving = None, None, ""
-        self.pending, self.search_click = None, None
-        self.candidates, self.chosen = [], None
-        self._invalidate()
-        self.state = "click_edge"
-        return True
-
-    def _found_step(self, base: set) -> Step | None:
-        if not self._found_pending():
+    # ------------------------------------------------------------------ the found poses in the pipeline
+    def start(self, chosen: int, views: list) -> Start | None:
+        """Found pose ``chosen`` as the pipeline's start and prior (its covariance, the camera's share
+        held apart: an error the clicks share, ``PosePrior.shared_cov``); None without found poses, without a
+        covariance, or with clicks in other cameras (``views``: the cameras fitted, the search's first)."""
+        if self.found is None or len(views) > 1:
             return None
-        i = self.chosen or 0
-        c = self.found[i]
-        n = len(self.found)
+        c = self.found[chosen]
+        if c.cov is None:
+            return None
+        prior = PosePrior(c.T_world_obj, c.cov, shared_cov=c.cov_camera, name="found pose")
+        return Start(c.T_world_obj, f"found pose {chosen + 1}", chosen, prior)
+
+    def record(self, chosen: int, frame: dict | None) -> dict[str, Any]:
+        """``site.update_pose``'s arguments for writing found pose ``chosen`` (method "search")."""
+        c = self.found[chosen]
+        clicks = dict(self.info or {})
+        clicks.update({"chosen": chosen, "frame": frame})
+        residuals = {"fit_px": c.fit_px, "support_px": c.support_px, "confidence": c.confidence}
+        return dict(T_world_obj=c.T_world_obj, cov=c.cov, method="search", clicks=clicks, residuals=residuals)
+
+    # ------------------------------------------------------------------ what is said of them
+    def step(self, chosen: int, base: set) -> Step:
+        """The step while only the found poses are in use: pose ``chosen`` drawn in white."""
+        i, c, n = chosen, self.found[chosen], len(self.found)
         sd = (
             f"σ {np.max(c.std_t_mm):.1f} mm, {np.max(c.std_r_deg):.2f}°"
             if np.all(np.isfinite(c.std_t_mm))
@@ -283,7 +293,7 @@ class OneClickMixin:
         choose = ""
         if n > 1:
             enabled.add("choose_candidate")
-            ties = self._near_ties()
+            ties = self.near_ties()
             if i > 0:
                 choose = (
                     f" Pose 1 matches the image best ({100 * (1 - self.found[0].mismatch):.0f} % against "
@@ -311,15 +321,15 @@ class OneClickMixin:
             frozenset(enabled),
         )
 
-    def _found_labels(self) -> list[str]:
+    def labels(self) -> list[str]:
         return [
             f"#{i + 1} · {100 * (1 - c.mismatch):.0f} % matched" + (" (best)" if i == 0 else "")
             for i, c in enumerate(self.found)
         ]
 
-    def _found_weaknesses(self) -> list[str]:
-        c = self.found[self.chosen or 0]
-        out = [self.found_moving] if self.found_moving else []
+    def weaknesses(self, chosen: int) -> list[str]:
+        c = self.found[chosen]
+        out = [self.moving] if self.moving else []
         sd, st = float(np.max(c.std_r_deg)), float(np.max(c.std_t_mm))
         if not (np.isfinite(sd) and np.isfinite(st)):
             out.append("the pose's uncertainty is unknown; click edges and Refine")
@@ -333,7 +343,7 @@ class OneClickMixin:
                 f"this pose lies beside your click, not under it (there {self.object_name} fits the image far "
                 "better): check that the white ghost is on the object"
             )
-        ties = self._near_ties()
+        ties = self.near_ties()
         if ties >= MANY_TIES:
             out.append(
                 f"{ties} other poses fit about as well: the image near your click does not single out one pose "
@@ -347,100 +357,16 @@ class OneClickMixin:
             )
         return out
 
-    def _accept_found(self):
-        """Write the chosen found pose (method "search", the click in the history); None when Accept is
-        for a refined pose instead."""
-        with self.lock:
-            self._check_open()
-            if not self._found_pending():
-                return None
-            i = self.chosen or 0
-            c = self.found[i]
-            clicks = dict(self.search_info or {})
-            clicks.update({"chosen": i, "frame": self.frame_record()})
-            residuals = {"fit_px": c.fit_px, "support_px": c.support_px, "confidence": c.confidence}
-            rec, self.obj = write_pose(
-                self,
-                self.obj,
-                c.T_world_obj,
-                c.cov,
-                method="search",
-                clicks=clicks,
-                residuals=residuals,
-                todo="Cancel, and update the pose again from its new one.",
-            )
-            self.accepted = True
-            self.state = "accepted"
-            self.message = (
-                f"{self.object_name} updated (version {rec.version}): found from one click, edges {c.fit_px:.1f} px off"
-            )
-            return rec
-
-    def _refine_found(self, prior, camera, clicks: dict, sigmas, generation: int):
-        """Refine: the found pose and the clicks since, together (``core.pose.refine_with_prior``: the
-        found pose with its covariance as the prior, so one clicked edge already helps; on the table
-        its height and tilt stay as the table has them). The camera calibration's share of the found
-        pose's σ (``SearchCandidate.cov_camera``) is common to the found pose and the clicks: it is taken
-        out of the prior and added to the result. Runs outside the lock; WorkflowError, nothing changed,
-        when the result is not plausible."""
-        from dataclasses import replace
-
-        from core.pose import plausibility, refine_with_prior
-
-        i, T, cov, cov_camera = prior
-        try:
-            # the camera calibration's share is an error common to the found pose and the clicks (both
-            # measured through C): the two are combined on the image's share alone, and it is added after
-            result = refine_with_prior(
-                camera, T, cov if cov_camera is None else cov - cov_camera, **clicks, sigma_px=sigmas
-            )
-        except ValueError as exc:
-            raise WorkflowError(f"Refine failed: {exc}") from None
-        if cov_camera is not None:
-            result = replace(
-                result,
-                cov=result.cov + cov_camera,
-                cov_parts={"found pose and clicks": result.cov, "camera calibration": cov_camera},
-            )
-        why = plausibility(camera, self.obj.model, result.T_world_obj, result.rms_px, 3.0 * self.sigma_px)
-        if why:
-            raise WorkflowError(
-                f"the clicks do not agree with the found pose ({why}): check the edge assignments, or "
-                "pick another found pose"
-            )
-        with self.lock:  # commit
-            self._unchanged_since(generation, "Refine")
-            self.refined = result
-            self.state = "review"
-            deg, m = pose_error(result.T_world_obj, T)
-            sig_deg, sig_mm = float(np.max(result.std_r_deg)), 1000 * float(np.max(result.std_t_m))
-            n_e, n_p = result.kinds.count("segment"), result.kinds.count("point")
-            what = " and ".join(
-                x
-                for x in (
-                    f"{n_e} edge{'s' if n_e != 1 else ''}" if n_e else "",
-                    f"{n_p} point{'s' if n_p != 1 else ''}" if n_p else "",
-                )
-                if x
-            )
-            self.message = (
-                f"found pose {i + 1} refined with {what}: RMS {result.rms_px:.2f} px, moved {deg:.2f}° and "
-                f"{1000 * m:.1f} mm from the found pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
-                + (" (camera calibration included)" if result.cov_parts else "")
-            )
-            return result
-
-    def _found_summary(self, out: dict[str, Any]) -> None:
-        if self.found is None:
-            return
-        c = self.found[self.chosen or 0]
-        out["found"] = {
+    def summary(self, chosen: int, T_db: np.ndarray) -> dict[str, Any]:
+        """The summary's "found" entry."""
+        c = self.found[chosen]
+        deg, m = pose_error(c.T_world_obj, T_db)
+        return {
             "candidates": len(self.found),
-            "chosen": (self.chosen or 0) + 1,
+            "chosen": chosen + 1,
             "fit_px": round(c.fit_px, 1),
             # an axis the table holds has σ 0: said as held, not as "0" (read as certain)
             "std_t_mm": [round(float(v), 1) if v > 0 else "held by the table" for v in c.std_t_mm],
             "std_r_deg": [round(float(v), 2) if v > 0 else "held" for v in c.std_r_deg],
+            "change": {"deg": round(float(deg), 2), "mm": round(float(1000 * m), 1)},
         }
-        deg, m = pose_error(c.T_world_obj, self.obj.T_world_obj)
-        out["found"]["change"] = {"deg": round(float(deg), 2), "mm": round(float(1000 * m), 1)}

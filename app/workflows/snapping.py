@@ -10,8 +10,9 @@ the snapped one, how far it moved, or why the snap failed (the raw click is then
 overlay shows both (``snap_marks``); ``refuse_snap`` goes back to the raw click; the history
 records raw and snapped coordinates (``ClickSnap.record``).
 
-``SnapMixin`` gives a workflow the ``snap`` option (on by default), ``set_snap(on)`` and the
-bookkeeping; each workflow says which of its clicks is the last one (``_last_snap``).
+``Snapper`` is a workflow's snapping as a collaborator (Update pose composes one); ``SnapMixin`` gives
+the other workflows the ``snap`` option (on by default), ``set_snap(on)`` and the bookkeeping through
+one, each workflow saying which of its clicks is the last one (``_last_snap``).
 """
 
 from __future__ import annotations
@@ -25,7 +26,9 @@ from .base import WorkflowError
 
 __all__ = [
     "ClickSnap",
+    "Snapper",
     "SnapMixin",
+    "segment_of",
     "vertex_edge_directions",
     "snap_marks",
     "SNAPPED_CORNER_SIGMA_PX",
@@ -140,8 +143,170 @@ def snap_marks(snaps: list[ClickSnap | None]) -> tuple[np.ndarray, np.ndarray, n
     )
 
 
+class Snapper:
+    """A workflow's snapping, composed rather than inherited: on or off, the frame a view's clicks were
+    made on, and the snap of a finished segment or of a clicked corner there. It reads only the
+    workflow's frames (``Workflow.frame``, ``frame_in``, ``site``, ``view``)."""
+
+    def __init__(self, workflow: Any, on: bool = True):
+        self.wf = workflow
+        self.on = bool(on)
+        self.error = ""  # why the last frame could not be read
+
+    def frame(self, view: str | None = None) -> np.ndarray | None:
+        """The frame clicks in ``view`` (the workflow's own for None) were made on: the frozen one (or,
+        in another camera, its frame frozen with it), else the site's newest; None when none can be read."""
+        wf = self.wf
+        view = view or wf.view
+        if view != wf.view:
+            ref = wf.frame_in(view)
+            if ref is not None:
+                return ref.image
+        elif wf.frame is not None:
+            return wf.frame.image
+        try:
+            return wf.site.frame_at(None, view)
+        except Exception as exc:  # noqa: BLE001 - a broken video must not stop the click: it is kept raw
+            self.error = f"the video frame could not be read ({exc})"
+            return None
+
+    def no_frame_reason(self) -> str:
+        return self.error or "no video frame to snap to"
+
+    def _active(self) -> bool:
+        return self.on and (self.wf.site.has_frames_of(self.wf.view) or self.wf.frame is not None)
+
+    def segment(self, seg: np.ndarray, view: str | None = None) -> ClickSnap | None:
+        """Snap a finished segment (2, 2) clicked in ``view`` to the image's edge; None when snapping is
+        off or the site has no video frames."""
+        if not self._active():
+            return None
+        from app.vision.snap import snap_segment
+
+        image = self.frame(view)
+        if image is None:
+            return ClickSnap("segment", seg.copy(), None, reason=self.no_frame_reason())
+        try:
+            res = snap_segment(image, seg)
+        except ValueError as exc:
+            return ClickSnap("segment", seg.copy(), None, reason=str(exc))
+        if not res.ok:
+            return ClickSnap(
+                "segment", seg.copy(), None, moved_px=float(res.moved_px), method="edge", reason=res.reason
+            )
+        return ClickSnap("segment", seg.copy(), res.seg_uv.copy(), float(res.moved_px), "edge")
+
+    def corner(
+        self,
+        uv: np.ndarray,
+        view: str | None = None,
+        model: Any = None,
+        T_world_obj: np.ndarray | None = None,
+        vertex: int | None = None,
+    ) -> ClickSnap | None:
+        """Snap a clicked image point (2,) in ``view`` of a model vertex (if known) to the image's corner;
+        None when snapping is off or the site has no video frames."""
+        if not self._active():
+            return None
+        from app.vision.corner import snap_corner
+
+        image = self.frame(view)
+        if image is None:
+            return ClickSnap("corner", uv.copy(), None, reason=self.no_frame_reason())
+        D = L = None
+        if model is not None and vertex is not None and T_world_obj is not None:
+            camera = self.wf.site.camera_of(view or self.wf.view)
+            D, L = vertex_edge_directions(camera, model, np.asarray(T_world_obj, float), int(vertex))
+        try:
+            res = snap_corner(image, uv, D, L)
+        except ValueError as exc:
+            return ClickSnap("corner", uv.copy(), None, reason=str(exc))
+        if not res.ok:
+            return ClickSnap("corner", uv.copy(), None, method=res.method, reason=res.reason)
+        return ClickSnap("corner", uv.copy(), res.uv.copy(), float(res.moved_px), res.method, lines_uv=res.lines_uv)
+
+    def take_segment(self, seg: np.ndarray, view: str, sigma_px: float) -> tuple[np.ndarray, float, ClickSnap | None]:
+        """A finished segment (2, 2) as it is used: (the pixels, their σ — a snap's measured precision,
+        ``SNAPPED_SEGMENT_SIGMA_PX``, or the operator's ``sigma_px`` —, the snap or None)."""
+        snap = self.segment(seg, view)
+        if snap is None or not snap.applied:
+            return (seg if snap is None else snap.used), sigma_px, snap
+        return snap.used, SNAPPED_SEGMENT_SIGMA_PX, snap
+
+    def take_corner(
+        self, uv: np.ndarray, view: str, sigma_px: float, model: Any, T_world_obj: np.ndarray, vertex: int
+    ) -> tuple[np.ndarray, float, ClickSnap | None]:
+        """A clicked image point of a model vertex as it is used: (the pixel, its σ —
+        ``SNAPPED_CORNER_SIGMA_PX`` when snapped, else ``sigma_px`` —, the snap or None)."""
+        snap = self.corner(uv, view, model, T_world_obj, vertex)
+        if snap is None or not snap.applied:
+            return (uv if snap is None else snap.used), sigma_px, snap
+        return snap.used, SNAPPED_CORNER_SIGMA_PX, snap
+
+    def add_segment(self, clicks: Any, seg: np.ndarray, view: str, sigma_px: float) -> str:
+        """Add a finished segment (2, 2) clicked in ``view`` to ``clicks`` (a ``core.pose.PoseClicks``) as it
+        is used (``take_segment``), its snap kept beside it; what to tell the operator."""
+        uv, sigma, snap = self.take_segment(seg, view, sigma_px)
+        clicks.add_segment(uv, view, sigma, snap)
+        return self.message(f"Edge {len(clicks.segs)}", snap)
+
+    def add_point(
+        self, clicks: Any, uv: np.ndarray, vertex: int, view: str, sigma_px: float, model: Any, T_world_obj: np.ndarray
+    ) -> str:
+        """Add the image point of model ``vertex`` clicked at ``uv`` in ``view`` to ``clicks`` as it is used
+        (``take_corner``: directions from ``model`` at ``T_world_obj``); what to tell the operator."""
+        clicks.check_vertex(vertex)
+        p, sigma, snap = self.take_corner(uv, view, sigma_px, model, T_world_obj, vertex)
+        clicks.add_point(p, vertex, view, sigma, snap)
+        return self.message(f"Point v{vertex}", snap)
+
+    @staticmethod
+    def message(what: str, s: ClickSnap | None) -> str:
+        """What the operator is told of a click's snap ("" without one)."""
+        if s is None:
+            return ""
+        if s.applied:
+            return (
+                f"{what} snapped {s.moved_px:.1f} px to the image's "
+                f"{'edge' if s.kind == 'segment' else 'corner'} (Refuse snap keeps your click)."
+            )
+        return f"{what} kept as clicked: {s.reason}."
+
+    def set(self, on: bool) -> str:
+        """Snapping on or off; what to tell the operator."""
+        self.on = bool(on)
+        if self.on:
+            return "Clicks will be snapped to the image's edges and corners."
+        return "Clicks will be used as clicked (snapping off)."
+
+    def refuse(self, clicks: Any, sigma_px: float) -> str:
+        """Refuse the snap of the last click of ``clicks`` (a ``core.pose.PoseClicks``): its raw pixels come
+        back, with the operator's ``sigma_px``; what to tell the operator. WorkflowError when the last
+        click's snap is not in use."""
+        last = clicks.last_click()
+        snap = self.refusable(None if last is None else clicks.note(*last))
+        snap.refused = True
+        clicks.replace(*last, snap.raw.copy(), sigma_px)
+        return "Snap refused: the last click is used as you clicked it."
+
+    @staticmethod
+    def refusable(snap: ClickSnap | None) -> ClickSnap:
+        """The last click's snap, to be refused; WorkflowError when there is none in use."""
+        if snap is None:
+            raise WorkflowError(
+                "the last click was not snapped (snapping is off, there is no video frame, or there is "
+                "no click to change since the last step): nothing to refuse"
+            )
+        if not snap.applied:
+            raise WorkflowError(
+                f"the last click is already used as clicked ({'refused' if snap.refused else snap.reason})"
+            )
+        return snap
+
+
 class SnapMixin:
-    """Snapping for a workflow: the ``snap`` option, ``set_snap``, ``refuse_snap`` and the snap calls.
+    """Snapping for a workflow: the ``snap`` option, ``set_snap``, ``refuse_snap`` and the snap calls,
+    through a ``Snapper`` (``self.snapper``).
 
     The workflow calls ``_snap_segment(seg)`` / ``_snap_corner(uv, ...)`` for each finished click
     and keeps the returned ``ClickSnap`` beside it; it implements ``_last_snap()`` → (ClickSnap or
@@ -151,41 +316,23 @@ class SnapMixin:
     snapping: ClassVar[bool] = True  # Session.start passes its "Snap clicks" setting as snap=
 
     def _init_snap(self, snap: bool) -> None:
-        self.snap = bool(snap)
+        self.snapper = Snapper(self, snap)
+
+    @property
+    def snap(self) -> bool:
+        return self.snapper.on
 
     def set_snap(self, on: bool = True) -> None:
         """Snap the next clicks to the image's edges and corners (on), or use them as clicked (off)."""
         with self.lock:
-            self.snap = bool(on)
-            self.message = (
-                "Clicks will be snapped to the image's edges and corners."
-                if self.snap
-                else "Clicks will be used as clicked (snapping off)."
-            )
+            self.message = self.snapper.set(on)
 
     def _frame(self) -> np.ndarray | None:
         """The frame the clicks were made on: the workflow's frozen frame, else the site's now."""
-        click_view = getattr(self, "click_view", None)
-        if click_view is not None and click_view != self.view:  # a click in another camera: its frame frozen
-            ref = self.frame_in(click_view)  # with the workflow's, else its newest one
-            if ref is not None:
-                return ref.image
-            try:
-                return self.site.frame_at(None, click_view)
-            except Exception as exc:  # noqa: BLE001 - as below
-                self._frame_error = f"the video frame could not be read ({exc})"
-                return None
-        frame = getattr(self, "frame", None)
-        if frame is not None:
-            return frame.image
-        try:
-            return self.site.frame_at(None, self.view)
-        except Exception as exc:  # noqa: BLE001 - a broken video must not stop the click: it is kept raw
-            self._frame_error = f"the video frame could not be read ({exc})"
-            return None
+        return self.snapper.frame(getattr(self, "click_view", None))
 
     def _no_frame_reason(self) -> str:
-        return getattr(self, "_frame_error", "") or "no video frame to snap to"
+        return self.snapper.no_frame_reason()
 
     def _click_segment(self, seg_uv) -> None:
         """Both clicks of a segment (2, 2) at once (a script's ``add_segment``), through ``click``."""
@@ -203,68 +350,24 @@ class SnapMixin:
     ) -> tuple[np.ndarray, ClickSnap | None]:
         """The segment of two clicks on an image edge, snapped: (the segment to use (2, 2), its
         snap or None); WorkflowError when the clicks are closer than ``min_px``."""
-        seg = np.array([first, second], dtype=float)
-        gap = float(np.linalg.norm(seg[1] - seg[0]))
-        if gap < min_px:
-            raise WorkflowError(
-                f"the two clicks are {gap:.1f} px apart: click the edge's other end, at least "
-                f"{min_px:.0f} px away along it (second click again)"
-            )
+        seg = segment_of(first, second, min_px)
         snap = self._snap_segment(seg)
         return (seg if snap is None else snap.used), snap
 
     def _snap_segment(self, seg: np.ndarray) -> ClickSnap | None:
         """Snap a finished segment (2, 2) on the current frame; None when snapping is off or the
         site has no video frames."""
-        if not self.snap or not (self.site.has_frames_of(self.view) or getattr(self, "frame", None) is not None):
-            return None
-        from app.vision.snap import snap_segment
-
-        image = self._frame()
-        if image is None:
-            return ClickSnap("segment", seg.copy(), None, reason=self._no_frame_reason())
-        try:
-            res = snap_segment(image, seg)
-        except ValueError as exc:
-            return ClickSnap("segment", seg.copy(), None, reason=str(exc))
-        if not res.ok:
-            return ClickSnap(
-                "segment", seg.copy(), None, moved_px=float(res.moved_px), method="edge", reason=res.reason
-            )
-        return ClickSnap("segment", seg.copy(), res.seg_uv.copy(), float(res.moved_px), "edge")
+        return self.snapper.segment(seg, getattr(self, "click_view", None))
 
     def _snap_corner(
         self, uv: np.ndarray, model: Any = None, T_world_obj: np.ndarray | None = None, vertex: int | None = None
     ) -> ClickSnap | None:
         """Snap a clicked image point (2,) of a model vertex (if known) to the image's corner; None
         when snapping is off or the site has no video frames."""
-        if not self.snap or not (self.site.has_frames_of(self.view) or getattr(self, "frame", None) is not None):
-            return None
-        from app.vision.corner import snap_corner
-
-        image = self._frame()
-        if image is None:
-            return ClickSnap("corner", uv.copy(), None, reason=self._no_frame_reason())
-        D = L = None
-        if model is not None and vertex is not None and T_world_obj is not None:
-            D, L = vertex_edge_directions(self._click_camera(), model, np.asarray(T_world_obj, float), int(vertex))
-        try:
-            res = snap_corner(image, uv, D, L)
-        except ValueError as exc:
-            return ClickSnap("corner", uv.copy(), None, reason=str(exc))
-        if not res.ok:
-            return ClickSnap("corner", uv.copy(), None, method=res.method, reason=res.reason)
-        return ClickSnap("corner", uv.copy(), res.uv.copy(), float(res.moved_px), res.method, lines_uv=res.lines_uv)
+        return self.snapper.corner(uv, getattr(self, "click_view", None), model, T_world_obj, vertex)
 
     def _snap_message(self, what: str, s: ClickSnap | None) -> str:
-        if s is None:
-            return ""
-        if s.applied:
-            return (
-                f"{what} snapped {s.moved_px:.1f} px to the image's "
-                f"{'edge' if s.kind == 'segment' else 'corner'} (Refuse snap keeps your click)."
-            )
-        return f"{what} kept as clicked: {s.reason}."
+        return Snapper.message(what, s)
 
     def _last_snap(self) -> tuple[ClickSnap | None, Any]:  # pragma: no cover - per workflow
         raise NotImplementedError
@@ -274,19 +377,22 @@ class SnapMixin:
         with self.lock:
             self._check_open()
             snap, put_back = self._last_snap()
-            if snap is None:
-                raise WorkflowError(
-                    "the last click was not snapped (snapping is off, there is no video frame, or there is "
-                    "no click to change since the last step): nothing to refuse"
-                )
-            if not snap.applied:
-                raise WorkflowError(
-                    f"the last click is already used as clicked ({'refused' if snap.refused else snap.reason})"
-                )
-            snap.refused = True
+            Snapper.refusable(snap).refused = True
             put_back(snap.raw.copy())
             self._after_refuse()
             self.message = "Snap refused: the last click is used as you clicked it."
 
     def _after_refuse(self) -> None:
         """A click changed: drop results that depend on it (the workflow's own invalidation)."""
+
+
+def segment_of(first: np.ndarray, second: np.ndarray, min_px: float) -> np.ndarray:
+    """The segment (2, 2) of two clicks on an image edge; WorkflowError when they are closer than ``min_px``."""
+    seg = np.array([first, second], dtype=float)
+    gap = float(np.linalg.norm(seg[1] - seg[0]))
+    if gap < min_px:
+        raise WorkflowError(
+            f"the two clicks are {gap:.1f} px apart: click the edge's other end, at least "
+            f"{min_px:.0f} px away along it (second click again)"
+        )
+    return seg

@@ -1,4 +1,6 @@
-"""The two-step pose update as the operator uses it (source paper §IV): P3L, then refinement.
+"""The two-step pose update as the operator uses it (source paper §IV): P3L, then refinement — the
+single-view case of the pose pipeline (``core.pose.pipeline``: P3L's starts and the prior, each
+refined with every click, one ranking).
 
 The operator clicks N ≥ 3 image edges (and possibly vertices) of a known object and matches each to
 a model edge (point). ``estimate_pose`` runs the geometric three-line solver on the first triple of
@@ -14,7 +16,6 @@ candidate is returned for display; the first is the estimate.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +23,8 @@ import numpy as np
 from ..camera import Camera
 from ..checks import MAX_M, finite_array, positive_scale
 from ..transforms import check_T, pose_error
-from .p3l import p3l
+from .candidates import p3l_triples
+from .pipeline import rank
 from .refine import RefineResult, check_options, click_sigmas, refine_many
 from .residuals import as_clicks
 
@@ -181,15 +183,12 @@ def estimate_pose(
     if not any(c.refined is not None for c in candidates):
         reasons = "; ".join(sorted({c.error for c in candidates if c.error}))
         raise ValueError(f"no candidate pose could be refined: {reasons}")
-    # Scores equal to 1e-6 px are a tie (e.g. two starts that refine to one pose): the better P3L
-    # rank first, so a merged candidate keeps the start closest to it.
-    candidates.sort(key=lambda c: (round(c.score_px, 6), c.p3l_rank if c.p3l_rank >= 0 else np.inf))
-    return PoseEstimate(_merge(candidates, clicks), triple, tuple(skipped))
+    return PoseEstimate(_ranked(candidates, clicks), triple, tuple(skipped))
 
 
 def _p3l_candidates(camera, clicks, refine_args, max_triples: int, fit_px: float):
-    """P3L on the triples in click order, each solution refined with every click, until a triple's
-    best candidate fits (RMS ≤ fit_px).
+    """P3L's starts (``p3l_triples``), each triple's refined with every click, until a triple's best
+    candidate fits (RMS ≤ fit_px).
 
     Returns (the first triple whose candidates were refined, or None; the triples skipped and why;
     the refined candidates of every triple tried).
@@ -197,13 +196,9 @@ def _p3l_candidates(camera, clicks, refine_args, max_triples: int, fit_px: float
     triple = None
     skipped: list[tuple[tuple[int, int, int], str]] = []
     candidates: list[PoseCandidate] = []
-    pts = (clicks.points_uv, clicks.points_obj) if clicks.n_points else (None, None)
-    for tri in itertools.islice(itertools.combinations(range(clicks.n_segments), 3), max_triples):
-        idx = list(tri)
-        try:
-            sols = p3l(camera, clicks.segs_uv[idx], clicks.edges_obj[idx], *pts)
-        except ValueError as exc:
-            skipped.append((tri, str(exc)))
+    for tri, sols, _, reason in p3l_triples(camera, clicks, max_triples):
+        if not sols:
+            skipped.append((tri, reason))
             continue
         found = _refined_all(camera, clicks, "p3l", sols, refine_args, tri)
         refined = [c.refined for c in found if c.refined is not None]
@@ -231,28 +226,25 @@ def _refined_all(camera, clicks, source: str, starts: list, refine_args, triple=
         results = [(str(exc), float("inf"))] * len(starts)
     out = []
     for k, (res, score) in enumerate(results):
-        rank = -1 if source == "prior" else k
+        p3l_rank = -1 if source == "prior" else k
         if isinstance(res, str):
-            out.append(PoseCandidate(source, starts[k], None, float("inf"), rank, res, triple))
+            out.append(PoseCandidate(source, starts[k], None, float("inf"), p3l_rank, res, triple))
         else:
-            out.append(PoseCandidate(source, starts[k], res, score, rank, None, triple))
+            out.append(PoseCandidate(source, starts[k], res, score, p3l_rank, None, triple))
     return out
 
 
-def _merge(candidates: list[PoseCandidate], clicks) -> list[PoseCandidate]:
-    """Drop refined candidates that reached the pose of a better ranked one (1e-6 rad, 1e-6 of
-    the clicked features' extent)."""
+def _ranked(candidates: list[PoseCandidate], clicks) -> list[PoseCandidate]:
+    """The pipeline's ranking of the refined candidates: by score (equal to 1e-6 px: a tie, the better
+    P3L rank first, so a merged candidate keeps the start closest to it), those that refined to the
+    pose of a better ranked one (1e-6 rad, 1e-6 of the clicked features' extent) merged into it."""
     extent = max(1e-3, float(np.abs(clicks.edges_obj).max()) if clicks.n_segments else 0.0)
-    out: list[PoseCandidate] = []
-    for c in candidates:
-        if c.refined is not None and any(
-            o.refined is not None and _same(o.T_world_obj, c.T_world_obj, extent) for o in out
-        ):
-            continue
-        out.append(c)
-    return out
 
+    def same(T1: np.ndarray, T2: np.ndarray) -> bool:
+        rot_deg, trans_m = pose_error(T1, T2)
+        return np.radians(rot_deg) < 1e-6 and trans_m < 1e-6 * extent
 
-def _same(T1: np.ndarray, T2: np.ndarray, extent: float) -> bool:
-    rot_deg, trans_m = pose_error(T1, T2)
-    return np.radians(rot_deg) < 1e-6 and trans_m < 1e-6 * extent
+    poses = [c.T_world_obj for c in candidates]
+    scores = [round(c.score_px, 6) for c in candidates]
+    tiebreak = [c.p3l_rank if c.p3l_rank >= 0 else np.inf for c in candidates]
+    return [candidates[i] for i in rank(poses, scores, same, tiebreak=tiebreak)]

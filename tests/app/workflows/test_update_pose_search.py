@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from app.workflows import Session, WorkflowError
+from app.workflows.pose_presentation import unseen_outline
 from core.transforms import pose_error
 
 from .test_update_pose import T_MOVED, _true_segments, _visible_edges
@@ -254,10 +255,10 @@ def test_a_refined_pose_whose_outline_misses_the_image_is_said(video_site, scene
     site.t["t"] = T_MOVED
     wf = _start(site)
     T_true = scene.body(BOX).pose_at(T_MOVED)
-    assert wf._unseen_outline(site.camera, T_true) == ""
+    assert unseen_outline(wf.snapper.frame(), site.camera, wf.obj.model, T_true) == ""
     high = T_true.copy()
     high[2, 3] += 0.05
-    said = wf._unseen_outline(site.camera, high)
+    said = unseen_outline(wf.snapper.frame(), site.camera, wf.obj.model, high)
     assert "of the refined pose's outline lies on the image's edges" in said and "mirror" in said
     # through Refine: clicks of the true edges, assigned as they are: nothing said
     obj = wf.obj
@@ -290,7 +291,7 @@ def test_a_box_clicked_on_the_cylinder_is_said_not_to_single_out_a_pose(video_si
         wf.find()
     except WorkflowError:
         pytest.fail("the search now refuses this click outright: assert that refusal here instead")
-    assert wf._near_ties() >= 4
+    assert wf.search.near_ties() >= 4
     assert any("does not single out one pose of box_1" in w for w in wf.weaknesses())
 
 

@@ -41,7 +41,8 @@ def _workflow(site, assign=True):
 
 
 @pytest.mark.parametrize(
-    "action, solver_module, solver", [("refine", update_pose, "refine"), ("solve", update_pose, "p3l_candidates")]
+    "action, solver_module, solver",
+    [("refine", update_pose, "refine_starts"), ("solve", update_pose, "p3l_candidates")],
 )
 def test_a_solve_runs_outside_the_lock_and_is_dropped_when_the_clicks_changed(
     site, monkeypatch, action, solver_module, solver
@@ -85,7 +86,9 @@ def test_auto_match_runs_outside_the_lock_and_is_dropped_when_the_clicks_changed
 
 def test_accept_refines_outside_the_lock(site, monkeypatch, db):
     wf = _workflow(site)
-    real, free = update_pose.refine, []
-    monkeypatch.setattr(update_pose, "refine", lambda *a, **k: (free.append(_lock_is_free(wf)), real(*a, **k))[1])
+    real, free = update_pose.refine_starts, []
+    monkeypatch.setattr(
+        update_pose, "refine_starts", lambda *a, **k: (free.append(_lock_is_free(wf)), real(*a, **k))[1]
+    )
     rec = wf.accept()
     assert free and all(free) and rec.version == db.get("parallelepiped").version and wf.accepted
