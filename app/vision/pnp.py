@@ -3,11 +3,14 @@
 With K known (a checkerboard calibration, ``mcit calibrate-intrinsics``, or the scene's camera
 block), C = K [R | t] has 6 unknowns instead of the DLT's 11: 4 points fix it, and every point
 beyond gives redundancy. ``solve_pnp`` starts from OpenCV's solvers (SQPnP, the iterative one,
-EPnP: the start with the smallest refined error, every point in front, wins), then refines the pose
-by Levenberg–Marquardt on the reprojection error in pixels, each point weighed by its σ (the
-maximum-likelihood pose under pixel noise, as ``core.calibration.calibrate_dlt`` does for C).
+EPnP), refines each by the pose pipeline's one refinement (``core.pose.refine_many``: Levenberg–Marquardt
+on the reprojection error in pixels, each point weighed by its σ — the maximum-likelihood pose under pixel
+noise, as ``core.calibration.calibrate_dlt`` does for C), and keeps the one with the smallest weighted
+error. The camera's pose T_cam_world is refined as the pose of an "object", the world, seen by the camera
+K [I | 0] at the origin: the clicked points are the object's points, and refine's perturbation (δt, δr) in
+that frame is this module's (δω, δt) reordered.
 
-The covariance is the pose's, first order from the refinement's Jacobian (the χ² policy of
+The covariance is the pose's, (Jᵀ W J)⁻¹ from the refinement (the χ² policy of
 ``calibrate_dlt``: scaled by χ²/dof when the χ² test rejects the stated σ, never shrunk), and
 taken through C = K [R | t] to the 12 entries of C for the workflows that propagate the
 calibration's uncertainty. K is taken as exact: its own uncertainty (a checkerboard calibration's)
@@ -20,6 +23,8 @@ import numpy as np
 
 from core.camera import Camera
 from core.checks import MAX_M, MAX_PX, MAX_SCALE, MIN_SCALE, finite_array, image_size
+from core.pose import refine_many
+from core.pose.residuals import as_clicks
 from core.transforms import exp_so3, make_T
 
 __all__ = ["PnPResult", "solve_pnp", "MIN_PNP_POINTS"]
@@ -112,50 +117,39 @@ def solve_pnp(K, X_world, uv, width: int, height: int, *, sigma_px=None) -> PnPR
         raise ValueError(
             "the points are on one line: they cannot fix the camera's pose; use corners spread over the scene"
         )
-    w = np.ones(n)
+    sig = np.ones(n)
     if sigma_px is not None:
         sig = np.asarray(sigma_px, dtype=float).reshape(-1)
         if sig.shape != (n,) or not (np.all(sig >= MIN_SCALE) and np.all(sig <= MAX_SCALE)):
             raise ValueError(f"sigma_px must hold {n} positive finite values (one per point), got {np.shape(sigma_px)}")
-        w = 1.0 / sig
 
-    from scipy.optimize import least_squares  # here, not at the top (start-up)
-
+    starts = _starts(K, X, uv)
     best = None
-    for R0, t0 in _starts(K, X, uv):
-
-        def residuals(x, R0=R0, t0=t0):
-            R, t = _pose(R0, t0, x)
-            return ((_project(K, R, t, X)[0] - uv) * w[:, None]).ravel()
-
-        sol = least_squares(residuals, np.zeros(6), method="lm", xtol=1e-15, ftol=1e-15)
-        R, t = _pose(R0, t0, sol.x)
-        if not np.all(np.isfinite(sol.fun)) or not np.all(_project(K, R, t, X)[1] > 0):
-            continue
-        cost = float(np.sum(sol.fun**2))
-        if best is None or cost < best[0]:
-            best = (cost, R, t)
+    if starts:  # each OpenCV start refined by core.pose's refinement: the world's pose seen by K [I | 0]
+        origin = Camera(np.column_stack([K, np.zeros(3)]), width, height)
+        T0 = np.array([make_T(R0, t0) for R0, t0 in starts])
+        for fit, _ in refine_many(origin, T0, as_clicks(points_uv=uv, points_obj=X), sigma_px=sig):
+            if isinstance(fit, str) or not np.all(np.isfinite(fit.T_world_obj)):
+                continue  # a start with a point behind the camera, or none that fixes the pose
+            cost = float(np.sum((fit.residuals_px / np.repeat(sig, 2)) ** 2))
+            if best is None or cost < best[0]:
+                best = (cost, fit)
     if best is None:
         raise ValueError(
             "no camera pose puts every point in front of the camera: check that each click is on its corner"
         )
-    cost, R, t = best
-
-    # The Jacobian at the optimum (central differences about the solution, exact enough for a covariance).
-    def weighted(x):
-        Rx, tx = _pose(R, t, x)
-        return ((_project(K, Rx, tx, X)[0] - uv) * w[:, None]).ravel()
-
-    eps = np.array([1e-7] * 3 + [1e-7 * max(1.0, float(np.linalg.norm(t)))] * 3)
-    J = np.column_stack([(weighted(e) - weighted(-e)) / (2 * e[i]) for i, e in enumerate(np.diag(eps))])
+    cost, fit = best
+    R, t = fit.T_world_obj[:3, :3], fit.T_world_obj[:3, 3]
+    order = [3, 4, 5, 0, 1, 2]  # refine's (δt, δr) → this module's (δω, δt)
+    cov_pose = fit.cov[np.ix_(order, order)]
     dof = 2 * n - 6
     factor = cost / max(dof, 1)
-    cov_pose = np.linalg.pinv(J.T @ J, rcond=1e-12)
     from scipy.stats import chi2  # here, not at the top (start-up)
 
     if dof > 0 and cost > chi2.ppf(0.99, dof):
         cov_pose = cov_pose * factor  # the clicks are worse than stated (or a point is wrong): say so in σ
     cov_pose = 0.5 * (cov_pose + cov_pose.T)
+    eps = np.array([1e-7] * 3 + [1e-7 * max(1.0, float(np.linalg.norm(t)))] * 3)
 
     def C_of(x):
         Rx, tx = _pose(R, t, x)
