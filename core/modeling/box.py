@@ -21,6 +21,7 @@ from ..brep import BRep
 from ..camera import Camera, as_segment
 from ..geometry import Plane, angle_between_planes
 from ..rangefinder import RangeFinderSpec, RangeScan
+from ..robust import huber_weights
 from ..transforms import check_T, exp_so3, make_T, skew
 from .box_scans import (
     BoxScans,
@@ -30,7 +31,7 @@ from .box_scans import (
     tangent_distances,
     tangent_distances_jacobian,
 )
-from .lm import huber_weights, levenberg_marquardt
+from .lm import levenberg_marquardt
 from .observations import PlaneObs, fit_face_plane, interpretation_plane_obs, support_obs
 from .result import ModelResult
 from .vertices import solve_vertices

@@ -24,8 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..brep import Revolution
+from ..robust import huber_weights
 from .cylinder import CylinderData, build_result, solve_paper
-from .lm import huber_weights, levenberg_marquardt
+from .lm import levenberg_marquardt
 from .profile import axis_basis
 from .returns import (
     MIN_INCIDENCE_COS,

@@ -1,5 +1,6 @@
-"""A small Levenberg–Marquardt solver with a Huber loss (iteratively reweighted), for the fits,
-and the one finite-difference Jacobian the modelling code uses where no analytic one is at hand.
+"""A small Levenberg–Marquardt solver with a Huber loss (iteratively reweighted, the weights and the
+cost ``core.robust``'s), for the fits, and the one finite-difference Jacobian the modelling code uses
+where no analytic one is at hand.
 
 The problems here are small (3–8 parameters, a few hundred residuals) and their Jacobians are
 analytic: a plain loop is several times faster than scipy's general ``least_squares`` on them.
@@ -11,9 +12,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..robust import huber_weights
+from ..robust import huber_loss, huber_weights
 
-__all__ = ["huber_weights", "levenberg_marquardt", "numeric_jacobian"]
+__all__ = ["levenberg_marquardt", "numeric_jacobian"]
 
 
 def numeric_jacobian(
@@ -48,11 +49,6 @@ def numeric_jacobian(
     return J
 
 
-def _cost(r: np.ndarray, c: float) -> float:
-    a = np.abs(r)
-    return float(np.sum(np.where(a <= c, a * a, 2 * c * a - c * c)))
-
-
 def levenberg_marquardt(
     fun: Callable[[np.ndarray], np.ndarray],
     jac: Callable[[np.ndarray], np.ndarray],
@@ -71,7 +67,7 @@ def levenberg_marquardt(
     """
     x = np.asarray(x0, dtype=float).copy()
     r = fun(x)
-    cost = _cost(r, huber)
+    cost = huber_loss(r, huber)
     lam = 1e-3
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 - the count of iterations, returned
@@ -92,7 +88,7 @@ def levenberg_marquardt(
                 break
             x_new = x + step
             r_new = fun(x_new)
-            c_new = _cost(r_new, huber)
+            c_new = huber_loss(r_new, huber)
             if c_new <= cost:
                 converged = cost - c_new <= ftol * cost
                 x, r, cost = x_new, r_new, c_new

@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import Plane
-from .lm import huber_weights, levenberg_marquardt
+from ..robust import huber_weights
+from .lm import levenberg_marquardt
 from .returns import MIN_INCIDENCE_COS, Returns, incidence_cos, range_residuals
 
 __all__ = ["axis_basis", "ProfileFit", "fit_profile", "front_plane", "front_plane_jacobian"]

@@ -22,7 +22,12 @@ import math
 import numpy as np
 from numba import njit
 
+from .. import robust
+
 _jit = njit(cache=True, nogil=True)
+# core.robust's Huber weight and cost of one residual, compiled: the refinement down-weights as every fit does
+_huber_weight = _jit(robust.huber_weight)
+_huber_rho = _jit(robust.huber_rho)
 
 IMAG_TOL_RAD = 1e-4  # eigenvalues with |imaginary part| mapped to α below this are real roots
 CONSTRAINT_TOL = 3e-6  # a rotation is kept when Σ_i |N_i · R V_i| is below this
@@ -848,7 +853,8 @@ def residuals(Cs, seg_view, pt_view, R, t, edges, segs, pts_obj, pts_uv, want_J,
 @_jit
 def robust(r, S, huber, huber_px, b, w, w_unit):
     """Cost of residuals r (m,) and their weights w (m,) (1/σ² b times the robust weights), the
-    per-pixel robust weights w_unit (2 S + P,): ``refine._robust``."""
+    per-pixel robust weights w_unit (2 S + P,): each clicked pixel's (a point's by its 2D distance)
+    Huber weight and cost, ``core.robust.huber_weight`` / ``huber_rho``."""
     m = r.shape[0]
     P = (m - 2 * S) // 2
     if not huber:
@@ -868,10 +874,9 @@ def robust(r, S, huber, huber_px, b, w, w_unit):
             j = 2 * S + 2 * (i - 2 * S)
             e = math.sqrt(r[j] * r[j] + r[j + 1] * r[j + 1])
             bu = b[j]
-        wu = min(1.0, huber_px / max(e, 1e-300))
+        wu = _huber_weight(e, huber_px)
         w_unit[i] = wu
-        rho = 0.5 * e * e if e <= huber_px else huber_px * e - 0.5 * huber_px * huber_px
-        cost += bu * rho
+        cost += bu * _huber_rho(e, huber_px)
         if i < 2 * S:
             w[i] = wu * b[i]
         else:

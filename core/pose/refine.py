@@ -18,8 +18,8 @@ points, as ``kinds``): each residual is weighted by 1/σ² (a click snapped to t
 0.15 px counts 44 times as much as a raw click at 1 px), and the covariance is ``(Jᵀ W J)⁻¹``.
 
 Robust loss: ``loss="huber"`` weights each clicked pixel (a segment's two pixels separately, a
-point's 2D distance) by ``min(1, huber_px / distance)`` (iteratively reweighted), so a wrong click
-pulls with a bounded force; the result names the down-weighted clicks.
+point's 2D distance) by ``min(1, huber_px / distance)`` (iteratively reweighted; ``core.robust``'s Huber
+weight, compiled), so a wrong click pulls with a bounded force; the result names the down-weighted clicks.
 
 Pose parametrisation of the steps and of the covariance: δ = (δt, δr), δt the translation of the
 object's origin in the world frame (metres), δr a rotation vector in world axes about the object's
@@ -35,7 +35,6 @@ import numpy as np
 
 from ..camera import Camera
 from ..checks import MAX_M, MAX_SCALE, MIN_SCALE, finite_array, positive_scale
-from ..robust import huber_weights
 from ..transforms import check_T
 from ._lazy import kernels
 from .residuals import Clicks, as_clicks, stack_views, view_matrices
@@ -50,7 +49,6 @@ __all__ = [
     "refine_views",
     "refine_many",
     "refine_with_prior",
-    "huber_weights",
     "click_sigmas",
 ]
 
@@ -124,13 +122,6 @@ class RefineResult:
     def std_r_deg(self) -> np.ndarray:
         """Standard deviations (3,) of the rotation about world axes, degrees."""
         return np.degrees(np.sqrt(np.diag(self.cov)[3:]))
-
-
-def _unit_distances(r: np.ndarray, n_seg: int) -> np.ndarray:
-    """Distances of the clicked pixels (2 S + P,): |r| for segment pixels, ‖(du, dv)‖ for points."""
-    seg = np.abs(r[: 2 * n_seg])
-    pts = r[2 * n_seg :].reshape(-1, 2)
-    return np.concatenate([seg, np.sqrt((pts * pts).sum(axis=1))])
 
 
 def check_options(camera, loss: str, huber_px: float, sigma_px) -> None:
