@@ -105,3 +105,66 @@ def test_bad_views_are_named():
         refine_views([], T)
     with pytest.raises(ValueError, match="view 1 must be a ViewClicks"):
         refine_views([(a.camera, a.segs_uv)], T)
+
+
+def test_the_clicks_order_is_the_callers_whatever_the_view():
+    """seg_index places each view's segments in the caller's order: the result's per-click arrays follow
+    it, and the pose is the one the views give in view order."""
+    rng = np.random.default_rng(5)
+    T, a, b = _two_views(rng, 1.0)
+    T0 = _start(rng, T)
+    na, nb = len(a.segs_uv), len(b.segs_uv)
+    by_view = refine_views(
+        [
+            ViewClicks(a.camera, a.segs_uv, a.edges_obj, sigma_px=1.0),
+            ViewClicks(b.camera, b.segs_uv, b.edges_obj, sigma_px=2.0),
+        ],
+        T0,
+    )
+    order = rng.permutation(na + nb)  # the caller clicked them in this order
+    at = np.argsort(order)  # where each view's click stands
+    mixed = refine_views(
+        [
+            ViewClicks(a.camera, a.segs_uv, a.edges_obj, sigma_px=1.0, seg_index=at[:na]),
+            ViewClicks(b.camera, b.segs_uv, b.edges_obj, sigma_px=2.0, seg_index=at[na:]),
+        ],
+        T0,
+    )
+    assert np.allclose(mixed.T_world_obj, by_view.T_world_obj, atol=1e-9)
+    assert np.allclose(mixed.click_residuals_px[at], by_view.click_residuals_px, atol=1e-6)
+    assert mixed.views == tuple(by_view.views[k] for k in order)
+    assert np.allclose(np.asarray(mixed.sigma_px)[at], by_view.sigma_px)
+    with pytest.raises(ValueError, match="for every view or for none"):
+        refine_views(
+            [
+                ViewClicks(a.camera, a.segs_uv, a.edges_obj, seg_index=range(na)),
+                ViewClicks(b.camera, b.segs_uv, b.edges_obj),
+            ],
+            T0,
+        )
+    with pytest.raises(ValueError, match="exactly once"):
+        refine_views(
+            [
+                ViewClicks(a.camera, a.segs_uv, a.edges_obj, seg_index=range(na)),
+                ViewClicks(b.camera, b.segs_uv, b.edges_obj, seg_index=range(nb)),
+            ],
+            T0,
+        )
+
+
+def test_a_prior_joins_the_views_and_its_shared_share_is_added_back():
+    """A PosePrior with a shared covariance (the camera's, common to it and the clicks): fused without it,
+    added to the result, said in cov_parts."""
+    from core.pose import PosePrior
+
+    rng = np.random.default_rng(6)
+    T, a, b = _two_views(rng, 1.0)
+    views = [ViewClicks(a.camera, a.segs_uv[:1], a.edges_obj[:1]), ViewClicks(b.camera, b.segs_uv[:1], b.edges_obj[:1])]
+    P = np.diag([4e-6, 4e-6, 4e-6, 1e-4, 1e-4, 1e-4])
+    shared = P / 4
+    res = refine_views(views, T, prior=PosePrior(T, P, shared_cov=shared, name="found pose"))
+    assert set(res.cov_parts) == {"found pose and clicks", "camera calibration"}
+    assert np.allclose(res.cov, res.cov_parts["found pose and clicks"] + shared)
+    assert np.all(np.diag(res.cov_parts["found pose and clicks"]) < np.diag(P - shared))  # the clicks helped
+    alone = refine_views([ViewClicks(a.camera)], T, prior=PosePrior(T, P))
+    assert np.allclose(alone.cov, P) and alone.rms_px == 0.0 and np.array_equal(alone.T_world_obj, T)
