@@ -11,6 +11,15 @@ The camera is the global model C (DESIGN.md); the projection Jacobian is written
 normal n_i is recomputed at every iteration from the projected edge direction; only the distance
 across the edge is measured, so a sample may slide along its edge.
 
+Why not the pose pipeline's refinement (``core.pose.refine_views``), whose clicked segment is the same
+point-to-projected-line distance: that one is the maximum-likelihood pose for clicks of *known* noise
+σ (weights 1/σ², a Huber loss at a fixed pixel threshold, covariance (Jᵀ W J)⁻¹ without rescaling).
+The tracker's hundreds of edge points a frame have no known σ and many gross outliers (an occluder's
+edge, a shadow): its scale is estimated from their spread at every iteration (the median absolute
+deviation), Tukey's loss gives those outliers no say at all, each sample carries a prior weight (its edge
+strength), and the covariance is scaled by the residuals' variance. Both down-weight through
+``core.robust``.
+
 Pose perturbation, as in ``core.pose``: δ = (δt, δr), δt a translation of the object's origin in
 the world frame (metres), δr a rotation vector in world axes about the object's origin::
 

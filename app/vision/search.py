@@ -43,6 +43,14 @@ model, its old pose, the calibrated camera C and, usually, that it lies on the t
    every edge is seen.
    Where the camera was calibrated in the database (``camera_cov``), its uncertainty joins each
    pose's covariance: the linearised move of the refinement's solution with C (``_camera_share``).
+   This refinement is not the pose pipeline's (``core.pose.pipeline``, which fits the operator's clicks):
+   it is a different estimator. Its measurements are not given but searched for again at every iteration
+   (the image's edge along each sample's normal, within a band that narrows), owned by one model edge
+   each, under a fixed-scale Tukey loss that drops what lies past 1.4 px; its unknowns are 3 on the
+   table (x, y, heading), with a numerical Jacobian through that parametrisation; and its covariance
+   models each edge's shared offset and tilt (``_edge_covariance``), not independent click noise. Its
+   result goes on to the pipeline: a found pose is a start *and* a measurement there (``PosePrior``, with
+   this covariance), so clicks added afterwards refine together with it.
 4. **Ranked by mismatch** (``_check``: 0 when every visible edge of the model lies on an image edge
    within a fraction of a pixel, 1 when none does), with σ. Poses that draw the same picture (the
    model's symmetries) count once, as the twin nearest the old pose; every other candidate that fits
@@ -1178,11 +1186,12 @@ def _refine(
     bands: tuple = (3.0, 3.0, 2.0),
     with_cov: bool = True,
 ):
-    """Gauss–Newton (IRLS, Tukey at ``GN_SCALE_PX``) of the pose's parameters (``_OnTable``: x, y, ψ;
-    ``_Free``: all six) on the model's visible edge samples and the image's edges found along their
-    normals (``profiles.search_along_normals``, sub-pixel), searched ± ``bands[i]`` pixels at iteration i
-    (the last one after). Returns (T, cov (6, 6) of (δt, δr) from ``_edge_covariance`` at the last
-    step's linearisation, or None; None too without ``with_cov``)."""
+    """Gauss–Newton (IRLS, Tukey at ``GN_SCALE_PX``, ``core.robust``'s weights) of the pose's parameters
+    (``_OnTable``: x, y, ψ; ``_Free``: all six) — a dense edge-distance fit, not the click refinement of
+    ``core.pose`` (the module docstring's 3. says why) — on the model's visible edge samples and the
+    image's edges found along their normals (``profiles.search_along_normals``, sub-pixel), searched
+    ± ``bands[i]`` pixels at iteration i (the last one after). Returns (T, cov (6, 6) of (δt, δr) from
+    ``_edge_covariance`` at the last step's linearisation, or None; None too without ``with_cov``)."""
     k = space.k
     p = space.params(T)
     last = None
