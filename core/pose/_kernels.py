@@ -1138,7 +1138,8 @@ def refine_one(
             free[i] = vec[i, 0] / sc[i]
         return UNOBSERVABLE, 0, False
     cost = robust(r, S, huber, huber_px, b, w, w_unit)
-    H_scratch, g_scratch = np.zeros((6, 6)), np.zeros(6)  # _prior_terms' sums when only its cost is wanted
+    n_scratch = 6 if has_prior else 0
+    H_scratch, g_scratch = np.zeros((n_scratch, 6)), np.zeros(n_scratch)  # _prior_terms' sums for its cost alone
     if has_prior:
         cost += _prior_terms(R, t, prior_T, Lam, H_scratch, g_scratch)
     r_new = np.empty(m)

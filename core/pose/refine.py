@@ -53,6 +53,7 @@ __all__ = [
 ]
 
 _LOSSES = ("l2", "huber")
+_NO_PRIOR = (np.eye(4), np.zeros((6, 6)))  # the kernel's prior pose and information when there is none (only read)
 
 
 @dataclass(frozen=True)
@@ -437,8 +438,8 @@ def refine_many(
         loss == "huber",
         float(huber_px),
         prior is not None,
-        np.eye(4) if prior is None else _as_pose(prior.T_world_obj),
-        np.zeros((6, 6)) if Lam is None else Lam,
+        _NO_PRIOR[0] if prior is None else _as_pose(prior.T_world_obj),
+        _NO_PRIOR[1] if Lam is None else Lam,
         int(max_iterations),
         extent,
         T,
