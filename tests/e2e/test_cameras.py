@@ -112,9 +112,11 @@ def test_both_cameras_frozen_fitted_side_by_side_and_clicked_in(browser, two_cam
     page.keyboard.press("h")  # again: the camera shown, alone
     shown = ui.server.views["side"].pixel_world
     wait_until(
-        lambda: not panel.viewport.all_cameras
-        and not panel.viewport.need_fit
-        and abs(float(panel.client.camera.look_at[0]) - shown.image_center[0]) < 0.02 * shown.render_size[0],
+        lambda: (
+            not panel.viewport.all_cameras
+            and not panel.viewport.need_fit
+            and abs(float(panel.client.camera.look_at[0]) - shown.image_center[0]) < 0.02 * shown.render_size[0]
+        ),
         what="the side image fitted alone",
         panel=panel,
     )
