@@ -251,7 +251,10 @@ class ClientPanel:
         if (action, args) != self.confirm_pending and self._ask(wf, c, args):
             return
         self.confirm_pending, self.warning, self.error = None, "", ""
-        wf.message = ""  # old messages go: the action says what it did
+        # old messages go; what runs is said until the action says what it did (a refinement on a loaded
+        # machine took 20 s, and a new operator saw nothing happen)
+        wf.message = f"{c.label}: working…"
+        self.app.wake()
         if c.kind == "long":
             act = self.guard(lambda: self._act(wf, c, args))
             self.worker = threading.Thread(target=act, daemon=True, name=f"mcit-measure-{self.client.client_id}")
@@ -295,16 +298,19 @@ class ClientPanel:
 
     def _act(self, wf, c, args: tuple) -> Any:
         where, self._double_at = (self._double_at, None) if c.action == "find" else (None, self._double_at)
+        working = f"{c.label}: working…"
         try:
             result = wf.perform(c.action, *args)
-        except WorkflowError as exc:
-            if where is None:
+        except BaseException as exc:
+            if wf.message == working:
+                wf.message = ""
+            if not isinstance(exc, WorkflowError) or where is None:
                 raise
             said = str(exc).rstrip(".")
             raise WorkflowError(
                 f"{said}. {where[0].upper()}{where[1:]}" if where.startswith("your") else f"{said} ({where})"
             ) from None
-        if not wf.message:
+        if not wf.message or wf.message == working:
             wf.message = f"{c.label}: done." if c.action not in ("resume", "pause", "restart") else ""
         return result
 

@@ -390,6 +390,9 @@ def summary(wf) -> dict[str, Any]:
             {"click": n, "residual_px": float(v), "weight": float(w)}
             for n, v, w in zip(_click_names(r.kinds), r.click_residuals_px, r.weights)
         ]
+        cameras = [c.seg_views[j] for j in c.assigned()] + list(c.point_views)
+        if len(set(cameras)) > 1 and len(cameras) == len(out["clicks"]):  # which camera each click was made in
+            out["clicks"] = [{**row, "camera": v} for row, v in zip(out["clicks"], cameras)]
     return out
 
 
@@ -574,12 +577,10 @@ def refine_message(wf, result, start, failures, unseen: str, views: list[str]) -
     if len(views) > 1:
         used += f" in cameras {', '.join(views)}"
     deg, m = pose_error(result.T_world_obj, wf.obj.T_world_obj)
-    uncalibrated = len(views) > 1 and any(wf.site.camera_cov(v) is not None for v in wf.clicks.all_views())
     return (
         f"{note}RMS {result.rms_px:.2f} px over {used}; moved {deg:.2f}° and "
         f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
         + (" (camera calibration included)" if result.cov_parts else "")
-        + (" (the cameras' calibration σ not included)" if uncalibrated else "")
         + (f". ⚠ {unseen}" if unseen else "")
     )
 

@@ -395,10 +395,11 @@ class PoseClicks:
         return max((views.count(v) for v in set(views)), default=0)
 
     def one_corner(self) -> list[int] | None:
-        """The segments (indices) when exactly three are assigned and their model edges share a vertex
-        (P3L cannot fix the distance from them, ``core.pose.p3l``), else None."""
+        """The segments (indices) when exactly three are assigned, in one camera, and their model edges share
+        a vertex (P3L cannot fix the distance from them, ``core.pose.p3l``), else None. Seen from two cameras
+        the corner is triangulated: its distance is fixed."""
         assigned = self.assigned()
-        if len(assigned) != 3:
+        if len(assigned) != 3 or len({self.seg_views[j] for j in assigned}) != 1:
             return None
         ends = [set(self.edges[self.edge_ids[j]].tolist()) for j in assigned]
         return assigned if ends[0] & ends[1] & ends[2] else None

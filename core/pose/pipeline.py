@@ -34,7 +34,7 @@ from ..camera import Camera
 from ..transforms import pose_error
 from .plausibility import plausibility
 from .refine import PosePrior, RefineResult, ViewClicks, refine_views
-from .uncertainty import with_camera_uncertainty
+from .uncertainty import with_views_camera_uncertainty
 
 __all__ = ["Refused", "Start", "Refined", "Estimates", "rank", "within", "refine_starts", "operator_starts"]
 
@@ -110,16 +110,16 @@ def refine_starts(
     max_rms_px: float,
     loss: str = "l2",
     huber_px: float = 3.0,
-    camera_cov: np.ndarray | None = None,
+    camera_covs: Sequence[np.ndarray | None] | None = None,
 ) -> Refined:
     """Refine the clicks of every view (``refine_views``) from each start in turn (with its prior, if
     it has one) and return the first result that can be the answer: finite, its RMS at most
     ``max_rms_px`` (e.g. 3 σ), ``model`` in front of ``camera`` and in its image (``plausibility``).
     The starts it could not use say why (a refinement refused, diverged, or not plausible).
 
-    camera_cov : (12, 12), optional, the covariance of ``camera``'s C: when every click was made in that
-    camera and the start is no prior, the calibration's share joins the result's σ
-    (``uncertainty.with_camera_uncertainty``; a prior measured through C holds it already)."""
+    camera_covs : optional, per view of ``views``, the covariance (12, 12) of its camera's C (or None): when
+    the start is no prior, every calibration's share joins the result's σ
+    (``uncertainty.with_views_camera_uncertainty``; a prior measured through C holds it already)."""
     failures: list[tuple[str, str]] = []
     for i, start in enumerate(starts):
         try:
@@ -134,10 +134,8 @@ def refine_starts(
         if why:
             failures.append((start.label, why))
             continue
-        if camera_cov is not None and len(views) == 1 and views[0].camera is camera and start.prior is None:
-            v = views[0]
-            clicks = dict(segs_uv=v.segs_uv, edges_obj=v.edges_obj, points_uv=v.points_uv, points_obj=v.points_obj)
-            res = with_camera_uncertainty(res, camera, camera_cov, **clicks, huber_px=huber_px)
+        if camera_covs is not None and start.prior is None:
+            res = with_views_camera_uncertainty(res, views, camera_covs, huber_px=huber_px)
         return Refined(res, i, tuple(failures))
     return Refined(None, None, tuple(failures))
 

@@ -5,11 +5,14 @@ DLT covariance, ``core.calibration.calibrate_dlt(...).cov``); its error shifts t
 way whatever the clicks. ``with_camera_uncertainty`` refines again from the solution with C moved
 ±1σ along each principal axis of its covariance (2 × 11 refinements, a few milliseconds each) and
 adds the spread of the pose: ``cov = cov_clicks + Σ_k δ_k δ_kᵀ``, δ_k the central difference of
-(δt, δr) in refine's convention (world frame, about the object's origin).
+(δt, δr) in refine's convention (world frame, about the object's origin). With clicks in several cameras
+(``with_views_camera_uncertainty``) each camera's calibration is moved in turn, the others held: their
+errors are independent, and their shares add.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -17,9 +20,9 @@ import numpy as np
 from ..calibration import check_covariance, perturbed_camera, principal_steps
 from ..camera import Camera
 from ..transforms import log_so3
-from .refine import RefineResult, refine
+from .refine import RefineResult, ViewClicks, refine_views
 
-__all__ = ["with_camera_uncertainty", "pose_delta"]
+__all__ = ["with_camera_uncertainty", "with_views_camera_uncertainty", "pose_delta"]
 
 
 def pose_delta(T: np.ndarray, T0: np.ndarray) -> np.ndarray:
@@ -44,23 +47,29 @@ def with_camera_uncertainty(
 
     camera_cov : array (12, 12), covariance of ``camera.C.ravel()``.
     """
-    if camera_cov is None:
+    view = ViewClicks(camera, segs_uv, edges_obj, points_uv, points_obj, sigma_px=result.sigma_px)
+    return with_views_camera_uncertainty(result, [view], [camera_cov], huber_px=huber_px)
+
+
+def with_views_camera_uncertainty(
+    result: RefineResult, views: Sequence[ViewClicks], camera_covs: Sequence[np.ndarray | None], huber_px: float = 3.0
+) -> RefineResult:
+    """``result`` (refined by ``refine_views`` on ``views``) with every camera calibration's share added to its
+    ``cov``: each view's C moved ±1σ along the principal axes of its covariance (``camera_covs``, one (12, 12)
+    or None per view), the other views held. ``cov_parts`` holds "clicks" and "camera calibration".
+    Unchanged when no view has a covariance."""
+    if all(c is None for c in camera_covs):
         return result
-    steps = principal_steps(check_covariance(camera_cov, 12, "camera_cov (of C's entries)"))
-    T0 = result.T_world_obj
-    kw = dict(
-        segs_uv=segs_uv,
-        edges_obj=edges_obj,
-        points_uv=points_uv,
-        points_obj=points_obj,
-        loss=result.loss,
-        huber_px=huber_px,
-        sigma_px=result.sigma_px,
-    )
-    share = np.zeros((6, 6))
-    for d in steps:
-        plus = refine(perturbed_camera(camera, d), T0, **kw).T_world_obj
-        minus = refine(perturbed_camera(camera, -d), T0, **kw).T_world_obj
-        dq = 0.5 * (pose_delta(plus, T0) - pose_delta(minus, T0))
-        share += np.outer(dq, dq)
+    T0, share = result.T_world_obj, np.zeros((6, 6))
+    for i, cov in enumerate(camera_covs):
+        if cov is None:
+            continue
+        for d in principal_steps(check_covariance(cov, 12, "camera_cov (of C's entries)")):
+            moved = []
+            for step in (d, -d):
+                vs = list(views)
+                vs[i] = replace(views[i], camera=perturbed_camera(views[i].camera, step))
+                moved.append(refine_views(vs, T0, loss=result.loss, huber_px=huber_px).T_world_obj)
+            dq = 0.5 * (pose_delta(moved[0], T0) - pose_delta(moved[1], T0))
+            share += np.outer(dq, dq)
     return replace(result, cov=result.cov + share, cov_parts={"clicks": result.cov, "camera calibration": share})

@@ -111,3 +111,21 @@ def test_solve_clicks_need_three_edges_in_one_camera_and_one_corner_is_said():
     assert c.one_corner() == [0, 1, 2]
     view, (segs, edges, pts, pobj) = c.solve_clicks("front")
     assert view == "front" and segs.shape == (3, 2, 2) and edges.shape == (3, 2, 3) and pts is None
+
+
+def test_three_edges_at_one_corner_in_two_cameras_are_not_said_to_leave_the_distance_open():
+    """Seen from two cameras the corner is triangulated: its distance is fixed (the panel had told a new
+    operator the edges "meet at one corner" when the clicks were split between the cameras)."""
+    T, front, side, vis, _ = _setup(3)
+    corner = next(
+        (i, j, k)
+        for i in vis
+        for j in vis
+        for k in vis
+        if len({i, j, k}) == 3 and set(BOX.edges[i]) & set(BOX.edges[j]) & set(BOX.edges[k])
+    )
+    c = PoseClicks(BOX.edges, BOX.vertices)
+    for k, (view, cam) in zip(corner, (("front", front), ("front", front), ("side", side))):
+        c.add_segment(_on_edge(cam, T, k), view, 1.0)
+        c.assign(k)
+    assert c.one_corner() is None

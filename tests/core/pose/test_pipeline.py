@@ -50,12 +50,12 @@ def test_refine_starts_adds_the_camera_calibrations_share_unless_the_start_is_a_
     d = np.random.default_rng(0).normal(size=12) * 1e-3 * np.abs(pb.camera.C).ravel()
     cam_cov = np.outer(d, d) + np.diag((1e-4 * np.abs(pb.camera.C).ravel()) ** 2)
     plain = Start(pb.T_world_obj, "the database pose")
-    out = refine_starts(views, [plain], model=model, camera=pb.camera, max_rms_px=2.0, camera_cov=cam_cov)
+    out = refine_starts(views, [plain], model=model, camera=pb.camera, max_rms_px=2.0, camera_covs=[cam_cov])
     bare = refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_uv, edges_obj=pb.edges_obj, sigma_px=0.5)
     want = with_camera_uncertainty(bare, pb.camera, cam_cov, segs_uv=pb.segs_uv, edges_obj=pb.edges_obj)
     assert set(out.result.cov_parts) == {"clicks", "camera calibration"} and np.allclose(out.result.cov, want.cov)
     prior = Start(pb.T_world_obj, "found pose 1", 0, PosePrior(pb.T_world_obj, np.eye(6) * 1e-4))
-    out = refine_starts(views, [prior], model=model, camera=pb.camera, max_rms_px=2.0, camera_cov=cam_cov)
+    out = refine_starts(views, [prior], model=model, camera=pb.camera, max_rms_px=2.0, camera_covs=[cam_cov])
     assert out.result.cov_parts == {}  # a prior measured through C holds the calibration's share already
 
 

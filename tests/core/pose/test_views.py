@@ -168,3 +168,29 @@ def test_a_prior_joins_the_views_and_its_shared_share_is_added_back():
     assert np.all(np.diag(res.cov_parts["found pose and clicks"]) < np.diag(P - shared))  # the clicks helped
     alone = refine_views([ViewClicks(a.camera)], T, prior=PosePrior(T, P))
     assert np.allclose(alone.cov, P) and alone.rms_px == 0.0 and np.array_equal(alone.T_world_obj, T)
+
+
+def test_each_cameras_calibration_share_is_added_and_the_shares_add():
+    """Clicks in two cameras: each camera's C moved along its covariance, the other held; the two
+    calibrations' errors are independent, so the shares add (the two-camera σ had left them out)."""
+    from core.pose.uncertainty import with_views_camera_uncertainty
+
+    rng = np.random.default_rng(4)
+    T, a, b = _two_views(rng, 0.3)
+    views = [
+        ViewClicks(a.camera, a.segs_uv, a.edges_obj, sigma_px=0.3),
+        ViewClicks(b.camera, b.segs_uv, b.edges_obj, sigma_px=0.3),
+    ]
+    res = refine_views(views, T)
+    covs = []
+    for cam in (a.camera, b.camera):
+        d = rng.normal(size=12) * 1e-3 * np.abs(cam.C).ravel()
+        covs.append(np.outer(d, d) + np.diag((2e-4 * np.abs(cam.C).ravel()) ** 2))
+    both = with_views_camera_uncertainty(res, views, covs)
+    front = with_views_camera_uncertainty(res, views, [covs[0], None])
+    side = with_views_camera_uncertainty(res, views, [None, covs[1]])
+    share = both.cov_parts["camera calibration"]
+    assert np.allclose(share, front.cov_parts["camera calibration"] + side.cov_parts["camera calibration"])
+    assert np.all(np.linalg.eigvalsh(share) > -1e-15) and np.trace(share) > 0
+    assert np.allclose(both.cov, res.cov + share)
+    assert with_views_camera_uncertainty(res, views, [None, None]) is res
