@@ -29,6 +29,17 @@ def _on_edge(camera, T, k, f=(0.3, 0.7)):
     return np.array([a + f[0] * (b - a), a + f[1] * (b - a)])
 
 
+def _corner(edges) -> tuple[int, int, int]:
+    """Three of ``edges`` (model edge indices) through one corner of the box."""
+    return next(
+        (i, j, k)
+        for i in edges
+        for j in edges
+        for k in edges
+        if len({i, j, k}) == 3 and set(BOX.edges[i]) & set(BOX.edges[j]) & set(BOX.edges[k])
+    )
+
+
 def test_the_click_flow_segment_then_its_model_edge_picked_on_the_projection():
     T, front, _, vis, _ = _setup()
     c = PoseClicks(BOX.edges, BOX.vertices, "the box")
@@ -97,13 +108,7 @@ def test_solve_clicks_need_three_edges_in_one_camera_and_one_corner_is_said():
     with pytest.raises(Refused, match="0 edges assigned; the three-line solver needs 3"):
         c.solve_clicks("front")
     ends = [set(BOX.edges[k].tolist()) for k in vis]
-    corner = next(
-        (i, j, k)
-        for i in vis
-        for j in vis
-        for k in vis
-        if len({i, j, k}) == 3 and set(BOX.edges[i]) & set(BOX.edges[j]) & set(BOX.edges[k])
-    )
+    corner = _corner(vis)
     assert ends
     for k in corner:
         c.add_segment(_on_edge(front, T, k), "front", 1.0)
@@ -117,13 +122,7 @@ def test_three_edges_at_one_corner_in_two_cameras_are_not_said_to_leave_the_dist
     """Seen from two cameras the corner is triangulated: its distance is fixed (the panel had told a new
     operator the edges "meet at one corner" when the clicks were split between the cameras)."""
     T, front, side, vis, _ = _setup(3)
-    corner = next(
-        (i, j, k)
-        for i in vis
-        for j in vis
-        for k in vis
-        if len({i, j, k}) == 3 and set(BOX.edges[i]) & set(BOX.edges[j]) & set(BOX.edges[k])
-    )
+    corner = _corner(vis)
     c = PoseClicks(BOX.edges, BOX.vertices)
     for k, (view, cam) in zip(corner, (("front", front), ("front", front), ("side", side))):
         c.add_segment(_on_edge(cam, T, k), view, 1.0)
