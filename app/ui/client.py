@@ -323,7 +323,9 @@ class ClientPanel:
             raise WorkflowError("select an object first (click it in the video, or choose it in the list)")
         self.app.site.set_status(name, "stale", method="operator", client=self.session.client)
         self.error = ""
-        self.notify("Marked stale", f"{name} is drawn orange until its pose is updated.", "blue")
+        self.notify(
+            "Marked stale", f"{name} is drawn orange (yellow while selected) until its pose is updated.", "blue"
+        )
 
     # ------------------------------------------------------------------ intents: clicks
     def on_pixel_click(self, uv: np.ndarray, at: float | None = None, double: bool | None = None) -> None:

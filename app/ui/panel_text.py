@@ -62,6 +62,7 @@ class PanelText:
             panel.gui_copy.value = text
         frozen = panel.frozen_frames
         show(panel.gui_frame, frozen.text(panel.feed.grabber.status().live))
+        panel.gui_live.visible = frozen.frame is not None  # nothing frozen: the live video is what is shown
         live_label = "Show frozen (L)" if frozen.show_live and frozen.frame is not None else "Show live (L)"
         if panel.gui_live.label != live_label:  # says what it does now
             panel.gui_live.label = live_label

@@ -528,6 +528,8 @@ class CalibrateCamera(SnapMixin, Workflow):
                 if self.solved_by == "pnp":
                     out["std_position_mm"] = 1000 * self.result.std_position_m
                     out["std_angle_deg"] = float(np.degrees(self.result.std_angle_rad))
-                out["errors_px"] = self.result.errors_px.tolist()
-                out["labels"] = list(self.labels)
+                # a table, one row a point (its residual beside its name: two lists read poorly)
+                out["points"] = [
+                    {"point": label, "residual_px": float(e)} for label, e in zip(self.labels, self.result.errors_px)
+                ]
             return out

@@ -65,7 +65,7 @@ def test_click_pairs_solve_accept_updates_every_reader(site, scene, db):
     assert wf.summary()["pairs"] == n
     result = wf.solve()
     assert result.rms_px < 1.0
-    assert len(wf.summary()["errors_px"]) == n
+    assert len(wf.summary()["points"]) == n
     assert len(db.calibrations("camera")) == n_cal  # nothing written before accept
     wf.accept()
     assert wf.accepted and len(db.calibrations("camera")) == n_cal + 1

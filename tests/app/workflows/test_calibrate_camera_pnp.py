@@ -185,7 +185,7 @@ def test_with_the_lens_known_5_points_solve_the_pose_by_pnp_and_say_so(lens_site
     assert wf.message.startswith("Solved the camera's pose from 5 points with the lens known (PnP): RMS ")
     assert wf.next_step.startswith("Solved the camera's pose from 5 points with the lens known (PnP)")
     s = wf.summary()
-    assert s["solved_by"] == "Pose, lens known (PnP)" and len(s["errors_px"]) == 5 and s["std_position_mm"] > 0
+    assert s["solved_by"] == "Pose, lens known (PnP)" and len(s["points"]) == 5 and s["std_position_mm"] > 0
     weak = wf.weaknesses()
     assert any("only 5 points (10 coordinates) for the pose's 6 unknowns: enough to solve" in w for w in weak)
     assert len(site.db.calibrations("camera")) == n_cal  # nothing written before Accept
@@ -217,7 +217,7 @@ def test_the_operator_can_choose_the_dlt_and_the_record_says_so(lens_site, scene
     assert wf.solved_by == "dlt" and wf.message.startswith("Solved the full camera matrix from 9 points (DLT): RMS ")
     wf.remove_pair(0)  # delete any point: the same table, the same Solve
     wf.solve()
-    assert len(wf.summary()["errors_px"]) == 8
+    assert len(wf.summary()["points"]) == 8
     wf.accept()
     cal = site.db.calibrations("camera")[-1]
     assert cal.method == "dlt" and cal.data["solved_by"] == "dlt" and "K" not in cal.data
