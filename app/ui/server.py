@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -43,6 +44,10 @@ from .inbound import guard_inbound_messages
 from .recent import RecentFrames
 from .world3d import World3D
 from .wslog import quiet_malformed_messages
+
+# A page that leaves while its marks or frozen image are on their way: viser drops them and warns. That a
+# departed page gets nothing is expected; the warning would reach the operator's terminal as noise.
+warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning)
 
 __all__ = ["InterfaceServer"]
 
