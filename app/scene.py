@@ -150,8 +150,11 @@ def _matrix(value: Any, shape: tuple[int, int], where: str) -> np.ndarray:
         M = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise SceneError(f"{where}: expected a {shape[0]}×{shape[1]} matrix of numbers") from None
-    if M.shape != shape or not np.all(np.isfinite(M)):
-        raise SceneError(f"{where}: expected a finite {shape[0]}×{shape[1]} matrix, got shape {M.shape}")
+    if M.shape != shape:
+        raise SceneError(f"{where}: expected a {shape[0]}×{shape[1]} matrix, got shape {M.shape}")
+    if not np.all(np.isfinite(M)):
+        i, j = (int(k) for k in np.argwhere(~np.isfinite(M))[0])
+        raise SceneError(f"{where}: entry ({i + 1}, {j + 1}) is {M[i, j]}; every entry must be a finite number")
     return M
 
 

@@ -188,14 +188,23 @@ class InterfaceServer:
         return f"http://{host}:{self.port}{token}"
 
     def size_mismatch(self, view: str) -> str:
-        """ "" when the camera ``view`` is calibrated for its video's size, else a sentence saying so."""
+        """ "" when the camera ``view`` is calibrated for its video's size and sees the database in front of it,
+        else a sentence saying what is wrong."""
         cam, pw = self.site.camera_of(view), self.views[view].pixel_world
-        if (cam.width, cam.height) == (pw.width, pw.height):
-            return ""
-        return (
-            f"the video is {pw.width}×{pw.height} but the camera is calibrated for {cam.width}×{cam.height}: "
-            "run Calibrate camera"
-        )
+        if (cam.width, cam.height) != (pw.width, pw.height):
+            return (
+                f"the video is {pw.width}×{pw.height} but the camera is calibrated for {cam.width}×{cam.height}: "
+                "run Calibrate camera"
+            )
+        V = [o.vertices_world() for o in self.site.objects()]
+        V = np.vstack([v for v in V if len(v)]) if any(len(v) for v in V) else np.zeros((0, 3))
+        if len(V) and not np.any(cam.depth(V) > 0):  # nothing would be drawn, and nothing said (a new user's)
+            return (
+                "the camera's C puts every database object behind it, so none is drawn: check C's sign, or "
+                "whether the world is mirrored (a reconstruction's often is: negate one world axis of the "
+                "objects and of C)"
+            )
+        return ""
 
     def view_at(self, origin: np.ndarray, direction: np.ndarray) -> tuple[str, np.ndarray] | None:
         """(camera name, pixel) of the image a viewer ray meets, or None when it meets none."""
@@ -247,7 +256,11 @@ class InterfaceServer:
             if self.size_mismatch(name):
                 said = self.size_mismatch(name)
                 where = f"Camera {name}: t" if len(self.views) > 1 else "T"
-                panel.notify("Camera and video differ", f"{where}{said[1:]}.", "yellow")
+                panel.notify(
+                    "Camera and video differ" if "video" in said else "Nothing in front of the camera",
+                    f"{where}{said[1:]}.",
+                    "yellow",
+                )
         self.wake()
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
