@@ -69,6 +69,7 @@ class ClientPanel:
         self.error = ""  # the last refused action, said in the panel until the next action or step
         self.error_step: str | None = None  # the step it was said in
         self.worker: threading.Thread | None = None  # a long action (a measurement) under way
+        self._performing = False  # a long action runs now (its worker has not returned from it)
         self.feeder: TrackFeeder | None = None  # feeds a workflow that follows the video
         self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
@@ -281,7 +282,7 @@ class ClientPanel:
     def _cancel(self, wf, c) -> None:
         """A running measurement (or search) is stopped alone, at once: the workflow and what was done before
         it stay; work done is asked about once more."""
-        if self.busy or wf.progress is not None:
+        if self._performing or wf.progress is not None:  # (its worker may still be saying what it did: done)
             self.confirm_pending, self.warning, self.error = None, "", ""
             wf.stop_measurement()
             return
@@ -299,6 +300,7 @@ class ClientPanel:
     def _act(self, wf, c, args: tuple) -> Any:
         where, self._double_at = (self._double_at, None) if c.action == "find" else (None, self._double_at)
         working = f"{c.label}: working…"
+        self._performing = c.kind == "long"  # a measurement: Cancel stops it alone
         try:
             result = wf.perform(c.action, *args)
         except BaseException as exc:
@@ -310,6 +312,8 @@ class ClientPanel:
             raise WorkflowError(
                 f"{said}. {where[0].upper()}{where[1:]}" if where.startswith("your") else f"{said} ({where})"
             ) from None
+        finally:
+            self._performing = False
         if not wf.message or wf.message == working:
             wf.message = f"{c.label}: done." if c.action not in ("resume", "pause", "restart") else ""
         return result

@@ -457,6 +457,9 @@ def weaknesses(wf) -> list[str]:
     for name, res, sg in zip(names, r.click_residuals_px, c.sigmas()):
         if res > 3 * max(sg, 0.3):
             out.append(f"{name} is {res:.1f} px from the refined model (more than 3σ): a wrong click or assignment?")
+    disagree = clicks_disagree(r, c.sigmas())
+    if disagree:
+        out.append(disagree)
     for what, snaps in (("edge", c.seg_snaps), ("point", c.point_snaps)):
         for j, sn in enumerate(snaps):
             if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
@@ -469,6 +472,27 @@ def weaknesses(wf) -> list[str]:
             "click a fourth edge"
         )
     return out
+
+
+def clicks_disagree(r, sigmas) -> str:
+    """ "" when the refined clicks' residuals are as their σ say (χ² of the weighted residuals within its
+    99.9 % quantile), else a sentence: the pose's σ is then understated. A new user's snapped clicks on
+    real images landed on a neighbouring edge by 1-2 px, each within 3σ; the written pose was 7 σ off."""
+    from scipy.stats import chi2
+
+    sig = np.repeat(np.maximum(np.asarray(sigmas, float), 1e-6), 2)
+    res, w = np.asarray(r.residuals_px, float), np.repeat(np.asarray(r.weights, float), 2)
+    dof = len(res) - 6
+    if dof <= 0 or len(sig) != len(res) or len(w) != len(res):
+        return ""
+    q = float(np.sum(w * (res / sig) ** 2))
+    if q <= chi2.ppf(0.999, dof):
+        return ""
+    return (
+        f"the clicks disagree more than their σ says (RMS {r.rms_px:.2f} px against σ {float(np.median(sig)):.2f} px), "
+        f"so the pose's σ is understated about {np.sqrt(q / dof):.1f}×: a snap may have landed on a neighbouring "
+        "edge (Refuse snap on it), or a click is off (Delete click)"
+    )
 
 
 # ---------------------------------------------------------------------------------------------- sentences
