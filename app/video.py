@@ -460,11 +460,15 @@ def stamp_replay_time(image: np.ndarray, t_s: float, duration_s: float) -> np.nd
     """A copy of ``image`` (RGB or grey uint8) with "REPLAY 12.3 / 28.6 s" in a dark box at its
     bottom-left corner: a recording replayed in a loop (the workcell's), whose objects jump back when it
     restarts, says where it is on the video itself (a new operator took a restart for a wrong update)."""
+    return stamp_corner(image, f"REPLAY {t_s % duration_s:4.1f} / {duration_s:.1f} s")
+
+
+def stamp_corner(image: np.ndarray, label: str) -> np.ndarray:
+    """A copy of ``image`` (RGB or grey uint8) with ``label`` (ASCII) in a dark box at its bottom-left corner."""
     import cv2
 
     out = np.ascontiguousarray(image).copy()
     h, w = out.shape[:2]
-    label = f"REPLAY {t_s % duration_s:4.1f} / {duration_s:.1f} s"
     font, thickness = cv2.FONT_HERSHEY_SIMPLEX, 1
     scale = max(0.35, h / 900.0)
     (tw, th), base = cv2.getTextSize(label, font, scale, thickness)

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.markup import Md
+from app.video import stamp_corner
 from app.workflows import WorkflowError
 from app.workflows.base import MOTION_GAP_S, FrameRef
 
@@ -156,7 +157,9 @@ class FrozenFrames:
             if ref is None:
                 panel.client.scene.remove_by_name(node)
             else:
-                _add_image(panel.client.scene, node, ref.image, panel.app.views[name].pixel_world)
+                # marked on the video itself: the panel's text alone left a new operator unsure what was shown
+                shown = stamp_corner(ref.image, f"FROZEN t = {ref.t_s:.2f} s")
+                _add_image(panel.client.scene, node, shown, panel.app.views[name].pixel_world)
 
     def text(self, live: bool) -> Md:
         """What the panel says of the frame shown (``live``: the video is live, not lost)."""

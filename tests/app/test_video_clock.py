@@ -36,3 +36,14 @@ def test_a_slow_recording_keeps_the_clock_of_a_fast_one():
     finally:
         fast.stop()
         slow.stop()
+
+
+def test_a_corner_stamp_marks_the_bottom_left_and_leaves_the_rest():
+    """The frozen frame is marked on the video ("FROZEN t = …"), as a replay is ("REPLAY …")."""
+    from app.video import stamp_corner
+
+    image = np.full((256, 512, 3), 128, np.uint8)
+    out = stamp_corner(image, "FROZEN t = 12.30 s")
+    changed = np.argwhere(np.any(out != image, axis=2))
+    assert len(changed) and changed[:, 0].min() > 200 and changed[:, 1].max() < 256  # the bottom-left corner only
+    assert np.array_equal(image, np.full((256, 512, 3), 128, np.uint8))  # a copy: the clicked frame untouched
