@@ -219,9 +219,6 @@ class ClientPanel:
         if event.client_id is not None:  # not the panel setting it back to 0 itself
             self.frozen_frames.freeze_back(float(self.gui_scrub.value))
 
-    def moved_on(self, wf) -> None:
-        self.texts.moved_on(wf)
-
     def press_event(self, action: str, _event=None) -> None:
         self.press(action)
 

@@ -102,7 +102,7 @@ class FrozenFrames:
         wf = panel.session.workflow
         if wf is not None and not wf.finished and wf.follows_live():
             raise WorkflowError(wf.follows_live())
-        panel.moved_on(wf)
+        panel.texts.moved_on(wf)  # a finished workflow's text goes
         if wf is not None and not wf.finished and "remove_last" in wf.current_step().enabled:
             raise WorkflowError(
                 "your clicks were made on the frozen frame: every click of a workflow uses one frame. "

@@ -171,8 +171,8 @@ class InterfaceServer:
             feed.grabber.add_listener(lambda _frame: self._wake.set())  # a new frame: redraw now
             # Snapping, matching and tracking work on what the operator sees: the grabber's latest frame.
             site.set_frames(GrabberFrames(feed.grabber), view=feed.name)
-            if self.size_mismatch(feed.name):
-                log.warning("camera %s: %s", feed.name, self.size_mismatch(feed.name))
+            if self.camera_doubt(feed.name):
+                log.warning("camera %s: %s", feed.name, self.camera_doubt(feed.name))
 
     # ------------------------------------------------------------------ life cycle
     @property
@@ -187,7 +187,7 @@ class InterfaceServer:
         token = "" if self.access.token is None else f"/?token={self.access.token}"
         return f"http://{host}:{self.port}{token}"
 
-    def size_mismatch(self, view: str) -> str:
+    def camera_doubt(self, view: str) -> str:
         """ "" when the camera ``view`` is calibrated for its video's size and sees the database in front of it,
         else a sentence saying what is wrong."""
         cam, pw = self.site.camera_of(view), self.views[view].pixel_world
@@ -253,8 +253,8 @@ class InterfaceServer:
         with self.clients_lock:
             self.clients[client.client_id] = panel
         for name in self.views:
-            if self.size_mismatch(name):
-                said = self.size_mismatch(name)
+            if self.camera_doubt(name):
+                said = self.camera_doubt(name)
                 where = f"Camera {name}: t" if len(self.views) > 1 else "T"
                 panel.notify(
                     "Camera and video differ" if "video" in said else "Nothing in front of the camera",

@@ -390,7 +390,8 @@ def summary(wf) -> dict[str, Any]:
             {"click": n, "residual_px": float(v), "weight": float(w)}
             for n, v, w in zip(_click_names(r.kinds), r.click_residuals_px, r.weights)
         ]
-        cameras = [c.seg_views[j] for j in c.assigned()] + list(c.point_views)
+        seg_views, pt_views = c.click_views()
+        cameras = seg_views + pt_views
         if len(set(cameras)) > 1 and len(cameras) == len(out["clicks"]):  # which camera each click was made in
             out["clicks"] = [{**row, "camera": v} for row, v in zip(out["clicks"], cameras)]
     return out
@@ -483,7 +484,7 @@ def clicks_disagree(r, sigmas) -> str:
     sig = np.repeat(np.maximum(np.asarray(sigmas, float), 1e-6), 2)
     res, w = np.asarray(r.residuals_px, float), np.repeat(np.asarray(r.weights, float), 2)
     dof = len(res) - 6
-    if dof <= 0 or len(sig) != len(res) or len(w) != len(res):
+    if dof <= 0:
         return ""
     q = float(np.sum(w * (res / sig) ** 2))
     if q <= chi2.ppf(0.999, dof):

@@ -330,6 +330,11 @@ class PoseClicks:
         """The view of each assigned segment and of each point, in the pipeline's order."""
         return [self.seg_views[j] for j in self.assigned()], list(self.point_views)
 
+    def fitted_views(self) -> list[str]:
+        """The views with an assigned segment or a point, in ``view_clicks``' order (one ViewClicks each)."""
+        seg_views, pt_views = self.click_views()
+        return list(dict.fromkeys(seg_views + pt_views))
+
     def sigmas(self) -> np.ndarray:
         """σ (pixels) of each assigned segment, then of each point."""
         return np.array([self.seg_sigmas[j] for j in self.assigned()] + self.point_sigmas, dtype=float)
@@ -345,7 +350,7 @@ class PoseClicks:
         seg_views, pt_views = self.click_views()
         si, pi = self.assigned(), range(len(self.points_uv))
         out = []
-        for view in dict.fromkeys(seg_views + pt_views):
+        for view in self.fitted_views():
             s = [k for k, v in enumerate(seg_views) if v == view]
             p = [k for k, v in enumerate(pt_views) if v == view]
             segs = np.array([self.segs[si[k]] for k in s]).reshape(-1, 2, 2)

@@ -24,17 +24,17 @@ K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
 
 
 def test_a_camera_that_sees_the_objects_is_not_doubted():
-    assert InterfaceServer.size_mismatch(_server(K @ np.eye(3, 4)), "a") == ""
+    assert InterfaceServer.camera_doubt(_server(K @ np.eye(3, 4)), "a") == ""
 
 
 def test_a_camera_with_every_object_behind_it_is_said():
     # a mirrored reconstruction: C's sign fixed by its determinant, every object at negative depth (VGG's house)
-    said = InterfaceServer.size_mismatch(_server(K @ np.eye(3, 4), z=-2.0), "a")
+    said = InterfaceServer.camera_doubt(_server(K @ np.eye(3, 4), z=-2.0), "a")
     assert "behind it" in said and "mirrored" in said
 
 
 def test_a_video_of_another_size_is_said_first():
-    said = InterfaceServer.size_mismatch(_server(K @ np.eye(3, 4), size=(768, 576)), "a")
+    said = InterfaceServer.camera_doubt(_server(K @ np.eye(3, 4), size=(768, 576)), "a")
     assert said.startswith("the video is 768×576 but the camera is calibrated for 640×480")
 
 
