@@ -15,6 +15,9 @@ mcit appends to (docs/exchange.md gives the schema, ``mcit-feed/1``). Each line 
   send (``xyz_m``: the range finder's point where it disagrees with the database, else the
   database's), the target frame ``T`` / ``quat_xyzw`` (z into the surface), the object and its version,
   the σ along the line of sight, the range finder's check and warning, who and when.
+* ``{"type": "robot", ...}``: the robot's joint state (``robot_event``): joint positions by name, the
+  tool's pose ``T`` in the world, moving or stopped, a fault; on each change of state and at least
+  once a second while it moves.
 
 Every line carries ``"feed": "mcit-feed/1"``. Lines are written whole (one ``write`` each, ending in
 ``\\n``); a reader may see the same object version twice (a change that happened while it
@@ -44,7 +47,7 @@ import numpy as np
 
 from app.db.export import iso, object_record, pose_fields
 
-__all__ = ["FEED_FORMAT", "change_event", "object_event", "target_event", "FeedPublisher", "follow"]
+__all__ = ["FEED_FORMAT", "change_event", "object_event", "target_event", "robot_event", "FeedPublisher", "follow"]
 
 log = logging.getLogger("mcit.feed")
 
@@ -181,6 +184,35 @@ def target_event(
             "who": who,
             "time": float(when),
             "time_iso": iso(when),
+        }
+    )
+    return ev
+
+
+def robot_event(robot: str, state: Any, T_world_tool: np.ndarray, *, carrying: str | None = None) -> dict[str, Any]:
+    """The ``robot`` line of the robot's joint state (an ``app.robot.controller.JointState``).
+
+    Fields: ``robot`` (its name), ``joints`` ({name: position}, rad or m), ``T`` (the tool's 4×4 pose
+    in the world, from the joints and the calibrated base) with ``xyz_m`` / ``quat_xyzw`` /
+    ``rotvec_rad``, ``moving``, ``fault`` (None, or what went wrong), ``carrying`` (the object in the
+    gripper, or None), ``time`` / ``time_iso`` (the state's wall-clock time).
+    """
+    fields = pose_fields(T_world_tool, None)
+    ev = _header("robot")
+    now = time.time()
+    ev.update(
+        {
+            "robot": robot,
+            "joints": state.by_name(),
+            "T": fields["T"],
+            "xyz_m": fields["xyz_m"],
+            "quat_xyzw": fields["quat_xyzw"],
+            "rotvec_rad": fields["rotvec_rad"],
+            "moving": bool(state.moving),
+            "fault": state.fault,
+            "carrying": carrying,
+            "time": now,
+            "time_iso": iso(now),
         }
     )
     return ev
