@@ -58,8 +58,8 @@ __all__ = [
     "MSAA",
 ]
 
-SUPERSAMPLE = 1  # the image drawn this many times finer along each axis, then box-filtered (bench/live_render.py)
-MSAA = 4  # multisample anti-aliasing: coverage samples a pixel (bench/live_render.py)
+SUPERSAMPLE = 2  # the image drawn this many times finer along each axis, then box-filtered (bench/live_render.py)
+MSAA = 4  # multisample anti-aliasing: coverage samples a (fine) pixel; 2 × 2 × 4 = 16 a pixel (bench/live_render.py)
 SILHOUETTE_TOL_PX = 0.02  # largest gap between a tessellated silhouette and the true one
 NEAR_M, FAR_M = 0.01, 200.0  # the depth range drawn
 _CREASE_COS = np.cos(np.radians(40.0))  # curved surfaces' facets closer than this share their normals
@@ -314,9 +314,9 @@ class _GLThread:
         self.ctx = ctx
         self.program = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FRAGMENT)
 
-    @property
-    def renderer_name(self) -> str:
-        return "" if self.ctx is None else str(self.ctx.info.get("GL_RENDERER", ""))
+    def describe(self) -> str:
+        """The OpenGL renderer and version (e.g. "llvmpipe (LLVM 15.0.6, 256 bits), 4.5 (Core Profile) Mesa")."""
+        return self.call(lambda gl: f"{gl.ctx.info['GL_RENDERER']}, {gl.ctx.info['GL_VERSION']}")
 
 
 @dataclass
