@@ -393,7 +393,7 @@ class LiveRenderer:
         self._meshes: dict[int, _Mesh] = {}
         self._extents: dict[int, tuple] = {}
         self._lock = threading.Lock()
-        self._key: tuple | None = None  # the bodies of the cached image
+        self._key: tuple | None = None  # the bodies of the cached image (``_key``)
         self._cached: dict[bool, np.ndarray] = {}  # blur → noise-free image of those bodies
         self.renders = 0  # images drawn by OpenGL (frames of unmoved bodies reuse the last)
         self._gl = _GLThread.get()
@@ -556,7 +556,7 @@ class LiveRenderer:
     def _clean(self, bodies: Sequence[RenderBody], blur: bool) -> np.ndarray:
         """The noise-free image, blurred or not, kept while the bodies stay as they are."""
         key = _key(bodies)
-        if key != self._key:
+        if not _same(self._key, key):
             self._cached = {False: self.render_float(bodies)}
             self._key = key
         if blur not in self._cached:
@@ -613,11 +613,19 @@ def _checked(bodies: Sequence[RenderBody]) -> list[RenderBody]:
     return out
 
 
-def _key(bodies: Sequence[RenderBody]) -> tuple:
-    """What the picture of ``bodies`` depends on: models (by identity), poses, appearances, texture salts."""
-    return tuple(
-        (id(b.brep), np.asarray(b.T_world, dtype=float).tobytes(), b.appearance, b.texture_salt) for b in bodies
-    )
+POSE_TOL = 1e-9  # poses closer than this (m, and rotation entries) draw the same picture
+
+
+def _key(bodies: Sequence[RenderBody]) -> tuple[tuple, np.ndarray]:
+    """What the picture of ``bodies`` depends on: models (by identity), appearances, texture salts, and the
+    poses (N, 4, 4), compared within POSE_TOL (a still body's interpolated pose can differ in its last bit)."""
+    same = tuple((id(b.brep), b.appearance, b.texture_salt) for b in bodies)
+    poses = np.array([np.asarray(b.T_world, dtype=float) for b in bodies]).reshape(-1, 4, 4)
+    return same, poses
+
+
+def _same(a: tuple[tuple, np.ndarray] | None, b: tuple[tuple, np.ndarray]) -> bool:
+    return a is not None and a[0] == b[0] and bool(np.all(np.abs(a[1] - b[1]) <= POSE_TOL))
 
 
 class LiveSource(VideoSource):

@@ -194,6 +194,14 @@ def test_the_image_is_kept_while_nothing_moves(workcell, live):
     for k in range(1, 5):
         live.render(scene_bodies(workcell, T_S), k)  # new lists, the same models and poses
     assert live.renders == n
+    still = scene_bodies(workcell, 1.3)
+    live.render(still, 0)
+    n = live.renders
+    box = [b for b in still if b.name == "parallelepiped"][0]
+    assert np.abs(scene_bodies(workcell, 2.0)[1].T_world - box.T_world).max() > 0  # the last bit moves, no edge
+    for t in (2.0, 5.0, 7.7, 11.1):  # still until 12 s: one picture
+        live.render(scene_bodies(workcell, t), 1)
+    assert live.renders == n
     live.render(scene_bodies(workcell, 13.0), 5)  # the parallelepiped moving
     assert live.renders == n + 1
     moved = [dataclasses.replace(b, appearance=Appearance(0.1)) if b.name == "table" else b for b in bodies]
