@@ -456,11 +456,12 @@ def stamp_not_live(image: np.ndarray, text: str) -> np.ndarray:
     return out
 
 
-def stamp_replay_time(image: np.ndarray, t_s: float, duration_s: float) -> np.ndarray:
+def stamp_replay_time(image: np.ndarray, t_s: float, duration_s: float, label: str = "REPLAY") -> np.ndarray:
     """A copy of ``image`` (RGB or grey uint8) with "REPLAY 12.3 / 28.6 s" in a dark box at its
     bottom-left corner: a recording replayed in a loop (the workcell's), whose objects jump back when it
-    restarts, says where it is on the video itself (a new operator took a restart for a wrong update)."""
-    return stamp_corner(image, f"REPLAY {t_s % duration_s:4.1f} / {duration_s:.1f} s")
+    restarts, says where it is on the video itself (a new operator took a restart for a wrong update).
+    ``label``: another word for what loops ("SCRIPT": a live site's scripted motions)."""
+    return stamp_corner(image, f"{label} {t_s % duration_s:4.1f} / {duration_s:.1f} s")
 
 
 def stamp_corner(image: np.ndarray, label: str) -> np.ndarray:

@@ -1,7 +1,11 @@
 """``mcit serve``: the operator interface on a scene, a video, a database and the devices.
 
-With no arguments: the bundled scene, its prerecorded video (looped), emulated devices in-process
-and the database at the default location (seeded from the scene when new), on 127.0.0.1.
+With no arguments: the bundled scene as a live emulated site — every camera's video rendered live from
+the site's state (``app.render.live.LiveSource``: the scene's scripted motions, looping with its
+recording, on one clock with the emulated devices) —, emulated devices in-process and the database at
+the default location (seeded from the scene when new), on 127.0.0.1. ``--video`` feeds a camera from a
+file, a camera or a stream instead; ``--recorded`` plays the scene's prerecorded videos (as ``mcit demo``
+does); where OpenGL cannot start (no libEGL), the recordings play and the log says why.
 """
 
 from __future__ import annotations
@@ -65,8 +69,13 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         default=[],
         metavar="[NAME=]SOURCE",
         help="video source: camera index (0), video file, image folder, image file or stream URL (default: the "
-        "scene's video). NAME=SOURCE feeds the scene's camera NAME (repeat for each camera); SOURCE alone feeds "
-        "the first camera",
+        "site rendered live from the scene). NAME=SOURCE feeds the scene's camera NAME (repeat for each camera); "
+        "SOURCE alone feeds the first camera",
+    )
+    p.add_argument(
+        "--recorded",
+        action="store_true",
+        help="play the scene's prerecorded videos (looped) instead of rendering the site live",
     )
     p.add_argument(
         "--fps",
@@ -137,15 +146,21 @@ def video_specs(values, scene) -> dict[str, str]:
     return out
 
 
-def _video_source(spec, scene, fps, view=None):
-    """The video source of one camera (the first for None): ``spec`` when given, else the scene's video
-    of that camera, else (the first camera only: no recording yet) one frame rendered from the scene's
-    truth at t = 0 (a still); None for another camera with no video."""
+def _video_source(spec, scene, fps, view=None, live: bool = False, bodies_at=None):
+    """The video source of one camera (the first for None): ``spec`` when given; else, with ``live``, the site
+    rendered live through that camera (``LiveSource`` drawing ``bodies_at(t)``, default the scene's bodies;
+    ``app.render.live.LiveRenderError`` when OpenGL cannot start); else the scene's video of that camera;
+    else (the first camera only: no recording yet) one frame rendered from the scene's truth at t = 0 (a
+    still); None for another camera with no video."""
     from app.video import StillSource, open_video
 
     v = scene.view(view)
     if spec is not None:
         return open_video(spec, fps)
+    if live:
+        from app.render.live import LiveSource
+
+        return LiveSource(scene, v.name, bodies_at=bodies_at, fps=fps)
     if v.video is not None and Path(v.video.path).is_file():
         return open_video(str(v.video.path), fps)
     if v is not scene.views[0]:
@@ -234,9 +249,15 @@ def _check_host(host: str, port: int) -> None:
             raise
 
 
-def build_interface(args: argparse.Namespace):
-    """Open everything ``mcit serve`` needs; returns (InterfaceServer, closers)."""
+def build_interface(args: argparse.Namespace, bodies_at=None):
+    """Open everything ``mcit serve`` needs; returns (InterfaceServer, closers).
+
+    bodies_at : scene time (s) → list of ``app.render.live.RenderBody``, what the live site's cameras draw
+    (default ``scene_bodies(scene, t)``: the scene's bodies and scripted motions); each camera's
+    ``LiveSource.bodies_at`` can also be replaced while it runs.
+    """
     from app.db import Database, default_db_path, seed_from_scene
+    from app.render.live import LiveRenderError
     from app.scene import default_scene_path, load_scene
     from app.ui.server import InterfaceServer
     from app.video import FrameGrabber
@@ -255,9 +276,15 @@ def build_interface(args: argparse.Namespace):
     grabbers: dict = {}
     start_at = time.monotonic()  # one clock for every camera's recording: their frames show one moment
     closers = []
+    live = not getattr(args, "recorded", False)
     try:
         for view in scene.views:
-            source = _video_source(specs.get(view.name), scene, args.fps, view.name)
+            try:
+                source = _video_source(specs.get(view.name), scene, args.fps, view.name, live, bodies_at)
+            except LiveRenderError as exc:  # no OpenGL here: the recordings instead, said once
+                log.warning("the site cannot be rendered live (%s): playing the scene's recordings", exc)
+                live = False
+                source = _video_source(specs.get(view.name), scene, args.fps, view.name)
             if source is None:
                 log.info("camera %s has no video: give --video %s=SOURCE to see it", view.name, view.name)
                 continue

@@ -441,7 +441,10 @@ class InterfaceServer:
             src = feed.grabber.source
             loop = None if src.live or (src.frame_count or 0) <= 1 else src.duration_s
             # a looping recording says where it is on the video itself: what moved in it jumps back at each restart
-            feed.video.image = frame.image if not loop else stamp_replay_time(frame.image, float(frame.t_s), loop)
+            # (a live site's scripted motions loop the same way)
+            label = "SCRIPT" if getattr(src, "rendered_live", False) else "REPLAY"
+            image = frame.image if not loop else stamp_replay_time(frame.image, float(frame.t_s), loop, label)
+            feed.video.image = image
             feed.frames_sent += 1
             self.frames_sent += 1
         return was_stamped != (feed.stamp is not None)  # lost, or live again
@@ -466,6 +469,10 @@ class InterfaceServer:
             loop = src.duration_s if not src.live else None
             if src.live:
                 video += Md(" · **live**")
+            elif getattr(src, "rendered_live", False):  # the emulated site: live, its scripted motions looping
+                video += Md(" · **the emulated site, rendered live**")
+                if loop and (src.frame_count or 0) > 1:
+                    video += Md("; its scripted motions restart every {:.1f} s (objects jump back then)").format(loop)
             elif loop and (src.frame_count or 0) > 1:  # say it: what moved in it jumps back at every loop
                 video += Md(
                     " · **a recording, replayed every {:.1f} s** (not live: objects jump back when it restarts)"

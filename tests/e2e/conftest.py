@@ -1,7 +1,9 @@
 """Real-browser fixtures: an in-process mcit interface on a free port, driven by Debian's chromium.
 
 The interface runs on the bundled scene with a frame rendered from its truth at FRAME_T_S (the
-known box has moved: the database is stale), a fresh database and no devices (tests/e2e/harness.py).
+known box has moved: the database is stale) as ``mcit serve`` shows it (the live renderer's;
+MCIT_E2E_FRAMES=raycast: the prerecorded video's renderer), a fresh database and no devices
+(tests/e2e/harness.py).
 """
 
 from __future__ import annotations
@@ -9,10 +11,9 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from .harness import CHROMIUM, FRAME_T_S, Interface, launch
+from .harness import CHROMIUM, FRAME_T_S, Interface, launch, site_frame
 
 
 @pytest.fixture(scope="session")
@@ -24,11 +25,8 @@ def scene():
 
 @pytest.fixture(scope="session")
 def frame(scene):
-    """The scene rendered at FRAME_T_S (RGB uint8)."""
-    from app.render.renderer import render_frame
-
-    img = render_frame(scene, FRAME_T_S)
-    return np.repeat(img[:, :, None], 3, axis=2) if img.ndim == 2 else img
+    """The scene rendered at FRAME_T_S (RGB uint8), the first camera's."""
+    return site_frame(scene, None, FRAME_T_S)
 
 
 @pytest.fixture(scope="session")

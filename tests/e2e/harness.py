@@ -1,8 +1,10 @@
 """A running mcit interface for real-browser tests and the documentation's screenshots.
 
 The interface runs in process on a free port with a fresh database seeded from the scene; the
-video is a still frame. Screen coordinates of a video pixel come from the viewer camera the
-browser reports (viser's OpenCV convention), so clicks land on exact pixels whatever the window.
+video is a still frame: the site at FRAME_T_S as ``mcit serve`` shows it (``site_frame``: the live
+renderer's; MCIT_E2E_FRAMES=raycast, or no OpenGL here, takes the ray-cast renderer's, the recording's).
+Screen coordinates of a video pixel come from the viewer camera the browser reports (viser's OpenCV
+convention), so clicks land on exact pixels whatever the window.
 """
 
 from __future__ import annotations
@@ -25,6 +27,26 @@ ARGS = [
 ]
 FRAME_T_S = 16.0  # the known box has moved (12 s → 15 s) and stays there
 VIEWPORT = {"width": 1200, "height": 700}
+
+
+def site_frame(scene, view: str | None = None, t_s: float = FRAME_T_S) -> np.ndarray:
+    """One camera's image (RGB uint8, H × W × 3) of the scene at t_s, as ``mcit serve`` shows it: rendered live
+    (app.render.live) by default, by the ray-cast renderer of the prerecorded videos with MCIT_E2E_FRAMES=raycast
+    or where OpenGL cannot start (as serve falls back to the recordings)."""
+    from app.render.live import LiveRenderer, LiveRenderError, scene_bodies
+    from app.render.renderer import Renderer
+
+    v = scene.view(view)
+    img = None
+    if os.environ.get("MCIT_E2E_FRAMES", "live") != "raycast":
+        try:
+            with LiveRenderer(scene, v.name) as r:
+                img = r.render(scene_bodies(scene, t_s), 0)
+        except LiveRenderError:
+            img = None
+    if img is None:
+        img = Renderer(scene, camera=v.camera, lens=v.lens).render(t_s, 0)
+    return np.repeat(img[:, :, None], 3, axis=2)
 
 
 def free_port() -> int:

@@ -9,7 +9,7 @@ import pytest
 from core.camera import Camera
 
 from .flows import Operator
-from .harness import FRAME_T_S, Interface, assert_prompt_controls, select_by_click, wait_until
+from .harness import FRAME_T_S, Interface, assert_prompt_controls, select_by_click, site_frame, wait_until
 from .test_workflows_site import _pair_corner, _true_box_in_database, _visible_corners, _workflow, _wrong_camera
 
 pytestmark = pytest.mark.e2e
@@ -18,11 +18,7 @@ pytestmark = pytest.mark.e2e
 @pytest.fixture(scope="module")
 def side_frame(scene):
     """The side camera's image at FRAME_T_S (RGB uint8)."""
-    from app.render.renderer import Renderer
-
-    view = scene.view("side")
-    img = Renderer(scene, camera=view.camera, lens=view.lens).render(FRAME_T_S, 0)
-    return np.repeat(img[:, :, None], 3, axis=2) if img.ndim == 2 else img
+    return site_frame(scene, "side", FRAME_T_S)
 
 
 @pytest.fixture

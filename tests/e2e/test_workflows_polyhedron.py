@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from .flows import Operator
-from .harness import FRAME_T_S, Interface, close_notifications, wait_until
+from .harness import FRAME_T_S, Interface, close_notifications, site_frame, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -52,14 +52,8 @@ def _wedge_scene(scene):
 
 @pytest.fixture
 def wedge_interface(scene, tmp_path):
-    from app.render.renderer import render_frame
-
     variant = _wedge_scene(scene)
-    # 16 samples per edge pixel (the bundled video's 89 cost ~4× the time): edges placed to ~1/16 px.
-    img = render_frame(
-        dataclasses.replace(variant, render=dataclasses.replace(variant.render, aa_samples=16)), FRAME_T_S
-    )
-    frame = np.repeat(img[:, :, None], 3, axis=2) if img.ndim == 2 else img
+    frame = site_frame(variant, None, FRAME_T_S)
     ui = Interface(variant, frame, tmp_path / "site.sqlite", devices="fast")
     yield ui
     ui.close()
