@@ -313,10 +313,37 @@ class _GLThread:
             raise LiveRenderError(self.error) from None
         self.ctx = ctx
         self.program = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FRAGMENT)
+        self._finish = _gil_free_finish(ctx)
+
+    def wait(self) -> None:
+        """Wait until the GL has drawn everything asked of it, letting the process's other threads run meanwhile
+        (moderngl's own calls hold Python's lock while llvmpipe draws: the interface would stall ~40 ms a frame)."""
+        self._finish()
 
     def describe(self) -> str:
         """The OpenGL renderer and version (e.g. "llvmpipe (LLVM 15.0.6, 256 bits), 4.5 (Core Profile) Mesa")."""
         return self.call(lambda gl: f"{gl.ctx.info['GL_RENDERER']}, {gl.ctx.info['GL_VERSION']}")
+
+
+def _gil_free_finish(ctx) -> Callable[[], None]:
+    """glFinish called through ctypes, which releases Python's lock during the call (moderngl's ``finish`` when
+    the function cannot be found)."""
+    import ctypes
+    import ctypes.util
+
+    for name in ("libEGL.so.1", ctypes.util.find_library("EGL")):
+        try:
+            egl = ctypes.CDLL(name) if name else None
+        except OSError:
+            continue
+        if egl is None:
+            continue
+        egl.eglGetProcAddress.restype = ctypes.c_void_p
+        egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+        address = egl.eglGetProcAddress(b"glFinish")
+        if address:
+            return ctypes.CFUNCTYPE(None)(address)
+    return ctx.finish
 
 
 @dataclass
@@ -388,8 +415,10 @@ class LiveRenderer:
         self.origin = (u0, v0)  # the ideal pixel drawn at the framebuffer's first column and row
         self.ideal_size = (u1 - u0 + 1, v1 - v0 + 1)
         self._P = projection_matrix(self.camera.C, u0, v0, *self.ideal_size)
-        K = self.camera.decompose()[0]
-        self._f_px = float(max(abs(K[0, 0]), abs(K[1, 1])))
+        # the focal lengths from C's rows (‖M₂‖ = 1: |fx| = ‖M₀ × M₂‖ without skew), not decompose(): scipy's
+        # import would cost the interface's start-up ~0.1 s
+        M = self.camera.C[:, :3]
+        self._f_px = float(max(np.linalg.norm(np.cross(M[0], M[2])), np.linalg.norm(np.cross(M[1], M[2]))))
         self._meshes: dict[int, _Mesh] = {}
         self._extents: dict[int, tuple] = {}
         self._lock = threading.Lock()
@@ -529,8 +558,10 @@ class LiveRenderer:
                 old = self._meshes.pop(key)
                 old.vao.release()
                 old.vbo.release()
+        gl.wait()  # the drawing, with the lock released: then the resolve and the read take little of it
         if self.msaa:
             gl.ctx.copy_framebuffer(self._resolved, fbo)
+            gl.wait()
             fbo = self._resolved
         raw = np.frombuffer(fbo.read(components=1, dtype="f4"), dtype=np.float32)
         return raw.reshape(self.ideal_size[1] * self.supersample, self.ideal_size[0] * self.supersample)
