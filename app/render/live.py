@@ -56,6 +56,7 @@ __all__ = [
     "smooth_mesh",
     "SUPERSAMPLE",
     "MSAA",
+    "gl_description",
 ]
 
 SUPERSAMPLE = 2  # the image drawn this many times finer along each axis, then box-filtered (bench/live_render.py)
@@ -344,6 +345,12 @@ def _gil_free_finish(ctx) -> Callable[[], None]:
         if address:
             return ctypes.CFUNCTYPE(None)(address)
     return ctx.finish
+
+
+def gl_description() -> str:
+    """The OpenGL renderer the live site draws with (e.g. "llvmpipe (LLVM 15.0.6, 256 bits), 4.5 (Core Profile) Mesa
+    22.3.6"); LiveRenderError when OpenGL cannot start."""
+    return _GLThread.get().describe()
 
 
 @dataclass
