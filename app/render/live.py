@@ -12,8 +12,9 @@ with no GPU), chosen by ``bench/live_render.py``, at the scene's frame rate on o
   ``(seed, frame_index)`` (numpy's generator, as the ray-cast renderer draws it).
 * Geometry through C exactly: the GL projection is built from C's rows (no K/pose split), with
   DESIGN.md's pixel convention (pixel centres at integers, the top-left pixel covering [−0.5, 0.5]²);
-  the image is drawn ``supersample`` times finer in each direction and box-filtered down, so an
-  edge pixel's grey level is its area coverage to 1/supersample² and edges lie where C projects them.
+  the image is drawn ``supersample`` times finer in each direction with ``msaa`` coverage samples a
+  fine pixel (2 × 2 × 4 = 16 a pixel by default) and box-filtered down, so an edge pixel's grey level
+  is its area coverage to a few % of the contrast and edges lie where C projects them.
 * Bodies are ``BRep.triangles()``: flat faces flat-shaded, curved primitives (cylinders, cones,
   spheres) with angle-weighted smooth normals and as many segments as keep their silhouettes within
   ``tol_px`` of the true ones at the body's distance (re-tessellated when a body comes closer).
@@ -23,7 +24,8 @@ with no GPU), chosen by ``bench/live_render.py``, at the scene's frame rate on o
   as the last frame): such a frame costs the sensor noise alone.
 
 OpenGL runs on one thread of the process (``mcit-gl``) that owns the one context; ``render`` may be
-called from any thread. ``LiveRenderError`` says why when OpenGL cannot start (no libEGL).
+called from any thread, and waits for llvmpipe with Python's lock released (the interface's threads
+run meanwhile). ``LiveRenderError`` says why when OpenGL cannot start (no libEGL).
 
 ``LiveSource`` is a ``VideoSource`` of those frames: the scene's bodies at scene time ``k / fps``
 (``scene_bodies``, looping with the recording's length as the recording does), or whatever
@@ -376,8 +378,11 @@ class LiveRenderer:
     lens : app.undistort.LensDistortion or None, optional
         Render through this lens instead of the view's (None: no distortion).
     supersample : int
-        Samples per pixel along each axis (box-filtered): an edge's grey level resolves its coverage
-        to 1 / supersample² of the contrast.
+        The image is drawn this many times finer along each axis, then box-filtered.
+    msaa : int
+        Multisample anti-aliasing: coverage samples a fine pixel (0: none). The defaults, 2 and 4, give 16
+        samples a pixel: each edge pixel's grey level within 9 % of the contrast of its exact area coverage
+        (2.8 % on average; bench/live_render.py).
     tol_px : float
         Largest gap between a curved body's tessellated silhouette and the true one, pixels.
 
