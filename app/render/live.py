@@ -286,6 +286,20 @@ class _GLThread:
                 cls._instance = cls()
             return cls._instance
 
+    @classmethod
+    def _forget(cls) -> None:
+        """In a child forked after OpenGL started: Mesa's display (its rasteriser threads, the parent's) is unusable
+        here — a draw would wait for ever —, so the live renderer refuses to start instead."""
+        cls._lock = threading.Lock()
+        if cls._instance is not None and cls._instance.ctx is not None:
+            cls._instance = cls()
+            cls._instance.error = (
+                "OpenGL was started before this process was forked and cannot be used in the child; start the "
+                "process with multiprocessing's 'spawn' method, or render in the parent"
+            )
+        else:
+            cls._instance = None
+
     def call(self, fn: Callable, *args):
         """``fn(ctx, *args)`` on the GL thread; its result, or its exception raised here."""
         return self._pool.submit(self._run, fn, args).result()
@@ -326,6 +340,10 @@ class _GLThread:
     def describe(self) -> str:
         """The OpenGL renderer and version (e.g. "llvmpipe (LLVM 15.0.6, 256 bits), 4.5 (Core Profile) Mesa")."""
         return self.call(lambda gl: f"{gl.ctx.info['GL_RENDERER']}, {gl.ctx.info['GL_VERSION']}")
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_GLThread._forget)
 
 
 def _gil_free_finish(ctx) -> Callable[[], None]:
