@@ -12,8 +12,9 @@ with no GPU), chosen by ``bench/live_render.py``, at the scene's frame rate on o
   ``(seed, frame_index)`` (numpy's generator, as the ray-cast renderer draws it).
 * Geometry through C exactly: the GL projection is built from C's rows (no K/pose split), with
   DESIGN.md's pixel convention (pixel centres at integers, the top-left pixel covering [−0.5, 0.5]²);
-  the image is drawn ``supersample`` times finer in each direction and box-filtered down, so an
-  edge pixel's grey level is its area coverage to 1/supersample² and edges lie where C projects them.
+  the image is drawn ``supersample`` times finer in each direction with ``msaa`` coverage samples a
+  fine pixel (2 × 2 × 4 = 16 a pixel by default) and box-filtered down, so an edge pixel's grey level
+  is its area coverage to a few % of the contrast and edges lie where C projects them.
 * Bodies are ``BRep.triangles()``: flat faces flat-shaded, curved primitives (cylinders, cones,
   spheres) with angle-weighted smooth normals and as many segments as keep their silhouettes within
   ``tol_px`` of the true ones at the body's distance (re-tessellated when a body comes closer).
@@ -23,7 +24,8 @@ with no GPU), chosen by ``bench/live_render.py``, at the scene's frame rate on o
   as the last frame): such a frame costs the sensor noise alone.
 
 OpenGL runs on one thread of the process (``mcit-gl``) that owns the one context; ``render`` may be
-called from any thread. ``LiveRenderError`` says why when OpenGL cannot start (no libEGL).
+called from any thread, and waits for llvmpipe with Python's lock released (the interface's threads
+run meanwhile). ``LiveRenderError`` says why when OpenGL cannot start (no libEGL).
 
 ``LiveSource`` is a ``VideoSource`` of those frames: the scene's bodies at scene time ``k / fps``
 (``scene_bodies``, looping with the recording's length as the recording does), or whatever
@@ -56,6 +58,7 @@ __all__ = [
     "smooth_mesh",
     "SUPERSAMPLE",
     "MSAA",
+    "gl_description",
 ]
 
 SUPERSAMPLE = 2  # the image drawn this many times finer along each axis, then box-filtered (bench/live_render.py)
@@ -283,6 +286,20 @@ class _GLThread:
                 cls._instance = cls()
             return cls._instance
 
+    @classmethod
+    def _forget(cls) -> None:
+        """In a child forked after OpenGL started: Mesa's display (its rasteriser threads, the parent's) is unusable
+        here — a draw would wait for ever —, so the live renderer refuses to start instead."""
+        cls._lock = threading.Lock()
+        if cls._instance is not None and cls._instance.ctx is not None:
+            cls._instance = cls()
+            cls._instance.error = (
+                "OpenGL was started before this process was forked and cannot be used in the child; start the "
+                "process with multiprocessing's 'spawn' method, or render in the parent"
+            )
+        else:
+            cls._instance = None
+
     def call(self, fn: Callable, *args):
         """``fn(ctx, *args)`` on the GL thread; its result, or its exception raised here."""
         return self._pool.submit(self._run, fn, args).result()
@@ -313,10 +330,47 @@ class _GLThread:
             raise LiveRenderError(self.error) from None
         self.ctx = ctx
         self.program = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FRAGMENT)
+        self._finish = _gil_free_finish(ctx)
+
+    def wait(self) -> None:
+        """Wait until the GL has drawn everything asked of it, letting the process's other threads run meanwhile
+        (moderngl's own calls hold Python's lock while llvmpipe draws: the interface would stall ~40 ms a frame)."""
+        self._finish()
 
     def describe(self) -> str:
         """The OpenGL renderer and version (e.g. "llvmpipe (LLVM 15.0.6, 256 bits), 4.5 (Core Profile) Mesa")."""
         return self.call(lambda gl: f"{gl.ctx.info['GL_RENDERER']}, {gl.ctx.info['GL_VERSION']}")
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_GLThread._forget)
+
+
+def _gil_free_finish(ctx) -> Callable[[], None]:
+    """glFinish called through ctypes, which releases Python's lock during the call (moderngl's ``finish`` when
+    the function cannot be found)."""
+    import ctypes
+    import ctypes.util
+
+    for name in ("libEGL.so.1", ctypes.util.find_library("EGL")):
+        try:
+            egl = ctypes.CDLL(name) if name else None
+        except OSError:
+            continue
+        if egl is None:
+            continue
+        egl.eglGetProcAddress.restype = ctypes.c_void_p
+        egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+        address = egl.eglGetProcAddress(b"glFinish")
+        if address:
+            return ctypes.CFUNCTYPE(None)(address)
+    return ctx.finish
+
+
+def gl_description() -> str:
+    """The OpenGL renderer the live site draws with (e.g. "llvmpipe (LLVM 15.0.6, 256 bits), 4.5 (Core Profile) Mesa
+    22.3.6"); LiveRenderError when OpenGL cannot start."""
+    return _GLThread.get().describe()
 
 
 @dataclass
@@ -342,8 +396,11 @@ class LiveRenderer:
     lens : app.undistort.LensDistortion or None, optional
         Render through this lens instead of the view's (None: no distortion).
     supersample : int
-        Samples per pixel along each axis (box-filtered): an edge's grey level resolves its coverage
-        to 1 / supersample² of the contrast.
+        The image is drawn this many times finer along each axis, then box-filtered.
+    msaa : int
+        Multisample anti-aliasing: coverage samples a fine pixel (0: none). The defaults, 2 and 4, give 16
+        samples a pixel: each edge pixel's grey level within 9 % of the contrast of its exact area coverage
+        (2.8 % on average; bench/live_render.py).
     tol_px : float
         Largest gap between a curved body's tessellated silhouette and the true one, pixels.
 
@@ -388,8 +445,10 @@ class LiveRenderer:
         self.origin = (u0, v0)  # the ideal pixel drawn at the framebuffer's first column and row
         self.ideal_size = (u1 - u0 + 1, v1 - v0 + 1)
         self._P = projection_matrix(self.camera.C, u0, v0, *self.ideal_size)
-        K = self.camera.decompose()[0]
-        self._f_px = float(max(abs(K[0, 0]), abs(K[1, 1])))
+        # the focal lengths from C's rows (‖M₂‖ = 1: |fx| = ‖M₀ × M₂‖ without skew), not decompose(): scipy's
+        # import would cost the interface's start-up ~0.1 s
+        M = self.camera.C[:, :3]
+        self._f_px = float(max(np.linalg.norm(np.cross(M[0], M[2])), np.linalg.norm(np.cross(M[1], M[2]))))
         self._meshes: dict[int, _Mesh] = {}
         self._extents: dict[int, tuple] = {}
         self._lock = threading.Lock()
@@ -529,8 +588,10 @@ class LiveRenderer:
                 old = self._meshes.pop(key)
                 old.vao.release()
                 old.vbo.release()
+        gl.wait()  # the drawing, with the lock released: then the resolve and the read take little of it
         if self.msaa:
             gl.ctx.copy_framebuffer(self._resolved, fbo)
+            gl.wait()
             fbo = self._resolved
         raw = np.frombuffer(fbo.read(components=1, dtype="f4"), dtype=np.float32)
         return raw.reshape(self.ideal_size[1] * self.supersample, self.ideal_size[0] * self.supersample)

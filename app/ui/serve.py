@@ -299,6 +299,11 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         for close in closers:
             close()
         raise
+    live_views = [name for name, g in grabbers.items() if getattr(g.source, "rendered_live", False)]
+    if live_views:
+        from app.render.live import gl_description
+
+        log.info("cameras %s: the site rendered live (%s)", ", ".join(live_views), gl_description())
     grabber = grabbers[scene.views[0].name]
 
     def clock() -> float:
