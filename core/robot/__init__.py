@@ -11,7 +11,7 @@
 
 from .ik import IkResult, reach_m, solve_ik
 from .model import JOINT_KINDS, Joint, LinkShape, Mimic, RobotModel
-from .path import joint_path, lever_arms, step_bound_m
+from .path import joint_path, lever_arms, pair_lever_arms, step_bound_m
 from .shapes import box_shape, cylinder_shape, mesh_shape, sphere_shape
 
 __all__ = [
@@ -25,6 +25,7 @@ __all__ = [
     "reach_m",
     "joint_path",
     "lever_arms",
+    "pair_lever_arms",
     "step_bound_m",
     "box_shape",
     "cylinder_shape",

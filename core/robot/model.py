@@ -215,6 +215,10 @@ class RobotModel:
                 out[link] = tuple(items)
         return out
 
+    def with_tool(self, tool: str, T_tool_tcp: np.ndarray | None = None) -> RobotModel:
+        """The same robot with another tool link (and TCP offset in it)."""
+        return RobotModel(self.name, self.joints, self.link_shapes, self.collision_shapes, tool, T_tool_tcp)
+
     # ------------------------------------------------------------------ structure
     @property
     def n(self) -> int:
