@@ -5,8 +5,10 @@ upper arm 425 mm, forearm 392.2 mm, wrist offsets 109.2 / 94.7 / 82.3 mm; at q =
 stretched along the base's +x), so the reach is the UR5's 0.85 m from the shoulder to the wrist.
 Its links are boxes and cylinders (visual and collision alike), which the database's B-Rep drawing,
 ray casting and collision handle as they are. The gripper is a parallel gripper: one prismatic joint
-``finger_joint`` (each finger's travel from the centre, 1–40 mm: 2–80 mm opening) and a second finger
-mimicking it. ``tool0`` sits between the fingertips, z out of the gripper (the approach direction).
+``finger_joint`` (each finger's travel from the centre, 1–60 mm: a 2–120 mm opening, enough for the
+workcell's 9 × 9.4 cm box) and a second finger mimicking it. ``tool0`` sits between the fingertips,
+z out of the gripper (the approach direction). The gripper's body is 17 cm wide, its fingers 1.5 cm
+thick: the thinnest links, which set the collision check's sampling step (7.5 mm).
 
 ``arm_urdf()`` is the text; ``scenes/workcell/arm.urdf`` holds it (``mcit robot urdf --out FILE``
 writes it again).
@@ -40,7 +42,7 @@ _LINKS = {
         ("cylinder", (0.06, 0.09), (0, 0.045, 0), _Y),
     ],
     "upper_arm_link": [
-        ("cylinder", (0.06, 0.12), (0, 0, 0), _Y),
+        ("cylinder", (0.06, 0.1), (0, 0, 0), _Y),
         ("cylinder", (0.045, 0.425), (0, 0, 0.2125), (0, 0, 0)),
         ("cylinder", (0.055, 0.15), (0, -0.045, 0.425), _Y),
     ],
@@ -51,7 +53,7 @@ _LINKS = {
     "wrist_1_link": [("cylinder", (0.04, 0.12), (0, 0.093, 0), (0, 0, 0))],
     "wrist_2_link": [("cylinder", (0.04, 0.1), (0, 0, 0.09465), _Y)],
     "wrist_3_link": [("cylinder", (0.04, 0.03), (0, 0.0673, 0), _Y)],
-    "gripper_link": [("box", (0.05, 0.13, 0.05), (0, 0, 0.025), (0, 0, 0))],
+    "gripper_link": [("box", (0.05, 0.17, 0.05), (0, 0, 0.025), (0, 0, 0))],
     "finger_left_link": [("box", (0.02, 0.015, 0.06), (0, 0.0075, 0.03), (0, 0, 0))],
     "finger_right_link": [("box", (0.02, 0.015, 0.06), (0, -0.0075, 0.03), (0, 0, 0))],
     "tool0": [],
@@ -73,9 +75,9 @@ _JOINTS = [
      (-2 * _PI, 2 * _PI, 2 * _PI), None),
     ("gripper_mount", "fixed", "wrist_3_link", "gripper_link", (0, 0.0823, 0), (-_PI / 2, 0, 0), None, None, None),
     ("finger_joint", "prismatic", "gripper_link", "finger_left_link", (0, 0, 0.05), (0, 0, 0), (0, 1, 0),
-     (0.001, 0.04, 0.1), None),
+     (0.001, 0.06, 0.1), None),
     ("finger_right_joint", "prismatic", "gripper_link", "finger_right_link", (0, 0, 0.05), (0, 0, 0), (0, -1, 0),
-     (0.001, 0.04, 0.1), "finger_joint"),
+     (0.001, 0.06, 0.1), "finger_joint"),
     ("tool0_joint", "fixed", "gripper_link", "tool0", (0, 0, 0.11), (0, 0, 0), None, None, None),
 ]  # fmt: skip
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from core.robot import Joint, LinkShape, Mimic, RobotModel, box_shape, cylinder_shape, mesh_shape, sphere_shape
 
-__all__ = ["UrdfError", "load_robot"]
+__all__ = ["UrdfError", "load_robot", "load_scene_robot"]
 
 
 class UrdfError(ValueError):
@@ -174,3 +174,17 @@ def load_robot(path: str | Path, tool: str | None = None) -> RobotModel:
         return RobotModel(robot.name, joints, visual, collision, tool)
     except ValueError as exc:
         raise UrdfError(f"{path}: {exc}") from None
+
+
+def load_scene_robot(spec) -> tuple[RobotModel, np.ndarray]:
+    """A scene's robot (``app.scene.RobotSpec``): (its model with the scene's tool, its home joints (n,)).
+
+    ``UrdfError`` for the file, ``SceneError`` naming the field for a tool or home joint the URDF does not have.
+    """
+    from app.scene import SceneError
+
+    model = load_robot(spec.urdf_path)
+    if spec.tool not in model.links:
+        raise SceneError(f"robot.tool: {spec.urdf_path.name} has no link {spec.tool!r}; its links: {list(model.links)}")
+    model = model.with_tool(spec.tool)
+    return model, spec.home_q(model)
