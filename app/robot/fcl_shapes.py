@@ -21,19 +21,22 @@ from core.brep import BRep
 from core.primitives import Polyhedron, Revolution, Sphere
 from core.transforms import make_T
 
-__all__ = ["FclPart", "fcl_parts"]
+__all__ = ["FclPart", "fcl_parts", "make_fcl"]
 
 
 @dataclass(frozen=True)
 class FclPart:
     """One collision geometry: ``geometry`` (fcl) at ``T_brep_geom`` (4, 4) in the B-Rep's frame, the
-    part's bounds (2, 3) in that frame (for the broad phase) and its kind ("box", "cylinder", "cone",
-    "sphere", "convex", "mesh")."""
+    part's bounds (2, 3) in that frame (for the broad phase), its kind ("box", "cylinder", "cone",
+    "sphere", "convex", "mesh") and the numbers that make it (``params``: the box's sides; radius and
+    height; the radius; the hull's points (V, 3) and triangles (T, 3); the mesh's), in its own frame,
+    so that another collision library can build the same geometry."""
 
     geometry: object
     T_brep_geom: np.ndarray
     bounds: np.ndarray
     kind: str
+    params: tuple
 
 
 def _z_onto(axis: np.ndarray) -> np.ndarray:
@@ -47,41 +50,52 @@ def _z_onto(axis: np.ndarray) -> np.ndarray:
     return np.eye(3) + K + K @ K * ((1 - c) / s**2)
 
 
-def _convex(points: np.ndarray) -> tuple[object, str]:
+def _hull(points: np.ndarray) -> tuple[str, tuple]:
     hull = ConvexHull(points)
-    faces = np.hstack([np.full((len(hull.simplices), 1), 3), hull.simplices]).ravel()
-    return fcl.Convex(points, len(hull.simplices), faces), "convex"
+    return "convex", (np.asarray(points, dtype=float), hull.simplices.astype(np.int64))
 
 
-def _polyhedron(p: Polyhedron) -> tuple[object, np.ndarray, str]:
+def _polyhedron(p: Polyhedron) -> tuple[str, tuple, np.ndarray]:
     V = p.vertices
     lo, hi = V.min(axis=0), V.max(axis=0)
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     scale = max(float(np.max(hi - lo)), 1e-9)
     off_corner = np.min(np.linalg.norm(V[:, None] - corners[None], axis=2), axis=1)
     if len(V) == 8 and len(p.faces) == 6 and np.all(off_corner < 1e-9 * scale):
-        return fcl.Box(*(hi - lo)), make_T(np.eye(3), (lo + hi) / 2.0), "box"
+        return "box", tuple(float(v) for v in hi - lo), make_T(np.eye(3), (lo + hi) / 2.0)
     if p.convex:
-        geometry, kind = _convex(V)
-        return geometry, np.eye(4), kind
+        return (*_hull(V), np.eye(4))
     V_t, T = p.triangles()
-    mesh = fcl.BVHModel()
-    mesh.beginModel(len(V_t), len(T))
-    mesh.addSubModel(np.asarray(V_t, dtype=float), np.asarray(T, dtype=np.int64))
-    mesh.endModel()
-    return mesh, np.eye(4), "mesh"
+    return "mesh", (np.asarray(V_t, dtype=float), np.asarray(T, dtype=np.int64)), np.eye(4)
 
 
-def _revolution(s: Revolution) -> tuple[object, np.ndarray, str]:
-    R = _z_onto(s.axis)
+def _revolution(s: Revolution) -> tuple[str, tuple, np.ndarray]:
     if s.is_cylinder:
-        return fcl.Cylinder(s.r0, s.height), make_T(R, (s.p0 + s.p1) / 2.0), "cylinder"
+        return "cylinder", (s.r0, s.height), make_T(_z_onto(s.axis), (s.p0 + s.p1) / 2.0)
     if min(s.r0, s.r1) == 0.0:  # fcl's cone: base at −h/2, apex at +h/2 along its z
         apex, base = (s.p1, s.p0) if s.r1 == 0.0 else (s.p0, s.p1)
-        axis = (apex - base) / s.height
-        return fcl.Cone(max(s.r0, s.r1), s.height), make_T(_z_onto(axis), (apex + base) / 2.0), "cone"
-    geometry, kind = _convex(s.support_points(48))
-    return geometry, np.eye(4), kind
+        return "cone", (max(s.r0, s.r1), s.height), make_T(_z_onto((apex - base) / s.height), (apex + base) / 2.0)
+    return (*_hull(s.support_points(48)), np.eye(4))
+
+
+def make_fcl(kind: str, params: tuple):
+    """The fcl geometry of a part's kind and numbers (``FclPart.params``)."""
+    if kind == "box":
+        return fcl.Box(*params)
+    if kind == "cylinder":
+        return fcl.Cylinder(*params)
+    if kind == "cone":
+        return fcl.Cone(*params)
+    if kind == "sphere":
+        return fcl.Sphere(*params)
+    V, T = params
+    if kind == "convex":
+        return fcl.Convex(V, len(T), np.hstack([np.full((len(T), 1), 3), T]).ravel())
+    mesh = fcl.BVHModel()
+    mesh.beginModel(len(V), len(T))
+    mesh.addSubModel(V, T)
+    mesh.endModel()
+    return mesh
 
 
 def fcl_parts(brep: BRep) -> list[FclPart]:
@@ -93,15 +107,14 @@ def fcl_parts(brep: BRep) -> list[FclPart]:
         if isinstance(part, Polyhedron):
             if not part.faces:
                 continue
-            geometry, T, kind = _polyhedron(part)
+            kind, params, T = _polyhedron(part)
         elif isinstance(part, Revolution):
-            geometry, T, kind = _revolution(part)
+            kind, params, T = _revolution(part)
         elif isinstance(part, Sphere):
-            geometry, T, kind = fcl.Sphere(part.radius), make_T(np.eye(3), part.centre), "sphere"
+            kind, params, T = "sphere", (part.radius,), make_T(np.eye(3), part.centre)
         else:  # a primitive kind added later: its hull
-            geometry, kind = _convex(part.support_points(48))
-            T = np.eye(4)
-        out.append(FclPart(geometry, T, np.asarray(part.bounds(), dtype=float), kind))
+            kind, params, T = (*_hull(part.support_points(48)), np.eye(4))
+        out.append(FclPart(make_fcl(kind, params), T, np.asarray(part.bounds(), dtype=float), kind, params))
     if not out:
         raise ValueError("the model has no solid part (faces, a solid of revolution or a sphere) to collide with")
     return out
