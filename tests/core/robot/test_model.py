@@ -151,6 +151,11 @@ def test_the_default_tool_is_the_deepest_link_no_finger_moves():
         Joint("g", "fixed", "arm", "grasp", at((0, 0, 1))),
     ]
     assert RobotModel("r", joints).tool == "grasp"
+    gantry = [
+        Joint("x", "prismatic", "base", "carriage", at(), (1, 0, 0), 0, 1),
+        Joint("z", "prismatic", "carriage", "head", at(), (0, 0, 1), 0, 1),
+    ]
+    assert RobotModel("gantry", gantry).tool == "head"
 
 
 @pytest.mark.parametrize(
