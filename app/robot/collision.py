@@ -49,7 +49,8 @@ _CHUNK = 32  # configurations per broad-phase batch along a path
 @dataclass(frozen=True)
 class Contact:
     """A link within its margin of ``other`` (an obstacle's or another link's name); distance_m is the
-    signed distance (m, < 0 when they overlap)."""
+    signed distance (m, < 0 when they overlap: then a penetration depth as fcl's EPA finds it, which for
+    shapes that merely touch face to face was once seen far from the least one; the sign is sure)."""
 
     link: str
     other: str
