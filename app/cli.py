@@ -48,6 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     from app.demo.cli import add_demo_parser  # argparse only: the replay, solvers and report load when the command runs
 
     add_demo_parser(sub)
+    from app.robot.cli import add_robot_parser  # argparse only: the arm's description loads when the command runs
+
+    add_robot_parser(sub)
     return parser
 
 

@@ -30,7 +30,10 @@ docs/scene-format.md is the full reference)::
       ],
       "video": {"file": "video.mp4", "fps": 12, "duration_s": 28},   # optional
       "render": {"light_dir": [-0.4, -0.5, 1], "ambient": 0.35, "noise_sigma": 2.0,
-                 "blur_sigma_px": 0.5, "seed": 8, "aa_samples": 89, "sky": 0.2}   # optional
+                 "blur_sigma_px": 0.5, "seed": 8, "aa_samples": 89, "sky": 0.2},  # optional
+      "robot": {"urdf": "arm.urdf", "T_world_base": <pose>,                   # optional
+                "home_deg": {"shoulder_pan_joint": 180, ...}, "home_m": {"finger_joint": 0.03},
+                "tool": "tool0", "appearance": {...}}
     }
 
 A ``<pose>`` is either a 4×4 matrix (rows) or ``{"xyz": [x, y, z], "rpy_deg": [roll, pitch, yaw]}``
@@ -42,6 +45,11 @@ Status: "known" bodies start in the database with their true pose at t = 0; "unk
 only in the truth (the emulated range finder sees them; the operator must model them);
 "scenery" bodies (floor, walls) are seen by the camera and the range finder but never enter the
 database.
+
+The robot (``Scene.robot``, a ``RobotSpec``) is not one of the bodies: the prerecorded videos were
+rendered without it. Its home joint positions are by joint name, revolute and continuous joints in
+degrees (``home_deg``), prismatic ones in metres (``home_m``); ``RobotSpec.home_q(model)`` checks them
+against the URDF's joints and limits (``app.robot.urdf.load_scene_robot`` loads both).
 
 Every block is checked: a missing or malformed field, or a key the format does not know (a
 typo), raises ``SceneError`` (a ``ValueError``) naming the file and the field. Keys starting with
@@ -71,6 +79,7 @@ __all__ = [
     "TurretSpec",
     "VideoSpec",
     "RenderSpec",
+    "RobotSpec",
     "Scene",
     "SceneView",
     "DEFAULT_VIEW",
@@ -339,6 +348,49 @@ class RenderSpec:
 
 
 @dataclass(frozen=True)
+class RobotSpec:
+    """The site's robot: its URDF, where its base stands, its home joint positions, its tool and its shading.
+
+    urdf_path : absolute path of the URDF. T_world_base : array, shape (4, 4), the URDF's root link in
+    the world. home : joint name → position (radians for a revolute or continuous joint, metres for a
+    prismatic one); joints not named are at 0 (brought within their limits). tool : the tool link.
+    appearance : how the renderer shades every link. home_in_metres : the joints the file gave in
+    metres (``home_m``), checked against the URDF's joint kinds.
+    """
+
+    urdf_path: Path
+    T_world_base: np.ndarray
+    home: dict = field(default_factory=dict)
+    tool: str = "tool0"
+    appearance: Appearance = Appearance()
+    home_in_metres: frozenset = frozenset()
+
+    def home_q(self, model) -> np.ndarray:
+        """The home joint vector (n,) in ``model``'s joint order (a ``core.robot.RobotModel`` of this URDF).
+
+        SceneError naming the field for a joint the URDF does not move, a value in the wrong unit
+        (a prismatic joint in ``home_deg``, a revolute one in ``home_m``) or out of the joint's limits.
+        """
+        q = np.clip(np.zeros(model.n), model.lower, model.upper)
+        for name, value in self.home.items():
+            field_name = "home_m" if name in self.home_in_metres else "home_deg"
+            if name not in model.joint_names:
+                raise SceneError(
+                    f"robot.{field_name}: {self.urdf_path.name} has no actuated joint {name!r}; "
+                    f"its joints: {list(model.joint_names)}"
+                )
+            prismatic = model.joint(name).kind == "prismatic"
+            if prismatic != (name in self.home_in_metres):
+                right = "home_m (metres)" if prismatic else "home_deg (degrees)"
+                raise SceneError(f"robot.{field_name}.{name}: a {model.joint(name).kind} joint; give it in {right}")
+            q[model.joint_names.index(name)] = value
+        beyond = model.within_limits(q)
+        if beyond is not None:
+            raise SceneError(f"robot: the home position puts {beyond}")
+        return q
+
+
+@dataclass(frozen=True)
 class Scene:
     """A loaded scene; see the module docstring for the file format."""
 
@@ -359,6 +411,8 @@ class Scene:
     # Every camera of the site, the first one's being camera, lens and video above (a scene with one
     # "camera" block has one view, named "main").
     views: tuple[SceneView, ...] = ()
+    # The site's robot (not one of the bodies: the prerecorded videos were rendered without it), or None.
+    robot: RobotSpec | None = None
 
     def __post_init__(self) -> None:
         v = self.views[0] if self.views else None
@@ -424,6 +478,7 @@ _RF_KEYS = ("sigma_range_m", "min_range_m", "max_range_m")
 _BODY_KEYS = ("name", "kind", "status", "model", "pose", "motion", "appearance")
 _APPEARANCE_KEYS = ("albedo", "texture", "texture_scale_m")
 _VIDEO_KEYS = ("file", "fps", "duration_s")
+_ROBOT_KEYS = ("urdf", "T_world_base", "home_deg", "home_m", "tool", "appearance")
 _RENDER_KEYS = ("light_dir", "ambient", "gain", "sky", "noise_sigma", "blur_sigma_px", "seed", "aa_samples")
 _TOP_KEYS = (
     "format",
@@ -436,6 +491,7 @@ _TOP_KEYS = (
     "bodies",
     "video",
     "render",
+    "robot",
 )
 VIEW_NAME = re.compile(r"[A-Za-z0-9_-]{1,32}")  # a camera's name: it is typed in --video NAME=SOURCE
 DEFAULT_VIEW = "main"  # the name of the one view of a scene with a "camera" block
@@ -662,6 +718,34 @@ def _render(r: Any, where: str) -> RenderSpec:
     )
 
 
+def _robot(r: Any, root: Path, where: str) -> RobotSpec:
+    _keys(r, _ROBOT_KEYS, where)
+    file = _need(r, "urdf", where)
+    if not isinstance(file, str) or not file:
+        raise SceneError(f"{where}.urdf: a URDF file name (relative to the scene folder) expected, got {file!r}")
+    path = (root / file).resolve()
+    if not path.is_file():
+        raise SceneError(f"{where}.urdf: file not found: {path}")
+    T = parse_pose(_need(r, "T_world_base", where), f"{where}.T_world_base")
+    home: dict[str, float] = {}
+    metres = set()
+    for key, scale in (("home_deg", np.pi / 180.0), ("home_m", 1.0)):
+        values = r.get(key, {})
+        if not isinstance(values, dict):
+            raise SceneError(f"{where}.{key}: an object {{joint name: value}} expected, got {values!r}")
+        for name, value in values.items():
+            if name in home:
+                raise SceneError(f"{where}.{key}.{name}: the joint is given twice (home_deg and home_m)")
+            home[str(name)] = _number(value, f"{where}.{key}.{name}") * scale
+            if key == "home_m":
+                metres.add(str(name))
+    tool = r.get("tool", "tool0")
+    if not isinstance(tool, str) or not tool:
+        raise SceneError(f"{where}.tool: the name of the tool link expected, got {tool!r}")
+    appearance = _appearance(r.get("appearance", {}), f"{where}.appearance")
+    return RobotSpec(path, T, home, tool, appearance, frozenset(metres))
+
+
 def _views(d: dict, root: Path, bodies: list[Body], where: str) -> tuple[SceneView, ...]:
     """The scene's cameras: a "cameras" list (each a camera block with a "name" and its own "video"), or
     one "camera" block (and the top-level "video") named ``DEFAULT_VIEW``."""
@@ -712,6 +796,7 @@ def scene_from_dict(d: Any, root: str | Path, where: str = "scene.json") -> Scen
     bodies = [_body(b, i, root, names, where) for i, b in enumerate(raw_bodies)]
     views = _views(d, root, bodies, where)
     render = _render(d.get("render", {}), f"{where}: render")
+    robot = _robot(d["robot"], root, f"{where}: robot") if "robot" in d else None
     for key in ("name", "description"):
         if key in d and not isinstance(d[key], str):
             raise SceneError(f"{where}: '{key}' must be a string, got {d[key]!r}")
@@ -730,6 +815,7 @@ def scene_from_dict(d: Any, root: str | Path, where: str = "scene.json") -> Scen
         render,
         first.lens,
         views,
+        robot,
     )
 
 

@@ -7,7 +7,9 @@ geometric one, its rotation rows mapped through the inverse left Jacobian of SO(
 several seeds at once, as one batch of numpy arrays (a batch of 8 costs about as much as one): q0
 first, then seeded random joint positions within the limits. Joints that do not move the tool (a
 gripper's fingers) stay at q0. Among the seeds that reach the target the solution nearest q0 is
-returned (each revolute joint also tried whole turns away, when its limits allow). ℓ
+returned, nearest meaning the least travel of the robot's points along the straight joint path
+from q0 (the bound of ``core.robot.path``: a turn of the shoulder counts more than one of the wrist),
+each revolute joint also tried whole turns away when its limits allow. ℓ
 (``rot_scale_m``) weighs a radian of orientation against metres of position.
 
 When none reaches it, the result says why: out of reach (farther than the arm's longest stretch, or
@@ -17,12 +19,13 @@ it: the joint it puts beyond its limit is named).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..transforms import check_T, rotation_angle
 from .model import RobotModel
+from .path import lever_arms
 
 __all__ = ["IkResult", "solve_ik", "reach_m"]
 
@@ -31,13 +34,16 @@ __all__ = ["IkResult", "solve_ik", "reach_m"]
 class IkResult:
     """q : array, shape (n,), the solution (or, when not ok, the nearest pose found within the limits).
     ok : the target is reached within the tolerances. position_error_m, rotation_error_rad : how far the
-    tool at q is from the target. reason : "" when ok, else one line saying why not."""
+    tool at q is from the target. reason : "" when ok, else one line saying why not. alternatives :
+    array, shape (m, n), the other distinct solutions found, nearest q0 first (a caller whose first
+    choice collides tries the next)."""
 
     q: np.ndarray
     ok: bool
     position_error_m: float
     rotation_error_rad: float
     reason: str = ""
+    alternatives: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 def _log_so3_many(R: np.ndarray) -> np.ndarray:
@@ -119,8 +125,9 @@ class _Target:
         return e, Je, np.linalg.norm(dp, axis=1), np.linalg.norm(r, axis=1)
 
 
-def _lm_step(e, J, x, lo, hi, lam):
-    """One projected Levenberg–Marquardt step per row: x (k, m) → x + δ clipped to [lo, hi]."""
+def _lm_step(e, J, x, lo, hi, lam, max_step: float = 0.5):
+    """One projected Levenberg–Marquardt step per row: x (k, m) → x + δ clipped to [lo, hi], δ scaled down
+    to at most ``max_step`` on any joint (a descent stays near its seed's branch instead of leaping)."""
     m = x.shape[1]
     g = np.einsum("kri,kr->ki", J, e)
     A = np.einsum("kri,krj->kij", J, J)
@@ -130,7 +137,9 @@ def _lm_step(e, J, x, lo, hi, lam):
     g = np.where(held, 0.0, g)
     d = np.einsum("kii->ki", A)
     A = A + lam[:, None, None] * (d[:, :, None] * np.eye(m) + 1e-9 * np.eye(m))
-    return np.clip(x - np.linalg.solve(A, g[:, :, None])[:, :, 0], lo, hi)
+    step = -np.linalg.solve(A, g[:, :, None])[:, :, 0]
+    step *= np.minimum(1.0, max_step / np.maximum(np.abs(step).max(axis=1, keepdims=True), 1e-300))
+    return np.clip(x + step, lo, hi)
 
 
 def _descend(target: _Target, X: np.ndarray, limits, tols, max_iter: int):
@@ -201,9 +210,10 @@ def solve_ik(
     """Joint positions q (n,) within the limits with ``model.tool_pose(q) ≈ T_base_target`` (4, 4), nearest q0.
 
     seeds : descents run (q0 first, then random ones from ``rng``). A solution is within
-    ``position_tol_m`` and ``rotation_tol_rad`` of the target. The nearest to q0 (Euclidean in joint
-    space) among the solutions is returned; without one, the nearest pose found within the limits
-    (smallest cost), ``ok`` False and the reason.
+    ``position_tol_m`` and ``rotation_tol_rad`` of the target. The nearest to q0 among the solutions
+    (the least travel of the robot's points from q0; see the module docstring) is returned, the others
+    in ``alternatives``; without one, the nearest pose found within the limits (smallest cost), ``ok``
+    False and the reason.
     """
     T_t = check_T(T_base_target, "T_base_target")
     q0 = model.as_q(q0, "q0")
@@ -221,9 +231,17 @@ def solve_ik(
     X, pos, rot = _descend(target, starts, (model.lower, model.upper), tols, max_iter)
     ok = np.flatnonzero((pos <= tols[0]) & (rot <= tols[1]))
     if len(ok):
-        found = [_nearest_turn(X[k], q0, model) for k in ok]
-        q = min(found, key=lambda x: float(np.linalg.norm(x - q0)))
-        return IkResult(q, True, *_errors(model, q, T_t))
+        levers = lever_arms(model)
+        found = sorted(
+            (_nearest_turn(X[k], q0, model) for k in ok),
+            key=lambda x: (float((levers @ np.abs(x - q0)).max()), float(np.linalg.norm(x - q0))),
+        )
+        distinct = [found[0]]
+        for x in found[1:]:
+            if min(float(np.abs(x - y).max()) for y in distinct) > 1e-3:
+                distinct.append(x)
+        others = np.array(distinct[1:]).reshape(-1, model.n)
+        return IkResult(found[0], True, *_errors(model, found[0], T_t), alternatives=others)
     best = int(np.argmin(pos**2 + (rot_scale_m * rot) ** 2))
     q, off_m, off_rad = X[best], float(pos[best]), float(rot[best])
     free = (np.full(model.n, -np.inf), np.full(model.n, np.inf))

@@ -196,14 +196,15 @@ class RobotModel:
         self._tool_axes = np.array([self.joints[i].axis for i in moving]).reshape(-1, 3)
 
     def _default_tool(self) -> str:
-        """ "tool0" when there is one, else the deepest link that no prismatic joint (a finger) moves."""
+        """The link named tool0 when there is one, else the deepest link that no prismatic joint (a finger)
+        moves (the deepest of all when prismatic joints move every link: a gantry)."""
         if "tool0" in self.links:
             return "tool0"
         depth = {}
         for k, link in enumerate(self.links):
             chain = self.chain(link)
-            if not any(self.joints[i].kind == "prismatic" for i in chain):
-                depth[link] = (len(chain), k)
+            fingered = any(self.joints[i].kind == "prismatic" for i in chain)
+            depth[link] = (bool(chain) and not fingered, len(chain), k)
         return max(depth, key=depth.get)
 
     def _shapes(self, shapes: dict | None) -> dict[str, tuple[LinkShape, ...]]:
@@ -214,6 +215,10 @@ class RobotModel:
             if items:
                 out[link] = tuple(items)
         return out
+
+    def with_tool(self, tool: str, T_tool_tcp: np.ndarray | None = None) -> RobotModel:
+        """The same robot with another tool link (and TCP offset in it)."""
+        return RobotModel(self.name, self.joints, self.link_shapes, self.collision_shapes, tool, T_tool_tcp)
 
     # ------------------------------------------------------------------ structure
     @property

@@ -15,7 +15,7 @@ import numpy as np
 
 from .model import RobotModel
 
-__all__ = ["lever_arms", "joint_path", "step_bound_m"]
+__all__ = ["lever_arms", "pair_lever_arms", "joint_path", "step_bound_m"]
 
 
 def _link_radius(model: RobotModel) -> dict[str, float]:
@@ -24,6 +24,25 @@ def _link_radius(model: RobotModel) -> dict[str, float]:
     for link, items in model.collision_shapes.items():
         shapes[link] = shapes.get(link, ()) + items
     return {k: max((s.radius_about_link_origin() for s in shapes.get(k, ())), default=0.0) for k in model.links}
+
+
+def _levers(model: RobotModel, link: str, radius: dict[str, float], above: frozenset = frozenset()) -> np.ndarray:
+    """(n,): how far a unit move of each actuated joint moves a point of ``link`` at most, counting the joints of
+    its chain below the joints ``above`` (indices; the chain of an ancestor link)."""
+    row = np.zeros(model.n)
+    reach = radius[link]
+    for i in reversed(model.chain(link)):  # from the link up towards the base, the reach growing
+        if i in above:
+            break
+        j = model.joints[i]
+        drive = model.drive(i)
+        if drive is not None:
+            k, mult, offset = drive
+            row[k] += abs(mult) * (1.0 if j.kind == "prismatic" else reach)
+            if j.kind == "prismatic":
+                reach += abs(mult) * max(abs(model.lower[k]), abs(model.upper[k])) + abs(offset)
+        reach += float(np.linalg.norm(j.T_parent_joint[:3, 3]))
+    return row
 
 
 def lever_arms(model: RobotModel) -> np.ndarray:
@@ -35,19 +54,22 @@ def lever_arms(model: RobotModel) -> np.ndarray:
     plus the link's own radius).
     """
     radius = _link_radius(model)
-    C = np.zeros((len(model.links), model.n))
-    for row, link in enumerate(model.links):
-        reach = radius[link]
-        for i in reversed(model.chain(link)):  # from the link up to the base, the reach growing
-            j = model.joints[i]
-            drive = model.drive(i)
-            if drive is not None:
-                k, mult, offset = drive
-                C[row, k] += abs(mult) * (1.0 if j.kind == "prismatic" else reach)
-                if j.kind == "prismatic":
-                    reach += abs(mult) * max(abs(model.lower[k]), abs(model.upper[k])) + abs(offset)
-            reach += float(np.linalg.norm(j.T_parent_joint[:3, 3]))
-    return C
+    return np.array([_levers(model, link, radius) for link in model.links])
+
+
+def pair_lever_arms(model: RobotModel, link_a: str, link_b: str) -> np.ndarray:
+    """(n,): the distance between a point of ``link_a`` and one of ``link_b`` changes by at most this @ |Δq|.
+
+    A motion of the joints above both links (their common ancestor's chain) moves them together and
+    changes no distance between them: only the joints below it count, each link's own lever arms.
+    """
+    chain_a, chain_b = model.chain(link_a), model.chain(link_b)
+    shared = 0
+    while shared < min(len(chain_a), len(chain_b)) and chain_a[shared] == chain_b[shared]:
+        shared += 1
+    above = frozenset(chain_a[:shared])
+    radius = _link_radius(model)
+    return _levers(model, link_a, radius, above) + _levers(model, link_b, radius, above)
 
 
 def step_bound_m(model: RobotModel, q0, q1) -> float:

@@ -100,3 +100,19 @@ def test_bad_targets_are_refused():
         solve_ik(m, np.eye(3), HOME)
     with pytest.raises(ValueError, match="q0"):
         solve_ik(m, np.eye(4), HOME[:3])
+
+
+def test_the_other_solutions_reach_the_target_and_come_after_by_travel():
+    from core.robot import lever_arms
+
+    m = ur_like()
+    T = m.tool_pose(np.array([0.4, -1.1, 1.3, -1.5, -1.2, 0.6, 0.02]))
+    r = solve_ik(m, T, HOME, seeds=24)
+    assert r.ok and len(r.alternatives) >= 2 and r.alternatives.shape[1] == m.n
+    C = lever_arms(m)
+    travel = [float((C @ np.abs(q - HOME)).max()) for q in [r.q, *r.alternatives]]
+    assert travel == sorted(travel)
+    for q in r.alternatives:
+        got = m.tool_pose(q)
+        assert np.linalg.norm(got[:3, 3] - T[:3, 3]) < 1e-4 and rotation_angle(got[:3, :3], T[:3, :3]) < 1e-3
+        assert m.within_limits(q) is None

@@ -151,6 +151,11 @@ def test_the_default_tool_is_the_deepest_link_no_finger_moves():
         Joint("g", "fixed", "arm", "grasp", at((0, 0, 1))),
     ]
     assert RobotModel("r", joints).tool == "grasp"
+    gantry = [
+        Joint("x", "prismatic", "base", "carriage", at(), (1, 0, 0), 0, 1),
+        Joint("z", "prismatic", "carriage", "head", at(), (0, 0, 1), 0, 1),
+    ]
+    assert RobotModel("gantry", gantry).tool == "head"
 
 
 @pytest.mark.parametrize(
@@ -177,3 +182,13 @@ def test_malformed_joints_are_refused():
         Joint("a", "revolute", "b", "c", at(), (0, 0, 0))
     with pytest.raises(ValueError, match="lower ≤ upper"):
         Joint("a", "revolute", "b", "c", at(), (0, 0, 1), 1.0, -1.0)
+
+
+def test_with_tool_moves_the_tcp_and_keeps_the_rest():
+    m = ur_like()
+    g = m.with_tool("gripper_link", at((0, 0, 0.2)))
+    q = np.array([0.1, -1.0, 1.0, -0.5, 0.3, 0.2, 0.02])
+    np.testing.assert_allclose(g.tool_pose(q), m.forward(q)["gripper_link"] @ at((0, 0, 0.2)))
+    assert g.joint_names == m.joint_names and g.link_shapes is not None
+    with pytest.raises(ValueError, match="no tool link 'hand'"):
+        m.with_tool("hand")

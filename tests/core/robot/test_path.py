@@ -54,3 +54,22 @@ def test_bad_steps_are_refused():
         joint_path(m, [0, 0], [1, 1], 0.0)
     with pytest.raises(ValueError, match="q1"):
         joint_path(m, [0, 0], [1, 1, 1], 0.01)
+
+
+def test_pair_lever_arms_bound_the_change_of_distance_between_two_links():
+    from core.robot import pair_lever_arms
+
+    m = ur_like()
+    lever = pair_lever_arms(m, "wrist_1_link", "gripper_link")
+    assert np.all(lever[:4] == 0)  # pan, lift, elbow, wrist 1 move both together
+    assert lever[4] > 0 and lever[5] > 0
+    rng = np.random.default_rng(3)
+    names = [name for name, _, _ in m.link_breps(np.zeros(m.n))]
+    ia, ib = names.index("wrist_1_link"), names.index("gripper_link")
+    for _ in range(20):
+        q0, q1 = random_q(m, rng), random_q(m, rng)
+        A0, B0 = (b.support_points(16) @ T[:3, :3].T + T[:3, 3] for _, b, T in [m.link_breps(q0)[i] for i in (ia, ib)])
+        A1, B1 = (b.support_points(16) @ T[:3, :3].T + T[:3, 3] for _, b, T in [m.link_breps(q1)[i] for i in (ia, ib)])
+        d0 = np.linalg.norm(A0[:, None] - B0[None], axis=2)
+        d1 = np.linalg.norm(A1[:, None] - B1[None], axis=2)
+        assert np.abs(d1 - d0).max() <= lever @ np.abs(q1 - q0) + 1e-12
