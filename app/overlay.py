@@ -61,6 +61,8 @@ COLORS: dict[str, tuple[int, int, int]] = {
     "tracked": (255, 80, 200),  # a tracked pose
     "edge_found": (0, 255, 255),  # image edge points that support the tracked pose
     "edge_rejected": (255, 140, 0),  # those the tracker's robust fit rejected
+    "robot": (150, 90, 255),  # the robot at its joint states (violet: no object status has it)
+    "robot_ghost": (255, 255, 255),  # the robot where a previewed motion ends (as a chosen pose's ghost)
 }
 
 

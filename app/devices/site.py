@@ -71,6 +71,8 @@ class EmulatedSite:
     rangefinder_baud, turret_baud : modelled line rates (0: infinitely fast lines).
     measure_delay_s, delay_per_m_s, no_target_delay_s : range-finder timing (see its emulator).
     fault_rates : {kind: probability per reply} for both emulators (see app.devices.faults).
+    bodies : what the range finder sees (app.render.raycast.BeamCaster's bodies), default the scene's (a site
+    with a robot passes its emulated world's: the robot's links, and bodies where the robot left them).
     """
 
     def __init__(
@@ -85,6 +87,7 @@ class EmulatedSite:
         delay_per_m_s: float = 0.005,
         no_target_delay_s: float = 0.3,
         fault_rates: dict[str, float] | None = None,
+        bodies=None,
     ):
         self.scene = scene
         rng = np.random.default_rng(seed)
@@ -95,7 +98,7 @@ class EmulatedSite:
         )
         try:
             self.rangefinder = RangeFinderEmulator(
-                BeamCaster(scene),
+                BeamCaster(scene if bodies is None else bodies),
                 scene.rangefinder,
                 scene.turret.T_world_turret,
                 self.mount.angles_rad,

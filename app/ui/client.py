@@ -418,6 +418,8 @@ class ClientPanel:
             self.gui_progress.value = float(np.clip(progress * 100.0, 0, 100))
         if self.frozen_frames.follow(wf):
             self.dirty = True
+        if wf is not None and not wf.finished and wf.tick():
+            self.dirty = True
         self.frozen_frames.send()
         if not (self.dirty or site_changed or self.busy):
             return False

@@ -27,6 +27,7 @@ START_BUTTONS: tuple[tuple[str, str], ...] = (
     ("Update pose", "update_pose"),
     ("Model object", "model_object"),
     ("Designate target", "designate"),
+    ("Move robot", "move_robot"),
     ("Track", "track"),
     ("History", "history"),
 )

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import viser
 
 from app.markup import Md
+from app.workflows.session import WORKFLOWS
 
 from .controls import START_BUTTONS, operator_help
 
@@ -48,6 +49,8 @@ def build_panel(panel: ClientPanel) -> None:
     panel.gui_start = gui.add_folder("Start a workflow")
     with panel.gui_start:
         for label, name in START_BUTTONS:
+            if WORKFLOWS[name].available(panel.app.site):
+                continue  # e.g. Move robot on a site with no robot
             gui.add_button(label).on_click(guard(functools.partial(panel.start, name)))
         panel.gui_shape = gui.add_dropdown("Shape", SHAPES, initial_value="box", hint="Model object: the shape you see")
         panel.gui_vertical = gui.add_checkbox("Vertical", True, hint="Model object: its axis/sides are vertical")

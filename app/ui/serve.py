@@ -277,6 +277,11 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
     start_at = time.monotonic()  # one clock for every camera's recording: their frames show one moment
     closers = []
     live = not getattr(args, "recorded", False)
+    holder: dict = {}  # the site and the clock, made below: the robot's feed lines and grasps use them
+    robot = _open_robot(scene, holder)
+    if robot is not None:
+        closers.append(robot.close)
+        bodies_at = bodies_at or robot.world.bodies_at
     try:
         for view in scene.views:
             try:
@@ -310,6 +315,10 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         frame = grabber.latest()
         return 0.0 if frame is None else frame.t_s
 
+    holder["clock"] = clock
+    if robot is not None and not live:
+        log.warning("the robot moves unseen on the recorded video: its overlay follows its joint states")
+
     db_path = args.db or default_db_path()
     db_path.parent.mkdir(parents=True, exist_ok=True)
     db = Database.open(db_path, client="mcit-serve")
@@ -322,13 +331,16 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         from app.devices import open_devices
 
         try:
-            devices = open_devices(scene, args.rangefinder, args.turret, clock=clock)
+            # the emulated range finder sees the robot's links and the bodies where the robot left them
+            options = {"bodies": robot.world.beam_bodies()} if robot is not None else None
+            devices = open_devices(scene, args.rangefinder, args.turret, clock=clock, site_options=options)
             closers.insert(0, devices.close)
         except Exception as exc:  # noqa: BLE001 - the interface works without devices; say so
             if args.rangefinder is not None:
                 raise
             log.error("emulated devices failed to start (%s): continuing without range finder and turret", exc)
-    site = Site(scene, db, devices=devices, clock=clock)
+    site = Site(scene, db, devices=devices, clock=clock, robot=None if robot is None else robot.cell)
+    holder["site"] = site
     if getattr(args, "feed_socket", None) or getattr(args, "feed_file", None):
         from app.feed import FeedPublisher
 
@@ -354,6 +366,21 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         token=access.token,
     )
     return server, closers
+
+
+def _open_robot(scene, holder: dict):
+    """The scene's robot (app.robot.setup.RobotSetup), emulated, or None; its joint states go out on the site's
+    live feed and its grasps read the scene time, both found in ``holder`` once made."""
+    if scene.robot is None:
+        return None
+    from app.robot.setup import open_robot
+
+    def publish(event: dict) -> None:
+        site = holder.get("site")
+        if site is not None:
+            site.publish(event)
+
+    return open_robot(scene, clock=lambda: holder["clock"]() if "clock" in holder else 0.0, publish=publish)
 
 
 def _warm_pose_kernels() -> None:

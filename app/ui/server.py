@@ -42,6 +42,7 @@ from .client import ClientPanel
 from .db_overlay import DatabaseOverlay
 from .inbound import guard_inbound_messages
 from .recent import RecentFrames
+from .robot_overlay import RobotOverlay
 from .world3d import World3D
 from .wslog import quiet_malformed_messages
 
@@ -163,6 +164,13 @@ class InterfaceServer:
         self.redraws = 0
         self._last_status_t = 0.0
         self.world3d = World3D(self.server.scene, offset=np.array([-60.0, 0.0, 0.0]))
+        self.robot_overlay = RobotOverlay(
+            self.server.scene,
+            self._send_lines,
+            {name: (f.pixel_world, f.overlay.prefix) for name, f in self.views.items()},
+            Z_DB,
+            self.world3d,
+        )
         self._setup_scene()
         self.server.on_client_connect(self._on_connect)
         self.server.on_client_disconnect(self._on_disconnect)
@@ -417,6 +425,7 @@ class InterfaceServer:
             panels = list(self.clients.values())
         with self.server.atomic():
             self._draw_beam(panels)
+            self.robot_overlay.sync(self.site)
             for panel in panels:
                 try:
                     panel.redraw(site_changed)

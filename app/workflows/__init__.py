@@ -13,6 +13,7 @@ from .designate import DesignateTarget, Target
 from .history import History
 from .model_object import ModelObject
 from .model_polyhedron import ModelPolyhedron
+from .move_robot import MoveRobot
 from .session import WORKFLOWS, Session, register
 from .site import RayHit, Site, SiteObject
 from .snapping import ClickSnap
@@ -27,6 +28,7 @@ for _cls in (
     UpdatePose,
     ModelObject,
     ModelPolyhedron,
+    MoveRobot,
     TrackObject,
 ):
     register(_cls)
@@ -43,6 +45,7 @@ __all__ = [
     "DesignateTarget",
     "ModelObject",
     "ModelPolyhedron",
+    "MoveRobot",
     "Target",
     "UpdatePose",
     "TrackObject",

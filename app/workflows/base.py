@@ -99,6 +99,7 @@ class Marks:
     rejected_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     circles: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # pixels to circle (a picked corner)
     live_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # range points measured so far
+    robot_ghost: list = field(default_factory=list)  # [(link, BRep, T_world)] the robot where a motion ends
 
 
 # How a shortcut key reads on a button (viser's hotkey names → what the keyboard shows).
@@ -321,6 +322,16 @@ class Workflow:
     def follows_live(self) -> str:
         """Why it works on the live video now and takes no frozen frame, as a sentence ("": it takes one)."""
         return ""
+
+    @classmethod
+    def available(cls, site: Any) -> str:
+        """Why this workflow cannot run on ``site`` ("" when it can): the panel offers only those that can."""
+        return ""
+
+    def tick(self) -> bool:
+        """Called at the interface's frame rate: follow what changes without the operator (a robot moving);
+        True when what the panel shows changed."""
+        return False
 
     def has_work(self) -> bool:
         """Cancel would throw work away (clicks, measurements): the panel asks once more first."""

@@ -204,6 +204,8 @@ class Site:
         matching, tracking; ``app.workflows.frames``): "scene" (default) reads the scene's
         prerecorded video at the scene time, if it has one; None: no frames (clicks are used as
         clicked); the interface installs its video grabber (``set_frames``).
+    robot : app.robot.cell.RobotCell or None
+        The site's robot (its model, controller and calibrated base), None for a site with none.
     """
 
     def __init__(
@@ -213,10 +215,12 @@ class Site:
         devices: Any = None,
         clock: Callable[[], float] | None = None,
         frames: Any = "scene",
+        robot: Any = None,
     ):
         self.scene = scene
         self.db = db
         self.devices = devices
+        self.robot = robot  # an app.robot.cell.RobotCell, or None for a site with no robot
         self._t0 = time.monotonic()
         self.clock = clock or (lambda: time.monotonic() - self._t0)
         self.lock = threading.RLock()

@@ -1,0 +1,96 @@
+"""The robot drawn at its joint states, for every operator: over each camera's image and in the 3D world.
+
+Over the video: ``<prefix>/robot`` per camera (its links' wireframes through that camera's C, each
+link hiding its own back edges), in the robot's colour, with a label at its base. In the 3D world:
+``/world3d/robot/<k>`` one mesh per link shape, moved on each joint state. Both are redrawn by the
+frame loop when the robot's joint state or a camera's calibration changed since the last draw
+(``sync``), never more often than the frame loop runs.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from app.overlay import COLORS, LineBatch, PixelWorld, project_wireframe
+
+__all__ = ["RobotOverlay", "robot_batch"]
+
+
+def robot_batch(camera, links, width: int, height: int, color=COLORS["robot"]) -> LineBatch:
+    """The wireframes of ``links`` [(link, BRep, T_world)] through ``camera``, back edges removed."""
+    batch = LineBatch()
+    for _link, brep, T in links:
+        batch.add_wireframe(project_wireframe(camera, brep, T, width=width, height=height), color, hidden="removed")
+    return batch
+
+
+class RobotOverlay:
+    """The robot's shared drawing (see the module docstring).
+
+    send_lines : ``InterfaceServer._send_lines``-like callable (scene, name, batch, z, pixel_world).
+    views : {camera name: (PixelWorld, node prefix)}. z : the overlay plane. world3d : the World3D.
+    """
+
+    def __init__(self, scene: Any, send_lines, views: dict[str, tuple[PixelWorld, str]], z: float, world3d):
+        self.scene = scene
+        self.send_lines = send_lines
+        self.views = views
+        self.z = float(z)
+        self.world3d = world3d
+        self._key: Any = None
+        self._meshes: list = []
+        self._labels: dict[str, Any] = {}
+
+    def sync(self, site) -> bool:
+        """Redraw when the robot moved or a camera was calibrated since the last draw; True when it drew."""
+        cell = site.robot
+        if cell is None:
+            return False
+        cams = {name: site.camera_of(name) for name in self.views}
+        key = (cell.revision, cell.T_world_base.tobytes(), *(c.C.tobytes() for c in cams.values()))
+        if key == self._key:
+            return False
+        self._key = key
+        links = cell.link_breps()
+        base = cell.T_world_base[:3, 3]
+        for name, (pw, prefix) in self.views.items():
+            cam = cams[name]
+            self.send_lines(self.scene, f"{prefix}/robot", robot_batch(cam, links, pw.width, pw.height), self.z, pw)
+            if cam.depth(base[None])[0] > 0 and f"{prefix}/robot_label" not in self._labels:
+                uv = cam.project(base[None])[0]
+                self._labels[f"{prefix}/robot_label"] = self.scene.add_label(
+                    f"{prefix}/robot_label",
+                    cell.model.name,
+                    position=tuple(float(v) for v in pw.to_world(uv, self.z)),
+                    anchor="top-center",
+                    font_screen_scale=0.8,
+                )
+        self._draw_3d(links)
+        return True
+
+    def _draw_3d(self, links) -> None:
+        from .world3d import _wxyz
+
+        if len(self._meshes) != len(links):
+            for h in self._meshes:
+                h.remove()
+            self._meshes = []
+            for k, (_link, brep, T) in enumerate(links):
+                V, F = brep.triangles(n_circle=24)
+                self._meshes.append(
+                    self.scene.add_mesh_simple(
+                        f"/world3d/robot/{k}",
+                        V.astype(np.float32),
+                        F.astype(np.uint32),
+                        color=COLORS["robot"],
+                        flat_shading=True,
+                        position=tuple(T[:3, 3]),
+                        wxyz=_wxyz(T[:3, :3]),
+                    )
+                )
+            return
+        for h, (_link, _brep, T) in zip(self._meshes, links):
+            h.position = tuple(T[:3, 3])
+            h.wxyz = _wxyz(T[:3, :3])
