@@ -203,8 +203,8 @@ class RobotCell:
         with self._check_lock:
             self.checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in obstacles])
             margins = {o.name: o.margin_m for o in obstacles}
-            best, first_reason, checked = None, "", 0
-            for q_pre, q_goal in self._solutions(X, n, standoff_m, q0):
+            best, first_reason, checked, ik_why = None, "", 0, []
+            for q_pre, q_goal in self._solutions(X, n, standoff_m, q0, ik_why):
                 path = np.vstack(
                     [
                         joint_path(self.model, q0, q_pre, self.max_step_m),
@@ -219,7 +219,8 @@ class RobotCell:
                 first_reason = first_reason or _collision_text(check, self.model.links, margins)
         T_goal = self.T_world_base @ self.model.tool_pose(best[-1] if best is not None else q0)
         if best is None:
-            reason = first_reason or self._why_unreachable(X, n, standoff_m, q0)
+            why = ik_why[0] if ik_why else "no joint solution"
+            reason = first_reason or f"the robot cannot reach the target: {why}"
             plan = self._refused(q0, X, n, standoff_m, t0, reason, warnings)
             plan.samples_checked = checked
             return plan
@@ -234,9 +235,10 @@ class RobotCell:
         Xo = np.linalg.solve(o.T_world_obj, np.append(X, 1.0))[:3]
         return bool(np.all(Xo >= lo - 1e-3) and np.all(Xo <= hi + 1e-3))
 
-    def _solutions(self, X, n, standoff_m, q0):
+    def _solutions(self, X, n, standoff_m, q0, why: list):
         """(q_pre, q_goal) for the tool's turns about the approach axis, the turn nearest the tool's present
-        one first (a lazy sequence: planning stops at the first that passes the check)."""
+        one first (a lazy sequence: planning stops at the first that passes the check); ``why`` gets the
+        inverse kinematics' reason for each turn that has no solution."""
         T_base_world = np.linalg.inv(self.T_world_base)
         x_now = (self.T_world_base @ self.model.tool_pose(q0))[:3, 0]
         T0 = tool_frame(X, n, standoff_m, 0.0)
@@ -245,15 +247,13 @@ class RobotCell:
         for yaw in sorted(yaws, key=lambda a: abs(np.angle(np.exp(1j * (a - yaw_now))))):
             goal = solve_ik(self.model, T_base_world @ tool_frame(X, n, standoff_m, yaw), q0, seeds=4)
             if not goal.ok:
+                why.append(goal.reason)
                 continue
             pre = solve_ik(self.model, T_base_world @ tool_frame(X, n, standoff_m + APPROACH_M, yaw), goal.q, seeds=2)
             if pre.ok:
                 yield pre.q, goal.q
-
-    def _why_unreachable(self, X, n, standoff_m, q0) -> str:
-        T_base_world = np.linalg.inv(self.T_world_base)
-        r = solve_ik(self.model, T_base_world @ tool_frame(X, n, standoff_m, 0.0), q0)
-        return f"the robot cannot reach the target: {r.reason or 'no joint solution'}"
+            else:
+                why.append(f"the approach {100 * APPROACH_M:.0f} cm out along the surface's normal: {pre.reason}")
 
     def _refused(self, q0, X, n, standoff_m, t0, reason, warnings) -> MovePlan:
         T = self.T_world_base @ self.model.tool_pose(q0)

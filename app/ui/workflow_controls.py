@@ -148,10 +148,12 @@ class WorkflowControls:
 
     def _show_choices(self, wf, action: str, handle) -> None:
         texts = {text: value for text, value in wf.choices(action)}
-        self._options[action] = texts
         options = tuple(texts) if texts else (NO_CHOICE,)
         if tuple(handle.options) != options:
+            # viser sets the value to the first option when the old one is gone, and calls on_choice: known only
+            # after this, the new options do not act on that (it chose a 5 mm standoff over the workflow's 20 mm)
             handle.options = options
+        self._options[action] = texts
         current = wf.choice_value(action)
         if current is None:
             current = self.choice_values.get(action)

@@ -115,8 +115,11 @@ class MoveRobot(Workflow):
 
     # ------------------------------------------------------------------ motion
     def _moving(self) -> bool:
-        s = self.cell.last_state()
-        return bool(s is not None and s.moving)
+        """The controller says a motion is under way (one that stopped answering: not known to move)."""
+        try:
+            return bool(self.cell.state().moving)
+        except ControllerError:
+            return False
 
     def move(self) -> None:
         with self.lock:
