@@ -39,6 +39,9 @@ __all__ = [
     "RobotCell",
     "tool_frame",
     "obstacles_of",
+    "PickPlan",
+    "grasp_frame",
+    "placed_pose",
 ]
 
 MARGIN_M = 0.01  # clearance kept from known and modelled objects and the table
@@ -137,6 +140,8 @@ class RobotCell:
         self._check_lock = threading.Lock()  # one planning at a time uses the checker
         thick = [s.thickness_m for shapes in model.collision_shapes.values() for s in shapes]
         self.max_step_m = 0.5 * min(thick) if thick else 0.01
+        prismatic = [k for k, n in enumerate(model.joint_names) if model.joint(n).kind == "prismatic"]
+        self.finger = prismatic[0] if prismatic else None  # the gripper's joint in q (closing: it decreases)
         self.revision = 0  # bumped on every joint state: the overlay redraws when it changes
         self._last: JointState | None = None
         self._publish = publish
@@ -259,6 +264,105 @@ class RobotCell:
         T = self.T_world_base @ self.model.tool_pose(q0)
         return MovePlan(q0[None].copy(), False, reason, T, X, n, standoff_m, warnings, time.perf_counter() - t0)
 
+    # ------------------------------------------------------------------ pick and place
+    def plan_pick_place(
+        self,
+        name: str,
+        brep,
+        T_world_obj: np.ndarray,
+        X_place: np.ndarray,
+        support: str,
+        obstacles: Sequence[Obstacle],
+        stands_on: str | None = None,
+    ) -> PickPlan:
+        """Plan and check picking body ``name`` (``brep`` at ``T_world_obj``, as the database has it) and putting
+        it down with its bottom's centre at X_place on ``support`` (see ``PickPlan``; the module docstring's
+        checks, with three exceptions the gripper's work needs: the body is no obstacle while the fingers come
+        down around it, close and carry it (it is checked as part of the robot, against everything else, while
+        carried), and the surfaces it stands on (``stands_on``) and is put on (``support``) are no obstacles for
+        the straight ``LIFT_M`` up and down with it)."""
+        t0 = time.perf_counter()
+        q0 = self.state().q
+        try:
+            if self.finger is None:
+                raise ValueError("this robot has no gripper")
+            T_grasp, width = grasp_frame(brep, T_world_obj, 2.0 * self.model.upper[self.finger])
+        except ValueError as exc:
+            return self._pick_refused(name, q0, str(exc), t0)
+        T_put = placed_pose(brep, T_world_obj, X_place)
+        T_tool_obj = np.linalg.solve(T_grasp, T_world_obj)
+        T_place = T_put @ np.linalg.inv(T_tool_obj)
+        lift = np.eye(4)
+        lift[2, 3] = LIFT_M
+        qs, seed = [], q0
+        for what, T in (
+            ("above the grasp", lift @ T_grasp),
+            ("the grasp", T_grasp),
+            ("above the place", lift @ T_place),
+            ("the place", T_place),
+        ):
+            r = solve_ik(self.model, np.linalg.solve(self.T_world_base, T), seed)
+            if not r.ok:
+                return self._pick_refused(name, q0, f"the robot cannot reach {what}: {r.reason}", t0)
+            qs.append(r.q)
+            seed = r.q
+        f = self.finger
+        opened = float(np.clip(width / 2 + GRIP_CLEARANCE_M, self.model.lower[f], self.model.upper[f]))
+        closed = float(np.clip(width / 2 - SQUEEZE_M, self.model.lower[f], self.model.upper[f]))
+
+        def at(q, finger):
+            q = q.copy()
+            q[f] = finger
+            return q
+
+        q_open = at(q0, opened)
+        pre_g, grasp, pre_p, place = (at(q, opened) for q in qs)
+        shut = at(grasp, closed)
+        carried = [shut, at(pre_g, closed), at(pre_p, closed), at(place, closed)]
+        others = [o for o in obstacles if o.name != name]
+        legs = [
+            (self.checker, [q0, q_open, pre_g], obstacles),
+            (self.checker, [pre_g, grasp, shut], others),
+            ("payload", carried[:2], [o for o in others if o.name != stands_on]),
+            ("payload", carried[1:3], others),
+            ("payload", carried[2:], [o for o in others if o.name != support]),
+            (self.checker, [carried[3], place, pre_p], others),
+        ]
+        payload = self._payload_checker(name, brep, T_tool_obj)
+        path = [q0[None]]
+        with self._check_lock:
+            for checker, waypoints, obs in legs:
+                checker = payload if checker == "payload" else checker
+                checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in obs])
+                for a, b in zip(waypoints, waypoints[1:]):
+                    seg = joint_path(self.model, a, b, self.max_step_m)[1:]
+                    check = checker.check_path(np.vstack([a[None], seg]))
+                    if not check.ok:
+                        margins = {o.name: o.margin_m for o in obs}
+                        return self._pick_refused(name, q0, _collision_text(check, checker.model.links, margins), t0)
+                    path.append(seg)
+        return PickPlan(
+            np.vstack(path), True, "", name, T_put, T_tool_obj, shut, carried[3], width,
+            preview_s=time.perf_counter() - t0,
+        )  # fmt: skip
+
+    def _payload_checker(self, name: str, brep, T_tool_obj: np.ndarray) -> CollisionChecker:
+        """The collision check of the robot carrying the body: the body is a link of the hand; it touches the
+        fingers, so the hand's links (those the last arm joint moves) are not checked against it."""
+        from core.robot import LinkShape
+
+        model = self.model.with_payload(name, LinkShape(brep, T_tool_obj))
+        last = max(i for i in model.chain(model.tool) if model.joints[i].kind in ("revolute", "continuous"))
+        hand = [k for k in model.links if last in model.chain(k)]
+        payload = f"payload:{name}"
+        pairs = [tuple(p) for p in self.checker.ignored_pairs if len(p) == 2]
+        pairs += [(payload, k) for k in hand if k != payload]
+        return CollisionChecker(model, self.T_world_base, pairs)
+
+    def _pick_refused(self, name: str, q0: np.ndarray, reason: str, t0: float) -> PickPlan:
+        I = np.eye(4)
+        return PickPlan(q0[None].copy(), False, reason, name, I, I, q0, q0, preview_s=time.perf_counter() - t0)
+
     # ------------------------------------------------------------------ motion
     def move(self, plan: MovePlan) -> None:
         """Send a checked plan to the controller (ControllerError when it cannot go; nothing moves then)."""
@@ -286,3 +390,69 @@ def _collision_text(check, links, margins: dict) -> str:
             f"{1000 * margins.get(what, 0.0):.0f} mm kept from it: choose another target, or move {what} first"
         )
     return f"the path would hit {what} with the robot's {check.link}: choose another target, or move {what} first"
+
+
+# ---------------------------------------------------------------------- pick and place
+GRASP_DEPTH_M = 0.03  # the fingertips this far below the body's top (at most half its height)
+GRIP_CLEARANCE_M = 0.015  # each finger this far off the body's side while it comes down
+LIFT_M = 0.10  # up and down this far, straight, at the grasp and at the place
+SQUEEZE_M = 0.003  # each finger commanded this far past the body's side (a gripper stops at contact and holds)
+UPRIGHT_COS = np.cos(np.radians(5.0))  # the body's z within 5° of the world's: grasped from above
+
+
+@dataclass
+class PickPlan:
+    """A pick and place: ``path`` (k, n) the whole motion (open, down, close, up, across, down, open, up).
+
+    T_world_obj_place : the body's pose where it is put. T_tool_obj : the body in the tool while carried.
+    q_release : the joints when the fingers open at the place (the pose written comes from them).
+    """
+
+    path: np.ndarray
+    ok: bool
+    reason: str
+    name: str
+    T_world_obj_place: np.ndarray
+    T_tool_obj: np.ndarray
+    q_grasp: np.ndarray
+    q_release: np.ndarray
+    width_m: float = 0.0
+    warnings: list[str] = field(default_factory=list)
+    preview_s: float = 0.0
+
+
+def grasp_frame(brep, T_world_obj: np.ndarray, max_opening_m: float) -> tuple[np.ndarray, float]:
+    """(T_world_tool at the grasp, the body's width across the fingers): the tool pointing down over the body's
+    centre, the fingers closing along the narrower of its horizontal axes, the tips ``GRASP_DEPTH_M`` below its
+    top. ValueError (what to do) for a body not upright or wider than the gripper opens."""
+    R = T_world_obj[:3, :3]
+    if R[2, 2] < UPRIGHT_COS:
+        raise ValueError("the robot grasps upright bodies from above: this one is tilted more than 5°")
+    lo, hi = brep.bounds()
+    size = hi - lo
+    axis = 0 if size[0] <= size[1] else 1
+    width = float(size[axis])
+    if width + 2 * GRIP_CLEARANCE_M > max_opening_m:
+        raise ValueError(
+            f"the body is {100 * width:.1f} cm across its narrower side; the gripper opens "
+            f"{100 * max_opening_m:.0f} cm (with {1000 * GRIP_CLEARANCE_M:.0f} mm each side to come down)"
+        )
+    depth = min(GRASP_DEPTH_M, 0.5 * size[2])
+    top_centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] - depth])
+    y = R[:, axis]
+    z = np.array([0.0, 0.0, -1.0])
+    y = y - (y @ z) * z
+    y /= np.linalg.norm(y)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([np.cross(y, z), y, z])
+    T[:3, 3] = T_world_obj[:3, :3] @ top_centre + T_world_obj[:3, 3]
+    return T, width
+
+
+def placed_pose(brep, T_world_obj: np.ndarray, X_place: np.ndarray) -> np.ndarray:
+    """The body's pose put down with its bottom's centre at X_place, turned as it is."""
+    lo, hi = brep.bounds()
+    bottom = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
+    T = T_world_obj.copy()
+    T[:3, 3] = np.asarray(X_place, float) - T_world_obj[:3, :3] @ bottom
+    return T

@@ -25,6 +25,7 @@ from .controller import JointState
 __all__ = ["EmulatedWorld", "GRASP_DEPTH_M", "ROBOT_APPEARANCE"]
 
 GRASP_DEPTH_M = 0.02  # a body is grasped when this point between the fingers (from their tips) is inside it
+GRIP_TOL_M = 0.002  # ... and the fingers closed to its width (within this)
 ROBOT_APPEARANCE = Appearance(albedo=0.55, texture=0.03, texture_scale_m=0.04)
 GRASPABLE = ("box", "cylinder", "cone", "polyhedron", "sphere")
 
@@ -73,6 +74,7 @@ class EmulatedWorld:
         self._q = np.asarray(controller.state().q, float)
         self._overrides: dict[int, np.ndarray] = {}  # body index → pose the robot left it at
         self.carried: tuple[int, np.ndarray] | None = None  # (body index, T_tool_body)
+        self._width = 0.0  # the carried body's width across the fingers
         self._lock = threading.Lock()
         controller.add_listener(self.on_state)
 
@@ -128,12 +130,19 @@ class EmulatedWorld:
         if self.finger is None:
             return
         dq = q[self.finger] - before[self.finger]
-        if dq < -1e-6 and self.carried is None and not s.moving:
-            self._grasp()
-        elif dq > 1e-6 and self.carried is not None:
+        gap = 2.0 * q[self.finger]  # the fingers' opening (each moves its joint's value off the centre)
+        if dq < -1e-9 and self.carried is None:
+            self._grasp(gap)
+        elif dq > 1e-9 and self.carried is not None and gap > self._width + GRIP_TOL_M:
             self._release()
 
-    def _grasp(self) -> None:
+    def _across(self, b, T: np.ndarray, T_tool: np.ndarray) -> float:
+        """The body's extent (m) along the direction the fingers close (the tool's y)."""
+        lo, hi = b.model.bounds()
+        return float(np.abs(T[:3, :3].T @ T_tool[:3, 1]) @ (hi - lo))
+
+    def _grasp(self, gap: float) -> None:
+        """The fingers closed to ``gap``: a body between them as wide as the gap is held from now on."""
         T_tool = self.tool_pose()
         P = T_tool @ np.array([0.0, 0.0, -GRASP_DEPTH_M, 1.0])
         for i, b in enumerate(self.scene.bodies):
@@ -142,9 +151,11 @@ class EmulatedWorld:
             T = self.pose_of(i, self.clock())
             lo, hi = b.model.bounds()
             p = np.linalg.solve(T, P)[:3]
-            if np.all(p >= lo) and np.all(p <= hi):
+            width = self._across(b, T, T_tool)
+            if np.all(p >= lo) and np.all(p <= hi) and gap <= width + GRIP_TOL_M:
                 with self._lock:
                     self.carried = (i, np.linalg.solve(T_tool, T))
+                    self._width = width
                 return
 
     def _release(self) -> None:

@@ -28,6 +28,7 @@ START_BUTTONS: tuple[tuple[str, str], ...] = (
     ("Model object", "model_object"),
     ("Designate target", "designate"),
     ("Move robot", "move_robot"),
+    ("Pick and place", "pick_place"),
     ("Track", "track"),
     ("History", "history"),
 )

@@ -365,6 +365,7 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         allow_origins=access.allow_origins,
         token=access.token,
     )
+    server.emulated_world = None if robot is None else robot.world  # the emulated site's truth (tests, benches)
     return server, closers
 
 

@@ -14,6 +14,7 @@ from .history import History
 from .model_object import ModelObject
 from .model_polyhedron import ModelPolyhedron
 from .move_robot import MoveRobot
+from .pick_place import PickPlace
 from .session import WORKFLOWS, Session, register
 from .site import RayHit, Site, SiteObject
 from .snapping import ClickSnap
@@ -29,6 +30,7 @@ for _cls in (
     ModelObject,
     ModelPolyhedron,
     MoveRobot,
+    PickPlace,
     TrackObject,
 ):
     register(_cls)
@@ -46,6 +48,7 @@ __all__ = [
     "ModelObject",
     "ModelPolyhedron",
     "MoveRobot",
+    "PickPlace",
     "Target",
     "UpdatePose",
     "TrackObject",

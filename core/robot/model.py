@@ -220,6 +220,15 @@ class RobotModel:
         """The same robot with another tool link (and TCP offset in it)."""
         return RobotModel(self.name, self.joints, self.link_shapes, self.collision_shapes, tool, T_tool_tcp)
 
+    def with_payload(self, name: str, shape: LinkShape) -> RobotModel:
+        """The same robot carrying a body: a link ``payload:<name>`` fixed to the tool link, with ``shape``
+        (its ``T_link_shape`` the body's pose in the TCP frame) drawn and checked for collisions."""
+        link = f"payload:{name}"
+        joint = Joint(f"{link}_joint", "fixed", self.tool, link, self.T_tool_tcp)
+        shapes = {**self.link_shapes, link: (shape,)}
+        collision = {**(self.collision_shapes or self.link_shapes), link: (shape,)}
+        return RobotModel(self.name, (*self.joints, joint), shapes, collision, self.tool, self.T_tool_tcp)
+
     # ------------------------------------------------------------------ structure
     @property
     def n(self) -> int:

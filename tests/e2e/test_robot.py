@@ -148,3 +148,46 @@ def test_stop_halts_the_robot_where_it_is(browser, robot_site):
     assert np.allclose(ui.site.robot.controller.state().q, q), "the robot went on after Stop"
     assert not ui.site.robot.controller.state().moving
     page.close()
+
+
+def _modelled_box_in_database(ui) -> None:
+    """Setup: the unknown box in the database as Model object leaves it: modelled, 2 mm and 0.5° off its truth."""
+    from core.transforms import exp_so3, make_T
+
+    b = ui.scene.body("unknown_box")
+    T = b.T_world_obj @ make_T(exp_so3(np.radians([0.0, 0.0, 0.5])), np.array([0.002, 0.0, 0.0]))
+    cov = np.diag([0.002**2] * 3 + [np.radians(0.5) ** 2] * 3)
+    ui.db.add_object("unknown_box", "box", b.model, T, cov=cov, status="modelled", client="test setup")
+
+
+def test_pick_and_place_moves_the_modelled_box_and_the_database_follows(browser, robot_site):
+    from core.transforms import log_so3
+
+    from .harness import select_by_click
+
+    ui = robot_site
+    _modelled_box_in_database(ui)
+    wait_until(lambda: ui.server.database_drawn, what="the box drawn")
+    page = ui.open(browser)
+    op = Operator(ui, page)
+    box = ui.site.object("unknown_box")
+    select_by_click(page, "unknown_box", lambda: op.click(ui.site.camera.project(box.vertices_world()).mean(axis=0)))
+    op.press("Pick and place")
+    _said(page, "step=click", "Pick and place's first step")
+    place = np.array([-0.05, -0.38, 0.0])
+    op.click(ui.site.camera.project(place[None])[0])
+    _said(page, "passes every check", "the motion checked")
+    op.key("m")
+    _said(page, "step=done", "the box put down and looked at")
+    text = panel_state(page.panel)
+    assert "confirmed by the video" in text, text
+    i = [b.name for b in ui.scene.bodies].index("unknown_box")
+    T_true = ui.server.emulated_world.pose_of(i, 0.0)
+    rec = ui.site.object("unknown_box")
+    dp = 1000 * np.linalg.norm(rec.T_world_obj[:3, 3] - T_true[:3, 3])
+    dr = np.degrees(np.linalg.norm(log_so3(T_true[:3, :3].T @ rec.T_world_obj[:3, :3])))
+    assert dp < 5.0 and dr < 1.0, f"the database's box is {dp:.1f} mm and {dr:.2f}° off the truth"
+    assert np.linalg.norm(T_true[:3, 3] - place) < 0.006, "the box is not where the operator clicked"
+    assert ui.db.history("unknown_box", limit=1)[-1].method == "robot"
+    assert op.actions <= 6, op.report("pick and place")
+    page.close()
