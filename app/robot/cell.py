@@ -39,6 +39,7 @@ __all__ = [
     "RobotCell",
     "tool_frame",
     "obstacles_of",
+    "joints_in_order",
     "PickPlan",
     "grasp_frame",
     "placed_pose",
@@ -86,6 +87,29 @@ class MovePlan:
     @property
     def q_goal(self) -> np.ndarray:
         return self.path[-1]
+
+
+def joints_in_order(model: RobotModel, names: Sequence[str], q: Sequence[float]) -> np.ndarray:
+    """A reported joint state (names, positions) in the model's joint order; ValueError (one line, what to fix)
+    for a joint the robot does not have, one missing, or a position that is not a finite number."""
+    names = [str(n) for n in names]
+    q = np.asarray(q, float).reshape(-1)
+    if len(names) != len(q):
+        raise ValueError(f"a joint state of {len(names)} names and {len(q)} positions: give one position per joint")
+    unknown = sorted(set(names) - set(model.joint_names))
+    if unknown:
+        raise ValueError(
+            f"the joint state names {unknown}, which robot {model.name} does not have (its joints: "
+            f"{list(model.joint_names)}): check the controller's joint names against the URDF"
+        )
+    missing = [n for n in model.joint_names if n not in names]
+    if missing:
+        raise ValueError(f"the joint state lacks {missing}: the controller must report every joint")
+    out = np.array([q[names.index(n)] for n in model.joint_names])
+    bad = [n for n, v in zip(model.joint_names, out) if not np.isfinite(v)]
+    if bad:
+        raise ValueError(f"the joint state gives {bad} no finite position: the robot's state is unknown")
+    return out
 
 
 def obstacles_of(objects, skip: tuple[str, ...] = ()) -> list[Obstacle]:

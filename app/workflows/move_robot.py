@@ -164,8 +164,12 @@ class MoveRobot(Workflow):
         try:
             s = self.cell.state()
         except ControllerError as exc:
+            self.cell.stop()  # the stop circuit: obeyed even when the controller's state cannot be read
             self.state = "fault"
-            self.message = f"{exc}. The robot may have stopped anywhere: look at the video before moving it again."
+            self.message = (
+                f"{exc}. The robot was sent Stop; it may be anywhere on its way: look at the video before moving it "
+                "again."
+            )
             return
         T = self.cell.tool_pose(s.q)
         G = self.sent.T_world_goal

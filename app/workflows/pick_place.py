@@ -186,8 +186,11 @@ class PickPlace(Workflow):
             try:
                 s = self.cell.state()
             except ControllerError as exc:
+                self.cell.stop()  # the stop circuit: obeyed even when the controller's state cannot be read
                 self.state = "click"
-                self.message = f"{exc}. Nothing was written: look at the video before moving the robot again."
+                self.message = (
+                    f"{exc}. The robot was sent Stop and nothing was written: look at the video before moving it again."
+                )
                 return True
             if s.moving:
                 return True

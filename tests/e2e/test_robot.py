@@ -191,3 +191,21 @@ def test_pick_and_place_moves_the_modelled_box_and_the_database_follows(browser,
     assert ui.db.history("unknown_box", limit=1)[-1].method == "robot"
     assert op.actions <= 6, op.report("pick and place")
     page.close()
+
+
+def test_a_joint_that_does_not_reach_its_command_is_said_in_the_panel(browser, robot_site):
+    from app.robot.controller import ControllerFaults
+
+    ui = robot_site
+    ui.site.robot.controller.faults = ControllerFaults(stall_joint="elbow_joint", stall_at=0.4)
+    page = ui.open(browser)
+    op = Operator(ui, page)
+    op.press("Move robot")
+    _said(page, "step=click", "Move robot's first step")
+    op.click(ui.site.camera.project(np.array([[0.15, -0.25, 0.0]]))[0])
+    _said(page, "passes every check", "the motion checked")
+    op.key("m")
+    _said(page, "Fault: joint elbow_joint did not reach its command", "the fault said")
+    lines = ui.robot_lines()
+    assert lines and "elbow_joint" in (lines[-1]["fault"] or ""), "the feed does not carry the fault"
+    page.close()

@@ -1,0 +1,147 @@
+"""Move robot and Pick and place through the session, on the workcell's emulated robot: what the operator is told
+when the robot's controller fails (a joint that does not reach its command, a controller that stops answering),
+a second operator's Move while the robot moves, targets out of reach; nothing written that did not happen."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.db import Database, seed_from_scene
+from app.robot.controller import ControllerFaults
+from app.robot.setup import open_robot
+from app.scene import default_scene_path, load_scene
+from app.workflows import Session, Site, WorkflowError
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene(default_scene_path())
+
+
+@pytest.fixture
+def site(scene, tmp_path):
+    robot = open_robot(scene)
+    robot.controller.speed_scale = 1.0
+    db = Database.open(tmp_path / "site.sqlite")
+    seed_from_scene(db, scene)
+    s = Site(scene, db, robot=robot.cell, frames=None)
+    s.robot_setup = robot
+    yield s
+    robot.close()
+    db.close()
+
+
+def _session_with_plan(site, X=(0.15, -0.25, 0.0)):
+    session = Session(site, client="alice")
+    wf = session.start("move_robot")
+    uv = site.camera.project(np.array([X], float))[0]
+    wf.click(uv)
+    assert wf.plan is not None and wf.plan.ok, wf.message
+    return session, wf
+
+
+def _run_until_done(wf, timeout_s=30.0):
+    import time
+
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        wf.tick()
+        if wf.state != "moving":
+            return
+        time.sleep(0.02)
+    raise AssertionError("the motion did not end")
+
+
+def test_the_robot_arrives_within_a_millimetre_of_the_commanded_pose(site):
+    _, wf = _session_with_plan(site)
+    wf.move()
+    _run_until_done(wf)
+    assert "Arrived" in wf.message and wf.arrival["tool_from_goal_mm"] < 1.0
+
+
+def test_a_joint_that_does_not_reach_its_command_is_said_and_nothing_else_happens(site):
+    site.robot.controller.faults = ControllerFaults(stall_joint="elbow_joint", stall_at=0.3)
+    _, wf = _session_with_plan(site)
+    wf.move()
+    _run_until_done(wf)
+    assert wf.message.startswith("Fault: joint elbow_joint did not reach its command"), wf.message
+    assert wf.arrival["tool_from_goal_mm"] > 5.0
+    assert not site.robot.state().moving
+
+
+def test_a_controller_that_stops_answering_is_said_and_the_robot_is_stopped(site):
+    _, wf = _session_with_plan(site)
+    wf.move()
+    site.robot.controller.faults.silent = True
+    _run_until_done(wf)
+    assert "does not answer" in wf.message and wf.state == "fault", wf.message
+    site.robot.controller.faults.silent = False
+    assert not site.robot.state().moving  # the stop circuit halted it
+
+
+def test_a_second_operators_move_while_the_robot_moves_is_refused(site):
+    _, first = _session_with_plan(site)
+    _, second = _session_with_plan(site, X=(0.2, -0.4, 0.0))
+    first.move()
+    with pytest.raises(WorkflowError, match="moving"):
+        second.move()
+    _run_until_done(first)
+    with pytest.raises(WorkflowError, match="moved since this motion was planned"):
+        second.move()  # planned from where the robot was: planned again first
+
+
+def test_a_target_out_of_reach_is_refused_saying_so_and_the_robot_stays(site):
+    session = Session(site, client="alice")
+    wf = session.start("move_robot")
+    q0 = site.robot.state().q
+    far = site.camera.project(np.array([[0.42, 0.65, 0.0]]))[0]  # the table's far corner, 1 m from the base
+    wf.click(far)
+    assert not wf.plan.ok and "cannot reach" in wf.message, wf.message
+    with pytest.raises(WorkflowError, match="refused"):
+        wf.move()
+    assert np.allclose(site.robot.state().q, q0)
+
+
+def test_a_click_that_sees_no_database_surface_is_refused(site):
+    wf = Session(site).start("move_robot")
+    with pytest.raises(WorkflowError, match="sees no object"):
+        wf.click([256.0, 2.0])  # above the table, on the back wall (not in the database)
+
+
+def test_pick_and_place_refuses_a_body_wider_than_the_gripper_opens(site):
+    session = Session(site)
+    session.select("parallelepiped")
+    wf = session.start("pick_place")
+    wf.click(site.camera.project(np.array([[0.15, -0.3, 0.0]]))[0])
+    assert not wf.plan.ok and "the gripper opens" in wf.message, wf.message
+
+
+def test_a_stall_during_pick_and_place_writes_nothing(site, scene):
+    b = scene.body("unknown_box")
+    site.db.add_object("unknown_box", "box", b.model, b.T_world_obj, status="modelled", client="setup")
+    site.robot.controller.faults = ControllerFaults(stall_joint="shoulder_pan_joint", stall_at=0.5)
+    session = Session(site)
+    session.select("unknown_box")
+    wf = session.start("pick_place")
+    wf.click(site.camera.project(np.array([[-0.05, -0.38, 0.0]]))[0])
+    assert wf.plan.ok, wf.message
+    version = site.object("unknown_box").version
+    wf.move()
+    _run_until_done(wf, 60.0)
+    assert wf.message.startswith("Fault:") and "Nothing was written" in wf.message, wf.message
+    assert site.object("unknown_box").version == version
+
+
+def test_a_reported_joint_state_with_unknown_names_or_nan_is_refused_in_one_line(site):
+    from app.robot.cell import joints_in_order
+
+    model = site.robot.model
+    names, q = list(model.joint_names), np.zeros(model.n)
+    assert np.allclose(joints_in_order(model, names[::-1], q[::-1] + np.arange(model.n)), np.arange(model.n)[::-1])
+    with pytest.raises(ValueError, match=r"names \['gripper_twist'\], which robot mcit_arm does not have"):
+        joints_in_order(model, names[:-1] + ["gripper_twist"], q)
+    with pytest.raises(ValueError, match="lacks"):
+        joints_in_order(model, names[:-1], q[:-1])
+    with pytest.raises(ValueError, match="no finite position"):
+        joints_in_order(model, names, np.where(np.arange(model.n) == 2, np.nan, 0.0))
