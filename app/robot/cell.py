@@ -234,6 +234,12 @@ class RobotCell:
             margins = {o.name: o.margin_m for o in obstacles}
             best, first_reason, checked, ik_why = None, "", 0, []
             for q_pre, q_goal in self._solutions(X, n, standoff_m, q0, ik_why):
+                at_goal = self.checker.check(q_goal)  # one pose: a goal in contact spares checking its path
+                if at_goal:
+                    c = at_goal[0]
+                    first_reason = first_reason or _collision_text(c, self.model.links, margins)
+                    checked += 1
+                    continue
                 path = np.vstack(
                     [
                         joint_path(self.model, q0, q_pre, self.max_step_m),
