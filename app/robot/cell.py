@@ -83,6 +83,7 @@ class MovePlan:
     warnings: list[str] = field(default_factory=list)
     preview_s: float = 0.0
     samples_checked: int = 0
+    q_contact: np.ndarray | None = None  # a refused plan's pose where the first contact was found
 
     @property
     def q_goal(self) -> np.ndarray:
@@ -232,12 +233,12 @@ class RobotCell:
         with self._check_lock:
             self.checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in obstacles])
             margins = {o.name: o.margin_m for o in obstacles}
-            best, first_reason, checked, ik_why = None, "", 0, []
+            best, first_reason, checked, ik_why, contact = None, "", 0, [], None
             for q_pre, q_goal in self._solutions(X, n, standoff_m, q0, ik_why):
                 at_goal = self.checker.check(q_goal)  # one pose: a goal in contact spares checking its path
                 if at_goal:
-                    c = at_goal[0]
-                    first_reason = first_reason or _collision_text(c, self.model.links, margins)
+                    if not first_reason:
+                        first_reason, contact = _collision_text(at_goal[0], self.model.links, margins), q_goal
                     checked += 1
                     continue
                 path = np.vstack(
@@ -251,13 +252,14 @@ class RobotCell:
                 if check.ok:
                     best = path
                     break
-                first_reason = first_reason or _collision_text(check, self.model.links, margins)
+                if not first_reason:
+                    first_reason, contact = _collision_text(check, self.model.links, margins), path[check.index]
         T_goal = self.T_world_base @ self.model.tool_pose(best[-1] if best is not None else q0)
         if best is None:
             why = ik_why[0] if ik_why else "no joint solution"
             reason = first_reason or f"the robot cannot reach the target: {why}"
             plan = self._refused(q0, X, n, standoff_m, t0, reason, warnings)
-            plan.samples_checked = checked
+            plan.samples_checked, plan.q_contact = checked, contact
             return plan
         return MovePlan(
             best, True, "", T_goal, X, n, standoff_m, warnings, time.perf_counter() - t0, samples_checked=checked

@@ -39,6 +39,7 @@ from .drawing import draw_marks, spread_labels
 from .frozen import FrozenFrames
 from .layout import NO_SELECTION, build_panel
 from .panel_text import PanelText, show
+from .robot_overlay import RobotGhost3D
 from .tracking import TrackFeeder
 from .viewport import Viewport
 from .workflow_controls import WorkflowControls
@@ -84,6 +85,7 @@ class ClientPanel:
         )
         self.viewport = Viewport(self)
         self.frozen_frames = FrozenFrames(self)
+        self.ghost3d = RobotGhost3D(client.scene, app.world3d.offset)
         self.texts = PanelText(self)
         self.session.on_start = self._started
         build_panel(self)
@@ -455,6 +457,7 @@ class ClientPanel:
         )
         labels = spread_labels(labels, self.viewport.image_px_per_screen_px())
         self._labels_sent = self.app.send_client_overlay(self.client, batch, labels, self._labels_sent, pw)
+        self.ghost3d.show(marks.robot_ghost)  # the previewed motion's end in the 3D world too
 
     def _announce(self) -> None:
         """Tell this operator of database changes made by others (who, what, when)."""

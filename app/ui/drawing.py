@@ -136,9 +136,9 @@ def draw_marks(
             COLORS["ghost_chosen"] if ghost.chosen else COLORS["ghost"],
             hidden="dashed" if ghost.chosen else "removed",
         )
-    for _link, brep, T in marks.robot_ghost:
-        pw = project_wireframe(camera, brep, T, width=width, height=height)
-        batch.add_wireframe(pw, COLORS["robot_ghost"], hidden="removed")
+    for links, color in ((marks.robot_ghost, COLORS["robot_ghost"]), (marks.robot_contact, COLORS["click"])):
+        for _link, brep, T in links:
+            batch.add_wireframe(project_wireframe(camera, brep, T, width=width, height=height), color, hidden="removed")
     for ghost in marks.tracked:
         pw = project_wireframe(camera, ghost.model, ghost.T_world_obj, width=width, height=height)
         color = COLORS["tracked"] if ghost.chosen else tuple(int(c * 0.55) for c in COLORS["tracked"])

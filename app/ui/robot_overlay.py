@@ -94,3 +94,39 @@ class RobotOverlay:
         for h, (_link, _brep, T) in zip(self._meshes, links):
             h.position = tuple(T[:3, 3])
             h.wxyz = _wxyz(T[:3, :3])
+
+
+class RobotGhost3D:
+    """One operator's ghost robot in the 3D world (client-scoped ``/robot_ghost3d/<k>``): where a previewed
+    motion ends, translucent; removed when there is none. ``offset`` is the 3D world's place in the scene."""
+
+    def __init__(self, scene: Any, offset: np.ndarray):
+        self.scene = scene
+        self.offset = np.asarray(offset, float)
+        self._handles: list = []
+        self._key: Any = None
+
+    def show(self, links) -> None:
+        from .world3d import _wxyz
+
+        key = tuple(np.round(T, 6).tobytes() for _l, _b, T in links)
+        if key == self._key:
+            return
+        self._key = key
+        for h in self._handles:
+            h.remove()
+        self._handles = []
+        for k, (_link, brep, T) in enumerate(links):
+            V, F = brep.triangles(n_circle=24)
+            self._handles.append(
+                self.scene.add_mesh_simple(
+                    f"/robot_ghost3d/{k}",
+                    V.astype(np.float32),
+                    F.astype(np.uint32),
+                    color=COLORS["robot_ghost"],
+                    opacity=0.4,
+                    flat_shading=True,
+                    position=tuple(T[:3, 3] + self.offset),
+                    wxyz=_wxyz(T[:3, :3]),
+                )
+            )

@@ -110,6 +110,8 @@ class MoveRobot(Workflow):
                 )
             else:
                 self.message = f"Target on {where}: refused: {plan.reason}. The robot did not move."
+                if plan.q_contact is not None:
+                    self.message += " The red robot shows where the path would hit."
             if plan.warnings:
                 self.message += " " + "; ".join(plan.warnings) + "."
 
@@ -232,6 +234,8 @@ class MoveRobot(Workflow):
                 m.targets = cam.project(self.target[0][None])
                 m.labels = [(m.targets[0], "target")]
             plan = self.plan
+            if plan is not None and not plan.ok and plan.q_contact is not None:
+                m.robot_contact = self.cell.link_breps(plan.q_contact)  # red: where the refused path would hit
             if plan is not None and plan.ok:
                 m.robot_ghost = self.cell.link_breps(plan.q_goal)
                 tips = np.array([self.cell.tool_pose(q)[:3, 3] for q in plan.path[:: max(1, len(plan.path) // 40)]])
