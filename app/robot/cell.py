@@ -359,6 +359,9 @@ class RobotCell:
             ("payload", carried[1:3], others),
             ("payload", carried[2:], [o for o in others if o.name != support]),
             (self.checker, [carried[3], place, pre_p], others),
+            # back where it started, out of the cameras' way for the look that follows, the body an obstacle where
+            # it now stands
+            (self.checker, [pre_p, at(q0, opened)], [*others, Obstacle(name, brep, T_put, MARGIN_M)]),
         ]
         payload = self._payload_checker(name, brep, T_tool_obj)
         path = [q0[None]]

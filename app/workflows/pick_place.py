@@ -3,8 +3,8 @@ follows it from the robot's kinematics, then looks at it in the video.
 
 Select an object, start Pick and place, click where it goes (a point on the table or on another object's
 top): ``app.robot.cell.RobotCell.plan_pick_place`` plans the whole motion (fingers open, down around the
-object, close, up, across, down, open, up) and checks it; the ghosts show the object where it will stand
-and the robot at the place. Pick and place (M) sends it; Stop (Space) or Esc halts it.
+object, close, up, across, down, open, up, back where it started) and checks it; the ghosts show the
+object where it will stand and the robot at the place. Pick and place (M) sends it; Stop (Space) or Esc halts it.
 
 When the motion ends with the fingers open at the place and no fault, the object's new pose is written
 (method "robot"): the pose it had in the gripper (``T_tool_obj`` from the database's pose at the grasp)
@@ -38,6 +38,7 @@ GRASP_SIGMA_DEG = 0.5
 AGREE_SIGMAS = 3.0
 AGREE_FLOOR_MM, AGREE_FLOOR_DEG = 5.0, 1.0  # the video and the robot agree within these whatever the σ
 PUT_ON_UP_COS = np.cos(np.radians(10.0))  # a place on a surface facing up within 10°
+LOOK_WAIT_S = 3.0  # the look waits this long at most for a frame taken after the robot stopped
 
 
 def _stands_on(obj, objects) -> str | None:
@@ -224,7 +225,8 @@ class PickPlace(Workflow):
         self.message = (
             f"Put down; its pose from the robot's joints is written. Looking for {self.obj.name} in the video…"
         )
-        self._looking = threading.Thread(target=self._look, args=(T, cov), name="pick-place-look", daemon=True)
+        t_end = self.site.time_s()
+        self._looking = threading.Thread(target=self._look, args=(T, cov, t_end), name="pick-place-look", daemon=True)
         self._looking.start()
 
     def _cov(self, T: np.ndarray) -> np.ndarray:
@@ -241,12 +243,18 @@ class PickPlace(Workflow):
             C += np.asarray(base, float)
         return C
 
-    def _look(self, T: np.ndarray, cov: np.ndarray) -> None:
-        """The one-click search from the written pose on the newest frame; the verdict in ``look``."""
+    def _look(self, T: np.ndarray, cov: np.ndarray, t_end: float) -> None:
+        """The one-click search from the written pose on a frame taken after the motion ended (the newest when
+        the video is slower than ``LOOK_WAIT_S``); the verdict in ``look``."""
+        import time
+
         from app.vision.search import NoPoseFits, search_pose
 
         from .model_object import table_support
 
+        deadline = time.monotonic() + LOOK_WAIT_S
+        while self.site.time_s() < t_end + 0.2 and time.monotonic() < deadline:
+            time.sleep(0.05)
         try:
             image = self.site.frame_at(None, self.view)
             cam = self.camera
