@@ -63,7 +63,7 @@ class ControllerFaults:
     """Faults of a real robot, switched on by tests and the fault drills.
 
     silent : the controller stops answering. stall_joint, stall_at : that joint stops following its
-    command once it has done ``stall_at`` (0..1) of the motion.
+    command once ``stall_at`` (0..1) of the motion's time has passed.
     """
 
     silent: bool = False
@@ -76,7 +76,8 @@ class _Motion:
     path: np.ndarray  # (k, n) waypoints, the first the state at the start
     times: np.ndarray  # (k,) seconds from the start at each waypoint
     t0: float
-    stall: tuple[int, float] | None = None  # (joint index, value it stops at)
+    stall: tuple[int, float] | None = None  # (joint index, share of the motion's time after which it stops)
+    stalled_at: float | None = None  # the value the stalled joint stopped at
     listeners_told_moving: bool = field(default=False)
 
 
@@ -146,8 +147,7 @@ class EmulatedController:
             times = np.concatenate([[0.0], np.cumsum(steps.max(axis=1))])
             stall = None
             if self.faults.stall_joint in self.names:
-                j = self.names.index(self.faults.stall_joint)
-                stall = (j, float(P[0, j] + self.faults.stall_at * (P[-1, j] - P[0, j])))
+                stall = (self.names.index(self.faults.stall_joint), float(self.faults.stall_at))
             self._motion = _Motion(P, times, self.clock(), stall)
             self._goal = P[-1].copy()
             self._fault = None
@@ -220,25 +220,21 @@ class EmulatedController:
         if m is None:
             return True
         t = self.clock() - m.t0
-        if t >= m.times[-1]:
-            q = m.path[-1].copy()
-            done = True
-        else:
-            k = int(np.searchsorted(m.times, t, side="right")) - 1
-            a = (t - m.times[k]) / max(m.times[k + 1] - m.times[k], 1e-12)
-            q = m.path[k] + a * (m.path[k + 1] - m.path[k])
-            done = False
+        done = t >= m.times[-1]
+        q = _along(m, t)
         if m.stall is not None:
-            j, at = m.stall
-            lo, hi = sorted((m.path[0, j], at))
-            q[j] = float(np.clip(q[j], lo, hi))
+            j, share = m.stall
+            if m.stalled_at is None and t >= share * m.times[-1]:
+                m.stalled_at = float(_along(m, share * m.times[-1])[j])  # it stops following from there on
+            if m.stalled_at is not None:
+                q[j] = m.stalled_at
         self._q = q
         if done and m.stall is not None:
             j = m.stall[0]
-            miss = abs(self._q[j] - m.path[-1, j])
+            miss = float(np.max(np.abs(m.path[:, j] - self._q[j])))  # the farthest its command went from it
             if miss > 1e-6:
                 self._fault = (
-                    f"joint {self.names[j]} did not reach its command: it stopped "
+                    f"joint {self.names[j]} did not reach its command: it stopped following it, up to "
                     f"{np.degrees(miss):.1f}° short; the robot is stopped where it is"
                 )
         return done
@@ -267,3 +263,12 @@ class EmulatedController:
                 fn(state)
             except Exception:  # noqa: BLE001 - a listener's bug never stops the robot's state
                 log.exception("a joint-state listener failed")
+
+
+def _along(m: _Motion, t: float) -> np.ndarray:
+    """The motion's commanded joints at time t (s from its start; its end after it)."""
+    if t >= m.times[-1]:
+        return m.path[-1].copy()
+    k = int(np.searchsorted(m.times, t, side="right")) - 1
+    a = (t - m.times[k]) / max(m.times[k + 1] - m.times[k], 1e-12)
+    return m.path[k] + a * (m.path[k + 1] - m.path[k])

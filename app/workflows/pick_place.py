@@ -257,6 +257,8 @@ class PickPlace(Workflow):
             time.sleep(0.05)
         try:
             image = self.site.frame_at(None, self.view)
+            if image is None:
+                raise ValueError("there is no video frame to look at")
             cam = self.camera
             centre = T[:3, 3] + T[:3, :3] @ np.mean(self.obj.model.bounds(), axis=0)
             res = search_pose(
@@ -287,11 +289,12 @@ class PickPlace(Workflow):
                     "where the robot put it (beyond 3σ). The database keeps the robot's pose: look at the video, and "
                     "double click the object to update it from there."
                 )
-        except (NoPoseFits, ValueError) as exc:
+        except Exception as exc:  # noqa: BLE001 - no frame, no pose that fits, a failed search: each said alike
+            why = str(exc) if isinstance(exc, (NoPoseFits, ValueError)) else f"the search failed: {exc}"
             look, text = (
                 {"confirmed": False},
                 (
-                    f"Warning: the video does not show {self.obj.name} where the robot put it ({exc}). The database "
+                    f"Warning: the video does not show {self.obj.name} where the robot put it ({why}). The database "
                     "keeps the robot's pose: look at the video."
                 ),
             )

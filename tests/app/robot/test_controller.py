@@ -89,7 +89,7 @@ def test_a_stalled_joint_is_reported_and_the_state_says_where_it_stopped():
         assert ctl.wait_idle(2.0)
         s = ctl.state()
         assert np.degrees(s.q[2]) == pytest.approx(30.0, abs=1e-6)
-        assert "joint c did not reach its command" in s.fault and "30.0° short" in s.fault
+        assert "joint c did not reach its command" in s.fault and "up to 30.0° short" in s.fault
     finally:
         ctl.close()
 
