@@ -70,6 +70,20 @@ def _true_tool(ui) -> np.ndarray:
     return ui.scene.robot.T_world_base @ cell.model.tool_pose(cell.controller.state().q)
 
 
+def _no_true_contact(ui, path) -> None:
+    """The motion the robot made touched none of the site's true bodies (the emulated truth, not the database)."""
+    from app.robot.collision import CollisionChecker
+
+    world = ui.server.emulated_world
+    checker = CollisionChecker(world.model, world.T_world_base)
+    t = ui.site.time_s()
+    checker.set_obstacles(
+        [(b.name, b.model, world.pose_of(i, t), 0.0) for i, b in enumerate(ui.scene.bodies) if b.status != "scenery"]
+    )
+    check = checker.check_path(path)
+    assert check.ok, f"the robot touched {check.other} with its {check.link} ({1000 * check.distance_m:.1f} mm)"
+
+
 def _said(page, text: str, what: str) -> None:
     wait_until(lambda: text in panel_state(page.panel), 60.0, what, panel=page.panel)
 
@@ -81,6 +95,7 @@ def _move_to(ui, page, op, X: np.ndarray, normal: np.ndarray) -> int:
     _said(page, "passes every check", "the motion checked")
     op.key("m")
     _said(page, "Arrived", "the robot's arrival")
+    _no_true_contact(ui, page.panel.session.workflow.sent.path)
     T = _true_tool(ui)
     goal = X + STANDOFF_M * normal
     err = float(np.linalg.norm(T[:3, 3] - goal))
