@@ -233,14 +233,17 @@ class RobotCell:
         with self._check_lock:
             self.checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in obstacles])
             margins = {o.name: o.margin_m for o in obstacles}
-            best, first_reason, checked, ik_why, contact = None, "", 0, [], None
-            for q_pre, q_goal in self._solutions(X, n, standoff_m, q0, ik_why):
-                at_goal = self.checker.check(q_goal)  # one pose: a goal in contact spares checking its path
-                if at_goal:
-                    if not first_reason:
-                        first_reason, contact = _collision_text(at_goal[0], self.model.links, margins), q_goal
-                    checked += 1
-                    continue
+            best, checked, ik_why = None, 0, []
+            refusal: list = []  # (reason, pose) of the first contact found
+
+            def goal_free(q_goal) -> bool:
+                """One pose: a goal in contact spares solving and checking its path."""
+                contacts = self.checker.check(q_goal)
+                if contacts and not refusal:
+                    refusal.append((_collision_text(contacts[0], self.model.links, margins), q_goal))
+                return not contacts
+
+            for q_pre, q_goal in self._solutions(X, n, standoff_m, q0, ik_why, goal_free):
                 path = np.vstack(
                     [
                         joint_path(self.model, q0, q_pre, self.max_step_m),
@@ -252,12 +255,12 @@ class RobotCell:
                 if check.ok:
                     best = path
                     break
-                if not first_reason:
-                    first_reason, contact = _collision_text(check, self.model.links, margins), path[check.index]
+                if not refusal:
+                    refusal.append((_collision_text(check, self.model.links, margins), path[check.index]))
         T_goal = self.T_world_base @ self.model.tool_pose(best[-1] if best is not None else q0)
         if best is None:
             why = ik_why[0] if ik_why else "no joint solution"
-            reason = first_reason or f"the robot cannot reach the target: {why}"
+            reason, contact = refusal[0] if refusal else (f"the robot cannot reach the target: {why}", None)
             plan = self._refused(q0, X, n, standoff_m, t0, reason, warnings)
             plan.samples_checked, plan.q_contact = checked, contact
             return plan
@@ -272,19 +275,23 @@ class RobotCell:
         Xo = np.linalg.solve(o.T_world_obj, np.append(X, 1.0))[:3]
         return bool(np.all(Xo >= lo - 1e-3) and np.all(Xo <= hi + 1e-3))
 
-    def _solutions(self, X, n, standoff_m, q0, why: list):
+    def _solutions(self, X, n, standoff_m, q0, why: list, goal_free):
         """(q_pre, q_goal) for the tool's turns about the approach axis, the turn nearest the tool's present
         one first (a lazy sequence: planning stops at the first that passes the check); ``why`` gets the
-        inverse kinematics' reason for each turn that has no solution."""
+        inverse kinematics' reason for each turn that has no solution. ``goal_free(q_goal)`` is asked before
+        the approach's joints are solved (a goal in contact needs none)."""
         T_base_world = np.linalg.inv(self.T_world_base)
         x_now = (self.T_world_base @ self.model.tool_pose(q0))[:3, 0]
         T0 = tool_frame(X, n, standoff_m, 0.0)
         yaw_now = np.arctan2(x_now @ T0[:3, 1], x_now @ T0[:3, 0])
         yaws = 2 * np.pi * np.arange(YAW_STEPS) / YAW_STEPS
-        for yaw in sorted(yaws, key=lambda a: abs(np.angle(np.exp(1j * (a - yaw_now))))):
-            goal = solve_ik(self.model, T_base_world @ tool_frame(X, n, standoff_m, yaw), q0, seeds=4)
+        for k, yaw in enumerate(sorted(yaws, key=lambda a: abs(np.angle(np.exp(1j * (a - yaw_now)))))):
+            # the nearest turns with more seeds: the others mostly repeat what those found
+            goal = solve_ik(self.model, T_base_world @ tool_frame(X, n, standoff_m, yaw), q0, seeds=4 if k < 3 else 2)
             if not goal.ok:
                 why.append(goal.reason)
+                continue
+            if not goal_free(goal.q):
                 continue
             pre = solve_ik(self.model, T_base_world @ tool_frame(X, n, standoff_m + APPROACH_M, yaw), goal.q, seeds=2)
             if pre.ok:

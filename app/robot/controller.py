@@ -20,7 +20,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -78,7 +78,7 @@ class _Motion:
     t0: float
     stall: tuple[int, float] | None = None  # (joint index, share of the motion's time after which it stops)
     stalled_at: float | None = None  # the value the stalled joint stopped at
-    listeners_told_moving: bool = field(default=False)
+    told: int = 0  # the last waypoint the listeners were told of
 
 
 class EmulatedController:
@@ -249,13 +249,30 @@ class EmulatedController:
                 self._wake.clear()
                 continue
             with self._lock:
-                if self._motion is None:
+                m = self._motion
+                if m is None:
                     continue
                 if self._advance_locked():
                     self._motion = None
                 state = self._state_locked()
+                passed = self._passed_locked(m, state)
+            for s in passed:  # a slow update (a loaded machine) still tells every waypoint the robot went through
+                self._tell(s)
             self._tell(state)
             time.sleep(period)
+
+    def _passed_locked(self, m: _Motion, now: JointState) -> list[JointState]:
+        """The waypoints passed since the listeners were last told (a stalled joint where it stopped)."""
+        k = int(np.searchsorted(m.times, self.clock() - m.t0, side="right")) - 1
+        k = min(k, len(m.path) - 2)  # the last waypoint is the state itself at the end
+        out = []
+        for i in range(m.told + 1, k + 1):
+            q = m.path[i].copy()
+            if m.stalled_at is not None:
+                q[m.stall[0]] = m.stalled_at
+            out.append(JointState(self.names, q, True, now.t_s, None, now.goal))
+        m.told = max(m.told, k)
+        return out
 
     def _tell(self, state: JointState) -> None:
         for fn in list(self._listeners):

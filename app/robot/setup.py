@@ -100,5 +100,4 @@ def open_robot(
     except BaseException:
         controller.close()
         raise
-    log.info("robot %s: %d joints, base at %s (emulated controller)", model.name, model.n, np.round(T[:3, 3], 3))
     return RobotSetup(cell, world, controller)

@@ -305,10 +305,17 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
             close()
         raise
     live_views = [name for name, g in grabbers.items() if getattr(g.source, "rendered_live", False)]
+    notes = []  # said once everything opened: a start that fails says one line, its reason
     if live_views:
         from app.render.live import gl_description
 
-        log.info("cameras %s: the site rendered live (%s)", ", ".join(live_views), gl_description())
+        notes.append(f"cameras {', '.join(live_views)}: the site rendered live ({gl_description()})")
+    if robot is not None:
+        cell = robot.cell
+        notes.append(
+            f"robot {cell.model.name}: {cell.model.n} joints, base at "
+            f"{[round(float(v), 3) for v in cell.T_world_base[:3, 3]]} (emulated controller)"
+        )
     grabber = grabbers[scene.views[0].name]
 
     def clock() -> float:
@@ -317,7 +324,7 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
 
     holder["clock"] = clock
     if robot is not None and not live:
-        log.warning("the robot moves unseen on the recorded video: its overlay follows its joint states")
+        notes.append("the robot moves unseen on the recorded video: its overlay follows its joint states")
 
     db_path = args.db or default_db_path()
     db_path.parent.mkdir(parents=True, exist_ok=True)
@@ -366,6 +373,8 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         token=access.token,
     )
     server.emulated_world = None if robot is None else robot.world  # the emulated site's truth (tests, benches)
+    for note in notes:
+        log.info(note)
     return server, closers
 
 

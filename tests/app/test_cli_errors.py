@@ -70,6 +70,7 @@ CASES = [
     ("calibrate-intrinsics", "{tmp}/no-frames --cols 9 --rows 6 --square-mm 25 --out {tmp}/cam.yml"),
     ("calibrate-intrinsics", "{notes} --cols 9 --rows 6 --square-mm 25 --out {tmp}/cam.yml"),
     ("demo", "--scene {tmp}/no-scene"),
+    ("robot urdf", "--out {tmp}/no-folder/arm.urdf"),
     ("nosuch", ""),
 ]
 

@@ -227,6 +227,7 @@ def test_mcit_serve_undistorts_the_video_of_a_scene_whose_camera_file_has_distor
     _write_cam(tmp_path / "cam.yml", D, "plumb_bob", (512, 256), Kw)
     d["cameras"] = [{"name": "front", "intrinsics_file": "cam.yml", "T_world_cam": front["T_world_cam"]}]
     (tmp_path / "scene.json").write_text(json.dumps(d))
+    (tmp_path / "arm.urdf").write_bytes((default_scene_path() / "arm.urdf").read_bytes())  # the scene's robot
     (tmp_path / "frames").mkdir()
     rng = np.random.default_rng(1)
     raw = cv2.GaussianBlur(rng.integers(0, 255, (256, 512, 3), dtype=np.uint8), (0, 0), 2.0)
