@@ -287,7 +287,8 @@ class RobotCell:
         yaws = 2 * np.pi * np.arange(YAW_STEPS) / YAW_STEPS
         for k, yaw in enumerate(sorted(yaws, key=lambda a: abs(np.angle(np.exp(1j * (a - yaw_now)))))):
             # the nearest turns with more seeds: the others mostly repeat what those found
-            goal = solve_ik(self.model, T_base_world @ tool_frame(X, n, standoff_m, yaw), q0, seeds=4 if k < 3 else 2)
+            T_goal = T_base_world @ tool_frame(X, n, standoff_m, yaw)
+            goal = solve_ik(self.model, T_goal, q0, seeds=4 if k < 3 else 2, explain=k == 0)  # why: said once
             if not goal.ok:
                 why.append(goal.reason)
                 continue

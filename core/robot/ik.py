@@ -206,6 +206,7 @@ def solve_ik(
     rotation_tol_rad: float = 1e-4,
     rot_scale_m: float = 0.2,
     max_iter: int = 100,
+    explain: bool = True,
 ) -> IkResult:
     """Joint positions q (n,) within the limits with ``model.tool_pose(q) ≈ T_base_target`` (4, 4), nearest q0.
 
@@ -213,7 +214,8 @@ def solve_ik(
     ``position_tol_m`` and ``rotation_tol_rad`` of the target. The nearest to q0 among the solutions
     (the least travel of the robot's points from q0; see the module docstring) is returned, the others
     in ``alternatives``; without one, the nearest pose found within the limits (smallest cost), ``ok``
-    False and the reason.
+    False and the reason. ``explain`` False spares the descents without the limits that tell "out of reach"
+    from "the joint limits" (a caller trying many targets explains one; the reason is then unsaid).
     """
     T_t = check_T(T_base_target, "T_base_target")
     q0 = model.as_q(q0, "q0")
@@ -244,6 +246,8 @@ def solve_ik(
         return IkResult(found[0], True, *_errors(model, found[0], T_t), alternatives=others)
     best = int(np.argmin(pos**2 + (rot_scale_m * rot) ** 2))
     q, off_m, off_rad = X[best], float(pos[best]), float(rot[best])
+    if not explain:
+        return IkResult(q, False, off_m, off_rad, "out of reach or beyond the joint limits")
     free = (np.full(model.n, -np.inf), np.full(model.n, np.inf))
     X, pos, rot = _descend(target, np.vstack([q, starts]), free, tols, max_iter)
     reached = np.flatnonzero((pos <= tols[0]) & (rot <= tols[1]))
