@@ -61,7 +61,7 @@ from benchenv import pin_one_core  # noqa: E402
 
 from app.render import Renderer  # noqa: E402
 from app.render.live import LiveRenderer, RenderBody, projection_matrix, scene_bodies  # noqa: E402
-from app.render.measure import edge_offsets, polygon_coverage, visible_edges  # noqa: E402
+from app.render.measure import edge_offsets, polygon_coverage, top_down_scene, visible_edges  # noqa: E402
 from app.report.markdown import markdown_table  # noqa: E402
 from app.scene import default_scene_path, load_scene, scene_from_dict  # noqa: E402
 
@@ -265,28 +265,6 @@ def _played(scene, seconds: float) -> None:
     print(markdown_table(["scene", "frames/s delivered", "images drawn", "CPU (% of the one core)"], rows))
 
 
-def top_down(yaw_deg: float) -> dict:
-    return {
-        "format": "mcit-scene/1",
-        "camera": {
-            "width": 40,
-            "height": 30,
-            "K": [[100, 0, 19.5], [0, 100, 14.5], [0, 0, 1]],
-            "T_world_cam": {"xyz": [0, 0, 2.0], "rpy_deg": [180, 0, 0]},
-        },
-        "turret": {"T_world_turret": {"xyz": [0.2, 0, 2.0]}},
-        "bodies": [
-            {
-                "name": "box",
-                "model": {"box": [1.0, 1.0, 0.1]},
-                "pose": {"xyz": [0.4969, 0, 0], "rpy_deg": [0, 0, yaw_deg]},
-                "appearance": {"albedo": 0.8},
-            }
-        ],
-        "render": {"ambient": 1.0, "sky": 0.1, "gain": 200.0, "noise_sigma": 0.0, "blur_sigma_px": 0.0},
-    }
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=36, help="moving frames timed per renderer")
@@ -370,7 +348,7 @@ def main() -> int:
     for label, s, m in VARIANTS:
         errs = []
         for yaw in (0.0, 17.0, 41.0, 58.3):
-            sc = scene_from_dict(top_down(yaw), ".")
+            sc = scene_from_dict(top_down_scene(yaw), ".")
             body = sc.bodies[0]
             T = body.pose_at(0.0)
             with LiveRenderer(sc, supersample=s, msaa=m) as r:

@@ -41,33 +41,11 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.render import Renderer  # noqa: E402
-from app.render.measure import edge_offsets, polygon_coverage, visible_edges  # noqa: E402
+from app.render.measure import edge_offsets, polygon_coverage, top_down_scene, visible_edges  # noqa: E402
 from app.report.markdown import markdown_table  # noqa: E402
 from app.scene import default_scene_path, load_scene, scene_from_dict  # noqa: E402
 
 CLIP = 12  # frames (one second) of each still scene
-
-
-def top_down(yaw_deg: float) -> dict:
-    return {
-        "format": "mcit-scene/1",
-        "camera": {
-            "width": 40,
-            "height": 30,
-            "K": [[100, 0, 19.5], [0, 100, 14.5], [0, 0, 1]],
-            "T_world_cam": {"xyz": [0, 0, 2.0], "rpy_deg": [180, 0, 0]},
-        },
-        "turret": {"T_world_turret": {"xyz": [0.2, 0, 2.0]}},
-        "bodies": [
-            {
-                "name": "box",
-                "model": {"box": [1.0, 1.0, 0.1]},
-                "pose": {"xyz": [0.4969, 0, 0], "rpy_deg": [0, 0, yaw_deg]},
-                "appearance": {"albedo": 0.8},
-            }
-        ],
-        "render": {"ambient": 1.0, "sky": 0.1, "gain": 200.0, "noise_sigma": 0.0, "blur_sigma_px": 0.0},
-    }
 
 
 def _decoded(path: str, first: int, n: int) -> list[np.ndarray]:
@@ -163,7 +141,7 @@ def main() -> int:
 
     rows_c = []
     for yaw in (0.0, 17.0, 41.0, 45.0, 58.3, 80.0):
-        s = scene_from_dict(top_down(yaw), ".")
+        s = scene_from_dict(top_down_scene(yaw), ".")
         img, _ = Renderer(s).render_float(0.0)
         T = s.bodies[0].pose_at(0.0)
         cover = polygon_coverage(s.camera.project(s.bodies[0].model.vertices @ T[:3, :3].T + T[:3, 3]), *s.camera.size)

@@ -18,7 +18,7 @@ from app.scene import Scene
 
 from .renderer import Renderer
 
-__all__ = ["edge_offsets", "visible_edges", "polygon_coverage"]
+__all__ = ["edge_offsets", "visible_edges", "polygon_coverage", "top_down_scene"]
 
 
 def edge_offsets(
@@ -111,3 +111,28 @@ def polygon_coverage(poly_uv: np.ndarray, width: int, height: int) -> np.ndarray
         for u in range(max(u0, 0), min(u1, width - 1) + 1):
             out[v, u] = _area(_clip(hull, np.array([u - 0.5, v - 0.5]), np.array([u + 0.5, v + 0.5])))
     return out
+
+
+def top_down_scene(yaw_deg: float, x_edge: float = -0.0031) -> dict:
+    """The renderers' edge test (``mcit-scene/1`` dict): a 40×30 camera looking straight down at a 1 m box whose
+    left edge is at world x = ``x_edge`` at yaw 0 (a third of a pixel off the image's middle column by default),
+    turned by ``yaw_deg``; flat light, no noise, no blur: the edge's grey levels are its coverage alone."""
+    return {
+        "format": "mcit-scene/1",
+        "camera": {
+            "width": 40,
+            "height": 30,
+            "K": [[100, 0, 19.5], [0, 100, 14.5], [0, 0, 1]],
+            "T_world_cam": {"xyz": [0, 0, 2.0], "rpy_deg": [180, 0, 0]},
+        },
+        "turret": {"T_world_turret": {"xyz": [0.2, 0, 2.0]}},
+        "bodies": [
+            {
+                "name": "box",
+                "model": {"box": [1.0, 1.0, 0.1]},
+                "pose": {"xyz": [x_edge + 0.5, 0, 0], "rpy_deg": [0, 0, yaw_deg]},
+                "appearance": {"albedo": 0.8},
+            }
+        ],
+        "render": {"ambient": 1.0, "sky": 0.1, "gain": 200.0, "noise_sigma": 0.0, "blur_sigma_px": 0.0},
+    }

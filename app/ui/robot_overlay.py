@@ -26,6 +26,28 @@ def robot_batch(camera, links, width: int, height: int, color=COLORS["robot"]) -
     return batch
 
 
+def link_meshes(scene, prefix: str, links, color, opacity: float, offset=(0.0, 0.0, 0.0)) -> list:
+    """One mesh node per link shape, ``<prefix>/<k>``, at its pose (shifted by ``offset``); their handles."""
+    from .world3d import _wxyz
+
+    out = []
+    for k, (_link, brep, T) in enumerate(links):
+        V, F = brep.triangles(n_circle=24)
+        out.append(
+            scene.add_mesh_simple(
+                f"{prefix}/{k}",
+                V.astype(np.float32),
+                F.astype(np.uint32),
+                color=color,
+                opacity=opacity,
+                flat_shading=True,
+                position=tuple(T[:3, 3] + np.asarray(offset, float)),
+                wxyz=_wxyz(T[:3, :3]),
+            )
+        )
+    return out
+
+
 class RobotOverlay:
     """The robot's shared drawing (see the module docstring).
 
@@ -76,20 +98,7 @@ class RobotOverlay:
         if len(self._meshes) != len(links):
             for h in self._meshes:
                 h.remove()
-            self._meshes = []
-            for k, (_link, brep, T) in enumerate(links):
-                V, F = brep.triangles(n_circle=24)
-                self._meshes.append(
-                    self.scene.add_mesh_simple(
-                        f"/world3d/robot/{k}",
-                        V.astype(np.float32),
-                        F.astype(np.uint32),
-                        color=COLORS["robot"],
-                        flat_shading=True,
-                        position=tuple(T[:3, 3]),
-                        wxyz=_wxyz(T[:3, :3]),
-                    )
-                )
+            self._meshes = link_meshes(self.scene, "/world3d/robot", links, COLORS["robot"], 1.0)
             return
         for h, (_link, _brep, T) in zip(self._meshes, links):
             h.position = tuple(T[:3, 3])
@@ -107,26 +116,10 @@ class RobotGhost3D:
         self._key: Any = None
 
     def show(self, links) -> None:
-        from .world3d import _wxyz
-
         key = tuple(np.round(T, 6).tobytes() for _l, _b, T in links)
         if key == self._key:
             return
         self._key = key
         for h in self._handles:
             h.remove()
-        self._handles = []
-        for k, (_link, brep, T) in enumerate(links):
-            V, F = brep.triangles(n_circle=24)
-            self._handles.append(
-                self.scene.add_mesh_simple(
-                    f"/robot_ghost3d/{k}",
-                    V.astype(np.float32),
-                    F.astype(np.uint32),
-                    color=COLORS["robot_ghost"],
-                    opacity=0.4,
-                    flat_shading=True,
-                    position=tuple(T[:3, 3] + self.offset),
-                    wxyz=_wxyz(T[:3, :3]),
-                )
-            )
+        self._handles = link_meshes(self.scene, "/robot_ghost3d", links, COLORS["robot_ghost"], 0.4, self.offset)

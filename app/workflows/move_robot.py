@@ -22,7 +22,8 @@ import numpy as np
 from app.robot.controller import ControllerError
 from core.transforms import log_so3
 
-from .base import Control, Marks, Step, Workflow, WorkflowError, as_pixel
+from .base import Control, Marks, Step, WorkflowError
+from .robot_work import RobotWork
 
 __all__ = ["MoveRobot", "STANDOFFS_MM"]
 
@@ -30,7 +31,7 @@ STANDOFFS_MM = (5, 10, 20, 50, 100)
 DEFAULT_STANDOFF_MM = 20
 
 
-class MoveRobot(Workflow):
+class MoveRobot(RobotWork):
     name = "move_robot"
     title = "Move robot"
     actions = ("click", "set_standoff", "move", "stop", "accept", "cancel")
@@ -42,39 +43,17 @@ class MoveRobot(Workflow):
         Control("cancel", "Cancel", "escape", color="red", hint="Stop the robot if it moves, and close"),
     )
 
-    @classmethod
-    def available(cls, site) -> str:
-        return "" if site.robot is not None else "this site has no robot: give the scene a robot block (docs/robot.md)"
-
     def __init__(self, site, client: str = "operator", view: str | None = None):
         super().__init__(site, client, view)
-        if self.available(site):
-            raise WorkflowError(self.available(site))
-        self.cell = site.robot
         self.standoff_mm = DEFAULT_STANDOFF_MM
         self.target: tuple[np.ndarray, np.ndarray, str, np.ndarray] | None = None  # (X, normal, object, uv)
-        self.plan = None  # the app.robot.cell.MovePlan previewed
-        self.sent = None  # the plan the robot was sent on
         self.arrival: dict[str, Any] = {}
         self.state = "click"
 
     # ------------------------------------------------------------------ target and plan
-    def follows_live(self) -> str:
-        return f"{self.title} watches the robot on the live video: nothing to freeze"
-
     def click(self, uv) -> None:
-        p = as_pixel(uv)
         with self.lock:
-            self._check_open()
-            if self._moving():
-                raise WorkflowError("the robot is moving: Stop it (Space) before choosing another target")
-            origin, d = self._click_camera().rays(p.reshape(1, 2))
-            hit = self.site.raycast(origin, d[0])
-            if hit is None:
-                raise WorkflowError(
-                    f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no object of the database: "
-                    "click on an object or the table"
-                )
+            p, hit = self._surface_at(uv, "the robot is moving: Stop it (Space) before choosing another target")
             self.target = (np.asarray(hit.X_world, float), np.asarray(hit.normal, float), hit.name, p)
         self._replan()
 
@@ -116,41 +95,16 @@ class MoveRobot(Workflow):
                 self.message += " " + "; ".join(plan.warnings) + "."
 
     # ------------------------------------------------------------------ motion
-    def _moving(self) -> bool:
-        """The controller says a motion is under way (one that stopped answering: not known to move)."""
-        try:
-            return bool(self.cell.state().moving)
-        except ControllerError:
-            return False
-
     def move(self) -> None:
         with self.lock:
-            self._check_open()
-            if self.plan is None:
-                raise WorkflowError("click a target on the video first")
-            if not self.plan.ok:
-                raise WorkflowError(f"this motion was refused: {self.plan.reason}")
-            try:
-                self.cell.move(self.plan)
-            except ControllerError as exc:
-                raise WorkflowError(str(exc)) from None
-            self.sent, self.plan = self.plan, None
+            self._send("click a target on the video first")
             self.arrival = {}
-            self.state = "moving"
-            self.message = "Moving: Stop (Space) halts the robot at once."
 
     def stop(self) -> None:
         self.cell.stop()
         with self.lock:
             if self.state == "moving":
                 self._arrived(stopped=True)
-
-    def cancel(self) -> None:
-        if self._moving():
-            self.cell.stop()
-        super().cancel()
-        with self.lock:
-            self.message = "Cancelled: the robot is stopped; nothing was written."
 
     def accept(self) -> None:
         with self.lock:

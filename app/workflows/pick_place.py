@@ -28,7 +28,8 @@ import numpy as np
 from app.robot.controller import ControllerError
 from core.transforms import log_so3
 
-from .base import Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
+from .base import Control, Ghost, Marks, Step, WorkflowError
+from .robot_work import RobotWork
 from .writing import write_pose
 
 __all__ = ["PickPlace", "GRASP_SIGMA_M", "GRASP_SIGMA_DEG"]
@@ -55,7 +56,7 @@ def _stands_on(obj, objects) -> str | None:
     return None
 
 
-class PickPlace(Workflow):
+class PickPlace(RobotWork):
     name = "pick_place"
     title = "Pick and place"
     options = ("object_name",)
@@ -67,16 +68,10 @@ class PickPlace(Workflow):
         Control("cancel", "Cancel", "escape", color="red", hint="Stop the robot if it moves, and close"),
     )
 
-    @classmethod
-    def available(cls, site) -> str:
-        if site.robot is None:
-            return "this site has no robot: give the scene a robot block (docs/robot.md)"
-        return "" if site.robot.finger is not None else "this site's robot has no gripper"
+    needs_gripper = True
 
     def __init__(self, site, client: str = "operator", view: str | None = None, object_name: str | None = None):
         super().__init__(site, client, view)
-        if self.available(site):
-            raise WorkflowError(self.available(site))
         try:
             self.obj = site.object(object_name)
         except KeyError:
@@ -84,30 +79,17 @@ class PickPlace(Workflow):
         if self.obj.kind == "table":
             raise WorkflowError("the robot cannot pick the table: select the object to move")
         self.object_name = self.obj.name
-        self.cell = site.robot
-        self.plan = None
-        self.sent = None
         self.written: dict[str, Any] = {}
         self.look: dict[str, Any] = {}
         self._looking: threading.Thread | None = None
         self.state = "click"
 
-    def follows_live(self) -> str:
-        return f"{self.title} watches the robot on the live video: nothing to freeze"
-
     # ------------------------------------------------------------------ where to put it
     def click(self, uv) -> None:
-        p = as_pixel(uv)
         with self.lock:
-            self._check_open()
-            if self.state in ("moving", "looking"):
-                raise WorkflowError("the robot is at work: wait for it, or Stop it (Space)")
-            origin, d = self._click_camera().rays(p.reshape(1, 2))
-            hit = self.site.raycast(origin, d[0])
-            if hit is None:
-                raise WorkflowError(
-                    f"the pixel ({p[0]:.0f}, {p[1]:.0f}) sees no surface of the database: click the table"
-                )
+            if self.state == "looking":
+                raise WorkflowError("mcit is looking for the object in the video: wait for it")
+            _, hit = self._surface_at(uv, "the robot is at work: wait for it, or Stop it (Space)")
             if hit.name == self.obj.name:
                 raise WorkflowError(f"that is {self.obj.name} itself: click where it should go")
             if not np.all(np.isfinite(hit.normal)) or hit.normal[2] < PUT_ON_UP_COS:
@@ -128,7 +110,7 @@ class PickPlace(Workflow):
         )
         with self.lock:
             self.plan = plan
-            where = f"on {support} at {' '.join(f'{v:.3f}' for v in X)} m"
+            where = f"on {support} at {self._xyz(X)} m"
             if plan.ok:
                 self.message = (
                     f"{obj.name} {where}: the motion passes every check ({1000 * plan.preview_s:.0f} ms). "
@@ -140,16 +122,7 @@ class PickPlace(Workflow):
     # ------------------------------------------------------------------ motion
     def move(self) -> None:
         with self.lock:
-            self._check_open()
-            if self.plan is None or not self.plan.ok:
-                raise WorkflowError("click where the object goes first (a motion that passes the checks)")
-            try:
-                self.cell.move(self.plan)
-            except ControllerError as exc:
-                raise WorkflowError(str(exc)) from None
-            self.sent, self.plan = self.plan, None
-            self.state = "moving"
-            self.message = "Moving: Stop (Space) halts the robot at once."
+            self._send("click where the object goes first (a motion that passes the checks)")
 
     def stop(self) -> None:
         self.cell.stop()
@@ -160,14 +133,6 @@ class PickPlace(Workflow):
                     f"Stopped: nothing was written. {self.obj.name} may be in the gripper or anywhere on the way: "
                     "look at the video."
                 )
-
-    def cancel(self) -> None:
-        try:
-            if self.cell.state().moving:
-                self.cell.stop()
-        except ControllerError:
-            self.cell.stop()
-        super().cancel()
 
     def accept(self) -> None:
         with self.lock:

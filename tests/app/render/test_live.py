@@ -19,7 +19,7 @@ from app.render.live import (
     scene_loop_s,
     segments_for,
 )
-from app.render.measure import edge_offsets, polygon_coverage, visible_edges
+from app.render.measure import edge_offsets, polygon_coverage, top_down_scene, visible_edges
 from app.render.renderer import _edge_pixels
 from app.scene import Appearance, default_scene_path, load_scene, scene_from_dict
 from app.undistort import LensDistortion
@@ -118,33 +118,11 @@ def test_curved_silhouettes_are_tessellated_finely_enough(workcell):
     assert segments_for(21.0, 0.02) >= 72 and segments_for(0.01) == 24  # 21 px: the cylinder's radius here
 
 
-def _top_down(yaw_deg: float) -> dict:
-    return {
-        "format": "mcit-scene/1",
-        "camera": {
-            "width": 40,
-            "height": 30,
-            "K": [[100, 0, 19.5], [0, 100, 14.5], [0, 0, 1]],
-            "T_world_cam": {"xyz": [0, 0, 2.0], "rpy_deg": [180, 0, 0]},
-        },
-        "turret": {"T_world_turret": {"xyz": [0.2, 0, 2.0]}},
-        "bodies": [
-            {
-                "name": "box",
-                "model": {"box": [1.0, 1.0, 0.1]},
-                "pose": {"xyz": [-0.0031 + 0.5, 0, 0], "rpy_deg": [0, 0, yaw_deg]},
-                "appearance": {"albedo": 0.8},
-            }
-        ],
-        "render": {"ambient": 1.0, "sky": 0.1, "gain": 200.0, "noise_sigma": 0.0, "blur_sigma_px": 0.0},
-    }
-
-
 @pytest.mark.parametrize("yaw_deg", [0.0, 17.0, 41.0, 58.3])
 def test_edge_pixels_carry_their_area_coverage(yaw_deg):
     """Half a pixel wrong anywhere (the GL pixel centres against DESIGN.md's) and every edge pixel is off by half
     the contrast: each pixel's grey level is its exact coverage to 16 samples' resolution."""
-    scene = scene_from_dict(_top_down(yaw_deg), ".")
+    scene = scene_from_dict(top_down_scene(yaw_deg), ".")
     try:
         r = LiveRenderer(scene)
     except LiveRenderError as exc:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from app.render import Renderer, lattice_offsets, value_noise
-from app.render.measure import edge_offsets, polygon_coverage, visible_edges
+from app.render.measure import edge_offsets, polygon_coverage, top_down_scene, visible_edges
 from app.render.raycast import SceneCaster
 from app.scene import default_scene_path, load_scene, scene_from_dict
 
@@ -63,32 +63,9 @@ def test_frames_are_deterministic(tmp_path, small_scene_dict):
         r.render(0.3, -1)
 
 
-def _top_down_scene(yaw_deg: float, x_edge: float) -> dict:
-    """A camera looking straight down at a box whose left edge is at world x = x_edge (at yaw 0)."""
-    return {
-        "format": "mcit-scene/1",
-        "camera": {
-            "width": 40,
-            "height": 30,
-            "K": [[100, 0, 19.5], [0, 100, 14.5], [0, 0, 1]],
-            "T_world_cam": {"xyz": [0, 0, 2.0], "rpy_deg": [180, 0, 0]},
-        },
-        "turret": {"T_world_turret": {"xyz": [0.2, 0, 2.0]}},
-        "bodies": [
-            {
-                "name": "box",
-                "model": {"box": [1.0, 1.0, 0.1]},
-                "pose": {"xyz": [x_edge + 0.5, 0, 0], "rpy_deg": [0, 0, yaw_deg]},
-                "appearance": {"albedo": 0.8},
-            }
-        ],
-        "render": {"ambient": 1.0, "sky": 0.1, "gain": 200.0, "noise_sigma": 0.0, "blur_sigma_px": 0.0},
-    }
-
-
 @pytest.mark.parametrize("yaw_deg", [0.0, 17.0, 41.0, 58.3])
 def test_edge_pixels_carry_their_exact_area_coverage(yaw_deg):
-    scene = scene_from_dict(_top_down_scene(yaw_deg, -0.0031), ".")
+    scene = scene_from_dict(top_down_scene(yaw_deg, -0.0031), ".")
     img, _ = Renderer(scene).render_float(0.0)
     # Flat shading: the box's image is the convex hull of its projected corners; each pixel's
     # exact coverage is the area of that hull clipped to the pixel's square.
