@@ -353,7 +353,8 @@ class RobotSpec:
 
     urdf_path : absolute path of the URDF. T_world_base : array, shape (4, 4), the URDF's root link in
     the world. home : joint name → position (radians for a revolute or continuous joint, metres for a
-    prismatic one); joints not named are at 0 (brought within their limits). tool : the tool link.
+    prismatic one); joints not named are at 0 (brought within their limits). tool : the tool link (None: "tool0"
+    when the URDF has one, else its deepest link that no finger moves).
     appearance : how the renderer shades every link. home_in_metres : the joints the file gave in
     metres (``home_m``), checked against the URDF's joint kinds.
     """
@@ -361,7 +362,7 @@ class RobotSpec:
     urdf_path: Path
     T_world_base: np.ndarray
     home: dict = field(default_factory=dict)
-    tool: str = "tool0"
+    tool: str | None = None
     appearance: Appearance = Appearance()
     home_in_metres: frozenset = frozenset()
 
@@ -739,8 +740,8 @@ def _robot(r: Any, root: Path, where: str) -> RobotSpec:
             home[str(name)] = _number(value, f"{where}.{key}.{name}") * scale
             if key == "home_m":
                 metres.add(str(name))
-    tool = r.get("tool", "tool0")
-    if not isinstance(tool, str) or not tool:
+    tool = r.get("tool")
+    if tool is not None and (not isinstance(tool, str) or not tool):
         raise SceneError(f"{where}.tool: the name of the tool link expected, got {tool!r}")
     appearance = _appearance(r.get("appearance", {}), f"{where}.appearance")
     return RobotSpec(path, T, home, tool, appearance, frozenset(metres))

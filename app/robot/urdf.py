@@ -184,6 +184,8 @@ def load_scene_robot(spec) -> tuple[RobotModel, np.ndarray]:
     from app.scene import SceneError
 
     model = load_robot(spec.urdf_path)
+    if spec.tool is None:
+        return model, spec.home_q(model)
     if spec.tool not in model.links:
         raise SceneError(f"robot.tool: {spec.urdf_path.name} has no link {spec.tool!r}; its links: {list(model.links)}")
     model = model.with_tool(spec.tool)

@@ -164,3 +164,43 @@ def test_from_home_the_arm_reaches_every_object_top_without_collision(workcell):
             assert r.ok, (name, r.reason)
             path = checker.check_path(joint_path(model, home, r.q, checker.path_step_m))
             assert path.ok, (name, t_s, path)
+
+
+def test_a_real_arms_urdf_with_mesh_links_and_no_tool0_serves_as_the_sites_robot(tmp_path):
+    """A user's own arm (pybullet's KUKA iiwa: mesh links, no tool0, no gripper) named in a scene: its tool is
+    its last link, it is drawn and rendered from its joints, and a Move robot plan is made for it."""
+    import shutil
+    from pathlib import Path
+
+    pybullet_data = pytest.importorskip("pybullet_data")
+    from app.db import Database, seed_from_scene
+    from app.robot.cell import obstacles_of
+    from app.robot.setup import open_robot
+    from app.scene import default_scene_path, load_scene
+    from app.workflows import Site
+
+    shutil.copytree(Path(pybullet_data.getDataPath()) / "kuka_iiwa", tmp_path / "kuka_iiwa")
+    d = json.loads((default_scene_path() / "scene.json").read_text())
+    for v in d["cameras"]:
+        v.pop("video", None)
+    d["robot"] = {
+        "urdf": "kuka_iiwa/model.urdf",
+        "T_world_base": {"xyz": [-0.55, 0.0, 0.0], "rpy_deg": [0, 0, 0]},
+        "home_deg": {"lbr_iiwa_joint_2": 30, "lbr_iiwa_joint_4": -60, "lbr_iiwa_joint_6": 60},
+    }
+    (tmp_path / "scene.json").write_text(json.dumps(d))
+    scene = load_scene(tmp_path)
+    robot = open_robot(scene)
+    try:
+        assert robot.cell.model.tool == "lbr_iiwa_link_7" and robot.cell.finger is None
+        assert len(robot.world.bodies_at(0.0)) > len(scene.bodies)  # its links are rendered
+        db = Database.open(tmp_path / "site.sqlite")
+        seed_from_scene(db, scene)
+        site = Site(scene, db, robot=robot.cell, frames=None)
+        plan = robot.cell.plan_approach(
+            np.array([-0.1, -0.2, 0.0]), np.array([0.0, 0.0, 1.0]), 0.1, obstacles_of(site.objects())
+        )
+        assert plan.ok, plan.reason
+        db.close()
+    finally:
+        robot.close()
