@@ -61,8 +61,9 @@ COLORS: dict[str, tuple[int, int, int]] = {
     "tracked": (255, 80, 200),  # a tracked pose
     "edge_found": (0, 255, 255),  # image edge points that support the tracked pose
     "edge_rejected": (255, 140, 0),  # those the tracker's robust fit rejected
-    "robot": (150, 90, 255),  # the robot at its joint states (violet: no object status has it)
-    "robot_ghost": (255, 255, 255),  # the robot where a previewed motion ends (as a chosen pose's ghost)
+    "robot": (225, 170, 90),  # the robot at its joint states (tan: far from every status and mark colour)
+    "robot_ghost": (255, 255, 255),  # the robot where a previewed motion ends, and the tool's way there
+    "robot_ghost_3d": (40, 160, 90),  # the same in the 3D world (white does not show on its grid)
 }
 
 

@@ -437,7 +437,7 @@ def _collision_text(check, links, margins: dict) -> str:
 
 # ---------------------------------------------------------------------- pick and place
 GRASP_DEPTH_M = 0.03  # the fingertips this far below the body's top (at most half its height)
-GRIP_CLEARANCE_M = 0.015  # each finger this far off the body's side while it comes down
+GRIP_CLEARANCE_M = 0.008  # each finger this far off the body's side while it comes down
 LIFT_M = 0.10  # up and down this far, straight, at the grasp and at the place
 SQUEEZE_M = 0.003  # each finger commanded this far past the body's side (a gripper stops at contact and holds)
 UPRIGHT_COS = np.cos(np.radians(5.0))  # the body's z within 5° of the world's: grasped from above
@@ -477,8 +477,9 @@ def grasp_frame(brep, T_world_obj: np.ndarray, max_opening_m: float) -> tuple[np
     width = float(size[axis])
     if width + 2 * GRIP_CLEARANCE_M > max_opening_m:
         raise ValueError(
-            f"the body is {100 * width:.1f} cm across its narrower side; the gripper opens "
-            f"{100 * max_opening_m:.0f} cm (with {1000 * GRIP_CLEARANCE_M:.0f} mm each side to come down)"
+            f"it is {1000 * width:.1f} mm across its narrower side; the gripper opens {1000 * max_opening_m:.0f} mm "
+            f"and comes down with {1000 * GRIP_CLEARANCE_M:.0f} mm each side: bodies up to "
+            f"{1000 * (max_opening_m - 2 * GRIP_CLEARANCE_M):.0f} mm across"
         )
     depth = min(GRASP_DEPTH_M, 0.5 * size[2])
     top_centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] - depth])

@@ -136,6 +136,8 @@ def draw_marks(
             COLORS["ghost_chosen"] if ghost.chosen else COLORS["ghost"],
             hidden="dashed" if ghost.chosen else "removed",
         )
+    inside = np.all((marks.robot_path >= 0) & (marks.robot_path <= [width - 1, height - 1]), axis=(1, 2))
+    batch.add(marks.robot_path[inside], COLORS["robot_ghost"])  # the tool's way, on the image only
     for links, color in ((marks.robot_ghost, COLORS["robot_ghost"]), (marks.robot_contact, COLORS["click"])):
         for _link, brep, T in links:
             batch.add_wireframe(project_wireframe(camera, brep, T, width=width, height=height), color, hidden="removed")

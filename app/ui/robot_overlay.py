@@ -81,12 +81,12 @@ class RobotOverlay:
             cam = cams[name]
             self.send_lines(self.scene, f"{prefix}/robot", robot_batch(cam, links, pw.width, pw.height), self.z, pw)
             if cam.depth(base[None])[0] > 0 and f"{prefix}/robot_label" not in self._labels:
-                uv = cam.project(base[None])[0]
+                uv = cam.project(base[None])[0] + [-40.0, 0.0]  # beside the base: not over what stands by it
                 self._labels[f"{prefix}/robot_label"] = self.scene.add_label(
                     f"{prefix}/robot_label",
                     cell.model.name,
                     position=tuple(float(v) for v in pw.to_world(uv, self.z)),
-                    anchor="top-center",
+                    anchor="top-right",
                     font_screen_scale=0.8,
                 )
         self._draw_3d(links)
@@ -122,4 +122,4 @@ class RobotGhost3D:
         self._key = key
         for h in self._handles:
             h.remove()
-        self._handles = link_meshes(self.scene, "/robot_ghost3d", links, COLORS["robot_ghost"], 0.4, self.offset)
+        self._handles = link_meshes(self.scene, "/robot_ghost3d", links, COLORS["robot_ghost_3d"], 0.6, self.offset)

@@ -101,6 +101,7 @@ class Marks:
     live_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # range points measured so far
     robot_ghost: list = field(default_factory=list)  # [(link, BRep, T_world)] the robot where a motion ends
     robot_contact: list = field(default_factory=list)  # [(link, BRep, T_world)] the robot where a refused one hits
+    robot_path: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))  # the tool's way there, pixels
 
 
 # How a shortcut key reads on a button (viser's hotkey names → what the keyboard shows).

@@ -85,7 +85,8 @@ class MoveRobot(RobotWork):
             if plan.ok:
                 self.message = (
                     f"Target on {where}: the motion passes every check ({plan.samples_checked} poses checked against "
-                    f"{len(objects)} objects and itself, in {1000 * plan.preview_s:.0f} ms)."
+                    f"the database's {len(objects)} objects and itself, in {1000 * plan.preview_s:.0f} ms). What the "
+                    "database lacks is not checked: look at the video before Move robot."
                 )
             else:
                 self.message = f"Target on {where}: refused: {plan.reason}. The robot did not move."
@@ -105,6 +106,8 @@ class MoveRobot(RobotWork):
         with self.lock:
             if self.state == "moving":
                 self._arrived(stopped=True)
+            else:
+                self._idle_stop()
 
     def accept(self) -> None:
         with self.lock:
@@ -142,12 +145,14 @@ class MoveRobot(RobotWork):
                 f"Arrived: the tool is {1000 * dp:.1f} mm and {dr:.2f}° from the commanded pose (from the joints "
                 "the controller reports). Click another target, or Done."
             )
+        self._outcome = self.message
 
     def tick(self) -> bool:
-        """The robot's motion, followed at the interface's frame rate: its end noticed (and said)."""
+        """The robot's motion, followed at the interface's frame rate: its end noticed (and said); a plan another
+        operator's motion made stale, dropped (``RobotWork.tick``)."""
         with self.lock:
             if self.state != "moving":
-                return False
+                return super().tick()
             if not self._moving():
                 self._arrived()
             return True
@@ -196,7 +201,7 @@ class MoveRobot(RobotWork):
                 tips = np.vstack([tips, plan.T_world_goal[:3, 3]])
                 if np.all(cam.depth(tips) > 0):
                     uv = cam.project(tips)
-                    m.segments = np.stack([uv[:-1], uv[1:]], axis=1)
+                    m.robot_path = np.stack([uv[:-1], uv[1:]], axis=1)
             return m
 
     def summary(self) -> dict[str, Any]:

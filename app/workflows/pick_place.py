@@ -79,6 +79,7 @@ class PickPlace(RobotWork):
         if self.obj.kind == "table":
             raise WorkflowError("the robot cannot pick the table: select the object to move")
         self.object_name = self.obj.name
+        self.place_X: np.ndarray | None = None  # where the operator clicked to put it
         self.written: dict[str, Any] = {}
         self.look: dict[str, Any] = {}
         self._looking: threading.Thread | None = None
@@ -95,6 +96,7 @@ class PickPlace(RobotWork):
             if not np.all(np.isfinite(hit.normal)) or hit.normal[2] < PUT_ON_UP_COS:
                 raise WorkflowError(f"{hit.name} does not face up there: click a flat top (the table)")
             obj, X, support = self.obj, np.asarray(hit.X_world, float), hit.name
+            self.place_X = X
             objects = self.site.objects()
             stands_on = _stands_on(obj, objects)
         from app.robot.cell import obstacles_of
@@ -129,10 +131,12 @@ class PickPlace(RobotWork):
         with self.lock:
             if self.state == "moving":
                 self.state = "click"
-                self.message = (
+                self.message = self._outcome = (
                     f"Stopped: nothing was written. {self.obj.name} may be in the gripper or anywhere on the way: "
                     "look at the video."
                 )
+            else:
+                self._idle_stop()
 
     def accept(self) -> None:
         with self.lock:
@@ -148,7 +152,7 @@ class PickPlace(RobotWork):
             if self.state == "looking":
                 return self._looking is None or not self._looking.is_alive()
             if self.state != "moving":
-                return False
+                return super().tick()
             try:
                 s = self.cell.state()
             except ControllerError as exc:
@@ -266,7 +270,7 @@ class PickPlace(RobotWork):
         with self.lock:
             self.look = look
             self.state = "done"
-            self.message = text
+            self.message = self._outcome = text
 
     # ------------------------------------------------------------------ the panel
     def _step(self) -> Step:
@@ -294,6 +298,8 @@ class PickPlace(RobotWork):
     def marks(self) -> Marks:
         with self.lock:
             m = Marks(selected=self.obj.name)
+            if self.place_X is not None and self.state not in ("done", "looking"):
+                m.targets = self.camera.project(self.place_X[None])
             plan = self.plan
             if plan is not None and plan.ok:
                 m.ghosts = [Ghost(self.obj.model, plan.T_world_obj_place, f"{self.obj.name} here", chosen=True)]

@@ -72,15 +72,50 @@ class RobotWork(Workflow):
         self.message = "Moving: Stop (Space) halts the robot at once."
 
     def cancel(self) -> None:
+        """Esc: a moving robot is stopped (the workflow stays: Esc again closes it); else the workflow closes."""
         try:
             moving = self.cell.state().moving
         except ControllerError:
-            moving = True  # not known: sent Stop all the same (a real robot's stop is its own circuit)
+            self.cell.stop()  # not known: sent Stop all the same (a real robot's stop is its own circuit)
+            moving = False
         if moving:
-            self.cell.stop()
+            self.stop()
+            with self.lock:
+                self.message += " Esc again closes."
+            return
         super().cancel()
         with self.lock:
             self.message = "Cancelled: the robot is stopped; nothing was written."
+
+    def stop(self) -> None:
+        """Space: halt the robot at once (each workflow says what it stopped)."""
+        raise NotImplementedError
+
+    def tick(self) -> bool:
+        """A previewed plan whose start is no longer where the robot stands (another operator moved it) is
+        dropped, and said: Move would be refused, and the ghost and path no longer show what would happen."""
+        with self.lock:
+            plan = self.plan
+            if plan is None or not plan.ok or self.state == "moving":
+                return False
+            try:
+                s = self.cell.state()
+            except ControllerError:
+                return False
+            if s.moving or np.max(np.abs(s.q - plan.path[0])) > 1e-3:
+                self.plan = None
+                self.message = (
+                    "The robot moved since this motion was planned (another operator's motion): click the target "
+                    "again to plan from where it stands."
+                )
+                return True
+            return False
+
+    def _idle_stop(self) -> None:
+        """Space with the robot standing still: said, the last outcome kept."""
+        self.message = f"The robot is not moving: nothing to stop. {self._outcome}".strip()
+
+    _outcome = ""  # the last thing the workflow said of a motion (kept when Space is pressed idle)
 
     def _xyz(self, X: np.ndarray) -> str:
         return " ".join(f"{v:.3f}" for v in X)

@@ -145,3 +145,38 @@ def test_a_reported_joint_state_with_unknown_names_or_nan_is_refused_in_one_line
         joints_in_order(model, names[:-1], q[:-1])
     with pytest.raises(ValueError, match="no finite position"):
         joints_in_order(model, names, np.where(np.arange(model.n) == 2, np.nan, 0.0))
+
+
+def test_esc_during_a_motion_stops_the_robot_and_keeps_the_workflow_and_space_idle_keeps_the_outcome(site):
+    _, wf = _session_with_plan(site)
+    wf.move()
+    wf.cancel()  # Esc while it moves
+    assert not site.robot.state().moving and not wf.finished
+    assert wf.message.startswith("Stopped:") and wf.message.endswith("Esc again closes."), wf.message
+    wf.stop()  # Space with the robot still
+    assert wf.message.startswith("The robot is not moving: nothing to stop. Stopped:"), wf.message
+    wf.cancel()
+    assert wf.finished
+
+
+def test_a_plan_another_operators_motion_made_stale_is_dropped_and_said(site):
+    _, first = _session_with_plan(site)
+    _, second = _session_with_plan(site, X=(0.2, -0.4, 0.0))
+    second.move()
+    _run_until_done(second)
+    assert first.tick() and first.plan is None
+    assert "moved since this motion was planned" in first.message
+    assert "move" not in first.current_step().enabled
+
+
+def test_pick_and_place_takes_a_box_modelled_a_little_wider_than_its_nine_centimetres(site, scene):
+    from core.brep import BRep
+
+    b = scene.body("unknown_box")
+    model = BRep.box(0.0906, 0.0942, 0.14)  # as a new operator's Model object gave it
+    site.db.add_object("box_1", "box", model, b.T_world_obj, status="modelled", client="setup")
+    session = Session(site)
+    session.select("box_1")
+    wf = session.start("pick_place")
+    wf.click(site.camera.project(np.array([[-0.05, -0.38, 0.0]]))[0])
+    assert wf.plan.ok, wf.message
