@@ -28,6 +28,8 @@ START_BUTTONS: tuple[tuple[str, str], ...] = (
     ("Model object", "model_object"),
     ("Designate target", "designate"),
     ("Move robot", "move_robot"),
+    ("Calibrate robot", "calibrate_robot"),
+    ("Calibrate camera from robot", "calibrate_camera_robot"),
     ("Track", "track"),
     ("History", "history"),
 )
