@@ -337,7 +337,8 @@ class CalibrateCameraFromRobot(Workflow):
         if self.result is not None:
             return Step(
                 "review",
-                f"{self._solved_text()}. {{accept}} stores it; more poses ({{go}}) and {{solve}} again improve it.",
+                f"{self._solved_text()}. {{accept}} stores it"
+                + ("; more poses ({go}) and {solve} again improve it." if "go" in has else "."),
                 frozenset(has | {"accept"}),
             )
         more = max(0, need - len(self.order))

@@ -456,7 +456,9 @@ class CalibrateRobot(Workflow):
         if self.fit is not None:
             return Step(
                 "review",
-                f"{self._solved_text()}. {{accept}} stores it; more edges (or {{go}}) and {{solve}} again improve it.",
+                f"{self._solved_text()}. {{accept}} stores it; more edges"
+                + (" (or {go})" if "go" in has else "")
+                + " and {solve} again improve it.",
                 frozenset(has | {"accept", "solve"}),
             )
         return Step(

@@ -5,9 +5,11 @@ plans the motion to the next pose with the cell's machinery (``RobotCell.plan_jo
 joint path, else through home, every sample checked against every database object with its margin and
 against the robot itself) and sends it; ``tick()`` follows it at the interface's frame rate and notices
 its end: arrived (the joints within ``ARRIVED_RAD`` of the pose), stopped short (Stop), or a fault the
-controller reports. Once arrived, the video is given ``SETTLE_S`` of scene time so that the newest frame
-shows the robot at rest; then ``settled`` is True and the workflow takes a frozen frame (the panel
-freezes the newest when ``follows_live`` says nothing). ``q`` is the pose's joints as the controller
+controller reports. Once arrived, the video is given two new frames and ``SETTLE_S`` of scene time, so that
+the newest frame shows the robot at rest (a frame is drawn from the site's state when its rendering starts,
+and under load that can be a good fraction of a second before it arrives: the frame that arrives just after
+the robot stopped may show it moving); then the state is "at" and the workflow takes a frozen frame (the
+panel freezes the newest when ``follows_live`` says nothing). ``q`` is the pose's joints as the controller
 reported them on arrival: what the calibration computes the robot's shapes from.
 """
 
@@ -41,7 +43,7 @@ class RobotTour:
         self.index = -1
         self.state = "idle"
         self.arrived: dict[int, np.ndarray] = {}
-        self._arrived_at_s = 0.0
+        self._frame_times: list[float] = []
         spec = getattr(site.scene, "robot", None)
         self.home = spec.home_q(self.cell.model) if spec is not None else None
 
@@ -99,9 +101,15 @@ class RobotTour:
         up: the frame can be frozen), else None."""
         if self.state == "moving" and not self.moving():
             return self._ended()
-        if self.state == "settling" and self.site.time_s() >= self._arrived_at_s + SETTLE_S:
-            self.state = "at"
-            return ""
+        if self.state == "settling":
+            t = self.site.time_s()
+            if t != self._frame_times[-1]:
+                self._frame_times.append(t)
+            # two new frames since the arrival (the second was rendered after the first arrived, itself after the
+            # arrival was seen: a frame rendering while the robot moved is not the one frozen), and SETTLE_S
+            if len(self._frame_times) >= 3 and (t - self._frame_times[0] >= SETTLE_S or t < self._frame_times[0]):
+                self.state = "at"
+                return ""
         return None
 
     def _ended(self) -> str:
@@ -118,7 +126,7 @@ class RobotTour:
             return f"The robot did not reach pose {k + 1} ({why}): Go sends it there again."
         self.arrived[k] = np.asarray(s.q, float).copy()
         self.state = "settling"
-        self._arrived_at_s = self.site.time_s()
+        self._frame_times = [self.site.time_s()]  # the video's time at the arrival, then each new frame's
         return f"At pose {k + 1} of {self.n}."
 
     def follows_live(self) -> str:
