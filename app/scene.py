@@ -32,7 +32,10 @@ docs/scene-format.md is the full reference)::
       "render": {"light_dir": [-0.4, -0.5, 1], "ambient": 0.35, "noise_sigma": 2.0,
                  "blur_sigma_px": 0.5, "seed": 8, "aa_samples": 89, "sky": 0.2},  # optional
       "robot": {"urdf": "arm.urdf", "T_world_base": <pose>,                   # optional
+                "T_world_base_nominal": <pose>,                               # optional
                 "home_deg": {"shoulder_pan_joint": 180, ...}, "home_m": {"finger_joint": 0.03},
+                "calibration_base_deg": [[-90, -40, 55, -180, -120, -15], ...],  # optional
+                "calibration_camera_deg": [[...], ...],                           # optional
                 "tool": "tool0", "appearance": {...}}
     }
 
@@ -50,6 +53,12 @@ The robot (``Scene.robot``, a ``RobotSpec``) is not one of the bodies: the prere
 rendered without it. Its home joint positions are by joint name, revolute and continuous joints in
 degrees (``home_deg``), prismatic ones in metres (``home_m``); ``RobotSpec.home_q(model)`` checks them
 against the URDF's joints and limits (``app.robot.urdf.load_scene_robot`` loads both).
+``T_world_base`` is where the base truly stands (the emulated site's truth); ``T_world_base_nominal``
+is where the drawing says it stands (default: the same), what a new database believes until the base
+is calibrated from the video. ``calibration_base_deg`` and ``calibration_camera_deg`` are the joint
+configurations the calibration workflows send the robot to (``RobotSpec.calibration_qs``): each one
+angle in degrees per actuated joint that is not prismatic, in the URDF's order, the prismatic ones (the
+gripper) at their lower limits (closed).
 
 Every block is checked: a missing or malformed field, or a key the format does not know (a
 typo), raises ``SceneError`` (a ``ValueError``) naming the file and the field. Keys starting with
@@ -352,11 +361,13 @@ class RobotSpec:
     """The site's robot: its URDF, where its base stands, its home joint positions, its tool and its shading.
 
     urdf_path : absolute path of the URDF. T_world_base : array, shape (4, 4), the URDF's root link in
-    the world. home : joint name → position (radians for a revolute or continuous joint, metres for a
+    the world (the truth). home : joint name → position (radians for a revolute or continuous joint, metres for a
     prismatic one); joints not named are at 0 (brought within their limits). tool : the tool link (None: "tool0"
     when the URDF has one, else its deepest link that no finger moves).
     appearance : how the renderer shades every link. home_in_metres : the joints the file gave in
-    metres (``home_m``), checked against the URDF's joint kinds.
+    metres (``home_m``), checked against the URDF's joint kinds. T_world_base_nominal : (4, 4) where the
+    drawing puts the base (None: at ``T_world_base``). calibration : {"base": ..., "camera": ...}, each a
+    tuple of configurations (tuples of degrees, one per actuated joint that is not prismatic).
     """
 
     urdf_path: Path
@@ -365,6 +376,34 @@ class RobotSpec:
     tool: str | None = None
     appearance: Appearance = Appearance()
     home_in_metres: frozenset = frozenset()
+    T_world_base_nominal: np.ndarray | None = None
+    calibration: dict = field(default_factory=dict)
+
+    @property
+    def nominal_base(self) -> np.ndarray:
+        """Where the drawing puts the base (4, 4): what a new database believes until it is calibrated."""
+        return self.T_world_base if self.T_world_base_nominal is None else self.T_world_base_nominal
+
+    def calibration_qs(self, model, which: str) -> np.ndarray:
+        """The joint configurations (k, n) of ``calibration_<which>_deg`` ("base" or "camera") in ``model``'s
+        joint order, the prismatic joints at their lower limits; (0, n) when the scene gives none. SceneError
+        naming the field for a configuration of the wrong length or out of the joint limits."""
+        field_name = f"robot.calibration_{which}_deg"
+        turning = [k for k, name in enumerate(model.joint_names) if model.joint(name).kind != "prismatic"]
+        out = []
+        for i, angles in enumerate(self.calibration.get(which, ())):
+            if len(angles) != len(turning):
+                names = [model.joint_names[k] for k in turning]
+                raise SceneError(
+                    f"{field_name}[{i}]: {len(angles)} angles for the {len(turning)} turning joints {names}"
+                )
+            q = np.where(np.isfinite(model.lower), model.lower, 0.0).astype(float)
+            q[turning] = np.radians(np.asarray(angles, float))
+            beyond = model.within_limits(q)
+            if beyond is not None:
+                raise SceneError(f"{field_name}[{i}] puts {beyond}")
+            out.append(q)
+        return np.array(out).reshape(-1, model.n)
 
     def home_q(self, model) -> np.ndarray:
         """The home joint vector (n,) in ``model``'s joint order (a ``core.robot.RobotModel`` of this URDF).
@@ -479,7 +518,17 @@ _RF_KEYS = ("sigma_range_m", "min_range_m", "max_range_m")
 _BODY_KEYS = ("name", "kind", "status", "model", "pose", "motion", "appearance")
 _APPEARANCE_KEYS = ("albedo", "texture", "texture_scale_m")
 _VIDEO_KEYS = ("file", "fps", "duration_s")
-_ROBOT_KEYS = ("urdf", "T_world_base", "home_deg", "home_m", "tool", "appearance")
+_ROBOT_KEYS = (
+    "urdf",
+    "T_world_base",
+    "T_world_base_nominal",
+    "home_deg",
+    "home_m",
+    "calibration_base_deg",
+    "calibration_camera_deg",
+    "tool",
+    "appearance",
+)
 _RENDER_KEYS = ("light_dir", "ambient", "gain", "sky", "noise_sigma", "blur_sigma_px", "seed", "aa_samples")
 _TOP_KEYS = (
     "format",
@@ -744,7 +793,24 @@ def _robot(r: Any, root: Path, where: str) -> RobotSpec:
     if tool is not None and (not isinstance(tool, str) or not tool):
         raise SceneError(f"{where}.tool: the name of the tool link expected, got {tool!r}")
     appearance = _appearance(r.get("appearance", {}), f"{where}.appearance")
-    return RobotSpec(path, T, home, tool, appearance, frozenset(metres))
+    nominal = None
+    if "T_world_base_nominal" in r:
+        nominal = parse_pose(r["T_world_base_nominal"], f"{where}.T_world_base_nominal")
+    calibration = {which: _configurations(r, f"calibration_{which}_deg", where) for which in ("base", "camera")}
+    return RobotSpec(path, T, home, tool, appearance, frozenset(metres), nominal, calibration)
+
+
+def _configurations(r: dict, key: str, where: str) -> tuple:
+    """A list of joint configurations (each a list of angles in degrees) as a tuple of tuples."""
+    values = r.get(key, [])
+    if not isinstance(values, list):
+        raise SceneError(f"{where}.{key}: a list of configurations (lists of angles in degrees) expected")
+    out = []
+    for i, angles in enumerate(values):
+        if not isinstance(angles, list) or not angles:
+            raise SceneError(f"{where}.{key}[{i}]: a list of angles in degrees expected, got {angles!r}")
+        out.append(tuple(_number(a, f"{where}.{key}[{i}]") for a in angles))
+    return tuple(out)
 
 
 def _views(d: dict, root: Path, bodies: list[Body], where: str) -> tuple[SceneView, ...]:

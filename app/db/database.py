@@ -871,8 +871,9 @@ class Database:
         note: str | None = None,
     ) -> CalibrationRecord:
         """Store a calibration (one transaction, logged): kind "camera" with data {"C": (3, 4),
-        "width", "height", ...} or "turret" with data {"T_world_turret": (4, 4), ...}; residuals as
-        the method gives them (pixels, metres)."""
+        "width", "height", ...}, "turret" with data {"T_world_turret": (4, 4), ...} or "robot_base" with
+        data {"T_world_base": (4, 4), "nominal": bool, "cov": (6, 6), ...}; residuals as the method gives
+        them (pixels, metres)."""
         if not isinstance(kind, str) or not kind:
             raise ValueError(f"kind must be a non-empty string ('camera', 'turret'), got {kind!r}")
         if not isinstance(data, Mapping):
@@ -883,6 +884,8 @@ class Database:
                 raise ValueError("a camera calibration needs data['C'], a finite 3×4 matrix")
         if kind == "turret":
             check_T(np.asarray(data.get("T_world_turret"), dtype=float), "data['T_world_turret']")
+        if kind == "robot_base":
+            check_T(np.asarray(data.get("T_world_base"), dtype=float), "data['T_world_base']")
         data_json, res_json = to_json(dict(data)), to_json(residuals)
         with self.transaction() as conn:
             return self._insert_calibration(conn, kind, data_json, res_json, method, client, note)

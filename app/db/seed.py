@@ -31,8 +31,9 @@ def dimensions_of(model: BRep, kind: str) -> dict[str, float]:
 
 
 def seed_from_scene(db: Database, scene: Scene, *, client: str = "seed") -> dict[str, Any]:
-    """Write the scene's "known" bodies (status known, pose at t = 0), its camera C and its
-    turret pose as the first calibrations, all in one transaction.
+    """Write the scene's "known" bodies (status known, pose at t = 0), its camera C, its turret
+    pose and, with a robot, its base's nominal pose (``RobotSpec.nominal_base``: the drawing's, marked
+    ``nominal`` until the base is calibrated) as the first calibrations, all in one transaction.
 
     Raises ValueError (nothing written) when the database already has objects or calibrations.
     Returns {"objects": [names], "calibrations": [ids]}.
@@ -78,4 +79,14 @@ def seed_from_scene(db: Database, scene: Scene, *, client: str = "seed") -> dict
                 client=client,
             ).id
         )
+        if scene.robot is not None:
+            cal_ids.append(
+                db.add_calibration(
+                    "robot_base",
+                    {"T_world_base": scene.robot.nominal_base, "nominal": True},
+                    None,
+                    method=method,
+                    client=client,
+                ).id
+            )
     return {"objects": names, "calibrations": cal_ids}

@@ -12,6 +12,9 @@ modelled objects, ``STALE_MARGIN_M`` for stale ones (their pose is doubtful: the
 and against itself. A path that collides or leaves a joint's limits is refused, naming the object or
 the joint; nothing moves.
 
+A motion to given joint positions (``plan_joints``: the calibration workflows' poses) is checked the same way,
+along the straight joint path or, when that is refused, through given intermediate configurations.
+
 ``move(plan)`` sends a checked plan to the controller, refused when the robot moved since it was
 planned, when it is moving, or when the plan was refused. ``stop()`` halts it at once.
 """
@@ -26,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.robot import RobotModel, joint_path, solve_ik
+from core.transforms import check_T
 
 from .collision import CollisionChecker
 from .controller import ControllerError, JointState
@@ -193,6 +197,13 @@ class RobotCell:
         q = self._q(q)
         return self.T_world_base @ self.model.tool_pose(q)
 
+    def set_base(self, T_world_base: np.ndarray) -> None:
+        """Use another base pose (a calibration, or its undo): plans, checks and the drawing go through it."""
+        T = check_T(T_world_base, "T_world_base")
+        with self._check_lock:
+            self.T_world_base = T
+            self.checker.T_world_base = T
+
     def link_breps(self, q: np.ndarray | None = None) -> list:
         """[(link, BRep, T_world_shape)] of the drawn shapes at q (default: the last joint state)."""
         return self.model.link_breps(self._q(q), self.T_world_base)
@@ -267,6 +278,36 @@ class RobotCell:
         return MovePlan(
             best, True, "", T_goal, X, n, standoff_m, warnings, time.perf_counter() - t0, samples_checked=checked
         )
+
+    def plan_joints(self, q_goal, obstacles: Sequence[Obstacle], via: Sequence[np.ndarray] = ()) -> MovePlan:
+        """Plan and check a motion to the joint positions ``q_goal`` (n,): the straight joint path, else through
+        each configuration of ``via`` in turn (e.g. home); refused naming the joint or what it would hit."""
+        t0 = time.perf_counter()
+        q0 = self.state().q
+        q_goal = self.model.as_q(q_goal, "q_goal")
+        T = self.T_world_base @ self.model.tool_pose(q_goal)
+        beyond = self.model.within_limits(q_goal)
+        if beyond is not None:
+            return self._refused(q0, T[:3, 3], -T[:3, 2], 0.0, t0, f"the pose puts {beyond}", [])
+        margins = {o.name: o.margin_m for o in obstacles}
+        reason, checked = "", 0
+        with self._check_lock:
+            self.checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in obstacles])
+            for legs in ([q0, q_goal], *([q0, np.asarray(v, float), q_goal] for v in via)):
+                path = np.vstack(
+                    [
+                        joint_path(self.model, a, b, self.max_step_m)[1 if k else 0 :]
+                        for k, (a, b) in enumerate(zip(legs, legs[1:]))
+                    ]
+                )
+                check = self.checker.check_path(path)
+                checked += len(path)
+                if check.ok:
+                    return MovePlan(path, True, "", T, T[:3, 3], -T[:3, 2], 0.0, [], time.perf_counter() - t0, checked)
+                reason = reason or _collision_text(check, self.model.links, margins)
+        plan = self._refused(q0, T[:3, 3], -T[:3, 2], 0.0, t0, reason, [])
+        plan.samples_checked = checked
+        return plan
 
     @staticmethod
     def _near(o: Obstacle, X: np.ndarray) -> bool:

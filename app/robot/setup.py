@@ -81,7 +81,9 @@ def open_robot(
 ) -> RobotSetup | None:
     """The scene's robot, emulated (see the module docstring); None when the scene has no robot block.
 
-    T_world_base : the base's calibrated pose (the database's), default the scene's nominal one.
+    T_world_base : the base's calibrated pose (the database's), default the scene's nominal one (the drawing's,
+    ``RobotSpec.nominal_base``; a ``Site`` then adopts the database's latest calibration of it). The emulated
+    world keeps the scene's true base (``RobotSpec.T_world_base``).
     """
     spec = scene.robot
     if spec is None:
@@ -92,7 +94,7 @@ def open_robot(
     controller = EmulatedController(model.joint_names, model.lower, model.upper, model.velocity, q0)
     try:
         world = EmulatedWorld(scene, model, controller, finger_joint=_finger(model), clock=clock)
-        T = spec.T_world_base if T_world_base is None else T_world_base
+        T = spec.nominal_base if T_world_base is None else T_world_base
         feed = None
         if publish is not None:
             feed = RobotFeed(publish, model.name, lambda q: cell.T_world_base @ model.tool_pose(q), world.carried_name)

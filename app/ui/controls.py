@@ -29,6 +29,8 @@ START_BUTTONS: tuple[tuple[str, str], ...] = (
     ("Designate target", "designate"),
     ("Move robot", "move_robot"),
     ("Pick and place", "pick_place"),
+    ("Calibrate robot", "calibrate_robot"),
+    ("Calibrate camera from robot", "calibrate_camera_robot"),
     ("Track", "track"),
     ("History", "history"),
 )

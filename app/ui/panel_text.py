@@ -47,6 +47,9 @@ class PanelText:
         step = None if wf is None else wf.current_step()
         if wf is None:
             title, report = Md("**No workflow.** ") + idle_text(selected), ""
+            base = panel.app.site.robot_base_warning()
+            if base:  # said while nothing is under way: a Move would be asked about it once more
+                title += Md("\n\n⚠ {} (Calibrate robot).").format(base.rsplit(".", 1)[0])
         else:
             title, report = self._workflow_text(wf, step)
         if panel.error:

@@ -8,6 +8,8 @@ No viser here.
 
 from .base import Cancelled, Ghost, Marks, Workflow, WorkflowError
 from .calibrate_camera import CalibrateCamera
+from .calibrate_camera_robot import CalibrateCameraFromRobot
+from .calibrate_robot import CalibrateRobot
 from .calibrate_turret import CalibrateTurret
 from .designate import DesignateTarget, Target
 from .history import History
@@ -23,6 +25,8 @@ from .update_pose import UpdatePose
 
 for _cls in (
     CalibrateCamera,
+    CalibrateCameraFromRobot,
+    CalibrateRobot,
     CalibrateTurret,
     DesignateTarget,
     History,
@@ -42,6 +46,8 @@ __all__ = [
     "Workflow",
     "WorkflowError",
     "CalibrateCamera",
+    "CalibrateCameraFromRobot",
+    "CalibrateRobot",
     "CalibrateTurret",
     "History",
     "DesignateTarget",

@@ -158,6 +158,11 @@ class MoveRobot(RobotWork):
             return True
 
     # ------------------------------------------------------------------ the panel
+    def question(self, action: str, *args: Any) -> str:
+        """Move with the robot's base not calibrated (the drawing's pose) is asked once more, saying why."""
+        why = self.site.robot_base_warning() if action == "move" else ""
+        return f"{why}, or move it anyway." if why else super().question(action, *args)
+
     def choices(self, action: str) -> list[tuple[str, Any]]:
         if action == "set_standoff":
             return [(f"{mm} mm", mm) for mm in STANDOFFS_MM]

@@ -3,7 +3,7 @@ the database, the devices and the scene clock, shared by every operator.
 
 Workflows read the site through snapshots (``objects()``, ``camera``) and write only through
 ``Site``'s named methods (``update_pose``, ``add_object``, ``set_status``, ``undo``, ``restore``,
-``set_camera``, ``set_turret``), each one database transaction; every write bumps ``revision`` so
+``set_camera``, ``set_turret``, ``set_robot_base``), each one database transaction; every write bumps ``revision`` so
 that every client's overlay redraws. ``poll()`` also notices changes made by another process (the
 ``mcit db`` command, a second server on the same file).
 
@@ -97,6 +97,9 @@ METHOD_WORDS = {
     "operator": "by hand",
     "dlt": "camera matrix from clicked points",
     "pnp": "camera pose from clicked points (lens known)",
+    "robot edges": "robot's base from its clicked edges",
+    "robot dlt": "camera matrix from the robot's tool tip",
+    "robot pnp": "camera pose from the robot's tool tip (lens known)",
     "undo": "undo",
     "restore": "brought back",
 }
@@ -133,7 +136,7 @@ def _change_sentence(rec: Any, undone: Any = None) -> str:
     name = rec.object_name or "an object"
     redo = is_redo(rec, undone)
     if rec.action == "calibration":
-        kind = (rec.after or {}).get("kind", "").replace("camera:", "camera ")  # "camera:side": camera side
+        kind = (rec.after or {}).get("kind", "").replace("camera:", "camera ").replace("_", " ")  # "camera side"
         if redo:
             return f"redid change #{undone.undoes} ({kind} calibration; undid undo #{rec.undoes})"
         if rec.undoes is not None:
@@ -205,7 +208,9 @@ class Site:
         prerecorded video at the scene time, if it has one; None: no frames (clicks are used as
         clicked); the interface installs its video grabber (``set_frames``).
     robot : app.robot.cell.RobotCell or None
-        The site's robot (its model, controller and calibrated base), None for a site with none.
+        The site's robot (its model, controller and calibrated base), None for a site with none. Its base
+        is the database's latest "robot_base" calibration (``robot_base_nominal`` while that is the scene's
+        nominal pose, or while there is none), adopted here and whenever it changes.
     """
 
     def __init__(
@@ -239,6 +244,8 @@ class Site:
         self._camera_covs: dict[str, np.ndarray | None] = dict.fromkeys(self._views)
         self._turret_cov: np.ndarray | None = None
         self._T_world_turret = np.asarray(scene.turret.T_world_turret, float).copy()
+        self._robot_base_nominal = True  # the robot's base is the drawing's until a calibration says otherwise
+        self._robot_base_cov: np.ndarray | None = None
         self.beam_X_world: np.ndarray | None = None  # the range finder's last measured point (shown)
         # The change feed: changes from the history after the one that was last when the site opened.
         self._feed: deque[Change] = deque(maxlen=FEED_LENGTH)
@@ -340,6 +347,27 @@ class Site:
         with self.lock:
             return self._camera_covs[name]
 
+    @property
+    def robot_base_nominal(self) -> bool:
+        """True while the robot's base is the scene's nominal pose (the drawing's), not calibrated from the video."""
+        with self.lock:
+            return self._robot_base_nominal
+
+    @property
+    def robot_base_cov(self) -> np.ndarray | None:
+        """The (6, 6) covariance of the robot base's calibration ((δt, δr), world frame), None while nominal."""
+        with self.lock:
+            return None if self._robot_base_cov is None else self._robot_base_cov.copy()
+
+    def robot_base_warning(self) -> str:
+        """One line for the operator while the robot's base is nominal ("" when calibrated, or no robot)."""
+        if self.robot is None or not self.robot_base_nominal:
+            return ""
+        return (
+            "The robot's base is not calibrated: its pose is the drawing's, maybe centimetres off, so the robot may "
+            "miss its target and the clearance checks may be wrong. Calibrate robot first"
+        )
+
     def time_s(self) -> float:
         """The scene time, seconds (the video's position)."""
         return float(self.clock())
@@ -429,6 +457,14 @@ class Site:
             self._turret_cov = None if tur.data.get("cov") is None else np.asarray(tur.data["cov"], float)
             self._cal_ids["turret"] = tur.id
             changed = True
+        base = self.db.latest_calibration("robot_base") if self.robot is not None else None
+        if base is not None and self._cal_ids.get("robot_base") != base.id:
+            d = base.data
+            self.robot.set_base(np.asarray(d["T_world_base"], float))
+            self._robot_base_nominal = bool(d.get("nominal", False))
+            self._robot_base_cov = None if d.get("cov") is None else np.asarray(d["cov"], float)
+            self._cal_ids["robot_base"] = base.id
+            changed = True
         return changed
 
     def set_camera(
@@ -481,6 +517,33 @@ class Site:
             self._T_world_turret = np.asarray(T_world_turret, float).copy()
             self._turret_cov = np.asarray(cov, float).copy()
             self._cal_ids["turret"] = rec.id
+            self.revision += 1
+        self._feed_after_write()
+
+    def set_robot_base(
+        self,
+        T_world_base: np.ndarray,
+        *,
+        cov: np.ndarray,
+        rms_px: float,
+        residuals_px: np.ndarray,
+        measurements: dict,
+        client: str,
+        method: str = "robot edges",
+    ) -> None:
+        """Store a calibration of the robot's base (one transaction) and use it from now on: plans, the overlay
+        and the feed's tool poses go through it. cov : (6, 6) of (δt, δr) in the world frame about the base."""
+        if self.robot is None:
+            raise ValueError("this site has no robot: there is no base to calibrate")
+        T = np.asarray(T_world_base, float)
+        data = {"T_world_base": T, "nominal": False, "cov": np.asarray(cov, float), "rms_px": float(rms_px)}
+        data.update(measurements)
+        rec = self.db.add_calibration("robot_base", data, np.asarray(residuals_px, float), method=method, client=client)
+        with self.lock:
+            self.robot.set_base(T)
+            self._robot_base_nominal = False
+            self._robot_base_cov = np.asarray(cov, float).copy()
+            self._cal_ids["robot_base"] = rec.id
             self.revision += 1
         self._feed_after_write()
 

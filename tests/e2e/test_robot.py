@@ -22,16 +22,21 @@ STANDOFF_M = 0.02  # the workflow's default standoff
 
 class LiveRobotSite(Interface):
     """``mcit serve``'s own interface (build_interface) on the bundled scene: the site rendered live with its
-    robot, no range finder and turret, a fresh database and a feed file."""
+    robot, no range finder and turret, a fresh database and a feed file. ``base_calibrated``: the database
+    starts with the robot's base calibrated at its true pose (as after Calibrate robot), else at the drawing's
+    nominal pose (as a new database does)."""
 
-    def __init__(self, tmp_path):
+    def __init__(self, tmp_path, base_calibrated: bool = True):
         from app.ui.serve import add_serve_parser, build_interface
 
         parser = argparse.ArgumentParser()
         add_serve_parser(parser.add_subparsers(dest="command"))
         self.feed_path = tmp_path / "feed.jsonl"
+        db_path = tmp_path / "site.sqlite"
+        if base_calibrated:
+            _calibrated_database(db_path)
         args = parser.parse_args(
-            ["serve", "--port", str(free_port()), "--db", str(tmp_path / "site.sqlite"), "--no-devices"]
+            ["serve", "--port", str(free_port()), "--db", str(db_path), "--no-devices"]
             + ["--feed-file", str(self.feed_path)]
         )
         self.server, self.closers = build_interface(args)
@@ -55,6 +60,18 @@ class LiveRobotSite(Interface):
             close()
         if self.csp_refusals:
             raise AssertionError(f"the page's Content-Security-Policy refused: {self.csp_refusals[:3]}")
+
+
+def _calibrated_database(path) -> None:
+    """A new database of the bundled scene whose robot base is calibrated at its true pose."""
+    from app.db import Database, seed_from_scene
+    from app.scene import default_scene_path, load_scene
+
+    scene = load_scene(default_scene_path())
+    with Database.open(path) as db:
+        seed_from_scene(db, scene)
+        base = {"T_world_base": scene.robot.T_world_base, "nominal": False}
+        db.add_calibration("robot_base", base, None, method="test set-up", client="test")
 
 
 @pytest.fixture

@@ -1,0 +1,140 @@
+"""The robot sent through a calibration's preset joint configurations, one at a time, each motion checked.
+
+A calibration workflow (Calibrate robot, Calibrate camera from robot) composes a ``RobotTour``: ``go()``
+plans the motion to the next pose with the cell's machinery (``RobotCell.plan_joints``: the straight
+joint path, else through home, every sample checked against every database object with its margin and
+against the robot itself) and sends it; ``tick()`` follows it at the interface's frame rate and notices
+its end: arrived (the joints within ``ARRIVED_RAD`` of the pose), stopped short (Stop), or a fault the
+controller reports. Once arrived, the video is given two new frames and ``SETTLE_S`` of scene time, so that
+the newest frame shows the robot at rest (a frame is drawn from the site's state when its rendering starts,
+and under load that can be a good fraction of a second before it arrives: the frame that arrives just after
+the robot stopped may show it moving); then the state is "at" and the workflow takes a frozen frame (the
+panel freezes the newest when ``follows_live`` says nothing). ``q`` is the pose's joints as the controller
+reported them on arrival: what the calibration computes the robot's shapes from.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.robot.controller import ControllerError
+
+from .base import WorkflowError
+
+__all__ = ["RobotTour", "ARRIVED_RAD", "SETTLE_S"]
+
+ARRIVED_RAD = 2e-3  # a joint this near its pose has arrived (the emulated controller's are exact)
+SETTLE_S = 0.4  # scene time given to the video after arrival before a frame is frozen
+
+
+class RobotTour:
+    """The poses ``qs`` (k, n) visited in order by the site's robot (module docstring).
+
+    index : the pose the robot is at or going to (−1 before the first). state : "idle" (not at a pose),
+    "moving", "settling" (arrived, waiting for the video), "at" (settled at pose ``index``).
+    arrived : {pose index: the joints (n,) reported on arrival}.
+    """
+
+    def __init__(self, site, qs: np.ndarray, what: str):
+        self.site = site
+        self.cell = site.robot
+        self.qs = np.asarray(qs, float).reshape(-1, self.cell.model.n)
+        self.what = what  # "base" or "camera": which of the scene's calibration poses, in messages
+        self.index = -1
+        self.state = "idle"
+        self.arrived: dict[int, np.ndarray] = {}
+        self._frame_times: list[float] = []
+        spec = getattr(site.scene, "robot", None)
+        self.home = spec.home_q(self.cell.model) if spec is not None else None
+
+    @property
+    def n(self) -> int:
+        return len(self.qs)
+
+    @property
+    def next_index(self) -> int | None:
+        """The pose Go sends the robot to (None after the last)."""
+        k = self.index + 1 if self.state in ("at", "settling") or self.index < 0 else self.index
+        return k if k < self.n else None
+
+    @property
+    def at(self) -> int | None:
+        """The pose the robot is settled at, None when it is not at one."""
+        return self.index if self.state == "at" else None
+
+    def moving(self) -> bool:
+        """The controller says a motion is under way (one that stopped answering: not known to move)."""
+        try:
+            return bool(self.cell.state().moving)
+        except ControllerError:
+            return False
+
+    def go(self) -> str:
+        """Plan and send the motion to the next pose; what to tell the operator. WorkflowError (nothing moves)
+        when there is none left, the robot moves, or the motion is refused."""
+        from app.robot.cell import obstacles_of
+
+        k = self.next_index
+        if k is None:
+            raise WorkflowError(f"the robot has been to all {self.n} poses: Solve, or Cancel")
+        if self.moving():
+            raise WorkflowError("the robot is moving: Stop it (Space) or wait for it to stop")
+        via = [] if self.home is None else [self.home]
+        plan = self.cell.plan_joints(self.qs[k], obstacles_of(self.site.objects()), via=via)
+        if not plan.ok:
+            raise WorkflowError(f"the motion to pose {k + 1} was refused: {plan.reason}. The robot did not move")
+        try:
+            self.cell.move(plan)
+        except ControllerError as exc:
+            raise WorkflowError(str(exc)) from None
+        self.index, self.state = k, "moving"
+        return (
+            f"Moving to pose {k + 1} of {self.n} (its path checked: {plan.samples_checked} poses): Stop (Space) "
+            "halts it."
+        )
+
+    def stop(self) -> None:
+        self.cell.stop()
+
+    def tick(self) -> str | None:
+        """Follow the motion; what to tell the operator when something changed (its end, or the video caught
+        up: the frame can be frozen), else None."""
+        if self.state == "moving" and not self.moving():
+            return self._ended()
+        if self.state == "settling":
+            t = self.site.time_s()
+            if t != self._frame_times[-1]:
+                self._frame_times.append(t)
+            # two new frames since the arrival (the second was rendered after the first arrived, itself after the
+            # arrival was seen: a frame rendering while the robot moved is not the one frozen), and SETTLE_S
+            if len(self._frame_times) >= 3 and (t - self._frame_times[0] >= SETTLE_S or t < self._frame_times[0]):
+                self.state = "at"
+                return ""
+        return None
+
+    def _ended(self) -> str:
+        k = self.index
+        try:
+            s = self.cell.state()
+        except ControllerError as exc:
+            self.state = "idle"
+            return f"{exc}. Look at the video, then Go again."
+        off = float(np.max(np.abs(s.q - self.qs[k])))
+        if s.fault or off > ARRIVED_RAD:
+            self.state = "idle"
+            why = f"fault: {s.fault}" if s.fault else f"stopped {np.degrees(off):.1f}° short of it"
+            return f"The robot did not reach pose {k + 1} ({why}): Go sends it there again."
+        self.arrived[k] = np.asarray(s.q, float).copy()
+        self.state = "settling"
+        self._frame_times = [self.site.time_s()]  # the video's time at the arrival, then each new frame's
+        return f"At pose {k + 1} of {self.n}."
+
+    def follows_live(self) -> str:
+        """Why the workflow shows the live video now ("" once the robot is settled at a pose)."""
+        if self.state == "at":
+            return ""
+        if self.state == "moving":
+            return f"the robot is moving to pose {self.index + 1}: the frame is frozen once it is there"
+        if self.state == "settling":
+            return "the robot has arrived: the frame is frozen in a moment"
+        return "the robot is not at a calibration pose yet: Go sends it to the next one"

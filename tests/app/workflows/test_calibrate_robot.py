@@ -1,0 +1,216 @@
+"""Calibrate robot and Calibrate camera from robot, headless, on the emulated workcell rendered live: the robot
+sent through the scene's poses, edges (or the tool's tip) clicked where the truth puts them as an operator
+would, solved, accepted, undone; the base's calibration in the database and Move robot asking once more while
+it is nominal."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from app.db import Database, seed_from_scene
+from app.robot.setup import open_robot
+from app.workflows import CalibrateCameraFromRobot, CalibrateRobot, MoveRobot, Site, WorkflowError
+from app.workflows.calibrate_camera_robot import visible_tip
+from core.camera import Camera
+from core.robot.calibration import features_at
+from core.transforms import exp_so3, make_T, pose_error
+from tests.app.robot.calibration_truth import clickable_edges, drawn_error_px, operator_segment, scene_points
+
+from .test_steps import Walk
+
+
+@pytest.fixture
+def robot_site(scene, tmp_path):
+    """The workcell with its emulated robot, a fresh database and frames rendered live from the truth."""
+    from app.render.live import LiveRenderer, LiveRenderError
+
+    setup = open_robot(scene)
+    try:
+        renderer = LiveRenderer(scene, scene.views[0].name)
+    except LiveRenderError as exc:
+        setup.close()
+        pytest.skip(f"no OpenGL here: {exc}")
+    db = Database.open(tmp_path / "site.sqlite")
+    seed_from_scene(db, scene)
+    clock = {"t": 0.0}
+    frames = lambda t: renderer.render(setup.world.bodies_at(0.0), 0)  # noqa: E731 - the truth now
+    site = Site(scene, db, clock=lambda: clock["t"], frames=frames, robot=setup.cell)
+    site.clock_state = clock
+    yield site
+    setup.close()
+    renderer.close()
+    db.close()
+
+
+def _arrive(wf, site, timeout_s: float = 60.0, walk: Walk | None = None) -> int:
+    """Tick the workflow (as the panel does at its frame rate, the scene clock running) until the robot is at a
+    pose; its index."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        time.sleep(0.02)
+        site.clock_state["t"] += 0.05
+        wf.tick()
+        if walk is not None:
+            walk.check(wf)
+        if wf.tour.at is not None:
+            return wf.tour.at
+    raise AssertionError(f"the robot did not arrive: {wf.message}")
+
+
+def test_a_new_database_believes_the_drawing_s_base_until_it_is_calibrated(robot_site, scene):
+    site = robot_site
+    assert site.robot_base_nominal and site.robot_base_cov is None
+    assert np.allclose(site.robot.T_world_base, scene.robot.nominal_base)
+    assert "not calibrated" in site.robot_base_warning()
+    rec = site.db.latest_calibration("robot_base")
+    assert rec.data["nominal"] and rec.method.startswith("seed")
+
+
+def test_move_robot_asks_once_more_while_the_base_is_nominal(robot_site, scene):
+    site = robot_site
+    wf = MoveRobot(site)
+    assert "not calibrated" in wf.question("move") and wf.question("move").endswith("or move it anyway.")
+    site.set_robot_base(scene.robot.T_world_base, cov=np.eye(6) * 1e-8, rms_px=0.1, residuals_px=[], measurements={},
+                        client="test")  # fmt: skip
+    assert wf.question("move") == "" and not site.robot_base_nominal
+
+
+def test_the_base_is_calibrated_from_edges_clicked_at_the_poses(robot_site, scene):
+    """The issue's target: within 1° and 3 mm of the truth, the drawn robot within 0.5 px of the rendered one."""
+    site, walk = robot_site, Walk()
+    cam, model, T_true = site.camera, site.robot.model, scene.robot.T_world_base
+    wf = CalibrateRobot(site)
+    walk.check(wf)
+    with pytest.raises(WorkflowError, match="not at a calibration pose"):
+        wf.click([100.0, 100.0])
+    rng = np.random.default_rng(0)
+    auto = hand = 0
+    for k in range(wf.tour.n):
+        wf.go()
+        assert walk.check(wf).name == "moving" and not wf.current_step().clicks
+        assert _arrive(wf, site, walk=walk) == k and wf.follows_live() == ""
+        q = wf.tour.arrived[k]
+        for f, a, b in clickable_edges(scene, model, q, k, cam, site.frame_at(), T_true):
+            seg = operator_segment(a, b, rng)
+            wf.click(seg[0])
+            assert walk.check(wf).name == "click_edge_end"
+            wf.click(seg[1])
+            edge = wf.edges[-1]
+            if edge.feature is None:
+                # asked which: click it on the white robot (drawn at the estimate)
+                assert walk.check(wf).name == "assign_edge"
+                drawn = {g: s for g, s, _ in features_at(model, q, wf.T_est, cam.center, k)}
+                wf.click(cam.project(drawn[f]).mean(axis=0))
+                hand += 1
+            else:
+                auto += 1
+            assert edge.feature == f, f"edge {len(wf.edges)} was taken for {edge.feature}, it is {f}"
+            assert walk.check(wf).name == "click_edge"
+        if k == 1:  # two poses clicked: Solve offered, and its review offers the next pose too
+            assert {"solve", "go"} <= walk.check(wf).enabled
+            wf.solve()
+            assert walk.check(wf).name == "review" and {"accept", "go"} <= wf.current_step().enabled
+    assert auto > hand  # matched automatically where possible
+    fit = wf.solve()
+    assert walk.check(wf).name == "review" and "go" not in wf.current_step().enabled
+    deg, m = pose_error(fit.T_world_base, T_true)
+    assert deg < 1.0 and m < 0.003, (deg, m)
+    assert 1000 * fit.std_position_m < 3.0 and not wf.weaknesses()
+    drawn = drawn_error_px(model, np.array(list(wf.tour.arrived.values())), cam, T_true, fit.T_world_base)
+    assert drawn < 0.5, drawn
+    n_cal = len(site.db.calibrations("robot_base"))
+    wf.accept()
+    assert walk.check(wf).name == "accepted"
+    assert {"go", "moving", "settling", "click_edge", "click_edge_end", "review"} <= walk.seen["calibrate_robot"]
+    assert len(site.db.calibrations("robot_base")) == n_cal + 1 and not site.robot_base_nominal
+    assert np.allclose(site.robot.T_world_base, fit.T_world_base) and site.robot_base_cov.shape == (6, 6)
+    rec = site.db.latest_calibration("robot_base")
+    assert rec.method == "robot edges" and len(rec.data["edges"]) == len(wf.edges)
+    change = site.db.history()[-1]
+    site.undo(change.id, client="test")  # undone as a camera's: the drawing's base again
+    assert site.robot_base_nominal and np.allclose(site.robot.T_world_base, scene.robot.nominal_base)
+
+
+def test_a_motion_into_an_object_is_refused_and_nothing_moves(robot_site, scene):
+    from core.brep import BRep
+
+    site = robot_site
+    wf = CalibrateRobot(site)
+    q0 = site.robot.state().q
+    tip = site.robot.T_world_base @ site.robot.model.tool_pose(wf.tour.qs[0])
+    site.add_object("crate", "box", BRep.box(0.3, 0.3, 0.3), make_T(np.eye(3), tip[:3, 3] - [0, 0, 0.15]),
+                    method="test", client="test")  # fmt: skip
+    with pytest.raises(WorkflowError, match="pose 1 was refused: .*crate.*The robot did not move"):
+        wf.go()
+    assert np.allclose(site.robot.state().q, q0) and wf.tour.state == "idle"
+
+
+def test_cancel_while_the_robot_moves_stops_it_and_writes_nothing(robot_site, scene):
+    site = robot_site
+    wf = CalibrateRobot(site)
+    n = len(site.db.history())
+    wf.go()
+    assert site.robot.state().moving
+    wf.cancel()
+    assert not site.robot.state().moving and wf.finished and len(site.db.history()) == n
+
+
+def test_solve_needs_edges_at_two_poses(robot_site, scene):
+    site = robot_site
+    wf = CalibrateRobot(site)
+    wf.go()
+    _arrive(wf, site)
+    with pytest.raises(WorkflowError, match="Solve needs 6 edges or more at 2 poses"):
+        wf.solve()
+    assert "solve" not in wf.current_step().enabled
+
+
+def test_workflows_without_a_robot_or_poses_are_not_offered(scene, tmp_path):
+    db = Database.open(tmp_path / "s.sqlite")
+    seed_from_scene(db, scene)
+    site = Site(scene, db, frames=None)
+    assert "no robot" in CalibrateRobot.available(site) and "no robot" in CalibrateCameraFromRobot.available(site)
+    with pytest.raises(WorkflowError, match="no robot"):
+        CalibrateRobot(site)
+    db.close()
+
+
+def test_the_camera_is_calibrated_from_the_tool_tip(robot_site, scene):
+    """The base known (surveyed: the truth stored as its calibration), the camera bumped 1° and 3 cm: the tip's
+    clicked corners at the eight poses give a C that puts the table's and boxes' corners within 3 px of the true
+    C's."""
+    site = robot_site
+    truth = site.camera
+    T_true = scene.robot.T_world_base
+    site.set_robot_base(T_true, cov=np.eye(6) * 1e-8, rms_px=0.0, residuals_px=[], measurements={}, client="test")
+    K, T_cw = truth.decompose()
+    bumped = make_T(exp_so3(np.radians([0.8, -0.6, 0.5])), [0.01, -0.015, 0.02]) @ T_cw
+    site.set_camera(Camera.from_intrinsics(K, bumped, truth.width, truth.height), rms_px=0, residuals_px=[],
+                    points={}, client="test")  # fmt: skip
+    X = scene_points(scene)
+    assert np.abs(site.camera.project(X) - truth.project(X)).max() > 10
+    wf, walk = CalibrateCameraFromRobot(site), Walk()
+    walk.check(wf)
+    rng = np.random.default_rng(0)
+    for k in range(wf.tour.n):
+        wf.go()
+        _arrive(wf, site, walk=walk)
+        corner = visible_tip(truth, site.robot.model, wf.tour.arrived[k], T_true)[0]
+        wf.click(truth.project(corner[None])[0] + rng.normal(0.0, 0.7, 2))
+        assert np.allclose(wf.points[k]["X"], corner)  # the corner the workflow circles is the one clicked
+        assert walk.check(wf).name == "click_tip"
+        if k == 5:  # six poses: the DLT is offered, and its review the next pose too
+            wf.solve()
+            assert walk.check(wf).name == "review" and {"accept", "go"} <= wf.current_step().enabled
+    res = wf.solve()
+    err = np.linalg.norm(res.camera.project(X) - truth.project(X), axis=1)
+    assert err.max() < 3.0, err.max()
+    walk.check(wf)
+    wf.accept()
+    walk.check(wf)
+    rec = site.db.latest_calibration("camera")
+    assert rec.method == "robot dlt" and len(rec.data["X_world"]) == wf.tour.n
+    assert np.allclose(site.camera.C / np.linalg.norm(site.camera.C), res.camera.C / np.linalg.norm(res.camera.C))
