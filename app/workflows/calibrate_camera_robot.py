@@ -334,7 +334,7 @@ class CalibrateCameraFromRobot(Workflow):
         base = (
             " (the robot's base is not calibrated: its drawing's pose is used)" if self.site.robot_base_nominal else ""
         )
-        if self.result is not None:
+        if self.result is not None and (t.at is None or t.at in self.points):
             return Step(
                 "review",
                 f"{self._solved_text()}. {{accept}} stores it"
@@ -349,6 +349,8 @@ class CalibrateCameraFromRobot(Workflow):
             nxt = "" if t.next_index is None else f"{{go}} sends the robot to pose {t.next_index + 1} of {t.n}. "
             return Step("go", nxt + tally + base, frozenset(has), False)
         clicked = " again to replace it" if t.at in self.points else ""
+        if self.result is not None:
+            has.add("accept")
         return Step(
             "click_tip",
             f"Pose {t.at + 1} of {t.n}: click the circled corner of the tool's tip where the video shows it{clicked}. "

@@ -67,7 +67,9 @@ def test_seed_from_the_bundled_scene(db):
     assert box.dims == pytest.approx({"size_x": 0.35, "size_y": 0.231, "size_z": 0.132})
     with pytest.raises(ValueError, match="already holds a site"):
         seed_from_scene(db, scene)
-    assert len(db.history()) == len(known) + 2
+    base = db.latest_calibration("robot_base")  # the robot's base as the drawing puts it, not calibrated yet
+    assert base.data["nominal"] and np.allclose(base.data["T_world_base"], scene.robot.nominal_base)
+    assert len(db.history()) == len(known) + 3
 
 
 def test_dimensions_of_shapes():

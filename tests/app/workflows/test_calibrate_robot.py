@@ -19,6 +19,8 @@ from core.robot.calibration import features_at
 from core.transforms import exp_so3, make_T, pose_error
 from tests.app.robot.calibration_truth import clickable_edges, drawn_error_px, operator_segment, scene_points
 
+from .test_steps import Walk
+
 
 @pytest.fixture
 def robot_site(scene, tmp_path):
@@ -43,7 +45,7 @@ def robot_site(scene, tmp_path):
     db.close()
 
 
-def _arrive(wf, site, timeout_s: float = 60.0) -> int:
+def _arrive(wf, site, timeout_s: float = 60.0, walk: Walk | None = None) -> int:
     """Tick the workflow (as the panel does at its frame rate, the scene clock running) until the robot is at a
     pose; its index."""
     deadline = time.monotonic() + timeout_s
@@ -51,6 +53,8 @@ def _arrive(wf, site, timeout_s: float = 60.0) -> int:
         time.sleep(0.02)
         site.clock_state["t"] += 0.05
         wf.tick()
+        if walk is not None:
+            walk.check(wf)
         if wf.tour.at is not None:
             return wf.tour.at
     raise AssertionError(f"the robot did not arrive: {wf.message}")
@@ -76,30 +80,42 @@ def test_move_robot_asks_once_more_while_the_base_is_nominal(robot_site, scene):
 
 def test_the_base_is_calibrated_from_edges_clicked_at_the_poses(robot_site, scene):
     """The issue's target: within 1° and 3 mm of the truth, the drawn robot within 0.5 px of the rendered one."""
-    site = robot_site
+    site, walk = robot_site, Walk()
     cam, model, T_true = site.camera, site.robot.model, scene.robot.T_world_base
     wf = CalibrateRobot(site)
+    walk.check(wf)
     with pytest.raises(WorkflowError, match="not at a calibration pose"):
         wf.click([100.0, 100.0])
     rng = np.random.default_rng(0)
     auto = hand = 0
     for k in range(wf.tour.n):
         wf.go()
-        assert wf.current_step().name == "moving" and not wf.current_step().clicks
-        assert _arrive(wf, site) == k and wf.follows_live() == ""
+        assert walk.check(wf).name == "moving" and not wf.current_step().clicks
+        assert _arrive(wf, site, walk=walk) == k and wf.follows_live() == ""
         q = wf.tour.arrived[k]
         for f, a, b in clickable_edges(scene, model, q, k, cam, site.frame_at(), T_true):
-            wf.add_segment(operator_segment(a, b, rng))
+            seg = operator_segment(a, b, rng)
+            wf.click(seg[0])
+            assert walk.check(wf).name == "click_edge_end"
+            wf.click(seg[1])
             edge = wf.edges[-1]
-            if edge.feature is None:  # asked which: click it on the white robot (drawn at the estimate)
+            if edge.feature is None:
+                # asked which: click it on the white robot (drawn at the estimate)
+                assert walk.check(wf).name == "assign_edge"
                 drawn = {g: s for g, s, _ in features_at(model, q, wf.T_est, cam.center, k)}
                 wf.click(cam.project(drawn[f]).mean(axis=0))
                 hand += 1
             else:
                 auto += 1
             assert edge.feature == f, f"edge {len(wf.edges)} was taken for {edge.feature}, it is {f}"
+            assert walk.check(wf).name == "click_edge"
+        if k == 1:  # two poses clicked: Solve offered, and its review offers the next pose too
+            assert {"solve", "go"} <= walk.check(wf).enabled
+            wf.solve()
+            assert walk.check(wf).name == "review" and {"accept", "go"} <= wf.current_step().enabled
     assert auto > hand  # matched automatically where possible
     fit = wf.solve()
+    assert walk.check(wf).name == "review" and "go" not in wf.current_step().enabled
     deg, m = pose_error(fit.T_world_base, T_true)
     assert deg < 1.0 and m < 0.003, (deg, m)
     assert 1000 * fit.std_position_m < 3.0 and not wf.weaknesses()
@@ -107,6 +123,8 @@ def test_the_base_is_calibrated_from_edges_clicked_at_the_poses(robot_site, scen
     assert drawn < 0.5, drawn
     n_cal = len(site.db.calibrations("robot_base"))
     wf.accept()
+    assert walk.check(wf).name == "accepted"
+    assert {"go", "moving", "settling", "click_edge", "click_edge_end", "review"} <= walk.seen["calibrate_robot"]
     assert len(site.db.calibrations("robot_base")) == n_cal + 1 and not site.robot_base_nominal
     assert np.allclose(site.robot.T_world_base, fit.T_world_base) and site.robot_base_cov.shape == (6, 6)
     rec = site.db.latest_calibration("robot_base")
@@ -128,6 +146,16 @@ def test_a_motion_into_an_object_is_refused_and_nothing_moves(robot_site, scene)
     with pytest.raises(WorkflowError, match="pose 1 was refused: .*crate.*The robot did not move"):
         wf.go()
     assert np.allclose(site.robot.state().q, q0) and wf.tour.state == "idle"
+
+
+def test_cancel_while_the_robot_moves_stops_it_and_writes_nothing(robot_site, scene):
+    site = robot_site
+    wf = CalibrateRobot(site)
+    n = len(site.db.history())
+    wf.go()
+    assert site.robot.state().moving
+    wf.cancel()
+    assert not site.robot.state().moving and wf.finished and len(site.db.history()) == n
 
 
 def test_solve_needs_edges_at_two_poses(robot_site, scene):
@@ -164,18 +192,25 @@ def test_the_camera_is_calibrated_from_the_tool_tip(robot_site, scene):
                     points={}, client="test")  # fmt: skip
     X = scene_points(scene)
     assert np.abs(site.camera.project(X) - truth.project(X)).max() > 10
-    wf = CalibrateCameraFromRobot(site)
+    wf, walk = CalibrateCameraFromRobot(site), Walk()
+    walk.check(wf)
     rng = np.random.default_rng(0)
     for k in range(wf.tour.n):
         wf.go()
-        _arrive(wf, site)
+        _arrive(wf, site, walk=walk)
         corner = visible_tip(truth, site.robot.model, wf.tour.arrived[k], T_true)[0]
         wf.click(truth.project(corner[None])[0] + rng.normal(0.0, 0.7, 2))
         assert np.allclose(wf.points[k]["X"], corner)  # the corner the workflow circles is the one clicked
+        assert walk.check(wf).name == "click_tip"
+        if k == 5:  # six poses: the DLT is offered, and its review the next pose too
+            wf.solve()
+            assert walk.check(wf).name == "review" and {"accept", "go"} <= wf.current_step().enabled
     res = wf.solve()
     err = np.linalg.norm(res.camera.project(X) - truth.project(X), axis=1)
     assert err.max() < 3.0, err.max()
+    walk.check(wf)
     wf.accept()
+    walk.check(wf)
     rec = site.db.latest_calibration("camera")
     assert rec.method == "robot dlt" and len(rec.data["X_world"]) == wf.tour.n
     assert np.allclose(site.camera.C / np.linalg.norm(site.camera.C), res.camera.C / np.linalg.norm(res.camera.C))
