@@ -363,9 +363,15 @@ class Site:
         """One line for the operator while the robot's base is nominal ("" when calibrated, or no robot)."""
         if self.robot is None or not self.robot_base_nominal:
             return ""
+        how = (
+            "Calibrate robot first"
+            if self.scene.robot.calibration.get("base")
+            else "give the scene's robot block calibration poses (calibration_base_deg, docs/robot-calibration.md) "
+            "to calibrate it"
+        )
         return (
             "The robot's base is not calibrated: its pose is the drawing's, maybe centimetres off, so the robot may "
-            "miss its target and the clearance checks may be wrong. Calibrate robot first"
+            f"miss its target and the clearance checks may be wrong. {how}"
         )
 
     def time_s(self) -> float:
