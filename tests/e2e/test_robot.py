@@ -171,6 +171,7 @@ def test_stop_halts_the_robot_where_it_is(browser, robot_site):
     _said(page, "step=click", "Move robot's first step")
     op.click(ui.site.camera.project(np.array([[0.2, -0.4, 0.0]]))[0])
     _said(page, "passes every check", "the motion checked")
+    ui.site.robot.controller.speed_scale = 0.03  # a slow robot: still moving when Space arrives on a loaded machine
     op.key("m")
     wait_until(lambda: ui.site.robot.controller.state().moving, 30.0, "the robot moving")
     op.key(" ")
