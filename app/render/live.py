@@ -48,6 +48,7 @@ from app.video import VideoSource
 from core.brep import BRep
 
 __all__ = [
+    "shutdown_gl",
     "RenderBody",
     "LiveRenderer",
     "LiveRenderError",
@@ -331,6 +332,21 @@ class _GLThread:
         self.ctx = ctx
         self.program = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FRAGMENT)
         self._finish = _gil_free_finish(ctx)
+
+    @classmethod
+    def shutdown(cls) -> None:
+        """Release the process's OpenGL context and stop its thread (before the process exits: Mesa's rasteriser
+        threads torn down by the exit itself printed "FATAL: exception not rethrown" after a failed start)."""
+        with cls._lock:
+            gl, cls._instance = cls._instance, None
+        if gl is None:
+            return
+        if gl.ctx is not None:
+            try:
+                gl._pool.submit(gl.ctx.release).result(timeout=5.0)
+            except Exception:  # noqa: BLE001 - at exit: nothing more to do
+                pass
+        gl._pool.shutdown(wait=True)
 
     def wait(self) -> None:
         """Wait until the GL has drawn everything asked of it, letting the process's other threads run meanwhile
@@ -749,3 +765,8 @@ class LiveSource(VideoSource):
 
     def close(self) -> None:
         self.renderer.close()
+
+
+def shutdown_gl() -> None:
+    """Release OpenGL before the process exits (``_GLThread.shutdown``); rendering starts it again if asked."""
+    _GLThread.shutdown()

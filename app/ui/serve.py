@@ -276,6 +276,15 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
     grabbers: dict = {}
     start_at = time.monotonic()  # one clock for every camera's recording: their frames show one moment
     closers = []
+    # the database first: a file that is not one is said before any video or OpenGL starts (their threads
+    # torn down by the exit printed C++ runtime lines after the one-line error)
+    db_path = args.db or default_db_path()
+    db_path.parent.mkdir(parents=True, exist_ok=True)
+    db = Database.open(db_path, client="mcit-serve")
+    closers.append(db.close)
+    seeded = not db.objects() and not db.calibrations()
+    if seeded:
+        seed_from_scene(db, scene)
     live = not getattr(args, "recorded", False)
     holder: dict = {}  # the site and the clock, made below: the robot's feed lines and grasps use them
     robot = _open_robot(scene, holder)
@@ -306,6 +315,8 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         raise
     live_views = [name for name, g in grabbers.items() if getattr(g.source, "rendered_live", False)]
     notes = []  # said once everything opened: a start that fails says one line, its reason
+    if seeded:
+        notes.append(f"new database {db_path} seeded from scene {scene.name}")
     if live_views:
         from app.render.live import gl_description
 
@@ -326,13 +337,6 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
     if robot is not None and not live:
         notes.append("the robot moves unseen on the recorded video: its overlay follows its joint states")
 
-    db_path = args.db or default_db_path()
-    db_path.parent.mkdir(parents=True, exist_ok=True)
-    db = Database.open(db_path, client="mcit-serve")
-    closers.append(db.close)
-    if not db.objects() and not db.calibrations():
-        seed_from_scene(db, scene)
-        log.info("new database %s seeded from scene %s", db_path, scene.name)
     devices = None
     if not args.no_devices:
         from app.devices import open_devices
@@ -415,7 +419,11 @@ def run_serve(args: argparse.Namespace) -> int:
         server, closers = build_interface(args)
     except ValueError as exc:  # e.g. a feed socket another program publishes on
         print(f"mcit serve: {exc}", file=sys.stderr, flush=True)
+        _release_gl()
         return 2
+    except BaseException:  # said by the CLI (a database that is not one, ...): OpenGL released first
+        _release_gl()
+        raise
     server.start()
     # The pose solvers' compiled kernels load (the first time on a machine: compile) while the page opens.
     threading.Thread(target=_warm_pose_kernels, name="pose-kernels", daemon=True).start()
@@ -442,4 +450,11 @@ def run_serve(args: argparse.Namespace) -> int:
                 close()
             except Exception:  # noqa: BLE001 - best effort at exit
                 log.debug("close failed", exc_info=True)
+        _release_gl()
     return 0
+
+
+def _release_gl() -> None:
+    """The live renderer's OpenGL released before the process exits (when it was started)."""
+    if "app.render.live" in sys.modules:
+        sys.modules["app.render.live"].shutdown_gl()
