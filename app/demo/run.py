@@ -268,6 +268,7 @@ class _Beside:
     @classmethod
     def fork(cls, job: Callable[[Callable[[int, int], None]], object], total: int, name: str):
         """Start ``job(progress)``; None where processes cannot be forked (then run it in this one)."""
+        import gc
         import multiprocessing as mp
 
         if "fork" not in mp.get_all_start_methods():
@@ -294,6 +295,9 @@ class _Beside:
             send.close()
 
         process = ctx.Process(target=child, name=name, daemon=True)
+        # Garbage collected here, not in the child: a cycle holding a resource of one of this process's threads
+        # (a video reader's decoder) collected in the child, where those threads are gone, waits for ever.
+        gc.collect()
         process.start()
         send.close()
         return cls(process, recv, count)
