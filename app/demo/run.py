@@ -295,8 +295,9 @@ class _Beside:
             send.close()
 
         process = ctx.Process(target=child, name=name, daemon=True)
-        # Garbage collected here, not in the child: a cycle holding a resource of one of this process's threads
-        # (a video reader's decoder) collected in the child, where those threads are gone, waits for ever.
+        # Garbage collected here, not in the child: garbage holding a resource of another of this process's
+        # threads (a video reader's, a library's pool), collected in the child where those threads are gone,
+        # can wait for them for ever (the simulation test's child hung in a numpy call without this).
         gc.collect()
         process.start()
         send.close()
