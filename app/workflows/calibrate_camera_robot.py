@@ -27,7 +27,7 @@ from core.transforms import transform_points
 
 from .base import CANCEL, Control, Marks, Step, Workflow, WorkflowError, as_pixel
 from .calibrate_camera import METHODS, MIN_REDUNDANT_PAIRS, MIN_REDUNDANT_PAIRS_PNP, known_K
-from .robot_tour import RobotTour
+from .robot_tour import start_tour, tour_unavailable
 from .snapping import Snapper, snap_marks
 
 __all__ = ["CalibrateCameraFromRobot", "visible_tip"]
@@ -103,26 +103,15 @@ class CalibrateCameraFromRobot(Workflow):
         CANCEL,
     )
 
+    poses_named = "camera calibration poses"
+
     @classmethod
     def available(cls, site) -> str:
-        if site.robot is None:
-            return "this site has no robot: give the scene a robot block (docs/robot.md)"
-        if not _poses(site).size:
-            return "the scene gives no camera calibration poses for the robot (robot.calibration_camera_deg)"
-        return ""
+        return tour_unavailable(site, "camera", cls.poses_named)
 
     def __init__(self, site, client: str = "operator", view: str | None = None, snap: bool = True, sigma_px=1.0):
         super().__init__(site, client, view)
-        why = self.available(site)
-        if why:
-            raise WorkflowError(why)
-        if not sigma_px > 0:
-            raise WorkflowError(f"sigma_px (the clicks' noise, pixels) must be positive, got {sigma_px}")
-        self.sigma_px = float(sigma_px)
-        self.cell = site.robot
-        self.model = self.cell.model
-        self.tour = RobotTour(site, _poses(site), "camera")
-        self.snapper = Snapper(self, snap)
+        start_tour(self, "camera", snap, sigma_px)
         self.K = known_K(site, self.view)
         self.method = "pnp" if self.K is not None else "dlt"
         self.solved_by: str | None = None
@@ -427,10 +416,3 @@ class CalibrateCameraFromRobot(Workflow):
                 if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
                     out.append(f"pose {k + 1}'s snap moved it {sn.moved_px:.1f} px")
             return out
-
-
-def _poses(site) -> np.ndarray:
-    spec = getattr(site.scene, "robot", None)
-    if spec is None or site.robot is None:
-        return np.zeros((0, 0))
-    return spec.calibration_qs(site.robot.model, "camera")

@@ -26,7 +26,7 @@ from core.robot.calibration import BaseClick, RobotFeature, features_at, match_s
 from core.transforms import pose_error
 
 from .base import CANCEL, Control, Marks, Step, Workflow, WorkflowError, as_pixel, sigma_over
-from .robot_tour import RobotTour
+from .robot_tour import start_tour, tour_unavailable
 from .snapping import ClickSnap, Snapper, segment_of, snap_marks
 
 __all__ = ["CalibrateRobot", "MIN_EDGES", "WEAK_SIGMA_MM", "WEAK_SIGMA_DEG"]
@@ -93,26 +93,15 @@ class CalibrateRobot(Workflow):
         CANCEL,
     )
 
+    poses_named = "calibration poses for its base"
+
     @classmethod
     def available(cls, site) -> str:
-        if site.robot is None:
-            return "this site has no robot: give the scene a robot block (docs/robot.md)"
-        if not _poses(site).size:
-            return "the scene gives no calibration poses for the robot's base (robot.calibration_base_deg)"
-        return ""
+        return tour_unavailable(site, "base", cls.poses_named)
 
     def __init__(self, site, client: str = "operator", view: str | None = None, snap: bool = True, sigma_px=1.0):
         super().__init__(site, client, view)
-        why = self.available(site)
-        if why:
-            raise WorkflowError(why)
-        if not sigma_px > 0:
-            raise WorkflowError(f"sigma_px (the clicks' noise, pixels) must be positive, got {sigma_px}")
-        self.sigma_px = float(sigma_px)
-        self.cell = site.robot
-        self.model = self.cell.model
-        self.tour = RobotTour(site, _poses(site), "base")
-        self.snapper = Snapper(self, snap)
+        start_tour(self, "base", snap, sigma_px)
         self.edges: list[_Edge] = []
         self.pending: np.ndarray | None = None
         self.frames: dict[int, Any] = {}  # pose → the frame its clicks were made on
@@ -562,14 +551,6 @@ class CalibrateRobot(Workflow):
                 if e.snap is not None and e.snap.applied and e.snap.moved_px > MAX_SNAP_MOVE_PX:
                     out.append(f"edge {i + 1}'s snap moved it {e.snap.moved_px:.1f} px")
             return out
-
-
-def _poses(site) -> np.ndarray:
-    """The scene's calibration poses of the base (k, n)."""
-    spec = getattr(site.scene, "robot", None)
-    if spec is None or site.robot is None:
-        return np.zeros((0, 0))
-    return spec.calibration_qs(site.robot.model, "base")
 
 
 def _point_segment_distances(p: np.ndarray, segs: np.ndarray) -> np.ndarray:

@@ -138,3 +138,36 @@ class RobotTour:
         if self.state == "settling":
             return "the robot has arrived: the frame is frozen in a moment"
         return "the robot is not at a calibration pose yet: Go sends it to the next one"
+
+
+def tour_poses(site, which: str) -> np.ndarray:
+    """The scene's calibration poses (k, n) of ``which`` ("base" or "camera"); (0, 0) without a robot."""
+    spec = getattr(site.scene, "robot", None)
+    if spec is None or site.robot is None:
+        return np.zeros((0, 0))
+    return spec.calibration_qs(site.robot.model, which)
+
+
+def tour_unavailable(site, which: str, what: str) -> str:
+    """Why a calibration tour of ``which`` cannot run on ``site`` ("" when it can); ``what`` names its poses."""
+    if site.robot is None:
+        return "this site has no robot: give the scene a robot block (docs/robot.md)"
+    if not tour_poses(site, which).size:
+        return f"the scene gives the robot no {what} (robot.calibration_{which}_deg)"
+    return ""
+
+
+def start_tour(wf, which: str, snap: bool, sigma_px) -> None:
+    """What both calibration tours set up: the robot, the poses' tour, the snapper, the clicks' σ (pixels)."""
+    from .snapping import Snapper
+
+    why = tour_unavailable(wf.site, which, wf.poses_named)
+    if why:
+        raise WorkflowError(why)
+    if not sigma_px > 0:
+        raise WorkflowError(f"sigma_px (the clicks' noise, pixels) must be positive, got {sigma_px}")
+    wf.sigma_px = float(sigma_px)
+    wf.cell = wf.site.robot
+    wf.model = wf.cell.model
+    wf.tour = RobotTour(wf.site, tour_poses(wf.site, which), which)
+    wf.snapper = Snapper(wf, snap)
