@@ -279,6 +279,7 @@ class _GLThread:
         self.ctx = None
         self.program = None
         self.error: str | None = None
+        self.closed = False  # shut down: its context, and every GL object made in it, released
 
     @classmethod
     def get(cls) -> _GLThread:
@@ -341,6 +342,7 @@ class _GLThread:
             gl, cls._instance = cls._instance, None
         if gl is None:
             return
+        gl.closed = True
         if gl.ctx is not None:
             try:
                 gl._pool.submit(gl.ctx.release).result(timeout=5.0)
@@ -504,7 +506,8 @@ class LiveRenderer:
 
     def close(self) -> None:
         """Release the GL objects (the renderer cannot render after)."""
-        if self._fbo is None:
+        if self._fbo is None or self._gl.closed:  # after shutdown_gl the context took its objects with it
+            self._fbo = None
             return
 
         def release(gl: _GLThread) -> None:

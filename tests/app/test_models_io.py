@@ -240,6 +240,7 @@ def test_scene_files_can_reference_cao_and_mesh_models(shared_data, tmp_path):
     save_model(BRep.box(0.1, 0.2, 0.3), tmp_path / "box.stl")
     d = json.loads((scenes_dir() / "workcell" / "scene.json").read_text())
     d.pop("video", None)
+    d.pop("robot", None)  # its URDF lies beside the workcell's scene, not in tmp_path
     d["bodies"] = [
         {"name": "tea", "kind": "box", "model": {"cao": str(teabox)}, "pose": {"xyz": [0, 0, 0.1]}},
         {"name": "stl", "kind": "box", "model": {"mesh": "box.stl"}, "pose": {"xyz": [0.3, 0, 0]}},
