@@ -47,7 +47,17 @@ import numpy as np
 
 from app.db.export import iso, object_record, pose_fields
 
-__all__ = ["FEED_FORMAT", "change_event", "object_event", "target_event", "robot_event", "FeedPublisher", "follow"]
+__all__ = [
+    "FEED_FORMAT",
+    "WORLD_FRAME",
+    "FeedFanout",
+    "change_event",
+    "object_event",
+    "target_event",
+    "robot_event",
+    "FeedPublisher",
+    "follow",
+]
 
 log = logging.getLogger("mcit.feed")
 
@@ -55,14 +65,17 @@ FEED_FORMAT = "mcit-feed/1"
 SEND_TIMEOUT_S = 2.0
 
 
+WORLD_FRAME = "world"  # the frame every pose and point of the feed is given in (ROS 2's frame_id too)
+
+
 def _header(kind: str) -> dict[str, Any]:
-    return {"feed": FEED_FORMAT, "type": kind}
+    return {"feed": FEED_FORMAT, "type": kind, "frame_id": WORLD_FRAME}
 
 
 def object_event(rec: Any, *, who: str | None = None, method: str | None = None) -> dict[str, Any]:
     """The ``pose`` line of an object as it stands (an ``app.db.ObjectRecord``): action "current"."""
     ev = _header("pose")
-    ev.update({"seq": None, "action": "current", "moved": False})
+    ev.update({"seq": None, "action": "current", "moved": False, "image_time": None})
     ev.update(
         object_record(
             rec.name,
@@ -108,7 +121,8 @@ def change_event(rec: Any) -> dict[str, Any] | None:
     )
     cov = after.get("cov")
     ev = _header("pose")
-    ev.update({"seq": int(rec.id), "action": rec.action, "moved": bool(moved)})
+    seen = getattr(rec, "seen_at", None)
+    ev.update({"seq": int(rec.id), "action": rec.action, "moved": bool(moved), "image_time": seen})
     ev.update(
         object_record(
             after.get("name", rec.object_name),
@@ -147,12 +161,20 @@ def _target_frame(X: np.ndarray, normal: np.ndarray, camera_centre: np.ndarray |
 
 
 def target_event(
-    target: Any, *, index: int, who: str, when: float, version: int | None, camera_centre: np.ndarray | None = None
+    target: Any,
+    *,
+    index: int,
+    who: str,
+    when: float,
+    version: int | None,
+    camera_centre: np.ndarray | None = None,
+    image_time: float | None = None,
 ) -> dict[str, Any]:
     """The ``target`` line of a designated target (``app.workflows.designate.Target``).
 
     index : the target's number in the operator's list (1, 2, …). version : the object's database
-    version the target was found on (None when the point is not on a database object).
+    version the target was found on (None when the point is not on a database object). image_time : when
+    the image it was clicked on was taken (unix seconds; None: not known).
     """
     X_db = np.asarray(target.X_world, float)
     rf = None if target.rangefinder_X is None else np.asarray(target.rangefinder_X, float)
@@ -184,6 +206,7 @@ def target_event(
             "who": who,
             "time": float(when),
             "time_iso": iso(when),
+            "image_time": None if image_time is None else float(image_time),
         }
     )
     return ev
@@ -199,7 +222,7 @@ def robot_event(robot: str, state: Any, T_world_tool: np.ndarray, *, carrying: s
     """
     fields = pose_fields(T_world_tool, None)
     ev = _header("robot")
-    now = time.time()
+    now = getattr(state, "stamp", None) or time.time()  # the controller's stamp where it gives one (ROS 2)
     ev.update(
         {
             "robot": robot,
@@ -216,6 +239,21 @@ def robot_event(robot: str, state: Any, T_world_tool: np.ndarray, *, carrying: s
         }
     )
     return ev
+
+
+class FeedFanout:
+    """Several readers of one site's lines (the feed socket or file, the ROS 2 bridge): ``publish`` sends each
+    line to every one; one that fails is logged and the others still get it."""
+
+    def __init__(self, *sinks: Any):
+        self.sinks = list(sinks)
+
+    def publish(self, event: dict | None) -> None:
+        for sink in self.sinks:
+            try:
+                sink.publish(event)
+            except Exception:  # noqa: BLE001 - one reader's failure is not the others'
+                log.exception("a line could not be sent to %s", type(sink).__name__)
 
 
 def _line(event: dict) -> bytes:

@@ -235,7 +235,7 @@ class UndistortedSource:
         from app.video import Frame
 
         frame = self.source.read()
-        return Frame(self.lens.undistort_image(frame.image), frame.index, frame.t_s)
+        return Frame(self.lens.undistort_image(frame.image), frame.index, frame.t_s, frame.stamp)
 
     def __enter__(self):
         return self

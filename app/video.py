@@ -64,11 +64,14 @@ class VideoError(ValueError):
 @dataclass(frozen=True)
 class Frame:
     """One frame: ``image`` RGB uint8 (H, W, 3); ``index`` since the source was opened (it keeps
-    counting across loops); ``t_s`` the scene time in seconds (see the module docstring)."""
+    counting across loops); ``t_s`` the scene time in seconds (see the module docstring); ``stamp`` when the
+    image was taken, unix seconds: the sender's stamp where the source carries one (a ROS 2 image's header),
+    else when mcit read it (None: not known)."""
 
     image: np.ndarray
     index: int
     t_s: float
+    stamp: float | None = None
 
 
 def _to_rgb(image: np.ndarray) -> np.ndarray:
@@ -114,7 +117,7 @@ class VideoSource:
         self._index += 1
         self._position += 1
         t_s = time.monotonic() - self._opened_at if self.live else self._position / self.fps
-        return Frame(image, self._index, float(t_s))
+        return Frame(image, self._index, float(t_s), time.time())
 
     def _read(self) -> np.ndarray | None:  # pragma: no cover - abstract
         raise NotImplementedError

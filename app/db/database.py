@@ -80,6 +80,17 @@ def _check_status(status: Any) -> str:
     return status
 
 
+def _check_seen_at(t: Any) -> float:
+    """A capture time: unix seconds, finite and positive."""
+    try:
+        t = float(t)
+    except (TypeError, ValueError):
+        raise ValueError(f"seen_at must be a time in unix seconds, got {t!r}") from None
+    if not np.isfinite(t) or t <= 0:
+        raise ValueError(f"seen_at must be a time in unix seconds, got {t!r}")
+    return t
+
+
 def _check_pose(T: Any) -> list:
     try:
         T = np.asarray(T, dtype=float)
@@ -496,12 +507,13 @@ class Database:
         residuals=None,
         note=None,
         undoes=None,
+        seen_at=None,
     ) -> int:
         if not isinstance(method, str) or not method:
             raise ValueError(f"method must be a non-empty string saying how the change was made, got {method!r}")
         cur = conn.execute(
             "INSERT INTO history (time, client, method, action, object_id, calibration_id, version, before, after, "
-            "clicks, measurements, residuals, note, undoes) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "clicks, measurements, residuals, note, undoes, seen_at) VALUES (" + ", ".join("?" * 15) + ")",
             (
                 time.time(),
                 str(client or self.client),
@@ -517,6 +529,7 @@ class Database:
                 to_json(residuals),
                 note,
                 undoes,
+                None if seen_at is None else _check_seen_at(seen_at),
             ),
         )
         return int(cur.lastrowid)
@@ -539,11 +552,13 @@ class Database:
         measurements: Any = None,
         residuals: Any = None,
         note: str | None = None,
+        seen_at: float | None = None,
     ) -> ObjectRecord:
         """Add an object (one transaction, history "add"); ValueError if the name is taken.
 
         T_world_obj : array, shape (4, 4), the pose (maps object to world). cov : (6, 6) or None.
-        dims, sigmas : name → metres. status : "known", "modelled" or "stale".
+        dims, sigmas : name → metres. status : "known", "modelled" or "stale". seen_at : when the image it
+        was measured on was taken (unix seconds; ``ChangeRecord.seen_at``).
         """
         _check_name(name)
         _check_kind(kind)
@@ -577,6 +592,7 @@ class Database:
                 measurements=measurements,
                 residuals=residuals,
                 note=note,
+                seen_at=seen_at,
             )
             return self._record(conn, row)
 
@@ -624,11 +640,13 @@ class Database:
         measurements: Any = None,
         residuals: Any = None,
         note: str | None = None,
+        seen_at: float | None = None,
     ) -> ObjectRecord:
         """Change any of an object's pose, covariance, status, model, kind, dims, sigmas at once.
 
         expected_version : the version the caller read; ConflictError if it moved (None: no check,
-        for operator commands that name the object explicitly). Returns the new record.
+        for operator commands that name the object explicitly). seen_at : when the image it was measured on
+        was taken (unix seconds). Returns the new record.
         """
         fields: dict[str, Any] = {}
         if T_world_obj is not _KEEP:
@@ -663,6 +681,7 @@ class Database:
                 measurements=measurements,
                 residuals=residuals,
                 note=note,
+                seen_at=seen_at,
             )
 
     def update_pose(
@@ -679,6 +698,7 @@ class Database:
         residuals: Any = None,
         note: str | None = None,
         status: str = "known",
+        seen_at: float | None = None,
     ) -> ObjectRecord:
         """New pose (and its covariance) of an object; its status becomes ``status`` ("known").
 
@@ -697,6 +717,7 @@ class Database:
             measurements=measurements,
             residuals=residuals,
             note=note,
+            seen_at=seen_at,
         )
 
     def set_status(
@@ -736,7 +757,25 @@ class Database:
 
     @staticmethod
     def _change_from_row(row: tuple) -> ChangeRecord:
-        (i, t, client, method, action, oid, cid, version, before, after, clicks, meas, res, note, undoes, name) = row
+        (
+            i,
+            t,
+            client,
+            method,
+            action,
+            oid,
+            cid,
+            version,
+            before,
+            after,
+            clicks,
+            meas,
+            res,
+            note,
+            undoes,
+            seen,
+            name,
+        ) = row
         load = lambda s: None if s is None else json.loads(s)  # noqa: E731
         return ChangeRecord(
             i,
@@ -755,12 +794,13 @@ class Database:
             load(res),
             note,
             undoes,
+            seen,
         )
 
     _HISTORY_SELECT = (
         "SELECT h.id, h.time, h.client, h.method, h.action, h.object_id, h.calibration_id, "
         "h.version, h.before, h.after, h.clicks, h.measurements, h.residuals, h.note, "
-        "h.undoes, o.name FROM history h LEFT JOIN objects o ON o.id = h.object_id"
+        "h.undoes, h.seen_at, o.name FROM history h LEFT JOIN objects o ON o.id = h.object_id"
     )
 
     def _change_record(self, conn, change_id: int) -> ChangeRecord:

@@ -121,7 +121,9 @@ class ChangeRecord:
     before, after : snapshots of the object (dicts with name, kind, status, model_id,
     T_world_obj, cov, dims, sigmas, removed); before is None for "add".
     clicks, measurements, residuals : what the method used and left (JSON values).
-    undoes : the change an undo/restore refers to.
+    undoes : the change an undo/restore refers to. seen_at : when the image the change was measured on was
+    taken (unix seconds: a ROS image's header stamp, else when mcit received the frame); None when the
+    change was not measured on an image.
     """
 
     id: int
@@ -140,6 +142,7 @@ class ChangeRecord:
     residuals: Any
     note: str | None
     undoes: int | None
+    seen_at: float | None = None
 
 
 @dataclass(frozen=True)

@@ -84,7 +84,12 @@ ALTER TABLE objects ADD COLUMN source TEXT;
 CREATE INDEX history_object ON history(object_id, id);
 """
 
-MIGRATIONS: tuple[str, ...] = (_V1, _V2)
+# Version 3: when the image a change was measured on was taken (unix seconds; NULL: not from an image).
+_V3 = """
+ALTER TABLE history ADD COLUMN seen_at REAL;
+"""
+
+MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3)
 LATEST_VERSION = len(MIGRATIONS)
 
 

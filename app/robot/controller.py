@@ -45,6 +45,8 @@ class JointState:
     moving : a motion is under way. t_s : the controller's time of this state (monotonic seconds).
     fault : None, or one line saying what went wrong in the last motion.
     goal : the last motion's final waypoint (None before any motion).
+    stamp : the controller's wall-clock time of this state (unix seconds; a ROS 2 message's header), None
+    when it gives none.
     """
 
     names: tuple[str, ...]
@@ -53,6 +55,7 @@ class JointState:
     t_s: float
     fault: str | None = None
     goal: np.ndarray | None = None
+    stamp: float | None = None
 
     def by_name(self) -> dict[str, float]:
         return {n: float(v) for n, v in zip(self.names, self.q)}

@@ -59,7 +59,9 @@ class FrozenFrames:
             hit = None if name == panel.camera_view else other.recent.nearest(at)
             if hit is not None:
                 f, arrived = hit
-                others[name] = FrameRef(f.image, float(f.t_s), int(f.index), source, view=name, gap_s=arrived - at)
+                others[name] = FrameRef(
+                    f.image, float(f.t_s), int(f.index), source, view=name, gap_s=arrived - at, stamp=f.stamp
+                )
         self.frame = FrameRef(
             frame.image,
             float(frame.t_s),
@@ -68,6 +70,7 @@ class FrozenFrames:
             previous=None if earlier is None else earlier.image,
             view=panel.camera_view,
             others=others,
+            stamp=getattr(frame, "stamp", None),
         )
         self.show_live = False
         self.adopt(panel.session.workflow)

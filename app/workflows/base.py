@@ -199,10 +199,13 @@ class FrameRef:
     # the other cameras' frames shown at the same moment (camera name → FrameRef): clicks in them use these
     others: dict = field(default_factory=dict, compare=False, repr=False)
     gap_s: float = 0.0  # for one of ``others``: how long after the frozen frame it arrived (seconds)
+    stamp: float | None = None  # when the image was taken (unix seconds, ``app.video.Frame.stamp``)
 
     def record(self) -> dict[str, Any]:
         """JSON-ready: which frame was used (for the history)."""
         out = {"t_s": round(float(self.t_s), 3), "index": int(self.index), "source": self.source}
+        if self.stamp is not None:
+            out["stamp"] = round(float(self.stamp), 6)
         return {**out, "view": self.view} if self.view else out
 
     def changed_in(self, live: np.ndarray | None, uv: Any) -> str:
@@ -380,6 +383,14 @@ class Workflow:
     def moving_share(self, uv: Any) -> float | None:
         """``FrameRef.moving_share`` of the frozen frame (None: no frame frozen)."""
         return None if self.frame is None else self.frame.moving_share(uv)
+
+    def seen_at(self) -> float | None:
+        """When the image the clicks were made on was taken (unix seconds): the frozen frame's, else the
+        newest frame's of the workflow's camera (a workflow on the live video); None when not known."""
+        if self.frame is not None:
+            return self.frame.stamp
+        frame = self.site.latest_frame(self.view)
+        return None if frame is None else getattr(frame, "stamp", None)
 
     def frame_record(self) -> dict[str, Any] | None:
         """Which frame the clicks were made on, for the history (None: the site's frame at the time)."""

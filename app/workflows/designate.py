@@ -210,6 +210,7 @@ class DesignateTarget(Workflow):
                     when=time.time(),
                     version=version,
                     camera_centre=self.camera.center,
+                    image_time=self.seen_at(),
                 )
             )
         except Exception:  # noqa: BLE001 - the target stands (shown, copied) even if the feed fails

@@ -102,3 +102,7 @@ class GrabberFrames:
     def __call__(self, t_s: float) -> np.ndarray | None:
         frame = self.grabber.latest()
         return None if frame is None else frame.image
+
+    def latest(self) -> Any:
+        """The newest ``app.video.Frame`` (its index, times and capture stamp), None before the first."""
+        return self.grabber.latest()

@@ -185,6 +185,7 @@ class PickPlace(RobotWork):
             cov,
             todo="Update its pose from the video (double click on it).",
             method="robot",
+            seen_at=None,  # from the joints, not an image
             measurements={"joints": plan.q_release.tolist(), "T_tool_obj": plan.T_tool_obj.tolist()},
         )
         self.obj = self.site.object(self.obj.name)

@@ -273,6 +273,7 @@ class RangeModelling:
                 measurements=measurements,
                 residuals={k: np.asarray(v) for k, v in r.residuals.items()},
                 note=note,
+                seen_at=self.seen_at(),
             )
         except ValueError as exc:
             raise WorkflowError(f"the database refused the object: {exc}") from None

@@ -301,6 +301,12 @@ class Site:
         image = frames(self.time_s() if t_s is None else float(t_s))
         return None if image is None else np.asarray(image)
 
+    def latest_frame(self, view: str | None = None) -> Any:
+        """The newest ``app.video.Frame`` of one view's live video (with its capture ``stamp``), None when the
+        view's frames are not a live video's (a recording read by time, or none)."""
+        latest = getattr(self._frames.get(self.view_name(view)), "latest", None)
+        return None if latest is None else latest()
+
     # ------------------------------------------------------------------ reading
     @property
     def views(self) -> tuple[str, ...]:
@@ -586,11 +592,13 @@ class Site:
         measurements: Any = None,
         residuals: Any = None,
         status: str = "known",
+        seen_at: float | None = None,
     ) -> Any:
         """Write a new pose of ``obj`` (the snapshot the workflow started from: its ``version`` is
         checked) with its covariance; its status becomes ``status``. T_world_obj : (4, 4). cov :
         (6, 6) or None. clicks, measurements, residuals : what the estimate used, kept in the
-        history. Returns the new ``app.db.ObjectRecord``."""
+        history. seen_at : when the image it was measured on was taken (unix seconds). Returns the new
+        ``app.db.ObjectRecord``."""
         rec = self.db.update_pose(
             obj.id,
             T_world_obj,
@@ -602,6 +610,7 @@ class Site:
             measurements=measurements,
             residuals=residuals,
             status=status,
+            seen_at=seen_at,
         )
         self._wrote()
         return rec
@@ -623,9 +632,11 @@ class Site:
         measurements: Any = None,
         residuals: Any = None,
         note: str | None = None,
+        seen_at: float | None = None,
     ) -> Any:
         """Add a new object (``app.db.Database.add_object``; ValueError if the name is taken).
-        T_world_obj : (4, 4), object → world. dims, sigmas : name → metres. Returns its record."""
+        T_world_obj : (4, 4), object → world. dims, sigmas : name → metres. seen_at : when the image it was
+        measured on was taken (unix seconds). Returns its record."""
         rec = self.db.add_object(
             name,
             kind,
@@ -641,6 +652,7 @@ class Site:
             measurements=measurements,
             residuals=residuals,
             note=note,
+            seen_at=seen_at,
         )
         self._wrote()
         return rec
@@ -729,8 +741,16 @@ class Site:
     def attach_feed(self, feed: Any) -> None:
         """Send every accepted change of an object (through this site, or another process's once
         ``poll()`` sees it) and every designated target out on ``feed`` (``app.feed.FeedPublisher``,
-        its snapshot the objects as they stand: ``feed_snapshot``); None detaches it."""
-        self.feed = feed
+        its snapshot the objects as they stand: ``feed_snapshot``); several may be attached (the feed socket
+        or file, the ROS 2 bridge: ``app.feed.FeedFanout``); None detaches them all."""
+        from app.feed import FeedFanout
+
+        if feed is None or self.feed is None:
+            self.feed = feed
+        elif isinstance(self.feed, FeedFanout):
+            self.feed.sinks.append(feed)
+        else:
+            self.feed = FeedFanout(self.feed, feed)
 
     def feed_snapshot(self) -> list[dict]:
         """The live feed's lines for every object as it stands (``action`` "current")."""

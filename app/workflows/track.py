@@ -122,6 +122,7 @@ class TrackObject(SnapMixin, Workflow):
         self.seg_snaps: list[ClickSnap | None] = []
         self.pending: np.ndarray | None = None
         self.reinits: list[dict[str, Any]] = []
+        self.stamp_good: float | None = None  # when the image of the last good pose was taken (unix seconds)
         self.state = "tracking"
 
     # ------------------------------------------------------------------ tracking
@@ -133,10 +134,10 @@ class TrackObject(SnapMixin, Workflow):
     def follows_live(self) -> str:
         return f"{self.title} follows the live video: nothing to freeze (Pause it first)" if self.following else ""
 
-    def step(self, frame=None, t_s: float | None = None):
-        """Follow the object into one frame: ``frame`` (an image of the camera's size) or the site's
-        frame at ``t_s`` (default: the scene time now). Returns ``app.vision.track.TrackResult``;
-        when it is lost the result says so (and the message what to do).
+    def step(self, frame=None, t_s: float | None = None, stamp: float | None = None):
+        """Follow the object into one frame: ``frame`` (an image of the camera's size, taken at ``stamp``, unix
+        seconds, when known) or the site's frame at ``t_s`` (default: the scene time now). Returns
+        ``app.vision.track.TrackResult``; when it is lost the result says so (and the message what to do).
 
         The tracking itself runs outside the workflow's lock (on a copy of the tracker), so that
         the overlay's ``marks()`` never waits for it; its result is kept only if nothing reset the
@@ -190,6 +191,7 @@ class TrackObject(SnapMixin, Workflow):
                 )
             else:
                 self.t_good, self.confidence_good = t, float(res.confidence)
+                self.stamp_good = stamp if stamp is not None else self.seen_at()
                 self.T_world_obj = res.T_world_obj.copy()
                 self.cov = None if self.diagnostics.cov is None else self.diagnostics.cov.copy()
                 self.rms_px = float(self.diagnostics.rms_px)
@@ -348,6 +350,7 @@ class TrackObject(SnapMixin, Workflow):
                 T,
                 cov,
                 method="tracking",
+                seen_at=self.stamp_good,
                 clicks=clicks,
                 measurements=measurements,
                 residuals=residuals,

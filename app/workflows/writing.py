@@ -24,6 +24,7 @@ def write_pose(wf: Workflow, obj: Any, T_world_obj: np.ndarray, cov: Any, *, tod
     from app.db import ConflictError
 
     site = wf.site
+    record.setdefault("seen_at", wf.seen_at())  # the image's capture time: the pose's stamp on the feed, ROS 2
     try:
         return site.update_pose(obj, T_world_obj, cov, client=wf.client, **record), obj
     except ConflictError as first:

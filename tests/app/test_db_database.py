@@ -35,7 +35,7 @@ def _pose(rng):
 def test_a_new_file_gets_the_schema_wal_and_foreign_keys(tmp_path):
     path = tmp_path / "sub" / "dir" / "site.sqlite"
     with Database.open(path) as d:
-        assert d.schema_version == 2
+        assert d.schema_version == 3
         conn = d._conn()
         assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
         assert conn.execute("PRAGMA foreign_keys").fetchone()[0] == 1

@@ -129,18 +129,19 @@ def test_migration_from_the_first_schema_keeps_every_row(tmp_path):
     assert conn.execute("PRAGMA application_id").fetchone()[0] == APPLICATION_ID
     conn.close()
     with Database.open(f) as db:
-        assert db.schema_version == LATEST_VERSION == 2
+        assert db.schema_version == LATEST_VERSION == 3
         (o,) = db.objects()
         assert (o.name, o.version, o.status, o.source) == ("parallelepiped", 2, "known", None)
         assert np.allclose(o.T_world_obj[:3, 3], [0.1, 0.2, 0.0]) and o.model == BRep.box(0.35, 0.231, 0.132)
         assert [h.method for h in db.history("parallelepiped")] == ["seed", "p3l"]
+        assert [h.seen_at for h in db.history("parallelepiped")] == [None, None]  # v3: not measured on an image
         assert db.latest_calibration("camera").residuals == [0.5]
         # the migrated file works as a new one: undo the old update, add with a source
         db.undo(2)
         assert np.array_equal(db.get(1).T_world_obj, np.eye(4))
-        db.add_object("tea", "box", BRep.box(1, 1, 1), np.eye(4), source="teabox.cao")
-        assert db.get("tea").source == "teabox.cao"
+        db.add_object("tea", "box", BRep.box(1, 1, 1), np.eye(4), source="teabox.cao", seen_at=1.7e9)
+        assert db.get("tea").source == "teabox.cao" and db.history("tea")[-1].seen_at == 1.7e9
         indexes = {r[0] for r in db._conn().execute("SELECT name FROM sqlite_master WHERE type = 'index'")}
         assert "history_object" in indexes
     with Database.open(f) as db:  # opening again migrates nothing
-        assert db.schema_version == 2 and [h.action for h in db.history()] == ["add", "update", "undo", "add"]
+        assert db.schema_version == 3 and [h.action for h in db.history()] == ["add", "update", "undo", "add"]
