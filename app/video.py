@@ -117,10 +117,14 @@ class VideoSource:
         self._index += 1
         self._position += 1
         t_s = time.monotonic() - self._opened_at if self.live else self._position / self.fps
-        return Frame(image, self._index, float(t_s), time.time())
+        return Frame(image, self._index, float(t_s), self._stamp())
 
     def _read(self) -> np.ndarray | None:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    def _stamp(self) -> float | None:
+        """When the image ``_read`` just gave was taken (unix seconds): now, unless the source knows better."""
+        return time.time()
 
     def skip(self, n: int) -> None:
         """Pass over the next ``n`` frames unseen (a prerecorded source played behind its clock)."""

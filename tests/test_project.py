@@ -20,7 +20,7 @@ def test_readme_has_exactly_two_setup_commands():
     assert len(cmds) == 2, cmds
     run, test = cmds
     assert "pip install -e ." in run and "mcit" in run.split("&&")[-1]
-    assert "'.[test]'" in test and "pytest" in test
+    assert "'.[test,ros2]'" in test and "pytest" in test  # the ROS 2 bridge's tests run against a real rclpy node
 
 
 def test_ci_runs_the_readme_test_command_verbatim():

@@ -24,9 +24,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["JointState", "ControllerError", "ControllerSilent", "ControllerFaults", "EmulatedController"]
+__all__ = ["path_times", "JointState", "ControllerError", "ControllerSilent", "ControllerFaults", "EmulatedController"]
 
 log = logging.getLogger("mcit.robot")
+
+
+def path_times(path: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+    """When each waypoint of ``path`` (k, n) is reached, seconds from the first: each segment timed by its
+    slowest joint at ``velocity`` (n,), so that all joints arrive together."""
+    steps = np.abs(np.diff(np.asarray(path, float), axis=0)) / np.asarray(velocity, float)
+    return np.concatenate([[0.0], np.cumsum(steps.max(axis=1) if len(steps) else [])])
 
 
 class ControllerError(RuntimeError):
@@ -146,8 +153,7 @@ class EmulatedController:
             if self._motion is not None:
                 raise ControllerError("the robot is moving: stop it first, or wait for the motion to end")
             P = np.vstack([self._q, P])
-            steps = np.abs(np.diff(P, axis=0)) / (self.velocity * self.speed_scale)
-            times = np.concatenate([[0.0], np.cumsum(steps.max(axis=1))])
+            times = path_times(P, self.velocity * self.speed_scale)
             stall = None
             if self.faults.stall_joint in self.names:
                 stall = (self.names.index(self.faults.stall_joint), float(self.faults.stall_at))

@@ -62,6 +62,7 @@ class EmulatedWorld:
         *,
         finger_joint: str | None = None,
         clock: Callable[[], float] | None = None,
+        home: np.ndarray | None = None,
     ):
         self.scene = scene
         self.clock = clock if clock is not None else (lambda: 0.0)
@@ -71,7 +72,8 @@ class EmulatedWorld:
         self.T_world_base = np.asarray(spec.T_world_base, float)
         self.appearance = getattr(spec, "appearance", None) or ROBOT_APPEARANCE
         self.finger = model.joint_names.index(finger_joint) if finger_joint in model.joint_names else None
-        self._q = np.asarray(controller.state().q, float)
+        # where it is drawn until the controller's first state (a real robot's may not have come yet)
+        self._q = np.asarray(controller.state().q if home is None else home, float)
         self._overrides: dict[int, np.ndarray] = {}  # body index → pose the robot left it at
         self.carried: tuple[int, np.ndarray] | None = None  # (body index, T_tool_body)
         self._width = 0.0  # the carried body's width across the fingers

@@ -61,7 +61,7 @@ class RobotFeed:
 class RobotSetup:
     cell: RobotCell
     world: EmulatedWorld
-    controller: EmulatedController
+    controller: EmulatedController  # or a real robot's (app.ros2.robot.RosController)
 
     def close(self) -> None:
         self.controller.close()
@@ -78,8 +78,12 @@ def open_robot(
     clock: Callable[[], float] | None = None,
     publish: Callable[[dict], None] | None = None,
     T_world_base: np.ndarray | None = None,
+    make_controller: Callable | None = None,
 ) -> RobotSetup | None:
     """The scene's robot, emulated (see the module docstring); None when the scene has no robot block.
+
+    make_controller : ``(model, home) -> controller`` for a real robot's controller (ROS 2's: ``app.ros2``), default
+    the emulated one.
 
     T_world_base : the base's calibrated pose (the database's), default the scene's nominal one (the drawing's,
     ``RobotSpec.nominal_base``; a ``Site`` then adopts the database's latest calibration of it). The emulated
@@ -91,9 +95,12 @@ def open_robot(
     from .urdf import load_scene_robot
 
     model, q0 = load_scene_robot(spec)
-    controller = EmulatedController(model.joint_names, model.lower, model.upper, model.velocity, q0)
+    if make_controller is not None:
+        controller = make_controller(model, q0)
+    else:
+        controller = EmulatedController(model.joint_names, model.lower, model.upper, model.velocity, q0)
     try:
-        world = EmulatedWorld(scene, model, controller, finger_joint=_finger(model), clock=clock)
+        world = EmulatedWorld(scene, model, controller, finger_joint=_finger(model), clock=clock, home=q0)
         T = spec.nominal_base if T_world_base is None else T_world_base
         feed = None
         if publish is not None:

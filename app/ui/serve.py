@@ -118,6 +118,9 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument(
         "--feed-file", type=Path, default=None, metavar="PATH", help="append the same JSON lines to this file"
     )
+    from app.ros2.bridge import add_ros2_arguments  # argparse only: rclpy loads when --ros2 is given
+
+    add_ros2_arguments(p)
     p.set_defaults(func=run_serve)
     return p
 
@@ -146,7 +149,7 @@ def video_specs(values, scene) -> dict[str, str]:
     return out
 
 
-def _video_source(spec, scene, fps, view=None, live: bool = False, bodies_at=None):
+def _video_source(spec, scene, fps, view=None, live: bool = False, bodies_at=None, bridge=None):
     """The video source of one camera (the first for None): ``spec`` when given; else, with ``live``, the site
     rendered live through that camera (``LiveSource`` drawing ``bodies_at(t)``, default the scene's bodies;
     ``app.render.live.LiveRenderError`` when OpenGL cannot start); else the scene's video of that camera;
@@ -155,6 +158,9 @@ def _video_source(spec, scene, fps, view=None, live: bool = False, bodies_at=Non
     from app.video import StillSource, open_video
 
     v = scene.view(view)
+    topic = None if spec is None else _ros2_topic(spec)
+    if topic is not None:
+        return bridge.video(topic, v.camera, v.lens, fps)
     if spec is not None:
         return open_video(spec, fps)
     if live:
@@ -169,6 +175,12 @@ def _video_source(spec, scene, fps, view=None, live: bool = False, bodies_at=Non
 
     log.warning("scene %s has no video file: showing a frame rendered from the scene", scene.name)
     return StillSource(render_frame(scene, 0.0), fps or 10.0, description=f"rendered still of {scene.name}")
+
+
+def _ros2_topic(spec) -> str | None:
+    from app.ros2.bridge import ros2_topic
+
+    return ros2_topic(spec)
 
 
 def scene_with_intrinsics(scene, path, camera_name: str | None = None):
@@ -286,15 +298,29 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
     if seeded:
         seed_from_scene(db, scene)
     live = not getattr(args, "recorded", False)
+    try:
+        from app.ros2.bridge import Ros2Bridge
+
+        bridge = Ros2Bridge.open(args, specs)  # None without --ros2 or a ros2: video
+    except BaseException:
+        db.close()
+        raise
+    if bridge is not None:
+        closers.append(bridge.close)
     holder: dict = {}  # the site and the clock, made below: the robot's feed lines and grasps use them
-    robot = _open_robot(scene, holder)
+    try:
+        robot = _open_robot(scene, holder, bridge)
+    except BaseException:
+        for close in closers:
+            close()
+        raise
     if robot is not None:
-        closers.append(robot.close)
+        closers.insert(0, robot.close)  # before the bridge's node, which its controller may use
         bodies_at = bodies_at or robot.world.bodies_at
     try:
         for view in scene.views:
             try:
-                source = _video_source(specs.get(view.name), scene, args.fps, view.name, live, bodies_at)
+                source = _video_source(specs.get(view.name), scene, args.fps, view.name, live, bodies_at, bridge)
             except LiveRenderError as exc:  # no OpenGL here: the recordings instead, said once
                 log.warning("the site cannot be rendered live (%s): playing the scene's recordings", exc)
                 live = False
@@ -323,9 +349,10 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         notes.append(f"cameras {', '.join(live_views)}: the site rendered live ({gl_description()})")
     if robot is not None:
         cell = robot.cell
+        by = "emulated controller" if bridge is None else f"joint states on {args.ros2_joint_states} (ROS 2)"
         notes.append(
             f"robot {cell.model.name}: {cell.model.n} joints, base at "
-            f"{[round(float(v), 3) for v in cell.T_world_base[:3, 3]]} (emulated controller)"
+            f"{[round(float(v), 3) for v in cell.T_world_base[:3, 3]]} ({by})"
         )
     grabber = grabbers[scene.views[0].name]
 
@@ -367,6 +394,12 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
             "live feed of poses and targets on %s",
             " and ".join(str(x) for x in (args.feed_socket, args.feed_file) if x),
         )
+    if bridge is not None:
+        bridge.attach(site)
+        notes.append(
+            f"ROS 2 (domain {bridge.node.domain}): object poses, markers and targets on {args.ros2_namespace}, "
+            f"frame {args.ros2_frame}"
+        )
     server = InterfaceServer(
         site,
         grabbers,
@@ -382,9 +415,10 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
     return server, closers
 
 
-def _open_robot(scene, holder: dict):
-    """The scene's robot (app.robot.setup.RobotSetup), emulated, or None; its joint states go out on the site's
-    live feed and its grasps read the scene time, both found in ``holder`` once made."""
+def _open_robot(scene, holder: dict, bridge=None):
+    """The scene's robot (app.robot.setup.RobotSetup), emulated (or through ROS 2 with a ``bridge``), or None; its
+    joint states go out on the site's live feed and its grasps read the scene time, both found in ``holder`` once
+    made."""
     if scene.robot is None:
         return None
     from app.robot.setup import open_robot
@@ -394,7 +428,12 @@ def _open_robot(scene, holder: dict):
         if site is not None:
             site.publish(event)
 
-    return open_robot(scene, clock=lambda: holder["clock"]() if "clock" in holder else 0.0, publish=publish)
+    return open_robot(
+        scene,
+        clock=lambda: holder["clock"]() if "clock" in holder else 0.0,
+        publish=publish,
+        make_controller=None if bridge is None else bridge.controller,
+    )
 
 
 def _warm_pose_kernels() -> None:
