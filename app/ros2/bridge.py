@@ -77,10 +77,20 @@ class Ros2Bridge:
         self.args = args
         self._closers: list = []
 
+    @staticmethod
+    def wanted(args: argparse.Namespace, video_specs: dict[str, str]) -> bool:
+        """Whether the command line asks for the bridge; Ros2Unavailable (how to install it) when it does and
+        ROS 2 is not installed, before anything is opened."""
+        if not (getattr(args, "ros2", False) or any(ros2_topic(s) for s in video_specs.values())):
+            return False
+        from . import require
+
+        require()
+        return True
+
     @classmethod
     def open(cls, args: argparse.Namespace, video_specs: dict[str, str]) -> Ros2Bridge | None:
-        wanted = getattr(args, "ros2", False) or any(ros2_topic(s) for s in video_specs.values())
-        if not wanted:
+        if not cls.wanted(args, video_specs):
             return None
         from .node import Ros2Node
 

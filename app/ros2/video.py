@@ -95,7 +95,7 @@ class RosImageSource(VideoSource):
                 self._arrivals.pop(0)
             rate = len(self._arrivals)
             self._cond.notify_all()
-        if rate > FLOOD_FACTOR * self.fps and rate >= 20:
+        if rate >= FLOOD_FACTOR * self.fps and rate >= 20:
             self._say(
                 "rate",
                 f"{self.topic}: images arrive at {rate}/s, {rate / self.fps:.0f}× the expected {self.fps:g}/s: only "

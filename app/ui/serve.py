@@ -288,6 +288,9 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
     grabbers: dict = {}
     start_at = time.monotonic()  # one clock for every camera's recording: their frames show one moment
     closers = []
+    from app.ros2.bridge import Ros2Bridge
+
+    Ros2Bridge.wanted(args, specs)  # --ros2 without ROS 2 installed: said before anything opens
     # the database first: a file that is not one is said before any video or OpenGL starts (their threads
     # torn down by the exit printed C++ runtime lines after the one-line error)
     db_path = args.db or default_db_path()
@@ -299,8 +302,6 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         seed_from_scene(db, scene)
     live = not getattr(args, "recorded", False)
     try:
-        from app.ros2.bridge import Ros2Bridge
-
         bridge = Ros2Bridge.open(args, specs)  # None without --ros2 or a ros2: video
     except BaseException:
         db.close()

@@ -492,6 +492,9 @@ class InterfaceServer:
             video += Md("\n\n**⚠ Not live: {}.** The image shown is the last frame, greyed{}.").format(
                 status.text, f" (last try: {status.reason})" if status.reason else ""
             )
+        said = getattr(src, "warning", "")  # what the source found wrong while it plays on (a ROS 2 camera's)
+        if said:
+            video += Md("\n\n**⚠ {}**").format(said)
         cam = self.site.camera_of(feed.name)
         return video + Md(" · calibrated for {}×{}").format(cam.width, cam.height)
 
