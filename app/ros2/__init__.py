@@ -35,4 +35,6 @@ def require() -> None:
         import trajectory_msgs.msg  # noqa: F401
         import visualization_msgs.msg  # noqa: F401
     except ImportError as exc:
-        raise Ros2Unavailable(f"ROS 2 is not installed in this Python ({exc.name} is missing): {INSTALL_HINT}") from None
+        raise Ros2Unavailable(
+            f"ROS 2 is not installed in this Python ({exc.name} is missing): {INSTALL_HINT}"
+        ) from None

@@ -230,7 +230,9 @@ def object_markers(objects: Sequence[Any], t: float, frame_id: str, line_width_m
         faces.header.stamp, faces.header.frame_id = stamp, frame_id
         faces.scale.x = faces.scale.y = faces.scale.z = 1.0
         faces.color.r, faces.color.g, faces.color.b, faces.color.a = r, g, b, 0.25
-        faces.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in np.asarray(V)[np.asarray(F)].reshape(-1, 3)]
+        faces.points = [
+            Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in np.asarray(V)[np.asarray(F)].reshape(-1, 3)
+        ]
         out.markers.append(faces)
         top = obj.T_world_obj @ np.array([0.0, 0.0, 0.0, 1.0])
         if len(edges):

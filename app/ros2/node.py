@@ -58,7 +58,9 @@ def domain_id(value: int | None) -> int:
         try:
             value = int(env)
         except ValueError:
-            raise ValueError(f"ROS_DOMAIN_ID={env!r} is not a number; set it to 0..232, or give --ros2-domain") from None
+            raise ValueError(
+                f"ROS_DOMAIN_ID={env!r} is not a number; set it to 0..232, or give --ros2-domain"
+            ) from None
     if not 0 <= int(value) <= 232:
         raise ValueError(f"ROS 2 domain id {value} is outside 0..232; give one in that range")
     return int(value)

@@ -50,7 +50,9 @@ class Ros2Publisher:
         self._thread = threading.Thread(target=self._run, name="mcit-ros2-out", daemon=True)
         self._thread.start()
         for rec in site.db.objects():  # every object as it stands, for a viewer that starts before any change
-            self.publish({"type": "pose", "object": rec.name, "T": rec.T_world_obj, "cov": rec.cov, "time": rec.updated_at})
+            self.publish(
+                {"type": "pose", "object": rec.name, "T": rec.T_world_obj, "cov": rec.cov, "time": rec.updated_at}
+            )
 
     def topic_of(self, name: str) -> str:
         """The pose topic of object ``name`` (one topic per name: a clash of tokens gets a suffix)."""

@@ -75,7 +75,7 @@ class RobotOverlay:
         if key == self._key:
             return False
         self._key = key
-        links = cell.link_breps()
+        links = cell.link_breps() if _heard(cell) else []  # a robot not heard from yet is not drawn anywhere
         base = cell.T_world_base[:3, 3]
         for name, (pw, prefix) in self.views.items():
             cam = cams[name]
@@ -103,6 +103,19 @@ class RobotOverlay:
         for h, (_link, _brep, T) in zip(self._meshes, links):
             h.position = tuple(T[:3, 3])
             h.wxyz = _wxyz(T[:3, :3])
+
+
+def _heard(cell) -> bool:
+    """Whether the robot's joints are known (a real robot's driver may not have spoken yet)."""
+    from app.robot.controller import ControllerError
+
+    if cell.last_state() is not None:
+        return True
+    try:
+        cell.state()
+    except ControllerError:
+        return False
+    return True
 
 
 class RobotGhost3D:

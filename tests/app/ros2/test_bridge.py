@@ -99,7 +99,9 @@ def _feed(tmp_path, kind: str) -> list[dict]:
     path = tmp_path / "feed.jsonl"
     if not path.exists():
         return []
-    return [x for x in (json.loads(line) for line in path.read_text().splitlines() if line.strip()) if x["type"] == kind]
+    return [
+        x for x in (json.loads(line) for line in path.read_text().splitlines() if line.strip()) if x["type"] == kind
+    ]
 
 
 @pytest.fixture
@@ -163,7 +165,9 @@ def test_joint_states_drive_the_robot_and_its_motions_go_out_as_trajectories(tmp
         stamp = T0 + 5.0
         with caplog.at_level(logging.WARNING, logger="mcit.ros2"):
             peer.publish_joints([*names, "not_a_joint"], [*q, 0.0], stamp)
-            _wait(lambda: any(np.allclose(list(x["joints"].values()), q) for x in _feed(tmp_path, "robot")), "robot line")
+            _wait(
+                lambda: any(np.allclose(list(x["joints"].values()), q) for x in _feed(tmp_path, "robot")), "robot line"
+            )
             line = next(x for x in _feed(tmp_path, "robot") if np.allclose(list(x["joints"].values()), q))
             assert list(line["joints"]) == list(names) and abs(line["time"] - stamp) < 1e-6
             T_tool = cell.T_world_base @ cell.model.tool_pose(q)
