@@ -41,11 +41,10 @@ def main() -> int:
     ap.add_argument("--domain", type=int, default=42, help="DDS domain id (default 42)")
     opts = ap.parse_args()
 
-    from tests.e2e.harness import free_port, site_frame
-
     from app.ros2.peer import RosPeer
     from app.scene import default_scene_path, load_scene
     from app.ui.serve import add_serve_parser, build_interface
+    from tests.e2e.harness import free_port, site_frame
 
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     scene = load_scene(default_scene_path())

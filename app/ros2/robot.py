@@ -183,7 +183,8 @@ class RosController:
         P = np.atleast_2d(np.asarray(path, float))
         if P.ndim != 2 or P.shape[1] != len(self.names) or len(P) == 0 or not np.all(np.isfinite(P)):
             raise ControllerError(
-                f"a path needs finite waypoints of {len(self.names)} joints, got shape {P.shape}; plan it for this robot"
+                f"a path needs finite waypoints of {len(self.names)} joints, got shape {P.shape}; plan it for this "
+                "robot"
             )
         out = np.flatnonzero(np.any((P < self.lower - 1e-9) | (P > self.upper + 1e-9), axis=0))
         if len(out):

@@ -23,7 +23,7 @@ from app.robot.controller import ControllerError
 from core.transforms import log_so3
 
 from .base import Control, Marks, Step, WorkflowError
-from .robot_work import RobotWork
+from .robot_work import RobotWork, planned
 
 __all__ = ["MoveRobot", "STANDOFFS_MM"]
 
@@ -77,7 +77,7 @@ class MoveRobot(RobotWork):
             objects = self.site.objects()
         from app.robot.cell import obstacles_of
 
-        plan = self.cell.plan_approach(X, n, standoff, obstacles_of(objects))
+        plan = planned(self.cell.plan_approach, X, n, standoff, obstacles_of(objects))
         with self.lock:
             self.plan = plan
             self.arrival = {}

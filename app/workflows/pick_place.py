@@ -29,7 +29,7 @@ from app.robot.controller import ControllerError
 from core.transforms import log_so3
 
 from .base import Control, Ghost, Marks, Step, WorkflowError
-from .robot_work import RobotWork
+from .robot_work import RobotWork, planned
 from .writing import write_pose
 
 __all__ = ["PickPlace", "GRASP_SIGMA_M", "GRASP_SIGMA_DEG"]
@@ -101,7 +101,8 @@ class PickPlace(RobotWork):
             stands_on = _stands_on(obj, objects)
         from app.robot.cell import obstacles_of
 
-        plan = self.cell.plan_pick_place(
+        plan = planned(
+            self.cell.plan_pick_place,
             obj.name,
             obj.model,
             obj.T_world_obj,

@@ -20,6 +20,7 @@ import numpy as np
 from app.robot.controller import ControllerError
 
 from .base import WorkflowError
+from .robot_work import planned
 
 __all__ = ["RobotTour", "ARRIVED_RAD", "SETTLE_S"]
 
@@ -80,7 +81,7 @@ class RobotTour:
         if self.moving():
             raise WorkflowError("the robot is moving: Stop it (Space) or wait for it to stop")
         via = [] if self.home is None else [self.home]
-        plan = self.cell.plan_joints(self.qs[k], obstacles_of(self.site.objects()), via=via)
+        plan = planned(self.cell.plan_joints, self.qs[k], obstacles_of(self.site.objects()), via=via)
         if not plan.ok:
             raise WorkflowError(f"the motion to pose {k + 1} was refused: {plan.reason}. The robot did not move")
         try:

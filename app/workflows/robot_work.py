@@ -3,13 +3,25 @@ moving, no frame frozen), the surface under a click, sending a checked plan, and
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
 from app.robot.controller import ControllerError
 
 from .base import Workflow, WorkflowError, as_pixel
 
-__all__ = ["RobotWork"]
+__all__ = ["RobotWork", "planned"]
+
+
+def planned(plan: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    """``plan(*args, **kwargs)``, one of the robot cell's planners; WorkflowError when the robot's controller does not
+    answer (a planner starts from where the robot is: a robot not heard from is not planned for)."""
+    try:
+        return plan(*args, **kwargs)
+    except ControllerError as exc:
+        raise WorkflowError(f"{exc}: nothing was planned, the robot did not move") from None
 
 
 class RobotWork(Workflow):

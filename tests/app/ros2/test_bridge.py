@@ -161,13 +161,22 @@ def test_joint_states_drive_the_robot_and_its_motions_go_out_as_trajectories(tmp
         names = cell.model.joint_names
         with pytest.raises(ControllerSilent, match="no joint state on /joint_states yet"):
             cell.controller.state()  # nothing heard: the robot is not moved, and the operator is told why
+        from app.workflows import Session, WorkflowError
+
+        wf = Session(server.site, client="alice").start("move_robot")
+        with pytest.raises(WorkflowError, match="no joint state on /joint_states"):
+            wf.click(server.site.camera.project(np.array([[0.15, -0.25, 0.0]]))[0])
+        assert wf.plan is None and not peer.trajectories
+        wf.cancel()
         q = np.array([0.3, -0.8, 1.1, -0.2, 0.4, 0.1, 0.02])[: len(names)]
         stamp = T0 + 5.0
         with caplog.at_level(logging.WARNING, logger="mcit.ros2"):
-            peer.publish_joints([*names, "not_a_joint"], [*q, 0.0], stamp)
-            _wait(
-                lambda: any(np.allclose(list(x["joints"].values()), q) for x in _feed(tmp_path, "robot")), "robot line"
-            )
+
+            def heard():  # as a driver does, again until heard (a first message may precede DDS's discovery)
+                peer.publish_joints([*names, "not_a_joint"], [*q, 0.0], stamp)
+                return any(np.allclose(list(x["joints"].values()), q) for x in _feed(tmp_path, "robot"))
+
+            _wait(heard, "robot line")
             line = next(x for x in _feed(tmp_path, "robot") if np.allclose(list(x["joints"].values()), q))
             assert list(line["joints"]) == list(names) and abs(line["time"] - stamp) < 1e-6
             T_tool = cell.T_world_base @ cell.model.tool_pose(q)
@@ -182,16 +191,25 @@ def test_joint_states_drive_the_robot_and_its_motions_go_out_as_trajectories(tmp
         goal = q + np.r_[0.2, np.zeros(len(names) - 1)]
         keep = threading_keep_publishing(peer, names, q)
         try:
+            n = len(peer.trajectories)  # (the Stop of the cancelled workflow above may be among them)
             cell.controller.move(goal[None, :])
-            assert peer.wait(lambda: len(peer.trajectories) >= 1, WAIT_S), "no JointTrajectory from mcit"
-            traj = peer.trajectories[-1][1]
+            assert peer.wait(lambda: len(peer.trajectories) > n, WAIT_S), "no JointTrajectory from mcit"
+            traj = peer.trajectories[n][1]
             assert list(traj.joint_names) == list(names) and np.allclose(traj.points[-1].positions, goal)
             dt = traj.points[-1].time_from_start.sec + 1e-9 * traj.points[-1].time_from_start.nanosec
             assert np.isclose(dt, 0.2 / (cell.model.velocity[0] * 0.5))  # the slowest joint at half its speed limit
             assert cell.controller.state().moving
             cell.controller.stop()
-            assert peer.wait(lambda: len(peer.trajectories) >= 2 and not peer.trajectories[-1][1].points, WAIT_S)
+            assert peer.wait(lambda: len(peer.trajectories) >= n + 2 and not peer.trajectories[-1][1].points, WAIT_S)
             assert not cell.controller.state().moving
+            # a robot that does not follow (its joints stay): the motion's fault once its time and a second passed,
+            # and Stop sent
+            n = len(peer.trajectories)
+            cell.controller.move(goal[None, :])
+            _wait(lambda: cell.controller.state().fault is not None, "the motion's fault")
+            assert cell.controller.state().fault.startswith(f"joint {names[0]} did not reach its command: 11.5°")
+            assert not cell.controller.state().moving
+            assert peer.wait(lambda: len(peer.trajectories) >= n + 2 and not peer.trajectories[-1][1].points, WAIT_S)
         finally:
             keep.set()
     finally:
