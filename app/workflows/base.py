@@ -257,11 +257,10 @@ def as_pixel(uv: Any) -> np.ndarray:
 class Workflow:
     """Base class: a state machine driven by explicit operator actions.
 
-    Subclasses set ``name`` (the id used by scripts and the UI), ``title``, ``actions`` (the
-    public action method names a script may call) and implement ``next_step``, ``marks`` and
-    ``summary``. ``state`` is a short string; ``finished`` is True once accepted or cancelled.
-    Every action holds the workflow's lock: the UI's callbacks may arrive on several threads.
-    """
+    Subclasses set ``name`` (the id used by scripts and the UI), ``title``, ``actions`` (the public action method
+    names a script may call) and implement ``next_step``, ``marks`` and ``summary``. ``state`` is a short string;
+    ``finished`` is True once accepted or cancelled. Every action holds the workflow's lock (the UI's callbacks may
+    arrive on several threads)."""
 
     name: ClassVar[str] = ""
     title: ClassVar[str] = ""
@@ -385,11 +384,8 @@ class Workflow:
         return None if self.frame is None else self.frame.moving_share(uv)
 
     def seen_at(self) -> float | None:
-        """When the image the clicks were made on was taken (unix seconds): the frozen frame's, else the
-        newest frame's of the workflow's camera (a workflow on the live video); None when not known."""
-        if self.frame is not None:
-            return self.frame.stamp
-        frame = self.site.latest_frame(self.view)
+        """When the image clicked on was taken (unix s): the frozen frame's, else its camera's newest (None: unknown)."""
+        frame = self.frame if self.frame is not None else self.site.latest_frame(self.view)
         return None if frame is None else getattr(frame, "stamp", None)
 
     def frame_record(self) -> dict[str, Any] | None:
