@@ -384,7 +384,7 @@ class Workflow:
         return None if self.frame is None else self.frame.moving_share(uv)
 
     def seen_at(self) -> float | None:
-        """When the image clicked on was taken (unix s): the frozen frame's, else its camera's newest (None: unknown)."""
+        """When the clicked image was taken (unix s): the frozen frame's, else the camera's newest (None: unknown)."""
         frame = self.frame if self.frame is not None else self.site.latest_frame(self.view)
         return None if frame is None else getattr(frame, "stamp", None)
 
