@@ -92,6 +92,22 @@ def test_the_video_from_ros2_is_worked_on_and_the_pose_goes_out_stamped_with_its
             return float(np.corrcoef(shown, truth)[0, 1]) > 0.9
 
         wait_until(shown_is_the_image, what="the ROS 2 image on the page")
+        # the database drawn over it: the table's long edges in green where C projects them
+        from .test_interface import _drawn_along
+
+        table = ui.site.object("table")
+        segs = ui.site.camera.project(table.model.edge_segments(table.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
+        wire = table.model.wireframe(ui.site.camera.center, table.T_world_obj)
+        long_edges = [
+            int(k)
+            for k, v in zip(wire.edge_index, wire.visible)
+            if v and k >= 0 and np.linalg.norm(segs[k, 1] - segs[k, 0]) > 100
+        ]
+        assert long_edges
+        wait_until(
+            lambda: min(_drawn_along(ui, page, ui.screenshot(page), segs[k]) for k in long_edges) >= 0.7,
+            what="the table's edges drawn over the ROS 2 image",
+        )
 
         # one double click on the box where the image shows it, Accept
         op = Operator(ui, page)
