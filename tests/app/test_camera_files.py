@@ -257,26 +257,26 @@ def test_mcit_track_camera_name(box_frames, capsys):
         "--intrinsics",
         str(d / "rig.xml"),
     ]
-    assert main(args) == 2
+    assert main(args) == 1  # a file that cannot be used: status 1 (app/exit_status.py)
     err = capsys.readouterr().err
     assert "rig.xml: 2 cameras for 320×240 images (wide 320×240; tele 320×240); choose one with --camera-name" in err
     assert err.count("\n") == 1
     # the name, then the video's frame size, choose the 320×240 'tele' camera: the box is tracked
     assert main(args + ["--camera-name", "tele"]) == 0
     assert "tracked 3 frames" in capsys.readouterr().out
-    assert main(args + ["--camera-name", "zoom"]) == 2
+    assert main(args + ["--camera-name", "zoom"]) == 1
     assert "rig.xml: no camera named 'zoom'" in capsys.readouterr().err
     # a file calibrated on other images than the video's is refused, naming both sizes
     (d / "big.yaml").write_text(
         "image_width: 640\nimage_height: 480\ncamera_name: tele\n"
         "camera_matrix: {rows: 3, cols: 3, data: [840, 0, 319.5, 0, 840, 239.5, 0, 0, 1]}\n"
     )
-    assert main(args[:-1] + [str(d / "big.yaml")]) == 2
+    assert main(args[:-1] + [str(d / "big.yaml")]) == 1
     assert (
         "big.yaml: the camera was calibrated on 640×480 images but the video's frames are 320×240"
         in capsys.readouterr().err
     )
-    # --camera-name without --intrinsics says what it is for
+    # --camera-name without --intrinsics says what it is for: a command line to fix, status 2
     assert main(["track", str(d / "frames"), "--scene", "x", "--camera-name", "tele"]) == 2
     assert "--camera-name chooses a camera in the --intrinsics file" in capsys.readouterr().err
 
