@@ -204,7 +204,10 @@ def test_real_visp_files_with_a_name(shared_data):
 
 _K9 = "camera_matrix: {rows: 3, cols: 3, data: [500, 0, 320, 0, 500, 240, 0, 0, 1]}\n"
 BAD = [
-    ("cam.yaml", "a: [1, 2\nb: }{", "OpenCV cannot parse it (line 2"),
+    ("cam.yaml", "a: [1, 2\nb: }{", "not valid YAML (line 2: "),
+    ("cam.yml", "%YAML:1.0\na: [1, 2\nb: }{", "OpenCV cannot parse it (line 3"),  # OpenCV's dialect: its reader
+    ("cam.yaml", "k: '<array type: double[9]>'\n", "echoed without its arrays"),
+    ("cam.yaml", b"\xff\xfe\x00k: [1]", "not a text file"),
     ("cam.yaml", "image_width: 640\nimage_height: 480\n", "no camera matrix (looked for camera_matrix"),
     ("cam.yaml", "camera_matrix: {rows: 3, cols: 3}\n", "a matrix needs 'data'"),
     ("cam.yaml", "camera_matrix: {rows: 3, cols: 3, data: [1, 2, 3]}\n", "does not fill 3×3 numbers"),
@@ -231,7 +234,7 @@ BAD = [
 @pytest.mark.parametrize("name, text, expected", BAD, ids=[b[2][:30] for b in BAD])
 def test_every_failure_is_one_line_naming_the_file(tmp_path, name, text, expected):
     f = tmp_path / name
-    f.write_text(text)
+    f.write_bytes(text if isinstance(text, bytes) else text.encode())
     with pytest.raises(ValueError) as info:
         read_intrinsics(f, camera_name="right" if "named 'left'" in expected else None)
     msg = str(info.value)
