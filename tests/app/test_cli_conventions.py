@@ -114,6 +114,7 @@ def test_the_exit_statuses_are_documented_once_for_all():
 )
 def test_each_kind_of_error_has_its_status(monkeypatch, capsys, exc, status):
     """(141, a reader that left: tests/app/test_cli_errors.py; 3, a lost object: tests/app/vision/test_sequence.py)"""
+
     def func(args):
         raise exc
 
