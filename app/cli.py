@@ -37,13 +37,22 @@ class _Parser(argparse.ArgumentParser):
         self.exit(exit_status.USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
+class _Version(argparse.Action):
+    """``--version``: the installed distribution's version, looked up only when asked (importlib.metadata
+    costs ~30 ms, which every other command would pay)."""
 
-    try:
-        return version("mcit")
-    except PackageNotFoundError:
-        return "(not installed: run from its source folder)"
+    def __init__(self, option_strings, dest, **kwargs):
+        super().__init__(option_strings, dest, nargs=0, help="print mcit's version and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            text = version("mcit")
+        except PackageNotFoundError:
+            text = "(not installed: run from its source folder)"
+        print(f"mcit {text}")  # on stdout, as argparse's own version action
+        parser.exit(0)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit status: 0 done, 1 the command could not do its job (the line on stderr says why), "
         "2 a wrong command line, 3 mcit track lost the object, 70 a bug in mcit, 130 Ctrl-C",
     )
-    parser.add_argument("--version", action="version", version=f"mcit {_version()}")
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     from app.db_cli import add_db_parser  # argparse only: the database modules load when a db command runs
 

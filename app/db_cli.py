@@ -295,7 +295,7 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     )
     db = subparsers.add_parser(
         "db",
-        help="the site's database: import, list, show, export, history, undo",
+        help="the site's database: import, list, show, show-calibration, export, history, undo",
         description="The site's 3D geometric database (SQLite).",
     )
     sub = db.add_subparsers(dest="db_command", metavar="DB_COMMAND", required=True)
