@@ -8,7 +8,7 @@ Exit status, one scheme for every command (``app/exit_status.py``; README "Exit 
 
     0    done
     1    the command could not do its job: a file, device, database or value it was given is wrong or
-         unavailable, or the machine refused (a full disk, a port in use); the line says which and what to do
+         unavailable, or the machine refused (a full disk, no port to listen on); the line says which and what to do
     2    the command line is wrong: an unknown option, a bad value, options that do not go together
     3    mcit track: the object was lost (the line says at which frame and how to restart)
     70   a bug in mcit (the line says so; set MCIT_TRACEBACK=1 to see the traceback)

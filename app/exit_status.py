@@ -3,7 +3,7 @@
 ====  =========================================================================================
  0    done
  1    the command could not do its job: a file, device, database or value it was given is wrong
-      or unavailable, or the machine refused (a full disk, a port in use); the line on stderr says
+      or unavailable, or the machine refused (a full disk, no port to listen on); the line on stderr says
       which and what to do
  2    the command line is wrong: an unknown option, a bad value, options that do not go together
       (``UsageError``); ``mcit COMMAND --help`` says what it takes

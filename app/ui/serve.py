@@ -471,6 +471,9 @@ def run_serve(args: argparse.Namespace) -> int:
         raise
     if args.port and server.port != args.port:
         print(f"mcit serve: port {args.port} is in use: listening on port {server.port} instead", file=sys.stderr)
+    # SIGTERM stops the interface from before its address is printed: a supervisor may stop it as soon as it reads it
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
     server.start()
     # The pose solvers' compiled kernels load (the first time on a machine: compile) while the page opens.
     threading.Thread(target=_warm_pose_kernels, name="pose-kernels", daemon=True).start()
@@ -483,8 +486,6 @@ def run_serve(args: argparse.Namespace) -> int:
             flush=True,
         )
     print(f"mcit: open {server.url} in a browser (Ctrl-C to stop)", flush=True)
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         while not stop.wait(0.5):
             pass
