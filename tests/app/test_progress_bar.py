@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from app.progress import progress_bar
+from tests.app.box_frames import box_frames  # noqa: F401 - a fixture
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -85,3 +86,28 @@ def test_render_with_stderr_a_terminal_draws_the_bar_on_stderr_only(tmp_path):
         assert out.startswith("wrote ") and out.count("\n") == 1, out
         text = err.decode()
         assert ("3/3" in text and "frames" in text) != quiet, text
+
+
+def test_track_and_calibrate_intrinsics_report_frames_done_of_frames_to_do(box_frames):  # noqa: F811 - fixture
+    import numpy as np
+
+    from app.models_io import load_model
+    from app.vision.intrinsics_cli import _frames
+    from app.vision.sequence import read_visp_pose, track_sequence
+    from core.camera import Camera
+
+    d = box_frames
+    K = np.array([[420.0, 0.0, 159.5], [0.0, 420.0, 119.5], [0.0, 0.0, 1.0]])
+    seen = []
+    frames = track_sequence(
+        d / "frames",
+        Camera.from_intrinsics(K, np.eye(4), 320, 240),
+        load_model(d / "box.cao"),
+        read_visp_pose(d / "box.pos"),
+        start=1,
+        progress=lambda done, total: seen.append((done, total)),
+    )
+    assert len(frames) == 2 and seen == [(1, 2), (2, 2)]
+    seen.clear()
+    assert [i for i, _ in _frames(str(d / "frames"), 2, lambda done, total: seen.append((done, total)))] == [0, 2]
+    assert seen == [(1, 3), (2, 3), (3, 3)]  # every frame read counts, the ones skipped by --every too
