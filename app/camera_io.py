@@ -21,7 +21,14 @@ distortion the file states.
   the equidistant model).
 * ROS ``camera_info`` YAML: the calibrator's ``ost.yaml`` (``camera_name``, ``camera_matrix`` and
   ``distortion_coefficients`` as ``rows``/``cols``/``data`` maps, ``distortion_model``) and a
-  ``CameraInfo`` message dump (``width``, ``height``, ``K``/``k`` and ``D``/``d`` as flat lists).
+  ``CameraInfo`` message as ``ros2 topic echo`` / ``rostopic echo`` print it (``header``, ``width``,
+  ``height``, ``distortion_model``, ``K``/``k`` and ``D``/``d`` as flat or block lists, the message
+  closed by ``---``; of several messages, the first). ``R``/``r`` and ``P``/``p`` (rectification) are
+  not used: mcit undistorts with K and the distortion.
+
+YAML is read with PyYAML, except OpenCV's own dialect (a file that opens with ``%YAML:1.0``, as
+``cv::FileStorage`` writes it), which OpenCV reads; both give the same tree to one interpretation
+(``_intrinsics_from_tree``). ``!!opencv-matrix`` maps read as plain ``rows``/``cols``/``data`` maps.
 * A YAML file holding several cameras as top-level maps (``cam0: {…}``, ``left: {…}``): ``camera_name``
   picks the map by its key or its ``camera_name``.
 
@@ -35,6 +42,7 @@ that C, with the file's K, holds in the undistorted image.
 
 from __future__ import annotations
 
+import functools
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -382,6 +390,51 @@ def _opencv_tree(path: Path) -> dict:
     return tree
 
 
+def _is_opencv_yaml(path: Path) -> bool:
+    """Whether a YAML file is in OpenCV's dialect: it opens with OpenCV's ``%YAML:1.0`` directive
+    (standard YAML writes ``%YAML 1.1``), which PyYAML refuses."""
+    head = path.read_bytes()[:64].lstrip(b"\xef\xbb\xbf \t\r\n")
+    return head.startswith(b"%YAML:")
+
+
+@functools.cache
+def _yaml_loader():
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        """PyYAML's safe loader, with OpenCV's ``!!opencv-matrix`` tag read as the map it tags."""
+
+    Loader.add_constructor(
+        "tag:yaml.org,2002:opencv-matrix", lambda loader, node: loader.construct_mapping(node, deep=True)
+    )
+    return Loader
+
+
+def _yaml_tree(path: Path) -> dict:
+    """A YAML camera file as a dict, read with PyYAML (ROS's ost.yaml, a CameraInfo as ``ros2 topic
+    echo`` prints it: the first of its ``---``-separated messages)."""
+    import yaml
+
+    where = str(path)
+    raw = path.read_bytes()
+    if not raw.strip():
+        raise ValueError(f"{where}: the file is empty; expected a camera matrix and the image size")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise ValueError(f"{where}: not a text file (not UTF-8); expected YAML with a camera matrix") from None
+    try:
+        docs = [d for d in yaml.load_all(text, Loader=_yaml_loader()) if d is not None]
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        at = f"line {mark.line + 1}: " if mark is not None else ""
+        what = getattr(exc, "problem", None) or str(exc)
+        raise ValueError(f"{where}: not valid YAML ({at}{' '.join(str(what).split())})") from None
+    if not docs or not isinstance(docs[0], dict) or not docs[0]:
+        raise ValueError(f"{where}: holds no named values; expected a camera matrix and the image size")
+    return docs[0]
+
+
 def _get(d: dict, keys, want_map: bool = False) -> tuple[str | None, Any]:
     """(key as written, value) of the first of ``keys`` in ``d`` (case-insensitive), or (None, None)."""
     lower = {}
@@ -409,6 +462,10 @@ def _matrix(value: Any, where: str, shape: tuple[int, ...] | None = None) -> np.
         except (TypeError, ValueError):
             raise ValueError(f"{where}: its data does not fill {rows}×{cols} numbers") from None
     else:
+        if isinstance(value, str) and value.startswith("<array type"):
+            raise ValueError(
+                f"{where}: the message was echoed without its arrays ({value}); echo it again without --no-arr"
+            )
         try:
             a = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
@@ -520,11 +577,14 @@ def _intrinsics_from_tree(tree: dict, path: Path, key: str | None, camera_name: 
 
 
 def _read_opencv(path: Path, key: str | None, camera_name: str | None = None) -> Intrinsics:
-    return _intrinsics_from_tree(_opencv_tree(path), path, key, camera_name)
+    """A FileStorage file (OpenCV's reader), or a YAML file not in OpenCV's dialect (PyYAML)."""
+    yaml_file = path.suffix.lower() in (".yml", ".yaml") and not _is_opencv_yaml(path)
+    tree = _yaml_tree(path) if yaml_file else _opencv_tree(path)
+    return _intrinsics_from_tree(tree, path, key, camera_name)
 
 
 def read_opencv_yml(path: str | Path, key: str | None = None) -> np.ndarray:
-    """K (3, 3), pixels, from an OpenCV FileStorage file (``.yml``, ``.yaml``, ``.xml``, ``.json``).
+    """K (3, 3), pixels, from an OpenCV FileStorage file (``.yml``, ``.yaml``, ``.xml``, ``.json``) or a ROS YAML file.
 
     The matrix is read under ``key`` or the first of camera_matrix, cameraMatrix, K, intrinsics, M
     (any case). ValueError naming the file and key on bad input.

@@ -2,22 +2,24 @@
 
     mcit db init --scene scenes/workcell        a new database from a scene's known objects
     mcit db import model.cao [--name N] [--xyz X Y Z] [--rpy-deg R P Y] [--status known] [--max-faces N]
-    mcit db list | show NAME | history [NAME] | undo CHANGE [--restore]
+    mcit db list | show NAME | history [NAME] [--json]      --json: one JSON document (docs/database.md)
+    mcit db show-calibration [camera|turret|robot-base|CAMERA|N] [--json]
+    mcit db undo CHANGE [--restore]
     mcit db export NAME out.{cao,obj,stl,ply,gltf,glb} [--world]
     mcit db export-poses out.{json,csv,pos} [--object NAME ...] [--frame world|camera]
     mcit db feed --socket PATH | --file PATH     the pose changes as JSON lines (app.poses_cli)
 
 Every sub-command takes ``--db PATH`` (default ``~/.local/share/mcit/mcit.sqlite``) and ``--wait-s S``
-(how long a change waits for another writer to finish, default 5 s). list, show, history and
-export only read: they work on a read-only file, folder or mount and never create the file. Every
-failure is one line on stderr and exit status 1, with nothing written. Heavy modules are imported
-inside the commands so that ``mcit --help`` stays fast.
+(how long a change waits for another writer to finish, default 5 s). list, show, history,
+show-calibration and export only read: they work on a read-only file, folder or mount and never
+create the file. Every failure is one line on stderr (app.cli) and exit status 1, with nothing
+written. Heavy modules are imported inside the commands so that ``mcit --help`` stays fast.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
+import json
 import time
 from pathlib import Path
 
@@ -47,7 +49,7 @@ def _cmd_init(args) -> int:
         out = seed_from_scene(db, scene, client="cli")
         print(
             f"{db.path}: seeded from scene {scene.name!r}: objects {', '.join(out['objects']) or '(none)'}; "
-            f"camera and turret calibrations #{out['calibrations'][0]}, #{out['calibrations'][1]}"
+            f"calibrations {', '.join(f'#{i}' for i in out['calibrations'])} (mcit db show-calibration)"
         )
     return 0
 
@@ -94,8 +96,19 @@ def _cmd_import(args) -> int:
     return 0
 
 
+def _print_json(doc: dict) -> None:
+    """One JSON document on stdout, indented, in ASCII (any other character as a \\u escape: a name's
+    terminal controls never reach the terminal, and ``safe_output`` has nothing to change)."""
+    print(json.dumps(doc, indent=1))
+
+
 def _cmd_list(args) -> int:
     with _open(args, readonly=True) as db:
+        if args.json:
+            from app.db.describe import objects_doc
+
+            _print_json(objects_doc(db))
+            return 0
         objs = db.objects()
         if not objs:
             print(f"{db.path}: no objects")
@@ -117,6 +130,11 @@ def _cmd_show(args) -> int:
 
     with _open(args, readonly=True) as db:
         o = db.get(int(args.name) if args.name.isdigit() else args.name)
+        if args.json:
+            from app.db.describe import object_doc
+
+            _print_json(object_doc(db, o))
+            return 0
         m = o.model
         rpy = pose_to_json(o.T_world_obj)["rpy_deg"]
         print(f"#{o.id} {o.name!r}  kind {o.kind}  status {o.status}  version {o.version}")
@@ -205,6 +223,11 @@ def _cmd_history(args) -> int:
     with _open(args, readonly=True) as db:
         name = None if args.name is None else (int(args.name) if args.name.isdigit() else args.name)
         changes = db.history(name, limit=args.limit)
+        if args.json:
+            from app.db.describe import history_doc
+
+            _print_json(history_doc(db, changes, args.name))
+            return 0
         if not changes:
             print(f"{db.path}: the history is empty")
             return 0
@@ -216,6 +239,22 @@ def _cmd_history(args) -> int:
                 f"{c.id:>5}  {_when(c.time)}  {c.client:<10} {c.action + extra:<14} {what:<20}"
                 f" {c.version or '':>4}  {c.method}"
             )
+    return 0
+
+
+def _cmd_show_calibration(args) -> int:
+    from app.db.describe import calibration_lines, calibration_record, calibrations_doc, pick_calibrations
+
+    with _open(args, readonly=True) as db:
+        chosen = pick_calibrations(db, args.what)
+        if args.json:
+            _print_json(calibrations_doc(db, chosen))
+            return 0
+        if not chosen:
+            print(f"{db.path}: no calibrations (mcit db init seeds a scene's; mcit serve calibrates)")
+            return 0
+        for cal in chosen:
+            print("\n".join(calibration_lines(calibration_record(cal), _when(cal.time))))
     return 0
 
 
@@ -231,29 +270,9 @@ def _cmd_undo(args) -> int:
 def _run(func):
     def wrapped(args) -> int:
         with safe_output():  # the database's text may hold terminal escapes: shown as codes
-            return _answer(func, args)
+            return func(args)  # a failure: its one line and exit status from app.cli
 
     return wrapped
-
-
-def _answer(func, args) -> int:
-    """``func(args)``, its failures as one line on stderr (status 1)."""
-    from app.db import ConflictError, DatabaseRefused, DatabaseUnavailable, NotFoundError
-
-    try:
-        return func(args)
-    except BrokenPipeError:
-        raise  # the reader of the output left (``| head``): app.cli ends quietly
-    except (ValueError, NotFoundError, ConflictError, DatabaseRefused, DatabaseUnavailable) as exc:
-        print(f"mcit db {args.db_command}: error: {exc}", file=sys.stderr)
-        return 1
-    except OSError as exc:  # a file named on the command line: say which and why, in one line
-        where = f"{exc.filename}: " if exc.filename else ""
-        print(
-            f"mcit db {args.db_command}: error: {where}{exc.strerror or exc}; {os_error_advice(exc)}",
-            file=sys.stderr,
-        )
-        return 1
 
 
 _wait_s = number(float, lambda v: 0.0 <= v <= 3600.0, kind="seconds (a number)", expected="0 to 3600 seconds")
@@ -276,7 +295,7 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     )
     db = subparsers.add_parser(
         "db",
-        help="the site's database: import, list, show, export, history, undo",
+        help="the site's database: import, list, show, show-calibration, export, history, undo",
         description="The site's 3D geometric database (SQLite).",
     )
     sub = db.add_subparsers(dest="db_command", metavar="DB_COMMAND", required=True)
@@ -312,12 +331,32 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_run(_cmd_import))
 
-    p = sub.add_parser("list", parents=[common], help="every object with its status, version and position")
+    as_json = argparse.ArgumentParser(add_help=False)
+    as_json.add_argument(
+        "--json", action="store_true", help="one JSON document instead of the table (keys: docs/database.md)"
+    )
+    p = sub.add_parser("list", parents=[common, as_json], help="every object with its status, version and position")
     p.set_defaults(func=_run(_cmd_list))
 
-    p = sub.add_parser("show", parents=[common], help="one object: model, dimensions ± σ, pose, covariance")
+    p = sub.add_parser("show", parents=[common, as_json], help="one object: model, dimensions ± σ, pose, covariance")
     p.add_argument("name", help="object name or id")
     p.set_defaults(func=_run(_cmd_show))
+
+    p = sub.add_parser(
+        "show-calibration",
+        parents=[common, as_json],
+        help="the cameras', the turret's and the robot base's calibrations: pose in the world, C and K, RMS, σ",
+        description="Show the latest calibration of every camera, of the turret and of the robot's base (or "
+        "the ones asked): who made it, when and how, the calibrated thing's pose in the world with its σ, "
+        "a camera's C and K, the fit's RMS.",
+    )
+    p.add_argument(
+        "what",
+        nargs="?",
+        help="camera (every camera's), turret, robot-base, a camera's name, or a calibration's number "
+        "(mcit db history); default: the latest of each",
+    )
+    p.set_defaults(func=_run(_cmd_show_calibration))
 
     p = sub.add_parser("export", parents=[common], help="write an object's model as .cao, OBJ, STL, PLY, glTF or GLB")
     p.add_argument("name", help="object name or id")
@@ -325,7 +364,7 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--world", action="store_true", help="bake the pose: write the model in the world frame")
     p.set_defaults(func=_run(_cmd_export))
 
-    p = sub.add_parser("history", parents=[common], help="every change (of one object): when, who, how")
+    p = sub.add_parser("history", parents=[common, as_json], help="every change (of one object): when, who, how")
     p.add_argument("name", nargs="?", help="object name or id (default: all)")
     p.add_argument("--limit", type=_limit, default=None, help="only the last N changes")
     p.set_defaults(func=_run(_cmd_history))

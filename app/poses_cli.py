@@ -45,8 +45,10 @@ def _cmd_feed(args) -> int:
     from app.db.export import iso
     from app.feed import FeedPublisher, change_event, object_event
 
-    if args.interval_s <= 0:
-        raise ValueError(f"--interval-s must be positive, got {args.interval_s}")
+    if not args.interval_s > 0:
+        from app.exit_status import UsageError
+
+        raise UsageError(f"--interval-s must be positive, got {args.interval_s}")
     stop = threading.Event()
     with _open(args) as db:
         last = db.last_change_id()
@@ -113,6 +115,8 @@ def add_pose_parsers(sub, common: argparse.ArgumentParser, run) -> None:
 
 
 def _feed_checked(args) -> int:
+    from app.exit_status import UsageError
+
     if not (args.socket or args.file):
-        raise ValueError("give --socket PATH and/or --file PATH: where the feed is published")
+        raise UsageError("give --socket PATH and/or --file PATH: where the feed is published")
     return _cmd_feed(args)

@@ -6,43 +6,9 @@ stays fast).
 
 from __future__ import annotations
 
-import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["add_scene_parsers", "cli_render", "cli_script", "progress_bar"]
-
-
-def progress_bar(label: str = "frames", stream=None) -> Callable[[int, int], None]:
-    """A text progress bar: ``show(done, total)``, on ``stream`` (default: standard error as it is now).
-
-    On a terminal it redraws one line in place; otherwise (a log file, CI) it writes a plain line
-    at each tenth of the way, so logs stay readable.
-    """
-    stream = sys.stderr if stream is None else stream
-    start = time.monotonic()
-    live = bool(getattr(stream, "isatty", lambda: False)())
-    last_tenth = -1
-
-    def show(done: int, total: int) -> None:
-        nonlocal last_tenth
-        width = 30
-        filled = int(width * done / max(total, 1))
-        elapsed = time.monotonic() - start
-        eta = elapsed / max(done, 1) * (total - done)
-        text = f"[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label}, {elapsed:.0f} s, ~{eta:.0f} s left"
-        if live:
-            stream.write("\r" + text + ("\n" if done >= total else ""))
-        else:
-            tenth = 10 * done // max(total, 1)
-            if tenth == last_tenth:
-                return
-            last_tenth = tenth
-            stream.write(text + "\n")
-        stream.flush()
-
-    return show
+__all__ = ["add_scene_parsers", "cli_render", "cli_script"]
 
 
 def add_scene_parsers(subparsers) -> None:
@@ -63,6 +29,7 @@ def add_scene_parsers(subparsers) -> None:
     p.add_argument("--out", default=None, help="output file (default: the camera's video.file)")
     p.add_argument("--frames", type=int, default=None, help="render only the first N frames")
     p.add_argument("--frame", type=float, default=None, metavar="T_S", help="write one PNG frame at time T_S instead")
+    p.add_argument("--quiet", action="store_true", help="no progress bar (there is none when stderr is not a terminal)")
     p.set_defaults(func=cli_render)
 
     q = subparsers.add_parser(
@@ -83,6 +50,8 @@ def add_scene_parsers(subparsers) -> None:
 
 def cli_render(args) -> int:
     """``mcit render``: render the video (or one frame with ``--frame``)."""
+    from app.exit_status import UsageError
+    from app.progress import progress_bar
     from app.render.renderer import Renderer
     from app.render.video import render_video
     from app.scene import default_scene_path, load_scene
@@ -99,9 +68,10 @@ def cli_render(args) -> int:
         return 0
     names = [args.camera] if args.camera else [v.name for v in scene.views if v.video is not None] or [view.name]
     if args.out and len(names) > 1:
-        raise ValueError(f"--out writes one video and the scene has {len(names)}: add --camera NAME")
+        raise UsageError(f"--out writes one video and the scene has {len(names)}: add --camera NAME")
     for name in names:
-        info = render_video(scene, args.out, frames=args.frames, progress=progress_bar(f"{name} frames"), view=name)
+        with progress_bar(f"{name} frames", quiet=args.quiet) as progress:
+            info = render_video(scene, args.out, frames=args.frames, progress=progress, view=name)
         size_mb = info.path.stat().st_size / 1e6
         print(
             f"wrote {info.path} ({name}): {info.frame_count} frames, {info.width}×{info.height}, {info.fps:g} fps, "

@@ -33,7 +33,16 @@ import numpy as np
 
 from core.transforms import log_so3
 
-__all__ = ["POSES_FORMAT", "pose_fields", "object_record", "camera_T", "export_poses", "format_of", "write_atomically"]
+__all__ = [
+    "POSES_FORMAT",
+    "pose_fields",
+    "object_record",
+    "record_of",
+    "camera_T",
+    "export_poses",
+    "format_of",
+    "write_atomically",
+]
 
 POSES_FORMAT = "mcit-poses/1"
 FORMATS = ("json", "csv", "pos")
@@ -208,27 +217,28 @@ def _records(db, names: Iterable[str] | None, frame: str) -> tuple[list[dict], d
         meta["T_cam_world"] = [[float(v) for v in row] for row in T_fw]
     elif frame != "world":
         raise ValueError(f"unknown frame {frame!r}; use world or camera")
-    out = []
-    for o in wanted:
-        last = db.history(o.id, limit=1)
-        who, method = (last[0].client, last[0].method) if last else (None, None)
-        out.append(
-            object_record(
-                o.name,
-                o.id,
-                o.kind,
-                o.status,
-                o.version,
-                o.T_world_obj,
-                o.cov,
-                who=who,
-                method=method,
-                when=o.updated_at,
-                T_frame_world=T_fw,
-                frame=frame,
-            )
-        )
-    return out, meta
+    return [record_of(db, o, T_fw, frame) for o in wanted], meta
+
+
+def record_of(db, o, T_frame_world: np.ndarray | None = None, frame: str = "world") -> dict[str, Any]:
+    """``object_record`` of an ``app.db.ObjectRecord`` as it stands, with the client and method of its
+    last change (from the history); T_frame_world (4, 4) moves it to ``frame``."""
+    last = db.history(o.id, limit=1)
+    who, method = (last[0].client, last[0].method) if last else (None, None)
+    return object_record(
+        o.name,
+        o.id,
+        o.kind,
+        o.status,
+        o.version,
+        o.T_world_obj,
+        o.cov,
+        who=who,
+        method=method,
+        when=o.updated_at,
+        T_frame_world=T_frame_world,
+        frame=frame,
+    )
 
 
 def _csv_text(records: list[dict]) -> str:

@@ -1,14 +1,17 @@
 """``mcit demo``: the headless demo from the command line.
 
 Only argparse here; the workflows, devices and solvers load when the command runs (``mcit
---help`` stays fast). Exit status: 0 when every step succeeded and the outputs are written, 1
-when a step of the replay failed (named on stderr), 2 for a scene or script that cannot be used.
+--help`` stays fast). Exit status (app/exit_status.py): 0 when every step succeeded and the outputs are
+written; 1 when a step of the replay failed (named on stderr) or the scene or script cannot be used; 2
+for options out of range.
 """
 
 from __future__ import annotations
 
 import sys
 import traceback
+
+from app.exit_status import UsageError
 
 __all__ = ["add_demo_parser", "cli_demo"]
 
@@ -58,23 +61,19 @@ def cli_demo(args) -> int:
 
     trials = args.sim_trials if args.sim_trials is not None else (20 if args.fast else 100)
     if trials < 0 or (args.frames is not None and args.frames < 1):
-        print("mcit demo: --sim-trials must be ≥ 0 and --frames ≥ 1", file=sys.stderr)
-        return 2
+        raise UsageError("--sim-trials must be ≥ 0 and --frames ≥ 1")
     from app.operator.script import load_script
     from app.scene import load_scene
 
-    try:
-        scene = load_scene(args.scene or default_scene_path())
-        script = load_script(args.script or scene.root / "operator.json")
-        if script.scene != scene.name:
-            raise ValueError(f"the script {args.script} was recorded on scene {script.scene!r}, not on {scene.name!r}")
-        if not args.no_video and (scene.video is None or not scene.video.path.is_file()):
-            raise ValueError(
-                f"scene {scene.name!r} has no video file to draw over: render it (mcit render) or use --no-video"
-            )
-    except ValueError as exc:  # SceneError, ScriptError
-        print(f"mcit demo: {exc}", file=sys.stderr)
-        return 2
+    # a scene or script that cannot be used (SceneError, ScriptError): app.cli says it, status 1
+    scene = load_scene(args.scene or default_scene_path())
+    script = load_script(args.script or scene.root / "operator.json")
+    if script.scene != scene.name:
+        raise ValueError(f"the script {args.script} was recorded on scene {script.scene!r}, not on {scene.name!r}")
+    if not args.no_video and (scene.video is None or not scene.video.path.is_file()):
+        raise ValueError(
+            f"scene {scene.name!r} has no video file to draw over: render it (mcit render) or use --no-video"
+        )
     try:
         outcome = run_demo(
             scene,
@@ -88,7 +87,7 @@ def cli_demo(args) -> int:
             stream=None if args.quiet else sys.stderr,
         )
     except DemoStepError as exc:
-        print(f"mcit demo: FAILED at {exc}", file=sys.stderr)
+        print(f"mcit demo: error: FAILED at {exc}", file=sys.stderr)
         cause = exc.__cause__
         from app.workflows import WorkflowError
 

@@ -38,23 +38,14 @@ class DemoOutcome:
     wall_s: dict
 
 
-def _bar(stream: TextIO | None, label: str, every_s: float = 0.25):
-    """A progress callback ``show(done, total)`` on stream, redrawn at most every ``every_s``
-    seconds and at the end (None when stream is None)."""
+def _bar(stream: TextIO | None, label: str):
+    """A progress callback ``show(done, total)`` on stream (app.progress: a bar while it is a terminal),
+    or None when stream is None."""
     if stream is None:
         return None
-    from app.scene_cli import progress_bar
+    from app.progress import progress_bar
 
-    show = progress_bar(label, stream)
-    last = [-np.inf]
-
-    def throttled(done: int, total: int) -> None:
-        now = time.monotonic()
-        if done >= total or now - last[0] >= every_s:
-            last[0] = now
-            show(done, total)
-
-    return throttled
+    return progress_bar(label, stream=stream)
 
 
 def _stills(script: OperatorScript, fps: float) -> list[tuple[str, str, float]]:

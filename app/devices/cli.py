@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import argparse
 import signal
-import sys
 import threading
+
+from app.exit_status import UsageError
 
 __all__ = ["add_emulate_parser", "run_emulate", "parse_fault_rates"]
 
@@ -23,8 +24,8 @@ DEFAULT_TURRET_LINK = "/tmp/mcit-turret"
 
 def parse_fault_rates(text: str | None, rate: float) -> dict[str, float]:
     """Fault rates from ``--faults kind=p,kind=p`` or, failing that, ``--fault-rate p`` spread evenly
-    over every kind but unplug."""
-    from app.devices.faults import FAULT_KINDS
+    over every kind but unplug; ValueError naming the option for an unknown kind or a rate out of [0, 1]."""
+    from app.devices.faults import FAULT_KINDS, FaultInjector
 
     if text:
         rates = {}
@@ -37,7 +38,10 @@ def parse_fault_rates(text: str | None, rate: float) -> dict[str, float]:
                 raise ValueError(
                     f"--faults expects kind=probability pairs like 'drop=0.05,garble=0.02', got {item!r}"
                 ) from None
-        return rates
+        try:
+            return FaultInjector.check_rates(rates)  # the emulators' own check, said before anything starts
+        except ValueError as exc:
+            raise ValueError(f"--faults: {exc}") from None
     if not 0.0 <= rate <= 1.0:
         raise ValueError(f"--fault-rate must be within [0, 1], got {rate}")
     kinds = [k for k in FAULT_KINDS if k != "unplug"]
@@ -95,28 +99,24 @@ def run_emulate(args: argparse.Namespace) -> int:
 
     try:
         rates = parse_fault_rates(args.faults, args.fault_rate)
-        scene = load_scene(args.scene or default_scene_path())
-        clock = (lambda: 0.0) if args.static else scene_clock(scene)
-        site = EmulatedSite(
-            scene,
-            clock=clock,
-            seed=args.seed,
-            rangefinder_baud=args.rangefinder_baud,
-            turret_baud=args.turret_baud,
-            measure_delay_s=args.measure_delay_ms / 1000.0,
-            fault_rates=rates,
-        )
-    except ValueError as exc:
-        print(f"mcit emulate: {exc}", file=sys.stderr)
-        return 2
+    except ValueError as exc:  # --faults, --fault-rate: the command line's
+        raise UsageError(str(exc)) from None
+    # a scene that cannot be used, a pty that cannot be made: app.cli says it (status 1)
+    scene = load_scene(args.scene or default_scene_path())
+    clock = (lambda: 0.0) if args.static else scene_clock(scene)
+    site = EmulatedSite(
+        scene,
+        clock=clock,
+        seed=args.seed,
+        rangefinder_baud=args.rangefinder_baud,
+        turret_baud=args.turret_baud,
+        measure_delay_s=args.measure_delay_ms / 1000.0,
+        fault_rates=rates,
+    )
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        try:
-            rf_path, turret_path = site.serve_pty(args.rangefinder_link, args.turret_link)
-        except (ValueError, OSError) as exc:
-            print(f"mcit emulate: {exc}", file=sys.stderr)
-            return 2
+        rf_path, turret_path = site.serve_pty(args.rangefinder_link, args.turret_link)
         scene_arg = f" --scene {args.scene}" if args.scene else ""
         print(f"scene: {scene.name} ({scene.root})")
         print(

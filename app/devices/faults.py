@@ -100,7 +100,7 @@ class FaultInjector:
         default_delay_s: float = 0.3,
     ):
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-        self.rates = self._check_rates(rates or {})
+        self.rates = self.check_rates(rates or {})
         self.error_line = error_line
         self.unsolicited_line = unsolicited_line
         self.default_delay_s = float(default_delay_s)
@@ -109,7 +109,9 @@ class FaultInjector:
         self.applied: list[tuple[str, bytes]] = []
 
     @staticmethod
-    def _check_rates(rates: dict[str, float]) -> dict[str, float]:
+    def check_rates(rates: dict[str, float]) -> dict[str, float]:
+        """``rates`` (fault kind → probability a reply) once each kind is known and each rate and their sum
+        lie in [0, 1]; ValueError saying which is not."""
         for kind, p in rates.items():
             if kind not in FAULT_KINDS:
                 raise ValueError(f"unknown fault kind {kind!r} in rates; use one of {FAULT_KINDS}")
@@ -121,7 +123,7 @@ class FaultInjector:
 
     def set_rates(self, rates: dict[str, float]) -> None:
         with self._lock:
-            self.rates = self._check_rates(rates)
+            self.rates = self.check_rates(rates)
 
     def push(self, *faults: Fault | str) -> None:
         """Queue faults (a Fault or a kind name); each applies to one later reply, in order."""

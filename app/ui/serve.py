@@ -18,7 +18,9 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ["add_serve_parser", "run_serve", "build_interface", "scene_with_intrinsics", "video_specs"]
+from app.exit_status import UsageError
+
+__all__ = ["add_serve_parser", "run_serve", "build_interface", "free_port", "scene_with_intrinsics", "video_specs"]
 
 log = logging.getLogger("mcit.serve")
 
@@ -61,7 +63,7 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         "--port",
         type=port_number,
         default=8080,
-        help="port, 1 to 65535 (default 8080; the next free one if taken; 0: any free port)",
+        help="port, 1 to 65535 (default 8080; when taken, the next free one, said on stderr; 0: any free port)",
     )
     p.add_argument(
         "--video",
@@ -261,6 +263,53 @@ def _check_host(host: str, port: int) -> None:
             raise
 
 
+PORT_TRIES = 100  # --port P taken: P + 1 … P + 99 are tried, then the start is refused
+
+
+def _bind_error(host: str, port: int) -> OSError | None:
+    """Why a server could not listen on ``host:port`` now (None: it could), bound as asyncio's
+    ``create_server`` (viser's) binds: every address of the host, SO_REUSEADDR, IPv6 sockets v6-only."""
+    import socket
+
+    for family, kind, proto, _, addr in socket.getaddrinfo(
+        host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+    ):
+        with socket.socket(family, kind, proto) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            if family == socket.AF_INET6:
+                probe.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
+            try:
+                probe.bind(addr)
+            except OSError as exc:
+                return exc
+    return None
+
+
+def free_port(host: str, port: int, tries: int = PORT_TRIES) -> int:
+    """The port ``mcit serve --port PORT`` listens on: PORT when it is free on ``host``, else the next free
+    one of the ``tries`` from PORT on (0 stays 0: the system chooses). ValueError, one line, when none can
+    be had: each taken, or refused (a port below 1024 without the right to it)."""
+    import errno
+
+    if port == 0:
+        return 0
+    last = min(65535, port + tries - 1)
+    for candidate in range(port, last + 1):
+        exc = _bind_error(host, candidate)
+        if exc is None:
+            return candidate
+        if exc.errno != errno.EADDRINUSE:
+            why = exc.strerror or str(exc)
+            if exc.errno == errno.EACCES and candidate < 1024:
+                why += " (a port below 1024 needs root or CAP_NET_BIND_SERVICE)"
+            raise ValueError(
+                f"--port {port}: cannot listen on {host}:{candidate}: {why}; "
+                "give another --port (1024 to 65535, 0: any free port)"
+            )
+    taken = f"port {port} is in use" if last == port else f"ports {port} to {last} are all in use"
+    raise ValueError(f"--port {port}: {taken} on {host}; give another --port, or 0 for any free port")
+
+
 def build_interface(args: argparse.Namespace, bodies_at=None):
     """Open everything ``mcit serve`` needs; returns (InterfaceServer, closers).
 
@@ -277,6 +326,7 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
 
     access = _access_policy(args)  # before anything opens: a bad --token or --allow-origin stops here
     _check_host(args.host, args.port)  # and an address this machine does not have
+    port = free_port(args.host, args.port)  # the next free one when it is taken (run_serve says so)
     scene = load_scene(args.scene or default_scene_path())
     if getattr(args, "camera_name", None) and not getattr(args, "intrinsics", None):
         raise ValueError("--camera-name chooses a camera in the --intrinsics file; give --intrinsics FILE")
@@ -405,7 +455,7 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         site,
         grabbers,
         host=args.host,
-        port=args.port,
+        port=port,
         jpeg_quality=args.jpeg_quality,
         allow_origins=access.allow_origins,
         token=access.token,
@@ -452,18 +502,18 @@ def run_serve(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
         _access_policy(args)
-    except ValueError as exc:
-        print(f"mcit serve: {exc}", file=sys.stderr, flush=True)
-        return 2
+    except ValueError as exc:  # --token, --allow-origin
+        raise UsageError(str(exc)) from None
     try:
         server, closers = build_interface(args)
-    except ValueError as exc:  # e.g. a feed socket another program publishes on
-        print(f"mcit serve: {exc}", file=sys.stderr, flush=True)
-        _release_gl()
-        return 2
-    except BaseException:  # said by the CLI (a database that is not one, ...): OpenGL released first
+    except BaseException:  # said by app.cli in one line (a database that is not one, ...): OpenGL released first
         _release_gl()
         raise
+    if args.port and server.port != args.port:
+        print(f"mcit serve: port {args.port} is in use: listening on port {server.port} instead", file=sys.stderr)
+    # SIGTERM stops the interface from before its address is printed: a supervisor may stop it as soon as it reads it
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
     server.start()
     # The pose solvers' compiled kernels load (the first time on a machine: compile) while the page opens.
     threading.Thread(target=_warm_pose_kernels, name="pose-kernels", daemon=True).start()
@@ -476,8 +526,6 @@ def run_serve(args: argparse.Namespace) -> int:
             flush=True,
         )
     print(f"mcit: open {server.url} in a browser (Ctrl-C to stop)", flush=True)
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         while not stop.wait(0.5):
             pass

@@ -7,7 +7,7 @@ FRAMES is a folder of images or a video file. The board is found in each frame (
 and OpenCV's 5 coefficients (``--model rational`` for 8), and the file holds ``image_width``,
 ``image_height``, ``camera_matrix``, ``distortion_model`` (plumb_bob / rational_polynomial),
 ``distortion_coefficients``, ``rms_px`` (the reprojection error over every corner) and the frames
-used. Examples::
+used. Progress goes to stderr on a terminal (``--quiet``: none). Examples::
 
     mcit calibrate-intrinsics frames/ --board checkerboard --cols 9 --rows 6 --square-mm 25 --out cam.yml
     mcit calibrate-intrinsics calib.mp4 --every 10 --board charuco --cols 7 --rows 5 --square-mm 30 \
@@ -17,11 +17,12 @@ used. Examples::
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from app.exit_status import UsageError
 
 __all__ = ["add_calibrate_intrinsics_parser", "Calibration", "calibrate_intrinsics", "write_camera_file"]
 
@@ -68,15 +69,20 @@ def add_calibrate_intrinsics_parser(sub) -> None:
     p.add_argument(
         "--out", default="camera.yml", help="camera file to write (.yml, .yaml, .xml or .json; default camera.yml)"
     )
+    p.add_argument("--quiet", action="store_true", help="no progress bar (there is none when stderr is not a terminal)")
     p.set_defaults(func=_cmd)
 
 
-def _frames(source: str, every: int):
-    from app.vision.sequence import iter_frames
+def _frames(source: str, every: int, progress=None):
+    """(index, image) of every ``every``-th frame; ``progress(frames read, frames in the source or None)``."""
+    from app.vision.sequence import frame_count, iter_frames
 
     if every < 1:
-        raise ValueError(f"--every must be at least 1, got {every}")
+        raise UsageError(f"--every must be at least 1, got {every}")
+    total = frame_count(source) if progress is not None and Path(source).exists() else None
     for i, rgb in iter_frames(source):
+        if progress is not None:
+            progress(i + 1, total)
         if i % every == 0:
             yield i, rgb
 
@@ -125,9 +131,9 @@ def charuco_board(cols: int, rows: int, square_m: float, marker_m: float, dictio
     import cv2
 
     if not hasattr(cv2.aruco, dictionary) or not dictionary.startswith("DICT_"):
-        raise ValueError(f"--dictionary {dictionary!r} is not an ArUco dictionary (e.g. DICT_5X5_100, DICT_4X4_50)")
+        raise UsageError(f"--dictionary {dictionary!r} is not an ArUco dictionary (e.g. DICT_5X5_100, DICT_4X4_50)")
     if not 0 < marker_m < square_m:
-        raise ValueError(
+        raise UsageError(
             f"--marker-mm must be positive and smaller than --square-mm, got {marker_m * 1e3:g} and {square_m * 1e3:g}"
         )
     d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
@@ -169,17 +175,17 @@ def calibrate_intrinsics(
     import cv2
 
     if cols < 3 or rows < 3:
-        raise ValueError(f"a board needs at least 3 × 3 squares, got {cols} × {rows}")
+        raise UsageError(f"a board needs at least 3 × 3 squares, got {cols} × {rows}")
     if not square_mm > 0:
-        raise ValueError(f"--square-mm must be positive, got {square_mm}")
+        raise UsageError(f"--square-mm must be positive, got {square_mm}")
     if board == "charuco":
         if marker_mm is None:
-            raise ValueError("a ChArUco board needs --marker-mm (the side of its markers)")
+            raise UsageError("a ChArUco board needs --marker-mm (the side of its markers)")
         detect = _charuco(cols, rows, square_mm / 1e3, marker_mm / 1e3, dictionary)
     elif board == "checkerboard":
         detect = _checkerboard(cols, rows, square_mm / 1e3)
     else:
-        raise ValueError(f"unknown board {board!r}: checkerboard or charuco")
+        raise UsageError(f"unknown board {board!r}: checkerboard or charuco")
     obj_pts, img_pts, used, size, seen = [], [], [], None, 0
     for index, image in frames:
         grey = _grey(image)
@@ -219,13 +225,18 @@ def calibrate_intrinsics(
     )
 
 
+def _checked_out(path: str | Path) -> Path:
+    path = Path(path)
+    if path.suffix.lower() not in (".yml", ".yaml", ".xml", ".json"):
+        raise UsageError(f"{path}: write the camera file as .yml, .yaml, .xml or .json")
+    return path
+
+
 def write_camera_file(cal: Calibration, path: str | Path) -> None:
     """Write ``cal`` as an OpenCV FileStorage camera file (written beside, then renamed into place)."""
     import cv2
 
-    path = Path(path)
-    if path.suffix.lower() not in (".yml", ".yaml", ".xml", ".json"):
-        raise ValueError(f"{path}: write the camera file as .yml, .yaml, .xml or .json")
+    path = _checked_out(path)
     tmp = path.with_name(path.stem + ".part" + path.suffix)
     fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
     if not fs.isOpened():
@@ -245,9 +256,13 @@ def write_camera_file(cal: Calibration, path: str | Path) -> None:
 
 
 def _cmd(args) -> int:
-    try:
+    """Calibrate and write the file; a failure raises (app.cli says it in one line: status 1, 2 for a UsageError)."""
+    from app.progress import progress_bar
+
+    _checked_out(args.out)  # before the frames are read
+    with progress_bar("frames", quiet=args.quiet) as progress:
         cal = calibrate_intrinsics(
-            _frames(args.frames, args.every),
+            _frames(args.frames, args.every, progress),
             board=args.board,
             cols=args.cols,
             rows=args.rows,
@@ -256,10 +271,7 @@ def _cmd(args) -> int:
             dictionary=args.dictionary,
             model=args.model,
         )
-        write_camera_file(cal, args.out)
-    except (ValueError, OSError) as exc:
-        print(f"mcit calibrate-intrinsics: {exc}", file=sys.stderr)
-        return 2
+    write_camera_file(cal, args.out)
     K = cal.K
     print(
         f"board found in {len(cal.frames_used)} of {cal.frames_seen} frames ({cal.width}×{cal.height}); "

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import csv
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,6 +37,7 @@ __all__ = [
     "read_init_points",
     "pose_from_points",
     "iter_frames",
+    "frame_count",
     "draw_tracking",
     "TrackedFrame",
     "track_sequence",
@@ -115,6 +116,24 @@ def iter_frames(source: str | Path, start: int = 0, count: int | None = None) ->
         cap.release()
 
 
+def frame_count(source: str | Path, start: int = 0, count: int | None = None) -> int | None:
+    """How many frames ``iter_frames(source, start, count)`` gives: exact for an image folder, the
+    container's count for a video (an estimate for some codecs), None when the video does not say."""
+    source = Path(source)
+    if source.is_dir():
+        total = sum(1 for p in source.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
+    else:
+        cap = cv2.VideoCapture(str(source))
+        try:
+            total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
+        finally:
+            cap.release()
+        if total <= 0:
+            return None
+    left = max(0, total - start)
+    return left if count is None else min(left, count)
+
+
 def _line(img: np.ndarray, seg: np.ndarray, color: tuple[int, int, int], thickness: int = 1) -> None:
     p = np.round(np.asarray(seg) * 16).astype(np.int64)
     cv2.line(img, (int(p[0, 0]), int(p[0, 1])), (int(p[1, 0]), int(p[1, 1])), color, thickness, cv2.LINE_AA, 4)
@@ -187,6 +206,7 @@ def track_sequence(
     fps_out: float = 25.0,
     stop_when_lost: bool = True,
     lens=None,
+    progress: Callable[[int, int | None], None] | None = None,
     **tracker_kwargs,
 ) -> list[TrackedFrame]:
     """Track a model through a recorded video from an initial pose.
@@ -201,6 +221,7 @@ def track_sequence(
     stop_when_lost : stop at the first lost frame (the operator must give the pose again).
     lens : app.undistort.LensDistortion or None: undistort each frame first (once, with precomputed
         maps); camera's C holds in the undistorted frames, which the overlay video shows.
+    progress : called as ``progress(frames done, frames to do or None)`` after each frame (app.progress).
     tracker_kwargs : passed to ``EdgeTracker``.
 
     Returns
@@ -210,6 +231,7 @@ def track_sequence(
     tracker = EdgeTracker(camera, model, T_world_obj, **tracker_kwargs)
     writer = None
     out: list[TrackedFrame] = []
+    total = frame_count(source, start, count) if progress is not None else None
     try:
         for index, frame in iter_frames(source, start, count):
             if lens is not None:
@@ -236,6 +258,8 @@ def track_sequence(
                 if writer is None:
                     writer = _open_writer(Path(video_out), fps_out, img.shape[1], img.shape[0])
                 writer.write(cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+            if progress is not None:
+                progress(len(out), total)
             if lost and stop_when_lost:
                 break
     finally:

@@ -13,7 +13,9 @@ ViSP ``.init`` file, and ``--init-clicks``, the pixels in the same order). ``--p
 tracked poses as ViSP ``.pos`` files (the form ``--pose`` reads; with ``--intrinsics`` ViSP's cMo).
 
 Tracking stops at the first frame where the tracker is lost (exit status 3), and says where to
-restart with a new pose. Parsers here; the work is in app.vision.sequence.
+restart with a new pose; a file that cannot be used is exit status 1, options that do not go
+together 2 (app/exit_status.py). Progress goes to stderr on a terminal (``--quiet``: none).
+Parsers here; the work is in app.vision.sequence.
 """
 
 from __future__ import annotations
@@ -21,6 +23,9 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+
+from app import exit_status
+from app.exit_status import UsageError
 
 __all__ = ["add_track_parser"]
 
@@ -87,6 +92,7 @@ def add_track_parser(sub) -> None:
     p.add_argument("--search-px", type=float, default=8.0, help="search ±this many pixels along the edges' normals")
     p.add_argument("--step-px", type=float, default=5.0, help="spacing of the edge samples (pixels)")
     p.add_argument("--keep-going", action="store_true", help="do not stop at a lost frame (draw the last good pose)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar (there is none when stderr is not a terminal)")
     p.set_defaults(func=_cmd_track)
 
 
@@ -120,7 +126,9 @@ def _setup(args):
     lens = None
     source = args.source
     if args.camera_name and not args.intrinsics:
-        raise ValueError("--camera-name chooses a camera in the --intrinsics file; give --intrinsics FILE")
+        raise UsageError("--camera-name chooses a camera in the --intrinsics file; give --intrinsics FILE")
+    if args.body and not args.scene:
+        raise UsageError("--body names a body of the --scene; give --scene DIR")
     if args.scene:
         from app.scene import load_scene
 
@@ -140,9 +148,9 @@ def _setup(args):
             source = str(scene.video_path)
     else:
         if source is None:
-            raise ValueError("give a video file or a folder of frames (or --scene with a video)")
+            raise UsageError("give a video file or a folder of frames (or --scene with a video)")
         if not args.intrinsics:
-            raise ValueError("give the camera: --intrinsics FILE (ViSP .xml / OpenCV .yml) or --scene DIR")
+            raise UsageError("give the camera: --intrinsics FILE (ViSP .xml / OpenCV .yml) or --scene DIR")
         from app.camera_io import read_intrinsics
 
         _, first = next(iter_frames(source, args.start, 1))
@@ -159,16 +167,16 @@ def _setup(args):
 
         lens = lens_of(intr, w, h)
     if model is None:
-        raise ValueError("give the object's model: --model FILE (or --scene with --body)")
+        raise UsageError("give the object's model: --model FILE (or --scene with --body)")
     if args.pose:
         T = _load_pose(Path(args.pose))
     elif args.init_points or args.init_clicks:
         if not (args.init_points and args.init_clicks):
-            raise ValueError("--init-points and --init-clicks go together (the model points and their clicked pixels)")
+            raise UsageError("--init-points and --init-clicks go together (the model points and their clicked pixels)")
         if K is None:
             K, T_cam_world = camera.decompose()
             if not np.allclose(T_cam_world, np.eye(4), atol=1e-9):
-                raise ValueError(
+                raise UsageError(
                     "--init-clicks needs --intrinsics (the camera frame "
                     "as the world); with --scene give --pose or --body"
                 )
@@ -177,8 +185,16 @@ def _setup(args):
             clicks = lens.undistort(clicks)
         T = pose_from_points(K, read_init_points(args.init_points), clicks)
     if T is None:
-        raise ValueError("give the initial pose: --pose FILE, --init-points/--init-clicks, or --scene with --body")
+        raise UsageError("give the initial pose: --pose FILE, --init-points/--init-clicks, or --scene with --body")
     return source, camera, model, T, lens
+
+
+def _pos_names(pattern: str, indices) -> list[str]:
+    """The --pos-out file names of the frames ``indices`` (``pattern % index``); UsageError when malformed."""
+    try:
+        return [pattern % i for i in indices]
+    except (TypeError, ValueError):
+        raise UsageError(f"--pos-out {pattern!r}: one %d (e.g. %04d) for the frame number expected") from None
 
 
 def _write_pos(pattern: str, frames) -> str:
@@ -189,10 +205,7 @@ def _write_pos(pattern: str, frames) -> str:
     if not good:
         raise ValueError(f"{pattern}: no frame was tracked, so there is no pose to write")
     if "%" in pattern:
-        try:
-            names = [pattern % f.index for f in good]
-        except (TypeError, ValueError):
-            raise ValueError(f"--pos-out {pattern!r}: one %d (e.g. %04d) for the frame number expected") from None
+        names = _pos_names(pattern, [f.index for f in good])
         for name, f in zip(names, good):
             Path(name).parent.mkdir(parents=True, exist_ok=True)
             Path(name).write_text(pos_text(f.T_world_obj))
@@ -204,12 +217,16 @@ def _write_pos(pattern: str, frames) -> str:
 
 
 def _cmd_track(args) -> int:
+    """Track; a failure raises (app.cli says it: status 1, or 2 for a UsageError), a lost object is status 3."""
     import numpy as np
 
+    from app.progress import progress_bar
     from app.vision.sequence import track_sequence
 
-    try:
-        source, camera, model, T, lens = _setup(args)
+    source, camera, model, T, lens = _setup(args)
+    if args.pos_out and "%" in args.pos_out:
+        _pos_names(args.pos_out, [0])  # a malformed pattern is said before the video is read
+    with progress_bar("frames", quiet=args.quiet) as progress:
         frames = track_sequence(
             source,
             camera,
@@ -224,20 +241,11 @@ def _cmd_track(args) -> int:
             search_px=args.search_px,
             sample_step_px=args.step_px,
             lens=lens,
+            progress=progress,
         )
-    except (ValueError, OSError) as exc:
-        print(f"mcit track: {exc}", file=sys.stderr)
-        return 2
     if not frames:
-        print(f"mcit track: no frame to track in {source} from frame {args.start}", file=sys.stderr)
-        return 2
-    pos_written = ""
-    if args.pos_out:
-        try:
-            pos_written = _write_pos(args.pos_out, frames)
-        except (ValueError, OSError) as exc:
-            print(f"mcit track: {exc}", file=sys.stderr)
-            return 2
+        raise ValueError(f"no frame to track in {source} from frame {args.start}")
+    pos_written = _write_pos(args.pos_out, frames) if args.pos_out else ""
     conf = np.array([f.confidence for f in frames if not f.lost] or [0.0])
     ms = np.array([f.track_ms for f in frames])
     lost = [f for f in frames if f.lost]
@@ -250,9 +258,9 @@ def _cmd_track(args) -> int:
     if lost:
         f = lost[0]
         print(
-            f"LOST at frame {f.index}: {f.reason}. Give the pose of frame {f.index} again and restart with "
-            f"--start {f.index} --pose <file>.",
+            f"mcit track: LOST at frame {f.index}: {f.reason}. Give the pose of frame {f.index} again and restart "
+            f"with --start {f.index} --pose <file>.",
             file=sys.stderr,
         )
-        return 3
-    return 0
+        return exit_status.LOST
+    return exit_status.OK

@@ -5,6 +5,7 @@ a new command without a case here fails the sweep) with bad input in its own pro
 from __future__ import annotations
 
 import argparse
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -34,49 +35,67 @@ def _commands() -> set[str]:
     return out
 
 
-# (command, arguments after it); {tmp} is a fresh folder, {notes} a text file, {db} a seeded database.
+# (command, arguments after it, exit status); {tmp} is a fresh folder, {notes} a text file, {db} a seeded database.
+# Status 1: the command could not do its job (a file, the database, a port); 2: the command line is wrong
+# (app/exit_status.py).
 CASES = [
-    ("db init", "--scene {tmp}/no-scene --db {tmp}/new.sqlite"),
-    ("db import", "{tmp}/no-model.cao --db {db}"),
-    ("db import", "{notes} --db {db}"),
-    ("db list", "--db {notes}"),
-    ("db list", "--db {tmp}/no.sqlite"),
-    ("db show", "ghost --db {db}"),
-    ("db show", "99999999999999999999999 --db {db}"),
-    ("db export", "parallelepiped {tmp}/no-folder/out.cao --db {db}"),
-    ("db export", "parallelepiped {tmp}/out.xyz --db {db}"),
-    ("db history", "ghost --db {db}"),
-    ("db undo", "99999999999999999999999 --db {db}"),
-    ("db undo", "42 --db {db} --wait-s -1"),
-    ("db export-poses", "{tmp}/poses.json --db {notes}"),
-    ("db feed", "--file {tmp}/feed.jsonl --db {notes}"),
-    ("emulate", "--scene {tmp}/no-scene"),
-    ("serve", "--scene {tmp}/no-scene"),
-    ("serve", "--video {tmp}/no-video.mp4 --no-devices --db {db} --port 0"),
-    ("serve", "--no-devices --db {notes} --port 0"),
+    ("db init", "--scene {tmp}/no-scene --db {tmp}/new.sqlite", 1),
+    ("db import", "{tmp}/no-model.cao --db {db}", 1),
+    ("db import", "{notes} --db {db}", 1),
+    ("db list", "--db {notes}", 1),
+    ("db list", "--db {tmp}/no.sqlite", 1),
+    ("db show", "ghost --db {db}", 1),
+    ("db show", "99999999999999999999999 --db {db}", 1),
+    ("db export", "parallelepiped {tmp}/no-folder/out.cao --db {db}", 1),
+    ("db export", "parallelepiped {tmp}/out.xyz --db {db}", 1),
+    ("db history", "ghost --db {db}", 1),
+    ("db undo", "99999999999999999999999 --db {db}", 1),
+    ("db undo", "42 --db {db} --wait-s -1", 2),
+    ("db export-poses", "{tmp}/poses.json --db {notes}", 1),
+    ("db feed", "--file {tmp}/feed.jsonl --db {notes}", 1),
+    ("emulate", "--scene {tmp}/no-scene", 1),
+    ("serve", "--scene {tmp}/no-scene", 1),
+    ("serve", "--video {tmp}/no-video.mp4 --no-devices --db {db} --port 0", 1),
+    ("serve", "--no-devices --db {notes} --port 0", 1),
     (
         "serve",
         "--host 999.1.1.1 --no-devices --db {tmp}/unwritten.sqlite --port 0",
+        1,
     ),  # hung before: viser waits for a thread that failed to bind
     (
         "serve",
         "--host 192.0.2.1 --no-devices --db {tmp}/unwritten.sqlite --port 0",
+        1,
     ),  # TEST-NET-1: no address of this machine
-    ("render", "--scene {tmp}/no-scene"),
-    ("script", "--scene {tmp}/no-scene"),
-    ("track", "{tmp}/no-video.mp4 --scene scenes/workcell --body parallelepiped"),
-    ("track", "{notes} --scene scenes/workcell --body parallelepiped"),
-    ("track", "--scene scenes/workcell --body nosuch"),
-    ("calibrate-intrinsics", "{tmp}/no-frames --cols 9 --rows 6 --square-mm 25 --out {tmp}/cam.yml"),
-    ("calibrate-intrinsics", "{notes} --cols 9 --rows 6 --square-mm 25 --out {tmp}/cam.yml"),
-    ("demo", "--scene {tmp}/no-scene"),
-    ("robot urdf", "--out {tmp}/no-folder/arm.urdf"),
-    ("nosuch", ""),
+    ("render", "--scene {tmp}/no-scene", 1),
+    ("script", "--scene {tmp}/no-scene", 1),
+    ("track", "{tmp}/no-video.mp4 --scene scenes/workcell --body parallelepiped", 1),
+    ("track", "{notes} --scene scenes/workcell --body parallelepiped", 1),
+    ("track", "--scene scenes/workcell --body nosuch", 1),
+    ("calibrate-intrinsics", "{tmp}/no-frames --cols 9 --rows 6 --square-mm 25 --out {tmp}/cam.yml", 1),
+    ("calibrate-intrinsics", "{notes} --cols 9 --rows 6 --square-mm 25 --out {tmp}/cam.yml", 1),
+    ("demo", "--scene {tmp}/no-scene", 1),
+    ("robot urdf", "--out {tmp}/no-folder/arm.urdf", 1),
+    ("db show-calibration", "turret --db {tmp}/no.sqlite", 1),
+    ("db show-calibration", "nosuch --db {db}", 1),
+    ("db show-calibration", "99 --db {db}", 1),
+    ("serve", "--port {busy} --host 127.0.0.1 --no-devices --db {tmp}/unwritten.sqlite", 1),
+    # the command line is wrong in a way argparse cannot see: status 2, as argparse's own refusals
+    ("nosuch", "", 2),
+    ("db feed", "--db {db}", 2),
+    ("serve", "--allow-origin not-a-url --no-devices --db {tmp}/unwritten.sqlite --port 0", 2),
+    ("track", "{notes} --scene scenes/workcell --body parallelepiped --init-points {notes}", 2),
+    ("track", "{notes} --intrinsics {notes} --body parallelepiped", 2),
+    ("calibrate-intrinsics", "{notes} --cols 9 --rows 6 --square-mm 25 --every 0 --out {tmp}/cam.yml", 2),
+    ("calibrate-intrinsics", "{notes} --cols 9 --rows 6 --square-mm 25 --out {tmp}/cam.txt", 2),
+    ("emulate", "--faults explode=0.5", 2),
+    ("demo", "--sim-trials -1", 2),
+    ("render", "--out {tmp}/one.avi", 2),
 ]
 
 
 def test_the_sweep_covers_every_command():
-    missing = _commands() - {c for c, _ in CASES}
+    missing = _commands() - {c for c, _, _ in CASES}
     assert not missing, f"add a failure case for: {sorted(missing)}"
 
 
@@ -87,17 +106,25 @@ def files(tmp_path_factory):
     notes.write_text("hello\n" * 50)
     db = tmp / "site.sqlite"
     assert cli.main(["db", "init", "--db", str(db)]) == 0
-    return {"tmp": str(tmp), "notes": str(notes), "db": str(db)}
+    with socket.socket() as busy:  # the last port taken, and no port after it: --port 65535 cannot be had
+        try:
+            busy.bind(("127.0.0.1", 65535))
+            busy.listen()
+        except OSError:  # another program has it: taken all the same
+            pass
+        yield {"tmp": str(tmp), "notes": str(notes), "db": str(db), "busy": "65535"}
 
 
-@pytest.mark.parametrize("command, arguments", CASES, ids=[f"{c} {a.split(' ')[0]}".strip() for c, a in CASES])
-def test_a_failure_is_one_line(files, command, arguments):
+@pytest.mark.parametrize(
+    "command, arguments, status", CASES, ids=[f"{c} {a.split(' ')[0]} {s}".strip() for c, a, s in CASES]
+)
+def test_a_failure_is_one_line(files, command, arguments, status):
     argv = command.split() + [a.format(**files) for a in arguments.split()]
     run = subprocess.run(
         [sys.executable, "-m", "app.cli", *argv], capture_output=True, text=True, cwd=ROOT, timeout=300
     )
     err = run.stderr
-    assert run.returncode != 0, (argv, run.stdout, err)
+    assert run.returncode == status, (argv, run.returncode, run.stdout, err)
     assert err.count("\n") == 1 and "Traceback" not in err, err
     assert err.startswith(f"mcit {command}: " if command != "nosuch" else "mcit: error: "), err
     assert "internal error" not in err, err  # each of these is the operator's to fix, not a bug

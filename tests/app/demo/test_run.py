@@ -209,15 +209,20 @@ def test_a_run_left_open_fails(scene, script, tmp_path):
         replay_script(scene, cut, tmp_path / "site.sqlite", timing="fast")
 
 
-def test_unusable_inputs_exit_2(scene, script, tmp_path, capsys):
-    assert _cli("--script", str(tmp_path / "missing.json")) == 2
+def test_unusable_inputs_exit_1_and_options_out_of_range_2(scene, script, tmp_path, capsys):
+    """README "Exit status": a file that cannot be used is 1, a command line that cannot run 2."""
+    assert _cli("--script", str(tmp_path / "missing.json")) == 1
     assert "no such operator script" in capsys.readouterr().err
     d = script.to_dict()
     d["scene"] = "elsewhere"
     path = tmp_path / "other.json"
     path.write_text(json.dumps(d))
-    assert _cli("--script", str(path), "--out", str(tmp_path / "out")) == 2
+    assert _cli("--script", str(path), "--out", str(tmp_path / "out")) == 1
     assert "recorded on scene 'elsewhere'" in capsys.readouterr().err
+    assert _cli("--frames", "0") == 2
+    assert capsys.readouterr().err == (
+        "mcit demo: error: --sim-trials must be ≥ 0 and --frames ≥ 1 (see mcit demo --help)\n"
+    )
 
 
 def test_simulation_beside_the_video_gives_the_same_sweeps(scene, script):

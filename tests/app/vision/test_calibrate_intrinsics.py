@@ -198,7 +198,7 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys):
                 str(out),
             ]
         )
-        == 2
+        == 1  # frames that cannot be used: status 1; options that cannot (below): 2
     )
     err = capsys.readouterr().err
     assert "the 9 × 6 checkerboard was found in 0 of 3 frames; at least 3 are needed" in err and err.count("\n") == 1

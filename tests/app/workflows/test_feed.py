@@ -231,8 +231,8 @@ def test_publisher_refuses_a_path_in_use(tmp_path, sock_path):
 def test_mcit_serve_feed_flags(tmp_path, sock_path, capsys):
     import cv2
 
-    from app.cli import build_parser
-    from app.ui.serve import build_interface, run_serve
+    from app.cli import build_parser, main
+    from app.ui.serve import build_interface
     from tests.e2e.harness import free_port
 
     cv2.imwrite(str(tmp_path / "f0.png"), np.full((240, 320), 90, np.uint8))
@@ -256,10 +256,11 @@ def test_mcit_serve_feed_flags(tmp_path, sock_path, capsys):
         names = sorted(o.name for o in server.site.objects())
         lines = follow(sock_path, timeout_s=WAIT_S)
         assert sorted(next(lines)["object"] for _ in names) == names
-        # a socket another program publishes on: one line, exit status 2, nothing left open
-        assert run_serve(build_parser().parse_args(argv[:-4] + ["--feed-socket", str(sock_path)])) == 2
+        # a socket another program publishes on: one line, exit status 1 (README "Exit status"), nothing left open
+        assert main(argv[:-4] + ["--feed-socket", str(sock_path)]) == 1
         err = capsys.readouterr().err
-        assert "another program is already publishing on this socket" in err and err.count("\n") == 1
+        assert err.startswith("mcit serve: error: ") and err.count("\n") == 1, err
+        assert "another program is already publishing on this socket" in err
     finally:
         server.server.stop()
         for close in closers:
