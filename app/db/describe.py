@@ -86,6 +86,7 @@ def _change(c, calibration_kinds: dict[int, str]) -> dict[str, Any]:
         "method": c.method,
         "undoes": c.undoes,
         "note": c.note,
+        "seen_at": c.seen_at,  # when the image it was measured on was taken (null: not measured on an image)
         "object": c.object_name,
         "object_id": c.object_id,
         "version": c.version,
