@@ -483,6 +483,12 @@ class ClientPanel:
     def set_status(self, text: str) -> None:
         show(self.gui_status, text)
 
+    def set_notice(self, text: str) -> None:
+        """The server's notice at the panel's top ("" hides it)."""
+        if self.gui_notice.visible != bool(text):
+            self.gui_notice.visible = bool(text)
+        show(self.gui_notice, text)
+
 
 def _sentence(text: str) -> str:
     """An operator message as a sentence: capitalised, ending with a full stop."""

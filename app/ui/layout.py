@@ -38,6 +38,7 @@ def build_panel(panel: ClientPanel) -> None:
     except Exception:  # noqa: BLE001 - layout only
         log.debug("could not dock the panel", exc_info=True)
     panel.gui_title = gui.add_markdown(Md("**No workflow.** Click an object to select it, or start a workflow below."))
+    panel.gui_notice = gui.add_markdown("", visible=False)  # the server's notice to every operator (solvers ready?)
     panel.gui_progress = gui.add_progress_bar(0.0, visible=False)
     panel.gui_actions = gui.add_folder(None)
     # A question asked once more (a weak result, Redo) goes under the buttons: shown above them it pushed the

@@ -163,6 +163,9 @@ class InterfaceServer:
         self.frames_sent = 0
         self.redraws = 0
         self._last_status_t = 0.0
+        # what every operator must know now, at the panel's top (key → callable giving the text, "" when none):
+        # e.g. the pose solvers being prepared at start (app/ui/serve.py)
+        self.notices: dict[str, Any] = {}
         self.world3d = World3D(self.server.scene, offset=np.array([-60.0, 0.0, 0.0]))
         self.robot_overlay = RobotOverlay(
             self.server.scene,
@@ -463,8 +466,10 @@ class InterfaceServer:
         text = Md("\n\n").join(parts) + Md("\n\n{} objects").format(len(self.site.objects()))
         with self.clients_lock:
             panels = list(self.clients.values())
+        notice = Md("\n\n").join(Md(t) for t in (fn() for fn in list(self.notices.values())) if t)
         for panel in panels:
             panel.set_status(text)
+            panel.set_notice(notice)
 
     def _video_status(self, feed: ViewFeed) -> Md:
         """What the panel says of one camera's video and calibration."""

@@ -4,6 +4,7 @@ canvas, two browsers at once, and an error path."""
 from __future__ import annotations
 
 import itertools
+import re
 import time
 
 import numpy as np
@@ -265,3 +266,24 @@ def test_two_browsers_share_the_database_and_keep_their_own_state(browser, inter
         )
     a.close()
     b.close()
+
+
+def test_the_pose_solvers_being_prepared_are_said_at_the_top_until_ready(browser, interface, monkeypatch):
+    """A new machine compiles the pose solvers at the first start (about 40 s): every operator is told at the
+    panel's top, from the start, with how long it takes; the notice goes when they are ready."""
+    import threading
+
+    from app.ui import serve
+
+    monkeypatch.setattr(serve, "_kernels_compiled", lambda: False)  # as on a fresh clone: numba's cache empty
+    ready = threading.Event()
+    serve.warm_solvers(interface.server, warm=lambda: ready.wait(120))
+    page = interface.open(browser, viewport={"width": 1280, "height": 720})
+    notice = page.get_by_text("Preparing the pose solvers")
+    notice.first.wait_for(timeout=60_000)
+    how = page.get_by_text(re.compile(r"compiling them once for this machine: about 40 s, \d+ s so far"))
+    how.first.wait_for(timeout=60_000)
+    assert notice.first.bounding_box()["y"] < 200  # at the panel's top, seen without scrolling
+    ready.set()
+    notice.first.wait_for(state="hidden", timeout=60_000)
+    page.close()
