@@ -1370,10 +1370,16 @@ def pose_ok(T, max_m):
     return det > 0.0
 
 
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = a.view()
+    a.flags.writeable = False
+    return a
+
+
 def warm_up() -> None:
     """Load (or, the first time on a machine, compile: ~30 s) every kernel, with the argument types
     core.pose passes: call it in a background thread at start-up so that no click waits for it."""
-    C = np.array([[500.0, 0.0, 320.0, 0.0], [0.0, 500.0, 240.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
+    C = _readonly(np.array([[500.0, 0.0, 320.0, 0.0], [0.0, 500.0, 240.0, 0.0], [0.0, 0.0, 1.0, 0.0]]))  # a Camera's
     segs = np.array(
         [[[100.0, 100.0], [200.0, 110.0]], [[300.0, 120.0], [310.0, 300.0]], [[120.0, 300.0], [400.0, 250.0]]]
     )
@@ -1381,6 +1387,8 @@ def warm_up() -> None:
         [[[0.0, 0.0, 2.0], [0.3, 0.0, 2.0]], [[0.3, 0.0, 2.0], [0.3, 0.2, 2.1]], [[0.0, 0.2, 2.0], [0.0, 0.2, 2.3]]]
     )
     no_uv, no_X = np.zeros((0, 2)), np.zeros((0, 3))
+    # read-only as core.pose passes them (core.pose._lazy.frozen): clicks_ok, distance_cost, refine_many's clicks
+    ro_segs, ro_edges, ro_uv, ro_X = (_readonly(a) for a in (segs, edges, no_uv, no_X))
     T, cost = np.empty((MAX_SOLUTIONS, 4, 4)), np.empty(MAX_SOLUTIONS)
     p3l_solve(C, segs, edges, no_uv, no_X, T, cost)
     n, d = np.empty((3, 3)), np.empty(3)
@@ -1389,7 +1397,8 @@ def warm_up() -> None:
     p3l_many(C, segs[None].copy(), edges[None].copy(), T[None].copy(), valid, False)
     p3l_many(C, segs[None].copy(), edges[None].copy(), T[None].copy(), valid, True)
     rotations_many(n[None].copy(), np.ones((1, 3)), np.eye(3)[None].copy(), np.empty((1, MAX_SOLUTIONS, 3, 3)), valid)
-    clicks_ok(segs, edges, no_uv, no_X, 1e7, 1e6)
+    clicks_ok(ro_segs, ro_edges, ro_uv, ro_X, 1e7, 1e6)
+    distance_cost(C, _readonly(np.eye(3)), _readonly(np.zeros(3)), ro_edges, ro_segs, ro_X, ro_uv)
     T0 = np.eye(4)
     T0[2, 3] = 0.0
     pose_ok(T0, 1e6)
@@ -1401,10 +1410,10 @@ def warm_up() -> None:
         np.zeros(S, np.int64),
         np.zeros(P, np.int64),
         T0[None].copy(),
-        edges[None].copy(),
-        segs,
-        no_X,
-        no_uv,
+        _readonly(edges[None].copy()),
+        ro_segs,
+        ro_X,
+        ro_uv,
         np.ones(m),
         False,
         3.0,

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import importlib
 
+import numpy as np
+
 
 class _Kernels:
     def __getattr__(self, name: str):  # only called for names not yet kept
@@ -30,3 +32,16 @@ def warm_up() -> None:
     """Load (or, the first time on a machine, compile: ~30 s) every kernel, with the argument types
     core.pose passes: call it in a background thread at start-up so that no click waits for it."""
     _KERNELS.warm_up()
+
+
+def frozen(a) -> np.ndarray:
+    """``a`` as a read-only contiguous float array (a view when it is one already; no copy of a contiguous array).
+
+    numba compiles a kernel once per writeability of each input, and callers' arrays are some read-only (a
+    ``Camera``'s C, frozen click sets), some not: every array input made read-only, one compiled version serves
+    them all, the one ``warm_up`` compiles at start (else a first click compiled another: 10–20 s)."""
+    a = np.ascontiguousarray(a, dtype=float)
+    if a.flags.writeable:
+        a = a.view()
+        a.flags.writeable = False
+    return a

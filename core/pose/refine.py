@@ -36,7 +36,7 @@ import numpy as np
 from ..camera import Camera
 from ..checks import MAX_M, MAX_SCALE, MIN_SCALE, finite_array, positive_scale
 from ..transforms import check_T
-from ._lazy import kernels
+from ._lazy import frozen, kernels
 from .residuals import Clicks, as_clicks, stack_views, view_matrices
 
 _k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded before mcit serve's first page)
@@ -430,10 +430,10 @@ def refine_many(
         seg_view,
         pt_view,
         T0,
-        edges,
-        clicks.segs_uv,
-        clicks.points_obj,
-        clicks.points_uv,
+        frozen(edges),
+        frozen(clicks.segs_uv),
+        frozen(clicks.points_obj),
+        frozen(clicks.points_uv),
         b,
         loss == "huber",
         float(huber_px),

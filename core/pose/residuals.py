@@ -33,7 +33,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..checks import MAX_M, MAX_PX, finite_array
-from ._lazy import kernels
+from ._lazy import frozen, kernels
 
 _k = kernels()  # core.pose._kernels, imported on first use (numba is not loaded before mcit serve's first page)
 
@@ -140,14 +140,7 @@ def as_clicks(segs_uv=None, edges_obj=None, points_uv=None, points_obj=None) -> 
             and pobj.ndim == 2
             and pobj.shape[1] == 3
             and len(puv) == len(pobj)
-            and _k.clicks_ok(
-                np.ascontiguousarray(segs),
-                np.ascontiguousarray(edges),
-                np.ascontiguousarray(puv),
-                np.ascontiguousarray(pobj),
-                MAX_PX,
-                MAX_M,
-            )
+            and _k.clicks_ok(frozen(segs), frozen(edges), frozen(puv), frozen(pobj), MAX_PX, MAX_M)
         ):
             return Clicks(segs, edges, puv, pobj)
     if (segs_uv is None) != (edges_obj is None):
@@ -412,7 +405,7 @@ def distance_cost(C, R, t, edges, segs, points_obj, points_uv) -> float | None:
     distances between 2D points of image obtained and initial image" that picks the solution. An
     edge with one endpoint behind the camera is measured to its infinite image line.
     """
-    f = lambda x, *shape: np.ascontiguousarray(np.asarray(x, dtype=float).reshape(shape))  # noqa: E731
+    f = lambda x, *shape: frozen(np.asarray(x, dtype=float).reshape(shape))  # noqa: E731
     cost = _k.distance_cost(
         f(C, 3, 4),
         f(R, 3, 3),
