@@ -46,15 +46,11 @@ _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".p
 
 
 def read_visp_pose(path: str | Path) -> np.ndarray:
-    """T (4, 4) from a ViSP ``.pos`` file: six numbers tx ty tz (m) θux θuy θuz (rad)."""
-    path = Path(path)
-    try:
-        values = np.array(path.read_text().split(), dtype=float)
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: cannot read a ViSP pose (six numbers: tx ty tz θux θuy θuz): {exc}") from None
-    if values.shape != (6,) or not np.all(np.isfinite(values)):
-        raise ValueError(f"{path}: a ViSP pose file holds six finite numbers (tx ty tz θux θuy θuz), got {values.size}")
-    return make_T(exp_so3(values[3:]), values[:3])
+    """T (4, 4) from a ViSP ``.pos`` file: six numbers tx ty tz (m) θux θuy θuz (rad) (``app.pose_files``,
+    the reader of every pose file)."""
+    from app.pose_files import read_visp_pos
+
+    return read_visp_pos(path)
 
 
 def read_init_points(path: str | Path) -> np.ndarray:

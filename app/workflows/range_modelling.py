@@ -58,10 +58,7 @@ class RangeModelling:
     def _devices(self):
         devices = self.site.devices
         if devices is None:
-            raise WorkflowError(
-                "no range finder and turret are connected: restart mcit serve with devices "
-                "(emulated by default) to measure"
-            )
+            raise WorkflowError(self.site.no_devices("measure"))
         return devices
 
     def _report(self, fraction: float, text: str, X: np.ndarray | None = None, keep: bool = True) -> None:
