@@ -102,7 +102,10 @@ class PoseFile:
 def _camera_pose(camera, path: Path, what: str) -> np.ndarray:
     """T_cam_world (4, 4) of a Camera; ValueError naming ``path`` when there is none or it is mirrored."""
     if camera is None:
-        raise ValueError(f"{path}: {what} needs the site's camera; give the site (--site DIR) or the camera")
+        raise ValueError(
+            f"{path}: {what} needs the camera's calibration and there is none; give the site (--site DIR) or a "
+            "database whose camera is calibrated, or the pose in the world (--pose-frame world)"
+        )
     K, T_cam_world = camera.decompose()
     if K[0, 0] < 0:
         raise ValueError(
@@ -313,6 +316,8 @@ def read_pose_file(path: str | Path, *, frame: str | None = None, camera=None, c
         )
     chosen = said or frame or default
     source = "the file" if said else "--pose-frame" if frame else f"the default for a {form}"
+    if suffix == ".init":
+        source = "the clicked points' pose in the camera"
     return PoseFile(T, chosen, form, path, source, cov, details)
 
 

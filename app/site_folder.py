@@ -235,7 +235,7 @@ def create_site(
         "width": width,
         "height": height,
         "intrinsics_file": "camera" + camera_file.suffix.lower(),
-        "T_world_cam": pose_to_json(T_world_cam),
+        "T_world_cam": {k: [v + 0.0 for v in vs] for k, vs in pose_to_json(T_world_cam).items()},  # no -0.0
     }
     if camera_name is not None:
         camera["camera_name"] = camera_name
@@ -255,8 +255,8 @@ def create_site(
     try:
         tmp.mkdir()
         shutil.copyfile(camera_file, tmp / camera["intrinsics_file"])
-        (tmp / "scene.json").write_text(json.dumps(scene, indent=2) + "\n")
-        (tmp / SITE_FILE).write_text(json.dumps(site, indent=2) + "\n")
+        (tmp / "scene.json").write_text(_json_text(scene))
+        (tmp / SITE_FILE).write_text(_json_text(site))
         loaded = load_scene(tmp)  # the scene is checked as mcit serve will read it (the lens too)
         _seed(tmp / DB_FILE, loaded)
         os.rename(tmp, root)  # onto a missing or empty folder: the site appears whole or not at all
@@ -278,6 +278,12 @@ def create_site(
         "lens": lens,
         "probed": not live,
     }
+
+
+def _json_text(d: dict) -> str:
+    """JSON as a person reads it: indented, each list of numbers on one line."""
+    text = json.dumps(d, indent=2)
+    return re.sub(r"\[\s+([^\[\]{}\"]*?)\s+\]", lambda m: "[" + " ".join(m.group(1).split()) + "]", text) + "\n"
 
 
 def _make_folders(folder: Path) -> list[Path]:

@@ -60,9 +60,18 @@ def build_panel(panel: ClientPanel) -> None:
                 Md("*Not on this site:* ")
                 + Md("; ").join(Md("{} ({})").format(", ".join(labels), why) for why, labels in missing.items())
             )
-        panel.gui_shape = gui.add_dropdown("Shape", SHAPES, initial_value="box", hint="Model object: the shape you see")
-        panel.gui_vertical = gui.add_checkbox("Vertical", True, hint="Model object: its axis/sides are vertical")
-        panel.gui_on_table = gui.add_checkbox("Lies on the table", True, hint="Model object: it stands on the table")
+        # Model object's form, shown where it is offered; "Lies on the table" where the database has a table
+        shown = not WORKFLOWS["model_object"].available(panel.app.site)
+        has_table = any(o.kind == "table" for o in panel.app.site.objects())  # a site of one's own may have none
+        panel.gui_shape = gui.add_dropdown(
+            "Shape", SHAPES, initial_value="box", hint="Model object: the shape you see", visible=shown
+        )
+        panel.gui_vertical = gui.add_checkbox(
+            "Vertical", True, hint="Model object: its axis/sides are vertical", visible=shown
+        )
+        panel.gui_on_table = gui.add_checkbox(
+            "Lies on the table", has_table, hint="Model object: it stands on the table", visible=shown
+        )
         panel.gui_snap = gui.add_checkbox(
             "Snap clicks",
             True,

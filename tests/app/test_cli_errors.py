@@ -71,6 +71,9 @@ CASES = [
     ("calibrate-intrinsics", "{notes} --cols 9 --rows 6 --square-mm 25 --out {tmp}/cam.yml"),
     ("demo", "--scene {tmp}/no-scene"),
     ("robot urdf", "--out {tmp}/no-folder/arm.urdf"),
+    ("site new", "{tmp}/new-site --camera {notes} --video {notes}"),
+    ("site new", "{tmp}/new-site --camera {tmp}/no-camera.xml --video {tmp}/no-video.mp4"),
+    ("serve", "--site {tmp} --port 0"),
     ("nosuch", ""),
 ]
 
