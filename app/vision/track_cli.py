@@ -11,7 +11,8 @@ is a file read by ``app.pose_files`` (ViSP ``.pos``: tx ty tz θux θuy θuz; a 
 matrix or {"xyz", "rpy_deg"}; a ViSP ``.init`` with its points' pixels), the pose of ``--body`` in the
 scene, or computed from clicked model points (``--init-points``, a ViSP ``.init`` file, and
 ``--init-clicks``, the pixels in the same order). ``--pos-out`` writes the
-tracked poses as ViSP ``.pos`` files (the form ``--pose`` reads; with ``--intrinsics`` ViSP's cMo).
+tracked poses as ViSP ``.pos`` files: the object's pose in the camera (ViSP's cMo), the form ``--pose``
+reads back.
 
 Tracking stops at the first frame where the tracker is lost (exit status 3), and says where to
 restart with a new pose. Parsers here; the work is in app.vision.sequence.
@@ -176,9 +177,14 @@ def _pose_file(args) -> Path | None:
     return None if path is None else Path(path)
 
 
-def _write_pos(pattern: str, frames) -> str:
-    """Write the tracked frames' poses as ViSP .pos files (see --pos-out); what was written, for the summary."""
+def _write_pos(pattern: str, frames, camera) -> str:
+    """Write the tracked frames' poses as ViSP .pos files (see --pos-out): each the object's pose in the
+    camera (cMo = T_cam_world · T_world_obj, what --pose reads a .pos as); what was written, for the summary."""
     from app.db.export import pos_text
+
+    K, T_cam_world = camera.decompose()
+    if K[0, 0] < 0:
+        raise ValueError(f"--pos-out {pattern}: the camera is mirrored, so it has no camera frame to give cMo in")
 
     good = [f for f in frames if not f.lost]
     if not good:
@@ -190,11 +196,11 @@ def _write_pos(pattern: str, frames) -> str:
             raise ValueError(f"--pos-out {pattern!r}: one %d (e.g. %04d) for the frame number expected") from None
         for name, f in zip(names, good):
             Path(name).parent.mkdir(parents=True, exist_ok=True)
-            Path(name).write_text(pos_text(f.T_world_obj))
+            Path(name).write_text(pos_text(T_cam_world @ f.T_world_obj))
         return f"; {len(good)} .pos files: {names[0]} … {names[-1]}" if len(good) > 1 else f"; pose: {names[0]}"
     path = Path(pattern)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(pos_text(good[-1].T_world_obj))
+    path.write_text(pos_text(T_cam_world @ good[-1].T_world_obj))
     return f"; pose of frame {good[-1].index}: {path}"
 
 
@@ -229,7 +235,7 @@ def _cmd_track(args) -> int:
     pos_written = ""
     if args.pos_out:
         try:
-            pos_written = _write_pos(args.pos_out, frames)
+            pos_written = _write_pos(args.pos_out, frames, camera)
         except (ValueError, OSError) as exc:
             print(f"mcit track: {exc}", file=sys.stderr)
             return 2

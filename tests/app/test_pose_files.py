@@ -243,3 +243,16 @@ def test_mcit_track_reads_its_pose_through_the_same_reader(tmp_path):
         init_clicks=None,
     )
     np.testing.assert_allclose(_setup(ns)[3], T_WORLD_OBJ, atol=1e-9)
+
+
+def test_mcit_track_pos_out_writes_cmo_that_its_pose_reads_back(tmp_path):
+    """--pos-out writes the tracked pose in the camera (cMo through the scene's C): read back by --pose it is
+    the world pose tracked, where the camera is not the world."""
+    from types import SimpleNamespace
+
+    from app.vision.track_cli import _write_pos
+
+    frames = [SimpleNamespace(index=0, lost=False, T_world_obj=T_WORLD_OBJ)]
+    _write_pos(str(tmp_path / "last.pos"), frames, CAMERA)
+    np.testing.assert_allclose(read_visp_pos(tmp_path / "last.pos"), T_CAM_OBJ, atol=1e-9)
+    np.testing.assert_allclose(read_pose_file(tmp_path / "last.pos").in_world(CAMERA)[0], T_WORLD_OBJ, atol=1e-9)
