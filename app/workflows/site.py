@@ -244,7 +244,8 @@ class Site:
         self._camera_covs: dict[str, np.ndarray | None] = dict.fromkeys(self._views)
         self._turret_cov: np.ndarray | None = None
         # A camera-only site has no turret (scene.turret None): the identity stands in, unused (no devices).
-        self._T_world_turret = np.eye(4) if scene.turret is None else np.asarray(scene.turret.T_world_turret, float)
+        turret = np.eye(4) if scene.turret is None else scene.turret.T_world_turret
+        self._T_world_turret = np.array(turret, dtype=float)  # a copy: the scene's stays as it was
         self._robot_base_nominal = True  # the robot's base is the drawing's until a calibration says otherwise
         self._robot_base_cov: np.ndarray | None = None
         self.beam_X_world: np.ndarray | None = None  # the range finder's last measured point (shown)
