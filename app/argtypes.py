@@ -6,7 +6,17 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-__all__ = ["MAX_FPS", "MAX_COORD_M", "number", "frame_rate", "port_number", "coordinate_m", "angle_deg", "percent"]
+__all__ = [
+    "MAX_FPS",
+    "MAX_COORD_M",
+    "number",
+    "frame_rate",
+    "port_number",
+    "coordinate_m",
+    "angle_deg",
+    "percent",
+    "pixel_uv",
+]
 
 MAX_FPS = 240.0  # the fastest rate a command replays, renders or writes at (frames per second)
 MAX_COORD_M = 1e6  # |coordinate| of a site, metres (as model files: app.models_io.cao.MAX_COORD_M)
@@ -47,3 +57,14 @@ angle_deg = number(
     float, lambda v: abs(v) <= 3600.0, kind="degrees (a number)", expected="a finite angle within ±3600 degrees"
 )
 percent = number(int, lambda v: 1 <= v <= 100, kind="a whole number from 1 to 100", expected="1 to 100")
+
+
+def pixel_uv(text: str) -> tuple[float, float]:
+    """A clicked pixel ``u,v`` (u right, v down; e.g. ``192,84.5``)."""
+    try:
+        u, v = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a clicked pixel is 'u,v' (e.g. 192,84.5), got {text!r}") from None
+    if not (abs(u) <= 1e6 and abs(v) <= 1e6):
+        raise argparse.ArgumentTypeError(f"a clicked pixel is two finite numbers within ±1e6, got {text!r}")
+    return u, v

@@ -88,6 +88,9 @@ def build_parser() -> argparse.ArgumentParser:
     from app.robot.cli import add_robot_parser  # argparse only: the arm's description loads when the command runs
 
     add_robot_parser(sub)
+    from app.site_cli import add_site_parser  # argparse only: the site's modules load when the command runs
+
+    add_site_parser(sub)
     return parser
 
 

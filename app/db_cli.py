@@ -2,6 +2,7 @@
 
     mcit db init --scene scenes/workcell        a new database from a scene's known objects
     mcit db import model.cao [--name N] [--xyz X Y Z] [--rpy-deg R P Y] [--status known] [--max-faces N]
+    mcit db import model.cao --pose FILE [--pose-frame camera|world] [--init-clicks U,V ...] [--site DIR]
     mcit db list | show NAME | history [NAME] [--json]      --json: one JSON document (docs/database.md)
     mcit db show-calibration [camera|turret|robot-base|CAMERA|N] [--json]
     mcit db undo CHANGE [--restore]
@@ -9,11 +10,11 @@
     mcit db export-poses out.{json,csv,pos} [--object NAME ...] [--frame world|camera]
     mcit db feed --socket PATH | --file PATH     the pose changes as JSON lines (app.poses_cli)
 
-Every sub-command takes ``--db PATH`` (default ``~/.local/share/mcit/mcit.sqlite``) and ``--wait-s S``
-(how long a change waits for another writer to finish, default 5 s). list, show, history,
-show-calibration and export only read: they work on a read-only file, folder or mount and never
-create the file. Every failure is one line on stderr (app.cli) and exit status 1, with nothing
-written. Heavy modules are imported inside the commands so that ``mcit --help`` stays fast.
+Every sub-command takes ``--db PATH`` (default ``~/.local/share/mcit/mcit.sqlite``) or ``--site DIR`` (a
+site folder's database, ``mcit site new``) and ``--wait-s S`` (how long a change waits for another writer to
+finish, default 5 s). list, show, history, show-calibration and export only read: they work on a read-only file,
+folder or mount and never create the file. Every failure is one line on stderr (app.cli) and exit status 1, with
+nothing written. Heavy modules are imported inside the commands so that ``mcit --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import json
 import time
 from pathlib import Path
 
-from app.argtypes import angle_deg, coordinate_m, number
+from app.argtypes import angle_deg, coordinate_m, number, pixel_uv
 from app.oserrors import os_error_advice
 from app.terminal import safe_output
 
@@ -36,8 +37,10 @@ def _when(t: float) -> str:
 
 def _open(args, readonly: bool = False):
     from app.db import Database
+    from app.site_folder import database_of
 
-    return Database.open(args.db, client="cli", busy_timeout_s=args.wait_s, readonly=readonly)
+    path = database_of(args.db, getattr(args, "site", None))
+    return Database.open(path, client="cli", busy_timeout_s=args.wait_s, readonly=readonly)
 
 
 def _cmd_init(args) -> int:
@@ -74,24 +77,55 @@ def _cmd_import(args) -> int:
         from app.models_io import read_cao_options
 
         options = read_cao_options(path)[1]
-    roll, pitch, yaw = np.radians(args.rpy_deg)
-    T = make_T(rot_z(yaw) @ rot_y(pitch) @ rot_x(roll), np.asarray(args.xyz, float))
+    measurements = {"cao_options": options.to_json()} if options else {}
+    cov, said, residuals = None, "", None
+    if args.pose is not None:  # read before the database is written: a bad file writes nothing
+        from app.pose_files import read_pose_file
+        from app.site_folder import current_camera
+
+        if args.xyz is not None or args.rpy_deg is not None:
+            raise ValueError("give the pose once: --pose FILE, or --xyz and --rpy-deg")
+        camera, lens, cal_id = _import_camera(args, current_camera)
+        clicks = None if args.init_clicks is None else np.array(args.init_clicks, dtype=float)
+        pose = read_pose_file(args.pose, frame=args.pose_frame, camera=camera, clicks=clicks, lens=lens)
+        T, cov = pose.in_world(camera)
+        through = "" if pose.frame == "world" else f" → T_world_obj through the camera's {_cal_text(cal_id)}"
+        said = f"; pose from {pose.describe()}{through}"
+        residuals = pose.details.get("residuals_px")
+        details = {k: v for k, v in pose.details.items() if k != "residuals_px"}
+        measurements["pose"] = {
+            "file": str(Path(args.pose).resolve()),
+            "form": pose.form,
+            "frame": pose.frame,
+            "frame_from": pose.frame_from,
+            "T_file": pose.T,
+            "camera_calibration": cal_id,
+            **details,
+        }
+    else:
+        if args.init_clicks is not None or args.pose_frame is not None:
+            raise ValueError("--init-clicks and --pose-frame go with --pose FILE")
+        roll, pitch, yaw = np.radians(args.rpy_deg or (0.0, 0.0, 0.0))
+        T = make_T(rot_z(yaw) @ rot_y(pitch) @ rot_x(roll), np.asarray(args.xyz or (0.0, 0.0, 0.0), float))
     with _open(args) as db:
         rec = db.add_object(
             name,
             args.kind,
             model,
             T,
+            cov=cov,
             status=args.status,
             source=str(path.resolve()),
             method=f"import {path.suffix.lower().lstrip('.')}",
             client="cli",
-            measurements={"cao_options": options.to_json()} if options else None,
+            measurements=measurements or None,
+            residuals=residuals,
         )
+        x, y, z = rec.T_world_obj[:3, 3]
         print(
             f"{db.path}: added #{rec.id} {rec.name!r} ({rec.kind}, {rec.status}): {len(model.vertices)} vertices, "
             f"{len(model.edges)} edges, {len(model.faces)} faces, "
-            f"{len(model.solids)} solids, {len(model.circles)} circles"
+            f"{len(model.solids)} solids, {len(model.circles)} circles; at x y z {x:.4f} {y:.4f} {z:.4f} m{said}"
         )
     return 0
 
@@ -100,6 +134,28 @@ def _print_json(doc: dict) -> None:
     """One JSON document on stdout, indented, in ASCII (any other character as a \\u escape: a name's
     terminal controls never reach the terminal, and ``safe_output`` has nothing to change)."""
     print(json.dumps(doc, indent=1))
+
+
+def _cal_text(cal_id) -> str:
+    return "scene pose (not yet calibrated)" if cal_id is None else f"calibration #{cal_id}"
+
+
+def _import_camera(args, current_camera):
+    """(camera, lens, calibration id) a --pose file is seen through: the database's latest camera calibration
+    (the site's scene's camera and lens with --site); (None, None, None) for a database not yet made."""
+    from app.db import Database, default_db_path
+    from app.site_folder import database_of, open_site
+
+    scene = None
+    if getattr(args, "site", None) is not None:
+        from app.scene import load_scene
+
+        scene = load_scene(open_site(args.site).scene_path)
+    path = database_of(args.db, getattr(args, "site", None)) or default_db_path()
+    if not Path(path).exists():
+        return current_camera(None, scene) if scene is not None else (None, None, None)
+    with Database.open(path, client="cli", busy_timeout_s=args.wait_s, readonly=True) as db:
+        return current_camera(db, scene)
 
 
 def _cmd_list(args) -> int:
@@ -287,6 +343,9 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
         "--db", metavar="PATH", default=None, help="database file (default: ~/.local/share/mcit/mcit.sqlite)"
     )
     common.add_argument(
+        "--site", metavar="DIR", type=Path, default=None, help="a site folder (mcit site new): its database"
+    )
+    common.add_argument(
         "--wait-s",
         type=_wait_s,
         default=5.0,
@@ -310,15 +369,39 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--kind", default="polyhedron", help="box, cylinder, polyhedron, ... (default polyhedron)")
     p.add_argument("--status", default="known", choices=("known", "modelled", "stale"))
     p.add_argument(
-        "--xyz", nargs=3, type=coordinate_m, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"), help="position, metres"
+        "--xyz",
+        nargs=3,
+        type=coordinate_m,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="position in the world, metres (default 0 0 0)",
     )
     p.add_argument(
         "--rpy-deg",
         nargs=3,
         type=angle_deg,
-        default=(0.0, 0.0, 0.0),
+        default=None,
         metavar=("R", "P", "Y"),
-        help="orientation R = Rz(yaw) Ry(pitch) Rx(roll), degrees",
+        help="orientation in the world R = Rz(yaw) Ry(pitch) Rx(roll), degrees (default 0 0 0)",
+    )
+    p.add_argument(
+        "--pose",
+        metavar="FILE",
+        help="the pose from a file instead: ViSP .pos (cMo), a 4×4 matrix (.txt, .dat; cMo unless it says), JSON "
+        "(T_world_obj unless it says) or a ViSP .init with its points' pixels (docs/own-site.md)",
+    )
+    p.add_argument(
+        "--pose-frame",
+        choices=("camera", "world"),
+        help="the frame of a --pose file that does not say: camera (T_cam_obj, ViSP's cMo: taken to the world "
+        "through the database's camera calibration) or world (T_world_obj)",
+    )
+    p.add_argument(
+        "--init-clicks",
+        nargs="+",
+        type=pixel_uv,
+        metavar="U,V",
+        help="with --pose FILE.init: its points' pixels, in its order (pixels of the video as recorded)",
     )
     p.add_argument("--angle-deg", type=float, default=30.0, help="meshes: dihedral angle from which an edge is drawn")
     p.add_argument(

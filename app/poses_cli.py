@@ -22,11 +22,12 @@ __all__ = ["add_pose_parsers"]
 
 def _open(args):
     from app.db import Database
+    from app.site_folder import database_of
 
     kwargs = {"client": "cli", "readonly": True}  # both commands only read: they work on a read-only file or mount
     if getattr(args, "wait_s", None) is not None:
         kwargs["busy_timeout_s"] = args.wait_s
-    return Database.open(args.db, **kwargs)
+    return Database.open(database_of(args.db, getattr(args, "site", None)), **kwargs)
 
 
 def _cmd_export_poses(args) -> int:

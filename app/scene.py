@@ -14,11 +14,11 @@ docs/scene-format.md is the full reference)::
                  "intrinsics_file": "cam.xml", "T_world_cam": <pose>}   # ViSP .xml / OpenCV .yml
                  # (a file with lens distortion: Scene.lens; the video is undistorted on arrival and the
                  #  renderer renders through the lens; C holds in the undistorted image, app/undistort.py)
-      "turret": {"T_world_turret": <pose>, "resolution_arcsec": 185.1428,
-                 "pan_limits_steps": [-3090, 3090], "tilt_limits_steps": [-907, 604],
+      "turret": {"T_world_turret": <pose>, "resolution_arcsec": 185.1428,      # optional: none on a
+                 "pan_limits_steps": [-3090, 3090], "tilt_limits_steps": [-907, 604],   # camera-only site
                  "speed_steps_s": 1000},
-      "rangefinder": {"sigma_range_m": 0.005, "min_range_m": 0.6, "max_range_m": 10.0},
-      "bodies": [
+      "rangefinder": {"sigma_range_m": 0.005, "min_range_m": 0.6, "max_range_m": 10.0},  # with a turret
+      "bodies": [                                                     # optional (default: none)
         {"name": "table", "kind": "table", "status": "known",
          "model": {"box": [1.6, 1.0, 0.05]}, "pose": <pose>},
         {"name": "box1", "kind": "box", "status": "known" | "unknown" | "scenery",
@@ -437,7 +437,7 @@ class Scene:
     name: str
     root: Path
     camera: Camera
-    turret: TurretSpec
+    turret: TurretSpec | None  # None: a camera-only site (no turret, no range finder)
     rangefinder: RangeFinderSpec
     bodies: tuple[Body, ...]
     video_path: Path | None = None
@@ -854,11 +854,20 @@ def scene_from_dict(d: Any, root: str | Path, where: str = "scene.json") -> Scen
     if fmt != FORMAT:
         raise SceneError(f"{where}: 'format' must be {FORMAT!r}, got {fmt!r}")
     _keys(d, _TOP_KEYS, where)
-    turret = _turret(_need(d, "turret", where), f"{where}: turret")
-    spec = _rangefinder(d.get("rangefinder", {}), turret.step_rad, f"{where}: rangefinder")
-    raw_bodies = _need(d, "bodies", where)
-    if not isinstance(raw_bodies, list) or not raw_bodies:
-        raise SceneError(f"{where}: bodies: a non-empty list of bodies expected")
+    # A camera-only site (docs/own-site.md) has no turret, hence no range finder: Scene.turret is None.
+    turret = _turret(d["turret"], f"{where}: turret") if "turret" in d else None
+    if turret is None and "rangefinder" in d:
+        raise SceneError(
+            f"{where}: rangefinder: a range finder is carried by the turret; give the scene its 'turret' block too, "
+            "or drop 'rangefinder' for a camera-only site"
+        )
+    step_rad = (turret or TurretSpec(np.eye(4))).step_rad
+    spec = _rangefinder(d.get("rangefinder", {}), step_rad, f"{where}: rangefinder")
+    raw_bodies = d.get("bodies", [])
+    if not isinstance(raw_bodies, list):
+        raise SceneError(
+            f"{where}: bodies: a list of bodies expected (empty for none), got {type(raw_bodies).__name__}"
+        )
     names: set[str] = set()
     bodies = [_body(b, i, root, names, where) for i, b in enumerate(raw_bodies)]
     views = _views(d, root, bodies, where)

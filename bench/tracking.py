@@ -65,7 +65,8 @@ from benchenv import pin_one_core  # noqa: E402
 
 from app.models_io import read_cao  # noqa: E402
 from app.vision.evaluate import edge_distance, oriented_edges  # noqa: E402
-from app.vision.sequence import iter_frames, pose_from_points, read_init_points, read_visp_pose  # noqa: E402
+from app.vision.pnp import solve_pnp  # noqa: E402
+from app.vision.sequence import iter_frames, read_init_points, read_visp_pose  # noqa: E402
 from app.vision.synthetic import render_poses  # noqa: E402
 from app.vision.track import EdgeTracker  # noqa: E402
 from core.brep import BRep  # noqa: E402
@@ -152,7 +153,7 @@ def real_sequences(repeat: int) -> None:
     if tea.is_dir():
         model = read_cao(tea / "teabox.cao")
         camera = Camera.from_intrinsics(TEABOX_K, np.eye(4), 640, 480)
-        T0 = pose_from_points(TEABOX_K, read_init_points(tea / "teabox.init"), TEABOX_CLICKS)
+        T0 = solve_pnp(TEABOX_K, read_init_points(tea / "teabox.init"), TEABOX_CLICKS, 640, 480).T_cam_world
         frames = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for _, f in iter_frames(tea / "teabox.mp4")]
         poses, conf, lost_at, ms = run(frames, camera, model, T0, repeat)
         dist = distances(frames, camera, model, poses)

@@ -31,12 +31,13 @@ def dimensions_of(model: BRep, kind: str) -> dict[str, float]:
 
 
 def seed_from_scene(db: Database, scene: Scene, *, client: str = "seed") -> dict[str, Any]:
-    """Write the scene's "known" bodies (status known, pose at t = 0), its camera C, its turret
-    pose and, with a robot, its base's nominal pose (``RobotSpec.nominal_base``: the drawing's, marked
-    ``nominal`` until the base is calibrated) as the first calibrations, all in one transaction.
+    """Write the scene's "known" bodies (status known, pose at t = 0), its camera C, its turret pose
+    (when it has a turret) and, with a robot, its base's nominal pose (``RobotSpec.nominal_base``: the
+    drawing's, marked ``nominal`` until the base is calibrated) as the first calibrations, all in one
+    transaction.
 
     Raises ValueError (nothing written) when the database already has objects or calibrations.
-    Returns {"objects": [names], "calibrations": [ids]}.
+    Returns {"objects": [names], "calibrations": [ids]} (camera, then turret and robot base when there are).
     """
     if db.objects() or db.calibrations():
         raise ValueError(
@@ -65,20 +66,21 @@ def seed_from_scene(db: Database, scene: Scene, *, client: str = "seed") -> dict
             ).id
         )
         t = scene.turret
-        cal_ids.append(
-            db.add_calibration(
-                "turret",
-                {
-                    "T_world_turret": t.T_world_turret,
-                    "resolution_arcsec": t.resolution_arcsec,
-                    "pan_limits_steps": t.pan_limits_steps,
-                    "tilt_limits_steps": t.tilt_limits_steps,
-                },
-                None,
-                method=method,
-                client=client,
-            ).id
-        )
+        if t is not None:  # a camera-only site has none
+            cal_ids.append(
+                db.add_calibration(
+                    "turret",
+                    {
+                        "T_world_turret": t.T_world_turret,
+                        "resolution_arcsec": t.resolution_arcsec,
+                        "pan_limits_steps": t.pan_limits_steps,
+                        "tilt_limits_steps": t.tilt_limits_steps,
+                    },
+                    None,
+                    method=method,
+                    client=client,
+                ).id
+            )
         if scene.robot is not None:
             cal_ids.append(
                 db.add_calibration(

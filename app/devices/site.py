@@ -62,6 +62,15 @@ def scene_clock(scene: Scene | None = None, *, loop_s: float | None = None) -> C
     return lambda: time.monotonic() - start
 
 
+def _check_turret(scene: Scene) -> None:
+    """ValueError for a camera-only scene (no turret block): it has no devices to emulate or drive."""
+    if scene.turret is None:
+        raise ValueError(
+            f"scene {scene.name!r} is camera-only (no 'turret' block), so it has no range finder and turret; give "
+            "the scene a turret block (docs/scene-format.md) to use them"
+        )
+
+
 class EmulatedSite:
     """The scene's turret and range finder, emulated and mounted together.
 
@@ -89,6 +98,7 @@ class EmulatedSite:
         fault_rates: dict[str, float] | None = None,
         bodies=None,
     ):
+        _check_turret(scene)
         self.scene = scene
         rng = np.random.default_rng(seed)
         rng_noise, rng_rf_faults, rng_turret_faults = rng.spawn(3)
@@ -180,6 +190,7 @@ def open_devices(
     transport : "inprocess" (``mcit://``) or "pty" for the emulators. site_options,
     rangefinder_options, turret_options : keyword arguments of EmulatedSite, RangeFinder, Turret.
     """
+    _check_turret(scene)
     if (rangefinder_url is None) != (turret_url is None):
         raise ValueError(
             "give both --rangefinder and --turret (real devices) or neither (emulated devices), "

@@ -21,6 +21,7 @@ from .cao import (
     read_cao,
     read_cao_options,
     read_init,
+    read_init_pixels,
     write_cao,
 )
 from .mesh import MAX_MESH_BYTES, MAX_MESH_FACES, MESH_SUFFIXES, MeshError, MeshWarning, read_mesh, write_mesh
@@ -40,6 +41,7 @@ __all__ = [
     "read_cao",
     "read_cao_options",
     "read_init",
+    "read_init_pixels",
     "write_cao",
     "cao_text",
     "read_mesh",

@@ -31,7 +31,9 @@ on one line has no plane: ViSP parses it, mcit leaves it out with a ``CaoWarning
 and loads the rest (a face without area, by contrast, is refused: see the limits).
 
 ``read_init`` reads a ViSP ``.init`` file (the model points a user clicks: a count, then ``X Y Z``
-per line), with the same ``load()`` lines first (ViSP ≥ 3.7) and the same limits.
+per line), with the same ``load()`` lines first (ViSP ≥ 3.7) and the same limits; ``read_init_pixels``
+also the points' pixels when the file gives them after the points, as ViSP's ``initFromPoints`` reads
+them (a count, then ``i j``: the row, then the column, of each point).
 
 Limits, so that a careless or hostile file is refused at once, never hangs the reader or
 exhausts memory, and so that whatever loads can also be exported and read back:
@@ -91,6 +93,7 @@ __all__ = [
     "read_cao",
     "read_cao_options",
     "read_init",
+    "read_init_pixels",
     "write_cao",
     "cao_text",
     "concat_breps",
@@ -453,6 +456,7 @@ class _Reading:
         self.options: dict[Path, CaoOptions] = {}  # each parsed file's ViSP options, by record of its model
         self.what = what
         self.counts = dict.fromkeys(MAX_COUNTS, 0)  # what the model holds so far, includes and repeats counted
+        self.image_points: dict[Path, np.ndarray] = {}  # an .init's pixels (ViSP's initFromPoints), by file
 
     def add(self, lines: _Lines, number: int, kind: str, n: int, what: str) -> None:
         """Count ``n`` more ``kind`` in the model, refused beyond ``MAX_COUNTS`` (before they are read)."""
@@ -736,10 +740,31 @@ def _parse_init(path: Path, text: str, stack: tuple[Path, ...], reading: _Readin
             values, _ = _numbers(lines, number, line, 3, "f", f"point {k}")
             _within(lines, number, values, f"point {k}")
             P[k] = values
-        parts.append(P)  # what follows the points (ViSP's 2D points for initFromPoints) is not read
+        parts.append(P)
+        if lines.peek() is not None:  # ViSP's initFromPoints: the points' pixels follow them
+            reading.image_points[path] = _image_points(lines, reading, sum(len(p) for p in parts))
     elif not parts:
         raise CaoError(f"{path}:{lines.last_line}: the file ends where the number of points was expected")
     return np.vstack(parts) if parts else None
+
+
+def _image_points(lines: _Lines, reading: _Reading, n_points: int) -> np.ndarray:
+    """The pixels of an .init's points as ViSP's ``initFromPoints`` reads them: a count (the number of
+    points), then ``i j`` per line — the row, then the column (v, u) — returned as (N, 2) ``uv``."""
+    number = lines.peek()[0]
+    n = _count(lines, "image points", reading, kind="points")
+    if n != n_points:
+        raise lines.error(
+            number, f"{n} image points for the file's {n_points} model points; give one pixel (row column) per point"
+        )
+    uv = np.zeros((n, 2))
+    for k in range(n):
+        number, line = lines.next(f"image point {k} of {n}")
+        (i, j), _ = _numbers(lines, number, line, 2, "f", f"image point {k} (row column)")
+        uv[k] = (j, i)
+    if lines.peek() is not None:
+        raise lines.error(lines.peek()[0], "more lines after the image points; an .init file ends with them")
+    return uv
 
 
 def read_init(path: str | Path) -> np.ndarray:
@@ -750,11 +775,20 @@ def read_init(path: str | Path) -> np.ndarray:
     whose points, placed as in a ``.cao``, come before this file's own; a file may hold only
     ``load()`` lines. The include limits of the module docstring apply. CaoError names file:line.
     """
+    return read_init_pixels(path)[0]
+
+
+def read_init_pixels(path: str | Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """(X_obj (N, 3) metres, uv (N, 2) pixels or None) of a ViSP ``.init`` file: its model points
+    (``read_init``) and, when the file gives them after the points as ViSP's
+    ``vpMbTracker::initFromPoints`` reads them (a count, then ``i j`` — row, column — per point), their
+    pixels as ``uv`` (u = j, v = i); None when the file holds the model points only."""
     path = _resolved(Path(path))
-    P = _Reading(_parse_init, "a ViSP .init file").read(path, str(path), (path,))
+    reading = _Reading(_parse_init, "a ViSP .init file")
+    P = reading.read(path, str(path), (path,))
     if P is None or len(P) == 0:
         raise CaoError(f"{path}: the file holds no points")
-    return P
+    return P, reading.image_points.get(path)
 
 
 def _fmt(x: float) -> str:

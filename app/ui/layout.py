@@ -49,13 +49,30 @@ def build_panel(panel: ClientPanel) -> None:
     # frame's controls (Freeze, Seconds back) below the fold (a new operator's run).
     panel.gui_start = gui.add_folder("Start a workflow")
     with panel.gui_start:
+        missing: dict[str, list[str]] = {}  # why → the workflows this site cannot run for that reason
         for label, name in START_BUTTONS:
-            if WORKFLOWS[name].available(panel.app.site):
-                continue  # e.g. Move robot on a site with no robot
+            why = WORKFLOWS[name].available(panel.app.site)
+            if why:  # e.g. Move robot on a site with no robot: not offered, and said why below
+                missing.setdefault(why, []).append(label)
+                continue
             gui.add_button(label).on_click(guard(functools.partial(panel.start, name)))
-        panel.gui_shape = gui.add_dropdown("Shape", SHAPES, initial_value="box", hint="Model object: the shape you see")
-        panel.gui_vertical = gui.add_checkbox("Vertical", True, hint="Model object: its axis/sides are vertical")
-        panel.gui_on_table = gui.add_checkbox("Lies on the table", True, hint="Model object: it stands on the table")
+        if missing:
+            gui.add_markdown(
+                Md("*Not on this site:* ")
+                + Md("; ").join(Md("{} ({})").format(", ".join(labels), why) for why, labels in missing.items())
+            )
+        # Model object's form, shown where it is offered; "Lies on the table" where the database has a table
+        shown = not WORKFLOWS["model_object"].available(panel.app.site)
+        has_table = any(o.kind == "table" for o in panel.app.site.objects())  # a site of one's own may have none
+        panel.gui_shape = gui.add_dropdown(
+            "Shape", SHAPES, initial_value="box", hint="Model object: the shape you see", visible=shown
+        )
+        panel.gui_vertical = gui.add_checkbox(
+            "Vertical", True, hint="Model object: its axis/sides are vertical", visible=shown
+        )
+        panel.gui_on_table = gui.add_checkbox(
+            "Lies on the table", has_table, hint="Model object: it stands on the table", visible=shown
+        )
         panel.gui_snap = gui.add_checkbox(
             "Snap clicks",
             True,

@@ -41,6 +41,14 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     )
     p.add_argument("--scene", type=Path, default=None, help="scene folder (default: the bundled workcell)")
     p.add_argument(
+        "--site",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="a site folder made by mcit site new: its scene, database, video and frame rate (--video and --fps "
+        "given here replace its own; docs/own-site.md)",
+    )
+    p.add_argument(
         "--host",
         default="127.0.0.1",
         help="address to listen on (default 127.0.0.1; any other address needs an access token, generated "
@@ -328,7 +336,16 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
     access = _access_policy(args)  # before anything opens: a bad --token or --allow-origin stops here
     _check_host(args.host, args.port)  # and an address this machine does not have
     port = free_port(args.host, args.port)  # the next free one when it is taken (run_serve says so)
+    if getattr(args, "site", None) is not None:  # a site folder (mcit site new): its scene, database and video
+        from app.site_folder import serve_site_args
+
+        serve_site_args(args)
     scene = load_scene(args.scene or default_scene_path())
+    if scene.turret is None and (args.rangefinder is not None or args.turret is not None):
+        raise ValueError(
+            f"scene {scene.name} is camera-only (no turret block): --rangefinder and --turret need a scene with a "
+            "turret (docs/scene-format.md)"
+        )
     if getattr(args, "camera_name", None) and not getattr(args, "intrinsics", None):
         raise ValueError("--camera-name chooses a camera in the --intrinsics file; give --intrinsics FILE")
     if getattr(args, "intrinsics", None):
@@ -417,7 +434,9 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         notes.append("the robot moves unseen on the recorded video: its overlay follows its joint states")
 
     devices = None
-    if not args.no_devices:
+    if scene.turret is None:  # a camera-only site: the workflows that need the devices say so
+        notes.append(f"scene {scene.name} is camera-only: no range finder and turret")
+    elif not args.no_devices:
         from app.devices import open_devices
 
         try:

@@ -123,6 +123,8 @@ class World3D:
             )
             if len(site.views) > 1:
                 self.scene.add_label(f"{node}_label", name, position=tuple(T_world_cam[:3, 3]))
+        if not getattr(site, "has_turret", True):  # a camera-only site: no turret, no beam
+            return
         T = site.T_world_turret
         self.scene.add_frame(
             "/world3d/turret", axes_length=0.12, axes_radius=0.006, position=tuple(T[:3, 3]), wxyz=_wxyz(T[:3, :3])

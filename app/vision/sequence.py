@@ -6,8 +6,8 @@ tracker follows is the object's pose in the camera, ViSP's ``cMo``).
 
 * ``read_visp_pose(path)``: a ViSP ``.pos`` file (tx ty tz θux θuy θuz: translation in metres,
   then the axis-angle vector in radians) → T (4, 4);
-* ``pose_from_points(camera_K, X_obj, uv)``: the pose from clicked model points (≥ 4), OpenCV's
-  SQPnP refined by Levenberg–Marquardt;
+* the pose from clicked model points: ``app.pose_files`` (an ``.init`` and its pixels), through
+  ``app.vision.pnp.solve_pnp``;
 * ``iter_frames(source)``: the frames of a video file or an image folder, once, in order;
 * ``draw_tracking(...)``: the frame with the tracked model and the matched edge samples;
 * ``track_sequence(...)``: the loop, returning one ``TrackedFrame`` per frame and optionally
@@ -28,14 +28,13 @@ import numpy as np
 from app.overlay import project_wireframe
 from core.brep import BRep
 from core.camera import Camera
-from core.transforms import exp_so3, log_so3, make_T
+from core.transforms import log_so3
 
 from .track import EdgeTracker, TrackDiagnostics
 
 __all__ = [
     "read_visp_pose",
     "read_init_points",
-    "pose_from_points",
     "iter_frames",
     "frame_count",
     "draw_tracking",
@@ -47,15 +46,11 @@ _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".p
 
 
 def read_visp_pose(path: str | Path) -> np.ndarray:
-    """T (4, 4) from a ViSP ``.pos`` file: six numbers tx ty tz (m) θux θuy θuz (rad)."""
-    path = Path(path)
-    try:
-        values = np.array(path.read_text().split(), dtype=float)
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: cannot read a ViSP pose (six numbers: tx ty tz θux θuy θuz): {exc}") from None
-    if values.shape != (6,) or not np.all(np.isfinite(values)):
-        raise ValueError(f"{path}: a ViSP pose file holds six finite numbers (tx ty tz θux θuy θuz), got {values.size}")
-    return make_T(exp_so3(values[3:]), values[:3])
+    """T (4, 4) from a ViSP ``.pos`` file: six numbers tx ty tz (m) θux θuy θuz (rad) (``app.pose_files``,
+    the reader of every pose file)."""
+    from app.pose_files import read_visp_pos
+
+    return read_visp_pos(path)
 
 
 def read_init_points(path: str | Path) -> np.ndarray:
@@ -65,23 +60,6 @@ def read_init_points(path: str | Path) -> np.ndarray:
     from app.models_io import read_init
 
     return read_init(path)
-
-
-def pose_from_points(K: np.ndarray, X_obj: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """The object's pose in the camera, T_cam_obj (4, 4), from ≥ 4 clicked model points.
-
-    K : array, shape (3, 3), intrinsics (pixels). X_obj : array, shape (N, 3), metres.
-    uv : array, shape (N, 2), pixels. OpenCV's SQPnP (global) then Levenberg–Marquardt.
-    """
-    X = np.asarray(X_obj, dtype=np.float64).reshape(-1, 3)
-    m = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    if len(X) < 4 or len(m) != len(X):
-        raise ValueError(f"give at least 4 model points and as many clicked pixels, got {len(X)} and {len(m)}")
-    ok, rvec, tvec = cv2.solvePnP(X, m, np.asarray(K, float), None, flags=cv2.SOLVEPNP_SQPNP)
-    if not ok:
-        raise ValueError("no pose explains these clicks; check the order of the clicked points")
-    rvec, tvec = cv2.solvePnPRefineLM(X, m, np.asarray(K, float), None, rvec, tvec)
-    return make_T(exp_so3(rvec.ravel()), tvec.ravel())
 
 
 def iter_frames(source: str | Path, start: int = 0, count: int | None = None) -> Iterator[tuple[int, np.ndarray]]:

@@ -7,10 +7,12 @@
 
 The camera is either intrinsics (a ViSP ``.xml`` or OpenCV ``.yml``; the world frame is then the
 camera's, as for a hand-held camera) or a scene's calibrated C (``--scene``). The initial pose
-is a file (ViSP ``.pos``: tx ty tz θux θuy θuz; or JSON: a 4×4 matrix or {"xyz", "rpy_deg"}),
-the pose of ``--body`` in the scene, or computed from clicked model points (``--init-points``, a
-ViSP ``.init`` file, and ``--init-clicks``, the pixels in the same order). ``--pos-out`` writes the
-tracked poses as ViSP ``.pos`` files (the form ``--pose`` reads; with ``--intrinsics`` ViSP's cMo).
+is a file read by ``app.pose_files`` (ViSP ``.pos``: tx ty tz θux θuy θuz; a 4×4 matrix; JSON: a 4×4
+matrix or {"xyz", "rpy_deg"}; a ViSP ``.init`` with its points' pixels), the pose of ``--body`` in the
+scene, or computed from clicked model points (``--init-points``, a ViSP ``.init`` file, and
+``--init-clicks``, the pixels in the same order). ``--pos-out`` writes the
+tracked poses as ViSP ``.pos`` files: the object's pose in the camera (ViSP's cMo), the form ``--pose``
+reads back.
 
 Tracking stops at the first frame where the tracker is lost (exit status 3), and says where to
 restart with a new pose; a file that cannot be used is exit status 1, options that do not go
@@ -30,16 +32,8 @@ from app.exit_status import UsageError
 __all__ = ["add_track_parser"]
 
 
-def _pixel(text: str) -> tuple[float, float]:
-    try:
-        u, v = (float(x) for x in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"a clicked pixel is 'u,v' (e.g. 192,84.5), got {text!r}") from None
-    return u, v
-
-
 def add_track_parser(sub) -> None:
-    from app.argtypes import frame_rate
+    from app.argtypes import frame_rate, pixel_uv
 
     p = sub.add_parser(
         "track",
@@ -66,12 +60,24 @@ def add_track_parser(sub) -> None:
         "or a YAML file's camera key or camera_name)",
     )
     p.add_argument("--body", help="with --scene: the body to track")
-    p.add_argument("--pose", help="initial pose file: ViSP .pos (tx ty tz θux θuy θuz) or JSON (4×4 or {xyz, rpy_deg})")
-    p.add_argument("--init-points", help="model points clicked to initialise (a ViSP .init file)")
+    p.add_argument(
+        "--pose",
+        help="initial pose file: ViSP .pos (tx ty tz θux θuy θuz), a 4×4 matrix (.txt, .dat), JSON (4×4 or "
+        "{xyz, rpy_deg}) or a ViSP .init with its points' pixels (app.pose_files; docs/own-site.md)",
+    )
+    p.add_argument(
+        "--pose-frame",
+        choices=("camera", "world"),
+        help="the frame of a --pose file that does not say: camera (T_cam_obj, ViSP's cMo; the default for .pos "
+        "and matrices) or world (T_world_obj; the default for JSON)",
+    )
+    p.add_argument(
+        "--init-points", help="model points clicked to initialise (a ViSP .init file; the same as --pose FILE.init)"
+    )
     p.add_argument(
         "--init-clicks",
         nargs="+",
-        type=_pixel,
+        type=pixel_uv,
         metavar="U,V",
         help="the clicked pixels of --init-points, in order "
         "(pixels of the video's frames as recorded; with lens distortion they are undistorted first)",
@@ -96,20 +102,6 @@ def add_track_parser(sub) -> None:
     p.set_defaults(func=_cmd_track)
 
 
-def _load_pose(path: Path):
-    import json
-
-    from app.scene import parse_pose
-    from app.vision.sequence import read_visp_pose
-
-    if path.suffix.lower() == ".json":
-        try:
-            return parse_pose(json.loads(path.read_text()), str(path))
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path}: not valid JSON ({exc})") from None
-    return read_visp_pose(path)
-
-
 def _setup(args):
     """(source, camera, model, T_world_obj, lens or None) from the arguments; ValueError on bad input.
     With lens distortion (the intrinsics file's or the scene's) the frames are undistorted as they are
@@ -117,12 +109,11 @@ def _setup(args):
     import numpy as np
 
     from app.models_io import load_model
-    from app.vision.sequence import iter_frames, pose_from_points, read_init_points
+    from app.vision.sequence import iter_frames
     from core.camera import Camera
 
     model = load_model(args.model) if args.model else None
     T = None
-    K = None
     lens = None
     source = args.source
     if args.camera_name and not args.intrinsics:
@@ -161,29 +152,20 @@ def _setup(args):
                 f"{args.intrinsics}: the camera was calibrated on {intr.width}×{intr.height} images but the "
                 f"video's frames are {w}×{h}; give the intrinsics for this size"
             )
-        K = intr.K
-        camera = Camera.from_intrinsics(K, np.eye(4), w, h)
+        camera = Camera.from_intrinsics(intr.K, np.eye(4), w, h)
         from app.undistort import lens_of
 
         lens = lens_of(intr, w, h)
     if model is None:
         raise UsageError("give the object's model: --model FILE (or --scene with --body)")
-    if args.pose:
-        T = _load_pose(Path(args.pose))
-    elif args.init_points or args.init_clicks:
-        if not (args.init_points and args.init_clicks):
-            raise UsageError("--init-points and --init-clicks go together (the model points and their clicked pixels)")
-        if K is None:
-            K, T_cam_world = camera.decompose()
-            if not np.allclose(T_cam_world, np.eye(4), atol=1e-9):
-                raise UsageError(
-                    "--init-clicks needs --intrinsics (the camera frame "
-                    "as the world); with --scene give --pose or --body"
-                )
-        clicks = np.array(args.init_clicks, dtype=float)
-        if lens is not None:
-            clicks = lens.undistort(clicks)
-        T = pose_from_points(K, read_init_points(args.init_points), clicks)
+    pose_file = _pose_file(args)
+    if pose_file is not None:  # the one reader of pose files (mcit db import --pose reads them too)
+        from app.pose_files import read_pose_file
+
+        clicks = None if args.init_clicks is None else np.array(args.init_clicks, dtype=float)
+        frame = getattr(args, "pose_frame", None)
+        pose = read_pose_file(pose_file, frame=frame, camera=camera, clicks=clicks, lens=lens)
+        T = pose.in_world(camera)[0]
     if T is None:
         raise UsageError("give the initial pose: --pose FILE, --init-points/--init-clicks, or --scene with --body")
     return source, camera, model, T, lens
@@ -197,9 +179,28 @@ def _pos_names(pattern: str, indices) -> list[str]:
         raise UsageError(f"--pos-out {pattern!r}: one %d (e.g. %04d) for the frame number expected") from None
 
 
-def _write_pos(pattern: str, frames) -> str:
-    """Write the tracked frames' poses as ViSP .pos files (see --pos-out); what was written, for the summary."""
+def _pose_file(args) -> Path | None:
+    """The initial pose's file: --pose, or --init-points (an .init whose pixels --init-clicks gives)."""
+    if args.pose and args.init_points:
+        raise UsageError("give the initial pose once: --pose FILE, or --init-points FILE.init with --init-clicks")
+    if args.init_points and Path(args.init_points).suffix.lower() != ".init":
+        raise UsageError(f"--init-points {args.init_points}: a ViSP .init file expected (the model points clicked)")
+    if args.init_clicks and not (args.init_points or str(args.pose or "").lower().endswith(".init")):
+        raise UsageError("--init-clicks are the pixels of an .init file's points: give --init-points FILE.init")
+    if getattr(args, "pose_frame", None) and not args.pose:
+        raise UsageError("--pose-frame says the frame of a --pose file; give --pose FILE")
+    path = args.pose or args.init_points
+    return None if path is None else Path(path)
+
+
+def _write_pos(pattern: str, frames, camera) -> str:
+    """Write the tracked frames' poses as ViSP .pos files (see --pos-out): each the object's pose in the
+    camera (cMo = T_cam_world · T_world_obj, what --pose reads a .pos as); what was written, for the summary."""
     from app.db.export import pos_text
+
+    K, T_cam_world = camera.decompose()
+    if K[0, 0] < 0:
+        raise ValueError(f"--pos-out {pattern}: the camera is mirrored, so it has no camera frame to give cMo in")
 
     good = [f for f in frames if not f.lost]
     if not good:
@@ -208,11 +209,11 @@ def _write_pos(pattern: str, frames) -> str:
         names = _pos_names(pattern, [f.index for f in good])
         for name, f in zip(names, good):
             Path(name).parent.mkdir(parents=True, exist_ok=True)
-            Path(name).write_text(pos_text(f.T_world_obj))
+            Path(name).write_text(pos_text(T_cam_world @ f.T_world_obj))
         return f"; {len(good)} .pos files: {names[0]} … {names[-1]}" if len(good) > 1 else f"; pose: {names[0]}"
     path = Path(pattern)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(pos_text(good[-1].T_world_obj))
+    path.write_text(pos_text(T_cam_world @ good[-1].T_world_obj))
     return f"; pose of frame {good[-1].index}: {path}"
 
 
@@ -245,7 +246,7 @@ def _cmd_track(args) -> int:
         )
     if not frames:
         raise ValueError(f"no frame to track in {source} from frame {args.start}")
-    pos_written = _write_pos(args.pos_out, frames) if args.pos_out else ""
+    pos_written = _write_pos(args.pos_out, frames, camera) if args.pos_out else ""
     conf = np.array([f.confidence for f in frames if not f.lost] or [0.0])
     ms = np.array([f.track_ms for f in frames])
     lost = [f for f in frames if f.lost]

@@ -61,6 +61,12 @@ class CalibrateTurret(Workflow):
         CANCEL,
     )
 
+    @classmethod
+    def available(cls, site) -> str:
+        if not site.has_turret:
+            return "this site is camera-only: it has no turret to calibrate (docs/own-site.md)"
+        return ""
+
     def __init__(self, site, client: str = "operator", view: str | None = None, shots: int = 3):
         super().__init__(site, client, view)
         self.shots = int(shots)
@@ -149,7 +155,7 @@ class CalibrateTurret(Workflow):
                 raise WorkflowError("pick a known point first (click a corner or a face centre)")
             devices = self.site.devices
             if devices is None:
-                raise WorkflowError("no range finder and turret are connected: restart mcit serve with devices")
+                raise WorkflowError(self.site.no_devices("measure"))
             X, label = self.pending_X, self.pending_label
             T = self.site.T_world_turret
             pan, tilt, _ = aim(T, X)
@@ -425,7 +431,7 @@ class CalibrateTurret(Workflow):
         if self.site.devices is None:
             return Step(
                 "no_devices",
-                "No range finder and turret are connected: restart mcit serve with devices to calibrate the turret.",
+                self.site.no_devices("calibrate the turret", sentence=True),
                 frozenset(base),
                 clicks=False,
             )

@@ -564,11 +564,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
         if done is not None:
             return done
         devices = self.site.devices is not None
-        no_dev = (
-            ""
-            if devices
-            else " (No range finder and turret are connected: restart mcit serve with devices to measure.)"
-        )
+        no_dev = "" if devices else f" ({self.site.no_devices('measure', sentence=True)})"
         if self.shape != "box":
             base.add("set_method")
         if self.result is not None:

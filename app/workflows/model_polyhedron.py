@@ -610,8 +610,7 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
         if self.site.devices is None:
             return Step(
                 "sides_clicked",
-                f"Face {n}: {len(face['segs'])} sides clicked. No range finder and turret are "
-                "connected: restart mcit serve with devices to measure.",
+                f"Face {n}: {len(face['segs'])} sides clicked. {self.site.no_devices('measure', sentence=True)}",
                 frozenset(base),
             )
         return Step(

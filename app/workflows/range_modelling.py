@@ -41,6 +41,13 @@ class RangeModelling:
     shows_beam = True
     selects_result = True  # the object just modelled is selected: Update pose, Track … apply to it next
 
+    @classmethod
+    def available(cls, site) -> str:
+        """A camera-only site cannot model: every shape needs range-finder measurements (paper §III)."""
+        if not site.has_turret:
+            return "this site is camera-only: modelling an object needs the range finder (docs/own-site.md)"
+        return ""
+
     def _init_acquisition(self) -> None:
         """The acquisition's state: progress (0..1 or None), its text, and the range points measured so
         far (world, metres; one per returned beam, appended from the acquiring thread under their own
@@ -58,10 +65,7 @@ class RangeModelling:
     def _devices(self):
         devices = self.site.devices
         if devices is None:
-            raise WorkflowError(
-                "no range finder and turret are connected: restart mcit serve with devices "
-                "(emulated by default) to measure"
-            )
+            raise WorkflowError(self.site.no_devices("measure"))
         return devices
 
     def _report(self, fraction: float, text: str, X: np.ndarray | None = None, keep: bool = True) -> None:

@@ -75,6 +75,9 @@ class Session:
             options = {**{k: v for k, v in form.items() if k in cls.form}, **options}
         if cls is None:
             raise WorkflowError(f"no workflow {name!r}; there are {', '.join(sorted(WORKFLOWS))}")
+        why = cls.available(self.site)
+        if why:  # the panel does not offer it; a script or a key might still ask
+            raise WorkflowError(f"{cls.title}: {why}")
         with self.lock:
             if self.workflow is not None and not self.workflow.finished:
                 self.workflow.cancel()

@@ -243,7 +243,9 @@ class Site:
         self._cameras: dict[str, Camera] = {v.name: v.camera for v in scene.views} or {"main": scene.camera}
         self._camera_covs: dict[str, np.ndarray | None] = dict.fromkeys(self._views)
         self._turret_cov: np.ndarray | None = None
-        self._T_world_turret = np.asarray(scene.turret.T_world_turret, float).copy()
+        # A camera-only site has no turret (scene.turret None): the identity stands in, unused (no devices).
+        turret = np.eye(4) if scene.turret is None else scene.turret.T_world_turret
+        self._T_world_turret = np.array(turret, dtype=float)  # a copy: the scene's stays as it was
         self._robot_base_nominal = True  # the robot's base is the drawing's until a calibration says otherwise
         self._robot_base_cov: np.ndarray | None = None
         self.beam_X_world: np.ndarray | None = None  # the range finder's last measured point (shown)
@@ -335,9 +337,24 @@ class Site:
 
     @property
     def T_world_turret(self) -> np.ndarray:
-        """The current turret calibration, (4, 4)."""
+        """The current turret calibration, (4, 4) (the identity on a site without a turret: ``has_turret``)."""
         with self.lock:
             return self._T_world_turret.copy()
+
+    @property
+    def has_turret(self) -> bool:
+        """False for a camera-only site: its scene has no turret (hence no range finder)."""
+        return self.scene.turret is not None
+
+    def no_devices(self, what: str, sentence: bool = False) -> str:
+        """What a workflow says when it needs the range finder and the site has none now: a camera-only site
+        never will, another was started without them. ``what`` it cannot do ("measure"); ``sentence``: with a
+        capital and a full stop (a step's text), else as an error's ("no range finder ...")."""
+        if not self.has_turret:
+            text = f"this site is camera-only: it has no range finder and turret, so it cannot {what}"
+        else:
+            text = f"no range finder and turret are connected: restart mcit serve with devices to {what}"
+        return text[:1].upper() + text[1:] + "." if sentence else text
 
     @property
     def calibration_covs(self) -> tuple[np.ndarray | None, np.ndarray | None]:

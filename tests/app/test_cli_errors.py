@@ -79,6 +79,9 @@ CASES = [
     ("db show-calibration", "turret --db {tmp}/no.sqlite", 1),
     ("db show-calibration", "nosuch --db {db}", 1),
     ("db show-calibration", "99 --db {db}", 1),
+    ("site new", "{tmp}/new-site --camera {notes} --video {notes}", 1),
+    ("site new", "{tmp}/new-site --camera {tmp}/no-camera.xml --video {tmp}/no-video.mp4", 1),
+    ("serve", "--site {tmp} --port 0", 1),
     ("serve", "--port {busy} --host 127.0.0.1 --no-devices --db {tmp}/unwritten.sqlite", 1),
     # the command line is wrong in a way argparse cannot see: status 2, as argparse's own refusals
     ("nosuch", "", 2),

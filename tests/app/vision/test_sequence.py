@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from app.cli import main
-from app.vision.sequence import iter_frames, pose_from_points, read_init_points, read_visp_pose, track_sequence
+from app.vision.sequence import iter_frames, read_init_points, read_visp_pose, track_sequence
 from app.vision.synthetic import render_poses
 from core.brep import BRep
 from core.camera import Camera
@@ -64,19 +64,6 @@ def test_visp_pose_and_init_files(tmp_path):
     r = tmp_path / "both.init"
     r.write_text('load("pts.init", t=[0.5; 0; 0])\n1\n0 0 1\n')
     assert np.allclose(read_init_points(r), [[0.5, 0, 0], [0, 0, 1]])
-
-
-def test_pose_from_points_recovers_the_pose():
-    rng = np.random.default_rng(0)
-    T = make_T(exp_so3([2.0, 0.5, -0.4]), [0.02, -0.01, 0.6])
-    X = np.array([[0, 0, 0], [0.165, 0, 0], [0.165, 0, -0.08], [0.165, 0.068, -0.08]])
-    cam = Camera.from_intrinsics(K, np.eye(4), 320, 240)
-    uv = cam.project_obj(T, X)
-    assert pose_error(pose_from_points(K, X, uv), T)[0] < 1e-6
-    noisy = pose_from_points(K, X, uv + rng.normal(0, 1.0, uv.shape))
-    assert pose_error(noisy, T)[0] < 5.0
-    with pytest.raises(ValueError, match="at least 4"):
-        pose_from_points(K, X[:3], uv[:3])
 
 
 def test_iter_frames_reads_folders_and_videos_once(rendered, tmp_path):

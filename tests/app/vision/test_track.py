@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from app.vision.evaluate import edge_distance
-from app.vision.sequence import iter_frames, pose_from_points, read_init_points, read_visp_pose
+from app.vision.pnp import solve_pnp
+from app.vision.sequence import iter_frames, read_init_points, read_visp_pose
 from app.vision.synthetic import render_poses
 from app.vision.track import EdgeTracker, sample_visible_edges
 from core.brep import BRep, Revolution
@@ -196,7 +197,7 @@ def test_real_teabox_initialised_from_four_clicks(shared_data):
     model = read_cao(folder / "teabox.cao")
     cam = Camera.from_intrinsics(TEABOX_K, np.eye(4), 640, 480)
     X = read_init_points(folder / "teabox.init")
-    T0 = pose_from_points(TEABOX_K, X, TEABOX_CLICKS)
+    T0 = solve_pnp(TEABOX_K, X, TEABOX_CLICKS, 640, 480).T_cam_world  # the camera frame is the world
     assert np.max(np.linalg.norm(cam.project_obj(T0, X) - TEABOX_CLICKS, axis=1)) < 5.0
     tracker = EdgeTracker(cam, model, T0)
     dists = []
