@@ -120,10 +120,12 @@ def open_site(path: str | Path) -> SiteFolder:
 def serve_site_args(args) -> None:
     """``mcit serve --site DIR``: its scene and database (refused beside --scene or --db), its video and
     frame rate unless --video or --fps give others."""
+    from app.exit_status import UsageError
+
     site = open_site(args.site)
     for flag, value in (("--scene", args.scene), ("--db", args.db)):
         if value is not None:
-            raise ValueError(f"--site {args.site} gives the scene and the database: drop {flag}")
+            raise UsageError(f"--site {args.site} gives the scene and the database: drop {flag}")
     args.scene, args.db = site.root, site.db_path
     if not args.video:
         args.video = [site.video]

@@ -263,9 +263,7 @@ def test_bad_input_is_one_line_naming_the_file_and_writes_nothing(files, capsys)
     assert main(["db", "list", "--site", str(files / "busy")]) == 1
     _one_line_error(capsys, "busy", "not a site folder")
     # serve
-    from app.ui.serve import run_serve
-
-    assert run_serve(build_parser().parse_args(["serve", "--site", str(site), "--scene", str(site)])) == 2
+    assert main(["serve", "--site", str(site), "--scene", str(site)]) == 2  # a wrong command line
     _one_line_error(capsys, "drop --scene")
 
 
