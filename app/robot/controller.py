@@ -16,6 +16,7 @@ after a stop or a stall, ``q`` is where it is, not where it was sent.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -261,13 +262,21 @@ class EmulatedController:
                 m = self._motion
                 if m is None:
                     continue
-                if self._advance_locked():
-                    self._motion = None
+                done = self._advance_locked()
                 state = self._state_locked()
                 passed = self._passed_locked(m, state)
+            if done:
+                state = dataclasses.replace(state, moving=False)
             for s in passed:  # a slow update (a loaded machine) still tells every waypoint the robot went through
                 self._tell(s)
             self._tell(state)
+            if done:
+                # the motion ends once every listener has its last state: one that asks state() meanwhile still
+                # hears "moving" (a frame drawn from the emulated world's joints after that is the robot at rest;
+                # ending it first let a loaded machine's video draw the robot where it was, 0.6–0.8 m away)
+                with self._lock:
+                    if self._motion is m:
+                        self._motion = None
             time.sleep(period)
 
     def _passed_locked(self, m: _Motion, now: JointState) -> list[JointState]:
