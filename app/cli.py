@@ -136,7 +136,12 @@ def warn_in_one_line(prefix: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # said by the command's own name, as its other refusals are (argparse names the top parser)
+        words = (getattr(args, "command", None), getattr(args, f"{getattr(args, 'command', None)}_command", None))
+        prog = " ".join(["mcit", *(w for w in words if w)])
+        print(f"{prog}: error: unrecognized arguments: {' '.join(extra)} (see {prog} --help)", file=sys.stderr)
+        return 2
     if args.command is None:
         parser.print_help()
         return exit_status.USAGE

@@ -108,19 +108,27 @@ def _cmd_import(args) -> int:
         roll, pitch, yaw = np.radians(args.rpy_deg or (0.0, 0.0, 0.0))
         T = make_T(rot_z(yaw) @ rot_y(pitch) @ rot_x(roll), np.asarray(args.xyz or (0.0, 0.0, 0.0), float))
     with _open(args) as db:
-        rec = db.add_object(
-            name,
-            args.kind,
-            model,
-            T,
-            cov=cov,
-            status=args.status,
-            source=str(path.resolve()),
-            method=f"import {path.suffix.lower().lstrip('.')}",
-            client="cli",
-            measurements=measurements or None,
-            residuals=residuals,
-        )
+        try:
+            rec = db.add_object(
+                name,
+                args.kind,
+                model,
+                T,
+                cov=cov,
+                status=args.status,
+                source=str(path.resolve()),
+                method=f"import {path.suffix.lower().lstrip('.')}",
+                client="cli",
+                measurements=measurements or None,
+                residuals=residuals,
+            )
+        except ValueError as exc:
+            if "already exists" not in str(exc):
+                raise
+            raise ValueError(
+                f"{exc}: give the import another with --name NAME (a new pose of {name!r} itself: Update pose in "
+                "mcit serve)"
+            ) from None
         x, y, z = rec.T_world_obj[:3, 3]
         print(
             f"{db.path}: added #{rec.id} {rec.name!r} ({rec.kind}, {rec.status}): {len(model.vertices)} vertices, "
@@ -209,12 +217,14 @@ def _cmd_show(args) -> int:
         for row in o.T_world_obj:
             print("    " + " ".join(f"{v:10.6f}" for v in row))
         if o.cov is not None:
+            sd = np.sqrt(np.clip(np.diag(o.cov), 0.0, None))
             print(
-                f"  pose σ (sqrt of the covariance's diagonal): {np.array2string(np.sqrt(np.diag(o.cov)), precision=5)}"
+                f"  pose σ: x y z {' '.join(f'{1000 * v:.2f}' for v in sd[:3])} mm, "
+                f"rotation about x y z {' '.join(f'{np.degrees(v):.3f}' for v in sd[3:])}°"
             )
         print(
             f"  created {_when(o.created_at)}, updated {_when(o.updated_at)}, "
-            f"{len(db.history(o.id))} changes in the history"
+            f"{len(db.history(o.id))} change{'' if len(db.history(o.id)) == 1 else 's'} in the history"
         )
     return 0
 

@@ -87,6 +87,10 @@ def _change(c, calibration_kinds: dict[int, str]) -> dict[str, Any]:
         "undoes": c.undoes,
         "note": c.note,
         "seen_at": c.seen_at,  # when the image it was measured on was taken (null: not measured on an image)
+        # what the method used and left, as kept (JSON values; null when none): clicks, range measurements, residuals
+        "clicks": c.clicks,
+        "measurements": c.measurements,
+        "residuals": c.residuals,
         "object": c.object_name,
         "object_id": c.object_id,
         "version": c.version,
@@ -250,8 +254,8 @@ def calibrations_doc(db, calibrations: Iterable) -> dict[str, Any]:
 def _pose_line(what: str, pose: dict[str, Any]) -> str:
     from app.scene import pose_to_json
 
-    xyz = ", ".join(f"{v:.4f}" for v in pose["xyz_m"])
-    rpy = ", ".join(f"{v:.2f}" for v in pose_to_json(np.asarray(pose["T"]))["rpy_deg"])
+    xyz = ", ".join(f"{v + 0.0:.4f}".replace("-0.0000", "0.0000") for v in pose["xyz_m"])
+    rpy = ", ".join(f"{v:.2f}".replace("-0.00", "0.00") for v in pose_to_json(np.asarray(pose["T"]))["rpy_deg"])
     line = f"  {what} in the world: position ({xyz}) m, roll pitch yaw ({rpy})°"
     s = pose["sigma"]
     if s is not None:

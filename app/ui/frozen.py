@@ -175,8 +175,15 @@ class FrozenFrames:
             )
             return head + Md(". *Seconds back* freezes an earlier frame.")
         others = Md("").join(Md(" · {} t = {:.2f} s").format(name, f.t_s) for name, f in self.frame.others.items())
+        src = self.panel.feed.grabber.source
+        number = (  # a recording's frame number (a video's frame, an image folder's file in name order, from 0)
+            Md(" (frame {})").format(int(round(self.frame.t_s * src.fps)))
+            if not src.live and not getattr(src, "rendered_live", False) and (src.frame_count or 0) > 1
+            else Md("")
+        )
         return (
             Md("Frozen frame: t = {:.2f} s").format(self.frame.t_s)
+            + number
             + others
             + Md(" · **live shown**" if self.show_live else "")
             + Md(". *Seconds back*: a frame that long before the live one.")

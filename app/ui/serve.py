@@ -481,6 +481,11 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
         token=access.token,
     )
     server.emulated_world = None if robot is None else robot.world  # the emulated site's truth (tests, benches)
+    if bridge is not None:
+        server.bridge_note = (
+            f"**ROS 2** on domain {bridge.node.domain}: poses, markers and targets out on {args.ros2_namespace}"
+            + (f"; the robot from {args.ros2_joint_states}" if robot is not None else "")
+        )
     for note in notes:
         log.info(note)
     return server, closers

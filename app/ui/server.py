@@ -166,6 +166,7 @@ class InterfaceServer:
         # what every operator must know now, at the panel's top (key → callable giving the text, "" when none):
         # e.g. the pose solvers being prepared at start (app/ui/serve.py)
         self.notices: dict[str, Any] = {}
+        self.bridge_note = ""  # what the status says of the ROS 2 bridge (app/ui/serve.py), "" without one
         self.world3d = World3D(self.server.scene, offset=np.array([-60.0, 0.0, 0.0]))
         self.robot_overlay = RobotOverlay(
             self.server.scene,
@@ -463,7 +464,10 @@ class InterfaceServer:
 
     def _update_status(self) -> None:
         parts = [self._video_status(feed) for feed in self.views.values()]
-        text = Md("\n\n").join(parts) + Md("\n\n{} objects").format(len(self.site.objects()))
+        n = len(self.site.objects())
+        text = Md("\n\n").join(parts) + Md("\n\n{} object{}").format(n, "" if n == 1 else "s")
+        if self.bridge_note:
+            text += Md("\n\n{}").format(self.bridge_note)
         with self.clients_lock:
             panels = list(self.clients.values())
         notice = Md("\n\n").join(Md(t) for t in (fn() for fn in list(self.notices.values())) if t)

@@ -126,13 +126,21 @@ def _setup(args):
         scene = load_scene(args.scene)
         camera = scene.camera
         lens = scene.lens
+        site = _site_folder(args.scene)
+        if site is not None and site.db_path.is_file():  # a site's camera as calibrated there by now
+            from app.db import Database
+            from app.site_folder import current_camera
+
+            with Database.open(site.db_path, readonly=True) as db:
+                camera, lens, _ = current_camera(db, scene)
         if args.body:
             try:
-                body = scene.body(args.body)
+                body_model, T = _body(scene, site, args.body)
             except KeyError as exc:  # an operator's typo: one line, not an internal error
                 raise ValueError(f"--body: {exc.args[0]}") from None
-            model = model or body.model
-            T = body.T_world_obj
+            model = model or body_model
+        if source is None and site is not None:
+            source = site.video  # a site folder's video (mcit site new)
         if source is None:
             if scene.video_path is None:
                 raise ValueError(f"scene {scene.name!r} has no video: give a video file or frame folder")
@@ -169,6 +177,43 @@ def _setup(args):
     if T is None:
         raise UsageError("give the initial pose: --pose FILE, --init-points/--init-clicks, or --scene with --body")
     return source, camera, model, T, lens
+
+
+def _site_folder(path):
+    """The site folder (``mcit site new``) at ``path``, None for a scene folder."""
+    from app.site_folder import SITE_FILE, open_site
+
+    return open_site(path) if (Path(path) / SITE_FILE).is_file() else None
+
+
+def _body(scene, site, name: str):
+    """(model, T_world_obj) of ``name``: the scene's body, else the site folder's database object; KeyError
+    saying where it looked."""
+    try:
+        body = scene.body(name)
+        return body.model, body.T_world_obj
+    except KeyError:
+        pass
+    if site is not None and site.db_path.is_file():
+        from app.db import Database, NotFoundError
+
+        with Database.open(site.db_path, readonly=True) as db:
+            try:
+                rec = db.get(name)
+            except NotFoundError:
+                rec = None
+            if rec is not None:
+                return rec.model, rec.T_world_obj
+            names = [o.name for o in db.objects()]
+        raise KeyError(
+            f"site {site.root.name} has no object named {name!r} (its database's: {', '.join(names) or 'none'}); "
+            "import it first (mcit db import MODEL --pose FILE --site DIR)"
+        )
+    names = [b.name for b in scene.bodies]
+    raise KeyError(
+        f"scene {scene.name!r} has no body named {name!r} (its bodies: {', '.join(names) or 'none'}); or give "
+        "--model FILE and --pose FILE"
+    )
 
 
 def _pos_names(pattern: str, indices) -> list[str]:

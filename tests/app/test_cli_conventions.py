@@ -192,3 +192,14 @@ def test_serve_on_a_taken_port_says_which_it_took(tmp_path):
     assert got != port and proc.returncode == 0, err
     said = [line for line in err.splitlines() if "in use" in line]
     assert said == [f"mcit serve: port {port} is in use: listening on port {got} instead"], err
+
+
+@pytest.mark.parametrize(
+    "argv, prog", [(["serve", "--bogus"], "mcit serve"), (["db", "list", "--bogus"], "mcit db list")]
+)
+def test_an_unknown_option_is_refused_by_the_commands_own_name(argv, prog, capsys):
+    from app.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err == f"{prog}: error: unrecognized arguments: --bogus (see {prog} --help)\n"

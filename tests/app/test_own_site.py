@@ -130,6 +130,15 @@ def test_three_commands_make_a_camera_only_site_that_serves(files, capsys):
         assert server.grabber.source.fps == 10.0  # an image folder's default rate
     finally:
         _close(server, closers)
+    # mcit track on the site's object: the folder's frames, the database's model and pose, the site's camera
+    csv = files / "track.csv"
+    argv = ["track", "--scene", str(site), "--body", "box", "--frames", "2", "--out", str(files / "t.mp4")]
+    assert main(argv + ["--csv", str(csv), "--quiet"]) == 0
+    rows = csv.read_text().splitlines()
+    assert len(rows) == 3 and float(rows[1].split(",")[1]) > 0.8  # a header and 2 frames, the first well tracked
+    assert main(["track", "--scene", str(site), "--body", "nosuch", "--out", str(files / "t.mp4")]) == 1
+    err = capsys.readouterr().err
+    assert "site site has no object named 'nosuch' (its database's: box, box2); import it first" in err
 
 
 def test_the_panel_says_what_a_camera_only_site_cannot_do(files):
