@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import socket
 import sys
 import tempfile
 import threading
@@ -94,23 +93,13 @@ def main() -> int:
 
         # poses: the PoseStamped at the peer beside the feed socket's line
         topic = peer.watch_pose("parallelepiped")
-        lines: list[tuple[float, bytes]] = []
-        reader = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        reader.connect(str(sock))
+        lines: list[tuple[float, dict]] = []  # (arrival, line) of the feed socket's reader
 
         def read():
-            buf = b""
-            while not stop.is_set():
-                try:
-                    chunk = reader.recv(65536)
-                except OSError:
-                    return
-                if not chunk:
-                    return
-                buf += chunk
-                while b"\n" in buf:
-                    line, buf = buf.split(b"\n", 1)
-                    lines.append((time.time(), line))
+            from app.feed import follow
+
+            for line in follow(sock):  # ends when the publisher closes the socket
+                lines.append((time.time(), line))
 
         threading.Thread(target=read, daemon=True).start()
         time.sleep(1.0)
@@ -131,7 +120,6 @@ def main() -> int:
             if len(lines) > n_feed:
                 feed_ms.append(1000 * (lines[n_feed][0] - t0))
             time.sleep(0.2)
-        reader.close()
     finally:
         stop.set()
         server.stop()

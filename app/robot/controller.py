@@ -25,7 +25,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["path_times", "JointState", "ControllerError", "ControllerSilent", "ControllerFaults", "EmulatedController"]
+__all__ = [
+    "path_times",
+    "JointState",
+    "StateListeners",
+    "ControllerError",
+    "ControllerSilent",
+    "ControllerFaults",
+    "EmulatedController",
+]
 
 log = logging.getLogger("mcit.robot")
 
@@ -92,7 +100,41 @@ class _Motion:
     told: int = 0  # the last waypoint the listeners were told of
 
 
-class EmulatedController:
+class StateListeners:
+    """What every controller shares: listeners of its joint states, told in order (a listener's bug is logged,
+    never the robot's), and ``wait_idle`` on the controller's ``_idle()``."""
+
+    def __init__(self) -> None:
+        self._listeners: list[Callable[[JointState], None]] = []
+
+    def add_listener(self, fn: Callable[[JointState], None]) -> None:
+        self._listeners.append(fn)
+
+    def remove_listener(self, fn: Callable[[JointState], None]) -> None:
+        if fn in self._listeners:
+            self._listeners.remove(fn)
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Wait until no motion is under way; False on timeout."""
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if self._idle():
+                return True
+            time.sleep(0.01)
+        return False
+
+    def _idle(self) -> bool:  # pragma: no cover - each controller's
+        raise NotImplementedError
+
+    def _tell(self, state: JointState) -> None:
+        for fn in list(self._listeners):
+            try:
+                fn(state)
+            except Exception:  # noqa: BLE001 - a listener's bug never stops the robot's state
+                log.exception("a joint-state listener failed")
+
+
+class EmulatedController(StateListeners):
     """A joint controller that follows paths in time (see the module docstring).
 
     names, lower, upper, velocity : the joints (rad, rad/s). home : the start configuration.
@@ -128,7 +170,7 @@ class EmulatedController:
         self._fault: str | None = None
         self._motion: _Motion | None = None
         self._lock = threading.Lock()
-        self._listeners: list[Callable[[JointState], None]] = []
+        super().__init__()
         self._wake = threading.Event()
         self._closed = False
         self._thread = threading.Thread(target=self._run, name="robot-controller", daemon=True)
@@ -174,22 +216,9 @@ class EmulatedController:
             state = self._state_locked()
         self._tell(state)
 
-    def add_listener(self, fn: Callable[[JointState], None]) -> None:
-        self._listeners.append(fn)
-
-    def remove_listener(self, fn: Callable[[JointState], None]) -> None:
-        if fn in self._listeners:
-            self._listeners.remove(fn)
-
-    def wait_idle(self, timeout_s: float) -> bool:
-        """Wait until no motion is under way; False on timeout."""
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            with self._lock:
-                if self._motion is None:
-                    return True
-            time.sleep(0.01)
-        return False
+    def _idle(self) -> bool:
+        with self._lock:
+            return self._motion is None
 
     def close(self) -> None:
         self._closed = True
@@ -291,13 +320,6 @@ class EmulatedController:
             out.append(JointState(self.names, q, True, now.t_s, None, now.goal))
         m.told = max(m.told, k)
         return out
-
-    def _tell(self, state: JointState) -> None:
-        for fn in list(self._listeners):
-            try:
-                fn(state)
-            except Exception:  # noqa: BLE001 - a listener's bug never stops the robot's state
-                log.exception("a joint-state listener failed")
 
 
 def _along(m: _Motion, t: float) -> np.ndarray:

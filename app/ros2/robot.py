@@ -17,12 +17,12 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from app.robot.controller import ControllerError, ControllerSilent, JointState, path_times
+from app.robot.controller import ControllerError, ControllerSilent, JointState, StateListeners, path_times
 
 from .messages import stamp_s, trajectory_message
 from .node import Ros2Node, qos
@@ -38,7 +38,7 @@ RATE_HZ = 50.0  # the listeners are told at most this often (a 1 kHz driver woul
 EXPECTED_HZ = 500.0  # joint states faster than ten times this are said
 
 
-class RosController:
+class RosController(StateListeners):
     """The robot's controller over ROS 2 (see the module docstring).
 
     node : the bridge's ``Ros2Node``. names, lower, upper, velocity, home : the URDF's joints (mcit's order).
@@ -77,7 +77,7 @@ class RosController:
         self._motion_end: float | None = None  # monotonic time the sent motion is due to end
         self._fault: str | None = None
         self._said: set[str] = set()
-        self._listeners: list[Callable[[JointState], None]] = []
+        super().__init__()
         self._told = 0.0
         self._arrivals: list[float] = []
         self._pub = node.node.create_publisher(JointTrajectory, trajectory, qos("events"))
@@ -123,11 +123,7 @@ class RosController:
         if rate > 10 * EXPECTED_HZ:
             self._say("rate", f"{self.topics[0]}: {rate} joint states a second: the interface follows {RATE_HZ:g}/s")
         if tell:
-            for fn in list(self._listeners):
-                try:
-                    fn(state)
-                except Exception:  # noqa: BLE001 - a listener's bug never stops the robot's state
-                    log.exception("a joint-state listener failed")
+            self._tell(state)
 
     def _settle_locked(self, now: float) -> None:
         """End the sent motion once its time (and the settling time) has passed, or the joints reached the goal;
@@ -206,22 +202,10 @@ class RosController:
             self._motion_end = None
         self._pub.publish(trajectory_message(self.names, np.zeros((0, len(self.names))), np.zeros(0)))
 
-    def add_listener(self, fn: Callable[[JointState], None]) -> None:
-        self._listeners.append(fn)
-
-    def remove_listener(self, fn: Callable[[JointState], None]) -> None:
-        if fn in self._listeners:
-            self._listeners.remove(fn)
-
-    def wait_idle(self, timeout_s: float) -> bool:
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            with self._lock:
-                self._settle_locked(time.monotonic())
-                if self._motion_end is None:
-                    return True
-            time.sleep(0.01)
-        return False
+    def _idle(self) -> bool:
+        with self._lock:
+            self._settle_locked(time.monotonic())
+            return self._motion_end is None
 
     def close(self) -> None:
         try:

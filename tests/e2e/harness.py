@@ -391,3 +391,32 @@ class Interface:
             raise AssertionError(
                 f"the page's Content-Security-Policy refused {len(self.csp_refusals)} thing(s): {self.csp_refusals[:3]}"
             )
+
+
+class ServedInterface(Interface):
+    """``mcit serve``'s own interface (``build_interface``), started, for ``argv`` (serve's flags but the port: a free
+    one is taken)."""
+
+    def __init__(self, argv: list[str]):
+        import argparse
+
+        from app.ui.serve import add_serve_parser, build_interface
+
+        parser = argparse.ArgumentParser()
+        add_serve_parser(parser.add_subparsers(dest="command"))
+        self.server, self.closers = build_interface(parser.parse_args(["serve", "--port", str(free_port()), *argv]))
+        self.server.start()
+        self.site = self.server.site
+        self.scene = self.site.scene
+        self.db = self.site.db
+        self._own_devices = None
+        self.frame_t_s = FRAME_T_S
+        self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
+        self.csp_refusals: list[str] = []
+
+    def close(self):
+        self.server.stop()
+        for close in self.closers:
+            close()
+        if self.csp_refusals:
+            raise AssertionError(f"the page's Content-Security-Policy refused: {self.csp_refusals[:3]}")

@@ -5,7 +5,6 @@ feed's robot lines) through the scene's true base pose."""
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 
@@ -13,53 +12,31 @@ import numpy as np
 import pytest
 
 from .flows import Operator
-from .harness import Interface, free_port, panel_state, wait_until
+from .harness import ServedInterface, panel_state, wait_until
 
 pytestmark = pytest.mark.e2e
 
 STANDOFF_M = 0.02  # the workflow's default standoff
 
 
-class LiveRobotSite(Interface):
+class LiveRobotSite(ServedInterface):
     """``mcit serve``'s own interface (build_interface) on the bundled scene: the site rendered live with its
     robot, no range finder and turret, a fresh database and a feed file. ``base_calibrated``: the database
     starts with the robot's base calibrated at its true pose (as after Calibrate robot), else at the drawing's
     nominal pose (as a new database does)."""
 
     def __init__(self, tmp_path, base_calibrated: bool = True):
-        from app.ui.serve import add_serve_parser, build_interface
-
-        parser = argparse.ArgumentParser()
-        add_serve_parser(parser.add_subparsers(dest="command"))
         self.feed_path = tmp_path / "feed.jsonl"
         db_path = tmp_path / "site.sqlite"
         if base_calibrated:
             _calibrated_database(db_path)
-        args = parser.parse_args(
-            ["serve", "--port", str(free_port()), "--db", str(db_path), "--no-devices"]
-            + ["--feed-file", str(self.feed_path)]
-        )
-        self.server, self.closers = build_interface(args)
-        self.server.start()
-        self.site = self.server.site
-        self.scene = self.site.scene
-        self.db = self.site.db
-        self._own_devices = None
-        self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
-        self.csp_refusals: list[str] = []
+        super().__init__(["--db", str(db_path), "--no-devices", "--feed-file", str(self.feed_path)])
 
     def robot_lines(self) -> list[dict]:
         if not self.feed_path.exists():
             return []
         lines = [json.loads(x) for x in self.feed_path.read_text().splitlines() if x.strip()]
         return [x for x in lines if x.get("type") == "robot"]
-
-    def close(self):
-        self.server.stop()
-        for close in self.closers:
-            close()
-        if self.csp_refusals:
-            raise AssertionError(f"the page's Content-Security-Policy refused: {self.csp_refusals[:3]}")
 
 
 def _calibrated_database(path) -> None:

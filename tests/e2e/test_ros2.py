@@ -5,7 +5,6 @@ stamp of the very image the click was made on, and the pose is the scene's truth
 
 from __future__ import annotations
 
-import argparse
 import os
 import threading
 
@@ -15,7 +14,7 @@ import pytest
 from core.transforms import pose_error
 
 from .flows import Operator, projected_edges
-from .harness import FRAME_T_S, Interface, free_port, site_frame, wait_until
+from .harness import FRAME_T_S, ServedInterface, site_frame, wait_until
 from .test_workflows_pose import _start_update_pose
 
 pytestmark = pytest.mark.e2e
@@ -25,32 +24,14 @@ BOX = "parallelepiped"
 T0 = 1_733_400_000.0  # the images' stamps: far from the clock's, so that a clock's stamp would show
 
 
-class RosCameraSite(Interface):
+class RosCameraSite(ServedInterface):
     """``mcit serve``'s own interface (build_interface) with its first camera's video from ROS 2."""
 
     def __init__(self, tmp_path, domain: int):
-        from app.ui.serve import add_serve_parser, build_interface
-
-        parser = argparse.ArgumentParser()
-        add_serve_parser(parser.add_subparsers(dest="command"))
-        args = parser.parse_args(
-            ["serve", "--port", str(free_port()), "--db", str(tmp_path / "site.sqlite"), "--no-devices", "--recorded"]
+        super().__init__(
+            ["--db", str(tmp_path / "site.sqlite"), "--no-devices", "--recorded"]
             + ["--video", "ros2:/cam/image_raw", "--ros2", "--ros2-domain", str(domain)]
         )
-        self.server, self.closers = build_interface(args)
-        self.server.start()
-        self.site = self.server.site
-        self.scene = self.site.scene
-        self.db = self.site.db
-        self._own_devices = None
-        self.frame_t_s = FRAME_T_S
-        self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
-        self.csp_refusals: list[str] = []
-
-    def close(self):
-        self.server.stop()
-        for close in self.closers:
-            close()
 
 
 def test_the_video_from_ros2_is_worked_on_and_the_pose_goes_out_stamped_with_its_image(browser, scene, tmp_path):

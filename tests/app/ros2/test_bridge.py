@@ -87,12 +87,9 @@ def _close(server, closers):
 
 
 def _wait(predicate, what: str, timeout_s: float = WAIT_S):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
+    from tests.e2e.harness import wait_until
+
+    wait_until(predicate, timeout_s, what)
 
 
 def _feed(tmp_path, kind: str) -> list[dict]:
