@@ -65,6 +65,7 @@ class ClientPanel:
         self.session = Session(app.site, client=f"browser-{client.client_id + getattr(app, 'client_number_offset', 0)}")
         self.camera_view = app.site.views[0]  # the camera whose image this page shows (and is clicked in)
         self.dirty = True
+        self._wf_seen: Any = None  # what the workflow looked like at the last draw (its own thread may change it)
         self.confirm_pending: tuple | None = None  # (action, args) waiting for its second press
         self.warning = ""  # a weak result's reasons, or a question, shown under the buttons
         self.error = ""  # the last refused action, said in the panel until the next action or step
@@ -421,6 +422,12 @@ class ClientPanel:
         if self.frozen_frames.follow(wf):
             self.dirty = True
         if wf is not None and not wf.finished and wf.tick():
+            self.dirty = True
+        # a workflow's own thread may change it (a search, a look, a solve ending): drawn when it shows, not at the
+        # operator's next key (a new operator waited 4 minutes on "Looking for … in the video")
+        seen = None if wf is None else (id(wf), wf.state, wf.message, wf.finished, wf.progress)
+        if seen != self._wf_seen:
+            self._wf_seen = seen
             self.dirty = True
         self.frozen_frames.send()
         if not (self.dirty or site_changed or self.busy):

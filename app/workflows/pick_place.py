@@ -83,6 +83,7 @@ class PickPlace(RobotWork):
         self.written: dict[str, Any] = {}
         self.look: dict[str, Any] = {}
         self._looking: threading.Thread | None = None
+        self._looked = False  # the look ended and the panel was not told yet (tick)
         self.state = "click"
 
     # ------------------------------------------------------------------ where to put it
@@ -150,8 +151,11 @@ class PickPlace(RobotWork):
 
     def tick(self) -> bool:
         with self.lock:
+            if self._looked:  # the look's verdict came (on its own thread): the panel shows it now, not at a key
+                self._looked = False
+                return True
             if self.state == "looking":
-                return self._looking is None or not self._looking.is_alive()
+                return False
             if self.state != "moving":
                 return super().tick()
             try:
@@ -273,6 +277,7 @@ class PickPlace(RobotWork):
             self.look = look
             self.state = "done"
             self.message = self._outcome = text
+            self._looked = True
 
     # ------------------------------------------------------------------ the panel
     def _step(self) -> Step:

@@ -191,6 +191,8 @@ def test_pick_and_place_moves_the_modelled_box_and_the_database_follows(browser,
     _said(page, "step=done", "the box put down and looked at")
     text = panel_state(page.panel)
     assert "confirmed by the video" in text, text
+    # the page says it by itself, with no key pressed (it stayed on "Looking for …" until a key, for minutes)
+    page.get_by_text("is put down, confirmed by the video", exact=False).first.wait_for(timeout=60_000)
     i = [b.name for b in ui.scene.bodies].index("unknown_box")
     T_true = ui.server.emulated_world.pose_of(i, 0.0)
     rec = ui.site.object("unknown_box")
