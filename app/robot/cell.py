@@ -468,6 +468,12 @@ def _collision_text(check, links, margins: dict) -> str:
     if check.other in links:
         return f"the path would bring the robot's {check.link} into its own {check.other}: choose another target"
     what = check.other
+    if getattr(check, "index", -1) == 0:  # where it stands now: no other target helps, the robot must move clear
+        return (
+            f"the robot's {check.link} stands {1000 * max(check.distance_m, 0.0):.0f} mm from {what} already, inside "
+            f"the {1000 * margins.get(what, 0.0):.0f} mm kept from it: move the robot clear first (Move robot, with a "
+            "larger Standoff), then try again"
+        )
     if check.distance_m > 0:
         return (
             f"the path would pass the robot's {check.link} {1000 * check.distance_m:.0f} mm from {what}, inside the "

@@ -92,7 +92,9 @@ class PanelText:
         title += Md("\n\n") + wf.prompt_text()
         said = wf.prompt_text(markdown=False)
         if wf.message and not wf.finished and not panel.warning and wf.message[:40] not in said:
-            title += Md("\n\n_{}_").format(wf.message)  # not said twice, nor above a question being asked
+            title += Md("\n\n_{}_").format(
+                wf.message.strip()
+            )  # (a space before the closing _ showed the _ raw)  # not said twice, nor above a question being asked
         weak = [w for w in self.weaknesses(wf, step) if w not in wf.message]  # not said twice
         if weak and not panel.warning:  # said with the result, not first at Accept (a new operator's)
             title += Md("\n\n⚠ **Check before accepting:** {}.").format("; ".join(weak))

@@ -536,13 +536,14 @@ def warm_solvers(server, warm=None) -> threading.Thread:
     def notice() -> str:
         so_far = time.monotonic() - t0
         how = (
-            f"compiling them once for this machine: about {SOLVERS_COLD_S:.0f} s, {so_far:.0f} s so far"
+            f"compiling them once for this machine: about {SOLVERS_COLD_S:.0f} s on an idle machine, "
+            f"{so_far:.0f} s so far"
             if cold
             else f"{so_far:.0f} s so far"
         )
         return (
-            f"⏳ **Preparing the pose solvers** ({how}). Auto match, Refine and the one-click search answer once they "
-            "are ready."
+            f"**Preparing the pose solvers** ({how}): until they are ready, an Auto match, a Refine or a one-click "
+            "search may wait for them."
         )
 
     server.notices["solvers"] = notice

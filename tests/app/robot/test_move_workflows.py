@@ -180,3 +180,17 @@ def test_pick_and_place_takes_a_box_modelled_a_little_wider_than_its_nine_centim
     wf = session.start("pick_place")
     wf.click(site.camera.project(np.array([[-0.05, -0.38, 0.0]]))[0])
     assert wf.plan.ok, wf.message
+
+
+def test_a_robot_standing_too_near_an_object_is_told_to_move_clear_not_to_choose_another_target():
+    """A path that fails at its first sample fails where the robot stands: no other target helps, so the panel
+    says to move it clear (a new operator was told "choose another target" in Calibrate robot, which has none)."""
+    from app.robot.cell import _collision_text
+    from app.robot.collision import PathCheck
+
+    margins = {"table": 0.010}
+    here = _collision_text(PathCheck(False, 0, "finger_left_link", "table", 0.009, 1), ("base_link",), margins)
+    assert here.startswith("the robot's finger_left_link stands 9 mm from table already, inside the 10 mm kept")
+    assert "move the robot clear first" in here and "choose another target" not in here
+    later = _collision_text(PathCheck(False, 7, "finger_left_link", "table", 0.009, 8), ("base_link",), margins)
+    assert "choose another target, or move table first" in later
