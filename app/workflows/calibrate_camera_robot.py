@@ -25,9 +25,9 @@ from core.calibration import calibrate_dlt
 from core.robot.calibration import tip_corners
 from core.transforms import transform_points
 
-from .base import CANCEL, Control, Marks, Step, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, Control, Marks, Step, WorkflowError, as_pixel
 from .calibrate_camera import METHODS, MIN_REDUNDANT_PAIRS, MIN_REDUNDANT_PAIRS_PNP, known_K
-from .robot_tour import start_tour, tour_unavailable
+from .robot_tour import TourWorkflow, start_tour, tour_unavailable
 from .snapping import Snapper, snap_marks
 
 __all__ = ["CalibrateCameraFromRobot", "visible_tip"]
@@ -68,7 +68,7 @@ class _Body:
         self.model = model
 
 
-class CalibrateCameraFromRobot(Workflow):
+class CalibrateCameraFromRobot(TourWorkflow):
     name = "calibrate_camera_robot"
     title = "Calibrate camera from robot"
     snapping = True
@@ -120,42 +120,6 @@ class CalibrateCameraFromRobot(Workflow):
         self.frames: dict[int, Any] = {}
         self.result = None
         self.state = "go"
-
-    # ------------------------------------------------------------------ the robot
-    def go(self) -> None:
-        with self.lock:
-            self._check_open()
-            self.message = self.tour.go()
-            self.state = "moving"
-
-    def stop(self) -> None:
-        self.tour.stop()
-
-    def tick(self) -> bool:
-        with self.lock:
-            if self.finished:
-                return False
-            said = self.tour.tick()
-            if said is None:
-                return False
-            if said:
-                self.message = said
-            self.state = "click" if self.tour.at is not None else "go"
-            return True
-
-    def follows_live(self) -> str:
-        return self.tour.follows_live()
-
-    def use_frame(self, frame) -> None:
-        super().use_frame(frame)
-        with self.lock:
-            if frame is not None and self.tour.at is not None:
-                self.frames[self.tour.at] = frame
-
-    def cancel(self) -> None:
-        if self.tour.moving():
-            self.tour.stop()
-        super().cancel()
 
     def _tip(self, k: int) -> tuple[np.ndarray, int, int] | None:
         """The tip corner at pose k (its world point through the database's base), as ``visible_tip``."""
@@ -294,21 +258,10 @@ class CalibrateCameraFromRobot(Workflow):
     def _step(self) -> Step:
         if self.finished:
             return self._finished_step()
+        moving = self._tour_step()
+        if moving is not None:
+            return moving
         t = self.tour
-        if t.state == "moving":
-            return Step(
-                "moving",
-                f"The robot is moving to pose {t.index + 1}: {{stop}} halts it.",
-                frozenset({"stop", "cancel"}),
-                False,
-            )
-        if t.state == "settling":
-            return Step(
-                "settling",
-                f"The robot is at pose {t.index + 1}: its frame is frozen in a moment.",
-                frozenset({"stop", "cancel"}),
-                False,
-            )
         has = {"cancel"} | ({"remove_last"} if self.order else set())
         last = self.points[self.order[-1]]["snap"] if self.order else None
         if last is not None and last.applied:

@@ -25,8 +25,8 @@ import numpy as np
 from core.robot.calibration import BaseClick, RobotFeature, features_at, match_segment, refine_base
 from core.transforms import pose_error
 
-from .base import CANCEL, Control, Marks, Step, Workflow, WorkflowError, as_pixel, sigma_over
-from .robot_tour import start_tour, tour_unavailable
+from .base import CANCEL, Control, Marks, Step, WorkflowError, as_pixel, sigma_over
+from .robot_tour import TourWorkflow, start_tour, tour_unavailable
 from .snapping import ClickSnap, Snapper, segment_of, snap_marks
 
 __all__ = ["CalibrateRobot", "MIN_EDGES", "WEAK_SIGMA_MM", "WEAK_SIGMA_DEG"]
@@ -56,9 +56,10 @@ class _Edge:
     how: str = ""
 
 
-class CalibrateRobot(Workflow):
+class CalibrateRobot(TourWorkflow):
     name = "calibrate_robot"
     title = "Calibrate robot"
+    at_state = "click_edge"  # settled at a pose: its edges are clicked
     snapping = True  # Session.start passes its "Snap clicks" setting as snap=
     actions = (
         "go",
@@ -111,45 +112,10 @@ class CalibrateRobot(Workflow):
         self.state = "go"
 
     # ------------------------------------------------------------------ the robot's poses
-    def go(self) -> None:
-        """Send the robot to the next pose (refused while an edge waits for its second click or its feature)."""
-        with self.lock:
-            self._check_open()
-            if self.pending is not None or self._unassigned() is not None:
-                raise WorkflowError("finish the edge under way first (or Remove last)")
-            self.message = self.tour.go()
-            self.state = "moving"
-
-    def stop(self) -> None:
-        self.tour.stop()
-
-    def tick(self) -> bool:
-        with self.lock:
-            if self.finished:
-                return False
-            said = self.tour.tick()
-            if said is None:
-                return False
-            if said:
-                self.message = said
-            self.state = (
-                "click_edge" if self.tour.at is not None else ("moving" if self.tour.state == "moving" else "go")
-            )
-            return True
-
-    def follows_live(self) -> str:
-        return self.tour.follows_live()
-
-    def use_frame(self, frame) -> None:
-        super().use_frame(frame)
-        with self.lock:
-            if frame is not None and self.tour.at is not None:
-                self.frames[self.tour.at] = frame
-
-    def cancel(self) -> None:
-        if self.tour.moving():
-            self.tour.stop()
-        super().cancel()
+    def _busy(self) -> str:
+        if self.pending is not None or self._unassigned() is not None:
+            return "finish the edge under way first (or Remove last)"
+        return ""
 
     # ------------------------------------------------------------------ clicks
     def click(self, uv) -> None:
@@ -409,21 +375,10 @@ class CalibrateRobot(Workflow):
     def _step(self) -> Step:
         if self.finished:
             return self._finished_step()
+        moving = self._tour_step()
+        if moving is not None:
+            return moving
         t = self.tour
-        if t.state == "moving":
-            return Step(
-                "moving",
-                f"The robot is moving to pose {t.index + 1}: {{stop}} halts it.",
-                frozenset({"stop", "cancel"}),
-                False,
-            )
-        if t.state == "settling":
-            return Step(
-                "settling",
-                f"The robot is at pose {t.index + 1}: its frame is frozen in a moment.",
-                frozenset({"stop", "cancel"}),
-                False,
-            )
         has = {"cancel"} | ({"remove_last"} if self.edges or self.pending is not None else set())
         if self.edges and self.edges[-1].snap is not None and self.edges[-1].snap.applied:
             has.add("refuse_snap")

@@ -19,10 +19,10 @@ import numpy as np
 
 from app.robot.controller import ControllerError
 
-from .base import WorkflowError
+from .base import Step, Workflow, WorkflowError
 from .robot_work import planned
 
-__all__ = ["RobotTour", "ARRIVED_RAD", "SETTLE_S"]
+__all__ = ["RobotTour", "TourWorkflow", "ARRIVED_RAD", "SETTLE_S"]
 
 ARRIVED_RAD = 2e-3  # a joint this near its pose has arrived (the emulated controller's are exact)
 SETTLE_S = 0.4  # scene time given to the video after arrival before a frame is frozen
@@ -172,3 +172,75 @@ def start_tour(wf, which: str, snap: bool, sigma_px) -> None:
     wf.model = wf.cell.model
     wf.tour = RobotTour(wf.site, tour_poses(wf.site, which), which)
     wf.snapper = Snapper(wf, snap)
+
+
+class TourWorkflow(Workflow):
+    """What both calibration tours do with the robot (``tour``, a RobotTour, made by ``start_tour``): Next pose sends
+    it (``go``, refused while ``_busy()`` says why), Stop halts it, ``tick`` follows it (``state`` becomes
+    ``at_state`` once it is settled at a pose), the frame frozen there is that pose's (``frames``), and Cancel stops
+    a moving robot first; ``_tour_step()`` is the panel's step while it moves or settles (None otherwise)."""
+
+    at_state = "click"
+
+    def _busy(self) -> str:
+        """Why Next pose must wait ("" when it need not): work under way at this pose."""
+        return ""
+
+    def go(self) -> None:
+        """Send the robot to the next pose."""
+        with self.lock:
+            self._check_open()
+            busy = self._busy()
+            if busy:
+                raise WorkflowError(busy)
+            self.message = self.tour.go()
+            self.state = "moving"
+
+    def stop(self) -> None:
+        self.tour.stop()
+
+    def tick(self) -> bool:
+        with self.lock:
+            if self.finished:
+                return False
+            said = self.tour.tick()
+            if said is None:
+                return False
+            if said:
+                self.message = said
+            self.state = (
+                self.at_state if self.tour.at is not None else ("moving" if self.tour.state == "moving" else "go")
+            )
+            return True
+
+    def follows_live(self) -> str:
+        return self.tour.follows_live()
+
+    def use_frame(self, frame) -> None:
+        super().use_frame(frame)
+        with self.lock:
+            if frame is not None and self.tour.at is not None:
+                self.frames[self.tour.at] = frame
+
+    def cancel(self) -> None:
+        if self.tour.moving():
+            self.tour.stop()
+        super().cancel()
+
+    def _tour_step(self) -> Step | None:
+        t = self.tour
+        if t.state == "moving":
+            return Step(
+                "moving",
+                f"The robot is moving to pose {t.index + 1}: {{stop}} halts it.",
+                frozenset({"stop", "cancel"}),
+                False,
+            )
+        if t.state == "settling":
+            return Step(
+                "settling",
+                f"The robot is at pose {t.index + 1}: its frame is frozen in a moment.",
+                frozenset({"stop", "cancel"}),
+                False,
+            )
+        return None
