@@ -139,8 +139,14 @@ class FrozenFrames:
         return False
 
     def toggle_live(self) -> None:
+        """Show the live video over the frozen frame, or the frozen frame again; a frame frozen only to look at
+        (no workflow's) is let go: back to the live video (a new operator found no way back but a workflow)."""
         if self.frame is None:
             raise WorkflowError("no frame is frozen: the live video is shown")
+        if self.by is None:
+            self.unfreeze()
+            self.panel.reset_scrubber()
+            return
         self.show_live = not self.show_live
 
     def send(self) -> None:

@@ -66,7 +66,10 @@ class PanelText:
         frozen = panel.frozen_frames
         show(panel.gui_frame, frozen.text(panel.feed.grabber.status().live))
         panel.gui_live.visible = frozen.frame is not None  # nothing frozen: the live video is what is shown
-        live_label = "Show frozen (L)" if frozen.show_live and frozen.frame is not None else "Show live (L)"
+        if frozen.frame is not None and frozen.by is None:  # frozen to look at, no workflow's: L goes back to live
+            live_label = "Back to live (L)"
+        else:
+            live_label = "Show frozen (L)" if frozen.show_live and frozen.frame is not None else "Show live (L)"
         if panel.gui_live.label != live_label:  # says what it does now
             panel.gui_live.label = live_label
 

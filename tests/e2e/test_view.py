@@ -73,6 +73,19 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     page.close()
 
 
+def test_a_frame_frozen_to_look_at_goes_back_to_live_by_l(browser, interface):
+    """With no workflow, a frame frozen to look at (F) is let go by L, "Back to live" (a new operator found no way
+    back to the live video but starting and cancelling a workflow)."""
+    ui = interface
+    page = ui.open(browser)
+    panel = page.panel
+    key_until(page, "f", lambda: panel.frozen is not None and panel.frozen_frames.by is None, "a frame frozen")
+    page.get_by_role("button", name="Back to live (L)").wait_for(timeout=60_000)
+    key_until(page, "l", lambda: panel.frozen is None, "back to the live video")
+    page.get_by_text("Live video (no frame frozen)").first.wait_for(timeout=60_000)
+    page.close()
+
+
 def test_marks_keep_their_screen_size_when_zoomed(browser, interface):
     ui = interface
     page = ui.open(browser)
