@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["changed_share", "inside", "CHANGED_GREY", "CHANGED_SHARE", "HALF_PX"]
+__all__ = ["camera_shift", "changed_share", "inside", "CHANGED_GREY", "CHANGED_SHARE", "HALF_PX"]
 
 CHANGED_GREY = 20.0  # grey levels (0-255) of difference that count as a change
 CHANGED_SHARE = 0.08  # share of a patch's pixels that must change
@@ -25,6 +25,7 @@ CHANGED_SHARE = 0.08  # share of a patch's pixels that must change
 # at. 24 px (a tenth of the workcell's image) saw the parallelepiped moving beside a box that stood still
 # and refused to scan the box (a new-operator run: 3 of 5 scans).
 HALF_PX = 8
+SHIFT_RESPONSE = 0.1  # phase correlation's peak (0-1) above which the whole image is taken to have shifted
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
@@ -47,14 +48,34 @@ def inside(uv: np.ndarray) -> np.ndarray:
     return np.vstack([c, uv + (c - uv) / 3.0])
 
 
-def changed_share(frozen: np.ndarray, live: np.ndarray, uv: np.ndarray, half_px: int = HALF_PX) -> float:
+def camera_shift(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The whole image's shift (dx, dy) from grey image ``a`` to ``b`` (phase correlation, sub-pixel), zero when
+    the correlation is not clear (nothing moved, or only a part of the image): what a moving camera does."""
+    import cv2
+
+    window = cv2.createHanningWindow((a.shape[1], a.shape[0]), cv2.CV_32F)
+    (dx, dy), response = cv2.phaseCorrelate(a, b, window)
+    return np.array([dx, dy]) if response > SHIFT_RESPONSE and np.hypot(dx, dy) >= 0.5 else np.zeros(2)
+
+
+def changed_share(
+    frozen: np.ndarray, live: np.ndarray, uv: np.ndarray, half_px: int = HALF_PX, follow_camera: bool = False
+) -> float:
     """The largest share of changed pixels over the patches around the pixels ``uv`` (N, 2) between
-    the frozen frame and the live one (same size); 0.0 for pixels outside the image. See the module."""
+    the frozen frame and the live one (same size); 0.0 for pixels outside the image. See the module.
+
+    follow_camera : the first image shifted by the whole image's shift first (``camera_shift``): what moved with
+    the view (a camera turned or carried) is no change, what moved in the scene still is."""
     import cv2
 
     a, b = _grey(frozen), _grey(live)
     if a.shape != b.shape:
         raise ValueError(f"the frozen frame is {a.shape[1]}×{a.shape[0]} px and the live one {b.shape[1]}×{b.shape[0]}")
+    if follow_camera:
+        dx, dy = camera_shift(a, b)
+        if dx or dy:
+            M = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy]], np.float32)
+            a = cv2.warpAffine(a, M, (a.shape[1], a.shape[0]), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     h, w = a.shape
     worst = 0.0
     for u, v in np.asarray(uv, float).reshape(-1, 2):

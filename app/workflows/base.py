@@ -232,7 +232,8 @@ class FrameRef:
             return None
         from app.vision.change import changed_share
 
-        return changed_share(self.previous, self.image, np.asarray(uv, float).reshape(-1, 2))
+        # the view's own motion taken off (a camera turned or carried): what moved with it was not moving
+        return changed_share(self.previous, self.image, np.asarray(uv, float).reshape(-1, 2), follow_camera=True)
 
 
 def sigma_over(sd_deg: float, sd_mm: float, max_deg: float, max_mm: float) -> str:

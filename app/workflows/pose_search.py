@@ -244,6 +244,16 @@ class OneClickSearch:
         share = moving_share(inside(uv))
         if share is None or share <= CHANGED_SHARE:
             return ""
+        # around it, its box's size further out: where most of that changed as much, the view moved (a hand-held
+        # camera), not the object (on the hand-held ViSP cube every frame was "moving" and every Accept asked twice)
+        c = uv.mean(axis=0)
+        ring = c + 2.0 * (uv - c)
+        ring = ring[
+            (ring[:, 0] > 8) & (ring[:, 1] > 8) & (ring[:, 0] < camera.width - 9) & (ring[:, 1] < camera.height - 9)
+        ]
+        around = [moving_share(p[None]) for p in ring]
+        if around and sum(a is not None and a > CHANGED_SHARE for a in around) > len(around) / 2:
+            return ""
         return (
             f"{self.object_name} was moving in this frame (it differs from the frame {MOTION_GAP_S:.1f} s before): "
             "the pose found is where it passed, not where it stays; once it has stopped, "
