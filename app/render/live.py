@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 import zlib
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -746,6 +747,7 @@ class LiveSource(VideoSource):
         self.frame_count = int(np.floor(video.duration_s * self.fps + 1e-9)) + 1 if video is not None else None
         self.width, self.height = view.camera.width, view.camera.height
         self.description = f"live render of {scene.name} ({view.name})"
+        self._sampled_at: float | None = None  # when the last frame's site state was read (its stamp)
 
     def _advance(self) -> int:
         p = self._position + 1
@@ -756,8 +758,12 @@ class LiveSource(VideoSource):
 
     def _read(self) -> np.ndarray | None:
         p = self._advance()
+        self._sampled_at = time.time()  # the site's state is read now: the frame's capture time (its stamp)
         grey = self.renderer.render(list(self.bodies_at(p / self.fps)), p)
         return np.repeat(grey[:, :, None], 3, axis=2)
+
+    def _stamp(self) -> float | None:
+        return self._sampled_at if self._sampled_at is not None else time.time()
 
     def skip(self, n: int) -> None:
         """Pass over ``n`` frames without rendering them (the grabber fell behind its clock)."""

@@ -15,6 +15,8 @@ reported them on arrival: what the calibration computes the robot's shapes from.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from app.robot.controller import ControllerError
@@ -45,6 +47,7 @@ class RobotTour:
         self.state = "idle"
         self.arrived: dict[int, np.ndarray] = {}
         self._frame_times: list[float] = []
+        self._seen_at = 0.0  # when the arrival was seen (unix seconds): a frozen frame is one taken after it
         spec = getattr(site.scene, "robot", None)
         self.home = spec.home_q(self.cell.model) if spec is not None else None
 
@@ -107,8 +110,13 @@ class RobotTour:
             if t != self._frame_times[-1]:
                 self._frame_times.append(t)
             # two new frames since the arrival (the second was rendered after the first arrived, itself after the
-            # arrival was seen: a frame rendering while the robot moved is not the one frozen), and SETTLE_S
-            if len(self._frame_times) >= 3 and (t - self._frame_times[0] >= SETTLE_S or t < self._frame_times[0]):
+            # arrival was seen: a frame rendering while the robot moved is not the one frozen), and SETTLE_S; and a
+            # frame taken after the arrival by its own stamp (a real camera's transport lags its images)
+            frame = self.site.latest_frame()
+            stamp = None if frame is None else getattr(frame, "stamp", None)
+            taken_after = stamp is None or stamp >= self._seen_at
+            settled = len(self._frame_times) >= 3 and (t - self._frame_times[0] >= SETTLE_S or t < self._frame_times[0])
+            if settled and taken_after:
                 self.state = "at"
                 return ""
         return None
@@ -128,6 +136,7 @@ class RobotTour:
         self.arrived[k] = np.asarray(s.q, float).copy()
         self.state = "settling"
         self._frame_times = [self.site.time_s()]  # the video's time at the arrival, then each new frame's
+        self._seen_at = time.time()
         return f"At pose {k + 1} of {self.n}."
 
     def follows_live(self) -> str:

@@ -214,3 +214,48 @@ def test_the_camera_is_calibrated_from_the_tool_tip(robot_site, scene):
     rec = site.db.latest_calibration("camera")
     assert rec.method == "robot dlt" and len(rec.data["X_world"]) == wf.tour.n
     assert np.allclose(site.camera.C / np.linalg.norm(site.camera.C), res.camera.C / np.linalg.norm(res.camera.C))
+
+
+def test_a_pose_is_settled_only_on_a_frame_taken_after_the_arrival(scene, tmp_path):
+    """A real camera's images come late (transport): new frames whose stamps are older than the robot's arrival
+    show it still moving, and are not the pose's frame; one taken after the arrival is (the frame's stamp: a ROS 2
+    image's header)."""
+    from app.video import Frame
+    from app.workflows.frames import GrabberFrames
+    from app.workflows.robot_tour import RobotTour, tour_poses
+
+    setup = open_robot(scene)
+    setup.controller.speed_scale = 1.0
+    db = Database.open(tmp_path / "site.sqlite")
+    seed_from_scene(db, scene)
+    clock = {"t": 0.0}
+    newest: dict = {"frame": None}
+
+    class Grabber:  # the camera's newest frame, its stamp given by the test
+        def latest(self):
+            return newest["frame"]
+
+    site = Site(scene, db, clock=lambda: clock["t"], frames=None, robot=setup.cell)
+    site.set_frames(GrabberFrames(Grabber()))
+    try:
+        tour = RobotTour(site, tour_poses(site, "base")[:1], "base")
+        tour.go()
+        deadline = time.monotonic() + 30
+        while tour.state == "moving":
+            assert time.monotonic() < deadline
+            tour.tick()
+            time.sleep(0.02)
+        assert tour.state == "settling"
+        late = time.time() - 2.0  # taken 2 s before: the robot was moving then
+        for k in range(1, 6):  # new frames, each later in the video's time, all taken before the arrival
+            clock["t"] = 0.5 * k
+            newest["frame"] = Frame(np.zeros((4, 4, 3), np.uint8), k, clock["t"], late + 0.01 * k)
+            tour.tick()
+        assert tour.state == "settling" and tour.at is None
+        clock["t"] = 3.0
+        newest["frame"] = Frame(np.zeros((4, 4, 3), np.uint8), 6, 3.0, time.time())  # taken now
+        tour.tick()
+        assert tour.state == "at" and tour.at == 0
+    finally:
+        setup.close()
+        db.close()
