@@ -27,7 +27,7 @@ from core.transforms import transform_points
 
 from .base import CANCEL, Control, Marks, Step, WorkflowError, as_pixel
 from .calibrate_camera import METHODS, MIN_REDUNDANT_PAIRS, MIN_REDUNDANT_PAIRS_PNP, known_K
-from .robot_tour import TourWorkflow, start_tour, tour_unavailable
+from .robot_tour import TourWorkflow
 from .snapping import Snapper, snap_marks
 
 __all__ = ["CalibrateCameraFromRobot", "visible_tip"]
@@ -92,8 +92,8 @@ class CalibrateCameraFromRobot(TourWorkflow):
             hint="With the lens known: the camera's pose alone (PnP, 4 poses or more) or the full camera matrix "
             "(DLT, 6 or more)",
         ),
-        Control("go", "Next pose", "G", color="blue", hint="Send the robot to the next pose (checked first)"),
-        Control("stop", "Stop", "space", color="red", hint="Halt the robot at once, where it is"),
+        TourWorkflow.GO,
+        TourWorkflow.STOP,
         Control("solve", "Solve", "R", color="blue", hint="The camera from the tool tip's clicked positions"),
         Control(
             "accept", "Accept", "enter", color="green", hint="Store the camera's calibration: every overlay is redrawn"
@@ -103,23 +103,17 @@ class CalibrateCameraFromRobot(TourWorkflow):
         CANCEL,
     )
 
+    which = "camera"
     poses_named = "camera calibration poses"
 
-    @classmethod
-    def available(cls, site) -> str:
-        return tour_unavailable(site, "camera", cls.poses_named)
-
     def __init__(self, site, client: str = "operator", view: str | None = None, snap: bool = True, sigma_px=1.0):
-        super().__init__(site, client, view)
-        start_tour(self, "camera", snap, sigma_px)
+        super().__init__(site, client, view, snap, sigma_px)
         self.K = known_K(site, self.view)
         self.method = "pnp" if self.K is not None else "dlt"
         self.solved_by: str | None = None
         self.points: dict[int, dict[str, Any]] = {}  # pose → {"X", "uv", "sigma", "snap", "frame"}
         self.order: list[int] = []  # the poses clicked, in click order (Remove last)
-        self.frames: dict[int, Any] = {}
         self.result = None
-        self.state = "go"
 
     def _tip(self, k: int) -> tuple[np.ndarray, int, int] | None:
         """The tip corner at pose k (its world point through the database's base), as ``visible_tip``."""

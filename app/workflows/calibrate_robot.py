@@ -26,7 +26,7 @@ from core.robot.calibration import BaseClick, RobotFeature, features_at, match_s
 from core.transforms import pose_error
 
 from .base import CANCEL, Control, Marks, Step, WorkflowError, as_pixel, sigma_over
-from .robot_tour import TourWorkflow, start_tour, tour_unavailable
+from .robot_tour import TourWorkflow
 from .snapping import ClickSnap, Snapper, segment_of, snap_marks
 
 __all__ = ["CalibrateRobot", "MIN_EDGES", "WEAK_SIGMA_MM", "WEAK_SIGMA_DEG"]
@@ -75,10 +75,8 @@ class CalibrateRobot(TourWorkflow):
         "set_snap",
     )
     controls = (
-        Control(
-            "go", "Next pose", "G", color="blue", hint="Send the robot to the next calibration pose (checked first)"
-        ),
-        Control("stop", "Stop", "space", color="red", hint="Halt the robot at once, where it is"),
+        TourWorkflow.GO,
+        TourWorkflow.STOP,
         Control("solve", "Solve", "R", color="blue", hint="The base's pose from every clicked edge, with σ"),
         Control(
             "accept",
@@ -94,22 +92,16 @@ class CalibrateRobot(TourWorkflow):
         CANCEL,
     )
 
+    which = "base"
     poses_named = "calibration poses for its base"
 
-    @classmethod
-    def available(cls, site) -> str:
-        return tour_unavailable(site, "base", cls.poses_named)
-
     def __init__(self, site, client: str = "operator", view: str | None = None, snap: bool = True, sigma_px=1.0):
-        super().__init__(site, client, view)
-        start_tour(self, "base", snap, sigma_px)
+        super().__init__(site, client, view, snap, sigma_px)
         self.edges: list[_Edge] = []
         self.pending: np.ndarray | None = None
-        self.frames: dict[int, Any] = {}  # pose → the frame its clicks were made on
         self.T_start = np.asarray(self.cell.T_world_base, float).copy()  # the database's base
         self.T_est = self.T_start.copy()  # the estimate the white robot is drawn at and edges are matched on
         self.fit = None  # core.robot.calibration.BaseFit of the last Solve (None: clicks changed since)
-        self.state = "go"
 
     # ------------------------------------------------------------------ the robot's poses
     def _busy(self) -> str:

@@ -16,12 +16,13 @@ reported them on arrival: what the calibration computes the robot's shapes from.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 
 from app.robot.controller import ControllerError
 
-from .base import Step, Workflow, WorkflowError
+from .base import Control, Step, Workflow, WorkflowError
 from .robot_work import planned
 
 __all__ = ["RobotTour", "TourWorkflow", "ARRIVED_RAD", "SETTLE_S"]
@@ -190,6 +191,22 @@ class TourWorkflow(Workflow):
     a moving robot first; ``_tour_step()`` is the panel's step while it moves or settles (None otherwise)."""
 
     at_state = "click"
+    which = "base"  # the scene's calibration poses it visits: "base" or "camera"
+    poses_named = "calibration poses"  # what the scene must give, in the refusal when it does not
+    GO = Control(
+        "go", "Next pose", "G", color="blue", hint="Send the robot to the next calibration pose (checked first)"
+    )
+    STOP = Control("stop", "Stop", "space", color="red", hint="Halt the robot at once, where it is")
+
+    @classmethod
+    def available(cls, site) -> str:
+        return tour_unavailable(site, cls.which, cls.poses_named)
+
+    def __init__(self, site, client: str = "operator", view: str | None = None, snap: bool = True, sigma_px=1.0):
+        super().__init__(site, client, view)
+        start_tour(self, self.which, snap, sigma_px)
+        self.frames: dict[int, Any] = {}  # pose → the frame its clicks were made on
+        self.state = "go"
 
     def _busy(self) -> str:
         """Why Next pose must wait ("" when it need not): work under way at this pose."""
