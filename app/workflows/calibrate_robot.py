@@ -27,7 +27,7 @@ from core.transforms import pose_error
 
 from .base import CANCEL, Control, Marks, Step, WorkflowError, as_pixel, sigma_over
 from .robot_tour import TourWorkflow
-from .snapping import ClickSnap, Snapper, segment_of, snap_marks
+from .snapping import ClickSnap, Snapper, click_segment, segment_of, snap_marks
 
 __all__ = ["CalibrateRobot", "MIN_EDGES", "WEAK_SIGMA_MM", "WEAK_SIGMA_DEG"]
 
@@ -150,14 +150,7 @@ class CalibrateRobot(TourWorkflow):
 
     def add_segment(self, seg_uv) -> None:
         """Both clicks of a segment (2, 2) at once (scripts), through ``click``."""
-        seg = np.asarray(seg_uv, dtype=float)
-        if seg.shape != (2, 2):
-            raise WorkflowError(f"a segment is two pixels [[u1, v1], [u2, v2]], got {seg_uv!r}")
-        with self.lock:
-            if self.pending is not None:
-                raise WorkflowError("finish the edge under way first (or Remove last)")
-            self.click(seg[0])
-            self.click(seg[1])
+        click_segment(self, seg_uv)
 
     def assign_edge(self, shape: int, kind: str, index: int) -> None:
         """Say which feature of the robot the waiting edge is (scripts; the operator clicks it instead)."""

@@ -304,6 +304,19 @@ class Snapper:
         return snap
 
 
+def click_segment(wf, seg_uv) -> None:
+    """Both clicks of a segment (2, 2) at once (a script's ``add_segment``), through ``wf.click``; refused while
+    an edge waits for its second click (``wf.pending``)."""
+    seg = np.asarray(seg_uv, dtype=float)
+    if seg.shape != (2, 2):
+        raise WorkflowError(f"a segment is two pixels [[u1, v1], [u2, v2]], got {seg_uv!r}")
+    with wf.lock:
+        if wf.pending is not None:
+            raise WorkflowError("finish the edge under way first (or Remove last)")
+        wf.click(seg[0])
+        wf.click(seg[1])
+
+
 class SnapMixin:
     """Snapping for a workflow: the ``snap`` option, ``set_snap``, ``refuse_snap`` and the snap calls,
     through a ``Snapper`` (``self.snapper``).
@@ -335,15 +348,7 @@ class SnapMixin:
         return self.snapper.no_frame_reason()
 
     def _click_segment(self, seg_uv) -> None:
-        """Both clicks of a segment (2, 2) at once (a script's ``add_segment``), through ``click``."""
-        seg = np.asarray(seg_uv, dtype=float)
-        if seg.shape != (2, 2):
-            raise WorkflowError(f"a segment is two pixels [[u1, v1], [u2, v2]], got {seg_uv!r}")
-        with self.lock:
-            if self.pending is not None:
-                raise WorkflowError("finish the edge under way first (or Remove last)")
-            self.click(seg[0])
-            self.click(seg[1])
+        click_segment(self, seg_uv)
 
     def _finish_segment(
         self, first: np.ndarray, second: np.ndarray, min_px: float
