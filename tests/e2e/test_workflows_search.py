@@ -386,10 +386,19 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
     assert panel.session.workflow.object_name == "cylinder_1"
     # Cancel: the found poses would be thrown away, so it asks once more ...
     # pressed once: a second Escape after a slow first would confirm the cancel
-    op.key("Escape")
-    wait_until(lambda: panel.asking == "cancel", 60.0, "the question", panel=panel)
-    op.key("Escape")  # ... and the second press cancels
-    wait_until(lambda: panel.session.workflow.finished, what="the cancel")
+    wf = panel.session.workflow
+    for attempt in (1, 2):  # a loaded page may drop a key before its shortcuts take it: then pressed once more
+        op.key("Escape")
+        try:
+            wait_until(lambda: panel.asking == "cancel" or wf.finished, 20.0, "the question", panel=panel)
+            break
+        except AssertionError:
+            if attempt == 2:
+                raise
+    if not wf.finished:  # (a first press taken late with the second: already cancelled)
+        assert panel.asking == "cancel"
+        op.key("Escape")  # ... and the second press cancels
+    wait_until(lambda: wf.finished, what="the cancel")
     # a click inside the box's drawn outline, far from every wireframe, selects it (a new operator clicked
     # a face, and nothing was selected)
     from scipy.spatial import Delaunay
