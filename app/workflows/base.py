@@ -178,6 +178,10 @@ class Step:
 
 
 MOTION_GAP_S = 0.3  # FrameRef.previous: how long before the frozen frame (a few video frames)
+# A frozen frame taken this long before its camera's newest may no longer show the site: what is measured
+# or looked up now is said to be of the site now, with the frame's age (a new operator designated a point
+# drawn on a box in a frame frozen 30 s before and was told "on table, range finder agrees").
+STALE_FRAME_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -298,6 +302,9 @@ class Workflow:
         return self.site.camera_of(self.view)
 
     click_view: str | None = None  # the camera of the click being handled (a workflow taking several: its own)
+    # video pixels per screen pixel where the click being handled was made (the page's zoom; 1: not known, a
+    # script's): what lies within a few screen pixels of a click is what the operator pointed at
+    click_px_per_screen_px: float = 1.0
 
     def _click_camera(self):
         """The calibration of the camera the click being handled was made in."""
@@ -383,6 +390,14 @@ class Workflow:
     def moving_share(self, uv: Any) -> float | None:
         """``FrameRef.moving_share`` of the frozen frame (None: no frame frozen)."""
         return None if self.frame is None else self.frame.moving_share(uv)
+
+    def frame_age_s(self) -> float | None:
+        """How long before its camera's newest frame the frozen frame was taken (seconds, from their capture
+        stamps); None without a frozen frame or where a stamp is unknown (a recording read by time)."""
+        if self.frame is None or self.frame.stamp is None:
+            return None
+        stamp = getattr(self.site.latest_frame(self.frame.view or self.view), "stamp", None)
+        return None if stamp is None else max(0.0, float(stamp) - float(self.frame.stamp))
 
     def seen_at(self) -> float | None:
         """When the clicked image was taken (unix s): the frozen frame's, else the camera's newest (None: unknown)."""
