@@ -33,15 +33,14 @@ from core.calibration import calibrate_dlt
 from core.camera import Camera
 
 from .base import CANCEL, Control, Marks, Step, Workflow, WorkflowError, as_pixel
-from .snapping import SNAPPED_CORNER_SIGMA_PX, SnapMixin, snap_marks
+from .snapping import SNAPPED_CORNER_SIGMA_PX, SnapMixin, snap_marks, weak_snaps
 
 __all__ = ["CalibrateCamera", "known_K", "METHODS"]
 
 PICK_RADIUS_PX = 25.0
 # Weak results (Accept asks once more): fewer pairs than this leave little redundancy in C's 11
-# unknowns; a snap that moved farther than this may have jumped to another corner.
+# unknowns (and a snap the image fits poorly: ``ClickSnap.weak``).
 MIN_REDUNDANT_PAIRS = 8
-MAX_SNAP_MOVE_PX = 2.0
 # The same redundancy (at least 5 coordinates beyond the unknowns) for the pose's 6 unknowns.
 MIN_REDUNDANT_PAIRS_PNP = 6
 
@@ -493,11 +492,7 @@ class CalibrateCamera(SnapMixin, Workflow):
                     f"point {i + 1} ({self.labels[i]}) is {self.result.errors_px[i]:.1f} px from where C puts it "
                     "(more than 3σ): a wrong corner?"
                 )
-            for i, sn in enumerate(self.snaps):
-                if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
-                    out.append(
-                        f"point {i + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
-                    )
+            out += weak_snaps((f"point {i + 1}", sn) for i, sn in enumerate(self.snaps))
             return out
 
     def marks(self) -> Marks:
