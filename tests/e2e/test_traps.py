@@ -139,3 +139,67 @@ def test_calibrate_turret_a_click_on_the_table_near_a_box_corner_is_the_table(br
     assert wf.pending_label == "a point on table", wf.pending_label
     page.get_by_text("Target: a point on table", exact=False).first.wait_for(timeout=60_000)
     page.close()
+
+
+def test_a_snap_that_moved_a_click_onto_the_true_edge_is_not_weak(browser, interface, scene):
+    """Update pose by four edges clicked 2.5 px beside where the video shows them: each snap moves its click
+    more than 2 px onto the edge, and Accept does not ask about the snaps (it asked "snap moved it 2.6 px")."""
+    import itertools
+
+    from core.transforms import pose_error
+
+    from .harness import select_by_click
+
+    ui = interface
+    page = ui.open(browser)
+    panel, site, cam = page.panel, ui.site, ui.site.camera
+    obj = site.object("parallelepiped")
+    T_true = scene.body("parallelepiped").pose_at(ui.frame_t_s)
+    drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
+    true = cam.project(obj.model.edge_segments(T_true).reshape(-1, 3)).reshape(-1, 2, 2)
+
+    def visible(T):
+        w = obj.model.wireframe(cam.center, T)
+        return [int(k) for k, v, kind in zip(w.edge_index, w.visible, w.kind) if v and kind == "edge"]
+
+    shown = visible(obj.T_world_obj)
+    k_sel = max(shown, key=lambda i: np.linalg.norm(drawn[i, 1] - drawn[i, 0]))
+    select_by_click(page, "parallelepiped", lambda: ui.click_pixel(page, drawn[k_sel].mean(axis=0)))
+    press(page, "Update pose")
+    wf = _workflow(page, "update_pose")
+    vis = [k for k in visible(T_true) if k in shown]
+    V, E = obj.model.vertices, obj.model.edges
+    axis = {k: int(np.abs(V[E[k][1]] - V[E[k][0]]).argmax()) for k in vis}
+    triple = next(
+        t
+        for t in itertools.combinations(vis, 3)
+        if len({axis[k] for k in t}) == 3 and not set(E[t[0]]) & set(E[t[1]]) & set(E[t[2]])
+    )
+    for k in list(triple) + [k for k in vis if k not in triple][:1]:
+        a, b = true[k]
+        n = np.array([-(b - a)[1], (b - a)[0]]) / np.linalg.norm(b - a)
+        n = n if (a + b) @ n / 2 > (drawn[k].mean(axis=0) @ n) else -n  # beside it, away from the drawn edge
+        ui.click_pixel(page, a + 0.3 * (b - a) + 2.5 * n)
+        ui.click_pixel(page, a + 0.7 * (b - a) + 2.5 * n)
+        ui.click_pixel(page, drawn[k].mean(axis=0))  # "this is model edge k", clicked on the overlay
+        wait_until(lambda: len(wf.edge_ids) and wf.edge_ids[-1] == k, what=f"edge {k} assigned", panel=panel)
+    snaps = [sn for sn in wf.seg_snaps if sn is not None]
+    assert len(snaps) == 4 and all(sn.applied for sn in snaps)
+    assert max(sn.moved_px for sn in snaps) > 2.0  # the snaps moved the clicks more than the old gate's 2 px
+    page.keyboard.press("p")  # Solve (P)
+    wait_until(lambda: len(wf.candidates) > 0, 300, "P3L candidates", panel=panel)  # first use: compiled
+    best = min(range(len(wf.candidates)), key=lambda i: pose_error(wf.candidates[i], T_true)[0])
+    if best != wf.chosen:
+        page.get_by_label("Candidate", exact=True).first.click()
+        page.get_by_role("option", name=next(t for t, v in wf.choices("choose_candidate") if v == best)).click()
+        wait_until(lambda: wf.chosen == best, what="the candidate chosen", panel=panel)
+    press(page, "Refine")
+    wait_until(lambda: wf.refined is not None, 300, "the refinement", panel=panel)
+    assert pose_error(wf.refined.T_world_obj, T_true)[1] < 0.01  # the snapped clicks give the true pose
+    wait_until(lambda: "accept" in wf.current_step().enabled, what="Accept offered", panel=panel)
+    press(page, "Accept")
+    wait_until(lambda: wf.accepted or panel.asking == "accept", what="the accept or its question", panel=panel)
+    asked = "" if wf.accepted else str(panel.warning)
+    assert "snap" not in asked, asked
+    assert page.get_by_text("snap moved", exact=False).count() == 0
+    page.close()
