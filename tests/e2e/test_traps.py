@@ -141,18 +141,17 @@ def test_calibrate_turret_a_click_on_the_table_near_a_box_corner_is_the_table(br
     page.close()
 
 
-def test_a_snap_that_moved_a_click_onto_the_true_edge_is_not_weak(browser, interface, scene):
-    """Update pose by four edges clicked 2.5 px beside where the video shows them: each snap moves its click
-    more than 2 px onto the edge, and Accept does not ask about the snaps (it asked "snap moved it 2.6 px")."""
+def _refine_box(ui, page, scene, beside_px: float):
+    """Update pose of the box by four edges clicked ``beside_px`` beside where the video shows them (away from
+    the drawn edge), Solve (P), the candidate nearest the truth chosen, Refine: the workflow."""
     import itertools
 
     from core.transforms import pose_error
 
     from .harness import select_by_click
 
-    ui = interface
-    page = ui.open(browser)
-    panel, site, cam = page.panel, ui.site, ui.site.camera
+    panel, site = page.panel, ui.site
+    cam = site.camera
     obj = site.object("parallelepiped")
     T_true = scene.body("parallelepiped").pose_at(ui.frame_t_s)
     drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
@@ -179,13 +178,10 @@ def test_a_snap_that_moved_a_click_onto_the_true_edge_is_not_weak(browser, inter
         a, b = true[k]
         n = np.array([-(b - a)[1], (b - a)[0]]) / np.linalg.norm(b - a)
         n = n if (a + b) @ n / 2 > (drawn[k].mean(axis=0) @ n) else -n  # beside it, away from the drawn edge
-        ui.click_pixel(page, a + 0.3 * (b - a) + 2.5 * n)
-        ui.click_pixel(page, a + 0.7 * (b - a) + 2.5 * n)
+        ui.click_pixel(page, a + 0.3 * (b - a) + beside_px * n)
+        ui.click_pixel(page, a + 0.7 * (b - a) + beside_px * n)
         ui.click_pixel(page, drawn[k].mean(axis=0))  # "this is model edge k", clicked on the overlay
         wait_until(lambda: len(wf.edge_ids) and wf.edge_ids[-1] == k, what=f"edge {k} assigned", panel=panel)
-    snaps = [sn for sn in wf.seg_snaps if sn is not None]
-    assert len(snaps) == 4 and all(sn.applied for sn in snaps)
-    assert max(sn.moved_px for sn in snaps) > 2.0  # the snaps moved the clicks more than the old gate's 2 px
     page.keyboard.press("p")  # Solve (P)
     wait_until(lambda: len(wf.candidates) > 0, 300, "P3L candidates", panel=panel)  # first use: compiled
     best = min(range(len(wf.candidates)), key=lambda i: pose_error(wf.candidates[i], T_true)[0])
@@ -195,11 +191,44 @@ def test_a_snap_that_moved_a_click_onto_the_true_edge_is_not_weak(browser, inter
         wait_until(lambda: wf.chosen == best, what="the candidate chosen", panel=panel)
     press(page, "Refine")
     wait_until(lambda: wf.refined is not None, 300, "the refinement", panel=panel)
-    assert pose_error(wf.refined.T_world_obj, T_true)[1] < 0.01  # the snapped clicks give the true pose
+    assert pose_error(wf.refined.T_world_obj, T_true)[1] < 0.01  # the clicks give the true pose
+    return wf
+
+
+def test_a_snap_that_moved_a_click_onto_the_true_edge_is_not_weak(browser, interface, scene):
+    """Update pose by four edges clicked 2.5 px beside where the video shows them: each snap moves its click
+    more than 2 px onto the edge, and Accept does not ask about the snaps (it asked "snap moved it 2.6 px")."""
+    ui = interface
+    page = ui.open(browser)
+    panel = page.panel
+    wf = _refine_box(ui, page, scene, beside_px=2.5)
+    snaps = [sn for sn in wf.seg_snaps if sn is not None]
+    assert len(snaps) == 4 and all(sn.applied for sn in snaps)
+    assert max(sn.moved_px for sn in snaps) > 2.0  # the snaps moved the clicks more than the old gate's 2 px
     wait_until(lambda: "accept" in wf.current_step().enabled, what="Accept offered", panel=panel)
     press(page, "Accept")
     wait_until(lambda: wf.accepted or panel.asking == "accept", what="the accept or its question", panel=panel)
     asked = "" if wf.accepted else str(panel.warning)
     assert "snap" not in asked, asked
     assert page.get_by_text("snap moved", exact=False).count() == 0
+    page.close()
+
+
+def test_the_result_is_visible_at_1280x720_without_scrolling(browser, interface, scene):
+    """After Refine at 1280×720 the pose's σ is on screen beside the buttons (the Result section, σ and
+    residuals, was below the fold)."""
+    ui = interface
+    page = ui.open(browser, viewport={"width": 1280, "height": 720})
+    _refine_box(ui, page, scene, beside_px=0.0)
+    said = page.get_by_text("σ translation (mm)", exact=False)
+    said.first.wait_for(state="attached", timeout=60_000)
+
+    def on_screen() -> bool:
+        for i in range(said.count()):
+            box = said.nth(i).bounding_box()
+            if box is not None and said.nth(i).is_visible() and 0 <= box["y"] and box["y"] + box["height"] <= 720:
+                return True
+        return False
+
+    wait_until(on_screen, 30, "the σ on screen without scrolling", panel=page.panel)
     page.close()
