@@ -239,6 +239,16 @@ class FrameRef:
         # the view's own motion taken off (a camera turned or carried): what moved with it was not moving
         return changed_share(self.previous, self.image, np.asarray(uv, float).reshape(-1, 2), follow_camera=True)
 
+    def object_motion_px(self, outline_uv: Any) -> float | None:
+        """How far the object inside ``outline_uv`` (N, 2) moved between ``previous`` and this frame against
+        what is around it (``app.vision.change.object_motion_px``); None when no earlier frame is known or its
+        image gives too little to follow."""
+        if self.previous is None or np.shape(self.previous) != np.shape(self.image):
+            return None
+        from app.vision.change import object_motion_px
+
+        return object_motion_px(self.previous, self.image, outline_uv)
+
 
 def sigma_over(sd_deg: float, sd_mm: float, max_deg: float, max_mm: float) -> str:
     """ "σ up to 1.17° and 26.4 mm: the position's is above 20 mm" — which of the two exceeds its limit
@@ -398,6 +408,10 @@ class Workflow:
             return None
         stamp = getattr(self.site.latest_frame(self.frame.view or self.view), "stamp", None)
         return None if stamp is None else max(0.0, float(stamp) - float(self.frame.stamp))
+
+    def object_motion_px(self, outline_uv: Any) -> float | None:
+        """``FrameRef.object_motion_px`` of the frozen frame (None: no frame frozen)."""
+        return None if self.frame is None else self.frame.object_motion_px(outline_uv)
 
     def seen_at(self) -> float | None:
         """When the clicked image was taken (unix s): the frozen frame's, else the camera's newest (None: unknown)."""
