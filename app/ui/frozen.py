@@ -60,6 +60,9 @@ class FrozenFrames:
         earlier = feed.recent.before(frame, MOTION_GAP_S)  # to see whether what is clicked on was moving
         at = feed.recent.arrival(frame)
         at = time.monotonic() if at is None else at
+        if earlier is None:  # a frame the ring did not keep (it keeps one every 0.1 s): the one kept before it
+            hit = feed.recent.back_from(at, MOTION_GAP_S)
+            earlier = hit[0] if hit is not None and hit[1] >= 0.5 * MOTION_GAP_S else None
         self.at = at
         others = {}
         for name, other in panel.app.views.items():

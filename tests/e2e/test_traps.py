@@ -232,3 +232,77 @@ def test_the_result_is_visible_at_1280x720_without_scrolling(browser, interface,
 
     wait_until(on_screen, 30, "the σ on screen without scrolling", panel=page.panel)
     page.close()
+
+
+SWEEP_S, TURN_DEG_S = 1.5, 4.0  # the turning view: 6° one way in 1.5 s, then back
+
+
+def _turning_view(image):
+    """A video of ``image`` turning continuously about its bottom centre (a continuously moving sequence: every
+    frame differs from the one 0.3 s before by 1.2°), to and fro; ``angle(t)`` its angle (degrees) at monotonic
+    time t."""
+    import time
+
+    import cv2
+
+    from app.video import StillSource
+
+    class Turning(StillSource):
+        t0 = time.monotonic()
+
+        @classmethod
+        def angle(cls, t: float) -> float:
+            phase = (t - cls.t0) % (2 * SWEEP_S)
+            return TURN_DEG_S * (phase if phase < SWEEP_S else 2 * SWEEP_S - phase) - 3.0
+
+        def _read(self):
+            h, w = self._image.shape[:2]
+            M = cv2.getRotationMatrix2D((w / 2, h), self.angle(time.monotonic()), 1.0)
+            return cv2.warpAffine(self._image, M, (w, h), borderMode=cv2.BORDER_REFLECT)
+
+    return Turning(image, fps=8)  # every frame kept by the scrubber (one every 0.1 s at most)
+
+
+def test_a_pose_found_on_a_continuously_moving_video_is_not_said_to_be_moving(browser, scene, frame, tmp_path):
+    """The whole view turns continuously (a moving sequence) while the box stands still: the pose a double click
+    finds is not "moving", and Accept does not ask about it (every frame was "moving", every Accept asked twice)."""
+    import time
+
+    import cv2
+
+    from .harness import Interface, select_by_click
+
+    video = _turning_view(frame)
+    ui = Interface(scene, video, tmp_path / "site.sqlite")
+    try:
+        page = ui.open(browser)
+        panel, site, cam = page.panel, ui.site, ui.site.camera
+        obj = site.object("parallelepiped")
+        drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
+        w = obj.model.wireframe(cam.center, obj.T_world_obj)
+        k = next(int(k) for k, v, kind in zip(w.edge_index, w.visible, w.kind) if v and kind == "edge")
+        select_by_click(page, "parallelepiped", lambda: ui.click_pixel(page, drawn[k].mean(axis=0)))
+        body = scene.body("parallelepiped")
+        centre = cam.project_obj(body.pose_at(ui.frame_t_s), body.model.vertices).mean(axis=0)
+        # mid-sweep: the frame clicked on and the one 0.3 s before it differ by a turn of 1.2°
+        wait_until(lambda: 0.5 < (time.monotonic() - video.t0) % SWEEP_S < 0.9, 10, "mid-sweep")
+        M = cv2.getRotationMatrix2D((cam.width / 2, cam.height), video.angle(time.monotonic()), 1.0)
+        ui.double_click_pixel(page, M[:, :2] @ centre + M[:, 2])  # where the video shows the box now
+        wait_until(
+            lambda: panel.session.workflow is not None and getattr(panel.session.workflow.search, "found", None),
+            300,  # the search's first use compiles it
+            "the pose found by the double click",
+            panel=panel,
+        )
+        wf = panel.session.workflow
+        wait_until(lambda: "your click" in wf.message, 60, "the search's message", panel=panel)
+        assert "was moving" not in wf.message, wf.message
+        page.get_by_text("your click (searched", exact=False).first.wait_for(timeout=60_000)
+        wait_until(lambda: "accept" in wf.current_step().enabled, what="Accept offered", panel=panel)
+        press(page, "Accept")
+        wait_until(lambda: wf.accepted or panel.asking == "accept", what="the accept or its question", panel=panel)
+        asked = "" if wf.accepted else str(panel.warning)
+        assert "was moving" not in asked, asked
+        page.close()
+    finally:
+        ui.close()
