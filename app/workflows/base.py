@@ -312,9 +312,6 @@ class Workflow:
         return self.site.camera_of(self.view)
 
     click_view: str | None = None  # the camera of the click being handled (a workflow taking several: its own)
-    # video pixels per screen pixel where the click being handled was made (the page's zoom; 1: not known, a
-    # script's): what lies within a few screen pixels of a click is what the operator pointed at
-    click_px_per_screen_px: float = 1.0
 
     def _click_camera(self):
         """The calibration of the camera the click being handled was made in."""
@@ -400,18 +397,6 @@ class Workflow:
     def moving_share(self, uv: Any) -> float | None:
         """``FrameRef.moving_share`` of the frozen frame (None: no frame frozen)."""
         return None if self.frame is None else self.frame.moving_share(uv)
-
-    def frame_age_s(self) -> float | None:
-        """How long before its camera's newest frame the frozen frame was taken (seconds, from their capture
-        stamps); None without a frozen frame or where a stamp is unknown (a recording read by time)."""
-        if self.frame is None or self.frame.stamp is None:
-            return None
-        stamp = getattr(self.site.latest_frame(self.frame.view or self.view), "stamp", None)
-        return None if stamp is None else max(0.0, float(stamp) - float(self.frame.stamp))
-
-    def object_motion_px(self, outline_uv: Any) -> float | None:
-        """``FrameRef.object_motion_px`` of the frozen frame (None: no frame frozen)."""
-        return None if self.frame is None else self.frame.object_motion_px(outline_uv)
 
     def seen_at(self) -> float | None:
         """When the clicked image was taken (unix s): the frozen frame's, else the camera's newest (None: unknown)."""

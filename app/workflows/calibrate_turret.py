@@ -38,6 +38,9 @@ class CalibrateTurret(Workflow):
     name = "calibrate_turret"
     title = "Calibrate turret"
     shows_beam = True
+    # video pixels per screen pixel where the click being handled was made (the page's zoom, set by the session;
+    # 1: not known, a script's)
+    click_px_per_screen_px: float = 1.0
     actions = ("click", "choose_point", "measure", "remove_last", "remove_measurement", "solve", "accept", "cancel")
     controls = (
         Control(

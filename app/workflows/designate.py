@@ -168,7 +168,7 @@ class DesignateTarget(Workflow):
 
     def _keep(self, t: Target, message: str) -> Target:
         why = self.scene_changed(t.uv)
-        age = self.frame_age_s()
+        age = _frame_age_s(self)
         if age is not None and age > STALE_FRAME_S:
             # what the database and the range finder say is of the site now: that the frame still shows it here
             # is not known (the live video may look the same while the database moved)
@@ -464,6 +464,15 @@ class DesignateTarget(Workflow):
                     row["disagreement_mm"] = _mm(t.disagreement_m)
                 rows.append(row)
             return {"targets": rows}
+
+
+def _frame_age_s(wf: Workflow) -> float | None:
+    """How long before its camera's newest frame ``wf``'s frozen frame was taken (seconds, from their capture
+    stamps); None without a frozen frame or where a stamp is unknown (a recording read by time)."""
+    if wf.frame is None or wf.frame.stamp is None:
+        return None
+    stamp = getattr(wf.site.latest_frame(wf.frame.view or wf.view), "stamp", None)
+    return None if stamp is None else max(0.0, float(stamp) - float(wf.frame.stamp))
 
 
 def _check_word(t: Target) -> str:

@@ -108,7 +108,8 @@ class Session:
         """A click at pixel uv of camera ``view``: the workflow's while it takes clicks, else it selects ``on``
         (the object drawn there, or None). ``live_shown``: the operator looks at the live video over a frozen
         frame, where the workflow's clicks would not land on what they see. ``px_per_screen_px``: video pixels
-        per screen pixel in the page's view (``Workflow.click_px_per_screen_px``)."""
+        per screen pixel in the page's view, for the workflows that pick what lies within a few screen pixels of a
+        click (``CalibrateTurret.click_px_per_screen_px``)."""
         wf = self.workflow
         if wf is not None and not wf.finished and "click" in wf.actions:
             if wf.current_step().clicks:
