@@ -59,8 +59,8 @@ def key_label(key: str) -> str:
             key, unit = key[: -len(suffix)], shown
             break
     words = [_WORDS.get(w.lower(), w) for w in key.replace("-", "_").split("_") if w]
-    if words[:1] == ["σ"] and words[1:] in (["t"], ["rot"]):  # a pose's σ: "σ translation", "σ rotation"
-        words = ["σ", {"t": "translation", "rot": "rotation"}[words[1]]]
+    if words[:1] == ["σ"] and words[1:] in (["t"], ["rot"], ["r"]):  # a pose's σ: "σ translation", "σ rotation"
+        words = ["σ", {"t": "translation", "rot": "rotation", "r": "rotation"}[words[1]]]
     text = " ".join(words)
     bare = [w for w in text.split(" ") if not (w.startswith("(") and w.endswith(")"))]  # "x y z (m)": its unit aside
     coordinates = bool(bare) and all(len(w) == 1 for w in bare)  # "x y z", "t" stay lower case

@@ -155,5 +155,7 @@ def test_the_result_headline_says_sigma_and_residuals_on_one_line():
         )
     )
     assert line.startswith("**Result**: RMS (px): 0.41 · σ translation (mm): 0.5, 0.8, 1.2")
-    assert "0.05, 0.02, 0.03" in line and "box" not in line and "edge 1" not in line and "20" not in line
+    assert (
+        "σ rotation (°): 0.05, 0.02, 0.03" in line and "box" not in line and "edge 1" not in line and "20" not in line
+    )
     assert str(result_headline({"object": "box", "edges clicked": 3})) == ""
