@@ -315,7 +315,8 @@ class ClientPanel:
         finally:
             self._performing = False
         if not wf.message or wf.message == working:
-            wf.message = f"{c.label}: done." if c.action not in ("resume", "pause", "restart") else ""
+            # a finished workflow says its own end ("Done." — "Done: done." said it twice)
+            wf.message = "" if wf.finished or c.action in ("resume", "pause", "restart") else f"{c.label}: done."
         return result
 
     def select(self, value: str) -> None:
