@@ -37,7 +37,8 @@ from .snapping import SNAPPED_CORNER_SIGMA_PX, SnapMixin, snap_marks, weak_snaps
 
 __all__ = ["CalibrateCamera", "known_K", "METHODS"]
 
-PICK_RADIUS_PX = 25.0
+# a model corner is picked within this many screen pixels of the click (in video pixels it depends on the zoom)
+PICK_RADIUS_SCREEN_PX = 12.0
 # Weak results (Accept asks once more): fewer pairs than this leave little redundancy in C's 11
 # unknowns (and a snap the image fits poorly: ``ClickSnap.weak``).
 MIN_REDUNDANT_PAIRS = 8
@@ -71,6 +72,7 @@ def known_K(site, view: str | None = None) -> np.ndarray | None:
 class CalibrateCamera(SnapMixin, Workflow):
     name = "calibrate_camera"
     title = "Calibrate camera"
+    click_px_per_screen_px: float = 1.0  # the page's zoom where the click was made (set by the session; 1: unknown)
     actions = (
         "click",
         "choose_point",
@@ -149,10 +151,11 @@ class CalibrateCamera(SnapMixin, Workflow):
             self._check_open()
             if self.pending_X is None:
                 name, k, X, dist = self._nearest_vertex(p)
-                if dist > PICK_RADIUS_PX:
+                radius = PICK_RADIUS_SCREEN_PX * self.click_px_per_screen_px
+                if dist > radius:
                     near = f" (the nearest visible one, {name} corner {k}, is {dist:.0f} px away)" if k >= 0 else ""
                     raise WorkflowError(
-                        f"No visible model corner within {PICK_RADIUS_PX:.0f} px of your click{near}: "
+                        f"No visible model corner within {radius:.0f} px of your click{near}: "
                         "click on a corner drawn in the overlay."
                     )
                 self._set_pending(X, f"{name} corner {k}", (name, k))
@@ -391,7 +394,7 @@ class CalibrateCamera(SnapMixin, Workflow):
             else:
                 shown[:] = True
             d = np.linalg.norm(cam.project(V) - p, axis=1)
-            for k in np.flatnonzero(front & shown & (d <= 3 * PICK_RADIUS_PX)):
+            for k in np.flatnonzero(front & shown & (d <= 3 * PICK_RADIUS_SCREEN_PX * self.click_px_per_screen_px)):
                 cands.append((float(d[k]), obj.name, int(k), V[k]))
         for d, name, k, X in sorted(cands, key=lambda c: c[0]):
             if self._unoccluded(X):
