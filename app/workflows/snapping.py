@@ -44,12 +44,13 @@ SNAPPED_CORNER_SIGMA_PX = 0.15
 # leaves room for real images (compression, blur, shading at silhouettes).
 SNAPPED_SEGMENT_SIGMA_PX = 0.15
 # A snap in use is weak (Accept asks once more) when the image fits it poorly at the snapped place, however far
-# it moved (a gate on the distance moved flagged a click snapped 2.6 px onto the true silhouette; on the workcell's
-# rendered frames 98 of 102 snaps that moved more than 2 px landed within 0.5 px of the true edge). Measured there
-# (clicks 0-3 px off every visible edge and corner, t = 5 s and 16 s): the RMS of a snapped edge's points about its
-# line was at most 0.16 px, a corner's lines' at most 0.35 px, cornerSubPix's fit (``app.vision.corner``) at most
-# 3.1 px on true corners; the limits sit above those. A snap onto a neighbouring straight edge fits as well as the
-# right one: the refined pose's residuals (3σ) are what catch it.
+# it moved (a gate on the distance moved flagged a click snapped 2.6 px onto the true silhouette). Measured by
+# bench/snap_gates.py on the workcell's rendered frames (clicks 0-3 px off every visible edge and corner, t = 5 s
+# and 16 s): 98 of the 102 edge snaps that moved more than 2 px and all 46 such corner snaps landed within 0.5 px
+# of the truth; where they landed right, a snapped edge's points' RMS about its line was at most 0.16 px, a
+# corner's lines' at most 0.28 px, cornerSubPix's fit (``app.vision.corner``) at most 3.2 px: the limits sit
+# above those. A snap onto a neighbouring straight edge fits as well as the right one (0.05-0.10 px): the
+# refined pose's residuals (3σ) are what catch it.
 WEAK_EDGE_RMS_PX = 0.3
 WEAK_CORNER_FIT_PX = {"edges": 0.5, "subpix": 3.5}
 
