@@ -36,9 +36,9 @@ CHANGED_SHARE = 0.08  # share of a patch's pixels that must change
 HALF_PX = 8
 SHIFT_RESPONSE = 0.1  # phase correlation's peak (0-1) above which the whole image is taken to have shifted
 # An object moved between two frames when its image moved more than this against the view's own motion (pixels,
-# ``object_motion_px``). Measured on the workcell's video, frames 0.3 s apart: the box in transit 4.8-7.4 px (at
-# 12.6, 13.4, 14.5 s), standing still 0.1 px; the whole view turned 1.5-3° or zoomed 2 % 0.06-0.30 px (where the
-# changed-pixel test saw 23-42 % of the box's pixels change: "moving").
+# ``object_motion_px``). Measured by bench/moving.py on the workcell's video, frames 0.3 s apart: the box in
+# transit 4.8-7.4 px (at 12.6, 13.4, 14.5 s), standing still 0.1 px; the whole view turned 1.2-3° or zoomed 2 %
+# 0.06-0.27 px (where the changed-pixel test saw 19-42 % of the box's pixels change: "moving").
 MOVING_PX = 1.5
 
 
