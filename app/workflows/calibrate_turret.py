@@ -26,7 +26,10 @@ from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowErr
 
 __all__ = ["CalibrateTurret"]
 
-PICK_RADIUS_PX = 25.0
+# a corner or a face centre is picked within this many screen pixels of the click (in video pixels it
+# depends on the zoom); farther, the click is a point on the surface under it (a new operator's click on the
+# table 24 video px from a box corner became "parallelepiped vertex 1")
+PICK_RADIUS_SCREEN_PX = 12.0
 OFF_SURFACE_M = 0.05
 POORLY_DEG, POORLY_M = 0.5, 0.01  # σ beyond which the operator is told to measure more
 
@@ -35,6 +38,9 @@ class CalibrateTurret(Workflow):
     name = "calibrate_turret"
     title = "Calibrate turret"
     shows_beam = True
+    # video pixels per screen pixel where the click being handled was made (the page's zoom, set by the session;
+    # 1: not known, a script's)
+    click_px_per_screen_px: float = 1.0
     actions = ("click", "choose_point", "measure", "remove_last", "remove_measurement", "solve", "accept", "cancel")
     controls = (
         Control(
@@ -112,7 +118,7 @@ class CalibrateTurret(Workflow):
             d = np.linalg.norm(cam.project(X) - p, axis=1) if len(X) else np.zeros(0)
             if len(X):
                 d[cam.depth(X) <= 0] = np.inf
-            if not len(X) or d.min() > PICK_RADIUS_PX:
+            if not len(X) or d.min() > PICK_RADIUS_SCREEN_PX * self.click_px_per_screen_px:
                 # anywhere else on a known surface: the beam lands on it (the fit is point-to-plane)
                 origin, ray = cam.rays(p.reshape(1, 2))
                 hit = self.site.raycast(origin, ray[0])

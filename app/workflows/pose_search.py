@@ -227,13 +227,18 @@ class OneClickSearch:
             )
         return message + (f". ⚠ {moving}" if moving else "")
 
-    def moving_at(self, T: np.ndarray, job: dict, moving_share) -> str:
-        """ "" unless the object at pose T changed between the frozen frame and the one shown just before
-        it (``moving_share``: ``Workflow.moving_share``; ``job``: the search's): then it was moving, and the
-        pose found there is where it passed, not where it stays. The pixels: its bounding box's corners,
-        projected, taken inside (``app.vision.change.inside``)."""
-        from app.vision.change import CHANGED_SHARE, inside
+    def moving_at(self, T: np.ndarray, job: dict, frame) -> str:
+        """ "" unless the object at pose T moved between the frozen ``frame`` (a ``FrameRef``, or None) and the
+        one shown just before it: then the pose found is where it passed, not where it stays. Judged where the
+        object is: its image (its bounding box's corners projected, their hull) against what is around it
+        (``FrameRef.object_motion_px``), so that the view moving (a hand-held camera, a turning one) or something
+        moving elsewhere is no motion of it (on a continuously moving sequence every frame was "moving" and
+        every Accept asked twice). Where its image gives too little to follow, the changed pixels inside it
+        (``FrameRef.moving_share``) against those around it."""
+        from app.vision.change import CHANGED_SHARE, MOVING_PX, inside
 
+        if frame is None:
+            return ""
         camera, model = job["camera"], job["model"]
         lo, hi = model.bounds()
         box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
@@ -241,21 +246,27 @@ class OneClickSearch:
         uv = camera.project(X[camera.depth(X) > 0])
         if not len(uv):
             return ""
-        share = moving_share(inside(uv))
-        if share is None or share <= CHANGED_SHARE:
-            return ""
-        # around it, its box's size further out: where most of that changed as much, the view moved (a hand-held
-        # camera), not the object (on the hand-held ViSP cube every frame was "moving" and every Accept asked twice)
-        c = uv.mean(axis=0)
-        ring = c + 2.0 * (uv - c)
-        ring = ring[
-            (ring[:, 0] > 8) & (ring[:, 1] > 8) & (ring[:, 0] < camera.width - 9) & (ring[:, 1] < camera.height - 9)
-        ]
-        around = [moving_share(p[None]) for p in ring]
-        if around and sum(a is not None and a > CHANGED_SHARE for a in around) > len(around) / 2:
-            return ""
+        motion = frame.object_motion_px(uv)
+        if motion is not None:
+            if motion <= MOVING_PX:
+                return ""
+            how = f"it moved {motion:.1f} px against what is around it since the frame {MOTION_GAP_S:.1f} s before"
+        else:
+            share = frame.moving_share(inside(uv))
+            if share is None or share <= CHANGED_SHARE:
+                return ""
+            # around it, its box's size further out: where most of that changed as much, the view moved
+            c = uv.mean(axis=0)
+            ring = c + 2.0 * (uv - c)
+            ring = ring[
+                (ring[:, 0] > 8) & (ring[:, 1] > 8) & (ring[:, 0] < camera.width - 9) & (ring[:, 1] < camera.height - 9)
+            ]
+            around = [frame.moving_share(p[None]) for p in ring]
+            if around and sum(a is not None and a > CHANGED_SHARE for a in around) > len(around) / 2:
+                return ""
+            how = f"it differs from the frame {MOTION_GAP_S:.1f} s before"
         return (
-            f"{self.object_name} was moving in this frame (it differs from the frame {MOTION_GAP_S:.1f} s before): "
+            f"{self.object_name} was moving in this frame ({how}): "
             "the pose found is where it passed, not where it stays; once it has stopped, "
             "press Remove last, freeze a frame (F; Seconds back reaches one where it had "
             "stopped before) and double-click it again, or Accept if it stopped there"

@@ -320,7 +320,7 @@ class UpdatePose(Workflow):
                 if self.estimates.generation == generation and self.clicks.drop_pending(p):
                     self._offer(state="click_edge")
             raise
-        moving = self.search.moving_at(res.candidates[0].T_world_obj, job, self.moving_share)
+        moving = self.search.moving_at(res.candidates[0].T_world_obj, job, self.frame)
         with self._commit(generation, "Find"):
             self.clicks.pending = None  # the click was the search's, not an edge's start
             self.message = self.search.adopt(res, p, moving)

@@ -314,7 +314,7 @@ class Interface:
     ):
         from app.db import Database, seed_from_scene
         from app.ui.server import InterfaceServer
-        from app.video import FrameGrabber, StillSource
+        from app.video import FrameGrabber, StillSource, VideoSource
         from app.workflows import Site
 
         self.db = (
@@ -327,9 +327,13 @@ class Interface:
             devices = self._own_devices = open_fast_devices(scene, frame_t_s)
         self.scene = scene
         self.site = Site(scene, self.db, devices=devices, clock=lambda: frame_t_s)
-        # one still per camera ({camera name: image}), or the first camera's alone
+        # one still per camera ({camera name: image}), or the first camera's alone; a video source instead of an
+        # image is played as it is
         frames = frame if isinstance(frame, dict) else {scene.views[0].name: frame}
-        grabbers = {name: FrameGrabber(StillSource(image, fps=20)) for name, image in frames.items()}
+        grabbers = {
+            name: FrameGrabber(image if isinstance(image, VideoSource) else StillSource(image, fps=20))
+            for name, image in frames.items()
+        }
         self.server = InterfaceServer(self.site, grabbers, port=free_port()).start()
         self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
         self.frame_t_s = frame_t_s

@@ -190,3 +190,34 @@ def test_a_point_far_from_its_surface_is_named_after_solve(device_site, fast_sce
     wf.remove_last()
     assert wf.result is not None and "accept" in wf.current_step().enabled and len(wf.pan) == len(targets)
     assert wf.current_step().prompt.startswith("Solved: RMS") and "solve stands" in wf.message
+
+
+def _table_pixel_near_a_box_corner(site, off_px: float):
+    """(a box corner's label, a pixel ``off_px`` from the corner's image whose ray meets the table)."""
+    cam = site.camera
+    box = site.object("parallelepiped")
+    for k, X in enumerate(box.vertices_world()):
+        c = cam.project(X[None])[0]
+        for ang in np.linspace(0, 2 * np.pi, 16, endpoint=False):
+            p = c + off_px * np.array([np.cos(ang), np.sin(ang)])
+            origin, ray = cam.rays(p.reshape(1, 2))
+            hit = site.raycast(origin, ray[0])
+            if hit is not None and hit.name == "table":
+                return f"parallelepiped vertex {k}", p
+    raise AssertionError("no table pixel near a box corner")
+
+
+@pytest.mark.parametrize("px_per_screen_px", [1.0, 0.5, 2.5])
+def test_a_corner_is_picked_within_a_screen_pixel_radius(device_site, px_per_screen_px):
+    """A click on the table 24 video px from a box corner is a point on the table, at the fitted view or zoomed in
+    (a new operator's became "parallelepiped vertex 1"); zoomed out so far that 24 video px are under 10 screen px,
+    it is a known point (the corner, or a face centre nearer)."""
+    from app.workflows.calibrate_turret import PICK_RADIUS_SCREEN_PX
+
+    label, p = _table_pixel_near_a_box_corner(device_site, 24.0)
+    wf = CalibrateTurret(device_site)
+    wf.click_px_per_screen_px = px_per_screen_px
+    wf.click(p)
+    near = 24.0 / px_per_screen_px <= PICK_RADIUS_SCREEN_PX
+    assert (wf.pending_label != "a point on table") == near, (wf.pending_label, label)  # near: a known point
+    assert (wf.pending_label == label) <= near
