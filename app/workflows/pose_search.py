@@ -154,7 +154,9 @@ class OneClickSearch:
         if table is not None and not rests_on(obj.model, obj.T_world_obj, table):
             table = None
         cam = site.camera_of(view)
-        return dict(camera=cam, model=obj.model, T_db=obj.T_world_obj, table=table, camera_cov=site.camera_cov(view))
+        return dict(
+            camera=cam, model=obj.model, T_db=obj.T_world_obj, table=table, camera_cov=site.pose_camera_cov(view)
+        )
 
     def run(self, job: dict, p: np.ndarray, frames, cancel):
         """``app.vision.search.search_pose`` from pixel p on the workflow's frame (``frames``: its

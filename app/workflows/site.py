@@ -370,6 +370,14 @@ class Site:
         with self.lock:
             return self._camera_covs[name]
 
+    def pose_camera_cov(self, view: str | None = None) -> np.ndarray:
+        """The camera's share of a pose's σ (issue 27): its calibration's covariance (``camera_cov``), else the
+        stated prior of a camera file (``core.pose.uncertainty.intrinsics_prior_cov``)."""
+        from core.pose.uncertainty import intrinsics_prior_cov
+
+        cov = self.camera_cov(view)
+        return intrinsics_prior_cov(self.camera_of(view)) if cov is None else cov
+
     @property
     def robot_base_nominal(self) -> bool:
         """True while the robot's base is the scene's nominal pose (the drawing's), not calibrated from the video."""
