@@ -48,7 +48,7 @@ model, its old pose, the calibrated camera C and, usually, that it lies on the t
    (the image's edge along each sample's normal, within a band that narrows), owned by one model edge
    each, under a fixed-scale Tukey loss that drops what lies past 1.4 px; its unknowns are 3 on the
    table (x, y, heading), with a numerical Jacobian through that parametrisation; and its covariance
-   models each edge's shared offset and tilt (``core.pose.uncertainty.edge_covariance``), not independent click noise. Its
+   models each edge's shared offset and tilt (``uncertainty.edge_covariance``), not click noise. Its
    result goes on to the pipeline: a found pose is a start *and* a measurement there (``PosePrior``, with
    this covariance), so clicks added afterwards refine together with it.
 4. **Ranked by mismatch** (``_check``: 0 when every visible edge of the model lies on an image edge
@@ -69,10 +69,10 @@ import cv2
 import numpy as np
 
 from core.brep import BRep
+from core.calibration import perturbed_camera
 from core.camera import Camera
 from core.geometry import Plane
 from core.pose.symmetry import symmetry_transforms
-from core.calibration import perturbed_camera
 from core.pose.uncertainty import (
     CURVED_EDGE_BIAS_PX,
     EDGE_BIAS_PX,
@@ -87,7 +87,7 @@ from core.transforms import exp_so3, make_T, pose_error
 
 from .evaluate import oriented_edges, sample_distances
 from .profiles import search_along_normals, smooth, to_gray_f32
-from .track import EdgeSamples, EdgeTracker, feature_groups, sample_visible_edges
+from .track import EdgeTracker, feature_groups, sample_visible_edges
 
 __all__ = [
     "SearchCandidate",
@@ -1204,7 +1204,7 @@ def _refine(
     ``core.pose`` (the module docstring's 3. says why) — on the model's visible edge samples and the
     image's edges found along their normals (``profiles.search_along_normals``, sub-pixel), searched
     ± ``bands[i]`` pixels at iteration i (the last one after). Returns (T, cov (6, 6) of (δt, δr) from
-    ``core.pose.uncertainty.edge_covariance`` at the last step's linearisation, or None; None too without ``with_cov``)."""
+    ``uncertainty.edge_covariance`` at the last step's linearisation, or None; None too without ``with_cov``)."""
     k = space.k
     p = space.params(T)
     last = None

@@ -56,8 +56,8 @@ import cv2
 import numpy as np
 
 from core.brep import BRep
-from core.camera import Camera
 from core.calibration import perturbed_camera
+from core.camera import Camera
 from core.point_line_pose import PointLineFit, point_line_residuals, refine_point_to_line
 from core.pose.uncertainty import (
     CURVED_EDGE_BIAS_PX,
@@ -134,8 +134,9 @@ class TrackDiagnostics:
     none was found). rms_px : weighted RMS of the kept samples' distances to their edges at the
     final pose. n_samples, n_found, n_inliers : counts. reason : why the tracker is lost ("" if not).
     cov : array, shape (6, 6), covariance of the pose's (δt [m], δr [rad]) at the last pose step: the
-    edges' errors, the camera's and the model's priors (``pose_covariance``), or None when there was none. edge_distance_px : the support check's mean
-    distance of the samples to the nearest image edge at the final pose (NaN when not reached).
+    edges' errors, the camera's and the model's priors (``pose_covariance``), or None when there was
+    none. edge_distance_px : the support check's mean distance of the samples to the nearest image edge
+    at the final pose (NaN when not reached).
     """
 
     samples: EdgeSamples
