@@ -106,6 +106,15 @@ def add_track_parser(sub) -> None:
         help="the model's stated uncertainty: σ of each model edge's position (mm, default 0.5), part of each "
         "frame's σ in --csv (docs/pose.md, 'What σ covers')",
     )
+    p.add_argument(
+        "--camera-sigma",
+        nargs=2,
+        type=sigma_mm,
+        metavar=("F_PCT", "C_PX"),
+        default=(0.3, 1.0),
+        help="the stated uncertainty of a camera file without a calibration's covariance: σ of fx, fy in percent "
+        "and of u0, v0 in pixels (default 0.3 %% and 1 px; 0 0 for a camera known exactly, e.g. a simulation's)",
+    )
     p.add_argument("--keep-going", action="store_true", help="do not stop at a lost frame (draw the last good pose)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (there is none when stderr is not a terminal)")
     p.set_defaults(func=_cmd_track)
@@ -282,12 +291,13 @@ def _cmd_track(args) -> int:
 
     from app.progress import progress_bar
     from app.vision.sequence import track_sequence
-
     from core.pose.uncertainty import Priors, intrinsics_prior_cov
 
     source, camera, model, T, lens = _setup(args)
     # each frame's σ: the camera's calibration (or its file's stated prior) and the model's prior (issue 27)
-    camera_cov = intrinsics_prior_cov(camera) if args.camera_cov is None else args.camera_cov
+    f_pct, c_px = args.camera_sigma
+    prior = intrinsics_prior_cov(camera, f_pct / 100.0, c_px) if f_pct > 0 or c_px > 0 else None
+    camera_cov = prior if args.camera_cov is None else args.camera_cov
     priors = Priors(camera_cov, args.model_sigma_mm / 1000.0)
     if args.pos_out and "%" in args.pos_out:
         _pos_names(args.pos_out, [0])  # a malformed pattern is said before the video is read
