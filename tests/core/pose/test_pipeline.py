@@ -56,7 +56,9 @@ def test_refine_starts_adds_the_camera_calibrations_share_unless_the_start_is_a_
     out = refine_starts(views, [plain], model=model, camera=pb.camera, max_rms_px=2.0, camera_covs=[cam_cov])
     bare = refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_uv, edges_obj=pb.edges_obj, sigma_px=0.5)
     want = with_camera_uncertainty(bare, pb.camera, cam_cov, segs_uv=pb.segs_uv, edges_obj=pb.edges_obj)
-    assert set(out.result.cov_parts) == {"clicks", "camera calibration"} and np.allclose(out.result.cov, want.cov)
+    parts = out.result.cov_parts  # and the model's stated prior (issue 27)
+    assert set(parts) == {"clicks", "camera calibration", "model"}
+    assert np.allclose(out.result.cov, want.cov + parts["model"])
     prior = Start(pb.T_world_obj, "found pose 1", 0, PosePrior(pb.T_world_obj, np.eye(6) * 1e-4))
     out = refine_starts(views, [prior], model=model, camera=pb.camera, max_rms_px=2.0, camera_covs=[cam_cov])
     assert out.result.cov_parts == {}  # a prior measured through C holds the calibration's share already
