@@ -171,7 +171,8 @@ class TrackedFrame:
     n_inliers: int
     track_ms: float
     reason: str = ""
-    cov: np.ndarray | None = None  # (6, 6) of (δt [m], δr [rad]), world frame (``TrackDiagnostics.cov``); None when lost
+    # (6, 6) of (δt [m], δr [rad]), world frame (``TrackDiagnostics.cov``); None when lost
+    cov: np.ndarray | None = None
 
 
 def world_sigmas(cov: np.ndarray | None) -> np.ndarray:
