@@ -1,6 +1,6 @@
 """Does a tracked pose's stated σ cover its error? (issue 27.1)
 
-Run: .venv/bin/python bench/sigma_coverage.py [--draws 8] [--frames 40] [--model-sigma-mm 0.5]
+Run: .venv/bin/python bench/sigma_coverage.py [--draws 8] [--frames 40] [--model-sigma-mm 0.3]
      [--f-rel 0.003] [--c-px 1.0]
 
 Per sequence and per world axis (translation x, y, z; rotation error R_est · R_trueᵀ as a rotation vector
@@ -20,9 +20,11 @@ Sequences (true poses):
 
 * **rendered** (the tuning sequence): a 20 × 13 × 8 cm box on a smooth path at 0.8–1 m, rendered by the
   project's renderer (``app.vision.synthetic.render_poses``: 640×480, f = 600 px, blur σ = 0.5 px, noise
-  σ = 2 grey levels). mcit is given a camera and a model drawn from the stated priors about the truth
-  (fx, fy × (1 + f_rel·N(0, 1)), u0, v0 + c_px·N(0, 1); each box dimension + √2·σ_model·N(0, 1), as two
-  opposite edges each off by σ_model), a new draw for each of ``--draws`` runs over the same frames.
+  σ = 2 grey levels). mcit is given a camera file and a model that differ from the truth by a realistic
+  budget: fx, fy × (1 + ``--truth-f-rel``·N(0, 1)), u0, v0 + ``--truth-c-px``·N(0, 1) (a checkerboard
+  calibration's error, the camera prior's values by default), each box dimension + ``--truth-dims-mm``·N(0, 1)
+  (a box measured with a ruler, 0.5 mm); a new draw for each of ``--draws`` runs over the same frames. The
+  model prior (``--model-sigma-mm``) was tuned here.
 * **Castle-simu** (ViSP's ``visp-images-data``, ``/usr/share/visp-images-data/ViSP-images/mbt-depth/
   Castle-simu``: 40 rendered 640×480 frames, ``CameraPose/Camera_NNN.txt`` the true cMo, ``Models/
   chateau.cao``, the camera of ``Config/chateau.xml``), tracked from its first true pose until lost;
@@ -51,7 +53,7 @@ from app.vision.track import EdgeTracker  # noqa: E402
 from core.brep import BRep  # noqa: E402
 from core.camera import Camera  # noqa: E402
 from core.point_line_pose import point_line_residuals  # noqa: E402
-from core.pose.uncertainty import Priors, intrinsics_prior_cov  # noqa: E402
+from core.pose.uncertainty import MODEL_PRIOR_M, Priors, intrinsics_prior_cov  # noqa: E402
 from core.transforms import exp_so3, log_so3, make_T  # noqa: E402
 
 CASTLE = Path("/usr/share/visp-images-data/ViSP-images/mbt-depth/Castle-simu")
@@ -126,14 +128,17 @@ def rendered(args) -> None:
     rows = []
     for _ in range(args.draws):
         Kb = K.copy()
-        Kb[0, 0] *= 1 + args.f_rel * rng.standard_normal()
-        Kb[1, 1] *= 1 + args.f_rel * rng.standard_normal()
-        Kb[:2, 2] += args.c_px * rng.standard_normal(2)
+        Kb[0, 0] *= 1 + args.truth_f_rel * rng.standard_normal()
+        Kb[1, 1] *= 1 + args.truth_f_rel * rng.standard_normal()
+        Kb[:2, 2] += args.truth_c_px * rng.standard_normal(2)
         cam = Camera.from_intrinsics(Kb, np.eye(4), W, H)
-        model = BRep.box(*(dims + np.sqrt(2) * args.model_sigma_mm / 1e3 * rng.standard_normal(3)))
+        model = BRep.box(*(dims + args.truth_dims_mm / 1e3 * rng.standard_normal(3)))
         priors = Priors(intrinsics_prior_cov(cam, args.f_rel, args.c_px), args.model_sigma_mm / 1e3)
         rows += track_errors(cam, model, frames, truth, priors)
-    table("rendered box (tuning sequence)", rows, f", {args.draws} draws of camera and model from the priors")
+    what = f"f × (1 ± {args.truth_f_rel:g}), u0, v0 ± {args.truth_c_px:g} px; sides ± {args.truth_dims_mm:g} mm"
+    table(
+        "rendered box (tuning sequence)", rows, f", {args.draws} draws of camera file and model about the truth: {what}"
+    )
 
 
 def castle(args) -> None:
@@ -170,9 +175,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--draws", type=int, default=8)
     ap.add_argument("--frames", type=int, default=40)
-    ap.add_argument("--model-sigma-mm", type=float, default=0.5)
+    ap.add_argument("--model-sigma-mm", type=float, default=1000 * MODEL_PRIOR_M)
     ap.add_argument("--f-rel", type=float, default=0.003)
     ap.add_argument("--c-px", type=float, default=1.0)
+    ap.add_argument("--truth-f-rel", type=float, default=0.003)
+    ap.add_argument("--truth-c-px", type=float, default=1.0)
+    ap.add_argument("--truth-dims-mm", type=float, default=0.5)
     ap.add_argument("--only", choices=("rendered", "castle", "cube"))
     args = ap.parse_args()
     print(

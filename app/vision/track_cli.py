@@ -102,8 +102,8 @@ def add_track_parser(sub) -> None:
     p.add_argument(
         "--model-sigma-mm",
         type=sigma_mm,
-        default=0.5,
-        help="the model's stated uncertainty: σ of each model edge's position (mm, default 0.5), part of each "
+        default=None,
+        help="the model's stated uncertainty: σ of each model edge's position (mm, default 0.3), part of each "
         "frame's σ in --csv (docs/pose.md, 'What σ covers')",
     )
     p.add_argument(
@@ -298,7 +298,7 @@ def _cmd_track(args) -> int:
     f_pct, c_px = args.camera_sigma
     prior = intrinsics_prior_cov(camera, f_pct / 100.0, c_px) if f_pct > 0 or c_px > 0 else None
     camera_cov = prior if args.camera_cov is None else args.camera_cov
-    priors = Priors(camera_cov, args.model_sigma_mm / 1000.0)
+    priors = Priors(camera_cov) if args.model_sigma_mm is None else Priors(camera_cov, args.model_sigma_mm / 1000.0)
     if args.pos_out and "%" in args.pos_out:
         _pos_names(args.pos_out, [0])  # a malformed pattern is said before the video is read
     with progress_bar("frames", quiet=args.quiet) as progress:

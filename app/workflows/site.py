@@ -370,13 +370,19 @@ class Site:
         with self.lock:
             return self._camera_covs[name]
 
-    def pose_camera_cov(self, view: str | None = None) -> np.ndarray:
-        """The camera's share of a pose's σ (issue 27): its calibration's covariance (``camera_cov``), else the
-        stated prior of a camera file (``core.pose.uncertainty.intrinsics_prior_cov``)."""
+    def pose_camera_cov(self, view: str | None = None) -> np.ndarray | None:
+        """The camera's share of a pose's σ (issue 27): its calibration's covariance (``camera_cov``), else for a
+        camera read from an intrinsics file (``SceneView.from_file``: an own site's ViSP, OpenCV or ROS file) the
+        file's stated prior (``core.pose.uncertainty.intrinsics_prior_cov``), else None (a camera the scene
+        writes itself, as the simulated workcell's)."""
         from core.pose.uncertainty import intrinsics_prior_cov
 
         cov = self.camera_cov(view)
-        return intrinsics_prior_cov(self.camera_of(view)) if cov is None else cov
+        if cov is not None:
+            return cov
+        name = self.view_name(view)
+        spec = next((v for v in self.scene.views if v.name == name), None)
+        return intrinsics_prior_cov(self.camera_of(view)) if spec is not None and spec.from_file else None
 
     @property
     def robot_base_nominal(self) -> bool:

@@ -16,16 +16,18 @@ share plus, by first order, two stated priors (``Priors``):
   calibration), else a prior on the intrinsics a camera file states without one (ViSP ``.xml``, OpenCV
   or ROS ``.yml``): σ(fx)/fx = σ(fy)/fy = ``CAMERA_PRIOR_F_REL`` (0.3 %) and σ(u0) = σ(v0) =
   ``CAMERA_PRIOR_C_PX`` (1 px), independent (``intrinsics_prior_cov``, as a covariance of C's entries);
-* the model's: each model edge (and clicked model point) lies ``model_sigma_m`` (default
-  ``MODEL_PRIOR_M``, 0.5 mm) from where the model puts it, an independent 3D offset per edge: a model
-  measured with a ruler or a CAD file that the object does not follow exactly. An edge's samples move
-  together, so the share does not average away over an edge's hundreds of samples.
+* the model's: each model edge (and clicked model point) lies ``model_sigma_m`` (default ``MODEL_PRIOR_M``,
+  0.3 mm, tuned on bench/sigma_coverage.py's rendered box) from where the model puts it, an independent 3D
+  offset per edge: a model measured with a ruler or a CAD file that the object does not follow exactly.
+  An edge's samples move together, so the share does not average away over an edge's hundreds of samples.
 
-Both priors were tuned on one sequence (the rendered one of ``bench/sigma_coverage.py``) and checked on
-the others. ``first_order_share`` is the one propagation: a weighted least-squares solution moves with a
-parameter p by ``dθ = −A⁻¹ Jᵀ W ∂r/∂p`` (A = Jᵀ W J); its share is ``D Σ_p Dᵀ``. ``edge_covariance`` is the
-measurements' share for edges found on an image (the tracker's, the one-click search's): a noise of each
-sample plus an offset and a tilt shared by each edge's samples.
+The camera prior is a stated assumption (a checkerboard calibration's typical error); the model prior was
+tuned on one sequence (the rendered box of ``bench/sigma_coverage.py``, its sides measured to 0.5 mm) and
+checked on the others (docs/pose.md, "What σ covers"). ``first_order_share`` is the one propagation: a
+weighted least-squares solution moves with a parameter p by ``dθ = −A⁻¹ Jᵀ W ∂r/∂p`` (A = Jᵀ W J); its
+share is ``D Σ_p Dᵀ``. ``edge_covariance`` is the measurements' share for edges found on an image (the
+tracker's, the one-click search's): a noise of each sample plus an offset and a tilt shared by each edge's
+samples.
 """
 
 from __future__ import annotations
@@ -61,7 +63,7 @@ __all__ = [
 # The stated priors (module docstring; measured in bench/sigma_coverage.py, docs/pose.md).
 CAMERA_PRIOR_F_REL = 0.003  # σ of fx and fy, relative, for a camera file that states no covariance
 CAMERA_PRIOR_C_PX = 1.0  # σ of u0 and v0 (pixels), idem
-MODEL_PRIOR_M = 0.0005  # σ of each model edge's position (metres), unless the object says its own
+MODEL_PRIOR_M = 0.0003  # σ of each model edge's position (metres), unless the object says its own
 # An edge found on an image may sit a fraction of a pixel off along its whole length: ``edge_covariance``
 # counts each edge's offset as one error of at least this (pixels), straight and curved (measured for the
 # one-click search: app/vision/search.py).
@@ -187,7 +189,9 @@ def with_views_camera_uncertainty(
                 moved.append(refine_views(vs, T0, loss=result.loss, huber_px=huber_px).T_world_obj)
             dq = 0.5 * (pose_delta(moved[0], T0) - pose_delta(moved[1], T0))
             share += np.outer(dq, dq)
-    parts = {"clicks": result.cov, "camera calibration": share}
+    parts = {"clicks": result.cov}
+    if any(c is not None for c in camera_covs):
+        parts["camera calibration"] = share
     if model is not None:
         parts["model"] = model
     return replace(result, cov=result.cov + share + (0.0 if model is None else model), cov_parts=parts)
