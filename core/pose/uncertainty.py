@@ -53,6 +53,7 @@ __all__ = [
     "MODEL_PRIOR_M",
     "intrinsics_prior_cov",
     "first_order_share",
+    "first_order_moves",
     "grouped_share",
     "edge_covariance",
     "clicks_model_share",
@@ -102,13 +103,20 @@ def first_order_share(
     (Jacobian J (m, k), weights w (m,)): ``D cov_p Dᵀ`` with D = −A⁻¹ Jᵀ W ∂r/∂p, ∂r/∂p by central
     differences of ``residual_of(δp)`` (the residuals (m,) at the solution with p moved by δp) along the
     principal axes of ``cov_p``."""
+    _, moves = first_order_moves(J, w, residual_of, cov_p)
+    return moves.T @ moves
+
+
+def first_order_moves(
+    J: np.ndarray, w: np.ndarray, residual_of: Callable[[np.ndarray], np.ndarray], cov_p: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``first_order_share``'s pieces: the ±1σ steps of p along the principal axes of ``cov_p`` (K, n) and the
+    solution's move for each (K, k), for a caller that needs the joint covariance of the solution and p."""
     A = (J * w[:, None]).T @ J
     Ai = np.linalg.pinv(A)
-    share = np.zeros((J.shape[1], J.shape[1]))
-    for d in principal_steps(cov_p):
-        dq = -Ai @ (J * w[:, None]).T @ (0.5 * (residual_of(d) - residual_of(-d)))
-        share += np.outer(dq, dq)
-    return share
+    steps = principal_steps(cov_p)
+    moves = np.array([-Ai @ (J * w[:, None]).T @ (0.5 * (residual_of(d) - residual_of(-d))) for d in steps])
+    return steps, moves.reshape(len(steps), J.shape[1])
 
 
 def grouped_share(
