@@ -56,7 +56,6 @@ import cv2
 import numpy as np
 
 from core.brep import BRep
-from core.calibration import perturbed_camera
 from core.camera import Camera
 from core.point_line_pose import PointLineFit, point_line_residuals, refine_point_to_line
 from core.pose.uncertainty import (
@@ -780,14 +779,17 @@ def pose_covariance(
         groups = feature_groups(s)
         curved = np.zeros(len(s), bool) if s.chord is None else s.chord >= 0
         floor = np.where(curved, CURVED_EDGE_BIAS_PX, EDGE_BIAS_PX)
-        cov = edge_covariance(J, r, w, groups, floor, 6, camera.project_obj(T, s.X_obj), n)
-
-        def r_of(cam: Camera, X: np.ndarray) -> np.ndarray:
-            return point_line_residuals(cam, T, X, s.D_obj, m)[0]
-
-        cov = cov + grouped_share(J, w, lambda d: r_of(camera, s.X_obj + d), groups, priors.model_sigma_m)
+        uv = camera.project_obj(T, s.X_obj)
+        cov = edge_covariance(J, r, w, groups, floor, 6, uv, n)
+        # The residuals' first-order moves, written out (the tracker runs this every frame): a model point moved
+        # by d (world axes) moves r by J[:, :3] d (r = n·(m − π(X)), ∂r/∂δt = −n·∂π/∂X); C moved by δC moves it
+        # by −n·∂π/∂C δC, with ∂u/∂C₀ = X̃/h₂, ∂u/∂C₂ = −u X̃/h₂ (v likewise).
+        cov = cov + grouped_share(J, w, lambda d: J[:, :3] @ d, groups, priors.model_sigma_m)
         if priors.camera_cov is not None:
-            cov = cov + first_order_share(J, w, lambda d: r_of(perturbed_camera(camera, d), s.X_obj), priors.camera_cov)
+            Xh = np.column_stack([s.X_obj @ T[:3, :3].T + T[:3, 3], np.ones(len(s))])
+            h2 = Xh @ camera.C[2]
+            dC = -np.hstack([n[:, :1] * Xh, n[:, 1:] * Xh, -(n * uv).sum(axis=1, keepdims=True) * Xh]) / h2[:, None]
+            cov = cov + first_order_share(J, w, lambda d: dC @ d, priors.camera_cov)
     except ValueError:  # a sample behind the camera or an edge seen end-on at a moved camera
         return None
     return 0.5 * (cov + cov.T)
