@@ -136,6 +136,7 @@ def _setup(args):
     lens = None
     source = args.source
     args.camera_cov = None
+    args.body_model_sigma_m = None  # a site object's stored model prior (mcit db import --model-sigma-mm)
     if args.camera_name and not args.intrinsics:
         raise UsageError("--camera-name chooses a camera in the --intrinsics file; give --intrinsics FILE")
     if args.body and not args.scene:
@@ -158,7 +159,7 @@ def _setup(args):
                     args.camera_cov = np.asarray(cal.data["cov"], float)
         if args.body:
             try:
-                body_model, T = _body(scene, site, args.body)
+                body_model, T, args.body_model_sigma_m = _body(scene, site, args.body)
             except KeyError as exc:  # an operator's typo: one line, not an internal error
                 raise ValueError(f"--body: {exc.args[0]}") from None
             model = model or body_model
@@ -210,11 +211,11 @@ def _site_folder(path):
 
 
 def _body(scene, site, name: str):
-    """(model, T_world_obj) of ``name``: the scene's body, else the site folder's database object; KeyError
-    saying where it looked."""
+    """(model, T_world_obj, the model's stated σ in metres or None for the default) of ``name``: the scene's body,
+    else the site folder's database object; KeyError saying where it looked."""
     try:
         body = scene.body(name)
-        return body.model, body.T_world_obj
+        return body.model, body.T_world_obj, None
     except KeyError:
         pass
     if site is not None and site.db_path.is_file():
@@ -226,7 +227,7 @@ def _body(scene, site, name: str):
             except NotFoundError:
                 rec = None
             if rec is not None:
-                return rec.model, rec.T_world_obj
+                return rec.model, rec.T_world_obj, rec.model_sigma_m
             names = [o.name for o in db.objects()]
         raise KeyError(
             f"site {site.root.name} has no object named {name!r} (its database's: {', '.join(names) or 'none'}); "
@@ -298,7 +299,8 @@ def _cmd_track(args) -> int:
     f_pct, c_px = args.camera_sigma
     prior = intrinsics_prior_cov(camera, f_pct / 100.0, c_px) if f_pct > 0 or c_px > 0 else None
     camera_cov = prior if args.camera_cov is None else args.camera_cov
-    priors = Priors(camera_cov) if args.model_sigma_mm is None else Priors(camera_cov, args.model_sigma_mm / 1000.0)
+    model_sigma_m = args.body_model_sigma_m if args.model_sigma_mm is None else args.model_sigma_mm / 1000.0
+    priors = Priors(camera_cov) if model_sigma_m is None else Priors(camera_cov, model_sigma_m)
     if args.pos_out and "%" in args.pos_out:
         _pos_names(args.pos_out, [0])  # a malformed pattern is said before the video is read
     with progress_bar("frames", quiet=args.quiet) as progress:

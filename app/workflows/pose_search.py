@@ -155,7 +155,12 @@ class OneClickSearch:
             table = None
         cam = site.camera_of(view)
         return dict(
-            camera=cam, model=obj.model, T_db=obj.T_world_obj, table=table, camera_cov=site.pose_camera_cov(view)
+            camera=cam,
+            model=obj.model,
+            T_db=obj.T_world_obj,
+            table=table,
+            camera_cov=site.pose_camera_cov(view),
+            model_sigma_m=obj.model_sigma_m,
         )
 
     def run(self, job: dict, p: np.ndarray, frames, cancel):
@@ -187,6 +192,7 @@ class OneClickSearch:
                 cancel=cancel,
                 progress=progress,
                 camera_cov=job["camera_cov"],
+                model_sigma_m=job["model_sigma_m"],
             )
         except Cancelled:
             raise WorkflowError("Find cancelled: nothing was written") from None

@@ -52,6 +52,13 @@ class SiteObject:
     dimensions: dict = field(default_factory=dict)
     sigmas: dict = field(default_factory=dict)
 
+    @property
+    def model_sigma_m(self) -> float:
+        """σ of each model edge's position (metres), part of every pose's σ (``ObjectRecord.model_sigma_m``)."""
+        from core.pose.uncertainty import model_sigma_of
+
+        return model_sigma_of(self.sigmas)
+
     def vertices_world(self) -> np.ndarray:
         """Model vertices in the world, (V, 3)."""
         V = self.model.vertices

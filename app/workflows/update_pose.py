@@ -278,6 +278,7 @@ class UpdatePose(Workflow):
             generation = self.estimates.generation
             fit = dict(model=self.obj.model, camera=self.camera, max_rms_px=3 * self.sigma_px, loss=self.loss)
             fit.update(camera_covs=[self.site.pose_camera_cov(v) for v in self.clicks.fitted_views()])  # as ``clicks``
+            fit.update(model_sigma_m=self.obj.model_sigma_m)
         out = refine_starts(clicks, starts, **fit)
         if out.result is None:
             raise WorkflowError(show.no_plausible(starts, out.failures))

@@ -57,6 +57,7 @@ __all__ = [
     "grouped_share",
     "edge_covariance",
     "clicks_model_share",
+    "model_sigma_of",
     "EDGE_BIAS_PX",
     "CURVED_EDGE_BIAS_PX",
 ]
@@ -69,6 +70,12 @@ MODEL_PRIOR_M = 0.0003  # σ of each model edge's position (metres), unless the 
 # counts each edge's offset as one error of at least this (pixels), straight and curved (measured for the
 # one-click search: app/vision/search.py).
 EDGE_BIAS_PX, CURVED_EDGE_BIAS_PX = 0.1, 0.2
+
+
+def model_sigma_of(sigmas) -> float:
+    """An object's model prior (metres) from its stored σs (a mapping name → metres): ``sigmas["model"]`` where
+    the operator said it (``mcit db import --model-sigma-mm``), else ``MODEL_PRIOR_M``."""
+    return float(sigmas.get("model", MODEL_PRIOR_M)) if sigmas else MODEL_PRIOR_M
 
 
 @dataclass(frozen=True)

@@ -110,3 +110,17 @@ def test_the_trackers_prior_shares_match_a_monte_carlo_of_its_fit(rendered):
     observed = np.array([np.sqrt(d[:, :3].var(axis=0).sum()), np.sqrt(d[:, 3:].var(axis=0).sum())])
     predicted = np.sqrt([np.trace(share[:3, :3]), np.trace(share[3:, 3:])])
     assert observed == pytest.approx(predicted, rel=0.2)
+
+
+def test_a_models_stated_sigma_is_kept_with_the_object(rendered, tmp_path):
+    """``mcit db import --model-sigma-mm`` stores the model's prior with the object (``sigmas["model"]``); an
+    object imported without it has the default prior."""
+    from app.db import Database
+    from core.pose.uncertainty import MODEL_PRIOR_M
+
+    cao, db = str(rendered[0] / "box.cao"), str(tmp_path / "site.db")
+    assert main(["db", "import", cao, "--db", db, "--name", "ruler", "--model-sigma-mm", "0.8"]) == 0
+    assert main(["db", "import", cao, "--db", db, "--name", "plain"]) == 0
+    with Database.open(db, readonly=True) as d:
+        assert d.get("ruler").model_sigma_m == pytest.approx(0.0008)
+        assert d.get("plain").model_sigma_m == MODEL_PRIOR_M
