@@ -210,7 +210,7 @@ def track_sequence(
     csv_out : write one row per frame (index, confidence, lost, rms_px, samples, inliers, ms,
         tx ty tz θux θuy θuz of T_world_obj, then its σ: sx_m sy_m sz_m srx_rad sry_rad srz_rad, ``world_sigmas``).
     priors : the camera's and the model's priors joining each frame's σ (``EdgeTracker.priors``; default: the
-        camera file's prior and the default model prior).
+        default model prior alone; ``mcit track`` gives the camera file's prior too).
     stop_when_lost : stop at the first lost frame (the operator must give the pose again).
     lens : app.undistort.LensDistortion or None: undistort each frame first (once, with precomputed
         maps); camera's C holds in the undistorted frames, which the overlay video shows.

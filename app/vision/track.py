@@ -65,7 +65,6 @@ from core.pose.uncertainty import (
     edge_covariance,
     first_order_share,
     grouped_share,
-    intrinsics_prior_cov,
 )
 from core.transforms import check_T, pose_error
 
@@ -451,20 +450,11 @@ class EdgeTracker:
         Bands not wider than ``search_px`` are left out; ``()`` turns it off.
     """
 
-    # The camera's and the model's priors that join each frame's σ (``pose_covariance``, issue 27): set
-    # ``priors`` (a ``core.pose.uncertainty.Priors``); by default the camera file's prior
-    # (``intrinsics_prior_cov``) and the default model prior.
-    _priors: Priors | None = None
-
-    @property
-    def priors(self) -> Priors:
-        if self._priors is None:
-            self._priors = Priors(intrinsics_prior_cov(self.camera))
-        return self._priors
-
-    @priors.setter
-    def priors(self, value: Priors) -> None:
-        self._priors = value
+    # The camera's and the model's priors that join each frame's σ (``pose_covariance``, issue 27): by default
+    # the default model prior and no camera share; set ``priors`` (a ``core.pose.uncertainty.Priors``) with a
+    # calibration's covariance or a camera file's prior (``intrinsics_prior_cov``), as mcit track and the Track
+    # workflow do.
+    priors: Priors = Priors()
 
     def __init__(
         self,
