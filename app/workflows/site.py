@@ -377,6 +377,11 @@ class Site:
         with self.lock:
             return self._camera_covs[name]
 
+    def pose_priors(self, views, obj: SiteObject) -> dict:
+        """``core.pose.pipeline.refine_starts``' priors for a pose of ``obj`` fitted in ``views`` (issue 27): each
+        view's camera covariance (``pose_camera_cov``) and the object's model prior."""
+        return dict(camera_covs=[self.pose_camera_cov(v) for v in views], model_sigma_m=obj.model_sigma_m)
+
     def pose_camera_cov(self, view: str | None = None) -> np.ndarray | None:
         """The camera's share of a pose's σ (issue 27): its calibration's covariance (``camera_cov``), else for a
         camera read from an intrinsics file (``SceneView.from_file``: an own site's ViSP, OpenCV or ROS file) the
