@@ -289,7 +289,7 @@ def main() -> None:
     ap.add_argument("--only", choices=("rendered", "clicks", "oneclick", "castle", "cube"))
     args = ap.parse_args()
     print(
-        f"σ coverage of tracked poses; priors: camera σ(f)/f = {args.f_rel:g}, σ(u0, v0) = {args.c_px:g} px; "
+        f"σ coverage of poses; priors: camera σ(f)/f = {args.f_rel:g}, σ(u0, v0) = {args.c_px:g} px; "
         f"model {args.model_sigma_mm:g} mm per edge. Target: 90–98 % within 2σ, none beyond 5σ."
     )
     for name, fn in (
