@@ -47,7 +47,17 @@ def _ros(path):
     )
 
 
-@pytest.mark.parametrize(("writer", "name"), [(_visp, "cam.xml"), (_opencv, "cam.yml"), (_ros, "ost.yaml")])
+def _ros_echo(path):
+    """A ``CameraInfo`` message as ``ros2 topic echo`` prints it (flat k)."""
+    path.write_text(
+        "header:\n  frame_id: cam\nheight: 480\nwidth: 640\ndistortion_model: plumb_bob\nd: [0.0, 0.0, 0.0, 0.0, 0.0]\n"
+        f"k: [{FX}, 0.0, {U0}, 0.0, {FY}, {V0}, 0.0, 0.0, 1.0]\n---\n"
+    )
+
+
+@pytest.mark.parametrize(
+    ("writer", "name"), [(_visp, "cam.xml"), (_opencv, "cam.yml"), (_ros, "ost.yaml"), (_ros_echo, "info.yaml")]
+)
 def test_every_camera_format_keeps_the_principal_point_where_the_file_puts_it(tmp_path, writer, name):
     """The optical axis projects to exactly (u0, v0) of the file: no half-pixel shift on reading."""
     path = tmp_path / name
