@@ -222,8 +222,7 @@ def track_sequence(
     list of TrackedFrame, one per frame tracked.
     """
     tracker = EdgeTracker(camera, model, T_world_obj, **tracker_kwargs)
-    if priors is not None:
-        tracker.priors = priors
+    tracker.priors = Priors() if priors is None else priors
     writer = None
     out: list[TrackedFrame] = []
     total = frame_count(source, start, count) if progress is not None else None

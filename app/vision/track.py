@@ -133,8 +133,8 @@ class TrackDiagnostics:
     final pose. n_samples, n_found, n_inliers : counts. reason : why the tracker is lost ("" if not).
     cov : array, shape (6, 6), covariance of the pose's (δt [m], δr [rad]) at the last pose step: the
     edges' errors, the camera's and the model's priors (``pose_covariance``), or None when there was
-    none. edge_distance_px : the support check's mean distance of the samples to the nearest image edge
-    at the final pose (NaN when not reached).
+    none or the tracker was given no ``priors``. edge_distance_px : the support check's mean distance of the
+    samples to the nearest image edge at the final pose (NaN when not reached).
     """
 
     samples: EdgeSamples
@@ -450,11 +450,11 @@ class EdgeTracker:
         Bands not wider than ``search_px`` are left out; ``()`` turns it off.
     """
 
-    # The camera's and the model's priors that join each frame's σ (``pose_covariance``, issue 27): by default
-    # the default model prior and no camera share; set ``priors`` (a ``core.pose.uncertainty.Priors``) with a
-    # calibration's covariance or a camera file's prior (``intrinsics_prior_cov``), as mcit track and the Track
-    # workflow do.
-    priors: Priors = Priors()
+    # The camera's and the model's priors that join each frame's σ (``pose_covariance``, issue 27): a
+    # ``core.pose.uncertainty.Priors`` (a calibration's covariance or a camera file's prior, the model's σ), as
+    # mcit track and the Track workflow set it; None (the default: auto match and the one-click search settle
+    # poses with the tracker and use no σ of it) computes none, ``diagnostics.cov`` is then None.
+    priors: Priors | None = None
 
     def __init__(
         self,
@@ -724,7 +724,9 @@ class EdgeTracker:
         n_inl = int(inl.sum())
         rms = p.fit.rms_px if p.fit is not None else float("nan")
         matched = np.where(p.found[:, None], p.matched, np.nan)
-        cov = None if p.fit is None else pose_covariance(self.camera, T, p.samples, matched, p.weights, self.priors)
+        cov = None
+        if p.fit is not None and self.priors is not None:
+            cov = pose_covariance(self.camera, T, p.samples, matched, p.weights, self.priors)
         self.diagnostics = TrackDiagnostics(
             p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason, cov, edge_px
         )
