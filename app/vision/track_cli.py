@@ -36,6 +36,7 @@ def add_track_parser(sub) -> None:
     from app.argtypes import frame_rate, number, pixel_uv
 
     sigma_mm = number(float, lambda v: 0.0 <= v <= 1000.0, kind="millimetres (a number)", expected="0 to 1000 mm")
+    lens_sigma = number(float, lambda v: 0.0 <= v <= 100.0, kind="a number", expected="0 to 100 (percent, pixels)")
 
     p = sub.add_parser(
         "track",
@@ -109,7 +110,7 @@ def add_track_parser(sub) -> None:
     p.add_argument(
         "--camera-sigma",
         nargs=2,
-        type=sigma_mm,
+        type=lens_sigma,
         metavar=("F_PCT", "C_PX"),
         default=(0.3, 1.0),
         help="the stated uncertainty of a camera file without a calibration's covariance: σ of fx, fy in percent "
