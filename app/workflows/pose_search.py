@@ -79,6 +79,7 @@ class OneClickSearch:
         self.moving = ""  # said when the object was moving in the frame the pose was found in
         self.progress: float | None = None  # a search under way: 0..1 (the workflow's progress bar), else None
         self.progress_text = ""
+        self.shared = "camera calibration"  # what the found poses' shared σ holds ("model" without a camera share)
 
     def clear(self, clicks=None) -> None:
         """The found poses go, and the click they came from (pending in ``clicks``, if given)."""
@@ -180,6 +181,7 @@ class OneClickSearch:
         # under way from now: the step refuses clicks (one made before the first progress report had become an
         # edge's point, and the found poses could then not be accepted: a new operator's second double click)
         self.progress, self.progress_text = 0.0, "searching"
+        self.shared = "model" if job["camera_cov"] is None else "camera calibration"
         try:
             return search_pose(
                 job["camera"],
@@ -287,7 +289,7 @@ class OneClickSearch:
         c = self.found[chosen]
         if c.cov is None:
             return None
-        prior = PosePrior(c.T_world_obj, c.cov, shared_cov=c.cov_camera, name="found pose")
+        prior = PosePrior(c.T_world_obj, c.cov, shared_cov=c.cov_camera, name="found pose", shared_name=self.shared)
         return Start(c.T_world_obj, f"found pose {chosen + 1}", chosen, prior)
 
     def record(self, chosen: int, frame: dict | None) -> dict[str, Any]:
