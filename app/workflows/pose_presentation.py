@@ -590,7 +590,7 @@ def refine_message(wf, result, start, failures, unseen: str, views: list[str]) -
         return (
             f"{start.label} refined with {used}: RMS {result.rms_px:.2f} px, moved {deg:.2f}° and "
             f"{1000 * m:.1f} mm from the found pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
-            + (" (camera calibration included)" if result.cov_parts else "")
+            + (" (camera calibration included)" if "camera calibration" in result.cov_parts else "")
         )
     note = ""
     if failures and start.index is not None and start.index >= 0:
@@ -603,7 +603,7 @@ def refine_message(wf, result, start, failures, unseen: str, views: list[str]) -
     return (
         f"{note}RMS {result.rms_px:.2f} px over {used}; moved {deg:.2f}° and "
         f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
-        + (" (camera calibration included)" if result.cov_parts else "")
+        + (" (camera calibration included)" if "camera calibration" in result.cov_parts else "")
         + (f". ⚠ {unseen}" if unseen else "")
     )
 

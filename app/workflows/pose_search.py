@@ -79,6 +79,7 @@ class OneClickSearch:
         self.moving = ""  # said when the object was moving in the frame the pose was found in
         self.progress: float | None = None  # a search under way: 0..1 (the workflow's progress bar), else None
         self.progress_text = ""
+        self.shared = "camera calibration"  # what the found poses' shared σ holds ("model" without a camera share)
 
     def clear(self, clicks=None) -> None:
         """The found poses go, and the click they came from (pending in ``clicks``, if given)."""
@@ -154,7 +155,14 @@ class OneClickSearch:
         if table is not None and not rests_on(obj.model, obj.T_world_obj, table):
             table = None
         cam = site.camera_of(view)
-        return dict(camera=cam, model=obj.model, T_db=obj.T_world_obj, table=table, camera_cov=site.camera_cov(view))
+        return dict(
+            camera=cam,
+            model=obj.model,
+            T_db=obj.T_world_obj,
+            table=table,
+            camera_cov=site.pose_camera_cov(view),
+            model_sigma_m=obj.model_sigma_m,
+        )
 
     def run(self, job: dict, p: np.ndarray, frames, cancel):
         """``app.vision.search.search_pose`` from pixel p on the workflow's frame (``frames``: its
@@ -173,6 +181,7 @@ class OneClickSearch:
         # under way from now: the step refuses clicks (one made before the first progress report had become an
         # edge's point, and the found poses could then not be accepted: a new operator's second double click)
         self.progress, self.progress_text = 0.0, "searching"
+        self.shared = "model" if job["camera_cov"] is None else "camera calibration"
         try:
             return search_pose(
                 job["camera"],
@@ -185,6 +194,7 @@ class OneClickSearch:
                 cancel=cancel,
                 progress=progress,
                 camera_cov=job["camera_cov"],
+                model_sigma_m=job["model_sigma_m"],
             )
         except Cancelled:
             raise WorkflowError("Find cancelled: nothing was written") from None
@@ -290,7 +300,7 @@ class OneClickSearch:
         c = self.found[chosen]
         if c.cov is None:
             return None
-        prior = PosePrior(c.T_world_obj, c.cov, shared_cov=c.cov_camera, name="found pose")
+        prior = PosePrior(c.T_world_obj, c.cov, shared_cov=c.cov_camera, name="found pose", shared_name=self.shared)
         return Start(c.T_world_obj, f"found pose {chosen + 1}", chosen, prior)
 
     def record(self, chosen: int, frame: dict | None) -> dict[str, Any]:
