@@ -30,6 +30,8 @@ __all__ = [
     "TurretCalibration",
     "calibrate_turret",
     "calibrate_turret_planes",
+    "turret_plane_rows",
+    "next_turret_point",
     "kabsch",
 ]
 
@@ -391,6 +393,54 @@ def calibrate_turret_planes(
     return TurretCalibration(
         T, cov, float(np.sqrt(np.mean(dist**2))), dist[:, None] * N, float(np.sqrt(np.mean(dist0**2)))
     )
+
+
+def turret_plane_rows(
+    T_world_turret: np.ndarray,
+    pan_rad: np.ndarray,
+    tilt_rad: np.ndarray,
+    range_m: np.ndarray,
+    n_world: np.ndarray,
+    spec: RangeFinderSpec = RangeFinderSpec(),
+) -> np.ndarray:
+    """The whitened rows (N, 6) of ``calibrate_turret_planes``' Jacobian at ``T_world_turret``: row i is
+    d(nᵢ·Xᵢ + dᵢ)/dδ / σᵢ for the pose ``T · exp(δ)``, δ = (rotation vector, translation) in the turret
+    frame. Their Gram matrix RᵀR is the pose's information: its inverse is the covariance the solve would
+    state for beams (pan, tilt, range) landing on planes of normals ``n_world`` (N, 3) — known before
+    the beams are measured, so where to aim next can be chosen (``next_turret_point``)."""
+    pan, tilt, rho = (np.asarray(a, dtype=float).reshape(-1) for a in (pan_rad, tilt_rad, range_m))
+    N = np.asarray(n_world, dtype=float).reshape(-1, 3)
+    T = check_T(T_world_turret, "T_world_turret")
+    X_turret = rho[:, None] * beam_direction(pan, tilt)
+    n_t = N @ T[:3, :3]  # the normals in the turret frame
+    cov_t = beam_point_cov(np.eye(4), pan, tilt, rho, spec)
+    sig = np.sqrt(np.einsum("ni,nij,nj->n", n_t, cov_t, n_t))
+    # X = R (exp(ω) Xt + v) + t: d(n·X)/dω = n_t·(ω × Xt) = ω·(Xt × n_t), d(n·X)/dv = n_t
+    return np.hstack([np.cross(X_turret, n_t), n_t]) / sig[:, None]
+
+
+def next_turret_point(
+    rows_done: np.ndarray, rows_candidates: np.ndarray, scale: np.ndarray, prior_sd: np.ndarray
+) -> tuple[int, np.ndarray]:
+    """Which candidate beam, added to those done, leaves the turret pose's worst scaled σ smallest.
+
+    rows_done (K, 6), rows_candidates (M ≥ 1, 6): ``turret_plane_rows``. scale (6,): each parameter's σ is
+    divided by it before the worst is taken (e.g. 0.5° for the rotations, 5 mm for the translations, so
+    both count). prior_sd (6,): a weak prior on the pose (the current calibration's spread) that keeps the
+    information invertible before six independent beams are in. Returns the candidate's index and the σ
+    (6,) of the pose with it (rad, m)."""
+    done = np.asarray(rows_done, float).reshape(-1, 6)
+    cand = np.asarray(rows_candidates, float).reshape(-1, 6)
+    if not len(cand):
+        raise ValueError("no candidate point to choose from")
+    info = done.T @ done + np.diag(1.0 / np.asarray(prior_sd, float) ** 2)
+    C = np.linalg.inv(info)
+    U = cand @ C  # (M, 6): C jᵢ (C symmetric)
+    denom = 1.0 + np.einsum("mi,mi->m", U, cand)
+    var = np.diag(C)[None, :] - U**2 / denom[:, None]  # Sherman–Morrison: diag of (info + jjᵀ)⁻¹
+    worst = np.sqrt(np.maximum(var, 0.0)) / np.asarray(scale, float)[None, :]
+    k = int(np.argmin(worst.max(axis=1)))
+    return k, np.sqrt(np.maximum(var[k], 0.0))
 
 
 # ---------------------------------------------------------------------- moving a calibration through its σ

@@ -18,17 +18,23 @@ from typing import Any
 
 import numpy as np
 
-from core.calibration import calibrate_turret_planes
-from core.rangefinder import aim, beam_point
+from core.calibration import calibrate_turret_planes, next_turret_point, turret_plane_rows
+from core.rangefinder import aim, beam_point, beam_ray
 from core.transforms import pose_error
 
 from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel, sigma_over
+from .beams import BeamCheck, check_beams, disagreement_text
 
 __all__ = ["CalibrateTurret"]
 
 PICK_RADIUS_PX = 25.0
 OFF_SURFACE_M = 0.05
 POORLY_DEG, POORLY_M = 0.5, 0.01  # σ beyond which the operator is told to measure more
+TARGET_DEG, TARGET_M = 0.2, 0.005  # the σ the suggested points work towards (each axis)
+EDGE_MARGIN_M = 0.05  # suggested points keep this far inside a face's edges (a thinner face: its middle line,
+# offered once the beams' own solve aims the turret: the calibration in use may be centimetres off)
+GRID = 5  # suggested points: a GRID × GRID grid over each face seen by the camera and the turret
+PRIOR_SD = np.array([np.radians(10.0)] * 3 + [0.5] * 3)  # keeps the information invertible before 6 beams
 
 
 class CalibrateTurret(Workflow):
@@ -77,11 +83,140 @@ class CalibrateTurret(Workflow):
         self.range_m: list[float] = []
         self.targets: list[np.ndarray] = []
         self.labels: list[str] = []
+        self.aimed: list[bytes] = []  # the pose each measurement was aimed with (T.tobytes())
         self.result = None
         self.solve_text = ""  # what the last Solve said (the review step repeats it)
         self.progress: float | None = None
         self.progress_text = ""  # "point k · aiming" / "point k · measuring n shots" while measuring
         self.state = "pick"
+        self.moved_text = ""  # what the last Solve left out as disagreeing with the database
+        self.suggestion: tuple[np.ndarray, str] | None = None  # the point to measure next, and its name
+        self.sigma_now: tuple[float, float] | None = None  # σ (°, m) the beams so far give (predicted)
+        self.sigma_next: tuple[float, float] | None = None  # ... and with the suggestion measured too
+        self._cand_cache: tuple | None = None
+        self.T_aim: np.ndarray | None = None  # the pose the turret aims with: the beams' own solve once they fix it
+        self._suggest()
+
+    # ------------------------------------------------------------------ suggesting where to aim
+    def _aim_candidates(self) -> tuple[np.ndarray, np.ndarray, list[str]]:
+        """Points to suggest: a grid over each face of a known object that both the camera and the turret
+        face, kept EDGE_MARGIN_M inside its edges, inside the image, and seen by both (the first surface
+        on the camera's ray and on the turret's beam at the current calibration). X (M, 3), the faces'
+        normals (M, 3), names. Cached until the objects or the calibration change."""
+        objects = self.site.objects()
+        T = self._aim_pose()
+        key = (tuple((o.name, o.version) for o in objects), T.tobytes(), self.view)
+        if self._cand_cache is not None and self._cand_cache[0] == key:
+            return self._cand_cache[1]
+        cam = self.camera
+        X, N, names = [], [], []
+        for obj in objects:
+            for x, n, k in _face_grid(obj, cam.center, T[:3, 3], thin=self.T_aim is not None):
+                uv = cam.project(x.reshape(1, 3))[0]
+                if (
+                    not (4 <= uv[0] <= cam.width - 5 and 4 <= uv[1] <= cam.height - 5)
+                    or cam.depth(x.reshape(1, 3))[0] <= 0
+                ):
+                    continue
+                if all(_first_is(self.site, o, x, obj.name) for o in (cam.center, T[:3, 3])):
+                    X.append(x)
+                    N.append(n)
+                    names.append(f"{obj.name} face {k}")
+        out = (np.array(X).reshape(-1, 3), np.array(N).reshape(-1, 3), names)
+        self._cand_cache = (key, out)
+        return out
+
+    def _suggest(self) -> None:
+        """Choose the point to measure next: of the candidates not measured yet, the one that leaves the
+        turret pose's worst σ smallest (rotations counted in TARGET_DEG, translations in TARGET_M), from
+        the beams measured so far (``core.calibration.next_turret_point``). Sets ``suggestion``,
+        ``sigma_now`` and ``sigma_next``."""
+        self.suggestion = self.sigma_now = self.sigma_next = None
+        if not self.site.has_turret or not self.site.objects():
+            return
+        self.T_aim = self._provisional_pose()
+        X, N, names = self._aim_candidates()
+        spec, T = self.site.scene.rangefinder, self._aim_pose()
+        done = np.zeros((0, 6))
+        landed = np.zeros(len(self.pan), bool)
+        if self.pan:
+            pan, tilt, rho = np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
+            mesh, _ = self.site.surfaces()
+            if mesh is not None:
+                _, dist, tri = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
+                landed = dist <= OFF_SURFACE_M  # a beam that missed every known surface tells nothing
+                done = turret_plane_rows(
+                    T, pan[landed], tilt[landed], rho[landed], mesh.face_normals[tri[landed]], spec
+                )
+        if len(self.targets) and len(X):
+            # a point measured twice is not offered again; nor the face of a beam that missed it while the
+            # turret aims the same way (once more beams move the aiming pose, it is offered again)
+            tg = np.array(self.targets)
+            times = (np.linalg.norm(X[:, None, :] - tg[None, landed, :], axis=2) < 0.01).sum(axis=1)
+            missed = {self.labels[i] for i in np.flatnonzero(~landed) if self.aimed[i] == T.tobytes()}
+            keep = (times < 2) & np.array([f"a suggested point on {nm}" not in missed for nm in names], bool)
+            X, N, names = X[keep], N[keep], [nm for nm, f in zip(names, keep) if f]
+        info = done.T @ done + np.diag(1.0 / PRIOR_SD**2)
+        sd = np.sqrt(np.diag(np.linalg.inv(info)))
+        self.sigma_now = (float(np.degrees(sd[:3].max())), float(sd[3:].max()))
+        if not len(X):
+            return
+        pan_c, tilt_c, rho_c = aim(T, X)
+        k, sd_k = next_turret_point(
+            done,
+            turret_plane_rows(T, pan_c, tilt_c, rho_c, N, spec),
+            np.array([np.radians(TARGET_DEG)] * 3 + [TARGET_M] * 3),
+            PRIOR_SD,
+        )
+        self.suggestion = (X[k].copy(), f"a suggested point on {names[k]}")
+        self.sigma_next = (float(np.degrees(sd_k[:3].max())), float(sd_k[3:].max()))
+
+    def _aim_pose(self) -> np.ndarray:
+        """The turret pose to aim with: the measured beams' own solve once they fix the pose, else the
+        calibration in use (a calibration centimetres off misses a thin face such as the table's edge;
+        where a beam lands does not matter to the solve, which uses the angles the turret reached)."""
+        return self.T_aim if self.T_aim is not None else self.site.T_world_turret
+
+    def _provisional_pose(self) -> np.ndarray | None:
+        """The pose the beams measured so far give (``_fit`` of those within OFF_SURFACE_M of a known
+        surface at the calibration in use), None while they do not fix it."""
+        if len(self.pan) < 6:
+            return None
+        mesh, _ = self.site.surfaces()
+        if mesh is None:
+            return None
+        pan, tilt, rho = np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
+        T = self.site.T_world_turret
+        _, dist, _ = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
+        used = dist <= OFF_SURFACE_M
+        if used.sum() < 6:
+            return None
+        try:
+            cal, T = self._fit(mesh, pan, tilt, rho, used, T, "", 5)
+        except WorkflowError:
+            return None
+        sd = np.sqrt(np.diag(cal.cov))
+        # a solve looser than the calibration's own offset would aim worse than it: only a fixed pose is used
+        return T if np.degrees(sd[:3].max()) < POORLY_DEG and sd[3:].max() < POORLY_M else None
+
+    def _suggestion_text(self) -> str:
+        """The step's sentence on σ and the suggested point ("" without one)."""
+        if self.sigma_now is None:
+            return ""
+        deg, m = self.sigma_now
+        reached = deg <= TARGET_DEG and m <= TARGET_M
+        now = (
+            f" The beams so far give σ {deg:.2f}°, {1000 * m:.1f} mm"
+            + (f" (within the {TARGET_DEG}° and {1000 * TARGET_M:.0f} mm aimed for)." if reached else ".")
+            if len(self.pan) >= 6
+            else ""
+        )
+        if self.suggestion is None or reached:
+            return now
+        return (
+            f"{now} Next, the point circled 'next' (on {self.suggestion[1].split(' on ', 1)[1]}) reduces σ the most"
+            + (f", to {self.sigma_next[0]:.2f}°, {1000 * self.sigma_next[1]:.1f} mm." if len(self.pan) >= 5 else ".")
+        )
 
     # ------------------------------------------------------------------ picking
     def _candidates(self) -> tuple[np.ndarray, list[str]]:
@@ -112,6 +247,13 @@ class CalibrateTurret(Workflow):
             d = np.linalg.norm(cam.project(X) - p, axis=1) if len(X) else np.zeros(0)
             if len(X):
                 d[cam.depth(X) <= 0] = np.inf
+            if self.suggestion is not None:  # the circled suggestion wins over a corner or centre as near
+                d_s = float(np.linalg.norm(cam.project(self.suggestion[0].reshape(1, 3))[0] - p))
+                if d_s <= PICK_RADIUS_PX and (not len(d) or d_s <= d.min() + 3.0):
+                    self.pending_X, self.pending_label = self.suggestion[0].copy(), self.suggestion[1]
+                    self.state = "measure"
+                    self.message = f"Target: {self.suggestion[1]}."
+                    return
             if not len(X) or d.min() > PICK_RADIUS_PX:
                 # anywhere else on a known surface: the beam lands on it (the fit is point-to-plane)
                 origin, ray = cam.rays(p.reshape(1, 2))
@@ -158,7 +300,8 @@ class CalibrateTurret(Workflow):
                 raise WorkflowError(self.site.no_devices("measure"))
             X, label = self.pending_X, self.pending_label
             T = self.site.T_world_turret
-            pan, tilt, _ = aim(T, X)
+            T_aim = self._aim_pose()
+            pan, tilt, _ = aim(T_aim, X)
             k = len(self.pan) + 1
             uv = self.camera.project(X.reshape(1, 3))
         why = self.scene_changed(uv)
@@ -202,6 +345,7 @@ class CalibrateTurret(Workflow):
             self.range_m.append(float(m.range_m))
             self.targets.append(X)
             self.labels.append(self.pending_label)
+            self.aimed.append(T_aim.tobytes())
             self.pending_X = None
             self.result = None
             self.state = "pick"
@@ -211,6 +355,12 @@ class CalibrateTurret(Workflow):
                 f"{self.labels[-1]}: {1000 * m.range_m:.1f} mm "
                 f"({len(self.pan)} measurement{'s' if len(self.pan) != 1 else ''})."
             )
+            check = check_beams(
+                self.site, self.site.T_world_turret, pan_r, tilt_r, m.range_m, self.site.calibration_covs[1]
+            )[0]
+            if check.disagrees:  # said now; Solve leaves it out if it still disagrees through the solved pose
+                self.message += " ⚠ " + disagreement_text([check], [self.labels[-1]], done="Solve leaves it out")
+            self._suggest()
             off = self._off_surface_m(Xm)
             if off > OFF_SURFACE_M:  # said now, not only when Solve leaves it out
                 self.message += (
@@ -236,11 +386,12 @@ class CalibrateTurret(Workflow):
             i = int(index)
             if not 0 <= i < len(self.pan):
                 raise WorkflowError(f"there is no measurement {i + 1}: {len(self.pan)} were made")
-            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
+            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels, self.aimed):
                 lst.pop(i)
             self.result = None
             self.state = "measure" if self.pending_X is not None else "pick"
             self.message = f"Measurement {i + 1} deleted: {len(self.pan)} left. Solve again."
+            self._suggest()
 
     def remove_last(self) -> None:
         """Drop the picked point, or else the last measurement."""
@@ -255,15 +406,22 @@ class CalibrateTurret(Workflow):
                     "; the solve stands." if self.result is not None else "."
                 )
                 return
-            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
+            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels, self.aimed):
                 lst.pop()
             self.result = None
             self.state = "pick"
             self.message = f"The last measurement is removed: {len(self.pan)} left."
+            self._suggest()
 
     # ------------------------------------------------------------------ solving
     def solve(self, max_rounds: int = 10):
-        """The turret pose that puts every measured point on the database's surfaces."""
+        """The turret pose that puts every measured point on the database's surfaces.
+
+        Beams more than 5 cm off every known surface at the current calibration are left out first;
+        then, fitted, each beam is checked against the database through the solved pose
+        (``beams.check_beams``): the beams at the object that disagrees most (its range more than 3σ
+        from the database's) are left out and the pose fitted again, until none disagrees — an object
+        that has moved since the database last saw it would otherwise pull the calibration."""
         with self.lock:
             self._check_open()
             n = len(self.pan)
@@ -274,7 +432,6 @@ class CalibrateTurret(Workflow):
                 raise WorkflowError("the database has no objects to measure on")
             pan, tilt, rho = np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
             T = self.site.T_world_turret
-            cal = None
             # Beams that landed off every known surface (e.g. on the floor, not in the database) would
             # drag the fit: only points within OFF_SURFACE_M of a surface at the current estimate count.
             _, dist0, _ = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
@@ -291,50 +448,20 @@ class CalibrateTurret(Workflow):
                     f"only {int(used.sum())} of {n} measurements landed within {100 * OFF_SURFACE_M:.0f} cm "
                     f"of a known surface; measure points well inside faces of known objects.{off_text}"
                 )
-            for _ in range(max_rounds):
-                # each measured point belongs to the face it is nearest to (re-associated every round)
-                closest, _, tri = mesh.nearest.on_surface(beam_point(T, pan[used], tilt[used], rho[used]))
-                normals = mesh.face_normals[tri]
-                try:
-                    cal = calibrate_turret_planes(
-                        pan[used],
-                        tilt[used],
-                        rho[used],
-                        normals,
-                        -np.einsum("ij,ij->i", normals, closest),
-                        T,
-                        self.site.scene.rangefinder,
-                    )
-                except ValueError as exc:
-                    if "independent normals" in str(exc):
-                        groups = _orientation_groups(normals)
-                        labels = [self.labels[i] for i in np.flatnonzero(used)]
-                        spread = "; ".join(
-                            f"{len(g)} facing {_facing(normals[g[0]])} ({labels[g[0]]}"
-                            + (f" and {len(g) - 1} more" if len(g) > 1 else "")
-                            + ")"
-                            for g in groups
-                        )
-                        raise WorkflowError(
-                            f"the {int(used.sum())} measurements on known surfaces do not fix the turret's "
-                            f"pose: by the way their faces face, {spread}. It needs points spread over three "
-                            "directions, two or more on each (the table top and two sides of a box at an "
-                            f"angle): measure more on the fewest.{off_text}"
-                        ) from None
-                    raise WorkflowError(f"turret calibration failed: {exc}") from None
-                deg, m = pose_error(cal.T_world_turret, T)
-                T = cal.T_world_turret
-                if deg < 1e-5 and m < 1e-7:
-                    break
+            # from the beams' own provisional solve when there is one: a start centimetres off can associate a beam
+            # near an edge with the wrong face and settle there
+            cal, T = self._fit(mesh, pan, tilt, rho, used, T, off_text, max_rounds)
+            cal, T, used, moved_text = self._leave_out_disagreeing(mesh, pan, tilt, rho, used, cal, T, max_rounds)
             self.used = used
             _, dist, _ = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
             dist = dist[used]
             self.result = cal
             self.T_solved = T
             self.surface_residuals_m = dist
+            self.moved_text = moved_text
             deg, m = pose_error(T, self.site.T_world_turret)
             self.state = "review"
-            dropped = f" ({n - int(used.sum())} off the known surfaces, left out: {', '.join(off)})" if off else ""
+            dropped = f" ({len(off)} off the known surfaces, left out: {', '.join(off)})" if off else ""
             # the pose has 6 unknowns: with 6 points the fit is exact, its RMS says nothing (a new operator read
             # "RMS 0.0 mm" as a perfect calibration)
             exact = (
@@ -346,24 +473,98 @@ class CalibrateTurret(Workflow):
                 f"RMS {1000 * np.sqrt(np.mean(dist**2)):.1f} mm to the surfaces over {int(used.sum())} "
                 f"points{exact}{dropped}; {deg:.2f}° and {1000 * m:.1f} mm from the current calibration"
             )
+            if moved_text:
+                self.message += f". ⚠ {moved_text}"
             far = self._far_points()
             if far:
                 self.message += f". ⚠ {far}"
             sd_rot_deg, sd_t_m = self._sigmas()
+            self.message += f". σ {sd_rot_deg.max():.2f}°, {1000 * sd_t_m.max():.1f} mm"
             if sd_rot_deg.max() > POORLY_DEG or sd_t_m.max() > POORLY_M:
-                few = len(self.site.objects()) <= 2
                 self.message += (
-                    f". Poorly determined (σ up to {sd_rot_deg.max():.2f}° and {1000 * sd_t_m.max():.1f} mm): "
-                    "measure faces of other objects, at other distances, before accepting"
-                    + (
-                        " (with only the table and one box known, model another object first: Model object; "
-                        "it measures with the current calibration, which stays in use until one is accepted)"
-                        if few
-                        else ""
-                    )
+                    " — poorly determined: measure more points, the suggested ones first (marked next: they "
+                    "reduce σ the most)"
                 )
             self.solve_text = self.message
+            self._suggest()
             return cal
+
+    def _fit(self, mesh, pan, tilt, rho, used, T, off_text: str, max_rounds: int):
+        """``calibrate_turret_planes`` on the beams ``used``, each associated with the face it is nearest
+        to, re-associated and fitted again until the pose stops moving: (TurretCalibration, T (4, 4))."""
+        cal = None
+        for _ in range(max_rounds):
+            closest, _, tri = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
+            normals = mesh.face_normals[tri]
+            # a beam cannot land on a face turned away from it: one nearest such a face (beside an edge,
+            # at a pose still off) is left out of this round rather than pull the pose to the wrong side
+            use = used & (np.einsum("ij,ij->i", normals, beam_ray(T, pan, tilt)[1]) < 0)
+            if use.sum() < 6:
+                use = used
+            normals, closest = normals[use], closest[use]
+            try:
+                cal = calibrate_turret_planes(
+                    pan[use],
+                    tilt[use],
+                    rho[use],
+                    normals,
+                    -np.einsum("ij,ij->i", normals, closest),
+                    T,
+                    self.site.scene.rangefinder,
+                )
+            except ValueError as exc:
+                if "independent normals" in str(exc):
+                    raise WorkflowError(self._too_few_orientations(normals, used, off_text)) from None
+                raise WorkflowError(f"turret calibration failed: {exc}") from None
+            deg, m = pose_error(cal.T_world_turret, T)
+            T = cal.T_world_turret
+            if deg < 1e-5 and m < 1e-7:
+                break
+        return cal, T
+
+    def _too_few_orientations(self, normals, used, off_text: str) -> str:
+        groups = _orientation_groups(normals)
+        labels = [self.labels[i] for i in np.flatnonzero(used)]
+        spread = "; ".join(
+            f"{len(g)} facing {_facing(normals[g[0]])} ({labels[g[0]]}"
+            + (f" and {len(g) - 1} more" if len(g) > 1 else "")
+            + ")"
+            for g in groups
+        )
+        return (
+            f"the {int(used.sum())} measurements on known surfaces do not fix the turret's "
+            f"pose: by the way their faces face, {spread}. It needs points spread over three "
+            "directions, two or more on each (the table top and two sides of a box at an "
+            f"angle): measure more on the fewest.{off_text}"
+        )
+
+    def _leave_out_disagreeing(self, mesh, pan, tilt, rho, used, cal, T, max_rounds: int):
+        """Check every used beam against the database through the solved pose; while some disagree,
+        leave out the beams at the object that disagrees most and fit again. Returns the calibration,
+        the pose, the beams used and what the operator is told of those left out ("" for none)."""
+        used = used.copy()
+        left: dict[int, BeamCheck] = {}
+        for _ in range(max_rounds):
+            idx = np.flatnonzero(used)
+            checks = check_beams(self.site, T, pan[idx], tilt[idx], rho[idx], cal.cov)
+            bad = [(abs(c.delta_m) / c.sigma_m, c.object) for c in checks if c.disagrees]
+            if not bad:
+                break
+            worst = max(bad)[1]
+            drop = [i for i, c in zip(idx, checks) if c.disagrees and c.object == worst]
+            if used.sum() - len(drop) < 6:
+                break  # too few would be left: the beams stay, and the far points are named below
+            trial = used.copy()
+            trial[drop] = False
+            try:
+                cal_t, T_t = self._fit(mesh, pan, tilt, rho, trial, T, "", max_rounds)
+            except WorkflowError:
+                break  # without them the pose is not fixed: they stay (and are named as far points)
+            left.update({int(i): c for i, c in zip(idx, checks) if int(i) in drop})
+            used, cal, T = trial, cal_t, T_t
+        order = sorted(left)
+        text = disagreement_text([left[i] for i in order], [f"{i + 1} {self.labels[i]}" for i in order])
+        return cal, T, used, text
 
     def _far_points(self) -> str:
         """The measured points that lie more than 3σ of the range finder from their surface after Solve,
@@ -445,7 +646,8 @@ class CalibrateTurret(Workflow):
         if self.pending_X is not None:
             return Step(
                 "measure",
-                "{measure} " + f"{self.pending_label} (the turret aims with the current calibration), or "
+                "{measure} " + f"{self.pending_label} (the turret aims with the current calibration, or once six "
+                "points fix the pose, with their solve), or "
                 "click another known point.",
                 frozenset(base | {"measure"}),
             )
@@ -459,7 +661,7 @@ class CalibrateTurret(Workflow):
         return Step(
             "pick",
             f"Click a known point — a face centre (cyan), a corner, or anywhere on a known face — "
-            f"then measure it{more}.",
+            f"then measure it{more}.{self._suggestion_text()}",
             frozenset(base),
         )
 
@@ -507,6 +709,10 @@ class CalibrateTurret(Workflow):
             m.targets = cam.project(centres) if len(centres) else np.zeros((0, 2))
             if self.pending_X is not None:
                 m.pending = cam.project(self.pending_X.reshape(1, 3))
+            elif self.suggestion is not None:
+                uv = cam.project(self.suggestion[0].reshape(1, 3))
+                m.circles = uv
+                m.labels.append((uv[0], "next"))
             if self.pan:
                 Xm = beam_point(
                     self.site.T_world_turret, np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
@@ -518,6 +724,8 @@ class CalibrateTurret(Workflow):
     def summary(self) -> dict[str, Any]:
         with self.lock:
             out: dict[str, Any] = {"measurements": len(self.pan)}
+            if self.sigma_now is not None:
+                out["sigma_predicted"] = {"deg": self.sigma_now[0], "mm": 1000 * self.sigma_now[1]}
             if self.result is not None:
                 out["rms_mm"] = float(1000 * np.sqrt(np.mean(self.surface_residuals_m**2)))
                 sd_rot_deg, sd_t_m = self._sigmas()
@@ -528,6 +736,8 @@ class CalibrateTurret(Workflow):
                 labels = [lab for lab, u in zip(self.labels, self.used) if u]
                 ranges = [r for r, u in zip(self.range_m, self.used) if u]
                 out["left_out"] = int((~self.used).sum())
+                if self.moved_text:
+                    out["disagreeing"] = self.moved_text
                 out["points"] = [
                     {"point": lab, "range_m": r, "to_surface_mm": 1000 * float(d)}
                     for lab, r, d in zip(labels, ranges, self.surface_residuals_m)
@@ -555,3 +765,52 @@ def _facing(n: np.ndarray) -> str:
     if n[2] < -0.9:
         return "down"
     return f"sideways (x {n[0]:+.2f}, y {n[1]:+.2f})"
+
+
+def _face_grid(obj, camera_center: np.ndarray, turret_origin: np.ndarray, thin: bool = True):
+    """(X (3,), unit normal (3,), face index) on a GRID × GRID grid over each planar face of ``obj`` that
+    faces both the camera and the turret, EDGE_MARGIN_M inside its edges (half its width where it is
+    thinner), inside the face's polygon."""
+    T = obj.T_world_obj
+    model = obj.model
+    if not model.faces:
+        return
+    normals = model.face_normals() @ T[:3, :3].T
+    for k, face in enumerate(model.faces):
+        V = model.vertices[list(face)] @ T[:3, :3].T + T[:3, 3]
+        n, c = normals[k], V.mean(axis=0)
+        if n @ (camera_center - c) <= 0 or n @ (turret_origin - c) <= 0:
+            continue
+        edges = np.roll(V, -1, axis=0) - V
+        e1 = edges[int(np.argmax(np.linalg.norm(edges, axis=1)))]
+        e1 = e1 / np.linalg.norm(e1)
+        e2 = np.cross(n, e1)
+        uv = (V - c) @ np.stack([e1, e2], axis=1)  # the polygon in the face's plane
+        axes = []
+        if not thin and np.ptp(uv, axis=0).min() <= 2 * EDGE_MARGIN_M:
+            continue
+        for lo, hi in zip(uv.min(axis=0), uv.max(axis=0)):
+            m = min(EDGE_MARGIN_M, 0.5 * (hi - lo))
+            axes.append(np.linspace(lo + m, hi - m, GRID) if hi - lo > 2 * m else np.array([0.5 * (lo + hi)]))
+        for a in axes[0]:
+            for b in axes[1]:
+                if _inside(uv, np.array([a, b])):
+                    yield c + a * e1 + b * e2, n, k
+
+
+def _inside(poly: np.ndarray, p: np.ndarray) -> bool:
+    """Whether the 2D point p lies inside the polygon poly (K, 2) (even–odd rule)."""
+    x, y = p
+    inside = False
+    for (x1, y1), (x2, y2) in zip(poly, np.roll(poly, -1, axis=0)):
+        if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
+            inside = not inside
+    return inside
+
+
+def _first_is(site, origin: np.ndarray, X: np.ndarray, name: str) -> bool:
+    """Whether the first database surface on the ray from ``origin`` towards X is object ``name``, at X."""
+    d = X - origin
+    dist = float(np.linalg.norm(d))
+    hit = site.raycast(origin, d / dist)
+    return hit is not None and hit.name == name and abs(hit.distance_m - dist) < 0.005

@@ -180,9 +180,10 @@ def test_a_point_far_from_its_surface_is_named_after_solve(device_site, fast_sce
     k = 0
     wf.range_m[k] -= 0.08  # short of its surface (an object in the beam, moving)
     wf.solve()
-    named = f"{k + 1} {wf.labels[k]} ("
-    assert named in wf.message and "more than 3σ" in wf.message and "Delete measurement" in wf.message, wf.message
-    assert any(named in w for w in wf.weaknesses())
+    # 8 cm short disagrees with the database by more than 3σ: left out of the solve, and named
+    named = f"left out: {k + 1} {wf.labels[k]}, "
+    assert named in wf.message and "mm expected, 3σ = " in wf.message, wf.message
+    assert wf.summary()["left_out"] == 1 and not wf.used[k] and wf.used[1:].all()
     # a point picked after Solve: Accept stays offered beside Measure, and Remove last drops the pick only
     wf.choose_point(targets[0])
     st = wf.current_step()
@@ -190,3 +191,60 @@ def test_a_point_far_from_its_surface_is_named_after_solve(device_site, fast_sce
     wf.remove_last()
     assert wf.result is not None and "accept" in wf.current_step().enabled and len(wf.pan) == len(targets)
     assert wf.current_step().prompt.startswith("Solved: RMS") and "solve stands" in wf.message
+
+
+def test_beams_at_a_moved_object_are_left_out_and_said(fast_scene, db):
+    """The parallelepiped moved (the devices measure the scene at 16 s, the database holds it at 0 s): the
+    beams at its faces disagree with the database by more than 3σ and the solve leaves them out, saying
+    it has moved; the table's beams give the pose. (Measured before: 0 points left out.)"""
+    from app.devices import open_devices
+    from app.workflows import Site
+
+    from .conftest import FAST_DEVICES
+
+    devs = open_devices(fast_scene, clock=lambda: 16.0, site_options=FAST_DEVICES)
+    try:
+        site = Site(fast_scene, db, devices=devs, clock=lambda: 16.0, frames=None)
+        wf = CalibrateTurret(site, shots=1)
+        T = site.object("table").T_world_obj
+        for x, y in ((-0.3, 0.5), (0.35, 0.55), (-0.3, -0.4), (0.3, -0.5), (0.0, -0.1), (-0.35, 0.0)):
+            wf.choose_point(T[:3, :3] @ [x, y, 0.04] + T[:3, 3], f"table {x} {y}")
+            wf.measure()
+        for X in _face_targets(site, ("parallelepiped",)):
+            wf.choose_point(X)
+            wf.measure()
+        box = [i for i, lab in enumerate(wf.labels) if not lab.startswith("table")]
+        with pytest.raises(WorkflowError, match="fix the turret's pose|landed within"):
+            wf.solve()  # the table alone (the box's beams left out) cannot fix the pose: said, nothing solved
+        assert wf.result is None
+    finally:
+        devs.close()
+    assert box
+
+
+def test_the_beam_check_says_an_object_moved(device_site):
+    """beams.check_beams: a beam at the table agrees at its range, disagrees 12 cm farther ("has moved")
+    and 12 cm nearer ("or something ... in front of it"); a beam that meets nothing never disagrees."""
+    from app.workflows.beams import LIMIT_SIGMA, check_beams, disagreement_text
+    from core.rangefinder import aim
+
+    site = device_site
+    T = site.T_world_turret
+    X = site.object("table").T_world_obj[:3, 3] + [0.3, -0.2, 0.04]
+    pan, tilt, rho = aim(T, X)
+    ok, far, near = check_beams(site, T, [pan] * 3, [tilt] * 3, [rho, rho + 0.12, rho - 0.12])
+    assert ok.object == far.object == "table" and abs(ok.expected_m - rho) < 1e-6
+    assert not ok.disagrees and far.disagrees and far.farther and near.disagrees and not near.farther
+    assert 0.005 <= ok.sigma_m < 0.12 / LIMIT_SIGMA
+    assert disagreement_text([ok]) == ""
+    text = disagreement_text([ok, far], ["a", "b"])
+    assert text.startswith("the table has moved: update its pose first") and "left out: b, " in text
+    assert f"{1000 * (rho + 0.12):.0f} mm measured against {1000 * rho:.0f} mm expected" in text
+    assert "something not in the database stands in front of it" in disagreement_text([near])
+    # the turret calibration's covariance widens σ: a 12 cm disagreement within a loose calibration agrees
+    (loose,) = check_beams(site, T, [pan], [tilt], [rho + 0.12], np.diag([0.05**2] * 3 + [0.1**2] * 3))
+    assert loose.sigma_m > far.sigma_m and not loose.disagrees
+    up = np.array([0.0, 0.0, 1.0])  # a beam up into the sky meets nothing
+    pan_u, tilt_u, _ = aim(T, T[:3, 3] + up)
+    (sky,) = check_beams(site, T, [pan_u], [tilt_u], [3.0])
+    assert sky.object == "" and not sky.disagrees
