@@ -107,16 +107,20 @@ def _off_facing_faces(mesh, owner, name: str, X: np.ndarray, d: np.ndarray) -> f
     return float(sub.nearest.on_surface(X.reshape(1, 3))[1][0])
 
 
-def disagreement_text(checks, labels=None, done: str = "left out") -> str:
+def disagreement_text(checks, labels=None, done: str = "left out", aimed=None) -> str:
     """What the operator is told of the beams that disagree (``checks``, a list of BeamCheck; ``labels``
     their names, default "beam k"), one sentence per object, e.g. "the parallelepiped has moved: update
-    its pose first (beams left out: 3 parallelepiped face 2 centre, 1968 mm measured against 1847 mm
-    expected, 3σ = 21 mm)"; "" when none disagrees. ``done``: what became of the beams ("left out")."""
+    its pose first (the range finder disagrees, left out: 3 parallelepiped face 2 centre, 1968 mm measured
+    against 1847 mm expected, 3σ = 21 mm)"; "" when none disagrees. ``done``: what became of the beams.
+    ``aimed``: the object each beam was aimed at, where known (None, or "" for one): a beam aimed at an
+    object that met another one in the database was aimed at an object that is not there any more, so that
+    object is named, as moved."""
     labels = list(labels) if labels is not None else [f"beam {i + 1}" for i in range(len(checks))]
+    aimed = list(aimed) if aimed is not None else [""] * len(checks)
     by_object: dict[str, list[int]] = {}
     for i, c in enumerate(checks):
         if c.disagrees:
-            by_object.setdefault(c.object, []).append(i)
+            by_object.setdefault(aimed[i] or c.object, []).append(i)
     out = []
     for name, idx in by_object.items():
         beams = "; ".join(
@@ -124,9 +128,10 @@ def disagreement_text(checks, labels=None, done: str = "left out") -> str:
             f"mm expected, {LIMIT_SIGMA:.0f}σ = {1000 * LIMIT_SIGMA * checks[i].sigma_m:.0f} mm"
             for i in idx
         )
+        moved = all(checks[i].farther or (aimed[i] and aimed[i] != checks[i].object) for i in idx)
         what = (
             f"the {name} has moved: update its pose first"
-            if all(checks[i].farther for i in idx)
+            if moved
             else f"the {name} has moved, or something not in the database stands in front of it: update its pose first"
         )
         out.append(f"{what} (the range finder disagrees, {done}: {beams})")

@@ -24,17 +24,30 @@ from core.transforms import pose_error
 
 from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel, sigma_over
 from .beams import BeamCheck, check_beams, disagreement_text
+from .turret_aims import (
+    ROOM_SIGMAS,
+    ROOM_SPARE_M,
+    Candidates,
+    face_candidates,
+    landing_rows,
+    landing_sd,
+    room_ratio,
+    unlocking,
+)
 
 __all__ = ["CalibrateTurret"]
 
 PICK_RADIUS_PX = 25.0
 OFF_SURFACE_M = 0.05
 POORLY_DEG, POORLY_M = 0.5, 0.01  # σ beyond which the operator is told to measure more
-TARGET_DEG, TARGET_M = 0.2, 0.005  # the σ the suggested points work towards (each axis)
-EDGE_MARGIN_M = 0.05  # suggested points keep this far inside a face's edges (a thinner face: its middle line,
-# offered once the beams' own solve aims the turret: the calibration in use may be centimetres off)
-GRID = 5  # suggested points: a GRID × GRID grid over each face seen by the camera and the turret
+TARGET_DEG, TARGET_M = 0.2, 0.0045  # the σ the suggested points work towards (each axis): the solve's within 5 mm
 PRIOR_SD = np.array([np.radians(10.0)] * 3 + [0.5] * 3)  # keeps the information invertible before 6 beams
+# The calibration in use, stored without a covariance (or a looser one), is taken to be within this (1σ)
+# when aiming: the beams' estimate starts from it (a prior) until they fix the pose themselves.
+AIM_PRIOR_SD = np.array([np.radians(1.0)] * 3 + [0.03] * 3)
+MAX_REPEATS = 4  # a suggested point is offered until it has been measured this many times
+UNLOCK_GAIN = 0.8  # a point out of reach worth this fraction of the best one's worst σ or less is unlocked first
+UNLOCK_STEP = 0.9  # ... by a beam within reach that narrows the aim there by this factor at least, else aimed at
 
 
 class CalibrateTurret(Workflow):
@@ -94,110 +107,124 @@ class CalibrateTurret(Workflow):
         self.sigma_now: tuple[float, float] | None = None  # σ (°, m) the beams so far give (predicted)
         self.sigma_next: tuple[float, float] | None = None  # ... and with the suggestion measured too
         self._cand_cache: tuple | None = None
+        self.unlocks = ""  # the face the suggested point brings into reach (its beam narrows the aim there)
+        self._unlock_tries = 0  # suggestions in a row that were to bring the same face into reach
         self.T_aim: np.ndarray | None = None  # the pose the turret aims with: the beams' own solve once they fix it
         self._suggest()
 
     # ------------------------------------------------------------------ suggesting where to aim
-    def _aim_candidates(self) -> tuple[np.ndarray, np.ndarray, list[str]]:
-        """Points to suggest: a grid over each face of a known object that both the camera and the turret
-        face, kept EDGE_MARGIN_M inside its edges, inside the image, and seen by both (the first surface
-        on the camera's ray and on the turret's beam at the current calibration). X (M, 3), the faces'
-        normals (M, 3), names. Cached until the objects or the calibration change."""
+    def _aim_candidates(self) -> Candidates:
+        """``turret_aims.face_candidates`` for the workflow's camera, cached until the objects or the
+        calibration in use change."""
         objects = self.site.objects()
-        T = self._aim_pose()
+        T = self.site.T_world_turret
         key = (tuple((o.name, o.version) for o in objects), T.tobytes(), self.view)
-        if self._cand_cache is not None and self._cand_cache[0] == key:
-            return self._cand_cache[1]
-        cam = self.camera
-        X, N, names = [], [], []
-        for obj in objects:
-            for x, n, k in _face_grid(obj, cam.center, T[:3, 3], thin=self.T_aim is not None):
-                uv = cam.project(x.reshape(1, 3))[0]
-                if (
-                    not (4 <= uv[0] <= cam.width - 5 and 4 <= uv[1] <= cam.height - 5)
-                    or cam.depth(x.reshape(1, 3))[0] <= 0
-                ):
-                    continue
-                if all(_first_is(self.site, o, x, obj.name) for o in (cam.center, T[:3, 3])):
-                    X.append(x)
-                    N.append(n)
-                    names.append(f"{obj.name} face {k}")
-        out = (np.array(X).reshape(-1, 3), np.array(N).reshape(-1, 3), names)
-        self._cand_cache = (key, out)
-        return out
+        if self._cand_cache is None or self._cand_cache[0] != key:
+            self._cand_cache = (key, face_candidates(self.site, self.camera, T))
+        return self._cand_cache[1]
 
     def _suggest(self) -> None:
-        """Choose the point to measure next: of the candidates not measured yet, the one that leaves the
-        turret pose's worst σ smallest (rotations counted in TARGET_DEG, translations in TARGET_M), from
-        the beams measured so far (``core.calibration.next_turret_point``). Sets ``suggestion``,
+        """Choose the point to measure next: of the candidates where a beam aimed through the current
+        estimate lands on the face aimed at (``turret_aims.landing_sd``), the one that leaves the turret
+        pose's worst σ smallest (rotations counted in TARGET_DEG, translations in TARGET_M) with the
+        beams measured so far (``core.calibration.next_turret_point``). Sets ``T_aim``, ``suggestion``,
         ``sigma_now`` and ``sigma_next``."""
         self.suggestion = self.sigma_now = self.sigma_next = None
         if not self.site.has_turret or not self.site.objects():
             return
-        self.T_aim = self._provisional_pose()
-        X, N, names = self._aim_candidates()
-        spec, T = self.site.scene.rangefinder, self._aim_pose()
-        done = np.zeros((0, 6))
-        landed = np.zeros(len(self.pan), bool)
-        if self.pan:
-            pan, tilt, rho = np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
+        landed, _ = self._landed()
+        self.T_aim, cov_aim = self._estimate(landed)
+        T, spec = self.T_aim, self.site.scene.rangefinder
+        pan, tilt, rho = np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
+        normals = np.zeros((len(pan), 3))
+        if len(pan):  # each beam on the face it is nearest to at the estimate
             mesh, _ = self.site.surfaces()
-            if mesh is not None:
-                _, dist, tri = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
-                landed = dist <= OFF_SURFACE_M  # a beam that missed every known surface tells nothing
-                done = turret_plane_rows(
-                    T, pan[landed], tilt[landed], rho[landed], mesh.face_normals[tri[landed]], spec
-                )
-        if len(self.targets) and len(X):
-            # a point measured twice is not offered again; nor the face of a beam that missed it while the
-            # turret aims the same way (once more beams move the aiming pose, it is offered again)
-            tg = np.array(self.targets)
-            times = (np.linalg.norm(X[:, None, :] - tg[None, landed, :], axis=2) < 0.01).sum(axis=1)
-            missed = {self.labels[i] for i in np.flatnonzero(~landed) if self.aimed[i] == T.tobytes()}
-            keep = (times < 2) & np.array([f"a suggested point on {nm}" not in missed for nm in names], bool)
-            X, N, names = X[keep], N[keep], [nm for nm, f in zip(names, keep) if f]
+            normals = mesh.face_normals[mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))[2]]
+        done = turret_plane_rows(T, pan[landed], tilt[landed], rho[landed], normals[landed], spec)
         info = done.T @ done + np.diag(1.0 / PRIOR_SD**2)
         sd = np.sqrt(np.diag(np.linalg.inv(info)))
         self.sigma_now = (float(np.degrees(sd[:3].max())), float(sd[3:].max()))
-        if not len(X):
+        c = self._aim_candidates()
+        keep = np.ones(len(c.X), bool)
+        if len(self.targets) and len(c.X):
+            # a point measured MAX_REPEATS times is not offered again; nor the face of a beam that missed it while the
+            # turret aimed the same way (once more beams move the estimate, it is offered again)
+            tg = np.array(self.targets)[landed].reshape(-1, 3)
+            keep &= (np.linalg.norm(c.X[:, None, :] - tg[None], axis=2) < 0.01).sum(axis=1) < MAX_REPEATS
+            # (a face whose beam missed waits until two more beams have landed: the estimate has moved)
+            missed = {self.labels[i] for i in np.flatnonzero(~landed) if landed[i + 1 :].sum() < 2}
+            keep &= np.array([f"a suggested point on {nm}" not in missed for nm in c.names], bool)
+        c = c.take(keep)
+        reach = room_ratio(c, landing_sd(T, cov_aim, c)) <= 1.0  # a beam aimed there lands on that face
+        if not reach.any():
             return
-        pan_c, tilt_c, rho_c = aim(T, X)
-        k, sd_k = next_turret_point(
-            done,
-            turret_plane_rows(T, pan_c, tilt_c, rho_c, N, spec),
-            np.array([np.radians(TARGET_DEG)] * 3 + [TARGET_M] * 3),
-            PRIOR_SD,
-        )
-        self.suggestion = (X[k].copy(), f"a suggested point on {names[k]}")
+        pan_c, tilt_c, rho_c = aim(T, c.X)
+        rows = turret_plane_rows(T, pan_c, tilt_c, rho_c, c.normals, spec)
+        scale = np.array([np.radians(TARGET_DEG)] * 3 + [TARGET_M] * 3)
+        idx = np.flatnonzero(reach)
+        k, sd_k = next_turret_point(done, rows[reach], scale, PRIOR_SD)
+        k = int(idx[k])
+        last, self.unlocks = self.unlocks, ""
+        if not reach.all():
+            # a point out of reach that would do much more than the best within reach: first the beam
+            # within reach that brings it into reach soonest (e.g. the table top, then the table's edge)
+            far = np.flatnonzero(~reach)
+            f, sd_f = next_turret_point(done, rows[~reach], scale, PRIOR_SD)
+            if (sd_f / scale).max() < UNLOCK_GAIN * (sd_k / scale).max():
+                f = int(far[f])
+                G = landing_rows(T, c.take(np.arange(len(c.X)) == f))[0]
+                room = np.array([c.room[f, :2].min(), c.room[f, 2:].min()])
+                now = float(
+                    np.max((ROOM_SIGMAS * np.sqrt(np.einsum("ak,kl,al->a", G, cov_aim, G)) + ROOM_SPARE_M) / room)
+                )
+                ratio = np.max((ROOM_SIGMAS * unlocking(G, cov_aim, rows[reach]) + ROOM_SPARE_M) / room, axis=1)
+                self._unlock_tries = self._unlock_tries + 1 if last == c.names[f] else 0
+                if (
+                    ratio.min() < UNLOCK_STEP * now and self._unlock_tries < 2
+                ):  # a beam within reach narrows the aim there
+                    k = int(idx[int(np.argmin(ratio))])
+                    self.unlocks = c.names[f]
+                else:  # nothing within reach helps: aim there anyway (a beam that lands near an edge waits)
+                    k, sd_k = f, sd_f
+                    self.unlocks = "?"
+                sd_k = np.sqrt(np.diag(np.linalg.inv(info + np.outer(rows[k], rows[k]))))
+        self.suggestion = (c.X[k].copy(), f"a suggested point on {c.names[k]}")
         self.sigma_next = (float(np.degrees(sd_k[:3].max())), float(sd_k[3:].max()))
 
-    def _aim_pose(self) -> np.ndarray:
-        """The turret pose to aim with: the measured beams' own solve once they fix the pose, else the
-        calibration in use (a calibration centimetres off misses a thin face such as the table's edge;
-        where a beam lands does not matter to the solve, which uses the angles the turret reached)."""
-        return self.T_aim if self.T_aim is not None else self.site.T_world_turret
-
-    def _provisional_pose(self) -> np.ndarray | None:
-        """The pose the beams measured so far give (``_fit`` of those within OFF_SURFACE_M of a known
-        surface at the calibration in use), None while they do not fix it."""
-        if len(self.pan) < 6:
-            return None
+    def _landed(self) -> tuple[np.ndarray, np.ndarray]:
+        """Which beams landed within OFF_SURFACE_M of a known surface at the calibration in use (N,), and
+        the normals (N, 3) of the faces they are nearest to."""
+        n = len(self.pan)
         mesh, _ = self.site.surfaces()
-        if mesh is None:
-            return None
+        if not n or mesh is None:
+            return np.zeros(n, bool), np.zeros((n, 3))
+        X = beam_point(self.site.T_world_turret, np.array(self.pan), np.array(self.tilt), np.array(self.range_m))
+        _, dist, tri = mesh.nearest.on_surface(X)
+        return dist <= OFF_SURFACE_M, mesh.face_normals[tri]
+
+    def _estimate(self, landed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The turret pose to aim with and its covariance (6, 6): the beams that landed, fitted with the
+        calibration in use as a prior (its covariance, or AIM_PRIOR_SD where it has none or a looser
+        one); the calibration in use and the prior before any beam. Where a beam lands does not matter
+        to the solve (it uses the angles the turret reached), but a beam that lands where it was aimed
+        measures what was chosen, and a thin face such as the table's edge is hit at all."""
+        T0 = self.site.T_world_turret
+        cov0 = self.site.calibration_covs[1]
+        if cov0 is None or np.any(np.sqrt(np.diag(cov0)) > AIM_PRIOR_SD):
+            cov0 = np.diag(AIM_PRIOR_SD**2)
+        mesh, _ = self.site.surfaces()
+        if not landed.any() or mesh is None:
+            return T0, cov0
         pan, tilt, rho = np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
-        T = self.site.T_world_turret
-        _, dist, _ = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
-        used = dist <= OFF_SURFACE_M
-        if used.sum() < 6:
-            return None
         try:
-            cal, T = self._fit(mesh, pan, tilt, rho, used, T, "", 5)
+            cal, T = self._fit(mesh, pan, tilt, rho, landed, T0, "", 5, prior=(T0, cov0))
         except WorkflowError:
-            return None
-        sd = np.sqrt(np.diag(cal.cov))
-        # a solve looser than the calibration's own offset would aim worse than it: only a fixed pose is used
-        return T if np.degrees(sd[:3].max()) < POORLY_DEG and sd[3:].max() < POORLY_M else None
+            return T0, cov0
+        return T, cal.cov
+
+    def _aim_pose(self) -> np.ndarray:
+        """The turret pose to aim with (``_estimate``)."""
+        return self.T_aim if self.T_aim is not None else self.site.T_world_turret
 
     def _suggestion_text(self) -> str:
         """The step's sentence on σ and the suggested point ("" without one)."""
@@ -359,7 +386,9 @@ class CalibrateTurret(Workflow):
                 self.site, self.site.T_world_turret, pan_r, tilt_r, m.range_m, self.site.calibration_covs[1]
             )[0]
             if check.disagrees:  # said now; Solve leaves it out if it still disagrees through the solved pose
-                self.message += " ⚠ " + disagreement_text([check], [self.labels[-1]], done="Solve leaves it out")
+                self.message += " ⚠ " + disagreement_text(
+                    [check], [self.labels[-1]], done="Solve leaves it out", aimed=self._aimed([len(self.pan) - 1])
+                )
             self._suggest()
             off = self._off_surface_m(Xm)
             if off > OFF_SURFACE_M:  # said now, not only when Solve leaves it out
@@ -443,15 +472,34 @@ class CalibrateTurret(Workflow):
                 if off
                 else ""
             )
+            # Beams that disagree with the database at the calibration in use, while most agree: their
+            # object has moved (had the calibration been off, most would disagree); left out before the fit
+            idx = np.flatnonzero(used)
+            pre = check_beams(self.site, T, pan[idx], tilt[idx], rho[idx], self.site.calibration_covs[1])
+            bad = np.array([c.disagrees for c in pre], bool)
+            pre_text = ""
+            if bad.any() and bad.sum() <= 0.5 * len(pre):
+                used[idx[bad]] = False
+                pre_text = disagreement_text(
+                    [c for c, b in zip(pre, bad) if b],
+                    [f"{i + 1} {self.labels[i]}" for i in idx[bad]],
+                    aimed=self._aimed(idx[bad]),
+                )
+                off_text += f" ⚠ {pre_text}."
             if used.sum() < 6:
                 raise WorkflowError(
                     f"only {int(used.sum())} of {n} measurements landed within {100 * OFF_SURFACE_M:.0f} cm "
-                    f"of a known surface; measure points well inside faces of known objects.{off_text}"
+                    f"of a known surface and agree with the database; measure points well inside faces of "
+                    f"known objects.{off_text}"
                 )
-            # from the beams' own provisional solve when there is one: a start centimetres off can associate a beam
-            # near an edge with the wrong face and settle there
-            cal, T = self._fit(mesh, pan, tilt, rho, used, T, off_text, max_rounds)
+            # from the beams' estimate (``_estimate``): a start centimetres off associates a beam beside an
+            # edge with the wrong face, and the fit settles there
+            landed, _ = self._landed()
+            landed &= used
+            T_est, _ = self._estimate(landed)
+            cal, T = self._fit(mesh, pan, tilt, rho, used, T_est, off_text, max_rounds)
             cal, T, used, moved_text = self._leave_out_disagreeing(mesh, pan, tilt, rho, used, cal, T, max_rounds)
+            moved_text = ". ".join(t for t in (pre_text, moved_text) if t)
             self.used = used
             _, dist, _ = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
             dist = dist[used]
@@ -489,38 +537,68 @@ class CalibrateTurret(Workflow):
             self._suggest()
             return cal
 
-    def _fit(self, mesh, pan, tilt, rho, used, T, off_text: str, max_rounds: int):
-        """``calibrate_turret_planes`` on the beams ``used``, each associated with the face it is nearest
-        to, re-associated and fitted again until the pose stops moving: (TurretCalibration, T (4, 4))."""
-        cal = None
-        for _ in range(max_rounds):
-            closest, _, tri = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
-            normals = mesh.face_normals[tri]
-            # a beam cannot land on a face turned away from it: one nearest such a face (beside an edge,
-            # at a pose still off) is left out of this round rather than pull the pose to the wrong side
-            use = used & (np.einsum("ij,ij->i", normals, beam_ray(T, pan, tilt)[1]) < 0)
-            if use.sum() < 6:
-                use = used
-            normals, closest = normals[use], closest[use]
+    def _fit(self, mesh, pan, tilt, rho, used, T, off_text: str, max_rounds: int, prior=None):
+        """``calibrate_turret_planes`` on the beams ``used``: first each on the face it was aimed at (the
+        face nearest its target), the beams that lie off it by more than 3σ_ρ left out (they landed beside
+        it) and fitted again; then each on the face it is nearest to, re-associated and fitted again
+        until the pose stops moving. Associating by nearness alone from a pose centimetres off puts a beam
+        beside an edge on the wrong face, and the fit settles on the wrong side. ``prior``: see
+        ``calibrate_turret_planes``. Returns (TurretCalibration, T (4, 4))."""
+        least = 1 if prior is not None else 6
+        spec = self.site.scene.rangefinder
+
+        def fit(use, normals, closest, T):
             try:
-                cal = calibrate_turret_planes(
+                return calibrate_turret_planes(
                     pan[use],
                     tilt[use],
                     rho[use],
-                    normals,
-                    -np.einsum("ij,ij->i", normals, closest),
+                    normals[use],
+                    -np.einsum("ij,ij->i", normals, closest)[use],
                     T,
-                    self.site.scene.rangefinder,
+                    spec,
+                    prior=prior,
                 )
             except ValueError as exc:
                 if "independent normals" in str(exc):
-                    raise WorkflowError(self._too_few_orientations(normals, used, off_text)) from None
+                    raise WorkflowError(self._too_few_orientations(normals[use], use, off_text)) from None
                 raise WorkflowError(f"turret calibration failed: {exc}") from None
+
+        closest, _, tri = mesh.nearest.on_surface(np.array(self.targets).reshape(-1, 3))  # the faces aimed at
+        normals = mesh.face_normals[tri]
+        use = used.copy()
+        for _ in range(3):
+            cal = fit(use, normals, closest, T)
+            off = np.abs(np.einsum("ij,ij->i", normals, beam_point(cal.T_world_turret, pan, tilt, rho) - closest))
+            beside = used & (off > 3 * spec.sigma_range_m)
+            if not (use & beside).any() or (used & ~beside).sum() < least:
+                break
+            use = used & ~beside
+        T = cal.T_world_turret
+        for _ in range(max_rounds):
+            closest, dist, tri = mesh.nearest.on_surface(beam_point(T, pan, tilt, rho))
+            normals = mesh.face_normals[tri]
+            # a beam cannot land on a face turned away from it: one nearest such a face (beside an edge,
+            # at a pose still off) is left out of this round rather than pull the pose to the wrong side;
+            # so is one more than 3σ_ρ from every face (an object that moved: ``solve`` then says which)
+            use = used & (np.einsum("ij,ij->i", normals, beam_ray(T, pan, tilt)[1]) < 0)
+            use &= dist <= 3 * spec.sigma_range_m
+            if use.sum() < least:
+                use = used
+            cal = fit(use, normals, closest, T)
             deg, m = pose_error(cal.T_world_turret, T)
             T = cal.T_world_turret
             if deg < 1e-5 and m < 1e-7:
                 break
         return cal, T
+
+    def _aimed(self, idx) -> list[str]:
+        """The object each measurement ``idx`` was aimed at (the owner of the surface nearest its target)."""
+        mesh, owner = self.site.surfaces()
+        if mesh is None or not len(idx):
+            return [""] * len(idx)
+        tri = mesh.nearest.on_surface(np.array(self.targets)[list(idx)].reshape(-1, 3))[2]
+        return [str(owner[t]) for t in tri]
 
     def _too_few_orientations(self, normals, used, off_text: str) -> str:
         groups = _orientation_groups(normals)
@@ -563,7 +641,9 @@ class CalibrateTurret(Workflow):
             left.update({int(i): c for i, c in zip(idx, checks) if int(i) in drop})
             used, cal, T = trial, cal_t, T_t
         order = sorted(left)
-        text = disagreement_text([left[i] for i in order], [f"{i + 1} {self.labels[i]}" for i in order])
+        text = disagreement_text(
+            [left[i] for i in order], [f"{i + 1} {self.labels[i]}" for i in order], aimed=self._aimed(order)
+        )
         return cal, T, used, text
 
     def _far_points(self) -> str:
@@ -765,52 +845,3 @@ def _facing(n: np.ndarray) -> str:
     if n[2] < -0.9:
         return "down"
     return f"sideways (x {n[0]:+.2f}, y {n[1]:+.2f})"
-
-
-def _face_grid(obj, camera_center: np.ndarray, turret_origin: np.ndarray, thin: bool = True):
-    """(X (3,), unit normal (3,), face index) on a GRID × GRID grid over each planar face of ``obj`` that
-    faces both the camera and the turret, EDGE_MARGIN_M inside its edges (half its width where it is
-    thinner), inside the face's polygon."""
-    T = obj.T_world_obj
-    model = obj.model
-    if not model.faces:
-        return
-    normals = model.face_normals() @ T[:3, :3].T
-    for k, face in enumerate(model.faces):
-        V = model.vertices[list(face)] @ T[:3, :3].T + T[:3, 3]
-        n, c = normals[k], V.mean(axis=0)
-        if n @ (camera_center - c) <= 0 or n @ (turret_origin - c) <= 0:
-            continue
-        edges = np.roll(V, -1, axis=0) - V
-        e1 = edges[int(np.argmax(np.linalg.norm(edges, axis=1)))]
-        e1 = e1 / np.linalg.norm(e1)
-        e2 = np.cross(n, e1)
-        uv = (V - c) @ np.stack([e1, e2], axis=1)  # the polygon in the face's plane
-        axes = []
-        if not thin and np.ptp(uv, axis=0).min() <= 2 * EDGE_MARGIN_M:
-            continue
-        for lo, hi in zip(uv.min(axis=0), uv.max(axis=0)):
-            m = min(EDGE_MARGIN_M, 0.5 * (hi - lo))
-            axes.append(np.linspace(lo + m, hi - m, GRID) if hi - lo > 2 * m else np.array([0.5 * (lo + hi)]))
-        for a in axes[0]:
-            for b in axes[1]:
-                if _inside(uv, np.array([a, b])):
-                    yield c + a * e1 + b * e2, n, k
-
-
-def _inside(poly: np.ndarray, p: np.ndarray) -> bool:
-    """Whether the 2D point p lies inside the polygon poly (K, 2) (even–odd rule)."""
-    x, y = p
-    inside = False
-    for (x1, y1), (x2, y2) in zip(poly, np.roll(poly, -1, axis=0)):
-        if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
-            inside = not inside
-    return inside
-
-
-def _first_is(site, origin: np.ndarray, X: np.ndarray, name: str) -> bool:
-    """Whether the first database surface on the ray from ``origin`` towards X is object ``name``, at X."""
-    d = X - origin
-    dist = float(np.linalg.norm(d))
-    hit = site.raycast(origin, d / dist)
-    return hit is not None and hit.name == name and abs(hit.distance_m - dist) < 0.005
