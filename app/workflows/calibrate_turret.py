@@ -151,8 +151,10 @@ class CalibrateTurret(Workflow):
             # turret aimed the same way (once more beams move the estimate, it is offered again)
             tg = np.array(self.targets)[landed].reshape(-1, 3)
             keep &= (np.linalg.norm(c.X[:, None, :] - tg[None], axis=2) < 0.01).sum(axis=1) < MAX_REPEATS
-            # (a face whose beam missed waits until two more beams have landed: the estimate has moved)
-            missed = {self.labels[i] for i in np.flatnonzero(~landed) if landed[i + 1 :].sum() < 2}
+            # (a face whose beam missed it — off every surface, or on another face — waits until two more
+            # beams have landed on the faces they were aimed at: the estimate has moved since)
+            on_aim = landed & (np.einsum("ij,ij->i", normals, self._aimed_normals()) > np.cos(np.radians(10.0)))
+            missed = {self.labels[i] for i in np.flatnonzero(~on_aim) if on_aim[i + 1 :].sum() < 2}
             keep &= np.array([f"a suggested point on {nm}" not in missed for nm in c.names], bool)
         c = c.take(keep)
         reach = room_ratio(c, landing_sd(T, cov_aim, c)) <= 1.0  # a beam aimed there lands on that face
@@ -168,8 +170,16 @@ class CalibrateTurret(Workflow):
         if not reach.all():
             # a point out of reach that would do much more than the best within reach: first the beam
             # within reach that brings it into reach soonest (e.g. the table top, then the table's edge)
-            far = np.flatnonzero(~reach)
-            f, sd_f = next_turret_point(done, rows[~reach], scale, PRIOR_SD)
+            # of each face out of reach, only its most central point (the likeliest to be hit) competes
+            ratio_all = room_ratio(c, landing_sd(T, cov_aim, c))
+            far = np.array(
+                [
+                    min((i for i in np.flatnonzero(~reach) if c.names[i] == nm), key=lambda i: ratio_all[i])
+                    for nm in sorted({c.names[i] for i in np.flatnonzero(~reach)})
+                ],
+                int,
+            )
+            f, sd_f = next_turret_point(done, rows[far], scale, PRIOR_SD)
             if (sd_f / scale).max() < UNLOCK_GAIN * (sd_k / scale).max():
                 f = int(far[f])
                 G = landing_rows(T, c.take(np.arange(len(c.X)) == f))[0]
@@ -591,6 +601,13 @@ class CalibrateTurret(Workflow):
             if deg < 1e-5 and m < 1e-7:
                 break
         return cal, T
+
+    def _aimed_normals(self) -> np.ndarray:
+        """(N, 3): the normal of the face each measurement was aimed at (the surface nearest its target)."""
+        mesh, _ = self.site.surfaces()
+        if mesh is None or not self.targets:
+            return np.zeros((len(self.targets), 3))
+        return mesh.face_normals[mesh.nearest.on_surface(np.array(self.targets).reshape(-1, 3))[2]]
 
     def _aimed(self, idx) -> list[str]:
         """The object each measurement ``idx`` was aimed at (the owner of the surface nearest its target)."""
