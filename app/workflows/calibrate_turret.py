@@ -244,7 +244,7 @@ class CalibrateTurret(Workflow):
         reached = deg <= TARGET_DEG and m <= TARGET_M
         now = (
             f" The beams so far give σ {deg:.2f}°, {1000 * m:.1f} mm"
-            + (f" (within the {TARGET_DEG}° and {1000 * TARGET_M:.0f} mm aimed for)." if reached else ".")
+            + (f" (within the {TARGET_DEG}° and {1000 * TARGET_M:.1f} mm aimed for: " + "{solve})." if reached else ".")
             if len(self.pan) >= 6
             else ""
         )
