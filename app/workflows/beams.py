@@ -90,8 +90,11 @@ def check_beams(site, T_world_turret, pan_rad, tilt_rad, range_m, turret_cov=Non
             along = float(n @ d_m)
             if abs(along) > 1e-6:
                 var += (float(n @ (hit.X_world - o_m)) / along - hit.distance_m) ** 2
-        off = _off_facing_faces(mesh, owner, hit.name, origin + rho[i] * d, d)
-        out.append(BeamCheck(hit.name, float(rho[i]), float(hit.distance_m), float(np.sqrt(var)), off))
+        sigma = float(np.sqrt(var))
+        off = float("inf")
+        if abs(rho[i] - hit.distance_m) > LIMIT_SIGMA * sigma:  # (only then does it matter: it costs a search)
+            off = _off_facing_faces(mesh, owner, hit.name, origin + rho[i] * d, d)
+        out.append(BeamCheck(hit.name, float(rho[i]), float(hit.distance_m), sigma, off))
     return out
 
 
