@@ -20,7 +20,7 @@ import numpy as np
 
 from core.calibration import calibrate_turret_planes, next_turret_point, turret_plane_rows
 from core.rangefinder import aim, beam_point, beam_ray
-from core.transforms import pose_error
+from core.transforms import log_so3, pose_error
 
 from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel, sigma_over
 from .beams import BeamCheck, check_beams, disagreement_text
@@ -45,6 +45,7 @@ PRIOR_SD = np.array([np.radians(10.0)] * 3 + [0.5] * 3)  # keeps the information
 # The calibration in use, stored without a covariance (or a looser one), is taken to be within this (1σ)
 # when aiming: the beams' estimate starts from it (a prior) until they fix the pose themselves.
 AIM_PRIOR_SD = np.array([np.radians(1.0)] * 3 + [0.03] * 3)
+WANDER_CHI2 = 22.46  # χ²(6) at 99.9 %: a solve farther than this from the beams' guided estimate is doubtful
 MAX_REPEATS = 4  # a suggested point is offered until it has been measured this many times
 UNLOCK_GAIN = 0.8  # a point out of reach worth this fraction of the best one's worst σ or less is unlocked first
 UNLOCK_STEP = 0.9  # ... by a beam within reach that narrows the aim there by this factor at least, else aimed at
@@ -103,6 +104,7 @@ class CalibrateTurret(Workflow):
         self.progress_text = ""  # "point k · aiming" / "point k · measuring n shots" while measuring
         self.state = "pick"
         self.moved_text = ""  # what the last Solve left out as disagreeing with the database
+        self.elsewhere_text = ""  # what the last Solve said when it wandered from the beams' guided estimate
         self.suggestion: tuple[np.ndarray, str] | None = None  # the point to measure next, and its name
         self.sigma_now: tuple[float, float] | None = None  # σ (°, m) the beams so far give (predicted)
         self.sigma_next: tuple[float, float] | None = None  # ... and with the suggestion measured too
@@ -157,49 +159,49 @@ class CalibrateTurret(Workflow):
             missed = {self.labels[i] for i in np.flatnonzero(~on_aim) if on_aim[i + 1 :].sum() < 2}
             keep &= np.array([f"a suggested point on {nm}" not in missed for nm in c.names], bool)
         c = c.take(keep)
-        reach = room_ratio(c, landing_sd(T, cov_aim, c)) <= 1.0  # a beam aimed there lands on that face
-        if not reach.any():
+        if not len(c.X):
             return
+        ratio = room_ratio(c, landing_sd(T, cov_aim, c))  # ≤ 1: a beam aimed there lands on that face
         pan_c, tilt_c, rho_c = aim(T, c.X)
         rows = turret_plane_rows(T, pan_c, tilt_c, rho_c, c.normals, spec)
-        scale = np.array([np.radians(TARGET_DEG)] * 3 + [TARGET_M] * 3)
-        idx = np.flatnonzero(reach)
-        k, sd_k = next_turret_point(done, rows[reach], scale, PRIOR_SD)
-        k = int(idx[k])
-        last, self.unlocks = self.unlocks, ""
-        if not reach.all():
-            # a point out of reach that would do much more than the best within reach: first the beam
-            # within reach that brings it into reach soonest (e.g. the table top, then the table's edge)
-            # of each face out of reach, only its most central point (the likeliest to be hit) competes
-            ratio_all = room_ratio(c, landing_sd(T, cov_aim, c))
-            far = np.array(
-                [
-                    min((i for i in np.flatnonzero(~reach) if c.names[i] == nm), key=lambda i: ratio_all[i])
-                    for nm in sorted({c.names[i] for i in np.flatnonzero(~reach)})
-                ],
-                int,
-            )
-            f, sd_f = next_turret_point(done, rows[far], scale, PRIOR_SD)
-            if (sd_f / scale).max() < UNLOCK_GAIN * (sd_k / scale).max():
-                f = int(far[f])
-                G = landing_rows(T, c.take(np.arange(len(c.X)) == f))[0]
-                room = np.array([c.room[f, :2].min(), c.room[f, 2:].min()])
-                now = float(
-                    np.max((ROOM_SIGMAS * np.sqrt(np.einsum("ak,kl,al->a", G, cov_aim, G)) + ROOM_SPARE_M) / room)
-                )
-                ratio = np.max((ROOM_SIGMAS * unlocking(G, cov_aim, rows[reach]) + ROOM_SPARE_M) / room, axis=1)
-                self._unlock_tries = self._unlock_tries + 1 if last == c.names[f] else 0
-                if (
-                    ratio.min() < UNLOCK_STEP * now and self._unlock_tries < 2
-                ):  # a beam within reach narrows the aim there
-                    k = int(idx[int(np.argmin(ratio))])
-                    self.unlocks = c.names[f]
-                else:  # nothing within reach helps: aim there anyway (a beam that lands near an edge waits)
-                    k, sd_k = f, sd_f
-                    self.unlocks = "?"
-                sd_k = np.sqrt(np.diag(np.linalg.inv(info + np.outer(rows[k], rows[k]))))
+        k = self._choose(c, ratio, rows, done, cov_aim, T)
+        sd_k = np.sqrt(np.diag(np.linalg.inv(info + np.outer(rows[k], rows[k]))))
         self.suggestion = (c.X[k].copy(), f"a suggested point on {c.names[k]}")
         self.sigma_next = (float(np.degrees(sd_k[:3].max())), float(sd_k[3:].max()))
+
+    def _choose(self, c: Candidates, ratio: np.ndarray, rows: np.ndarray, done: np.ndarray, cov_aim, T) -> int:
+        """Which candidate to suggest (``_suggest``): the best within reach (``ratio`` ≤ 1), unless a point
+        out of reach would do much more (UNLOCK_GAIN); then first the beam within reach that brings it into
+        reach soonest (e.g. the table top, then the table's edge), or, when none helps or none is within
+        reach, that point itself (of each face out of reach only its most central point competes: the
+        likeliest to be hit). Sets ``unlocks``."""
+        scale = np.array([np.radians(TARGET_DEG)] * 3 + [TARGET_M] * 3)
+        reach = ratio <= 1.0
+        names = sorted({c.names[i] for i in np.flatnonzero(~reach)})
+        far = np.array(
+            [min((i for i in np.flatnonzero(~reach) if c.names[i] == nm), key=lambda i: ratio[i]) for nm in names], int
+        )
+        last, self.unlocks = self.unlocks, ""
+        if not reach.any():
+            self.unlocks = "?"
+            return int(far[next_turret_point(done, rows[far], scale, PRIOR_SD)[0]])
+        idx = np.flatnonzero(reach)
+        k, sd_k = next_turret_point(done, rows[reach], scale, PRIOR_SD)
+        if not len(far):
+            return int(idx[k])
+        f, sd_f = next_turret_point(done, rows[far], scale, PRIOR_SD)
+        if (sd_f / scale).max() >= UNLOCK_GAIN * (sd_k / scale).max():
+            return int(idx[k])
+        f = int(far[f])
+        G = landing_rows(T, c.take(np.arange(len(c.X)) == f))[0]
+        room = np.array([c.room[f, :2].min(), c.room[f, 2:].min()])
+        ratio_f = np.max((ROOM_SIGMAS * unlocking(G, cov_aim, rows[reach]) + ROOM_SPARE_M) / room, axis=1)
+        self._unlock_tries = self._unlock_tries + 1 if last == c.names[f] else 0
+        if ratio_f.min() < UNLOCK_STEP * ratio[f] and self._unlock_tries < 2:  # a beam within reach narrows it
+            self.unlocks = c.names[f]
+            return int(idx[int(np.argmin(ratio_f))])
+        self.unlocks = "?"  # nothing within reach helps: aim there anyway (a beam that lands elsewhere waits)
+        return f
 
     def _landed(self) -> tuple[np.ndarray, np.ndarray]:
         """Which beams landed within OFF_SURFACE_M of a known surface at the calibration in use (N,), and
@@ -506,7 +508,7 @@ class CalibrateTurret(Workflow):
             # edge with the wrong face, and the fit settles there
             landed, _ = self._landed()
             landed &= used
-            T_est, _ = self._estimate(landed)
+            T_est, cov_est = self._estimate(landed)
             cal, T = self._fit(mesh, pan, tilt, rho, used, T_est, off_text, max_rounds)
             cal, T, used, moved_text = self._leave_out_disagreeing(mesh, pan, tilt, rho, used, cal, T, max_rounds)
             moved_text = ". ".join(t for t in (pre_text, moved_text) if t)
@@ -536,6 +538,9 @@ class CalibrateTurret(Workflow):
             far = self._far_points()
             if far:
                 self.message += f". ⚠ {far}"
+            self.elsewhere_text = self._wandered(T, T_est, cov_est)
+            if self.elsewhere_text:
+                self.message += f". ⚠ {self.elsewhere_text}"
             sd_rot_deg, sd_t_m = self._sigmas()
             self.message += f". σ {sd_rot_deg.max():.2f}°, {1000 * sd_t_m.max():.1f} mm"
             if sd_rot_deg.max() > POORLY_DEG or sd_t_m.max() > POORLY_M:
@@ -662,6 +667,23 @@ class CalibrateTurret(Workflow):
             [left[i] for i in order], [f"{i + 1} {self.labels[i]}" for i in order], aimed=self._aimed(order)
         )
         return cal, T, used, text
+
+    def _wandered(self, T: np.ndarray, T_est: np.ndarray, cov_est: np.ndarray) -> str:
+        """ "" or what the operator is told when the solved pose ``T`` lies beyond the 99.9 % region of the
+        beams' own estimate (``_estimate``: the same beams with the calibration in use as a prior; its
+        covariance ``cov_est``): the beams fix the pose too loosely, and the solve wandered along what they
+        leave free (measured: from 8 points on the table and the box, a pose 16° and 56 cm off with a
+        stated σ of 5.5 mm)."""
+        rel = np.linalg.solve(T_est, T)
+        d = np.concatenate([log_so3(rel[:3, :3]), rel[:3, 3]])
+        if float(d @ np.linalg.solve(cov_est, d)) <= WANDER_CHI2:
+            return ""
+        deg, m = pose_error(T, T_est)
+        return (
+            f"the solve lies {deg:.1f}° and {1000 * m:.0f} mm from where the same beams put the turret with the "
+            "calibration in use as a guide: they fix the pose too loosely (too few, or on too few faces) and the "
+            "solve may be wrong whatever its σ; measure the suggested points and Solve again"
+        )
 
     def _far_points(self) -> str:
         """The measured points that lie more than 3σ of the range finder from their surface after Solve,
@@ -792,6 +814,8 @@ class CalibrateTurret(Workflow):
             far = self._far_points()
             if far:
                 out.append(far)
+            if getattr(self, "elsewhere_text", ""):
+                out.append(self.elsewhere_text)
             if int(np.sum(self.used)) <= 6:
                 out.append("only 6 points: little redundancy to catch a wrong one (8 or more is safer)")
             return out
