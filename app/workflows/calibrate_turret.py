@@ -46,7 +46,7 @@ PRIOR_SD = np.array([np.radians(10.0)] * 3 + [0.5] * 3)  # keeps the information
 # when aiming: the beams' estimate starts from it (a prior) until they fix the pose themselves.
 AIM_PRIOR_SD = np.array([np.radians(1.0)] * 3 + [0.03] * 3)
 WANDER_CHI2 = 22.46  # χ²(6) at 99.9 %: a solve farther than this from the beams' guided estimate is doubtful
-MAX_REPEATS = 4  # a suggested point is offered until it has been measured this many times
+MAX_REPEATS = 8  # a suggested point is offered until it has been measured this many times
 UNLOCK_GAIN = 0.8  # a point out of reach worth this fraction of the best one's worst σ or less is unlocked first
 UNLOCK_STEP = 0.9  # ... by a beam within reach that narrows the aim there by this factor at least, else aimed at
 
