@@ -97,7 +97,6 @@ class CalibrateTurret(Workflow):
         self.range_m: list[float] = []
         self.targets: list[np.ndarray] = []
         self.labels: list[str] = []
-        self.aimed: list[bytes] = []  # the pose each measurement was aimed with (T.tobytes())
         self.result = None
         self.solve_text = ""  # what the last Solve said (the review step repeats it)
         self.progress: float | None = None
@@ -109,7 +108,9 @@ class CalibrateTurret(Workflow):
         self.sigma_now: tuple[float, float] | None = None  # σ (°, m) the beams so far give (predicted)
         self.sigma_next: tuple[float, float] | None = None  # ... and with the suggestion measured too
         self._cand_cache: tuple | None = None
-        self.unlocks = ""  # the face the suggested point brings into reach (its beam narrows the aim there)
+        # why the suggestion: "" the best point within reach; a face's name: its beam narrows the aim at that
+        # face, out of reach yet; "?": a point out of reach, aimed at anyway (nothing within reach helps)
+        self.unlocks = ""
         self._unlock_tries = 0  # suggestions in a row that were to bring the same face into reach
         self.T_aim: np.ndarray | None = None  # the pose the turret aims with: the beams' own solve once they fix it
         self._suggest()
@@ -252,9 +253,14 @@ class CalibrateTurret(Workflow):
         )
         if self.suggestion is None or reached:
             return now
-        return (
-            f"{now} Next, the point circled 'next' (on {self.suggestion[1].split(' on ', 1)[1]}) reduces σ the most"
-            + (f", to {self.sigma_next[0]:.2f}°, {1000 * self.sigma_next[1]:.1f} mm." if len(self.pan) >= 5 else ".")
+        where = self.suggestion[1].split(" on ", 1)[1]
+        if self.unlocks and self.unlocks != "?":
+            return (
+                f"{now} Next, the point circled 'next' (on {where}): it narrows the aim at {self.unlocks}, "
+                "which reduces σ the most."
+            )
+        return f"{now} Next, the point circled 'next' (on {where}) reduces σ the most" + (
+            f", to {self.sigma_next[0]:.2f}°, {1000 * self.sigma_next[1]:.1f} mm." if len(self.pan) >= 5 else "."
         )
 
     # ------------------------------------------------------------------ picking
@@ -339,8 +345,7 @@ class CalibrateTurret(Workflow):
                 raise WorkflowError(self.site.no_devices("measure"))
             X, label = self.pending_X, self.pending_label
             T = self.site.T_world_turret
-            T_aim = self._aim_pose()
-            pan, tilt, _ = aim(T_aim, X)
+            pan, tilt, _ = aim(self._aim_pose(), X)
             k = len(self.pan) + 1
             uv = self.camera.project(X.reshape(1, 3))
         why = self.scene_changed(uv)
@@ -384,7 +389,6 @@ class CalibrateTurret(Workflow):
             self.range_m.append(float(m.range_m))
             self.targets.append(X)
             self.labels.append(self.pending_label)
-            self.aimed.append(T_aim.tobytes())
             self.pending_X = None
             self.result = None
             self.state = "pick"
@@ -427,7 +431,7 @@ class CalibrateTurret(Workflow):
             i = int(index)
             if not 0 <= i < len(self.pan):
                 raise WorkflowError(f"there is no measurement {i + 1}: {len(self.pan)} were made")
-            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels, self.aimed):
+            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
                 lst.pop(i)
             self.result = None
             self.state = "measure" if self.pending_X is not None else "pick"
@@ -447,7 +451,7 @@ class CalibrateTurret(Workflow):
                     "; the solve stands." if self.result is not None else "."
                 )
                 return
-            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels, self.aimed):
+            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
                 lst.pop()
             self.result = None
             self.state = "pick"
