@@ -74,7 +74,7 @@ def check_beams(site, T_world_turret, pan_rad, tilt_rad, range_m, turret_cov=Non
     steps = principal_steps(turret_cov) if turret_cov is not None else np.zeros((0, 6))
     moved = [perturbed_turret(T, s) for s in steps]
     origin, dirs = beam_ray(T, pan, tilt)
-    mesh, owner = site.surfaces()
+    surfaces = None  # the database as one mesh, fetched only when a beam disagrees (its first build imports trimesh)
     out = []
     for i, d in enumerate(dirs.reshape(-1, 3)):
         hit = site.raycast(origin, d) if np.isfinite(rho[i]) else None
@@ -93,7 +93,8 @@ def check_beams(site, T_world_turret, pan_rad, tilt_rad, range_m, turret_cov=Non
         sigma = float(np.sqrt(var))
         off = float("inf")
         if abs(rho[i] - hit.distance_m) > LIMIT_SIGMA * sigma:  # (only then does it matter: it costs a search)
-            off = _off_facing_faces(mesh, owner, hit.name, origin + rho[i] * d, d)
+            surfaces = surfaces or site.surfaces()
+            off = _off_facing_faces(*surfaces, hit.name, origin + rho[i] * d, d)
         out.append(BeamCheck(hit.name, float(rho[i]), float(hit.distance_m), sigma, off))
     return out
 
