@@ -55,10 +55,28 @@ class CalibrateTurret(Workflow):
     name = "calibrate_turret"
     title = "Calibrate turret"
     shows_beam = True
-    actions = ("click", "choose_point", "measure", "remove_last", "remove_measurement", "solve", "accept", "cancel")
+    actions = (
+        "click",
+        "choose_point",
+        "measure",
+        "measure_next",
+        "remove_last",
+        "remove_measurement",
+        "solve",
+        "accept",
+        "cancel",
+    )
     controls = (
         Control(
             "measure", "Measure", "M", kind="long", color="blue", hint="Aim at the picked point and measure its range"
+        ),
+        Control(
+            "measure_next",
+            "Measure next",
+            "G",
+            kind="long",
+            color="blue",
+            hint="Measure the point circled 'next': of the points the beam will land on, the one that reduces σ most",
         ),
         Control(
             "solve",
@@ -112,7 +130,7 @@ class CalibrateTurret(Workflow):
         # face, out of reach yet; "?": a point out of reach, aimed at anyway (nothing within reach helps)
         self.unlocks = ""
         self._unlock_tries = 0  # suggestions in a row that were to bring the same face into reach
-        self.T_aim: np.ndarray | None = None  # the pose the turret aims with: the beams' own solve once they fix it
+        self.T_aim: np.ndarray | None = None  # the pose the turret aims with (``_estimate``)
         self._suggest()
 
     # ------------------------------------------------------------------ suggesting where to aim
@@ -257,10 +275,12 @@ class CalibrateTurret(Workflow):
         if self.unlocks and self.unlocks != "?":
             return (
                 f"{now} Next, the point circled 'next' (on {where}): it narrows the aim at {self.unlocks}, "
-                "which reduces σ the most."
+                "which reduces σ the most; {measure_next} measures it."
             )
-        return f"{now} Next, the point circled 'next' (on {where}) reduces σ the most" + (
-            f", to {self.sigma_next[0]:.2f}°, {1000 * self.sigma_next[1]:.1f} mm." if len(self.pan) >= 5 else "."
+        return (
+            f"{now} Next, the point circled 'next' (on {where}) reduces σ the most"
+            + (f", to {self.sigma_next[0]:.2f}°, {1000 * self.sigma_next[1]:.1f} mm" if len(self.pan) >= 5 else "")
+            + "; {measure_next} measures it."
         )
 
     # ------------------------------------------------------------------ picking
@@ -328,6 +348,16 @@ class CalibrateTurret(Workflow):
             self.state = "measure"
 
     # ------------------------------------------------------------------ measuring
+    def measure_next(self):
+        """Pick the point circled 'next' (``suggestion``) and measure it (``measure``)."""
+        with self.lock:
+            self._check_open()
+            if self.suggestion is None:
+                raise WorkflowError("there is no point to suggest now: click a known point and Measure")
+            self.pending_X, self.pending_label = self.suggestion[0].copy(), self.suggestion[1]
+            self.state = "measure"
+        return self.measure()
+
     def measure(self):
         """Aim at the picked point with the current calibration and measure (median of ``shots``).
 
@@ -769,23 +799,25 @@ class CalibrateTurret(Workflow):
         if self.pending_X is not None:
             return Step(
                 "measure",
-                "{measure} " + f"{self.pending_label} (the turret aims with the current calibration, or once six "
-                "points fix the pose, with their solve), or "
-                "click another known point.",
+                "{measure} " + f"{self.pending_label} (the turret aims through the beams' estimate so far, the "
+                "current calibration as its guide), or click another known point.",
                 frozenset(base | {"measure"}),
             )
+        nxt = {"measure_next"} if self.suggestion is not None else set()
         if self.result is not None:
             return Step(
                 "review",
-                f"Solved: {self.solve_text}. " + "{accept} to use it, or measure more points and {solve} again.",
-                frozenset(base | {"accept"}),
+                f"Solved: {self.solve_text}. "
+                + "{accept} to use it, or measure more points and {solve} again"
+                + (" ({measure_next} measures the one circled 'next')." if nxt else "."),
+                frozenset(base | {"accept"} | nxt),
             )
         more = f" ({6 - n} more at least)" if n < 6 else "; {solve} when done"
         return Step(
             "pick",
             f"Click a known point — a face centre (cyan), a corner, or anywhere on a known face — "
             f"then measure it{more}.{self._suggestion_text()}",
-            frozenset(base),
+            frozenset(base | nxt),
         )
 
     def choices(self, action: str) -> list[tuple[str, Any]]:

@@ -270,16 +270,22 @@ def test_the_suggested_points_calibrate_on_the_shipped_database(device_site, fas
     T_wrong = T_true @ make_T(exp_so3(np.radians([0.6, -0.5, 1.2])), [0.02, -0.015, 0.01])
     site.set_turret(T_wrong, rms_m=0.0, residuals_m=np.zeros(0), cov=np.eye(6), measurements={}, client="test")
     wf = CalibrateTurret(site, shots=3)
-    for _ in range(40):
+    for i in range(60):
         X, label = wf.suggestion
-        wf.click(site.camera.project(X[None])[0])
-        assert wf.pending_label == label
-        wf.measure()
+        if i % 2:  # Measure next (G): the circled point picked and measured at once
+            assert (
+                "measure_next" in wf.current_step().enabled and "{measure_next} measures it" in wf.current_step().prompt
+            )
+            wf.measure_next()
+        else:  # a click on the circled point, then Measure
+            wf.click(site.camera.project(X[None])[0])
+            assert wf.pending_label == label
+            wf.measure()
+        assert wf.labels[-1] == label
         if "within the" in wf.current_step().prompt:
             break
     assert "Next, the point circled" not in wf.current_step().prompt
-    n = len(wf.pan)
-    assert n <= 35
+    assert len(wf.pan) <= 45
     cal = wf.solve()
     sd_rot_deg = np.degrees(np.sqrt(np.diag(cal.cov)[:3]))
     sd_t_m = np.sqrt(np.diag(cal.cov)[3:])
