@@ -115,6 +115,7 @@ class CalibrateTurret(Workflow):
         self.range_m: list[float] = []
         self.targets: list[np.ndarray] = []
         self.labels: list[str] = []
+        self.checks: list[BeamCheck] = []  # each measurement against the database, through the calibration in use
         self.result = None
         self.solve_text = ""  # what the last Solve said (the review step repeats it)
         self.progress: float | None = None
@@ -154,6 +155,7 @@ class CalibrateTurret(Workflow):
         if not self.site.has_turret or not self.site.objects():
             return
         landed, _ = self._landed()
+        landed &= ~self._moved(landed)  # beams at an object that moved would pull the aim
         self.T_aim, cov_aim = self._estimate(landed)
         T, spec = self.T_aim, self.site.scene.rangefinder
         pan, tilt, rho = np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
@@ -431,6 +433,7 @@ class CalibrateTurret(Workflow):
             check = check_beams(
                 self.site, self.site.T_world_turret, pan_r, tilt_r, m.range_m, self.site.calibration_covs[1]
             )[0]
+            self.checks.append(check)
             if check.disagrees:  # said now; Solve leaves it out if it still disagrees through the solved pose
                 self.message += " ⚠ " + disagreement_text(
                     [check], [self.labels[-1]], done="Solve leaves it out", aimed=self._aimed([len(self.pan) - 1])
@@ -461,7 +464,7 @@ class CalibrateTurret(Workflow):
             i = int(index)
             if not 0 <= i < len(self.pan):
                 raise WorkflowError(f"there is no measurement {i + 1}: {len(self.pan)} were made")
-            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
+            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels, self.checks):
                 lst.pop(i)
             self.result = None
             self.state = "measure" if self.pending_X is not None else "pick"
@@ -481,7 +484,7 @@ class CalibrateTurret(Workflow):
                     "; the solve stands." if self.result is not None else "."
                 )
                 return
-            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels):
+            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels, self.checks):
                 lst.pop()
             self.result = None
             self.state = "pick"
@@ -518,18 +521,13 @@ class CalibrateTurret(Workflow):
                 if off
                 else ""
             )
-            # Beams that disagree with the database at the calibration in use, while most agree: their
-            # object has moved (had the calibration been off, most would disagree); left out before the fit
-            idx = np.flatnonzero(used)
-            pre = check_beams(self.site, T, pan[idx], tilt[idx], rho[idx], self.site.calibration_covs[1])
-            bad = np.array([c.disagrees for c in pre], bool)
+            bad = self._moved(used)
             pre_text = ""
-            if bad.any() and bad.sum() <= 0.5 * len(pre):
-                used[idx[bad]] = False
+            if bad.any():
+                used &= ~bad
+                idx = np.flatnonzero(bad)
                 pre_text = disagreement_text(
-                    [c for c, b in zip(pre, bad) if b],
-                    [f"{i + 1} {self.labels[i]}" for i in idx[bad]],
-                    aimed=self._aimed(idx[bad]),
+                    [self.checks[i] for i in idx], [f"{i + 1} {self.labels[i]}" for i in idx], aimed=self._aimed(idx)
                 )
                 off_text += f" ⚠ {pre_text}."
             if used.sum() < 6:
@@ -640,6 +638,13 @@ class CalibrateTurret(Workflow):
             if deg < 1e-5 and m < 1e-7:
                 break
         return cal, T
+
+    def _moved(self, used: np.ndarray) -> np.ndarray:
+        """(N,) bool: the beams among ``used`` that disagreed with the database when measured (``checks``,
+        through the calibration in use), while most agreed: their object has moved (had the calibration
+        been off, most would disagree). They are left out of the estimate and of the solve."""
+        bad = used & np.array([c.disagrees for c in self.checks], bool).reshape(-1)
+        return bad if bad.sum() <= 0.5 * used.sum() else np.zeros_like(bad)
 
     def _aimed_normals(self) -> np.ndarray:
         """(N, 3): the normal of the face each measurement was aimed at (the surface nearest its target)."""
