@@ -121,7 +121,7 @@ def test_beams_at_the_moved_parallelepiped_are_left_out_and_said(browser, device
                 timeout=60_000
             )  # on the page while this measurement's message is shown
             said += 1
-    assert said >= 2
+    assert said >= 1  # (a beam at its top may meet the moved top where the database still has top: it agrees)
     op.press("Solve")
     page.get_by_text(
         re.compile(r"the parallelepiped has moved: update its pose first \(the range finder disagrees, left out: ")
