@@ -32,6 +32,7 @@ __all__ = [
 ]
 
 GRID = 9  # points along each axis of a face
+MAX_FACES = 40  # the largest faces that get a grid (a site of thousands of objects: the start stays quick)
 EDGE_M = 0.01  # the grid keeps this far inside a face's edges (a thinner face: its middle line)
 ROOM_SIGMAS = 2.5  # a candidate's room to its face's edges, in σ of where its beam lands
 ROOM_SPARE_M = 0.005  # ... plus this
@@ -65,9 +66,11 @@ def face_candidates(site, camera, T_world_turret: np.ndarray) -> Candidates:
     """The candidate points of ``site``'s known objects for ``camera`` and the turret at ``T_world_turret``."""
     rows = []
     origin = np.asarray(T_world_turret, float)[:3, 3]
-    for obj in site.objects():
-        for x, n, k, e1, e2, room in _face_grid(obj, camera.center, origin):
-            rows.append((x, n, f"{obj.name} face {k}", e1, e2, room, obj.name))
+    faces = [f for obj in site.objects() for f in _faces(obj, camera.center, origin)]
+    faces.sort(key=lambda f: -f[-1])  # the largest first: a site of thousands of objects keeps MAX_FACES of them
+    for name, k, V, n, _ in faces[:MAX_FACES]:
+        for x, e1, e2, room in _grid(V, n):
+            rows.append((x, n, f"{name} face {k}", e1, e2, room, name))
     if rows:
         X = np.array([r[0] for r in rows])
         uv = camera.project(X)
@@ -129,9 +132,9 @@ def unlocking(G_target: np.ndarray, cov: np.ndarray, rows: np.ndarray) -> np.nda
     return np.sqrt(np.maximum(var, 0.0))
 
 
-def _face_grid(obj, camera_center: np.ndarray, turret_origin: np.ndarray):
-    """(X, unit normal, face index, e1, e2, room (4,)) on a GRID × GRID grid over each planar face of
-    ``obj`` that faces both the camera and the turret, EDGE_M inside its extent, inside its polygon."""
+def _faces(obj, camera_center: np.ndarray, turret_origin: np.ndarray):
+    """(object name, face index, vertices (K, 3), unit normal, area) of each planar face of ``obj``, in the
+    world, that faces both the camera and the turret."""
     T = obj.T_world_obj
     model = obj.model
     if not model.faces:
@@ -140,23 +143,29 @@ def _face_grid(obj, camera_center: np.ndarray, turret_origin: np.ndarray):
     for k, face in enumerate(model.faces):
         V = model.vertices[list(face)] @ T[:3, :3].T + T[:3, 3]
         n, c = normals[k], V.mean(axis=0)
-        if n @ (camera_center - c) <= 0 or n @ (turret_origin - c) <= 0:
-            continue
-        edges = np.roll(V, -1, axis=0) - V
-        e1 = edges[int(np.argmax(np.linalg.norm(edges, axis=1)))]
-        e1 = e1 / np.linalg.norm(e1)
-        e2 = np.cross(n, e1)
-        uv = (V - c) @ np.stack([e1, e2], axis=1)  # the polygon in the face's plane
-        lo, hi = uv.min(axis=0), uv.max(axis=0)
-        axes = [
-            np.linspace(a + EDGE_M, b - EDGE_M, GRID) if b - a > 4 * EDGE_M else np.array([0.5 * (a + b)])
-            for a, b in zip(lo, hi)
-        ]
-        for a in axes[0]:
-            for b in axes[1]:
-                if _inside(uv, np.array([a, b])):
-                    room = np.array([a - lo[0], hi[0] - a, b - lo[1], hi[1] - b])
-                    yield c + a * e1 + b * e2, n, k, e1, e2, room
+        if n @ (camera_center - c) > 0 and n @ (turret_origin - c) > 0:
+            area = 0.5 * float(np.linalg.norm(np.cross(V - c, np.roll(V, -1, axis=0) - c).sum(axis=0)))
+            yield obj.name, k, V, n, area
+
+
+def _grid(V: np.ndarray, n: np.ndarray):
+    """(X, e1, e2, room (4,)) on a GRID × GRID grid over the planar polygon V (K, 3) of normal n, EDGE_M
+    inside its extent (a thinner extent: its middle), inside the polygon; e1 along its longest edge."""
+    c = V.mean(axis=0)
+    edges = np.roll(V, -1, axis=0) - V
+    e1 = edges[int(np.argmax(np.linalg.norm(edges, axis=1)))]
+    e1 = e1 / np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    uv = (V - c) @ np.stack([e1, e2], axis=1)  # the polygon in the face's plane
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    axes = [
+        np.linspace(a + EDGE_M, b - EDGE_M, GRID) if b - a > 4 * EDGE_M else np.array([0.5 * (a + b)])
+        for a, b in zip(lo, hi)
+    ]
+    for a in axes[0]:
+        for b in axes[1]:
+            if _inside(uv, np.array([a, b])):
+                yield c + a * e1 + b * e2, e1, e2, np.array([a - lo[0], hi[0] - a, b - lo[1], hi[1] - b])
 
 
 def _inside(poly: np.ndarray, p: np.ndarray) -> bool:
