@@ -1,15 +1,24 @@
 """Calibrate the turret (``T_world_turret``) from range measurements on the database's known surfaces.
 
-The operator clicks known points in the overlay — a model vertex or the centre of a face (faces
-are better: the beam lands on a surface, not on an edge) — and the turret aims at each with the
-current calibration and measures. Where the beam really lands is not known exactly (the current
-calibration is what is being corrected), but it lands on a known surface: ``solve()`` finds the
-turret pose that puts every measured point on the database's surfaces (point-to-plane: each
-measured point is associated with the face it is nearest to and ``core.calibration
-.calibrate_turret_planes`` re-estimates the pose; repeated until it stops moving). At least 6
-points on faces of three different orientations are needed (e.g. the table top and two sides of
-a box). ``accept()`` stores
-the calibration (one transaction) and every later aim uses it.
+The operator clicks known points in the overlay — a face centre, a model vertex, anywhere on a known
+face, or the point circled 'next' (**Measure next** picks and measures it) — and the turret aims at
+each and measures. It aims through the beams' estimate so far (``_estimate``: the beams fitted with the
+calibration in use as a prior), so that a beam lands where it was aimed even on a thin face such as the
+table's 4 cm edge. The point circled 'next' (``_suggest``, ``turret_aims``) is, of a grid on the known
+faces both the camera and the turret see, the one that lowers the pose's worst σ most among those a beam
+lands on: on the shipped database (the table and one box) the face centres alone leave yaw and
+sideways shift confounded (σ of several cm); the suggestions bring σ within 5 mm (bench/turret.py).
+
+Where a beam really lands is not known exactly (the calibration is what is being corrected), but it
+lands on a known surface: ``solve()`` finds the turret pose that puts every measured point on the
+database's surfaces (point-to-plane, ``core.calibration.calibrate_turret_planes``: each beam first on
+the face it was aimed at, those beside it left out, then each on the face it is nearest to, repeated
+until the pose stops moving). At least 6 points on faces of three orientations are needed. Every beam
+is checked against the database (``beams.check_beams``, the check every workflow that uses beams
+makes): one that disagrees by more than 3σ at a known object — when measured, through the calibration
+in use, while most agree; or after the fit, through the solved pose — is left out and its object named
+as moved. A solve far from the beams' guided estimate is said and weak. ``accept()`` stores the
+calibration (one transaction) and every later aim uses it.
 """
 
 from __future__ import annotations
