@@ -45,11 +45,11 @@ from typing import Any
 import numpy as np
 
 from .base import CANCEL, STALE_FRAME_S, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel
+from .beams import LIMIT_SIGMA  # the beam check's limit (app/workflows/beams.py), here along the camera's ray
 
 __all__ = ["Target", "DesignateTarget", "NOT_CHECKED", "LIMIT_SIGMA"]
 
 NOT_CHECKED = "not checked by the range finder"
-LIMIT_SIGMA = 3.0  # a disagreement beyond this many σ along the ray is a warning
 NOT_IN_DATABASE = "not in the database"
 AIM_OFF_PX = 1.0  # a beam that lands farther than this from the click is said so
 OLD_FRAME_S = 1.0  # a disagreement found from a frame older than this says when the frame was
@@ -344,7 +344,8 @@ class DesignateTarget(Workflow):
             else:
                 warning = (
                     f"Warning: the range finder met no surface at {hit.name} but one {100 * delta:.1f} cm behind "
-                    f"it, at {_xyz(X_rf)} m: {hit.name} is not where the database has it; update its pose{off}"
+                    f"it, at {_xyz(X_rf)} m: {hit.name} is not where the database has it: the {hit.name} has moved: "
+                    f"update its pose first{off}"
                 )
         return Target(
             p,

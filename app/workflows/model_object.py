@@ -380,6 +380,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                         pan_stop_rad=float(pan0 + rel.max() + pad),
                     )
                 )
+        scans, moved = self._leave_out_moved(scans, T)
         with self.lock:
             self.progress = None
             self._clear_live()  # now in self.scans
@@ -389,7 +390,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             self.message = (
                 f"2 profiles across the box: {hits[0]} and {hits[1]} returns "
                 f"of {len(scans[0])} and {len(scans[1])} beams"
-            )
+            ) + (f". ⚠ {moved}" if moved else "")
             return scans
 
     def scan(self) -> list[RangeScan]:
@@ -443,6 +444,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                         devices, k, T, tilt_rad=m.tilt_rad, pan_start_rad=lo, pan_stop_rad=hi, pan_step_rad=step
                     )
                 )
+        scans, moved = self._leave_out_moved(scans, T)
         with self.lock:
             self.progress = None
             self._clear_live()  # now in self.scans
@@ -454,6 +456,8 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             self.site.set_beam(last.points(T)[np.nonzero(last.hits)[0][-1]])
             self.result = None
             self.message = f"2 profiles: {hits[0]} and {hits[1]} returns of {len(scans[0])} and {len(scans[1])} beams"
+            if moved:
+                self.message += f". ⚠ {moved}"
             return scans
 
     # ------------------------------------------------------------------ solve and accept
