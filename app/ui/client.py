@@ -74,6 +74,7 @@ class ClientPanel:
         self._performing = False  # a long action runs now (its worker has not returned from it)
         self.feeder: TrackFeeder | None = None  # feeds a workflow that follows the video
         self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
+        self.clicks_received = 0  # the page's clicks and told double clicks on the video that reached the server
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
         self.seen_change = app.site.change_seq
         self._double_at: str | None = None  # where the double click that pressed Find was, for its refusal
@@ -94,6 +95,7 @@ class ClientPanel:
         on_click = self.guard(self._on_click)
 
         async def clicked(event) -> None:  # its arrival time read here: a busy worker does not split a double click
+            self.clicks_received += 1
             self.click_worker.submit(on_click, event, time.monotonic())
 
         client.scene.on_click()(clicked)

@@ -126,6 +126,7 @@ def build_panel(panel: ClientPanel) -> None:
     on_double = guard(panel.on_double)
 
     async def told(_event) -> None:  # after the click before it, in the order they arrive
+        panel.clicks_received += 1
         panel.click_worker.submit(on_double, str(double.value), time.monotonic())
 
     double.on_update(told)

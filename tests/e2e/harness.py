@@ -387,14 +387,26 @@ class Interface:
 
     def click_pixel(self, page, uv):
         """A click on video pixel uv, by the mouse at that point of the page, as an operator's (what is over
-        the canvas there takes it, as it would theirs). Not playwright's element click: it waits for two steady
-        animation frames and checks the hit first, 0.3-1.1 s per click on software WebGL."""
+        the canvas there takes it, as it would theirs), then waits until the click has reached the server.
+
+        Not playwright's element click: it waits for two steady animation frames and checks the hit first,
+        0.3-1.1 s per click on software WebGL. The wait for the server: the page sends its scene clicks
+        through viser's 20 ms throttle, which keeps only the newest of the clicks waiting in it; on a loaded
+        machine a page can take three clicks made 50 ms apart inside one window and drop the middle one."""
+        panel = getattr(page, "panel", None)
+        before = None if panel is None else panel.clicks_received
         page.mouse.click(*self.canvas_point(page, uv))
-        time.sleep(0.05)
+        if panel is not None:
+            wait_until(lambda: panel.clicks_received > before, 30.0, "the click to reach the server", panel=panel)
 
     def double_click_pixel(self, page, uv):
-        """A double click on video pixel uv (one gesture)."""
+        """A double click on video pixel uv (one gesture), then waits until it reached the server: its first click
+        and the page's word that it was a double (static/wheel.js keeps its second press from viser)."""
+        panel = getattr(page, "panel", None)
+        before = None if panel is None else panel.clicks_received
         page.mouse.dblclick(*self.canvas_point(page, uv))
+        if panel is not None:
+            wait_until(lambda: panel.clicks_received >= before + 2, 30.0, "the double click to reach the server")
 
     def screenshot(self, page, path=None) -> np.ndarray:
         import cv2
