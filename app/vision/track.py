@@ -58,7 +58,7 @@ import numpy as np
 from core.brep import BRep
 from core.camera import Camera
 from core.point_line_pose import PointLineFit, refine_point_to_line
-from core.transforms import check_T, pose_error
+from core.transforms import check_T, invert_T, make_T, orthonormalize, pose_error
 
 from .profiles import search_along_normals, to_gray_f32
 
@@ -463,6 +463,8 @@ class EdgeTracker:
         capture_px: float = 32.0,
         start_capture_px: tuple[float, ...] = (24.0, 16.0),
         start_capture_deg: float = 10.0,
+        motion_model: bool = True,
+        max_band_px: float = 24.0,
     ):
         if not isinstance(camera, Camera):
             raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
@@ -496,6 +498,8 @@ class EdgeTracker:
         self.check_min_strength = float(check_min_strength)
         self.capture_px = float(capture_px)
         self.start_capture_deg = float(start_capture_deg)
+        self.motion_model = bool(motion_model)
+        self.max_band_px = float(max_band_px)
         self.start_capture_px = tuple(
             float(px) for px in np.atleast_1d(np.asarray(start_capture_px, float)) if px > self.search_px
         )
@@ -508,6 +512,9 @@ class EdgeTracker:
         self._lost = False
         self._polarity: dict[int, float] = {}
         self._followed = False  # a frame tracked since this pose was given (the retry is for motion, not for a start)
+        self._velocity: np.ndarray | None = None  # T_k · T_{k−1}⁻¹ of the last two frames tracked (world frame)
+        self._motion_px = 0.0  # the image motion (median over the samples, px) of that step
+        self._surprise_px = 0.0  # how far (px) the last frame's pose lay from its prediction
         self.diagnostics: TrackDiagnostics | None = None
 
     @property
@@ -529,8 +536,23 @@ class EdgeTracker:
         return sample_view(self.camera, view, T, step_px=self.sample_step_px, vertex_margin_px=self.vertex_margin_px)
 
     def _schedule(self) -> tuple[float, ...]:
-        """The half-widths of the frame's search passes, coarse to fine."""
-        return (self.search_px, self.refine_search_px)
+        """The half-widths of the frame's search passes, coarse to fine.
+
+        With the motion model on (``motion_model``), the first band is widened to twice the last frame's surprise (how
+        far its pose lay from its prediction, px), at most ``max_band_px``: the prediction is as
+        good as the motion is steady."""
+        first = self.search_px
+        if self.motion_model and self._velocity is not None:
+            first = float(np.clip(2.0 * self._surprise_px, self.search_px, max(self.max_band_px, self.search_px)))
+        return (first, self.refine_search_px)
+
+    def _prediction(self) -> np.ndarray:
+        """Where the object should be in the next frame: the last pose moved once more by the last step
+        (constant velocity, ``motion_model``), or the last pose."""
+        if not self.motion_model or self._velocity is None:
+            return self._T
+        T = self._velocity @ self._T
+        return make_T(orthonormalize(T[:3, :3]), T[:3, 3])  # a rotation to rounding, as check_T asks
 
     def _capture_schedule(self, capture_px: float | None = None) -> tuple[float, ...]:
         """The passes tried when the usual ones lose the object: from ``capture_px`` down (none if off)."""
@@ -540,7 +562,9 @@ class EdgeTracker:
             h /= 2.0
         return tuple(out) + (self.search_px, self.refine_search_px) if out else ()
 
-    def _pass(self, band: BandSmoothed, view: VisibleSegments, T: np.ndarray, half_range: float) -> _Pass:
+    def _pass(
+        self, band: BandSmoothed, view: VisibleSegments, T: np.ndarray, half_range: float, min_scale_px: float = 0.3
+    ) -> _Pass:
         """Sample the visible edges at pose T, search the image along their normals, refine T."""
         samples = self._samples(view, T)
         n = len(samples)
@@ -570,6 +594,7 @@ class EdgeTracker:
             matched[found],
             loss=self.loss,
             max_iter=self.max_iter,
+            min_scale_px=min_scale_px,
         )
         w[found] = fit.weights
         return _Pass(samples, matched, found, hits.strength, w, fit)
@@ -586,20 +611,25 @@ class EdgeTracker:
         )
         return float(np.mean(np.where(hits.found, np.minimum(np.abs(hits.offset_px), R), R)))
 
-    def _attempt(self, band: BandSmoothed, view: VisibleSegments, schedule: tuple[float, ...]):
-        """The passes of ``schedule`` from the last good pose, and the lost tests on their answer.
+    def _attempt(self, band: BandSmoothed, view: VisibleSegments, schedule: tuple[float, ...], T_start: np.ndarray):
+        """The passes of ``schedule`` from T_start (the prediction or the last good pose; ``view`` is
+        seen from there), and the lost tests on their answer.
 
         Returns (T, the last pass, reason ("" if tracked), confidence, inliers (bool per sample),
         edge_distance_px).
         """
-        T = self._T
+        T = T_start
         reason = ""
         p = None
         try:
             for k, half_range in enumerate(schedule):
                 if k:  # which edges are seen, again at the pose the last pass reached
                     view = self._view(T)
-                p = self._pass(band, view, T, half_range)
+                # A coarse pass's robust scale is kept at least an eighth of its band: its start may be
+                # off as a whole by pixels (a motion the prediction missed), so that every residual
+                # shares one offset and their spread, the scale estimated, is small enough to cut them all.
+                floor = max(0.3, half_range / 8.0) if self.motion_model and k < len(schedule) - 1 else 0.3
+                p = self._pass(band, view, T, half_range, floor)
                 if p.fit is None:
                     reason = (
                         f"the image shows an edge near only {int(p.found.sum())} of the {len(p.samples)} points "
@@ -626,7 +656,7 @@ class EdgeTracker:
             else:
                 # A jump larger than the search band cannot come from edges found within it.
                 jump = np.linalg.norm(
-                    self.camera.project_obj(T, p.samples.X_obj) - self.camera.project_obj(self._T, p.samples.X_obj),
+                    self.camera.project_obj(T, p.samples.X_obj) - self.camera.project_obj(T_start, p.samples.X_obj),
                     axis=1,
                 )
                 if np.median(jump) > 2.0 * max(schedule):
@@ -664,8 +694,9 @@ class EdgeTracker:
                 "track frames of the calibrated camera"
             )
         band = BandSmoothed(im, self.sigma_px)  # blurred only around the samples, as they are searched
-        view = self._view(self._T)  # which edges are seen from the start (shared by a retry's first pass)
-        T, p, reason, confidence, inl, edge_px = self._attempt(band, view, self._schedule())
+        T_start = self._prediction()
+        view = self._view(T_start)  # which edges are seen from the start (shared by a retry's first pass)
+        T, p, reason, confidence, inl, edge_px = self._attempt(band, view, self._schedule(), T_start)
         wide = self._capture_schedule()
         if (
             reason
@@ -676,7 +707,7 @@ class EdgeTracker:
         ):
             # The first frame after a given pose: the pose may be degrees or a centimetre off (a
             # stale database pose, clicked edges), beyond the ±search_px band. See start_capture_px.
-            tried = [self._attempt(band, view, self._capture_schedule(px)) for px in self.start_capture_px]
+            tried = [self._attempt(band, view, self._capture_schedule(px), T_start) for px in self.start_capture_px]
             good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
             if good:
                 X = good[0][1].samples.X_obj
@@ -695,12 +726,17 @@ class EdgeTracker:
                     )
                 else:
                     T, p, reason, confidence, inl, edge_px = good[0]
-        elif reason and wide and self._followed and np.isfinite(edge_px) and confidence >= self.lost_confidence:
-            # Most samples found their edge but the model does not sit on the image's edges: the
-            # signature of motion beyond the band (a wrong convergence shows a low confidence, and
-            # a wider search would only settle it elsewhere). Once more from the same start, coarse
-            # to fine from a wider band; kept only if it passes every test, else the first answer stands.
-            retry = self._attempt(band, view, wide)
+        elif (
+            reason
+            and wide
+            and self._followed
+            and (self.motion_model or (np.isfinite(edge_px) and confidence >= self.lost_confidence))
+        ):
+            # Motion beyond the band: the prediction missed (a start, a stop, a jerk). Once more from
+            # the same start, coarse to fine from ±capture_px; kept only if it passes every test, else
+            # the first answer stands. Without the motion model only when most samples found their edge
+            # but the model does not sit on the image's edges (the retry of issue 16).
+            retry = self._attempt(band, view, wide, T_start)
             if not retry[2]:
                 T, p, reason, confidence, inl, edge_px = retry
         n = len(p.samples)
@@ -714,6 +750,12 @@ class EdgeTracker:
         if reason:
             self._lost = True
             return TrackResult(self._T.copy(), float(confidence), True)
+        if self._followed:  # the step from a given pose is its correction, not the object's motion
+            X = p.samples.X_obj
+            uv = self.camera.project_obj(T, X)
+            self._surprise_px = float(np.median(np.linalg.norm(uv - self.camera.project_obj(T_start, X), axis=1)))
+            self._motion_px = float(np.median(np.linalg.norm(uv - self.camera.project_obj(self._T, X), axis=1)))
+            self._velocity = T @ invert_T(self._T)
         self._T = T
         self._followed = True
         # Remember each feature's polarity (the sign of the derivative along its normal).
