@@ -193,7 +193,7 @@ def castle_data():
 
 
 def circle_sequence(speed_px: float, n: int = 40, omega: float = 0.3):
-    """A box rendered on a circular path at speed_px image pixels a frame (at 0.9 m, f = 600 px),
+    """A box rendered on a circle at speed_px image pixels a frame (at 0.9 m, f = 600 px),
     turning 1.5° a frame, from rest: frame 1 already moves at full speed. (camera, model, frames, truth)."""
     W, H, f = 640, 480, 600.0
     camera = Camera.from_intrinsics(np.array([[f, 0, (W - 1) / 2], [0, f, (H - 1) / 2], [0, 0, 1]]), np.eye(4), W, H)
@@ -203,7 +203,7 @@ def circle_sequence(speed_px: float, n: int = 40, omega: float = 0.3):
     truth = []
     for k in range(n):
         R = exp_so3(np.radians(1.5) * k * np.array([0.3, 0.8, 0.5])) @ R0
-        p = [a * np.sin(omega * k), 0.6 * a * (np.cos(omega * k) - 1.0), 0.9 + 0.01 * np.sin(k / 5.0)]
+        p = [a * np.sin(omega * k), a * (np.cos(omega * k) - 1.0), 0.9 + 0.01 * np.sin(k / 5.0)]
         truth.append(make_T(R, p))
     frames = render_poses(camera, box, truth, noise_sigma=2.0, blur_sigma_px=0.5, seed=1)
     return camera, box, frames, truth

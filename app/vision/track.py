@@ -14,7 +14,15 @@ Each frame (the "moving edges" tracker of Comport, Marchand et al., 2006, as in 
 5. if the answer fails the support check below while its confidence is good (motion beyond the
    band), after at least one frame followed, the frame is tried once more from the same start,
    coarse to fine (``capture_px``, then the two bands above), before the object is declared lost;
-6. the first frame after a pose is given (which may be degrees or a centimetre off) that fails,
+6. the motion model (``motion_model``, issue 27): from the third frame after a pose is given, each
+   frame starts from the last pose moved once more by the last step (constant velocity, the step
+   T_k · T_{k−1}⁻¹ in the world frame), and the first pass's band is twice the last frame's
+   surprise (how far, median over the samples, its pose lay from its prediction), between
+   ``search_px`` and ``max_band_px``; the coarse passes keep the robust scale at least an eighth of
+   their band (a start off as a whole shares one offset in every residual, whose small spread would
+   cut them all); and the retry of step 5 runs on any failure (a start, a stop, a jerk the
+   prediction missed), from the prediction;
+7. the first frame after a pose is given (which may be degrees or a centimetre off) that fails,
    whatever its confidence, is tried again from the same start coarse to fine from each of
    ``start_capture_px`` (±24 and ±16 px): two hypotheses, each kept only if it passes every lost
    test and turns the given pose by at most ``start_capture_deg`` (10°), and the frame is lost
@@ -437,6 +445,12 @@ class EdgeTracker:
         infinite: a tracker that does not judge its answer with both tests (auto match's settling
         step, the one-click search's) cannot tell a captured pose from a wrong one.
         Bands not wider than ``search_px`` are left out; ``()`` turns it off.
+    motion_model : predict each frame's pose from the last two tracked (constant velocity), widen the
+        first band to twice the last prediction's miss (at most ``max_band_px``), and retry coarse to
+        fine from ``capture_px`` on any failure (step 6 above). A rendered box moving 30 px a frame
+        from rest is followed on every frame within 0.25° / 1 mm; False: the tracker of issue 16,
+        lost at the first moving frame (``bench/tracking.py``, "Fast motion"; tests/app/vision/test_track.py).
+    max_band_px : the widest first band the motion model asks for (pixels).
     """
 
     def __init__(
