@@ -135,7 +135,7 @@ def test_a_wrongly_converged_pose_is_flagged_lost_and_a_right_one_is_not():
         assert (deg > 5.0 or m > 0.01) and conf >= 0.3 and not lost  # what the issue saw
         assert (conf < 0.5) == low_conf
 
-        tracker = EdgeTracker(cam, box, T_start)
+        tracker = EdgeTracker(cam, box, T_start, motion_model=False)
         T, conf, lost = tracker.track(img)
         assert lost and tracker.lost and np.allclose(T, T_start)  # the wrong pose is not reported
         assert "not supported by the image" in tracker.diagnostics.reason
@@ -143,6 +143,12 @@ def test_a_wrongly_converged_pose_is_flagged_lost_and_a_right_one_is_not():
             assert (
                 tracker.diagnostics.edge_distance_px > 1.5 and "px from the image's edges" in tracker.diagnostics.reason
             )
+
+    # With the motion model's coarse passes (their robust scale at least an eighth of the band), the
+    # start slid 2 cm (9 px) is pulled onto the truth instead; the turned one is still lost.
+    T, conf, lost = EdgeTracker(cam, box, slid).track(img)
+    assert not lost and pose_error(T, truth)[0] < 0.5 and pose_error(T, truth)[1] < 0.002
+    assert EdgeTracker(cam, box, turned).track(img).lost
 
     right = EdgeTracker(
         cam, box, truth @ make_T(exp_so3(np.radians(1.0) * np.array([1.0, 0.0, 0.0])), [0.003, 0.0, 0.0])
