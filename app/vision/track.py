@@ -513,6 +513,8 @@ class EdgeTracker:
         self.capture_px = float(capture_px)
         self.start_capture_deg = float(start_capture_deg)
         self.motion_model = bool(motion_model)
+        # the motion model's coarse-pass scale floor, for a tracker that judges its answers with both tests
+        self._judged = self.motion_model and self.lost_confidence > 0 and np.isfinite(self.max_edge_distance_px)
         self.max_band_px = float(max_band_px)
         self.start_capture_px = tuple(
             float(px) for px in np.atleast_1d(np.asarray(start_capture_px, float)) if px > self.search_px
@@ -642,7 +644,9 @@ class EdgeTracker:
                 # A coarse pass's robust scale is kept at least an eighth of its band: its start may be
                 # off as a whole by pixels (a motion the prediction missed), so that every residual
                 # shares one offset and their spread, the scale estimated, is small enough to cut them all.
-                floor = max(0.3, half_range / 8.0) if self.motion_model and k < len(schedule) - 1 else 0.3
+                # Only for a tracker that judges its answers (a wider pull may settle wrongly; the
+                # lost tests catch it): auto match's and the one-click search's settling steps keep theirs.
+                floor = max(0.3, half_range / 8.0) if self._judged and k < len(schedule) - 1 else 0.3
                 p = self._pass(band, view, T, half_range, floor)
                 if p.fit is None:
                     reason = (
