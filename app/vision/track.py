@@ -424,7 +424,8 @@ class EdgeTracker:
     max_face_angle_deg : edges of faces seen more obliquely than this are not tracked (see
         ``sample_visible_edges``).
     capture_px : when a frame fails the support check although most samples found an edge (the
-        signature of motion beyond the band), and the tracker has followed at least one frame since
+        signature of motion beyond the band; with ``motion_model``, when it fails any lost test,
+        from the prediction), and the tracker has followed at least one frame since
         its pose was given (``reset``: a given pose that fails is the operator's or the matcher's
         to fix, and the matcher's one-step settling must stay quick), it is tracked once more from
         the same start, coarse to fine: passes of ±capture_px, halved while wider than ±search_px, then ±search_px and
