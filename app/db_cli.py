@@ -116,6 +116,7 @@ def _cmd_import(args) -> int:
                 T,
                 cov=cov,
                 status=args.status,
+                sigmas=None if args.model_sigma_mm is None else {"model": args.model_sigma_mm / 1000.0},
                 source=str(path.resolve()),
                 method=f"import {path.suffix.lower().lstrip('.')}",
                 client="cli",
@@ -412,6 +413,13 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
         type=pixel_uv,
         metavar="U,V",
         help="with --pose FILE.init: its points' pixels, in its order (pixels of the video as recorded)",
+    )
+    p.add_argument(
+        "--model-sigma-mm",
+        type=number(float, lambda v: 0.0 <= v <= 1000.0, kind="millimetres (a number)", expected="0 to 1000 mm"),
+        default=None,
+        help="how well the model follows the object: σ of each model edge's position (mm; default 0.3), part of "
+        "every pose's σ (docs/pose.md, 'What σ covers')",
     )
     p.add_argument("--angle-deg", type=float, default=30.0, help="meshes: dihedral angle from which an edge is drawn")
     p.add_argument(

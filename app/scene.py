@@ -326,6 +326,10 @@ class SceneView:
     camera: Camera
     lens: Any = field(default=None, compare=False)
     video: VideoSpec | None = None
+    # The camera came from an intrinsics file (ViSP .xml, OpenCV or ROS .yml) that states no covariance: a pose's
+    # σ then holds the file's stated prior (core.pose.uncertainty.intrinsics_prior_cov; issue 27). A camera
+    # written in the scene (C, or K and its pose: a simulation's, or one mcit calibrated) holds none.
+    from_file: bool = field(default=False, compare=False)
 
 
 @dataclass(frozen=True)
@@ -838,11 +842,12 @@ def _views(d: dict, root: Path, bodies: list[Body], where: str) -> tuple[SceneVi
             block = {k: v for k, v in c.items() if k not in ("name", "video")}
             camera, lens = _camera_and_lens(block, root, at)
             video = _video(c["video"], root, bodies, f"{at}.video") if "video" in c else None
-            views.append(SceneView(name, camera, lens, video))
+            views.append(SceneView(name, camera, lens, video, from_file="intrinsics_file" in block))
         return tuple(views)
-    camera, lens = _camera_and_lens(_need(d, "camera", where), root, f"{where}: camera")
+    block = _need(d, "camera", where)
+    camera, lens = _camera_and_lens(block, root, f"{where}: camera")
     video = _video(d["video"], root, bodies, f"{where}: video") if "video" in d else None
-    return (SceneView(DEFAULT_VIEW, camera, lens, video),)
+    return (SceneView(DEFAULT_VIEW, camera, lens, video, from_file="intrinsics_file" in block),)
 
 
 def scene_from_dict(d: Any, root: str | Path, where: str = "scene.json") -> Scene:

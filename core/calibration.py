@@ -17,7 +17,7 @@ import numpy as np
 from .camera import Camera
 from .checks import MAX_M, MAX_PX, MAX_SCALE, MIN_SCALE, finite_array, image_size
 from .rangefinder import RangeFinderSpec, beam_direction, beam_point_cov
-from .transforms import check_T, exp_so3, make_T
+from .transforms import check_T, exp_so3, invert_T, log_so3, make_T
 
 __all__ = [
     "DLTResult",
@@ -30,6 +30,8 @@ __all__ = [
     "TurretCalibration",
     "calibrate_turret",
     "calibrate_turret_planes",
+    "turret_plane_rows",
+    "next_turret_point",
     "kabsch",
 ]
 
@@ -331,6 +333,7 @@ def calibrate_turret_planes(
     d_world: np.ndarray,
     T_world_turret0: np.ndarray,
     spec: RangeFinderSpec = RangeFinderSpec(),
+    prior: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> TurretCalibration:
     """The turret's pose from measurements that land on known planes (not on known points).
 
@@ -341,7 +344,11 @@ def calibrate_turret_planes(
 
     pan_rad, tilt_rad, range_m : arrays, shape (N,). n_world : array, shape (N, 3), unit normals of
     the plane each point lies on; d_world : array, shape (N,), their offsets (n·X + d = 0).
-    Needs N ≥ 6 points on planes of at least 3 independent normals (else ValueError).
+    Needs N ≥ 6 points on planes of at least 3 independent normals (else ValueError), unless ``prior``
+    = (T_prior (4, 4), cov (6, 6)) is given: a Gaussian prior on the pose, ``T = T_prior · exp(δ)``, δ of
+    covariance cov (the calibration in use and its spread); the estimate is then the maximum a posteriori
+    one from N ≥ 1 points, and its covariance includes the prior (e.g. to aim the next beam before the
+    measurements alone fix the pose).
     The result's ``residuals_m`` (N, 3) is each point's offset from its plane, along the normal;
     its ``linear_rms_m`` is the RMS distance at the starting pose.
     """
@@ -350,7 +357,7 @@ def calibrate_turret_planes(
     d = np.asarray(d_world, dtype=float).reshape(-1)
     if not (len(pan) == len(tilt) == len(rho) == len(N) == len(d)):
         raise ValueError(f"inputs must pair one to one, got {len(pan)}, {len(tilt)}, {len(rho)}, {len(N)}, {len(d)}")
-    if len(pan) < 6:
+    if len(pan) < (1 if prior is not None else 6):
         raise ValueError(f"a pose on planes needs at least 6 measurements, got {len(pan)}")
     if not (np.all(np.isfinite(rho)) and np.all(rho > 0)):
         raise ValueError("ranges must be finite and positive (measure every point)")
@@ -362,9 +369,10 @@ def calibrate_turret_planes(
         raise ValueError(f"n_world must hold unit normals, got norms {norms[:4].tolist()}")
     T0 = check_T(T_world_turret0, "T_world_turret0")
     finite_array(T0[:3, 3], (3,), "T_world_turret0's translation", max_abs=MAX_M, unit=" m")
-    sv = np.linalg.svd(N, compute_uv=False)
-    if sv[2] <= 0.1 * sv[0]:
+    sv = np.linalg.svd(N, compute_uv=False) if len(N) >= 3 else np.zeros(3)
+    if prior is None and sv[2] <= 0.1 * sv[0]:
         raise ValueError("the planes have fewer than 3 independent normals: the pose is not fixed by them")
+    prior_res = _prior_residual(prior)
     X_turret = rho[:, None] * beam_direction(pan, tilt)
     cov_t = beam_point_cov(np.eye(4), pan, tilt, rho, spec)
 
@@ -375,7 +383,8 @@ def calibrate_turret_planes(
     def residuals(x: np.ndarray, T_base: np.ndarray, sig: np.ndarray) -> np.ndarray:
         T = T_base @ make_T(exp_so3(x[:3]), x[3:])
         X = X_turret @ T[:3, :3].T + T[:3, 3]
-        return (np.einsum("ni,ni->n", N, X) + d) / sig
+        r = (np.einsum("ni,ni->n", N, X) + d) / sig
+        return r if prior_res is None else np.concatenate([r, prior_res(T)])
 
     sig = sigma_along(T0)
     from scipy.optimize import least_squares  # here, not at the top (start-up)
@@ -391,6 +400,80 @@ def calibrate_turret_planes(
     return TurretCalibration(
         T, cov, float(np.sqrt(np.mean(dist**2))), dist[:, None] * N, float(np.sqrt(np.mean(dist0**2)))
     )
+
+
+def _prior_residual(prior):
+    """The whitened residual T ↦ L⁻¹ δ(T), δ = (log R, t) of ``T_prior⁻¹ T``, of a pose prior
+    (T_prior, cov); None without a prior."""
+    if prior is None:
+        return None
+    T_p = check_T(prior[0], "the prior's pose")
+    W = np.linalg.inv(np.linalg.cholesky(check_covariance(prior[1], 6, "the prior's covariance")))
+    T_p_inv = invert_T(T_p)
+
+    def res(T: np.ndarray) -> np.ndarray:
+        rel = T_p_inv @ T
+        return W @ np.concatenate([log_so3(rel[:3, :3]), rel[:3, 3]])
+
+    return res
+
+
+def turret_plane_rows(
+    T_world_turret: np.ndarray,
+    pan_rad: np.ndarray,
+    tilt_rad: np.ndarray,
+    range_m: np.ndarray,
+    n_world: np.ndarray,
+    spec: RangeFinderSpec = RangeFinderSpec(),
+) -> np.ndarray:
+    """The whitened rows (N, 6) of ``calibrate_turret_planes``' Jacobian at ``T_world_turret``: row i is
+    d(nᵢ·Xᵢ + dᵢ)/dδ / σᵢ for the pose ``T · exp(δ)``, δ = (rotation vector, translation) in the turret
+    frame. Their Gram matrix RᵀR is the pose's information: its inverse is the covariance the solve would
+    state for beams (pan, tilt, range) landing on planes of normals ``n_world`` (N, 3) — known before
+    the beams are measured, so where to aim next can be chosen (``next_turret_point``)."""
+    pan, tilt, rho = (np.asarray(a, dtype=float).reshape(-1) for a in (pan_rad, tilt_rad, range_m))
+    N = np.asarray(n_world, dtype=float).reshape(-1, 3)
+    T = check_T(T_world_turret, "T_world_turret")
+    X_turret = rho[:, None] * beam_direction(pan, tilt)
+    n_t = N @ T[:3, :3]  # the normals in the turret frame
+    cov_t = beam_point_cov(np.eye(4), pan, tilt, rho, spec)
+    sig = np.sqrt(np.einsum("ni,nij,nj->n", n_t, cov_t, n_t))
+    # X = R (exp(ω) Xt + v) + t: d(n·X)/dω = n_t·(ω × Xt) = ω·(Xt × n_t), d(n·X)/dv = n_t
+    return np.hstack([np.cross(X_turret, n_t), n_t]) / sig[:, None]
+
+
+D_OPTIMAL_ABOVE = 4.0  # next_turret_point: beyond this many times the target σ, the D-optimal point
+
+
+def next_turret_point(
+    rows_done: np.ndarray, rows_candidates: np.ndarray, scale: np.ndarray, prior_sd: np.ndarray
+) -> tuple[int, np.ndarray]:
+    """Which candidate beam, added to those done, leaves the turret pose's worst scaled σ smallest.
+
+    rows_done (K, 6), rows_candidates (M ≥ 1, 6): ``turret_plane_rows``. scale (6,): each parameter's σ is
+    divided by it before the worst is taken (e.g. 0.5° for the rotations, 5 mm for the translations, so
+    both count); while the worst scaled σ is above D_OPTIMAL_ABOVE, the point that shrinks the pose's
+    uncertainty volume most (D-optimal) is taken instead. prior_sd (6,): a weak prior on the pose (the
+    current calibration's spread) that keeps the
+    information invertible before six independent beams are in. Returns the candidate's index and the σ
+    (6,) of the pose with it (rad, m)."""
+    done = np.asarray(rows_done, float).reshape(-1, 6)
+    cand = np.asarray(rows_candidates, float).reshape(-1, 6)
+    if not len(cand):
+        raise ValueError("no candidate point to choose from")
+    info = done.T @ done + np.diag(1.0 / np.asarray(prior_sd, float) ** 2)
+    C = np.linalg.inv(info)
+    U = cand @ C  # (M, 6): C jᵢ (C symmetric)
+    denom = 1.0 + np.einsum("mi,mi->m", U, cand)
+    var = np.diag(C)[None, :] - U**2 / denom[:, None]  # Sherman–Morrison: diag of (info + jjᵀ)⁻¹
+    worst = np.sqrt(np.maximum(var, 0.0)) / np.asarray(scale, float)[None, :]
+    if (np.sqrt(np.diag(C)) / np.asarray(scale, float)).max() > D_OPTIMAL_ABOVE:
+        # far from the target, the worst σ hardly moves whichever point is added (every other direction
+        # is loose too): the point that shrinks the uncertainty's volume most, log det (I + jjᵀ) = log(1 + jᵀCj)
+        k = int(np.argmax(np.einsum("mi,mi->m", U, cand)))
+    else:
+        k = int(np.argmin(worst.max(axis=1)))
+    return k, np.sqrt(np.maximum(var[k], 0.0))
 
 
 # ---------------------------------------------------------------------- moving a calibration through its σ

@@ -111,6 +111,15 @@ class ObjectRecord:
     def dimensions(self) -> Mapping[str, float]:
         return self.dims
 
+    @property
+    def model_sigma_m(self) -> float:
+        """The model's stated uncertainty: σ of each model edge's position (metres), part of every pose's σ
+        (issue 27): ``sigmas["model"]`` (``mcit db import --model-sigma-mm``), else the default prior
+        (``core.pose.uncertainty.MODEL_PRIOR_M``)."""
+        from core.pose.uncertainty import model_sigma_of
+
+        return model_sigma_of(self.sigmas)
+
 
 @dataclass(frozen=True)
 class ChangeRecord:

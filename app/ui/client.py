@@ -220,7 +220,7 @@ class ClientPanel:
 
     def on_scrub(self, event) -> None:
         if event.client_id is not None:  # not the panel setting it back to 0 itself
-            self.frozen_frames.freeze_back(float(self.gui_scrub.value))
+            self.frozen_frames.scrub(float(self.gui_scrub.value))
 
     def press_event(self, action: str, _event=None) -> None:
         self.press(action)
@@ -315,7 +315,8 @@ class ClientPanel:
         finally:
             self._performing = False
         if not wf.message or wf.message == working:
-            wf.message = f"{c.label}: done." if c.action not in ("resume", "pause", "restart") else ""
+            # a finished workflow says its own end ("Done." — "Done: done." said it twice)
+            wf.message = "" if wf.finished or c.action in ("resume", "pause", "restart") else f"{c.label}: done."
         return result
 
     def select(self, value: str) -> None:
@@ -347,7 +348,13 @@ class ClientPanel:
         live_shown = self.frozen_frames.show_live and self.frozen is not None
         self.confirm_pending, self.warning, self.error = None, "", ""
         if not g.double:
-            self.session.click(self.camera_view, g.uv, on=on, live_shown=live_shown)
+            self.session.click(
+                self.camera_view,
+                g.uv,
+                on=on,
+                live_shown=live_shown,
+                px_per_screen_px=self.viewport.image_px_per_screen_px(),
+            )
             return
         frame = None if self.frozen_frames.looked_at else g.frame
         press = self.session.double_click(

@@ -59,8 +59,8 @@ def key_label(key: str) -> str:
             key, unit = key[: -len(suffix)], shown
             break
     words = [_WORDS.get(w.lower(), w) for w in key.replace("-", "_").split("_") if w]
-    if words[:1] == ["σ"] and words[1:] in (["t"], ["rot"]):  # a pose's σ: "σ translation", "σ rotation"
-        words = ["σ", {"t": "translation", "rot": "rotation"}[words[1]]]
+    if words[:1] == ["σ"] and words[1:] in (["t"], ["rot"], ["r"]):  # a pose's σ: "σ translation", "σ rotation"
+        words = ["σ", {"t": "translation", "rot": "rotation", "r": "rotation"}[words[1]]]
     text = " ".join(words)
     bare = [w for w in text.split(" ") if not (w.startswith("(") and w.endswith(")"))]  # "x y z (m)": its unit aside
     coordinates = bool(bare) and all(len(w) == 1 for w in bare)  # "x y z", "t" stay lower case
@@ -110,6 +110,25 @@ def _items(key: str, value: Any, indent: str) -> list[str]:
             out += _items(str(k), v, indent + "  ")
         return out
     return [Md("{}- **{}**: {}").format(Md(indent), key_label(key), format_value(key, value))]
+
+
+_HEADLINE_WORDS = {"rms", "std", "sd", "sigma"}  # a result's σ and residuals: what says how good it is
+
+
+def result_headline(summary: dict[str, Any]) -> Md:
+    """A result's σ and residuals on one line, for under the action buttons (the Result section below can be
+    under the fold at 1280×720): the summary's top-level numbers and lists whose key starts with rms, std, sd
+    or sigma, e.g. "**Result**: RMS (px) 0.41 · σ translation (mm) 0.5, 0.8, 1.2". Empty when it has none."""
+    parts = []
+    for key, value in summary.items():
+        if key.split("_")[0].lower() not in _HEADLINE_WORDS or isinstance(value, dict):
+            continue
+        values = np.asarray(value, dtype=object).ravel() if isinstance(value, (list, tuple, np.ndarray)) else [value]
+        if len(values) and not isinstance(values[0], dict):
+            parts.append(Md("{}: {}").format(key_label(key), ", ".join(format_value(key, v) for v in values[:6])))
+    if not parts:
+        return Md("")
+    return Md("**Result**: ") + Md(" · ").join(parts[:4]) + Md(" _(the Result section below has the rest)_")
 
 
 def _with_unit(unit: str, v: Any) -> str:

@@ -38,6 +38,11 @@ class FrozenFrames:
         self.by: Any = None
         self.show_live = False
         self._sent: dict[str, Any] = {}  # camera → the frame shown over its video (its id)
+        self.at: float | None = None  # when the frozen frame arrived (time.monotonic)
+        # Seconds back counts from the frame on screen when the scrubber left 0 (when it arrived), not from the
+        # live video (a new operator on a frame frozen a while before reached one far earlier than asked)
+        self._scrub_from: float | None = None
+        self.note = ""  # said under the frame: a Seconds back that reached past the kept frames
 
     @property
     def looked_at(self) -> bool:
@@ -47,6 +52,7 @@ class FrozenFrames:
     def freeze(self, frame: Any, source: str) -> None:
         """Freeze ``frame`` (a grabbed frame of the shown camera) and the other cameras' of that moment."""
         panel = self.panel
+        self._scrub_from, self.note = None, ""
         if frame is None:
             self.frame = None
             return
@@ -54,6 +60,10 @@ class FrozenFrames:
         earlier = feed.recent.before(frame, MOTION_GAP_S)  # to see whether what is clicked on was moving
         at = feed.recent.arrival(frame)
         at = time.monotonic() if at is None else at
+        if earlier is None:  # a frame the ring did not keep (it keeps one every 0.1 s): the one kept before it
+            hit = feed.recent.back_from(at, MOTION_GAP_S)
+            earlier = hit[0] if hit is not None and hit[1] >= 0.5 * MOTION_GAP_S else None
+        self.at = at
         others = {}
         for name, other in panel.app.views.items():
             hit = None if name == panel.camera_view else other.recent.nearest(at)
@@ -83,6 +93,7 @@ class FrozenFrames:
 
     def unfreeze(self) -> None:
         self.frame, self.by, self.show_live = None, None, False
+        self._scrub_from, self.note = None, ""
 
     def started(self, wf, frame: Any) -> None:
         """A workflow started: on the live video if it follows it, else on the frame the operator froze to
@@ -99,8 +110,9 @@ class FrozenFrames:
             self.freeze(frame if frame is not None else panel.feed.grabber.latest(), "live")
         panel.reset_scrubber()
 
-    def freeze_back(self, seconds: float) -> None:
-        """Freeze the frame shown ``seconds`` before the newest (0: the newest)."""
+    def _may_freeze(self) -> None:
+        """WorkflowError when another frame may not be frozen now (the workflow follows the live video, or
+        its clicks were made on the frozen frame)."""
         panel = self.panel
         wf = panel.session.workflow
         if wf is not None and not wf.finished and wf.follows_live():
@@ -111,12 +123,44 @@ class FrozenFrames:
                 "your clicks were made on the frozen frame: every click of a workflow uses one frame. "
                 "Remove them (Remove last) or Cancel before freezing another frame"
             )
-        feed = panel.feed
-        frame = feed.recent.seconds_back(seconds) if seconds > 0 else feed.grabber.latest()
+
+    def freeze_back(self, seconds: float) -> None:
+        """Freeze the newest frame (``seconds`` 0: Freeze), or the one ``seconds`` before the frame on screen
+        (``scrub``)."""
+        if seconds > 0:
+            self.scrub(seconds)
+            return
+        self._may_freeze()
+        frame = self.panel.feed.grabber.latest()
         if frame is None:
             raise WorkflowError("no video frame has arrived yet: check the video source")
-        self.freeze(frame, "scrubbed" if seconds > 0 else "live")
-        panel.error = ""
+        self.freeze(frame, "live")
+        self.panel.reset_scrubber()  # the scrubber counts from this frame now
+        self.panel.error = ""
+
+    def scrub(self, seconds: float) -> None:
+        """Freeze the frame ``seconds`` before the frame on screen when the scrubber left 0 (the frozen frame, or
+        the live video's newest), and say when the kept frames do not reach that far back."""
+        self._may_freeze()
+        feed = self.panel.feed
+        origin = self._scrub_from
+        if origin is None:
+            shown = self.frame is not None and not self.show_live and self.at is not None
+            newest = feed.grabber.latest()
+            arrived = None if newest is None else feed.recent.arrival(newest)
+            origin = self.at if shown else (time.monotonic() if arrived is None else arrived)
+        hit = feed.recent.back_from(origin, seconds)
+        if hit is None:
+            raise WorkflowError("no video frame has arrived yet: check the video source")
+        frame, back_s = hit
+        self.freeze(frame, "scrubbed" if back_s > 0 else "live")
+        self._scrub_from = origin
+        if back_s < float(seconds) - 0.25:  # beyond the kept frames (the scrubber's step is 0.5 s)
+            self.note = (
+                f"Seconds back {float(seconds):g} reaches past the frames kept: this is the oldest kept, "
+                f"{back_s:.1f} s before the frame you scrubbed from"
+            )
+        self.panel.error = ""
 
     def follow(self, wf) -> bool:
         """A finished workflow's frozen frame goes (back to the live video); a workflow that follows the live
@@ -179,7 +223,7 @@ class FrozenFrames:
                 else "**Not live**: the video is lost and the image is its last frame, greyed; no frame frozen "
                 "(the status below says more)"
             )
-            return head + Md(". *Seconds back* freezes an earlier frame.")
+            return head + Md(". *Seconds back* freezes an earlier frame (counted from the newest).")
         others = Md("").join(Md(" · {} t = {:.2f} s").format(name, f.t_s) for name, f in self.frame.others.items())
         src = self.panel.feed.grabber.source
         number = (  # a recording's frame number (a video's frame, an image folder's file in name order, from 0)
@@ -192,7 +236,8 @@ class FrozenFrames:
             + number
             + others
             + Md(" · **live shown**" if self.show_live else "")
-            + Md(". *Seconds back*: a frame that long before the live one.")
+            + (Md(". **{}**").format(self.note) if self.note else Md(""))
+            + Md(". *Seconds back*: a frame that long before the frame on screen.")
         )
 
 

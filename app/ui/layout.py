@@ -44,6 +44,8 @@ def build_panel(panel: ClientPanel) -> None:
     # A question asked once more (a weak result, Redo) goes under the buttons: shown above them it pushed the
     # button just pressed down, away from the cursor about to press it again.
     panel.gui_warning = gui.add_markdown("", visible=False)
+    # the result's σ and residuals under the buttons: the Result section was below the fold at 1280×720
+    panel.gui_headline = gui.add_markdown("", visible=False)
     panel.gui_copy = gui.add_text("Target (m)", "", visible=False, hint="World x y z of the last target: copy it")
     # Hidden while a workflow is under way (Cancel it to start another): at 1280×720 its buttons pushed the
     # frame's controls (Freeze, Seconds back) below the fold (a new operator's run).

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 from app.markup import Md, as_markdown
 
-from .controls import report_markdown
+from .controls import report_markdown, result_headline
 
 if TYPE_CHECKING:  # pragma: no cover
     from .client import ClientPanel
@@ -46,16 +46,18 @@ class PanelText:
                 wf = None
         step = None if wf is None else wf.current_step()
         if wf is None:
-            title, report = Md("**No workflow.** ") + idle_text(selected), ""
+            title, report, headline = Md("**No workflow.** ") + idle_text(selected), "", ""
             base = panel.app.site.robot_base_warning()
             if base:  # said while nothing is under way: a Move would be asked about it once more
                 title += Md("\n\n⚠ {} (Calibrate robot).").format(base.rsplit(".", 1)[0])
         else:
-            title, report = self._workflow_text(wf, step)
+            title, report, headline = self._workflow_text(wf, step)
         if panel.error:
             title += Md("\n\n⚠ {}").format(panel.error)
         show(panel.gui_title, title)
         show(panel.gui_report, report)
+        panel.gui_headline.visible = bool(headline)
+        show(panel.gui_headline, headline)
         panel.gui_warning.visible = bool(panel.warning)
         show(panel.gui_warning, panel.warning)
         panel.workflow_controls.update(wf, step, panel.busy)
@@ -73,7 +75,7 @@ class PanelText:
         if panel.gui_live.label != live_label:  # says what it does now
             panel.gui_live.label = live_label
 
-    def _workflow_text(self, wf, step) -> tuple[Md, str]:
+    def _workflow_text(self, wf, step) -> tuple[Md, str, str]:
         panel = self.panel
         closes = wf.control("accept")  # History's Close, Designate's Done: nothing is accepted
         done = "accepted" if closes is None or closes.label == "Accept" else "closed"
@@ -104,10 +106,10 @@ class PanelText:
         if wf.finished:
             title += Md("\n\n") + idle_text(panel.session.selected)
         # a cancelled result is gone; a closed one (History, Designate: nothing accepted) too
-        report = "" if wf.cancelled or (wf.finished and done == "closed") else report_markdown(wf.summary())
+        summary = {} if wf.cancelled or (wf.finished and done == "closed") else wf.summary()
         if panel.error and panel.error_step is not None and step.name != panel.error_step:
             panel.error = ""  # said in a step the workflow has left
-        return title, report
+        return title, report_markdown(summary), result_headline(summary)
 
     def weaknesses(self, wf, step) -> list[str]:
         """The result's weaknesses while Accept applies (``Workflow.weaknesses``), read again only when the

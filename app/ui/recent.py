@@ -54,8 +54,19 @@ class RecentFrames:
             if not self._frames:
                 return None
             newest = self._frames[-1][1]
-            best = min(self._frames, key=lambda fa: abs(newest - float(seconds) - fa[1]))
-            return best[0]
+        hit = self.back_from(newest, seconds)
+        return None if hit is None else hit[0]
+
+    def back_from(self, at: float, seconds: float) -> tuple[Any, float] | None:
+        """(the kept frame that arrived nearest ``seconds`` before ``at`` (time.monotonic: when the frame on
+        screen arrived), how long before ``at`` it arrived); the oldest kept when that reaches further back
+        (the caller says so: the second value is then less than ``seconds``). None when empty."""
+        with self._lock:
+            if not self._frames:
+                return None
+            want = float(at) - float(seconds)
+            frame, arrived = min(self._frames, key=lambda fa: abs(want - fa[1]))
+            return frame, float(at) - arrived
 
     def before(self, frame: Any, seconds: float) -> Any:
         """The kept frame that arrived about ``seconds`` before ``frame`` (at least half that), or None

@@ -17,7 +17,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["camera_shift", "changed_share", "inside", "CHANGED_GREY", "CHANGED_SHARE", "HALF_PX"]
+__all__ = [
+    "camera_shift",
+    "changed_share",
+    "inside",
+    "object_motion_px",
+    "CHANGED_GREY",
+    "CHANGED_SHARE",
+    "HALF_PX",
+    "MOVING_PX",
+]
 
 CHANGED_GREY = 20.0  # grey levels (0-255) of difference that count as a change
 CHANGED_SHARE = 0.08  # share of a patch's pixels that must change
@@ -26,6 +35,11 @@ CHANGED_SHARE = 0.08  # share of a patch's pixels that must change
 # and refused to scan the box (a new-operator run: 3 of 5 scans).
 HALF_PX = 8
 SHIFT_RESPONSE = 0.1  # phase correlation's peak (0-1) above which the whole image is taken to have shifted
+# An object moved between two frames when its image moved more than this against the view's own motion (pixels,
+# ``object_motion_px``). Measured by bench/moving.py on the workcell's video, frames 0.3 s apart: the box in
+# transit 4.8-7.4 px (at 12.6, 13.4, 14.5 s), standing still 0.1 px; the whole view turned 1.2-3° or zoomed 2 %
+# 0.06-0.27 px (where the changed-pixel test saw 19-42 % of the box's pixels change: "moving").
+MOVING_PX = 1.5
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
@@ -89,3 +103,58 @@ def changed_share(
         d -= np.median(d)
         worst = max(worst, float(np.mean(np.abs(d) > CHANGED_GREY)))
     return worst
+
+
+def _tracked(a: np.ndarray, b: np.ndarray, mask: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The corners OpenCV finds in frame ``b`` (grey uint8) under ``mask`` (uint8, 255 where to look), (K, 2), and
+    where pyramidal Lucas-Kanade puts them in frame ``a`` (K, 2): only those that track back to within 0.5 px."""
+    import cv2
+
+    none = np.zeros((0, 2)), np.zeros((0, 2))
+    pts = cv2.goodFeaturesToTrack(b, maxCorners=n, qualityLevel=0.01, minDistance=4, mask=mask, blockSize=5)
+    if pts is None:
+        return none
+    lk = dict(winSize=(15, 15), maxLevel=3, criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+    back, st, _ = cv2.calcOpticalFlowPyrLK(b, a, pts, None, **lk)
+    again, st2, _ = cv2.calcOpticalFlowPyrLK(a, b, back, None, **lk)
+    ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm((again - pts).reshape(-1, 2), axis=1) < 0.5)
+    return pts.reshape(-1, 2)[ok].astype(float), back.reshape(-1, 2)[ok].astype(float)
+
+
+def object_motion_px(before: np.ndarray, frame: np.ndarray, outline_uv: np.ndarray) -> float | None:
+    """How far (pixels) the object inside the outline ``outline_uv`` (N, 2; its convex hull is taken) moved from
+    ``before`` to ``frame`` against the view: the median, over the corners found on it (its hull dilated by
+    2 px) and followed by Lucas-Kanade, of the distance between where they were and where the view's own
+    motion puts them. The view's motion is a similarity (shift, turn, zoom) fitted by RANSAC to the corners
+    followed outside the object (beyond 6 px of it): what moved with the view (a hand-held, turning or
+    zooming camera) did not move, and what moves elsewhere in the image (outliers to that fit) does not count.
+    With fewer than 6 such corners (a plain background) the whole image's shift (``camera_shift``) stands for
+    the view's motion. None when fewer than 3 corners on the object could be followed."""
+    import cv2
+
+    a = np.clip(_grey(before), 0, 255).astype(np.uint8)
+    b = np.clip(_grey(frame), 0, 255).astype(np.uint8)
+    if a.shape != b.shape:
+        raise ValueError(f"the frames are {a.shape[1]}×{a.shape[0]} px and {b.shape[1]}×{b.shape[0]} px")
+    uv = np.asarray(outline_uv, float).reshape(-1, 2)
+    uv = uv[np.all(np.isfinite(uv), axis=1)]
+    if len(uv) < 3:
+        return None
+    obj = np.zeros(b.shape, np.uint8)
+    cv2.fillConvexPoly(obj, cv2.convexHull(np.round(uv).astype(np.int32)), 255)
+
+    def grown(px: int) -> np.ndarray:
+        return cv2.dilate(obj, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * px + 1, 2 * px + 1)))
+
+    on_b, on_a = _tracked(a, b, grown(2), 40)
+    if len(on_b) < 3:
+        return None
+    out_b, out_a = _tracked(a, b, cv2.bitwise_not(grown(6)), 300)
+    M = None
+    if len(out_b) >= 6:
+        M, _ = cv2.estimateAffinePartial2D(out_b, out_a, method=cv2.RANSAC, ransacReprojThreshold=1.0)
+    if M is not None:
+        expected = on_b @ M[:, :2].T + M[:, 2]  # where the view's motion puts the object's corners in ``before``
+    else:
+        expected = on_b - camera_shift(a.astype(np.float32), b.astype(np.float32))
+    return float(np.median(np.linalg.norm(on_a - expected, axis=1)))

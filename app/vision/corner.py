@@ -41,6 +41,9 @@ class CornerSnap:
     sigma_px : standard deviation of the corner's position (pixels; NaN when unknown).
     lines_uv : array, shape (K, 2, 2): the snapped edge segments that meet there (method "edges"),
         for display. reason : why ok is False ("" when ok).
+    fit_px : how well the image fits a corner at ``uv`` (pixels; NaN when not ok): method "edges", the
+        largest RMS distance of a line's edge points to its snapped line; "subpix", the RMS distance of
+        the window's gradient lines from ``uv`` (weighted by gradient strength; an ideal corner's is 0).
     """
 
     uv: np.ndarray
@@ -51,6 +54,7 @@ class CornerSnap:
     sigma_px: float
     lines_uv: np.ndarray
     reason: str = ""
+    fit_px: float = float("nan")
 
 
 def _as_point(uv) -> np.ndarray:
@@ -116,7 +120,7 @@ def snap_corner_edges(
     L = np.full(len(D), np.inf) if lengths_px is None else np.asarray(lengths_px, dtype=float).reshape(-1)
     if L.shape != (len(D),):
         raise ValueError(f"lengths_px must have shape ({len(D)},), got {L.shape}")
-    centres, dirs, weights, drawn = [], [], [], []
+    centres, dirs, weights, drawn, fits = [], [], [], [], []
     for d, length in zip(D, L):
         res = None
         # The whole stretch first (more edge points, a better line); if another object hides
@@ -137,6 +141,7 @@ def snap_corner_edges(
         sig = res.sigma_px if np.isfinite(res.sigma_px) and res.sigma_px > 0 else 0.1
         weights.append(1.0 / max(sig, 0.02) ** 2)
         drawn.append(s)
+        fits.append(res.rms_px)
     lines = np.array(drawn).reshape(-1, 2, 2)
     if len(dirs) < 2:
         return _refused(p, "edges", f"{len(dirs)} of the corner's edges found in the image (2 needed)", lines)
@@ -155,7 +160,8 @@ def snap_corner_edges(
         return _refused(p, "edges", f"the edges meet {moved:.1f} px from the click (more than {max_move_px} px)", lines)
     # The lines were fitted from the click's end: draw them from the corner found.
     lines = np.array([[X + ((s[0] - X) @ u) * u, X + ((s[1] - X) @ u) * u] for s, u in zip(drawn, U)])
-    return CornerSnap(X, p.copy(), moved, True, "edges", float(np.sqrt(np.trace(cov) / 2.0)), lines)
+    fit = float(max(fits))
+    return CornerSnap(X, p.copy(), moved, True, "edges", float(np.sqrt(np.trace(cov) / 2.0)), lines, fit_px=fit)
 
 
 def snap_corner_subpix(
@@ -196,7 +202,13 @@ def snap_corner_subpix(
     moved = float(np.linalg.norm(X - p))
     if not np.all(np.isfinite(X)) or moved > max_move_px:
         return _refused(p, "subpix", f"the corner search moved {moved:.1f} px away (more than {max_move_px} px)")
-    return CornerSnap(X, p.copy(), moved, True, "subpix", float("nan"), np.zeros((0, 2, 2)))
+    # cornerSubPix's own equation at X: each gradient's line (through its pixel, across the gradient) passes
+    # through an ideal corner; their RMS distance from X says how well a corner fits there
+    ys, xs = np.mgrid[y0 - win_px : y0 + win_px + 1, x0 - win_px : x0 + win_px + 1]
+    w = gx * gx + gy * gy
+    dist = gx * (X[0] - xs) + gy * (X[1] - ys)  # |g| × the distance of X from the gradient's line
+    fit = float(np.sqrt(np.sum(dist * dist) / max(np.sum(w), 1e-12)))
+    return CornerSnap(X, p.copy(), moved, True, "subpix", float("nan"), np.zeros((0, 2, 2)), fit_px=fit)
 
 
 def snap_corner(image: np.ndarray, uv, directions_uv=None, lengths_px=None, **kw) -> CornerSnap:

@@ -24,7 +24,14 @@ import numpy as np
 from core.camera import Camera
 from core.checks import MAX_M, MAX_PX, MAX_SCALE, MIN_SCALE, finite_array, image_size
 from core.pose import refine_many
-from core.pose.residuals import as_clicks
+from core.pose.residuals import as_clicks, residuals
+from core.pose.uncertainty import (
+    CAMERA_PRIOR_C_PX,
+    CAMERA_PRIOR_F_REL,
+    MODEL_PRIOR_M,
+    first_order_moves,
+    grouped_share,
+)
 from core.transforms import exp_so3, make_T
 
 __all__ = ["PnPResult", "solve_pnp", "MIN_PNP_POINTS"]
@@ -38,7 +45,8 @@ class PnPResult:
     camera : Camera, C = K [R | t] (normalised as Camera does). T_cam_world : (4, 4).
     rms_px : RMS reprojection distance. residuals_px : (N, 2) projected minus clicked; errors_px (N,).
     cov_pose : (6, 6) covariance of the pose's perturbation (δω rad, δt m), R = exp(δω) R̂, t = t̂ + δt
-    (camera frame). cov : (12, 12) covariance of ``camera.C.ravel()`` from it (K exact).
+    (camera frame), K's stated prior and the world points' included. cov : (12, 12) covariance of
+    ``camera.C.ravel()`` from it and K's prior.
     variance_factor : χ² of the weighted residuals per degree of freedom (2N − 6).
     std_position_m : σ of the camera's optical centre in the world along its worst direction (m).
     std_angle_rad : σ of its orientation about its worst axis (rad).
@@ -95,11 +103,57 @@ def _starts(K: np.ndarray, X: np.ndarray, uv: np.ndarray) -> list[tuple[np.ndarr
     return out
 
 
-def solve_pnp(K, X_world, uv, width: int, height: int, *, sigma_px=None) -> PnPResult:
+def _prior_shares(K, fit, X, uv, sig, k_prior, points_sigma_m, cov_pose, Jc, order):
+    """(cov_pose, cov_C) with K's prior and the world points' added (``solve_pnp``): the pose's move with each
+    ±1σ step of (fx, fy, u0, v0) (``first_order_moves``) and C's, K's own step and the pose's together."""
+    R, t = fit.T_world_obj[:3, :3], fit.T_world_obj[:3, 3]
+    clicks = as_clicks(points_uv=uv, points_obj=X)
+    origin = Camera(np.column_stack([K, np.zeros(3)]), 1, 1)
+    _, J, _ = residuals(origin, R, t, clicks, jacobian=True)
+    w = np.repeat(1.0 / sig**2, 2)
+    cov_C = Jc @ cov_pose @ Jc.T
+    if points_sigma_m > 0:
+        moved = lambda d: residuals(origin, R, t, as_clicks(points_uv=uv, points_obj=X + d))[0]  # noqa: E731
+        share = grouped_share(J, w, moved, np.arange(2 * len(X)) // 2, points_sigma_m)[np.ix_(order, order)]
+        cov_pose, cov_C = cov_pose + share, cov_C + Jc @ share @ Jc.T
+    f_rel, c_px = k_prior
+    if f_rel > 0 or c_px > 0:
+        P = np.column_stack([R, t])
+
+        def K_of(k):
+            return K + np.array([[k[0], 0, k[2]], [0, k[1], k[3]], [0, 0, 0]])
+
+        cov_k = np.diag(np.array([f_rel * K[0, 0], f_rel * K[1, 1], c_px, c_px]) ** 2)
+        resid = lambda k: residuals(Camera(np.column_stack([K_of(k), np.zeros(3)]), 1, 1), R, t, clicks)[0]  # noqa: E731
+        steps, moves = first_order_moves(J, w, resid, cov_k)
+        for d, dq in zip(steps, moves):
+            dq = dq[order]
+            cov_pose = cov_pose + np.outer(dq, dq)
+            dC = (K_of(d) - K) @ P
+            dC = dC.ravel() + Jc @ dq
+            cov_C = cov_C + np.outer(dC, dC)
+    return 0.5 * (cov_pose + cov_pose.T), cov_C
+
+
+def solve_pnp(
+    K,
+    X_world,
+    uv,
+    width: int,
+    height: int,
+    *,
+    sigma_px=None,
+    k_prior: tuple[float, float] = (CAMERA_PRIOR_F_REL, CAMERA_PRIOR_C_PX),
+    points_sigma_m: float = MODEL_PRIOR_M,
+) -> PnPResult:
     """The camera C = K [R | t] from ≥ 4 clicked pixels ``uv`` (N, 2) of known world points
     ``X_world`` (N, 3, metres, not all on one line), K (3, 3) known. ``sigma_px`` (N,): each
     pixel's σ (default 1 px). ValueError (plain words) for too few points, collinear points, or no
-    pose that puts every point in front of the camera."""
+    pose that puts every point in front of the camera.
+
+    The pose's and C's covariances hold, by first order (issue 27, ``core.pose.uncertainty``), K's stated
+    prior ``k_prior`` = (σ(fx)/fx = σ(fy)/fy, σ(u0) = σ(v0) in pixels; (0, 0): K exact) — the pose moves with
+    K, and C with both — and the world points' ``points_sigma_m`` (each point off by its own 3D offset)."""
     K = _check_K(K)
     X = finite_array(X_world, (None, 3), "X_world", max_abs=MAX_M, unit=" m")
     uv = finite_array(uv, (None, 2), "uv", max_abs=MAX_PX, unit=" px")
@@ -161,7 +215,7 @@ def solve_pnp(K, X_world, uv, width: int, height: int, *, sigma_px=None) -> PnPR
 
     Jc = np.column_stack([(C_of(e) - C_of(-e)) / (2 * e[i]) for i, e in enumerate(np.diag(eps))])
     Jo = np.column_stack([(centre(e) - centre(-e)) / (2 * e[i]) for i, e in enumerate(np.diag(eps))])
-    cov_C = Jc @ cov_pose @ Jc.T
+    cov_pose, cov_C = _prior_shares(K, fit, X, uv, sig, k_prior, points_sigma_m, cov_pose, Jc, order)
     cov_centre = Jo @ cov_pose @ Jo.T
     camera = Camera(K @ np.column_stack([R, t]), width, height, in_front=X)
     res = _project(K, R, t, X)[0] - uv

@@ -38,17 +38,17 @@ model, its old pose, the calibrated camera C and, usually, that it lies on the t
    poses' headings are stepped by 1° over ± 6° (``_heading_profile``). *Free*: two ``track`` passes
    of the edge tracker (``track.EdgeTracker``, as auto match settles its candidates), then the same
    Gauss–Newton on all six unknowns for the covariance. Every pose's covariance comes from a model
-   of the edges' errors (``_edge_covariance``). The check (``_check``) is made for a partly hidden
+   of the edges' errors (``core.pose.uncertainty.edge_covariance``). The check (``_check``) is made for a partly hidden
    object: it asks that the model's visible edges that the image shows pin the pose, not that
    every edge is seen.
    Where the camera was calibrated in the database (``camera_cov``), its uncertainty joins each
-   pose's covariance: the linearised move of the refinement's solution with C (``_camera_share``).
+   pose's covariance: the linearised move of the refinement's solution with C (``_prior_share``).
    This refinement is not the pose pipeline's (``core.pose.pipeline``, which fits the operator's clicks):
    it is a different estimator. Its measurements are not given but searched for again at every iteration
    (the image's edge along each sample's normal, within a band that narrows), owned by one model edge
    each, under a fixed-scale Tukey loss that drops what lies past 1.4 px; its unknowns are 3 on the
    table (x, y, heading), with a numerical Jacobian through that parametrisation; and its covariance
-   models each edge's shared offset and tilt (``_edge_covariance``), not independent click noise. Its
+   models each edge's shared offset and tilt (``uncertainty.edge_covariance``), not click noise. Its
    result goes on to the pipeline: a found pose is a start *and* a measurement there (``PosePrior``, with
    this covariance), so clicks added afterwards refine together with it.
 4. **Ranked by mismatch** (``_check``: 0 when every visible edge of the model lies on an image edge
@@ -69,15 +69,25 @@ import cv2
 import numpy as np
 
 from core.brep import BRep
+from core.calibration import perturbed_camera
 from core.camera import Camera
 from core.geometry import Plane
 from core.pose.symmetry import symmetry_transforms
+from core.pose.uncertainty import (
+    CURVED_EDGE_BIAS_PX,
+    EDGE_BIAS_PX,
+    MODEL_PRIOR_M,
+    Priors,
+    edge_covariance,
+    first_order_share,
+    grouped_share,
+)
 from core.robust import robust_weights
 from core.transforms import exp_so3, make_T, pose_error
 
 from .evaluate import oriented_edges, sample_distances
 from .profiles import search_along_normals, smooth, to_gray_f32
-from .track import EdgeSamples, EdgeTracker, sample_visible_edges
+from .track import EdgeTracker, feature_groups, sample_visible_edges
 
 __all__ = [
     "SearchCandidate",
@@ -112,10 +122,10 @@ MAX_SIGMA_MM, MAX_SIGMA_DEG = 6.0, 3.0
 # An edge found by the refinement may sit a fraction of a pixel off the model's edge along its whole
 # length (a blurred corner, the occluder's rim, a shaded curved side): the covariance counts each edge's
 # offset as one error of at least this size, straight edges and curved ones (silhouettes, rims)
-# (``_edge_covariance``). Measured (bench/search.py (b), 150 placements): with 0.1 px for both, the
+# (``core.pose.uncertainty.edge_covariance``). Measured (bench/search.py (b), 150 placements): with 0.1 px for both, the
 # truth lay inside the stated 95 % region for 98-100 % of boxes and parallelepipeds but 76 % of
 # cylinders; with 0.2 px on curved edges, 94 %.
-EDGE_BIAS_PX, CURVED_EDGE_BIAS_PX = 0.1, 0.2
+# (EDGE_BIAS_PX, CURVED_EDGE_BIAS_PX, in core.pose.uncertainty with edge_covariance, which the tracker uses too.)
 # The refinement's robust scale (Tukey, c = 4.685 × this: 1.4 px): an edge found farther than that from
 # the model's (the occluder's rim, a shadow) has no say. Measured (bench/search.py (b), 150 placements):
 # with the scale from the residuals' spread (1.4-5 px), 131 right; fixed at 0.3 px, 134.
@@ -157,8 +167,8 @@ class SearchCandidate:
     included when known, or None.
     std_t_mm (3,), std_r_deg (3,): its square-root diagonal. coarse_px : the search's score of the
     pose the refinement started from. mismatch : in [0, 1], ranks the candidates (``_check``).
-    cov_camera : (6, 6), the camera calibration's share of ``cov`` (``camera_cov`` given), or None: a
-    common error of every measurement in this camera, which a later refinement with clicks must not
+    cov_camera : (6, 6), the camera's and the model's share of ``cov`` (``_prior_share``), or None: a
+    common error of every measurement in this camera of this model, which a later refinement with clicks must not
     average away (``workflows.pose_search``).
     """
 
@@ -478,6 +488,7 @@ def search_pose(
     n_refine: int | None = None,
     max_turn_deg: float = 30.0,
     camera_cov: np.ndarray | None = None,
+    model_sigma_m: float = MODEL_PRIOR_M,
 ) -> SearchResult:
     """The poses of ``model`` that fit one click on it in ``image`` (see the module docstring).
 
@@ -491,8 +502,10 @@ def search_pose(
         search (``Cancelled``). progress : called with (fraction done, what).
     max_candidates : at most this many candidates returned. n_seeds : distinct coarse poses descended
         (default 48 on the table, 24 free).
-    camera_cov : (12, 12) covariance of C's entries (a camera calibrated in the database): its share
-        joins each candidate's covariance (``_camera_share``).
+    camera_cov : (12, 12) covariance of C's entries (a camera calibrated in the database, or the prior of a
+        camera file, ``core.pose.uncertainty.intrinsics_prior_cov``): its share joins each candidate's
+        covariance (``_prior_share``). model_sigma_m : σ of each model edge's position (metres), whose share
+        joins it too (``core.pose.uncertainty.Priors``).
     n_refine : poses refined (default 8; bench/search.py: the real cube without the hint 4, 6, 9 of 22
         right with 4, 8, 12, but with 12 one wrong pose passed unflagged; the rendered box on the table,
         48 seeds, 40 → 42 of 50 from 4 to 8, 42 with 12). max_turn_deg : the free search's reach in orientation.
@@ -711,16 +724,16 @@ def search_pose(
             under = bool(_ray_hits(hull, T[None, :3, :3], T[None, :3, 3], origin, ray)[0])
             out = [replace(_replace_T(near, T), beside_click=not under)] + out
     out = out[:max_candidates]
-    if camera_cov is not None:  # the camera's calibration uncertainty joins each pose's σ
-        rims = _rims(model)
-        for j, c in enumerate(out):
-            space = _OnTable(sp, z0, centre_obj, 3 if per[2] > 0 else 2) if table is not None else _Free(c.T_world_obj)
-            share = _camera_share(camera, model, c.T_world_obj, img_s, space, rims, np.asarray(camera_cov, float))
-            # no share (too few edges found at the final pose): σ unknown, said so, rather than the image's alone
-            cov = None if share is None or c.cov is None else c.cov + share
-            out[j] = replace(
-                c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1], cov_camera=None if cov is None else share
-            )
+    rims = _rims(model)  # the camera's and the model's uncertainty join each pose's σ (core.pose.uncertainty)
+    priors = Priors(None if camera_cov is None else np.asarray(camera_cov, float), float(model_sigma_m))
+    for j, c in enumerate(out):
+        space = _OnTable(sp, z0, centre_obj, 3 if per[2] > 0 else 2) if table is not None else _Free(c.T_world_obj)
+        share = _prior_share(camera, model, c.T_world_obj, img_s, space, rims, priors)
+        # no share (too few edges found at the final pose): σ unknown, said so, rather than the image's alone
+        cov = None if share is None or c.cov is None else c.cov + share
+        out[j] = replace(
+            c, cov=cov, std_t_mm=_std(cov)[0], std_r_deg=_std(cov)[1], cov_camera=None if cov is None else share
+        )
     return SearchResult(out, mode, n_scored, len(top), time.perf_counter() - t0, timings)
 
 
@@ -1056,7 +1069,7 @@ def _measure(camera: Camera, model: BRep, T: np.ndarray, oe, img_s: np.ndarray, 
     hits = search_along_normals(img_s, s.uv, s.normals, 3.0, prior_sigma_px=1.5)
     f = np.flatnonzero(hits.found)
     counted = np.ones(len(s), bool)  # an image edge found by a nearer parallel model edge counts for that one only
-    counted[f] = _own_edges(s.uv[f], s.normals[f], hits.offset_px[f], _feature_groups(s.subset(f)))
+    counted[f] = _own_edges(s.uv[f], s.normals[f], hits.offset_px[f], feature_groups(s.subset(f)))
     cap = np.where(s.feature < len(model.edges), MISMATCH_CAP_PX, CURVED_MISMATCH_CAP_PX)
     off = (np.where(hits.found, np.abs(hits.offset_px), np.inf) / cap)[counted]
     return d, float(np.mean(d <= 1.5)), float(np.median(d)), float(np.mean(np.minimum(off, 1.0) ** 2))
@@ -1129,7 +1142,7 @@ def _linearize(camera: Camera, model: BRep, p: np.ndarray, img_s: np.ndarray, sp
     if f.sum() <= k + 2:
         return None
     s, r = s.subset(f), hits.offset_px[f]
-    own = _own_edges(s.uv, s.normals, r, _feature_groups(s))
+    own = _own_edges(s.uv, s.normals, r, feature_groups(s))
     if own.sum() <= k + 2:
         return None
     s, r = s.subset(own), r[own]
@@ -1191,7 +1204,7 @@ def _refine(
     ``core.pose`` (the module docstring's 3. says why) — on the model's visible edge samples and the
     image's edges found along their normals (``profiles.search_along_normals``, sub-pixel), searched
     ± ``bands[i]`` pixels at iteration i (the last one after). Returns (T, cov (6, 6) of (δt, δr) from
-    ``_edge_covariance`` at the last step's linearisation, or None; None too without ``with_cov``)."""
+    ``uncertainty.edge_covariance`` at the last step's linearisation, or None; None too without ``with_cov``)."""
     k = space.k
     p = space.params(T)
     last = None
@@ -1212,96 +1225,35 @@ def _refine(
     if last is None or not with_cov:
         return space.pose(p), None
     T, s, r, J, w = last  # the covariance of the last step, from its linearisation
-    groups = _feature_groups(s)
+    groups = feature_groups(s)
     floor = np.where(groups < len(model.edges), EDGE_BIAS_PX, CURVED_EDGE_BIAS_PX)
     Gm = space.G(T)
-    return space.pose(p), Gm @ _edge_covariance(J, r, w, groups, floor, k, s.uv, s.normals) @ Gm.T
+    return space.pose(p), Gm @ edge_covariance(J, r, w, groups, floor, k, s.uv, s.normals) @ Gm.T
 
 
-def _camera_share(
-    camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space, rims: bool, camera_cov: np.ndarray
+def _prior_share(
+    camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space, rims: bool, priors: Priors
 ) -> np.ndarray | None:
-    """(6, 6) covariance of (δt, δr) that the camera's calibration (``camera_cov``, of C's 12 entries)
-    adds to a pose refined on the image's edges: the refinement's solution moves with C by
-    dp/dC = −A⁻¹ Jᵀ W ∂(n·uv)/∂C, each sample's projection uv = (C X̃)₀,₁ / (C X̃)₂ differentiated in C."""
+    """(6, 6) covariance of (δt, δr) that the camera's uncertainty (``priors.camera_cov``, of C's 12 entries)
+    and the model's (``priors.model_sigma_m`` per edge) add to a pose refined on the image's edges, by first
+    order (``core.pose.uncertainty.first_order_share``, ``grouped_share``): each sample's projection along
+    its normal moved with C, and with its edge. None when too few edges are found at T."""
     lin = _linearize(camera, model, space.params(T), img_s, space, rims, 2.0)
     if lin is None:
         return None
     T, s, r, J, w = lin
-    Xw = s.X_obj @ T[:3, :3].T + T[:3, 3]
-    Xh = np.column_stack([Xw, np.ones(len(Xw))])
-    h = Xh @ camera.C.T
-    uv = h[:, :2] / h[:, 2:3]
     n = s.normals
-    dC = np.concatenate([n[:, :1] * Xh, n[:, 1:] * Xh, -(n * uv).sum(axis=1, keepdims=True) * Xh], axis=1) / h[:, 2:3]
-    A = (J * w[:, None]).T @ J
-    D = -np.linalg.pinv(A) @ (J * w[:, None]).T @ dC  # (k, 12)
+
+    def along(cam: Camera, X_obj: np.ndarray) -> np.ndarray:  # the samples' projections along their normals
+        return -np.einsum("ni,ni->n", cam.project_obj(T, X_obj), n)  # r = edge − projection
+
+    share = grouped_share(J, w, lambda d: along(camera, s.X_obj + d), feature_groups(s), priors.model_sigma_m)
+    if priors.camera_cov is not None:
+        share = share + first_order_share(
+            J, w, lambda d: along(perturbed_camera(camera, d), s.X_obj), priors.camera_cov
+        )
     Gm = space.G(T)
-    return Gm @ D @ camera_cov @ D.T @ Gm.T
-
-
-def _feature_groups(s: EdgeSamples, arc: int = 8) -> np.ndarray:
-    """Which edge each sample lies on, as group ids: a straight edge or a silhouette line is one group
-    (its feature), a curve (a rim, a circle, a sphere's outline) arcs of ``arc`` chords (60° of 48):
-    the curve's chords have consecutive features from ``feature − chord`` (``Wireframe.chord``)."""
-    f = np.asarray(s.feature, np.int64)
-    if s.chord is None:
-        return f
-    chord = np.asarray(s.chord, np.int64)
-    return np.where(chord < 0, f, f - chord + chord // arc)
-
-
-def _edge_covariance(
-    J: np.ndarray,
-    r: np.ndarray,
-    w: np.ndarray,
-    groups: np.ndarray,
-    floor: np.ndarray,
-    k: int,
-    uv: np.ndarray,
-    normals: np.ndarray,
-) -> np.ndarray:
-    """(k, k) covariance of a weighted least-squares step's parameters when the samples' errors are a
-    noise of their own plus, per edge, an offset and a tilt shared by its samples (an edge found a
-    fraction of a pixel off, or turned a little, is so along its length):
-    A⁻¹ Jᵀ W Σ W J A⁻¹ with Σ = s² I + Σ_edges (σ_o² 1 1ᵀ + σ_θ² ℓ ℓᵀ), ℓ the samples' positions along
-    their edge (pixels). s² is the residuals' weighted variance about their edge's line, σ_o² and σ_θ²
-    the edges' mean squared offset and tilt, each edge's at least its floor (``floor`` pixels; its ends
-    moved by ``floor`` for the tilt)."""
-    A = (J * w[:, None]).T @ J
-    Ai = np.linalg.pinv(A)
-    ug, inv = np.unique(groups, return_inverse=True)
-    G = len(ug)
-    sw = np.maximum(np.bincount(inv, weights=w, minlength=G), 1e-12)
-    # each edge's position coordinate: along its mean tangent, about its weighted centre
-    nm = np.zeros((G, 2))
-    np.add.at(nm, inv, normals * w[:, None])
-    nm /= np.maximum(np.linalg.norm(nm, axis=1), 1e-12)[:, None]
-    tang = np.column_stack([-nm[:, 1], nm[:, 0]])
-    c = np.zeros((G, 2))
-    np.add.at(c, inv, uv * w[:, None])
-    c /= sw[:, None]
-    ell = np.einsum("ni,ni->n", uv - c[inv], tang[inv])
-    # each edge's line fitted to its residuals: offset + tilt · ell
-    mean = np.bincount(inv, weights=w * r, minlength=G) / sw
-    sll = np.bincount(inv, weights=w * ell * ell, minlength=G)
-    tilt = np.bincount(inv, weights=w * ell * r, minlength=G) / np.maximum(sll, 1e-9)
-    fit = mean[inv] + tilt[inv] * ell
-    dof = max(float(w.sum()) - 2 * G, 1.0)
-    s2 = float(np.sum(w * (r - fit) ** 2) / dof)
-    fl = np.zeros(G)
-    fl[inv] = np.asarray(floor, float)
-    o2 = np.maximum(float(np.sum(sw * mean**2) / float(sw.sum())), fl**2)
-    long_ = sll > 1e-6
-    t2 = float(np.sum(sw[long_] * tilt[long_] ** 2) / max(float(sw[long_].sum()), 1e-12)) if long_.any() else 0.0
-    half = np.sqrt(3.0 * sll / sw)  # an edge's half length (pixels), from the spread of its samples along it
-    t2 = np.maximum(t2, (fl / np.maximum(half, 1.0)) ** 2)  # at least its ends moved by its floor
-    Go = np.zeros((G, k))  # Σ_i∈edge w_i J_i
-    np.add.at(Go, inv, J * w[:, None])
-    Gt = np.zeros((G, k))  # Σ_i∈edge w_i ℓ_i J_i
-    np.add.at(Gt, inv, J * (w * ell)[:, None])
-    M = s2 * ((J * (w**2)[:, None]).T @ J) + (Go * o2[:, None]).T @ Go + (Gt * t2[:, None]).T @ Gt
-    return Ai @ M @ Ai
+    return Gm @ share @ Gm.T
 
 
 def _replace_T(c: SearchCandidate, T: np.ndarray) -> SearchCandidate:
@@ -1358,7 +1310,7 @@ def _settle(camera, model, T, image, oe, img_s, coarse_px) -> SearchCandidate | 
             return None
         tr.reset(res.T_world_obj)
     # the tracked pose refined on the sub-pixel edges, all six unknowns, for the covariance of the edge
-    # model (``_edge_covariance``) that the table's search has too
+    # model (``core.pose.uncertainty.edge_covariance``) that the table's search has too
     T2, cov = _refine(camera, model, res.T_world_obj, img_s, _Free(res.T_world_obj), rims)
     m = _measure(camera, model, T2, oe, img_s, rims)
     if m is None:

@@ -28,6 +28,7 @@ import numpy as np
 from app.overlay import project_wireframe
 from core.brep import BRep
 from core.camera import Camera
+from core.pose.uncertainty import Priors
 from core.transforms import log_so3
 
 from .track import EdgeTracker, TrackDiagnostics
@@ -40,6 +41,7 @@ __all__ = [
     "draw_tracking",
     "TrackedFrame",
     "track_sequence",
+    "world_sigmas",
 ]
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")
@@ -169,6 +171,16 @@ class TrackedFrame:
     n_inliers: int
     track_ms: float
     reason: str = ""
+    # (6, 6) of (δt [m], δr [rad]), world frame (``TrackDiagnostics.cov``); None when lost
+    cov: np.ndarray | None = None
+
+
+def world_sigmas(cov: np.ndarray | None) -> np.ndarray:
+    """(sx, sy, sz [m], srx, sry, srz [rad]) of a tracked pose: the σ of its translation along the world's axes
+    and of its rotation error's rotation vector (R_est · R_trueᵀ) about them; NaN without a covariance."""
+    if cov is None:
+        return np.full(6, np.nan)
+    return np.sqrt(np.maximum(np.diag(np.asarray(cov, float)), 0.0))
 
 
 def track_sequence(
@@ -185,6 +197,7 @@ def track_sequence(
     stop_when_lost: bool = True,
     lens=None,
     progress: Callable[[int, int | None], None] | None = None,
+    priors: Priors | None = None,
     **tracker_kwargs,
 ) -> list[TrackedFrame]:
     """Track a model through a recorded video from an initial pose.
@@ -195,7 +208,9 @@ def track_sequence(
     model : BRep. T_world_obj : array, shape (4, 4), the pose in frame ``start``.
     start, count : the frames to track. video_out : write the overlay video there (.mp4/.avi).
     csv_out : write one row per frame (index, confidence, lost, rms_px, samples, inliers, ms,
-        tx ty tz θux θuy θuz of T_world_obj).
+        tx ty tz θux θuy θuz of T_world_obj, then its σ: sx_m sy_m sz_m srx_rad sry_rad srz_rad, ``world_sigmas``).
+    priors : the camera's and the model's priors joining each frame's σ (``EdgeTracker.priors``; default: the
+        default model prior alone; ``mcit track`` gives the camera file's prior too).
     stop_when_lost : stop at the first lost frame (the operator must give the pose again).
     lens : app.undistort.LensDistortion or None: undistort each frame first (once, with precomputed
         maps); camera's C holds in the undistorted frames, which the overlay video shows.
@@ -207,6 +222,7 @@ def track_sequence(
     list of TrackedFrame, one per frame tracked.
     """
     tracker = EdgeTracker(camera, model, T_world_obj, **tracker_kwargs)
+    tracker.priors = Priors() if priors is None else priors
     writer = None
     out: list[TrackedFrame] = []
     total = frame_count(source, start, count) if progress is not None else None
@@ -229,6 +245,7 @@ def track_sequence(
                     d.n_inliers if d else 0,
                     ms,
                     d.reason if d else "",
+                    None if (d is None or lost or d.cov is None) else d.cov,
                 )
             )
             if video_out is not None:
@@ -277,6 +294,12 @@ def _write_csv(path: Path, frames: list[TrackedFrame]) -> None:
                 "rx_rad",
                 "ry_rad",
                 "rz_rad",
+                "sx_m",
+                "sy_m",
+                "sz_m",
+                "srx_rad",
+                "sry_rad",
+                "srz_rad",
             ]
         )
         for f in frames:
@@ -293,4 +316,5 @@ def _write_csv(path: Path, frames: list[TrackedFrame]) -> None:
                 ]
                 + [f"{x:.6f}" for x in f.T_world_obj[:3, 3]]
                 + [f"{x:.6f}" for x in r]
+                + ["" if not np.isfinite(x) else f"{x:.3e}" for x in world_sigmas(f.cov)]
             )

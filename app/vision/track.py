@@ -65,7 +65,15 @@ import numpy as np
 
 from core.brep import BRep
 from core.camera import Camera
-from core.point_line_pose import PointLineFit, refine_point_to_line
+from core.point_line_pose import PointLineFit, point_line_residuals, refine_point_to_line
+from core.pose.uncertainty import (
+    CURVED_EDGE_BIAS_PX,
+    EDGE_BIAS_PX,
+    Priors,
+    edge_covariance,
+    first_order_share,
+    grouped_share,
+)
 from core.transforms import check_T, invert_T, make_T, orthonormalize, pose_error
 
 from .profiles import search_along_normals, to_gray_f32
@@ -80,6 +88,8 @@ __all__ = [
     "visible_segments",
     "sample_view",
     "BandSmoothed",
+    "feature_groups",
+    "pose_covariance",
 ]
 
 
@@ -129,9 +139,10 @@ class TrackDiagnostics:
     found for each sample (NaN where none). weights : array, shape (N,), robust weights (0 where
     none was found). rms_px : weighted RMS of the kept samples' distances to their edges at the
     final pose. n_samples, n_found, n_inliers : counts. reason : why the tracker is lost ("" if not).
-    cov : array, shape (6, 6), covariance of the pose's (δt [m], δr [rad]) from the last pose step
-    (``PointLineFit.cov``), or None when there was none. edge_distance_px : the support check's mean
-    distance of the samples to the nearest image edge at the final pose (NaN when not reached).
+    cov : array, shape (6, 6), covariance of the pose's (δt [m], δr [rad]) at the last pose step: the
+    edges' errors, the camera's and the model's priors (``pose_covariance``), or None when there was
+    none or the tracker was given no ``priors``. edge_distance_px : the support check's mean distance of the
+    samples to the nearest image edge at the final pose (NaN when not reached).
     """
 
     samples: EdgeSamples
@@ -454,6 +465,12 @@ class EdgeTracker:
     max_band_px : the widest first band the motion model asks for (pixels).
     """
 
+    # The camera's and the model's priors that join each frame's σ (``pose_covariance``, issue 27): a
+    # ``core.pose.uncertainty.Priors`` (a calibration's covariance or a camera file's prior, the model's σ), as
+    # mcit track and the Track workflow set it; None (the default: auto match and the one-click search settle
+    # poses with the tracker and use no σ of it) computes none, ``diagnostics.cov`` is then None.
+    priors: Priors | None = None
+
     def __init__(
         self,
         camera: Camera,
@@ -762,7 +779,9 @@ class EdgeTracker:
         n_inl = int(inl.sum())
         rms = p.fit.rms_px if p.fit is not None else float("nan")
         matched = np.where(p.found[:, None], p.matched, np.nan)
-        cov = None if p.fit is None else p.fit.cov.copy()
+        cov = None
+        if p.fit is not None and self.priors is not None:
+            cov = pose_covariance(self.camera, T, p.samples, matched, p.weights, self.priors)
         self.diagnostics = TrackDiagnostics(
             p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason, cov, edge_px
         )
@@ -784,3 +803,46 @@ class EdgeTracker:
             pol[int(f)] = float(np.sign(np.median(p.strength[sel])))
         self._polarity = pol
         return TrackResult(T.copy(), float(confidence), False)
+
+
+def feature_groups(s: EdgeSamples, arc: int = 8) -> np.ndarray:
+    """Which edge each sample lies on, as group ids: a straight edge or a silhouette line is one group
+    (its feature), a curve (a rim, a circle, a sphere's outline) arcs of ``arc`` chords (60° of 48):
+    the curve's chords have consecutive features from ``feature − chord`` (``Wireframe.chord``)."""
+    f = np.asarray(s.feature, np.int64)
+    if s.chord is None:
+        return f
+    chord = np.asarray(s.chord, np.int64)
+    return np.where(chord < 0, f, f - chord + chord // arc)
+
+
+def pose_covariance(
+    camera: Camera, T: np.ndarray, samples: EdgeSamples, matched: np.ndarray, weights: np.ndarray, priors: Priors
+) -> np.ndarray | None:
+    """(6, 6) covariance of (δt [m], δr [rad]) of a pose fitted to edges found along the samples' normals
+    (``matched``, NaN where none; ``weights``, the fit's): the edges' errors (a noise of each sample plus an
+    offset and a tilt shared by each edge's samples, ``core.pose.uncertainty.edge_covariance``) and, by first
+    order, the camera's and the model's priors (issue 27). None with fewer than 6 samples kept."""
+    keep = np.isfinite(matched[:, 0]) & (weights > 0)
+    if keep.sum() < 6:
+        return None
+    s, m, w = samples.subset(keep), matched[keep], weights[keep]
+    try:
+        r, J, n = point_line_residuals(camera, T, s.X_obj, s.D_obj, m)
+        groups = feature_groups(s)
+        curved = np.zeros(len(s), bool) if s.chord is None else s.chord >= 0
+        floor = np.where(curved, CURVED_EDGE_BIAS_PX, EDGE_BIAS_PX)
+        uv = camera.project_obj(T, s.X_obj)
+        cov = edge_covariance(J, r, w, groups, floor, 6, uv, n)
+        # The residuals' first-order moves, written out (the tracker runs this every frame): a model point moved
+        # by d (world axes) moves r by J[:, :3] d (r = n·(m − π(X)), ∂r/∂δt = −n·∂π/∂X); C moved by δC moves it
+        # by −n·∂π/∂C δC, with ∂u/∂C₀ = X̃/h₂, ∂u/∂C₂ = −u X̃/h₂ (v likewise).
+        cov = cov + grouped_share(J, w, lambda d: J[:, :3] @ d, groups, priors.model_sigma_m)
+        if priors.camera_cov is not None:
+            Xh = np.column_stack([s.X_obj @ T[:3, :3].T + T[:3, 3], np.ones(len(s))])
+            h2 = Xh @ camera.C[2]
+            dC = -np.hstack([n[:, :1] * Xh, n[:, 1:] * Xh, -(n * uv).sum(axis=1, keepdims=True) * Xh]) / h2[:, None]
+            cov = cov + first_order_share(J, w, lambda d: dC @ d, priors.camera_cov)
+    except ValueError:  # a sample behind the camera or an edge seen end-on at a moved camera
+        return None
+    return 0.5 * (cov + cov.T)

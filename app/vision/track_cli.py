@@ -33,7 +33,10 @@ __all__ = ["add_track_parser"]
 
 
 def add_track_parser(sub) -> None:
-    from app.argtypes import frame_rate, pixel_uv
+    from app.argtypes import frame_rate, number, pixel_uv
+
+    sigma_mm = number(float, lambda v: 0.0 <= v <= 1000.0, kind="millimetres (a number)", expected="0 to 1000 mm")
+    lens_sigma = number(float, lambda v: 0.0 <= v <= 100.0, kind="a number", expected="0 to 100 (percent, pixels)")
 
     p = sub.add_parser(
         "track",
@@ -103,13 +106,30 @@ def add_track_parser(sub) -> None:
         "by itself, up to ±24 px, where the motion is less steady)",
     )
     p.add_argument("--step-px", type=float, default=5.0, help="spacing of the edge samples (pixels)")
+    p.add_argument(
+        "--model-sigma-mm",
+        type=sigma_mm,
+        default=None,
+        help="the model's stated uncertainty: σ of each model edge's position (mm, default 0.3), part of each "
+        "frame's σ in --csv (docs/pose.md, 'What σ covers')",
+    )
+    p.add_argument(
+        "--camera-sigma",
+        nargs=2,
+        type=lens_sigma,
+        metavar=("F_PCT", "C_PX"),
+        default=(0.3, 1.0),
+        help="the stated uncertainty of a camera file without a calibration's covariance: σ of fx, fy in percent "
+        "and of u0, v0 in pixels (default 0.3 %% and 1 px; 0 0 for a camera known exactly, e.g. a simulation's)",
+    )
     p.add_argument("--keep-going", action="store_true", help="do not stop at a lost frame (draw the last good pose)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (there is none when stderr is not a terminal)")
     p.set_defaults(func=_cmd_track)
 
 
 def _setup(args):
-    """(source, camera, model, T_world_obj, lens or None) from the arguments; ValueError on bad input.
+    """(source, camera, model, T_world_obj, lens or None) from the arguments; ValueError on bad input. Sets
+    ``args.camera_cov``: the covariance of C's entries where the site calibrated the camera, else None.
     With lens distortion (the intrinsics file's or the scene's) the frames are undistorted as they are
     read and C holds in the undistorted frames (app/undistort.py)."""
     import numpy as np
@@ -122,6 +142,8 @@ def _setup(args):
     T = None
     lens = None
     source = args.source
+    args.camera_cov = None
+    args.body_model_sigma_m = None  # a site object's stored model prior (mcit db import --model-sigma-mm)
     if args.camera_name and not args.intrinsics:
         raise UsageError("--camera-name chooses a camera in the --intrinsics file; give --intrinsics FILE")
     if args.body and not args.scene:
@@ -138,10 +160,13 @@ def _setup(args):
             from app.site_folder import current_camera
 
             with Database.open(site.db_path, readonly=True) as db:
-                camera, lens, _ = current_camera(db, scene)
+                camera, lens, cal_id = current_camera(db, scene)
+                cal = db.latest_calibration("camera") if cal_id is not None else None
+                if cal is not None and cal.data.get("cov") is not None:
+                    args.camera_cov = np.asarray(cal.data["cov"], float)
         if args.body:
             try:
-                body_model, T = _body(scene, site, args.body)
+                body_model, T, args.body_model_sigma_m = _body(scene, site, args.body)
             except KeyError as exc:  # an operator's typo: one line, not an internal error
                 raise ValueError(f"--body: {exc.args[0]}") from None
             model = model or body_model
@@ -193,11 +218,11 @@ def _site_folder(path):
 
 
 def _body(scene, site, name: str):
-    """(model, T_world_obj) of ``name``: the scene's body, else the site folder's database object; KeyError
-    saying where it looked."""
+    """(model, T_world_obj, the model's stated σ in metres or None for the default) of ``name``: the scene's body,
+    else the site folder's database object; KeyError saying where it looked."""
     try:
         body = scene.body(name)
-        return body.model, body.T_world_obj
+        return body.model, body.T_world_obj, None
     except KeyError:
         pass
     if site is not None and site.db_path.is_file():
@@ -209,7 +234,7 @@ def _body(scene, site, name: str):
             except NotFoundError:
                 rec = None
             if rec is not None:
-                return rec.model, rec.T_world_obj
+                return rec.model, rec.T_world_obj, rec.model_sigma_m
             names = [o.name for o in db.objects()]
         raise KeyError(
             f"site {site.root.name} has no object named {name!r} (its database's: {', '.join(names) or 'none'}); "
@@ -274,8 +299,15 @@ def _cmd_track(args) -> int:
 
     from app.progress import progress_bar
     from app.vision.sequence import track_sequence
+    from core.pose.uncertainty import Priors, intrinsics_prior_cov
 
     source, camera, model, T, lens = _setup(args)
+    # each frame's σ: the camera's calibration (or its file's stated prior) and the model's prior (issue 27)
+    f_pct, c_px = args.camera_sigma
+    prior = intrinsics_prior_cov(camera, f_pct / 100.0, c_px) if f_pct > 0 or c_px > 0 else None
+    camera_cov = prior if args.camera_cov is None else args.camera_cov
+    model_sigma_m = args.body_model_sigma_m if args.model_sigma_mm is None else args.model_sigma_mm / 1000.0
+    priors = Priors(camera_cov) if model_sigma_m is None else Priors(camera_cov, model_sigma_m)
     if args.pos_out and "%" in args.pos_out:
         _pos_names(args.pos_out, [0])  # a malformed pattern is said before the video is read
     with progress_bar("frames", quiet=args.quiet) as progress:
@@ -294,6 +326,7 @@ def _cmd_track(args) -> int:
             sample_step_px=args.step_px,
             lens=lens,
             progress=progress,
+            priors=priors,
         )
     if not frames:
         raise ValueError(f"no frame to track in {source} from frame {args.start}")

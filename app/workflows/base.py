@@ -178,6 +178,10 @@ class Step:
 
 
 MOTION_GAP_S = 0.3  # FrameRef.previous: how long before the frozen frame (a few video frames)
+# A frozen frame taken this long before its camera's newest may no longer show the site: what is measured
+# or looked up now is said to be of the site now, with the frame's age (a new operator designated a point
+# drawn on a box in a frame frozen 30 s before and was told "on table, range finder agrees").
+STALE_FRAME_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -234,6 +238,16 @@ class FrameRef:
 
         # the view's own motion taken off (a camera turned or carried): what moved with it was not moving
         return changed_share(self.previous, self.image, np.asarray(uv, float).reshape(-1, 2), follow_camera=True)
+
+    def object_motion_px(self, outline_uv: Any) -> float | None:
+        """How far the object inside ``outline_uv`` (N, 2) moved between ``previous`` and this frame against
+        what is around it (``app.vision.change.object_motion_px``); None when no earlier frame is known or its
+        image gives too little to follow."""
+        if self.previous is None or np.shape(self.previous) != np.shape(self.image):
+            return None
+        from app.vision.change import object_motion_px
+
+        return object_motion_px(self.previous, self.image, outline_uv)
 
 
 def sigma_over(sd_deg: float, sd_mm: float, max_deg: float, max_mm: float) -> str:

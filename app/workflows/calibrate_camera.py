@@ -33,15 +33,15 @@ from core.calibration import calibrate_dlt
 from core.camera import Camera
 
 from .base import CANCEL, Control, Marks, Step, Workflow, WorkflowError, as_pixel
-from .snapping import SNAPPED_CORNER_SIGMA_PX, SnapMixin, snap_marks
+from .snapping import SNAPPED_CORNER_SIGMA_PX, SnapMixin, snap_marks, weak_snaps
 
 __all__ = ["CalibrateCamera", "known_K", "METHODS"]
 
-PICK_RADIUS_PX = 25.0
+# a model corner is picked within this many screen pixels of the click (in video pixels it depends on the zoom)
+PICK_RADIUS_SCREEN_PX = 12.0
 # Weak results (Accept asks once more): fewer pairs than this leave little redundancy in C's 11
-# unknowns; a snap that moved farther than this may have jumped to another corner.
+# unknowns (and a snap the image fits poorly: ``ClickSnap.weak``).
 MIN_REDUNDANT_PAIRS = 8
-MAX_SNAP_MOVE_PX = 2.0
 # The same redundancy (at least 5 coordinates beyond the unknowns) for the pose's 6 unknowns.
 MIN_REDUNDANT_PAIRS_PNP = 6
 
@@ -72,6 +72,7 @@ def known_K(site, view: str | None = None) -> np.ndarray | None:
 class CalibrateCamera(SnapMixin, Workflow):
     name = "calibrate_camera"
     title = "Calibrate camera"
+    click_px_per_screen_px: float = 1.0  # the page's zoom where the click was made (set by the session; 1: unknown)
     actions = (
         "click",
         "choose_point",
@@ -150,10 +151,11 @@ class CalibrateCamera(SnapMixin, Workflow):
             self._check_open()
             if self.pending_X is None:
                 name, k, X, dist = self._nearest_vertex(p)
-                if dist > PICK_RADIUS_PX:
+                radius = PICK_RADIUS_SCREEN_PX * self.click_px_per_screen_px
+                if dist > radius:
                     near = f" (the nearest visible one, {name} corner {k}, is {dist:.0f} px away)" if k >= 0 else ""
                     raise WorkflowError(
-                        f"No visible model corner within {PICK_RADIUS_PX:.0f} px of your click{near}: "
+                        f"No visible model corner within {radius:.0f} px of your click{near}: "
                         "click on a corner drawn in the overlay."
                     )
                 self._set_pending(X, f"{name} corner {k}", (name, k))
@@ -392,7 +394,7 @@ class CalibrateCamera(SnapMixin, Workflow):
             else:
                 shown[:] = True
             d = np.linalg.norm(cam.project(V) - p, axis=1)
-            for k in np.flatnonzero(front & shown & (d <= 3 * PICK_RADIUS_PX)):
+            for k in np.flatnonzero(front & shown & (d <= 3 * PICK_RADIUS_SCREEN_PX * self.click_px_per_screen_px)):
                 cands.append((float(d[k]), obj.name, int(k), V[k]))
         for d, name, k, X in sorted(cands, key=lambda c: c[0]):
             if self._unoccluded(X):
@@ -493,11 +495,7 @@ class CalibrateCamera(SnapMixin, Workflow):
                     f"point {i + 1} ({self.labels[i]}) is {self.result.errors_px[i]:.1f} px from where C puts it "
                     "(more than 3σ): a wrong corner?"
                 )
-            for i, sn in enumerate(self.snaps):
-                if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
-                    out.append(
-                        f"point {i + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
-                    )
+            out += weak_snaps((f"point {i + 1}", sn) for i, sn in enumerate(self.snaps))
             return out
 
     def marks(self) -> Marks:

@@ -28,11 +28,9 @@ from core.transforms import transform_points
 from .base import CANCEL, Control, Marks, Step, WorkflowError, as_pixel
 from .calibrate_camera import METHODS, MIN_REDUNDANT_PAIRS, MIN_REDUNDANT_PAIRS_PNP, known_K
 from .robot_tour import TourWorkflow
-from .snapping import Snapper, snap_marks
+from .snapping import Snapper, snap_marks, weak_snaps
 
 __all__ = ["CalibrateCameraFromRobot", "visible_tip"]
-
-MAX_SNAP_MOVE_PX = 2.0
 
 
 def visible_tip(camera, model, q, T_world_base) -> tuple[np.ndarray, int, int] | None:
@@ -359,7 +357,5 @@ class CalibrateCameraFromRobot(TourWorkflow):
             for k, e, s in zip(self.order, self.result.errors_px, sig):
                 if e > 3 * max(s, 0.5):
                     out.append(f"pose {k + 1}'s tip is {e:.1f} px from where C puts it (more than 3σ): a wrong corner?")
-                sn = self.points[k]["snap"]
-                if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
-                    out.append(f"pose {k + 1}'s snap moved it {sn.moved_px:.1f} px")
+                out += weak_snaps([(f"pose {k + 1}", self.points[k]["snap"])])
             return out

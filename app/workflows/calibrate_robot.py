@@ -27,7 +27,7 @@ from core.transforms import pose_error
 
 from .base import CANCEL, Control, Marks, Step, WorkflowError, as_pixel, sigma_over
 from .robot_tour import TourWorkflow
-from .snapping import ClickSnap, Snapper, click_segment, segment_of, snap_marks
+from .snapping import ClickSnap, Snapper, click_segment, segment_of, snap_marks, weak_snaps
 
 __all__ = ["CalibrateRobot", "MIN_EDGES", "WEAK_SIGMA_MM", "WEAK_SIGMA_DEG"]
 
@@ -37,8 +37,7 @@ ESTIMATE_FROM = 4  # the drawn estimate follows the clicks from this many assign
 ESTIMATE_MAX_MM, ESTIMATE_MAX_DEG = 20.0, 2.0  # … when their σ is below these
 PICK_RADIUS_PX = 25.0
 MIN_SEGMENT_PX = 3.0
-MAX_SNAP_MOVE_PX = 2.0  # Accept asks once more when a snap moved an edge farther than this …
-MAX_SNAP_USE_PX = 3.0  # … and a snap that moves it farther than this is not used (the click is kept)
+MAX_SNAP_USE_PX = 3.0  # a snap that moves an edge farther than this is not used (the click is kept)
 # Accept asks once more above these: the issue's target for the base (1°, 3 mm) as one σ.
 WEAK_SIGMA_MM, WEAK_SIGMA_DEG = 3.0, 1.0
 
@@ -488,8 +487,7 @@ class CalibrateRobot(TourWorkflow):
                         f"edge {i + 1} ({e.feature.label(links)}, pose {e.pose + 1}) is {r:.1f} px off (more than 3σ): "
                         "a wrong edge?"
                     )
-                if e.snap is not None and e.snap.applied and e.snap.moved_px > MAX_SNAP_MOVE_PX:
-                    out.append(f"edge {i + 1}'s snap moved it {e.snap.moved_px:.1f} px")
+                out += weak_snaps([(f"edge {i + 1}", e.snap)])
             return out
 
 

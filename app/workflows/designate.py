@@ -44,12 +44,12 @@ from typing import Any
 
 import numpy as np
 
-from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, STALE_FRAME_S, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel
+from .beams import LIMIT_SIGMA  # the beam check's limit (app/workflows/beams.py), here along the camera's ray
 
 __all__ = ["Target", "DesignateTarget", "NOT_CHECKED", "LIMIT_SIGMA"]
 
 NOT_CHECKED = "not checked by the range finder"
-LIMIT_SIGMA = 3.0  # a disagreement beyond this many σ along the ray is a warning
 NOT_IN_DATABASE = "not in the database"
 AIM_OFF_PX = 1.0  # a beam that lands farther than this from the click is said so
 OLD_FRAME_S = 1.0  # a disagreement found from a frame older than this says when the frame was
@@ -65,7 +65,8 @@ class Target:
     return); disagreement_m its depth along the ray minus the database's (+: the range finder's
     surface is farther; NaN when there is nothing to compare); sigma_m σ of that difference (see
     the module's model); check one sentence saying what the check found; warning "" or the
-    sentence the operator must read.
+    sentence the operator must read; frame_age_s how long before the newest frame the clicked frame was
+    taken, when that is more than ``STALE_FRAME_S`` (NaN otherwise).
     """
 
     uv: np.ndarray
@@ -78,6 +79,7 @@ class Target:
     sigma_m: float = float("nan")
     check: str = NOT_CHECKED
     warning: str = ""
+    frame_age_s: float = float("nan")  # set when the frame clicked on was old (``STALE_FRAME_S``): its age
     details: dict = field(default_factory=dict, compare=False)
 
     def text(self) -> str:
@@ -166,7 +168,23 @@ class DesignateTarget(Workflow):
 
     def _keep(self, t: Target, message: str) -> Target:
         why = self.scene_changed(t.uv)
-        if why:
+        age = _frame_age_s(self)
+        if age is not None and age > STALE_FRAME_S:
+            # what the database and the range finder say is of the site now: that the frame still shows it here
+            # is not known (the live video may look the same while the database moved)
+            old = f"this frame is {age:.0f} s old; the scene may have changed since"
+            now = f"{t.check} (with the database as it is now)" if t.check.startswith("the range finder agrees") else ""
+            t = dataclasses.replace(
+                t,
+                check=now or t.check,
+                frame_age_s=age,
+                warning=f"Warning: {old}{': ' + why if why else ''}: the target is where the "
+                f"database{' and the range finder' if t.rangefinder_X is not None else ''} put it now, on "
+                f"{t.object}, which may not be what this frame shows; look at the live video (L) or freeze a new "
+                f"frame (F){'. ' + _sentence(t.warning) if t.warning else ''}",
+            )
+            message = _sentence(t.warning)
+        elif why:
             warning = (
                 f"Warning: {why}: the target is where the "
                 f"database{' and the range finder' if t.rangefinder_X is not None else ''} put it now, "
@@ -326,7 +344,8 @@ class DesignateTarget(Workflow):
             else:
                 warning = (
                     f"Warning: the range finder met no surface at {hit.name} but one {100 * delta:.1f} cm behind "
-                    f"it, at {_xyz(X_rf)} m: {hit.name} is not where the database has it; update its pose{off}"
+                    f"it, at {_xyz(X_rf)} m: {hit.name} is not where the database has it: the {hit.name} has moved: "
+                    f"update its pose first{off}"
                 )
         return Target(
             p,
@@ -393,7 +412,12 @@ class DesignateTarget(Workflow):
             )
         if self.targets:
             t = self.targets[-1]
-            if t.warning:
+            if t.warning and np.isfinite(t.frame_age_s):
+                head = (
+                    f"Target {len(self.targets)}: {self._copy_point(t)} m on {t.object} (in the Target (m) box to "
+                    f"copy). {_sentence(t.warning)}"
+                )
+            elif t.warning:
                 head = (
                     f"Target {len(self.targets)}: {self._copy_point(t)} m, where the range finder met a surface (in "
                     f"the Target (m) box to copy). {_sentence(t.warning)}"
@@ -443,10 +467,21 @@ class DesignateTarget(Workflow):
             return {"targets": rows}
 
 
+def _frame_age_s(wf: Workflow) -> float | None:
+    """How long before its camera's newest frame ``wf``'s frozen frame was taken (seconds, from their capture
+    stamps); None without a frozen frame or where a stamp is unknown (a recording read by time)."""
+    if wf.frame is None or wf.frame.stamp is None:
+        return None
+    stamp = getattr(wf.site.latest_frame(wf.frame.view or wf.view), "stamp", None)
+    return None if stamp is None else max(0.0, float(stamp) - float(wf.frame.stamp))
+
+
 def _check_word(t: Target) -> str:
     """The target's check in a few words (the table, the label on the video): what its warning says."""
     if not t.warning:
         return t.check
+    if np.isfinite(t.frame_age_s):
+        return f"frame {t.frame_age_s:.0f} s old: the site now"
     return "not in the database: the range finder's point" if t.object == NOT_IN_DATABASE else "range finder disagrees"
 
 

@@ -39,7 +39,7 @@ from core.rangefinder import RangeScan, aim, beam_point_cov
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
 from .range_modelling import RangeModelling
-from .snapping import SnapMixin, snap_marks
+from .snapping import SnapMixin, snap_marks, weak_snaps
 
 __all__ = ["ModelObject", "SHAPES", "table_support"]
 
@@ -50,10 +50,9 @@ MIN_SEGMENT_PX = 3.0
 # (docs/modeling.md), so the box's run ends where its edge is.
 BOX_SCAN_FRACTIONS = (0.5, 0.75)
 BOX_SCAN_MARGIN_M = 0.03
-# A model is weak (Accept asks once more) when a dimension's σ exceeds this, or a snap moved a click
-# more than MAX_SNAP_MOVE_PX.
+# A model is weak (Accept asks once more) when a dimension's σ exceeds this, or a snap fits the image
+# poorly where it put a click (``ClickSnap.weak``).
 WEAK_SIGMA_MM = 5.0
-MAX_SNAP_MOVE_PX = 2.0
 CYLINDER_METHODS = {
     "fused": "fused (all measurements)",
     "tangential": "tangential planes (camera + range finder)",
@@ -381,6 +380,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                         pan_stop_rad=float(pan0 + rel.max() + pad),
                     )
                 )
+        scans, moved = self._leave_out_moved(scans, T)
         with self.lock:
             self.progress = None
             self._clear_live()  # now in self.scans
@@ -390,7 +390,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             self.message = (
                 f"2 profiles across the box: {hits[0]} and {hits[1]} returns "
                 f"of {len(scans[0])} and {len(scans[1])} beams"
-            )
+            ) + (f". ⚠ {moved}" if moved else "")
             return scans
 
     def scan(self) -> list[RangeScan]:
@@ -444,6 +444,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
                         devices, k, T, tilt_rad=m.tilt_rad, pan_start_rad=lo, pan_stop_rad=hi, pan_step_rad=step
                     )
                 )
+        scans, moved = self._leave_out_moved(scans, T)
         with self.lock:
             self.progress = None
             self._clear_live()  # now in self.scans
@@ -455,6 +456,8 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             self.site.set_beam(last.points(T)[np.nonzero(last.hits)[0][-1]])
             self.result = None
             self.message = f"2 profiles: {hits[0]} and {hits[1]} returns of {len(scans[0])} and {len(scans[1])} beams"
+            if moved:
+                self.message += f". ⚠ {moved}"
             return scans
 
     # ------------------------------------------------------------------ solve and accept
@@ -688,11 +691,7 @@ class ModelObject(RangeModelling, SnapMixin, Workflow):
             snaps = (
                 [sn for f in self.faces for sn in f["snaps"]] if self.shape == "box" else list(self.silhouette_snaps)
             )
-            out += [
-                f"a snap moved a click {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
-                for sn in snaps
-                if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX
-            ]
+            out += weak_snaps(("a click", sn) for sn in snaps)
             if self.shape == "box" and len(self.box_faces()) == 1 and not self.scans:
                 out.append(
                     "one face measured: the box's depth rests on the clicks alone (measure a second face, or scan)"

@@ -40,9 +40,9 @@ from core.modeling.result import DIMENSION_WORDS
 from core.rangefinder import beam_point_cov
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
-from .model_object import MAX_CLICK_RESIDUAL_PX, MAX_SNAP_MOVE_PX, MIN_SEGMENT_PX, WEAK_SIGMA_MM, table_support
+from .model_object import MAX_CLICK_RESIDUAL_PX, MIN_SEGMENT_PX, WEAK_SIGMA_MM, table_support
 from .range_modelling import RangeModelling
-from .snapping import SnapMixin, snap_marks
+from .snapping import SnapMixin, snap_marks, weak_snaps
 
 __all__ = ["ModelPolyhedron", "PolyShape", "POLY_SHAPES"]
 
@@ -637,11 +637,7 @@ class ModelPolyhedron(RangeModelling, SnapMixin, Workflow):
                     f"{MAX_CLICK_RESIDUAL_PX:.0f} px)"
                 )
             snaps = [sn for f in self.faces for sn in f["snaps"]]
-            out += [
-                f"a snap moved a click {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)"
-                for sn in snaps
-                if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX
-            ]
+            out += weak_snaps(("a click", sn) for sn in snaps)
             if sum(f["points"] is not None for f in self.faces) == 1:
                 out.append(
                     f"one face measured: the hidden corners rest on the clicks and the {self.shape}'s hints "

@@ -244,7 +244,7 @@ class PickPlace(RobotWork):
                 image,
                 table=table_support(self.site),
                 name=self.obj.name,
-                camera_cov=self.site.camera_cov(self.view),
+                camera_cov=self.site.pose_camera_cov(self.view),
             )
             found = res.candidates[0].T_world_obj
             dp = float(np.linalg.norm(found[:3, 3] - T[:3, 3]))

@@ -16,7 +16,7 @@ import numpy as np
 from core.transforms import pose_error
 
 from .base import CANCEL, Control, Ghost, Marks, Step, sigma_over
-from .snapping import snap_marks
+from .snapping import snap_marks, weak_snaps
 
 __all__ = [
     "ACTIONS",
@@ -40,10 +40,10 @@ __all__ = [
 ]
 
 # A refined pose is weak (Accept asks once more) when its σ exceed these, a click lies more than 3σ
-# off, a snap moved a click more than MAX_SNAP_MOVE_PX, or the clicks fix the 6 unknowns just barely.
+# off, a snap fits the image poorly where it put a click (``ClickSnap.weak``), or the clicks fix the 6 unknowns
+# just barely.
 WEAK_SIGMA_DEG = 2.0
 WEAK_SIGMA_MM = 20.0
-MAX_SNAP_MOVE_PX = 2.0
 # A refined pose whose outline lies on the image's edges for less than this share is said suspect (its clicks
 # may fit a wrong assignment): the one-click search's own floor (app.vision.search.MIN_NEAR), which the right
 # poses of 150 rendered placements, a fifth to a third of them hidden, all passed.
@@ -462,9 +462,7 @@ def weaknesses(wf) -> list[str]:
     if disagree:
         out.append(disagree)
     for what, snaps in (("edge", c.seg_snaps), ("point", c.point_snaps)):
-        for j, sn in enumerate(snaps):
-            if sn is not None and sn.applied and sn.moved_px > MAX_SNAP_MOVE_PX:
-                out.append(f"{what} {j + 1}'s snap moved it {sn.moved_px:.1f} px (more than {MAX_SNAP_MOVE_PX:.0f} px)")
+        out += weak_snaps((f"{what} {j + 1}", sn) for j, sn in enumerate(snaps))
     if wf.refined_unseen:
         out.append(wf.refined_unseen)
     if len(r.kinds) * 2 <= 6 and wf.search.found is None:  # with a found pose the image's edges are the redundancy
@@ -592,7 +590,7 @@ def refine_message(wf, result, start, failures, unseen: str, views: list[str]) -
         return (
             f"{start.label} refined with {used}: RMS {result.rms_px:.2f} px, moved {deg:.2f}° and "
             f"{1000 * m:.1f} mm from the found pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
-            + (" (camera calibration included)" if result.cov_parts else "")
+            + (" (camera calibration included)" if "camera calibration" in result.cov_parts else "")
         )
     note = ""
     if failures and start.index is not None and start.index >= 0:
@@ -605,7 +603,7 @@ def refine_message(wf, result, start, failures, unseen: str, views: list[str]) -
     return (
         f"{note}RMS {result.rms_px:.2f} px over {used}; moved {deg:.2f}° and "
         f"{1000 * m:.1f} mm from the database pose; σ up to {sig_deg:.2f}° and {sig_mm:.1f} mm"
-        + (" (camera calibration included)" if result.cov_parts else "")
+        + (" (camera calibration included)" if "camera calibration" in result.cov_parts else "")
         + (f". ⚠ {unseen}" if unseen else "")
     )
 

@@ -79,6 +79,7 @@ class OneClickSearch:
         self.moving = ""  # said when the object was moving in the frame the pose was found in
         self.progress: float | None = None  # a search under way: 0..1 (the workflow's progress bar), else None
         self.progress_text = ""
+        self.shared = "camera calibration"  # what the found poses' shared σ holds ("model" without a camera share)
 
     def clear(self, clicks=None) -> None:
         """The found poses go, and the click they came from (pending in ``clicks``, if given)."""
@@ -154,7 +155,14 @@ class OneClickSearch:
         if table is not None and not rests_on(obj.model, obj.T_world_obj, table):
             table = None
         cam = site.camera_of(view)
-        return dict(camera=cam, model=obj.model, T_db=obj.T_world_obj, table=table, camera_cov=site.camera_cov(view))
+        return dict(
+            camera=cam,
+            model=obj.model,
+            T_db=obj.T_world_obj,
+            table=table,
+            camera_cov=site.pose_camera_cov(view),
+            model_sigma_m=obj.model_sigma_m,
+        )
 
     def run(self, job: dict, p: np.ndarray, frames, cancel):
         """``app.vision.search.search_pose`` from pixel p on the workflow's frame (``frames``: its
@@ -173,6 +181,7 @@ class OneClickSearch:
         # under way from now: the step refuses clicks (one made before the first progress report had become an
         # edge's point, and the found poses could then not be accepted: a new operator's second double click)
         self.progress, self.progress_text = 0.0, "searching"
+        self.shared = "model" if job["camera_cov"] is None else "camera calibration"
         try:
             return search_pose(
                 job["camera"],
@@ -185,6 +194,7 @@ class OneClickSearch:
                 cancel=cancel,
                 progress=progress,
                 camera_cov=job["camera_cov"],
+                model_sigma_m=job["model_sigma_m"],
             )
         except Cancelled:
             raise WorkflowError("Find cancelled: nothing was written") from None
@@ -227,13 +237,18 @@ class OneClickSearch:
             )
         return message + (f". ⚠ {moving}" if moving else "")
 
-    def moving_at(self, T: np.ndarray, job: dict, moving_share) -> str:
-        """ "" unless the object at pose T changed between the frozen frame and the one shown just before
-        it (``moving_share``: ``Workflow.moving_share``; ``job``: the search's): then it was moving, and the
-        pose found there is where it passed, not where it stays. The pixels: its bounding box's corners,
-        projected, taken inside (``app.vision.change.inside``)."""
-        from app.vision.change import CHANGED_SHARE, inside
+    def moving_at(self, T: np.ndarray, job: dict, frame) -> str:
+        """ "" unless the object at pose T moved between the frozen ``frame`` (a ``FrameRef``, or None) and the
+        one shown just before it: then the pose found is where it passed, not where it stays. Judged where the
+        object is: its image (its bounding box's corners projected, their hull) against what is around it
+        (``FrameRef.object_motion_px``), so that the view moving (a hand-held camera, a turning one) or something
+        moving elsewhere is no motion of it (on a continuously moving sequence every frame was "moving" and
+        every Accept asked twice). Where its image gives too little to follow, the changed pixels inside it
+        (``FrameRef.moving_share``) against those around it."""
+        from app.vision.change import CHANGED_SHARE, MOVING_PX, inside
 
+        if frame is None:
+            return ""
         camera, model = job["camera"], job["model"]
         lo, hi = model.bounds()
         box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
@@ -241,21 +256,27 @@ class OneClickSearch:
         uv = camera.project(X[camera.depth(X) > 0])
         if not len(uv):
             return ""
-        share = moving_share(inside(uv))
-        if share is None or share <= CHANGED_SHARE:
-            return ""
-        # around it, its box's size further out: where most of that changed as much, the view moved (a hand-held
-        # camera), not the object (on the hand-held ViSP cube every frame was "moving" and every Accept asked twice)
-        c = uv.mean(axis=0)
-        ring = c + 2.0 * (uv - c)
-        ring = ring[
-            (ring[:, 0] > 8) & (ring[:, 1] > 8) & (ring[:, 0] < camera.width - 9) & (ring[:, 1] < camera.height - 9)
-        ]
-        around = [moving_share(p[None]) for p in ring]
-        if around and sum(a is not None and a > CHANGED_SHARE for a in around) > len(around) / 2:
-            return ""
+        motion = frame.object_motion_px(uv)
+        if motion is not None:
+            if motion <= MOVING_PX:
+                return ""
+            how = f"it moved {motion:.1f} px against what is around it since the frame {MOTION_GAP_S:.1f} s before"
+        else:
+            share = frame.moving_share(inside(uv))
+            if share is None or share <= CHANGED_SHARE:
+                return ""
+            # around it, its box's size further out: where most of that changed as much, the view moved
+            c = uv.mean(axis=0)
+            ring = c + 2.0 * (uv - c)
+            ring = ring[
+                (ring[:, 0] > 8) & (ring[:, 1] > 8) & (ring[:, 0] < camera.width - 9) & (ring[:, 1] < camera.height - 9)
+            ]
+            around = [frame.moving_share(p[None]) for p in ring]
+            if around and sum(a is not None and a > CHANGED_SHARE for a in around) > len(around) / 2:
+                return ""
+            how = f"it differs from the frame {MOTION_GAP_S:.1f} s before"
         return (
-            f"{self.object_name} was moving in this frame (it differs from the frame {MOTION_GAP_S:.1f} s before): "
+            f"{self.object_name} was moving in this frame ({how}): "
             "the pose found is where it passed, not where it stays; once it has stopped, "
             "press Remove last, freeze a frame (F; Seconds back reaches one where it had "
             "stopped before) and double-click it again, or Accept if it stopped there"
@@ -279,7 +300,7 @@ class OneClickSearch:
         c = self.found[chosen]
         if c.cov is None:
             return None
-        prior = PosePrior(c.T_world_obj, c.cov, shared_cov=c.cov_camera, name="found pose")
+        prior = PosePrior(c.T_world_obj, c.cov, shared_cov=c.cov_camera, name="found pose", shared_name=self.shared)
         return Start(c.T_world_obj, f"found pose {chosen + 1}", chosen, prior)
 
     def record(self, chosen: int, frame: dict | None) -> dict[str, Any]:

@@ -180,6 +180,7 @@ class RangeModelling:
                 progress=self._progress(T, "face patch"),
                 cancel=self.cancel_event,
             )
+        (scan,), moved = self._leave_out_moved([scan], T)
         with self.lock:
             self.progress = None
             self._clear_live()  # kept in the face below, or dropped with it
@@ -196,6 +197,8 @@ class RangeModelling:
             self.site.set_beam(X[-1])
             self.result = None
             self.message = f"Face {len(self.faces)}: {len(X)} range points of {len(scan)} beams."
+            if moved:
+                self.message += f" ⚠ {moved}."
             doubt = _patch_doubts(X, covs, len(scan))
             if doubt:
                 # said now, not as a wrong face blamed at Solve (a new operator's patch fell half off its face)
@@ -205,6 +208,29 @@ class RangeModelling:
                     "visible sides, then Measure face again."
                 )
             return scan
+
+    def _leave_out_moved(self, scans: list, T: np.ndarray) -> tuple[list, str]:
+        """The scans with each beam that met a known object farther than the database has it by more than
+        3σ (``beams.check_beams``: that object's surface is not there, it has moved) made a miss, and what
+        the operator is told ("" for none). A return nearer than the database's surface is what is being
+        modelled (the database does not have it yet), so only farther ones are left out."""
+        import dataclasses
+
+        from .beams import check_beams, disagreement_text
+
+        out, moved, labels = [], [], []
+        for k, scan in enumerate(scans):
+            hit = np.flatnonzero(scan.hits)
+            checks = check_beams(
+                self.site, T, scan.pan_rad[hit], scan.tilt_rad[hit], scan.range_m[hit], self.site.calibration_covs[1]
+            )
+            far = [(i, c) for i, c in zip(hit, checks) if c.farther]
+            rho = scan.range_m.copy()
+            rho[[i for i, _ in far]] = np.nan
+            out.append(dataclasses.replace(scan, range_m=rho) if far else scan)
+            moved += [c for _, c in far]
+            labels += [f"beam {i + 1}" + (f" of profile {k + 1}" if len(scans) > 1 else "") for i, _ in far]
+        return out, disagreement_text(moved, labels)
 
     def _refuse_if_changed(self, uv: np.ndarray, what: str, inside: bool = False) -> None:
         """WorkflowError when the live video around the pixels ``uv`` differs from the frozen frame:

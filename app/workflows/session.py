@@ -96,10 +96,20 @@ class Session:
             self.on_start(wf, frame)
         return wf
 
-    def click(self, view: str, uv: np.ndarray, *, on: str | None = None, live_shown: bool = False) -> None:
+    def click(
+        self,
+        view: str,
+        uv: np.ndarray,
+        *,
+        on: str | None = None,
+        live_shown: bool = False,
+        px_per_screen_px: float = 1.0,
+    ) -> None:
         """A click at pixel uv of camera ``view``: the workflow's while it takes clicks, else it selects ``on``
         (the object drawn there, or None). ``live_shown``: the operator looks at the live video over a frozen
-        frame, where the workflow's clicks would not land on what they see."""
+        frame, where the workflow's clicks would not land on what they see. ``px_per_screen_px``: video pixels
+        per screen pixel in the page's view, for the workflows that pick what lies within a few screen pixels of a
+        click (``CalibrateTurret.click_px_per_screen_px``)."""
         wf = self.workflow
         if wf is not None and not wf.finished and "click" in wf.actions:
             if wf.current_step().clicks:
@@ -109,6 +119,8 @@ class Session:
                         "frozen (L) to see it, then click"
                     )
                 wf.message = ""
+                scale = float(px_per_screen_px)
+                wf.click_px_per_screen_px = scale if np.isfinite(scale) and scale > 0 else 1.0
                 wf.click_in(view, uv)  # the workflow says whether it takes clicks in this camera
                 return
             if not wf.follows_live():

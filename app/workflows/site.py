@@ -52,6 +52,13 @@ class SiteObject:
     dimensions: dict = field(default_factory=dict)
     sigmas: dict = field(default_factory=dict)
 
+    @property
+    def model_sigma_m(self) -> float:
+        """σ of each model edge's position (metres), part of every pose's σ (``ObjectRecord.model_sigma_m``)."""
+        from core.pose.uncertainty import model_sigma_of
+
+        return model_sigma_of(self.sigmas)
+
     def vertices_world(self) -> np.ndarray:
         """Model vertices in the world, (V, 3)."""
         V = self.model.vertices
@@ -369,6 +376,25 @@ class Site:
         name = self.view_name(view)
         with self.lock:
             return self._camera_covs[name]
+
+    def pose_priors(self, views, obj: SiteObject) -> dict:
+        """``core.pose.pipeline.refine_starts``' priors for a pose of ``obj`` fitted in ``views`` (issue 27): each
+        view's camera covariance (``pose_camera_cov``) and the object's model prior."""
+        return dict(camera_covs=[self.pose_camera_cov(v) for v in views], model_sigma_m=obj.model_sigma_m)
+
+    def pose_camera_cov(self, view: str | None = None) -> np.ndarray | None:
+        """The camera's share of a pose's σ (issue 27): its calibration's covariance (``camera_cov``), else for a
+        camera read from an intrinsics file (``SceneView.from_file``: an own site's ViSP, OpenCV or ROS file) the
+        file's stated prior (``core.pose.uncertainty.intrinsics_prior_cov``), else None (a camera the scene
+        writes itself, as the simulated workcell's)."""
+        from core.pose.uncertainty import intrinsics_prior_cov
+
+        cov = self.camera_cov(view)
+        if cov is not None:
+            return cov
+        name = self.view_name(view)
+        spec = next((v for v in self.scene.views if v.name == name), None)
+        return intrinsics_prior_cov(self.camera_of(view)) if spec is not None and spec.from_file else None
 
     @property
     def robot_base_nominal(self) -> bool:

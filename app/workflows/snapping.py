@@ -33,6 +33,7 @@ __all__ = [
     "snap_marks",
     "SNAPPED_CORNER_SIGMA_PX",
     "SNAPPED_SEGMENT_SIGMA_PX",
+    "weak_snaps",
 ]
 
 # The precision of a corner snapped to the image, pixels: bench/corner_snapping.py measured a mean
@@ -42,6 +43,16 @@ SNAPPED_CORNER_SIGMA_PX = 0.15
 # 95 % of accepted snaps within 0.07 px (max 0.25 px) of the true edge on rendered frames; 0.15 px
 # leaves room for real images (compression, blur, shading at silhouettes).
 SNAPPED_SEGMENT_SIGMA_PX = 0.15
+# A snap in use is weak (Accept asks once more) when the image fits it poorly at the snapped place, however far
+# it moved (a gate on the distance moved flagged a click snapped 2.6 px onto the true silhouette). Measured by
+# bench/snap_gates.py on the workcell's rendered frames (clicks 0-3 px off every visible edge and corner, t = 5 s
+# and 16 s): 98 of the 102 edge snaps that moved more than 2 px and all 46 such corner snaps landed within 0.5 px
+# of the truth; where they landed right, a snapped edge's points' RMS about its line was at most 0.16 px, a
+# corner's lines' at most 0.28 px, cornerSubPix's fit (``app.vision.corner``) at most 3.2 px: the limits sit
+# above those. A snap onto a neighbouring straight edge fits as well as the right one (0.05-0.10 px): the
+# refined pose's residuals (3σ) are what catch it.
+WEAK_EDGE_RMS_PX = 0.3
+WEAK_CORNER_FIT_PX = {"edges": 0.5, "subpix": 3.5}
 
 
 @dataclass
@@ -53,6 +64,8 @@ class ClickSnap:
     moved_px : largest distance a clicked pixel moved. reason : why it failed ("" if it did not).
     refused : the operator refused the snap (the raw click is used).
     lines_uv : (K, 2, 2) the image edges a corner was found on (display).
+    fit_px : how well the image fits it at the snapped place (pixels; NaN: not known): a segment's edge points'
+    RMS about the snapped line, a corner's ``CornerSnap.fit_px``.
     """
 
     kind: str
@@ -63,6 +76,7 @@ class ClickSnap:
     reason: str = ""
     refused: bool = False
     lines_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    fit_px: float = float("nan")
 
     @property
     def applied(self) -> bool:
@@ -73,6 +87,17 @@ class ClickSnap:
     def used(self) -> np.ndarray:
         """The click in use: snapped, unless the snap failed or was refused."""
         return (self.snapped if self.applied else self.raw).copy()
+
+    def weak(self) -> str:
+        """ "" unless the snap in use fits the image poorly where it put the click (``WEAK_EDGE_RMS_PX``,
+        ``WEAK_CORNER_FIT_PX``): then why, as a sentence's end."""
+        if not self.applied or not np.isfinite(self.fit_px):
+            return ""
+        limit = WEAK_EDGE_RMS_PX if self.kind == "segment" else WEAK_CORNER_FIT_PX.get(self.method, np.inf)
+        if self.fit_px <= limit:
+            return ""
+        what = "edge's points scatter" if self.kind == "segment" else "corner fits the image within"
+        return f"the image's {what} {self.fit_px:.2f} px there (more than {limit:g} px)"
 
     def text(self) -> str:
         """A short label for the overlay."""
@@ -194,7 +219,7 @@ class Snapper:
             return ClickSnap(
                 "segment", seg.copy(), None, moved_px=float(res.moved_px), method="edge", reason=res.reason
             )
-        return ClickSnap("segment", seg.copy(), res.seg_uv.copy(), float(res.moved_px), "edge")
+        return ClickSnap("segment", seg.copy(), res.seg_uv.copy(), float(res.moved_px), "edge", fit_px=res.rms_px)
 
     def corner(
         self,
@@ -223,7 +248,15 @@ class Snapper:
             return ClickSnap("corner", uv.copy(), None, reason=str(exc))
         if not res.ok:
             return ClickSnap("corner", uv.copy(), None, method=res.method, reason=res.reason)
-        return ClickSnap("corner", uv.copy(), res.uv.copy(), float(res.moved_px), res.method, lines_uv=res.lines_uv)
+        return ClickSnap(
+            "corner",
+            uv.copy(),
+            res.uv.copy(),
+            float(res.moved_px),
+            res.method,
+            lines_uv=res.lines_uv,
+            fit_px=res.fit_px,
+        )
 
     def take_segment(self, seg: np.ndarray, view: str, sigma_px: float) -> tuple[np.ndarray, float, ClickSnap | None]:
         """A finished segment (2, 2) as it is used: (the pixels, their σ — a snap's measured precision,
@@ -302,6 +335,12 @@ class Snapper:
                 f"the last click is already used as clicked ({'refused' if snap.refused else snap.reason})"
             )
         return snap
+
+
+def weak_snaps(named: Any) -> list[str]:
+    """The weak snaps among ``named`` ((what, ClickSnap or None) pairs, e.g. ("point 2", snap)), each said:
+    "point 2's snap: the image's corner fits … (more than … px)"."""
+    return [f"{what}'s snap: {sn.weak()}" for what, sn in named if sn is not None and sn.weak()]
 
 
 def click_segment(wf, seg_uv) -> None:

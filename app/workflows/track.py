@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from core.pose import nearest_twin, plausibility
+from core.pose.uncertainty import Priors
 from core.transforms import pose_error
 
 from .base import CANCEL, Control, Ghost, Marks, Step, Workflow, WorkflowError, as_pixel
@@ -102,6 +103,8 @@ class TrackObject(SnapMixin, Workflow):
             self.tracker = EdgeTracker(self.camera, self.obj.model, self.obj.T_world_obj, **tracker_options)
         except (TypeError, ValueError) as exc:
             raise WorkflowError(f"Track: cannot track {object_name}: {exc}") from None
+        # each frame's σ holds the camera's calibration (or its file's prior) and the model's prior (issue 27)
+        self.tracker.priors = Priors(site.pose_camera_cov(view), self.obj.model_sigma_m)
         self.T_world_obj = self.obj.T_world_obj.copy()  # the last good pose
         self.cov: np.ndarray | None = None
         self.confidence: float | None = None

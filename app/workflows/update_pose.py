@@ -277,7 +277,7 @@ class UpdatePose(Workflow):
             starts = self.estimates.starts(self.search.start(self.chosen or 0, views))  # the found pose alone, if any
             generation = self.estimates.generation
             fit = dict(model=self.obj.model, camera=self.camera, max_rms_px=3 * self.sigma_px, loss=self.loss)
-            fit.update(camera_covs=[self.site.camera_cov(v) for v in self.clicks.fitted_views()])  # as ``clicks``
+            fit.update(self.site.pose_priors(self.clicks.fitted_views(), self.obj))  # the views as ``clicks``
         out = refine_starts(clicks, starts, **fit)
         if out.result is None:
             raise WorkflowError(show.no_plausible(starts, out.failures))
@@ -320,7 +320,7 @@ class UpdatePose(Workflow):
                 if self.estimates.generation == generation and self.clicks.drop_pending(p):
                     self._offer(state="click_edge")
             raise
-        moving = self.search.moving_at(res.candidates[0].T_world_obj, job, self.moving_share)
+        moving = self.search.moving_at(res.candidates[0].T_world_obj, job, self.frame)
         with self._commit(generation, "Find"):
             self.clicks.pending = None  # the click was the search's, not an edge's start
             self.message = self.search.adopt(res, p, moving)

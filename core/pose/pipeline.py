@@ -34,7 +34,7 @@ from ..camera import Camera
 from ..transforms import pose_error
 from .plausibility import plausibility
 from .refine import PosePrior, RefineResult, ViewClicks, refine_views
-from .uncertainty import with_views_camera_uncertainty
+from .uncertainty import MODEL_PRIOR_M, with_views_camera_uncertainty
 
 __all__ = ["Refused", "Start", "Refined", "Estimates", "rank", "within", "refine_starts", "operator_starts"]
 
@@ -111,15 +111,17 @@ def refine_starts(
     loss: str = "l2",
     huber_px: float = 3.0,
     camera_covs: Sequence[np.ndarray | None] | None = None,
+    model_sigma_m: float = MODEL_PRIOR_M,
 ) -> Refined:
     """Refine the clicks of every view (``refine_views``) from each start in turn (with its prior, if
     it has one) and return the first result that can be the answer: finite, its RMS at most
     ``max_rms_px`` (e.g. 3 σ), ``model`` in front of ``camera`` and in its image (``plausibility``).
     The starts it could not use say why (a refinement refused, diverged, or not plausible).
 
-    camera_covs : optional, per view of ``views``, the covariance (12, 12) of its camera's C (or None): when
-    the start is no prior, every calibration's share joins the result's σ
-    (``uncertainty.with_views_camera_uncertainty``; a prior measured through C holds it already)."""
+    camera_covs : optional, per view of ``views``, the covariance (12, 12) of its camera's C (or None; a camera
+    file's prior: ``uncertainty.intrinsics_prior_cov``); model_sigma_m : σ of each model edge's position
+    (metres, ``uncertainty.Priors``). When the start is no prior, every camera's and the model's share join the
+    result's σ (``uncertainty.with_views_camera_uncertainty``; a prior measured through C holds them already)."""
     failures: list[tuple[str, str]] = []
     for i, start in enumerate(starts):
         try:
@@ -134,8 +136,9 @@ def refine_starts(
         if why:
             failures.append((start.label, why))
             continue
-        if camera_covs is not None and start.prior is None:
-            res = with_views_camera_uncertainty(res, views, camera_covs, huber_px=huber_px)
+        if start.prior is None:
+            covs = [None] * len(views) if camera_covs is None else camera_covs
+            res = with_views_camera_uncertainty(res, views, covs, huber_px=huber_px, model_sigma_m=model_sigma_m)
         return Refined(res, i, tuple(failures))
     return Refined(None, None, tuple(failures))
 

@@ -268,13 +268,15 @@ class PosePrior:
     height and tilt) are held at ``fixed_std`` (metres, radians). shared_cov : (6, 6), optional, the share
     of ``cov`` the clicks have too (the camera calibration's, both being measured through one C): the two
     are combined without it, and it is added to the result. name : what the result's ``cov_parts`` calls
-    the prior ("found pose": "found pose and clicks")."""
+    the prior ("found pose": "found pose and clicks"); shared_name what it calls ``shared_cov`` ("camera
+    calibration", or "model" for a found pose's σ that holds the model's prior alone)."""
 
     T_world_obj: np.ndarray
     cov: np.ndarray
     fixed_std: tuple[float, float] = (1e-4, 1e-4)
     shared_cov: np.ndarray | None = None
     name: str = "prior"
+    shared_name: str = "camera calibration"
 
     def information(self) -> np.ndarray:
         """Λ (6, 6): pinv of (cov − shared_cov) on its range, 1/fixed_std² along the directions it
@@ -464,7 +466,7 @@ def refine_many(
 def _with_shared(res: RefineResult, prior: PosePrior) -> RefineResult:
     """``res`` with the prior's shared covariance added back (``PosePrior.shared_cov``)."""
     shared = np.asarray(prior.shared_cov, dtype=float)
-    parts = {f"{prior.name} and clicks": res.cov, "camera calibration": shared}
+    parts = {f"{prior.name} and clicks": res.cov, prior.shared_name: shared}
     return replace(res, cov=res.cov + shared, cov_parts=parts)
 
 

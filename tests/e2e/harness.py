@@ -142,6 +142,21 @@ def close_webgl_notice(page) -> None:
         pass
 
 
+# viser tells a user on software WebGL that their GPU is not used (a notice over the video's top-left corner). On
+# swiftshader it came 3.5-7 s after the page had connected, at no moment a test can wait for: closing it cost up to
+# 5 s per page and sometimes missed it, and it then covered clicks. The tests' pages report a renderer name without
+# "software" in it, so that viser does not show it; nothing of mcit reads the name.
+NO_SOFTWARE_WEBGL_NOTICE = """
+for (const C of [self.WebGLRenderingContext, self.WebGL2RenderingContext]) {
+  if (!C) continue;
+  const get = C.prototype.getParameter;
+  C.prototype.getParameter = function (p) {
+    return p === 0x9246 ? "ANGLE (mcit browser tests)" : get.call(this, p);  // UNMASKED_RENDERER_WEBGL
+  };
+}
+"""
+
+
 def select_by_click(page, name: str, click) -> int:
     """Select object ``name`` by ``click()`` (a canvas click on its wireframe) and wait for the
     selection. On a loaded machine a page's first canvas click can arrive before the page listens
@@ -299,7 +314,7 @@ class Interface:
     ):
         from app.db import Database, seed_from_scene
         from app.ui.server import InterfaceServer
-        from app.video import FrameGrabber, StillSource
+        from app.video import FrameGrabber, StillSource, VideoSource
         from app.workflows import Site
 
         self.db = (
@@ -312,9 +327,13 @@ class Interface:
             devices = self._own_devices = open_fast_devices(scene, frame_t_s)
         self.scene = scene
         self.site = Site(scene, self.db, devices=devices, clock=lambda: frame_t_s)
-        # one still per camera ({camera name: image}), or the first camera's alone
+        # one still per camera ({camera name: image}), or the first camera's alone; a video source instead of an
+        # image is played as it is
         frames = frame if isinstance(frame, dict) else {scene.views[0].name: frame}
-        grabbers = {name: FrameGrabber(StillSource(image, fps=20)) for name, image in frames.items()}
+        grabbers = {
+            name: FrameGrabber(image if isinstance(image, VideoSource) else StillSource(image, fps=20))
+            for name, image in frames.items()
+        }
         self.server = InterfaceServer(self.site, grabbers, port=free_port()).start()
         self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
         self.frame_t_s = frame_t_s
@@ -326,6 +345,7 @@ class Interface:
         software-WebGL notice closed."""
         before = set(self.server.clients)
         page = browser.new_page(viewport=viewport or VIEWPORT)
+        page.add_init_script(NO_SOFTWARE_WEBGL_NOTICE)
         page.on(
             "console", lambda m: self.csp_refusals.append(m.text[:300]) if "Content Security Policy" in m.text else None
         )
@@ -338,7 +358,6 @@ class Interface:
         # the database drawn as it is now (its own thread; slow on a loaded machine): clicks that
         # select an object pick what is drawn
         wait_until(lambda: self.server.database_drawn, 20.0, "the database overlay to be drawn")
-        close_webgl_notice(page)
         wait_for_steady_camera(panel)  # clicks are placed through the camera the page reports: let the fit land
         page.panel = panel
         return page
@@ -357,24 +376,25 @@ class Interface:
             x, y = self.screen_of(page, uv)
         return x, y
 
-    def click_pixel(self, page, uv):
+    def canvas_point(self, page, uv) -> tuple[float, float]:
+        """Page position (x, y) of video pixel uv: the canvas's own position plus the pixel's on the canvas
+        (the canvas does not move in a page of fixed size: its box is read once per page)."""
         x, y = self.on_canvas(page, uv)
-        from playwright.sync_api import TimeoutError as PlaywrightTimeout
+        box = getattr(page, "canvas_box", None)
+        if box is None:
+            box = page.canvas_box = page.locator("canvas").nth(1).bounding_box()
+        return box["x"] + x, box["y"] + y
 
-        canvas = page.locator("canvas").nth(1)
-        try:
-            canvas.click(position={"x": x, "y": y}, timeout=60_000)
-        except PlaywrightTimeout:  # playwright's hit test kept finding the page, not the canvas, there
-            # (seen on loaded fresh clones only): the mouse clicks the point as an operator's would; a click
-            # that reaches nothing is made again by the callers that wait for its effect (select_by_click)
-            box = canvas.bounding_box()
-            page.mouse.click(box["x"] + x, box["y"] + y)
+    def click_pixel(self, page, uv):
+        """A click on video pixel uv, by the mouse at that point of the page, as an operator's (what is over
+        the canvas there takes it, as it would theirs). Not playwright's element click: it waits for two steady
+        animation frames and checks the hit first, 0.3-1.1 s per click on software WebGL."""
+        page.mouse.click(*self.canvas_point(page, uv))
         time.sleep(0.05)
 
     def double_click_pixel(self, page, uv):
         """A double click on video pixel uv (one gesture)."""
-        x, y = self.on_canvas(page, uv)
-        page.locator("canvas").nth(1).dblclick(position={"x": x, "y": y})
+        page.mouse.dblclick(*self.canvas_point(page, uv))
 
     def screenshot(self, page, path=None) -> np.ndarray:
         import cv2

@@ -21,30 +21,20 @@ pytestmark = pytest.mark.e2e
 
 
 def _shaded_frames(folder) -> None:
-    """The frames as a camera sees the box: its faces filled, lit by their normal, on a darker table (the
-    fixture's drawn edges alone are a line drawing, which no camera makes)."""
+    """The frames as a camera sees the box: rendered by the project's renderer (``app.render``: exact area coverage,
+    Lambert shading, blur σ = 0.8 px, noise σ = 2 grey levels). Issue 27: these frames were once OpenCV's filled
+    polygons, which cover every pixel their outline touches: a box drawn ~1 px larger than its pose projects, whose
+    one-click pose came out 5.4 mm nearer the camera (0.9°) while fitting the image within 0.3 px; the renderer's
+    box gives 0.03° / 0.04 mm (headless, ``app.vision.search.search_pose`` on the same click)."""
     import cv2
 
+    from app.vision.synthetic import render_poses
     from core.camera import Camera
 
     cam = Camera.from_intrinsics(K, np.eye(4), 640, 480)
-    rng = np.random.default_rng(0)
-    image = np.full((480, 640), 70.0)
-    R, t = T_CAM_OBJ[:3, :3], T_CAM_OBJ[:3, 3]
-    faces = [np.asarray(f) for f in BOX.faces]
-    centres = BOX.face_centroids() @ R.T + t
-    normals = BOX.face_normals() @ R.T
-    for k in np.argsort(-centres[:, 2]):  # far faces first
-        if normals[k] @ centres[k] >= 0:  # facing away
-            continue
-        uv = cam.project_obj(T_CAM_OBJ, BOX.vertices[faces[k]])
-        light = np.array([0.45, -0.5, -0.74]) / np.linalg.norm([0.45, -0.5, -0.74])  # camera frame: upper left
-        grey = 110.0 + 140.0 * abs(float(normals[k] @ light))
-        # sub-pixel corners (16ths), anti-aliased: a polygon rounded to whole pixels is a box 1 px off its pose
-        cv2.fillConvexPoly(image, np.round(16 * uv).astype(np.int32), grey, lineType=cv2.LINE_AA, shift=4)
-    image = cv2.GaussianBlur(image, (0, 0), 0.8) + rng.normal(0.0, 2.0, image.shape)
+    image = render_poses(cam, BOX, [T_CAM_OBJ], noise_sigma=2.0, blur_sigma_px=0.8)[0]
     for path in folder.iterdir():
-        cv2.imwrite(str(path), np.clip(image, 0, 255).astype(np.uint8))
+        cv2.imwrite(str(path), image)
 
 
 def test_an_own_camera_only_site_is_served_and_its_object_updated_by_a_double_click(browser, files):  # noqa: F811
@@ -73,9 +63,11 @@ def test_an_own_camera_only_site_is_served_and_its_object_updated_by_a_double_cl
         print(
             f"written {deg:.3f}° / {1000 * m:.2f} mm from the frames' truth; σ {1000 * sd[:3]} mm {np.degrees(sd[3:])}°"
         )
-        # closer than the import (1 cm off). Measured 0.9° / 5.4 mm against a stated σ of 0.19° / 0.59 mm on this
-        # rendered box: a σ that does not cover the error (issue 27, item 1), kept in the closing note
-        assert m < 0.007 and deg < 1.5
+        # far closer than the import (1 cm off), and within the stated σ (issue 27: the camera file's and the
+        # model's priors included); see _shaded_frames for the 0.9° / 5.4 mm once measured here
+        e = np.r_[ui.db.get("box").T_world_obj[:3, 3] - T_CAM_OBJ[:3, 3]]
+        assert m < 0.002 and deg < 0.3
+        assert np.all(np.abs(e) <= 3 * sd[:3])
         page.close()
     finally:
         ui.close()

@@ -126,17 +126,16 @@ def test_double_and_rapid_clicks_are_taken_in_order_or_refused_with_the_state_in
         ui.click_pixel(page, p)
         time.sleep(0.8)  # not a double click
     wait_until(lambda: len(wf.segs) == 1, what="the first edge")
-    x, y = ui.screen_of(page, [200.0, 120.0])
-    page.locator("canvas").nth(1).dblclick(position={"x": x, "y": y})
+    ui.double_click_pixel(page, [200.0, 120.0])
     page.get_by_text("px apart", exact=False).first.wait_for(timeout=60_000)
     assert wf.pending is not None and len(wf.segs) == 1  # the first click waits; the second was refused
     press(page, "Remove last")
     wait_until(lambda: wf.pending is None, what="the pending click removed")
     pts = [[100.0 + 20 * i, 60.0 + 7 * i] for i in range(8)]
-    for p in pts:  # a burst, no waiting in between
-        sx, sy = ui.screen_of(page, p)
-        page.locator("canvas").nth(1).click(position={"x": sx, "y": sy})
-    wait_until(lambda: len(wf.segs) == 5, what="four segments from eight quick clicks")
+    for p in pts:  # a burst: as fast as a hand clicks (8 a second), each click waiting on nothing
+        page.mouse.click(*ui.canvas_point(page, p))
+        time.sleep(0.12)
+    wait_until(lambda: len(wf.segs) == 5, what="four segments from eight quick clicks", panel=panel)
     # in the order clicked: each segment's raw clicks (before any snap) are the burst's pairs
     raw = [sn.raw if sn is not None else seg for sn, seg in zip(wf.seg_snaps[1:], wf.segs[1:])]
     assert np.allclose(np.array(raw), np.array(pts).reshape(4, 2, 2), atol=0.6)

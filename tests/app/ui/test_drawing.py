@@ -135,3 +135,27 @@ def test_an_object_no_camera_can_project_is_left_out_and_said_once(site, caplog)
     assert {name for name, *_ in labels} == {o.name for o in objs} - {bad.name}
     said = [r for r in caplog.records if bad.name in r.getMessage()]
     assert len(said) == 1 and "is not drawn" in said[0].getMessage()
+
+
+def test_the_result_headline_says_sigma_and_residuals_on_one_line():
+    """Under the buttons, a result's σ and residuals (the Result section below was under the fold at
+    1280×720): its top-level rms/std/sd/sigma numbers and lists, nothing else; none: empty."""
+    from app.ui.controls import result_headline
+
+    line = str(
+        result_headline(
+            {
+                "object": "box",
+                "rms_px": 0.4123,
+                "std_t_mm": [0.51, 0.8, 1.2],
+                "std_r_deg": [0.051, 0.02, 0.03],
+                "clicks": [{"click": "edge 1", "residual_px": 0.3}],
+                "change": {"deg": 1.0, "mm": 20.0},
+            }
+        )
+    )
+    assert line.startswith("**Result**: RMS (px): 0.41 · σ translation (mm): 0.5, 0.8, 1.2")
+    assert (
+        "σ rotation (°): 0.05, 0.02, 0.03" in line and "box" not in line and "edge 1" not in line and "20" not in line
+    )
+    assert str(result_headline({"object": "box", "edges clicked": 3})) == ""

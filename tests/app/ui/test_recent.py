@@ -58,3 +58,22 @@ def test_the_frame_shown_before_a_frozen_one():
     assert got is not None and 1 <= frames[-1].index - got.index <= 7  # about 0.3 s: 5 frames at one per 0.06 s
     assert r.before(frames[0], 0.3) is None  # nothing older
     assert r.before(Frame(img, 99, 9.9), 0.3) is None  # not kept
+
+
+def test_seconds_back_from_a_frame_on_screen_and_how_far_it_reached():
+    """``back_from``: counted from when the frame on screen arrived, not from the newest; beyond the kept
+    frames the oldest, with how far back it really is (less than asked: the panel says it was clamped)."""
+    g = _Grabber()
+    r = RecentFrames(g, seconds=5.0, max_frames=100)
+    img = np.zeros((2, 2, 3), np.uint8)
+    for i in range(16):
+        g.push(Frame(img, i, i * 0.05))
+        time.sleep(0.06)
+    kept = r.frames()
+    on_screen = kept[10]
+    at = r.arrival(on_screen)
+    frame, back_s = r.back_from(at, 0.3)
+    assert 0.2 <= back_s <= 0.4 and 3 <= on_screen.index - frame.index <= 7
+    assert frame.index < r.seconds_back(0.3).index  # the newest's 0.3 s back is a later frame
+    oldest, reached = r.back_from(at, 30.0)
+    assert oldest.index == kept[0].index and reached < 1.0  # clamped: far less than asked

@@ -85,3 +85,19 @@ def test_bad_input_raises():
         snap_corner_edges(img, [20.0, 20.0], [[0.0, 0.0], [1.0, 0.0]])
     with pytest.raises(ValueError, match="lengths_px"):
         snap_corner_edges(img, [20.0, 20.0], [[0.0, 1.0], [1.0, 0.0]], [10.0])
+
+
+def test_the_fit_at_the_snapped_corner_is_small_on_a_true_corner_and_large_off_one(rendered):
+    """``fit_px``: how well the image fits a corner where it was snapped (the snap gates judge it, not how far
+    the click moved): the edges' RMS about their lines on a true corner well under 0.5 px; cornerSubPix's
+    gradient-line distance smaller at the corner than at a point on an edge beside it."""
+    frame, corners = rendered
+    rng = np.random.default_rng(1)
+    for truth, D in corners:
+        res = snap_corner_edges(frame, truth + rng.normal(0, 1.5, 2), D, np.linalg.norm(D, axis=1))
+        assert res.ok and 0.0 < res.fit_px < 0.5, res.fit_px
+    truth, D = corners[0]
+    sub = snap_corner_subpix(frame, truth + [0.8, -0.6])
+    assert sub.ok and np.isfinite(sub.fit_px)
+    refused = snap_corner_subpix(frame, np.array([5.0, 5.0]))  # the background: no corner, no fit
+    assert not refused.ok and np.isnan(refused.fit_px)

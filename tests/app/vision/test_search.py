@@ -180,6 +180,7 @@ def test_the_camera_calibration_share_of_a_found_pose_matches_a_perturbed_camera
     from app.vision import search as S
     from app.vision.profiles import smooth, to_gray_f32
     from core.camera import Camera
+    from core.pose.uncertainty import Priors
 
     box = scene.body("parallelepiped")
     image, t = frame(scene, 16.5)
@@ -200,7 +201,7 @@ def test_the_camera_calibration_share_of_a_found_pose_matches_a_perturbed_camera
     space = S._OnTable(sp, z0, centre, 3)
     img_s = smooth(to_gray_f32(image), 1.0)
     T0, _ = S._refine(scene.camera, box.model, plain.T_world_obj, img_s, space, False)
-    share = S._camera_share(scene.camera, box.model, T0, img_s, space, False, np.outer(d, d))
+    share = S._prior_share(scene.camera, box.model, T0, img_s, space, False, Priors(np.outer(d, d), 0.0))
     moved = Camera(C + d.reshape(3, 4), scene.camera.width, scene.camera.height)
     T1, _ = S._refine(moved, box.model, T0, img_s, space, False)
     dt = T1[:3, 3] - T0[:3, 3]
@@ -216,7 +217,7 @@ def test_a_camera_share_that_cannot_be_computed_leaves_the_sigma_unknown(scene, 
 
     box = scene.body("parallelepiped")
     image, t = frame(scene, 16.5)
-    monkeypatch.setattr(S, "_camera_share", lambda *a, **k: None)
+    monkeypatch.setattr(S, "_prior_share", lambda *a, **k: None)
     c = search_pose(
         scene.camera,
         box.model,

@@ -45,6 +45,7 @@ def test_a_click_picks_only_a_visible_corner(site):
     assert gap < 40
     click = uv[h] + 0.4 * (uv[near] - uv[h])  # nearer the hidden corner than the visible one
     wf = CalibrateCamera(site, client="alice")
+    wf.click_px_per_screen_px = gap / 10.0  # zoomed out: both corners within the pick's 12 screen pixels
     wf.click(click)
     assert wf.pending_vertex == ("parallelepiped", near)
     assert "circled" in wf.next_step
@@ -129,3 +130,26 @@ def test_remove_last_redo_and_marks(site):
     wf.cancel()
     with pytest.raises(WorkflowError, match="cancelled"):
         wf.click([1.0, 1.0])
+
+
+def test_a_corner_is_picked_within_a_screen_pixel_radius(site):
+    """A click 20 video px from the nearest visible corner picks no corner at the fitted view (1 video px per
+    screen px here) or zoomed in, and picks it zoomed out (2.5 video px per screen px: 8 screen px away)."""
+    from app.workflows import WorkflowError
+
+    k = _visible_vertices(site, "parallelepiped")[0]
+    uv = site.camera.project(site.object("parallelepiped").vertices_world()[k : k + 1])[0]
+    for scale, picked in ((1.0, False), (0.5, False), (2.5, True)):
+        wf = CalibrateCamera(site, client="alice")
+        wf.click_px_per_screen_px = scale
+        others = site.camera.project(np.vstack([o.vertices_world() for o in site.objects()]))
+        for ang in np.linspace(0, 2 * np.pi, 36, endpoint=False):  # 20 px off, farther from every other corner
+            p = uv + 20.0 * np.array([np.cos(ang), np.sin(ang)])
+            if np.sort(np.linalg.norm(others - p, axis=1))[0] > 19.5:
+                break
+        if picked:
+            wf.click(p)
+            assert wf.pending_vertex == ("parallelepiped", k)
+        else:
+            with pytest.raises(WorkflowError, match="No visible model corner within"):
+                wf.click(p)

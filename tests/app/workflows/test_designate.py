@@ -255,3 +255,42 @@ def test_a_disagreement_found_from_an_old_frozen_frame_says_when_the_frame_was(d
             "t = -2.5 s)" in t.warning
         ) == said
         assert ("measures the site as it is now" in wf.message) == said
+
+
+class _LiveVideo:
+    """A site's live video of one image whose newest frame was taken at ``stamp`` (unix seconds)."""
+
+    def __init__(self, image, stamp: float):
+        self.image, self.stamp = image, stamp
+
+    def __call__(self, _t_s):
+        return self.image
+
+    def latest(self):
+        from app.video import Frame
+
+        return Frame(self.image, 100, 0.0, self.stamp)
+
+
+@pytest.mark.parametrize("age_s", [30.0, 3.0])
+def test_a_target_on_an_old_frozen_frame_says_its_age_and_claims_no_agreement_with_it(device_site, age_s):
+    """On a frame frozen 30 s before the newest, the database and the range finder agree on the site as it is
+    now, but not with what the frame shows: the target says the frame's age (a new operator was told "on
+    table, range finder agrees" for a point drawn on a box); 3 s old (under STALE_FRAME_S): nothing added."""
+    from app.workflows.base import STALE_FRAME_S, FrameRef
+
+    site = device_site
+    image = np.full((site.camera.height, site.camera.width, 3), 90, np.uint8)
+    site.set_frames(_LiveVideo(image, stamp=1000.0 + age_s))
+    table = site.object("table")
+    T = table.T_world_obj
+    X = T[:3, :3] @ np.array([0.25, -0.3, float(table.model.vertices[:, 2].max())]) + T[:3, 3]
+    wf = DesignateTarget(site)
+    wf.use_frame(FrameRef(image, 0.0, stamp=1000.0))
+    t = wf.click(site.camera.project(X))
+    assert t.object == "table" and "agrees" in t.check
+    stale = age_s > STALE_FRAME_S
+    assert (f"this frame is {age_s:.0f} s old; the scene may have changed since" in t.warning) == stale
+    assert ("this frame is" in wf.message) == stale and ("range finder agrees" in wf.message) != stale
+    assert (wf.summary()["targets"][0]["check"] == "frame 30 s old: the site now") == stale
+    assert np.isfinite(t.frame_age_s) == stale

@@ -141,3 +141,36 @@ def test_an_object_that_stands_still_is_not_changed_by_the_box_moving_beside_it(
         for t in np.arange(0.0, 28.5, 0.5):
             site.t["t"] = t
             wf._refuse_if_changed(outline, "the box", inside=True)  # WorkflowError if it saw a change
+
+
+def _box_outline(scene, camera, name, t):
+    """A body's bounding box's corners at scene time t, projected (what the search's "was moving" looks at)."""
+    body = scene.body(name)
+    lo, hi = body.model.bounds()
+    B = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    T = body.pose_at(t)
+    return camera.project(B @ T[:3, :3].T + T[:3, 3])
+
+
+def test_an_object_moves_only_where_it_moves_against_the_view(video_site, scene):
+    """``object_motion_px``: the box in transit moves well beyond MOVING_PX; standing still, or with the whole view
+    turning and zooming about the image's centre (a continuously moving sequence: every frame was "moving"), or
+    with another object moving beside it, it does not."""
+    import cv2
+
+    from app.vision.change import MOVING_PX, object_motion_px
+
+    site, cam = video_site, video_site.camera
+    box = _box_outline(scene, cam, "parallelepiped", 13.4)
+    assert object_motion_px(site.frame_at(13.1), site.frame_at(13.4), box) > 2 * MOVING_PX  # in transit
+    still = site.frame_at(16.0)
+    box = _box_outline(scene, cam, "parallelepiped", 16.0)
+    assert object_motion_px(site.frame_at(15.7), still, box) < MOVING_PX / 5
+    h, w = still.shape[:2]
+    for angle_deg, scale in ((1.5, 1.0), (3.0, 1.0), (0.0, 1.02), (1.5, 1.02)):
+        turned = cv2.warpAffine(still, cv2.getRotationMatrix2D((w / 2, h / 2), angle_deg, scale), (w, h))
+        assert changed_share(turned, still, box, follow_camera=True) > CHANGED_SHARE  # what said "moving" before
+        assert object_motion_px(turned, still, box) < MOVING_PX / 3, (angle_deg, scale)
+    other = _box_outline(scene, cam, "unknown_box", 13.4)  # stands still while the box passes
+    assert object_motion_px(site.frame_at(13.1), site.frame_at(13.4), other) < MOVING_PX / 3
+    assert object_motion_px(still, still, other[:2]) is None  # no outline: nothing said

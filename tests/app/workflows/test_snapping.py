@@ -245,3 +245,21 @@ def test_update_pose_point_clicks_snap_to_the_vertex_corner(video_site, scene):
     assert len(wf.marks().raw_points) == 1 and "Point v" in wf.message
     wf.refuse_snap()
     assert np.array_equal(wf.points_uv[-1], raw) and len(wf.marks().raw_points) == 0
+
+
+def test_a_snap_is_weak_for_a_poor_fit_where_it_landed_not_for_the_distance_it_moved():
+    """A click snapped 2.6 px onto an edge its points fit within 0.05 px is not weak (a new operator's was
+    flagged for the distance); one whose edge points scatter 0.6 px is, however little it moved."""
+    from app.workflows.snapping import WEAK_EDGE_RMS_PX, ClickSnap, weak_snaps
+
+    seg = np.array([[10.0, 10.0], [60.0, 10.0]])
+    far_good = ClickSnap("segment", seg, seg + [0.0, 2.6], 2.6, "edge", fit_px=0.05)
+    near_poor = ClickSnap("segment", seg, seg + [0.0, 0.4], 0.4, "edge", fit_px=2 * WEAK_EDGE_RMS_PX)
+    corner = ClickSnap("corner", seg[0], seg[0] + 3.0, 4.2, "edges", fit_px=0.1)
+    assert far_good.weak() == "" and corner.weak() == ""
+    assert "scatter 0.60 px there (more than 0.3 px)" in near_poor.weak()
+    assert weak_snaps([("edge 1", far_good), ("edge 2", near_poor), ("edge 3", None)]) == [
+        f"edge 2's snap: {near_poor.weak()}"
+    ]
+    near_poor.refused = True  # the raw click in use: nothing to judge
+    assert near_poor.weak() == ""

@@ -368,3 +368,26 @@ def test_a_double_click_after_the_found_poses_searches_again_from_it(video_site,
     with pytest.raises(WorkflowError, match="only while no edge has been clicked since the search"):
         wf.search_again(again)
     assert len(wf.segs) == 1 and wf.found is not None
+
+
+def test_a_pose_found_while_the_whole_view_turns_is_not_said_to_be_moving(video_site, scene, db):
+    """A continuously moving sequence (the view turning 2° and zooming 2 % about the image's centre between the
+    frame 0.3 s before and the frozen one), the box still in the scene: the pose found is not "moving" (every
+    frame of such a sequence was, and every Accept asked twice)."""
+    import cv2
+
+    from app.workflows.base import FrameRef
+
+    site = video_site
+    site.t["t"] = T_MOVED
+    image = site.frame_at(T_MOVED)
+    h, w = image.shape[:2]
+    before = cv2.warpAffine(image, cv2.getRotationMatrix2D((w / 2, h / 2), 2.0, 1.02), (w, h))
+    box = scene.body(BOX)
+    wf = _start(site)
+    wf.use_frame(FrameRef(image, T_MOVED, previous=before))
+    assert wf.moving_share(site.camera.project_obj(box.pose_at(T_MOVED), box.model.vertices)) > 0.08
+    wf.click(site.camera.project_obj(box.pose_at(T_MOVED), box.model.vertices).mean(axis=0) + [4.0, 2.0])
+    wf.find()
+    assert "was moving" not in wf.message and not any("was moving" in w for w in wf.weaknesses()), wf.message
+    wf.cancel()

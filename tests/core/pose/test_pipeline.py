@@ -38,7 +38,10 @@ def test_refine_starts_offers_the_first_plausible_start_and_says_why_not_the_oth
     out = refine_starts(views, starts, model=model, camera=pb.camera, max_rms_px=1.5)
     assert out.start == 1 and out.failures[0][0] == "candidate 1" and "behind the camera" in out.failures[0][1]
     direct = refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_uv, edges_obj=pb.edges_obj, sigma_px=0.5)
-    assert np.allclose(out.result.T_world_obj, direct.T_world_obj) and np.allclose(out.result.cov, direct.cov)
+    assert np.allclose(out.result.T_world_obj, direct.T_world_obj)
+    parts = out.result.cov_parts  # the clicks' share, and the model's stated prior (issue 27)
+    assert np.allclose(parts["clicks"], direct.cov) and np.allclose(out.result.cov, direct.cov + parts["model"])
+    assert np.trace(parts["model"]) > 0
     none = refine_starts(views, starts, model=model, camera=pb.camera, max_rms_px=1e-6)  # nothing fits that well
     assert none.result is None and none.start is None and len(none.failures) == 2
     assert "more than the 0.0 px allowed" in none.failures[1][1]
@@ -53,7 +56,9 @@ def test_refine_starts_adds_the_camera_calibrations_share_unless_the_start_is_a_
     out = refine_starts(views, [plain], model=model, camera=pb.camera, max_rms_px=2.0, camera_covs=[cam_cov])
     bare = refine(pb.camera, pb.T_world_obj, segs_uv=pb.segs_uv, edges_obj=pb.edges_obj, sigma_px=0.5)
     want = with_camera_uncertainty(bare, pb.camera, cam_cov, segs_uv=pb.segs_uv, edges_obj=pb.edges_obj)
-    assert set(out.result.cov_parts) == {"clicks", "camera calibration"} and np.allclose(out.result.cov, want.cov)
+    parts = out.result.cov_parts  # and the model's stated prior (issue 27)
+    assert set(parts) == {"clicks", "camera calibration", "model"}
+    assert np.allclose(out.result.cov, want.cov + parts["model"])
     prior = Start(pb.T_world_obj, "found pose 1", 0, PosePrior(pb.T_world_obj, np.eye(6) * 1e-4))
     out = refine_starts(views, [prior], model=model, camera=pb.camera, max_rms_px=2.0, camera_covs=[cam_cov])
     assert out.result.cov_parts == {}  # a prior measured through C holds the calibration's share already

@@ -1,0 +1,102 @@
+"""The camera's and the model's stated priors in a pose's σ (core.pose.uncertainty, issue 27): the first-order
+shares against the scatter of poses refined when the truth is drawn from those priors (seeded Monte Carlo),
+and how they grow with the priors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from core.camera import Camera
+from core.pose import refine
+from core.pose.refine import ViewClicks
+from core.pose.synthetic import paper_problems
+from core.pose.uncertainty import (
+    intrinsics_prior_cov,
+    pose_delta,
+    with_camera_uncertainty,
+    with_views_camera_uncertainty,
+)
+
+
+def _problem():
+    """The paper's box and camera, its edges clicked at their projected ends (so that a moved edge's clicks are
+    where the Monte Carlo projects them)."""
+    pb = paper_problems(np.random.default_rng(5), 1, sigma_px=0.0)[0]
+    segs = np.stack([pb.camera.project_obj(pb.T_world_obj, e) for e in pb.edges_obj])
+    return pb, dict(segs_uv=segs, edges_obj=pb.edges_obj)
+
+
+def _spread(d: np.ndarray) -> np.ndarray:
+    """RMS of the translation (m) and of the rotation (rad) of pose deltas (K, 6)."""
+    return np.array([np.sqrt(d[:, :3].var(axis=0).sum()), np.sqrt(d[:, 3:].var(axis=0).sum())])
+
+
+def _predicted(share: np.ndarray) -> np.ndarray:
+    return np.sqrt([np.trace(share[:3, :3]), np.trace(share[3:, 3:])])
+
+
+def test_the_camera_prior_of_a_file_matches_the_scatter_of_poses_through_cameras_drawn_from_it():
+    pb, kw = _problem()
+    cam = pb.camera
+    K, T_cam_world = cam.decompose()
+    r = refine(cam, pb.T_world_obj, **kw, sigma_px=0.2)
+    f_rel, c_px = 0.003, 1.0
+    share = with_camera_uncertainty(r, cam, intrinsics_prior_cov(cam, f_rel, c_px), **kw).cov_parts[
+        "camera calibration"
+    ]
+    rng = np.random.default_rng(1)
+    d = []
+    for _ in range(200):  # the true camera drawn from the prior; mcit believes the file's
+        Kt = K.copy()
+        Kt[0, 0] *= 1 + f_rel * rng.standard_normal()
+        Kt[1, 1] *= 1 + f_rel * rng.standard_normal()
+        Kt[:2, 2] += c_px * rng.standard_normal(2)
+        true_cam = Camera.from_intrinsics(Kt, T_cam_world, cam.width, cam.height)
+        segs = np.stack([true_cam.project_obj(pb.T_world_obj, e) for e in pb.edges_obj])
+        d.append(
+            pose_delta(refine(cam, r.T_world_obj, segs_uv=segs, edges_obj=pb.edges_obj).T_world_obj, r.T_world_obj)
+        )
+    assert _spread(np.array(d)) == pytest.approx(_predicted(share), rel=0.2)
+    # first order: the share grows as the prior's square
+    twice = with_camera_uncertainty(r, cam, intrinsics_prior_cov(cam, 2 * f_rel, 2 * c_px), **kw)
+    assert np.allclose(twice.cov_parts["camera calibration"], 4 * share, rtol=0.02, atol=1e-14)
+
+
+def test_the_model_prior_matches_the_scatter_of_poses_of_models_drawn_from_it():
+    pb, kw = _problem()
+    cam = pb.camera
+    r = refine(cam, pb.T_world_obj, **kw, sigma_px=0.2)
+    sigma_m = 0.002
+    view = ViewClicks(cam, sigma_px=0.2, **kw)
+    out = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m)
+    share = out.cov_parts["model"]
+    assert np.allclose(out.cov, r.cov + share)
+    rng = np.random.default_rng(2)
+    d = []
+    _, edge = np.unique(pb.edges_obj.reshape(len(pb.edges_obj), -1), axis=0, return_inverse=True)
+    for _ in range(
+        200
+    ):  # each true model edge off by its own offset (an edge clicked twice, once); mcit believes the model
+        true_edges = pb.edges_obj + rng.normal(0, sigma_m, (edge.max() + 1, 1, 3))[edge.ravel()]
+        segs = np.stack([cam.project_obj(pb.T_world_obj, e) for e in true_edges])
+        d.append(
+            pose_delta(refine(cam, r.T_world_obj, segs_uv=segs, edges_obj=pb.edges_obj).T_world_obj, r.T_world_obj)
+        )
+    assert _spread(np.array(d)) == pytest.approx(_predicted(share), rel=0.2)
+    half = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m / 2).cov_parts["model"]
+    assert np.allclose(half, share / 4, rtol=0.02, atol=1e-12)
+    assert with_views_camera_uncertainty(r, [view], [None], model_sigma_m=0.0) is r
+
+
+def test_the_intrinsics_prior_moves_only_what_a_lens_has():
+    """C = K [R | t] with R, t exact: the prior's covariance has rank 4 (fx, fy, u0, v0), and moving C by one of
+    its principal steps keeps the camera's centre."""
+    pb, _ = _problem()
+    cov = intrinsics_prior_cov(pb.camera, 0.01, 2.0)
+    w = np.linalg.eigvalsh(cov)
+    assert int(np.sum(w > 1e-9 * w.max())) == 4
+    from core.calibration import perturbed_camera, principal_steps
+
+    for step in principal_steps(cov):
+        assert np.allclose(perturbed_camera(pb.camera, step).center, pb.camera.center, atol=1e-9)
