@@ -324,6 +324,15 @@ RULES = (
 )
 
 
+def ref_error(T: np.ndarray, Tr: np.ndarray) -> tuple[float, float]:
+    """(degrees, metres) from T to the reference Tr (4, 4), or to the nearest of several (R, 4, 4): on
+    visp-cube the runs of both trackers from ViSP's pose part 3.8° / 17 mm in frames 130–160, where the
+    image fits both within 0.6 px, and a pose on either is not wrong."""
+    if np.ndim(Tr) == 3:
+        return min((pose_error(T, r) for r in Tr), key=lambda e: (e[0] > WRONG_DEG or e[1] > WRONG_M, e[0]))
+    return pose_error(T, Tr)
+
+
 def perturbed(T: np.ndarray, deg: float, m: float, rng: np.random.Generator) -> np.ndarray:
     """T turned by deg about a random axis (object frame) and moved m along a random direction."""
     a, d = rng.normal(size=3), rng.normal(size=3)
@@ -350,7 +359,7 @@ def open_runs(frames, camera, model, truth, starts):
             if lost:
                 stopped = True
                 break
-            deg, m = pose_error(T, Tt)
+            deg, m = ref_error(T, Tt)
             conf.append(c)
             dist.append(tracker.diagnostics.edge_distance_px)
             wrong.append(deg > WRONG_DEG or m > WRONG_M)
@@ -406,7 +415,7 @@ def as_run_rows(frames, camera, model, truth, starts) -> None:
                     lost_first += i == 0
                     lost_later += i > 0
                     break
-                deg, m = pose_error(T, Tt)
+                deg, m = ref_error(T, Tt)
                 tracked += 1
                 wrong_tracked += deg > WRONG_DEG or m > WRONG_M
         print(
@@ -464,16 +473,21 @@ def confusion_tables(repeat_seed: int = 0, skip_rendered: bool = False) -> None:
         model = read_cao(cube / "cube_and_cylinder.cao")
         camera = Camera.from_intrinsics(CUBE_K, np.eye(4), 640, 480)
         frames = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for _, f in iter_frames(cube / "frames")]
-        # No true poses come with it: the reference is the tracker's own run from ViSP's pose
-        # (never lost, ≤ 1.28 px from the image edges on every frame, the table above).
-        ref_tracker = EdgeTracker(camera, model, read_visp_pose(cube / "cube.0.pos"))
-        ref = [ref_tracker.track(f).T_world_obj for f in frames]
+        # No true poses come with it: the reference is the trackers' own runs from ViSP's pose (never
+        # lost, ≤ 1.28 px from the image edges on every frame, the table above), now's and before's; a
+        # frame is wrong when far from both (``ref_error``); the starts are drawn around before's.
+        runs = []
+        for _, kw in TRACKERS:
+            ref_tracker = EdgeTracker(camera, model, read_visp_pose(cube / "cube.0.pos"), **kw)
+            runs.append([ref_tracker.track(f).T_world_obj for f in frames])
+        ref = np.stack([np.array(r) for r in runs], axis=1)  # (frames, 2, 4, 4)
         starts = []
         for _ in range(16):
             s = int(rng.integers(0, len(frames) - 40))
-            starts.append((s, perturbed(ref[s], 5.0, 0.01, rng), 40))
+            starts.append((s, perturbed(ref[s, 1], 5.0, 0.01, rng), 40))
         confusion_rows(
-            "(b) visp-cube, real (reference: tracked from ViSP's pose), starts 5° and 1 cm off, 40 frames each",
+            "(b) visp-cube, real (reference: tracked from ViSP's pose by either tracker), starts 5° and 1 cm off, "
+            "40 frames each",
             open_runs(frames, camera, model, ref, starts),
         )
         as_run_rows(frames, camera, model, ref, starts)
