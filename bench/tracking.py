@@ -37,6 +37,15 @@ frame's CPU time, with the first-frame coarse-to-fine capture (``start_capture_p
 with a ±16 px band instead (the issue's anchors: ViSP 3 of 10, 7 of 10 with a 16 px band).
 ``--only capture --capture-seeds 0,1,2,3,4,5`` for other draws of starts (seed 0: the issue's).
 
+Fast motion (issue 27): every 2nd and 3rd frame of visp-cube (with cube_and_cylinder.cao and with
+the plain cube.cao) and visp-teabox, on default settings ("now": the constant-velocity motion model)
+beside the defaults of before ("before": issue 16's tracker), in the same run; with true poses,
+Castle-simu (ViSP's, from Debian's visp-images-data, /usr/share/visp-images-data; skipped when
+absent; held out: never tuned on) every 1st–3rd frame, and a rendered box on a circle at 10–40 px a
+frame from rest (developed on), with the frames reported tracked while more than 5° / 1 cm off.
+``--only fast`` for these alone. The capture range also runs on the held-out visp-teabox and
+Castle-simu (20 frames a run).
+
 Speed: the tracker alone (frames decoded beforehand), pinned to one core with one thread
 (OpenCV, BLAS). Targets: mean edge distance ≤ 1.5 px on every frame of visp-cube, never lost,
 ≥ 30 frames/s at 640×480 on one core; issue 16: also on every 3rd frame, ≤ 8 ms mean per frame.
@@ -85,11 +94,15 @@ TARGET_MS = 8.0
 LAST_CPU_MS: list[float] = []  # CPU time per frame (ms) of the last run() kept: less moved by the load than wall time
 
 
-def run(frames: list[np.ndarray], camera: Camera, model: BRep, T0: np.ndarray, repeat: int = 1):
+# The trackers compared (issue 27): today's defaults, and the defaults before the motion model.
+TRACKERS = (("now", {}), ("before", dict(motion_model=False)))
+
+
+def run(frames: list[np.ndarray], camera: Camera, model: BRep, T0: np.ndarray, repeat: int = 1, **kw):
     """Track the frames; (poses, confidences, lost index or None, ms per frame (best of repeats))."""
     best = None
     for _ in range(repeat):
-        tracker = EdgeTracker(camera, model, T0)
+        tracker = EdgeTracker(camera, model, T0, **kw)
         poses, conf, ms, cpu, lost_at = [], [], [], [], None
         for i, f in enumerate(frames):
             t0, c0 = time.perf_counter(), time.process_time()
@@ -126,28 +139,33 @@ def row(name, n_total, poses, conf, lost_at, ms, dist, held):
 
 
 def real_sequences(repeat: int) -> None:
+    """visp-cube (both models) and visp-teabox, every frame and every 2nd and 3rd (fast motion), on
+    today's default settings ("now") and on the defaults before the motion model ("before")."""
     cube = DATA / "visp-cube"
     tea = DATA / "visp-teabox"
     print(
-        "  sequence              frames       lost  conf   conf   dist    dist    dist    held    held    "
-        "ms/f    ms/f  frames/s  cpu ms/f  ≤1.5 px,"
+        "  sequence                     tracker frames       lost  conf   conf   dist    dist    dist    held    "
+        "held    ms/f    ms/f  frames/s  cpu ms/f  ≤1.5 px,"
     )
     print(
-        "                        tracked             min    mean   mean   median   max     mean    max     "
-        "mean    95 %    (mean)    mean    not lost"
+        "                                       tracked             min    mean   mean   median   max     mean    "
+        "max     mean    95 %    (mean)    mean    not lost"
     )
     if cube.is_dir():
-        model = read_cao(cube / "cube_and_cylinder.cao")
         camera = Camera.from_intrinsics(CUBE_K, np.eye(4), 640, 480)
         T0 = read_visp_pose(cube / "cube.0.pos")
         frames = [f for _, f in iter_frames(cube / "frames")]
         frames = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in frames]
-        for step in (1, 2, 3):
-            sub = frames[::step]
-            poses, conf, lost_at, ms = run(sub, camera, model, T0, repeat if step == 1 else 1)
-            dist = distances(sub, camera, model, poses)
-            held = distances(sub, camera, model, [T0] * len(sub))
-            row(f"visp-cube every {step}", len(sub), poses, conf, lost_at, ms, dist, held)
+        for cao in ("cube_and_cylinder.cao", "cube.cao"):
+            model = read_cao(cube / cao)
+            for step in (1, 2, 3):
+                sub = frames[::step]
+                held = distances(sub, camera, model, [T0] * len(sub))
+                for name, kw in TRACKERS:
+                    poses, conf, lost_at, ms = run(sub, camera, model, T0, repeat if step == 1 else 1, **kw)
+                    dist = distances(sub, camera, model, poses)
+                    label = f"cube{'' if cao.startswith('cube_and') else ' (cube.cao)'} every {step}"
+                    row(f"{label:28s}{name:>7s}", len(sub), poses, conf, lost_at, ms, dist, held)
     else:
         print(f"  visp-cube: data not found at {cube} (skipped)")
     if tea.is_dir():
@@ -155,12 +173,98 @@ def real_sequences(repeat: int) -> None:
         camera = Camera.from_intrinsics(TEABOX_K, np.eye(4), 640, 480)
         T0 = solve_pnp(TEABOX_K, read_init_points(tea / "teabox.init"), TEABOX_CLICKS, 640, 480).T_cam_world
         frames = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for _, f in iter_frames(tea / "teabox.mp4")]
-        poses, conf, lost_at, ms = run(frames, camera, model, T0, repeat)
-        dist = distances(frames, camera, model, poses)
-        held = distances(frames, camera, model, [T0] * len(frames))
-        row("visp-teabox (clicks)", len(frames), poses, conf, lost_at, ms, dist, held)
+        for step in (1, 2, 3):
+            sub = frames[::step]
+            held = distances(sub, camera, model, [T0] * len(sub))
+            for name, kw in TRACKERS:
+                poses, conf, lost_at, ms = run(sub, camera, model, T0, repeat if step == 1 else 1, **kw)
+                dist = distances(sub, camera, model, poses)
+                row(f"{f'teabox (clicks) every {step}':28s}{name:>7s}", len(sub), poses, conf, lost_at, ms, dist, held)
     else:
         print(f"  visp-teabox: data not found at {tea} (skipped)")
+
+
+CASTLE = Path("/usr/share/visp-images-data/ViSP-images/mbt-depth/Castle-simu")
+
+
+def castle_data():
+    """ViSP's Castle-simu (Debian's visp-images-data): (camera, model, frames, true poses) or None.
+
+    40 rendered 640×480 frames of a castle (floor and tower, chateau.cao) with the true pose of each
+    (CameraPose/Camera_NNN.txt, cMo) and intrinsics px = py = 700, u0 = 320, v0 = 240 (Config/chateau.xml)."""
+    if not CASTLE.is_dir():
+        return None
+    camera = Camera.from_intrinsics(np.array([[700.0, 0, 320.0], [0, 700.0, 240.0], [0, 0, 1]]), np.eye(4), 640, 480)
+    model = read_cao(CASTLE / "Models" / "chateau.cao")
+    truth = [np.loadtxt(q) for q in sorted((CASTLE / "CameraPose").glob("Camera_*.txt"))]
+    frames = [cv2.imread(str(q), cv2.IMREAD_GRAYSCALE) for q in sorted((CASTLE / "Images").glob("Image_*.pgm"))]
+    return camera, model, frames, truth
+
+
+def circle_sequence(speed_px: float, n: int = 40, omega: float = 0.3):
+    """A box rendered on a circle at speed_px image pixels a frame (at 0.9 m, f = 600 px),
+    turning 1.5° a frame, from rest: frame 1 already moves at full speed. (camera, model, frames, truth)."""
+    W, H, f = 640, 480, 600.0
+    camera = Camera.from_intrinsics(np.array([[f, 0, (W - 1) / 2], [0, f, (H - 1) / 2], [0, 0, 1]]), np.eye(4), W, H)
+    box = BRep.box(0.2, 0.13, 0.08)
+    R0 = exp_so3([2.2, 0.4, 0.3])
+    a = speed_px / omega * 0.9 / f
+    truth = []
+    for k in range(n):
+        R = exp_so3(np.radians(1.5) * k * np.array([0.3, 0.8, 0.5])) @ R0
+        p = [a * np.sin(omega * k), a * (np.cos(omega * k) - 1.0), 0.9 + 0.01 * np.sin(k / 5.0)]
+        truth.append(make_T(R, p))
+    frames = render_poses(camera, box, truth, noise_sigma=2.0, blur_sigma_px=0.5, seed=1)
+    return camera, box, frames, truth
+
+
+def truth_rows(name: str, camera, model, frames, truth, steps=(1, 2, 3)) -> None:
+    """Every ``step``-th frame from the true first pose, both trackers: frames reported tracked, where
+    lost, the error (mean, max) of the frames tracked, the frames reported tracked while wrong (more than
+    5° or 1 cm off), the image motion a frame (median over the model's vertices, largest), ms a frame."""
+    for step in steps:
+        sub, tru = frames[::step], truth[::step]
+        move = max(
+            float(
+                np.median(
+                    np.linalg.norm(
+                        camera.project_obj(a, model.vertices) - camera.project_obj(b, model.vertices), axis=1
+                    )
+                )
+            )
+            for a, b in zip(tru, tru[1:])
+        )
+        for tname, kw in TRACKERS:
+            poses, _, lost_at, ms = run(sub, camera, model, tru[0], **kw)
+            err = np.array([pose_error(T, Tt) for T, Tt in zip(poses, tru)]) if poses else np.zeros((1, 2))
+            wrong = int(np.sum((err[:, 0] > WRONG_DEG) | (err[:, 1] > WRONG_M))) if poses else 0
+            lost = "never" if lost_at is None else f"frame {lost_at}"
+            print(
+                f"  {f'{name} every {step}':30s}{tname:>7s}{move:7.1f}{len(poses):>6d}/{len(sub):<4d}{lost:>9s}"
+                f"{err[:, 0].mean():9.3f}{err[:, 0].max():8.3f}"
+                f"{1e3 * err[:, 1].mean():9.2f}{1e3 * err[:, 1].max():8.2f}"
+                f"{wrong:>7d}{np.mean(ms):8.1f}{np.mean(LAST_CPU_MS):8.1f}"
+            )
+
+
+def fast_sequences() -> None:
+    """Fast motion with true poses: Castle-simu (held out) every 1st–3rd frame; a rendered box on a
+    circle at 10–40 px a frame (developed on), both trackers."""
+    print(
+        "Fast motion with true poses (issue 27: follow 30 px a frame on default settings, 0 frames tracked while "
+        f"more than {WRONG_DEG:.0f}° / {100 * WRONG_M:.0f} cm off)"
+    )
+    print(
+        f"  {'sequence':30s}{'tracker':>7s}{'px/f':>7s}{'tracked':>11s}{'lost':>9s}{'rot mean°':>9s}{'max°':>8s}"
+        f"{'mm mean':>9s}{'max':>8s}{'wrong':>7s}{'ms/f':>8s}{'cpu ms':>8s}"
+    )
+    castle = castle_data()
+    if castle is None:
+        print(f"  Castle-simu: not found at {CASTLE} (apt-get install visp-images-data; skipped)")
+    else:
+        truth_rows("Castle-simu (held out)", *castle)
+    for speed in (10.0, 20.0, 30.0, 40.0):
+        truth_rows(f"rendered circle {speed:.0f} px/f", *circle_sequence(speed), steps=(1,))
 
 
 def rendered_sequence(n: int = 120, seed: int = 0):
@@ -220,6 +324,15 @@ RULES = (
 )
 
 
+def ref_error(T: np.ndarray, Tr: np.ndarray) -> tuple[float, float]:
+    """(degrees, metres) from T to the reference Tr (4, 4), or to the nearest of several (R, 4, 4): on
+    visp-cube the runs of both trackers from ViSP's pose part 3.8° / 17 mm in frames 130–160, where the
+    image fits both within 0.6 px, and a pose on either is not wrong."""
+    if np.ndim(Tr) == 3:
+        return min((pose_error(T, r) for r in Tr), key=lambda e: (e[0] > WRONG_DEG or e[1] > WRONG_M, e[0]))
+    return pose_error(T, Tr)
+
+
 def perturbed(T: np.ndarray, deg: float, m: float, rng: np.random.Generator) -> np.ndarray:
     """T turned by deg about a random axis (object frame) and moved m along a random direction."""
     a, d = rng.normal(size=3), rng.normal(size=3)
@@ -246,7 +359,7 @@ def open_runs(frames, camera, model, truth, starts):
             if lost:
                 stopped = True
                 break
-            deg, m = pose_error(T, Tt)
+            deg, m = ref_error(T, Tt)
             conf.append(c)
             dist.append(tracker.diagnostics.edge_distance_px)
             wrong.append(deg > WRONG_DEG or m > WRONG_M)
@@ -280,8 +393,9 @@ def confusion_rows(name: str, runs) -> None:
 
 
 AS_RUN = (
-    ("as run, first-frame capture (now)", {}),
-    ("as run, first-frame capture off (before)", dict(start_capture_px=())),
+    ("as run, now (motion model)", {}),
+    ("as run, issue 16's defaults (no motion model)", dict(motion_model=False)),
+    ("as run, first-frame capture off (before issue 16)", dict(motion_model=False, start_capture_px=())),
 )
 
 
@@ -301,7 +415,7 @@ def as_run_rows(frames, camera, model, truth, starts) -> None:
                     lost_first += i == 0
                     lost_later += i > 0
                     break
-                deg, m = pose_error(T, Tt)
+                deg, m = ref_error(T, Tt)
                 tracked += 1
                 wrong_tracked += deg > WRONG_DEG or m > WRONG_M
         print(
@@ -359,16 +473,21 @@ def confusion_tables(repeat_seed: int = 0, skip_rendered: bool = False) -> None:
         model = read_cao(cube / "cube_and_cylinder.cao")
         camera = Camera.from_intrinsics(CUBE_K, np.eye(4), 640, 480)
         frames = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for _, f in iter_frames(cube / "frames")]
-        # No true poses come with it: the reference is the tracker's own run from ViSP's pose
-        # (never lost, ≤ 1.28 px from the image edges on every frame, the table above).
-        ref_tracker = EdgeTracker(camera, model, read_visp_pose(cube / "cube.0.pos"))
-        ref = [ref_tracker.track(f).T_world_obj for f in frames]
+        # No true poses come with it: the reference is the trackers' own runs from ViSP's pose (never
+        # lost, ≤ 1.28 px from the image edges on every frame, the table above), now's and before's; a
+        # frame is wrong when far from both (``ref_error``); the starts are drawn around before's.
+        runs = []
+        for _, kw in TRACKERS:
+            ref_tracker = EdgeTracker(camera, model, read_visp_pose(cube / "cube.0.pos"), **kw)
+            runs.append([ref_tracker.track(f).T_world_obj for f in frames])
+        ref = np.stack([np.array(r) for r in runs], axis=1)  # (frames, 2, 4, 4)
         starts = []
         for _ in range(16):
             s = int(rng.integers(0, len(frames) - 40))
-            starts.append((s, perturbed(ref[s], 5.0, 0.01, rng), 40))
+            starts.append((s, perturbed(ref[s, 1], 5.0, 0.01, rng), 40))
         confusion_rows(
-            "(b) visp-cube, real (reference: tracked from ViSP's pose), starts 5° and 1 cm off, 40 frames each",
+            "(b) visp-cube, real (reference: tracked from ViSP's pose by either tracker), starts 5° and 1 cm off, "
+            "40 frames each",
             open_runs(frames, camera, model, ref, starts),
         )
         as_run_rows(frames, camera, model, ref, starts)
@@ -377,53 +496,35 @@ def confusion_tables(repeat_seed: int = 0, skip_rendered: bool = False) -> None:
 
 
 CAPTURE = (
-    ("now: first frame coarse to fine from ±24 and ±16 px", {}),
-    ("first-frame capture off (before)", dict(start_capture_px=())),
-    ("both retries off, band ±16 px", dict(capture_px=0.0, start_capture_px=(), search_px=16.0)),
+    ("now: motion model, first frame from ±24 and ±16 px", {}),
+    ("before: issue 16's defaults (no motion model)", dict(motion_model=False)),
+    ("first-frame capture off (before issue 16)", dict(motion_model=False, start_capture_px=())),
+    ("both retries off, band ±16 px", dict(motion_model=False, capture_px=0.0, start_capture_px=(), search_px=16.0)),
 )
 
 
-def capture_range(n_runs: int = 10, n_frames: int = 40, seeds: tuple[int, ...] = (0,)) -> None:
-    """visp-cube from starts 5° / 1 cm off the reference (the tracker's own run from ViSP's pose):
-    how many runs of n_frames are tracked whole (never lost, every frame within 5° / 1 cm of it),
-    per draw of starts (seed 0: the draw the issue's target is read on), with the first-frame capture
-    (``start_capture_px``) on and off; also the frames reported tracked while wrong, the runs lost at
-    their first frame, and the first frame's CPU time."""
-    cube = DATA / "visp-cube"
-    if not cube.is_dir():
-        print(f"  capture range: data not found at {cube} (skipped)")
-        return
-    model = read_cao(cube / "cube_and_cylinder.cao")
-    camera = Camera.from_intrinsics(CUBE_K, np.eye(4), 640, 480)
-    frames = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for _, f in iter_frames(cube / "frames")]
-    ref_tracker = EdgeTracker(camera, model, read_visp_pose(cube / "cube.0.pos"))
-    ref = [ref_tracker.track(f).T_world_obj for f in frames]
-    print(
-        f"Capture range: visp-cube from {n_runs} starts 5° and 1 cm off (reference: "
-        f"tracked from ViSP's pose), {n_frames} frames each; whole = never lost and "
-        f"every frame within {WRONG_DEG:.0f}° / {100 * WRONG_M:.0f} cm of the reference"
-    )
-    print(
-        "  anchors (issue 16, measured outside this bench on seed 0's kind of draw): ViSP's edge "
-        "tracker 3 of 10 whole with its default band, 7 of 10 with a 16 px band; target ≥ 8 of 10"
-    )
-    print(
-        f"    {'seed':>4s}  {'tracker':52s}{'whole':>9s}{'tracked':>9s}"
-        f"{'wrong+tracked':>15s}{'lost at 1st':>13s}{'1st frame cpu ms':>18s}"
-    )
+def capture_table(frames, camera, model, ref, n_runs: int, n_frames: int, seeds, variants=CAPTURE) -> None:
+    """From n_runs starts 5° / 1 cm off the reference, n_frames each, per draw of starts (seed): runs
+    tracked whole (never lost, every frame within 5° / 1 cm of the reference), frames tracked, of them
+    wrong, runs lost at their first frame, and the first frame's CPU time, per tracker.
+
+    ref : the reference poses, or a list of several references (visp-cube: the runs of both trackers
+    from ViSP's pose, which part 3.8° / 17 mm in frames 130–160 where the image fits both within
+    0.6 px): a frame is wrong when it is far from every one."""
+    refs = ref if isinstance(ref, list) and np.ndim(ref[0]) == 3 else [ref]
     for seed in seeds:
         rng = np.random.default_rng(seed)
         starts = []
         for _ in range(n_runs):
             s = int(rng.integers(0, len(frames) - n_frames))
-            starts.append((s, perturbed(ref[s], 5.0, 0.01, rng)))
-        for name, kw in CAPTURE:
+            starts.append((s, perturbed(refs[-1][s], 5.0, 0.01, rng)))
+        for name, kw in variants:
             whole = tracked = wrong_tracked = lost_first = 0
             first_ms = []
             for s, T0 in starts:
                 tracker = EdgeTracker(camera, model, T0, **kw)
                 ok = True
-                for i, (f, Tr) in enumerate(zip(frames[s : s + n_frames], ref[s : s + n_frames])):
+                for i, f in enumerate(frames[s : s + n_frames]):
                     c0 = time.process_time()
                     T, _, lost = tracker.track(f)
                     if i == 0:
@@ -432,9 +533,9 @@ def capture_range(n_runs: int = 10, n_frames: int = 40, seeds: tuple[int, ...] =
                         lost_first += i == 0
                         ok = False
                         break
-                    deg, m = pose_error(T, Tr)
                     tracked += 1
-                    if deg > WRONG_DEG or m > WRONG_M:
+                    errs = [pose_error(T, r[s + i]) for r in refs]
+                    if all(deg > WRONG_DEG or m > WRONG_M for deg, m in errs):
                         wrong_tracked += 1
                         ok = False
                 whole += ok
@@ -442,6 +543,67 @@ def capture_range(n_runs: int = 10, n_frames: int = 40, seeds: tuple[int, ...] =
                 f"    {seed:>4d}  {name:52s}{whole:>3d} of {n_runs}{tracked:>9d}{wrong_tracked:>15d}{lost_first:>13d}"
                 f"{np.mean(first_ms):11.1f} mean, {np.max(first_ms):.0f} max"
             )
+
+
+def capture_range(n_runs: int = 10, n_frames: int = 40, seeds: tuple[int, ...] = (0,)) -> None:
+    """visp-cube from starts 5° / 1 cm off the reference (the tracker's own run from ViSP's pose;
+    seed 0: the draw the issue 16 target is read on), and the held-out sequences: visp-teabox
+    (reference: the tracker of before from the clicks, every frame, never lost) and Castle-simu (its
+    true poses), 20 frames each; every 2nd frame of Castle-simu too (fast motion)."""
+    header = (
+        f"    {'seed':>4s}  {'tracker':52s}{'whole':>9s}{'tracked':>9s}"
+        f"{'wrong+tracked':>15s}{'lost at 1st':>13s}{'1st frame cpu ms':>18s}"
+    )
+    cube = DATA / "visp-cube"
+    if cube.is_dir():
+        model = read_cao(cube / "cube_and_cylinder.cao")
+        camera = Camera.from_intrinsics(CUBE_K, np.eye(4), 640, 480)
+        frames = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for _, f in iter_frames(cube / "frames")]
+        ref = []
+        for _, kw in TRACKERS:
+            ref_tracker = EdgeTracker(camera, model, read_visp_pose(cube / "cube.0.pos"), **kw)
+            ref.append(np.array([ref_tracker.track(f).T_world_obj for f in frames]))
+        print(
+            f"Capture range: visp-cube from {n_runs} starts 5° and 1 cm off (reference: "
+            f"tracked from ViSP's pose by either tracker), {n_frames} frames each; whole = never lost and "
+            f"every frame within {WRONG_DEG:.0f}° / {100 * WRONG_M:.0f} cm of a reference"
+        )
+        print(
+            "  anchors (issue 16, measured outside this bench on seed 0's kind of draw): ViSP's edge "
+            "tracker 3 of 10 whole with its default band, 7 of 10 with a 16 px band; target ≥ 8 of 10"
+        )
+        print(header)
+        capture_table(frames, camera, model, ref, n_runs, n_frames, seeds)
+    else:
+        print(f"  capture range: data not found at {cube} (skipped)")
+    print(
+        "  held out (issue 27: ≥ 9 of 10 whole; the issue's held-out teabox, rendered by others: 6 of 10 before, "
+        "ViSP 3), 20 frames each:"
+    )
+    tea = DATA / "visp-teabox"
+    if tea.is_dir():
+        model = read_cao(tea / "teabox.cao")
+        camera = Camera.from_intrinsics(TEABOX_K, np.eye(4), 640, 480)
+        T0 = solve_pnp(TEABOX_K, read_init_points(tea / "teabox.init"), TEABOX_CLICKS, 640, 480).T_cam_world
+        frames = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for _, f in iter_frames(tea / "teabox.mp4")]
+        ref_tracker = EdgeTracker(camera, model, T0, motion_model=False)
+        ref = [ref_tracker.track(f).T_world_obj for f in frames]
+        print("  visp-teabox (reference: the tracker of before from the clicks)")
+        print(header)
+        capture_table(frames, camera, model, ref, n_runs, 20, seeds, CAPTURE[:2])
+    else:
+        print(f"  visp-teabox: data not found at {tea} (skipped)")
+    castle = castle_data()
+    if castle is not None:
+        camera, model, frames, truth = castle
+        for step in (1, 2):
+            print(f"  Castle-simu every {step} (true poses)")
+            print(header)
+            capture_table(
+                frames[::step], camera, model, truth[::step], n_runs, 20 if step == 1 else 12, seeds, CAPTURE[:2]
+            )
+    else:
+        print(f"  Castle-simu: not found at {CASTLE} (apt-get install visp-images-data; skipped)")
 
 
 def main() -> int:
@@ -456,7 +618,7 @@ def main() -> int:
     )
     ap.add_argument(
         "--only",
-        choices=("sequences", "capture", "confusion"),
+        choices=("sequences", "fast", "capture", "confusion"),
         help="print only the real sequences, the capture range or the lost-or-tracked tables",
     )
     args = ap.parse_args()
@@ -482,6 +644,9 @@ def main() -> int:
     if args.only == "sequences":
         real_sequences(args.repeat)
         return 0
+    if args.only == "fast":
+        fast_sequences()
+        return 0
     if args.only == "capture":
         capture_range(seeds=tuple(int(k) for k in args.capture_seeds.split(",")))
         return 0
@@ -490,6 +655,8 @@ def main() -> int:
             confusion_tables(repeat_seed=k, skip_rendered=args.skip_rendered)
         return 0
     real_sequences(args.repeat)
+    print()
+    fast_sequences()
     print()
     workcell_sequence(args.repeat)
     if not args.skip_rendered:

@@ -14,7 +14,15 @@ Each frame (the "moving edges" tracker of Comport, Marchand et al., 2006, as in 
 5. if the answer fails the support check below while its confidence is good (motion beyond the
    band), after at least one frame followed, the frame is tried once more from the same start,
    coarse to fine (``capture_px``, then the two bands above), before the object is declared lost;
-6. the first frame after a pose is given (which may be degrees or a centimetre off) that fails,
+6. the motion model (``motion_model``, issue 27): from the third frame after a pose is given, each
+   frame starts from the last pose moved once more by the last step (constant velocity, the step
+   T_k · T_{k−1}⁻¹ in the world frame), and the first pass's band is twice the last frame's
+   surprise (how far, median over the samples, its pose lay from its prediction), between
+   ``search_px`` and ``max_band_px``; the coarse passes keep the robust scale at least an eighth of
+   their band (a start off as a whole shares one offset in every residual, whose small spread would
+   cut them all); and the retry of step 5 runs on any failure (a start, a stop, a jerk the
+   prediction missed), from the prediction;
+7. the first frame after a pose is given (which may be degrees or a centimetre off) that fails,
    whatever its confidence, is tried again from the same start coarse to fine from each of
    ``start_capture_px`` (±24 and ±16 px): two hypotheses, each kept only if it passes every lost
    test and turns the given pose by at most ``start_capture_deg`` (10°), and the frame is lost
@@ -66,7 +74,7 @@ from core.pose.uncertainty import (
     first_order_share,
     grouped_share,
 )
-from core.transforms import check_T, pose_error
+from core.transforms import check_T, invert_T, make_T, orthonormalize, pose_error
 
 from .profiles import search_along_normals, to_gray_f32
 
@@ -427,7 +435,8 @@ class EdgeTracker:
     max_face_angle_deg : edges of faces seen more obliquely than this are not tracked (see
         ``sample_visible_edges``).
     capture_px : when a frame fails the support check although most samples found an edge (the
-        signature of motion beyond the band), and the tracker has followed at least one frame since
+        signature of motion beyond the band; with ``motion_model``, when it fails any lost test,
+        from the prediction), and the tracker has followed at least one frame since
         its pose was given (``reset``: a given pose that fails is the operator's or the matcher's
         to fix, and the matcher's one-step settling must stay quick), it is tracked once more from
         the same start, coarse to fine: passes of ±capture_px, halved while wider than ±search_px, then ±search_px and
@@ -448,6 +457,12 @@ class EdgeTracker:
         infinite: a tracker that does not judge its answer with both tests (auto match's settling
         step, the one-click search's) cannot tell a captured pose from a wrong one.
         Bands not wider than ``search_px`` are left out; ``()`` turns it off.
+    motion_model : predict each frame's pose from the last two tracked (constant velocity), widen the
+        first band to twice the last prediction's miss (at most ``max_band_px``), and retry coarse to
+        fine from ``capture_px`` on any failure (step 6 above). A rendered box moving 30 px a frame
+        from rest is followed on every frame within 0.25° / 1 mm; False: the tracker of issue 16,
+        lost at the first moving frame (``bench/tracking.py``, "Fast motion"; tests/app/vision/test_track.py).
+    max_band_px : the widest first band the motion model asks for (pixels).
     """
 
     # The camera's and the model's priors that join each frame's σ (``pose_covariance``, issue 27): a
@@ -480,6 +495,8 @@ class EdgeTracker:
         capture_px: float = 32.0,
         start_capture_px: tuple[float, ...] = (24.0, 16.0),
         start_capture_deg: float = 10.0,
+        motion_model: bool = True,
+        max_band_px: float = 24.0,
     ):
         if not isinstance(camera, Camera):
             raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
@@ -513,6 +530,10 @@ class EdgeTracker:
         self.check_min_strength = float(check_min_strength)
         self.capture_px = float(capture_px)
         self.start_capture_deg = float(start_capture_deg)
+        self.motion_model = bool(motion_model)
+        # the motion model's coarse-pass scale floor, for a tracker that judges its answers with both tests
+        self._judged = self.motion_model and self.lost_confidence > 0 and np.isfinite(self.max_edge_distance_px)
+        self.max_band_px = float(max_band_px)
         self.start_capture_px = tuple(
             float(px) for px in np.atleast_1d(np.asarray(start_capture_px, float)) if px > self.search_px
         )
@@ -525,6 +546,9 @@ class EdgeTracker:
         self._lost = False
         self._polarity: dict[int, float] = {}
         self._followed = False  # a frame tracked since this pose was given (the retry is for motion, not for a start)
+        self._velocity: np.ndarray | None = None  # T_k · T_{k−1}⁻¹ of the last two frames tracked (world frame)
+        self._motion_px = 0.0  # the image motion (median over the samples, px) of that step
+        self._surprise_px = 0.0  # how far (px) the last frame's pose lay from its prediction
         self.diagnostics: TrackDiagnostics | None = None
 
     @property
@@ -546,8 +570,23 @@ class EdgeTracker:
         return sample_view(self.camera, view, T, step_px=self.sample_step_px, vertex_margin_px=self.vertex_margin_px)
 
     def _schedule(self) -> tuple[float, ...]:
-        """The half-widths of the frame's search passes, coarse to fine."""
-        return (self.search_px, self.refine_search_px)
+        """The half-widths of the frame's search passes, coarse to fine.
+
+        With the motion model on (``motion_model``), the first band is widened to twice the last frame's surprise (how
+        far its pose lay from its prediction, px), at most ``max_band_px``: the prediction is as
+        good as the motion is steady."""
+        first = self.search_px
+        if self.motion_model and self._velocity is not None:
+            first = float(np.clip(2.0 * self._surprise_px, self.search_px, max(self.max_band_px, self.search_px)))
+        return (first, self.refine_search_px)
+
+    def _prediction(self) -> np.ndarray:
+        """Where the object should be in the next frame: the last pose moved once more by the last step
+        (constant velocity, ``motion_model``), or the last pose."""
+        if not self.motion_model or self._velocity is None:
+            return self._T
+        T = self._velocity @ self._T
+        return make_T(orthonormalize(T[:3, :3]), T[:3, 3])  # a rotation to rounding, as check_T asks
 
     def _capture_schedule(self, capture_px: float | None = None) -> tuple[float, ...]:
         """The passes tried when the usual ones lose the object: from ``capture_px`` down (none if off)."""
@@ -557,7 +596,9 @@ class EdgeTracker:
             h /= 2.0
         return tuple(out) + (self.search_px, self.refine_search_px) if out else ()
 
-    def _pass(self, band: BandSmoothed, view: VisibleSegments, T: np.ndarray, half_range: float) -> _Pass:
+    def _pass(
+        self, band: BandSmoothed, view: VisibleSegments, T: np.ndarray, half_range: float, min_scale_px: float = 0.3
+    ) -> _Pass:
         """Sample the visible edges at pose T, search the image along their normals, refine T."""
         samples = self._samples(view, T)
         n = len(samples)
@@ -587,6 +628,7 @@ class EdgeTracker:
             matched[found],
             loss=self.loss,
             max_iter=self.max_iter,
+            min_scale_px=min_scale_px,
         )
         w[found] = fit.weights
         return _Pass(samples, matched, found, hits.strength, w, fit)
@@ -603,20 +645,27 @@ class EdgeTracker:
         )
         return float(np.mean(np.where(hits.found, np.minimum(np.abs(hits.offset_px), R), R)))
 
-    def _attempt(self, band: BandSmoothed, view: VisibleSegments, schedule: tuple[float, ...]):
-        """The passes of ``schedule`` from the last good pose, and the lost tests on their answer.
+    def _attempt(self, band: BandSmoothed, view: VisibleSegments, schedule: tuple[float, ...], T_start: np.ndarray):
+        """The passes of ``schedule`` from T_start (the prediction or the last good pose; ``view`` is
+        seen from there), and the lost tests on their answer.
 
         Returns (T, the last pass, reason ("" if tracked), confidence, inliers (bool per sample),
         edge_distance_px).
         """
-        T = self._T
+        T = T_start
         reason = ""
         p = None
         try:
             for k, half_range in enumerate(schedule):
                 if k:  # which edges are seen, again at the pose the last pass reached
                     view = self._view(T)
-                p = self._pass(band, view, T, half_range)
+                # A coarse pass's robust scale is kept at least an eighth of its band: its start may be
+                # off as a whole by pixels (a motion the prediction missed), so that every residual
+                # shares one offset and their spread, the scale estimated, is small enough to cut them all.
+                # Only for a tracker that judges its answers (a wider pull may settle wrongly; the
+                # lost tests catch it): auto match's and the one-click search's settling steps keep theirs.
+                floor = max(0.3, half_range / 8.0) if self._judged and k < len(schedule) - 1 else 0.3
+                p = self._pass(band, view, T, half_range, floor)
                 if p.fit is None:
                     reason = (
                         f"the image shows an edge near only {int(p.found.sum())} of the {len(p.samples)} points "
@@ -643,7 +692,7 @@ class EdgeTracker:
             else:
                 # A jump larger than the search band cannot come from edges found within it.
                 jump = np.linalg.norm(
-                    self.camera.project_obj(T, p.samples.X_obj) - self.camera.project_obj(self._T, p.samples.X_obj),
+                    self.camera.project_obj(T, p.samples.X_obj) - self.camera.project_obj(T_start, p.samples.X_obj),
                     axis=1,
                 )
                 if np.median(jump) > 2.0 * max(schedule):
@@ -681,8 +730,9 @@ class EdgeTracker:
                 "track frames of the calibrated camera"
             )
         band = BandSmoothed(im, self.sigma_px)  # blurred only around the samples, as they are searched
-        view = self._view(self._T)  # which edges are seen from the start (shared by a retry's first pass)
-        T, p, reason, confidence, inl, edge_px = self._attempt(band, view, self._schedule())
+        T_start = self._prediction()
+        view = self._view(T_start)  # which edges are seen from the start (shared by a retry's first pass)
+        T, p, reason, confidence, inl, edge_px = self._attempt(band, view, self._schedule(), T_start)
         wide = self._capture_schedule()
         if (
             reason
@@ -693,7 +743,7 @@ class EdgeTracker:
         ):
             # The first frame after a given pose: the pose may be degrees or a centimetre off (a
             # stale database pose, clicked edges), beyond the ±search_px band. See start_capture_px.
-            tried = [self._attempt(band, view, self._capture_schedule(px)) for px in self.start_capture_px]
+            tried = [self._attempt(band, view, self._capture_schedule(px), T_start) for px in self.start_capture_px]
             good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
             if good:
                 X = good[0][1].samples.X_obj
@@ -712,12 +762,17 @@ class EdgeTracker:
                     )
                 else:
                     T, p, reason, confidence, inl, edge_px = good[0]
-        elif reason and wide and self._followed and np.isfinite(edge_px) and confidence >= self.lost_confidence:
-            # Most samples found their edge but the model does not sit on the image's edges: the
-            # signature of motion beyond the band (a wrong convergence shows a low confidence, and
-            # a wider search would only settle it elsewhere). Once more from the same start, coarse
-            # to fine from a wider band; kept only if it passes every test, else the first answer stands.
-            retry = self._attempt(band, view, wide)
+        elif (
+            reason
+            and wide
+            and self._followed
+            and (self.motion_model or (np.isfinite(edge_px) and confidence >= self.lost_confidence))
+        ):
+            # Motion beyond the band: the prediction missed (a start, a stop, a jerk). Once more from
+            # the same start, coarse to fine from ±capture_px; kept only if it passes every test, else
+            # the first answer stands. Without the motion model only when most samples found their edge
+            # but the model does not sit on the image's edges (the retry of issue 16).
+            retry = self._attempt(band, view, wide, T_start)
             if not retry[2]:
                 T, p, reason, confidence, inl, edge_px = retry
         n = len(p.samples)
@@ -733,6 +788,12 @@ class EdgeTracker:
         if reason:
             self._lost = True
             return TrackResult(self._T.copy(), float(confidence), True)
+        if self._followed:  # the step from a given pose is its correction, not the object's motion
+            X = p.samples.X_obj
+            uv = self.camera.project_obj(T, X)
+            self._surprise_px = float(np.median(np.linalg.norm(uv - self.camera.project_obj(T_start, X), axis=1)))
+            self._motion_px = float(np.median(np.linalg.norm(uv - self.camera.project_obj(self._T, X), axis=1)))
+            self._velocity = T @ invert_T(self._T)
         self._T = T
         self._followed = True
         # Remember each feature's polarity (the sign of the derivative along its normal).

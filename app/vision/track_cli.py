@@ -98,7 +98,13 @@ def add_track_parser(sub) -> None:
     p.add_argument(
         "--fps", type=frame_rate, default=25.0, help="frame rate of the overlay video (above 0, at most 240)"
     )
-    p.add_argument("--search-px", type=float, default=8.0, help="search ±this many pixels along the edges' normals")
+    p.add_argument(
+        "--search-px",
+        type=float,
+        default=8.0,
+        help="search ±this many pixels along the edges' normals around the predicted pose (the band widens "
+        "by itself, up to ±24 px, where the motion is less steady)",
+    )
     p.add_argument("--step-px", type=float, default=5.0, help="spacing of the edge samples (pixels)")
     p.add_argument(
         "--model-sigma-mm",
