@@ -106,47 +106,54 @@ class DatabaseOverlay:
         """Bring the nodes up to date with ``objects`` seen through ``camera``; returns how many
         objects were redrawn (0 when nothing changed)."""
         with self._lock:
-            objects = list(objects)
-            ckey = (camera.C.tobytes(), int(camera.width), int(camera.height))
-            full = ckey != self._camera_key
-            self._camera_key = ckey
-            pw = self.pixel_world
-            dirty: set[tuple] = set()
-            redrawn, labels = [], []
-            for obj in objects:
-                key = (int(obj.version), obj.status, obj.name)
-                old = self._drawn.get(obj.id)
-                if full or old is None or old.key != key:
-                    batch, label, wire = draw_object(camera, obj, pw.width, pw.height)
-                    self._store(obj, key, batch, wire, _outline(camera, obj, wire))
-                    labels.append((obj.id, label))
-                    dirty |= self._groups.place(obj.id, 0)
-                    redrawn.append(obj.id)
-            for k in range(0, len(labels), LABEL_CHUNK):
-                with self.atomic():  # one wake-up of viser's loop per chunk, not one per message
-                    for obj_id, label in labels[k : k + LABEL_CHUNK]:
-                        self._send_label(obj_id, label)
-            live = {o.id for o in objects}
-            gone = [i for i in self._drawn if i not in live]
-            for i in gone:
-                d = self._drawn.pop(i)
-                if d.label is not None:
-                    d.label.remove()
-                dirty.add(self._groups.drop(i))
-                self._offsets.pop(i, None)
-            for group in sorted(g for g in dirty if g is not None):
-                self._send_group(group)
-            self.redrawn = redrawn
-            self.removed = gone
-            if redrawn or gone:
-                order = [o.id for o in objects if o.id in self._drawn]
-                segs = [self._drawn[i].seg_uv for i in order]
-                owners = [np.full(len(s), self._drawn[i].name, dtype=object) for i, s in zip(order, segs)]
-                self._pick = (
-                    np.concatenate(segs) if segs else np.zeros((0, 2, 2)),
-                    np.concatenate(owners) if owners else np.zeros(0, dtype=object),
-                )
-            return len(redrawn)
+            try:
+                return self._sync(camera, list(objects))
+            except BaseException:
+                # part of it sent (a message viser failed to queue): the next sync draws every object again
+                self._camera_key = None
+                raise
+
+    def _sync(self, camera: Camera, objects: list[SiteObject]) -> int:
+        ckey = (camera.C.tobytes(), int(camera.width), int(camera.height))
+        full = ckey != self._camera_key
+        self._camera_key = ckey
+        pw = self.pixel_world
+        dirty: set[tuple] = set()
+        redrawn, labels = [], []
+        for obj in objects:
+            key = (int(obj.version), obj.status, obj.name)
+            old = self._drawn.get(obj.id)
+            if full or old is None or old.key != key:
+                batch, label, wire = draw_object(camera, obj, pw.width, pw.height)
+                self._store(obj, key, batch, wire, _outline(camera, obj, wire))
+                labels.append((obj.id, label))
+                dirty |= self._groups.place(obj.id, 0)
+                redrawn.append(obj.id)
+        for k in range(0, len(labels), LABEL_CHUNK):
+            with self.atomic():  # one wake-up of viser's loop per chunk, not one per message
+                for obj_id, label in labels[k : k + LABEL_CHUNK]:
+                    self._send_label(obj_id, label)
+        live = {o.id for o in objects}
+        gone = [i for i in self._drawn if i not in live]
+        for i in gone:
+            d = self._drawn.pop(i)
+            if d.label is not None:
+                d.label.remove()
+            dirty.add(self._groups.drop(i))
+            self._offsets.pop(i, None)
+        for group in sorted(g for g in dirty if g is not None):
+            self._send_group(group)
+        self.redrawn = redrawn
+        self.removed = gone
+        if redrawn or gone:
+            order = [o.id for o in objects if o.id in self._drawn]
+            segs = [self._drawn[i].seg_uv for i in order]
+            owners = [np.full(len(s), self._drawn[i].name, dtype=object) for i, s in zip(order, segs)]
+            self._pick = (
+                np.concatenate(segs) if segs else np.zeros((0, 2, 2)),
+                np.concatenate(owners) if owners else np.zeros(0, dtype=object),
+            )
+        return len(redrawn)
 
     def _store(self, obj: SiteObject, key: tuple, batch, wire, outline) -> None:
         """Keep one object's projection (for picking) and its part of its group's arrays."""

@@ -56,6 +56,9 @@ class NodeGroups:
     def group_of(self, obj_id: Hashable) -> tuple | None:
         return self._where.get(obj_id)
 
+    def groups(self) -> set[tuple]:
+        return set(self._members)
+
     def members(self, group: tuple) -> list:
         return list(self._members.get(group, ()))
 

@@ -48,6 +48,7 @@ class World3D:
         self._objects: dict[Any, tuple[tuple, tuple]] = {}
         self._groups = NodeGroups(group_size)
         self._group_nodes: set[tuple] = set()  # the groups sent
+        self._resend = False  # a sync failed part way: send every group at the next
         self._sensors_key: Any = None
         self.redrawn: list[Any] = []  # ids the last sync drew or moved
 
@@ -91,8 +92,15 @@ class World3D:
         for gone in set(self._objects) - seen:
             del self._objects[gone]
             dirty.add(self._groups.drop(gone))
-        for group in sorted((g for g in dirty if g is not None), key=str):
-            self._send_group(group)
+        if self._resend:
+            dirty |= self._group_nodes | self._groups.groups()
+            self._resend = False
+        try:
+            for group in sorted((g for g in dirty if g is not None), key=str):
+                self._send_group(group)
+        except BaseException:  # part of it sent (a message viser failed to queue): every group again at the next sync
+            self._resend = True
+            raise
         cams = [site.camera_of(v) for v in site.views]
         sensors = (*((c.C.tobytes(), c.width, c.height) for c in cams), site.T_world_turret.tobytes())
         if sensors != self._sensors_key:
