@@ -103,7 +103,6 @@ def main() -> int:
             changes += 1
             t = now - t_start
             if snap0 is None and t >= args.warmup:
-                gc.collect()
                 snap0 = tracemalloc.take_snapshot() if tracemalloc.is_tracing() else None
                 rss0 = rss_mb()  # after the snapshot, which is kept (tens of MB)
                 print(f"  warm-up done at {t:.0f} s: RSS {rss0:.1f} MB", file=sys.stderr, flush=True)
@@ -117,8 +116,9 @@ def main() -> int:
                     readers.append(Reader(server.port))
                 last_rejoin = t
             time.sleep(max(0.0, t_start + changes * args.every - time.monotonic()))
+        rss1 = rss_mb()  # as the process runs
         gc.collect()
-        rss1 = rss_mb()  # before the second snapshot
+        rss1_gc = rss_mb()  # after a full collection (cyclic garbage waits for one), before the second snapshot
         snap1 = tracemalloc.take_snapshot() if tracemalloc.is_tracing() else None
         t_end = time.monotonic() - t_start
         frames = [len(r.frames(time.time() - 60.0, time.time())) / 60.0 for r in readers]
@@ -141,10 +141,13 @@ def main() -> int:
     for t, mb, n in samples[:: max(1, len(samples) // 12)] + [samples[-1]]:
         print(f"| {t / 60:.1f} | {mb:.1f} | {n} |")
     growth = 100.0 * (rss1 - rss0) / rss0
+    peak = max(mb for t, mb, _ in samples if t >= args.warmup)
     print()
     print(
         f"RSS after the {args.warmup:.0f} s warm-up {rss0:.1f} MB, at the end {rss1:.1f} MB: {growth:+.1f} % "
-        f"(target: within ±10 %); frames/s received in the last minute: {', '.join(f'{f:.1f}' for f in frames)}"
+        f"(target: within ±10 %); at most {peak:.1f} MB ({100.0 * (peak - rss0) / rss0:+.1f} %) in between; "
+        f"{rss1_gc:.1f} MB after a full garbage collection at the end; frames/s received in the last minute: "
+        f"{', '.join(f'{f:.1f}' for f in frames)}"
     )
     if snap0 is not None and snap1 is not None:
         traced0 = sum(s.size for s in snap0.statistics("filename")) / 1e6
