@@ -6,18 +6,17 @@ GROUP_SIZE objects, one node each: ``/overlay/db/group_<k>`` (``app.ui.node_grou
 name is its own label ``/overlay/db_labels/<object id>``. Each object's projection is kept (the
 segments the operator sees, used to pick an object by clicking: picking needs no node of its own).
 ``sync(camera, objects)`` compares each object's (version, status, name) with what was drawn: an
-unchanged object sends nothing, a changed one resends its group's arrays (``handle.points``/``colors``)
+unchanged object sends nothing, a changed one sends its group's node again (one message, both arrays)
 and updates its label in place, a new one joins a group, a removed one leaves it. Every object is
 redrawn only when the camera calibration C changes. It runs on the interface's database thread, never
-in the video frame's path, and holds viser's message buffer (``atomic``) only for the two arrays of
-one group at a time: a browser's video is never held behind a full draw.
+in the video frame's path, and never inside viser's ``atomic()``, which would hold every browser's
+video while it lasts (on a loaded machine a thread can be descheduled for 100 ms and more inside it).
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Iterable
-from contextlib import AbstractContextManager, nullcontext
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,7 +32,6 @@ from .node_groups import NodeGroups
 __all__ = ["DatabaseOverlay"]
 
 GROUP_SIZE = 64  # objects per wireframe node: a full draw of 2,000 objects is 32 nodes, a change resends ~64 objects
-LABEL_CHUNK = 50  # labels sent per atomic group (~10 ms: viser's buffer is held no longer than that)
 MAX_OUTLINE_SHARE = 0.25  # an outline larger than this share of the image is not picked by a click inside it
 
 
@@ -58,7 +56,6 @@ class DatabaseOverlay:
     pixel_world : PixelWorld (the camera's image, where it lies)
     z : the overlay plane (world units, in front of the image)
     line_px : line thickness, screen pixels
-    atomic : callable returning a context manager that groups messages (``server.atomic``)
     prefix : the start of the nodes' names ("/overlay": ``/overlay/db/group_<k>``)
     group_size : objects per wireframe node
     """
@@ -69,7 +66,6 @@ class DatabaseOverlay:
         pixel_world: PixelWorld,
         z: float,
         line_px: float,
-        atomic: Callable[[], AbstractContextManager] | None = None,
         prefix: str = "/overlay",
         group_size: int = GROUP_SIZE,
     ):
@@ -78,7 +74,6 @@ class DatabaseOverlay:
         self.pixel_world = pixel_world
         self.z = float(z)
         self.line_px = float(line_px)
-        self.atomic = atomic or nullcontext
         self._drawn: dict[Any, _Drawn] = {}
         self._groups = NodeGroups(group_size)
         self._group_nodes: dict[tuple, Any] = {}  # group → its viser handle
@@ -129,10 +124,9 @@ class DatabaseOverlay:
                 labels.append((obj.id, label))
                 dirty |= self._groups.place(obj.id, 0)
                 redrawn.append(obj.id)
-        for k in range(0, len(labels), LABEL_CHUNK):
-            with self.atomic():  # one wake-up of viser's loop per chunk, not one per message
-                for obj_id, label in labels[k : k + LABEL_CHUNK]:
-                    self._send_label(obj_id, label)
+        # never inside viser's atomic(): it holds every browser's video while the labels are built
+        for obj_id, label in labels:
+            self._send_label(obj_id, label)
         live = {o.id for o in objects}
         gone = [i for i in self._drawn if i not in live]
         for i in gone:
@@ -182,16 +176,15 @@ class DatabaseOverlay:
                 handle.remove()
                 del self._group_nodes[group]
             return
-        points = np.concatenate([d.points for d in parts])
-        colors = np.concatenate([d.colors for d in parts])
-        if handle is None:
-            self._group_nodes[group] = self.scene.add_line_segments(
-                self.group_name(group), points, colors, thickness=self.line_px, thickness_units="screen"
-            )
-            return
-        with self.atomic():  # both arrays together: a browser never draws new points with old colours
-            handle.points = points
-            handle.colors = colors
+        # the node sent again whole: one message with both arrays (a browser never draws new points with old
+        # colours) and no atomic() (it holds every browser's video while it lasts)
+        self._group_nodes[group] = self.scene.add_line_segments(
+            self.group_name(group),
+            np.concatenate([d.points for d in parts]),
+            np.concatenate([d.colors for d in parts]),
+            thickness=self.line_px,
+            thickness_units="screen",
+        )
 
     def _send_label(self, obj_id: Any, label: tuple[np.ndarray, str] | None) -> None:
         d = self._drawn[obj_id]

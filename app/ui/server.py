@@ -3,9 +3,9 @@
 Layout of the viser scene (DESIGN.md §"The operator interface"):
 
 * ``/video``: the frame as a textured plane in the pixel world (pixel (u, v) ↔ (u·k, v·k, 0));
-* ``/overlay/db/<object id>`` and ``/overlay/db_labels/<object id>``: each database object projected
-  through C and its name (shared by all clients; ``app.ui.db_overlay``); ``/overlay/beam``: the
-  range finder's last spot;
+* ``/overlay/db/group_<k>`` and ``/overlay/db_labels/<object id>``: the database objects projected
+  through C, up to 64 a node, and each one's name (shared by all clients; ``app.ui.db_overlay``);
+  ``/overlay/beam``: the range finder's last spot;
 * ``/overlay/marks`` and ``/overlay/marks_labels/*``: one client's workflow marks (client-scoped);
 * ``/world3d/...``: the virtual world in metres (objects, camera frustum, turret, beam), placed
   away from the image plane; a client's "3D world" view orbits it.
@@ -145,7 +145,7 @@ class InterfaceServer:
             pw = PixelWorld(g.source.width, g.source.height, k, x0)
             first = not self.views
             prefix = "/overlay" if first else f"/views/{name}/overlay"
-            overlay = DatabaseOverlay(self.server.scene, pw, Z_DB, LINE_PX, atomic=self.server.atomic, prefix=prefix)
+            overlay = DatabaseOverlay(self.server.scene, pw, Z_DB, LINE_PX, prefix=prefix)
             # the recent frames, for each operator's frozen frame and its scrubber (app/ui/recent.py)
             self.views[name] = ViewFeed(name, g, pw, overlay, RecentFrames(g, seconds=12.0, max_frames=120))
             x0 += (g.source.width + VIEW_GAP_PX) * k
@@ -394,7 +394,7 @@ class InterfaceServer:
 
     def _db_loop(self) -> None:
         # Woken by callbacks (a write is usually what they did); polls the database each second for
-        # other writers. Never blocks the frame loop: the overlay's nodes are sent in short groups.
+        # other writers. Never blocks the frame loop: the overlay's nodes are sent outside viser's atomic().
         while not self._stop.is_set():
             self._db_wake.wait(0.25)
             self._db_wake.clear()

@@ -105,7 +105,7 @@ def test_the_database_overlay_draws_a_mesh_spheres_outline_and_follows_it_when_i
     site.update_pose(obj, T2, None, method="test", client="test")
     scene.take()
     assert overlay.sync(cam, site.objects()) == 1 and overlay.redrawn == [rec.id]
-    assert ("set", overlay.node_of(rec.id), "points") in scene.take()
+    assert ("add", overlay.node_of(rec.id), "lines") in scene.take()
     drawn2 = overlay._drawn[rec.id].seg_uv
     outline2 = _sphere_outline_uv(cam, T2[:3, 3], r)
     assert _to_polyline(drawn2.reshape(-1, 2), outline2).max() <= 0.5

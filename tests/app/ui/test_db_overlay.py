@@ -109,10 +109,11 @@ def test_a_change_to_one_object_resends_only_its_groups_node_and_its_label(site)
     _nudge(site, "parallelepiped")
     assert overlay.sync(site.camera, site.objects()) == 1
     sent = scene.take()
-    assert sent and all(op == "set" for op, _, _ in sent)  # updated in place, no node created
-    assert {n for _, n, _ in sent} == {overlay.node_of(box.id), DO.label_name(box.id)}
-    assert ("set", overlay.node_of(box.id), "points") in sent and ("set", overlay.node_of(box.id), "colors") in sent
-    assert overlay.handles(box.id) == (lines, label)
+    # its group's node sent again whole (one message: points and colours together), its label updated in place
+    assert sorted(sent) == sorted(
+        [("add", overlay.node_of(box.id), "lines"), ("set", DO.label_name(box.id), "position")]
+    )
+    assert overlay.handles(box.id)[1] is label
     after = overlay.points_sent(box.id)
     assert after.shape == before.shape and np.abs(after - before).max() > 1e-3  # its own segments moved
     drawn = overlay._drawn[box.id]
@@ -122,8 +123,12 @@ def test_a_change_to_one_object_resends_only_its_groups_node_and_its_label(site)
     table = site.object("table")
     assert overlay.sync(site.camera, site.objects()) == 1 and overlay.redrawn == [table.id]
     sent = scene.take()
-    assert ("set", overlay.node_of(table.id), "colors") in sent
+    assert ("add", overlay.node_of(table.id), "lines") in sent
     assert {n for _, n, _ in sent} == {overlay.node_of(table.id), DO.label_name(table.id)}
+    assert (
+        np.asarray(overlay.handles(table.id)[0].colors).reshape(-1, 3).tolist()
+        != np.asarray(lines.colors).reshape(-1, 3).tolist()
+    )  # recoloured
     assert overlay.handles(table.id)[1].text == "table (stale)"
 
 
@@ -140,9 +145,10 @@ def test_a_removed_objects_nodes_go_and_a_new_camera_redraws_all(site, db):
     assert site.poll()
     assert overlay.sync(site.camera, site.objects()) == 0
     assert overlay.removed == [box.id] and box.id not in overlay.drawn_ids
-    assert label.removed and not lines.removed  # its label goes; its group stays, without it
-    assert ("set", group, "points") in scene.take()
-    assert len(np.asarray(lines.points)) == n_before - own
+    assert label.removed  # its label goes; its group is sent again without it
+    assert ("add", group, "lines") in scene.take()
+    assert overlay.node_of(site.object("table").id) == group  # the table shared its group
+    assert len(np.asarray(overlay.handles(site.object("table").id)[0].points)) == n_before - own
     assert overlay.object_at(site.camera.project(box.vertices_world()).mean(axis=0), 1e6) != "parallelepiped"
     cam = site.camera
     moved = Camera(
@@ -272,7 +278,7 @@ def test_a_sync_that_fails_part_way_draws_every_object_at_the_next(site):
     original = FakeHandle.__setattr__
 
     def flaky(self, key, value):
-        if key == "points" and fail["n"]:
+        if key == "position" and fail["n"]:
             fail["n"] -= 1
             raise RuntimeError("deque mutated during iteration")
         original(self, key, value)
@@ -287,7 +293,7 @@ def test_a_sync_that_fails_part_way_draws_every_object_at_the_next(site):
             pass
         scene.take()
         assert overlay.sync(site.camera, site.objects()) == len(site.objects())  # all again
-        assert ("set", overlay.node_of(box.id), "points") in scene.take()
+        assert ("add", overlay.node_of(box.id), "lines") in scene.take()
         assert np.allclose(overlay.points_sent(box.id), overlay._drawn[box.id].points)
     finally:
         FakeHandle.__setattr__ = original
