@@ -14,12 +14,19 @@ DESIGN.md), viewport 1200 × 700.
    the click's arrival (the start of viser's callback) to the end of the redraw that sends that
    client's updated marks (the message queued to the websocket).
 
-3. Stall table (also alone: ``--stall``, no chromium): a browser-like client (a websocket reader in
-   its own process, reporting its camera as the page does, no rendering) records when each video
-   frame arrives, at 50, 500 and 2,000 objects while one object's pose is written every 2 s (as
-   Accept writes it) over 12 s: the longest gap between frames and the frames/s; then selection
-   clicks at 2,000 objects (click → that client's marks sent). Targets (issue 13): gap ≤ 100 ms and
-   ≥ 28 frames/s at 2,000 objects; click → overlay p95 ≤ 50 ms.
+3. Scale table (also alone: ``--stall``, no chromium): browser-like clients (websocket readers in their
+   own processes, reporting their camera as the page does, no rendering) record when each message
+   arrives and what it holds (video frames, database overlay nodes), at 50, 500 and 2,000 objects:
+   the full draw at start (one reader connected before the server starts), for a browser joining
+   (5 joins, one after the other: the median and the worst), and after a new camera calibration (C's
+   centre moved 5 mm): the time to the last overlay message received, and each reader's longest video
+   gap meanwhile, counted from its connection (a browser with no frame yet counts); then the longest
+   gap while one object's pose is written every 2 s (as Accept writes it) over 12 s, and selection
+   clicks at 2,000 objects (click → that client's marks sent). ``--before DIR`` runs the same on
+   another checkout (its root) and prints it beside; bare viser's join (the video alone) is printed
+   under it. Targets (issues 13, 27): at 2,000 objects the full overlay within 2 s, no video frozen
+   more than 0.5 s, a watching browser's gap ≤ 150 ms when another joins, ≤ 100 ms and ≥ 28 frames/s
+   while the database changes; click → overlay p95 ≤ 50 ms.
 
 4. Undistortion table (also alone: ``--undistort``, no chromium): the frames/s the browser-like client
    receives from a 30 frames/s source at 640 × 480 and 1280 × 720, with the frames undistorted on
@@ -27,8 +34,8 @@ DESIGN.md), viewport 1200 × 700.
    with precomputed maps) and without, in the same run, and the remap's own time per frame.
    Targets (issue 15): ≥ 28 frames/s at 640 × 480 and ≥ 25 at 1280 × 720 with undistortion on.
 
-Run: ``.venv/bin/python bench/interface.py [--seconds 10] [--clicks 60] [--stall] [--undistort]``. Targets
-(issue 7): ≥ 25 frames/s; p95 click → overlay ≤ 100 ms.
+Run: ``.venv/bin/python bench/interface.py [--seconds 10] [--clicks 60] [--stall [--before DIR]] [--undistort]``.
+Targets (issue 7): ≥ 25 frames/s; p95 click → overlay ≤ 100 ms.
 """
 
 from __future__ import annotations
@@ -347,6 +354,9 @@ def _moved_camera(cam):
     return Camera(K @ T[:3], cam.width, cam.height)
 
 
+JOINS = 5  # browsers joining one after the other, for the join figures
+
+
 def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks: int, rng) -> dict:
     """At ``n_objects``: the full draw at start, for a joining browser and after a new camera calibration
     (time to the last overlay message received; each browser's longest video gap meanwhile, counted from
@@ -366,14 +376,20 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
         done = _settled(server, a, t0)
         r["start_s"], r["start_gap_ms"] = done - t0, a.longest_gap_ms(t0, done)
         time.sleep(2.0)
-        b = Reader(server.port)  # a browser joins
-        readers.append(b)
-        tb = b.wait_connected()
-        done = _settled(server, b, tb)
-        time.sleep(1.0)
-        r["join_s"], r["join_gap_ms"] = done - tb, b.longest_gap_ms(tb, done)
-        r["join_other_gap_ms"] = a.longest_gap_ms(tb - 0.5, done + 1.0)
-        time.sleep(1.0)
+        joins = []
+        for k in range(JOINS):  # a browser joins (then leaves, but for the last one, which stays)
+            b = Reader(server.port)
+            readers.append(b)
+            tb = b.wait_connected()
+            done = _settled(server, b, tb)
+            time.sleep(1.0)
+            joins.append((done - tb, b.longest_gap_ms(tb, done), a.longest_gap_ms(tb - 0.5, done + 1.0)))
+            if k < JOINS - 1:
+                readers.pop().stop()
+            time.sleep(1.0)
+        # the median of the joins, and the worst (a loaded machine's single join is noise: 0.07-0.40 s)
+        for key, values in zip(("join_s", "join_gap_ms", "join_other_gap_ms"), zip(*joins)):
+            r[key], r[key + "_max"] = float(np.median(values)), float(np.max(values))
         tc = time.time()  # a new camera calibration: every object redrawn
         site.set_camera(_moved_camera(site.camera), rms_px=0.5, residuals_px=np.zeros(0), points={}, client="bench")
         done = max(_settled(server, x, tc) for x in readers)
@@ -485,9 +501,12 @@ STALL_COLUMNS = (
     ("scene nodes of the overlay", "nodes", "{:.0f}", "—"),
     ("full draw at start, to the last overlay message (s)", "start_s", "{:.2f}", "≤ 2"),
     ("  its browser's longest video gap from the start (ms)", "start_gap_ms", "{:.0f}", "≤ 500"),
-    ("full draw for a joining browser, from its connection (s)", "join_s", "{:.2f}", "≤ 2"),
-    ("  the joining browser's longest video gap from its connection (ms)", "join_gap_ms", "{:.0f}", "≤ 500"),
-    ("  the watching browser's longest video gap meanwhile (ms)", "join_other_gap_ms", "{:.0f}", "≤ 150"),
+    ("full draw for a joining browser, from its connection (s), median of 5", "join_s", "{:.2f}", "≤ 2"),
+    ("  the same, the slowest of the 5 joins", "join_s_max", "{:.2f}", "≤ 2"),
+    ("  the joining browser's longest video gap from its connection (ms), median", "join_gap_ms", "{:.0f}", "≤ 500"),
+    ("  the same, the worst of the 5 joins", "join_gap_ms_max", "{:.0f}", "≤ 500"),
+    ("  the watching browser's longest video gap meanwhile (ms), median", "join_other_gap_ms", "{:.0f}", "≤ 150"),
+    ("  the same, the worst of the 5 joins", "join_other_gap_ms_max", "{:.0f}", "≤ 150"),
     ("full draw after a new camera calibration (s)", "calib_s", "{:.2f}", "≤ 2"),
     ("  the browsers' longest video gap meanwhile (ms)", "calib_gap_ms", "{:.0f}", "≤ 500 (watching: ≤ 150)"),
     ("longest video gap, a pose written every 2 s (ms)", "gap_ms", "{:.0f}", "≤ 100"),
