@@ -166,9 +166,11 @@ def clip_segments_rect(
     P = np.asarray(seg_uv, dtype=float).reshape(-1, 2, 2)
     if len(P) == 0:
         return P, np.zeros(0, np.int64)
-    p0, d = P[:, 0], P[:, 1] - P[:, 0]
     lo = np.array([-margin_px, -margin_px])
     hi = np.array([width - 1 + margin_px, height - 1 + margin_px])
+    if np.all((P >= lo) & (P <= hi)):  # wholly inside (most objects): nothing to clip
+        return P, np.arange(len(P))
+    p0, d = P[:, 0], P[:, 1] - P[:, 0]
     t0 = np.zeros(len(P))
     t1 = np.ones(len(P))
     ok = np.ones(len(P), bool)

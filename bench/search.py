@@ -28,6 +28,14 @@ Cases:
     table point that lies on the box itself), said (Accept asks once more: near-ties, weak σ or match), or
     silent: a wrong pose offered with nothing said.
 
+(e) ``--edges``, alone (the search's time against the model's size): a rack of 1, 4 and 32 upright sticks
+    (12, 48 and 384 edges, every one a sharp edge the image shows; 2 × 2 and 4 × 8 sticks on a footprint
+    of 12 × 20 cm, 8 cm tall, gaps of a third of the pitch) put in the parallelepiped's place at random places
+    and headings on the table, rendered with the workcell as in (b) without the grey rectangle; per placement
+    one click on the rack (a success is (b)'s) and one on the bare table 15 cm beside it (its right answer:
+    no pose fits). CPU seconds per call, p50 / p95, beside the same run on another checkout (``--before DIR``).
+    Target (issue 27): p95 ≤ 1 s on models of a few hundred edges, a refusal faster than a success.
+
 Success: the top candidate (the one Accept writes) within 1° and 5 mm of the truth, up to the model's
 symmetries (for the upright cylinder: its axis and origin; its heading is not seen). "σ ok": of the
 right top candidates, the share whose error lies inside the 95 % region of their stated covariance
@@ -65,6 +73,8 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+if os.environ.get("MCIT_BENCH_TREE"):  # measure another checkout's search (``--before``) with this bench
+    sys.path.insert(0, os.environ["MCIT_BENCH_TREE"])
 sys.path.insert(0, str(ROOT / "bench"))
 
 from benchenv import pin_one_core  # noqa: E402
@@ -539,14 +549,146 @@ def table_rows(title: str, groups: dict[str, list[Case]], target: float, total: 
     print()
 
 
+def rack(rows: int, cols: int) -> BRep:
+    """(e): ``rows`` × ``cols`` upright sticks on a 12 × 20 cm footprint, 8 cm tall (12 edges a stick)."""
+    px, py = 0.12 / rows, 0.20 / cols
+    V, F = [], []
+    for i in range(rows):
+        for j in range(cols):
+            w = (2 / 3 if rows * cols > 1 else 1.0) * np.array([px, py])
+            b = BRep.box(w[0], w[1], 0.08)
+            shift = [(i + 0.5) * px - 0.06, (j + 0.5) * py - 0.10, 0.0]
+            F += [tuple(k + len(V) * 8 for k in f) for f in b.faces]
+            V.append(b.vertices + shift)
+    return BRep.from_faces(np.vstack(V), F)
+
+
+def prism_cases(rng, scene, shape: tuple[int, int], n: int) -> list[tuple[Case, np.ndarray]]:
+    """(e): ``n`` placements of a rack of ``shape`` sticks in the parallelepiped's place; each case with a
+    click on the bare table beside it."""
+    from app.render.renderer import Renderer
+
+    model = rack(*shape)
+    table = table_plane(scene)
+    half = np.array(scene.body("table").model.bounds()[1][:2])
+    base = {b.name: b.pose_at(0.0) for b in scene.bodies}
+    others = [base[o][:3, 3][:2] for o in ("unknown_box", "unknown_cylinder")]
+    out = []
+    while len(out) < n:
+        xy = rng.uniform(-half + 0.08, half - 0.2)
+        if any(np.linalg.norm(xy - c) < 0.25 for c in others):
+            continue
+        T = make_T(rot_z(rng.uniform(0, 2 * np.pi)), [xy[0], xy[1], 0.0])
+        uv = scene.camera.project_obj(T, model.vertices)
+        off = np.array([xy[0] + 0.15, xy[1], 0.0])
+        beside = scene.camera.project(off[None])[0]
+        if not (scene.camera.in_image(uv, 5.0).all() and scene.camera.in_image(beside[None], 5.0)[0]):
+            continue
+        bodies = tuple(
+            dataclasses.replace(b, model=model, T_world_obj=T, motion=())
+            if b.name == "parallelepiped"
+            else dataclasses.replace(b, T_world_obj=base[b.name], motion=())
+            for b in scene.bodies
+        )
+        sc = dataclasses.replace(
+            scene,
+            bodies=bodies,
+            render=dataclasses.replace(scene.render, aa_samples=8, seed=int(rng.integers(1 << 30))),
+        )
+        img = Renderer(sc).render(0.0, len(out))
+        T_old = make_T(np.eye(3), [0.0, 0.0, 0.0])
+        c = Case("e", f"rack {shape} #{len(out)}", scene.camera, model, T_old, T, img, None, table, None)
+        out.append((dataclasses.replace(c, click=random_click(rng, scene.camera, model, T)), beside))
+    return out
+
+
+def edges_rows(seed: int, placements: int, shapes=((1, 1), (2, 2), (4, 8))) -> list[dict]:
+    """(e): per rack, CPU seconds of the clicks on it and of the clicks beside it, and their outcomes."""
+    rng = np.random.default_rng(seed)
+    scene = load_scene(default_scene_path())
+    rows = []
+    for k in shapes:
+        cases = prism_cases(rng, scene, k, placements)
+        if not rows:  # warm-up (compiled kernels, caches): not timed
+            run_search(cases[0][0])
+        hit, miss, right, refused = [], [], 0, 0
+        for c, beside in cases:
+            top, _, cpu, *_ = run_search(c)
+            hit.append(cpu)
+            right += bool(top)
+            t0 = time.process_time()
+            try:
+                search_pose(c.camera, c.model, c.T_old, beside, c.image, table=c.table)
+            except NoPoseFits:
+                refused += 1
+            miss.append(time.process_time() - t0)
+        rows.append(
+            {"edges": int(len(cases[0][0].model.edges)), "hit": hit, "miss": miss, "right": right, "refused": refused}
+        )
+        print(
+            f"  {rows[-1]['edges']} edges: p95 {np.percentile(hit, 95):.2f} s, "
+            f"refusal p95 {np.percentile(miss, 95):.2f} s",
+            file=sys.stderr,
+            flush=True,
+        )
+    return rows
+
+
+def edges_table(seed: int, placements: int, before: str | None) -> None:
+    import json
+    import subprocess
+
+    old = None
+    if before:
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--edges-json", "--seed", str(seed)]
+        cmd += ["--placements", str(placements)]
+        env = dict(os.environ, MCIT_BENCH_TREE=str(Path(before).resolve()))
+        old = json.loads(
+            subprocess.run(cmd, env=env, capture_output=True, text=True, check=True).stdout.splitlines()[-1]
+        )
+    rows = edges_rows(seed, placements)
+    print(
+        f"(e) the search's time against the model's edges: a rack of sticks in the parallelepiped's place, "
+        f"{placements} placements each, rendered; CPU s per call (one core); load average {os.getloadavg()[0]:.1f}"
+        + (f"; before = {before}" if before else "")
+    )
+    print()
+    print("| edges | | clicks on it: right | p50 / p95 (s) | clicks beside it: refused | p50 / p95 (s) |")
+    print("|---|---|---|---|---|---|")
+    for i, r in enumerate(rows):
+        for tag, x in (("before", old[i] if old else None), ("after", r)):
+            if x is None:
+                continue
+            h, m = np.array(x["hit"]), np.array(x["miss"])
+            print(
+                f"| {x['edges']} | {tag} | {x['right']} of {len(h)} | {np.percentile(h, 50):.2f} / "
+                f"{np.percentile(h, 95):.2f} | {x['refused']} of {len(m)} | {np.percentile(m, 50):.2f} / "
+                f"{np.percentile(m, 95):.2f} |"
+            )
+    print()
+    print("target: p95 ≤ 1 s at a few hundred edges; a refusal faster than a success")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--placements", type=int, default=10, help="(b): random placements per object")
     ap.add_argument("--cube", type=int, default=22, help="(c): frames of the real cube")
     ap.add_argument("--skip", default="", help="groups to skip, e.g. 'b' or 'bcd'")
+    ap.add_argument("--edges", action="store_true", help="only (e): the time against the model's edges")
+    ap.add_argument("--before", help="with --edges: beside the same run on another checkout (its root)")
+    ap.add_argument("--edges-json", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     pinned = pin_one_core()
+    if args.edges_json:
+        import json
+
+        print(json.dumps(edges_rows(args.seed, args.placements)))
+        return 0
+    if args.edges:
+        print(f"  {pinned}, one BLAS/OpenCV thread")
+        edges_table(args.seed, args.placements, args.before)
+        return 0
     rng = np.random.default_rng(args.seed)
     scene = load_scene(default_scene_path())
     load0 = os.getloadavg()[0]

@@ -1,20 +1,23 @@
-"""The database overlay shared by every client: one scene node per object, redrawn only when it changes.
+"""The database overlay shared by every client: the objects' wireframes in a few shared nodes, redrawn
+only where they change.
 
-Each object is drawn as ``/overlay/db/<object id>`` (its wireframe through C, line segments) and
-``/overlay/db_labels/<object id>`` (its name), kept with its projection (the segments the operator
-sees, used to pick an object by clicking). ``sync(camera, objects)`` compares each object's
-(version, status, name) with what was drawn: an unchanged object sends nothing, a changed one
-updates its nodes in place (``handle.points``/``colors``, ``text``/``position``), a new one gets
-its nodes, a removed one loses them. Every object is redrawn only when the camera calibration C
-changes. It runs on the interface's database thread, never in the video frame's path.
+The wireframes (line segments, coloured per vertex by status) are packed in groups of up to
+GROUP_SIZE objects, one node each: ``/overlay/db/group_<k>`` (``app.ui.node_groups``); each object's
+name is its own label ``/overlay/db_labels/<object id>``. Each object's projection is kept (the
+segments the operator sees, used to pick an object by clicking: picking needs no node of its own).
+``sync(camera, objects)`` compares each object's (version, status, name) with what was drawn: an
+unchanged object sends nothing, a changed one sends its group's node again (one message, both arrays)
+and updates its label in place, a new one joins a group, a removed one leaves it. Every object is
+redrawn only when the camera calibration C changes. It runs on the interface's database thread, never
+in the video frame's path, and never inside viser's ``atomic()``, which would hold every browser's
+video while it lasts (on a loaded machine a thread can be descheduled for 100 ms and more inside it).
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Iterable
-from contextlib import AbstractContextManager, nullcontext
-from dataclasses import dataclass
+from collections.abc import Iterable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -24,10 +27,11 @@ from app.workflows.site import SiteObject
 from core.camera import Camera
 
 from .drawing import draw_object
+from .node_groups import NodeGroups
 
 __all__ = ["DatabaseOverlay"]
 
-SEND_CHUNK = 100  # objects sent per atomic group (a full redraw never holds viser's buffer for long)
+GROUP_SIZE = 64  # objects per wireframe node: a full draw of 2,000 objects is 32 nodes, a change resends ~64 objects
 MAX_OUTLINE_SHARE = 0.25  # an outline larger than this share of the image is not picked by a click inside it
 
 
@@ -38,12 +42,13 @@ class _Drawn:
     seg_uv: np.ndarray  # (K, 2, 2) the visible segments drawn, pixels (for picking)
     outline: np.ndarray | None = None  # (H, 2) its drawn outline's convex hull, pixels: a click inside picks it
     depth: float = np.inf  # its centre's depth from the camera (the nearest of several outlines is picked)
-    lines: Any = None  # viser handle of /overlay/db/<id>, or None when nothing is in view
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3), np.float32))  # its part of its group's node
+    colors: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3), np.uint8))
     label: Any = None  # viser handle of /overlay/db_labels/<id>, or None
 
 
 class DatabaseOverlay:
-    """Per-object nodes of the database overlay.
+    """The database overlay's nodes: grouped wireframes, one label per object.
 
     Parameters
     ----------
@@ -51,8 +56,8 @@ class DatabaseOverlay:
     pixel_world : PixelWorld (the camera's image, where it lies)
     z : the overlay plane (world units, in front of the image)
     line_px : line thickness, screen pixels
-    atomic : callable returning a context manager that groups messages (``server.atomic``)
-    prefix : the start of the nodes' names ("/overlay": ``/overlay/db/<id>``)
+    prefix : the start of the nodes' names ("/overlay": ``/overlay/db/group_<k>``)
+    group_size : objects per wireframe node
     """
 
     def __init__(
@@ -61,117 +66,147 @@ class DatabaseOverlay:
         pixel_world: PixelWorld,
         z: float,
         line_px: float,
-        atomic: Callable[[], AbstractContextManager] | None = None,
         prefix: str = "/overlay",
+        group_size: int = GROUP_SIZE,
     ):
         self.scene = scene
         self.prefix = prefix  # the nodes' names start so (each camera's overlay has its own)
         self.pixel_world = pixel_world
         self.z = float(z)
         self.line_px = float(line_px)
-        self.atomic = atomic or nullcontext
         self._drawn: dict[Any, _Drawn] = {}
+        self._groups = NodeGroups(group_size)
+        self._group_nodes: dict[tuple, Any] = {}  # group → its viser handle
+        self._offsets: dict[Any, tuple[int, int]] = {}  # object id → (first, end) of its segments in its group's node
         self._camera_key: Any = None
         self._pick: tuple[np.ndarray, np.ndarray] = (np.zeros((0, 2, 2)), np.zeros(0, dtype=object))
         self._lock = threading.Lock()  # one sync at a time
         self.redrawn: list[Any] = []  # ids drawn by the last sync (new, changed, or all on a new C)
         self.removed: list[Any] = []  # ids whose nodes the last sync removed
 
-    @staticmethod
-    def node_name(obj_id: Any, prefix: str = "/overlay") -> str:
-        return f"{prefix}/db/{obj_id}"
+    def group_name(self, group: tuple) -> str:
+        return f"{self.prefix}/db/group_{group[1]}"
 
     @staticmethod
     def label_name(obj_id: Any, prefix: str = "/overlay") -> str:
         return f"{prefix}/db_labels/{obj_id}"
+
+    def node_of(self, obj_id: Any) -> str | None:
+        """The name of the node that holds an object's wireframe, or None."""
+        group = self._groups.group_of(obj_id)
+        return None if group is None else self.group_name(group)
 
     # ------------------------------------------------------------------ sync
     def sync(self, camera: Camera, objects: Iterable[SiteObject]) -> int:
         """Bring the nodes up to date with ``objects`` seen through ``camera``; returns how many
         objects were redrawn (0 when nothing changed)."""
         with self._lock:
-            objects = list(objects)
-            ckey = (camera.C.tobytes(), int(camera.width), int(camera.height))
-            full = ckey != self._camera_key
-            self._camera_key = ckey
-            pw = self.pixel_world
-            todo = []
-            for obj in objects:
-                key = (int(obj.version), obj.status, obj.name)
-                old = self._drawn.get(obj.id)
-                if full or old is None or old.key != key:
-                    batch, label, wire = draw_object(camera, obj, pw.width, pw.height)
-                    todo.append((obj, key, batch, label, wire, _outline(camera, obj, wire)))
-            live = {o.id for o in objects}
-            gone = [i for i in self._drawn if i not in live]
-            for k in range(0, max(len(todo), 1), SEND_CHUNK):
-                with self.atomic():
-                    for obj, key, batch, label, wire, outline in todo[k : k + SEND_CHUNK]:
-                        self._send(obj, key, batch, label, wire)
-                        self._drawn[obj.id].outline, self._drawn[obj.id].depth = outline
-                    if k == 0:
-                        for i in gone:
-                            self._remove(self._drawn.pop(i))
-            self.redrawn = [t[0].id for t in todo]
-            self.removed = gone
-            if todo or gone:
-                order = [o.id for o in objects if o.id in self._drawn]
-                segs = [self._drawn[i].seg_uv for i in order]
-                owners = [np.full(len(s), self._drawn[i].name, dtype=object) for i, s in zip(order, segs)]
-                self._pick = (
-                    np.concatenate(segs) if segs else np.zeros((0, 2, 2)),
-                    np.concatenate(owners) if owners else np.zeros(0, dtype=object),
-                )
-            return len(todo)
+            try:
+                return self._sync(camera, list(objects))
+            except BaseException:
+                # part of it sent (a message viser failed to queue): the next sync draws every object again
+                self._camera_key = None
+                raise
 
-    def _send(self, obj: SiteObject, key: tuple, batch, label, wire) -> None:
+    def _sync(self, camera: Camera, objects: list[SiteObject]) -> int:
+        ckey = (camera.C.tobytes(), int(camera.width), int(camera.height))
+        full = ckey != self._camera_key
+        self._camera_key = ckey
+        pw = self.pixel_world
+        dirty: set[tuple] = set()
+        redrawn, labels = [], []
+        for obj in objects:
+            key = (int(obj.version), obj.status, obj.name)
+            old = self._drawn.get(obj.id)
+            if full or old is None or old.key != key:
+                batch, label, wire = draw_object(camera, obj, pw.width, pw.height)
+                self._store(obj, key, batch, wire, _outline(camera, obj, wire))
+                labels.append((obj.id, label))
+                dirty |= self._groups.place(obj.id, 0)
+                redrawn.append(obj.id)
+        # never inside viser's atomic(): it holds every browser's video while the labels are built
+        for obj_id, label in labels:
+            self._send_label(obj_id, label)
+        live = {o.id for o in objects}
+        gone = [i for i in self._drawn if i not in live]
+        for i in gone:
+            d = self._drawn.pop(i)
+            if d.label is not None:
+                d.label.remove()
+            dirty.add(self._groups.drop(i))
+            self._offsets.pop(i, None)
+        for group in sorted(g for g in dirty if g is not None):
+            self._send_group(group)
+        self.redrawn = redrawn
+        self.removed = gone
+        if redrawn or gone:
+            order = [o.id for o in objects if o.id in self._drawn]
+            segs = [self._drawn[i].seg_uv for i in order]
+            owners = [np.full(len(s), self._drawn[i].name, dtype=object) for i, s in zip(order, segs)]
+            self._pick = (
+                np.concatenate(segs) if segs else np.zeros((0, 2, 2)),
+                np.concatenate(owners) if owners else np.zeros(0, dtype=object),
+            )
+        return len(redrawn)
+
+    def _store(self, obj: SiteObject, key: tuple, batch, wire, outline) -> None:
+        """Keep one object's projection (for picking) and its part of its group's arrays."""
         d = self._drawn.get(obj.id)
         if d is None:
             d = self._drawn[obj.id] = _Drawn(key, obj.name, np.zeros((0, 2, 2)))
         d.key, d.name = key, obj.name
         d.seg_uv = wire.seg_uv[wire.visible] if wire is not None else np.zeros((0, 2, 2))
-        pw = self.pixel_world
+        d.outline, d.depth = outline
         if len(batch):
-            points, colors = batch.world(pw, self.z)
-            points = points.astype(np.float32)
-            if d.lines is None:
-                d.lines = self.scene.add_line_segments(
-                    self.node_name(obj.id, self.prefix),
-                    points,
-                    colors,
-                    thickness=self.line_px,
-                    thickness_units="screen",
-                )
-            else:
-                d.lines.points = points
-                d.lines.colors = colors
-        elif d.lines is not None:
-            d.lines.remove()
-            d.lines = None
-        if label is not None:
-            uv, text = label
-            position = tuple(float(v) for v in pw.to_world(uv, self.z))
-            if d.label is None:
-                d.label = self.scene.add_label(
-                    self.label_name(obj.id, self.prefix),
-                    text,
-                    position=position,
-                    anchor="bottom-center",
-                    font_screen_scale=0.9,
-                )
-            else:
-                if d.label.text != text:
-                    d.label.text = text
-                d.label.position = position
-        elif d.label is not None:
-            d.label.remove()
-            d.label = None
+            points, colors = batch.world(self.pixel_world, self.z)
+            d.points, d.colors = points.astype(np.float32), colors
+        else:
+            d.points, d.colors = np.zeros((0, 2, 3), np.float32), np.zeros((0, 2, 3), np.uint8)
 
-    @staticmethod
-    def _remove(d: _Drawn) -> None:
-        for handle in (d.lines, d.label):
+    def _send_group(self, group: tuple) -> None:
+        """Send one group's wireframes as one node (created, updated in place, or removed when empty)."""
+        members = self._groups.members(group)
+        parts = [self._drawn[i] for i in members]
+        n = np.cumsum([0] + [len(d.points) for d in parts])
+        for i, a, b in zip(members, n[:-1], n[1:]):
+            self._offsets[i] = (int(a), int(b))
+        handle = self._group_nodes.get(group)
+        if n[-1] == 0:
             if handle is not None:
                 handle.remove()
+                del self._group_nodes[group]
+            return
+        # the node sent again whole: one message with both arrays (a browser never draws new points with old
+        # colours) and no atomic() (it holds every browser's video while it lasts)
+        self._group_nodes[group] = self.scene.add_line_segments(
+            self.group_name(group),
+            np.concatenate([d.points for d in parts]),
+            np.concatenate([d.colors for d in parts]),
+            thickness=self.line_px,
+            thickness_units="screen",
+        )
+
+    def _send_label(self, obj_id: Any, label: tuple[np.ndarray, str] | None) -> None:
+        d = self._drawn[obj_id]
+        if label is None:
+            if d.label is not None:
+                d.label.remove()
+                d.label = None
+            return
+        uv, text = label
+        position = tuple(float(v) for v in self.pixel_world.to_world(uv, self.z))
+        if d.label is None:
+            d.label = self.scene.add_label(
+                self.label_name(obj_id, self.prefix),
+                text,
+                position=position,
+                anchor="bottom-center",
+                font_screen_scale=0.9,
+            )
+            return
+        if d.label.text != text:
+            d.label.text = text
+        d.label.position = position
 
     # ------------------------------------------------------------------ reading
     @property
@@ -179,10 +214,26 @@ class DatabaseOverlay:
         """Ids of the objects the overlay holds (drawn, or out of view)."""
         return set(self._drawn)
 
+    @property
+    def node_count(self) -> int:
+        """How many scene nodes the overlay holds (its wireframe groups and labels)."""
+        return len(self._group_nodes) + sum(d.label is not None for d in self._drawn.values())
+
     def handles(self, obj_id: Any) -> tuple[Any, Any]:
-        """(lines, label) handles of one object (None where nothing is drawn)."""
+        """(its group's lines, its label) handles of one object (None where nothing is drawn)."""
         d = self._drawn.get(obj_id)
-        return (None, None) if d is None else (d.lines, d.label)
+        if d is None:
+            return None, None
+        group = self._groups.group_of(obj_id)
+        return self._group_nodes.get(group) if len(d.points) else None, d.label
+
+    def points_sent(self, obj_id: Any) -> np.ndarray:
+        """The segments (K, 2, 3) of one object in its group's node, as viser holds them."""
+        lines, _ = self.handles(obj_id)
+        if lines is None:
+            return np.zeros((0, 2, 3), np.float32)
+        a, b = self._offsets[obj_id]
+        return np.asarray(lines.points).reshape(-1, 2, 3)[a:b]
 
     def object_at(self, uv: np.ndarray, radius_px: float) -> str | None:
         """The name of the object whose drawn (visible) wireframe passes nearest to pixel ``uv`` (2,),
@@ -217,10 +268,9 @@ def _outline(camera: Camera, obj: SiteObject, wire) -> tuple[np.ndarray | None, 
         X = obj.T_world_obj[:3, 3][None]
     if obj.kind == "table" or wire is None or len(wire.seg_uv) == 0 or not np.all(camera.depth(X) > 0):
         return None, float("inf")
-    pts = wire.seg_uv.reshape(-1, 2).astype(np.float32)
-    if len(np.unique(pts, axis=0)) < 3:
+    hull = cv2.convexHull(wire.seg_uv.reshape(-1, 2).astype(np.float32)).reshape(-1, 2)
+    if len(hull) < 3:  # fewer than 3 distinct points drawn
         return None, float("inf")
-    hull = cv2.convexHull(pts).reshape(-1, 2)
     if cv2.contourArea(hull) > MAX_OUTLINE_SHARE * camera.width * camera.height:
         return None, float("inf")
     return hull, float(camera.depth(X.mean(axis=0)[None])[0])

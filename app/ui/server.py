@@ -3,9 +3,9 @@
 Layout of the viser scene (DESIGN.md §"The operator interface"):
 
 * ``/video``: the frame as a textured plane in the pixel world (pixel (u, v) ↔ (u·k, v·k, 0));
-* ``/overlay/db/<object id>`` and ``/overlay/db_labels/<object id>``: each database object projected
-  through C and its name (shared by all clients; ``app.ui.db_overlay``); ``/overlay/beam``: the
-  range finder's last spot;
+* ``/overlay/db/group_<k>`` and ``/overlay/db_labels/<object id>``: the database objects projected
+  through C, up to 64 a node, and each one's name (shared by all clients; ``app.ui.db_overlay``);
+  ``/overlay/beam``: the range finder's last spot;
 * ``/overlay/marks`` and ``/overlay/marks_labels/*``: one client's workflow marks (client-scoped);
 * ``/world3d/...``: the virtual world in metres (objects, camera frustum, turret, beam), placed
   away from the image plane; a client's "3D world" view orbits it.
@@ -14,8 +14,8 @@ Threads: viser runs callbacks on its pool (they only change state). The frame lo
 (``mcit-redraw``), woken by each new video frame or by a callback, sends the frame, then each
 client's marks inside ``server.atomic()``. The database thread (``mcit-database``) polls the
 database each second and, when the site changed, redraws only the objects whose version or status
-moved (every object only when C changed), the 3D world likewise, and rebuilds the ray-casting
-index: the video never waits for the database.
+moved (every object only when C changed), the 3D world likewise, and builds the changed objects' ray
+casters: the video never waits for the database.
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ from .db_overlay import DatabaseOverlay
 from .inbound import guard_inbound_messages
 from .recent import RecentFrames
 from .robot_overlay import RobotOverlay
+from .viser_hints import share_prop_hints
 from .world3d import World3D
 from .wslog import quiet_malformed_messages
 
@@ -115,6 +116,7 @@ class InterfaceServer:
                 "give the first camera's video and name each other one as the scene does"
             )
         self.jpeg_quality = int(jpeg_quality)
+        share_prop_hints()  # a full draw builds thousands of handles (app/ui/viser_hints.py)
         self.access = AccessPolicy(host=host, allow_origins=tuple(allow_origins), token=token)
         quiet_malformed_messages()  # a message a browser sent that cannot be read: one log line, not a traceback
         self.server = open_viser_server(self.access, host=host, port=port, label="mcit", verbose=verbose)
@@ -143,7 +145,7 @@ class InterfaceServer:
             pw = PixelWorld(g.source.width, g.source.height, k, x0)
             first = not self.views
             prefix = "/overlay" if first else f"/views/{name}/overlay"
-            overlay = DatabaseOverlay(self.server.scene, pw, Z_DB, LINE_PX, atomic=self.server.atomic, prefix=prefix)
+            overlay = DatabaseOverlay(self.server.scene, pw, Z_DB, LINE_PX, prefix=prefix)
             # the recent frames, for each operator's frozen frame and its scrubber (app/ui/recent.py)
             self.views[name] = ViewFeed(name, g, pw, overlay, RecentFrames(g, seconds=12.0, max_frames=120))
             x0 += (g.source.width + VIEW_GAP_PX) * k
@@ -346,7 +348,7 @@ class InterfaceServer:
 
     def sync_database(self) -> int:
         """Bring the database overlay and the 3D world up to date (only what changed) and build the
-        ray-casting index; the database thread's work. Returns how many objects were redrawn."""
+        changed objects' ray casters; the database thread's work. Returns how many objects were redrawn."""
         site = self.site
         revision = site.revision
         objects = site.objects()
@@ -354,7 +356,13 @@ class InterfaceServer:
         for feed in self.views.values():
             n = max(n, feed.overlay.sync(site.camera_of(feed.name), objects))
         self.world3d.sync(site, objects)
-        site.surfaces()  # build the ray-casting index now, not on the operator's next click
+        # the ray casters of the objects that changed built now, not on the operator's next click (one ray cast:
+        # 0.03 s at 2,000 objects). Not site.surfaces() (its one trimesh of every object, which the ray casts no
+        # longer use, was built again at each change; each old one became cyclic garbage that only a full
+        # collection frees: 10 changes at 500 objects left 13 MB of arrays, bench/soak.py's growth)
+        cam = site.camera
+        origin, dirs = cam.rays(np.array([[cam.width / 2.0, cam.height / 2.0]]))
+        site.raycast(np.asarray(origin).reshape(-1, 3)[0], dirs[0])
         self._db_revision = revision
         return n
 
@@ -392,7 +400,7 @@ class InterfaceServer:
 
     def _db_loop(self) -> None:
         # Woken by callbacks (a write is usually what they did); polls the database each second for
-        # other writers. Never blocks the frame loop: the overlay's nodes are sent in short groups.
+        # other writers. Never blocks the frame loop: the overlay's nodes are sent outside viser's atomic().
         while not self._stop.is_set():
             self._db_wake.wait(0.25)
             self._db_wake.clear()

@@ -16,9 +16,12 @@ from app.overlay import COLORS, STATUS_COLORS
 from app.workflows.site import Site
 from core.transforms import invert_T
 
+from .node_groups import NodeGroups
+
 __all__ = ["World3D"]
 
 R_VIEWER_WORLD = np.eye(3)  # the site's frame is the viewer's (z up), shifted by the offset
+GROUP_SIZE = 64  # objects per mesh node (app/ui/node_groups.py)
 
 
 def _wxyz(R: np.ndarray) -> np.ndarray:
@@ -28,19 +31,24 @@ def _wxyz(R: np.ndarray) -> np.ndarray:
 class World3D:
     """Scene nodes of the virtual world; ``sync(site)`` refreshes what changed.
 
-    Each object is ``/world3d/objects/<object id>`` (its mesh, placed at ``T_world_obj``) with its
-    edges as a child: a pose change moves the node, a status change recolours it, a new model
-    replaces it, a removed object's node goes. The camera and the turret are redrawn only when
-    their calibrations change."""
+    The objects are packed by colour (status) and opacity (the table's) in groups of up to GROUP_SIZE
+    (``app.ui.node_groups``): ``/world3d/objects/<status>_<k>`` is one mesh of its objects' triangles placed
+    at their ``T_world_obj``, with their edges as a child. A change to an object resends its group (and the
+    group it left, when its status changed); a removed object leaves its group. The camera and the turret
+    are redrawn only when their calibrations change."""
 
-    def __init__(self, scene: viser.SceneApi, offset: np.ndarray):
+    def __init__(self, scene: viser.SceneApi, offset: np.ndarray, group_size: int = GROUP_SIZE):
         self.scene = scene
         self.offset = np.asarray(offset, float)
         self.root = scene.add_frame(
             "/world3d", show_axes=False, position=tuple(self.offset), wxyz=_wxyz(R_VIEWER_WORLD)
         )
         scene.add_grid("/world3d/grid", width=4.0, height=4.0, plane="xy", cell_size=0.1, section_size=0.5)
-        self._objects: dict[Any, tuple[tuple, Any, Any]] = {}  # id → ((version, status, name), model, handle)
+        # id → ((version, status, name), (V (N, 3), F (M, 3), E (K, 2, 3)) in the site's frame)
+        self._objects: dict[Any, tuple[tuple, tuple]] = {}
+        self._groups = NodeGroups(group_size)
+        self._group_nodes: set[tuple] = set()  # the groups sent
+        self._resend = False  # a sync failed part way: send every group at the next
         self._sensors_key: Any = None
         self.redrawn: list[Any] = []  # ids the last sync drew or moved
 
@@ -52,11 +60,22 @@ class World3D:
         """Same as ``sync(site)``."""
         self.sync(site)
 
+    @staticmethod
+    def group_name(group: tuple) -> str:
+        (status, table), index = group
+        return f"/world3d/objects/{status}{'_table' if table else ''}_{index}"
+
+    def node_of(self, obj_id: Any) -> str | None:
+        """The name of the mesh node that holds an object, or None."""
+        group = self._groups.group_of(obj_id)
+        return None if group is None else self.group_name(group)
+
     def sync(self, site: Site, objects: Any = None) -> int:
         """Bring the objects' nodes (and the sensors) up to date; returns how many objects were drawn."""
         objects = site.objects() if objects is None else objects
         seen = set()
         self.redrawn = []
+        dirty: set[tuple] = set()
         for obj in objects:
             seen.add(obj.id)
             key = (int(obj.version), obj.status, obj.name)
@@ -65,43 +84,61 @@ class World3D:
                 continue
             self.redrawn.append(obj.id)
             T = obj.T_world_obj
-            color = STATUS_COLORS.get(obj.status, STATUS_COLORS["known"])
-            if old is not None and old[1] is obj.model and old[0][1] == obj.status:
-                handle = old[2]  # same model and colour: move it
-                handle.position = tuple(T[:3, 3])
-                handle.wxyz = _wxyz(T[:3, :3])
-                self._objects[obj.id] = (key, obj.model, handle)
-                continue
-            name = f"/world3d/objects/{obj.id}"
-            if old is not None:
-                self.scene.remove_by_name(name)
             V, F = obj.model.triangles(n_circle=32)
-            handle = self.scene.add_mesh_simple(
-                name,
-                V.astype(np.float32),
-                F.astype(np.uint32),
-                color=color,
-                opacity=0.35 if obj.kind == "table" else 0.75,
-                flat_shading=True,
-                side="double",
-                position=tuple(T[:3, 3]),
-                wxyz=_wxyz(T[:3, :3]),
-            )
-            E = obj.model.edge_segments(np.eye(4))
-            if len(E):
-                self.scene.add_line_segments(
-                    f"{name}/edges", E.astype(np.float32), (20, 20, 20), thickness=1.5, thickness_units="screen"
-                )
-            self._objects[obj.id] = (key, obj.model, handle)
+            V = V @ T[:3, :3].T + T[:3, 3]
+            E = obj.model.edge_segments(T)
+            self._objects[obj.id] = (key, (V.astype(np.float32), F.astype(np.uint32), E.astype(np.float32)))
+            dirty |= self._groups.place(obj.id, (obj.status, obj.kind == "table"))
         for gone in set(self._objects) - seen:
             del self._objects[gone]
-            self.scene.remove_by_name(f"/world3d/objects/{gone}")
+            dirty.add(self._groups.drop(gone))
+        if self._resend:
+            dirty |= self._group_nodes | self._groups.groups()
+            self._resend = False
+        try:
+            for group in sorted((g for g in dirty if g is not None), key=str):
+                self._send_group(group)
+        except BaseException:  # part of it sent (a message viser failed to queue): every group again at the next sync
+            self._resend = True
+            raise
         cams = [site.camera_of(v) for v in site.views]
         sensors = (*((c.C.tobytes(), c.width, c.height) for c in cams), site.T_world_turret.tobytes())
         if sensors != self._sensors_key:
             self._sensors_key = sensors
             self._draw_sensors(site)
         return len(self.redrawn)
+
+    def _send_group(self, group: tuple) -> None:
+        """One group's objects as one mesh (and its edges), replaced whole; removed when empty."""
+        name = self.group_name(group)
+        parts = [self._objects[i][1] for i in self._groups.members(group)]
+        parts = [p for p in parts if len(p[1])]
+        if not parts:
+            if group in self._group_nodes:
+                self._group_nodes.discard(group)
+                self.scene.remove_by_name(name)
+            return
+        first = np.cumsum([0] + [len(V) for V, _, _ in parts])[:-1]
+        V = np.concatenate([V for V, _, _ in parts])
+        F = np.concatenate([F + k for (_, F, _), k in zip(parts, first)]).astype(np.uint32)
+        (status, table), _ = group
+        self.scene.add_mesh_simple(
+            name,
+            V,
+            F,
+            color=STATUS_COLORS.get(status, STATUS_COLORS["known"]),
+            opacity=0.35 if table else 0.75,
+            flat_shading=True,
+            side="double",
+        )
+        E = [E for _, _, E in parts if len(E)]
+        if E:
+            self.scene.add_line_segments(
+                f"{name}/edges", np.concatenate(E), (20, 20, 20), thickness=1.5, thickness_units="screen"
+            )
+        elif group in self._group_nodes:  # its objects with edges left it
+            self.scene.remove_by_name(f"{name}/edges")
+        self._group_nodes.add(group)
 
     def _draw_sensors(self, site: Site) -> None:
         for i, name in enumerate(site.views):  # every camera's frustum, named when there are several

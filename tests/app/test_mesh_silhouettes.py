@@ -95,7 +95,7 @@ def test_the_database_overlay_draws_a_mesh_spheres_outline_and_follows_it_when_i
     assert len(drawn) > 50 and _to_polyline(drawn.reshape(-1, 2), outline).max() <= 0.5
     assert _to_polyline(outline, np.concatenate(list(drawn))).max() <= 0.5  # the whole outline, no gap
     # what viser receives is those segments in the pixel world
-    pts = np.asarray(lines.points, float).reshape(-1, 2, 3)
+    pts = overlay.points_sent(rec.id).astype(float)
     assert np.allclose(pts[..., :2] / overlay.pixel_world.k, drawn, atol=1e-3)
     # a click on the outline selects the ball
     assert overlay.object_at(outline[100], radius_px=3.0) == "ball"
@@ -105,7 +105,7 @@ def test_the_database_overlay_draws_a_mesh_spheres_outline_and_follows_it_when_i
     site.update_pose(obj, T2, None, method="test", client="test")
     scene.take()
     assert overlay.sync(cam, site.objects()) == 1 and overlay.redrawn == [rec.id]
-    assert ("set", DatabaseOverlay.node_name(rec.id), "points") in scene.take()
+    assert ("add", overlay.node_of(rec.id), "lines") in scene.take()
     drawn2 = overlay._drawn[rec.id].seg_uv
     outline2 = _sphere_outline_uv(cam, T2[:3, 3], r)
     assert _to_polyline(drawn2.reshape(-1, 2), outline2).max() <= 0.5

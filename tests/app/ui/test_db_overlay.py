@@ -1,6 +1,6 @@
-"""The shared database overlay and the 3D world redraw only what changed: one node per object,
-updated in place when its version or status moves, removed when it goes, all redrawn on a new C;
-picking a clicked object uses the projections already drawn."""
+"""The shared database overlay and the 3D world redraw only what changed: the objects packed in a few
+group nodes, a group resent when one of its objects' version or status moves or it goes, all redrawn on
+a new C; picking a clicked object uses the projections already drawn."""
 
 from __future__ import annotations
 
@@ -74,6 +74,13 @@ def _overlay(site):
     return scene, DatabaseOverlay(scene, PixelWorld(cam.width, cam.height), z=-0.001, line_px=2.0)
 
 
+def _add_boxes(site, n):
+    box = site.object("parallelepiped")
+    for k in range(n):
+        T = box.T_world_obj @ make_T(np.eye(3), [0.02 * (k + 1), 0.0, 0.0])
+        site.add_object(f"box_{k}", "box", box.model, T, method="test", client="test")
+
+
 def _nudge(site, name, dx=0.01):
     obj = site.object(name)
     return site.update_pose(
@@ -81,28 +88,47 @@ def _nudge(site, name, dx=0.01):
     )
 
 
-def test_a_change_to_one_object_resends_only_that_objects_nodes(site):
-    scene, overlay = _overlay(site)
+def test_a_change_to_one_object_resends_only_its_groups_node_and_its_label(site):
+    from app.ui.db_overlay import DatabaseOverlay as DO
+
+    scene = FakeScene()
+    cam = site.camera
+    _add_boxes(site, 6)  # more objects than a group holds: two groups
+    overlay = DO(scene, PixelWorld(cam.width, cam.height), z=-0.001, line_px=2.0, group_size=4)
     objects = site.objects()
     assert overlay.sync(site.camera, objects) == len(objects)
     first = scene.take()
-    assert {n for op, n, _ in first if op == "add"} >= {DatabaseOverlay.node_name(o.id) for o in objects}
+    groups = {n for op, n, kind in first if op == "add" and kind == "lines"}
+    assert len(groups) == -(-len(objects) // 4)  # one node per 4 objects, not one per object
+    assert {overlay.node_of(o.id) for o in objects} == groups
+    assert {n for op, n, kind in first if op == "add" and kind == "label"} == {DO.label_name(o.id) for o in objects}
     assert overlay.sync(site.camera, site.objects()) == 0 and scene.take() == []  # nothing changed: nothing sent
     box = site.object("parallelepiped")
     lines, label = overlay.handles(box.id)
+    before = overlay.points_sent(box.id).copy()
     _nudge(site, "parallelepiped")
     assert overlay.sync(site.camera, site.objects()) == 1
     sent = scene.take()
-    assert sent and all(op == "set" for op, _, _ in sent)  # updated in place, no node created
-    assert {n for _, n, _ in sent} <= {DatabaseOverlay.node_name(box.id), DatabaseOverlay.label_name(box.id)}
-    assert ("set", DatabaseOverlay.node_name(box.id), "points") in sent
-    assert overlay.handles(box.id) == (lines, label)
+    # its group's node sent again whole (one message: points and colours together), its label updated in place
+    assert sorted(sent) == sorted(
+        [("add", overlay.node_of(box.id), "lines"), ("set", DO.label_name(box.id), "position")]
+    )
+    assert overlay.handles(box.id)[1] is label
+    after = overlay.points_sent(box.id)
+    assert after.shape == before.shape and np.abs(after - before).max() > 1e-3  # its own segments moved
+    drawn = overlay._drawn[box.id]
+    assert np.allclose(after, drawn.points)
     # a status change recolours it (and relabels it), nothing else
     site.set_status("table", "stale", client="test")
     table = site.object("table")
     assert overlay.sync(site.camera, site.objects()) == 1 and overlay.redrawn == [table.id]
     sent = scene.take()
-    assert ("set", DatabaseOverlay.node_name(table.id), "colors") in sent
+    assert ("add", overlay.node_of(table.id), "lines") in sent
+    assert {n for _, n, _ in sent} == {overlay.node_of(table.id), DO.label_name(table.id)}
+    assert (
+        np.asarray(overlay.handles(table.id)[0].colors).reshape(-1, 3).tolist()
+        != np.asarray(lines.colors).reshape(-1, 3).tolist()
+    )  # recoloured
     assert overlay.handles(table.id)[1].text == "table (stale)"
 
 
@@ -112,11 +138,17 @@ def test_a_removed_objects_nodes_go_and_a_new_camera_redraws_all(site, db):
     scene.take()
     box = site.object("parallelepiped")
     lines, label = overlay.handles(box.id)
+    group = overlay.node_of(box.id)
+    n_before = len(np.asarray(lines.points))
+    own = len(overlay.points_sent(box.id))
     db.remove("parallelepiped", method="test", client="other")  # another process, seen by poll
     assert site.poll()
     assert overlay.sync(site.camera, site.objects()) == 0
     assert overlay.removed == [box.id] and box.id not in overlay.drawn_ids
-    assert lines.removed and label.removed
+    assert label.removed  # its label goes; its group is sent again without it
+    assert ("add", group, "lines") in scene.take()
+    assert overlay.node_of(site.object("table").id) == group  # the table shared its group
+    assert len(np.asarray(overlay.handles(site.object("table").id)[0].points)) == n_before - own
     assert overlay.object_at(site.camera.project(box.vertices_world()).mean(axis=0), 1e6) != "parallelepiped"
     cam = site.camera
     moved = Camera(
@@ -205,20 +237,63 @@ def test_a_click_inside_an_objects_outline_picks_it_the_nearest_first_not_the_ta
     assert overlay.object_at(mid, 0.5) == "cylinder_1"
 
 
-def test_world3d_moves_only_the_changed_objects_node(site, db):
+def test_world3d_resends_only_the_changed_objects_group(site, db):
     scene = FakeScene()
-    world = World3D(scene, offset=np.zeros(3))
+    _add_boxes(site, 3)
+    world = World3D(scene, offset=np.zeros(3), group_size=2)
     objects = site.objects()
     assert world.sync(site) == len(objects)
-    scene.take()
+    first = scene.take()
+    meshes = {n for op, n, kind in first if op == "add" and kind == "mesh"}
+    assert len(meshes) < len(objects) and {world.node_of(o.id) for o in objects} == meshes
     assert world.sync(site) == 0 and scene.take() == []
     box = site.object("parallelepiped")
     _nudge(site, "parallelepiped")
     assert world.sync(site) == 1
     sent = scene.take()
-    assert sent and {n for _, n, _ in sent} == {f"/world3d/objects/{box.id}"}
-    assert {op for op, _, _ in sent} == {"set"}  # moved, not re-sent
+    assert {n for _, n, _ in sent} <= {world.node_of(box.id), world.node_of(box.id) + "/edges"}
+    assert ("add", world.node_of(box.id), "mesh") in sent
+    # a status change moves it to a group of its new colour; its old group is resent without it
+    old_group = world.node_of(box.id)
+    site.set_status("parallelepiped", "stale", client="test")
+    world.sync(site)
+    assert world.node_of(box.id) != old_group and "stale" in world.node_of(box.id)
+    sent = {n for _, n, _ in scene.take()}
+    assert world.node_of(box.id) in sent
     db.remove("parallelepiped", method="test", client="other")
     site.poll()
+    group = world.node_of(box.id)
     world.sync(site)
-    assert ("remove", f"/world3d/objects/{box.id}", None) in scene.take()
+    assert ("remove", group, None) in scene.take() and world.node_of(box.id) is None  # alone in it: it goes
+
+
+def test_a_sync_that_fails_part_way_draws_every_object_at_the_next(site):
+    """viser can fail to queue a message (a race in its buffer, seen at 2,000 objects): what was not sent is
+    sent at the next sync, not left stale because the objects' versions were already noted."""
+    scene, overlay = _overlay(site)
+    overlay.sync(site.camera, site.objects())
+    box = site.object("parallelepiped")
+    lines, _ = overlay.handles(box.id)
+    fail = {"n": 1}
+    original = FakeHandle.__setattr__
+
+    def flaky(self, key, value):
+        if key == "position" and fail["n"]:
+            fail["n"] -= 1
+            raise RuntimeError("deque mutated during iteration")
+        original(self, key, value)
+
+    FakeHandle.__setattr__ = flaky
+    try:
+        _nudge(site, "parallelepiped")
+        try:
+            overlay.sync(site.camera, site.objects())
+            raise AssertionError("the failure was not raised")
+        except RuntimeError:
+            pass
+        scene.take()
+        assert overlay.sync(site.camera, site.objects()) == len(site.objects())  # all again
+        assert ("add", overlay.node_of(box.id), "lines") in scene.take()
+        assert np.allclose(overlay.points_sent(box.id), overlay._drawn[box.id].points)
+    finally:
+        FakeHandle.__setattr__ = original
