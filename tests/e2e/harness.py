@@ -337,6 +337,9 @@ class Interface:
         self.server = InterfaceServer(self.site, grabbers, port=free_port()).start()
         self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
         self.frame_t_s = frame_t_s
+        # the pages opened on it, closed with it: a page left open (its test failed before closing it) went on
+        # drawing, trying to reconnect, and took the software renderer's CPU from every later test
+        self.pages: list = []
         # What the page's Content-Security-Policy refused (app/ui/page.py): every browser test fails on one.
         self.csp_refusals: list[str] = []
 
@@ -345,6 +348,7 @@ class Interface:
         software-WebGL notice closed."""
         before = set(self.server.clients)
         page = browser.new_page(viewport=viewport or VIEWPORT)
+        self.pages.append(page)
         page.add_init_script(NO_SOFTWARE_WEBGL_NOTICE)
         page.on(
             "console", lambda m: self.csp_refusals.append(m.text[:300]) if "Content Security Policy" in m.text else None
@@ -414,7 +418,16 @@ class Interface:
         png = page.screenshot(path=path)
         return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
 
+    def close_pages(self) -> None:
+        for page in self.pages:
+            try:
+                page.close()
+            except Exception:  # noqa: BLE001 - closed already, or its browser gone
+                pass
+        self.pages.clear()
+
     def close(self):
+        self.close_pages()
         self.server.stop()
         if self._own_devices is not None:
             self._own_devices.close()
@@ -444,9 +457,11 @@ class ServedInterface(Interface):
         self._own_devices = None
         self.frame_t_s = FRAME_T_S
         self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
+        self.pages: list = []
         self.csp_refusals: list[str] = []
 
     def close(self):
+        self.close_pages()
         self.server.stop()
         for close in self.closers:
             close()
