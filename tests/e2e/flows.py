@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from .harness import assert_prompt_controls, press, wait_until
+from .harness import assert_prompt_controls, key_until, press, wait_until
 
 
 class Operator:
@@ -52,6 +52,13 @@ class Operator:
 
     def key(self, key: str) -> None:
         self.page.keyboard.press(key)
+        self.actions += 1
+        self.log.append(f"key {key}")
+
+    def key_until(self, key: str, predicate, what: str) -> None:
+        """Press ``key`` until ``predicate()`` shows it was taken (harness.key_until: a key a loaded page had no
+        shortcut for yet is pressed once more, as an operator would); one action."""
+        key_until(self.page, key, predicate, what, panel=self.page.panel)
         self.actions += 1
         self.log.append(f"key {key}")
 

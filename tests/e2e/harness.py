@@ -381,13 +381,22 @@ class Interface:
         return x, y
 
     def canvas_point(self, page, uv) -> tuple[float, float]:
-        """Page position (x, y) of video pixel uv: the canvas's own position plus the pixel's on the canvas
-        (the canvas does not move in a page of fixed size: its box is read once per page)."""
+        """Page position (x, y) of video pixel uv: the canvas's position now plus the pixel's on the canvas; once
+        nothing lies over the canvas there (a notification sliding over the video: an operator waits for it to
+        go, or closes it, before clicking under it)."""
         x, y = self.on_canvas(page, uv)
-        box = getattr(page, "canvas_box", None)
-        if box is None:
-            box = page.canvas_box = page.locator("canvas").nth(1).bounding_box()
-        return box["x"] + x, box["y"] + y
+        box = page.locator("canvas").nth(1).bounding_box()
+        X, Y = box["x"] + x, box["y"] + y
+        on_canvas = (  # the top element there is not a notification (a label drawn over the video passes clicks on)
+            "([x, y]) => { const e = document.elementFromPoint(x, y); "
+            "return !!e && !e.closest('.mantine-Notification-root, .mantine-Notifications-root'); }"
+        )
+        deadline = time.monotonic() + 30.0
+        while not page.evaluate(on_canvas, [X, Y]):
+            if time.monotonic() > deadline:
+                raise AssertionError(f"something lies over the video at pixel {tuple(np.round(uv, 1))} for 30 s")
+            close_notifications(page, timeout_s=5.0, required=False)
+        return X, Y
 
     def click_pixel(self, page, uv):
         """A click on video pixel uv, by the mouse at that point of the page, as an operator's (what is over

@@ -78,6 +78,11 @@ def _no_true_contact(ui, path) -> None:
     assert check.ok, f"the robot touched {check.other} with its {check.link} ({1000 * check.distance_m:.1f} mm)"
 
 
+def _moved(ui, page) -> bool:
+    """Move (M) was taken: the robot moves, or the preview has gone (arrived, faulted or stopped already)."""
+    return ui.site.robot.controller.state().moving or "step=preview" not in panel_state(page.panel)
+
+
 def _said(page, text: str, what: str) -> None:
     wait_until(lambda: text in panel_state(page.panel), 60.0, what, panel=page.panel)
 
@@ -87,7 +92,7 @@ def _move_to(ui, page, op, X: np.ndarray, normal: np.ndarray) -> int:
     before = op.actions
     op.click(ui.site.camera.project(X[None])[0])
     _said(page, "passes every check", "the motion checked")
-    op.key("m")
+    op.key_until("m", lambda: _moved(ui, page), "the motion sent")
     _said(page, "Arrived", "the robot's arrival")
     _no_true_contact(ui, page.panel.session.workflow.sent.path)
     T = _true_tool(ui)
@@ -149,8 +154,7 @@ def test_stop_halts_the_robot_where_it_is(browser, robot_site):
     op.click(ui.site.camera.project(np.array([[0.2, -0.4, 0.0]]))[0])
     _said(page, "passes every check", "the motion checked")
     ui.site.robot.controller.speed_scale = 0.03  # a slow robot: still moving when Space arrives on a loaded machine
-    op.key("m")
-    wait_until(lambda: ui.site.robot.controller.state().moving, 30.0, "the robot moving")
+    op.key_until("m", lambda: _moved(ui, page), "the robot moving")
     op.key(" ")
     _said(page, "Stopped", "the stop said")
     q = ui.site.robot.controller.state().q
@@ -187,7 +191,7 @@ def test_pick_and_place_moves_the_modelled_box_and_the_database_follows(browser,
     place = np.array([-0.05, -0.38, 0.0])
     op.click(ui.site.camera.project(place[None])[0])
     _said(page, "passes every check", "the motion checked")
-    op.key("m")
+    op.key_until("m", lambda: _moved(ui, page), "the pick and place started")
     _said(page, "step=done", "the box put down and looked at")
     text = panel_state(page.panel)
     assert "confirmed by the video" in text, text
@@ -216,7 +220,7 @@ def test_a_joint_that_does_not_reach_its_command_is_said_in_the_panel(browser, r
     _said(page, "step=click", "Move robot's first step")
     op.click(ui.site.camera.project(np.array([[0.15, -0.25, 0.0]]))[0])
     _said(page, "passes every check", "the motion checked")
-    op.key("m")
+    op.key_until("m", lambda: _moved(ui, page), "the motion sent")
     _said(page, "Fault: joint elbow_joint did not reach its command", "the fault said")
     lines = ui.robot_lines()
     assert lines and "elbow_joint" in (lines[-1]["fault"] or ""), "the feed does not carry the fault"

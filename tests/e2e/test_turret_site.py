@@ -59,12 +59,13 @@ def test_the_suggested_points_calibrate_the_turret_on_the_shipped_database(brows
     for i in range(60):
         wait_until(lambda: wf.suggestion is not None, what="a suggested point")
         X, label = wf.suggestion
+        taken = lambda n=i: len(wf.pan) > n or wf.progress is not None  # noqa: E731 - the measurement under way
         if i % 2:  # Measure next (G): the circled point picked and measured in one key
-            op.key("g")
+            op.key_until("g", taken, f"{label} measuring")
         else:  # a click on the point circled 'next', then Measure (M)
             op.click(site.camera.project(X[None])[0])
             wait_until(lambda: wf.pending_label == label, what=f"{label} picked")
-            op.key("m")
+            op.key_until("m", taken, f"{label} measuring")
         wait_until(lambda: len(wf.pan) == i + 1 and wf.progress is None, timeout_s=60, what=f"{label} measured")
         assert wf.labels[-1] == label
         if "aimed for" in wf.current_step().prompt:
@@ -114,7 +115,7 @@ def test_beams_at_the_moved_parallelepiped_are_left_out_and_said(browser, device
     for i, x in enumerate(table + centres):
         op.click(cam.project(np.asarray(x)[None])[0])
         wait_until(lambda: wf.pending_X is not None, what="a point picked")
-        op.key("m")
+        op.key_until("m", lambda n=i: len(wf.pan) > n or wf.progress is not None, "the point measuring")
         wait_until(lambda: len(wf.pan) == i + 1 and wf.progress is None, timeout_s=60, what="the point measured")
         if i >= len(table) and "the parallelepiped has moved: update its pose first" in wf.message:
             page.get_by_text(re.compile("the parallelepiped has moved: update its pose first")).first.wait_for(
