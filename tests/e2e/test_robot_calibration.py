@@ -68,8 +68,7 @@ def test_the_base_is_calibrated_from_edges_clicked_on_the_live_video(browser, tm
         _said(page, "step=click", "Move robot's first step")
         op.click(cam.project(np.array([[0.15, -0.25, 0.0]]))[0])
         _said(page, "passes every check", "the motion checked")
-        op.key("m")
-        wait_until(lambda: page.panel.asking == "move", 30.0, "Move's question", panel=page.panel)
+        op.key_until("m", lambda: page.panel.asking == "move", "Move's question")
         assert "not calibrated" in page.panel.warning and "\n" not in page.panel.warning
         assert np.allclose(site.robot.controller.state().q, q0)
         op.key("Escape")
