@@ -142,21 +142,6 @@ def close_webgl_notice(page) -> None:
         pass
 
 
-# viser tells a user on software WebGL that their GPU is not used (a notice over the video's top-left corner). On
-# swiftshader it came 3.5-7 s after the page had connected, at no moment a test can wait for: closing it cost up to
-# 5 s per page and sometimes missed it, and it then covered clicks. The tests' pages report a renderer name without
-# "software" in it, so that viser does not show it; nothing of mcit reads the name.
-NO_SOFTWARE_WEBGL_NOTICE = """
-for (const C of [self.WebGLRenderingContext, self.WebGL2RenderingContext]) {
-  if (!C) continue;
-  const get = C.prototype.getParameter;
-  C.prototype.getParameter = function (p) {
-    return p === 0x9246 ? "ANGLE (mcit browser tests)" : get.call(this, p);  // UNMASKED_RENDERER_WEBGL
-  };
-}
-"""
-
-
 def select_by_click(page, name: str, click) -> int:
     """Select object ``name`` by ``click()`` (a canvas click on its wireframe) and wait for the
     selection. On a loaded machine a page's first canvas click can arrive before the page listens
@@ -349,7 +334,6 @@ class Interface:
         before = set(self.server.clients)
         page = browser.new_page(viewport=viewport or VIEWPORT)
         self.pages.append(page)
-        page.add_init_script(NO_SOFTWARE_WEBGL_NOTICE)
         page.on(
             "console", lambda m: self.csp_refusals.append(m.text[:300]) if "Content Security Policy" in m.text else None
         )
@@ -362,6 +346,7 @@ class Interface:
         # the database drawn as it is now (its own thread; slow on a loaded machine): clicks that
         # select an object pick what is drawn
         wait_until(lambda: self.server.database_drawn, 20.0, "the database overlay to be drawn")
+        close_webgl_notice(page)
         wait_for_steady_camera(panel)  # clicks are placed through the camera the page reports: let the fit land
         page.panel = panel
         return page
@@ -380,70 +365,38 @@ class Interface:
             x, y = self.screen_of(page, uv)
         return x, y
 
-    def canvas_point(self, page, uv) -> tuple[float, float] | None:
-        """Page position (x, y) of video pixel uv: the canvas's position now plus the pixel's on the canvas; once
-        nothing lies over the canvas there (a notification sliding over the video: an operator waits for it to
-        go, or closes it, before clicking under it). None: the point lies outside the window (the page must
-        scroll to it first)."""
-        x, y = self.on_canvas(page, uv)
-        box = page.locator("canvas").nth(1).bounding_box()
-        X, Y = box["x"] + x, box["y"] + y
-        size = page.viewport_size or VIEWPORT
-        if not (0 <= X < size["width"] and 0 <= Y < size["height"]):
-            return None
-        on_canvas = (  # the top element there is not a notification (a label drawn over the video passes clicks on)
-            "([x, y]) => { const e = document.elementFromPoint(x, y); "
-            "return !!e && !e.closest('.mantine-Notification-root, .mantine-Notifications-root'); }"
-        )
-        deadline = time.monotonic() + 20.0
-        while time.monotonic() < deadline and not page.evaluate(on_canvas, [X, Y]):
-            close_notifications(page, timeout_s=5.0, required=False)
-        return X, Y  # (still covered after 20 s: clicked there all the same, as an operator would at last)
-
     def click_pixel(self, page, uv):
-        """A click on video pixel uv, by the mouse at that point of the page, as an operator's (what is over
-        the canvas there takes it, as it would theirs), then waits until the click has reached the server.
-
-        Not playwright's element click (but for a point the page must scroll to): it waits for two steady
-        animation frames and checks the hit first, 0.3-1.1 s per click on software WebGL. The wait for the
-        server: the page sends its scene clicks through viser's 20 ms throttle, which keeps only the newest of
-        the clicks waiting in it; on a loaded machine a page can take three clicks made 50 ms apart inside one
-        window and drop the middle one."""
+        """A click on video pixel uv, then a wait until the click has reached the server: the page sends its scene
+        clicks through viser's 20 ms throttle, which keeps only the newest of the clicks waiting in it; on a loaded
+        machine a page took three clicks made 50 ms apart inside one window and dropped the middle one."""
         panel = getattr(page, "panel", None)
         before = None if panel is None else panel.clicks_received
-        at = self.canvas_point(page, uv)
-        if at is None:
-            self._click_outside_window(page, uv, double=False)
-        else:
-            page.mouse.click(*at)
-        if panel is not None and at is not None:  # (a point outside the window may reach nothing, as before)
+        if self._click(page, uv, double=False) and panel is not None:
             wait_until(lambda: panel.clicks_received > before, 30.0, "the click to reach the server", panel=panel)
 
-    def _click_outside_window(self, page, uv, double: bool) -> None:
-        """A click at a canvas point outside the window: playwright scrolls the page to it; where its hit test
-        finds the page, not the canvas, there (seen on loaded machines), the mouse clicks the point all the same."""
+    def double_click_pixel(self, page, uv):
+        """A double click on video pixel uv (one gesture), then a wait until it reached the server: its first click
+        and the page's word that it was a double (static/wheel.js keeps its second press from viser)."""
+        panel = getattr(page, "panel", None)
+        before = None if panel is None else panel.clicks_received
+        if self._click(page, uv, double=True) and panel is not None:
+            wait_until(lambda: panel.clicks_received >= before + 2, 30.0, "the double click to reach the server")
+
+    def _click(self, page, uv, double: bool) -> bool:
+        """Click (or double-click) the canvas at video pixel uv; False where playwright's hit test kept finding the
+        page, not the canvas, there (seen on loaded fresh clones only) and the mouse clicked the point all the same,
+        as an operator's would (a click that reaches nothing is made again by the callers that wait for its effect)."""
         from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
         x, y = self.on_canvas(page, uv)
         canvas = page.locator("canvas").nth(1)
         try:
             (canvas.dblclick if double else canvas.click)(position={"x": x, "y": y}, timeout=60_000)
+            return True
         except PlaywrightTimeout:
             box = canvas.bounding_box()
             (page.mouse.dblclick if double else page.mouse.click)(box["x"] + x, box["y"] + y)
-
-    def double_click_pixel(self, page, uv):
-        """A double click on video pixel uv (one gesture), then waits until it reached the server: its first click
-        and the page's word that it was a double (static/wheel.js keeps its second press from viser)."""
-        panel = getattr(page, "panel", None)
-        before = None if panel is None else panel.clicks_received
-        at = self.canvas_point(page, uv)
-        if at is None:
-            self._click_outside_window(page, uv, double=True)
-        else:
-            page.mouse.dblclick(*at)
-        if panel is not None and at is not None:
-            wait_until(lambda: panel.clicks_received >= before + 2, 30.0, "the double click to reach the server")
+            return False
 
     def screenshot(self, page, path=None) -> np.ndarray:
         import cv2

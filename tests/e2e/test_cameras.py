@@ -9,7 +9,7 @@ import pytest
 from core.camera import Camera
 
 from .flows import Operator
-from .harness import FRAME_T_S, Interface, assert_prompt_controls, key_until, select_by_click, site_frame, wait_until
+from .harness import FRAME_T_S, Interface, assert_prompt_controls, select_by_click, site_frame, wait_until
 from .test_workflows_site import _pair_corner, _true_box_in_database, _visible_corners, _workflow, _wrong_camera
 
 pytestmark = pytest.mark.e2e
@@ -30,17 +30,11 @@ def two_cameras(scene, frame, side_frame, tmp_path):
 
 def _show_side(page):
     panel = page.panel
-    # N cycles the cameras: pressed again only when the first press was lost (a loaded page that had not yet taken
-    # the panel's shortcuts), after 10 s with the front camera still shown
-    for attempt in range(2):
-        page.keyboard.press("n")
-        try:
-            wait_until(lambda: panel.camera_view == "side", 10.0 if attempt == 0 else 60.0, "the side camera shown")
-            break
-        except AssertionError:
-            if attempt or panel.camera_view != "front":
-                raise
-    wait_until(lambda: not panel.viewport.need_fit, 60.0, "the side camera fitted", panel=panel)
+    # pressed once: N cycles the cameras, a second press after a slow first would show the front one again
+    page.keyboard.press("n")
+    wait_until(
+        lambda: panel.camera_view == "side" and not panel.viewport.need_fit, 60.0, "the side camera shown", panel=panel
+    )
     wait_until(lambda: page.get_by_text("Camera (N)").first.is_visible(), what="the Camera chooser")
 
 
@@ -76,10 +70,9 @@ def test_both_cameras_frozen_fitted_side_by_side_and_clicked_in(browser, two_cam
     panel = page.panel
     _true_box_in_database(ui, scene)
     wait_until(lambda: ui.server.database_drawn, what="the moved box drawn")
+    page.keyboard.press("f")
     frozen = panel.frozen_frames
-    # (F again, where a loaded page lost the first press, freezes the newest frame once more: no harm)
-    both = lambda: frozen.frame is not None and set(frozen.frame.others) == {"side"}  # noqa: E731
-    key_until(page, "f", both, "both frames frozen")
+    wait_until(lambda: frozen.frame is not None and set(frozen.frame.others) == {"side"}, what="both frames frozen")
     wait_until(
         lambda: all(frozen._sent.get(v) is not None for v in ("front", "side")), what="each camera's frozen image"
     )
