@@ -142,6 +142,20 @@ def close_webgl_notice(page) -> None:
         pass
 
 
+def workflow_shown(page, name: str):
+    """The workflow ``name`` once it is under way on the page's panel with its controls built; the workflow."""
+    wait_until(
+        lambda: (
+            page.panel.session.workflow is not None
+            and page.panel.session.workflow.name == name
+            and page.panel.workflow_controls.built_for is page.panel.session.workflow
+        ),
+        what=f"the {name} workflow's controls",
+        panel=page.panel,
+    )
+    return page.panel.session.workflow
+
+
 def select_by_click(page, name: str, click) -> int:
     """Select object ``name`` by ``click()`` (a canvas click on its wireframe) and wait for the
     selection. On a loaded machine a page's first canvas click can arrive before the page listens

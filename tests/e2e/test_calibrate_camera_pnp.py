@@ -19,8 +19,8 @@ import pytest
 
 from core.camera import Camera
 
-from .harness import Interface, assert_prompt_controls, wait_until
-from .test_workflows_site import Operator, _miscalibrated, _pair_corner, _visible_corners, _workflow
+from .harness import Interface, assert_prompt_controls, wait_until, workflow_shown
+from .test_workflows_site import Operator, _miscalibrated, _pair_corner, _visible_corners
 
 pytestmark = pytest.mark.e2e
 
@@ -51,7 +51,7 @@ def test_calibrate_camera_by_pnp_from_5_points(browser, lens_interface, scene):
     page = ui.open(browser)
     op = Operator(ui, page, "Calibrate camera by PnP")
     op.press("Calibrate camera")
-    wf = _workflow(page, "calibrate_camera")
+    wf = workflow_shown(page, "calibrate_camera")
     # the lens is known: Solve by offers the pose alone (PnP), chosen already; the instruction names the chooser
     assert "Solve by" in assert_prompt_controls(page)
     assert wf.method == "pnp"

@@ -9,8 +9,16 @@ import pytest
 from core.camera import Camera
 
 from .flows import Operator
-from .harness import FRAME_T_S, Interface, assert_prompt_controls, select_by_click, site_frame, wait_until
-from .test_workflows_site import _pair_corner, _true_box_in_database, _visible_corners, _workflow, _wrong_camera
+from .harness import (
+    FRAME_T_S,
+    Interface,
+    assert_prompt_controls,
+    select_by_click,
+    site_frame,
+    wait_until,
+    workflow_shown,
+)
+from .test_workflows_site import _pair_corner, _true_box_in_database, _visible_corners, _wrong_camera
 
 pytestmark = pytest.mark.e2e
 
@@ -132,7 +140,7 @@ def test_calibrate_the_side_camera_by_clicks(browser, two_cameras, scene):
     op = Operator(ui, page)
     _show_side(page)
     op.press("Calibrate camera")
-    wf = _workflow(page, "calibrate_camera")
+    wf = workflow_shown(page, "calibrate_camera")
     assert wf.view == "side"
     assert_prompt_controls(page)
     corners = _visible_corners(ui.site, wrong)

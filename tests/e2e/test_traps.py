@@ -12,24 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from .harness import press, wait_until
+from .harness import press, wait_until, workflow_shown
 
 pytestmark = pytest.mark.e2e
 
 OLD_FRAME_S = 11.0  # older than the age past which a frozen frame is said to be old (10 s)
-
-
-def _workflow(page, name: str):
-    wait_until(
-        lambda: (
-            page.panel.session.workflow is not None
-            and page.panel.session.workflow.name == name
-            and page.panel.workflow_controls.built_for is page.panel.session.workflow
-        ),
-        what=f"the {name} workflow's controls",
-        panel=page.panel,
-    )
-    return page.panel.session.workflow
 
 
 def _table_point(site, fx: float = 0.25, fy: float = -0.3) -> np.ndarray:
@@ -51,7 +38,7 @@ def test_designate_on_an_old_frozen_frame_says_its_age(browser, device_interface
     page = ui.open(browser)
     panel = page.panel
     press(page, "Designate target")
-    wf = _workflow(page, "designate")
+    wf = workflow_shown(page, "designate")
     wait_until(lambda: wf.frame is not None and wf.frame.stamp is not None, what="the frozen frame")
     # the live video runs on while the operator looks at the frozen frame
     wait_until(
@@ -133,7 +120,7 @@ def test_calibrate_turret_a_click_on_the_table_near_a_box_corner_is_the_table(br
             break
     assert target is not None
     press(page, "Calibrate turret")
-    wf = _workflow(page, "calibrate_turret")
+    wf = workflow_shown(page, "calibrate_turret")
     ui.click_pixel(page, target)
     wait_until(lambda: wf.pending_label, what="the picked point", panel=panel)
     assert wf.pending_label == "a point on table", wf.pending_label
@@ -165,7 +152,7 @@ def _refine_box(ui, page, scene, beside_px: float):
     k_sel = max(shown, key=lambda i: np.linalg.norm(drawn[i, 1] - drawn[i, 0]))
     select_by_click(page, "parallelepiped", lambda: ui.click_pixel(page, drawn[k_sel].mean(axis=0)))
     press(page, "Update pose")
-    wf = _workflow(page, "update_pose")
+    wf = workflow_shown(page, "update_pose")
     vis = [k for k in visible(T_true) if k in shown]
     V, E = obj.model.vertices, obj.model.edges
     axis = {k: int(np.abs(V[E[k][1]] - V[E[k][0]]).argmax()) for k in vis}

@@ -18,21 +18,9 @@ import pytest
 from core.transforms import exp_so3, make_T, pose_error
 
 from .flows import Operator
-from .harness import Interface, assert_prompt_controls, site_frame, wait_until
+from .harness import Interface, assert_prompt_controls, site_frame, wait_until, workflow_shown
 
 pytestmark = pytest.mark.e2e
-
-
-def _workflow(page, name: str):
-    wait_until(
-        lambda: (
-            page.panel.session.workflow is not None
-            and page.panel.session.workflow.name == name
-            and page.panel.workflow_controls.built_for is page.panel.session.workflow
-        ),
-        what=f"the {name} workflow's controls",
-    )
-    return page.panel.session.workflow
 
 
 @pytest.fixture
@@ -55,7 +43,7 @@ def test_the_suggested_points_calibrate_the_turret_on_the_shipped_database(brows
     page = ui.open(browser)
     op = Operator(ui, page)
     op.press("Calibrate turret")
-    wf = _workflow(page, "calibrate_turret")
+    wf = workflow_shown(page, "calibrate_turret")
     for i in range(60):
         wait_until(lambda: wf.suggestion is not None, what="a suggested point")
         X, label = wf.suggestion
@@ -104,7 +92,7 @@ def test_beams_at_the_moved_parallelepiped_are_left_out_and_said(browser, device
     page = ui.open(browser)
     op = Operator(ui, page)
     op.press("Calibrate turret")
-    wf = _workflow(page, "calibrate_turret")
+    wf = workflow_shown(page, "calibrate_turret")
     T = site.object("table").T_world_obj
     table = [T[:3, :3] @ [x, y, 0.04] + T[:3, 3] for x, y in ((0.35, 0.55), (-0.3, -0.4), (0.3, -0.5), (0.4, -0.3))]
     box = site.object("parallelepiped")

@@ -28,7 +28,7 @@ import pytest
 from core.camera import Camera
 from core.transforms import exp_so3, make_T, pose_error
 
-from .harness import assert_prompt_controls, close_notifications, press, select_by_click, wait_until
+from .harness import assert_prompt_controls, close_notifications, press, select_by_click, wait_until, workflow_shown
 
 pytestmark = pytest.mark.e2e
 
@@ -74,18 +74,6 @@ class Operator:
         )
         print(line)
         return line
-
-
-def _workflow(page, name: str):
-    wait_until(
-        lambda: (
-            page.panel.session.workflow is not None
-            and page.panel.session.workflow.name == name
-            and page.panel.workflow_controls.built_for is page.panel.session.workflow
-        ),
-        what=f"the {name} workflow's controls",
-    )
-    return page.panel.session.workflow
 
 
 def _db_state(db):
@@ -172,7 +160,7 @@ def test_calibrate_camera_by_clicks(browser, interface, scene):
     page = ui.open(browser)
     op = Operator(ui, page, "Calibrate camera")
     op.press("Calibrate camera")
-    wf = _workflow(page, "calibrate_camera")
+    wf = workflow_shown(page, "calibrate_camera")
     assert_prompt_controls(page)
     # ten visible corners spread in depth and height: the table's six, every other one of the box's
     corners = _visible_corners(ui.site, wrong)
@@ -270,7 +258,7 @@ def test_calibrate_turret_by_clicks(browser, device_interface, scene):
     page = ui.open(browser)
     op = Operator(ui, page, "Calibrate turret")
     op.press("Calibrate turret")
-    wf = _workflow(page, "calibrate_turret")
+    wf = workflow_shown(page, "calibrate_turret")
     assert_prompt_controls(page)
     targets = _turret_targets(site, site.camera)
     assert len(targets) >= 10
@@ -320,7 +308,7 @@ def test_designate_known_and_unknown_by_clicks(browser, device_interface, scene)
     page = ui.open(browser, viewport={"width": 1280, "height": 720})  # this flow at 1280×720 (the others at VIEWPORT)
     op = Operator(ui, page, "Designate target")
     op.press("Designate target")
-    wf = _workflow(page, "designate")
+    wf = workflow_shown(page, "designate")
     assert_prompt_controls(page)
     page.keyboard.press("p")  # Solve's key in Update pose: said to do nothing here, with the keys that do
     page.get_by_text("P does nothing in Designate target", exact=False).first.wait_for(timeout=60_000)
@@ -409,7 +397,7 @@ def _update_pose_until_refined(op, ui, scene):
     true = cam.project(obj.model.edge_segments(T_true).reshape(-1, 3)).reshape(-1, 2, 2)
     _select_box(op, ui)
     op.press("Update pose")
-    wf = _workflow(page, "update_pose")
+    wf = workflow_shown(page, "update_pose")
     assert_prompt_controls(page)
     vis = [k for k in _visible_edges(site, T_true) if k in _visible_edges(site, obj.T_world_obj)]
     V, E = obj.model.vertices, obj.model.edges
@@ -465,7 +453,7 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     close_notifications(a, required=False)
     op_a = Operator(ui, a, "A: History, choose, Undo change, Close")
     op_a.press("History")
-    wf = _workflow(a, "history")
+    wf = workflow_shown(a, "history")
     assert_prompt_controls(a)
     text = next(t for t, v in wf.choices("change") if v == change.id)
     op_a.choose("Change", text)
@@ -541,7 +529,7 @@ def test_history_a_question_about_one_change_does_not_carry_over_to_another(brow
     page = ui.open(browser)
     op = Operator(ui, page, "History: a question, another change, its own undo")
     op.press("History")
-    wf = _workflow(page, "history")
+    wf = workflow_shown(page, "history")
     text = {v: t for t, v in wf.choices("change")}
     op.choose("Change", text[c1.id])
     wait_until(
@@ -569,7 +557,7 @@ def test_cancel_asks_once_more_before_throwing_work_away(browser, interface):
     op = Operator(ui, page, "Cancel after clicks: asked, then cancelled")
     _select_box(op, ui)
     op.press("Update pose")
-    wf = _workflow(page, "update_pose")
+    wf = workflow_shown(page, "update_pose")
     n = len(ui.db.history())
     op.click([200.0, 150.0])
     op.click([260.0, 170.0])
@@ -583,7 +571,7 @@ def test_cancel_asks_once_more_before_throwing_work_away(browser, interface):
     assert len(ui.db.history()) == n
     op.press("Update pose")
     wait_until(lambda: page.panel.session.workflow is not wf, what="a new Update pose")  # not the cancelled one
-    wf2 = _workflow(page, "update_pose")
+    wf2 = workflow_shown(page, "update_pose")
     assert wf2 is not wf and not wf2.finished
     op.press("Cancel")  # nothing done: cancelled at once
     wait_until(lambda: wf2.finished, what="the cancel without a question")
@@ -607,7 +595,7 @@ def test_esc_while_designate_measures_stops_the_check_only(browser, scene, frame
         page = ui.open(browser)
         op = Operator(ui, page, "Designate: Esc during the second check")
         op.press("Designate target")
-        wf = _workflow(page, "designate")
+        wf = workflow_shown(page, "designate")
         table = site.object("table")
         T = table.T_world_obj
         top = float(table.model.vertices[:, 2].max())

@@ -8,41 +8,15 @@ import pytest
 
 from app.cli import main
 from app.vision.sequence import iter_frames, read_init_points, read_visp_pose, track_sequence
-from app.vision.synthetic import render_poses
-from core.brep import BRep
-from core.camera import Camera
 from core.transforms import exp_so3, log_so3, make_T, pose_error
 
-K = np.array([[420.0, 0.0, 159.5], [0.0, 420.0, 119.5], [0.0, 0.0, 1.0]])
-BOX = (0.2, 0.13, 0.08)
-
-
-def _poses(n):
-    R0 = exp_so3([2.2, 0.4, 0.3])
-    return [
-        make_T(exp_so3(np.radians(0.8) * k * np.array([0.0, 1.0, 0.3])) @ R0, [0.003 * k, 0.0, 0.9]) for k in range(n)
-    ]
+from .sequence_files import write_sequence
 
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
     """A folder of 5 rendered frames of a moving box, its model (.cao), intrinsics (ViSP .xml), first pose (.pos)."""
-    from app.models_io import write_cao
-
-    d = tmp_path_factory.mktemp("seq")
-    cam = Camera.from_intrinsics(K, np.eye(4), 320, 240)
-    box = BRep.box(*BOX)
-    truth = _poses(5)
-    (d / "frames").mkdir()
-    for k, img in enumerate(render_poses(cam, box, truth, noise_sigma=2.0)):
-        cv2.imwrite(str(d / "frames" / f"image{k:04d}.png"), img)
-    write_cao(box, d / "box.cao")
-    (d / "cam.xml").write_text(
-        "<?xml version='1.0'?><conf><camera><u0>159.5</u0><v0>119.5</v0><px>420</px><py>420</py></camera></conf>"
-    )
-    T0 = truth[0]
-    (d / "box.pos").write_text("\n".join(f"{x:.12f}" for x in np.r_[T0[:3, 3], log_so3(T0[:3, :3])]))
-    return d, cam, box, truth
+    return write_sequence(tmp_path_factory.mktemp("seq"), 5)
 
 
 def test_visp_pose_and_init_files(tmp_path):
