@@ -57,9 +57,12 @@ def lens_samples():
 
 def _board_coords(ideal, R, t):
     """Board-plane coordinates (metres) seen at ideal pixels, through the homography K [r1 r2 t]."""
-    Hm = K @ np.column_stack([R[:, 0], R[:, 1], t])
-    p = np.concatenate([ideal.reshape(-1, 2), np.ones((ideal[..., 0].size, 1))], axis=1) @ np.linalg.inv(Hm).T
-    return (p[:, :2] / p[:, 2:]).reshape(ideal.shape)
+    Hi = np.linalg.inv(K @ np.column_stack([R[:, 0], R[:, 1], t]))
+    u, v = ideal[..., 0], ideal[..., 1]  # per component: a thin (N, 3) @ (3, 3) product took 0.85 s a frame
+    w = Hi[2, 0] * u + Hi[2, 1] * v + Hi[2, 2]
+    return np.stack(
+        [(Hi[0, 0] * u + Hi[0, 1] * v + Hi[0, 2]) / w, (Hi[1, 0] * u + Hi[1, 1] * v + Hi[1, 2]) / w], axis=-1
+    )
 
 
 def _render(lens_samples, value, views, seed=0):

@@ -73,7 +73,7 @@ def test_polyhedron_sigmas_match_scatter():
     cam, T_wt, Bw, world = _setup(brep)
     rng = np.random.default_rng(3)
     errs, sig = [], []
-    for _ in range(500):
+    for _ in range(200):
         fp, fc, es = simulate_polyhedron(cam, world, Bw, rng)
         res = model_polyhedron(
             cam,
