@@ -50,10 +50,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from scipy.stats import binom, chi2  # noqa: E402
+
 from app.models_io import load_model  # noqa: E402
 from app.vision.sequence import iter_frames, read_visp_pose  # noqa: E402
 from app.vision.synthetic import render_poses  # noqa: E402
-from app.vision.track import EdgeTracker  # noqa: E402
+from app.vision.track import EdgeTracker, pose_covariance_parts  # noqa: E402
 from core.brep import BRep  # noqa: E402
 from core.camera import Camera  # noqa: E402
 from core.point_line_pose import point_line_residuals  # noqa: E402
@@ -63,6 +65,7 @@ from core.transforms import exp_so3, log_so3, make_T  # noqa: E402
 CASTLE = Path("/usr/share/visp-images-data/ViSP-images/mbt-depth/Castle-simu")
 DATA = (ROOT / ".." / "shared" / "data").resolve()
 AXES = ("x", "y", "z", "rx", "ry", "rz")
+SHARES = {"edges": "edges found on the image", "model": "model", "camera": "camera"}
 
 
 def old_cov(camera: Camera, T: np.ndarray, d) -> np.ndarray | None:
@@ -76,8 +79,9 @@ def old_cov(camera: Camera, T: np.ndarray, d) -> np.ndarray | None:
     return sigma2 * np.linalg.inv((J * w[:, None]).T @ J)
 
 
-def track_errors(camera, model, frames, truth, priors: Priors, stop_lost: bool = True):
-    """Per tracked frame: (error (6,), old σ (6,), new σ (6,)); stops at the first lost frame."""
+def track_errors(camera, model, frames, truth, priors: Priors, stop_lost: bool = True, keep=None):
+    """Per tracked frame: (error (6,), old σ (6,), new σ (6,), the new σ's shares by name (each (6,), σ per axis));
+    stops at the first lost frame. ``keep`` (a list): (T, diagnostics) of each frame appended to it."""
     tr = EdgeTracker(camera, model, truth[0])
     tr.priors = priors
     out = []
@@ -92,11 +96,47 @@ def track_errors(camera, model, frames, truth, priors: Priors, stop_lost: bool =
         c_old = old_cov(camera, T, d)
         if c_old is None:
             continue
-        out.append((e, np.sqrt(np.diag(c_old)), np.sqrt(np.diag(d.cov))))
+        parts = pose_covariance_parts(camera, T, d.samples, d.matched_uv, d.weights, priors)
+        shares = {k: np.sqrt(np.diag(v)) for k, v in parts.items()}
+        out.append((e, np.sqrt(np.diag(c_old)), np.sqrt(np.diag(d.cov)), shares))
+        if keep is not None:
+            keep.append((T, d))
     return out
 
 
-def table(name: str, rows, note: str = "") -> None:
+def spread(z: np.ndarray, groups: np.ndarray | None) -> tuple[float, int, int]:
+    """(n_eff, lo %, hi %): the frames' worth in independent draws — n / (1 + (m − 1) ρ), ρ the share of
+    e/σ's mean square that its runs' means hold (frames of one run share one camera file and one model), m the
+    frames per run — and the range of "within 2σ" that 95 % of such sets give when σ is right (binomial,
+    p = 95.4 %). ``groups``: each frame's run (None: one run)."""
+    g = np.zeros(len(z), int) if groups is None else np.asarray(groups)
+    _, inv, cnt = np.unique(g, return_inverse=True, return_counts=True)
+    means = np.bincount(inv, weights=z) / cnt
+    rho = min(1.0, float(np.sum(cnt * means**2) / max(float(np.sum(z**2)), 1e-300)))
+    m = len(z) / len(cnt)
+    n_eff = len(z) / (1.0 + (m - 1.0) * rho)
+    n = max(int(round(n_eff)), 1)
+    p = 0.9545
+    return n_eff, int(round(100 * binom.ppf(0.025, n, p) / n)), int(round(100 * binom.ppf(0.975, n, p) / n))
+
+
+def shares_table(rows, labels: dict[str, str]) -> None:
+    """Median σ of each share of the new σ, per axis (a share's σ: the square root of its covariance's
+    diagonal; the total's square is their squares' sum)."""
+    print(f"  shares of the new σ (median over frames): {'':>13}" + " ".join(f"{a:>7}" for a in AXES))
+    f = np.array([1e3] * 3 + [np.degrees(1.0)] * 3)
+    for k, label in labels.items():
+        if k in rows[0][3]:
+            v = np.median([r[3][k] for r in rows], axis=0) * f
+            print(f"    {label:<52}" + " ".join(f"{x:7.3f}" for x in v))
+    print(f"    {'total':<52}" + " ".join(f"{x:7.3f}" for x in np.median([r[2] for r in rows], axis=0) * f))
+    print(f"    {'RMS error':<52}" + " ".join(f"{x:7.3f}" for x in np.sqrt(np.mean([r[0] ** 2 for r in rows], 0)) * f))
+    print("    (mm for x y z, degrees for rx ry rz)")
+
+
+def table(name: str, rows, note: str = "", groups=None) -> None:
+    """Per axis: RMS error, old and new σ (median), within 2σ, largest |e|/σ, RMS e/σ; then the new σ's frames'
+    worth in independent draws (``spread``) and the range of "within 2σ" that a right σ gives on so few."""
     if not rows:
         print(f"{name}: no frame tracked{note}")
         return
@@ -114,6 +154,12 @@ def table(name: str, rows, note: str = "") -> None:
             cells.append(f"{f * np.median(s):7.3f}{unit:>2} {within:4.0f}% {z.max():6.1f} {rms_z:7.2f}")
         rms = f * np.sqrt(np.mean(e[:, k] ** 2))
         print(f"  {ax:>4} | {rms:8.3f}{unit:>2} | old {cells[0]} | new {cells[1]}")
+    z = e / np.array([r[2] for r in rows])
+    sp = [spread(z[:, k], groups) for k in range(6)]
+    print(
+        f"  new σ: frames worth {min(s[0] for s in sp):.0f}–{max(s[0] for s in sp):.0f} independent draws per axis; "
+        f"a right σ gives {min(s[1] for s in sp)}–{max(s[2] for s in sp)} % within 2σ in 95 % of such sets"
+    )
 
 
 def rendered(args) -> None:
@@ -129,8 +175,8 @@ def rendered(args) -> None:
         truth.append(make_T(exp_so3(r) @ R0, p))
     frames = render_poses(cam_true, BRep.box(*dims), truth, noise_sigma=2.0, blur_sigma_px=0.5, seed=0)
     rng = np.random.default_rng(27)
-    rows = []
-    for _ in range(args.draws):
+    rows, groups = [], []
+    for i in range(args.draws):
         Kb = K.copy()
         Kb[0, 0] *= 1 + args.truth_f_rel * rng.standard_normal()
         Kb[1, 1] *= 1 + args.truth_f_rel * rng.standard_normal()
@@ -138,11 +184,17 @@ def rendered(args) -> None:
         cam = Camera.from_intrinsics(Kb, np.eye(4), W, H)
         model = BRep.box(*(dims + args.truth_dims_mm / 1e3 * rng.standard_normal(3)))
         priors = Priors(intrinsics_prior_cov(cam, args.f_rel, args.c_px), args.model_sigma_mm / 1e3)
-        rows += track_errors(cam, model, frames, truth, priors)
+        got = track_errors(cam, model, frames, truth, priors)
+        rows += got
+        groups += [i] * len(got)
     what = f"f × (1 ± {args.truth_f_rel:g}), u0, v0 ± {args.truth_c_px:g} px; sides ± {args.truth_dims_mm:g} mm"
     table(
-        "rendered box (tuning sequence)", rows, f", {args.draws} draws of camera file and model about the truth: {what}"
+        "rendered box (tuning sequence)",
+        rows,
+        f", {args.draws} draws of camera file and model about the truth: {what}",
+        groups,
     )
+    shares_table(rows, SHARES)
 
 
 def oneclick(args) -> None:
@@ -193,6 +245,7 @@ def oneclick(args) -> None:
         "one-click search, rendered box (held out)",
         rows,
         f" of {args.clicks} clicks, one draw of camera and model each",
+        np.arange(len(rows)),
     )
 
 
@@ -241,21 +294,152 @@ def clicks(args) -> None:
         "update pose from clicked edges, σ = 1 px (held out)",
         rows,
         ", each an independent draw of pose, lens and sides",
+        np.arange(len(rows)),
     )
 
 
-def castle(args) -> None:
+# What an operator knows of a renderer's camera file (``mcit track --camera-sigma 0 0.5``): the focal length is the
+# renderer's own, the principal point known to the half pixel by which the two pixel conventions (a pixel's centre
+# at integers, as ViSP, OpenCV and mcit, or at halves, as OpenGL and Blender) differ when the renderer does not say.
+RENDERER_F_REL, RENDERER_C_PX = 0.0, 0.5
+
+
+def castle_data():
+    """(camera file's camera, model, frames, true poses) of Castle-simu, or None when absent."""
     poses = sorted(glob.glob(str(CASTLE / "CameraPose" / "*.txt")))
     if not poses:
         print(f"\nCastle-simu: not found at {CASTLE} (apt-get install visp-images-data; skipped)")
-        return
+        return None
     truth = [np.loadtxt(p) for p in poses]
     frames = [cv2.imread(p, cv2.IMREAD_GRAYSCALE) for p in sorted(glob.glob(str(CASTLE / "Images" / "*.pgm")))]
     model = load_model(str(CASTLE / "Models" / "chateau.cao"))
     cam = Camera.from_intrinsics(np.array([[700.0, 0, 320], [0, 700, 240], [0, 0, 1]]), np.eye(4), 640, 480)
-    priors = Priors(intrinsics_prior_cov(cam, args.f_rel, args.c_px), args.model_sigma_mm / 1e3)
-    rows = track_errors(cam, model, frames, truth, priors)
-    table("Castle-simu (ViSP)", rows, f" of {len(frames)} (until lost)")
+    return cam, model, frames, truth
+
+
+def image_against_file(cam: Camera, kept, truth) -> np.ndarray:
+    """(du, dv, δf/f): how far the image's edges sit from the model projected at the true poses through the
+    camera file, as a move of its principal point and a scale of its focal length (least squares over every
+    edge sample the tracker found: r = n·(image edge − projection) ≈ n·(du, dv) + δf/f · n·(uv − c))."""
+    K, _ = cam.decompose()
+    A, b = [], []
+    for (_, d), T_true in zip(kept, truth):
+        ok = np.isfinite(d.matched_uv[:, 0]) & (d.weights > 0)
+        s = d.samples.subset(ok)
+        r, _, n = point_line_residuals(cam, T_true, s.X_obj, s.D_obj, d.matched_uv[ok])
+        uv = cam.project_obj(T_true, s.X_obj)
+        A.append(np.column_stack([n, np.sum(n * (uv - K[:2, 2]), axis=1)]))
+        b.append(r)
+    return np.linalg.lstsq(np.vstack(A), np.concatenate(b), rcond=None)[0]
+
+
+def castle(args) -> None:
+    """Castle-simu tracked with its own camera file and model, the σ under several statements of what is known of
+    them, side by side on the same poses; then draws of camera file and model about them (``castle_draws``)."""
+    data = castle_data()
+    if data is None:
+        return
+    cam, model, frames, truth = data
+    msig = args.model_sigma_mm / 1e3
+    statements = {
+        f"a camera file's prior ({100 * args.f_rel:g} %, {args.c_px:g} px; before)": Priors(
+            intrinsics_prior_cov(cam, args.f_rel, args.c_px), msig
+        ),
+        f"a renderer's camera (--camera-sigma 0 {RENDERER_C_PX:g}; after)": Priors(
+            intrinsics_prior_cov(cam, RENDERER_F_REL, RENDERER_C_PX), msig
+        ),
+        "camera exact (--camera-sigma 0 0)": Priors(None, msig),
+        "camera exact and model exact: the edges' share alone": Priors(None, 0.0),
+    }
+    kept: list = []
+    rows = track_errors(cam, model, frames, truth, next(iter(statements.values())), keep=kept)
+    if not rows:
+        print("\nCastle-simu: no frame tracked")
+        return
+    table("Castle-simu (ViSP), its camera file and model as shipped", rows, f" of {len(frames)} (until lost)")
+    e = np.array([r[0] for r in rows])
+    f = np.array([1e3] * 3 + [np.degrees(1.0)] * 3)
+    print(
+        f"  mean error (mm, °): {' '.join(f'{x:.3f}' for x in e.mean(0) * f)}; its scatter about the mean: "
+        f"{' '.join(f'{x:.3f}' for x in e.std(0) * f)} (a bias: the frames are about one draw)"
+    )
+    du, dv, df = image_against_file(cam, kept, truth[: len(kept)])
+    print(
+        f"  the images' edges against the model at the true poses through the camera file: as if u0 moved by "
+        f"{du:+.2f} px, v0 by {dv:+.2f} px, f by {100 * df:+.3f} %"
+    )
+    by = {}
+    for name, pr in statements.items():
+        covs = [sum(pose_covariance_parts(cam, T, d.samples, d.matched_uv, d.weights, pr).values()) for T, d in kept]
+        by[name] = covs
+    sh = [
+        {
+            **r[3],
+            "renderer camera": np.sqrt(
+                np.diag(
+                    pose_covariance_parts(cam, T, d.samples, d.matched_uv, d.weights, statements[list(statements)[1]])[
+                        "camera"
+                    ]
+                )
+            ),
+        }
+        for r, (T, d) in zip(rows, kept)
+    ]
+    shares_table(
+        [(r[0], r[1], r[2], s) for r, s in zip(rows, sh)],
+        {
+            "edges": "edges found on the image",
+            "model": f"model ({args.model_sigma_mm:g} mm per edge)",
+            "camera": f"camera: a camera file's prior ({100 * args.f_rel:g} %, {args.c_px:g} px)",
+            "renderer camera": f"camera: a renderer's (f exact, u0 v0 ± {RENDERER_C_PX:g} px)",
+        },
+    )
+    print("  the same poses, σ by statement (per axis x y z rx ry rz; χ²₆ = eᵀ Σ⁻¹ e, median over frames, and the")
+    print("  chance P that a right σ gives less: below 1 % too wide, above 99 % too narrow)")
+    print(f"    {'statement':<66} {'within 2σ %':<24} {'largest |e|/σ':<30} χ²₆ (P)")
+    for name, covs in by.items():
+        sg = np.sqrt(np.array([np.diag(c) for c in covs]))
+        z = np.abs(e) / sg
+        x2 = float(np.median([v @ np.linalg.solve(c, v) for v, c in zip(e, covs)]))
+        print(
+            f"    {name:<66} {' '.join(f'{x:3.0f}' for x in 100 * np.mean(z <= 2, 0)):<24} "
+            f"{' '.join(f'{x:4.1f}' for x in z.max(0)):<30} {x2:5.2f} ({100 * chi2.cdf(x2, 6):.1f} %)"
+        )
+    castle_draws(args, cam, model, frames, truth)
+
+
+def castle_draws(args, cam0: Camera, model0, frames, truth) -> None:
+    """Castle-simu with ``--castle-draws`` camera files and models drawn about its own (the budget of ``rendered``:
+    f × (1 ± ``--truth-f-rel``), u0, v0 ± ``--truth-c-px``; the model's extents ± ``--truth-dims-mm``, each axis
+    scaled), σ with the camera file's prior: the frames of one draw share its errors, so many draws show how
+    often σ covers them."""
+    from dataclasses import replace
+
+    if args.castle_draws < 1:
+        return
+    K0, _ = cam0.decompose()
+    V = np.asarray(model0.vertices)
+    ext = V.max(0) - V.min(0)
+    rng = np.random.default_rng(28)
+    rows, groups = [], []
+    for i in range(args.castle_draws):
+        K = K0.copy()
+        K[0, 0] *= 1 + args.truth_f_rel * rng.standard_normal()
+        K[1, 1] *= 1 + args.truth_f_rel * rng.standard_normal()
+        K[:2, 2] += args.truth_c_px * rng.standard_normal(2)
+        cam = Camera.from_intrinsics(K, np.eye(4), cam0.width, cam0.height)
+        model = replace(model0, vertices=V * (1 + args.truth_dims_mm / 1e3 * rng.standard_normal(3) / ext))
+        priors = Priors(intrinsics_prior_cov(cam, args.f_rel, args.c_px), args.model_sigma_mm / 1e3)
+        got = track_errors(cam, model, frames, truth, priors)
+        rows += got
+        groups += [i] * len(got)
+    what = f"f × (1 ± {args.truth_f_rel:g}), u0, v0 ± {args.truth_c_px:g} px; extents ± {args.truth_dims_mm:g} mm"
+    table(
+        "Castle-simu, camera file and model drawn about its own (held out)",
+        rows,
+        f", {args.castle_draws} draws: {what}; σ with the camera file's prior",
+        groups,
+    )
 
 
 def cube(args) -> None:
@@ -284,6 +468,7 @@ def main() -> None:
     ap.add_argument("--truth-f-rel", type=float, default=0.003)
     ap.add_argument("--truth-c-px", type=float, default=1.0)
     ap.add_argument("--truth-dims-mm", type=float, default=0.5)
+    ap.add_argument("--castle-draws", type=int, default=8, help="Castle-simu runs with a drawn camera and model")
     ap.add_argument("--clicks", type=int, default=30, help="one-click searches (each its own frame and draw)")
     ap.add_argument("--click-draws", type=int, default=300, help="update-pose draws")
     ap.add_argument("--only", choices=("rendered", "clicks", "oneclick", "castle", "cube"))

@@ -90,6 +90,7 @@ __all__ = [
     "BandSmoothed",
     "feature_groups",
     "pose_covariance",
+    "pose_covariance_parts",
 ]
 
 
@@ -821,9 +822,22 @@ def pose_covariance(
     camera: Camera, T: np.ndarray, samples: EdgeSamples, matched: np.ndarray, weights: np.ndarray, priors: Priors
 ) -> np.ndarray | None:
     """(6, 6) covariance of (δt [m], δr [rad]) of a pose fitted to edges found along the samples' normals
-    (``matched``, NaN where none; ``weights``, the fit's): the edges' errors (a noise of each sample plus an
-    offset and a tilt shared by each edge's samples, ``core.pose.uncertainty.edge_covariance``) and, by first
-    order, the camera's and the model's priors (issue 27). None with fewer than 6 samples kept."""
+    (``matched``, NaN where none; ``weights``, the fit's): the sum of ``pose_covariance_parts``. None with fewer
+    than 6 samples kept."""
+    parts = pose_covariance_parts(camera, T, samples, matched, weights, priors)
+    if parts is None:
+        return None
+    cov = sum(parts.values())
+    return 0.5 * (cov + cov.T)
+
+
+def pose_covariance_parts(
+    camera: Camera, T: np.ndarray, samples: EdgeSamples, matched: np.ndarray, weights: np.ndarray, priors: Priors
+) -> dict[str, np.ndarray] | None:
+    """``pose_covariance``'s shares by name: "edges" (a noise of each sample plus an offset and a tilt shared by
+    each edge's samples, ``core.pose.uncertainty.edge_covariance``), "model" and "camera" (by first order, the
+    priors of issue 27; "camera" only with ``priors.camera_cov``), each (6, 6). None with fewer than 6 samples
+    kept."""
     keep = np.isfinite(matched[:, 0]) & (weights > 0)
     if keep.sum() < 6:
         return None
@@ -834,16 +848,16 @@ def pose_covariance(
         curved = np.zeros(len(s), bool) if s.chord is None else s.chord >= 0
         floor = np.where(curved, CURVED_EDGE_BIAS_PX, EDGE_BIAS_PX)
         uv = camera.project_obj(T, s.X_obj)
-        cov = edge_covariance(J, r, w, groups, floor, 6, uv, n)
+        parts = {"edges": edge_covariance(J, r, w, groups, floor, 6, uv, n)}
         # The residuals' first-order moves, written out (the tracker runs this every frame): a model point moved
         # by d (world axes) moves r by J[:, :3] d (r = n·(m − π(X)), ∂r/∂δt = −n·∂π/∂X); C moved by δC moves it
         # by −n·∂π/∂C δC, with ∂u/∂C₀ = X̃/h₂, ∂u/∂C₂ = −u X̃/h₂ (v likewise).
-        cov = cov + grouped_share(J, w, lambda d: J[:, :3] @ d, groups, priors.model_sigma_m)
+        parts["model"] = grouped_share(J, w, lambda d: J[:, :3] @ d, groups, priors.model_sigma_m)
         if priors.camera_cov is not None:
             Xh = np.column_stack([s.X_obj @ T[:3, :3].T + T[:3, 3], np.ones(len(s))])
             h2 = Xh @ camera.C[2]
             dC = -np.hstack([n[:, :1] * Xh, n[:, 1:] * Xh, -(n * uv).sum(axis=1, keepdims=True) * Xh]) / h2[:, None]
-            cov = cov + first_order_share(J, w, lambda d: dC @ d, priors.camera_cov)
+            parts["camera"] = first_order_share(J, w, lambda d: dC @ d, priors.camera_cov)
     except ValueError:  # a sample behind the camera or an edge seen end-on at a moved camera
         return None
-    return 0.5 * (cov + cov.T)
+    return parts
