@@ -10,7 +10,10 @@ about x, y, z): the share of frames whose |error| ≤ 2σ and the largest |error
   (Jᵀ W J)⁻¹, every edge sample an independent measurement), recomputed here at the same poses;
 * **new σ**: ``app.vision.track.pose_covariance``: each edge's shared offset and tilt
   (``core.pose.uncertainty.edge_covariance``) plus, by first order, the camera's prior (a camera file:
-  σ(f)/f = ``--f-rel``, σ(u0, v0) = ``--c-px``) and the model's (``--model-sigma-mm`` per edge).
+  σ(f)/f = ``--f-rel``, σ(u0, v0) = ``--c-px``) and the model's (``--model-sigma-mm`` per edge, and √2 of it
+  per extent: ``core.pose.uncertainty.model_scale_share``);
+* **no-scale σ** (before the model's scale share, printed beside it in the same run): the new σ with the
+  model's per-edge share alone (its extents given as 0 to the same code).
 
 Target: 90–98 % within 2σ, never beyond 5σ (a σ too wide, 100 % and a largest ratio ≪ 2, is a defect too).
 "RMS e/σ" is the RMS of error / σ (1 for a σ that is right on average). The frames of one run share one
@@ -69,13 +72,20 @@ from app.vision.track import EdgeTracker, pose_covariance_parts  # noqa: E402
 from core.brep import BRep  # noqa: E402
 from core.camera import Camera  # noqa: E402
 from core.point_line_pose import point_line_residuals  # noqa: E402
-from core.pose.uncertainty import MODEL_PRIOR_M, Priors, intrinsics_prior_cov  # noqa: E402
+from core.pose.uncertainty import (  # noqa: E402
+    MODEL_EXTENT_PER_EDGE,
+    MODEL_PRIOR_M,
+    Priors,
+    intrinsics_prior_cov,
+    model_extent,
+)
 from core.transforms import exp_so3, log_so3, make_T  # noqa: E402
 
 CASTLE = Path("/usr/share/visp-images-data/ViSP-images/mbt-depth/Castle-simu")
 DATA = (ROOT / ".." / "shared" / "data").resolve()
 AXES = ("x", "y", "z", "rx", "ry", "rz")
 SHARES = {"edges": "edges found on the image", "model": "model", "camera": "camera"}
+NO_SCALE = np.zeros(3)  # a model's extents given as 0: its scale's share left out (the σ before it)
 
 
 def old_cov(camera: Camera, T: np.ndarray, d) -> np.ndarray | None:
@@ -91,7 +101,7 @@ def old_cov(camera: Camera, T: np.ndarray, d) -> np.ndarray | None:
 
 def track_errors(camera, model, frames, truth, priors: Priors, stop_lost: bool = True, keep=None):
     """Per tracked frame: (error (6,), old σ (6,), new σ (6,), the new σ's shares by name (each (6,), σ per axis),
-    χ²₆ = eᵀ Σ⁻¹ e with the new covariance Σ);
+    χ²₆ = eᵀ Σ⁻¹ e with the new covariance Σ, the no-scale σ (6,));
     stops at the first lost frame. ``keep`` (a list): (T, diagnostics) of each frame appended to it."""
     tr = EdgeTracker(camera, model, truth[0])
     tr.priors = priors
@@ -107,13 +117,19 @@ def track_errors(camera, model, frames, truth, priors: Priors, stop_lost: bool =
         c_old = old_cov(camera, T, d)
         if c_old is None:
             continue
-        parts = pose_covariance_parts(camera, T, d.samples, d.matched_uv, d.weights, priors)
+        parts = pose_covariance_parts(camera, T, d.samples, d.matched_uv, d.weights, priors, tr.extent_m)
         shares = {k: np.sqrt(np.diag(v)) for k, v in parts.items()}
         chi2_6 = float(e @ np.linalg.solve(d.cov, e))
-        out.append((e, np.sqrt(np.diag(c_old)), np.sqrt(np.diag(d.cov)), shares, chi2_6))
+        before = sum(pose_covariance_parts(camera, T, d.samples, d.matched_uv, d.weights, priors, NO_SCALE).values())
+        out.append((e, np.sqrt(np.diag(c_old)), np.sqrt(np.diag(d.cov)), shares, chi2_6, np.sqrt(np.diag(before))))
         if keep is not None:
             keep.append((T, d))
     return out
+
+
+def _sd(cov: np.ndarray) -> np.ndarray:
+    """σ per axis (6,) of a (6, 6) covariance."""
+    return np.sqrt(np.diag(cov))
 
 
 def spread(z: np.ndarray, groups: np.ndarray | None) -> tuple[float, int, int]:
@@ -147,32 +163,33 @@ def shares_table(rows, labels: dict[str, str]) -> None:
 
 
 def table(name: str, rows, note: str = "", groups=None) -> None:
-    """Per axis: RMS error, old and new σ (median), within 2σ, largest |e|/σ, RMS e/σ; then the new σ's frames'
-    worth in independent draws (``spread``) and the range of "within 2σ" that a right σ gives on so few."""
+    """Per axis: RMS error, old, no-scale and new σ (median), within 2σ, largest |e|/σ, RMS e/σ; then the new σ's
+    frames' worth in independent draws (``spread``) and the range of "within 2σ" that a right σ gives on so few.
+    Rows: (e, old σ, new σ, shares or None, χ²₆ or None, no-scale σ)."""
     if not rows:
         print(f"{name}: no frame tracked{note}")
         return
     e = np.array([r[0] for r in rows])
     print(f"\n{name}: {len(rows)} frames{note}")
     head = f"{'σ':>9} {'≤2σ':>5} {'max/σ':>6} {'RMS e/σ':>7}"
-    print(f"  {'axis':>4} | {'RMS error':>10} | old {head} | new {head}")
+    print(f"  {'axis':>4} | {'RMS error':>10} | old {head} | no scale {head} | new {head}")
     for k, ax in enumerate(AXES):
         unit, f = ("mm", 1e3) if k < 3 else ("°", np.degrees(1.0))
         cells = []
-        for j in (1, 2):
+        for j in (1, 5, 2):
             s = np.array([r[j][k] for r in rows])
             z = np.abs(e[:, k]) / s
             within, rms_z = 100 * np.mean(z <= 2), np.sqrt(np.mean(z**2))
             cells.append(f"{f * np.median(s):7.3f}{unit:>2} {within:4.0f}% {z.max():6.1f} {rms_z:7.2f}")
         rms = f * np.sqrt(np.mean(e[:, k] ** 2))
-        print(f"  {ax:>4} | {rms:8.3f}{unit:>2} | old {cells[0]} | new {cells[1]}")
+        print(f"  {ax:>4} | {rms:8.3f}{unit:>2} | old {cells[0]} | no scale {cells[1]} | new {cells[2]}")
     z = e / np.array([r[2] for r in rows])
     sp = [spread(z[:, k], groups) for k in range(6)]
     print(
         f"  new σ: frames worth {min(s[0] for s in sp):.0f}–{max(s[0] for s in sp):.0f} independent draws per axis; "
         f"a right σ gives {min(s[1] for s in sp)}–{max(s[2] for s in sp)} % within 2σ in 95 % of such sets"
     )
-    if len(rows[0]) > 4:
+    if rows[0][4] is not None:
         x2 = float(np.median([r[4] for r in rows]))
         print(
             f"  new σ: χ²₆ = eᵀ Σ⁻¹ e, median over frames, {x2:.2f}: "
@@ -248,7 +265,9 @@ def oneclick(args) -> None:
     """The one-click search (``app.vision.search.search_pose``, free pose) on rendered frames of the box, its camera
     file and model drawn about the truth as in ``rendered``, from a start 2° / 1 cm off, clicked at the box's
     projected centre. Old σ: the search's edges' share alone (its camera share needed a calibration in the
-    database); new: with the camera file's and the model's priors."""
+    database); new: with the camera file's and the model's priors; no scale: the same search again with the
+    model's extents given as 0 to its scale share (``app.vision.search.model_extent`` replaced here)."""
+    import app.vision.search as S
     from app.vision.search import NoPoseFits, search_pose
 
     W, H, f = 640, 480, 600.0
@@ -271,23 +290,31 @@ def oneclick(args) -> None:
         start = make_T(exp_so3(np.radians(2.0) * rng.standard_normal(3) / np.sqrt(3)) @ T_true[:3, :3], T_true[:3, 3])
         start[:3, 3] += 0.01 * rng.standard_normal(3) / np.sqrt(3)
         click = cam_true.project_obj(T_true, model.vertices).mean(axis=0)
-        try:
-            c = search_pose(
-                cam,
-                model,
-                start,
-                click,
-                im,
-                camera_cov=intrinsics_prior_cov(cam, args.f_rel, args.c_px),
-                model_sigma_m=args.model_sigma_mm / 1e3,
-            ).candidates[0]
-        except NoPoseFits:
+        found = []
+        for extent in (S.model_extent, lambda b: NO_SCALE):
+            S.model_extent, keep_fn = extent, S.model_extent
+            try:
+                found.append(
+                    search_pose(
+                        cam,
+                        model,
+                        start,
+                        click,
+                        im,
+                        camera_cov=intrinsics_prior_cov(cam, args.f_rel, args.c_px),
+                        model_sigma_m=args.model_sigma_mm / 1e3,
+                    ).candidates[0]
+                )
+            except NoPoseFits:
+                break
+            finally:
+                S.model_extent = keep_fn
+        if len(found) < 2 or found[0].cov is None or found[1].cov is None:
             continue
-        if c.cov is None:
-            continue
+        c, b = found
         T = c.T_world_obj
         e = np.concatenate([T[:3, 3] - T_true[:3, 3], log_so3(T[:3, :3] @ T_true[:3, :3].T)])
-        rows.append((e, np.sqrt(np.diag(c.cov - c.cov_camera)), np.sqrt(np.diag(c.cov))))
+        rows.append((e, np.sqrt(np.diag(c.cov - c.cov_camera)), np.sqrt(np.diag(c.cov)), None, None, _sd(b.cov)))
     table(
         "one-click search, rendered box (held out)",
         rows,
@@ -331,12 +358,19 @@ def clicks(args) -> None:
             r = refine_views([view], T_true)
         except ValueError:
             continue
-        new = with_views_camera_uncertainty(
-            r, [view], [intrinsics_prior_cov(cam, args.f_rel, args.c_px)], model_sigma_m=args.model_sigma_mm / 1e3
+        new, before = (
+            with_views_camera_uncertainty(
+                r,
+                [view],
+                [intrinsics_prior_cov(cam, args.f_rel, args.c_px)],
+                model_sigma_m=args.model_sigma_mm / 1e3,
+                model_extent_m=ext,
+            )
+            for ext in (model_extent(BRep.box(*dims).bounds()), NO_SCALE)
         )
         T = r.T_world_obj
         e = np.concatenate([T[:3, 3] - T_true[:3, 3], log_so3(T[:3, :3] @ T_true[:3, :3].T)])
-        rows.append((e, np.sqrt(np.diag(r.cov)), np.sqrt(np.diag(new.cov))))
+        rows.append((e, _sd(r.cov), _sd(new.cov), None, None, _sd(before.cov)))
     table(
         "update pose from clicked edges, σ = 1 px (held out)",
         rows,
@@ -388,6 +422,8 @@ def castle(args) -> None:
         return
     cam, model, frames, truth = data
     msig = args.model_sigma_mm / 1e3
+    ext = model_extent(model.bounds())
+    per_extent = MODEL_EXTENT_PER_EDGE * args.model_sigma_mm
     statements = {
         f"a camera file's prior ({100 * args.f_rel:g} %, {args.c_px:g} px; before)": Priors(
             intrinsics_prior_cov(cam, args.f_rel, args.c_px), msig
@@ -396,6 +432,7 @@ def castle(args) -> None:
             intrinsics_prior_cov(cam, RENDERER_F_REL, RENDERER_C_PX), msig
         ),
         "camera exact (--camera-sigma 0 0)": Priors(None, msig),
+        "camera exact, the model's per-edge share alone (no scale)": Priors(None, msig),
         "camera exact and model exact: the edges' share alone": Priors(None, 0.0),
     }
     kept: list = []
@@ -417,16 +454,17 @@ def castle(args) -> None:
     )
     by = {}
     for name, pr in statements.items():
-        covs = [sum(pose_covariance_parts(cam, T, d.samples, d.matched_uv, d.weights, pr).values()) for T, d in kept]
+        x = NO_SCALE if "no scale" in name else ext
+        covs = [sum(pose_covariance_parts(cam, T, d.samples, d.matched_uv, d.weights, pr, x).values()) for T, d in kept]
         by[name] = covs
     sh = [
         {
             **r[3],
             "renderer camera": np.sqrt(
                 np.diag(
-                    pose_covariance_parts(cam, T, d.samples, d.matched_uv, d.weights, statements[list(statements)[1]])[
-                        "camera"
-                    ]
+                    pose_covariance_parts(
+                        cam, T, d.samples, d.matched_uv, d.weights, statements[list(statements)[1]], ext
+                    )["camera"]
                 )
             ),
         }
@@ -436,7 +474,7 @@ def castle(args) -> None:
         [(r[0], r[1], r[2], s) for r, s in zip(rows, sh)],
         {
             "edges": "edges found on the image",
-            "model": f"model ({args.model_sigma_mm:g} mm per edge)",
+            "model": f"model ({args.model_sigma_mm:g} mm per edge, {per_extent:.2f} per extent)",
             "camera": f"camera: a camera file's prior ({100 * args.f_rel:g} %, {args.c_px:g} px)",
             "renderer camera": f"camera: a renderer's (f exact, u0 v0 ± {RENDERER_C_PX:g} px)",
         },
@@ -523,7 +561,7 @@ def main() -> None:
     args = ap.parse_args()
     print(
         f"σ coverage of poses; priors: camera σ(f)/f = {args.f_rel:g}, σ(u0, v0) = {args.c_px:g} px; "
-        f"model {args.model_sigma_mm:g} mm per edge. Target: 90–98 % within 2σ, none beyond 5σ."
+        f"model {args.model_sigma_mm:g} mm per edge, √2 of it per extent. Target: 90–98 % within 2σ, none beyond 5σ."
     )
     for name, fn in (
         ("rendered", rendered),

@@ -13,7 +13,7 @@ from app.vision.sequence import track_sequence, world_sigmas
 from app.vision.track import pose_covariance, pose_covariance_parts, sample_visible_edges
 from core.camera import Camera
 from core.point_line_pose import refine_point_to_line
-from core.pose.uncertainty import Priors, intrinsics_prior_cov, pose_delta
+from core.pose.uncertainty import MODEL_EXTENT_PER_EDGE, Priors, intrinsics_prior_cov, model_extent, pose_delta
 from core.transforms import log_so3
 
 from .sequence_files import K, write_sequence
@@ -58,8 +58,9 @@ def test_mcit_track_csv_with_the_priors_said_on_the_command_line(rendered, tmp_p
 
 def test_the_trackers_prior_shares_match_a_monte_carlo_of_its_fit(rendered):
     """Samples on the box's visible edges at the true pose, found exactly where a camera and a model drawn from
-    the priors put them; the scatter of the poses fitted with the nominal ones (l2, as the linearisation) against
-    ``pose_covariance``'s shares, within 20 %."""
+    the priors put them (each edge off by its own offset, each of the model's extents by √2 σ); the scatter of the
+    poses fitted with the nominal ones (l2, as the linearisation) against ``pose_covariance``'s shares, within
+    20 %."""
     _, cam, box, truth = rendered
     T = truth[0]
     s = sample_visible_edges(cam, box, T, step_px=4.0)
@@ -68,7 +69,8 @@ def test_the_trackers_prior_shares_match_a_monte_carlo_of_its_fit(rendered):
     priors = Priors(intrinsics_prior_cov(cam, f_rel, c_px), sigma_m)
     uv0 = cam.project_obj(T, s.X_obj)
     w = np.ones(len(s))
-    share = pose_covariance(cam, T, s, uv0, w, priors) - pose_covariance(cam, T, s, uv0, w, Priors(None, 0.0))
+    ext = model_extent(box.bounds())
+    share = pose_covariance(cam, T, s, uv0, w, priors, ext) - pose_covariance(cam, T, s, uv0, w, Priors(None, 0.0))
     rng = np.random.default_rng(3)
     _, feat = np.unique(s.feature, return_inverse=True)
     d = []
@@ -78,7 +80,8 @@ def test_the_trackers_prior_shares_match_a_monte_carlo_of_its_fit(rendered):
         Kt[1, 1] *= 1 + f_rel * rng.standard_normal()
         Kt[:2, 2] += c_px * rng.standard_normal(2)
         true_cam = Camera.from_intrinsics(Kt, T_cw, cam.width, cam.height)
-        X_true = s.X_obj + rng.normal(0, sigma_m, (feat.max() + 1, 3))[feat]
+        scale = 1 + MODEL_EXTENT_PER_EDGE * sigma_m / ext * rng.standard_normal(3)  # about the model's origin
+        X_true = s.X_obj * scale + rng.normal(0, sigma_m, (feat.max() + 1, 3))[feat]
         fit = refine_point_to_line(cam, T, s.X_obj, s.D_obj, true_cam.project_obj(T, X_true), loss="l2", scale_px=1.0)
         d.append(pose_delta(fit.T_world_obj, T))
     d = np.array(d)
