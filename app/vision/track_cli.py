@@ -110,8 +110,9 @@ def add_track_parser(sub) -> None:
         "--model-sigma-mm",
         type=sigma_mm,
         default=None,
-        help="the model's stated uncertainty: σ of each model edge's position (mm, default 0.3), part of each "
-        "frame's σ in --csv (docs/pose.md, 'What σ covers')",
+        help="the model's stated uncertainty: σ of each model edge's position (mm, default 0.3), and √2 of it for "
+        "each of the model's extents (a length is read between two edges: one flag, as one measurement gives "
+        "both), part of each frame's σ in --csv (docs/pose.md, 'What σ covers')",
     )
     p.add_argument(
         "--camera-sigma",

@@ -28,7 +28,9 @@ share plus, by first order, two stated priors (``Priors``):
 
 The camera prior is a stated assumption (a checkerboard calibration's typical error); the model prior was
 tuned on one sequence (the rendered box of ``bench/sigma_coverage.py``, its sides measured to 0.5 mm) and
-checked on the others (docs/pose.md, "What σ covers"). ``first_order_share`` is the one propagation: a
+checked on the others (docs/pose.md, "What σ covers"); its extents' √2 follows from it (two readings of a
+ruler per length), not tuned — 0.42 mm at the default, within ISO 2768-m's general tolerances of a machined
+length (± 0.3 mm to 120 mm, ± 0.5 mm to 400 mm). ``first_order_share`` is the one propagation: a
 weighted least-squares solution moves with a parameter p by ``dθ = −A⁻¹ Jᵀ W ∂r/∂p`` (A = Jᵀ W J); its
 share is ``D Σ_p Dᵀ``. ``edge_covariance`` is the measurements' share for edges found on an image (the
 tracker's, the one-click search's): a noise of each sample plus an offset and a tilt shared by each edge's
@@ -93,7 +95,8 @@ def model_sigma_of(sigmas) -> float:
 class Priors:
     """What a pose's σ adds to its measurements' share. camera_cov : (12, 12) covariance of C's entries
     (a calibration's, or ``intrinsics_prior_cov``'s), or None: no camera share. model_sigma_m : σ of each
-    model edge's position (metres), 0: no model share."""
+    model edge's position (metres), and ``MODEL_EXTENT_PER_EDGE`` of it for each of the model's extents
+    (``model_scale_share``); 0: no model share."""
 
     camera_cov: np.ndarray | None = None
     model_sigma_m: float = MODEL_PRIOR_M
