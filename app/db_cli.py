@@ -418,8 +418,9 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
         "--model-sigma-mm",
         type=number(float, lambda v: 0.0 <= v <= 1000.0, kind="millimetres (a number)", expected="0 to 1000 mm"),
         default=None,
-        help="how well the model follows the object: σ of each model edge's position (mm; default 0.3), part of "
-        "every pose's σ (docs/pose.md, 'What σ covers')",
+        help="how well the model follows the object: σ of each model edge's position (mm; default 0.3), and √2 of "
+        "it for each of the model's extents (a length is read between two edges: one flag, as one measurement "
+        "gives both), part of every pose's σ (docs/pose.md, 'What σ covers')",
     )
     p.add_argument("--angle-deg", type=float, default=30.0, help="meshes: dihedral angle from which an edge is drawn")
     p.add_argument(

@@ -81,6 +81,8 @@ from core.pose.uncertainty import (
     edge_covariance,
     first_order_share,
     grouped_share,
+    model_extent,
+    model_scale_share,
 )
 from core.robust import robust_weights
 from core.transforms import exp_so3, make_T, pose_error
@@ -1258,9 +1260,10 @@ def _prior_share(
     camera: Camera, model: BRep, T: np.ndarray, img_s: np.ndarray, space, rims: bool, priors: Priors
 ) -> np.ndarray | None:
     """(6, 6) covariance of (δt, δr) that the camera's uncertainty (``priors.camera_cov``, of C's 12 entries)
-    and the model's (``priors.model_sigma_m`` per edge) add to a pose refined on the image's edges, by first
-    order (``core.pose.uncertainty.first_order_share``, ``grouped_share``): each sample's projection along
-    its normal moved with C, and with its edge. None when too few edges are found at T."""
+    and the model's (``priors.model_sigma_m`` per edge, and √2 of it per extent) add to a pose refined on the
+    image's edges, by first order (``core.pose.uncertainty.first_order_share``, ``grouped_share``,
+    ``model_scale_share``): each sample's projection along its normal moved with C, with its edge, and with the
+    model's scale. None when too few edges are found at T."""
     lin = _linearize(camera, model, space.params(T), img_s, space, rims, 2.0)
     if lin is None:
         return None
@@ -1271,6 +1274,8 @@ def _prior_share(
         return -np.einsum("ni,ni->n", cam.project_obj(T, X_obj), n)  # r = edge − projection
 
     share = grouped_share(J, w, lambda d: along(camera, s.X_obj + d), feature_groups(s), priors.model_sigma_m)
+    scaled = lambda sc: along(camera, s.X_obj * (1.0 + sc))  # noqa: E731  (the model scaled about its origin)
+    share = share + model_scale_share(J, w, scaled, model_extent(model.bounds()), priors.model_sigma_m)
     if priors.camera_cov is not None:
         share = share + first_order_share(
             J, w, lambda d: along(perturbed_camera(camera, d), s.X_obj), priors.camera_cov

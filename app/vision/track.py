@@ -73,6 +73,8 @@ from core.pose.uncertainty import (
     edge_covariance,
     first_order_share,
     grouped_share,
+    model_extent,
+    model_scale_share,
 )
 from core.transforms import check_T, invert_T, make_T, orthonormalize, pose_error
 
@@ -90,6 +92,7 @@ __all__ = [
     "BandSmoothed",
     "feature_groups",
     "pose_covariance",
+    "pose_covariance_parts",
 ]
 
 
@@ -514,6 +517,7 @@ class EdgeTracker:
             )
         self.camera = camera
         self.model = model
+        self.extent_m = model_extent(model.bounds())  # the model's extents, for its scale's share of σ
         self.sample_step_px = float(sample_step_px)
         self.search_px = float(search_px)
         self.refine_search_px = float(refine_search_px)
@@ -782,7 +786,7 @@ class EdgeTracker:
         matched = np.where(p.found[:, None], p.matched, np.nan)
         cov = None
         if p.fit is not None and self.priors is not None:
-            cov = pose_covariance(self.camera, T, p.samples, matched, p.weights, self.priors)
+            cov = pose_covariance(self.camera, T, p.samples, matched, p.weights, self.priors, self.extent_m)
         self.diagnostics = TrackDiagnostics(
             p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason, cov, edge_px
         )
@@ -818,12 +822,38 @@ def feature_groups(s: EdgeSamples, arc: int = 8) -> np.ndarray:
 
 
 def pose_covariance(
-    camera: Camera, T: np.ndarray, samples: EdgeSamples, matched: np.ndarray, weights: np.ndarray, priors: Priors
+    camera: Camera,
+    T: np.ndarray,
+    samples: EdgeSamples,
+    matched: np.ndarray,
+    weights: np.ndarray,
+    priors: Priors,
+    extent_m: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """(6, 6) covariance of (δt [m], δr [rad]) of a pose fitted to edges found along the samples' normals
-    (``matched``, NaN where none; ``weights``, the fit's): the edges' errors (a noise of each sample plus an
-    offset and a tilt shared by each edge's samples, ``core.pose.uncertainty.edge_covariance``) and, by first
-    order, the camera's and the model's priors (issue 27). None with fewer than 6 samples kept."""
+    (``matched``, NaN where none; ``weights``, the fit's): the sum of ``pose_covariance_parts``. None with fewer
+    than 6 samples kept."""
+    parts = pose_covariance_parts(camera, T, samples, matched, weights, priors, extent_m)
+    if parts is None:
+        return None
+    cov = sum(parts.values())
+    return 0.5 * (cov + cov.T)
+
+
+def pose_covariance_parts(
+    camera: Camera,
+    T: np.ndarray,
+    samples: EdgeSamples,
+    matched: np.ndarray,
+    weights: np.ndarray,
+    priors: Priors,
+    extent_m: np.ndarray | None = None,
+) -> dict[str, np.ndarray] | None:
+    """``pose_covariance``'s shares by name: "edges" (a noise of each sample plus an offset and a tilt shared by
+    each edge's samples, ``core.pose.uncertainty.edge_covariance``), "model" and "camera" (by first order, the
+    priors of issue 27; "camera" only with ``priors.camera_cov``), each (6, 6). "model" holds each edge's own
+    offset and the model's per-dimension scale (its extents ``extent_m`` (3,), the tracker's model's; None: the
+    samples' own). None with fewer than 6 samples kept."""
     keep = np.isfinite(matched[:, 0]) & (weights > 0)
     if keep.sum() < 6:
         return None
@@ -834,16 +864,20 @@ def pose_covariance(
         curved = np.zeros(len(s), bool) if s.chord is None else s.chord >= 0
         floor = np.where(curved, CURVED_EDGE_BIAS_PX, EDGE_BIAS_PX)
         uv = camera.project_obj(T, s.X_obj)
-        cov = edge_covariance(J, r, w, groups, floor, 6, uv, n)
+        parts = {"edges": edge_covariance(J, r, w, groups, floor, 6, uv, n)}
         # The residuals' first-order moves, written out (the tracker runs this every frame): a model point moved
         # by d (world axes) moves r by J[:, :3] d (r = n·(m − π(X)), ∂r/∂δt = −n·∂π/∂X); C moved by δC moves it
         # by −n·∂π/∂C δC, with ∂u/∂C₀ = X̃/h₂, ∂u/∂C₂ = −u X̃/h₂ (v likewise).
-        cov = cov + grouped_share(J, w, lambda d: J[:, :3] @ d, groups, priors.model_sigma_m)
+        parts["model"] = grouped_share(J, w, lambda d: J[:, :3] @ d, groups, priors.model_sigma_m)
+        # the model scaled by 1 + sc about its origin moves its points by R (sc ⊙ X) in the world
+        ext = np.ptp(s.X_obj, axis=0) if extent_m is None else extent_m
+        scaled = lambda sc: np.einsum("nk,nk->n", J[:, :3], (s.X_obj * sc) @ T[:3, :3].T)  # noqa: E731
+        parts["model"] = parts["model"] + model_scale_share(J, w, scaled, ext, priors.model_sigma_m)
         if priors.camera_cov is not None:
             Xh = np.column_stack([s.X_obj @ T[:3, :3].T + T[:3, 3], np.ones(len(s))])
             h2 = Xh @ camera.C[2]
             dC = -np.hstack([n[:, :1] * Xh, n[:, 1:] * Xh, -(n * uv).sum(axis=1, keepdims=True) * Xh]) / h2[:, None]
-            cov = cov + first_order_share(J, w, lambda d: dC @ d, priors.camera_cov)
+            parts["camera"] = first_order_share(J, w, lambda d: dC @ d, priors.camera_cov)
     except ValueError:  # a sample behind the camera or an edge seen end-on at a moved camera
         return None
-    return 0.5 * (cov + cov.T)
+    return parts

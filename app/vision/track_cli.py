@@ -110,8 +110,9 @@ def add_track_parser(sub) -> None:
         "--model-sigma-mm",
         type=sigma_mm,
         default=None,
-        help="the model's stated uncertainty: σ of each model edge's position (mm, default 0.3), part of each "
-        "frame's σ in --csv (docs/pose.md, 'What σ covers')",
+        help="the model's stated uncertainty: σ of each model edge's position (mm, default 0.3), and √2 of it for "
+        "each of the model's extents (a length is read between two edges: one flag, as one measurement gives "
+        "both), part of each frame's σ in --csv (docs/pose.md, 'What σ covers')",
     )
     p.add_argument(
         "--camera-sigma",
@@ -120,7 +121,9 @@ def add_track_parser(sub) -> None:
         metavar=("F_PCT", "C_PX"),
         default=(0.3, 1.0),
         help="the stated uncertainty of a camera file without a calibration's covariance: σ of fx, fy in percent "
-        "and of u0, v0 in pixels (default 0.3 %% and 1 px; 0 0 for a camera known exactly, e.g. a simulation's)",
+        "and of u0, v0 in pixels (default 0.3 %% and 1 px, a checkerboard calibration's; 0 0.5 for a renderer's "
+        "camera file, its focal length exact but its pixel convention unsaid; 0 0 only for a camera known exactly, "
+        "convention included: docs/pose.md, 'What σ covers')",
     )
     p.add_argument("--keep-going", action="store_true", help="do not stop at a lost frame (draw the last good pose)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (there is none when stderr is not a terminal)")

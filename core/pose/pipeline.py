@@ -34,7 +34,7 @@ from ..camera import Camera
 from ..transforms import pose_error
 from .plausibility import plausibility
 from .refine import PosePrior, RefineResult, ViewClicks, refine_views
-from .uncertainty import MODEL_PRIOR_M, with_views_camera_uncertainty
+from .uncertainty import MODEL_PRIOR_M, model_extent, with_views_camera_uncertainty
 
 __all__ = ["Refused", "Start", "Refined", "Estimates", "rank", "within", "refine_starts", "operator_starts"]
 
@@ -120,8 +120,9 @@ def refine_starts(
 
     camera_covs : optional, per view of ``views``, the covariance (12, 12) of its camera's C (or None; a camera
     file's prior: ``uncertainty.intrinsics_prior_cov``); model_sigma_m : σ of each model edge's position
-    (metres, ``uncertainty.Priors``). When the start is no prior, every camera's and the model's share join the
-    result's σ (``uncertainty.with_views_camera_uncertainty``; a prior measured through C holds them already)."""
+    (metres, ``uncertainty.Priors``; with it, ``model``'s extents each to √2 of it). When the start is no prior,
+    every camera's and the model's share join the result's σ (``uncertainty.with_views_camera_uncertainty``; a
+    prior measured through C holds them already)."""
     failures: list[tuple[str, str]] = []
     for i, start in enumerate(starts):
         try:
@@ -138,7 +139,14 @@ def refine_starts(
             continue
         if start.prior is None:
             covs = [None] * len(views) if camera_covs is None else camera_covs
-            res = with_views_camera_uncertainty(res, views, covs, huber_px=huber_px, model_sigma_m=model_sigma_m)
+            res = with_views_camera_uncertainty(
+                res,
+                views,
+                covs,
+                huber_px=huber_px,
+                model_sigma_m=model_sigma_m,
+                model_extent_m=model_extent(model.bounds()),
+            )
         return Refined(res, i, tuple(failures))
     return Refined(None, None, tuple(failures))
 

@@ -20,10 +20,17 @@ share plus, by first order, two stated priors (``Priors``):
   0.3 mm, tuned on bench/sigma_coverage.py's rendered box) from where the model puts it, an independent 3D
   offset per edge: a model measured with a ruler or a CAD file that the object does not follow exactly.
   An edge's samples move together, so the share does not average away over an edge's hundreds of samples.
+  And a per-dimension scale (``model_scale_share``): each of the model's extents (its bounds along its own
+  axes) off by ``MODEL_EXTENT_PER_EDGE`` × ``model_sigma_m`` (√2: an extent is read between two edges, each
+  placed to ``model_sigma_m``), every point moving with it in proportion to its distance from the model's
+  origin. A ruler's error moves every edge along one dimension together; as independent offsets it would
+  average away over a model's many edges (ViSP's castle: depth 84 % within 2σ without it, docs/pose.md).
 
 The camera prior is a stated assumption (a checkerboard calibration's typical error); the model prior was
 tuned on one sequence (the rendered box of ``bench/sigma_coverage.py``, its sides measured to 0.5 mm) and
-checked on the others (docs/pose.md, "What σ covers"). ``first_order_share`` is the one propagation: a
+checked on the others (docs/pose.md, "What σ covers"); its extents' √2 follows from it (two readings of a
+ruler per length), not tuned — 0.42 mm at the default, within ISO 2768-m's general tolerances of a machined
+length (± 0.3 mm to 120 mm, ± 0.5 mm to 400 mm). ``first_order_share`` is the one propagation: a
 weighted least-squares solution moves with a parameter p by ``dθ = −A⁻¹ Jᵀ W ∂r/∂p`` (A = Jᵀ W J); its
 share is ``D Σ_p Dᵀ``. ``edge_covariance`` is the measurements' share for edges found on an image (the
 tracker's, the one-click search's): a noise of each sample plus an offset and a tilt shared by each edge's
@@ -58,6 +65,9 @@ __all__ = [
     "edge_covariance",
     "clicks_model_share",
     "model_sigma_of",
+    "MODEL_EXTENT_PER_EDGE",
+    "model_extent",
+    "model_scale_share",
     "EDGE_BIAS_PX",
     "CURVED_EDGE_BIAS_PX",
 ]
@@ -66,6 +76,9 @@ __all__ = [
 CAMERA_PRIOR_F_REL = 0.003  # σ of fx and fy, relative, for a camera file that states no covariance
 CAMERA_PRIOR_C_PX = 1.0  # σ of u0 and v0 (pixels), idem
 MODEL_PRIOR_M = 0.0003  # σ of each model edge's position (metres), unless the object says its own
+# σ of each of the model's extents, per model_sigma_m: the distance between two edges, each placed to
+# model_sigma_m, is known to √2 of it (one stated number, the model's; not tuned on any sequence).
+MODEL_EXTENT_PER_EDGE = float(np.sqrt(2.0))
 # An edge found on an image may sit a fraction of a pixel off along its whole length: ``edge_covariance``
 # counts each edge's offset as one error of at least this (pixels), straight and curved (measured for the
 # one-click search: app/vision/search.py).
@@ -82,7 +95,8 @@ def model_sigma_of(sigmas) -> float:
 class Priors:
     """What a pose's σ adds to its measurements' share. camera_cov : (12, 12) covariance of C's entries
     (a calibration's, or ``intrinsics_prior_cov``'s), or None: no camera share. model_sigma_m : σ of each
-    model edge's position (metres), 0: no model share."""
+    model edge's position (metres), and ``MODEL_EXTENT_PER_EDGE`` of it for each of the model's extents
+    (``model_scale_share``); 0: no model share."""
 
     camera_cov: np.ndarray | None = None
     model_sigma_m: float = MODEL_PRIOR_M
@@ -124,6 +138,32 @@ def first_order_moves(
     steps = principal_steps(cov_p)
     moves = np.array([-Ai @ (J * w[:, None]).T @ (0.5 * (residual_of(d) - residual_of(-d))) for d in steps])
     return steps, moves.reshape(len(steps), J.shape[1])
+
+
+def model_extent(bounds: np.ndarray) -> np.ndarray:
+    """(3,) a model's extents (metres) along its own axes from its bounds (2, 3) (``BRep.bounds()``, or the min
+    and max of its points)."""
+    b = np.asarray(bounds, float).reshape(2, 3)
+    return b[1] - b[0]
+
+
+def model_scale_share(
+    J: np.ndarray,
+    w: np.ndarray,
+    residual_of: Callable[[np.ndarray], np.ndarray],
+    extent_m: np.ndarray,
+    sigma_m: float,
+) -> np.ndarray:
+    """(k, k) share of the model's per-dimension scale in a weighted least-squares solution (J (m, k), weights
+    w (m,)): each extent ``extent_m`` (3,) off by ``MODEL_EXTENT_PER_EDGE`` × ``sigma_m``, independently, the
+    model's points moving about its origin by X_k s_k with s_k = δextent_k / extent_k. ``residual_of(s)`` gives
+    the residuals (m,) with the points so scaled by s (3,). An axis with no extent (under 1 mm: a flat model's
+    thickness) has no scale to be off."""
+    ext = np.asarray(extent_m, float).reshape(3)
+    var = np.where(ext > 1e-3, (MODEL_EXTENT_PER_EDGE * float(sigma_m) / np.maximum(ext, 1e-3)) ** 2, 0.0)
+    if not (sigma_m > 0 and var.max() > 0):
+        return np.zeros((J.shape[1], J.shape[1]))
+    return first_order_share(J, w, residual_of, np.diag(var))
 
 
 def grouped_share(
@@ -183,13 +223,14 @@ def with_views_camera_uncertainty(
     camera_covs: Sequence[np.ndarray | None],
     huber_px: float = 3.0,
     model_sigma_m: float = 0.0,
+    model_extent_m: np.ndarray | None = None,
 ) -> RefineResult:
     """``result`` (refined by ``refine_views`` on ``views``) with every camera calibration's share added to its
     ``cov``: each view's C moved ±1σ along the principal axes of its covariance (``camera_covs``, one (12, 12)
     or None per view), the other views held; and the model's share (``model_sigma_m`` per model edge or
-    point, ``clicks_model_share``). ``cov_parts`` holds "clicks", "camera calibration" and "model". Unchanged
-    when no view has a covariance and ``model_sigma_m`` is 0."""
-    model = clicks_model_share(result, views, model_sigma_m)
+    point and its extents ``model_extent_m``, ``clicks_model_share``). ``cov_parts`` holds "clicks", "camera
+    calibration" and "model". Unchanged when no view has a covariance and ``model_sigma_m`` is 0."""
+    model = clicks_model_share(result, views, model_sigma_m, model_extent_m)
     if all(c is None for c in camera_covs) and model is None:
         return result
     T0, share = result.T_world_obj, np.zeros((6, 6))
@@ -212,15 +253,18 @@ def with_views_camera_uncertainty(
     return replace(result, cov=result.cov + share + (0.0 if model is None else model), cov_parts=parts)
 
 
-def clicks_model_share(result: RefineResult, views: Sequence[ViewClicks], model_sigma_m: float) -> np.ndarray | None:
+def clicks_model_share(
+    result: RefineResult, views: Sequence[ViewClicks], model_sigma_m: float, extent_m: np.ndarray | None = None
+) -> np.ndarray | None:
     """(6, 6) share of the model's uncertainty in a pose refined from clicks (``refine_views`` on ``views``):
     each clicked model edge (point) off by an independent 3D offset of σ ``model_sigma_m`` (one per model
-    feature, whichever view clicked it), propagated by first order (``grouped_share``) with the clicks'
-    weights 1/σ². None when ``model_sigma_m`` is 0."""
+    feature, whichever view clicked it, ``grouped_share``) and the model's extents ``extent_m`` (3,; None: the
+    clicked features' own) each off by √2 of it (``model_scale_share``), propagated by first order with the
+    clicks' weights 1/σ². None when ``model_sigma_m`` is 0."""
     if not model_sigma_m > 0:
         return None
     R, t = result.T_world_obj[:3, :3], result.T_world_obj[:3, 3]
-    Js, ws, keys, fns = [], [], [], []
+    Js, ws, keys, fns, pts = [], [], [], [], []
     for v in views:
         c = as_clicks(v.segs_uv, v.edges_obj, v.points_uv, v.points_obj)
         _, J, _ = residuals(v.camera, R, t, c, jacobian=True)
@@ -229,18 +273,23 @@ def clicks_model_share(result: RefineResult, views: Sequence[ViewClicks], model_
         feats = [np.round(e, 6).tobytes() for e in c.edges_obj] + [np.round(p, 6).tobytes() for p in c.points_obj]
         keys += [k for k in feats for _ in (0, 1)]  # two residual rows per click
 
-        def moved(d, v=v, c=c):
-            e = None if c.n_segments == 0 else c.edges_obj + d
-            p = None if c.n_points == 0 else c.points_obj + d
+        def moved(d, v=v, c=c, scale=False):  # every clicked model point moved by d, or scaled by 1 + d
+            e = None if c.n_segments == 0 else c.edges_obj * (1.0 + d) if scale else c.edges_obj + d
+            p = None if c.n_points == 0 else c.points_obj * (1.0 + d) if scale else c.points_obj + d
             s = None if c.n_segments == 0 else c.segs_uv
             u = None if c.n_points == 0 else c.points_uv
             return residuals(v.camera, R, t, as_clicks(s, e, u, p))[0]
 
         fns.append(moved)
+        pts.append(np.vstack([c.edges_obj.reshape(-1, 3), c.points_obj.reshape(-1, 3)]))
     groups = np.unique(np.array(keys, dtype=object), return_inverse=True)[1]
-    return grouped_share(
-        np.vstack(Js), np.concatenate(ws), lambda d: np.concatenate([f(d) for f in fns]), groups, model_sigma_m
-    )
+    J, w = np.vstack(Js), np.concatenate(ws)
+    share = grouped_share(J, w, lambda d: np.concatenate([f(d) for f in fns]), groups, model_sigma_m)
+    if extent_m is None:
+        P = np.vstack(pts)
+        extent_m = model_extent(np.array([P.min(axis=0), P.max(axis=0)]))
+    scaled = lambda s: np.concatenate([f(s, scale=True) for f in fns])  # noqa: E731
+    return share + model_scale_share(J, w, scaled, extent_m, model_sigma_m)
 
 
 def edge_covariance(

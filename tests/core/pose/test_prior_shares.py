@@ -12,6 +12,7 @@ from core.pose import refine
 from core.pose.refine import ViewClicks
 from core.pose.synthetic import paper_problems
 from core.pose.uncertainty import (
+    MODEL_EXTENT_PER_EDGE,
     intrinsics_prior_cov,
     pose_delta,
     with_camera_uncertainty,
@@ -69,7 +70,8 @@ def test_the_model_prior_matches_the_scatter_of_poses_of_models_drawn_from_it():
     r = refine(cam, pb.T_world_obj, **kw, sigma_px=0.2)
     sigma_m = 0.002
     view = ViewClicks(cam, sigma_px=0.2, **kw)
-    out = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m)
+    flat = np.zeros(3)  # the model's extents given as 0: its per-edge share alone (its scale's: the test below)
+    out = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m, model_extent_m=flat)
     share = out.cov_parts["model"]
     assert np.allclose(out.cov, r.cov + share)
     rng = np.random.default_rng(2)
@@ -84,9 +86,44 @@ def test_the_model_prior_matches_the_scatter_of_poses_of_models_drawn_from_it():
             pose_delta(refine(cam, r.T_world_obj, segs_uv=segs, edges_obj=pb.edges_obj).T_world_obj, r.T_world_obj)
         )
     assert _spread(np.array(d)) == pytest.approx(_predicted(share), rel=0.2)
-    half = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m / 2).cov_parts["model"]
+    half = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m / 2, model_extent_m=flat)
+    half = half.cov_parts["model"]
     assert np.allclose(half, share / 4, rtol=0.02, atol=1e-12)
     assert with_views_camera_uncertainty(r, [view], [None], model_sigma_m=0.0) is r
+
+
+def test_a_model_whose_length_is_off_is_covered_by_its_scale_share_alone():
+    """A ruler's error moves every edge along one dimension together: as independent offsets per edge it averages
+    away over many edges (ViSP's castle). A model of 200 edges through a 20 × 13 × 8 cm box (origin at a corner)
+    whose true extent along one axis is 2σ longer than the model says: the pose's error is within 2σ on every axis
+    with the model's scale share, beyond 3.5σ on some axis without it; and the share is the refined pose's own
+    move with the model scaled by ±1σ along each axis (first order)."""
+    pb, _ = _problem()
+    cam, T = pb.camera, pb.T_world_obj
+    dims = np.array([0.2, 0.13, 0.08])
+    E = np.random.default_rng(3).uniform(0, 1, (200, 2, 3)) * dims
+    sigma_m = 0.0003
+    s_ext = MODEL_EXTENT_PER_EDGE * sigma_m / dims  # each extent's relative σ
+
+    def fit(scale: np.ndarray):  # clicks on the true object (the model scaled by ``scale``), solved with the model
+        segs = np.stack([cam.project_obj(T, e) for e in E * scale])
+        return refine(cam, T, segs_uv=segs, edges_obj=E, sigma_px=0.02)
+
+    r = fit(np.ones(3))
+    view = ViewClicks(cam, np.stack([cam.project_obj(T, e) for e in E]), E, sigma_px=0.02)
+    full = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m, model_extent_m=dims)
+    flat = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m, model_extent_m=np.zeros(3))
+    worst_without = 0.0
+    for k in range(3):
+        e = pose_delta(fit(1 + 2 * s_ext * np.eye(3)[k]).T_world_obj, T)
+        assert np.all(np.abs(e) <= 2 * np.sqrt(np.diag(full.cov)))
+        worst_without = max(worst_without, float(np.max(np.abs(e) / np.sqrt(np.diag(flat.cov)))))
+    assert worst_without > 3.5
+    moves = np.array(
+        [0.5 * (pose_delta(fit(1 + d).T_world_obj, T) - pose_delta(fit(1 - d).T_world_obj, T)) for d in np.diag(s_ext)]
+    )
+    scale_share = full.cov_parts["model"] - flat.cov_parts["model"]
+    assert np.allclose(scale_share, moves.T @ moves, rtol=0.05, atol=1e-3 * np.abs(scale_share).max())
 
 
 def test_the_intrinsics_prior_moves_only_what_a_lens_has():
