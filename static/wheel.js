@@ -80,7 +80,10 @@
       e.stopPropagation();
       e.preventDefault();
       nd += 1;
-      if (input) write(input, s.x.toFixed(5) + " " + s.y.toFixed(5) + " " + nd);
+      // told 50 ms on: viser sends the first click through a 20 ms throttle, so a quick double click (a
+      // script's, 1 ms apart) was told before its own first click, which the server then took as a new one
+      var said = s.x.toFixed(5) + " " + s.y.toFixed(5) + " " + nd;
+      if (input) setTimeout(function () { write(input, said); }, 50);
       return;
     }
     // a press on the video released where it was pressed (not a drag) may start a double click (the

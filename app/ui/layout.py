@@ -116,6 +116,15 @@ def build_panel(panel: ClientPanel) -> None:
     panel.gui_status = gui.add_markdown("…")
     with gui.add_folder("Help", expand_by_default=False):
         gui.add_markdown(Md(operator_help()))  # static/help.md: the project's own file
+    for label, key, fn in (
+        ("Freeze", "F", lambda: frozen.freeze_back(0)),
+        ("Show live / frozen", "L", frozen.toggle_live),
+        ("Fit view", "H", viewport.request_fit),
+        *((("Next camera", "N", panel.show_camera),) if len(panel.app.views) > 1 else ()),
+    ):  # workflow_controls.GLOBAL_KEYS
+        gui.add_command(label, hotkey=key).on_trigger(guard(lambda _e, fn=fn: fn()))
+    # The hidden fields come last: the page shows them only once it has taken everything before them, the
+    # shortcuts included (a page-ready sign for the browser tests, tests/e2e/harness.py).
     # Wheel zoom about the cursor (static/wheel.js, run by the page: app/ui/page.py): viser zooms to the centre;
     # the page script sends the cursor and the wheel through this hidden field instead.
     wheel = gui.add_text(WHEEL_FIELD, "")
@@ -130,10 +139,3 @@ def build_panel(panel: ClientPanel) -> None:
         panel.click_worker.submit(on_double, str(double.value), time.monotonic())
 
     double.on_update(told)
-    for label, key, fn in (
-        ("Freeze", "F", lambda: frozen.freeze_back(0)),
-        ("Show live / frozen", "L", frozen.toggle_live),
-        ("Fit view", "H", viewport.request_fit),
-        *((("Next camera", "N", panel.show_camera),) if len(panel.app.views) > 1 else ()),
-    ):  # workflow_controls.GLOBAL_KEYS
-        gui.add_command(label, hotkey=key).on_trigger(guard(lambda _e, fn=fn: fn()))
