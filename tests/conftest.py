@@ -22,3 +22,16 @@ def shared_data_path(*parts: str) -> Path:
 def shared_data():
     """The function ``shared_data(*parts) -> Path`` (skips the test when the data is absent)."""
     return shared_data_path
+
+
+def pytest_configure(config):
+    """Under xdist, compile the pose solvers' numba kernels once, in the controller, before the workers start: on a
+    fresh clone (numba's cache empty) each worker compiled them itself at its first solver test, 31 s of CPU each,
+    at the same time. The workers then load them from numba's cache (about 1 s)."""
+    if hasattr(config, "workerinput") or not config.getoption("numprocesses", None):
+        return
+    from app.vision.matching import warm_up as warm_up_matching
+    from core.pose import warm_up
+
+    warm_up()
+    warm_up_matching()
