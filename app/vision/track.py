@@ -74,8 +74,9 @@ from core.pose.uncertainty import (
     first_order_share,
     grouped_share,
 )
-from core.transforms import check_T, invert_T, make_T, orthonormalize, pose_error
+from core.transforms import check_T, exp_so3, invert_T, make_T, orthonormalize, pose_error
 
+from .edge_field import EdgeField, _descend, _distinct, _ModelSamples, _score
 from .profiles import search_along_normals, to_gray_f32
 
 __all__ = [
@@ -498,6 +499,8 @@ class EdgeTracker:
         start_capture_deg: float = 10.0,
         motion_model: bool = True,
         max_band_px: float = 24.0,
+        start_search: tuple[float, float, int] = (5.0, 0.01, 4),
+        start_ambiguity_px: float = 0.3,
     ):
         if not isinstance(camera, Camera):
             raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
@@ -535,6 +538,14 @@ class EdgeTracker:
         # the motion model's coarse-pass scale floor, for a tracker that judges its answers with both tests
         self._judged = self.motion_model and self.lost_confidence > 0 and np.isfinite(self.max_edge_distance_px)
         self.max_band_px = float(max_band_px)
+        deg, m, n = start_search
+        self.start_search = (float(deg), float(m), int(n) if deg > 0 and m > 0 else 0)
+        self.start_ambiguity_px = float(start_ambiguity_px)
+        pts = model.support_points(16)
+        self._centre_obj = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+        # the model's edge samples the pose search scores (as the one-click search's: ``search.search_pose``)
+        self._scored = _ModelSamples(model, per_edge=10, max_edges=96)
+        self._scored_coarse = _ModelSamples(model, per_edge=3, n_rim=16, max_edges=96)
         self.start_capture_px = tuple(
             float(px) for px in np.atleast_1d(np.asarray(start_capture_px, float)) if px > self.search_px
         )
@@ -708,6 +719,67 @@ class EdgeTracker:
                 )
         return T, p, reason, confidence, inl, edge_px
 
+    def _start_hypotheses(self, frame: np.ndarray, T: np.ndarray) -> list[np.ndarray]:
+        """Starts near a given pose T for its capture (``start_search``): poses within ±deg and ±m of T
+        (turned about the model's centre, moved along and across the line of sight), scored on the frame's
+        oriented Canny edges by the one-click search's machinery (``edge_field``: a 3⁶ grid, then
+        its coordinate descent), the ``n`` best distinct ones."""
+        deg, m, n = self.start_search
+        c = T[:3, :3] @ self._centre_obj + T[:3, 3]
+        z = c - self.camera.center
+        z /= np.linalg.norm(z)
+        x = np.cross(z, [0.0, 1.0, 0.0] if abs(z[1]) < 0.9 else [1.0, 0.0, 0.0])
+        x /= np.linalg.norm(x)
+        A = np.stack([x, np.cross(z, x), z])  # across, across, along the line of sight
+
+        def to_pose(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            R = np.stack([exp_so3(r @ A) for r in q[:, 3:]]) @ T[:3, :3]
+            return R, c + q[:, :3] @ A - R @ self._centre_obj
+
+        ef = EdgeField(frame)
+        step = np.array([m, m, m, np.radians(deg), np.radians(deg), np.radians(deg)])
+        grid = np.array(np.meshgrid(*([[-1.0, 0.0, 1.0]] * 6), indexing="ij")).reshape(6, -1).T * step
+
+        def evaluate(q: np.ndarray, tau: float, ms: _ModelSamples = self._scored) -> np.ndarray:
+            return _score(ef, self.camera, ms, *to_pose(q), tau)
+
+        seeds = _distinct(grid, evaluate(grid, 12.0, self._scored_coarse), step, n)
+        if not len(seeds):
+            return []
+        q, best = _descend(evaluate, grid[seeds], step / 2.0, (6.0, 3.0, 3.0))
+        R, t = to_pose(q[np.argsort(best, kind="stable")])
+        return [make_T(Ri, ti) for Ri, ti in zip(R, t)]
+
+    def _capture_start(self, frame: np.ndarray, band: BandSmoothed, view: VisibleSegments, T_start: np.ndarray):
+        """The first frame after a given pose, which failed from it: tried again coarse to fine from the
+        given pose (each of ``start_capture_px``); when none of these answers counts, from the starts the
+        pose search finds near it (``start_search``). An answer counts when it passes every lost test and
+        turns the given pose by at most ``start_capture_deg``. Returns the answer, None when none counts,
+        or why none is reported: two count but lie apart (the image fits both). Of the searched starts'
+        answers the one nearest the image's edges (the support check's distance) is kept, unless another
+        lies apart and within ``start_ambiguity_px`` of it."""
+        tried = [self._attempt(band, view, self._capture_schedule(px), T_start) for px in self.start_capture_px]
+        good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
+        margin = np.inf  # the captures of issue 16: any two apart and the frame is lost
+        if not good and self.start_search[2] > 0:
+            schedule = self._capture_schedule(min(self.start_capture_px, default=2.0 * self.search_px))
+            tried = [self._attempt(band, self._view(T), schedule, T) for T in self._start_hypotheses(frame, T_start)]
+            good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
+            good.sort(key=lambda r: r[5])
+            margin = self.start_ambiguity_px
+        if not good:
+            return None
+        X = good[0][1].samples.X_obj
+        uv0 = self.camera.project_obj(good[0][0], X)
+        for g in good[1:]:
+            apart = float(np.median(np.linalg.norm(self.camera.project_obj(g[0], X) - uv0, axis=1)))
+            if apart > self.max_edge_distance_px and g[5] <= good[0][5] + margin:
+                return (
+                    f"near the given pose the image fits two poses whose edges lie {apart:.1f} px apart, "
+                    "and does not show which is right"
+                )
+        return good[0]
+
     def track(self, frame: np.ndarray) -> TrackResult:
         """Follow the object into the next frame.
 
@@ -744,25 +816,11 @@ class EdgeTracker:
         ):
             # The first frame after a given pose: the pose may be degrees or a centimetre off (a
             # stale database pose, clicked edges), beyond the ±search_px band. See start_capture_px.
-            tried = [self._attempt(band, view, self._capture_schedule(px), T_start) for px in self.start_capture_px]
-            good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
-            if good:
-                X = good[0][1].samples.X_obj
-                uv0 = self.camera.project_obj(good[0][0], X)
-                apart = max(
-                    (
-                        float(np.median(np.linalg.norm(self.camera.project_obj(g[0], X) - uv0, axis=1)))
-                        for g in good[1:]
-                    ),
-                    default=0.0,
-                )
-                if apart > self.max_edge_distance_px:
-                    reason = (
-                        f"near the given pose the image fits two poses whose edges lie {apart:.1f} px apart, "
-                        "and does not show which is right"
-                    )
-                else:
-                    T, p, reason, confidence, inl, edge_px = good[0]
+            first = self._capture_start(im, band, view, T_start)
+            if isinstance(first, str):
+                reason = first
+            elif first is not None:  # else the first attempt's reason stands
+                T, p, reason, confidence, inl, edge_px = first
         elif (
             reason
             and wide
