@@ -760,15 +760,14 @@ class EdgeTracker:
         lies apart and within ``start_ambiguity_px`` of it."""
         tried = [self._attempt(band, view, self._capture_schedule(px), T_start) for px in self.start_capture_px]
         good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
-        margin = np.inf  # the captures of issue 16: any two apart and the frame is lost
         if not good and self.start_search[2] > 0:
-            schedule = self._capture_schedule(min(self.start_capture_px, default=2.0 * self.search_px))
+            schedule = self._capture_schedule(min(self.start_capture_px))
             tried = [self._attempt(band, self._view(T), schedule, T) for T in self._start_hypotheses(frame, T_start)]
             good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
-            good.sort(key=lambda r: r[5])
-            margin = self.start_ambiguity_px
         if not good:
             return None
+        good.sort(key=lambda r: r[5])  # nearest the image's edges first
+        margin = self.start_ambiguity_px if self.start_search[2] > 0 else np.inf  # of before: any two apart, lost
         X = good[0][1].samples.X_obj
         uv0 = self.camera.project_obj(good[0][0], X)
         for g in good[1:]:
