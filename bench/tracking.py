@@ -395,7 +395,8 @@ def confusion_rows(name: str, runs) -> None:
 
 
 AS_RUN = (
-    ("as run, now (motion model)", {}),
+    ("as run, now (motion model, pose search)", {}),
+    ("as run, without the pose search (last session)", dict(start_search=(0.0, 0.0, 0))),
     ("as run, issue 16's defaults (no motion model)", dict(motion_model=False, start_search=(0.0, 0.0, 0))),
     ("as run, first-frame capture off (before issue 16)", dict(motion_model=False, start_capture_px=())),
 )

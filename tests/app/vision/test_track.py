@@ -135,7 +135,7 @@ def test_a_wrongly_converged_pose_is_flagged_lost_and_a_right_one_is_not():
         assert (deg > 5.0 or m > 0.01) and conf >= 0.3 and not lost  # what the issue saw
         assert (conf < 0.5) == low_conf
 
-        tracker = EdgeTracker(cam, box, T_start, motion_model=False)
+        tracker = EdgeTracker(cam, box, T_start, motion_model=False, start_search=(0.0, 0.0, 0))
         T, conf, lost = tracker.track(img)
         assert lost and tracker.lost and np.allclose(T, T_start)  # the wrong pose is not reported
         assert "not supported by the image" in tracker.diagnostics.reason
@@ -148,6 +148,10 @@ def test_a_wrongly_converged_pose_is_flagged_lost_and_a_right_one_is_not():
     # start slid 2 cm (9 px) is pulled onto the truth instead; the turned one is still lost.
     T, conf, lost = EdgeTracker(cam, box, slid).track(img)
     assert not lost and pose_error(T, truth)[0] < 0.5 and pose_error(T, truth)[1] < 0.002
+    # So is it by the pose search near a given pose (start_search, on by default) without them.
+    T, conf, lost = EdgeTracker(cam, box, slid, motion_model=False).track(img)
+    assert not lost and pose_error(T, truth)[0] < 0.5 and pose_error(T, truth)[1] < 0.002
+    assert EdgeTracker(cam, box, turned, motion_model=False).track(img).lost
     assert EdgeTracker(cam, box, turned).track(img).lost
 
     right = EdgeTracker(
