@@ -480,9 +480,11 @@ class EdgeTracker:
         more where it runs. n = 0 turns it off.
     start_ambiguity_px : the first frame's answers that count are ranked by the support check's
         distance; another lying apart (median over the samples, more than ``max_edge_distance_px``)
-        within this many pixels of the best makes the frame lost: on visp-cube's frame 140 two poses
-        4° apart score 0.59 and 0.61 px (lost), on Castle-simu a right pose 0.38 px and one 4° off
-        1.36 px (the right one kept). Without the search (``start_search`` off), any other apart.
+        within this many pixels of the best makes the frame lost. 0.3 px: the two poses visp-cube's
+        frame 140 fits (4° apart) score 0.59 and 0.61 px, and must stay lost; on the rendered box of
+        the lost rule's calibration right poses score ≤ 1.2 px and wrong ones ≥ 1.45 px. (Seen later
+        on the held-out Castle-simu: a right pose 0.38 px beside one 4° off at 1.36 px, the right one
+        kept.) Without the search (``start_search`` off), any other answer apart, as before.
     """
 
     # The camera's and the model's priors that join each frame's σ (``pose_covariance``, issue 27): a
