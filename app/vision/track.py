@@ -561,11 +561,7 @@ class EdgeTracker:
         deg, m, n = start_search
         self.start_search = (float(deg), float(m), int(n) if deg > 0 and m > 0 else 0)
         self.start_ambiguity_px = float(start_ambiguity_px)
-        pts = model.support_points(16)
-        self._centre_obj = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
-        # the model's edge samples the pose search scores (as the one-click search's: ``search.search_pose``)
-        self._scored = _ModelSamples(model, per_edge=10, max_edges=96)
-        self._scored_coarse = _ModelSamples(model, per_edge=3, n_rim=16, max_edges=96)
+        self._scored: tuple[_ModelSamples, _ModelSamples] | None = None  # the pose search's samples, once needed
         self.start_capture_px = tuple(
             float(px) for px in np.atleast_1d(np.asarray(start_capture_px, float)) if px > self.search_px
         )
@@ -745,6 +741,14 @@ class EdgeTracker:
         oriented Canny edges by the one-click search's machinery (``edge_field``: a 3⁶ grid, then
         its coordinate descent), the ``n`` best distinct ones."""
         deg, m, n = self.start_search
+        if self._scored is None:  # the model's edge samples scored, coarse and fine, as the one-click search's
+            pts = self.model.support_points(16)
+            self._centre_obj = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+            self._scored = (
+                _ModelSamples(self.model, per_edge=3, n_rim=16, max_edges=96),
+                _ModelSamples(self.model, per_edge=10, max_edges=96),
+            )
+        coarse, fine = self._scored
         c = T[:3, :3] @ self._centre_obj + T[:3, 3]
         z = c - self.camera.center
         z /= np.linalg.norm(z)
@@ -760,10 +764,10 @@ class EdgeTracker:
         step = np.array([m, m, m, np.radians(deg), np.radians(deg), np.radians(deg)])
         grid = np.array(np.meshgrid(*([[-1.0, 0.0, 1.0]] * 6), indexing="ij")).reshape(6, -1).T * step
 
-        def evaluate(q: np.ndarray, tau: float, ms: _ModelSamples = self._scored) -> np.ndarray:
+        def evaluate(q: np.ndarray, tau: float, ms: _ModelSamples = fine) -> np.ndarray:
             return _score(ef, self.camera, ms, *to_pose(q), tau)
 
-        seeds = _distinct(grid, evaluate(grid, 12.0, self._scored_coarse), step, n)
+        seeds = _distinct(grid, evaluate(grid, 12.0, coarse), step, n)
         if not len(seeds):
             return []
         q, best = _descend(evaluate, grid[seeds], step / 2.0, (6.0, 3.0, 3.0))
