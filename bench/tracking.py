@@ -507,11 +507,14 @@ CAPTURE = (
 )
 
 
-def capture_table(frames, camera, model, ref, n_runs: int, n_frames: int, seeds, variants=CAPTURE) -> None:
+def capture_table(
+    frames, camera, model, ref, n_runs: int, n_frames: int, seeds, variants=CAPTURE, truth_lost_at=None
+) -> None:
     """From n_runs starts 5° / 1 cm off the reference, n_frames each, per draw of starts (seed): runs
     tracked whole (never lost, every frame within 5° / 1 cm of the reference), runs captured (their
     first frame tracked within 5° / 1 cm), frames tracked, of them wrong, runs lost at their first
-    frame, and the first frame's CPU time, per tracker.
+    frame, and the first frame's CPU time, per tracker; with ``truth_lost_at`` (the frame where the tracker
+    started on the true pose is lost), the runs lost there or later too.
 
     ref : the reference poses, or a list of several references (visp-cube: the runs of both trackers
     from ViSP's pose, which part 3.8° / 17 mm in frames 130–160 where the image fits both within
@@ -524,7 +527,7 @@ def capture_table(frames, camera, model, ref, n_runs: int, n_frames: int, seeds,
             s = int(rng.integers(0, len(frames) - n_frames))
             starts.append((s, perturbed(refs[-1][s], 5.0, 0.01, rng)))
         for name, kw in variants:
-            whole = captured = tracked = wrong_tracked = lost_first = 0
+            whole = captured = tracked = wrong_tracked = lost_first = lost_there = 0
             first_ms = []
             for s, T0 in starts:
                 tracker = EdgeTracker(camera, model, T0, **kw)
@@ -536,6 +539,7 @@ def capture_table(frames, camera, model, ref, n_runs: int, n_frames: int, seeds,
                         first_ms.append(1e3 * (time.process_time() - c0))
                     if lost:
                         lost_first += i == 0
+                        lost_there += truth_lost_at is not None and s + i >= truth_lost_at
                         ok = False
                         break
                     tracked += 1
@@ -549,6 +553,7 @@ def capture_table(frames, camera, model, ref, n_runs: int, n_frames: int, seeds,
             print(
                 f"    {seed:>4d}  {name:52s}{whole:>3d} of {n_runs}{captured:>7d}{tracked:>9d}"
                 f"{wrong_tracked:>15d}{lost_first:>13d}{np.mean(first_ms):11.1f} mean, {np.max(first_ms):.0f} max"
+                + ("" if truth_lost_at is None else f"; lost where the run from the truth is, or later: {lost_there}")
             )
 
 
@@ -604,15 +609,14 @@ def capture_range(n_runs: int = 10, n_frames: int = 40, seeds: tuple[int, ...] =
     if castle is not None:
         camera, model, frames, truth = castle
         for step in (1, 2):
-            lost_at = run(frames[::step], camera, model, truth[0])[2]
+            lost_at = run(frames[::step], camera, model, truth[0])[2]  # index in the subsampled frames
             print(
                 f"  Castle-simu every {step}, held out (true poses; from the true pose of frame 0 the tracker is lost "
                 f"at {'no frame' if lost_at is None else f'frame {step * lost_at}'}: a run through it cannot be whole)"
             )
             print(header)
-            capture_table(
-                frames[::step], camera, model, truth[::step], n_runs, 20 if step == 1 else 12, seeds, CAPTURE[:3]
-            )
+            n = 20 if step == 1 else 12
+            capture_table(frames[::step], camera, model, truth[::step], n_runs, n, seeds, CAPTURE[:3], lost_at)
     else:
         print(f"  Castle-simu: not found at {CASTLE} (apt-get install visp-images-data; skipped)")
 
