@@ -396,6 +396,7 @@ def confusion_rows(name: str, runs) -> None:
 
 AS_RUN = (
     ("as run, now (motion model, pose search)", {}),
+    ("as run, the pose search only when the captures fail", dict(start_check=False)),
     ("as run, without the pose search (last session)", dict(start_search=(0.0, 0.0, 0))),
     ("as run, issue 16's defaults (no motion model)", dict(motion_model=False, start_search=(0.0, 0.0, 0))),
     ("as run, first-frame capture off (before issue 16)", dict(motion_model=False, start_capture_px=())),
@@ -499,7 +500,8 @@ def confusion_tables(repeat_seed: int = 0, skip_rendered: bool = False) -> None:
 
 
 CAPTURE = (
-    ("now: ±24/±16 px, then the pose search ±5° / 1 cm", {}),
+    ("now: ±24/±16 px, the pose search ±5° / 1 cm, checked", {}),
+    ("the pose search only when the captures fail", dict(start_check=False)),
     ("before the pose search (issue 27, last session)", dict(start_search=(0.0, 0.0, 0))),
     ("before: issue 16's defaults (no motion model)", dict(motion_model=False, start_search=(0.0, 0.0, 0))),
     ("first-frame capture off (before issue 16)", dict(motion_model=False, start_capture_px=())),

@@ -521,6 +521,7 @@ class EdgeTracker:
         max_band_px: float = 24.0,
         start_search: tuple[float, float, int] = (5.0, 0.01, 4),
         start_ambiguity_px: float = 0.3,
+        start_check: bool = True,
     ):
         if not isinstance(camera, Camera):
             raise ValueError(f"camera must be a core.camera.Camera, got {type(camera).__name__}")
@@ -561,6 +562,7 @@ class EdgeTracker:
         deg, m, n = start_search
         self.start_search = (float(deg), float(m), int(n) if deg > 0 and m > 0 else 0)
         self.start_ambiguity_px = float(start_ambiguity_px)
+        self.start_check = bool(start_check)
         self._scored: tuple[_ModelSamples, _ModelSamples] | None = None  # the pose search's samples, once needed
         self.start_capture_px = tuple(
             float(px) for px in np.atleast_1d(np.asarray(start_capture_px, float)) if px > self.search_px
@@ -774,7 +776,9 @@ class EdgeTracker:
         R, t = to_pose(q[np.argsort(best, kind="stable")])
         return [make_T(Ri, ti) for Ri, ti in zip(R, t)]
 
-    def _capture_start(self, frame: np.ndarray, band: BandSmoothed, view: VisibleSegments, T_start: np.ndarray):
+    def _capture_start(
+        self, frame: np.ndarray, band: BandSmoothed, view: VisibleSegments, T_start: np.ndarray, passed=None
+    ):
         """The first frame after a given pose, which failed from it: tried again coarse to fine from the
         given pose (each of ``start_capture_px``); when none of these answers counts, from the starts the
         pose search finds near it (``start_search``). An answer counts when it passes every lost test and
@@ -782,10 +786,15 @@ class EdgeTracker:
         or why none is reported: two count but lie apart (the image fits both). Of the searched starts'
         answers the one nearest the image's edges (the support check's distance) is kept, unless another
         lies apart and within ``start_ambiguity_px`` of it."""
+        schedule = self._capture_schedule(min(self.start_capture_px))
+        if passed is not None:  # kept unless the search finds a pose that fits clearly better
+            tried = [self._attempt(band, self._view(T), schedule, T) for T in self._start_hypotheses(frame, T_start)]
+            ok = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
+            best = min(ok, key=lambda r: r[5], default=None)
+            return best if best is not None and best[5] < passed[5] - self.start_ambiguity_px else passed
         tried = [self._attempt(band, view, self._capture_schedule(px), T_start) for px in self.start_capture_px]
         good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
         if not good and self.start_search[2] > 0:
-            schedule = self._capture_schedule(min(self.start_capture_px))
             tried = [self._attempt(band, self._view(T), schedule, T) for T in self._start_hypotheses(frame, T_start)]
             good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
         if not good:
@@ -831,7 +840,7 @@ class EdgeTracker:
         T, p, reason, confidence, inl, edge_px = self._attempt(band, view, self._schedule(), T_start)
         wide = self._capture_schedule()
         if (
-            reason
+            (reason or (self.start_check and self.start_search[2] > 0))
             and not self._followed
             and self.start_capture_px
             and self.lost_confidence > 0
@@ -839,7 +848,8 @@ class EdgeTracker:
         ):
             # The first frame after a given pose: the pose may be degrees or a centimetre off (a
             # stale database pose, clicked edges), beyond the ±search_px band. See start_capture_px.
-            first = self._capture_start(im, band, view, T_start)
+            passed = None if reason else (T, p, reason, confidence, inl, edge_px)
+            first = self._capture_start(im, band, view, T_start, passed)
             if isinstance(first, str):
                 reason = first
             elif first is not None:  # else the first attempt's reason stands
