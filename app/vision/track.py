@@ -459,7 +459,8 @@ class EdgeTracker:
         when two answers count and their samples lie more than
         ``max_edge_distance_px`` apart (median), the image fits both equally (visp-cube's frames
         140–160 from a start 5° off: the cube 4° and 16 mm off, its edges 0.6 px from the image's)
-        and the frame is lost; else the first answer is kept. From 10 starts 5° / 1 cm off on
+        and the frame is lost (with ``start_search`` on: only when they fit within
+        ``start_ambiguity_px`` alike); else the one nearest the image's edges is kept. From 10 starts 5° / 1 cm off on
         visp-cube, 8 of 10 runs tracked whole instead of 4 (``bench/tracking.py``, "Capture
         range"). Off (no capture) when ``lost_confidence`` is 0 or ``max_edge_distance_px`` is
         infinite: a tracker that does not judge its answer with both tests (auto match's settling
