@@ -34,7 +34,9 @@ with the first-frame capture on and off. ``--only confusion --confusion-seeds 1,
 Capture range (issue 16): visp-cube from 10 starts 5° / 1 cm off the reference, 40 frames each:
 runs tracked whole, frames reported tracked while wrong, runs lost at their first frame and that
 frame's CPU time, with the first-frame coarse-to-fine capture (``start_capture_px``) on and off and
-with a ±16 px band instead (the issue's anchors: ViSP 3 of 10, 7 of 10 with a 16 px band).
+with a ±16 px band instead (the issue's anchors: ViSP 3 of 10, 7 of 10 with a 16 px band); with the
+pose search near the given pose (``start_search``, issue 27) and without it (the capture of before).
+visp-cube is the sequence the capture was developed on; visp-teabox and Castle-simu are held out.
 ``--only capture --capture-seeds 0,1,2,3,4,5`` for other draws of starts (seed 0: the issue's).
 
 Fast motion (issue 27): every 2nd and 3rd frame of visp-cube (with cube_and_cylinder.cao and with
@@ -95,7 +97,7 @@ LAST_CPU_MS: list[float] = []  # CPU time per frame (ms) of the last run() kept:
 
 
 # The trackers compared (issue 27): today's defaults, and the defaults before the motion model.
-TRACKERS = (("now", {}), ("before", dict(motion_model=False)))
+TRACKERS = (("now", {}), ("before", dict(motion_model=False, start_search=(0.0, 0.0, 0))))
 
 
 def run(frames: list[np.ndarray], camera: Camera, model: BRep, T0: np.ndarray, repeat: int = 1, **kw):
@@ -393,8 +395,10 @@ def confusion_rows(name: str, runs) -> None:
 
 
 AS_RUN = (
-    ("as run, now (motion model)", {}),
-    ("as run, issue 16's defaults (no motion model)", dict(motion_model=False)),
+    ("as run, now (motion model, pose search)", {}),
+    ("as run, the pose search only when the captures fail", dict(start_check=False)),
+    ("as run, without the pose search (last session)", dict(start_search=(0.0, 0.0, 0))),
+    ("as run, issue 16's defaults (no motion model)", dict(motion_model=False, start_search=(0.0, 0.0, 0))),
     ("as run, first-frame capture off (before issue 16)", dict(motion_model=False, start_capture_px=())),
 )
 
@@ -496,17 +500,23 @@ def confusion_tables(repeat_seed: int = 0, skip_rendered: bool = False) -> None:
 
 
 CAPTURE = (
-    ("now: motion model, first frame from ±24 and ±16 px", {}),
-    ("before: issue 16's defaults (no motion model)", dict(motion_model=False)),
+    ("now: ±24/±16 px, the pose search ±5° / 1 cm, checked", {}),
+    ("the pose search only when the captures fail", dict(start_check=False)),
+    ("before the pose search (issue 27, last session)", dict(start_search=(0.0, 0.0, 0))),
+    ("before: issue 16's defaults (no motion model)", dict(motion_model=False, start_search=(0.0, 0.0, 0))),
     ("first-frame capture off (before issue 16)", dict(motion_model=False, start_capture_px=())),
     ("both retries off, band ±16 px", dict(motion_model=False, capture_px=0.0, start_capture_px=(), search_px=16.0)),
 )
 
 
-def capture_table(frames, camera, model, ref, n_runs: int, n_frames: int, seeds, variants=CAPTURE) -> None:
+def capture_table(
+    frames, camera, model, ref, n_runs: int, n_frames: int, seeds, variants=CAPTURE, truth_lost_at=None
+) -> None:
     """From n_runs starts 5° / 1 cm off the reference, n_frames each, per draw of starts (seed): runs
-    tracked whole (never lost, every frame within 5° / 1 cm of the reference), frames tracked, of them
-    wrong, runs lost at their first frame, and the first frame's CPU time, per tracker.
+    tracked whole (never lost, every frame within 5° / 1 cm of the reference), runs captured (their
+    first frame tracked within 5° / 1 cm), frames tracked, of them wrong, runs lost at their first
+    frame, and the first frame's CPU time, per tracker; with ``truth_lost_at`` (the frame where the tracker
+    started on the true pose is lost), the runs lost there or later too.
 
     ref : the reference poses, or a list of several references (visp-cube: the runs of both trackers
     from ViSP's pose, which part 3.8° / 17 mm in frames 130–160 where the image fits both within
@@ -519,7 +529,7 @@ def capture_table(frames, camera, model, ref, n_runs: int, n_frames: int, seeds,
             s = int(rng.integers(0, len(frames) - n_frames))
             starts.append((s, perturbed(refs[-1][s], 5.0, 0.01, rng)))
         for name, kw in variants:
-            whole = tracked = wrong_tracked = lost_first = 0
+            whole = captured = tracked = wrong_tracked = lost_first = lost_there = 0
             first_ms = []
             for s, T0 in starts:
                 tracker = EdgeTracker(camera, model, T0, **kw)
@@ -531,6 +541,7 @@ def capture_table(frames, camera, model, ref, n_runs: int, n_frames: int, seeds,
                         first_ms.append(1e3 * (time.process_time() - c0))
                     if lost:
                         lost_first += i == 0
+                        lost_there += truth_lost_at is not None and s + i >= truth_lost_at
                         ok = False
                         break
                     tracked += 1
@@ -538,10 +549,13 @@ def capture_table(frames, camera, model, ref, n_runs: int, n_frames: int, seeds,
                     if all(deg > WRONG_DEG or m > WRONG_M for deg, m in errs):
                         wrong_tracked += 1
                         ok = False
+                    elif i == 0:
+                        captured += 1
                 whole += ok
             print(
-                f"    {seed:>4d}  {name:52s}{whole:>3d} of {n_runs}{tracked:>9d}{wrong_tracked:>15d}{lost_first:>13d}"
-                f"{np.mean(first_ms):11.1f} mean, {np.max(first_ms):.0f} max"
+                f"    {seed:>4d}  {name:52s}{whole:>3d} of {n_runs}{captured:>7d}{tracked:>9d}"
+                f"{wrong_tracked:>15d}{lost_first:>13d}{np.mean(first_ms):11.1f} mean, {np.max(first_ms):.0f} max"
+                + ("" if truth_lost_at is None else f"; lost where the run from the truth is, or later: {lost_there}")
             )
 
 
@@ -551,7 +565,7 @@ def capture_range(n_runs: int = 10, n_frames: int = 40, seeds: tuple[int, ...] =
     (reference: the tracker of before from the clicks, every frame, never lost) and Castle-simu (its
     true poses), 20 frames each; every 2nd frame of Castle-simu too (fast motion)."""
     header = (
-        f"    {'seed':>4s}  {'tracker':52s}{'whole':>9s}{'tracked':>9s}"
+        f"    {'seed':>4s}  {'tracker':52s}{'whole':>9s}{'captured':>9s}{'tracked':>9s}"
         f"{'wrong+tracked':>15s}{'lost at 1st':>13s}{'1st frame cpu ms':>18s}"
     )
     cube = DATA / "visp-cube"
@@ -564,7 +578,7 @@ def capture_range(n_runs: int = 10, n_frames: int = 40, seeds: tuple[int, ...] =
             ref_tracker = EdgeTracker(camera, model, read_visp_pose(cube / "cube.0.pos"), **kw)
             ref.append(np.array([ref_tracker.track(f).T_world_obj for f in frames]))
         print(
-            f"Capture range: visp-cube from {n_runs} starts 5° and 1 cm off (reference: "
+            f"Capture range: visp-cube (tuned on) from {n_runs} starts 5° and 1 cm off (reference: "
             f"tracked from ViSP's pose by either tracker), {n_frames} frames each; whole = never lost and "
             f"every frame within {WRONG_DEG:.0f}° / {100 * WRONG_M:.0f} cm of a reference"
         )
@@ -588,20 +602,23 @@ def capture_range(n_runs: int = 10, n_frames: int = 40, seeds: tuple[int, ...] =
         frames = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for _, f in iter_frames(tea / "teabox.mp4")]
         ref_tracker = EdgeTracker(camera, model, T0, motion_model=False)
         ref = [ref_tracker.track(f).T_world_obj for f in frames]
-        print("  visp-teabox (reference: the tracker of before from the clicks)")
+        print("  visp-teabox, held out (reference: the tracker of before from the clicks)")
         print(header)
-        capture_table(frames, camera, model, ref, n_runs, 20, seeds, CAPTURE[:2])
+        capture_table(frames, camera, model, ref, n_runs, 20, seeds, CAPTURE[:3])
     else:
         print(f"  visp-teabox: data not found at {tea} (skipped)")
     castle = castle_data()
     if castle is not None:
         camera, model, frames, truth = castle
         for step in (1, 2):
-            print(f"  Castle-simu every {step} (true poses)")
-            print(header)
-            capture_table(
-                frames[::step], camera, model, truth[::step], n_runs, 20 if step == 1 else 12, seeds, CAPTURE[:2]
+            lost_at = run(frames[::step], camera, model, truth[0])[2]  # index in the subsampled frames
+            print(
+                f"  Castle-simu every {step}, held out (true poses; from the true pose of frame 0 the tracker is lost "
+                f"at {'no frame' if lost_at is None else f'frame {step * lost_at}'}: a run through it cannot be whole)"
             )
+            print(header)
+            n = 20 if step == 1 else 12
+            capture_table(frames[::step], camera, model, truth[::step], n_runs, n, seeds, CAPTURE[:3], lost_at)
     else:
         print(f"  Castle-simu: not found at {CASTLE} (apt-get install visp-images-data; skipped)")
 

@@ -135,7 +135,7 @@ def test_a_wrongly_converged_pose_is_flagged_lost_and_a_right_one_is_not():
         assert (deg > 5.0 or m > 0.01) and conf >= 0.3 and not lost  # what the issue saw
         assert (conf < 0.5) == low_conf
 
-        tracker = EdgeTracker(cam, box, T_start, motion_model=False)
+        tracker = EdgeTracker(cam, box, T_start, motion_model=False, start_search=(0.0, 0.0, 0))
         T, conf, lost = tracker.track(img)
         assert lost and tracker.lost and np.allclose(T, T_start)  # the wrong pose is not reported
         assert "not supported by the image" in tracker.diagnostics.reason
@@ -148,6 +148,10 @@ def test_a_wrongly_converged_pose_is_flagged_lost_and_a_right_one_is_not():
     # start slid 2 cm (9 px) is pulled onto the truth instead; the turned one is still lost.
     T, conf, lost = EdgeTracker(cam, box, slid).track(img)
     assert not lost and pose_error(T, truth)[0] < 0.5 and pose_error(T, truth)[1] < 0.002
+    # So is it by the pose search near a given pose (start_search, on by default) without them.
+    T, conf, lost = EdgeTracker(cam, box, slid, motion_model=False).track(img)
+    assert not lost and pose_error(T, truth)[0] < 0.5 and pose_error(T, truth)[1] < 0.002
+    assert EdgeTracker(cam, box, turned, motion_model=False).track(img).lost
     assert EdgeTracker(cam, box, turned).track(img).lost
 
     right = EdgeTracker(
@@ -318,6 +322,24 @@ def test_a_first_frame_the_image_fits_two_ways_is_lost_not_guessed(visp_cube_ref
     one = EdgeTracker(cam, model, T0, start_capture_px=(24.0,))  # one hypothesis alone would guess
     T1, _, lost1 = one.track(frames[140])
     assert not lost1 and one.diagnostics.edge_distance_px < 1.5
+
+
+def test_a_first_frame_that_passes_off_the_object_is_replaced_by_the_pose_search_near_it(visp_cube_ref):
+    """Frame 118 of the real cube from a start 5° / 1 cm off: the ±8 px band settles 5° and 14 mm off the
+    reference with the edges 1 px or so from the image's, and it passes the lost tests. The pose search
+    near the given pose (``start_search``), run on every first frame (``start_check``), finds the
+    reference fitting clearly better (by more than ``start_ambiguity_px``), and that is reported."""
+    cam, model, frames, ref = visp_cube_ref
+    T0 = _off(ref[118], [0, 1, 0], [0, 1, 0])
+    unchecked = EdgeTracker(cam, model, T0, start_check=False)
+    T, _, lost = unchecked.track(frames[118])
+    deg, m = pose_error(T, ref[118])
+    assert not lost and (deg > 4.0 and m > 0.01), (deg, m)  # reported tracked, wrong
+    tracker = EdgeTracker(cam, model, T0)
+    T, _, lost = tracker.track(frames[118])
+    deg, m = pose_error(T, ref[118])
+    assert not lost and deg < 0.3 and m < 0.001, (deg, m)
+    assert tracker.diagnostics.edge_distance_px < unchecked.diagnostics.edge_distance_px - 0.3
 
 
 def _circle(speed_px: float, n: int = 24):
