@@ -236,10 +236,12 @@ class EdgeField:
 
     def lookup(self, uv: np.ndarray, normal_angle: np.ndarray, tau: float, bilinear: bool = False) -> np.ndarray:
         H, W = self.shape
-        b = np.rint((normal_angle % np.pi) / (np.pi / N_BINS)).astype(np.int64) % N_BINS
+        # the bin of the angle modulo π (a multiple of π is a multiple of N_BINS bins); a NaN or infinite u or v
+        # fails the comparisons below, so reads tau
+        b = np.rint(normal_angle * (N_BINS / np.pi)).astype(np.int64) % N_BINS
         if bilinear:
             u, v = uv[..., 0], uv[..., 1]
-            inside = (u >= 0) & (u < W - 1) & (v >= 0) & (v < H - 1) & np.isfinite(u) & np.isfinite(v)
+            inside = (u >= 0) & (u < W - 1) & (v >= 0) & (v < H - 1)
             u = np.where(inside, u, 0.0)
             v = np.where(inside, v, 0.0)
             x0, y0 = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
@@ -252,7 +254,7 @@ class EdgeField:
             return np.where(inside, np.minimum(d, tau), tau)
         u = np.rint(uv[..., 0])
         v = np.rint(uv[..., 1])
-        inside = (u >= 0) & (u < W) & (v >= 0) & (v < H) & np.isfinite(u) & np.isfinite(v)
+        inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
         ui = np.where(inside, u, 0).astype(np.int64)
         vi = np.where(inside, v, 0).astype(np.int64)
         d = self.dist[(b * H + vi) * W + ui]
@@ -1169,6 +1171,8 @@ def _linearize(camera: Camera, model: BRep, p: np.ndarray, img_s: np.ndarray, sp
     if own.sum() <= k + 2:
         return None
     s, r = s.subset(own), r[own]
+    if isinstance(space, _OnTable):  # x, y, heading: their moves of a point are exact (G)
+        return T, s, r, _normal_jacobian(camera, T, s.X_obj, s.normals, space.G(T)), robust_weights(r, "tukey", GN_SCALE_PX)
     J = np.zeros((len(s), k))  # how far each sample moves along its image normal per unit of p
     for j in range(k):
         dp = np.zeros(k)
@@ -1177,6 +1181,20 @@ def _linearize(camera: Camera, model: BRep, p: np.ndarray, img_s: np.ndarray, sp
         bwd = camera.project_obj(space.pose(p - dp), s.X_obj)
         J[:, j] = np.einsum("ni,ni->n", (fwd - bwd) / (2 * space.h[j]), s.normals)
     return T, s, r, J, robust_weights(r, "tukey", GN_SCALE_PX)
+
+
+def _normal_jacobian(camera: Camera, T: np.ndarray, X_obj: np.ndarray, normals: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """(N, k): how far each point X_obj (N, 3) (object frame, the object at T) moves in the image along its
+    normal (N, 2) per unit of the parameters whose (δt, δr) (``core.pose.residuals``' convention) is G (6, k)
+    per unit. A point moves by δX = δt + δr × (R·X_obj); its pixel by (∂uv/∂X)·δX. (Central differences
+    cost twice k poses and projections a step of the refinement: a sixth of a one-click search.)"""
+    C = camera.C
+    RX = X_obj @ T[:3, :3].T
+    h = (RX + T[:3, 3]) @ C[:, :3].T + C[:, 3]
+    uv = h[:, :2] / h[:, 2:3]
+    # n·∂uv/∂X = (n·C[:2, :3] − (n·uv) C[2, :3]) / h₂, a row (3,) per point
+    nA = (normals @ C[:2, :3] - np.einsum("ni,ni->n", normals, uv)[:, None] * C[2, :3]) / h[:, 2:3]
+    return nA @ G[:3] + np.cross(RX, nA) @ G[3:]
 
 
 def _own_edges(
