@@ -133,14 +133,18 @@ class DatabaseOverlay:
         # sit ahead of the video frame queued after them in every browser's stream (viser sends its buffer in
         # order, 128 messages a window): the watching browser's video stopped for the 0.2-0.3 s they took to
         # go out. A group's 64 labels and one node are at most a window or two, while the next group is drawn.
-        redrawn = []
+        redrawn, wires = [], []
         for group in sorted(set(changed) | {g for g in dirty if g is not None}):
             for obj, key in changed.get(group, ()):
                 batch, label, wire = draw_object(camera, obj, self.pixel_world.width, self.pixel_world.height)
-                self._store(obj, key, batch, wire, _outline(camera, obj, wire))
+                self._store(obj, key, batch, wire)
                 self._send_label(obj.id, label)  # never inside viser's atomic(): it holds every browser's video
                 redrawn.append(obj.id)
+                wires.append((obj, wire))
             self._send_group(group)
+        for obj, wire in wires:  # the outlines a click inside picks: after the drawing (they are not drawn)
+            d = self._drawn[obj.id]
+            d.outline, d.depth = _outline(camera, obj, wire)
         self.redrawn = redrawn
         self.removed = gone
         if redrawn or gone:
@@ -153,14 +157,13 @@ class DatabaseOverlay:
             )
         return len(redrawn)
 
-    def _store(self, obj: SiteObject, key: tuple, batch, wire, outline) -> None:
+    def _store(self, obj: SiteObject, key: tuple, batch, wire) -> None:
         """Keep one object's projection (for picking) and its part of its group's arrays."""
         d = self._drawn.get(obj.id)
         if d is None:
             d = self._drawn[obj.id] = _Drawn(key, obj.name, np.zeros((0, 2, 2)))
         d.key, d.name = key, obj.name
         d.seg_uv = wire.seg_uv[wire.visible] if wire is not None else np.zeros((0, 2, 2))
-        d.outline, d.depth = outline
         if len(batch):
             points, colors = batch.world(self.pixel_world, self.z)
             d.points, d.colors = points.astype(np.float32), colors
