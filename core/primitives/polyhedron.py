@@ -114,7 +114,7 @@ class Polyhedron:
         out = np.zeros((len(self.faces), 3))
         for which, loops in self._loops_by_length():  # all loops of one length at once (one at a time was a third
             n = _newell(self.vertices[loops])  # of the interface's first draw of 2,000 boxes)
-            out[which] = n / np.maximum(np.sqrt(np.einsum("ij,ij->i", n, n)), 1e-300)[:, None]
+            out[which] = [v / max(np.linalg.norm(v), 1e-300) for v in n]
         return out
 
     def _loops_by_length(self) -> list[tuple[np.ndarray, np.ndarray]]:
