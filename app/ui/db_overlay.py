@@ -131,8 +131,8 @@ class DatabaseOverlay:
             self._offsets.pop(i, None)
         # Drawn and sent one group at a time: a new C moves every label, and 2,000 label messages queued at once
         # sit ahead of the video frame queued after them in every browser's stream (viser sends its buffer in
-        # order, 128 messages a window): the watching browser's video stopped for the 0.2-0.3 s they took to
-        # go out. A group's 64 labels and one node are at most a window or two, while the next group is drawn.
+        # order, 128 messages a window): the watching browser's video stopped 0.14-0.27 s (load 5) while they
+        # went out. A group's 64 labels and one node are about a window, queued while the next group is drawn.
         redrawn, wires = [], []
         for group in sorted(set(changed) | {g for g in dirty if g is not None}):
             for obj, key in changed.get(group, ()):
