@@ -78,9 +78,6 @@ class SmoothSides:
         nxt_pos = np.arange(len(flat)) + 1
         nxt_pos[starts + lengths - 1] = starts  # the last vertex of a loop runs back to its first
         a, b = flat, flat[nxt_pos]
-        # Newell normal = Σ P_i × P_i+1 over the loop; centroid = mean of the loop's vertices.
-        normals = np.add.reduceat(np.cross(V[a], V[b]), starts, axis=0)
-        points = np.add.reduceat(V[a], starts, axis=0) / lengths[:, None]
         n = len(V)
         lo, hi = np.minimum(a, b), np.maximum(a, b)
         key = lo * n + hi
@@ -90,6 +87,11 @@ class SmoothSides:
             if len(E)
             else np.zeros(len(key), bool)
         )
+        if sharp.all():  # every side an edge (a box, any B-Rep built of planar faces): nothing smooth
+            return empty
+        # Newell normal = Σ P_i × P_i+1 over the loop; centroid = mean of the loop's vertices.
+        normals = np.add.reduceat(np.cross(V[a], V[b]), starts, axis=0)
+        points = np.add.reduceat(V[a], starts, axis=0) / lengths[:, None]
         order = np.argsort(key, kind="stable")
         k_sorted = key[order]
         first = np.ones(len(k_sorted), bool)

@@ -996,6 +996,14 @@ def _linearize(camera: Camera, model: BRep, p: np.ndarray, img_s: np.ndarray, sp
     if own.sum() <= k + 2:
         return None
     s, r = s.subset(own), r[own]
+    if isinstance(space, _OnTable):  # x, y, heading: their moves of a point are exact (G)
+        return (
+            T,
+            s,
+            r,
+            _normal_jacobian(camera, T, s.X_obj, s.normals, space.G(T)),
+            robust_weights(r, "tukey", GN_SCALE_PX),
+        )
     J = np.zeros((len(s), k))  # how far each sample moves along its image normal per unit of p
     for j in range(k):
         dp = np.zeros(k)
@@ -1004,6 +1012,22 @@ def _linearize(camera: Camera, model: BRep, p: np.ndarray, img_s: np.ndarray, sp
         bwd = camera.project_obj(space.pose(p - dp), s.X_obj)
         J[:, j] = np.einsum("ni,ni->n", (fwd - bwd) / (2 * space.h[j]), s.normals)
     return T, s, r, J, robust_weights(r, "tukey", GN_SCALE_PX)
+
+
+def _normal_jacobian(
+    camera: Camera, T: np.ndarray, X_obj: np.ndarray, normals: np.ndarray, G: np.ndarray
+) -> np.ndarray:
+    """(N, k): how far each point X_obj (N, 3) (object frame, the object at T) moves in the image along its
+    normal (N, 2) per unit of the parameters whose (δt, δr) (``core.pose.residuals``' convention) is G (6, k)
+    per unit. A point moves by δX = δt + δr × (R·X_obj); its pixel by (∂uv/∂X)·δX. (Central differences
+    cost twice k poses and projections: 0.2 of a step's 1.9 ms at 384 edges.)"""
+    C = camera.C
+    RX = X_obj @ T[:3, :3].T
+    h = (RX + T[:3, 3]) @ C[:, :3].T + C[:, 3]
+    uv = h[:, :2] / h[:, 2:3]
+    # n·∂uv/∂X = (n·C[:2, :3] − (n·uv) C[2, :3]) / h₂, a row (3,) per point
+    nA = (normals @ C[:2, :3] - np.einsum("ni,ni->n", normals, uv)[:, None] * C[2, :3]) / h[:, 2:3]
+    return nA @ G[:3] + np.cross(RX, nA) @ G[3:]
 
 
 def _own_edges(

@@ -160,6 +160,39 @@ def test_a_removed_objects_nodes_go_and_a_new_camera_redraws_all(site, db):
     assert overlay.sync(moved, site.objects()) == 0
 
 
+def test_a_new_c_sends_each_group_with_its_labels_before_the_next_group_is_drawn(site):
+    """A new C redraws every object: each group's labels and node go out before the next group's objects
+    are drawn, so the video frames queued meanwhile wait behind one group's messages, not all of them."""
+    from app.ui import db_overlay as D
+
+    scene = FakeScene()
+    cam = site.camera
+    _add_boxes(site, 9)
+    overlay = D.DatabaseOverlay(scene, PixelWorld(cam.width, cam.height), z=-0.001, line_px=2.0, group_size=4)
+    overlay.sync(cam, site.objects())
+    scene.take()
+    drawn = D.draw_object
+
+    def draw(camera, obj, *a, **kw):
+        scene.log.append(("draw", obj.name, None))
+        return drawn(camera, obj, *a, **kw)
+
+    moved = Camera(cam.C + np.array([[0, 0, 0, 2.0], [0, 0, 0, 0], [0, 0, 0, 0]]), cam.width, cam.height)
+    D.draw_object = draw
+    try:
+        assert overlay.sync(moved, site.objects()) == len(site.objects())
+    finally:
+        D.draw_object = drawn
+    log = scene.take()
+    nodes = [i for i, (what, name, _) in enumerate(log) if what == "add" and "/db/group_" in name]
+    draws = [i for i, (what, _, _) in enumerate(log) if what == "draw"]
+    n = len(site.objects())
+    assert len(nodes) == -(-n // 4) >= 3 and len(draws) == n  # 4 objects a group
+    for g, i in enumerate(nodes):  # a group's node right after its objects' draws, before the next group's
+        assert sum(d < i for d in draws) == min(4 * (g + 1), n)
+    assert all(what != "draw" for what, _, _ in log[nodes[-1] :])
+
+
 def test_object_at_picks_on_the_drawn_projections(site):
     _, overlay = _overlay(site)
     overlay.sync(site.camera, site.objects())

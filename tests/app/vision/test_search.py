@@ -366,3 +366,30 @@ def test_a_click_just_beside_the_box_offers_the_box_said_to_be_beside(scene, tab
     # a click on the box itself: found under the click, not marked
     res = search_pose(scene.camera, box.model, box.pose_at(16.0), uv.mean(axis=0), image, table=table)
     assert not res.candidates[0].beside_click and pose_error(res.candidates[0].T_world_obj, T_true)[0] < 1.0
+
+
+@pytest.mark.parametrize("k", [3, 2])
+def test_the_refinement_jacobian_on_the_table_is_the_derivative_of_the_projection(scene, table, k):
+    """``_normal_jacobian`` (what the refinement on the table uses) against central differences of the
+    projected points along their normals, for x, y, heading (k = 3) and x, y with the heading held (k = 2)."""
+    from app.vision import search as S
+
+    box = scene.body("parallelepiped")
+    T = box.pose_at(0.0)
+    sp = S._TableSpace(T, table)
+    pts = S._support_points(box.model)
+    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    space = S._OnTable(sp, S._centre_height(pts, centre, sp, table), centre, k, psi=0.3)
+    p = space.params(T) + np.array([0.004, -0.003, 0.05])[:k]
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-1.0, 1.0, (20, 3)) * np.ptp(box.model.vertices, axis=0) / 2 + centre
+    a = rng.uniform(0.0, 2.0 * np.pi, 20)
+    normals = np.column_stack([np.cos(a), np.sin(a)])
+    J = S._normal_jacobian(scene.camera, space.pose(p), X, normals, space.G(space.pose(p)))
+    for j in range(k):
+        dp = np.zeros(k)
+        dp[j] = 1e-6
+        moved = scene.camera.project_obj(space.pose(p + dp), X) - scene.camera.project_obj(space.pose(p - dp), X)
+        want = np.einsum("ni,ni->n", moved / 2e-6, normals)
+        assert np.allclose(J[:, j], want, rtol=1e-5, atol=1e-6 * np.abs(want).max()), (j, J[:, j], want)
+    assert np.abs(J).max() > 1.0  # pixels per metre or radian: not all zero
