@@ -15,6 +15,7 @@ from .harness import (
     assert_prompt_controls,
     select_by_click,
     site_frame,
+    wait_for_steady_camera,
     wait_until,
     workflow_shown,
 )
@@ -44,6 +45,15 @@ def _show_side(page):
         lambda: panel.camera_view == "side" and not panel.viewport.need_fit, 60.0, "the side camera shown", panel=panel
     )
     wait_until(lambda: page.get_by_text("Camera (N)").first.is_visible(), what="the Camera chooser")
+    # the page's own camera on the side camera's image (its report comes after the fit is sent): a click placed
+    # through the camera it reported before lands on the front camera's image
+    side = panel.app.views["side"].pixel_world
+    wait_until(
+        lambda: abs(float(panel.client.camera.look_at[0]) - side.image_center[0]) < 0.05 * side.render_size[0],
+        what="the page's view on the side camera's image",
+        panel=panel,
+    )
+    wait_for_steady_camera(panel)
 
 
 def test_the_side_camera_is_shown_by_its_key_and_clicked_in(browser, two_cameras, scene):
