@@ -90,8 +90,14 @@ def panel_state(panel) -> str:
         f"workflow={getattr(wf, 'name', None)}:{getattr(wf, 'object_name', None)} "
         f"step={getattr(step, 'name', None)} offers={sorted(getattr(step, 'enabled', ()))} "
         f"finished={getattr(wf, 'finished', None)} error={panel.error!r} warning={panel.warning!r} "
-        f"message={getattr(wf, 'message', '')!r} selected={panel.session.selected!r}"
+        f"message={getattr(wf, 'message', '')!r} selected={panel.session.selected!r} "
+        f"camera={panel.camera_view} clicks={panel.clicks_received} last click={_last_click(panel)}"
     )
+
+
+def _last_click(panel) -> str:
+    last = panel.clicks.last
+    return "none" if last is None else f"({last[1][0]:.1f}, {last[1][1]:.1f})"
 
 
 def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float = 0.6) -> None:
@@ -189,7 +195,7 @@ def select_by_click(page, name: str, click) -> int:
     for attempt, timeout_s in ((1, 6.0), (2, 14.0)):
         click()
         try:
-            wait_until(lambda: page.panel.session.selected == name, timeout_s, "the selection")
+            wait_until(lambda: page.panel.session.selected == name, timeout_s, "the selection", panel=page.panel)
             return attempt
         except AssertionError:
             if attempt == 2:

@@ -117,7 +117,9 @@ def test_double_and_rapid_clicks_are_taken_in_order_or_refused_with_the_state_in
     drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
     select_by_click(page, "parallelepiped", lambda: ui.click_pixel(page, drawn[1].mean(axis=0)))
     page.get_by_role("button", name="Update pose").click()
-    wait_until(lambda: panel.session.workflow is not None and panel.workflow_controls.handles, what="the workflow")
+    wait_until(
+        lambda: panel.session.workflow is not None and panel.workflow_controls.handles, what="the workflow", panel=panel
+    )
     wf = panel.session.workflow
     press(page, "Auto match")  # Auto match first: clicked edges wait for the match
     wait_until(lambda: wf.auto, what="automatic assignment")
