@@ -328,7 +328,13 @@ def press(page, label: str, timeout_ms: int = 60_000) -> None:
     except PlaywrightTimeout:
         panel = getattr(page, "panel", None)
         said = "" if panel is None else f"; the panel: {panel_state(panel)}"
-        raise AssertionError(f"no visible button {label!r} after {timeout_ms / 1000:.0f} s{said}") from None
+        try:  # what the page shows instead
+            shown = [t.strip() for t in page.get_by_role("button").all_inner_texts() if t.strip()]
+        except Exception:  # noqa: BLE001 - the page gone
+            shown = []
+        raise AssertionError(
+            f"no visible button {label!r} after {timeout_ms / 1000:.0f} s{said}; the page's buttons: {shown[:40]}"
+        ) from None
     button.click()
 
 
