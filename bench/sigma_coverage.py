@@ -77,7 +77,6 @@ from core.pose.uncertainty import (  # noqa: E402
     MODEL_PRIOR_M,
     Priors,
     intrinsics_prior_cov,
-    model_extent,
 )
 from core.transforms import exp_so3, log_so3, make_T  # noqa: E402
 
@@ -85,7 +84,7 @@ CASTLE = Path("/usr/share/visp-images-data/ViSP-images/mbt-depth/Castle-simu")
 DATA = (ROOT / ".." / "shared" / "data").resolve()
 AXES = ("x", "y", "z", "rx", "ry", "rz")
 SHARES = {"edges": "edges found on the image", "model": "model", "camera": "camera"}
-NO_SCALE = np.zeros(3)  # a model's extents given as 0: its scale's share left out (the σ before it)
+NO_SCALE = np.zeros((2, 3))  # a model's bounds given as a point: its scale's share left out (the σ before it)
 
 
 def old_cov(camera: Camera, T: np.ndarray, d) -> np.ndarray | None:
@@ -117,7 +116,7 @@ def track_errors(camera, model, frames, truth, priors: Priors, stop_lost: bool =
         c_old = old_cov(camera, T, d)
         if c_old is None:
             continue
-        parts = pose_covariance_parts(camera, T, d.samples, d.matched_uv, d.weights, priors, tr.extent_m)
+        parts = pose_covariance_parts(camera, T, d.samples, d.matched_uv, d.weights, priors, tr.bounds_m)
         shares = {k: np.sqrt(np.diag(v)) for k, v in parts.items()}
         chi2_6 = float(e @ np.linalg.solve(d.cov, e))
         before = sum(pose_covariance_parts(camera, T, d.samples, d.matched_uv, d.weights, priors, NO_SCALE).values())
@@ -266,7 +265,7 @@ def oneclick(args) -> None:
     file and model drawn about the truth as in ``rendered``, from a start 2° / 1 cm off, clicked at the box's
     projected centre. Old σ: the search's edges' share alone (its camera share needed a calibration in the
     database); new: with the camera file's and the model's priors; no scale: the same search again with the
-    model's extents given as 0 to its scale share (``app.vision.search.model_extent`` replaced here)."""
+    model's scale share left out (``app.vision.search.model_scale_share`` replaced here by a zero share)."""
     import app.vision.search as S
     from app.vision.search import NoPoseFits, search_pose
 
@@ -291,8 +290,8 @@ def oneclick(args) -> None:
         start[:3, 3] += 0.01 * rng.standard_normal(3) / np.sqrt(3)
         click = cam_true.project_obj(T_true, model.vertices).mean(axis=0)
         found = []
-        for extent in (S.model_extent, lambda b: NO_SCALE):
-            S.model_extent, keep_fn = extent, S.model_extent
+        for share_fn in (S.model_scale_share, lambda J, *_: np.zeros((J.shape[1], J.shape[1]))):
+            S.model_scale_share, keep_fn = share_fn, S.model_scale_share
             try:
                 found.append(
                     search_pose(
@@ -308,7 +307,7 @@ def oneclick(args) -> None:
             except NoPoseFits:
                 break
             finally:
-                S.model_extent = keep_fn
+                S.model_scale_share = keep_fn
         if len(found) < 2 or found[0].cov is None or found[1].cov is None:
             continue
         c, b = found
@@ -364,9 +363,9 @@ def clicks(args) -> None:
                 [view],
                 [intrinsics_prior_cov(cam, args.f_rel, args.c_px)],
                 model_sigma_m=args.model_sigma_mm / 1e3,
-                model_extent_m=ext,
+                model_bounds_m=ext,
             )
-            for ext in (model_extent(BRep.box(*dims).bounds()), NO_SCALE)
+            for ext in (BRep.box(*dims).bounds(), NO_SCALE)
         )
         T = r.T_world_obj
         e = np.concatenate([T[:3, 3] - T_true[:3, 3], log_so3(T[:3, :3] @ T_true[:3, :3].T)])
@@ -422,7 +421,7 @@ def castle(args) -> None:
         return
     cam, model, frames, truth = data
     msig = args.model_sigma_mm / 1e3
-    ext = model_extent(model.bounds())
+    ext = model.bounds()
     per_extent = MODEL_EXTENT_PER_EDGE * args.model_sigma_mm
     statements = {
         f"a camera file's prior ({100 * args.f_rel:g} %, {args.c_px:g} px; before)": Priors(

@@ -31,7 +31,6 @@ from core.pose.uncertainty import (
     MODEL_PRIOR_M,
     first_order_moves,
     grouped_share,
-    model_extent,
     model_scale_share,
 )
 from core.transforms import exp_so3, make_T
@@ -117,12 +116,10 @@ def _prior_shares(K, fit, X, uv, sig, k_prior, points_sigma_m, cov_pose, Jc, ord
     if points_sigma_m > 0:
         moved = lambda d: residuals(origin, R, t, as_clicks(points_uv=uv, points_obj=X + d))[0]  # noqa: E731
         share = grouped_share(J, w, moved, np.arange(2 * len(X)) // 2, points_sigma_m)
-        # the points' set scaled about its centre along each world axis, its extents each read to √2 σ
-        c = X.mean(axis=0)
-        scaled = lambda s: residuals(origin, R, t, as_clicks(points_uv=uv, points_obj=c + (X - c) * (1 + s)))[0]  # noqa: E731
-        share = (share + model_scale_share(J, w, scaled, model_extent(np.array([X.min(0), X.max(0)])), points_sigma_m))[
-            np.ix_(order, order)
-        ]
+        # the points' set scaled along each world axis, its extents each read to √2 σ
+        scaled = lambda scale: residuals(origin, R, t, as_clicks(points_uv=uv, points_obj=scale(X)))[0]  # noqa: E731
+        bounds = np.array([X.min(axis=0), X.max(axis=0)])
+        share = (share + model_scale_share(J, w, scaled, bounds, points_sigma_m))[np.ix_(order, order)]
         cov_pose, cov_C = cov_pose + share, cov_C + Jc @ share @ Jc.T
     f_rel, c_px = k_prior
     if f_rel > 0 or c_px > 0:
@@ -162,7 +159,7 @@ def solve_pnp(
     The pose's and C's covariances hold, by first order (issue 27, ``core.pose.uncertainty``), K's stated
     prior ``k_prior`` = (σ(fx)/fx = σ(fy)/fy, σ(u0) = σ(v0) in pixels; (0, 0): K exact) — the pose moves with
     K, and C with both — and the world points' ``points_sigma_m`` (each point off by its own 3D offset, and the
-    points' extents along the world's axes each by √2 of it, about their centre: ``model_scale_share``)."""
+    points' extents along the world's axes each by √2 of it: ``model_scale_share``)."""
     K = _check_K(K)
     X = finite_array(X_world, (None, 3), "X_world", max_abs=MAX_M, unit=" m")
     uv = finite_array(uv, (None, 2), "uv", max_abs=MAX_PX, unit=" px")

@@ -80,7 +80,6 @@ from core.pose.uncertainty import (
     edge_covariance,
     first_order_share,
     grouped_share,
-    model_extent,
     model_scale_share,
 )
 from core.robust import robust_weights
@@ -1123,8 +1122,8 @@ def _prior_share(
         return -np.einsum("ni,ni->n", cam.project_obj(T, X_obj), n)  # r = edge − projection
 
     share = grouped_share(J, w, lambda d: along(camera, s.X_obj + d), feature_groups(s), priors.model_sigma_m)
-    scaled = lambda sc: along(camera, s.X_obj * (1.0 + sc))  # noqa: E731  (the model scaled about its origin)
-    share = share + model_scale_share(J, w, scaled, model_extent(model.bounds()), priors.model_sigma_m)
+    scaled = lambda scale: along(camera, scale(s.X_obj))  # noqa: E731
+    share = share + model_scale_share(J, w, scaled, model.bounds(), priors.model_sigma_m)
     if priors.camera_cov is not None:
         share = share + first_order_share(
             J, w, lambda d: along(perturbed_camera(camera, d), s.X_obj), priors.camera_cov

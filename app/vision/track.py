@@ -79,7 +79,6 @@ from core.pose.uncertainty import (
     edge_covariance,
     first_order_share,
     grouped_share,
-    model_extent,
     model_scale_share,
 )
 from core.transforms import check_T, exp_so3, invert_T, make_T, orthonormalize, pose_error
@@ -551,7 +550,7 @@ class EdgeTracker:
             )
         self.camera = camera
         self.model = model
-        self.extent_m = model_extent(model.bounds())  # the model's extents, for its scale's share of σ
+        self.bounds_m = model.bounds()  # (2, 3) object frame, metres: for the model's scale's share of σ
         self.sample_step_px = float(sample_step_px)
         self.search_px = float(search_px)
         self.refine_search_px = float(refine_search_px)
@@ -887,7 +886,7 @@ class EdgeTracker:
         matched = np.where(p.found[:, None], p.matched, np.nan)
         cov = None
         if p.fit is not None and self.priors is not None:
-            cov = pose_covariance(self.camera, T, p.samples, matched, p.weights, self.priors, self.extent_m)
+            cov = pose_covariance(self.camera, T, p.samples, matched, p.weights, self.priors, self.bounds_m)
         self.diagnostics = TrackDiagnostics(
             p.samples, matched, p.weights, rms, n, int(p.found.sum()), n_inl, reason, cov, edge_px
         )
@@ -929,12 +928,12 @@ def pose_covariance(
     matched: np.ndarray,
     weights: np.ndarray,
     priors: Priors,
-    extent_m: np.ndarray | None = None,
+    bounds_m: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """(6, 6) covariance of (δt [m], δr [rad]) of a pose fitted to edges found along the samples' normals
     (``matched``, NaN where none; ``weights``, the fit's): the sum of ``pose_covariance_parts``. None with fewer
     than 6 samples kept."""
-    parts = pose_covariance_parts(camera, T, samples, matched, weights, priors, extent_m)
+    parts = pose_covariance_parts(camera, T, samples, matched, weights, priors, bounds_m)
     if parts is None:
         return None
     cov = sum(parts.values())
@@ -948,13 +947,13 @@ def pose_covariance_parts(
     matched: np.ndarray,
     weights: np.ndarray,
     priors: Priors,
-    extent_m: np.ndarray | None = None,
+    bounds_m: np.ndarray | None = None,
 ) -> dict[str, np.ndarray] | None:
     """``pose_covariance``'s shares by name: "edges" (a noise of each sample plus an offset and a tilt shared by
     each edge's samples, ``core.pose.uncertainty.edge_covariance``), "model" and "camera" (by first order, the
     priors of issue 27; "camera" only with ``priors.camera_cov``), each (6, 6). "model" holds each edge's own
-    offset and the model's per-dimension scale (its extents ``extent_m`` (3,), the tracker's model's; None: the
-    samples' own). None with fewer than 6 samples kept."""
+    offset and the model's per-dimension scale (its bounds ``bounds_m`` (2, 3), object frame, the tracker's model's;
+    None: the samples' own). None with fewer than 6 samples kept."""
     keep = np.isfinite(matched[:, 0]) & (weights > 0)
     if keep.sum() < 6:
         return None
@@ -970,10 +969,10 @@ def pose_covariance_parts(
         # by d (world axes) moves r by J[:, :3] d (r = n·(m − π(X)), ∂r/∂δt = −n·∂π/∂X); C moved by δC moves it
         # by −n·∂π/∂C δC, with ∂u/∂C₀ = X̃/h₂, ∂u/∂C₂ = −u X̃/h₂ (v likewise).
         parts["model"] = grouped_share(J, w, lambda d: J[:, :3] @ d, groups, priors.model_sigma_m)
-        # the model scaled by 1 + sc about its origin moves its points by R (sc ⊙ X) in the world
-        ext = np.ptp(s.X_obj, axis=0) if extent_m is None else extent_m
-        scaled = lambda sc: np.einsum("nk,nk->n", J[:, :3], (s.X_obj * sc) @ T[:3, :3].T)  # noqa: E731
-        parts["model"] = parts["model"] + model_scale_share(J, w, scaled, ext, priors.model_sigma_m)
+        # the model's points moved to scale(X) in its frame move by R (scale(X) − X) in the world
+        b = np.array([s.X_obj.min(axis=0), s.X_obj.max(axis=0)]) if bounds_m is None else bounds_m
+        scaled = lambda scale: np.einsum("nk,nk->n", J[:, :3], (scale(s.X_obj) - s.X_obj) @ T[:3, :3].T)  # noqa: E731
+        parts["model"] = parts["model"] + model_scale_share(J, w, scaled, b, priors.model_sigma_m)
         if priors.camera_cov is not None:
             Xh = np.column_stack([s.X_obj @ T[:3, :3].T + T[:3, 3], np.ones(len(s))])
             h2 = Xh @ camera.C[2]

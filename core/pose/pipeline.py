@@ -34,7 +34,7 @@ from ..camera import Camera
 from ..transforms import pose_error
 from .plausibility import plausibility
 from .refine import PosePrior, RefineResult, ViewClicks, refine_views
-from .uncertainty import MODEL_PRIOR_M, model_extent, with_views_camera_uncertainty
+from .uncertainty import MODEL_PRIOR_M, with_views_camera_uncertainty
 
 __all__ = ["Refused", "Start", "Refined", "Estimates", "rank", "within", "refine_starts", "operator_starts"]
 
@@ -145,7 +145,7 @@ def refine_starts(
                 covs,
                 huber_px=huber_px,
                 model_sigma_m=model_sigma_m,
-                model_extent_m=model_extent(model.bounds()),
+                model_bounds_m=model.bounds(),
             )
         return Refined(res, i, tuple(failures))
     return Refined(None, None, tuple(failures))

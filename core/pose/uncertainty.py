@@ -22,8 +22,8 @@ share plus, by first order, two stated priors (``Priors``):
   An edge's samples move together, so the share does not average away over an edge's hundreds of samples.
   And a per-dimension scale (``model_scale_share``): each of the model's extents (its bounds along its own
   axes) off by ``MODEL_EXTENT_PER_EDGE`` × ``model_sigma_m`` (√2: an extent is read between two edges, each
-  placed to ``model_sigma_m``), every point moving with it in proportion to its distance from the model's
-  origin. A ruler's error moves every edge along one dimension together; as independent offsets it would
+  placed to ``model_sigma_m``), every point moving with it in proportion to its distance from the bounds'
+  centre. A ruler's error moves every edge along one dimension together; as independent offsets it would
   average away over a model's many edges (ViSP's castle: depth 84 % within 2σ without it, docs/pose.md).
 
 The camera prior is a stated assumption (a checkerboard calibration's typical error); the model prior was
@@ -66,7 +66,6 @@ __all__ = [
     "clicks_model_share",
     "model_sigma_of",
     "MODEL_EXTENT_PER_EDGE",
-    "model_extent",
     "model_scale_share",
     "EDGE_BIAS_PX",
     "CURVED_EDGE_BIAS_PX",
@@ -140,30 +139,25 @@ def first_order_moves(
     return steps, moves.reshape(len(steps), J.shape[1])
 
 
-def model_extent(bounds: np.ndarray) -> np.ndarray:
-    """(3,) a model's extents (metres) along its own axes from its bounds (2, 3) (``BRep.bounds()``, or the min
-    and max of its points)."""
-    b = np.asarray(bounds, float).reshape(2, 3)
-    return b[1] - b[0]
-
-
 def model_scale_share(
     J: np.ndarray,
     w: np.ndarray,
-    residual_of: Callable[[np.ndarray], np.ndarray],
-    extent_m: np.ndarray,
+    residual_of: Callable[[Callable[[np.ndarray], np.ndarray]], np.ndarray],
+    bounds_m: np.ndarray,
     sigma_m: float,
 ) -> np.ndarray:
     """(k, k) share of the model's per-dimension scale in a weighted least-squares solution (J (m, k), weights
-    w (m,)): each extent ``extent_m`` (3,) off by ``MODEL_EXTENT_PER_EDGE`` × ``sigma_m``, independently, the
-    model's points moving about its origin by X_k s_k with s_k = δextent_k / extent_k. ``residual_of(s)`` gives
-    the residuals (m,) with the points so scaled by s (3,). An axis with no extent (under 1 mm: a flat model's
-    thickness) has no scale to be off."""
-    ext = np.asarray(extent_m, float).reshape(3)
+    w (m,)): each of the model's extents (its bounds ``bounds_m`` (2, 3), metres, in the frame of the points it
+    scales: ``BRep.bounds()`` in the object's) off by ``MODEL_EXTENT_PER_EDGE`` × ``sigma_m``, independently, the
+    points moving about the bounds' centre (not the frame's origin, which may lie anywhere: a mesh exported in
+    site coordinates). ``residual_of(scale)`` gives the residuals (m,) with the model's points X (…, 3) moved to
+    ``scale(X)``. An axis with no extent (under 1 mm: a flat model's thickness) has no scale to be off."""
+    b = np.asarray(bounds_m, float).reshape(2, 3)
+    ext, centre = b[1] - b[0], 0.5 * (b[0] + b[1])
     var = np.where(ext > 1e-3, (MODEL_EXTENT_PER_EDGE * float(sigma_m) / np.maximum(ext, 1e-3)) ** 2, 0.0)
     if not (sigma_m > 0 and var.max() > 0):
         return np.zeros((J.shape[1], J.shape[1]))
-    return first_order_share(J, w, residual_of, np.diag(var))
+    return first_order_share(J, w, lambda s: residual_of(lambda X: centre + (X - centre) * (1.0 + s)), np.diag(var))
 
 
 def grouped_share(
@@ -223,14 +217,15 @@ def with_views_camera_uncertainty(
     camera_covs: Sequence[np.ndarray | None],
     huber_px: float = 3.0,
     model_sigma_m: float = 0.0,
-    model_extent_m: np.ndarray | None = None,
+    model_bounds_m: np.ndarray | None = None,
 ) -> RefineResult:
     """``result`` (refined by ``refine_views`` on ``views``) with every camera calibration's share added to its
     ``cov``: each view's C moved ±1σ along the principal axes of its covariance (``camera_covs``, one (12, 12)
     or None per view), the other views held; and the model's share (``model_sigma_m`` per model edge or
-    point and its extents ``model_extent_m``, ``clicks_model_share``). ``cov_parts`` holds "clicks", "camera
-    calibration" and "model". Unchanged when no view has a covariance and ``model_sigma_m`` is 0."""
-    model = clicks_model_share(result, views, model_sigma_m, model_extent_m)
+    point, and its extents from its bounds ``model_bounds_m`` (2, 3), object frame: ``clicks_model_share``).
+    ``cov_parts`` holds "clicks", "camera calibration" and "model". Unchanged when no view has a covariance and
+    ``model_sigma_m`` is 0."""
+    model = clicks_model_share(result, views, model_sigma_m, model_bounds_m)
     if all(c is None for c in camera_covs) and model is None:
         return result
     T0, share = result.T_world_obj, np.zeros((6, 6))
@@ -254,13 +249,13 @@ def with_views_camera_uncertainty(
 
 
 def clicks_model_share(
-    result: RefineResult, views: Sequence[ViewClicks], model_sigma_m: float, extent_m: np.ndarray | None = None
+    result: RefineResult, views: Sequence[ViewClicks], model_sigma_m: float, bounds_m: np.ndarray | None = None
 ) -> np.ndarray | None:
     """(6, 6) share of the model's uncertainty in a pose refined from clicks (``refine_views`` on ``views``):
     each clicked model edge (point) off by an independent 3D offset of σ ``model_sigma_m`` (one per model
-    feature, whichever view clicked it, ``grouped_share``) and the model's extents ``extent_m`` (3,; None: the
-    clicked features' own) each off by √2 of it (``model_scale_share``), propagated by first order with the
-    clicks' weights 1/σ². None when ``model_sigma_m`` is 0."""
+    feature, whichever view clicked it, ``grouped_share``), and the model's extents (its bounds ``bounds_m``
+    (2, 3), object frame; None: the clicked features' own) each off by √2 of it (``model_scale_share``),
+    propagated by first order with the clicks' weights 1/σ². None when ``model_sigma_m`` is 0."""
     if not model_sigma_m > 0:
         return None
     R, t = result.T_world_obj[:3, :3], result.T_world_obj[:3, 3]
@@ -273,9 +268,10 @@ def clicks_model_share(
         feats = [np.round(e, 6).tobytes() for e in c.edges_obj] + [np.round(p, 6).tobytes() for p in c.points_obj]
         keys += [k for k in feats for _ in (0, 1)]  # two residual rows per click
 
-        def moved(d, v=v, c=c, scale=False):  # every clicked model point moved by d, or scaled by 1 + d
-            e = None if c.n_segments == 0 else c.edges_obj * (1.0 + d) if scale else c.edges_obj + d
-            p = None if c.n_points == 0 else c.points_obj * (1.0 + d) if scale else c.points_obj + d
+        def moved(d, v=v, c=c):  # every clicked model point moved by d (3,), or to d(X) (model_scale_share)
+            move = d if callable(d) else lambda X, d=d: X + d
+            e = None if c.n_segments == 0 else move(c.edges_obj)
+            p = None if c.n_points == 0 else move(c.points_obj)
             s = None if c.n_segments == 0 else c.segs_uv
             u = None if c.n_points == 0 else c.points_uv
             return residuals(v.camera, R, t, as_clicks(s, e, u, p))[0]
@@ -285,11 +281,11 @@ def clicks_model_share(
     groups = np.unique(np.array(keys, dtype=object), return_inverse=True)[1]
     J, w = np.vstack(Js), np.concatenate(ws)
     share = grouped_share(J, w, lambda d: np.concatenate([f(d) for f in fns]), groups, model_sigma_m)
-    if extent_m is None:
+    if bounds_m is None:
         P = np.vstack(pts)
-        extent_m = model_extent(np.array([P.min(axis=0), P.max(axis=0)]))
-    scaled = lambda s: np.concatenate([f(s, scale=True) for f in fns])  # noqa: E731
-    return share + model_scale_share(J, w, scaled, extent_m, model_sigma_m)
+        bounds_m = np.array([P.min(axis=0), P.max(axis=0)])
+    scaled = lambda scale: np.concatenate([f(scale) for f in fns])  # noqa: E731
+    return share + model_scale_share(J, w, scaled, bounds_m, model_sigma_m)
 
 
 def edge_covariance(

@@ -13,7 +13,7 @@ from app.vision.sequence import track_sequence, world_sigmas
 from app.vision.track import pose_covariance, pose_covariance_parts, sample_visible_edges
 from core.camera import Camera
 from core.point_line_pose import refine_point_to_line
-from core.pose.uncertainty import MODEL_EXTENT_PER_EDGE, Priors, intrinsics_prior_cov, model_extent, pose_delta
+from core.pose.uncertainty import MODEL_EXTENT_PER_EDGE, Priors, intrinsics_prior_cov, pose_delta
 from core.transforms import log_so3
 
 from .sequence_files import K, write_sequence
@@ -69,8 +69,9 @@ def test_the_trackers_prior_shares_match_a_monte_carlo_of_its_fit(rendered):
     priors = Priors(intrinsics_prior_cov(cam, f_rel, c_px), sigma_m)
     uv0 = cam.project_obj(T, s.X_obj)
     w = np.ones(len(s))
-    ext = model_extent(box.bounds())
-    share = pose_covariance(cam, T, s, uv0, w, priors, ext) - pose_covariance(cam, T, s, uv0, w, Priors(None, 0.0))
+    bounds = box.bounds()
+    ext, centre = bounds[1] - bounds[0], bounds.mean(axis=0)
+    share = pose_covariance(cam, T, s, uv0, w, priors, bounds) - pose_covariance(cam, T, s, uv0, w, Priors(None, 0.0))
     rng = np.random.default_rng(3)
     _, feat = np.unique(s.feature, return_inverse=True)
     d = []
@@ -80,8 +81,8 @@ def test_the_trackers_prior_shares_match_a_monte_carlo_of_its_fit(rendered):
         Kt[1, 1] *= 1 + f_rel * rng.standard_normal()
         Kt[:2, 2] += c_px * rng.standard_normal(2)
         true_cam = Camera.from_intrinsics(Kt, T_cw, cam.width, cam.height)
-        scale = 1 + MODEL_EXTENT_PER_EDGE * sigma_m / ext * rng.standard_normal(3)  # about the model's origin
-        X_true = s.X_obj * scale + rng.normal(0, sigma_m, (feat.max() + 1, 3))[feat]
+        scale = 1 + MODEL_EXTENT_PER_EDGE * sigma_m / ext * rng.standard_normal(3)  # about the model's centre
+        X_true = centre + (s.X_obj - centre) * scale + rng.normal(0, sigma_m, (feat.max() + 1, 3))[feat]
         fit = refine_point_to_line(cam, T, s.X_obj, s.D_obj, true_cam.project_obj(T, X_true), loss="l2", scale_px=1.0)
         d.append(pose_delta(fit.T_world_obj, T))
     d = np.array(d)

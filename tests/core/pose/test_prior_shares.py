@@ -18,6 +18,7 @@ from core.pose.uncertainty import (
     with_camera_uncertainty,
     with_views_camera_uncertainty,
 )
+from core.transforms import make_T
 
 
 def _problem():
@@ -70,8 +71,8 @@ def test_the_model_prior_matches_the_scatter_of_poses_of_models_drawn_from_it():
     r = refine(cam, pb.T_world_obj, **kw, sigma_px=0.2)
     sigma_m = 0.002
     view = ViewClicks(cam, sigma_px=0.2, **kw)
-    flat = np.zeros(3)  # the model's extents given as 0: its per-edge share alone (its scale's: the test below)
-    out = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m, model_extent_m=flat)
+    flat = np.zeros((2, 3))  # the model's bounds given as a point: its per-edge share alone (its scale's: below)
+    out = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m, model_bounds_m=flat)
     share = out.cov_parts["model"]
     assert np.allclose(out.cov, r.cov + share)
     rng = np.random.default_rng(2)
@@ -86,7 +87,7 @@ def test_the_model_prior_matches_the_scatter_of_poses_of_models_drawn_from_it():
             pose_delta(refine(cam, r.T_world_obj, segs_uv=segs, edges_obj=pb.edges_obj).T_world_obj, r.T_world_obj)
         )
     assert _spread(np.array(d)) == pytest.approx(_predicted(share), rel=0.2)
-    half = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m / 2, model_extent_m=flat)
+    half = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m / 2, model_bounds_m=flat)
     half = half.cov_parts["model"]
     assert np.allclose(half, share / 4, rtol=0.02, atol=1e-12)
     assert with_views_camera_uncertainty(r, [view], [None], model_sigma_m=0.0) is r
@@ -105,14 +106,15 @@ def test_a_model_whose_length_is_off_is_covered_by_its_scale_share_alone():
     sigma_m = 0.0003
     s_ext = MODEL_EXTENT_PER_EDGE * sigma_m / dims  # each extent's relative σ
 
-    def fit(scale: np.ndarray):  # clicks on the true object (the model scaled by ``scale``), solved with the model
-        segs = np.stack([cam.project_obj(T, e) for e in E * scale])
+    def fit(scale: np.ndarray):  # clicks on the true object (the model scaled by ``scale`` about its centre)
+        segs = np.stack([cam.project_obj(T, e) for e in dims / 2 + (E - dims / 2) * scale])
         return refine(cam, T, segs_uv=segs, edges_obj=E, sigma_px=0.02)
 
     r = fit(np.ones(3))
     view = ViewClicks(cam, np.stack([cam.project_obj(T, e) for e in E]), E, sigma_px=0.02)
-    full = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m, model_extent_m=dims)
-    flat = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m, model_extent_m=np.zeros(3))
+    bounds = np.array([np.zeros(3), dims])
+    full = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m, model_bounds_m=bounds)
+    flat = with_views_camera_uncertainty(r, [view], [None], model_sigma_m=sigma_m, model_bounds_m=np.zeros((2, 3)))
     worst_without = 0.0
     for k in range(3):
         e = pose_delta(fit(1 + 2 * s_ext * np.eye(3)[k]).T_world_obj, T)
@@ -124,6 +126,35 @@ def test_a_model_whose_length_is_off_is_covered_by_its_scale_share_alone():
     )
     scale_share = full.cov_parts["model"] - flat.cov_parts["model"]
     assert np.allclose(scale_share, moves.T @ moves, rtol=0.05, atol=1e-3 * np.abs(scale_share).max())
+
+
+def test_the_scale_share_does_not_depend_on_where_the_model_frame_s_origin_lies():
+    """The same object and clicks, its model written with its frame's origin 2 m away (a mesh exported in site
+    coordinates) and its pose moved to match: the same pose σ. Scaled about the origin, as first written, the
+    far origin's lever turned a 0.4 mm ruler error into centimetres."""
+    pb, _ = _problem()
+    cam, T = pb.camera, pb.T_world_obj
+    dims = np.array([0.2, 0.13, 0.08])
+    E = np.random.default_rng(4).uniform(0, 1, (60, 2, 3)) * dims
+    shift = np.array([2.0, -1.0, 0.5])  # the model's points in a frame whose origin lies 2 m from them
+    T_far = T @ make_T(np.eye(3), -shift)
+    segs = np.stack([cam.project_obj(T, e) for e in E])
+    covs = []
+    for Tm, Em in ((T, E), (T_far, E + shift)):
+        r = refine(cam, Tm, segs_uv=segs, edges_obj=Em, sigma_px=0.3)
+        view = ViewClicks(cam, segs, Em, sigma_px=0.3)
+        bounds = np.array([Em.reshape(-1, 3).min(axis=0), Em.reshape(-1, 3).max(axis=0)])
+        covs.append(with_views_camera_uncertainty(r, [view], [None], model_sigma_m=0.0003, model_bounds_m=bounds))
+
+    # the same σ of the model's centre in the world (δX = δt + δr × R X, pose_delta's frame) and of its rotation
+    def centre_cov(res, c_obj):
+        Rc = res.T_world_obj[:3, :3] @ c_obj
+        G = np.hstack([np.eye(3), -np.array([[0, -Rc[2], Rc[1]], [Rc[2], 0, -Rc[0]], [-Rc[1], Rc[0], 0]])])
+        return G @ res.cov_parts["model"] @ G.T
+
+    near, far = centre_cov(covs[0], dims / 2), centre_cov(covs[1], dims / 2 + shift)
+    assert np.allclose(far, near, rtol=0.02, atol=1e-3 * np.abs(near).max())
+    assert np.allclose(covs[1].cov_parts["model"][3:, 3:], covs[0].cov_parts["model"][3:, 3:], rtol=0.02)
 
 
 def test_the_intrinsics_prior_moves_only_what_a_lens_has():
