@@ -311,7 +311,7 @@ def assert_prompt_controls(page, timeout_s: float = 15.0) -> list[str]:
         if time.monotonic() > deadline:
             raise AssertionError(
                 f"the instruction names {missing[0] if missing else labels!r} but the page shows "
-                "no such enabled control"
+                f"no such enabled control; the panel: {panel_state(page.panel)}, busy={page.panel.busy}"
             )
         time.sleep(0.1)
 
