@@ -800,16 +800,23 @@ class EdgeTracker:
         answers the one nearest the image's edges (the support check's distance) is kept, unless another
         lies apart and within ``start_ambiguity_px`` of it."""
         schedule = self._capture_schedule(min(self.start_capture_px))
+
+        def counting(tried):  # the answers that pass every lost test and turn the given pose by at most the limit
+            return [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
+
+        def searched():
+            return counting(
+                [self._attempt(band, self._view(T), schedule, T) for T in self._start_hypotheses(frame, T_start)]
+            )
+
         if passed is not None:  # kept unless the search finds a pose that fits clearly better
-            tried = [self._attempt(band, self._view(T), schedule, T) for T in self._start_hypotheses(frame, T_start)]
-            ok = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
-            best = min(ok, key=lambda r: r[5], default=None)
+            best = min(searched(), key=lambda r: r[5], default=None)
             return best if best is not None and best[5] < passed[5] - self.start_ambiguity_px else passed
-        tried = [self._attempt(band, view, self._capture_schedule(px), T_start) for px in self.start_capture_px]
-        good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
+        good = counting(
+            [self._attempt(band, view, self._capture_schedule(px), T_start) for px in self.start_capture_px]
+        )
         if not good and self.start_search[2] > 0:
-            tried = [self._attempt(band, self._view(T), schedule, T) for T in self._start_hypotheses(frame, T_start)]
-            good = [r for r in tried if not r[2] and pose_error(r[0], self._T)[0] <= self.start_capture_deg]
+            good = searched()
         if not good:
             return None
         good.sort(key=lambda r: r[5])  # nearest the image's edges first
