@@ -35,3 +35,11 @@ def pytest_configure(config):
 
     warm_up()
     warm_up_matching()
+
+
+def pytest_collection_modifyitems(config, items):
+    """The browser tests first (kept in their order), the rest after: xdist hands the first quarter of the tests out
+    alternately and the rest to whichever worker is free, so the long tests start early and the many short ones fill
+    the end, rather than a worker alone at the end with the last browser tests (the same order in every process, as
+    xdist requires)."""
+    items.sort(key=lambda item: 0 if item.nodeid.startswith("tests/e2e/") else 1)

@@ -18,6 +18,10 @@ import numpy as np
 CHROMIUM = os.environ.get("MCIT_CHROMIUM", "/usr/bin/chromium")
 ARGS = [
     "--no-sandbox",
+    # one renderer process for the pages of one site (127.0.0.1, whatever the port) in one context: a page opened
+    # after the first finds viser's script compiled, and opens on about half the CPU (tests/e2e: 3.5 s against 6.5 s
+    # of chromium's CPU a page with software WebGL)
+    "--process-per-site",
     "--use-angle=swiftshader",
     "--enable-unsafe-swiftshader",
     "--disable-background-networking",
@@ -252,6 +256,17 @@ def close_notifications(page, timeout_s: float = 20.0, required: bool = True) ->
         )
 
 
+def shared_context(browser):
+    """The one browser context the interfaces' pages open in (``Interface.open``), made at first use: its pages share
+    a renderer process (``--process-per-site``) and its cache. Its cookies are cleared as each interface closes, so
+    that no test's page carries another's (they are per host, not per port); a test of cookies or of another site's
+    page makes its own context."""
+    context = getattr(browser, "_mcit_context", None)
+    if context is None:
+        context = browser._mcit_context = browser.new_context(viewport=VIEWPORT)
+    return context
+
+
 def launch(playwright):
     """Debian's chromium in headless mode with the flags that work here (DESIGN.md)."""
     return playwright.chromium.launch(executable_path=CHROMIUM, args=ARGS)
@@ -383,7 +398,8 @@ class Interface:
         """A new page on the interface (``viewport``, default VIEWPORT), connected, fitted, with the
         software-WebGL notice closed."""
         before = set(self.server.clients)
-        page = browser.new_page(viewport=viewport or VIEWPORT)
+        page = shared_context(browser).new_page()
+        page.set_viewport_size(viewport or VIEWPORT)
         self.pages.append(page)
         page.on(
             "console", lambda m: self.csp_refusals.append(m.text[:300]) if "Content Security Policy" in m.text else None
@@ -483,6 +499,7 @@ class Interface:
         for page in self.pages:
             try:
                 page.close()
+                page.context.clear_cookies()
             except Exception:  # noqa: BLE001 - closed already, or its browser gone
                 pass
         self.pages.clear()
