@@ -365,6 +365,16 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
     from core.transforms import make_T
 
     server, site, db, _ = build(n_objects, fps=30.0, start=False)
+    draws: list[tuple[float, float]] = []  # (when it began, the database thread's CPU seconds) per sync_database
+    sync = server.sync_database
+
+    def timed_sync() -> int:  # the draw's own CPU, on the database thread (not the video's or the sockets')
+        t, c = time.time(), time.thread_time()
+        n = sync()
+        draws.append((t, time.thread_time() - c))
+        return n
+
+    server.sync_database = timed_sync
     a = Reader(server.port)
     readers = [a]
     r: dict = {"objects": n_objects}
@@ -375,6 +385,7 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
         server.start()  # the first draw starts now, with a browser watching
         done = _settled(server, a, t0)
         r["start_s"], r["start_gap_ms"] = done - t0, a.longest_gap_ms(t0, done)
+        r["start_cpu_s"] = sum(c for t, c in draws if t0 <= t <= done)
         time.sleep(2.0)
         joins = []
         for k in range(JOINS):  # a browser joins (then leaves, but for the last one, which stays)
@@ -394,6 +405,7 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
         site.set_camera(_moved_camera(site.camera), rms_px=0.5, residuals_px=np.zeros(0), points={}, client="bench")
         done = max(_settled(server, x, tc) for x in readers)
         r["calib_s"] = done - tc
+        r["calib_cpu_s"] = sum(c for t, c in draws if tc <= t <= done)
         r["calib_gap_ms"] = max(x.longest_gap_ms(tc, done + 0.5) for x in readers)
         time.sleep(1.0)
         movable = [o for o in site.objects() if o.kind != "table"]
@@ -490,7 +502,8 @@ def stall_rows(sizes, seconds: float, change_every_s: float, clicks: int) -> lis
         rows.append(measure_stall(n, seconds, change_every_s, clicks if n == max(sizes) else 0, rng))
         r = rows[-1]
         print(
-            f"  {n} objects: start {r['start_s']:.2f} s, join {r['join_s']:.2f} s, calibration {r['calib_s']:.2f} s",
+            f"  {n} objects: start {r['start_s']:.2f} s ({r['start_cpu_s']:.2f} s CPU), join {r['join_s']:.2f} s, "
+            f"calibration {r['calib_s']:.2f} s ({r['calib_cpu_s']:.2f} s CPU), load {os.getloadavg()[0]:.1f}",
             file=sys.stderr,
             flush=True,
         )
@@ -500,6 +513,7 @@ def stall_rows(sizes, seconds: float, change_every_s: float, clicks: int) -> lis
 STALL_COLUMNS = (
     ("scene nodes of the overlay", "nodes", "{:.0f}", "—"),
     ("full draw at start, to the last overlay message (s)", "start_s", "{:.2f}", "≤ 2"),
+    ("  its CPU: the database thread's drawing (s)", "start_cpu_s", "{:.2f}", "—"),
     ("  its browser's longest video gap from the start (ms)", "start_gap_ms", "{:.0f}", "≤ 500"),
     ("full draw for a joining browser, from its connection (s), median of 5", "join_s", "{:.2f}", "≤ 2"),
     ("  the same, the slowest of the 5 joins", "join_s_max", "{:.2f}", "≤ 2"),
@@ -508,6 +522,7 @@ STALL_COLUMNS = (
     ("  the watching browser's longest video gap meanwhile (ms), median", "join_other_gap_ms", "{:.0f}", "≤ 150"),
     ("  the same, the worst of the 5 joins", "join_other_gap_ms_max", "{:.0f}", "≤ 150"),
     ("full draw after a new camera calibration (s)", "calib_s", "{:.2f}", "≤ 2"),
+    ("  its CPU: the database thread's drawing (s)", "calib_cpu_s", "{:.2f}", "—"),
     ("  the browsers' longest video gap meanwhile (ms)", "calib_gap_ms", "{:.0f}", "≤ 500 (watching: ≤ 150)"),
     ("longest video gap, a pose written every 2 s (ms)", "gap_ms", "{:.0f}", "≤ 100"),
     ("frames/s delivered meanwhile (the slower browser)", "fps", "{:.1f}", "≥ 28"),
