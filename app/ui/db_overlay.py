@@ -26,7 +26,7 @@ from app.overlay import PixelWorld, nearest_segment
 from app.workflows.site import SiteObject
 from core.camera import Camera
 
-from .drawing import draw_object
+from .drawing import draw_objects
 from .node_groups import NodeGroups
 
 __all__ = ["DatabaseOverlay"]
@@ -135,12 +135,19 @@ class DatabaseOverlay:
         # went out. A group's 64 labels and one node are about a window, queued while the next group is drawn.
         redrawn, wires = [], []
         for group in sorted(set(changed) | {g for g in dirty if g is not None}):
-            for obj, key in changed.get(group, ()):
-                batch, label, wire = draw_object(camera, obj, self.pixel_world.width, self.pixel_world.height)
-                self._store(obj, key, batch, wire)
-                self._send_label(obj.id, label)  # never inside viser's atomic(): it holds every browser's video
-                redrawn.append(obj.id)
-                wires.append((obj, wire))
+            todo = changed.get(group, [])
+            if todo:  # the group's changed objects projected, dashed and placed in the pixel world at once
+                objs = [obj for obj, _ in todo]
+                seg, colors, bounds, labels, projections = draw_objects(
+                    camera, objs, self.pixel_world.width, self.pixel_world.height
+                )
+                points = self.pixel_world.to_world(seg, self.z).astype(np.float32)
+                colors = np.repeat(colors[:, None, :], 2, axis=1)
+                for (obj, key), label, wire, a, b in zip(todo, labels, projections, bounds[:-1], bounds[1:]):
+                    self._store(obj, key, wire, points[a:b], colors[a:b])
+                    self._send_label(obj.id, label)  # never inside viser's atomic(): it holds every browser's video
+                    redrawn.append(obj.id)
+                    wires.append((obj, wire))
             self._send_group(group)
         for obj, wire in wires:  # the outlines a click inside picks: after the drawing (they are not drawn)
             d = self._drawn[obj.id]
@@ -157,18 +164,15 @@ class DatabaseOverlay:
             )
         return len(redrawn)
 
-    def _store(self, obj: SiteObject, key: tuple, batch, wire) -> None:
-        """Keep one object's projection (for picking) and its part of its group's arrays."""
+    def _store(self, obj: SiteObject, key: tuple, wire, points: np.ndarray, colors: np.ndarray) -> None:
+        """Keep one object's projection (for picking) and its part of its group's arrays: points (K, 2, 3)
+        float32 in the pixel world, colours (K, 2, 3) uint8."""
         d = self._drawn.get(obj.id)
         if d is None:
             d = self._drawn[obj.id] = _Drawn(key, obj.name, np.zeros((0, 2, 2)))
         d.key, d.name = key, obj.name
-        d.seg_uv = wire.seg_uv[wire.visible] if wire is not None else np.zeros((0, 2, 2))
-        if len(batch):
-            points, colors = batch.world(self.pixel_world, self.z)
-            d.points, d.colors = points.astype(np.float32), colors
-        else:
-            d.points, d.colors = np.zeros((0, 2, 3), np.float32), np.zeros((0, 2, 3), np.uint8)
+        d.seg_uv = wire.seg_uv[wire.visible]
+        d.points, d.colors = points, colors
 
     def _send_group(self, group: tuple) -> None:
         """Send one group's wireframes as one node (created, updated in place, or removed when empty)."""

@@ -22,6 +22,8 @@ from app.overlay import (
     cross_markers,
     dash_segments,
     project_wireframe,
+    project_wireframes,
+    wireframe_lines,
 )
 from app.workflows.base import Marks
 from app.workflows.site import SiteObject
@@ -29,7 +31,7 @@ from core.camera import Camera
 
 log = logging.getLogger("mcit.ui")
 
-__all__ = ["label_anchor", "draw_database", "draw_object", "draw_marks", "spread_labels"]
+__all__ = ["label_anchor", "draw_database", "draw_object", "draw_objects", "draw_marks", "spread_labels"]
 
 WIDE_TOP_PX = 160.0  # label_anchor: an outline wider than this (a table) gets its label under its front edge
 
@@ -91,15 +93,27 @@ def draw_object(
 ) -> tuple[LineBatch, tuple[np.ndarray, str] | None, ProjectedWireframe]:
     """One object's wireframe at its database pose, colour by status: (batch, label (uv (2,), text)
     or None, its projection)."""
+    seg, colors, _, labels, pws = draw_objects(camera, [obj], width, height, hidden)
     batch = LineBatch()
-    color = STATUS_COLORS.get(obj.status, STATUS_COLORS["known"])
-    pw = project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height)
-    batch.add_wireframe(pw, color, hidden=hidden)
-    anchor = label_anchor(pw, height)
-    label = None
-    if anchor is not None:
-        label = (anchor, obj.name if obj.status == "known" else f"{obj.name} ({obj.status})")
-    return batch, label, pw
+    batch.add(seg, colors)
+    return batch, labels[0], pws[0]
+
+
+def draw_objects(
+    camera: Camera, objects: list[SiteObject], width: int, height: int, hidden: str = "dashed"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[np.ndarray, str] | None], list[ProjectedWireframe]]:
+    """Objects' wireframes at their database poses, colour by status, projected and dashed all at once:
+    (segments (K, 2, 2) pixels, colours (K, 3) uint8, bounds (n + 1,) — object i's lines are
+    ``bounds[i]:bounds[i + 1]`` —, each one's label (uv (2,), text) or None, each one's projection)."""
+    pws = project_wireframes(camera, [(o.model, o.T_world_obj) for o in objects], width=width, height=height)
+    colors = [STATUS_COLORS.get(o.status, STATUS_COLORS["known"]) for o in objects]
+    seg, line_colors, bounds = wireframe_lines(pws, colors, hidden)
+    labels = []
+    for obj, pw in zip(objects, pws):
+        anchor = label_anchor(pw, height)
+        text = obj.name if obj.status == "known" else f"{obj.name} ({obj.status})"
+        labels.append(None if anchor is None else (anchor, text))
+    return seg, line_colors, bounds, labels, pws
 
 
 def draw_marks(
