@@ -204,28 +204,51 @@ class Revolution:
         c = np.asarray(center_obj, dtype=float).reshape(3)
         sil = self.silhouette(c)
         m = len(sil)
-        parts = [
-            Outline(
-                sil,
-                np.ones(m, bool),
-                np.full(m, "silhouette", dtype="<U10"),
-                np.full(m, -1, np.int64),
-                np.arange(m),
-                np.full(m, -1, np.int64),
-                2,
-            )
-        ]
-        th = np.linspace(0.0, 2.0 * np.pi, n_circle + 1)
-        e, lat_n = self.lateral_normal(th)
-        for centre, r, cap_n in self._caps():
-            if r > 0:
-                P = centre + r * e
-                cap_facing = float(cap_n @ (c - centre)) > 0
-                lat_facing = np.einsum("ij,ij->i", lat_n, c - P) > 0
-                parts.append(closed_curve_outline(P, cap_facing | (lat_facing[:-1] & lat_facing[1:]), "rim", 0))
-            else:
-                parts.append(Outline.empty(n_circle))
-        return join_outlines(parts)
+        rims, lat_n, fixed = self._rims(n_circle)
+        visible = [np.ones(m, bool)]
+        for centre, cap_n, P in rims:
+            cap_facing = float(cap_n @ (c - centre)) > 0
+            lat_facing = np.einsum("ij,ij->i", lat_n, c - P) > 0
+            visible.append(cap_facing | (lat_facing[:-1] & lat_facing[1:]))
+        segments, kind, edge, feature, chord = fixed[m]
+        segments = np.concatenate([sil, segments]) if m else segments.copy()
+        return Outline(segments, np.concatenate(visible), kind, edge, feature, chord, 2 + 2 * n_circle)
+
+    def _rims(self, n_circle: int) -> tuple[list, np.ndarray, dict]:
+        """What ``outline`` draws that the view does not change, kept per ``n_circle`` (it was most of
+        a cylinder's redraw): each rim's (centre, cap's outward normal, points (n + 1, 3)), the lateral
+        normals (n + 1, 3) at those points, and per count of silhouette generators m (0 or 2) the
+        rim chords (K, 2, 3) and the outline's kind, edge, feature and chord arrays (read-only)."""
+        kept = self.__dict__.setdefault("_rims_by_n", {})
+        if n_circle not in kept:
+            th = np.linspace(0.0, 2.0 * np.pi, n_circle + 1)
+            e, lat_n = self.lateral_normal(th)
+            rims, parts = [], []
+            for centre, r, cap_n in self._caps():
+                if r > 0:
+                    P = centre + r * e
+                    rims.append((centre, cap_n, P))
+                    parts.append(closed_curve_outline(P, np.zeros(n_circle, bool), "rim", 0))
+                else:
+                    parts.append(Outline.empty(n_circle))
+            fixed = {}
+            for m in (0, 2):
+                sil = Outline(
+                    np.zeros((m, 2, 3)),
+                    np.ones(m, bool),
+                    np.full(m, "silhouette", dtype="<U10"),
+                    np.full(m, -1, np.int64),
+                    np.arange(m),
+                    np.full(m, -1, np.int64),
+                    2,
+                )
+                o = join_outlines([sil] + parts)
+                arrays = (o.segments[m:], o.kind, o.edge, o.feature, o.chord)
+                for a in arrays:
+                    a.setflags(write=False)
+                fixed[m] = arrays
+            kept[n_circle] = (rims, lat_n, fixed)
+        return kept[n_circle]
 
     def edge_samples(self, centers_obj: np.ndarray, per_edge: int, n_rim: int) -> list[SampleGroup]:
         """Each rim's ``n_rim`` points (seen when its cap or the lateral surface there faces the point)
