@@ -143,9 +143,12 @@ class DatabaseOverlay:
                 )
                 points = self.pixel_world.to_world(seg, self.z).astype(np.float32)
                 colors = np.repeat(colors[:, None, :], 2, axis=1)
+                anchors = [label[0] for label in labels if label is not None]
+                where = iter(self.pixel_world.to_world(np.reshape(anchors, (-1, 2)), self.z).tolist())
                 for (obj, key), label, wire, a, b in zip(todo, labels, projections, bounds[:-1], bounds[1:]):
                     self._store(obj, key, wire, points[a:b], colors[a:b])
-                    self._send_label(obj.id, label)  # never inside viser's atomic(): it holds every browser's video
+                    # never inside viser's atomic(): it holds every browser's video
+                    self._send_label(obj.id, None if label is None else (tuple(next(where)), label[1]))
                     redrawn.append(obj.id)
                     wires.append((obj, wire))
             self._send_group(group)
@@ -197,15 +200,15 @@ class DatabaseOverlay:
             thickness_units="screen",
         )
 
-    def _send_label(self, obj_id: Any, label: tuple[np.ndarray, str] | None) -> None:
+    def _send_label(self, obj_id: Any, label: tuple[tuple[float, float, float], str] | None) -> None:
+        """Create, move or remove one object's label: (its position in the pixel world, its text) or None."""
         d = self._drawn[obj_id]
         if label is None:
             if d.label is not None:
                 d.label.remove()
                 d.label = None
             return
-        uv, text = label
-        position = tuple(float(v) for v in self.pixel_world.to_world(uv, self.z))
+        position, text = label
         if d.label is None:
             d.label = self.scene.add_label(
                 self.label_name(obj_id, self.prefix),
