@@ -152,9 +152,10 @@ class DatabaseOverlay:
                     redrawn.append(obj.id)
                     wires.append((obj, wire))
             self._send_group(group)
-        for obj, wire in wires:  # the outlines a click inside picks: after the drawing (they are not drawn)
+        # the outlines a click inside picks: after the drawing (they are not drawn)
+        for (obj, _), (outline, depth) in zip(wires, _outlines(camera, wires)):
             d = self._drawn[obj.id]
-            d.outline, d.depth = _outline(camera, obj, wire)
+            d.outline, d.depth = outline, depth
         self.redrawn = redrawn
         self.removed = gone
         if redrawn or gone:
@@ -270,21 +271,29 @@ class DatabaseOverlay:
         return min(holding, key=lambda d: d.depth).name if holding else near
 
 
-def _outline(camera: Camera, obj: SiteObject, wire) -> tuple[np.ndarray | None, float]:
-    """(the convex hull (H, 2) float32 of an object's drawn wireframe, pixels, or None; its centre's depth)
-    for picking by a click inside it. None for the table and for anything whose outline covers more
-    than MAX_OUTLINE_SHARE of the image (a wall: they hold the other objects, and are picked by their
-    wireframe), for an object not wholly in front of the camera, or drawn as fewer than 3 points."""
+def _outlines(camera: Camera, drawn: list[tuple[SiteObject, Any]]) -> list[tuple[np.ndarray | None, float]]:
+    """Per (object, its drawn projection): (the convex hull (H, 2) float32 of its drawn wireframe, pixels,
+    or None; its centre's depth) for picking by a click inside it. None for the table and for anything
+    whose outline covers more than MAX_OUTLINE_SHARE of the image (a wall: they hold the other objects,
+    and are picked by their wireframe), for an object not wholly in front of the camera, or drawn as
+    fewer than 3 points. Whether they are in front is told for all their points at once."""
     import cv2
 
-    X = obj.vertices_world()
-    if len(X) == 0:  # a cylinder, a cone: no vertices, its origin on its axis
-        X = obj.T_world_obj[:3, 3][None]
-    if obj.kind == "table" or wire is None or len(wire.seg_uv) == 0 or not np.all(camera.depth(X) > 0):
-        return None, float("inf")
-    hull = cv2.convexHull(wire.seg_uv.reshape(-1, 2).astype(np.float32)).reshape(-1, 2)
-    if len(hull) < 3:  # fewer than 3 distinct points drawn
-        return None, float("inf")
-    if cv2.contourArea(hull) > MAX_OUTLINE_SHARE * camera.width * camera.height:
-        return None, float("inf")
-    return hull, float(camera.depth(X.mean(axis=0)[None])[0])
+    points = []
+    for obj, _ in drawn:
+        X = obj.vertices_world()
+        points.append(X if len(X) else obj.T_world_obj[:3, 3][None])  # a cylinder, a cone: its origin, on its axis
+    if not points:
+        return []
+    counts = np.array([len(X) for X in points])
+    ahead = np.minimum.reduceat(camera.depth(np.concatenate(points)), np.cumsum(counts) - counts) > 0
+    out: list[tuple[np.ndarray | None, float]] = []
+    for (obj, wire), in_front, X in zip(drawn, ahead, points):
+        hull = None
+        if obj.kind != "table" and wire is not None and len(wire.seg_uv) and in_front:
+            hull = cv2.convexHull(wire.seg_uv.reshape(-1, 2).astype(np.float32)).reshape(-1, 2)
+            if len(hull) < 3 or cv2.contourArea(hull) > MAX_OUTLINE_SHARE * camera.width * camera.height:
+                hull = None  # fewer than 3 distinct points drawn, or a wall
+        # each centre's depth alone: in one product with the others', its last bit could differ
+        out.append((hull, float(camera.depth(X.mean(axis=0)[None])[0])) if hull is not None else (None, float("inf")))
+    return out
