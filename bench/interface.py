@@ -19,8 +19,9 @@ DESIGN.md), viewport 1200 × 700.
    arrives and what it holds (video frames, database overlay nodes), at 50, 500 and 2,000 objects:
    the full draw at start (one reader connected before the server starts), for a browser joining
    (5 joins, one after the other: the median and the worst), and after a new camera calibration (C's
-   centre moved 5 mm): the time to the last overlay message received, and each reader's longest video
-   gap meanwhile, counted from its connection (a browser with no frame yet counts); then the longest
+   centre moved 5 mm): the time to the last overlay message received, the CPU seconds of the database
+   thread's drawing (the overlay's, and with the 3D world's and the ray casters'), and each reader's longest
+   video gap meanwhile, counted from its connection (a browser with no frame yet counts); then the longest
    gap while one object's pose is written every 2 s (as Accept writes it) over 12 s, and selection
    clicks at 2,000 objects (click → that client's marks sent). ``--before DIR`` runs the same on
    another checkout (its root) and prints it beside; bare viser's join (the video alone) is printed
