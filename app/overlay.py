@@ -34,7 +34,9 @@ __all__ = [
     "dash_segments",
     "ProjectedWireframe",
     "project_wireframe",
+    "project_wireframes",
     "LineBatch",
+    "wireframe_lines",
     "cross_markers",
     "circle_marker",
     "nearest_segment",
@@ -240,12 +242,67 @@ def project_wireframe(
 
     width, height : the image to clip to (default: the camera's).
     """
-    wf = model.wireframe(camera.center, T_world_obj, n_circle=n_circle)
-    S, idx = clip_segments_depth(camera, wf.segments)
+    return project_wireframes(camera, [(model, T_world_obj)], n_circle=n_circle, width=width, height=height)[0]
+
+
+def project_wireframes(
+    camera: Camera,
+    posed: list[tuple[BRep, np.ndarray]],
+    *,
+    n_circle: int = 48,
+    width: int | None = None,
+    height: int | None = None,
+) -> list[ProjectedWireframe]:
+    """``project_wireframe`` of many (model, T_world_obj) at once, one ProjectedWireframe each: each
+    model's outline from the optical centre, then one depth clip, one product through C and one image
+    clip over all their segments (per object, the numpy calls' overhead was most of a 2,000-object draw)."""
+    wfs = [model.wireframe(camera.center, T, n_circle=n_circle) for model, T in posed]
+    if not wfs:
+        return []
+    counts = np.array([len(wf.segments) for wf in wfs])
+    owner = np.repeat(np.arange(len(wfs)), counts)
+    S, idx = clip_segments_depth(camera, np.concatenate([wf.segments.reshape(-1, 2, 3) for wf in wfs]))
     uv = camera.project(S.reshape(-1, 3)).reshape(-1, 2, 2) if len(S) else np.zeros((0, 2, 2))
     uv, idx2 = clip_segments_rect(uv, width or camera.width, height or camera.height)
-    src = idx[idx2]
-    return ProjectedWireframe(uv, wf.visible[src], wf.edge_index[src], wf.kind[src])
+    src = idx[idx2]  # ascending: the clips keep the segments' order
+    visible, edge_index, kind = (
+        np.concatenate([getattr(wf, a) for wf in wfs]) for a in ("visible", "edge_index", "kind")
+    )
+    bounds = np.searchsorted(owner[src], np.arange(len(wfs) + 1))
+    return [
+        ProjectedWireframe(uv[a:b], visible[src[a:b]], edge_index[src[a:b]], kind[src[a:b]])
+        for a, b in zip(bounds[:-1], bounds[1:])
+    ]
+
+
+def wireframe_lines(
+    pws: list[ProjectedWireframe], colors, hidden: str = "dashed", dim: float = 0.55
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Wireframes as lines, one after the other: each one's visible segments solid in its colour (n, 3),
+    then its hidden ones dashed and dimmed ("dashed") or left out ("removed"), all dashed at once.
+
+    Returns segments (K, 2, 2) pixels, colours (K, 3) uint8 and bounds (n + 1,): wireframe i's lines
+    are ``bounds[i]:bounds[i + 1]``.
+    """
+    if hidden not in ("dashed", "removed"):
+        raise ValueError(f"hidden must be 'dashed' or 'removed', got {hidden!r}")
+    n = len(pws)
+    colors = np.asarray(colors, dtype=np.uint8).reshape(n, 3)
+    if n == 0:
+        return np.zeros((0, 2, 2)), np.zeros((0, 3), np.uint8), np.zeros(1, np.int64)
+    seg = np.concatenate([np.asarray(pw.seg_uv, dtype=float).reshape(-1, 2, 2) for pw in pws])
+    visible = np.concatenate([np.asarray(pw.visible, dtype=bool).reshape(-1) for pw in pws])
+    owner = np.repeat(np.arange(n), [len(pw.seg_uv) for pw in pws])
+    segs, owners, cols = [seg[visible]], [owner[visible]], [colors[owner[visible]]]
+    if hidden == "dashed":
+        dashes, idx = dash_segments(seg[~visible])
+        dashed_owner = owner[~visible][idx]
+        dimmed = (colors * float(dim)).astype(np.uint8)  # each component truncated, as int(c * dim)
+        segs, owners, cols = segs + [dashes], owners + [dashed_owner], cols + [dimmed[dashed_owner]]
+    order = np.argsort(np.concatenate([2 * o + k for k, o in enumerate(owners)]), kind="stable")
+    owner_out = np.concatenate(owners)[order]
+    bounds = np.searchsorted(owner_out, np.arange(n + 1))
+    return np.concatenate(segs)[order], np.concatenate(cols)[order], bounds
 
 
 @dataclass
@@ -268,12 +325,8 @@ class LineBatch:
         self, pw: ProjectedWireframe, color: tuple[int, int, int], hidden: str = "dashed", dim: float = 0.55
     ) -> None:
         """Visible segments solid; hidden ones dashed and dimmed ("dashed"), or left out ("removed")."""
-        self.add(pw.seg_uv[pw.visible], color)
-        if hidden == "dashed":
-            dashes, _ = dash_segments(pw.seg_uv[~pw.visible])
-            self.add(dashes, tuple(int(c * dim) for c in color))
-        elif hidden != "removed":
-            raise ValueError(f"hidden must be 'dashed' or 'removed', got {hidden!r}")
+        seg, colors, _ = wireframe_lines([pw], [color], hidden, dim)
+        self.add(seg, colors)
 
     def __len__(self) -> int:
         return int(sum(len(s) for s in self.segments))

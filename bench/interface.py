@@ -19,8 +19,9 @@ DESIGN.md), viewport 1200 × 700.
    arrives and what it holds (video frames, database overlay nodes), at 50, 500 and 2,000 objects:
    the full draw at start (one reader connected before the server starts), for a browser joining
    (5 joins, one after the other: the median and the worst), and after a new camera calibration (C's
-   centre moved 5 mm): the time to the last overlay message received, and each reader's longest video
-   gap meanwhile, counted from its connection (a browser with no frame yet counts); then the longest
+   centre moved 5 mm): the time to the last overlay message received, the CPU seconds of the database
+   thread's drawing (the overlay's, and with the 3D world's and the ray casters'), and each reader's longest
+   video gap meanwhile, counted from its connection (a browser with no frame yet counts); then the longest
    gap while one object's pose is written every 2 s (as Accept writes it) over 12 s, and selection
    clicks at 2,000 objects (click → that client's marks sent). ``--before DIR`` runs the same on
    another checkout (its root) and prints it beside; bare viser's join (the video alone) is printed
@@ -365,6 +366,33 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
     from core.transforms import make_T
 
     server, site, db, _ = build(n_objects, fps=30.0, start=False)
+    draws: list[tuple[float, float, float]] = []  # per sync_database: (when it began, CPU s of the overlay, of all)
+    sync, overlays = server.sync_database, [feed.overlay for feed in server.views.values()]
+    overlay_cpu = [0.0]
+
+    def timed(overlay):
+        sync_overlay = overlay.sync
+
+        def timed_overlay(*args):
+            c = time.thread_time()
+            try:
+                return sync_overlay(*args)
+            finally:
+                overlay_cpu[0] += time.thread_time() - c
+
+        return timed_overlay
+
+    for overlay in overlays:
+        overlay.sync = timed(overlay)
+
+    def timed_sync() -> int:  # the draw's own CPU, on the database thread (not the video's or the sockets')
+        t, c = time.time(), time.thread_time()
+        overlay_cpu[0] = 0.0
+        n = sync()
+        draws.append((t, overlay_cpu[0], time.thread_time() - c))
+        return n
+
+    server.sync_database = timed_sync
     a = Reader(server.port)
     readers = [a]
     r: dict = {"objects": n_objects}
@@ -375,6 +403,8 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
         server.start()  # the first draw starts now, with a browser watching
         done = _settled(server, a, t0)
         r["start_s"], r["start_gap_ms"] = done - t0, a.longest_gap_ms(t0, done)
+        r["start_cpu_s"] = sum(c for t, c, _ in draws if t0 <= t <= done)
+        r["start_all_cpu_s"] = sum(c for t, _, c in draws if t0 <= t <= done)
         time.sleep(2.0)
         joins = []
         for k in range(JOINS):  # a browser joins (then leaves, but for the last one, which stays)
@@ -394,6 +424,8 @@ def measure_stall(n_objects: int, seconds: float, change_every_s: float, clicks:
         site.set_camera(_moved_camera(site.camera), rms_px=0.5, residuals_px=np.zeros(0), points={}, client="bench")
         done = max(_settled(server, x, tc) for x in readers)
         r["calib_s"] = done - tc
+        r["calib_cpu_s"] = sum(c for t, c, _ in draws if tc <= t <= done)
+        r["calib_all_cpu_s"] = sum(c for t, _, c in draws if tc <= t <= done)
         r["calib_gap_ms"] = max(x.longest_gap_ms(tc, done + 0.5) for x in readers)
         time.sleep(1.0)
         movable = [o for o in site.objects() if o.kind != "table"]
@@ -490,7 +522,10 @@ def stall_rows(sizes, seconds: float, change_every_s: float, clicks: int) -> lis
         rows.append(measure_stall(n, seconds, change_every_s, clicks if n == max(sizes) else 0, rng))
         r = rows[-1]
         print(
-            f"  {n} objects: start {r['start_s']:.2f} s, join {r['join_s']:.2f} s, calibration {r['calib_s']:.2f} s",
+            f"  {n} objects: start {r['start_s']:.2f} s (overlay {r['start_cpu_s']:.2f} s CPU, "
+            f"all {r['start_all_cpu_s']:.2f}), "
+            f"join {r['join_s']:.2f} s, calibration {r['calib_s']:.2f} s (overlay {r['calib_cpu_s']:.2f} s CPU, all "
+            f"{r['calib_all_cpu_s']:.2f}), load {os.getloadavg()[0]:.1f}",
             file=sys.stderr,
             flush=True,
         )
@@ -500,6 +535,8 @@ def stall_rows(sizes, seconds: float, change_every_s: float, clicks: int) -> lis
 STALL_COLUMNS = (
     ("scene nodes of the overlay", "nodes", "{:.0f}", "—"),
     ("full draw at start, to the last overlay message (s)", "start_s", "{:.2f}", "≤ 2"),
+    ("  its CPU: the database overlay's drawing (s)", "start_cpu_s", "{:.2f}", "—"),
+    ("  its CPU with the 3D world's and the ray casters' (the database thread's, s)", "start_all_cpu_s", "{:.2f}", "—"),
     ("  its browser's longest video gap from the start (ms)", "start_gap_ms", "{:.0f}", "≤ 500"),
     ("full draw for a joining browser, from its connection (s), median of 5", "join_s", "{:.2f}", "≤ 2"),
     ("  the same, the slowest of the 5 joins", "join_s_max", "{:.2f}", "≤ 2"),
@@ -508,6 +545,8 @@ STALL_COLUMNS = (
     ("  the watching browser's longest video gap meanwhile (ms), median", "join_other_gap_ms", "{:.0f}", "≤ 150"),
     ("  the same, the worst of the 5 joins", "join_other_gap_ms_max", "{:.0f}", "≤ 150"),
     ("full draw after a new camera calibration (s)", "calib_s", "{:.2f}", "≤ 2"),
+    ("  its CPU: the database overlay's drawing (s)", "calib_cpu_s", "{:.2f}", "—"),
+    ("  its CPU with the 3D world's and the ray casters' (the database thread's, s)", "calib_all_cpu_s", "{:.2f}", "—"),
     ("  the browsers' longest video gap meanwhile (ms)", "calib_gap_ms", "{:.0f}", "≤ 500 (watching: ≤ 150)"),
     ("longest video gap, a pose written every 2 s (ms)", "gap_ms", "{:.0f}", "≤ 100"),
     ("frames/s delivered meanwhile (the slower browser)", "fps", "{:.1f}", "≥ 28"),

@@ -60,6 +60,11 @@ class SmoothSides:
         return len(self.sides)
 
     @classmethod
+    def none(cls) -> SmoothSides:
+        """No smooth side (a model whose faces' sides are all edges)."""
+        return cls(np.zeros((0, 2), np.int64), np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+
+    @classmethod
     def of(cls, vertices: np.ndarray, faces, edges: np.ndarray) -> SmoothSides:
         """The smooth sides of faces (vertex loops) over vertices (V, 3), given the sharp edges (E, 2).
 
@@ -68,7 +73,7 @@ class SmoothSides:
         not coplanar.
         """
         V = np.asarray(vertices, dtype=float).reshape(-1, 3)
-        empty = cls(np.zeros((0, 2), np.int64), np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+        empty = cls.none()
         if len(faces) < 2:
             return empty
         lengths = np.fromiter((len(f) for f in faces), dtype=np.int64, count=len(faces))

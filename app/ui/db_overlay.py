@@ -26,7 +26,7 @@ from app.overlay import PixelWorld, nearest_segment
 from app.workflows.site import SiteObject
 from core.camera import Camera
 
-from .drawing import draw_object
+from .drawing import draw_objects
 from .node_groups import NodeGroups
 
 __all__ = ["DatabaseOverlay"]
@@ -135,16 +135,27 @@ class DatabaseOverlay:
         # went out. A group's 64 labels and one node are about a window, queued while the next group is drawn.
         redrawn, wires = [], []
         for group in sorted(set(changed) | {g for g in dirty if g is not None}):
-            for obj, key in changed.get(group, ()):
-                batch, label, wire = draw_object(camera, obj, self.pixel_world.width, self.pixel_world.height)
-                self._store(obj, key, batch, wire)
-                self._send_label(obj.id, label)  # never inside viser's atomic(): it holds every browser's video
-                redrawn.append(obj.id)
-                wires.append((obj, wire))
+            todo = changed.get(group, [])
+            if todo:  # the group's changed objects projected, dashed and placed in the pixel world at once
+                objs = [obj for obj, _ in todo]
+                seg, colors, bounds, labels, projections = draw_objects(
+                    camera, objs, self.pixel_world.width, self.pixel_world.height
+                )
+                points = self.pixel_world.to_world(seg, self.z).astype(np.float32)
+                colors = np.repeat(colors[:, None, :], 2, axis=1)
+                anchors = [label[0] for label in labels if label is not None]
+                where = iter(self.pixel_world.to_world(np.reshape(anchors, (-1, 2)), self.z).tolist())
+                for (obj, key), label, wire, a, b in zip(todo, labels, projections, bounds[:-1], bounds[1:]):
+                    self._store(obj, key, wire, points[a:b], colors[a:b])
+                    # never inside viser's atomic(): it holds every browser's video
+                    self._send_label(obj.id, None if label is None else (tuple(next(where)), label[1]))
+                    redrawn.append(obj.id)
+                    wires.append((obj, wire))
             self._send_group(group)
-        for obj, wire in wires:  # the outlines a click inside picks: after the drawing (they are not drawn)
+        # the outlines a click inside picks: after the drawing (they are not drawn)
+        for (obj, _), (outline, depth) in zip(wires, _outlines(camera, wires)):
             d = self._drawn[obj.id]
-            d.outline, d.depth = _outline(camera, obj, wire)
+            d.outline, d.depth = outline, depth
         self.redrawn = redrawn
         self.removed = gone
         if redrawn or gone:
@@ -157,18 +168,15 @@ class DatabaseOverlay:
             )
         return len(redrawn)
 
-    def _store(self, obj: SiteObject, key: tuple, batch, wire) -> None:
-        """Keep one object's projection (for picking) and its part of its group's arrays."""
+    def _store(self, obj: SiteObject, key: tuple, wire, points: np.ndarray, colors: np.ndarray) -> None:
+        """Keep one object's projection (for picking) and its part of its group's arrays: points (K, 2, 3)
+        float32 in the pixel world, colours (K, 2, 3) uint8."""
         d = self._drawn.get(obj.id)
         if d is None:
             d = self._drawn[obj.id] = _Drawn(key, obj.name, np.zeros((0, 2, 2)))
         d.key, d.name = key, obj.name
-        d.seg_uv = wire.seg_uv[wire.visible] if wire is not None else np.zeros((0, 2, 2))
-        if len(batch):
-            points, colors = batch.world(self.pixel_world, self.z)
-            d.points, d.colors = points.astype(np.float32), colors
-        else:
-            d.points, d.colors = np.zeros((0, 2, 3), np.float32), np.zeros((0, 2, 3), np.uint8)
+        d.seg_uv = wire.seg_uv[wire.visible]
+        d.points, d.colors = points, colors
 
     def _send_group(self, group: tuple) -> None:
         """Send one group's wireframes as one node (created, updated in place, or removed when empty)."""
@@ -193,15 +201,15 @@ class DatabaseOverlay:
             thickness_units="screen",
         )
 
-    def _send_label(self, obj_id: Any, label: tuple[np.ndarray, str] | None) -> None:
+    def _send_label(self, obj_id: Any, label: tuple[tuple[float, float, float], str] | None) -> None:
+        """Create, move or remove one object's label: (its position in the pixel world, its text) or None."""
         d = self._drawn[obj_id]
         if label is None:
             if d.label is not None:
                 d.label.remove()
                 d.label = None
             return
-        uv, text = label
-        position = tuple(float(v) for v in self.pixel_world.to_world(uv, self.z))
+        position, text = label
         if d.label is None:
             d.label = self.scene.add_label(
                 self.label_name(obj_id, self.prefix),
@@ -263,21 +271,29 @@ class DatabaseOverlay:
         return min(holding, key=lambda d: d.depth).name if holding else near
 
 
-def _outline(camera: Camera, obj: SiteObject, wire) -> tuple[np.ndarray | None, float]:
-    """(the convex hull (H, 2) float32 of an object's drawn wireframe, pixels, or None; its centre's depth)
-    for picking by a click inside it. None for the table and for anything whose outline covers more
-    than MAX_OUTLINE_SHARE of the image (a wall: they hold the other objects, and are picked by their
-    wireframe), for an object not wholly in front of the camera, or drawn as fewer than 3 points."""
+def _outlines(camera: Camera, drawn: list[tuple[SiteObject, Any]]) -> list[tuple[np.ndarray | None, float]]:
+    """Per (object, its drawn projection): (the convex hull (H, 2) float32 of its drawn wireframe, pixels,
+    or None; its centre's depth) for picking by a click inside it. None for the table and for anything
+    whose outline covers more than MAX_OUTLINE_SHARE of the image (a wall: they hold the other objects,
+    and are picked by their wireframe), for an object not wholly in front of the camera, or drawn as
+    fewer than 3 points. Whether they are in front is told for all their points at once."""
     import cv2
 
-    X = obj.vertices_world()
-    if len(X) == 0:  # a cylinder, a cone: no vertices, its origin on its axis
-        X = obj.T_world_obj[:3, 3][None]
-    if obj.kind == "table" or wire is None or len(wire.seg_uv) == 0 or not np.all(camera.depth(X) > 0):
-        return None, float("inf")
-    hull = cv2.convexHull(wire.seg_uv.reshape(-1, 2).astype(np.float32)).reshape(-1, 2)
-    if len(hull) < 3:  # fewer than 3 distinct points drawn
-        return None, float("inf")
-    if cv2.contourArea(hull) > MAX_OUTLINE_SHARE * camera.width * camera.height:
-        return None, float("inf")
-    return hull, float(camera.depth(X.mean(axis=0)[None])[0])
+    points = []
+    for obj, _ in drawn:
+        X = obj.vertices_world()
+        points.append(X if len(X) else obj.T_world_obj[:3, 3][None])  # a cylinder, a cone: its origin, on its axis
+    if not points:
+        return []
+    counts = np.array([len(X) for X in points])
+    ahead = np.minimum.reduceat(camera.depth(np.concatenate(points)), np.cumsum(counts) - counts) > 0
+    out: list[tuple[np.ndarray | None, float]] = []
+    for (obj, wire), in_front, X in zip(drawn, ahead, points):
+        hull = None
+        if obj.kind != "table" and wire is not None and len(wire.seg_uv) and in_front:
+            hull = cv2.convexHull(wire.seg_uv.reshape(-1, 2).astype(np.float32)).reshape(-1, 2)
+            if len(hull) < 3 or cv2.contourArea(hull) > MAX_OUTLINE_SHARE * camera.width * camera.height:
+                hull = None  # fewer than 3 distinct points drawn, or a wall
+        # each centre's depth alone: in one product with the others', its last bit could differ
+        out.append((hull, float(camera.depth(X.mean(axis=0)[None])[0])) if hull is not None else (None, float("inf")))
+    return out

@@ -22,6 +22,8 @@ from app.overlay import (
     cross_markers,
     dash_segments,
     project_wireframe,
+    project_wireframes,
+    wireframe_lines,
 )
 from app.workflows.base import Marks
 from app.workflows.site import SiteObject
@@ -29,7 +31,15 @@ from core.camera import Camera
 
 log = logging.getLogger("mcit.ui")
 
-__all__ = ["label_anchor", "draw_database", "draw_object", "draw_marks", "spread_labels"]
+__all__ = [
+    "label_anchor",
+    "label_anchors",
+    "draw_database",
+    "draw_object",
+    "draw_objects",
+    "draw_marks",
+    "spread_labels",
+]
 
 WIDE_TOP_PX = 160.0  # label_anchor: an outline wider than this (a table) gets its label under its front edge
 
@@ -39,18 +49,39 @@ def label_anchor(pw: ProjectedWireframe, height: int | None = None) -> np.ndarra
     wide outline (a table) has it just under the middle of its front (lowest) edge instead, kept inside
     the image of ``height`` rows: above, its far edge is where the objects standing on it are drawn (two
     new operators read "table" as the parallelepiped's label, at its middle and near its left end)."""
-    P = pw.seg_uv[pw.visible].reshape(-1, 2) if pw.visible.any() else pw.seg_uv.reshape(-1, 2)
-    if not len(P):
-        return None
-    top = P[P[:, 1] <= P[:, 1].min() + 3.0]
-    lo, hi = float(top[:, 0].min()), float(top[:, 0].max())
-    if float(np.ptp(P[:, 0])) > WIDE_TOP_PX:
-        front = P[P[:, 1] >= P[:, 1].max() - 3.0]
-        y = float(P[:, 1].max()) + 16.0
-        if height is not None:
-            y = min(y, float(height) - 4.0)
-        return np.array([0.5 * (float(front[:, 0].min()) + float(front[:, 0].max())), y])
-    return np.array([0.5 * (lo + hi), P[:, 1].min() - 4.0])
+    return label_anchors([pw], height)[0]
+
+
+def label_anchors(pws: list[ProjectedWireframe], height: int | None = None) -> list[np.ndarray | None]:
+    """``label_anchor`` of each wireframe, their points' extremes taken all at once."""
+    points = [pw.seg_uv[pw.visible].reshape(-1, 2) if pw.visible.any() else pw.seg_uv.reshape(-1, 2) for pw in pws]
+    out: list[np.ndarray | None] = [None] * len(pws)
+    drawn = [i for i, P in enumerate(points) if len(P)]
+    if not drawn:
+        return out
+    counts = np.array([len(points[i]) for i in drawn])
+    starts, owner = np.cumsum(counts) - counts, np.repeat(np.arange(len(drawn)), counts)
+    x, y = np.concatenate([points[i] for i in drawn]).T
+
+    def lowest(v, where=None):
+        return np.minimum.reduceat(v if where is None else np.where(where, v, np.inf), starts)
+
+    def highest(v, where=None):
+        return np.maximum.reduceat(v if where is None else np.where(where, v, -np.inf), starts)
+
+    top, bottom = lowest(y), highest(y)
+    at_top, at_front = y <= (top + 3.0)[owner], y >= (bottom - 3.0)[owner]
+    wide = highest(x) - lowest(x) > WIDE_TOP_PX
+    ends = zip(lowest(x, at_top), highest(x, at_top), lowest(x, at_front), highest(x, at_front))
+    for i, w, t, b, (lo, hi, front_lo, front_hi) in zip(drawn, wide, top, bottom, ends):
+        if w:
+            v = float(b) + 16.0
+            if height is not None:
+                v = min(v, float(height) - 4.0)
+            out[i] = np.array([0.5 * (float(front_lo) + float(front_hi)), v])
+        else:
+            out[i] = np.array([0.5 * (float(lo) + float(hi)), t - 4.0])
+    return out
 
 
 def draw_database(
@@ -91,15 +122,26 @@ def draw_object(
 ) -> tuple[LineBatch, tuple[np.ndarray, str] | None, ProjectedWireframe]:
     """One object's wireframe at its database pose, colour by status: (batch, label (uv (2,), text)
     or None, its projection)."""
+    seg, colors, _, labels, pws = draw_objects(camera, [obj], width, height, hidden)
     batch = LineBatch()
-    color = STATUS_COLORS.get(obj.status, STATUS_COLORS["known"])
-    pw = project_wireframe(camera, obj.model, obj.T_world_obj, width=width, height=height)
-    batch.add_wireframe(pw, color, hidden=hidden)
-    anchor = label_anchor(pw, height)
-    label = None
-    if anchor is not None:
-        label = (anchor, obj.name if obj.status == "known" else f"{obj.name} ({obj.status})")
-    return batch, label, pw
+    batch.add(seg, colors)
+    return batch, labels[0], pws[0]
+
+
+def draw_objects(
+    camera: Camera, objects: list[SiteObject], width: int, height: int, hidden: str = "dashed"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[np.ndarray, str] | None], list[ProjectedWireframe]]:
+    """Objects' wireframes at their database poses, colour by status, projected and dashed all at once:
+    (segments (K, 2, 2) pixels, colours (K, 3) uint8, bounds (n + 1,) — object i's lines are
+    ``bounds[i]:bounds[i + 1]`` —, each one's label (uv (2,), text) or None, each one's projection)."""
+    pws = project_wireframes(camera, [(o.model, o.T_world_obj) for o in objects], width=width, height=height)
+    colors = [STATUS_COLORS.get(o.status, STATUS_COLORS["known"]) for o in objects]
+    seg, line_colors, bounds = wireframe_lines(pws, colors, hidden)
+    labels = []
+    for obj, anchor in zip(objects, label_anchors(pws, height)):
+        text = obj.name if obj.status == "known" else f"{obj.name} ({obj.status})"
+        labels.append(None if anchor is None else (anchor, text))
+    return seg, line_colors, bounds, labels, pws
 
 
 def draw_marks(

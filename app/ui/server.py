@@ -43,7 +43,7 @@ from .db_overlay import DatabaseOverlay
 from .inbound import guard_inbound_messages
 from .recent import RecentFrames
 from .robot_overlay import RobotOverlay
-from .viser_hints import share_prop_hints
+from .viser_hints import plain_pose_setter, share_prop_hints
 from .world3d import World3D
 from .wslog import quiet_malformed_messages
 
@@ -117,6 +117,7 @@ class InterfaceServer:
             )
         self.jpeg_quality = int(jpeg_quality)
         share_prop_hints()  # a full draw builds thousands of handles (app/ui/viser_hints.py)
+        plain_pose_setter()  # ... and moves their labels
         self.access = AccessPolicy(host=host, allow_origins=tuple(allow_origins), token=token)
         quiet_malformed_messages()  # a message a browser sent that cannot be read: one log line, not a traceback
         self.server = open_viser_server(self.access, host=host, port=port, label="mcit", verbose=verbose)

@@ -33,7 +33,7 @@ _EPS = 1e-12
 
 def _newell(P: np.ndarray) -> np.ndarray:
     """Newell normals (..., 3) of loops P (..., L, 3), summed over the loop's sides (not normalised)."""
-    Q = np.roll(P, -1, axis=-2)
+    Q = P[..., (np.arange(P.shape[-2]) + 1) % P.shape[-2], :]  # each vertex's next (np.roll's values, sooner)
     return np.stack(
         [
             ((P[..., 1] - Q[..., 1]) * (P[..., 2] + Q[..., 2])).sum(axis=-1),
@@ -168,7 +168,18 @@ class Polyhedron:
 
     def smooth_sides(self) -> SmoothSides:
         """The sides of its faces that are no edge and join two bent faces (a mesh's curved regions)."""
-        return self._cached("_smooth", lambda: SmoothSides.of(self.vertices, self.faces, self.edges))
+        return self._cached("_smooth", self._compute_smooth_sides)
+
+    def _compute_smooth_sides(self) -> SmoothSides:
+        # every side of every face an edge (a box, any model built of planar faces) has none: told from the
+        # faces each edge borders, which the hidden-line rule needs anyway (the search cost a box's first draw
+        # 70 us); with two edges on one side the count would not tell, and the search does
+        E = self.edges.tolist()
+        if len({(min(a, b), max(a, b)) for a, b in E}) == len(E) and sum(map(len, self.edge_faces())) == sum(
+            map(len, self.faces)
+        ):
+            return SmoothSides.none()
+        return SmoothSides.of(self.vertices, self.faces, self.edges)
 
     def _planes(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The face planes (n (F, 3), d (F,)) when the polyhedron is convex, else None."""
@@ -279,9 +290,9 @@ class Polyhedron:
             else np.zeros(0, bool)
         )
         pairs = self.edge_face_pairs()
-        has_face = np.bincount(pairs[:, 0], minlength=E) > 0
+        faceless = self._cached("_faceless", lambda: ~(np.bincount(pairs[:, 0], minlength=E) > 0))
         seen = np.bincount(pairs[:, 0], weights=facing[pairs[:, 1]], minlength=E) > 0
-        return ~has_face | seen
+        return faceless | seen
 
     def outline(self, center_obj: np.ndarray, n_circle: int = 48) -> Outline:
         """Its edges (features 0..E−1, visible by the hidden-line rule) and the contour generator of its
@@ -293,6 +304,9 @@ class Polyhedron:
         S = len(smooth) if smooth is not None else 0
         if E == 0 and S == 0:
             return Outline.empty()
+        if S == 0:  # its edges alone: all but their visibility kept (they were most of a box's redraw)
+            segments, kind, edge, feature, chord = self._cached("_edge_outline", self._edge_outline)
+            return Outline(segments.copy(), self._edge_visibility(c), kind, edge, feature, chord, E)
         idx = smooth.contour(c) if S else np.zeros(0, np.int64)
         m = len(idx)
         edge = np.concatenate([np.arange(E), np.full(m, -1)]).astype(np.int64)
@@ -305,6 +319,21 @@ class Polyhedron:
             np.full(E + m, -1, np.int64),
             E + S,
         )
+
+    def _edge_outline(self) -> tuple[np.ndarray, ...]:
+        """The view-independent arrays of ``outline`` with no smooth side: segments (E, 2, 3), kind, edge,
+        feature, chord (E,), read-only."""
+        E = len(self.edges)
+        arrays = (
+            self.vertices[self.edges].reshape(-1, 2, 3),
+            np.full(E, "edge", dtype="<U10"),
+            np.arange(E, dtype=np.int64),
+            np.arange(E, dtype=np.int64),
+            np.full(E, -1, np.int64),
+        )
+        for a in arrays:
+            a.setflags(write=False)
+        return arrays
 
     def edge_samples(self, centers_obj: np.ndarray, per_edge: int, n_rim: int) -> list[SampleGroup]:
         """``per_edge`` points along each edge (away from its ends), seen by the hidden-line rule.

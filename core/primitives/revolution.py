@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .base import CaoPart, Outline, SampleGroup, circle_basis, closed_curve_outline, join_outlines, same_arrays
+from .base import CaoPart, Outline, SampleGroup, circle_basis, same_arrays
 
 __all__ = ["Revolution"]
 
@@ -204,28 +204,46 @@ class Revolution:
         c = np.asarray(center_obj, dtype=float).reshape(3)
         sil = self.silhouette(c)
         m = len(sil)
-        parts = [
-            Outline(
-                sil,
-                np.ones(m, bool),
-                np.full(m, "silhouette", dtype="<U10"),
-                np.full(m, -1, np.int64),
-                np.arange(m),
-                np.full(m, -1, np.int64),
-                2,
+        rims, lat_n, fixed = self._rims(n_circle)
+        visible = [np.ones(m, bool)]
+        for centre, cap_n, P in rims:
+            cap_facing = float(cap_n @ (c - centre)) > 0
+            lat_facing = np.einsum("ij,ij->i", lat_n, c - P) > 0
+            visible.append(cap_facing | (lat_facing[:-1] & lat_facing[1:]))
+        chords, *ids = fixed
+        segments = np.concatenate([sil, chords]) if m else chords.copy()
+        kind, edge, feature, chord = (a[2 - m :] for a in ids)  # the silhouettes' rows (m of 2), then the rims'
+        return Outline(segments, np.concatenate(visible), kind, edge, feature, chord, 2 + 2 * n_circle)
+
+    def _rims(self, n_circle: int) -> tuple[list, np.ndarray, tuple[np.ndarray, ...]]:
+        """What ``outline`` draws that the view does not change, kept per ``n_circle`` (it was most of
+        a cylinder's redraw): each rim's (centre, cap's outward normal, points (n + 1, 3)), the lateral
+        normals (n + 1, 3) at those points, the rims' chords (K, 2, 3), and the outline's kind, edge,
+        feature and chord arrays (2 + K,) as with two silhouettes (with none, all but their first two
+        rows); read-only."""
+        kept = self.__dict__.setdefault("_rims_by_n", {})
+        if n_circle not in kept:
+            th = np.linspace(0.0, 2.0 * np.pi, n_circle + 1)
+            e, lat_n = self.lateral_normal(th)
+            rims, chords, features = [], [np.zeros((0, 2, 3))], [np.arange(2)]
+            for which, (centre, r, cap_n) in enumerate(self._caps()):
+                if r > 0:  # a cone's point has no rim (its features are kept all the same)
+                    P = centre + r * e
+                    rims.append((centre, cap_n, P))
+                    chords.append(np.stack([P[:-1], P[1:]], axis=1))
+                    features.append(2 + which * n_circle + np.arange(n_circle))
+            k = n_circle * len(rims)
+            fixed = (
+                np.concatenate(chords),
+                np.concatenate([np.full(2, "silhouette", dtype="<U10"), np.full(k, "rim", dtype="<U10")]),
+                np.full(2 + k, -1, np.int64),
+                np.concatenate(features).astype(np.int64),
+                np.concatenate([np.full(2, -1, np.int64), np.tile(np.arange(n_circle, dtype=np.int64), len(rims))]),
             )
-        ]
-        th = np.linspace(0.0, 2.0 * np.pi, n_circle + 1)
-        e, lat_n = self.lateral_normal(th)
-        for centre, r, cap_n in self._caps():
-            if r > 0:
-                P = centre + r * e
-                cap_facing = float(cap_n @ (c - centre)) > 0
-                lat_facing = np.einsum("ij,ij->i", lat_n, c - P) > 0
-                parts.append(closed_curve_outline(P, cap_facing | (lat_facing[:-1] & lat_facing[1:]), "rim", 0))
-            else:
-                parts.append(Outline.empty(n_circle))
-        return join_outlines(parts)
+            for a in fixed:
+                a.setflags(write=False)
+            kept[n_circle] = (rims, lat_n, fixed)
+        return kept[n_circle]
 
     def edge_samples(self, centers_obj: np.ndarray, per_edge: int, n_rim: int) -> list[SampleGroup]:
         """Each rim's ``n_rim`` points (seen when its cap or the lateral surface there faces the point)

@@ -171,18 +171,18 @@ def test_a_new_c_sends_each_group_with_its_labels_before_the_next_group_is_drawn
     overlay = D.DatabaseOverlay(scene, PixelWorld(cam.width, cam.height), z=-0.001, line_px=2.0, group_size=4)
     overlay.sync(cam, site.objects())
     scene.take()
-    drawn = D.draw_object
+    drawn = D.draw_objects
 
-    def draw(camera, obj, *a, **kw):
-        scene.log.append(("draw", obj.name, None))
-        return drawn(camera, obj, *a, **kw)
+    def draw(camera, objs, *a, **kw):
+        scene.log.extend(("draw", obj.name, None) for obj in objs)
+        return drawn(camera, objs, *a, **kw)
 
     moved = Camera(cam.C + np.array([[0, 0, 0, 2.0], [0, 0, 0, 0], [0, 0, 0, 0]]), cam.width, cam.height)
-    D.draw_object = draw
+    D.draw_objects = draw
     try:
         assert overlay.sync(moved, site.objects()) == len(site.objects())
     finally:
-        D.draw_object = drawn
+        D.draw_objects = drawn
     log = scene.take()
     nodes = [i for i, (what, name, _) in enumerate(log) if what == "add" and "/db/group_" in name]
     draws = [i for i, (what, _, _) in enumerate(log) if what == "draw"]
