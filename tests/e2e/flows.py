@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from .harness import assert_prompt_controls, key_until, press, wait_until
+from .harness import assert_prompt_controls, click_control, key_until, press, wait_until
 
 
 class Operator:
@@ -66,8 +66,8 @@ class Operator:
         """Pick ``option`` in the chooser labelled ``chooser`` (a Mantine select: click it, click the option)."""
         box = self.page.get_by_label(chooser, exact=True)
         box.wait_for(state="visible", timeout=60_000)
-        box.click()
-        self.page.get_by_role("option", name=option, exact=True).click()
+        click_control(box)
+        click_control(self.page.get_by_role("option", name=option, exact=True))
         self.actions += 1
         self.log.append(f"{chooser}: {option}")
 

@@ -13,7 +13,7 @@ import pytest
 from core.transforms import pose_error
 
 from .flows import Operator
-from .harness import close_notifications, select_by_click
+from .harness import click_control, close_notifications, select_by_click
 
 pytestmark = pytest.mark.e2e
 
@@ -90,9 +90,9 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
     # error paths: each shows a notification saying what to do, and nothing is written
     versions = [(o.name, o.version) for o in ui.db.objects()]
     n_changes, n_cal = len(ui.db.history()), len(ui.db.calibrations())
-    page.get_by_role("button", name="Update pose").click()  # nothing selected
+    click_control(page.get_by_role("button", name="Update pose"))  # nothing selected
     page.get_by_text("select an object first").first.wait_for(timeout=60_000)
-    page.get_by_role("button", name="Calibrate camera").click()
+    click_control(page.get_by_role("button", name="Calibrate camera"))
     _wait(
         lambda: page.panel.session.workflow is not None and page.panel.workflow_controls.handles,
         what="the workflow's controls",
@@ -123,7 +123,7 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
         return abs(cx - cam.image_width / 2) < 5 and abs(cy - cam.image_height / 2) < 5
 
     _wait(centred, what="the zoomed view to centre on the dragged rectangle")
-    page.get_by_role("button", name="Fit view").click()
+    click_control(page.get_by_role("button", name="Fit view"))
     _wait(lambda: abs(np.linalg.norm(cam.position - cam.look_at) - far) < 1e-3 * far, what="the fit")
     # a narrower window: the view is fitted again, the whole image inside the canvas
     aspect = page.panel.viewport.fitted_aspect

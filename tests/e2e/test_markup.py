@@ -22,7 +22,7 @@ import pytest
 from core.transforms import make_T
 
 from .flows import Operator
-from .harness import close_notifications, free_port, press, wait_until
+from .harness import click_control, close_notifications, free_port, press, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -173,9 +173,9 @@ def test_names_methods_operators_and_notes_with_markup_are_shown_as_text(browser
     page.locator(".mantine-Notification-root", has_text="Changed by another operator").first.wait_for(timeout=60_000)
 
     # the 3D world: the objects' labels
-    page.get_by_role("button", name="3D world", exact=True).click()
+    click_control(page.get_by_role("button", name="3D world", exact=True))
     time.sleep(1.0)
-    page.get_by_role("button", name="Video", exact=True).click()
+    click_control(page.get_by_role("button", name="Video", exact=True))
     _no_markup_ran(page, ui, canary, evil)
 
 

@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from .harness import select_by_click
+from .harness import click_control, select_by_click
 from .harness import wait_until as _wait
 
 pytestmark = pytest.mark.e2e
@@ -25,7 +25,7 @@ def test_a_clicked_edge_is_snapped_shown_and_can_be_refused(browser, interface, 
     wfv = obj.model.wireframe(cam.center, obj.T_world_obj)
     k_sel = next(int(k) for k, v, kind in zip(wfv.edge_index, wfv.visible, wfv.kind) if v and kind == "edge")
     select_by_click(page, "parallelepiped", lambda: ui.click_pixel(page, drawn[k_sel].mean(axis=0)))
-    page.get_by_role("button", name="Update pose").click()
+    click_control(page.get_by_role("button", name="Update pose"))
     _wait(lambda: page.panel.session.workflow is not None, what="the workflow")
     wf = page.panel.session.workflow
     # the longest visible edge of the box where the video shows it, clicked 1.5 px off on average
@@ -46,7 +46,7 @@ def test_a_clicked_edge_is_snapped_shown_and_can_be_refused(browser, interface, 
         timeout=60_000
     )  # how far it moved, in the panel
     assert len(wf.marks().raw_segments) == 1  # and the raw click drawn beside the snapped one
-    page.get_by_role("button", name="Refuse snap").click()
+    click_control(page.get_by_role("button", name="Refuse snap"))
     _wait(lambda: not wf.seg_snaps[0].applied, what="the refusal")
     assert np.array_equal(wf.segs[0], snap.raw) and len(wf.marks().raw_segments) == 0
     page.get_by_text("Snap refused", exact=False).first.wait_for(timeout=60_000)

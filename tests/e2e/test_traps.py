@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from .harness import press, wait_until, workflow_shown
+from .harness import click_control, press, wait_until, workflow_shown
 
 pytestmark = pytest.mark.e2e
 
@@ -61,7 +61,7 @@ def test_designate_on_an_old_frozen_frame_says_its_age(browser, device_interface
 def _seconds_back(page, value: str) -> None:
     """Type ``value`` in the Seconds back box and press Enter."""
     box = page.get_by_text("Seconds back", exact=True).first.locator("xpath=ancestor::div[2]").locator("input").last
-    box.click()
+    click_control(box)
     box.fill(value)
     page.keyboard.press("Enter")
 
@@ -173,8 +173,8 @@ def _refine_box(ui, page, scene, beside_px: float):
     wait_until(lambda: len(wf.candidates) > 0, 300, "P3L candidates", panel=panel)  # first use: compiled
     best = min(range(len(wf.candidates)), key=lambda i: pose_error(wf.candidates[i], T_true)[0])
     if best != wf.chosen:
-        page.get_by_label("Candidate", exact=True).first.click()
-        page.get_by_role("option", name=next(t for t, v in wf.choices("choose_candidate") if v == best)).click()
+        click_control(page.get_by_label("Candidate", exact=True).first)
+        click_control(page.get_by_role("option", name=next(t for t, v in wf.choices("choose_candidate") if v == best)))
         wait_until(lambda: wf.chosen == best, what="the candidate chosen", panel=panel)
     press(page, "Refine")
     wait_until(lambda: wf.refined is not None, 300, "the refinement", panel=panel)

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from .harness import key_until, press, select_by_click, wait_until
+from .harness import click_control, key_until, press, select_by_click, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -30,7 +30,7 @@ def test_wheel_zooms_about_the_cursor(browser, interface):
         time.sleep(0.3)
         x1, y1 = ui.screen_of(page, uv)
         assert np.hypot(x1 - x0, y1 - y0) < 3.0, f"the point under the cursor moved from {(x0, y0)} to {(x1, y1)}"
-        page.get_by_role("button", name="Fit view").click()
+        click_control(page.get_by_role("button", name="Fit view"))
         wait_until(lambda: abs(abs(float(cam.position[2])) - d0) < 0.02 * d0, what="the fit")
     page.close()
 
@@ -47,7 +47,7 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     time.sleep(0.5)
     assert panel.frozen is not None
     looked_at = panel.frozen
-    page.get_by_role("button", name="Calibrate camera").click()
+    click_control(page.get_by_role("button", name="Calibrate camera"))
     wait_until(
         lambda: panel.session.workflow is not None and panel.frozen_frames.by is panel.session.workflow,
         what="the workflow's own frozen frame",
@@ -116,7 +116,7 @@ def test_double_and_rapid_clicks_are_taken_in_order_or_refused_with_the_state_in
     cam = ui.site.camera
     drawn = cam.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)
     select_by_click(page, "parallelepiped", lambda: ui.click_pixel(page, drawn[1].mean(axis=0)))
-    page.get_by_role("button", name="Update pose").click()
+    click_control(page.get_by_role("button", name="Update pose"))
     wait_until(
         lambda: panel.session.workflow is not None and panel.workflow_controls.handles, what="the workflow", panel=panel
     )
@@ -151,7 +151,7 @@ def test_a_number_typed_in_a_box_gives_the_keys_back_on_enter_or_a_click_on_the_
     page = ui.open(browser)
     panel = page.panel
     box = page.get_by_text("Seconds back", exact=True).first.locator("xpath=ancestor::div[2]").locator("input").last
-    box.click()
+    click_control(box)
     box.fill("1")
     page.keyboard.press("Enter")
     wait_until(lambda: panel.frozen is not None and panel.gui_scrub.value == 1.0, what="the frame 1 s back frozen")
@@ -159,7 +159,7 @@ def test_a_number_typed_in_a_box_gives_the_keys_back_on_enter_or_a_click_on_the_
     page.keyboard.press("f")  # Freeze: the newest frame, not an "f" in the box
     wait_until(lambda: panel.frozen is not first, what="Freeze by its key after Enter in the box")
     assert box.input_value() in ("0", "1")
-    box.click()
+    click_control(box)
     box.fill("2")
     time.sleep(1.0)  # the value taken (or not) before the click
     second = panel.frozen

@@ -27,7 +27,7 @@ import pytest
 
 from core.transforms import pose_error
 
-from .harness import assert_prompt_controls, close_notifications, press, wait_until
+from .harness import assert_prompt_controls, click_control, close_notifications, press, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -71,8 +71,8 @@ class Operator:
 
     def choose(self, dropdown: str, option: str) -> None:
         """Open the dropdown labelled ``dropdown`` and pick ``option`` (two clicks)."""
-        self.page.get_by_role("combobox", name=dropdown).click()
-        self.page.get_by_role("option", name=option, exact=True).click()
+        click_control(self.page.get_by_role("combobox", name=dropdown))
+        click_control(self.page.get_by_role("option", name=option, exact=True))
         self.controls += 2
 
     def wait(self, result, what: str, timeout_s: float = 30.0, seen: set | None = None) -> None:

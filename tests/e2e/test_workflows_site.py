@@ -28,7 +28,15 @@ import pytest
 from core.camera import Camera
 from core.transforms import exp_so3, make_T, pose_error
 
-from .harness import assert_prompt_controls, close_notifications, press, select_by_click, wait_until, workflow_shown
+from .harness import (
+    assert_prompt_controls,
+    click_control,
+    close_notifications,
+    press,
+    select_by_click,
+    wait_until,
+    workflow_shown,
+)
 
 pytestmark = pytest.mark.e2e
 
@@ -59,8 +67,8 @@ class Operator:
 
     def choose(self, label: str, option: str) -> None:
         """Choose ``option`` in the chooser labelled ``label`` (a Mantine Select: open it, click the option)."""
-        self.page.get_by_label(label, exact=True).first.click()
-        self.page.get_by_role("option", name=option, exact=True).first.click()
+        click_control(self.page.get_by_label(label, exact=True).first)
+        click_control(self.page.get_by_role("option", name=option, exact=True).first)
         self.choices += 1
 
     @property

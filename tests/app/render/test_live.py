@@ -279,33 +279,35 @@ def test_grabber_paces_a_live_source_on_the_shared_clock(workcell):
 
 def test_the_interface_threads_run_while_it_draws(workcell, live):
     """OpenGL waits with Python's lock released: moderngl's own calls held it for the whole drawing (~37 ms a
-    frame, a tick every 37 ms for the interface's threads while a body moved)."""
+    frame, a tick every 37 ms for the interface's threads while a body moved). Checked by what runs, not by how
+    fast: a thread that needs the lock to take a time stamp takes them all through a frame's drawing, not only at
+    the few moments the drawing lets the lock go (about 2 a frame), however loaded the machine."""
     import threading
     import time
 
     frames = [scene_bodies(workcell, 12.0 + 0.1 * k) for k in range(10)]  # the parallelepiped moving
     live.render_float(frames[-1])
-    gaps, stop = [], threading.Event()
+    ticks, draws, stop = [], [], threading.Event()
 
     def ticker():
-        last = time.perf_counter()
         while not stop.is_set():
             time.sleep(0.001)
-            now = time.perf_counter()
-            gaps.append(now - last)
-            last = now
+            ticks.append(time.perf_counter())
 
     thread = threading.Thread(target=ticker)
     thread.start()
     try:
         for bodies in frames:
+            t0 = time.perf_counter()
             live.render_float(bodies)
+            draws.append((t0, time.perf_counter()))
     finally:
         stop.set()
         thread.join()
-    p95 = float(np.percentile(gaps, 95)) * 1000.0
-    print(f"{len(gaps)} ticks, p95 gap {p95:.1f} ms, longest {max(gaps) * 1000:.1f} ms")
-    assert p95 < 10.0  # measured 1.1 ms (36.7 ms with the lock held)
+    t = np.asarray(ticks)
+    during = sum(int(np.count_nonzero((t > a) & (t < b))) for a, b in draws)
+    print(f"{len(ticks)} ticks, {during} while a frame was drawn ({len(draws)} frames)")
+    assert during >= 5 * len(draws)  # measured 489 (21 with moderngl's own glFinish, which holds the lock)
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork here")
