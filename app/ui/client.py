@@ -18,7 +18,6 @@ the frame the clicks use), ``WorkflowControls`` (app/ui/workflow_controls.py), `
 from __future__ import annotations
 
 import collections
-import concurrent.futures
 import functools
 import logging
 import threading
@@ -34,7 +33,7 @@ from app.markup import Md, escape
 from app.workflows import Cancelled, Session, WorkflowError
 from app.workflows.base import Marks
 
-from .clicks import ClickTimer, Gesture
+from .clicks import ClickTimer, ClickWorker, Gesture
 from .drawing import draw_marks, spread_labels
 from .frozen import FrozenFrames
 from .layout import NO_SELECTION, build_panel
@@ -75,16 +74,13 @@ class ClientPanel:
         self.feeder: TrackFeeder | None = None  # feeds a workflow that follows the video
         self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
         self.clicks_received = 0  # the page's clicks and told double clicks on the video that reached the server
+        self.keys_received = 0  # the page's shortcuts that reached the server (a key the page had none for sends none)
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
         self.seen_change = app.site.change_seq
         self._double_at: str | None = None  # where the double click that pressed Find was, for its refusal
         self._labels_sent: dict = {}
         self.clicks = ClickTimer()
-        # Clicks are handled one at a time, in the order they arrive (viser runs plain callbacks on a thread
-        # pool, where two quick clicks could swap); the event loop is not blocked.
-        self.click_worker = concurrent.futures.ThreadPoolExecutor(
-            max_workers=1, thread_name_prefix=f"mcit-click-{client.client_id}"
-        )
+        self.click_worker = ClickWorker(f"mcit-click-{client.client_id}")
         self.viewport = Viewport(self)
         self.frozen_frames = FrozenFrames(self)
         self.ghost3d = RobotGhost3D(client.scene, app.world3d.offset)
@@ -225,6 +221,7 @@ class ClientPanel:
             self.frozen_frames.scrub(float(self.gui_scrub.value))
 
     def press_event(self, action: str, _event=None) -> None:
+        self.click_worker.wait_handled()  # pressed after the clicks that reached the server before it
         self.press(action)
 
     def press(self, action: str) -> None:
@@ -277,8 +274,6 @@ class ClientPanel:
         if not question:
             return False
         self.confirm_pending, self.warning, self.error = (c.action, args), escape(question) + again, ""
-        label = "Accept anyway" if c.action == "accept" else f"{c.label}: confirm"
-        self.workflow_controls.relabel(c.action, f"{label} ({c.key_text})" if c.key else label)
         return True
 
     def _cancel(self, wf, c) -> None:
@@ -294,7 +289,6 @@ class ClientPanel:
                 "Cancel throws away what you did in {} (your clicks and measurements; nothing was "
                 "written). Press **Cancel** again to throw it away, or go on."
             ).format(wf.title)
-            self.workflow_controls.relabel("cancel", f"Cancel: confirm ({c.key_text})" if c.key else "Cancel: confirm")
             return
         self.confirm_pending, self.warning, self.error = None, "", ""
         wf.cancel()  # also stops a running measurement

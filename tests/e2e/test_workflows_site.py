@@ -28,7 +28,15 @@ import pytest
 from core.camera import Camera
 from core.transforms import exp_so3, make_T, pose_error
 
-from .harness import assert_prompt_controls, close_notifications, press, select_by_click, wait_until, workflow_shown
+from .harness import (
+    assert_prompt_controls,
+    close_notifications,
+    press,
+    press_key,
+    select_by_click,
+    wait_until,
+    workflow_shown,
+)
 
 pytestmark = pytest.mark.e2e
 
@@ -54,7 +62,7 @@ class Operator:
         self.presses += 1
 
     def key(self, key: str) -> None:
-        self.page.keyboard.press(key)
+        press_key(self.page, key)
         self.keys += 1
 
     def choose(self, label: str, option: str) -> None:
