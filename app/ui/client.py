@@ -427,8 +427,9 @@ class ClientPanel:
         if wf is not None and not wf.finished and wf.tick():
             self.dirty = True
         # a workflow's own thread may change it (a search, a look, a solve ending): drawn when it shows, not at the
-        # operator's next key (a new operator waited 4 minutes on "Looking for … in the video")
-        seen = None if wf is None else (id(wf), wf.state, wf.message, wf.finished, wf.progress)
+        # operator's next key (a new operator waited 4 minutes on "Looking for … in the video"); a long action's
+        # worker ends after its last wake-up (drawn while it still ran, the controls stayed hidden)
+        seen = None if wf is None else (id(wf), wf.state, wf.message, wf.finished, wf.progress, self.busy)
         if seen != self._wf_seen:
             self._wf_seen = seen
             self.dirty = True

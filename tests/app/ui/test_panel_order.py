@@ -77,3 +77,39 @@ def test_the_question_s_label_is_drawn_from_the_panel_s_state(site, caplog, monk
     finally:
         page.close()
         served.stop()
+
+
+class _Worker:
+    """A long action's worker thread, as the panel asks it whether it runs."""
+
+    alive = True
+
+    def is_alive(self) -> bool:
+        return self.alive
+
+
+def test_the_controls_come_back_when_a_long_action_s_worker_ends_after_its_last_redraw(site, caplog, monkeypatch):
+    served, page, panel = _served_page(site, caplog, monkeypatch)
+    try:
+        panel.session.select("parallelepiped")
+        wf = panel.session.start("update_pose")
+        controls = panel.workflow_controls
+        wait_until(lambda: controls.built_for is wf, 15.0, "the controls")
+        action = sorted(a for a in wf.current_step().enabled if a != "cancel" and a in controls.handles)[0]
+        wait_until(lambda: controls.handles[action].visible, 15.0, f"{action} shown")
+        worker = panel.worker = _Worker()  # a measurement under way
+        drawn = panel.texts.update
+
+        def update(shown_wf) -> None:  # it ends just after a redraw drew it running, with no wake-up after it
+            drawn(shown_wf)
+            if not controls.handles[action].visible:
+                worker.alive = False
+
+        monkeypatch.setattr(panel.texts, "update", update)
+        panel.dirty = True
+        panel.app.wake()
+        wait_until(lambda: not worker.alive, 15.0, "the controls hidden while it ran")
+        wait_until(lambda: controls.handles[action].visible, 5.0, "the controls back")
+    finally:
+        page.close()
+        served.stop()
