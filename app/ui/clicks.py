@@ -10,23 +10,17 @@ double click means is the session's to decide (``app.workflows.Session.click`` /
 
 from __future__ import annotations
 
-import concurrent.futures
-import logging
-import threading
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-__all__ = ["ClickTimer", "ClickWorker", "Gesture", "DOUBLE_CLICK_S", "DOUBLE_CLICK_PX"]
-
-log = logging.getLogger("mcit.ui")
+__all__ = ["ClickTimer", "Gesture", "DOUBLE_CLICK_S", "DOUBLE_CLICK_PX"]
 
 DOUBLE_CLICK_S = 0.6  # two clicks this close in time and place at the server are a double click
 DOUBLE_CLICK_PX = 4.0
 LATE_FIRST_CLICK_S = 3.0  # a click by a page-told double click soon after it is its first click, arriving late
 LATE_FIRST_CLICK_PX = 12.0  # the page tells a double within 5 screen px: more image px when the view is zoomed out
-CLICKS_FIRST_S = 10.0  # how long a press waits for the clicks before it to be handled
 
 
 @dataclass(frozen=True)
@@ -78,23 +72,3 @@ class ClickTimer:
         self.last = None  # a third click is a click of its own
         first = last if last is not None else (at, uv, selected, frame)  # its first click unseen: as if made here
         return Gesture(uv, True, first[2], first[3])
-
-
-class ClickWorker(concurrent.futures.ThreadPoolExecutor):
-    """A page's clicks (and Object choices), handled one at a time in the order they arrive (viser runs plain
-    callbacks on a thread pool, where two quick clicks could swap), off viser's event loop."""
-
-    def __init__(self, name: str):
-        super().__init__(max_workers=1, thread_name_prefix=name)
-        self._name = name
-
-    def wait_handled(self, timeout_s: float = CLICKS_FIRST_S) -> None:
-        """Wait until what was given to the worker so far is handled: a press (on viser's threads) is pressed
-        after the clicks that reached the server before it (a click's handling clears a question: an Esc after
-        two clicks on a loaded machine was asked about, then its question cleared by the second click)."""
-        if threading.current_thread().name.startswith(self._name + "_"):
-            return  # a press made by a click (a double click's Find): those before it are handled
-        try:
-            self.submit(lambda: None).result(timeout=timeout_s)
-        except (RuntimeError, concurrent.futures.TimeoutError):  # the page gone, or a click's handling stuck
-            log.debug("a press did not wait for the clicks before it", exc_info=True)

@@ -18,6 +18,7 @@ the frame the clicks use), ``WorkflowControls`` (app/ui/workflow_controls.py), `
 from __future__ import annotations
 
 import collections
+import concurrent.futures
 import functools
 import logging
 import threading
@@ -33,7 +34,7 @@ from app.markup import Md, escape
 from app.workflows import Cancelled, Session, WorkflowError
 from app.workflows.base import Marks
 
-from .clicks import ClickTimer, ClickWorker, Gesture
+from .clicks import ClickTimer, Gesture
 from .drawing import draw_marks, spread_labels
 from .frozen import FrozenFrames
 from .layout import NO_SELECTION, build_panel
@@ -66,6 +67,7 @@ class ClientPanel:
         self.dirty = True
         self._wf_seen: Any = None  # what the workflow looked like at the last draw (its own thread may change it)
         self.confirm_pending: tuple | None = None  # (action, args) waiting for its second press
+        self.asked_at = 0.0  # when it was asked (monotonic): a click that arrived before it leaves it
         self.warning = ""  # a weak result's reasons, or a question, shown under the buttons
         self.error = ""  # the last refused action, said in the panel until the next action or step
         self.error_step: str | None = None  # the step it was said in
@@ -80,7 +82,11 @@ class ClientPanel:
         self._double_at: str | None = None  # where the double click that pressed Find was, for its refusal
         self._labels_sent: dict = {}
         self.clicks = ClickTimer()
-        self.click_worker = ClickWorker(f"mcit-click-{client.client_id}")
+        # Clicks are handled one at a time, in the order they arrive (viser runs plain callbacks on a thread
+        # pool, where two quick clicks could swap); the event loop is not blocked.
+        self.click_worker = concurrent.futures.ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix=f"mcit-click-{client.client_id}"
+        )
         self.viewport = Viewport(self)
         self.frozen_frames = FrozenFrames(self)
         self.ghost3d = RobotGhost3D(client.scene, app.world3d.offset)
@@ -221,7 +227,6 @@ class ClientPanel:
             self.frozen_frames.scrub(float(self.gui_scrub.value))
 
     def press_event(self, action: str, _event=None) -> None:
-        self.click_worker.wait_handled()  # pressed after the clicks that reached the server before it
         self.press(action)
 
     def press(self, action: str) -> None:
@@ -274,6 +279,7 @@ class ClientPanel:
         if not question:
             return False
         self.confirm_pending, self.warning, self.error = (c.action, args), escape(question) + again, ""
+        self.asked_at = time.monotonic()
         return True
 
     def _cancel(self, wf, c) -> None:
@@ -284,7 +290,7 @@ class ClientPanel:
             wf.stop_measurement()
             return
         if wf.has_work() and self.confirm_pending != ("cancel", ()):
-            self.confirm_pending, self.error = ("cancel", ()), ""
+            self.confirm_pending, self.error, self.asked_at = ("cancel", ()), "", time.monotonic()
             self.warning = Md(
                 "Cancel throws away what you did in {} (your clicks and measurements; nothing was "
                 "written). Press **Cancel** again to throw it away, or go on."
@@ -335,14 +341,16 @@ class ClientPanel:
         at = time.monotonic() if at is None else float(at)
         gesture = self.clicks.arrive(uv, at, double, self.session.selected, self.feed.grabber.latest())
         if gesture is not None:
-            self.send_click(gesture)
+            self.send_click(gesture, at)
 
-    def send_click(self, g: Gesture) -> None:
-        """A click gesture to the session, in the camera shown; a double click that presses an action (Find)
-        presses it, its refusal saying where the double click was."""
+    def send_click(self, g: Gesture, at: float | None = None) -> None:
+        """A click gesture (arrived at ``at``, monotonic) to the session, in the camera shown; a double click that
+        presses an action (Find) presses it, its refusal saying where the double click was."""
         on = self._object_at(g.uv)
         live_shown = self.frozen_frames.show_live and self.frozen is not None
-        self.confirm_pending, self.warning, self.error = None, "", ""
+        if at is None or at >= self.asked_at:  # a question asked after the click arrived stays (Esc after it)
+            self.confirm_pending, self.warning = None, ""
+        self.error = ""
         if not g.double:
             self.session.click(
                 self.camera_view,
@@ -426,9 +434,8 @@ class ClientPanel:
             self.dirty = True
         if wf is not None and not wf.finished and wf.tick():
             self.dirty = True
-        # a workflow's own thread may change it (a search, a look, a solve ending): drawn when it shows, not at the
-        # operator's next key (a new operator waited 4 minutes on "Looking for … in the video"); a long action's
-        # worker ends after its last wake-up (drawn while it still ran, the controls stayed hidden)
+        # a workflow's own thread may change it (a search, a look, a solve ending; a long action's worker ends after
+        # its last wake-up): drawn when it shows (a new operator waited 4 minutes on "Looking for … in the video")
         seen = None if wf is None else (id(wf), wf.state, wf.message, wf.finished, wf.progress, self.busy)
         if seen != self._wf_seen:
             self._wf_seen = seen
