@@ -67,6 +67,7 @@ class ClientPanel:
         self.dirty = True
         self._wf_seen: Any = None  # what the workflow looked like at the last draw (its own thread may change it)
         self.confirm_pending: tuple | None = None  # (action, args) waiting for its second press
+        self.asked_at = 0.0  # when it was asked (monotonic): a click that arrived before it leaves it
         self.warning = ""  # a weak result's reasons, or a question, shown under the buttons
         self.error = ""  # the last refused action, said in the panel until the next action or step
         self.error_step: str | None = None  # the step it was said in
@@ -75,6 +76,7 @@ class ClientPanel:
         self.feeder: TrackFeeder | None = None  # feeds a workflow that follows the video
         self.click_t: float | None = None  # arrival (monotonic) of a click not yet answered by a redraw
         self.clicks_received = 0  # the page's clicks and told double clicks on the video that reached the server
+        self.keys_received = 0  # the page's shortcuts that reached the server (a key the page had none for sends none)
         self.click_latencies_s: collections.deque = collections.deque(maxlen=1000)  # click → marks sent
         self.seen_change = app.site.change_seq
         self._double_at: str | None = None  # where the double click that pressed Find was, for its refusal
@@ -277,8 +279,7 @@ class ClientPanel:
         if not question:
             return False
         self.confirm_pending, self.warning, self.error = (c.action, args), escape(question) + again, ""
-        label = "Accept anyway" if c.action == "accept" else f"{c.label}: confirm"
-        self.workflow_controls.relabel(c.action, f"{label} ({c.key_text})" if c.key else label)
+        self.asked_at = time.monotonic()
         return True
 
     def _cancel(self, wf, c) -> None:
@@ -289,12 +290,11 @@ class ClientPanel:
             wf.stop_measurement()
             return
         if wf.has_work() and self.confirm_pending != ("cancel", ()):
-            self.confirm_pending, self.error = ("cancel", ()), ""
+            self.confirm_pending, self.error, self.asked_at = ("cancel", ()), "", time.monotonic()
             self.warning = Md(
                 "Cancel throws away what you did in {} (your clicks and measurements; nothing was "
                 "written). Press **Cancel** again to throw it away, or go on."
             ).format(wf.title)
-            self.workflow_controls.relabel("cancel", f"Cancel: confirm ({c.key_text})" if c.key else "Cancel: confirm")
             return
         self.confirm_pending, self.warning, self.error = None, "", ""
         wf.cancel()  # also stops a running measurement
@@ -341,14 +341,16 @@ class ClientPanel:
         at = time.monotonic() if at is None else float(at)
         gesture = self.clicks.arrive(uv, at, double, self.session.selected, self.feed.grabber.latest())
         if gesture is not None:
-            self.send_click(gesture)
+            self.send_click(gesture, at)
 
-    def send_click(self, g: Gesture) -> None:
-        """A click gesture to the session, in the camera shown; a double click that presses an action (Find)
-        presses it, its refusal saying where the double click was."""
+    def send_click(self, g: Gesture, at: float | None = None) -> None:
+        """A click gesture (arrived at ``at``, monotonic) to the session, in the camera shown; a double click that
+        presses an action (Find) presses it, its refusal saying where the double click was."""
         on = self._object_at(g.uv)
         live_shown = self.frozen_frames.show_live and self.frozen is not None
-        self.confirm_pending, self.warning, self.error = None, "", ""
+        if at is None or at >= self.asked_at:  # a question asked after the click arrived stays (Esc after it)
+            self.confirm_pending, self.warning = None, ""
+        self.error = ""
         if not g.double:
             self.session.click(
                 self.camera_view,
@@ -432,9 +434,9 @@ class ClientPanel:
             self.dirty = True
         if wf is not None and not wf.finished and wf.tick():
             self.dirty = True
-        # a workflow's own thread may change it (a search, a look, a solve ending): drawn when it shows, not at the
-        # operator's next key (a new operator waited 4 minutes on "Looking for … in the video")
-        seen = None if wf is None else (id(wf), wf.state, wf.message, wf.finished, wf.progress)
+        # a workflow's own thread may change it (a search, a look, a solve ending; a long action's worker ends after
+        # its last wake-up): drawn when it shows (a new operator waited 4 minutes on "Looking for … in the video")
+        seen = None if wf is None else (id(wf), wf.state, wf.message, wf.finished, wf.progress, self.busy)
         if seen != self._wf_seen:
             self._wf_seen = seen
             self.dirty = True

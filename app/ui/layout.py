@@ -15,6 +15,7 @@ from app.markup import Md
 from app.workflows.session import WORKFLOWS
 
 from .controls import START_BUTTONS, operator_help
+from .workflow_controls import on_key
 
 if TYPE_CHECKING:  # pragma: no cover
     from .client import ClientPanel
@@ -108,7 +109,18 @@ def build_panel(panel: ClientPanel) -> None:
         fit.on_click(guard(lambda _e: viewport.request_fit()))
     with gui.add_folder("Object"):
         panel.gui_object = gui.add_dropdown("Object", (NO_SELECTION,), initial_value=NO_SELECTION)
-        panel.gui_object.on_update(guard(lambda _e: panel.select(panel.gui_object.value)))
+
+        async def chosen(event) -> None:
+            """The operator's choice, as it arrives (the value read now: a redraw may set the chooser back before a
+            worker runs), selects it after the clicks before it. The panel's own setting of the chooser (``_draw``:
+            to a selection read before a click changed it) selected back what the click had changed: not a choice."""
+            if event.client_id is not None:
+                try:
+                    panel.click_worker.submit(guard(panel.select), str(event.target.value))
+                except RuntimeError:  # the page gone
+                    pass
+
+        panel.gui_object.on_update(chosen)
         stale = gui.add_button("Mark stale", hint="The selected object has moved: flag it until its pose is updated")
         stale.on_click(guard(panel.mark_stale))
     with gui.add_folder("Result"):
@@ -122,7 +134,7 @@ def build_panel(panel: ClientPanel) -> None:
         ("Fit view", "H", viewport.request_fit),
         *((("Next camera", "N", panel.show_camera),) if len(panel.app.views) > 1 else ()),
     ):  # workflow_controls.GLOBAL_KEYS
-        gui.add_command(label, hotkey=key).on_trigger(guard(lambda _e, fn=fn: fn()))
+        gui.add_command(label, hotkey=key).on_trigger(on_key(panel, lambda _e, fn=fn: fn()))
     # The hidden fields come last: the page shows them only once it has taken everything before them, the
     # shortcuts included (a page-ready sign for the browser tests, tests/e2e/harness.py).
     # Wheel zoom about the cursor (static/wheel.js, run by the page: app/ui/page.py): viser zooms to the centre;

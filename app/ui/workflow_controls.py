@@ -15,7 +15,7 @@ from app.workflows.session import WORKFLOWS
 if TYPE_CHECKING:  # pragma: no cover
     from .client import ClientPanel
 
-__all__ = ["WorkflowControls", "GLOBAL_KEYS", "NO_CHOICE"]
+__all__ = ["WorkflowControls", "GLOBAL_KEYS", "NO_CHOICE", "button_label", "on_key"]
 
 NO_CHOICE = "—"
 GLOBAL_KEYS = {"f", "l", "h", "n"}  # the panel's own shortcuts (Freeze, Show live, Fit view, Next camera), always live
@@ -64,7 +64,7 @@ class WorkflowControls:
                             description=c.hint or None,
                             disabled=live_keys.get(c.key) != c.action,
                         )
-                        cmd.on_trigger(panel.guard(functools.partial(panel.press_event, c.action)))
+                        cmd.on_trigger(on_key(panel, functools.partial(panel.press_event, c.action)))
                         self.commands.append(cmd)
                         self._command_of[c.action] = cmd
                 self.handles[c.action] = handle
@@ -95,17 +95,15 @@ class WorkflowControls:
                 )
 
             cmd = self.panel.client.gui.add_command(f"{name}: {', '.join(where[:2])}", hotkey=key)
-            cmd.on_trigger(self.panel.guard(said))
+            cmd.on_trigger(on_key(self.panel, said))
             self.commands.append(cmd)
-
-    def relabel(self, action: str, label: str) -> None:
-        handle = self.handles.get(action)
-        if handle is not None and hasattr(handle, "label"):
-            handle.label = label
 
     def on_choice(self, action: str, _event=None) -> None:
         """The operator chose in the chooser of ``action``: remembered for the button that takes it, or
-        acted on at once by a chooser that acts (candidate, method)."""
+        acted on at once by a chooser that acts (candidate, method). The panel's own setting of a chooser
+        (``_show_choices``: to what the workflow holds; viser calls this for it too) is not a choice."""
+        if _event is not None and _event.client_id is None:
+            return
         panel, handle = self.panel, self.handles.get(action)
         wf = panel.session.workflow
         if handle is None or wf is None or wf.finished:
@@ -143,8 +141,10 @@ class WorkflowControls:
                 cmd.disabled = not live
             if c.kind == "choice" and on:
                 self._show_choices(wf, c.action, handle)
-            elif c.kind != "choice" and asking != c.action and handle.label != c.button_label:
-                handle.label = c.button_label
+            elif c.kind != "choice":
+                label = button_label(c, asking)
+                if handle.label != label:
+                    handle.label = label
 
     def _show_choices(self, wf, action: str, handle) -> None:
         texts = {text: value for text, value in wf.choices(action)}
@@ -165,6 +165,26 @@ class WorkflowControls:
                 self.choice_values[action] = texts[shown]
         if handle.value != shown:
             handle.value = shown
+
+
+def on_key(panel: ClientPanel, fn):
+    """``fn`` as a shortcut's callback on ``panel``: guarded, and counted in ``panel.keys_received``."""
+    guarded = panel.guard(fn)
+
+    def triggered(*args, **kwargs):
+        panel.keys_received += 1
+        return guarded(*args, **kwargs)
+
+    return triggered
+
+
+def button_label(c, asking: str | None) -> str:
+    """The label of control ``c``'s button: what pressing it does now. Asking once more about it (``asking``, the
+    panel's question): "Accept anyway" for Accept, "<label>: confirm" for the others; else its own label."""
+    if asking != c.action:
+        return c.button_label
+    label = "Accept anyway" if c.action == "accept" else f"{c.label}: confirm"
+    return f"{label} ({c.key_text})" if c.key else label
 
 
 def _live_shortcuts(controls, applies) -> dict[str, str]:

@@ -223,6 +223,25 @@ def key_until(page, key: str, predicate, what: str, panel=None) -> int:
     return 2
 
 
+def press_key(page, key: str, timeout_s: float = 8.0) -> int:
+    """Press ``key`` until it reaches the server (the page's ``panel.keys_received``). A key is sent only as a
+    shortcut the page has taken (a workflow's come with its controls): on a loaded machine a key pressed before
+    the page took them sends nothing, and is pressed again, as an operator who saw nothing happen would. A key
+    that reached the server is not pressed again (Escape's second press would throw the work away), so this
+    is for keys that have a shortcut. Returns the number of presses (1 to 3)."""
+    panel = page.panel
+    for attempt in (1, 2, 3):
+        before = panel.keys_received
+        page.keyboard.press(key)
+        try:
+            wait_until(lambda: panel.keys_received > before, timeout_s, f"the key {key} to reach the server", panel)
+            return attempt
+        except AssertionError:
+            if attempt == 3:
+                raise
+    return 3
+
+
 def close_notifications(page, timeout_s: float = 20.0, required: bool = True) -> None:
     """Close every notification and wait until none is left: they stack over the video's top-left
     corner (below them a click or a drag reaches the notification, not the canvas).

@@ -33,6 +33,7 @@ from .harness import (
     click_control,
     close_notifications,
     press,
+    press_key,
     select_by_click,
     wait_until,
     workflow_shown,
@@ -62,7 +63,7 @@ class Operator:
         self.presses += 1
 
     def key(self, key: str) -> None:
-        self.page.keyboard.press(key)
+        press_key(self.page, key)
         self.keys += 1
 
     def choose(self, label: str, option: str) -> None:
