@@ -351,12 +351,13 @@ def assert_prompt_controls(page, timeout_s: float = 15.0) -> list[str]:
 
 
 def press(page, label: str, timeout_ms: int = 60_000) -> None:
-    """Click the visible button whose name starts with ``label`` (e.g. "Solve" for "Solve (R)")."""
+    """Click the visible button named ``label``, with or without its key (e.g. "Solve" for "Solve (R)"; not "Measure
+    next" for "Measure": a button about to be hidden is clicked at once where it is shown)."""
     import re
 
     from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
-    button = page.get_by_role("button", name=re.compile("^" + re.escape(label))).first
+    button = page.get_by_role("button", name=re.compile("^" + re.escape(label) + r"( \(.+\))?$")).first
     try:
         button.wait_for(state="visible", timeout=timeout_ms)
     except PlaywrightTimeout:

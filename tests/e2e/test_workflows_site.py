@@ -276,7 +276,12 @@ def test_calibrate_turret_by_clicks(browser, device_interface, scene):
         wait_until(lambda: wf.pending_label == label, what=f"{label} picked")
         assert_prompt_controls(page)
         op.key("m") if i % 2 else op.press("Measure")  # Measure (M): the key and the button
-        wait_until(lambda: len(wf.pan) == i + 1 and wf.progress is None, timeout_s=60, what=f"{label} measured")
+        wait_until(
+            lambda: len(wf.pan) == i + 1 and wf.progress is None,
+            timeout_s=60,
+            what=f"{label} measured",
+            panel=page.panel,
+        )
         assert_prompt_controls(page)
     assert {lab.split(" ")[0] for lab in wf.labels} >= {"table", "parallelepiped", "unknown_box"}  # ≥ 3 orientations
     assert len(ui.db.calibrations("turret")) == n_cal
