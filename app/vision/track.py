@@ -499,8 +499,11 @@ class EdgeTracker:
         off was reported, and on frame 118 one 5° / 14 mm off; both are replaced by the reference, which
         fits better by more than ``start_ambiguity_px``. Where the image fits two poses alike (visp-cube's
         frames 125–160, two poses 4° / 16 mm apart) the band may settle on a third between or beside them
-        (frame 144: 6° / 28 mm off, 0.9 px from the image's edges against the reference's 0.7): lost, as
-        a first frame that failed from the given pose would be (tests/app/vision/test_track.py). It costs
+        (frame 144: 6° / 28 mm off, 0.91 px from the image's edges against the reference's 0.66): lost, as
+        a first frame that failed from the given pose would be (tests/app/vision/test_track.py). From 10
+        starts 5° / 1 cm off on visp-cube, seeds 0–5 (``bench/tracking.py --only capture``): 0 first frames
+        reported wrong (before: 1, seed 3), and 8–10 captured (before 9–10): the 3 runs now lost start in
+        frames 129–147, where the image fits both poses; visp-teabox and Castle-simu unchanged. It costs
         every first frame after a given pose the search (30–50 ms CPU on one core, ``bench/tracking.py``).
     """
 
