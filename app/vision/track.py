@@ -31,8 +31,9 @@ Each frame (the "moving edges" tracker of Comport, Marchand et al., 2006, as in 
    same capture runs from the 4 best poses found. Of the answers kept, the one nearest the image's
    edges (the support check's distance) is reported, and the frame is lost when another kept answer
    lies apart and fits within ``start_ambiguity_px`` as well (the image fits two poses). A first
-   frame that passes from the given pose is checked so too (``start_check``): the answer of the
-   search that fits best replaces it when it fits better by more than ``start_ambiguity_px``.
+   frame that passes from the given pose is judged so too (``start_check``): its answer, given one
+   more round of passes, joins the search's answers, the best is reported, and the frame is lost
+   when two of them lie apart within ``start_ambiguity_px``.
 
 Which edges are seen is computed once per pass, at the pose the pass starts from
 (``visible_segments``), and the support check reuses the last pass's; the frame is smoothed only
@@ -490,13 +491,20 @@ class EdgeTracker:
         the lost rule's calibration right poses score ≤ 1.2 px and wrong ones ≥ 1.45 px. (Seen later
         on the held-out Castle-simu: a right pose 0.38 px beside one 4° off at 1.36 px, the right one
         kept.) Without the search (``start_search`` off), any other answer apart, as before.
-    start_check : also search near the given pose when its first frame passes from it, and report the
-        search's best answer instead when its support distance is lower by more than
-        ``start_ambiguity_px`` (else the first answer stands: no frame is lost by the check). The ±8 px
-        band can settle degrees and centimetres off and pass the lost tests: on visp-cube from 10 starts
-        5° / 1 cm off (seed 1) a first frame 1.6° / 10 mm off was reported, and on frame 118 one 5° /
-        14 mm off (tests/app/vision/test_track.py); checked, both are on the reference. It costs every
-        first frame after a given pose the search (30–50 ms CPU on one core, ``bench/tracking.py``).
+    start_check : also search near the given pose when its first frame passes from it, and judge its
+        answer (after one more round of passes from where it stopped) with the search's answers as above:
+        the one nearest the image's edges is reported, and the frame is lost when another lies apart
+        within ``start_ambiguity_px``. The ±8 px band can settle degrees and centimetres off and pass
+        the lost tests: on visp-cube from 10 starts 5° / 1 cm off (seed 1) a first frame 1.6° / 10 mm
+        off was reported, and on frame 118 one 5° / 14 mm off; both are replaced by the reference, which
+        fits better by more than ``start_ambiguity_px``. Where the image fits two poses alike (visp-cube's
+        frames 125–160, two poses 4° / 16 mm apart) the band may settle on a third between or beside them
+        (frame 144: 6° / 28 mm off, 0.91 px from the image's edges against the reference's 0.66): lost, as
+        a first frame that failed from the given pose would be (tests/app/vision/test_track.py). From 10
+        starts 5° / 1 cm off on visp-cube, seeds 0–5 (``bench/tracking.py --only capture``): 0 first frames
+        reported wrong (before: 1, seed 3), and 8–10 captured (before 9–10): the 3 runs now lost start in
+        frames 129–147, where the image fits both poses; visp-teabox and Castle-simu unchanged. It costs
+        every first frame after a given pose the search (30–50 ms CPU on one core, ``bench/tracking.py``).
     """
 
     # The camera's and the model's priors that join each frame's σ (``pose_covariance``, issue 27): a
@@ -792,13 +800,16 @@ class EdgeTracker:
     def _capture_start(
         self, frame: np.ndarray, band: BandSmoothed, view: VisibleSegments, T_start: np.ndarray, passed=None
     ):
-        """The first frame after a given pose, which failed from it: tried again coarse to fine from the
-        given pose (each of ``start_capture_px``); when none of these answers counts, from the starts the
-        pose search finds near it (``start_search``). An answer counts when it passes every lost test and
-        turns the given pose by at most ``start_capture_deg``. Returns the answer, None when none counts,
-        or why none is reported: two count but lie apart (the image fits both). Of the searched starts'
-        answers the one nearest the image's edges (the support check's distance) is kept, unless another
-        lies apart and within ``start_ambiguity_px`` of it."""
+        """The first frame after a given pose: when it failed from it (``passed`` None), tried again coarse
+        to fine from the given pose (each of ``start_capture_px``), and when none of these answers counts,
+        from the starts the pose search finds near it (``start_search``); when it passed (``passed``, the
+        answer from the given pose: ``start_check``), that answer and the searched starts' answers. An
+        answer counts when it passes every lost test and turns the given pose by at most
+        ``start_capture_deg``. Returns the answer, None when none counts, or why none is reported. Of the
+        answers that count the one nearest the image's edges (the support check's distance) is kept,
+        unless another lies apart and within ``start_ambiguity_px`` of it (with the search off: any other
+        apart): the image fits both, and does not show which is right. The answer from the given pose is
+        judged so too: the band may have settled it on the second of two poses the image fits alike."""
         schedule = self._capture_schedule(min(self.start_capture_px))
 
         def counting(tried):  # the answers that pass every lost test and turn the given pose by at most the limit
@@ -809,14 +820,18 @@ class EdgeTracker:
                 [self._attempt(band, self._view(T), schedule, T) for T in self._start_hypotheses(frame, T_start)]
             )
 
-        if passed is not None:  # kept unless the search finds a pose that fits clearly better
-            best = min(searched(), key=lambda r: r[5], default=None)
-            return best if best is not None and best[5] < passed[5] - self.start_ambiguity_px else passed
-        good = counting(
-            [self._attempt(band, view, self._capture_schedule(px), T_start) for px in self.start_capture_px]
-        )
-        if not good and self.start_search[2] > 0:
-            good = searched()
+        if passed is not None:
+            # its passes (±search_px, ±refine_search_px) may stop short of the pose they head for (from 5° off:
+            # 1.3° short on visp-cube's frame 118) while the searched starts' answers had a pass more: one
+            # more round from where it stopped, so that two answers apart are two poses, not one reached twice
+            again = self._attempt(band, self._view(passed[0]), self._schedule(), passed[0])
+            good = counting([again if not again[2] else passed]) + searched()
+        else:
+            good = counting(
+                [self._attempt(band, view, self._capture_schedule(px), T_start) for px in self.start_capture_px]
+            )
+            if not good and self.start_search[2] > 0:
+                good = searched()
         if not good:
             return None
         good.sort(key=lambda r: r[5])  # nearest the image's edges first
