@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -30,6 +31,11 @@ def pytest_configure(config):
     at the same time. The workers then load them from numba's cache (about 1 s)."""
     if hasattr(config, "workerinput") or not config.getoption("numprocesses", None):
         return
+    # One thread of numpy's BLAS per worker (the workers inherit the environment): with a thread per core in each
+    # worker, more threads than cores, and OpenBLAS's threads wait for each other by spinning: a modelling test file
+    # took 80-124 s beside another worker and a busy core, 36-79 s with one thread (the same CPU, 27-31 s).
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(name, "1")
     from app.vision.matching import warm_up as warm_up_matching
     from core.pose import warm_up
 

@@ -33,6 +33,10 @@ class Viewport:
         self.marks_scale = 1.0
         self.all_cameras = False  # the fit shows every camera's image side by side (Fit view pressed again)
         self._fitted_at: np.ndarray | None = None  # where the last fit put the browser's camera
+        # The page has not yet reported its camera where the last fit put it: the camera the server holds is the fit's,
+        # the page still shows the view before it (a click now lands through the old view).
+        self.fit_pending = False
+        self._page_position: np.ndarray | None = None  # the camera position the page last reported
         self._rect_cb = self.client.scene.on_rect_select()(panel.guard(self.on_rect))
         self.client.camera.on_update(self.on_camera)
 
@@ -140,9 +144,14 @@ class Viewport:
         with self.client.atomic():
             place_camera(cam, X + f * (position - X), X + f * (look_at - X))
         self._fitted_at = None  # zoomed: Fit view fits the shown image first
+        self.fit_pending = False
         self.panel.dirty = True
 
     def on_camera(self, cam) -> None:
+        """The page reported its camera (viser calls this for the page's reports only)."""
+        self._page_position = np.asarray(cam.position, float).copy()
+        if self.fit_pending and self._fitted_at is not None and self._page_at(self._fitted_at):
+            self.fit_pending = False
         try:
             aspect = cam.aspect
         except (AssertionError, ZeroDivisionError):
@@ -215,7 +224,14 @@ class Viewport:
             cam.up_direction = up
             place_camera(cam, position, look_at)
         self._fitted_at = np.asarray(position, float).copy()
+        self.fit_pending = not self._page_at(self._fitted_at)
         self.panel.dirty = True
+
+    def _page_at(self, position: np.ndarray) -> bool:
+        """Whether the page last reported its camera at ``position`` (its camera controls settle it: within 2 % of
+        the distance)."""
+        at = self._page_position
+        return at is not None and float(np.linalg.norm(at - position)) <= 0.02 * max(abs(float(position[2])), 1e-9)
 
     def _rect_select(self, on: bool) -> None:
         """A left drag zooms on the video; in the 3D world it orbits (viser's own)."""

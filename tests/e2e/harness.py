@@ -112,7 +112,8 @@ def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float = 0.6
     def state():
         cam = panel.client.camera
         return (
-            panel.viewport.fitted_aspect is not None,
+            # fitted, and the page shows the fit: the camera the server holds is the fit's as soon as it is sent
+            panel.viewport.fitted_aspect is not None and not panel.viewport.fit_pending,
             tuple(np.round(cam.position, 6)),
             tuple(np.round(cam.wxyz, 6)),
             round(float(cam.fov), 6),
