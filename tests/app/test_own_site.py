@@ -27,14 +27,20 @@ T_WORLD_CAM = make_T(exp_so3([-2.1, 0.15, 0.3]), [0.1, -0.9, 1.2])  # where --ca
 
 @pytest.fixture
 def files(tmp_path):
-    """A ViSP camera file, two 640×480 frames of the box (its edges drawn), its model and an .init with pixels."""
+    """A ViSP camera file, two 640×480 frames of the box (an opaque box: its faces toward the camera, each its own
+    grey; with its hidden edges drawn too the image fits the pose seen inside out as well, and the tracker rightly
+    says so), its model and an .init with pixels."""
     cam = Camera.from_intrinsics(K, np.eye(4), 640, 480)
     frames = tmp_path / "frames"
     frames.mkdir()
     image = np.full((480, 640), 60, np.uint8)
-    for a, b in BOX.edge_segments(np.eye(4)):
-        (u0, v0), (u1, v1) = cam.project_obj(T_CAM_OBJ, np.array([a, b]))
-        cv2.line(image, (round(u0), round(v0)), (round(u1), round(v1)), 200, 1)
+    R, t = T_CAM_OBJ[:3, :3], T_CAM_OBJ[:3, 3]
+    for k, loop in enumerate(BOX.faces):
+        V = BOX.vertices[list(loop)]
+        normal = np.cross(V[1] - V[0], V[2] - V[1])
+        if (R @ normal) @ (R @ V[0] + t) < 0:  # faces the camera
+            uv = cam.project_obj(T_CAM_OBJ, V)
+            cv2.fillConvexPoly(image, np.round(uv).astype(np.int32), 90 + 30 * k, lineType=cv2.LINE_AA)
     for k in range(2):
         cv2.imwrite(str(frames / f"image{k:04d}.png"), image)
     (tmp_path / "cam.xml").write_text(VISP_XML)
