@@ -374,29 +374,11 @@ def press(page, label: str, timeout_ms: int = 60_000) -> None:
     click_control(button, timeout_ms)
 
 
-# Whether a control can take a click now: enabled, and on top at its centre (inside the window).
-_ON_TOP_JS = """(e) => {
-  if (e.disabled || e.getAttribute('aria-disabled') === 'true' || e.hasAttribute('data-disabled')) return false;
-  const r = e.getBoundingClientRect(), x = r.left + r.width / 2, y = r.top + r.height / 2;
-  if (r.width <= 0 || r.height <= 0) return false;
-  if (x < 0 || y < 0 || x >= window.innerWidth || y >= window.innerHeight) return false;
-  const hit = document.elementFromPoint(x, y);
-  return hit !== null && (hit === e || e.contains(hit));
-}"""
-
-
 def click_control(locator, timeout_ms: int = 60_000) -> None:
-    """Click a panel control: at once where it is enabled and on top at its centre, else through playwright's
-    checks (visible, enabled, steady over two animation frames: 0.3-1 s a click with software WebGL, and on a
-    heavily loaded machine more than 30 s)."""
-    try:
-        ready = locator.evaluate(_ON_TOP_JS)
-    except Exception:  # noqa: BLE001 - gone or re-rendered meanwhile: the checked click below waits for it
-        ready = False
-    if ready:
-        locator.click(force=True)
-    else:
-        locator.click(timeout=timeout_ms)
+    """Click a panel control through playwright's checks (visible, enabled, steady over two animation frames), for
+    up to ``timeout_ms``: on a heavily loaded machine they took more than playwright's default 30 s. Not forced: a
+    click made at once, before the page had hidden the button it was taking down, went to that button."""
+    locator.click(timeout=timeout_ms)
 
 
 class Interface:
