@@ -21,6 +21,15 @@ def _served_page(site, caplog, monkeypatch):
     return served, page, panel
 
 
+def _update_pose_controls(panel):
+    """Update pose started on the parallelepiped, its controls built: the workflow and the controls."""
+    panel.session.select("parallelepiped")
+    wf = panel.session.start("update_pose")
+    controls = panel.workflow_controls
+    wait_until(lambda: controls.built_for is wf and "cancel" in controls.handles, 15.0, "the controls")
+    return wf, controls
+
+
 def test_the_panel_setting_the_object_chooser_selects_nothing_and_the_page_s_choice_selects(site, caplog, monkeypatch):
     served, page, panel = _served_page(site, caplog, monkeypatch)
     try:
@@ -40,10 +49,11 @@ def test_the_panel_setting_the_object_chooser_selects_nothing_and_the_page_s_cho
 def test_a_click_that_arrived_before_a_question_leaves_it_and_one_after_it_drops_it(site, caplog, monkeypatch):
     served, page, panel = _served_page(site, caplog, monkeypatch)
     try:
-        panel.session.select("parallelepiped")
-        wf = panel.session.start("update_pose")
+        wf, _ = _update_pose_controls(panel)  # (the first redraw of a new workflow's controls drops any question)
         arrived = time.monotonic()  # a click reached the server; its handling (snapping, on a loaded machine) ...
         panel.on_pixel_click(np.array([200.0, 150.0]), arrived - 2.0)  # (the edge's first point, handled at once)
+        # its snapping done (Cancel during a running action stops that action alone, and asks nothing)
+        wait_until(lambda: wf.progress is None and not panel.busy, 15.0, "the first point taken")
         panel.press("cancel")  # ... waits behind an Esc pressed after it, asked about at once
         assert panel.asking == "cancel"
         panel.on_pixel_click(np.array([260.0, 170.0]), arrived)
@@ -58,10 +68,7 @@ def test_a_click_that_arrived_before_a_question_leaves_it_and_one_after_it_drops
 def test_the_question_s_label_is_drawn_from_the_panel_s_state(site, caplog, monkeypatch):
     served, page, panel = _served_page(site, caplog, monkeypatch)
     try:
-        panel.session.select("parallelepiped")
-        wf = panel.session.start("update_pose")
-        controls = panel.workflow_controls
-        wait_until(lambda: controls.built_for is wf and "cancel" in controls.handles, 15.0, "the controls")
+        wf, controls = _update_pose_controls(panel)
         wait_until(lambda: controls.handles["cancel"].visible, 15.0, "Cancel shown")
         cancel = controls.handles["cancel"]
         assert cancel.label == "Cancel (Esc)"
@@ -91,10 +98,7 @@ class _Worker:
 def test_the_controls_come_back_when_a_long_action_s_worker_ends_after_its_last_redraw(site, caplog, monkeypatch):
     served, page, panel = _served_page(site, caplog, monkeypatch)
     try:
-        panel.session.select("parallelepiped")
-        wf = panel.session.start("update_pose")
-        controls = panel.workflow_controls
-        wait_until(lambda: controls.built_for is wf and "cancel" in controls.handles, 15.0, "the controls")
+        wf, controls = _update_pose_controls(panel)
         action = sorted(a for a in wf.current_step().enabled if a != "cancel" and a in controls.handles)[0]
         wait_until(lambda: controls.handles[action].visible, 15.0, f"{action} shown")
         worker = panel.worker = _Worker()  # a measurement under way
