@@ -9,16 +9,23 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pytest
 
 from tests.app.ui.test_ws_fuzz import Served
 from tests.e2e.harness import wait_until
 
 
-def _served_page(site, caplog, monkeypatch):
+@pytest.fixture
+def served_page(site, caplog, monkeypatch):
+    """A served interface, a page on it and its panel, the object list drawn; closed after the test."""
     served = Served(site, caplog, monkeypatch)
     page, panel = served.page()
-    wait_until(lambda: "parallelepiped" in panel.gui_object.options, 15.0, "the object list drawn")
-    return served, page, panel
+    try:
+        wait_until(lambda: "parallelepiped" in panel.gui_object.options, 15.0, "the object list drawn")
+        yield served, page, panel
+    finally:
+        page.close()
+        served.stop()
 
 
 def _update_pose_controls(panel):
@@ -30,60 +37,48 @@ def _update_pose_controls(panel):
     return wf, controls
 
 
-def test_the_panel_setting_the_object_chooser_selects_nothing_and_the_page_s_choice_selects(site, caplog, monkeypatch):
-    served, page, panel = _served_page(site, caplog, monkeypatch)
-    try:
-        with panel.app.clients_lock:  # no redraw meanwhile: it would set the chooser to the selection
-            panel.session.select("table")  # a click selected the table ...
-            panel.gui_object.value = "parallelepiped"  # ... after a redraw had read the selection before it
-        served.settle(page, panel)
-        assert panel.session.selected == "table"
-        page.send(dict(type="GuiUpdateMessage", uuid=panel.gui_object._impl.uuid, updates={"value": "parallelepiped"}))
-        served.settle(page, panel)
-        assert panel.session.selected == "parallelepiped"  # the operator's choice on the page
-    finally:
-        page.close()
-        served.stop()
+def test_the_panel_setting_the_object_chooser_selects_nothing_and_the_page_s_choice_selects(served_page):
+    served, page, panel = served_page
+    with panel.app.clients_lock:  # no redraw meanwhile: it would set the chooser to the selection
+        panel.session.select("table")  # a click selected the table ...
+        panel.gui_object.value = "parallelepiped"  # ... after a redraw had read the selection before it
+    served.settle(page, panel)
+    assert panel.session.selected == "table"
+    page.send(dict(type="GuiUpdateMessage", uuid=panel.gui_object._impl.uuid, updates={"value": "parallelepiped"}))
+    served.settle(page, panel)
+    assert panel.session.selected == "parallelepiped"  # the operator's choice on the page
 
 
-def test_a_click_that_arrived_before_a_question_leaves_it_and_one_after_it_drops_it(site, caplog, monkeypatch):
-    served, page, panel = _served_page(site, caplog, monkeypatch)
-    try:
-        wf, _ = _update_pose_controls(panel)  # (the first redraw of a new workflow's controls drops any question)
-        arrived = time.monotonic()  # a click reached the server; its handling (snapping, on a loaded machine) ...
-        panel.on_pixel_click(np.array([200.0, 150.0]), arrived - 2.0)  # (the edge's first point, handled at once)
-        # its snapping done (Cancel during a running action stops that action alone, and asks nothing)
-        wait_until(lambda: wf.progress is None and not panel.busy, 15.0, "the first point taken")
-        panel.press("cancel")  # ... waits behind an Esc pressed after it, asked about at once
-        assert panel.asking == "cancel"
-        panel.on_pixel_click(np.array([260.0, 170.0]), arrived)
-        assert panel.asking == "cancel" and len(wf.clicks.segs) == 1  # the click taken, the question kept
-        panel.on_pixel_click(np.array([300.0, 100.0]), time.monotonic())  # a click made after the question
-        assert panel.asking is None
-    finally:
-        page.close()
-        served.stop()
+def test_a_click_that_arrived_before_a_question_leaves_it_and_one_after_it_drops_it(served_page):
+    served, page, panel = served_page
+    wf, _ = _update_pose_controls(panel)  # (the first redraw of a new workflow's controls drops any question)
+    arrived = time.monotonic()  # a click reached the server; its handling (snapping, on a loaded machine) ...
+    panel.on_pixel_click(np.array([200.0, 150.0]), arrived - 2.0)  # (the edge's first point, handled at once)
+    # its snapping done (Cancel during a running action stops that action alone, and asks nothing)
+    wait_until(lambda: wf.progress is None and not panel.busy, 15.0, "the first point taken")
+    panel.press("cancel")  # ... waits behind an Esc pressed after it, asked about at once
+    assert panel.asking == "cancel"
+    panel.on_pixel_click(np.array([260.0, 170.0]), arrived)
+    assert panel.asking == "cancel" and len(wf.clicks.segs) == 1  # the click taken, the question kept
+    panel.on_pixel_click(np.array([300.0, 100.0]), time.monotonic())  # a click made after the question
+    assert panel.asking is None
 
 
-def test_the_question_s_label_is_drawn_from_the_panel_s_state(site, caplog, monkeypatch):
-    served, page, panel = _served_page(site, caplog, monkeypatch)
-    try:
-        wf, controls = _update_pose_controls(panel)
-        wait_until(lambda: controls.handles["cancel"].visible, 15.0, "Cancel shown")
-        cancel = controls.handles["cancel"]
-        assert cancel.label == "Cancel (Esc)"
-        with panel.app.clients_lock:  # Esc asked while a redraw that had read the state before it ...
-            panel.confirm_pending = ("cancel", ())
-            cancel.label = "Cancel (Esc)"  # ... set the button's label back
-            panel.dirty = True
-        panel.app.wake()
-        wait_until(lambda: cancel.label == "Cancel: confirm (Esc)", 15.0, "the question's label")
-        panel.confirm_pending, panel.dirty = None, True  # the question dropped: the label back
-        panel.app.wake()
-        wait_until(lambda: cancel.label == "Cancel (Esc)", 15.0, "the label back")
-    finally:
-        page.close()
-        served.stop()
+def test_the_question_s_label_is_drawn_from_the_panel_s_state(served_page):
+    served, page, panel = served_page
+    wf, controls = _update_pose_controls(panel)
+    wait_until(lambda: controls.handles["cancel"].visible, 15.0, "Cancel shown")
+    cancel = controls.handles["cancel"]
+    assert cancel.label == "Cancel (Esc)"
+    with panel.app.clients_lock:  # Esc asked while a redraw that had read the state before it ...
+        panel.confirm_pending = ("cancel", ())
+        cancel.label = "Cancel (Esc)"  # ... set the button's label back
+        panel.dirty = True
+    panel.app.wake()
+    wait_until(lambda: cancel.label == "Cancel: confirm (Esc)", 15.0, "the question's label")
+    panel.confirm_pending, panel.dirty = None, True  # the question dropped: the label back
+    panel.app.wake()
+    wait_until(lambda: cancel.label == "Cancel (Esc)", 15.0, "the label back")
 
 
 class _Worker:
@@ -95,25 +90,21 @@ class _Worker:
         return self.alive
 
 
-def test_the_controls_come_back_when_a_long_action_s_worker_ends_after_its_last_redraw(site, caplog, monkeypatch):
-    served, page, panel = _served_page(site, caplog, monkeypatch)
-    try:
-        wf, controls = _update_pose_controls(panel)
-        action = sorted(a for a in wf.current_step().enabled if a != "cancel" and a in controls.handles)[0]
-        wait_until(lambda: controls.handles[action].visible, 15.0, f"{action} shown")
-        worker = panel.worker = _Worker()  # a measurement under way
-        drawn = panel.texts.update
+def test_the_controls_come_back_when_a_long_action_s_worker_ends_after_its_last_redraw(served_page, monkeypatch):
+    served, page, panel = served_page
+    wf, controls = _update_pose_controls(panel)
+    action = sorted(a for a in wf.current_step().enabled if a != "cancel" and a in controls.handles)[0]
+    wait_until(lambda: controls.handles[action].visible, 15.0, f"{action} shown")
+    worker = panel.worker = _Worker()  # a measurement under way
+    drawn = panel.texts.update
 
-        def update(shown_wf) -> None:  # it ends just after a redraw drew it running, with no wake-up after it
-            drawn(shown_wf)
-            if not controls.handles[action].visible:
-                worker.alive = False
+    def update(shown_wf) -> None:  # it ends just after a redraw drew it running, with no wake-up after it
+        drawn(shown_wf)
+        if not controls.handles[action].visible:
+            worker.alive = False
 
-        monkeypatch.setattr(panel.texts, "update", update)
-        panel.dirty = True
-        panel.app.wake()
-        wait_until(lambda: not worker.alive, 15.0, "the controls hidden while it ran")
-        wait_until(lambda: controls.handles[action].visible, 5.0, "the controls back")
-    finally:
-        page.close()
-        served.stop()
+    monkeypatch.setattr(panel.texts, "update", update)
+    panel.dirty = True
+    panel.app.wake()
+    wait_until(lambda: not worker.alive, 15.0, "the controls hidden while it ran")
+    wait_until(lambda: controls.handles[action].visible, 5.0, "the controls back")
