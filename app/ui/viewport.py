@@ -47,12 +47,7 @@ class Viewport:
     def request_fit(self, again: bool = True) -> None:
         """Fit the shown camera's image; ``again`` (Fit view pressed) with the view still where the last fit
         put it and several cameras: every camera's image side by side."""
-        try:
-            at, fitted = np.asarray(self.client.camera.position, float), self._fitted_at
-            # as the page reports it back (its own camera controls settle it): 2 % of the distance is "unmoved"
-            unmoved = fitted is not None and np.linalg.norm(at - fitted) <= 0.02 * abs(float(fitted[2]))
-        except (AssertionError, ZeroDivisionError, TypeError):
-            unmoved = False
+        unmoved = self._fitted_at is not None and self._page_at(self._fitted_at)  # as the page reports it back
         self.all_cameras = again and unmoved and not self.all_cameras and len(self.panel.app.views) > 1
         self.zoom_rect = None
         self.need_fit = True

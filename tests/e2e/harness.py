@@ -353,7 +353,7 @@ def assert_prompt_controls(page, timeout_s: float = 15.0) -> list[str]:
 
 def press(page, label: str, timeout_ms: int = 60_000) -> None:
     """Click the visible button named ``label``, with or without its key (e.g. "Solve" for "Solve (R)"; not "Measure
-    next" for "Measure": a button about to be hidden is clicked at once where it is shown)."""
+    next" for "Measure", nor "Calibrate camera from robot" for "Calibrate camera")."""
     import re
 
     from playwright.sync_api import TimeoutError as PlaywrightTimeout

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from tests.app.ui.test_ws_fuzz import Served
+from tests.app.ui.test_ws_fuzz import Served, camera
 from tests.e2e.harness import wait_until
 
 
@@ -108,3 +108,20 @@ def test_the_controls_come_back_when_a_long_action_s_worker_ends_after_its_last_
     panel.app.wake()
     wait_until(lambda: not worker.alive, 15.0, "the controls hidden while it ran")
     wait_until(lambda: controls.handles[action].visible, 5.0, "the controls back")
+
+
+def test_a_fit_is_pending_until_the_page_reports_its_camera_there(served_page):
+    """The server holds the camera it sends as if the page had it: a click placed through it while the page still
+    showed the view before landed on another camera's image. ``fit_pending`` says the page has not shown it yet."""
+    served, page, panel = served_page
+    vp = panel.viewport
+    wait_until(lambda: vp.fitted_aspect is not None and vp._fitted_at is not None, 15.0, "the first fit")
+    with panel.app.clients_lock:  # no redraw meanwhile
+        vp.fit()  # sent again, the page last reported its camera elsewhere (the test page's own)
+        fitted = vp._fitted_at.copy()
+        assert vp.fit_pending
+    page.send(camera(fov=0.95))  # a report from the view before: still pending
+    served.settle(page, panel)
+    assert vp.fit_pending
+    page.send(camera(position=[float(x) for x in fitted], fov=0.95))  # the page shows the fit
+    wait_until(lambda: not vp.fit_pending, 15.0, "the fit no longer pending")
