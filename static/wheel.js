@@ -51,7 +51,25 @@
     pending = pending ? { x: x, y: y, dy: pending.dy + dy } : { x: x, y: y, dy: dy };
     if (timer === null) timer = setTimeout(send, 16); // at most one update a frame
   }, { capture: true, passive: false });
-  setInterval(function () { field(); field("mcit-dblclick"); }, 1000); // keep the fields hidden when the panel re-renders
+  // The 3D view's size on screen (CSS pixels), told through the hidden field "mcit-canvas" as "width height" when it
+  // changes: viser reports its camera's image in the canvas's own pixels, which are the screen's times the page's
+  // pixel ratio (2 on many laptops, less when viser lowers it for speed), and the server's radii (how near a click
+  // picks an object or a corner) are in the screen's pixels (app/ui/viewport.py, Viewport.on_canvas_size).
+  var told = "";
+  function tellSize() {
+    var input = field("mcit-canvas");
+    if (!input) return;
+    var best = null, canvases = document.querySelectorAll("canvas");
+    for (var i = 0; i < canvases.length; i++) {
+      var r = canvases[i].getBoundingClientRect();
+      if (r.width >= 200 && r.height >= 200 && (!best || r.width * r.height > best.width * best.height)) best = r;
+    }
+    if (!best) return;
+    var said = Math.round(best.width) + " " + Math.round(best.height);
+    if (said !== told) { told = said; write(input, said); }
+  }
+  setInterval(function () { field(); field("mcit-dblclick"); tellSize(); }, 1000); // keep the fields hidden when the panel re-renders
+  window.addEventListener("resize", function () { setTimeout(tellSize, 50); });
 
   // Double clicks on the video are told here, from the presses' own timestamps (e.timeStamp): the
   // server cannot time them, since a busy page, network or server delays one click's message more

@@ -20,12 +20,13 @@ from .workflow_controls import on_key
 if TYPE_CHECKING:  # pragma: no cover
     from .client import ClientPanel
 
-__all__ = ["build_panel", "WHEEL_FIELD", "DOUBLE_FIELD", "SHAPES"]
+__all__ = ["build_panel", "WHEEL_FIELD", "DOUBLE_FIELD", "SIZE_FIELD", "SHAPES"]
 
 log = logging.getLogger("mcit.ui")
 
 WHEEL_FIELD = "mcit-wheel"  # the hidden text field static/wheel.js writes the wheel into
 DOUBLE_FIELD = "mcit-dblclick"  # the hidden text field static/wheel.js writes a double click into
+SIZE_FIELD = "mcit-canvas"  # the hidden text field static/wheel.js writes the 3D view's size on screen into
 SHAPES = ("box", "cylinder", "cone", "wedge", "pyramid")  # Model object's shapes
 NO_SELECTION = "(none)"
 
@@ -141,6 +142,8 @@ def build_panel(panel: ClientPanel) -> None:
     # the page script sends the cursor and the wheel through this hidden field instead.
     wheel = gui.add_text(WHEEL_FIELD, "")
     wheel.on_update(guard(lambda _e: viewport.on_wheel(str(wheel.value))))
+    size = gui.add_text(SIZE_FIELD, "")  # the view's size in the screen's pixels (viser's are the canvas's own)
+    size.on_update(guard(lambda _e: viewport.on_canvas_size(str(size.value))))
     # Double clicks are told by the page (static/wheel.js), timed by the browser: at the server a double
     # click's two messages arrived 0.3–2.7 s apart on a loaded machine.
     double = gui.add_text(DOUBLE_FIELD, "")

@@ -37,6 +37,8 @@ class Viewport:
         # the page still shows the view before it (a click now lands through the old view).
         self.fit_pending = False
         self._page_position: np.ndarray | None = None  # the camera position the page last reported
+        # The view's size on the screen (CSS pixels), as the page tells it (static/wheel.js); None until it has.
+        self.screen_size: tuple[int, int] | None = None
         self._rect_cb = self.client.scene.on_rect_select()(panel.guard(self.on_rect))
         self.client.camera.on_update(self.on_camera)
 
@@ -171,13 +173,24 @@ class Viewport:
         fit = abs(float(self.pixel_world.fit_camera(aspect, fov)[0][2]))
         return float(np.clip(dist / fit, 0.02, 4.0)) if fit > 0 else None
 
+    def on_canvas_size(self, value: str) -> None:
+        """The page told the view's size on the screen: "width height" in CSS pixels (static/wheel.js)."""
+        try:
+            w, h = (int(v) for v in value.split()[:2])
+        except ValueError:
+            return  # cleared, or typed into the hidden field
+        if 0 < w <= 100_000 and 0 < h <= 100_000:
+            self.screen_size = (w, h)
+
     def image_px_per_screen_px(self) -> float:
-        """Video pixels per screen pixel in this client's view now (1 when it is not known)."""
+        """Video pixels per screen pixel (CSS pixel: the page's, whatever its pixel ratio) in this client's view now
+        (1 when it is not known). viser reports the camera's image in the canvas's own pixels, the screen's times
+        the page's pixel ratio; the page's own report of the view's size is used when it has come."""
         try:
             cam = self.client.camera
             dist = abs(float(cam.position[2]))
             visible = 2.0 * dist * np.tan(float(cam.fov) / 2.0) / self.pixel_world.k  # video px across the height
-            k = visible / float(cam.image_height)
+            k = visible / float(cam.image_height if self.screen_size is None else self.screen_size[1])
         except (AssertionError, ZeroDivisionError, TypeError, AttributeError, ValueError):
             return 1.0
         return k if np.isfinite(k) and k > 0 else 1.0

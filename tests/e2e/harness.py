@@ -22,6 +22,9 @@ ARGS = [
     # after the first finds viser's script compiled, and opens on about half the CPU (tests/e2e: 3.5 s against 6.5 s
     # of chromium's CPU a page with software WebGL)
     "--process-per-site",
+    # the page composited by the CPU rather than through the software WebGL: a page opened on 2.1 s of the GPU
+    # process's CPU against 4.8 s, and a frame on 72 ms against 100 ms (the 3D canvas still draws with SwiftShader)
+    "--disable-gpu-compositing",
     "--use-angle=swiftshader",
     "--enable-unsafe-swiftshader",
     "--disable-background-networking",
@@ -31,6 +34,11 @@ ARGS = [
 ]
 FRAME_T_S = 16.0  # the known box has moved (12 s → 15 s) and stays there
 VIEWPORT = {"width": 1200, "height": 700}
+# The 3D canvas drawn at a quarter of the page's pixels (viser's ``fixedDpr``): the software WebGL's cost is per pixel
+# drawn, about 100 ms a frame at 1 against 12-18 ms at 0.25 (1200x700 with --disable-gpu-compositing), and a browser
+# test draws some hundred frames. Clicks and the camera's report are in the page's own (CSS) pixels, which the DPR
+# does not change. A test that reads the overlay's pixels from a screenshot opens its page at ``dpr=1``.
+PAGE_DPR = 0.25
 DOUBLE_GAP_S = 0.7  # two clicks at one place further apart than this are two clicks (app/ui/clicks.py: 0.6 s)
 
 
@@ -60,17 +68,26 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def canvas_size(panel) -> tuple[float, float]:
+    """The 3D view's size on the page (CSS pixels, where the mouse clicks), as the page told it; else the canvas's
+    own pixels viser reports (the same at a pixel ratio of 1)."""
+    size = panel.viewport.screen_size
+    cam = panel.client.camera
+    return (float(cam.image_width), float(cam.image_height)) if size is None else (float(size[0]), float(size[1]))
+
+
 def screen_of(server, panel, uv) -> tuple[float, float]:
-    """Canvas position (x, y) of video pixel uv in a client's view, from the camera it reports."""
+    """Canvas position (x, y, CSS pixels) of video pixel uv in a client's view, from the camera it reports."""
     import viser
 
+    width, height = canvas_size(panel)
     cam = panel.client.camera
     X = server.views[panel.camera_view].pixel_world.to_world(np.asarray(uv, float))  # on the camera it shows
     R = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix()
     p = R.T @ (X - np.asarray(cam.position))
     t = np.tan(cam.fov / 2.0)
-    x = (0.5 + p[0] / p[2] / (2 * t * cam.aspect)) * cam.image_width
-    y = (0.5 + p[1] / p[2] / (2 * t)) * cam.image_height
+    x = (0.5 + p[0] / p[2] / (2 * t * cam.aspect)) * width
+    y = (0.5 + p[1] / p[2] / (2 * t)) * height
     return float(x), float(y)
 
 
@@ -276,6 +293,35 @@ def close_notifications(page, timeout_s: float = 20.0, required: bool = True) ->
         )
 
 
+# The page's animation frames at most every FRAME_GAP_MS. viser draws on demand, but each request draws on for 250 ms
+# (its "settle" window), so a page whose video changes 4 times a second drew 50-60 frames a second: a live robot site's
+# idle page took 1.1 cores of the software WebGL at 60 frames/s, 0.34 at 10. Animations in the page are timed by the
+# clock, not by frames (viser's camera moves, its damping), so they end when they would, in fewer frames.
+# Playwright's own checks (a control steady before a click) run in their own world and keep the real frames.
+FRAME_GAP_MS = 100
+PACED_FRAMES_JS = """(() => {
+  const gap = FRAME_GAP_MS, raf = window.requestAnimationFrame.bind(window);
+  let waiting = new Map(), next = 1, scheduled = false, last = -Infinity;
+  function run(t) {
+    scheduled = false;
+    last = t;
+    const due = waiting;
+    waiting = new Map();
+    for (const cb of due.values()) cb(t);
+  }
+  window.requestAnimationFrame = (cb) => {
+    const id = next++;
+    waiting.set(id, cb);
+    if (!scheduled) {
+      scheduled = true;
+      setTimeout(() => raf(run), Math.max(0, last + gap - performance.now()));
+    }
+    return id;
+  };
+  window.cancelAnimationFrame = (id) => { waiting.delete(id); };
+})();""".replace("FRAME_GAP_MS", str(FRAME_GAP_MS))
+
+
 def shared_context(browser):
     """The one browser context the interfaces' pages open in (``Interface.open``), made at first use: its pages share
     a renderer process (``--process-per-site``) and its cache. Its cookies are cleared as each interface closes, so
@@ -284,6 +330,7 @@ def shared_context(browser):
     context = getattr(browser, "_mcit_context", None)
     if context is None:
         context = browser._mcit_context = browser.new_context(viewport=VIEWPORT)
+        context.add_init_script(PACED_FRAMES_JS)
     return context
 
 
@@ -414,7 +461,7 @@ class Interface:
             for name, image in frames.items()
         }
         self.server = InterfaceServer(self.site, grabbers, port=free_port()).start()
-        self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
+        self.url = f"http://127.0.0.1:{self.server.port}"
         self.frame_t_s = frame_t_s
         # the pages opened on it, closed with it: a page left open (its test failed before closing it) went on
         # drawing, trying to reconnect, and took the software renderer's CPU from every later test
@@ -422,9 +469,9 @@ class Interface:
         # What the page's Content-Security-Policy refused (app/ui/page.py): every browser test fails on one.
         self.csp_refusals: list[str] = []
 
-    def open(self, browser, viewport: dict | None = None):
-        """A new page on the interface (``viewport``, default VIEWPORT), connected, fitted, with the
-        software-WebGL notice closed."""
+    def open(self, browser, viewport: dict | None = None, dpr: float = PAGE_DPR):
+        """A new page on the interface (``viewport``, default VIEWPORT; its 3D canvas drawn at ``dpr``), connected,
+        fitted, with the software-WebGL notice closed."""
         before = set(self.server.clients)
         page = shared_context(browser).new_page()
         page.set_viewport_size(viewport or VIEWPORT)
@@ -436,12 +483,15 @@ class Interface:
             "pageerror",
             lambda e: self.csp_refusals.append(str(e)[:300]) if "Content Security Policy" in str(e) else None,
         )
-        page.goto(self.url)
+        page.goto(f"{self.url}/?fixedDpr={dpr:g}")
         panel = wait_for_panel(self.server, before)
         # the database drawn as it is now (its own thread; slow on a loaded machine): clicks that
         # select an object pick what is drawn
         wait_until(lambda: self.server.database_drawn, 20.0, "the database overlay to be drawn")
         wait_for_page_ready(page)
+        # the page tells the view's size on the screen within a second of showing its panel: until then the server's
+        # radii (a click's pick) are in the canvas's pixels, a quarter of the screen's at PAGE_DPR
+        wait_until(lambda: panel.viewport.screen_size is not None, 30.0, "the page to tell its view's size")
         wait_for_steady_camera(panel)  # clicks are placed through the camera the page reports: let the fit land
         page.panel = panel
         return page
@@ -454,8 +504,8 @@ class Interface:
         """Canvas position of video pixel uv; when it falls off the canvas (the page's camera was moving
         when it was read, on a loaded machine), once the camera has settled."""
         x, y = self.screen_of(page, uv)
-        cam = page.panel.client.camera
-        if not (0 <= x < cam.image_width and 0 <= y < cam.image_height):
+        width, height = canvas_size(page.panel)
+        if not (0 <= x < width and 0 <= y < height):
             wait_for_steady_camera(page.panel)
             x, y = self.screen_of(page, uv)
         return x, y
@@ -562,7 +612,7 @@ class ServedInterface(Interface):
         self.db = self.site.db
         self._own_devices = None
         self.frame_t_s = FRAME_T_S
-        self.url = f"http://127.0.0.1:{self.server.port}/?fixedDpr=1"
+        self.url = f"http://127.0.0.1:{self.server.port}"
         self.pages: list = []
         self.csp_refusals: list[str] = []
 

@@ -13,6 +13,7 @@ from .harness import (
     FRAME_T_S,
     Interface,
     assert_prompt_controls,
+    canvas_size,
     select_by_click,
     site_frame,
     wait_for_steady_camera,
@@ -114,8 +115,9 @@ def test_both_cameras_frozen_fitted_side_by_side_and_clicked_in(browser, two_cam
     X = ui.server.views["side"].pixel_world.to_world(uv)
     p = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix().T @ (X - np.asarray(cam.position))
     t = np.tan(cam.fov / 2.0)
-    x = (0.5 + p[0] / p[2] / (2 * t * cam.aspect)) * cam.image_width
-    y = (0.5 + p[1] / p[2] / (2 * t)) * cam.image_height
+    width, height = canvas_size(panel)
+    x = (0.5 + p[0] / p[2] / (2 * t * cam.aspect)) * width
+    y = (0.5 + p[1] / p[2] / (2 * t)) * height
     page.locator("canvas").nth(1).click(position={"x": float(x), "y": float(y)})
     wait_until(
         lambda: panel.camera_view == "side" and panel.session.selected == "parallelepiped",

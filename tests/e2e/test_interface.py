@@ -13,7 +13,7 @@ import pytest
 from core.transforms import pose_error
 
 from .flows import Operator
-from .harness import click_control, close_notifications, select_by_click
+from .harness import canvas_size, click_control, close_notifications, select_by_click
 
 pytestmark = pytest.mark.e2e
 
@@ -53,7 +53,7 @@ def _visible_box_edges(site, T):
 
 def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interface, frame):
     ui = interface
-    page = ui.open(browser)
+    page = ui.open(browser, dpr=1)  # its pixels are read
     # the video: the shown image correlates with the frame at the pixels the camera maps them to
     # (local means: the frame's sensor noise and the JPEG transport decorrelate single pixels); a loaded
     # machine's page shows the first frame a while after it connects
@@ -120,7 +120,8 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
 
     def centred() -> bool:  # the dragged rectangle's centre ends at the canvas's centre
         cx, cy = ui.screen_of(page, [164, 92])
-        return abs(cx - cam.image_width / 2) < 5 and abs(cy - cam.image_height / 2) < 5
+        width, height = canvas_size(page.panel)
+        return abs(cx - width / 2) < 5 and abs(cy - height / 2) < 5
 
     _wait(centred, what="the zoomed view to centre on the dragged rectangle")
     click_control(page.get_by_role("button", name="Fit view"))
@@ -137,8 +138,9 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
 
     def fitted() -> bool:  # the whole image inside the canvas, fitted to its width
         corners = [ui.screen_of(page, uv) for uv in ([-0.5, -0.5], [511.5, 255.5])]
-        inside = all(-1 <= x <= cam.image_width + 1 and -1 <= y <= cam.image_height + 1 for x, y in corners)
-        return inside and abs(corners[1][0] - corners[0][0]) > 0.9 * cam.image_width
+        width, height = canvas_size(page.panel)
+        inside = all(-1 <= x <= width + 1 and -1 <= y <= height + 1 for x, y in corners)
+        return inside and abs(corners[1][0] - corners[0][0]) > 0.9 * width
 
     _wait(fitted, what="the view to fit the narrower window")
     page.close()
@@ -151,7 +153,7 @@ def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
     five, Accept (not weak). Measured (1200×700, 2 shared cores, -s prints it): 28 operator actions
     in 19 s; written pose 0.05° / 1.3 mm from the truth (0.07° / 1.2 mm with the six edges)."""
     ui = interface
-    page = ui.open(browser)
+    page = ui.open(browser, dpr=1)  # the overlay's pixels are read at the end
     op = Operator(ui, page)
     site = ui.site
     obj = site.object("parallelepiped")
@@ -238,7 +240,7 @@ def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
 
 def test_two_browsers_share_the_database_and_keep_their_own_state(browser, interface, scene):
     ui = interface
-    a, b = ui.open(browser), ui.open(browser)
+    a, b = ui.open(browser, dpr=1), ui.open(browser, dpr=1)  # the overlay's pixels are read
     assert a.panel is not b.panel
     obj = ui.site.object("parallelepiped")
     drawn = ui.site.camera.project(obj.model.edge_segments(obj.T_world_obj).reshape(-1, 3)).reshape(-1, 2, 2)

@@ -57,7 +57,7 @@ def test_the_video_from_ros2_is_worked_on_and_the_pose_goes_out_stamped_with_its
     ui = RosCameraSite(tmp_path, domain)
     try:
         topic = peer.watch_pose(BOX)
-        page = ui.open(browser, viewport={"width": 1280, "height": 720})
+        page = ui.open(browser, viewport={"width": 1280, "height": 720}, dpr=1)  # its pixels are read
         page.get_by_text("ROS 2 /cam/image_raw").first.wait_for(timeout=60_000)  # the panel names the source
         # the published image is what the page shows (local means: JPEG transport decorrelates single pixels)
         import cv2
