@@ -343,13 +343,35 @@ RECOVERY_STATS = (
 )  # a retry, re-read or reconnect
 
 
-def matrix_trials(scene, trials: int, seed: int, attempt_timeout_s: float = 0.15):
+def matrix_trials(scene, trials: int, seed: int, attempt_timeout_s: float = 0.15, workers: int = 1):
     """{(device, row): Counter of outcomes}. ``attempt_timeout_s``: the drivers' wait for one reply (a loaded
-    machine's emulator answers late: the suite gives it longer than the bench)."""
+    machine's emulator answers late: the suite gives it longer than the bench). ``workers``: rows run side by side,
+    each on its own emulated site (a row mostly waits on the serial lines' timing and the drivers' deadlines)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from app.render.raycast import BeamCaster
+
+    caster = BeamCaster(scene)
+    face = face_target(scene)
+    rows = [
+        (device, r_i, row, make)
+        for device in ("turret", "rangefinder")
+        for r_i, (row, make) in enumerate(matrix_rows(device))
+    ]
+
+    def run(job):
+        device, r_i, row, make = job
+        return (device, row), _matrix_row(scene, caster, face, device, r_i, make, trials, seed, attempt_timeout_s)
+
+    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        return dict(pool.map(run, rows))
+
+
+def _matrix_row(scene, caster, face, device: str, r_i: int, make, trials: int, seed: int, attempt_timeout_s: float):
+    """One fault row's ``trials`` on a new emulated site: a Counter of outcomes."""
     from collections import Counter
 
     from app.devices import DeviceError
-    from app.render.raycast import BeamCaster
     from core.rangefinder import beam_ray
 
     exact_site = dict(
@@ -357,60 +379,52 @@ def matrix_trials(scene, trials: int, seed: int, attempt_timeout_s: float = 0.15
     )
     driver = dict(attempt_timeout_s=attempt_timeout_s, retries=2, reconnect_timeout_s=max(1.0, 4 * attempt_timeout_s))
     sigma = scene.rangefinder.sigma_range_m
-    caster = BeamCaster(scene)
-    face = face_target(scene)
-    results = {}
-    for device in ("turret", "rangefinder"):
-        for r_i, (row, make) in enumerate(matrix_rows(device)):
-            rng = np.random.default_rng([seed, r_i, device == "turret"])
-            site = EmulatedSite(scene, clock=lambda: 0.0, seed=seed + r_i, **exact_site)
-            urls = site.serve_inprocess()
-            rf = RangeFinder(urls[0], **driver)
-            tu = Turret(urls[1], **driver)
-            out = Counter()
+    rng = np.random.default_rng([seed, r_i, device == "turret"])
+    site = EmulatedSite(scene, clock=lambda: 0.0, seed=seed + r_i, **exact_site)
+    urls = site.serve_inprocess()
+    rf = RangeFinder(urls[0], **driver)
+    tu = Turret(urls[1], **driver)
+    out = Counter()
+    try:
+        tu.speed_steps_s()
+        aim0 = tu.rad_to_steps(*aim(scene.turret.T_world_turret, face)[:2])
+        emu = site.turret if device == "turret" else site.rangefinder
+        drv = tu if device == "turret" else rf
+        for _ in range(trials):
+            if device == "turret":
+                target = (aim0[0] + int(rng.integers(-300, 301)), aim0[1] + int(rng.integers(-200, 201)))
+            else:  # a point of the facing face within ±2 cm of its centre
+                target = tu.rad_to_steps(*aim(scene.turret.T_world_turret, face + rng.uniform(-0.02, 0.02, 3))[:2])
+                tu.move_to_steps(*target)
+            before = sum(drv.stats[k] for k in RECOVERY_STATS)
+            emu.faults.push(*make(rng))
             try:
-                tu.speed_steps_s()
-                aim0 = tu.rad_to_steps(*aim(scene.turret.T_world_turret, face)[:2])
-                emu = site.turret if device == "turret" else site.rangefinder
-                drv = tu if device == "turret" else rf
-                for _ in range(trials):
-                    if device == "turret":
-                        target = (aim0[0] + int(rng.integers(-300, 301)), aim0[1] + int(rng.integers(-200, 201)))
-                    else:  # a point of the facing face within ±2 cm of its centre
-                        target = tu.rad_to_steps(
-                            *aim(scene.turret.T_world_turret, face + rng.uniform(-0.02, 0.02, 3))[:2]
-                        )
-                        tu.move_to_steps(*target)
-                    before = sum(drv.stats[k] for k in RECOVERY_STATS)
-                    emu.faults.push(*make(rng))
-                    try:
-                        if device == "turret":
-                            got = tu.move_to_steps(*target)
-                            pos = tu.position_steps()
-                            truth = tuple(int(round(v)) for v in site.mount.steps_at())
-                            ok = got == truth == target and pos == truth
-                        else:
-                            value = rf.measure()
-                            o, d = beam_ray(scene.turret.T_world_turret, *site.mount.angles_rad())
-                            ok = abs(value - caster.cast(o, d)[0]) <= 5 * sigma
-                        retried = sum(drv.stats[k] for k in RECOVERY_STATS) > before
-                        out["WRONG" if not ok else "recovered" if retried else "right"] += 1
-                    except DeviceError:
-                        out["error"] += 1
-                        emu.faults.clear()
-                        time.sleep(0.05)  # let a late reply or a replug land before the next trial
-                        try:  # back to a known state, fault-free
-                            tu.move_to_steps(*aim0)
-                        except DeviceError:
-                            tu.connect()
-                            tu.move_to_steps(*aim0)
-                    emu.faults.clear()
-            finally:
-                rf.close()
-                tu.close()
-                site.close()
-            results[(device, row)] = out
-    return results
+                if device == "turret":
+                    got = tu.move_to_steps(*target)
+                    pos = tu.position_steps()
+                    truth = tuple(int(round(v)) for v in site.mount.steps_at())
+                    ok = got == truth == target and pos == truth
+                else:
+                    value = rf.measure()
+                    o, d = beam_ray(scene.turret.T_world_turret, *site.mount.angles_rad())
+                    ok = abs(value - caster.cast(o, d)[0]) <= 5 * sigma
+                retried = sum(drv.stats[k] for k in RECOVERY_STATS) > before
+                out["WRONG" if not ok else "recovered" if retried else "right"] += 1
+            except DeviceError:
+                out["error"] += 1
+                emu.faults.clear()
+                time.sleep(0.05)  # let a late reply or a replug land before the next trial
+                try:  # back to a known state, fault-free
+                    tu.move_to_steps(*aim0)
+                except DeviceError:
+                    tu.connect()
+                    tu.move_to_steps(*aim0)
+            emu.faults.clear()
+    finally:
+        rf.close()
+        tu.close()
+        site.close()
+    return out
 
 
 def bench_fault_matrix(scene, trials, seed):
