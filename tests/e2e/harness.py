@@ -1,6 +1,6 @@
 """A running mcit interface for real-browser tests and the documentation's screenshots.
 
-The interface runs in process on a free port with a fresh database seeded from the scene; the
+The interface runs in process, on this process's one interface port, with a fresh database seeded from the scene; the
 video is a still frame: the site at FRAME_T_S as ``mcit serve`` shows it (``site_frame``: the live
 renderer's; MCIT_E2E_FRAMES=raycast, or no OpenGL here, takes the ray-cast renderer's, the recording's).
 Screen coordinates of a video pixel come from the viewer camera the browser reports (viser's OpenCV
@@ -36,8 +36,9 @@ FRAME_T_S = 16.0  # the known box has moved (12 s → 15 s) and stays there
 VIEWPORT = {"width": 1200, "height": 700}
 # The 3D canvas drawn at a quarter of the page's pixels (viser's ``fixedDpr``): the software WebGL's cost is per pixel
 # drawn, about 100 ms a frame at 1 against 12-18 ms at 0.25 (1200x700 with --disable-gpu-compositing), and a browser
-# test draws some hundred frames. Clicks and the camera's report are in the page's own (CSS) pixels, which the DPR
-# does not change. A test that reads the overlay's pixels from a screenshot opens its page at ``dpr=1``.
+# test draws some hundred frames. Clicks are in the page's CSS pixels, viser's camera report in the canvas's own
+# (a quarter of them): clicks are placed by the view's size the page tells (``canvas_size``). A test that reads the
+# overlay's pixels from a screenshot opens its page at ``dpr=1``.
 PAGE_DPR = 0.25
 DOUBLE_GAP_S = 0.7  # two clicks at one place further apart than this are two clicks (app/ui/clicks.py: 0.6 s)
 
