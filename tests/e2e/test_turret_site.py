@@ -52,7 +52,7 @@ def test_the_suggested_points_calibrate_the_turret_on_the_shipped_database(brows
             op.key_until("g", taken, f"{label} measuring")
         else:  # a click on the point circled 'next', then Measure (M)
             op.click(site.camera.project(X[None])[0])
-            wait_until(lambda: wf.pending_label == label, what=f"{label} picked")
+            wait_until(lambda: wf.pending_label == label, what=f"{label} picked", panel=page.panel)
             op.key_until("m", taken, f"{label} measuring")
         wait_until(lambda: len(wf.pan) == i + 1 and wf.progress is None, timeout_s=60, what=f"{label} measured")
         assert wf.labels[-1] == label
