@@ -68,8 +68,8 @@
     var said = Math.round(best.width) + " " + Math.round(best.height);
     if (said !== told) { told = said; write(input, said); }
   }
-  setInterval(function () { field(); field("mcit-dblclick"); tellSize(); }, 1000); // keep the fields hidden when the panel re-renders
-  window.addEventListener("resize", function () { setTimeout(tellSize, 50); });
+  setInterval(function () { field(); field("mcit-dblclick"); }, 1000); // keep the fields hidden when the panel re-renders
+  setInterval(tellSize, 250); // the view changes size with the window and the docked panel, not only on "resize"
 
   // Double clicks on the video are told here, from the presses' own timestamps (e.timeStamp): the
   // server cannot time them, since a busy page, network or server delays one click's message more

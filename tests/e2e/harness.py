@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import socket
 import time
+import weakref
 
 import numpy as np
 
@@ -81,12 +82,26 @@ def interface_port() -> int:
     return _INTERFACE_PORT[0]
 
 
-def canvas_size(panel) -> tuple[float, float]:
-    """The 3D view's size on the page (CSS pixels, where the mouse clicks), as the page told it; else the canvas's
-    own pixels viser reports (the same at a pixel ratio of 1)."""
-    size = panel.viewport.screen_size
-    cam = panel.client.camera
-    return (float(cam.image_width), float(cam.image_height)) if size is None else (float(size[0]), float(size[1]))
+_PAGE_DPRS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # panel → the DPR its page was opened at
+
+
+def canvas_size(panel, timeout_s: float = 15.0) -> tuple[float, float]:
+    """The 3D view's size on the page (CSS pixels, where the mouse clicks), as the page told it, once it agrees with
+    viser's camera report (the canvas's own pixels, its DPR times the page's): the page tells a new size a moment
+    after the view changed size, the camera report comes with the change. Else the canvas's own pixels."""
+    dpr = _PAGE_DPRS.get(panel)
+    deadline = time.monotonic() + timeout_s
+    while True:
+        size, cam = panel.viewport.screen_size, panel.client.camera
+        agrees = size is not None and (
+            dpr is None or max(abs(size[0] * dpr - cam.image_width), abs(size[1] * dpr - cam.image_height)) <= 1.5
+        )
+        if agrees:
+            return float(size[0]), float(size[1])
+        if time.monotonic() > deadline:
+            scale = 1.0 if dpr is None else dpr
+            return float(cam.image_width) / scale, float(cam.image_height) / scale
+        time.sleep(0.05)
 
 
 def screen_of(server, panel, uv) -> tuple[float, float]:
@@ -513,6 +528,7 @@ class Interface:
         wait_until(lambda: panel.viewport.screen_size is not None, 30.0, "the page to tell its view's size")
         wait_for_steady_camera(panel)  # clicks are placed through the camera the page reports: let the fit land
         page.panel = panel
+        _PAGE_DPRS[panel] = dpr
         return page
 
     def screen_of(self, page, uv):
