@@ -55,7 +55,6 @@
   // changes: viser reports its camera's image in the canvas's own pixels, which are the screen's times the page's
   // pixel ratio (2 on many laptops, less when viser lowers it for speed), and the server's radii (how near a click
   // picks an object or a corner) are in the screen's pixels (app/ui/viewport.py, Viewport.on_canvas_size).
-  var told = "";
   function tellSize() {
     var input = field("mcit-canvas");
     if (!input) return;
@@ -65,8 +64,9 @@
       if (r.width >= 200 && r.height >= 200 && (!best || r.width * r.height > best.width * best.height)) best = r;
     }
     if (!best) return;
+    // told again whenever the field does not hold it: a panel made anew (viser reconnected) has an empty field
     var said = Math.round(best.width) + " " + Math.round(best.height);
-    if (said !== told) { told = said; write(input, said); }
+    if (input.value !== said) write(input, said);
   }
   setInterval(function () { field(); field("mcit-dblclick"); }, 1000); // keep the fields hidden when the panel re-renders
   setInterval(tellSize, 250); // the view changes size with the window and the docked panel, not only on "resize"

@@ -85,23 +85,21 @@ def interface_port() -> int:
 _PAGE_DPRS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # panel → the DPR its page was opened at
 
 
-def canvas_size(panel, timeout_s: float = 15.0) -> tuple[float, float]:
+def canvas_size(panel, timeout_s: float = 30.0) -> tuple[float, float]:
     """The 3D view's size on the page (CSS pixels, where the mouse clicks), as the page told it, once it agrees with
-    viser's camera report (the canvas's own pixels, its DPR times the page's): the page tells a new size a moment
-    after the view changed size, the camera report comes with the change. Else the canvas's own pixels."""
+    viser's camera report (the canvas's own pixels, the page's DPR times its own): the page tells a new size a moment
+    after the view changed size, the camera report comes with the change. AssertionError when they never agree."""
     dpr = _PAGE_DPRS.get(panel)
-    deadline = time.monotonic() + timeout_s
-    while True:
+
+    def agreed() -> bool:
         size, cam = panel.viewport.screen_size, panel.client.camera
-        agrees = size is not None and (
-            dpr is None or max(abs(size[0] * dpr - cam.image_width), abs(size[1] * dpr - cam.image_height)) <= 1.5
-        )
-        if agrees:
-            return float(size[0]), float(size[1])
-        if time.monotonic() > deadline:
-            scale = 1.0 if dpr is None else dpr
-            return float(cam.image_width) / scale, float(cam.image_height) / scale
-        time.sleep(0.05)
+        if size is None:
+            return False
+        return dpr is None or max(abs(size[0] * dpr - cam.image_width), abs(size[1] * dpr - cam.image_height)) <= 1.5
+
+    wait_until(agreed, timeout_s, "the view's size told by the page to agree with viser's camera report", panel=panel)
+    size = panel.viewport.screen_size
+    return float(size[0]), float(size[1])
 
 
 def screen_of(server, panel, uv) -> tuple[float, float]:
