@@ -152,10 +152,11 @@ class Served:
         (cid,) = set(self.server.clients) - before
         return page, self.server.clients[cid]
 
-    def settle(self, page: Page, panel: ClientPanel) -> None:
-        """Wait until the server has read everything ``page`` sent and run the callbacks it caused."""
+    def settle(self, page: Page, panel: ClientPanel, **report) -> None:
+        """Wait until the server has read everything ``page`` sent and run the callbacks it caused (``report``: the
+        fields of the camera report sent to know it, e.g. where the page's camera is)."""
         fov = 0.9 + 0.1 * np.random.default_rng().random()
-        page.send(camera(fov=fov))  # read after everything sent before it: the reader is in order
+        page.send(camera(**(report | {"fov": fov})))  # read after everything sent before it: the reader is in order
         handle = self.server.server.get_clients()[panel.client.client_id]
         deadline = time.monotonic() + 15
         while abs(handle.camera.fov - fov) > 1e-9:
