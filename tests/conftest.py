@@ -25,22 +25,81 @@ def shared_data():
     return shared_data_path
 
 
+_KERNELS_READY = "MCIT_TEST_KERNELS_READY"  # files the warm-up processes write when numba's cache holds the kernels
+# Two processes, one half of the kernels each (core.pose._kernels.WARM_UP_PARTS), the matcher's after the solvers.
+_WARM_UP = (
+    "import pathlib, sys\n"
+    "from core.pose._kernels import warm_up\n"
+    "try:\n"
+    "    warm_up((sys.argv[2],))\n"
+    "    if sys.argv[2] == 'solvers':\n"
+    "        from app.vision.matching import warm_up as warm_up_matching\n"
+    "        warm_up_matching()\n"
+    "    said = 'ready'\n"
+    "except Exception as exc:\n"
+    "    said = f'failed: {exc!r}'\n"
+    "pathlib.Path(sys.argv[1]).write_text(said)\n"
+)
+
+
 def pytest_configure(config):
-    """Under xdist, compile the pose solvers' numba kernels once, in the controller, before the workers start: on a
-    fresh clone (numba's cache empty) each worker compiled them itself at its first solver test, 31 s of CPU each,
-    at the same time. The workers then load them from numba's cache (about 1 s)."""
-    if hasattr(config, "workerinput") or not config.getoption("numprocesses", None):
+    """Under xdist, the pose solvers' numba kernels are compiled once, by two processes the controller starts (half
+    each), while the workers start and run their first tests. On a fresh clone (numba's cache empty) each worker
+    compiled them itself at its first solver test (31 s of CPU each, at the same time), and compiling them in the
+    controller first kept the workers from starting for 46 s. A worker's first call of any compiled function waits
+    for them, then loads the kernels from numba's cache (about 1 s)."""
+    if hasattr(config, "workerinput"):
+        if os.environ.get(_KERNELS_READY):
+            _wait_for_kernels_at_first_compile([Path(p) for p in os.environ[_KERNELS_READY].split(os.pathsep)])
+        return
+    if not config.getoption("numprocesses", None):
         return
     # One thread of numpy's BLAS per worker (the workers inherit the environment): with a thread per core in each
     # worker, more threads than cores, and OpenBLAS's threads wait for each other by spinning: a modelling test file
     # took 80-124 s beside another worker and a busy core, 36-79 s with one thread (the same CPU, 27-31 s).
     for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(name, "1")
-    from app.vision.matching import warm_up as warm_up_matching
-    from core.pose import warm_up
+    import subprocess
+    import sys
+    import tempfile
 
-    warm_up()
-    warm_up_matching()
+    from core.pose._kernels import WARM_UP_PARTS
+
+    folder = Path(tempfile.mkdtemp(prefix="mcit-kernels-"))
+    config._mcit_warm_up = [
+        subprocess.Popen([sys.executable, "-c", _WARM_UP, str(folder / part), part], cwd=PROJECT_ROOT)
+        for part in WARM_UP_PARTS
+    ]
+    os.environ[_KERNELS_READY] = os.pathsep.join(str(folder / part) for part in WARM_UP_PARTS)
+
+
+def pytest_unconfigure(config):
+    for warm_up in getattr(config, "_mcit_warm_up", []):
+        if warm_up.poll() is None:
+            warm_up.kill()
+            warm_up.wait()
+
+
+def _wait_for_kernels_at_first_compile(ready: list[Path], timeout_s: float = 900.0) -> None:
+    """numba compiles a function at its first call with argument types it has no machine code for, after looking in
+    its cache: that first look waits until the warm-up processes have filled the cache (or failed, or timed out: the
+    worker then compiles what it needs itself)."""
+    import time
+
+    from numba.core.dispatcher import Dispatcher
+
+    compile_for_args = Dispatcher._compile_for_args
+    waited = []
+
+    def waiting(self, *args, **kwargs):
+        if not waited:
+            deadline = time.monotonic() + timeout_s
+            while not all(p.exists() for p in ready) and time.monotonic() < deadline:
+                time.sleep(0.1)
+            waited.append(True)
+        return compile_for_args(self, *args, **kwargs)
+
+    Dispatcher._compile_for_args = waiting
 
 
 def pytest_collection_modifyitems(config, items):

@@ -1376,9 +1376,16 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def warm_up() -> None:
-    """Load (or, the first time on a machine, compile: ~30 s) every kernel, with the argument types
-    core.pose passes: call it in a background thread at start-up so that no click waits for it."""
+WARM_UP_PARTS = ("solvers", "refinement")  # two halves of about equal compile time (18-20 s each on first use)
+
+
+def warm_up(parts: tuple[str, ...] = WARM_UP_PARTS) -> None:
+    """Load (or, the first time on a machine, compile: ~45 s) every kernel, with the argument types
+    core.pose passes: call it in a background thread at start-up so that no click waits for it.
+    ``parts``: the P3L solvers, the refinement, or both (two processes can compile one each)."""
+    unknown = set(parts) - set(WARM_UP_PARTS)
+    if unknown:
+        raise ValueError(f"unknown kernel parts {sorted(unknown)}: choose among {WARM_UP_PARTS}")
     C = _readonly(np.array([[500.0, 0.0, 320.0, 0.0], [0.0, 500.0, 240.0, 0.0], [0.0, 0.0, 1.0, 0.0]]))  # a Camera's
     segs = np.array(
         [[[100.0, 100.0], [200.0, 110.0]], [[300.0, 120.0], [310.0, 300.0]], [[120.0, 300.0], [400.0, 250.0]]]
@@ -1389,15 +1396,19 @@ def warm_up() -> None:
     no_uv, no_X = np.zeros((0, 2)), np.zeros((0, 3))
     # read-only as core.pose passes them (core.pose._lazy.frozen): clicks_ok, distance_cost, refine_many's clicks
     ro_segs, ro_edges, ro_uv, ro_X = (_readonly(a) for a in (segs, edges, no_uv, no_X))
-    T, cost = np.empty((MAX_SOLUTIONS, 4, 4)), np.empty(MAX_SOLUTIONS)
-    p3l_solve(C, segs, edges, no_uv, no_X, T, cost)
-    n, d = np.empty((3, 3)), np.empty(3)
-    planes(C, segs, n, d)
-    valid = np.empty((1, MAX_SOLUTIONS), dtype=np.bool_)
-    p3l_many(C, segs[None].copy(), edges[None].copy(), T[None].copy(), valid, False)
-    p3l_many(C, segs[None].copy(), edges[None].copy(), T[None].copy(), valid, True)
-    rotations_many(n[None].copy(), np.ones((1, 3)), np.eye(3)[None].copy(), np.empty((1, MAX_SOLUTIONS, 3, 3)), valid)
-    clicks_ok(ro_segs, ro_edges, ro_uv, ro_X, 1e7, 1e6)
+    if "solvers" in parts:
+        T, cost = np.empty((MAX_SOLUTIONS, 4, 4)), np.empty(MAX_SOLUTIONS)
+        p3l_solve(C, segs, edges, no_uv, no_X, T, cost)
+        n, d = np.empty((3, 3)), np.empty(3)
+        planes(C, segs, n, d)
+        valid = np.empty((1, MAX_SOLUTIONS), dtype=np.bool_)
+        p3l_many(C, segs[None].copy(), edges[None].copy(), T[None].copy(), valid, False)
+        p3l_many(C, segs[None].copy(), edges[None].copy(), T[None].copy(), valid, True)
+        M = np.empty((1, MAX_SOLUTIONS, 3, 3))
+        rotations_many(n[None].copy(), np.ones((1, 3)), np.eye(3)[None].copy(), M, valid)
+        clicks_ok(ro_segs, ro_edges, ro_uv, ro_X, 1e7, 1e6)
+    if "refinement" not in parts:
+        return
     distance_cost(C, _readonly(np.eye(3)), _readonly(np.zeros(3)), ro_edges, ro_segs, ro_X, ro_uv)
     T0 = np.eye(4)
     T0[2, 3] = 0.0

@@ -1,6 +1,7 @@
 """Every ``mcit`` command's failures (app/cli.py): one line on stderr saying what happened and what to
 do, a non-zero exit, no traceback. A sweep runs each sub-command (every one ``mcit --help`` lists:
-a new command without a case here fails the sweep) with bad input in its own process."""
+a new command without a case here fails the sweep) with bad input in a process of its own
+(forked from one that has imported the CLI: tests/forked_cli.py)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from app import cli
+from tests.forked_cli import ForkedCli
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -103,6 +105,16 @@ def test_the_sweep_covers_every_command():
 
 
 @pytest.fixture(scope="module")
+def forked():
+    """Each case in a process of its own, forked from one that has imported the CLI (tests/forked_cli.py)."""
+    runner = ForkedCli()
+    yield runner
+    said = runner.stderr()
+    runner.close()
+    assert said == "", said
+
+
+@pytest.fixture(scope="module")
 def files(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cli")
     notes = tmp / "notes.txt"
@@ -121,11 +133,9 @@ def files(tmp_path_factory):
 @pytest.mark.parametrize(
     "command, arguments, status", CASES, ids=[f"{c} {a.split(' ')[0]} {s}".strip() for c, a, s in CASES]
 )
-def test_a_failure_is_one_line(files, command, arguments, status):
+def test_a_failure_is_one_line(files, forked, command, arguments, status):
     argv = command.split() + [a.format(**files) for a in arguments.split()]
-    run = subprocess.run(
-        [sys.executable, "-m", "app.cli", *argv], capture_output=True, text=True, cwd=ROOT, timeout=300
-    )
+    run = forked.run(argv)
     err = run.stderr
     assert run.returncode == status, (argv, run.returncode, run.stdout, err)
     assert err.count("\n") == 1 and "Traceback" not in err, err

@@ -6,13 +6,12 @@ silenced) and a non-zero exit."""
 from __future__ import annotations
 
 import socket
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from app.video import VideoError, open_video
+from tests.forked_cli import ForkedCli
 
 ROOT = Path(__file__).resolve().parents[2]
 NO_CAMERA = 63  # /dev/video63: checked absent below
@@ -38,6 +37,16 @@ def _bad_sources(tmp_path: Path) -> dict[str, tuple[str, str]]:
     }
 
 
+@pytest.fixture(scope="module")
+def forked():
+    """Each ``mcit serve`` in a process of its own, forked from one that has imported the CLI (tests/forked_cli.py)."""
+    runner = ForkedCli()
+    yield runner
+    said = runner.stderr()
+    runner.close()
+    assert said == "", said
+
+
 @pytest.fixture
 def no_camera():
     if Path(f"/dev/video{NO_CAMERA}").exists():
@@ -55,16 +64,10 @@ def test_each_unopenable_source_says_why_and_what_to_do(tmp_path, no_camera):
 
 
 @pytest.mark.parametrize("name", ["missing", "not a video", "empty", "no camera", "refused stream"])
-def test_serve_on_an_unopenable_video_is_one_line(tmp_path, no_camera, name):
+def test_serve_on_an_unopenable_video_is_one_line(tmp_path, no_camera, forked, name):
     spec, says = _bad_sources(tmp_path)[name]
     db = tmp_path / "site.sqlite"
-    run = subprocess.run(
-        [sys.executable, "-m", "app.cli", "serve", "--video", spec, "--no-devices", "--db", str(db), "--port", "0"],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=120,
-    )
+    run = forked.run(["serve", "--video", spec, "--no-devices", "--db", str(db), "--port", "0"], timeout_s=120)
     assert run.returncode != 0
     assert run.stderr.count("\n") == 1 and "Traceback" not in run.stderr, run.stderr  # FFmpeg's lines silenced too
     assert run.stderr.startswith("mcit serve: ") and says in run.stderr, run.stderr
