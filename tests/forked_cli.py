@@ -1,6 +1,7 @@
 """``mcit`` commands run each in its own process, forked from one that has imported the CLI and what its commands
-load (numpy, SciPy, viser, ...; not OpenCV, whose logging ``main`` sets before it is loaded): a sweep of failing commands otherwise spent most of its CPU starting Python and
-importing the same modules again for every case (about 0.5 s each).
+load (numpy, SciPy, viser, ...; not OpenCV, whose logging ``main`` sets before it is loaded): a sweep of failing
+commands otherwise spent most of its CPU starting Python and importing the same modules again for every case (about
+0.5 s each).
 
 Each command still runs as ``python -m app.cli`` would: a process of its own, its stdout and stderr its own files
 (what native code writes, OpenCV's and FFmpeg's lines, lands there too), its exit status the process's, its

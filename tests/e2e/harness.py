@@ -129,6 +129,13 @@ def wait_until(predicate, timeout_s: float = 60.0, what: str = "condition", pane
     raise AssertionError(f"timed out waiting for {what}{said}")
 
 
+def measured(wf, n: int) -> bool:
+    """Calibrate turret's workflow ``wf`` holds ``n`` measurements and none is under way, its state complete: read
+    under its lock, which a measurement holds from storing the range to its check, message and next suggestion."""
+    with wf.lock:
+        return len(wf.pan) == n and wf.progress is None
+
+
 def panel_state(panel) -> str:
     """What a client's panel shows: its workflow and step, error, warning, message, selection."""
     wf = panel.session.workflow

@@ -18,7 +18,7 @@ import pytest
 from core.transforms import exp_so3, make_T, pose_error
 
 from .flows import Operator
-from .harness import Interface, assert_prompt_controls, site_frame, wait_until, workflow_shown
+from .harness import Interface, assert_prompt_controls, measured, site_frame, wait_until, workflow_shown
 
 pytestmark = pytest.mark.e2e
 
@@ -54,7 +54,7 @@ def test_the_suggested_points_calibrate_the_turret_on_the_shipped_database(brows
             op.click(site.camera.project(X[None])[0])
             wait_until(lambda: wf.pending_label == label, what=f"{label} picked", panel=page.panel)
             op.key_until("m", taken, f"{label} measuring")
-        wait_until(lambda: len(wf.pan) == i + 1 and wf.progress is None, timeout_s=60, what=f"{label} measured")
+        wait_until(lambda: measured(wf, i + 1), timeout_s=60, what=f"{label} measured")
         assert wf.labels[-1] == label
         if "aimed for" in wf.current_step().prompt:
             break
@@ -104,7 +104,7 @@ def test_beams_at_the_moved_parallelepiped_are_left_out_and_said(browser, device
         op.click(cam.project(np.asarray(x)[None])[0])
         wait_until(lambda: wf.pending_X is not None, what="a point picked")
         op.key_until("m", lambda n=i: len(wf.pan) > n or wf.progress is not None, "the point measuring")
-        wait_until(lambda: len(wf.pan) == i + 1 and wf.progress is None, timeout_s=60, what="the point measured")
+        wait_until(lambda: measured(wf, i + 1), timeout_s=60, what="the point measured")
         if i >= len(table) and "the parallelepiped has moved: update its pose first" in wf.message:
             page.get_by_text(re.compile("the parallelepiped has moved: update its pose first")).first.wait_for(
                 timeout=60_000

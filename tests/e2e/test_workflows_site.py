@@ -32,6 +32,7 @@ from .harness import (
     assert_prompt_controls,
     click_control,
     close_notifications,
+    measured,
     press,
     press_key,
     select_by_click,
@@ -277,7 +278,7 @@ def test_calibrate_turret_by_clicks(browser, device_interface, scene):
         assert_prompt_controls(page)
         op.key("m") if i % 2 else op.press("Measure")  # Measure (M): the key and the button
         wait_until(
-            lambda: len(wf.pan) == i + 1 and wf.progress is None,
+            lambda: measured(wf, i + 1),
             timeout_s=60,
             what=f"{label} measured",
             panel=page.panel,
