@@ -103,27 +103,11 @@ def _wait_for_kernels_at_first_compile(ready: list[Path], timeout_s: float = 900
 
 
 def pytest_collection_modifyitems(config, items):
-    """The browser test files spread evenly over the first three quarters of the run, each file kept whole (its
-    fixtures are set up once) and between two other files.
+    """The browser tests first, in their order: xdist (3.8) hands each worker a run of consecutive tests first (a
+    quarter of its share, more than the browser tests), so one worker runs the browser tests and the other the rest.
 
-    xdist (3.8) hands each worker a run of consecutive tests first, then more as it finishes: with the browser
-    tests together, one worker had nearly all of them (526 s of its 600 s) while the other ended 136 s early. Spread
-    out, every run of tests holds its share of them, whichever scheduler hands them out, and the end of the run is
-    short tests (the same order in every process, as xdist requires)."""
-    files: dict[str, list] = {}
-    for item in items:
-        files.setdefault(item.nodeid.split("::")[0], []).append(item)
-    browser = [f for name, f in files.items() if name.startswith("tests/e2e/")]
-    others = [f for name, f in files.items() if not name.startswith("tests/e2e/")]
-    if not browser or not others:
-        return
-    span = 0.75 * sum(len(f) for f in others)  # the browser files placed among the first three quarters
-    order, done, b = [], 0, 0
-    for f in others:
-        while b < len(browser) and done >= span * b / len(browser):
-            order.append(browser[b])
-            b += 1
-        order.append(f)
-        done += len(f)
-    order.extend(browser[b:])
-    items[:] = [item for f in order for item in f]
+    The browser tests mostly wait (for the page, the server, a robot's motion) and the rest mostly compute, so the
+    two workers overlap well, and beside a busy core each takes about as long (601-710 s). Spread over both
+    workers, the two often waited at once and computed at once: a quiet run was shorter (508 s against 620 s),
+    runs beside a busy core were not (710 and 727 s)."""
+    items.sort(key=lambda item: 0 if item.nodeid.startswith("tests/e2e/") else 1)
