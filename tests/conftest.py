@@ -25,6 +25,19 @@ def shared_data():
     return shared_data_path
 
 
+@pytest.fixture(scope="module")
+def forked():
+    """``mcit`` commands each in a process of its own, forked from one that has imported the CLI
+    (tests/forked_cli.py): ``forked.run(argv)``."""
+    from tests.forked_cli import ForkedCli
+
+    runner = ForkedCli()
+    yield runner
+    said = runner.stderr()
+    runner.close()
+    assert said == "", f"the forking process wrote on stderr: {said}"
+
+
 _KERNELS_READY = "MCIT_TEST_KERNELS_READY"  # files the warm-up processes write when numba's cache holds the kernels
 # Two processes, one half of the kernels each (core.pose._kernels.WARM_UP_PARTS), the matcher's after the solvers.
 _WARM_UP = (

@@ -14,7 +14,6 @@ from pathlib import Path
 import pytest
 
 from app import cli
-from tests.forked_cli import ForkedCli
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -102,16 +101,6 @@ CASES = [
 def test_the_sweep_covers_every_command():
     missing = _commands() - {c for c, _, _ in CASES}
     assert not missing, f"add a failure case for: {sorted(missing)}"
-
-
-@pytest.fixture(scope="module")
-def forked():
-    """Each case in a process of its own, forked from one that has imported the CLI (tests/forked_cli.py)."""
-    runner = ForkedCli()
-    yield runner
-    said = runner.stderr()
-    runner.close()
-    assert said == "", said
 
 
 @pytest.fixture(scope="module")

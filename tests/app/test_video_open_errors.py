@@ -11,7 +11,6 @@ from pathlib import Path
 import pytest
 
 from app.video import VideoError, open_video
-from tests.forked_cli import ForkedCli
 
 ROOT = Path(__file__).resolve().parents[2]
 NO_CAMERA = 63  # /dev/video63: checked absent below
@@ -35,16 +34,6 @@ def _bad_sources(tmp_path: Path) -> dict[str, tuple[str, str]]:
         "no camera": (str(NO_CAMERA), f"there is no camera {NO_CAMERA}"),
         "refused stream": (f"rtsp://op:s3cret@127.0.0.1:{_refused_port()}/live", "Connection refused"),
     }
-
-
-@pytest.fixture(scope="module")
-def forked():
-    """Each ``mcit serve`` in a process of its own, forked from one that has imported the CLI (tests/forked_cli.py)."""
-    runner = ForkedCli()
-    yield runner
-    said = runner.stderr()
-    runner.close()
-    assert said == "", said
 
 
 @pytest.fixture
