@@ -4,15 +4,17 @@ commands otherwise spent most of its CPU starting Python and importing the same 
 0.5 s each).
 
 Each command still runs as ``python -m app.cli`` would: a process of its own, its stdout and stderr its own files
-(what native code writes, OpenCV's and FFmpeg's lines, lands there too), its exit status the process's, its
-environment changed as asked; the forking process is never touched by a command. What importing wrote on the
-forking process's stderr (a warning at import, which a real start would show on every command) fails the run.
+(what native code writes, OpenCV's and FFmpeg's lines, lands there too), its exit status the process's; the forking
+process is never touched by a command. What importing wrote on the forking process's stderr (a warning at import,
+which a real start would show on every command) fails the run.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import select
+import signal
 import subprocess
 import sys
 import tempfile
@@ -20,7 +22,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# The forking process: imports, says "ready", then forks a child per request line (JSON: argv, env) and answers a
+# The forking process: imports, says "ready", then forks a child per request line (JSON: argv) and answers a
 # line (JSON: status, stdout, stderr) once the child has ended.
 _SERVER = r"""
 import json, os, sys, tempfile
@@ -39,9 +41,6 @@ for line in sys.stdin:
             os.dup2(devnull, 0)
             os.dup2(out.fileno(), 1)
             os.dup2(err.fileno(), 2)
-            os.environ.update(request["env"])
-            for name in request["unset"]:
-                os.environ.pop(name, None)
             try:
                 status = app.cli.main(request["argv"])
             except SystemExit as exit_:
@@ -79,16 +78,15 @@ class ForkedCli:
             stdout=subprocess.PIPE,
             stderr=self._err,
             text=True,
+            start_new_session=True,  # a command that hangs is killed with the forking process (close)
         )
         ready = self._line(120.0)
-        assert ready == "ready", f"the forking process did not start: {ready!r} {self._stderr()!r}"
-        assert self._stderr() == "", f"importing the CLI wrote on stderr: {self._stderr()!r}"
+        assert ready == "ready", f"the forking process did not start: {ready!r} {self.stderr()!r}"
+        assert self.stderr() == "", f"importing the CLI wrote on stderr: {self.stderr()!r}"
 
-    def run(
-        self, argv: list[str], env: dict[str, str] | None = None, unset: tuple[str, ...] = (), timeout_s: float = 300.0
-    ) -> subprocess.CompletedProcess:
+    def run(self, argv: list[str], timeout_s: float = 300.0) -> subprocess.CompletedProcess:
         """``python -m app.cli *argv`` in a process of its own: its exit status, stdout and stderr."""
-        request = {"argv": [str(a) for a in argv], "env": env or {}, "unset": list(unset)}
+        request = {"argv": [str(a) for a in argv]}
         self._proc.stdin.write(json.dumps(request) + "\n")
         self._proc.stdin.flush()
         answer = json.loads(self._line(timeout_s))
@@ -97,15 +95,13 @@ class ForkedCli:
     def _line(self, timeout_s: float) -> str:
         ready, _, _ = select.select([self._proc.stdout], [], [], timeout_s)
         if not ready:
+            os.killpg(self._proc.pid, signal.SIGKILL)  # the forking process and the command it waits for
             self.close()
             raise TimeoutError(f"no answer within {timeout_s:g} s from the forked command")
         return self._proc.stdout.readline().strip()
 
     def stderr(self) -> str:
         """What the forking process itself wrote on stderr (nothing, unless importing or forking went wrong)."""
-        return self._stderr()
-
-    def _stderr(self) -> str:
         self._err.seek(0)
         return self._err.read().decode("utf-8", "replace")
 
