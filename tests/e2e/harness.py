@@ -331,7 +331,10 @@ def close_notifications(page, timeout_s: float = 20.0, required: bool = True) ->
 # idle page took 1.1 cores of the software WebGL at 60 frames/s, 0.34 at 10. Animations in the page are timed by the
 # clock, not by frames (viser's camera moves, its damping), so they end when they would, in fewer frames.
 # Playwright's own checks (a control steady before a click) run in their own world and keep the real frames.
-FRAME_GAP_MS = 100
+# tests/e2e/test_interface.py and test_robot.py (9 tests, 3 pages at dpr 1) at a frame every 100 / 250 / 500 ms: the GPU
+# process 43.6 / 30.0 / 19.1 s of CPU, the renderer 23.1 / 21.3 / 21.2 s, 71 / 72 / 81 s: at 500 ms the page's waits
+# grew, at 250 ms they did not.
+FRAME_GAP_MS = 250
 KEEPER_URL = "http://127.0.0.1:9/keeper"  # answered by the context itself (port 9: nothing listens there)
 PACED_FRAMES_JS = """(() => {
   const gap = FRAME_GAP_MS, raf = window.requestAnimationFrame.bind(window);
