@@ -154,10 +154,12 @@ def _last_click(panel) -> str:
     return "none" if last is None else f"({last[1][0]:.1f}, {last[1][1]:.1f})"
 
 
-def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float = 0.6) -> None:
+def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float | None = None) -> None:
     """Wait until the page has been fitted and the viewer camera it reports has not changed for
     ``steady_s`` (a click placed through a camera the page has already left misses: on a loaded
-    machine the fitted camera can arrive well after the page connects)."""
+    machine the fitted camera can arrive well after the page connects). By default three of the page's frames
+    (FRAME_GAP_MS): a camera on the move reports at each frame."""
+    steady_s = 3 * FRAME_GAP_MS / 1000 if steady_s is None else steady_s
 
     def state():
         cam = panel.client.camera

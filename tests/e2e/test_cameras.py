@@ -107,6 +107,9 @@ def test_both_cameras_frozen_fitted_side_by_side_and_clicked_in(browser, two_cam
         what="both images fitted side by side",
         panel=panel,
     )
+    # the click is placed through the camera the page reports: wait for the fit's move to end (its look-at can
+    # reach the middle while the view still zooms out)
+    wait_for_steady_camera(panel)
     assert panel.camera_view == "front"
     side = ui.site.camera_of("side")
     V = ui.site.object("parallelepiped").vertices_world()
