@@ -201,7 +201,7 @@ class ClientPanel:
     # ------------------------------------------------------------------ intents: start, press, select
     def start(self, name: str, _event=None) -> None:
         """A Start button: the workflow ``name`` in the camera shown, with the form's options."""
-        if self.busy:
+        if _running(self):
             raise WorkflowError("a measurement is running: wait for it or Cancel it first")
         self.error = ""
         form = {"shape": self.gui_shape.value, "vertical": bool(self.gui_vertical.value)}
@@ -242,7 +242,7 @@ class ClientPanel:
         if action == "cancel":
             self._cancel(wf, c)
             return
-        if self.busy:
+        if _running(self):
             raise WorkflowError("a measurement is running: wait for it, or Cancel")
         args: tuple = ()
         if c.arg is not None:
@@ -517,3 +517,13 @@ def _sentence(text: str) -> str:
     if not any(ch == "_" or ch.isdigit() for ch in first):  # an object's name ("cylinder_1 has …") keeps its case
         text = text[0].upper() + text[1:]
     return text if text.endswith((".", "!", "?")) else text + "."
+
+
+def _running(panel: ClientPanel, timeout_s: float = 0.25) -> bool:
+    """Whether a long action runs on ``panel``'s worker, for a press. One that has returned leaves its worker a moment
+    to say what it did: the press then waits (at most ``timeout_s``) for it to end, rather than being refused as "a
+    measurement is running" (Measure next pressed as the last measurement's result showed, on a loaded machine)."""
+    worker = panel.worker
+    if worker is not None and worker.is_alive() and not panel._performing:
+        worker.join(timeout_s)
+    return panel.busy

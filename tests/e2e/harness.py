@@ -268,20 +268,21 @@ def key_until(page, key: str, predicate, what: str, panel=None) -> int:
 
     The page sends a key only as a shortcut it has taken (``panel.keys_received`` counts those that reached the
     server): a key that reached neither the server nor ``predicate`` within REACH_S is pressed again at once, rather
-    than after the whole wait (a turret test lost 6 s a run to it). Without the page's panel, after 6 s."""
+    than after the whole wait (a turret test lost 6 s a run to it). A key that reached the server but was refused
+    (a measurement's worker not yet ended: "a measurement is running") is pressed again after 6 s, as before."""
     panel = panel if panel is not None else getattr(page, "panel", None)
     for attempt in (1, 2, 3):
         before = None if panel is None else panel.keys_received
         page.keyboard.press(key)
-        reached = (lambda: predicate() or panel.keys_received > before) if panel is not None else predicate
         try:
-            wait_until(reached, REACH_S if panel is not None else 6.0, f"the key {key} taken")
+            if panel is not None:
+                reached = lambda: predicate() or panel.keys_received > before  # noqa: E731
+                wait_until(reached, REACH_S if attempt < 3 else 30.0, f"the key {key} to reach the server")
+            wait_until(predicate, 6.0 if attempt < 3 else 30.0, what, panel=panel)
+            return attempt
         except AssertionError:
             if attempt == 3:
                 raise
-            continue
-        wait_until(predicate, 30.0, what, panel=panel)
-        return attempt
     return 3
 
 

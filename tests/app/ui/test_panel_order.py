@@ -2,15 +2,18 @@
 (tests/app/ui/test_ws_fuzz.py's ``Served``): the panel's own setting of the Object chooser is not the operator's
 choice; a click that reached the server before a question (handled after it) leaves the question; a question's
 button label is drawn from the panel's state by every redraw (a redraw that read the state before the question had
-set it back); the controls come back when a long action's worker ends after its last redraw."""
+set it back); the controls come back when a long action's worker ends after its last redraw; a press during a long
+action is refused, and one as its worker ends waits for it."""
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
 import pytest
 
+from app.workflows import WorkflowError
 from tests.app.ui.test_ws_fuzz import Served, camera
 from tests.e2e.harness import wait_until
 
@@ -128,3 +131,26 @@ def test_a_fit_is_pending_until_the_page_reports_its_camera_there(served_page):
     assert vp.fit_pending
     page.send(camera(position=[float(x) for x in fitted], fov=0.95))  # the page shows the fit
     wait_until(lambda: not vp.fit_pending, 15.0, "the fit no longer pending")
+
+
+def test_a_press_during_a_long_action_is_refused_and_one_as_its_worker_ends_waits_for_it(served_page):
+    served, page, panel = served_page
+    wf, controls = _update_pose_controls(panel)
+    action = sorted(a for a in wf.current_step().enabled if a != "cancel" and a in controls.handles)[0]
+    running = threading.Thread(target=time.sleep, args=(1.0,))  # the action under way
+    running.start()
+    panel.worker, panel._performing = running, True
+    try:
+        with pytest.raises(WorkflowError, match="a measurement is running"):
+            panel.press(action)
+    finally:
+        panel._performing = False
+        running.join()
+    ending = threading.Thread(target=time.sleep, args=(0.1,))  # its action returned: the worker is saying so
+    ending.start()
+    panel.worker = ending
+    try:
+        panel.press(action)
+    except WorkflowError as exc:  # what the action itself may say (nothing clicked yet), never that one runs
+        assert "measurement is running" not in str(exc), exc
+    assert not ending.is_alive()
