@@ -100,9 +100,14 @@ def test_the_base_is_calibrated_from_edges_clicked_on_the_live_video(browser, tm
                     op.click(cam.project(drawn[f]).mean(axis=0))
                     wait_until(lambda: edge.feature is not None, 30.0, "the edge assigned", panel=page.panel)
                     hand += 1
+                    how = "assigned by the click on the robot"
                 else:
                     auto += 1
-                assert edge.feature == f, f"edge {len(wf.edges)} was taken for {edge.feature}; it is {f}"
+                    how = "matched automatically"
+                assert edge.feature == f, (
+                    f"edge {len(wf.edges)} at pose {k + 1} was {how} to {edge.feature}; it is {f} "
+                    f"(the frame of t = {wf.frame.t_s} s)"
+                )
         op.key("r")
         _said(page, "step=review", "the solved base")
         op.check()
