@@ -5,14 +5,16 @@ more preset joint configurations (the scene's ``calibration_base_deg``).
 (``RobotTour``); once it is there the newest frame is frozen. The operator clicks two points along a
 straight edge of the robot in the video — a box's edge (the gripper, the fingers) or a link's silhouette
 (a cylinder's side) — snapped to the image's edge as Update pose's clicks are. Which feature of the robot's
-model it is, is found automatically when one alone fits (``core.robot.calibration.match_segment``: the
-features drawn at the current estimate, white, near the clicked segment and along it); otherwise the
-operator clicks that edge on the drawn robot. With four edges or more the estimate follows the clicks (the
-white robot moves onto the video), so later edges match more surely. **Solve** (R) fits the one base pose
-that all the clicked edges of every pose share (``core.robot.calibration.refine_base``: the pose pipeline's
-refinement, silhouettes recomputed at each estimate), with σ (clicks, and the camera calibration's share);
-**Accept** stores it as the database's "robot_base" calibration (undoable in History like a camera's): the
-robot is drawn, checked and moved through it from then on.
+model it is, is found automatically when only one can be it given how well the estimate is known
+(``core.robot.calibration.match_segment``: the features drawn at the current estimate, white, each one's
+distance to the clicks against the estimate's covariance); otherwise the operator clicks that edge on the
+drawn robot. A base not yet calibrated has no covariance (a drawing's error is unknown), so its first edges
+are always assigned by hand; with four edges or more the estimate follows the clicks (the white robot moves
+onto the video) with the fit's covariance, and later edges are matched automatically where one alone fits.
+**Solve** (R) fits the one base pose that all the clicked edges of every pose share
+(``core.robot.calibration.refine_base``: the pose pipeline's refinement, silhouettes recomputed at each estimate),
+with σ (clicks, and the camera calibration's share); **Accept** stores it as the database's "robot_base"
+calibration (undoable in History like a camera's): the robot is drawn, checked and moved through it from then on.
 """
 
 from __future__ import annotations
@@ -100,6 +102,8 @@ class CalibrateRobot(TourWorkflow):
         self.pending: np.ndarray | None = None
         self.T_start = np.asarray(self.cell.T_world_base, float).copy()  # the database's base
         self.T_est = self.T_start.copy()  # the estimate the white robot is drawn at and edges are matched on
+        self.cov_start = None if self.site.robot_base_nominal else self.site.robot_base_cov
+        self.cov_est = self.cov_start  # its covariance (None: unknown, every edge is assigned by hand)
         self.fit = None  # core.robot.calibration.BaseFit of the last Solve (None: clicks changed since)
 
     # ------------------------------------------------------------------ the robot's poses
@@ -136,14 +140,17 @@ class CalibrateRobot(TourWorkflow):
             edge = _Edge(np.asarray(uv_used, float), float(sigma), snap, k)
             self.edges.append(edge)
             self._changed()
-            feats, proj = self._candidates(k)
-            j, _ = match_segment(edge.seg, proj)
             said = Snapper.message(f"Edge {len(self.edges)}", snap)
+            j, why = None, " (the base is not known well enough yet to match it)"
+            if self.cov_est is not None:
+                feats, segs = self._candidates(k, world=True)
+                j, _ = match_segment(edge.seg, segs, self.camera, self.T_est, self.cov_est, sigma_px=edge.sigma_px)
+                why = ""
             if j is None:
                 self.state = "assign_edge"
                 self.message = (
                     said + " " if said else ""
-                ) + "Which edge of the robot is it? Click it on the white robot."
+                ) + f"Which edge of the robot is it{why}? Click it on the white robot."
                 return
             self._assign(edge, feats[j], "auto", said)
 
@@ -237,17 +244,17 @@ class CalibrateRobot(TourWorkflow):
     def _links(self) -> list[str]:
         return [link for link, _, _ in self.model.link_breps(self.tour.qs[0])]
 
-    def _candidates(self, k: int) -> tuple[list[RobotFeature], np.ndarray]:
+    def _candidates(self, k: int, world: bool = False) -> tuple[list[RobotFeature], np.ndarray]:
         """The features of the robot at pose k seen at the estimate, not yet assigned there, and their pixels
-        (F, 2, 2) through the camera."""
+        (F, 2, 2) through the camera (``world``: their segments in the world (F, 2, 3))."""
         cam = self.camera
         used = {e.feature for e in self.edges if e.feature is not None}
         feats, segs = [], []
         for f, seg, visible in features_at(self.model, self.tour.arrived[k], self.T_est, cam.center, config=k):
             if visible and f not in used and np.all(cam.depth(seg) > 0):
                 feats.append(f)
-                segs.append(cam.project(seg))
-        return feats, np.array(segs).reshape(-1, 2, 2)
+                segs.append(seg if world else cam.project(seg))
+        return feats, np.array(segs).reshape((-1, 2, 3) if world else (-1, 2, 2))
 
     def _problem(self) -> tuple[np.ndarray, list[BaseClick]]:
         """The poses' joints (K, n) as reported on arrival (poses not reached: their presets) and the clicks."""
@@ -257,8 +264,8 @@ class CalibrateRobot(TourWorkflow):
 
     def _follow_estimate(self) -> bool:
         """Move the drawn estimate onto the clicks once they fix it well enough; True when it moved."""
+        self.T_est, self.cov_est = self.T_start.copy(), self.cov_start
         if len(self._assigned()) < ESTIMATE_FROM:
-            self.T_est = self.T_start.copy()
             return False
         configs, clicks = self._problem()
         try:  # from the database's base each time: a wrong edge removed leaves no trace
@@ -269,7 +276,7 @@ class CalibrateRobot(TourWorkflow):
             return False
         if 1000 * fit.std_position_m > ESTIMATE_MAX_MM or np.degrees(fit.std_angle_rad) > ESTIMATE_MAX_DEG:
             return False
-        self.T_est = fit.T_world_base
+        self.T_est, self.cov_est = fit.T_world_base, fit.cov
         return True
 
     def solve(self):
@@ -295,7 +302,7 @@ class CalibrateRobot(TourWorkflow):
             self._check_open()
             if [e.feature for e in self._assigned()] != [c.feature for c in clicks]:
                 raise WorkflowError("the clicks changed while solving: Solve again")
-            self.fit, self.T_est, self.state = fit, fit.T_world_base.copy(), "review"
+            self.fit, self.T_est, self.cov_est, self.state = fit, fit.T_world_base.copy(), fit.cov, "review"
             self.message = self._solved_text() + "."
             return fit
 

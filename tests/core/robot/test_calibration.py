@@ -154,23 +154,50 @@ def test_features_at_lists_edges_with_their_visibility_and_both_silhouettes():
         assert np.allclose(transform_points(T_TRUE, feature_line(MODEL, CONFIGS[0], f, c_base)), seg)
 
 
-def test_match_segment_takes_the_one_feature_that_fits():
-    proj = np.array(
-        [
-            [[0.0, 0.0], [100.0, 0.0]],  # along u at v = 0
-            [[0.0, 30.0], [100.0, 30.0]],  # parallel, 30 px below
-            [[50.0, -50.0], [50.0, 50.0]],  # across
-        ]
-    )
-    j, score = match_segment(np.array([[20.0, 4.0], [80.0, 4.0]]), proj)
-    assert j == 0 and score[0] == pytest.approx(4.0) and np.isinf(score[2])
-    j, _ = match_segment(np.array([[20.0, 15.0], [80.0, 15.0]]), proj)  # halfway between the two parallels
-    assert j is None
-    j, _ = match_segment(np.array([[20.0, 4.0], [80.0, 4.0]]) + [300.0, 0.0], proj)  # beside no feature
-    assert j is None
-    j, _ = match_segment(np.array([[20.0, 4.0], [80.0, 30.0]]), proj)  # 23° off every direction
-    assert j is None
-    assert match_segment(np.array([[0.0, 0.0], [1.0, 1.0]]), np.zeros((0, 2, 2)))[0] is None
+def _visible(q, T):
+    """The robot's visible features at q and base T in front of CAM: (features, world segments (F, 2, 3))."""
+    got = [(f, s) for f, s, v in features_at(MODEL, q, T, CAM.center) if v and np.all(CAM.depth(s) > 0)]
+    return [f for f, _ in got], np.array([s for _, s in got])
+
+
+def test_match_segment_takes_the_one_feature_the_base_s_uncertainty_allows():
+    q, sharp = CONFIGS[0], np.diag([1e-6] * 3 + [np.radians(0.05) ** 2] * 3)  # the base known to 1 mm, 0.05°
+    feats, W = _visible(q, T_TRUE)
+    P = CAM.project(W.reshape(-1, 3)).reshape(-1, 2, 2)
+    L = np.linalg.norm(P[:, 1] - P[:, 0], axis=1)
+    i = int(np.argmax(L))  # the longest feature in the image
+    click = P[i, 0] + np.array([[0.3], [0.7]]) * (P[i, 1] - P[i, 0])
+    j, d2 = match_segment(click, W, CAM, T_TRUE, sharp)
+    assert j == i and d2[i] < 1e-6
+    n = np.array([-(P[i, 1] - P[i, 0])[1], (P[i, 1] - P[i, 0])[0]]) / L[i]
+    assert match_segment(click + 30 * n, W, CAM, T_TRUE, sharp)[0] != i  # 30 px off: not it
+    vague = np.diag([0.05**2] * 3 + [np.radians(5.0) ** 2] * 3)  # 5 cm, 5°: several features could be it
+    j, d2 = match_segment(click, W, CAM, T_TRUE, vague)
+    assert j is None and np.sum(d2 < 13.8) > 1
+    assert match_segment(click, np.zeros((0, 2, 3)), CAM, T_TRUE, sharp)[0] is None
+
+
+def test_match_segment_is_never_wrong_when_the_estimate_is_as_far_off_as_its_covariance_says():
+    """A click on each feature, matched at estimates drawn from the covariance about the truth: the old matcher
+    (nearest within 20 px, twice as near as the next) took another feature here for a base 2.5 cm and 2° off."""
+    rng = np.random.default_rng(3)
+    cov = np.diag([0.008**2] * 3 + [np.radians(0.8) ** 2] * 3)
+    right = wrong = 0
+    for q in CONFIGS:
+        feats, W = _visible(q, T_TRUE)
+        P = CAM.project(W.reshape(-1, 3)).reshape(-1, 2, 2)
+        for _ in range(8):
+            d = rng.multivariate_normal(np.zeros(6), cov)
+            T_est = make_T(exp_so3(d[3:]), d[:3] + T_TRUE[:3, 3] - exp_so3(d[3:]) @ T_TRUE[:3, 3]) @ T_TRUE
+            feats_est, W_est = _visible(q, T_est)
+            for f, p in zip(feats, P):
+                if np.linalg.norm(p[1] - p[0]) < 25 or f not in feats_est:
+                    continue
+                click = p[0] + np.array([[0.25], [0.75]]) * (p[1] - p[0]) + rng.normal(0, 0.7, (2, 1))
+                j, _ = match_segment(click, W_est, CAM, T_est, cov, sigma_px=0.7)
+                right += j is not None and feats_est[j] == f
+                wrong += j is not None and feats_est[j] != f
+    assert wrong == 0 and right > 50, (wrong, right)
 
 
 def test_tip_corners_are_the_closed_fingertips_end_corners():
