@@ -70,7 +70,9 @@ def pytest_configure(config):
     # One thread of numpy's BLAS per worker (the workers inherit the environment): with a thread per core in each
     # worker, more threads than cores, and OpenBLAS's threads wait for each other by spinning: a modelling test file
     # took 80-124 s beside another worker and a busy core, 36-79 s with one thread (the same CPU, 27-31 s).
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    # OpenCV's thread pool likewise waits actively: test_calibrate_intrinsics.py and test_search.py beside a busy
+    # core, 32.8 s of CPU and 31.8 s of wall with its default pool, 28.0 s and 27.1 s with one thread.
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENCV_FOR_THREADS_NUM"):
         os.environ.setdefault(name, "1")
     import subprocess
     import sys
