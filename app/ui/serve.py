@@ -71,8 +71,9 @@ def add_serve_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     p.add_argument(
         "--port",
         type=port_number,
-        default=8080,
-        help="port, 1 to 65535 (default 8080; when taken, the next free one, said on stderr; 0: any free port)",
+        default=None,
+        help=f"port, 1 to 65535 (default {DEFAULT_PORT}, or the next free one when it is taken, said on stderr); a "
+        "port given here is the one listened on, the start refused when it is taken; 0: any free port",
     )
     p.add_argument(
         "--video",
@@ -272,7 +273,8 @@ def _check_host(host: str, port: int) -> None:
             raise
 
 
-PORT_TRIES = 100  # --port P taken: P + 1 … P + 99 are tried, then the start is refused
+DEFAULT_PORT = 8080
+PORT_TRIES = 100  # the default port taken: the 99 after it are tried, then the start is refused
 
 
 def _bind_error(host: str, port: int) -> OSError | None:
@@ -334,8 +336,10 @@ def build_interface(args: argparse.Namespace, bodies_at=None):
     from app.workflows import Site
 
     access = _access_policy(args)  # before anything opens: a bad --token or --allow-origin stops here
-    _check_host(args.host, args.port)  # and an address this machine does not have
-    port = free_port(args.host, args.port)  # the next free one when it is taken (run_serve says so)
+    _check_host(args.host, DEFAULT_PORT if args.port is None else args.port)  # an address this machine does not have
+    # the default port, or the next free one when it is taken (run_serve says so); a port given is that one or none:
+    # a proxy, a tunnel or a script set up for it would reach another program, or nothing
+    port = free_port(args.host, DEFAULT_PORT) if args.port is None else free_port(args.host, args.port, tries=1)
     if getattr(args, "site", None) is not None:  # a site folder (mcit site new): its scene, database and video
         from app.site_folder import serve_site_args
 
@@ -582,8 +586,8 @@ def run_serve(args: argparse.Namespace) -> int:
     except BaseException:  # said by app.cli in one line (a database that is not one, ...): OpenGL released first
         _release_gl()
         raise
-    if args.port and server.port != args.port:
-        print(f"mcit serve: port {args.port} is in use: listening on port {server.port} instead", file=sys.stderr)
+    if args.port is None and server.port != DEFAULT_PORT:
+        print(f"mcit serve: port {DEFAULT_PORT} is in use: listening on port {server.port} instead", file=sys.stderr)
     # SIGTERM stops the interface from before its address is printed: a supervisor may stop it as soon as it reads it
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

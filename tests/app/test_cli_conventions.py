@@ -166,32 +166,58 @@ def test_a_port_that_cannot_be_had_is_one_line(monkeypatch):
         serve.free_port("127.0.0.1", 80)
 
 
-def test_serve_on_a_taken_port_says_which_it_took(tmp_path):
+def _serve(tmp_path, *extra: str) -> tuple[subprocess.Popen, str]:
+    """``mcit serve`` on a still folder, started: (the process, the address line it printed, "" if none)."""
     import cv2
 
-    (tmp_path / "frames").mkdir()
+    (tmp_path / "frames").mkdir(exist_ok=True)
     cv2.imwrite(str(tmp_path / "frames" / "f0.png"), np.full((256, 512), 90, np.uint8))
+    argv = ["serve", "--video", tmp_path / "frames", "--no-devices", "--recorded", "--db", tmp_path / "s.sqlite"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "app.cli", *map(str, argv), *extra],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    return proc, next((line for line in proc.stdout if line.startswith("mcit: open ")), "")
+
+
+def test_serve_on_the_default_port_taken_says_which_it_took(tmp_path):
+    from app.ui.serve import DEFAULT_PORT
+
     with socket.socket() as taken:
-        taken.bind(("127.0.0.1", 0))
-        taken.listen()
-        port = taken.getsockname()[1]
-        argv = ["serve", "--video", tmp_path / "frames", "--no-devices", "--recorded", "--db", tmp_path / "s.sqlite"]
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "app.cli", *map(str, argv), "--port", str(port)],
-            cwd=ROOT,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
         try:
-            url = next((line for line in proc.stdout if line.startswith("mcit: open ")), "")
+            taken.bind(("127.0.0.1", DEFAULT_PORT))
+            taken.listen()
+        except OSError:
+            pass  # taken by another program: as good
+        proc, url = _serve(tmp_path)
+        try:
+            assert url, "no address printed"
         finally:
             proc.send_signal(signal.SIGTERM)
             _, err = proc.communicate(timeout=120)
     got = int(re.search(r":(\d+) in a browser", url).group(1))
-    assert got != port and proc.returncode == 0, err
+    assert got != DEFAULT_PORT and proc.returncode == 0, err
     said = [line for line in err.splitlines() if "in use" in line]
-    assert said == [f"mcit serve: port {port} is in use: listening on port {got} instead"], err
+    assert said == [f"mcit serve: port {DEFAULT_PORT} is in use: listening on port {got} instead"], err
+
+
+def test_serve_on_a_given_port_taken_refuses_to_start(tmp_path):
+    """A port given is the one listened on: a proxy, a tunnel or a script set up for it would reach another."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        proc, url = _serve(tmp_path, "--port", str(port))
+        _, err = proc.communicate(timeout=120)
+    assert url == "" and proc.returncode == 1, err
+    assert err == (
+        f"mcit serve: error: --port {port}: port {port} is in use on 127.0.0.1; give another --port, or 0 for any "
+        "free port\n"
+    )
+    assert not (tmp_path / "s.sqlite").exists()  # nothing opened, nothing written
 
 
 @pytest.mark.parametrize(

@@ -230,7 +230,7 @@ def test_a_rate_or_port_out_of_range_is_refused_by_the_parser(capsys, argv, says
         ("serve", "fps", None),
         ("serve --port 1", "port", 1),
         ("serve --port 65535", "port", 65535),
-        ("serve", "port", 8080),
+        ("serve", "port", None),  # the default port, or the next free one (tests/app/test_cli_conventions.py)
         ("serve --port 0", "port", 0),  # any free port: viser binds port 0 and reports the one the system chose
         ("track video.mp4 --fps 60", "fps", 60.0),
         ("track video.mp4", "fps", 25.0),

@@ -659,11 +659,15 @@ class ServedInterface(Interface):
     def __init__(self, argv: list[str]):
         import argparse
 
+        from app.ui import serve as serve_module
         from app.ui.serve import add_serve_parser, build_interface
 
         parser = argparse.ArgumentParser()
         add_serve_parser(parser.add_subparsers(dest="command"))
-        args = parser.parse_args(["serve", "--port", str(interface_port()), *argv])
+        port = interface_port()
+        if serve_module._bind_error("127.0.0.1", port) is not None:  # a given port is that one or none: another
+            port = free_port()
+        args = parser.parse_args(["serve", "--port", str(port), *argv])
         self.server, self.closers = build_interface(args)
         self.server.start()
         self.site = self.server.site

@@ -13,7 +13,7 @@ from tests.e2e.harness import free_port
 
 def test_defaults_listen_on_loopback_with_emulated_devices():
     args = build_parser().parse_args(["serve"])
-    assert args.host == "127.0.0.1" and args.port == 8080
+    assert args.host == "127.0.0.1" and args.port is None  # 8080, or the next free one
     assert args.video == [] and args.db is None and args.rangefinder is None and not args.no_devices
 
 
