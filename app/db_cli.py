@@ -57,6 +57,30 @@ def _cmd_init(args) -> int:
     return 0
 
 
+FAR_TIMES_SIZE = 1000  # a pose this many times the model's size from the camera: a file in millimetres
+
+
+def _check_distance(pose_path, name: str, model, T_cam_obj, T_world_obj, camera) -> None:
+    """ValueError when the pose puts the object more than FAR_TIMES_SIZE times its size from the camera (a pose in
+    millimetres read as metres: 0.5 m becomes 500 m, and the object a dot). The distance from the pose in the camera
+    frame, else from the camera's centre when the site has a camera; no check without either."""
+    import numpy as np
+
+    if T_cam_obj is not None:
+        far = float(np.linalg.norm(np.asarray(T_cam_obj)[:3, 3]))
+    elif camera is not None:
+        far = float(np.linalg.norm(np.asarray(T_world_obj)[:3, 3] - camera.center))
+    else:
+        return
+    lo, hi = model.bounds()
+    size = float(np.max(hi - lo))
+    if size > 0 and far > FAR_TIMES_SIZE * size:
+        raise ValueError(
+            f"{pose_path}: the pose puts {name!r} {far:.4g} m from the camera, {far / size:,.0f} times its size "
+            f"({1000 * size:.4g} mm): is the pose in millimetres? mcit reads metres; write it in metres"
+        )
+
+
 def _cmd_import(args) -> int:
     import numpy as np
 
@@ -89,6 +113,7 @@ def _cmd_import(args) -> int:
         clicks = None if args.init_clicks is None else np.array(args.init_clicks, dtype=float)
         pose = read_pose_file(args.pose, frame=args.pose_frame, camera=camera, clicks=clicks, lens=lens)
         T, cov = pose.in_world(camera)
+        _check_distance(args.pose, name, model, pose.T if pose.frame == "camera" else None, T, camera)
         through = "" if pose.frame == "world" else f" → T_world_obj through the camera's {_cal_text(cal_id)}"
         said = f"; pose from {pose.describe()}{through}"
         residuals = pose.details.get("residuals_px")
@@ -127,8 +152,8 @@ def _cmd_import(args) -> int:
             if "already exists" not in str(exc):
                 raise
             raise ValueError(
-                f"{exc}: give the import another with --name NAME (a new pose of {name!r} itself: Update pose in "
-                "mcit serve)"
+                f"an object named {name!r} already exists: give the import another name with --name NAME (a new "
+                f"pose of {name!r} itself: Update pose in mcit serve)"
             ) from None
         x, y, z = rec.T_world_obj[:3, 3]
         print(

@@ -182,6 +182,12 @@ def read_visp_pos(path: str | Path) -> np.ndarray:
         )
     if np.abs(values[:3]).max() > _MAX_M:
         raise ValueError(f"{path}: the translation is beyond ±{_MAX_M:g} m (a pose is in metres); check the file")
+    angle = float(np.linalg.norm(values[3:]))
+    if angle > np.pi + 1e-6:  # ViSP writes the angle in [0, π]: more is a file in degrees, most likely
+        raise ValueError(
+            f"{path}: θu's norm is {angle:.4g}, more than π: ViSP writes θu in radians, its norm the angle (at most "
+            "π); were these degrees? write the pose again in radians"
+        )
     return make_T(exp_so3(values[3:]), values[:3])
 
 

@@ -488,7 +488,9 @@ class _Reading:
             with open(path, "rb") as fh:
                 data = fh.read(st.st_size + 1)
         except OSError as exc:
-            raise CaoError(f"{where}: cannot read {path}: {exc.strerror or type(exc).__name__}") from None
+            what = "it" if where == str(path) else str(path)  # the file itself: its name said once
+            hint = "; check the path" if isinstance(exc, FileNotFoundError) else ""
+            raise CaoError(f"{where}: cannot read {what}: {exc.strerror or type(exc).__name__}{hint}") from None
         if len(data) != st.st_size:
             raise CaoError(f"{where}: {path} changed while it was read; read it again when it is complete")
         try:

@@ -112,6 +112,11 @@ def test_cli_errors_are_one_line_and_exit_1(tmp_path, capsys):
     assert code == 1 and "cone" in err and "glTF" in err
     code, _, err = _mcit(capsys, "db", "export", "cone", str(tmp_path / "cone.glb"), "--db", db)
     assert code == 0
+    code, _, err = _mcit(capsys, "db", "import", str(tmp_path / "cone.glb"), "--name", "cone", "--db", db)
+    assert code == 1 and err == (
+        "mcit db import: error: an object named 'cone' already exists: give the import another name with --name NAME "
+        "(a new pose of 'cone' itself: Update pose in mcit serve)\n"
+    )
 
 
 def _disk_full_after(n_bytes: int, real_writer):

@@ -262,7 +262,13 @@ def test_bad_input_is_one_line_naming_the_file_and_writes_nothing(files, capsys)
     (files / "scaled.txt").write_text("2 0 0 0\n0 2 0 0\n0 0 2 0.5\n0 0 0 1\n")
     (files / "short.txt").write_text("1 0 0 0\n0 1 0 0\n0 0 1 0.5\n0 0 0\n")
     (files / "pose.yaml").write_text("xyz: [0, 0, 0]")
+    (files / "mm.pos").write_text("10 20 500 0.1 0.2 0.3\n")  # millimetres read as metres: the box 500 m away
+    (files / "mm.txt").write_text("1 0 0 10\n0 1 0 20\n0 0 1 500\n0 0 0 1\n")
+    (files / "deg.pos").write_text("0.01 0.02 0.5 120 65 -26\n")  # θu in degrees
     for argv, words in (
+        (["--pose", str(files / "mm.pos")], ("mm.pos", "500.5 m from the camera", "millimetres")),
+        (["--pose", str(files / "mm.txt")], ("mm.txt", "millimetres")),
+        (["--pose", str(files / "deg.pos")], ("deg.pos", "more than π", "degrees")),
         (["--pose", str(files / "scaled.txt")], ("scaled.txt", "not a rigid transform")),
         (["--pose", str(files / "short.txt")], ("short.txt", "got 15")),
         (["--pose", str(files / "pose.yaml")], ("pose.yaml", "unknown pose file type")),
