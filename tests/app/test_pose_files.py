@@ -121,6 +121,21 @@ def test_an_init_file_with_its_pixels_gives_the_pose_by_pnp(tmp_path):
     assert np.linalg.norm(error) < 0.03 and np.all(np.abs(error) < 4 * np.sqrt(np.diag(cov)[:3]))
 
 
+def test_pixels_written_the_other_way_round_are_refused_saying_so(tmp_path):
+    """A swap of (u, v) still gives a pose a few pixels off: refused when the swapped pixels fit far better."""
+    X = BOX.vertices[[0, 1, 2, 5, 6]]
+    uv = CAMERA.project_obj(T_WORLD_OBJ, X)
+    p = tmp_path / "box.init"
+    _init_file(p, X, uv[:, ::-1])  # written 'u v' where ViSP's order is 'row column'
+    with pytest.raises(ValueError, match=r"box\.init: .*0\.00 px with each pixel's two coordinates swapped: the file"):
+        read_pose_file(p, camera=CAMERA)
+    _init_file(p, X)
+    with pytest.raises(ValueError, match=r"--init-clicks are U,V \(column, then row\); were they written the other"):
+        read_pose_file(p, camera=CAMERA, clicks=uv[:, ::-1])
+    noisy = uv + np.random.default_rng(1).normal(0.0, 3.0, uv.shape)  # clicks merely poor: taken, as before
+    assert read_pose_file(p, camera=CAMERA, clicks=noisy).details["rms_px"] > 1.0
+
+
 @pytest.mark.parametrize(
     "name, text, kwargs, match",
     [
