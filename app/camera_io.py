@@ -50,7 +50,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Intrinsics", "read_visp_xml", "read_opencv_yml", "read_intrinsics"]
+__all__ = ["Intrinsics", "read_visp_xml", "read_opencv_yml", "read_intrinsics", "read_projection_matrix", "P_SUFFIXES"]
+
+P_SUFFIXES = (".p",)  # a 3×4 projection matrix as text (Oxford VGG's multi-view data, Bundler's and others' exports)
 
 _VISP_NO_DISTORTION = "perspectiveProjWithoutDistortion"
 _VISP_DISTORTION = "perspectiveProjWithDistortion"
@@ -614,6 +616,36 @@ def read_intrinsics(
         return _checked(_read_intrinsics(path, camera_name, image_size), image_size)
     except OSError as exc:  # unreadable: permissions, a vanished mount
         raise ValueError(f"{path}: cannot be read ({exc.strerror or exc}); check the file's permissions") from None
+
+
+def read_projection_matrix(path: str | Path) -> np.ndarray:
+    """The camera C (3, 4) of a projection-matrix file (``.P``): twelve numbers, three rows of four (``#`` starts a
+    comment), mapping world points to pixels (x y, the origin at the top-left pixel's centre) — mcit's global model
+    itself, its pose included. ValueError, one line naming the file, otherwise."""
+    from core.camera import Camera
+
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such camera file; check the path")
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot be read ({exc.strerror or exc}); check the file's permissions") from None
+    words = " ".join(line.split("#", 1)[0] for line in text.splitlines()).split()
+    try:
+        values = np.array([float(w) for w in words])
+    except ValueError:
+        raise ValueError(f"{path}: a projection matrix file holds numbers only (3 rows of 4)") from None
+    if values.size != 12:
+        raise ValueError(f"{path}: a projection matrix file holds 12 numbers (3 rows of 4), got {values.size}")
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"{path}: the projection matrix holds a number that is not finite")
+    C = values.reshape(3, 4)
+    try:
+        Camera(C, 1, 1)  # of rank 3, a finite optical centre
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    return C
 
 
 def _read_intrinsics(path: Path, camera_name: str | None, image_size: tuple[int, int] | None) -> Intrinsics:

@@ -28,7 +28,13 @@ def _cmd_new(args) -> int:
         name=args.name,
     )
     site, (w, h), K = out["site"], out["size"], out["K"]
-    world = "the pose --camera-pose gives" if args.camera_pose else "the world frame is the camera's"
+    world = (
+        "its pose the projection matrix's"
+        if out["matrix"]
+        else "the pose --camera-pose gives"
+        if args.camera_pose
+        else "the world frame is the camera's"
+    )
     lines = [
         f"made site {site.root}: one camera, {w}×{h}, px {K[0, 0]:.2f} py {K[1, 1]:.2f} u0 {K[0, 2]:.2f} "
         f"v0 {K[1, 2]:.2f}, {out['lens'] or 'no lens distortion'}; no turret or range finder",
@@ -86,7 +92,8 @@ def add_site_parser(sub) -> argparse.ArgumentParser:
         description="Make the folder DIR that mcit serve --site DIR serves: a camera-only scene (no turret or "
         "range finder) whose camera is the camera file's K at the video's image size, the video source, and a "
         "database holding the camera's calibration. The world frame is the camera's until Calibrate camera "
-        "(or --camera-pose) places it. Nothing is written on a failure.",
+        "(or --camera-pose) places it; a projection matrix (.P) gives the camera whole, its pose included. Nothing "
+        "is written on a failure.",
     )
     p.add_argument("dir", type=Path, help="the site's folder, to be made (a missing or empty folder)")
     p.add_argument(
@@ -94,7 +101,8 @@ def add_site_parser(sub) -> argparse.ArgumentParser:
         required=True,
         type=Path,
         metavar="FILE",
-        help="the camera's intrinsics: ViSP .xml, OpenCV or ROS camera_info .yml/.yaml/.json (copied into DIR)",
+        help="the camera's intrinsics: ViSP .xml, OpenCV or ROS camera_info .yml/.yaml/.json; or the whole camera as "
+        "a 3×4 projection matrix .P (its pose included) (copied into DIR)",
     )
     p.add_argument(
         "--video",

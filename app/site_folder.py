@@ -3,7 +3,9 @@
     DIR/scene.json      the scene: the camera (K from the camera file, the image size, its pose in the
                         world), no turret, no bodies — a camera-only site; the database holds the objects
     DIR/camera.<ext>    a copy of the camera file (ViSP .xml, OpenCV or ROS .yml/.yaml/.json), which the
-                        scene names (a file with lens distortion: the video is undistorted on arrival)
+                        scene names (a file with lens distortion: the video is undistorted on arrival); or of a
+                        3×4 projection matrix (.P, as Oxford VGG's multi-view data give each view): the scene
+                        holds it as C, the camera whole, its pose included (no --camera-pose)
     DIR/site.json       how it is served: {"format": "mcit-site/1", "video": SOURCE, "fps": N or null}
     DIR/site.sqlite     its database, holding the camera's calibration (``app.db.seed_from_scene``)
 
@@ -185,7 +187,7 @@ def _probe(source: str, fps: float | None) -> tuple[str, tuple[int, int]]:
 def _image_size(intr, probed, size, camera_file: Path, video: str) -> tuple[int, int]:
     """The site's image size: the camera file's, the video's and --size, which must agree."""
     known = {}
-    if intr.width is not None:
+    if intr is not None and intr.width is not None:
         known[f"the camera file {camera_file.name}"] = (intr.width, intr.height)
     if probed is not None:
         known[f"the video {video}"] = probed
@@ -216,9 +218,12 @@ def create_site(
 ) -> dict[str, Any]:
     """Make the site folder ``root`` (see the module docstring); returns what was made, for the summary:
     {"site": SiteFolder, "size": (w, h), "K": (3, 3), "T_world_cam": (4, 4), "lens": text or None,
-    "probed": bool}. ValueError naming the file or the flag, and nothing written, on bad input."""
-    from app.camera_io import read_intrinsics
+    "probed": bool, "matrix": bool (a projection matrix)}. ValueError naming the file or the flag, and nothing
+    written, on bad input."""
+    from app.camera_io import P_SUFFIXES, read_intrinsics, read_projection_matrix
     from app.scene import load_scene, pose_to_json
+    from core.camera import Camera
+    from core.transforms import invert_T
 
     root = Path(root).expanduser().absolute()
     _check_target(root)
@@ -226,27 +231,46 @@ def create_site(
     fps = _check_fps(fps, "--fps")
     live = _is_live(video)
     stored, probed = (video.strip(), None) if live else _probe(video, fps)
-    intr = read_intrinsics(camera_file, camera_name=camera_name, image_size=probed or size)
-    width, height = _image_size(intr, probed, size, camera_file, video)
-    T_world_cam = np.eye(4)
-    if camera_pose is not None:
-        from app.pose_files import read_camera_pose
+    if camera_file.suffix.lower() in P_SUFFIXES:  # the global model itself: its pose in it, no size, no lens
+        C = read_projection_matrix(camera_file)
+        if camera_pose is not None or camera_name is not None:
+            flag = "--camera-pose" if camera_pose is not None else "--camera-name"
+            raise ValueError(f"{camera_file}: a projection matrix is the whole camera, its pose included; drop {flag}")
+        width, height = _image_size(None, probed, size, camera_file, video)
+        K, T_cam_world = Camera(C, width, height).decompose()
+        T_world_cam = invert_T(T_cam_world)
+        camera = {"width": width, "height": height, "C": [[v + 0.0 for v in row] for row in C.tolist()]}
+    else:
+        try:
+            intr = read_intrinsics(camera_file, camera_name=camera_name, image_size=probed or size)
+        except ValueError as exc:
+            if "unknown intrinsics format" not in str(exc):
+                raise
+            raise ValueError(f"{exc}, or a 3×4 projection matrix (.P)") from None
+        width, height = _image_size(intr, probed, size, camera_file, video)
+        K, T_world_cam = intr.K, np.eye(4)
+        if camera_pose is not None:
+            from app.pose_files import read_camera_pose
 
-        T_world_cam = read_camera_pose(camera_pose)
-    camera = {
-        "width": width,
-        "height": height,
-        "intrinsics_file": "camera" + camera_file.suffix.lower(),
-        "T_world_cam": {k: [v + 0.0 for v in vs] for k, vs in pose_to_json(T_world_cam).items()},  # no -0.0
-    }
-    if camera_name is not None:
-        camera["camera_name"] = camera_name
+            T_world_cam = read_camera_pose(camera_pose)
+        camera = {
+            "width": width,
+            "height": height,
+            "intrinsics_file": "camera" + camera_file.suffix.lower(),
+            "T_world_cam": {k: [v + 0.0 for v in vs] for k, vs in pose_to_json(T_world_cam).items()},  # no -0.0
+        }
+        if camera_name is not None:
+            camera["camera_name"] = camera_name
     scene = {
         "format": "mcit-scene/1",
         "name": name or root.name,
         "description": "made by mcit site new: one camera, no turret or range finder (docs/own-site.md)",
-        "_camera": "T_world_cam: "
-        + ("the camera's pose given to mcit site new" if camera_pose else "the world frame is the camera's")
+        "_camera": (
+            f"C: the projection matrix of {camera_file.name}"
+            if "C" in camera
+            else "T_world_cam: "
+            + ("the camera's pose given to mcit site new" if camera_pose else "the world frame is the camera's")
+        )
         + " until Calibrate camera moves it",
         "camera": camera,
         "bodies": [],
@@ -256,7 +280,7 @@ def create_site(
     tmp = root.parent / f".{root.name}.new-{secrets.token_hex(4)}"
     try:
         tmp.mkdir()
-        shutil.copyfile(camera_file, tmp / camera["intrinsics_file"])
+        shutil.copyfile(camera_file, tmp / ("camera.P" if "C" in camera else camera["intrinsics_file"]))
         (tmp / "scene.json").write_text(_json_text(scene))
         (tmp / SITE_FILE).write_text(_json_text(site))
         loaded = load_scene(tmp)  # the scene is checked as mcit serve will read it (the lens too)
@@ -275,10 +299,11 @@ def create_site(
     return {
         "site": folder,
         "size": (width, height),
-        "K": intr.K,
+        "K": K,
         "T_world_cam": T_world_cam,
         "lens": lens,
         "probed": not live,
+        "matrix": "C" in camera,
     }
 
 

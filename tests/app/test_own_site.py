@@ -219,6 +219,55 @@ def test_a_camera_pose_given_places_the_world(files, capsys):
         _close(server, closers)
 
 
+def test_a_projection_matrix_is_the_camera_whole(files, capsys):
+    """A .P file (3 rows of 4, as Oxford VGG's multi-view data give each view): the camera with its pose, as given;
+    no --camera-pose beside it; a pose in the camera frame reaches the world through it."""
+    site = files / "site"
+    C = Camera.from_intrinsics(K, invert_T(T_WORLD_CAM), 640, 480).C * -3.7  # any scale and sign
+    (files / "view.P").write_text("\n".join(" ".join(repr(float(v)) for v in row) for row in C) + "\n")
+    argv = ["site", "new", str(site), "--camera", str(files / "view.P"), "--video", str(files / "frames")]
+    assert main(argv + ["--camera-pose", str(files / "view.P")]) == 1
+    _one_line_error(capsys, "view.P", "the whole camera", "drop --camera-pose")
+    assert not site.exists()
+    (files / "short.P").write_text("1 0 0 0\n0 1 0 0\n0 0 1\n")
+    assert main(["site", "new", str(site), "--camera", str(files / "short.P"), "--video", str(files / "frames")]) == 1
+    _one_line_error(capsys, "short.P", "12 numbers", "got 11")
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "px 500.00 py 505.00 u0 319.50 v0 239.50" in out and "its pose the projection matrix's" in out
+    assert (site / "camera.P").read_text() == (files / "view.P").read_text()
+    with Database.open(site / "site.sqlite", readonly=True) as db:
+        stored = Camera(np.asarray(db.latest_calibration("camera").data["C"]), 640, 480)
+    X = np.random.default_rng(0).uniform(-0.3, 0.3, (20, 3))
+    np.testing.assert_allclose(stored.project(X), Camera(C, 640, 480).project(X), atol=1e-9)
+    pos = files / "box.0.pos"
+    pos.write_text(" ".join(repr(float(v)) for v in np.r_[T_CAM_OBJ[:3, 3], log_so3(T_CAM_OBJ[:3, :3])]))
+    assert main(["db", "import", str(files / "box.cao"), "--site", str(site), "--pose", str(pos)]) == 0
+    np.testing.assert_allclose(_poses(site)["box"], T_WORLD_CAM @ T_CAM_OBJ, atol=1e-9)
+
+
+def test_the_real_vgg_house_from_its_projection_matrix_projects_its_lines_onto_the_image_s(shared_data, tmp_path):
+    """Oxford VGG's Model House, view 0: the site made from house.000.P and its images puts the reconstruction's 30
+    3D lines on the lines detected in the real image (the data's own check: 0.2-0.5 px)."""
+    P = shared_data("vgg-house", "house.000.P")
+    house = P.parent
+    site = tmp_path / "site"
+    assert main(["site", "new", str(site), "--camera", str(P), "--video", str(house / "images")]) == 0
+    with Database.open(site / "site.sqlite", readonly=True) as db:
+        cam = Camera(np.asarray(db.latest_calibration("camera").data["C"]), 768, 576)
+    ends = cam.project(np.loadtxt(house / "house.l3d").reshape(-1, 3)).reshape(-1, 2, 2)
+    seen = np.loadtxt(house / "house.000.lines")[:, :4].reshape(-1, 2, 2)
+    index = np.loadtxt(house / "house.nview-lines", dtype=str)[:, 0]
+    d = []
+    for k, j in enumerate(index):
+        if j == "*":
+            continue
+        a, b = seen[int(j)]
+        n = np.array([-(b - a)[1], (b - a)[0]]) / np.linalg.norm(b - a)
+        d += list(np.abs((ends[k] - a) @ n))
+    assert len(d) >= 20 and np.median(d) < 0.6, (len(d), np.median(d))
+
+
 def test_a_live_source_is_not_opened_and_needs_the_image_size(files, capsys):
     site = files / "site"
     argv = ["site", "new", str(site), "--camera", str(files / "cam.xml"), "--video", "rtsp://camera.local/stream"]
@@ -246,7 +295,7 @@ def test_bad_input_is_one_line_naming_the_file_and_writes_nothing(files, capsys)
     )
     for argv, words in (
         (["--camera", str(files / "bad.xml"), "--video", frames], ("bad.xml",)),
-        (["--camera", str(files / "cam.ini"), "--video", frames], ("cam.ini", "unknown intrinsics format")),
+        (["--camera", str(files / "cam.ini"), "--video", frames], ("cam.ini", "unknown intrinsics format", ".P")),
         (["--camera", str(files / "none.xml"), "--video", frames], ("none.xml", "no such")),
         (["--camera", cam, "--video", str(files / "missing.mp4")], ("missing.mp4", "no such file")),
         (["--camera", str(files / "small.yml"), "--video", frames], ("320×240", "640×480", "disagree")),
