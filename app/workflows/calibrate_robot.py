@@ -42,6 +42,7 @@ MIN_SEGMENT_PX = 3.0
 MAX_SNAP_USE_PX = 3.0  # a snap that moves an edge farther than this is not used (the click is kept)
 # Accept asks once more above these: the issue's target for the base (1°, 3 mm) as one σ.
 WEAK_SIGMA_MM, WEAK_SIGMA_DEG = 3.0, 1.0
+INSIDE_MM = 2.0  # through the solved base a link this deep in a database object at a pose: a base the video denies
 
 
 @dataclass
@@ -105,6 +106,7 @@ class CalibrateRobot(TourWorkflow):
         self.cov_start = None if self.site.robot_base_nominal else self.site.robot_base_cov
         self.cov_est = self.cov_start  # its covariance (None: unknown, every edge is assigned by hand)
         self.fit = None  # core.robot.calibration.BaseFit of the last Solve (None: clicks changed since)
+        self.inside: list[str] = []  # what the robot would be inside at the poses through the solved base
 
     # ------------------------------------------------------------------ the robot's poses
     def _busy(self) -> str:
@@ -298,13 +300,31 @@ class CalibrateRobot(TourWorkflow):
             fit = refine_base(self.model, configs, clicks, [camera], T0, camera_covs=[cov])
         except ValueError as exc:
             raise WorkflowError(f"Solve: {exc}") from None
+        inside = self._inside(fit.T_world_base, [self.tour.arrived[k] for k in sorted(self.tour.arrived)])
         with self.lock:
             self._check_open()
             if [e.feature for e in self._assigned()] != [c.feature for c in clicks]:
                 raise WorkflowError("the clicks changed while solving: Solve again")
+            self.inside = inside
             self.fit, self.T_est, self.cov_est, self.state = fit, fit.T_world_base.copy(), fit.cov, "review"
             self.message = self._solved_text() + "."
             return fit
+
+    def _inside(self, T_world_base: np.ndarray, qs: list) -> list[str]:
+        """What the robot, at the poses it was clicked at, would be inside through ``T_world_base``: a link more than
+        INSIDE_MM deep in a database object, which the video showed it was not (a wrong edge pulled the base)."""
+        from app.robot.collision import CollisionChecker
+
+        checker = CollisionChecker(self.model, T_world_base)
+        objects = [o for o in self.site.objects() if o.status != "stale"]
+        checker.set_obstacles([(o.name, o.model, o.T_world_obj, 0.0) for o in objects])
+        names, out = {o.name for o in objects}, []
+        for k, q in enumerate(qs):
+            for c in checker.check(q):
+                if c.other in names and c.distance_m < -INSIDE_MM / 1000:
+                    out.append(f"at pose {k + 1} its {c.link} {-1000 * c.distance_m:.0f} mm inside the {c.other}")
+                    break
+        return out
 
     def _moved(self) -> tuple[float, float]:
         """(degrees, mm) between the solved base and the database's."""
@@ -486,6 +506,12 @@ class CalibrateRobot(TourWorkflow):
             if sd_deg > WEAK_SIGMA_DEG or sd_mm > WEAK_SIGMA_MM:
                 out.append(
                     sigma_over(sd_deg, sd_mm, WEAK_SIGMA_DEG, WEAK_SIGMA_MM) + ": click more edges, at more poses"
+                )
+            if self.inside:
+                out.append(
+                    "through this base the robot would be " + "; ".join(self.inside) + ", which the video does not "
+                    "show: a wrong edge pulled it (the edges' residuals say which; Remove last, or Cancel and start "
+                    "again)"
                 )
             links = self._links()
             for i, (e, r) in enumerate(zip(self._assigned(), f.result.click_residuals_px)):

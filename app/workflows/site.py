@@ -148,6 +148,8 @@ def _change_sentence(rec: Any, undone: Any = None) -> str:
             return f"redid change #{undone.undoes} ({kind} calibration; undid undo #{rec.undoes})"
         if rec.undoes is not None:
             return f"{'undid' if rec.method == 'undo' else 'went back to'} change #{rec.undoes} ({kind} calibration)"
+        if kind == "robot base" and str(rec.method).startswith("seed"):  # the drawing's pose, not a calibration
+            return "set the robot base where the drawing puts it (not calibrated)"
         return f"calibrated the {kind}" if kind else "stored a calibration"
     if rec.action == "add":
         return f"added {name}"

@@ -6,6 +6,7 @@ it is nominal."""
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -67,6 +68,10 @@ def test_a_new_database_believes_the_drawing_s_base_until_it_is_calibrated(robot
     assert "not calibrated" in site.robot_base_warning()
     rec = site.db.latest_calibration("robot_base")
     assert rec.data["nominal"] and rec.method.startswith("seed")
+    from app.workflows.site import _change_sentence
+
+    said = [_change_sentence(h) for h in site.db.history() if "robot base" in _change_sentence(h)]
+    assert said == ["set the robot base where the drawing puts it (not calibrated)"], said  # History's words
 
 
 def test_move_robot_asks_once_more_while_the_base_is_nominal(robot_site, scene):
@@ -132,6 +137,24 @@ def test_the_base_is_calibrated_from_edges_clicked_at_the_poses(robot_site, scen
     change = site.db.history()[-1]
     site.undo(change.id, client="test")  # undone as a camera's: the drawing's base again
     assert site.robot_base_nominal and np.allclose(site.robot.T_world_base, scene.robot.nominal_base)
+
+
+def test_a_base_that_puts_the_robot_inside_an_object_is_said_before_accept(robot_site, scene):
+    """A wrong edge can pull the base 10 cm away (a new operator's run): the robot, at the poses the video showed it
+    clear of everything, would be inside the table; Accept asks once more, naming it."""
+    site = robot_site
+    wf = CalibrateRobot(site)
+    wf.go()
+    _arrive(wf, site)
+    q = wf.tour.arrived[0]
+    assert wf._inside(scene.robot.T_world_base, [q]) == []  # the true base: clear
+    sunk = make_T(np.eye(3), [0.0, 0.0, -0.12]) @ scene.robot.T_world_base  # 12 cm down, into the table
+    said = wf._inside(sunk, [q])
+    assert len(said) == 1 and said[0].startswith("at pose 1 its ") and said[0].endswith("inside the table"), said
+    wf.inside = said  # as Solve leaves it for such a base
+    # a fit whose σ and residuals are clean: the base's place alone is what is wrong
+    wf.fit = SimpleNamespace(std_angle_rad=0.0, std_position_m=0.0, result=SimpleNamespace(click_residuals_px=[]))
+    assert any("inside the table" in w and "a wrong edge" in w for w in wf.weaknesses())
 
 
 def test_a_motion_into_an_object_is_refused_and_nothing_moves(robot_site, scene):
