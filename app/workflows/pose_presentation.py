@@ -180,8 +180,14 @@ def _clicking_step(wf, base: set, where: str, first: bool) -> Step | None:
             frozenset(base | {"confirm_match", "choose_candidate"}),
         )
     if c.waiting_for_edge():
-        return Step(
-            "assign_edge", f"Which model edge is it? Click that edge of {name} {where}.", frozenset(base | rows)
+        if c.assigned():  # a hand assignment under way goes on by hand
+            return Step(
+                "assign_edge", f"Which model edge is it? Click that edge of {name} {where}.", frozenset(base | rows)
+            )
+        return Step(  # the first edge: Auto match still takes over, as the instruction before the clicks said
+            "assign_edge",
+            f"Which model edge is it? Click that edge of {name} {where}; " + "or {auto_match} to let mcit match them.",
+            frozenset(base | rows | {"auto_match"}),
         )
     n = len(c.assigned())
     if c.auto and (n < k or c.empty):  # automatic assignment: said from the start

@@ -201,9 +201,18 @@ def test_update_pose_states_by_hand_and_by_auto_match(site, walk):
     walk.check(wf)
     wf.accept()
     walk.check(wf)
-    # automatic assignment
+    # automatic assignment, pressed once the first edge is clicked (as the instruction before the clicks says)
     wf2 = UpdatePose(site, client="bob", object_name="parallelepiped", snap=False)
-    wf2.auto_match()  # fewer than 3 edges: switches to automatic assignment
+    for k in edges[:1]:
+        uv = site.camera.project(obj.model.vertices[obj.model.edges[k]] @ T_true[:3, :3].T + T_true[:3, 3])
+        wf2.click(uv[0] + 0.25 * (uv[1] - uv[0]))
+        wf2.click(uv[0] + 0.75 * (uv[1] - uv[0]))
+    st = walk.check(wf2)
+    assert st.name == "assign_edge" and "auto_match" in st.enabled
+    wf2.auto_match()  # fewer than 3 edges: switches to automatic assignment, the edge clicked kept
+    st = walk.check(wf2)
+    assert st.name == "auto_click" and "edge 2" in st.prompt and len(wf2.segs) == 1
+    wf2.remove_last()
     walk.check(wf2)
     for k in edges[:4]:
         uv = site.camera.project(obj.model.vertices[obj.model.edges[k]] @ T_true[:3, :3].T + T_true[:3, 3])
