@@ -42,6 +42,7 @@ class FrozenFrames:
         # Seconds back counts from the frame on screen when the scrubber left 0 (when it arrived), not from the
         # live video (a new operator on a frame frozen a while before reached one far earlier than asked)
         self._scrub_from: float | None = None
+        self.scrubbed_s = 0.0  # what the scrubber says of the frame on screen (a refused value goes back to it)
         self.note = ""  # said under the frame: a Seconds back that reached past the kept frames
 
     @property
@@ -108,7 +109,11 @@ class FrozenFrames:
             return
         else:
             self.freeze(frame if frame is not None else panel.feed.grabber.latest(), "live")
-        panel.reset_scrubber()
+        self._scrubber_at_zero()
+
+    def _scrubber_at_zero(self) -> None:
+        self.scrubbed_s = 0.0
+        self.panel.reset_scrubber()
 
     def _may_freeze(self) -> None:
         """WorkflowError when another frame may not be frozen now (the workflow follows the live video, or
@@ -135,13 +140,18 @@ class FrozenFrames:
         if frame is None:
             raise WorkflowError("no video frame has arrived yet: check the video source")
         self.freeze(frame, "live")
-        self.panel.reset_scrubber()  # the scrubber counts from this frame now
+        self._scrubber_at_zero()  # the scrubber counts from this frame now
         self.panel.error = ""
 
     def scrub(self, seconds: float) -> None:
         """Freeze the frame ``seconds`` before the frame on screen when the scrubber left 0 (the frozen frame, or
-        the live video's newest), and say when the kept frames do not reach that far back."""
-        self._may_freeze()
+        the live video's newest), and say when the kept frames do not reach that far back. Refused, the scrubber
+        goes back to what it said of the frame on screen (a new operator's box kept the refused 12)."""
+        try:
+            self._may_freeze()
+        except WorkflowError:
+            self.panel.gui_scrub.value = self.scrubbed_s
+            raise
         feed = self.panel.feed
         origin = self._scrub_from
         if origin is None:
@@ -154,7 +164,7 @@ class FrozenFrames:
             raise WorkflowError("no video frame has arrived yet: check the video source")
         frame, back_s = hit
         self.freeze(frame, "scrubbed" if back_s > 0 else "live")
-        self._scrub_from = origin
+        self._scrub_from, self.scrubbed_s = origin, float(seconds)
         if back_s < float(seconds) - 0.25:  # beyond the kept frames (the scrubber's step is 0.5 s)
             self.note = (
                 f"Seconds back {float(seconds):g} reaches past the frames kept: this is the oldest kept, "
@@ -169,7 +179,7 @@ class FrozenFrames:
         if wf is None or wf.finished:
             if self.frame is not None and self.by is not None:
                 self.unfreeze()
-                self.panel.reset_scrubber()  # back to the live video: the scrubber says so (it kept "4")
+                self._scrubber_at_zero()  # back to the live video: the scrubber says so (it kept "4")
                 return True
             return False
         live = bool(wf.follows_live())
@@ -189,7 +199,7 @@ class FrozenFrames:
             raise WorkflowError("no frame is frozen: the live video is shown")
         if self.by is None:
             self.unfreeze()
-            self.panel.reset_scrubber()
+            self._scrubber_at_zero()
             return
         self.show_live = not self.show_live
 

@@ -73,13 +73,16 @@ class WorkflowControls:
         """The keys of other workflows' controls, live here so that pressing one says it does nothing now
         and which keys do (a new operator pressed P, Solve in Update pose, in Designate: nothing said)."""
         own = {c.key.lower() for c in (wf.controls if wf is not None else ()) if c.key}
-        uses: dict[str, list[str]] = {}
+        by_label: dict[str, dict[str, list[str]]] = {}  # key → its label → the workflows it is that in
         for cls in WORKFLOWS.values():
             for c in cls.controls:
                 if c.key and c.key.lower() not in own | GLOBAL_KEYS and (wf is not None or c.key != "escape"):
-                    where = uses.setdefault(c.key, [])
-                    if f"{c.label} in {cls.title}" not in where:
-                        where.append(f"{c.label} in {cls.title}")
+                    titles = by_label.setdefault(c.key, {}).setdefault(c.label, [])
+                    if cls.title not in titles:
+                        titles.append(cls.title)
+        # every use said, grouped: "Solve in Calibrate camera, Model object; Refine in Update pose" (two of them
+        # only left a new operator looking for the others)
+        uses = {k: "; ".join(f"{label} in {', '.join(t)}" for label, t in d.items()) for k, d in by_label.items()}
         here = (
             f"{wf.title}'s keys: " + ", ".join(f"{c.key_text} {c.label}" for c in wf.controls if c.key)
             if wf is not None
@@ -90,11 +93,10 @@ class WorkflowControls:
 
             def said(_event, name=name, where=where) -> None:
                 raise WorkflowError(
-                    f"{name} does nothing {'in ' + wf.title if wf is not None else 'now'} "
-                    f"(it is {', '.join(where[:2])}): {here}"
+                    f"{name} does nothing {'in ' + wf.title if wf is not None else 'now'} (it is {where}): {here}"
                 )
 
-            cmd = self.panel.client.gui.add_command(f"{name}: {', '.join(where[:2])}", hotkey=key)
+            cmd = self.panel.client.gui.add_command(f"{name}: {where}", hotkey=key)
             cmd.on_trigger(on_key(self.panel, said))
             self.commands.append(cmd)
 

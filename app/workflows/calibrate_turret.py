@@ -170,7 +170,8 @@ class CalibrateTurret(Workflow):
         if not self.site.has_turret or not self.site.objects():
             return
         landed, _ = self._landed()
-        landed &= ~self._moved(landed)  # beams at an object that moved would pull the aim
+        moved = self._moved(landed)
+        landed &= ~moved  # beams at an object that moved would pull the aim
         self.T_aim, cov_aim = self._estimate(landed)
         T, spec = self.T_aim, self.site.scene.rangefinder
         pan, tilt, rho = np.array(self.pan), np.array(self.tilt), np.array(self.range_m)
@@ -194,6 +195,9 @@ class CalibrateTurret(Workflow):
             on_aim = landed & (np.einsum("ij,ij->i", normals, self._aimed_normals()) > np.cos(np.radians(10.0)))
             missed = {self.labels[i] for i in np.flatnonzero(~on_aim) if on_aim[i + 1 :].sum() < 2}
             keep &= np.array([f"a suggested point on {nm}" not in missed for nm in c.names], bool)
+        if moved.any():  # an object a beam found moved is not offered again (it was, after saying it moved)
+            gone = set(self._aimed(np.flatnonzero(moved))) | {self.checks[i].object for i in np.flatnonzero(moved)}
+            keep &= np.array([not any(nm.startswith(f"{o} ") for o in gone if o) for nm in c.names], bool)
         c = c.take(keep)
         if not len(c.X):
             return
@@ -280,9 +284,20 @@ class CalibrateTurret(Workflow):
             return ""
         deg, m = self.sigma_now
         reached = deg <= TARGET_DEG and m <= TARGET_M
+        # σ at its prior along some direction: the beams leave it free there (a new operator read 10.00°, 500.0 mm,
+        # the prior, through ten table points as the pose's σ)
+        free = lambda sd: sd[0] >= 0.9 * np.degrees(PRIOR_SD[0]) or sd[1] >= 0.9 * PRIOR_SD[3]  # noqa: E731
         now = (
-            f" The beams so far give σ {deg:.2f}°, {1000 * m:.1f} mm"
-            + (f" (within the {TARGET_DEG}° and {1000 * TARGET_M:.1f} mm aimed for: " + "{solve})." if reached else ".")
+            (
+                " The beams so far leave the turret's pose free in some direction: faces of three orientations fix it."
+                if free(self.sigma_now)
+                else f" The beams so far give σ {deg:.2f}°, {1000 * m:.1f} mm"
+                + (
+                    f" (within the {TARGET_DEG}° and {1000 * TARGET_M:.1f} mm aimed for: " + "{solve})."
+                    if reached
+                    else "."
+                )
+            )
             if len(self.pan) >= 6
             else ""
         )
@@ -296,7 +311,11 @@ class CalibrateTurret(Workflow):
             )
         return (
             f"{now} Next, the point circled 'next' (on {where}) reduces σ the most"
-            + (f", to {self.sigma_next[0]:.2f}°, {1000 * self.sigma_next[1]:.1f} mm" if len(self.pan) >= 5 else "")
+            + (
+                f", to {self.sigma_next[0]:.2f}°, {1000 * self.sigma_next[1]:.1f} mm"
+                if len(self.pan) >= 5 and not free(self.sigma_next)
+                else ""
+            )
             + "; {measure_next} measures it."
         )
 

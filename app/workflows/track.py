@@ -187,11 +187,8 @@ class TrackObject(SnapMixin, Workflow):
                     )
                 self.state = "lost"
                 self.t_lost = t
-                self.message = (
-                    f"Lost at t = {t:.2f} s: {self.reason}. Nothing is written while lost: click three or "
-                    f"more edges of {self.object_name} (two clicks each) and Re-initialise, or Restart "
-                    "from the last good pose" + (", or Accept that pose." if self.t_good is not None else ".")
-                )
+                # the reason and what to do are the instruction's (said three times, it filled 20 lines)
+                self.message = f"Lost at t = {t:.2f} s. Nothing is written while lost."
             else:
                 self.t_good, self.confidence_good = t, float(res.confidence)
                 self.stamp_good = stamp if stamp is not None else self.seen_at()

@@ -112,6 +112,17 @@ def test_seconds_back_counts_from_the_frame_on_screen_and_says_when_clamped(brow
     wait_until(lambda: panel.frozen is not one_back, what="the oldest kept frame frozen", panel=panel)
     page.get_by_text("reaches past the frames kept", exact=False).first.wait_for(timeout=60_000)
     assert on_screen.stamp - panel.frozen.stamp < 12.0 - 0.5
+    # a workflow's click made on this frame: another Seconds back is refused, and the box says the frame on screen
+    press(page, "Calibrate camera")
+    wf = workflow_shown(page, "calibrate_camera")
+    kept = panel.frozen
+    ui.click_pixel(page, ui.site.camera.project(ui.site.object("table").vertices_world()[:1])[0])
+    wait_until(lambda: "remove_last" in wf.current_step().enabled, what="the click taken", panel=panel)
+    box = page.get_by_text("Seconds back", exact=True).first.locator("xpath=ancestor::div[2]").locator("input").last
+    _seconds_back(page, "3")
+    wait_until(lambda: "Cancel before freezing another frame" in panel.error, what="the refusal", panel=panel)
+    wait_until(lambda: box.input_value() == "12", what="the box back at 12 s, the frame on screen's")
+    assert panel.frozen is kept
     page.close()
 
 

@@ -327,6 +327,10 @@ def test_designate_known_and_unknown_by_clicks(browser, device_interface, scene)
     assert_prompt_controls(page)
     page.keyboard.press("p")  # Solve's key in Update pose: said to do nothing here, with the keys that do
     page.get_by_text("P does nothing in Designate target", exact=False).first.wait_for(timeout=60_000)
+    from app.workflows.session import WORKFLOWS
+
+    p_uses = {cls.title for cls in WORKFLOWS.values() for c in cls.controls if (c.key or "").lower() == "p"}
+    assert len(p_uses) >= 2 and all(t in page.panel.error for t in p_uses), (p_uses, page.panel.error)  # every use
     assert page.get_by_text("Designate target's keys: X Clear, Enter Done, Esc Cancel", exact=False).first.is_visible()
     # a point of the table top in front, where nothing else stands (in the database and in the truth)
     table = site.object("table")

@@ -63,7 +63,10 @@ def test_a_click_that_arrived_before_a_question_leaves_it_and_one_after_it_drops
     assert panel.asking == "cancel"
     panel.on_pixel_click(np.array([260.0, 170.0]), arrived)
     assert panel.asking == "cancel" and len(wf.clicks.segs) == 1  # the click taken, the question kept
-    panel.on_pixel_click(np.array([300.0, 100.0]), time.monotonic())  # a click made after the question
+    # a click made after the question: on a drawn edge of the parallelepiped (the edge's model edge)
+    model_edges = wf.obj.model.edge_segments(wf.T_current)
+    uv = panel.app.site.camera.project(model_edges[int(np.argmax(np.ptp(model_edges[:, :, 0], axis=1)))]).mean(axis=0)
+    panel.on_pixel_click(uv, time.monotonic())
     assert panel.asking is None
 
 

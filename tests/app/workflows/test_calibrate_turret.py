@@ -106,6 +106,9 @@ def test_one_orientation_is_not_enough(device_site):
     assert "Left out" not in str(e.value)  # none was: nothing to name
     with pytest.raises(WorkflowError, match="Solve first"):
         wf.accept()
+    # the step says the beams leave the pose free, not the prior's 10°, 500 mm as if the beams had given it
+    text = wf.current_step().prompt
+    assert "free in some direction" in text and "500.0 mm" not in text, text
 
 
 def test_measure_says_which_point_and_moves_the_beam_spot(device_site, devices):

@@ -108,7 +108,7 @@ def test_a_track_lost_after_good_frames_can_accept_its_last_good_pose_when_asked
     T_good, _, lost = wf.step()
     assert not lost and wf.weaknesses() == []
     wf.step(frame=np.full((256, 512, 3), 60, np.uint8), t_s=12.0)  # then a blank frame: lost
-    assert wf.lost and "or Accept that pose" in wf.message
+    assert wf.lost and "Accept" in wf.next_step and "Lost at t" in wf.message  # the reason and choices: the step's
     step = wf.current_step()
     assert "accept" in step.enabled and "(t = 11.50 s)" in step.prompt
     (why,) = wf.weaknesses()
@@ -178,7 +178,7 @@ def test_a_track_on_a_pose_the_image_does_not_support_is_lost_and_writes_nothing
     wf.tracker.reset(drifted)
     T, confidence, lost = wf.step()
     assert lost and wf.lost and confidence > 0.3
-    assert "not supported by the image" in wf.message and "Re-initialise" in wf.next_step
+    assert "not supported by the image" in wf.next_step and "Re-initialise" in wf.next_step
     assert np.allclose(wf.T_world_obj, obj.T_world_obj) and not wf.marks().tracked[0].chosen
     with pytest.raises(WorkflowError, match="nothing written"):
         wf.accept()

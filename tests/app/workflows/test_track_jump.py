@@ -22,4 +22,4 @@ def test_a_loss_where_the_video_jumped_back_says_so(video_site):
     wf.restart()
     wf.tracker.reset(site.object("parallelepiped").T_world_obj)
     wf.t_last = 20.0  # the last frame was at 20 s; the video restarts at 16 s
-    assert wf.step()[2] and "the video jumped back in time" in wf.reason and "jumped back" in wf.message
+    assert wf.step()[2] and "the video jumped back in time" in wf.reason and "jumped back" in wf.next_step
