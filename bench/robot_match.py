@@ -8,9 +8,8 @@ database's base (the drawing's: 2.5 cm and 2° from the truth). A session visits
 clicks a random subset (3 or more) of the edges an operator can click (``clickable_edges``: seen, 25 px or
 longer), in random order, two pixels each 0.7 px off the edge. Each click is matched as the workflow does:
 candidates are the features not yet assigned, drawn at the current estimate; the estimate follows the assigned
-edges from ``ESTIMATE_FROM`` on, when their fit's σ is below ``ESTIMATE_MAX_MM`` and ``ESTIMATE_MAX_DEG``
-(the workflow's constants). An edge not matched is assigned by hand (rightly: the operator clicks it on the
-white robot).
+edges as the workflow's does (``app.workflows.calibrate_robot.estimate_from_clicks``). An edge not matched is
+assigned by hand (rightly: the operator clicks it on the white robot).
 
 * **ours** — ``match_segment``: the only feature whose χ² against the estimate's covariance (carried to the
   image) passes; no automatic match while the base has no covariance (nominal, not yet followed).
@@ -33,8 +32,8 @@ sys.path.insert(0, str(ROOT))
 
 from app.robot.urdf import load_scene_robot  # noqa: E402
 from app.scene import default_scene_path, load_scene  # noqa: E402
-from app.workflows.calibrate_robot import ESTIMATE_FROM, ESTIMATE_MAX_DEG, ESTIMATE_MAX_MM  # noqa: E402
-from core.robot.calibration import BaseClick, features_at, match_segment, refine_base  # noqa: E402
+from app.workflows.calibrate_robot import estimate_from_clicks  # noqa: E402
+from core.robot.calibration import BaseClick, features_at, match_segment  # noqa: E402
 from tests.app.robot.calibration_truth import clickable_edges, operator_segment  # noqa: E402
 
 SIGMA_PX = 0.7
@@ -73,18 +72,9 @@ class Site:
 
     def follow(self, assigned):
         """The workflow's estimate from the assigned (segment, feature) pairs: (T, cov), cov None when not followed."""
-        if len(assigned) < ESTIMATE_FROM:
-            return self.T_nom, None
         clicks = [BaseClick(s, f, SIGMA_PX, 0) for s, f in assigned]
-        try:
-            fit = refine_base(self.model, self.qs, clicks, [self.cam], self.T_nom)
-        except ValueError:
-            return self.T_nom, None
-        if fit.rms_px > 3 * SIGMA_PX:
-            return self.T_nom, None
-        if 1000 * fit.std_position_m > ESTIMATE_MAX_MM or np.degrees(fit.std_angle_rad) > ESTIMATE_MAX_DEG:
-            return self.T_nom, None
-        return fit.T_world_base, fit.cov
+        fit = estimate_from_clicks(self.model, self.qs, clicks, self.cam, self.T_nom)
+        return (self.T_nom, None) if fit is None else (fit.T_world_base, fit.cov)
 
     def session(self, seed: int, rule: str) -> np.ndarray:
         """(wrong, automatic, asked) over one session."""

@@ -31,7 +31,7 @@ from .base import CANCEL, Control, Marks, Step, WorkflowError, as_pixel, sigma_o
 from .robot_tour import TourWorkflow
 from .snapping import ClickSnap, Snapper, click_segment, segment_of, snap_marks, weak_snaps
 
-__all__ = ["CalibrateRobot", "MIN_EDGES", "WEAK_SIGMA_MM", "WEAK_SIGMA_DEG"]
+__all__ = ["CalibrateRobot", "MIN_EDGES", "WEAK_SIGMA_MM", "WEAK_SIGMA_DEG", "estimate_from_clicks"]
 
 MIN_EDGES = 6  # Solve needs this many assigned edges (12 residuals for the base's 6 unknowns) …
 MIN_POSES = 2  # … clicked at this many poses
@@ -267,16 +267,9 @@ class CalibrateRobot(TourWorkflow):
     def _follow_estimate(self) -> bool:
         """Move the drawn estimate onto the clicks once they fix it well enough; True when it moved."""
         self.T_est, self.cov_est = self.T_start.copy(), self.cov_start
-        if len(self._assigned()) < ESTIMATE_FROM:
-            return False
         configs, clicks = self._problem()
-        try:  # from the database's base each time: a wrong edge removed leaves no trace
-            fit = refine_base(self.model, configs, clicks, [self.camera], self.T_start)
-        except ValueError:
-            return False
-        if fit.rms_px > 3 * max(max(c.sigma_px for c in clicks), 0.5):
-            return False
-        if 1000 * fit.std_position_m > ESTIMATE_MAX_MM or np.degrees(fit.std_angle_rad) > ESTIMATE_MAX_DEG:
+        fit = estimate_from_clicks(self.model, configs, clicks, self.camera, self.T_start)
+        if fit is None:
             return False
         self.T_est, self.cov_est = fit.T_world_base, fit.cov
         return True
@@ -300,7 +293,7 @@ class CalibrateRobot(TourWorkflow):
             fit = refine_base(self.model, configs, clicks, [camera], T0, camera_covs=[cov])
         except ValueError as exc:
             raise WorkflowError(f"Solve: {exc}") from None
-        inside = self._inside(fit.T_world_base, [self.tour.arrived[k] for k in sorted(self.tour.arrived)])
+        inside = self._inside(fit.T_world_base, dict(self.tour.arrived))
         with self.lock:
             self._check_open()
             if [e.feature for e in self._assigned()] != [c.feature for c in clicks]:
@@ -310,16 +303,17 @@ class CalibrateRobot(TourWorkflow):
             self.message = self._solved_text() + "."
             return fit
 
-    def _inside(self, T_world_base: np.ndarray, qs: list) -> list[str]:
-        """What the robot, at the poses it was clicked at, would be inside through ``T_world_base``: a link more than
-        INSIDE_MM deep in a database object, which the video showed it was not (a wrong edge pulled the base)."""
+    def _inside(self, T_world_base: np.ndarray, qs: dict) -> list[str]:
+        """What the robot, at the poses it was clicked at (``qs``: pose index → joints), would be inside through
+        ``T_world_base``: a link more than INSIDE_MM deep in a database object, which the video showed it was not (a
+        wrong edge pulled the base)."""
         from app.robot.collision import CollisionChecker
 
         checker = CollisionChecker(self.model, T_world_base)
         objects = [o for o in self.site.objects() if o.status != "stale"]
         checker.set_obstacles([(o.name, o.model, o.T_world_obj, 0.0) for o in objects])
         names, out = {o.name for o in objects}, []
-        for k, q in enumerate(qs):
+        for k, q in sorted(qs.items()):
             for c in checker.check(q):
                 if c.other in names and c.distance_m < -INSIDE_MM / 1000:
                     out.append(f"at pose {k + 1} its {c.link} {-1000 * c.distance_m:.0f} mm inside the {c.other}")
@@ -522,6 +516,24 @@ class CalibrateRobot(TourWorkflow):
                     )
                 out += weak_snaps([(f"edge {i + 1}", e.snap)])
             return out
+
+
+def estimate_from_clicks(model, configs, clicks: list[BaseClick], camera, T_start: np.ndarray):
+    """The base the assigned edges fix well enough to draw the robot at and match later edges against
+    (``core.robot.calibration.BaseFit``, with its covariance), or None: fewer than ESTIMATE_FROM edges, no unique
+    fit, an RMS above 3σ of the clicks, or σ above ESTIMATE_MAX_MM / ESTIMATE_MAX_DEG. Fitted from ``T_start``
+    each time: a wrong edge removed leaves no trace."""
+    if len(clicks) < ESTIMATE_FROM:
+        return None
+    try:
+        fit = refine_base(model, configs, clicks, [camera], T_start)
+    except ValueError:
+        return None
+    if fit.rms_px > 3 * max(max(c.sigma_px for c in clicks), 0.5):
+        return None
+    if 1000 * fit.std_position_m > ESTIMATE_MAX_MM or np.degrees(fit.std_angle_rad) > ESTIMATE_MAX_DEG:
+        return None
+    return fit
 
 
 def _point_segment_distances(p: np.ndarray, segs: np.ndarray) -> np.ndarray:

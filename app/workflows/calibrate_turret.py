@@ -63,6 +63,12 @@ UNLOCK_GAIN = 0.8  # a point out of reach worth this fraction of the best one's 
 UNLOCK_STEP = 0.9  # ... by a beam within reach that narrows the aim there by this factor at least, else aimed at
 
 
+def _at_prior(sd: tuple[float, float]) -> bool:
+    """σ (degrees, metres) still at its prior along some direction: the beams leave the pose free there (a new
+    operator read 10.00°, 500.0 mm, the prior, through ten table points as the pose's σ)."""
+    return sd[0] >= 0.9 * np.degrees(PRIOR_SD[0]) or sd[1] >= 0.9 * PRIOR_SD[3]
+
+
 class CalibrateTurret(Workflow):
     name = "calibrate_turret"
     title = "Calibrate turret"
@@ -197,7 +203,7 @@ class CalibrateTurret(Workflow):
             keep &= np.array([f"a suggested point on {nm}" not in missed for nm in c.names], bool)
         if moved.any():  # an object a beam found moved is not offered again (it was, after saying it moved)
             gone = set(self._aimed(np.flatnonzero(moved))) | {self.checks[i].object for i in np.flatnonzero(moved)}
-            keep &= np.array([not any(nm.startswith(f"{o} ") for o in gone if o) for nm in c.names], bool)
+            keep &= np.array([o not in gone for o in c.objects], bool)
         c = c.take(keep)
         if not len(c.X):
             return
@@ -284,13 +290,10 @@ class CalibrateTurret(Workflow):
             return ""
         deg, m = self.sigma_now
         reached = deg <= TARGET_DEG and m <= TARGET_M
-        # σ at its prior along some direction: the beams leave it free there (a new operator read 10.00°, 500.0 mm,
-        # the prior, through ten table points as the pose's σ)
-        free = lambda sd: sd[0] >= 0.9 * np.degrees(PRIOR_SD[0]) or sd[1] >= 0.9 * PRIOR_SD[3]  # noqa: E731
         now = (
             (
                 " The beams so far leave the turret's pose free in some direction: faces of three orientations fix it."
-                if free(self.sigma_now)
+                if _at_prior(self.sigma_now)
                 else f" The beams so far give σ {deg:.2f}°, {1000 * m:.1f} mm"
                 + (
                     f" (within the {TARGET_DEG}° and {1000 * TARGET_M:.1f} mm aimed for: " + "{solve})."
@@ -313,7 +316,7 @@ class CalibrateTurret(Workflow):
             f"{now} Next, the point circled 'next' (on {where}) reduces σ the most"
             + (
                 f", to {self.sigma_next[0]:.2f}°, {1000 * self.sigma_next[1]:.1f} mm"
-                if len(self.pan) >= 5 and not free(self.sigma_next)
+                if len(self.pan) >= 5 and not _at_prior(self.sigma_next)
                 else ""
             )
             + "; {measure_next} measures it."

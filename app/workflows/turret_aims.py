@@ -41,7 +41,8 @@ ROOM_SPARE_M = 0.005  # ... plus this
 @dataclass(frozen=True)
 class Candidates:
     """X (M, 3) world points, normals (M, 3), names ("table face 1"), e1 / e2 (M, 3) the face's in-plane
-    axes, room (M, 4): the distances to the face's extent along −e1, +e1, −e2, +e2 (metres)."""
+    axes, room (M, 4): the distances to the face's extent along −e1, +e1, −e2, +e2 (metres), objects (M,) the
+    object each lies on ("table")."""
 
     X: np.ndarray
     normals: np.ndarray
@@ -49,6 +50,7 @@ class Candidates:
     e1: np.ndarray
     e2: np.ndarray
     room: np.ndarray
+    objects: list
 
     def take(self, keep: np.ndarray) -> Candidates:
         keep = np.asarray(keep, bool)
@@ -59,6 +61,7 @@ class Candidates:
             self.e1[keep],
             self.e2[keep],
             self.room[keep],
+            [o for o, k in zip(self.objects, keep) if k],
         )
 
 
@@ -83,9 +86,9 @@ def face_candidates(site, camera, T_world_turret: np.ndarray) -> Candidates:
         rows = [r for r, keep in zip(rows, inside) if keep]
     if not rows:
         z = np.zeros((0, 3))
-        return Candidates(z, z, [], z, z, np.zeros((0, 4)))
-    X, N, names, E1, E2, room, _ = zip(*rows)
-    return Candidates(np.array(X), np.array(N), list(names), np.array(E1), np.array(E2), np.array(room))
+        return Candidates(z, z, [], z, z, np.zeros((0, 4)), [])
+    X, N, names, E1, E2, room, objects = zip(*rows)
+    return Candidates(np.array(X), np.array(N), list(names), np.array(E1), np.array(E2), np.array(room), list(objects))
 
 
 def landing_rows(T_world_turret: np.ndarray, c: Candidates) -> np.ndarray:

@@ -259,6 +259,7 @@ def refine_base(
 MATCH_GATE = 13.8  # χ² of 2 degrees of freedom at 0.999: a click farther than this from a feature is not it
 MODEL_PX = 1.0  # the robot model's own error on the image (link lengths, joint offsets), added to the click's
 OVERLAP_SIGMAS = 3.0  # a feature's ends may lie this many σ farther along its line
+MIN_FEATURE_PX = 2.0  # a feature drawn shorter than this (end-on) has no direction to match a click by
 
 
 def _click_distances(seg_uv: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -325,7 +326,7 @@ def match_segment(
     lo, hi = t.min(axis=1), t.max(axis=1)
     ls = max(float(np.linalg.norm(seg[1] - seg[0])), 1e-12)
     overlap = np.clip(np.minimum(hi, L[0] + slack[:, 1]) - np.maximum(lo, -slack[:, 0]), 0.0, None) / ls
-    d2 = np.where((overlap >= min_overlap) & (L[0] >= 2.0), d2, np.inf)
+    d2 = np.where((overlap >= min_overlap) & (L[0] >= MIN_FEATURE_PX), d2, np.inf)
     fits = np.flatnonzero(d2 <= gate)
     return (int(fits[0]) if len(fits) == 1 else None), d2
 

@@ -659,13 +659,15 @@ class ServedInterface(Interface):
     def __init__(self, argv: list[str]):
         import argparse
 
-        from app.ui import serve as serve_module
         from app.ui.serve import add_serve_parser, build_interface
+        from app.ui.serve import free_port as serve_port
 
         parser = argparse.ArgumentParser()
         add_serve_parser(parser.add_subparsers(dest="command"))
         port = interface_port()
-        if serve_module._bind_error("127.0.0.1", port) is not None:  # a given port is that one or none: another
+        try:  # a port given to serve is that one or none: still held by the last interface, another is taken
+            serve_port("127.0.0.1", port, tries=1)
+        except ValueError:
             port = free_port()
         args = parser.parse_args(["serve", "--port", str(port), *argv])
         self.server, self.closers = build_interface(args)

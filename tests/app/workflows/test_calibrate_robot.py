@@ -147,9 +147,9 @@ def test_a_base_that_puts_the_robot_inside_an_object_is_said_before_accept(robot
     wf.go()
     _arrive(wf, site)
     q = wf.tour.arrived[0]
-    assert wf._inside(scene.robot.T_world_base, [q]) == []  # the true base: clear
+    assert wf._inside(scene.robot.T_world_base, {0: q}) == []  # the true base: clear
     sunk = make_T(np.eye(3), [0.0, 0.0, -0.12]) @ scene.robot.T_world_base  # 12 cm down, into the table
-    said = wf._inside(sunk, [q])
+    said = wf._inside(sunk, {0: q})
     assert len(said) == 1 and said[0].startswith("at pose 1 its ") and said[0].endswith("inside the table"), said
     wf.inside = said  # as Solve leaves it for such a base
     # a fit whose σ and residuals are clean: the base's place alone is what is wrong
