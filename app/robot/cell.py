@@ -15,6 +15,11 @@ the joint; nothing moves.
 A motion to given joint positions (``plan_joints``: the calibration workflows' poses) is checked the same way,
 along the straight joint path or, when that is refused, through given intermediate configurations.
 
+A robot that already stands inside an object's margin (not touching it: a base calibrated since, an object
+modelled beside the arm) may move, but not nearer: for that motion the object's margin is where the robot stands
+(``_set_obstacles``), and the operator is told. Without it every motion was refused at its first sample, Move robot's
+too, and the robot could not be moved clear.
+
 ``move(plan)`` sends a checked plan to the controller, refused when the robot moved since it was
 planned, when it is moving, or when the plan was refused. ``stop()`` halts it at once.
 """
@@ -24,7 +29,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -52,6 +57,7 @@ __all__ = [
 MARGIN_M = 0.01  # clearance kept from known and modelled objects and the table
 STALE_MARGIN_M = 0.04  # clearance kept from objects whose pose is stale
 APPROACH_M = 0.08  # the last leg comes straight in along the normal from this far out
+LEAVE_SLACK_M = 1e-4  # a start inside a margin: the motion may come this much nearer (the distance's own precision)
 YAW_STEPS = 12  # turns about the approach axis tried (every 30°)
 PLAN_MOVED_RAD = 1e-3  # the robot moved since the plan when a joint is farther than this from its start
 
@@ -242,8 +248,8 @@ class RobotCell:
                 warnings,
             )
         with self._check_lock:
-            self.checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in obstacles])
             margins = {o.name: o.margin_m for o in obstacles}
+            warnings += self._set_obstacles(self.checker, q0, obstacles)
             best, checked, ik_why = None, 0, []
             refusal: list = []  # (reason, pose) of the first contact found
 
@@ -292,7 +298,7 @@ class RobotCell:
         margins = {o.name: o.margin_m for o in obstacles}
         reason, checked = "", 0
         with self._check_lock:
-            self.checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in obstacles])
+            warnings = self._set_obstacles(self.checker, q0, obstacles)
             for legs in ([q0, q_goal], *([q0, np.asarray(v, float), q_goal] for v in via)):
                 path = np.vstack(
                     [
@@ -303,11 +309,32 @@ class RobotCell:
                 check = self.checker.check_path(path)
                 checked += len(path)
                 if check.ok:
-                    return MovePlan(path, True, "", T, T[:3, 3], -T[:3, 2], 0.0, [], time.perf_counter() - t0, checked)
+                    dt = time.perf_counter() - t0
+                    return MovePlan(path, True, "", T, T[:3, 3], -T[:3, 2], 0.0, warnings, dt, checked)
                 reason = reason or _collision_text(check, self.model.links, margins)
-        plan = self._refused(q0, T[:3, 3], -T[:3, 2], 0.0, t0, reason, [])
+        plan = self._refused(q0, T[:3, 3], -T[:3, 2], 0.0, t0, reason, warnings)
         plan.samples_checked = checked
         return plan
+
+    def _set_obstacles(self, checker: CollisionChecker, q0: np.ndarray, obstacles: Sequence[Obstacle]) -> list[str]:
+        """Give ``checker`` the obstacles for a motion starting at q0 (the module's docstring): one the robot stands
+        inside the margin of, not touching it, kept no nearer than the robot stands; what to tell of those."""
+        checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in obstacles])
+        near: dict[str, float] = {}
+        for c in checker.check(q0):
+            if c.other not in self.model.links and c.distance_m > LEAVE_SLACK_M:
+                near[c.other] = min(near.get(c.other, np.inf), c.distance_m)
+        if not near:
+            return []
+        kept = [replace(o, margin_m=near[o.name] - LEAVE_SLACK_M) if o.name in near else o for o in obstacles]
+        checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in kept])
+        return [
+            f"the robot stands {1000 * d:.1f} mm from {name}, inside the {1000 * o.margin_m:.0f} mm kept from it: this "
+            "motion may take it away but not nearer"
+            for o in obstacles
+            for name, d in near.items()
+            if o.name == name
+        ]
 
     @staticmethod
     def _near(o: Obstacle, X: np.ndarray) -> bool:
@@ -400,6 +427,7 @@ class RobotCell:
         pre_g, grasp, pre_p, place = (at(q, opened) for q in qs)
         shut = at(grasp, closed)
         carried = [shut, at(pre_g, closed), at(pre_p, closed), at(place, closed)]
+        back = at(q0, opened)
         others = [o for o in obstacles if o.name != name]
         legs = [
             (self.checker, [q0, q_open, pre_g], obstacles),
@@ -410,14 +438,18 @@ class RobotCell:
             (self.checker, [carried[3], place, pre_p], others),
             # back where it started, out of the cameras' way for the look that follows, the body an obstacle where
             # it now stands
-            (self.checker, [pre_p, at(q0, opened)], [*others, Obstacle(name, brep, T_put, MARGIN_M)]),
+            (self.checker, [pre_p, back], [*others, Obstacle(name, brep, T_put, MARGIN_M)]),
         ]
         payload = self._payload_checker(name, brep, T_tool_obj)
-        path = [q0[None]]
+        path, warnings = [q0[None]], []
         with self._check_lock:
             for checker, waypoints, obs in legs:
                 checker = payload if checker == "payload" else checker
-                checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in obs])
+                if waypoints[0] is q0 or waypoints[-1] is back:  # from where the robot stands, and back there
+                    said = self._set_obstacles(checker, q0, obs)
+                    warnings += [w for w in said if w not in warnings]
+                else:
+                    checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in obs])
                 for a, b in zip(waypoints, waypoints[1:]):
                     seg = joint_path(self.model, a, b, self.max_step_m)[1:]
                     check = checker.check_path(np.vstack([a[None], seg]))
@@ -426,7 +458,7 @@ class RobotCell:
                         return self._pick_refused(name, q0, _collision_text(check, checker.model.links, margins), t0)
                     path.append(seg)
         return PickPlan(
-            np.vstack(path), True, "", name, T_put, T_tool_obj, shut, carried[3], width,
+            np.vstack(path), True, "", name, T_put, T_tool_obj, shut, carried[3], width, warnings,
             preview_s=time.perf_counter() - t0,
         )  # fmt: skip
 
@@ -468,11 +500,10 @@ def _collision_text(check, links, margins: dict) -> str:
     if check.other in links:
         return f"the path would bring the robot's {check.link} into its own {check.other}: choose another target"
     what = check.other
-    if getattr(check, "index", -1) == 0:  # where it stands now: no other target helps, the robot must move clear
+    if getattr(check, "index", -1) == 0:  # where it stands now (touching: a start inside the margin may leave it)
         return (
-            f"the robot's {check.link} stands {1000 * max(check.distance_m, 0.0):.0f} mm from {what} already, inside "
-            f"the {1000 * margins.get(what, 0.0):.0f} mm kept from it: move the robot clear first (Move robot, with a "
-            "larger Standoff), then try again"
+            f"the database has the robot's {check.link} touching {what} where it stands: check {what}'s pose "
+            "(Update pose) and the robot's base (Calibrate robot), then try again"
         )
     if check.distance_m > 0:
         return (

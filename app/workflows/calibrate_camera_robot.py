@@ -72,6 +72,7 @@ class CalibrateCameraFromRobot(TourWorkflow):
     snapping = True
     actions = (
         "go",
+        "skip",
         "stop",
         "click",
         "remove_last",
@@ -91,6 +92,7 @@ class CalibrateCameraFromRobot(TourWorkflow):
             "(DLT, 6 or more)",
         ),
         TourWorkflow.GO,
+        TourWorkflow.SKIP,
         TourWorkflow.STOP,
         Control("solve", "Solve", "R", color="blue", hint="The camera from the tool tip's clicked positions"),
         Control(
@@ -260,8 +262,7 @@ class CalibrateCameraFromRobot(TourWorkflow):
             has.add("refuse_snap")
         if self.K is not None:
             has.add("set_method")
-        if t.next_index is not None:
-            has.add("go")
+        has = self._tour_controls(has, True)
         _, need, what, how = METHODS[self.method]
         if len(self.order) >= need:
             has.add("solve")

@@ -65,6 +65,7 @@ class CalibrateRobot(TourWorkflow):
     snapping = True  # Session.start passes its "Snap clicks" setting as snap=
     actions = (
         "go",
+        "skip",
         "stop",
         "click",
         "add_segment",
@@ -78,6 +79,7 @@ class CalibrateRobot(TourWorkflow):
     )
     controls = (
         TourWorkflow.GO,
+        TourWorkflow.SKIP,
         TourWorkflow.STOP,
         Control("solve", "Solve", "R", color="blue", hint="The base's pose from every clicked edge, with σ"),
         Control(
@@ -389,8 +391,7 @@ class CalibrateRobot(TourWorkflow):
             has.add("refuse_snap")
         edges, poses = self._assigned(), {e.pose for e in self._assigned()}
         busy = self.pending is not None or self._unassigned() is not None
-        if not busy and t.next_index is not None:
-            has.add("go")
+        has = self._tour_controls(has, not busy)
         if not busy and len(edges) >= MIN_EDGES and len(poses) >= MIN_POSES:
             has.add("solve")
         if t.at is None:

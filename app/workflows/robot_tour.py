@@ -35,8 +35,9 @@ class RobotTour:
     """The poses ``qs`` (k, n) visited in order by the site's robot (module docstring).
 
     index : the pose the robot is at or going to (−1 before the first). state : "idle" (not at a pose),
-    "moving", "settling" (arrived, waiting for the video), "at" (settled at pose ``index``).
-    arrived : {pose index: the joints (n,) reported on arrival}.
+    "moving", "settling" (arrived, waiting for the video), "at" (settled at pose ``index``), "skipped" (pose
+    ``index`` left out). arrived : {pose index: the joints (n,) reported on arrival}. refused : the pose whose
+    motion was refused last (None once a motion is sent): the operator may leave it out (``skip``).
     """
 
     def __init__(self, site, qs: np.ndarray, what: str):
@@ -47,6 +48,8 @@ class RobotTour:
         self.index = -1
         self.state = "idle"
         self.arrived: dict[int, np.ndarray] = {}
+        self.refused: int | None = None
+        self.skipped: list[int] = []
         self._frame_times: list[float] = []
         self._seen_at = 0.0  # when the arrival was seen (unix seconds): a frozen frame is one taken after it
         spec = getattr(site.scene, "robot", None)
@@ -59,7 +62,7 @@ class RobotTour:
     @property
     def next_index(self) -> int | None:
         """The pose Go sends the robot to (None after the last)."""
-        k = self.index + 1 if self.state in ("at", "settling") or self.index < 0 else self.index
+        k = self.index + 1 if self.state in ("at", "settling", "skipped") or self.index < 0 else self.index
         return k if k < self.n else None
 
     @property
@@ -81,22 +84,40 @@ class RobotTour:
 
         k = self.next_index
         if k is None:
-            raise WorkflowError(f"the robot has been to all {self.n} poses: Solve, or Cancel")
+            out = f" ({len(self.skipped)} left out)" if self.skipped else ""
+            raise WorkflowError(f"no calibration pose is left of {self.n}{out}: Solve, or Cancel")
         if self.moving():
             raise WorkflowError("the robot is moving: Stop it (Space) or wait for it to stop")
         via = [] if self.home is None else [self.home]
         plan = planned(self.cell.plan_joints, self.qs[k], obstacles_of(self.site.objects()), via=via)
         if not plan.ok:
-            raise WorkflowError(f"the motion to pose {k + 1} was refused: {plan.reason}. The robot did not move")
+            self.refused = k
+            raise WorkflowError(
+                f"the motion to pose {k + 1} was refused: {plan.reason}. The robot did not move; Skip pose (K) "
+                "leaves this pose out"
+            )
         try:
             self.cell.move(plan)
         except ControllerError as exc:
             raise WorkflowError(str(exc)) from None
-        self.index, self.state = k, "moving"
+        self.index, self.state, self.refused = k, "moving", None
+        said = f" ({'; '.join(plan.warnings)})" if plan.warnings else ""
         return (
-            f"Moving to pose {k + 1} of {self.n} (its path checked: {plan.samples_checked} poses): Stop (Space) "
-            "halts it."
+            f"Moving to pose {k + 1} of {self.n} (its path checked: {plan.samples_checked} poses{said}): Stop "
+            "(Space) halts it."
         )
+
+    def skip(self) -> str:
+        """Leave out the pose whose motion was refused (the robot stays where it is); what to tell the operator.
+        WorkflowError when no motion to the next pose was refused."""
+        k = self.next_index
+        if k is None or self.refused != k:
+            raise WorkflowError("only a pose whose motion was refused can be left out: Next pose (G) tries it first")
+        self.index, self.state, self.refused = k, "skipped", None
+        self.skipped.append(k)
+        nxt = self.next_index
+        then = f"Next pose (G) sends the robot to pose {nxt + 1}" if nxt is not None else "it was the last: Solve"
+        return f"Pose {k + 1} of {self.n} left out: {then}."
 
     def stop(self) -> None:
         self.cell.stop()
@@ -197,6 +218,7 @@ class TourWorkflow(Workflow):
         "go", "Next pose", "G", color="blue", hint="Send the robot to the next calibration pose (checked first)"
     )
     STOP = Control("stop", "Stop", "space", color="red", hint="Halt the robot at once, where it is")
+    SKIP = Control("skip", "Skip pose", "K", hint="Leave out the pose whose motion was refused: Next pose goes on")
 
     @classmethod
     def available(cls, site) -> str:
@@ -222,8 +244,23 @@ class TourWorkflow(Workflow):
             self.message = self.tour.go()
             self.state = "moving"
 
+    def skip(self) -> None:
+        """Leave out the next pose, whose motion was refused."""
+        with self.lock:
+            self._check_open()
+            self.message = self.tour.skip()
+            self.state = "go"
+
     def stop(self) -> None:
         self.tour.stop()
+
+    def _tour_controls(self, has: set[str], ready: bool) -> set[str]:
+        """``has`` with Next pose when the tour has a next pose and the workflow is ``ready`` for it, and Skip pose
+        when that pose's motion was refused."""
+        t = self.tour
+        if ready and t.next_index is not None:
+            has = has | {"go"} | ({"skip"} if t.refused == t.next_index else set())
+        return has
 
     def tick(self) -> bool:
         with self.lock:

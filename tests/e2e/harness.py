@@ -10,6 +10,7 @@ convention), so clicks land on exact pixels whatever the window.
 from __future__ import annotations
 
 import os
+import re
 import socket
 import time
 import weakref
@@ -383,6 +384,7 @@ def shared_context(browser):
     if context is None:
         context = browser._mcit_context = browser.new_context(viewport=VIEWPORT)
         context.add_init_script(PACED_FRAMES_JS)
+        context.add_init_script(BUTTON_CLICKS_JS)
         # A blank page of the interfaces' site (127.0.0.1), kept open: chromium keeps the site's renderer process,
         # and its compiled code, between one test's page and the next (a page opened on 1.5 s of the renderer's
         # CPU against 2.3 s when the renderer is started again).
@@ -458,7 +460,6 @@ def assert_prompt_controls(page, timeout_s: float = 15.0) -> list[str]:
 def press(page, label: str, timeout_ms: int = 60_000) -> None:
     """Click the visible button named ``label``, with or without its key (e.g. "Solve" for "Solve (R)"; not "Measure
     next" for "Measure", nor "Calibrate camera from robot" for "Calibrate camera")."""
-    import re
 
     from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
@@ -481,8 +482,58 @@ def press(page, label: str, timeout_ms: int = 60_000) -> None:
 def click_control(locator, timeout_ms: int = 60_000) -> None:
     """Click a panel control through playwright's checks (visible, enabled, steady over two animation frames), for
     up to ``timeout_ms``: on a heavily loaded machine they took more than playwright's default 30 s. Not forced: a
-    click made at once, before the page had hidden the button it was taking down, went to that button."""
-    locator.click(timeout=timeout_ms)
+    click made at once, before the page had hidden the button it was taking down, went to that button.
+
+    A button of an interface's page (viser gives it its element's id) is clicked until its press reaches the server,
+    at most three times: on loaded machines a click made as the panel redrew (a selection's text arriving) reached no
+    button, and the workflow it was to start never started. A click the page's button took is waited for at the
+    server (up to TAKEN_REACH_S: a second press of Accept would be refused, so only a press the page lost is made
+    again); one it did not take is made again at once."""
+    page = locator.page
+    counts = _BUTTON_PRESSES.get(id(page))
+    uuid = locator.get_attribute("id", timeout=timeout_ms) if counts is not None else None
+    if not (uuid and _UUID.fullmatch(uuid)):  # not a viser button (a chooser's option, a folder's title)
+        locator.click(timeout=timeout_ms)
+        return
+    for attempt in (1, 2, 3):
+        before, taken = counts.get(uuid, 0), page.evaluate("() => window.__mcitButtonClicks.length")
+        locator.click(timeout=timeout_ms)
+        took = uuid in page.evaluate("(n) => window.__mcitButtonClicks.slice(n)", taken)
+        deadline = time.monotonic() + (TAKEN_REACH_S if took else 0.0)
+        while counts.get(uuid, 0) <= before and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if counts.get(uuid, 0) > before:
+            return
+        if attempt == 3 or not locator.is_visible() or not locator.is_enabled():
+            return  # the press's effect is the caller's to wait for (a control the page took down answered)
+
+
+_UUID = re.compile(r"[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}")  # a viser element's id
+TAKEN_REACH_S = 30.0  # how long a press the page's button took has to reach the server before it is made again
+# Clicks the page's buttons took, by their element's id (viser's uuid), in the order they came: read by click_control.
+BUTTON_CLICKS_JS = """(() => {
+  window.__mcitButtonClicks = [];
+  document.addEventListener("click", (e) => {
+    const b = e.target && e.target.closest && e.target.closest("button");
+    if (b && b.id) window.__mcitButtonClicks.push(b.id);
+  }, true);
+})();"""
+# A page's button presses that reached the server: id(page) → {button uuid: count} (Interface.open).
+_BUTTON_PRESSES: dict[int, dict[str, int]] = {}
+
+
+def count_button_presses(server, client_id: int) -> dict[str, int]:
+    """A live count of ``client_id``'s button presses as viser's server receives them (before any callback runs)."""
+    import viser._messages as messages
+
+    counts: dict[str, int] = {}
+
+    def received(cid, message) -> None:
+        if cid == client_id and message.updates.get("value") is True:
+            counts[message.uuid] = counts.get(message.uuid, 0) + 1
+
+    server._websock_server.register_handler(messages.GuiUpdateMessage, received)
+    return counts
 
 
 class Interface:
@@ -552,6 +603,7 @@ class Interface:
         wait_for_steady_camera(panel)  # clicks are placed through the camera the page reports: let the fit land
         page.panel = panel
         _PAGE_DPRS[panel] = dpr
+        _BUTTON_PRESSES[id(page)] = count_button_presses(self.server.server, panel.client.client_id)
         return page
 
     def screen_of(self, page, uv):

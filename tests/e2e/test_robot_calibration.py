@@ -181,3 +181,38 @@ def test_the_camera_is_calibrated_from_the_robot_s_tool_tip(browser, tmp_path):
         page.close()
     finally:
         ui.close()
+
+
+def test_a_calibration_pose_an_object_blocks_is_refused_and_left_out_by_skip_pose(browser, tmp_path):
+    """A crate modelled where the camera's first calibration pose puts the tool: Next pose is refused, naming it and
+    Skip pose (K); the Skip pose button leaves the pose out, and Next pose then sends the robot to the second."""
+    from app.db import Database
+    from app.robot.urdf import load_scene_robot
+    from core.brep import BRep
+    from core.transforms import make_T
+
+    ui = LiveRobotSite(tmp_path)
+    try:
+        scene = ui.scene
+        model, _ = load_scene_robot(scene.robot)
+        tip = scene.robot.T_world_base @ model.tool_pose(scene.robot.calibration_qs(model, "camera")[0])
+        with Database.open(tmp_path / "site.sqlite") as db:
+            db.add_object("crate", "box", BRep.box(0.04, 0.04, 0.04), make_T(np.eye(3), tip[:3, 3]), client="test")
+        page = ui.open(browser)
+        op = Operator(ui, page)
+        wait_until(lambda: "crate" in [o.name for o in ui.site.objects()], 30.0, "the crate in the site")
+        q0 = ui.site.robot.controller.state().q
+        op.press("Calibrate camera from robot")
+        _said(page, "step=go", "the first step")
+        wf = page.panel.session.workflow
+        op.key_until("g", lambda: "Skip pose (K)" in page.panel.error, "pose 1's motion refused")
+        assert "pose 1 was refused" in page.panel.error and "crate" in page.panel.error, page.panel.error
+        assert np.allclose(ui.site.robot.controller.state().q, q0)
+        op.press("Skip pose")
+        wait_until(lambda: wf.tour.skipped == [0], 30.0, "pose 1 left out", panel=page.panel)
+        _said(page, f"Pose 1 of {wf.tour.n} left out: Next pose (G) sends the robot to pose 2", "the pose left out")
+        _at_pose(op, page, wf, 1, "click_tip")
+        op.key("Escape")
+        page.close()
+    finally:
+        ui.close()

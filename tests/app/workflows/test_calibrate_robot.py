@@ -282,3 +282,29 @@ def test_a_pose_is_settled_only_on_a_frame_taken_after_the_arrival(scene, tmp_pa
     finally:
         setup.close()
         db.close()
+
+
+def test_a_pose_whose_motion_is_refused_can_be_left_out_and_the_tour_goes_on(robot_site, scene):
+    """An object modelled where a calibration pose puts the tool: Next pose is refused, naming it, and offers Skip
+    pose; once it is left out, Next pose goes to the one after, and a pose not refused cannot be skipped."""
+    from core.brep import BRep
+
+    site = robot_site
+    wf = CalibrateCameraFromRobot(site)
+    blocked = 1
+    tip = site.robot.T_world_base @ site.robot.model.tool_pose(wf.tour.qs[blocked])
+    site.add_object("crate", "box", BRep.box(0.04, 0.04, 0.04), make_T(np.eye(3), tip[:3, 3]), method="test",
+                    client="test")  # fmt: skip
+    with pytest.raises(WorkflowError, match="only a pose whose motion was refused"):
+        wf.skip()
+    wf.go()
+    assert _arrive(wf, site) == 0 and "skip" not in wf.current_step().enabled
+    q0 = site.robot.state().q
+    with pytest.raises(WorkflowError, match="pose 2 was refused: .*crate.*Skip pose \\(K\\) leaves this pose out"):
+        wf.go()
+    assert np.allclose(site.robot.state().q, q0) and "skip" in wf.current_step().enabled
+    wf.skip()
+    assert f"Pose 2 of {wf.tour.n} left out: Next pose (G) sends the robot to pose 3" in wf.message
+    assert "skip" not in wf.current_step().enabled and wf.tour.skipped == [1]
+    wf.go()
+    assert _arrive(wf, site) == 2 and sorted(wf.tour.arrived) == [0, 2]
