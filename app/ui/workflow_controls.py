@@ -47,6 +47,10 @@ class WorkflowControls:
             return
         panel, gui = self.panel, self.panel.client.gui
         live_keys = _live_shortcuts(wf.controls, wf.current_step().enabled)  # live from the start, no gap
+        # Buttons made as they are to be shown: one made hidden and shown in the same redraw left its update queued
+        # after viser had dropped the making (the workflow ended before the page took it), and the page logged
+        # "Tried to update non-existent component" (a new operator's console).
+        applies = _applies(wf, wf.current_step(), panel.busy)
         with panel.gui_actions:
             for c in wf.controls:
                 if c.kind == "choice":
@@ -55,7 +59,8 @@ class WorkflowControls:
                     )
                     handle.on_update(panel.guard(functools.partial(self.on_choice, c.action)))
                 else:
-                    handle = gui.add_button(c.button_label, color=c.color, hint=c.hint or None, visible=False)
+                    label, shown = button_label(c, panel.asking), c.action in applies
+                    handle = gui.add_button(label, color=c.color, hint=c.hint or None, visible=shown)
                     handle.on_click(panel.guard(functools.partial(panel.press_event, c.action)))
                     if c.key is not None:
                         cmd = gui.add_command(
@@ -127,7 +132,7 @@ class WorkflowControls:
         """Show the controls that apply now (the others hidden), the choosers' options, shortcuts on/off."""
         if wf is None or step is None or wf is not self.built_for:
             return
-        applies = {c.action for c in wf.controls if c.action in step.enabled and not (busy and c.action != "cancel")}
+        applies = _applies(wf, step, busy)
         keyed = _live_shortcuts(wf.controls, applies)
         asking = self.panel.asking
         for c in wf.controls:
@@ -167,6 +172,11 @@ class WorkflowControls:
                 self.choice_values[action] = texts[shown]
         if handle.value != shown:
             handle.value = shown
+
+
+def _applies(wf, step, busy: bool) -> set[str]:
+    """The actions of ``wf``'s controls that apply at ``step`` (only Cancel while a long action runs)."""
+    return {c.action for c in wf.controls if c.action in step.enabled and not (busy and c.action != "cancel")}
 
 
 def on_key(panel: ClientPanel, fn):

@@ -157,3 +157,19 @@ def test_a_press_during_a_long_action_is_refused_and_one_as_its_worker_ends_wait
     except WorkflowError as exc:  # what the action itself may say (nothing clicked yet), never that one runs
         assert "measurement is running" not in str(exc), exc
     assert not ending.is_alive()
+
+
+def test_a_workflow_s_buttons_are_made_as_they_are_shown_not_hidden_then_shown(served_page):
+    """A button made hidden and shown in the same redraw queued an update that outlived its making when the workflow
+    ended before the page took them (viser drops a pending making once its removal follows): the page logged "Tried
+    to update non-existent component". Each is made as the step shows it, so the first update has nothing to send."""
+    served, page, panel = served_page
+    with panel.app.clients_lock:  # no redraw meanwhile
+        panel.session.select("parallelepiped")
+        wf = panel.session.start("update_pose")
+        controls = panel.workflow_controls
+        controls.rebuild(wf)
+        made = {a: (h.visible, getattr(h, "label", None)) for a, h in controls.handles.items()}
+        controls.update(wf, wf.current_step(), panel.busy)
+        shown = {a: (h.visible, getattr(h, "label", None)) for a, h in controls.handles.items()}
+    assert made == shown and any(visible for visible, _ in made.values())
