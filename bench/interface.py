@@ -97,9 +97,17 @@ def build(n_objects: int, fps: float, source=None, start: bool = True):
     elif FRAMES.is_dir():
         source, video = FolderSource(FRAMES, fps=fps), f"ViSP cube sequence (218 real frames, 640×480) at {fps:.0f} fps"
     else:
+
+        class NoiseVideo(StillSource):
+            """A noise image moved a pixel each frame: a new image every frame, as a camera gives (the interface
+            sends a still's same image once)."""
+
+            def _read(self):
+                return np.roll(self._image, self._index + 1, axis=1)
+
         source, video = (
-            StillSource(rng.integers(0, 255, (480, 640, 3), dtype=np.uint8), fps=fps),
-            "a 640×480 noise still",
+            NoiseVideo(rng.integers(0, 255, (480, 640, 3), dtype=np.uint8), fps=fps),
+            "a 640×480 noise image, moving",
         )
     site = Site(scene, db, clock=lambda: 0.0)
     server = InterfaceServer(site, FrameGrabber(source), port=free_port())

@@ -77,6 +77,7 @@ class ViewFeed:
     frame_index: int = -1
     stamp: str | None = None  # the not-live text stamped on the shown frame, or None
     frames_sent: int = 0
+    sent_image: Any = None  # the image last sent: a still source gives the same array every frame
 
 
 class InterfaceServer:
@@ -460,6 +461,11 @@ class InterfaceServer:
         elif frame is not None and (frame.index != feed.frame_index or was_stamped):
             feed.stamp = None
             feed.frame_index = frame.index
+            if frame.image is feed.sent_image and not was_stamped:
+                # a still's same image again: the page has it (sent at the still's rate, each browser decoded and
+                # drew it again, 20 times a second for the browser tests' stills)
+                return False
+            feed.sent_image = frame.image
             src = feed.grabber.source
             loop = None if src.live or (src.frame_count or 0) <= 1 else src.duration_s
             # a looping recording says where it is on the video itself: what moved in it jumps back at each restart
