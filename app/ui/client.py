@@ -426,26 +426,26 @@ class ClientPanel:
         idle = wf is None or wf.finished
         if self.gui_start.visible != idle:
             self.gui_start.visible = idle
+        busy = self.busy  # what this pass draws: a worker that starts or ends meanwhile changes ``seen``, drawn next
         progress = wf.progress if wf is not None else None
-        self.gui_progress.visible = bool(self.busy or (progress is not None and 0 < progress < 1))
+        self.gui_progress.visible = bool(busy or (progress is not None and 0 < progress < 1))
         if progress is not None:
             self.gui_progress.value = float(np.clip(progress * 100.0, 0, 100))
-        if self.frozen_frames.follow(wf):
-            self.dirty = True
-        if wf is not None and not wf.finished and wf.tick():
+        followed = self.frozen_frames.follow(wf)  # (before the tick, which may change the workflow's frame)
+        if (wf is not None and not wf.finished and wf.tick()) or followed:
             self.dirty = True
         # a workflow's own thread may change it (a search, a look, a solve ending; a long action's worker ends after
         # its last wake-up): drawn when it shows (a new operator waited 4 minutes on "Looking for … in the video")
-        seen = None if wf is None else (id(wf), wf.state, wf.message, wf.finished, wf.progress, self.busy)
+        seen = None if wf is None else (id(wf), wf.state, wf.message, wf.finished, wf.progress, busy)
         if seen != self._wf_seen:
             self._wf_seen = seen
             self.dirty = True
         self.frozen_frames.send()
-        if not (self.dirty or site_changed or self.busy):
+        if not (self.dirty or site_changed or busy):
             return False
         self.dirty = False
         self._draw(wf)
-        self.texts.update(wf)
+        self.texts.update(wf, busy)
         if self.click_t is not None:
             self.click_latencies_s.append(time.monotonic() - self.click_t)
             self.click_t = None

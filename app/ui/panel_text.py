@@ -35,7 +35,8 @@ class PanelText:
         if wf is not None and wf.finished and self.finished_at is not None and self.finished_at[0] is wf:
             self.finished_at = (wf, self.finished_at[1], object())
 
-    def update(self, wf) -> None:
+    def update(self, wf, busy: bool) -> None:
+        """Draw the texts and the workflow's controls (``busy``: a long action runs, as the redraw read it)."""
         panel = self.panel
         selected = panel.session.selected
         if wf is not None and wf.finished and self.finished_at is not None and self.finished_at[0] is wf:
@@ -60,7 +61,7 @@ class PanelText:
         show(panel.gui_headline, headline)
         panel.gui_warning.visible = bool(panel.warning)
         show(panel.gui_warning, panel.warning)
-        panel.workflow_controls.update(wf, step, panel.busy)
+        panel.workflow_controls.update(wf, step, busy)
         text = wf.copy_text() if wf is not None and not wf.finished else ""
         panel.gui_copy.visible = bool(text)
         if text and panel.gui_copy.value != text:

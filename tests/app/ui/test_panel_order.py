@@ -104,8 +104,8 @@ def test_the_controls_come_back_when_a_long_action_s_worker_ends_after_its_last_
     worker = panel.worker = _Worker()  # a measurement under way
     drawn = panel.texts.update
 
-    def update(shown_wf) -> None:  # it ends just after a redraw drew it running, with no wake-up after it
-        drawn(shown_wf)
+    def update(shown_wf, busy) -> None:  # it ends just after a redraw drew it running, with no wake-up after it
+        drawn(shown_wf, busy)
         if not controls.handles[action].visible:
             worker.alive = False
 
