@@ -71,6 +71,7 @@ class CalibrateRobot(TourWorkflow):
         "add_segment",
         "assign_edge",
         "remove_last",
+        "remove_edge",
         "solve",
         "accept",
         "cancel",
@@ -93,6 +94,8 @@ class CalibrateRobot(TourWorkflow):
             "refuse_snap", "Refuse snap", "U", hint="Use the last edge as clicked, not moved onto the image's edge"
         ),
         Control("remove_last", "Remove last", "backspace", hint="Undo the last click"),
+        Control("edge", "Edge", kind="choice", hint="A clicked edge: the robot's edge it is, its pose, its residual"),
+        Control("remove_edge", "Remove edge", arg="edge", hint="Forget the chosen edge (a wrong one: its residual)"),
         CANCEL,
     )
 
@@ -217,6 +220,39 @@ class CalibrateRobot(TourWorkflow):
                 raise WorkflowError("there is no click to remove")
             self._changed()
             self.state = "click_edge" if self.tour.at is not None else "go"
+
+    def remove_edge(self, i: int) -> None:
+        """Forget edge ``i`` (from 0, in the order clicked), wherever it was clicked: one a wrong assignment or a
+        wrong click put there, which the Solve's residuals point at."""
+        with self.lock:
+            self._check_open()
+            if self.pending is not None or self._unassigned() is not None:
+                raise WorkflowError("finish the edge under way first (or Remove last)")
+            if not 0 <= int(i) < len(self.edges):
+                raise WorkflowError(f"there is no edge {int(i) + 1}: choose one of the {len(self.edges)} in the list")
+            e = self.edges.pop(int(i))
+            self.message = (
+                f"Edge {int(i) + 1} ({e.feature.label(self._links())}, pose {e.pose + 1}) is removed: "
+                f"{len(self.edges)} left."
+            )
+            self._follow_estimate()
+            self._changed()
+            self.state = "click_edge" if self.tour.at is not None else "go"
+
+    def choices(self, action: str) -> list[tuple[str, Any]]:
+        """The Edge chooser: every clicked edge, the farthest off first after a Solve, else the newest first."""
+        if action != "edge":
+            return []
+        with self.lock:
+            links = self._links()
+            res = list(self.fit.result.click_residuals_px) if self.fit is not None else []
+            out = []
+            for i, e in enumerate(self.edges):
+                if e.feature is not None:
+                    off = f", {res[i]:.1f} px off" if i < len(res) else ""
+                    rank = res[i] if i < len(res) else i  # (residuals after a Solve, else the order clicked)
+                    out.append((rank, f"{i + 1}: {e.feature.label(links)}, pose {e.pose + 1}{off}", i))
+            return [(text, i) for _, text, i in sorted(out, key=lambda t: -t[0])]
 
     def refuse_snap(self) -> None:
         with self.lock:
@@ -392,6 +428,8 @@ class CalibrateRobot(TourWorkflow):
         edges, poses = self._assigned(), {e.pose for e in self._assigned()}
         busy = self.pending is not None or self._unassigned() is not None
         has = self._tour_controls(has, not busy)
+        if self.edges and not busy:
+            has |= {"edge", "remove_edge"}
         if not busy and len(edges) >= MIN_EDGES and len(poses) >= MIN_POSES:
             has.add("solve")
         if t.at is None:
@@ -505,15 +543,14 @@ class CalibrateRobot(TourWorkflow):
             if self.inside:
                 out.append(
                     "through this base the robot would be " + "; ".join(self.inside) + ", which the video does not "
-                    "show: a wrong edge pulled it (the edges' residuals say which; Remove last, or Cancel and start "
-                    "again)"
+                    "show: a wrong edge pulled it (the edges' residuals say which: Remove edge forgets one)"
                 )
             links = self._links()
             for i, (e, r) in enumerate(zip(self._assigned(), f.result.click_residuals_px)):
                 if r > 3 * max(e.sigma_px, 0.5):
                     out.append(
                         f"edge {i + 1} ({e.feature.label(links)}, pose {e.pose + 1}) is {r:.1f} px off (more than 3σ): "
-                        "a wrong edge?"
+                        "a wrong edge? (Remove edge forgets it)"
                     )
                 out += weak_snaps([(f"edge {i + 1}", e.snap)])
             return out

@@ -5,9 +5,9 @@ the scene's truth.
 * Calibrate robot: a new database believes the drawing's base (2.5 cm and 2° off); Move robot asks once more
   before moving through it. The robot goes to the scene's three poses (G); at each, the operator clicks two
   points along the edges a human would click (seen, long enough, one clear step in the frozen frame), each
-  off the edge by 0.7 px; when the panel asks which edge it is, they click it on the white robot. Solve (R),
-  Accept: the base within 1° and 3 mm of the truth, and the robot drawn through it within 0.5 px of the
-  rendered one at every pose.
+  off the edge by 0.7 px; when the panel asks which edge it is, they click it on the white robot. Solve (R); the
+  farthest-off edge chosen in Edge and forgotten by Remove edge; Solve again, Accept: the base within 1° and
+  3 mm of the truth, and the robot drawn through it within 0.5 px of the rendered one at every pose.
 * Calibrate camera from robot: the base known (its true pose stored, as surveyed), the camera's calibration
   bumped by 1° and 3 cm: the robot shows its tool's tip at the scene's eight poses, the operator clicks the
   circled corner where the video shows it (0.7 px off), Solve, Accept: the table's and boxes' corners
@@ -111,6 +111,17 @@ def test_the_base_is_calibrated_from_edges_clicked_on_the_live_video(browser, tm
         op.key("r")
         _said(page, "step=review", "the solved base")
         op.check()
+        # the farthest-off edge, chosen in the Edge chooser, forgotten by Remove edge; then solved again
+        n = len(wf.edges)
+        text, i = wf.choices("edge")[0]
+        removed = wf.edges[i]
+        op.choose("Edge", text)
+        op.press("Remove edge")
+        gone = lambda: len(wf.edges) == n - 1 and all(e is not removed for e in wf.edges)  # noqa: E731
+        wait_until(gone, 30.0, "the edge removed", page.panel)
+        _said(page, f"Edge {i + 1} (", "the edge's removal said")
+        op.key("r")
+        _said(page, "step=review", "the base solved again")
         op.accept(wf)
         T = site.robot.T_world_base
         deg, m = pose_error(T, T_true)

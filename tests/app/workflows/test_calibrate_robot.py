@@ -6,6 +6,7 @@ it is nominal."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -126,6 +127,27 @@ def test_the_base_is_calibrated_from_edges_clicked_at_the_poses(robot_site, scen
     assert 1000 * fit.std_position_m < 3.0 and not wf.weaknesses()
     drawn = drawn_error_px(model, np.array(list(wf.tour.arrived.values())), cam, T_true, fit.T_world_base)
     assert drawn < 0.5, drawn
+
+    # an edge taken for another of the robot's edges, among the first ones: Solve says which is off, the Edge chooser
+    # lists it first, and Remove edge forgets it (Remove last would have taken every edge after it)
+    good = list(wf.edges)
+    k = good[2].pose
+    other = next(
+        g
+        for g, _, seen in features_at(model, wf.tour.arrived[k], T_true, cam.center, k)
+        if seen and g not in {e.feature for e in good}
+    )
+    wf.edges.insert(2, replace(good[2], feature=other, how="hand"))
+    wf.solve()
+    weak = [w for w in wf.weaknesses() if w.startswith("edge 3 (")]
+    assert weak and weak[0].endswith("a wrong edge? (Remove edge forgets it)"), wf.weaknesses()
+    assert {"edge", "remove_edge"} <= wf.current_step().enabled
+    text, value = wf.choices("edge")[0]
+    assert text.startswith(f"3: {other.label(wf._links())}, pose {k + 1}, ") and text.endswith(" px off") and value == 2
+    wf.remove_edge(value)
+    assert wf.edges == good and wf.fit is None and wf.message.startswith("Edge 3 (")
+    fit = wf.solve()
+    assert pose_error(fit.T_world_base, T_true)[1] < 0.003 and not wf.weaknesses()
     n_cal = len(site.db.calibrations("robot_base"))
     wf.accept()
     assert walk.check(wf).name == "accepted"
