@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from .harness import click_control, key_until, press, select_by_click, wait_until
+from .harness import click_control, key_until, press, select_by_click, wait_for_steady_camera, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -20,6 +20,8 @@ def test_wheel_zooms_about_the_cursor(browser, interface):
     cam = page.panel.client.camera
     box = page.locator("canvas").nth(1).bounding_box()
     for uv in (np.array([150.0, 100.0]), np.array([420.0, 60.0])):
+        # the camera the page shows, at rest: after Fit view a camera on its way back put the cursor on another point
+        wait_for_steady_camera(page.panel)
         x0, y0 = ui.screen_of(page, uv)
         d0 = abs(float(cam.position[2]))
         page.mouse.move(box["x"] + x0, box["y"] + y0)
@@ -27,7 +29,7 @@ def test_wheel_zooms_about_the_cursor(browser, interface):
             page.mouse.wheel(0, -100)
             time.sleep(0.15)
         wait_until(lambda: abs(float(cam.position[2])) < 0.7 * d0, what="the wheel zoom")
-        time.sleep(0.3)
+        wait_for_steady_camera(page.panel)  # every notch taken, the page showing the last
         x1, y1 = ui.screen_of(page, uv)
         assert np.hypot(x1 - x0, y1 - y0) < 3.0, f"the point under the cursor moved from {(x0, y0)} to {(x1, y1)}"
         click_control(page.get_by_role("button", name="Fit view"))
