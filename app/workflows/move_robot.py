@@ -23,6 +23,7 @@ from app.robot.controller import ControllerError
 from core.transforms import log_so3
 
 from .base import Control, Marks, Step, WorkflowError
+from .robot_tour import ARRIVED_RAD
 from .robot_work import RobotWork, planned
 
 __all__ = ["MoveRobot", "STANDOFFS_MM"]
@@ -102,10 +103,13 @@ class MoveRobot(RobotWork):
             self.arrival = {}
 
     def stop(self) -> None:
+        was_moving = self.state == "moving"
         self.cell.stop()
         with self.lock:
             if self.state == "moving":
                 self._arrived(stopped=True)
+            elif was_moving:  # the frame loop saw this Stop end the motion first, and said so
+                self.message = self._outcome
             else:
                 self._idle_stop()
 
@@ -138,7 +142,7 @@ class MoveRobot(RobotWork):
         self.state = "click"
         if s.fault:
             self.message = f"Fault: {s.fault}. The tool is {1000 * dp:.1f} mm from the commanded pose."
-        elif stopped:
+        elif stopped or np.max(np.abs(s.q - self.sent.q_goal)) > ARRIVED_RAD:  # (a Stop the frame loop saw first)
             self.message = f"Stopped: the tool is {1000 * dp:.1f} mm from the commanded pose. Click a new target."
         else:
             self.message = (

@@ -256,3 +256,13 @@ def test_a_robot_touching_an_object_where_it_stands_is_told_to_check_the_databas
     assert "choose another target" not in here
     later = _collision_text(PathCheck(False, 7, "finger_left_link", "table", 0.009, 8), ("base_link",), margins)
     assert "choose another target, or move table first" in later
+
+
+def test_a_motion_stopped_before_the_frame_loop_looks_is_said_stopped_not_arrived(site):
+    """Space's stop reached the controller and the frame loop saw the motion end before the Stop's own handling did:
+    it said "Arrived: the tool is 609.6 mm … from the commanded pose", then "nothing to stop" (a loaded browser run)."""
+    _, wf = _session_with_plan(site)
+    wf.move()
+    site.robot.stop()  # the controller halted: the workflow has not heard of it yet
+    assert wf.tick()  # the frame loop notices the motion has ended
+    assert wf.message.startswith("Stopped: the tool is") and wf.arrival["tool_from_goal_mm"] > 1.0, wf.message
