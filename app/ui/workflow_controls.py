@@ -164,12 +164,13 @@ class WorkflowControls:
         current = wf.choice_value(action)
         if current is None:
             current = self.choice_values.get(action)
-        shown = next((t for t, v in texts.items() if v == current), None)
-        if shown is None:
+        shown = next((t for t, v in texts.items() if v == current), options[0])
+        # what a button taking it uses: the value shown (the workflow's own choice too: Remove edge was refused with
+        # "choose the edge first" while the chooser showed the one the workflow had chosen)
+        if texts:
+            self.choice_values[action] = texts[shown]
+        else:
             self.choice_values.pop(action, None)
-            shown = options[0]
-            if texts:
-                self.choice_values[action] = texts[shown]
         if handle.value != shown:
             handle.value = shown
 

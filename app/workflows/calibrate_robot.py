@@ -71,6 +71,7 @@ class CalibrateRobot(TourWorkflow):
         "add_segment",
         "assign_edge",
         "remove_last",
+        "edge",
         "remove_edge",
         "solve",
         "accept",
@@ -112,6 +113,7 @@ class CalibrateRobot(TourWorkflow):
         self.cov_est = self.cov_start  # its covariance (None: unknown, every edge is assigned by hand)
         self.fit = None  # core.robot.calibration.BaseFit of the last Solve (None: clicks changed since)
         self.inside: list[str] = []  # what the robot would be inside at the poses through the solved base
+        self.edge_chosen: int | None = None  # the edge the operator chose in Edge since the edges last changed
 
     # ------------------------------------------------------------------ the robot's poses
     def _busy(self) -> str:
@@ -239,6 +241,19 @@ class CalibrateRobot(TourWorkflow):
             self._changed()
             self.state = "click_edge" if self.tour.at is not None else "go"
 
+    def edge(self, i: int) -> None:
+        """The operator chose edge ``i`` in the Edge chooser (kept until the edges or the Solve change)."""
+        with self.lock:
+            self.edge_chosen = int(i)
+
+    def choice_value(self, action: str) -> Any:
+        """The Edge chooser shows the operator's choice, else the first listed (after a Solve the farthest off: a new
+        operator's chooser still showed the first edge clicked, and Remove edge would have taken a good one)."""
+        if action != "edge":
+            return None
+        values = [i for _, i in self.choices("edge")]
+        return self.edge_chosen if self.edge_chosen in values else (values[0] if values else None)
+
     def choices(self, action: str) -> list[tuple[str, Any]]:
         """The Edge chooser: every clicked edge, the farthest off first after a Solve, else the newest first."""
         if action != "edge":
@@ -271,7 +286,7 @@ class CalibrateRobot(TourWorkflow):
 
     # ------------------------------------------------------------------ solving
     def _changed(self) -> None:
-        self.fit = None
+        self.fit, self.edge_chosen = None, None
         if self.state == "review":
             self.state = "click_edge" if self.tour.at is not None else "go"
 
@@ -338,6 +353,7 @@ class CalibrateRobot(TourWorkflow):
                 raise WorkflowError("the clicks changed while solving: Solve again")
             self.inside = inside
             self.fit, self.T_est, self.cov_est, self.state = fit, fit.T_world_base.copy(), fit.cov, "review"
+            self.edge_chosen = None  # the chooser shows the farthest off
             self.message = self._solved_text() + "."
             return fit
 

@@ -115,6 +115,8 @@ def test_the_base_is_calibrated_from_edges_clicked_on_the_live_video(browser, tm
         n = len(wf.edges)
         text, i = wf.choices("edge")[0]
         removed = wf.edges[i]
+        chooser = page.panel.workflow_controls.handles["edge"]
+        wait_until(lambda: chooser.value == text, 30.0, "the farthest-off edge shown chosen", page.panel)
         op.choose("Edge", text)
         op.press("Remove edge")
         gone = lambda: len(wf.edges) == n - 1 and all(e is not removed for e in wf.edges)  # noqa: E731

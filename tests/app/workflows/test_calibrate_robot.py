@@ -144,6 +144,11 @@ def test_the_base_is_calibrated_from_edges_clicked_at_the_poses(robot_site, scen
     assert {"edge", "remove_edge"} <= wf.current_step().enabled
     text, value = wf.choices("edge")[0]
     assert text.startswith(f"3: {other.label(wf._links())}, pose {k + 1}, ") and text.endswith(" px off") and value == 2
+    assert wf.choice_value("edge") == 2  # shown chosen: the chooser had stayed on the first edge clicked
+    wf.edge(0)  # the operator's choice stays, until the edges or the Solve change
+    assert wf.choice_value("edge") == 0
+    wf.solve()
+    assert wf.choice_value("edge") == 2
     wf.remove_edge(value)
     assert wf.edges == good and wf.fit is None and wf.message.startswith("Edge 3 (")
     fit = wf.solve()
