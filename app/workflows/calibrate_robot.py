@@ -37,7 +37,9 @@ MIN_EDGES = 6  # Solve needs this many assigned edges (12 residuals for the base
 MIN_POSES = 2  # … clicked at this many poses
 ESTIMATE_FROM = 4  # the drawn estimate follows the clicks from this many assigned edges
 ESTIMATE_MAX_MM, ESTIMATE_MAX_DEG = 20.0, 2.0  # … when their σ is below these
-PICK_RADIUS_PX = 25.0
+# A white robot's edge is picked this near the click on screen (video px: by the page's zoom; 25 video px took an
+# edge a new operator clicked 40 screen px from, zoomed in)
+PICK_RADIUS_SCREEN_PX = 12.0
 MIN_SEGMENT_PX = 3.0
 MAX_SNAP_USE_PX = 3.0  # a snap that moves an edge farther than this is not used (the click is kept)
 # Accept asks once more above these: the target for the base (1°, 3 mm) as one σ.
@@ -63,6 +65,7 @@ class CalibrateRobot(TourWorkflow):
     title = "Calibrate robot"
     at_state = "click_edge"  # settled at a pose: its edges are clicked
     snapping = True  # Session.start passes its "Snap clicks" setting as snap=
+    click_px_per_screen_px = 1.0  # video pixels per screen pixel where the click was made (Session.click sets it)
     actions = (
         "go",
         "skip",
@@ -186,12 +189,12 @@ class CalibrateRobot(TourWorkflow):
         feats, proj = self._candidates(edge.pose)
         if not len(feats):
             raise WorkflowError("no edge of the robot is drawn here: Remove last, and click an edge it shows")
-        d = _point_segment_distances(p, proj)
+        d = _point_segment_distances(p, proj) / self.click_px_per_screen_px  # screen pixels
         j = int(np.argmin(d))
-        if d[j] > PICK_RADIUS_PX:
+        if d[j] > PICK_RADIUS_SCREEN_PX:
             raise WorkflowError(
-                f"no edge of the white robot within {PICK_RADIUS_PX:.0f} px of your click (the nearest is "
-                f"{d[j]:.0f} px away): click on the white robot's edge that you clicked in the video"
+                f"no edge of the white robot within {PICK_RADIUS_SCREEN_PX:.0f} screen px of your click (the nearest "
+                f"is {d[j]:.0f} px away): click on the white robot's edge that you clicked in the video"
             )
         self._assign(edge, feats[j], "hand", "")
 

@@ -16,6 +16,7 @@ from app.db import Database, seed_from_scene
 from app.robot.setup import open_robot
 from app.workflows import CalibrateCameraFromRobot, CalibrateRobot, MoveRobot, Site, WorkflowError
 from app.workflows.calibrate_camera_robot import visible_tip
+from app.workflows.calibrate_robot import _point_segment_distances
 from core.camera import Camera
 from core.robot.calibration import features_at
 from core.transforms import exp_so3, make_T, pose_error
@@ -94,6 +95,7 @@ def test_the_base_is_calibrated_from_edges_clicked_at_the_poses(robot_site, scen
         wf.click([100.0, 100.0])
     rng = np.random.default_rng(0)
     auto = hand = 0
+    refused = False  # a click too far from every white edge was refused (25 video px took one 40 screen px off)
     for k in range(wf.tour.n):
         wf.go()
         assert walk.check(wf).name == "moving" and not wf.current_step().clicks
@@ -109,6 +111,17 @@ def test_the_base_is_calibrated_from_edges_clicked_at_the_poses(robot_site, scen
                 # asked which: click it on the white robot (drawn at the estimate)
                 assert walk.check(wf).name == "assign_edge"
                 drawn = {g: s for g, s, _ in features_at(model, q, wf.T_est, cam.center, k)}
+                if not refused:  # a click beside the white edge, farther than 12 px from every edge: refused
+                    a2, b2 = cam.project(drawn[f])
+                    normal = np.array([b2[1] - a2[1], a2[0] - b2[0]]) / np.linalg.norm(b2 - a2)
+                    _, proj = wf._candidates(k)
+                    for beside in ((a2 + b2) / 2 + off * normal for off in (15.0, -15.0, 20.0, -20.0)):
+                        if np.min(_point_segment_distances(beside, proj)) > 13.0:
+                            with pytest.raises(WorkflowError, match="no edge of the white robot within 12 screen px"):
+                                wf.click(beside)
+                            assert edge.feature is None
+                            refused = True
+                            break
                 wf.click(cam.project(drawn[f]).mean(axis=0))
                 hand += 1
             else:
@@ -119,7 +132,7 @@ def test_the_base_is_calibrated_from_edges_clicked_at_the_poses(robot_site, scen
             assert {"solve", "go"} <= walk.check(wf).enabled
             wf.solve()
             assert walk.check(wf).name == "review" and {"accept", "go"} <= wf.current_step().enabled
-    assert auto > hand  # matched automatically where possible
+    assert auto > hand and refused  # matched automatically where possible
     fit = wf.solve()
     assert walk.check(wf).name == "review" and "go" not in wf.current_step().enabled
     deg, m = pose_error(fit.T_world_base, T_true)
