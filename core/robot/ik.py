@@ -258,5 +258,8 @@ def solve_ik(
         if beyond is None:
             return IkResult(q_free, True, *_errors(model, q_free, T_t))
         reason = f"joint limits: the target needs {beyond}"
-    off = f"the nearest pose within the limits is {off_m * 1e3:.1f} mm and {np.degrees(off_rad):.1f}° off the target"
+    off = (
+        f"the nearest pose within the limits is {off_m * 1e3:.1f} mm and {np.degrees(off_rad):.1f}° off the target (a "
+        f"target is reached within {tols[0] * 1e3:.2f} mm and {np.degrees(tols[1]):.3f}°)"
+    )
     return IkResult(q, False, off_m, off_rad, f"{reason}; {off}")

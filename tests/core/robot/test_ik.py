@@ -83,6 +83,8 @@ def test_an_orientation_the_arm_cannot_take_is_out_of_reach():
     r = solve_ik(m, T, [0.1, 0.1])
     assert not r.ok and r.reason.startswith("out of reach")
     assert r.position_error_m >= 0.05 - 1e-9
+    # how near counts as reached is said: "0.7 mm off" alone read as reached to a new operator
+    assert r.reason.endswith("off the target (a target is reached within 0.01 mm and 0.006°)"), r.reason
 
 
 def test_planar_round_trip_from_the_other_elbow():
