@@ -328,12 +328,11 @@ class RobotCell:
             return []
         kept = [replace(o, margin_m=near[o.name] - LEAVE_SLACK_M) if o.name in near else o for o in obstacles]
         checker.set_obstacles([(o.name, o.brep, o.T_world_obj, o.margin_m) for o in kept])
+        margins = {o.name: o.margin_m for o in obstacles}
         return [
-            f"the robot stands {1000 * d:.1f} mm from {name}, inside the {1000 * o.margin_m:.0f} mm kept from it: this "
-            "motion may take it away but not nearer"
-            for o in obstacles
+            f"the robot stands {1000 * d:.1f} mm from {name}, inside the {1000 * margins[name]:.0f} mm kept from it: "
+            "this motion may take it away but not nearer"
             for name, d in near.items()
-            if o.name == name
         ]
 
     @staticmethod

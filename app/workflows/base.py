@@ -28,6 +28,8 @@ __all__ = [
     "Ghost",
     "Marks",
     "Workflow",
+    "PICK_RADIUS_SCREEN_PX",
+    "pick_radius_px",
     "as_pixel",
     "Control",
     "Step",
@@ -36,6 +38,10 @@ __all__ = [
     "KEY_TEXT",
     "AS_CLICK",
 ]
+
+# What a click picks (a model's corner or edge, the white robot's edge, a face's centre) lies within this many screen
+# pixels of it; in video pixels it depends on the page's zoom (``pick_radius_px``).
+PICK_RADIUS_SCREEN_PX = 12.0
 
 
 class WorkflowError(ValueError):
@@ -269,6 +275,11 @@ def as_pixel(uv: Any) -> np.ndarray:
     return p
 
 
+def pick_radius_px(wf: Workflow) -> float:
+    """PICK_RADIUS_SCREEN_PX in video pixels at the zoom of ``wf``'s last click (its ``click_px_per_screen_px``)."""
+    return PICK_RADIUS_SCREEN_PX * wf.click_px_per_screen_px
+
+
 class Workflow:
     """Base class: a state machine driven by explicit operator actions.
 
@@ -290,6 +301,7 @@ class Workflow:
     follows_video: ClassVar[bool] = False  # True: the interface feeds it the live video while it runs
     shows_beam: ClassVar[bool] = False  # True: the range finder's spot it showed goes when it ends
     selects_result: ClassVar[bool] = False  # True: the object it made is selected once accepted
+    click_px_per_screen_px: float = 1.0  # video pixels per screen pixel where the last click was made (Session.click)
 
     def __init__(self, site: Site, client: str = "operator", view: str | None = None):
         self.site = site

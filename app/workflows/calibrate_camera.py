@@ -32,13 +32,11 @@ import numpy as np
 from core.calibration import calibrate_dlt
 from core.camera import Camera
 
-from .base import CANCEL, Control, Marks, Step, Workflow, WorkflowError, as_pixel
+from .base import CANCEL, Control, Marks, Step, Workflow, WorkflowError, as_pixel, pick_radius_px
 from .snapping import SNAPPED_CORNER_SIGMA_PX, SnapMixin, snap_marks, weak_snaps
 
 __all__ = ["CalibrateCamera", "known_K", "METHODS"]
 
-# a model corner is picked within this many screen pixels of the click (in video pixels it depends on the zoom)
-PICK_RADIUS_SCREEN_PX = 12.0
 # Weak results (Accept asks once more): fewer pairs than this leave little redundancy in C's 11
 # unknowns (and a snap the image fits poorly: ``ClickSnap.weak``).
 MIN_REDUNDANT_PAIRS = 8
@@ -72,7 +70,6 @@ def known_K(site, view: str | None = None) -> np.ndarray | None:
 class CalibrateCamera(SnapMixin, Workflow):
     name = "calibrate_camera"
     title = "Calibrate camera"
-    click_px_per_screen_px: float = 1.0  # the page's zoom where the click was made (set by the session; 1: unknown)
     actions = (
         "click",
         "choose_point",
@@ -151,7 +148,7 @@ class CalibrateCamera(SnapMixin, Workflow):
             self._check_open()
             if self.pending_X is None:
                 name, k, X, dist = self._nearest_vertex(p)
-                radius = PICK_RADIUS_SCREEN_PX * self.click_px_per_screen_px
+                radius = pick_radius_px(self)
                 if dist > radius:
                     near = f" (the nearest visible one, {name} corner {k}, is {dist:.0f} px away)" if k >= 0 else ""
                     raise WorkflowError(
@@ -394,7 +391,7 @@ class CalibrateCamera(SnapMixin, Workflow):
             else:
                 shown[:] = True
             d = np.linalg.norm(cam.project(V) - p, axis=1)
-            for k in np.flatnonzero(front & shown & (d <= 3 * PICK_RADIUS_SCREEN_PX * self.click_px_per_screen_px)):
+            for k in np.flatnonzero(front & shown & (d <= 3 * pick_radius_px(self))):
                 cands.append((float(d[k]), obj.name, int(k), V[k]))
         for d, name, k, X in sorted(cands, key=lambda c: c[0]):
             if self._unoccluded(X):

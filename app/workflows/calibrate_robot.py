@@ -27,7 +27,7 @@ import numpy as np
 from core.robot.calibration import BaseClick, RobotFeature, features_at, match_segment, refine_base
 from core.transforms import pose_error
 
-from .base import CANCEL, Control, Marks, Step, WorkflowError, as_pixel, sigma_over
+from .base import CANCEL, PICK_RADIUS_SCREEN_PX, Control, Marks, Step, WorkflowError, as_pixel, sigma_over
 from .robot_tour import TourWorkflow
 from .snapping import ClickSnap, Snapper, click_segment, segment_of, snap_marks, weak_snaps
 
@@ -37,9 +37,6 @@ MIN_EDGES = 6  # Solve needs this many assigned edges (12 residuals for the base
 MIN_POSES = 2  # … clicked at this many poses
 ESTIMATE_FROM = 4  # the drawn estimate follows the clicks from this many assigned edges
 ESTIMATE_MAX_MM, ESTIMATE_MAX_DEG = 20.0, 2.0  # … when their σ is below these
-# A white robot's edge is picked this near the click on screen (video px: by the page's zoom; 25 video px took an
-# edge a new operator clicked 40 screen px from, zoomed in)
-PICK_RADIUS_SCREEN_PX = 12.0
 MIN_SEGMENT_PX = 3.0
 MAX_SNAP_USE_PX = 3.0  # a snap that moves an edge farther than this is not used (the click is kept)
 # Accept asks once more above these: the target for the base (1°, 3 mm) as one σ.
@@ -65,7 +62,6 @@ class CalibrateRobot(TourWorkflow):
     title = "Calibrate robot"
     at_state = "click_edge"  # settled at a pose: its edges are clicked
     snapping = True  # Session.start passes its "Snap clicks" setting as snap=
-    click_px_per_screen_px = 1.0  # video pixels per screen pixel where the click was made (Session.click sets it)
     actions = (
         "go",
         "skip",
@@ -263,12 +259,14 @@ class CalibrateRobot(TourWorkflow):
             return []
         with self.lock:
             links = self._links()
-            res = list(self.fit.result.click_residuals_px) if self.fit is not None else []
+            # each assigned edge's residual after a Solve (by the edge: the fit's clicks are the assigned edges)
+            res = {} if self.fit is None else dict(zip(map(id, self._assigned()), self.fit.result.click_residuals_px))
             out = []
             for i, e in enumerate(self.edges):
                 if e.feature is not None:
-                    off = f", {res[i]:.1f} px off" if i < len(res) else ""
-                    rank = res[i] if i < len(res) else i  # (residuals after a Solve, else the order clicked)
+                    r = res.get(id(e))
+                    off = "" if r is None else f", {r:.1f} px off"
+                    rank = i if r is None else r  # (residuals after a Solve, else the order clicked)
                     out.append((rank, f"{i + 1}: {e.feature.label(links)}, pose {e.pose + 1}{off}", i))
             return [(text, i) for _, text, i in sorted(out, key=lambda t: -t[0])]
 

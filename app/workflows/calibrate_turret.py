@@ -31,7 +31,7 @@ from core.calibration import calibrate_turret_planes, next_turret_point, turret_
 from core.rangefinder import aim, beam_point, beam_ray
 from core.transforms import log_so3, pose_error
 
-from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel, sigma_over
+from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel, pick_radius_px, sigma_over
 from .beams import BeamCheck, check_beams, disagreement_text
 from .turret_aims import (
     ROOM_SIGMAS,
@@ -46,10 +46,6 @@ from .turret_aims import (
 
 __all__ = ["CalibrateTurret"]
 
-# a corner or a face centre is picked within this many screen pixels of the click (in video pixels it
-# depends on the zoom); farther, the click is a point on the surface under it (a new operator's click on the
-# table 24 video px from a box corner became "parallelepiped vertex 1")
-PICK_RADIUS_SCREEN_PX = 12.0
 OFF_SURFACE_M = 0.05
 POORLY_DEG, POORLY_M = 0.5, 0.01  # σ beyond which the operator is told to measure more
 TARGET_DEG, TARGET_M = 0.2, 0.0045  # the σ the suggested points work towards (each axis): the solve's within 5 mm
@@ -75,7 +71,6 @@ class CalibrateTurret(Workflow):
     shows_beam = True
     # video pixels per screen pixel where the click being handled was made (the page's zoom, set by the session;
     # 1: not known, a script's)
-    click_px_per_screen_px: float = 1.0
     actions = (
         "click",
         "choose_point",
@@ -351,7 +346,7 @@ class CalibrateTurret(Workflow):
             d = np.linalg.norm(cam.project(X) - p, axis=1) if len(X) else np.zeros(0)
             if len(X):
                 d[cam.depth(X) <= 0] = np.inf
-            radius = PICK_RADIUS_SCREEN_PX * self.click_px_per_screen_px
+            radius = pick_radius_px(self)  # farther: a point on the surface under the click
             if self.suggestion is not None:  # the circled suggestion wins over a corner or centre as near
                 d_s = float(np.linalg.norm(cam.project(self.suggestion[0].reshape(1, 3))[0] - p))
                 if d_s <= radius and (not len(d) or d_s <= d.min() + 3.0):

@@ -109,7 +109,7 @@ class Session:
         (the object drawn there, or None). ``live_shown``: the operator looks at the live video over a frozen
         frame, where the workflow's clicks would not land on what they see. ``px_per_screen_px``: video pixels
         per screen pixel in the page's view, for the workflows that pick what lies within a few screen pixels of a
-        click (``CalibrateTurret.click_px_per_screen_px``)."""
+        click (``Workflow.click_px_per_screen_px``)."""
         wf = self.workflow
         if wf is not None and not wf.finished and "click" in wf.actions:
             if wf.current_step().clicks:

@@ -45,7 +45,7 @@ from core.pose import PoseClicks, Refused, nearest_twin, p3l_candidates, plausib
 from core.pose.pipeline import Estimates, refine_starts
 
 from . import pose_presentation as show
-from .base import AS_CLICK, Workflow, WorkflowError, as_pixel
+from .base import AS_CLICK, Workflow, WorkflowError, as_pixel, pick_radius_px
 from .pose_matching import AutoMatch, Match
 from .pose_search import NothingFound, OneClickSearch
 from .snapping import Snapper, segment_of
@@ -53,7 +53,6 @@ from .writing import write_pose
 
 __all__ = ["UpdatePose", "Match", "plausibility", "nearest_twin"]
 
-PICK_RADIUS_SCREEN_PX = 12.0  # a model edge or vertex is picked this near the click on screen (video px: by the zoom)
 MIN_SEGMENT_PX = 3.0
 MAX_VIEW_GAP_S = 0.5  # clicks in two cameras are of one moment when their frames arrived this close
 MAX_TRIPLES = 20  # Solve tries at most this many triples of the assigned edges (6 edges: all 20)
@@ -112,9 +111,8 @@ class UpdatePose(Workflow):
     name = "update_pose"
     title = "Update pose"
     options = ("object_name",)
-    actions = show.ACTIONS
-    controls = show.CONTROLS
-    snapping, click_px_per_screen_px = True, 1.0  # Session.start passes snap=; Session.click sets the click's zoom
+    actions, controls = show.ACTIONS, show.CONTROLS
+    snapping = True  # Session.start passes its "Snap clicks" setting as snap=
     # the parts' state, read as the workflow's (the panel, scripts, the demo)
     segs, edge_ids, seg_views, seg_snaps, points_uv, point_snaps, pending, pending_vertex, auto = (
         _Of("clicks") for _ in range(9)
@@ -178,9 +176,9 @@ class UpdatePose(Workflow):
     @action
     def click(self, uv) -> None:
         """A click on the video; what it means depends on the step (``core.pose.PoseClicks.click``)."""
-        p, view, c, r = as_pixel(uv), self.click_view or self.view, self.clicks, self.click_px_per_screen_px
+        p, view, c = as_pixel(uv), self.click_view or self.view, self.clicks
         # with no edges to click, a click replaces the one waiting for Find
-        kind, what = c.click(p, view, self._click_camera(), self.T_current, PICK_RADIUS_SCREEN_PX * r, not self.found)
+        kind, what = c.click(p, view, self._click_camera(), self.T_current, pick_radius_px(self), not self.found)
         if kind == "point":
             return self.add_point(p, what)
         if kind == "segment":

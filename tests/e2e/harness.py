@@ -490,7 +490,7 @@ def click_control(locator, timeout_ms: int = 60_000) -> None:
     server (up to TAKEN_REACH_S: a second press of Accept would be refused, so only a press the page lost is made
     again); one it did not take is made again at once."""
     page = locator.page
-    counts = _BUTTON_PRESSES.get(id(page))
+    counts = getattr(page, "button_presses", None)  # (Interface.open's pages)
     uuid = locator.get_attribute("id", timeout=timeout_ms) if counts is not None else None
     if not (uuid and _UUID.fullmatch(uuid)):  # not a viser button (a chooser's option, a folder's title)
         locator.click(timeout=timeout_ms)
@@ -518,8 +518,6 @@ BUTTON_CLICKS_JS = """(() => {
     if (b && b.id) window.__mcitButtonClicks.push(b.id);
   }, true);
 })();"""
-# A page's button presses that reached the server: id(page) → {button uuid: count} (Interface.open).
-_BUTTON_PRESSES: dict[int, dict[str, int]] = {}
 
 
 def count_button_presses(server, client_id: int) -> dict[str, int]:
@@ -603,7 +601,7 @@ class Interface:
         wait_for_steady_camera(panel)  # clicks are placed through the camera the page reports: let the fit land
         page.panel = panel
         _PAGE_DPRS[panel] = dpr
-        _BUTTON_PRESSES[id(page)] = count_button_presses(self.server.server, panel.client.client_id)
+        page.button_presses = count_button_presses(self.server.server, panel.client.client_id)
         return page
 
     def screen_of(self, page, uv):

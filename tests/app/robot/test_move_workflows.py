@@ -4,6 +4,8 @@ a second operator's Move while the robot moves, targets out of reach; nothing wr
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -42,8 +44,6 @@ def _session_with_plan(site, X=(0.15, -0.25, 0.0)):
 
 
 def _run_until_done(wf, timeout_s=30.0):
-    import time
-
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
         wf.tick()
@@ -195,8 +195,6 @@ def _stand_over_the_table(site, standoff_m: float) -> np.ndarray:
     goal = solve_ik(cell.model, T_goal, cell.state().q, seeds=4)
     assert goal.ok, goal.reason
     cell.controller.move(joint_path(cell.model, cell.state().q, goal.q, cell.max_step_m))
-    import time
-
     end = time.monotonic() + 30.0
     while cell.state().moving and time.monotonic() < end:
         time.sleep(0.02)

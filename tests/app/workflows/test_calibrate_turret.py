@@ -218,7 +218,7 @@ def test_a_corner_is_picked_within_a_screen_pixel_radius(device_site, px_per_scr
     """A click on the table 24 video px from a box corner is a point on the table, at the fitted view or zoomed in
     (a new operator's became "parallelepiped vertex 1"); zoomed out so far that 24 video px are under 10 screen px,
     it is a known point (the corner, or a face centre nearer)."""
-    from app.workflows.calibrate_turret import PICK_RADIUS_SCREEN_PX
+    from app.workflows.base import PICK_RADIUS_SCREEN_PX
 
     label, p = _table_pixel_near_a_box_corner(device_site, 24.0)
     wf = CalibrateTurret(device_site)
