@@ -76,6 +76,8 @@ class CalibrateCameraFromRobot(TourWorkflow):
         "stop",
         "click",
         "remove_last",
+        "pose",
+        "remove_pose",
         "solve",
         "accept",
         "cancel",
@@ -100,6 +102,8 @@ class CalibrateCameraFromRobot(TourWorkflow):
         ),
         Control("refuse_snap", "Refuse snap", "U", hint="Use the last click as clicked, not moved onto the corner"),
         Control("remove_last", "Remove last", "backspace", hint="Forget the last pose's click"),
+        Control("pose", "Pose", kind="choice", hint="A clicked pose: its tip's residual after a Solve"),
+        Control("remove_pose", "Remove pose", arg="pose", hint="Forget the chosen pose's click (a wrong corner)"),
         CANCEL,
     )
 
@@ -114,6 +118,7 @@ class CalibrateCameraFromRobot(TourWorkflow):
         self.points: dict[int, dict[str, Any]] = {}  # pose → {"X", "uv", "sigma", "snap", "frame"}
         self.order: list[int] = []  # the poses clicked, in click order (Remove last)
         self.result = None
+        self.pose_chosen: int | None = None  # the pose the operator chose in Pose since the clicks last changed
 
     def _tip(self, k: int) -> tuple[np.ndarray, int, int] | None:
         """The tip corner at pose k (its world point through the database's base), as ``visible_tip``."""
@@ -139,7 +144,7 @@ class CalibrateCameraFromRobot(TourWorkflow):
             if k in self.order:
                 self.order.remove(k)
             self.order.append(k)
-            self.result, self.solved_by = None, None
+            self.result, self.solved_by, self.pose_chosen = None, None, None
             said = Snapper.message(f"Pose {k + 1}'s tip", snap)
             self.message = (said + " " if said else "") + ("(It replaces this pose's last click.)" if replaced else "")
 
@@ -148,10 +153,26 @@ class CalibrateCameraFromRobot(TourWorkflow):
             self._check_open()
             if not self.order:
                 raise WorkflowError("there is no click to remove")
-            k = self.order.pop()
-            self.points.pop(k)
-            self.result, self.solved_by = None, None
-            self.message = f"Pose {k + 1}'s click is removed: {len(self.order)} left."
+            self._forget(self.order[-1])
+
+    def remove_pose(self, k: int) -> None:
+        """Forget pose ``k``'s click (from 0), whichever pose it was: a wrong corner the Solve's residuals point at."""
+        with self.lock:
+            self._check_open()
+            if int(k) not in self.points:
+                raise WorkflowError(f"pose {int(k) + 1} has no click: choose one of the poses in the list")
+            self._forget(int(k))
+
+    def _forget(self, k: int) -> None:
+        self.order.remove(k)
+        self.points.pop(k)
+        self.result, self.solved_by, self.pose_chosen = None, None, None
+        self.message = f"Pose {k + 1}'s click is removed: {len(self.order)} left."
+
+    def pose(self, k: int) -> None:
+        """The operator chose pose ``k`` in the Pose chooser (kept until the clicks or the Solve change)."""
+        with self.lock:
+            self.pose_chosen = int(k)
 
     def refuse_snap(self) -> None:
         with self.lock:
@@ -203,7 +224,7 @@ class CalibrateCameraFromRobot(TourWorkflow):
                     self.result = calibrate_dlt(X, uv, w, h, sigma_px=sig)
             except ValueError as exc:
                 raise WorkflowError(f"calibration failed: {exc}") from None
-            self.solved_by, self.state = self.method, "review"
+            self.solved_by, self.state, self.pose_chosen = self.method, "review", None
             self.message = self._solved_text() + "."
             return self.result
 
@@ -256,7 +277,7 @@ class CalibrateCameraFromRobot(TourWorkflow):
         if moving is not None:
             return moving
         t = self.tour
-        has = {"cancel"} | ({"remove_last"} if self.order else set())
+        has = {"cancel"} | ({"remove_last", "pose", "remove_pose"} if self.order else set())
         last = self.points[self.order[-1]]["snap"] if self.order else None
         if last is not None and last.applied:
             has.add("refuse_snap")
@@ -297,10 +318,27 @@ class CalibrateCameraFromRobot(TourWorkflow):
     def choices(self, action: str) -> list[tuple[str, Any]]:
         if action == "set_method" and self.K is not None:
             return [(METHODS[m][0], m) for m in ("pnp", "dlt")]
-        return []
+        if action != "pose":
+            return []
+        with self.lock:
+            # after a Solve the farthest off first (a wrong corner), else the newest first
+            errors = {} if self.result is None else dict(zip(self.order, self.result.errors_px))
+            out = []
+            for i, k in enumerate(self.order):
+                e = errors.get(k)
+                off = "" if e is None else f", {e:.1f} px off"
+                out.append((i if e is None else float(e), f"pose {k + 1}{off}", k))
+            return [(text, k) for _, text, k in sorted(out, key=lambda t: -t[0])]
 
     def choice_value(self, action: str) -> Any:
-        return self.method if action == "set_method" else None
+        """Solve by shows the method; Pose the operator's choice, else the first listed (after a Solve the farthest
+        off, so that Remove pose at once takes the likeliest wrong corner)."""
+        if action == "set_method":
+            return self.method
+        if action != "pose":
+            return None
+        values = [k for _, k in self.choices("pose")]
+        return self.pose_chosen if self.pose_chosen in values else (values[0] if values else None)
 
     def marks(self) -> Marks:
         with self.lock:
@@ -357,6 +395,9 @@ class CalibrateCameraFromRobot(TourWorkflow):
             _, _, sig = self._arrays()
             for k, e, s in zip(self.order, self.result.errors_px, sig):
                 if e > 3 * max(s, 0.5):
-                    out.append(f"pose {k + 1}'s tip is {e:.1f} px from where C puts it (more than 3σ): a wrong corner?")
+                    out.append(
+                        f"pose {k + 1}'s tip is {e:.1f} px from where C puts it (more than 3σ): a wrong corner? "
+                        "(Remove pose forgets it)"
+                    )
                 out += weak_snaps([(f"pose {k + 1}", self.points[k]["snap"])])
             return out
