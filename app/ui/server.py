@@ -126,8 +126,9 @@ class InterfaceServer:
         self.inbound = guard_inbound_messages(
             self.server, name_of=lambda cid: f"browser-{cid + self.client_number_offset}"
         )
-        # no Share button: it would open a tunnel to the interface through viser's public relay
-        self.server.gui.configure_theme(show_share_button=False)
+        # no Share button: it would open a tunnel to the interface through viser's public relay; no viser logo: an
+        # operator took its axes icon for the view's axes, and it opens viser's credits
+        self.server.gui.configure_theme(show_share_button=False, show_logo=False)
         self.host = host
         self.clients: dict[int, ClientPanel] = {}
         self.clients_lock = threading.RLock()
