@@ -198,6 +198,7 @@ def draw_marks(
         E = obj.model.edge_segments(T)[k]
         if np.all(camera.depth(E) > 0):
             batch.add(camera.project(E).reshape(1, 2, 2), COLORS["assigned"])
+    batch.add(marks.assigned_lines, COLORS["assigned"])
     batch.add(dash_segments(marks.raw_segments, 3.0 * s, 3.0 * s)[0], COLORS["raw"])
     batch.add(cross_markers(marks.raw_points, 4.0 * s), COLORS["raw"])
     batch.add(marks.snap_lines, COLORS["raw"])

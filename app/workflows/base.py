@@ -84,7 +84,8 @@ class Marks:
     corner was found on. tracked : Ghosts of tracked poses (their own colour). found_points :
     (F, 2) image edge points that support a tracked pose; rejected_points : (R, 2) those the
     robust fit rejected. circles : (C, 2) pixels to circle (the picked model corner). live_points :
-    (L, 2) range points of a scan under way.
+    (L, 2) range points of a scan under way. assigned_lines : (A, 2, 2) the model edges (not an object's: the
+    robot's) that clicked edges are assigned to, highlighted as ``highlight``'s.
     """
 
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
@@ -108,6 +109,7 @@ class Marks:
     robot_ghost: list = field(default_factory=list)  # [(link, BRep, T_world)] the robot where a motion ends
     robot_contact: list = field(default_factory=list)  # [(link, BRep, T_world)] the robot where a refused one hits
     robot_path: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))  # the tool's way there, pixels
+    assigned_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))  # the model edges assigned, px
 
 
 # How a shortcut key reads on a button (viser's hotkey names → what the keyboard shows).

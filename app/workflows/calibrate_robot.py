@@ -499,6 +499,13 @@ class CalibrateRobot(TourWorkflow):
             m.labels += snap_labels
             if self.pending is not None:
                 m.pending = self.pending.reshape(1, 2)
+            # the white robot's edges the pose's clicked edges are assigned to, highlighted (an operator could not
+            # tell which one an assignment took from its label alone)
+            assigned = {e.feature for e in here if e.feature is not None}
+            if assigned:
+                seen = features_at(self.model, self.tour.arrived[k], self.T_est, cam.center, config=k)
+                lines = [seg for f, seg, _ in seen if f in assigned and np.all(cam.depth(seg) > 0)]
+                m.assigned_lines = cam.project(np.reshape(lines, (-1, 3))).reshape(-1, 2, 2)
             if self.fit is not None:
                 m.residuals = self._residual_marks(here, cam)
             return m

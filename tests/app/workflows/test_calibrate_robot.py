@@ -128,6 +128,11 @@ def test_the_base_is_calibrated_from_edges_clicked_at_the_poses(robot_site, scen
                 auto += 1
             assert edge.feature == f, f"edge {len(wf.edges)} was taken for {edge.feature}, it is {f}"
             assert walk.check(wf).name == "click_edge"
+            # the white robot's edge it was assigned to is highlighted, with the pose's others
+            lines = wf.marks().assigned_lines
+            assert len(lines) == sum(e.pose == k for e in wf.edges), len(lines)
+            now = {g: cam.project(s) for g, s, _ in features_at(model, q, wf.T_est, cam.center, k)}[f]
+            assert np.min(np.abs(lines - now).max(axis=(1, 2))) < 1e-6
         if k == 1:  # two poses clicked: Solve offered, and its review offers the next pose too
             assert {"solve", "go"} <= walk.check(wf).enabled
             wf.solve()
