@@ -37,6 +37,11 @@ class Viewport:
         # the page still shows the view before it (a click now lands through the old view).
         self.fit_pending = False
         self._page_position: np.ndarray | None = None  # the camera position the page last reported
+        try:  # the page's report at its connection (viser connects a page at its first report): a page that connects
+            # again already at the fit never reports it again, and its fit stayed pending
+            self._page_position = np.asarray(self.client.camera.position, float).copy()
+        except AssertionError:  # no report yet
+            pass
         # The view's size on the screen (CSS pixels), as the page tells it (static/wheel.js); None until it has.
         self.screen_size: tuple[int, int] | None = None
         self._rect_cb = self.client.scene.on_rect_select()(panel.guard(self.on_rect))

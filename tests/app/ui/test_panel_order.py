@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from app.workflows import WorkflowError
-from tests.app.ui.test_ws_fuzz import Served, camera
+from tests.app.ui.test_ws_fuzz import Page, Served, camera
 from tests.e2e.harness import wait_until
 
 
@@ -134,6 +134,26 @@ def test_a_fit_is_pending_until_the_page_reports_its_camera_there(served_page):
     assert vp.fit_pending
     page.send(camera(position=[float(x) for x in fitted], fov=0.95))  # the page shows the fit
     wait_until(lambda: not vp.fit_pending, 15.0, "the fit no longer pending")
+
+
+def test_a_page_that_connects_already_at_its_fit_is_not_left_pending(served_page):
+    """A page that connects again (the server restarted) already shows the view the fit puts it at: it reports no
+    camera after its first, and its fit stayed pending for good (the harness waited 20 s for it, and Fit view
+    pressed again never saw the view unmoved)."""
+    served, page, panel = served_page
+    wait_until(lambda: panel.viewport._fitted_at is not None, 15.0, "the first page's fit")
+    at = [float(x) for x in panel.viewport._fitted_at]
+    before = set(served.server.clients)
+    again = Page(served.port)
+    try:
+        again.send(camera(position=at))  # its first report: where the fit puts it
+        wait_until(lambda: set(served.server.clients) - before, 15.0, "the second page's panel")
+        (cid,) = set(served.server.clients) - before
+        vp = served.server.clients[cid].viewport
+        wait_until(lambda: vp._fitted_at is not None, 15.0, "the second page's fit")
+        assert np.allclose(vp._fitted_at, at) and not vp.fit_pending
+    finally:
+        again.close()
 
 
 def test_a_press_during_a_long_action_is_refused_and_one_as_its_worker_ends_waits_for_it(served_page):
