@@ -18,7 +18,11 @@ model, its old pose, the calibrated camera C and, usually, that it lies on the t
    radius across) and the orientation on a 15° grid within ±``max_turn_deg`` (30°) of the old one.
    It finds moves that keep the object roughly facing the same way (bench/search.py: every small
    move of the workcell's box, none of its 55° turn; about half of the real cube's starts 30° off);
-   beyond that the operator clicks edges and uses Auto match.
+   beyond that the operator clicks edges and uses Auto match. The old pose itself, and moved onto the
+   click's ray, are settled first, by the tracker's own first-frame capture (coarse to fine, poses
+   searched within ±5° / ±1 cm, judged as tracking is): on a close object the grid's poses lie 100 px
+   and more apart, and on the real tea box at 0.45 m none led to it (every click refused before;
+   10 of 13 frames found after, none wrong, against the tracker's poses).
    Every pose whose projection does not contain the click (the ray misses the model's convex hull)
    is dropped.
 2. **Scored on the frame's edges**, all candidates at once (numpy): the model's visible edges
@@ -517,6 +521,15 @@ def search_pose(
     img_s = smooth(to_gray_f32(im), 1.0)
     found: list[SearchCandidate] = []
     starts, start_px = q[top], best[top]
+    n_near = 0
+    if table is None:  # the old pose as it is and moved onto the click's ray: starts for an object that moved little
+        # (a close object spans the grid's steps by 100 px or more: on the real tea box at 0.45 m no coarse pose led to
+        # it, though the old pose was 2 px off; a new user's double clicks were all refused)
+        near_old = np.array([np.r_[basis @ (c_old - c0), 0.0, 0.0, 0.0], np.zeros(6)])
+        near_px = evaluate(near_old, TAU_FINE)
+        keep = np.isfinite(near_px)
+        starts, start_px = np.concatenate([near_old[keep], starts]), np.concatenate([near_px[keep], start_px])
+        n_near = int(keep.sum())
     if table is not None:  # a near-symmetry (a box of nearly square footprint): each start's twins too
         turns = _near_turns(model, sp, centre_obj, per[2])
         if turns:
@@ -532,7 +545,7 @@ def search_pose(
         if table is not None:
             cand = _settle_table(camera, model, T, oe, img_s, ef, fine, sp, z0, centre_obj, per, float(start_px[j]))
         else:
-            cand = _settle(camera, model, T, im, oe, img_s, float(start_px[j]))
+            cand = _settle(camera, model, T, im, oe, img_s, float(start_px[j]), capture=j < n_near)
         if cand is not None:
             found.append(cand)
     if table is not None and per[2] > 0 and len(model.edges):  # with no straight edge there is no heading to step
@@ -1161,7 +1174,7 @@ def _same_pose(Ta: np.ndarray, Tb: np.ndarray, syms: list[np.ndarray], deg: floa
     return False
 
 
-def _settle(camera, model, T, image, oe, img_s, coarse_px) -> SearchCandidate | None:
+def _settle(camera, model, T, image, oe, img_s, coarse_px, capture: bool = False) -> SearchCandidate | None:
     """Free search: track twice from T (the edge tracker, 6 unknowns), refine on the sub-pixel edges
     (``_refine``, for the covariance), then the support check. None when the image does not support the
     pose.
@@ -1177,9 +1190,12 @@ def _settle(camera, model, T, image, oe, img_s, coarse_px) -> SearchCandidate | 
     uv = camera.project_obj(T, _support_points(model))
     size_px = float(np.linalg.norm(uv.max(axis=0) - uv.min(axis=0)))  # a small object: denser samples (≥ 20 kept)
     step_px = float(np.clip(size_px / 25.0, 2.0, 5.0))
-    tr = EdgeTracker(
-        camera, model, T, rims=rims, lost_confidence=0.3, max_edge_distance_px=float("inf"), sample_step_px=step_px
-    )
+    if capture:  # the tracker's own first-frame capture (coarse to fine, poses searched near T), judged as tracking's
+        tr = EdgeTracker(camera, model, T, rims=rims, sample_step_px=step_px)
+    else:
+        tr = EdgeTracker(
+            camera, model, T, rims=rims, lost_confidence=0.3, max_edge_distance_px=float("inf"), sample_step_px=step_px
+        )
     for _ in range(2):
         res = tr.track(image)
         if res.lost:
