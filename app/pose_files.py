@@ -243,6 +243,9 @@ def _read_json(path: Path) -> tuple[np.ndarray, str | None]:
         raise ValueError(text if text.startswith(str(path)) else f"{path}: {text}") from None
 
 
+MAX_INIT_RMS_PX = 10.0  # clicks by eye put a model's corners 1-3 px RMS from where the pose puts them (the tea box's
+# four on frame 0: 2.74 px); beyond this a click is on another corner or out of the file's order (a new user's four
+# clicks in reverse order: 30.9 px, on one line: 49.9 px, each stored as a known pose before)
 SWAP_CHECK_PX = 0.5  # a PnP this far off (RMS) is tried with each pixel's coordinates swapped …
 SWAP_BETTER = 4.0  # … and refused as swapped when that fits this many times better
 
@@ -299,6 +302,14 @@ def _pose_from_init(path: Path, camera, clicks, lens) -> tuple[np.ndarray, np.nd
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
     _check_pixel_order(path, K, X, uv, lens, camera, r.rms_px, clicks is None)
+    if r.rms_px > MAX_INIT_RMS_PX:
+        worst = int(np.argmax(r.errors_px))
+        given = "the file's pixels" if clicks is None else "the --init-clicks"
+        raise ValueError(
+            f"{path}: the points fit {given} with RMS {r.rms_px:.1f} px (point {worst + 1}: "
+            f"{r.errors_px[worst]:.1f} px), more than {MAX_INIT_RMS_PX:.0f} px: a pixel on another corner, or "
+            "out of the file's order? give each point's pixel in the order the file lists the points"
+        )
     order = [3, 4, 5, 0, 1, 2]  # solve_pnp's (δω, δt) → the database's (δt, δr)
     cov = r.cov_pose[np.ix_(order, order)]
     details = {

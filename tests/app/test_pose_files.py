@@ -201,6 +201,22 @@ def test_an_init_with_pixels_and_clicks_too_and_clicks_of_the_wrong_count_are_re
         read_pose_file(p, camera=CAMERA, clicks=uv)
 
 
+def test_init_clicks_in_reverse_order_or_on_one_line_are_refused_and_good_ones_with_noise_taken(tmp_path):
+    """A new user's four clicks in reverse order (RMS 30.9 px) and on one line (49.9 px) were each stored as a
+    known pose; clicks by eye (1-3 px) are taken."""
+    X = BOX.vertices[[0, 1, 2, 5, 6]]
+    uv = CAMERA.project_obj(T_WORLD_OBJ, X)
+    p = tmp_path / "box.init"
+    _init_file(p, X)
+    noisy = uv + np.random.default_rng(0).normal(0.0, 2.0, uv.shape)
+    assert read_pose_file(p, camera=CAMERA, clicks=noisy).details["rms_px"] < 4.0
+    for clicks in (uv[::-1], np.linspace([100.0, 100.0], [400.0, 400.0], len(X))):
+        with pytest.raises(
+            ValueError, match=r"box\.init: the points fit the --init-clicks with RMS .* more than 10 px"
+        ):
+            read_pose_file(p, camera=CAMERA, clicks=clicks)
+
+
 def test_a_camera_frame_pose_needs_a_camera_that_is_not_mirrored(tmp_path):
     p = tmp_path / "cMo.txt"
     p.write_text(_matrix_text(T_CAM_OBJ))
