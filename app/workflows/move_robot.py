@@ -107,7 +107,7 @@ class MoveRobot(RobotWork):
         self.cell.stop()
         with self.lock:
             if self.state == "moving":
-                self._arrived(stopped=True)
+                self._arrived()
             elif was_moving:  # the frame loop saw this Stop end the motion first, and said so
                 self.message = self._outcome
             else:
@@ -122,7 +122,7 @@ class MoveRobot(RobotWork):
             self.state = "accepted"
             self.message = "Closed (nothing is written to the database)."
 
-    def _arrived(self, stopped: bool = False) -> None:
+    def _arrived(self) -> None:
         """The motion ended: how far the tool is from the commanded pose, or what went wrong."""
         try:
             s = self.cell.state()
@@ -142,12 +142,18 @@ class MoveRobot(RobotWork):
         self.state = "click"
         if s.fault:
             self.message = f"Fault: {s.fault}. The tool is {1000 * dp:.1f} mm from the commanded pose."
-        elif stopped or np.max(np.abs(s.q - self.sent.q_goal)) > ARRIVED_RAD:  # (a Stop the frame loop saw first)
+        elif np.max(np.abs(s.q - self.sent.q_goal)) > ARRIVED_RAD:  # short of its goal: stopped (a Stop the frame
+            # loop saw first, or this one); a Stop pressed once the robot stood at its goal stopped nothing
             self.message = f"Stopped: the tool is {1000 * dp:.1f} mm from the commanded pose. Click a new target."
         else:
             self.message = (
                 f"Arrived: the tool is {1000 * dp:.1f} mm and {dr:.2f}° from the commanded pose (from the joints "
                 "the controller reports). Click another target, or Done."
+            )
+        if not s.fault and self.site.robot_base_nominal:  # the joints say where the tool is from the base only
+            self.message += (
+                " The robot's base is not calibrated: in the world, and in the video, the tool can be centimetres "
+                "from its target (Calibrate robot)."
             )
         self._outcome = self.message
 
