@@ -457,12 +457,15 @@ class CalibrateCamera(SnapMixin, Workflow):
             return [(METHODS[m][0], m) for m in ("pnp", "dlt")] if self.K is not None else []
         if action != "pair":
             return []
-        with self.lock:
+        with self.lock:  # after a Solve the farthest off first, as Delete point's default (it deleted the best)
             err = self.result.errors_px if self.result is not None else None
-            return [
+            out = [
                 (f"{i + 1} {lab}" + (f" · {err[i]:.1f} px" if err is not None and i < len(err) else ""), i)
                 for i, lab in enumerate(self.labels)
             ]
+            if err is not None and len(err) == len(out):
+                out.sort(key=lambda item: -float(err[item[1]]))
+            return out
 
     def weaknesses(self) -> list[str]:
         with self.lock:

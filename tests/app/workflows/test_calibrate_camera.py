@@ -67,6 +67,10 @@ def test_click_pairs_solve_accept_updates_every_reader(site, scene, db):
     result = wf.solve()
     assert result.rms_px < 1.0
     assert len(wf.summary()["points"]) == n
+    # the Point chooser lists the farthest off first after a Solve: Delete point's default (it deleted the best)
+    listed = [i for _, i in wf.choices("pair")]
+    assert sorted(listed) == list(range(n)) and listed[0] == int(np.argmax(result.errors_px))
+    assert list(result.errors_px[listed]) == sorted(result.errors_px, reverse=True)
     assert len(db.calibrations("camera")) == n_cal  # nothing written before accept
     wf.accept()
     assert wf.accepted and len(db.calibrations("camera")) == n_cal + 1
