@@ -74,6 +74,12 @@ def free_port() -> int:
 _INTERFACE_PORT: list[int] = []
 
 
+def _refused(page, text: str) -> None:
+    """A console line or page error: kept when it is the Content-Security-Policy's refusal."""
+    if "Content Security Policy" in text:
+        page._mcit_refusals.append(text[:300])
+
+
 def interface_port() -> int:
     """The port this process's interfaces are served on, one after another: the same address each time, so that
     the browser's renderer finds viser's client compiled for it (a page opened on 1.0 s of the renderer's CPU
@@ -199,7 +205,11 @@ def wait_for_panel(server, before: set, timeout_s: float = 60.0):
     raise AssertionError("the page did not connect and fit its view")
 
 
-READY_JS = "() => Array.from(document.querySelectorAll('p')).some((p) => p.textContent === 'mcit-dblclick')"
+# (a parked page's panel, left on it until its next connection replaces it, is marked old: not ready)
+READY_JS = (
+    "() => Array.from(document.querySelectorAll('p')).some((p) => p.textContent === 'mcit-dblclick' && "
+    "!p.dataset.mcitOld)"
+)
 
 
 def wait_for_page_ready(page, timeout_s: float = 60.0) -> None:
@@ -393,6 +403,57 @@ def shared_context(browser):
     return context
 
 
+# A page kept from one interface to the next (one a browser): when an interface closes, its first page is parked —
+# told it has no focus, so that viser's client does not reconnect when the server goes — and the next interface on
+# the same address, viewport and DPR takes it: the page connects again, and viser's client resets its GUI and scene
+# for the new server, instead of loading viser's page anew (a page taken again on 1.2 s of chromium's CPU against
+# 2.5 s for one opened, tests/e2e). Its notifications are closed, its scrolled boxes scrolled back and its panel marked
+# old first (READY_JS: until its next connection replaces it, the old panel must not read as the new one, ready).
+PARK_JS = """() => {
+  document.hasFocus = () => false;
+  window.dispatchEvent(new Event("blur"));
+  for (const b of document.querySelectorAll(".mantine-Notification-root button")) b.click();
+  for (const e of document.querySelectorAll("*")) if (e.scrollTop) e.scrollTop = 0;
+  for (const p of document.querySelectorAll("p")) p.dataset.mcitOld = "1";
+}"""
+TAKE_JS = '() => { delete document.hasFocus; window.dispatchEvent(new Event("focus")); }'
+_PARKED: dict = {}  # id(browser) → (page, url, viewport, dpr)
+
+
+def _take_parked(browser, url: str, viewport: dict, dpr: float):
+    """The page parked on ``browser`` for this address, viewport and DPR, told to connect again; None if none."""
+    parked = _PARKED.pop(id(browser), None)
+    if parked is None:
+        return None
+    page = parked[0]
+    if page.is_closed() or parked[1:] != (url, viewport, dpr):
+        _close_quietly(page)
+        return None
+    page.evaluate(TAKE_JS)
+    return page
+
+
+def _park(page) -> bool:
+    """Keep ``page`` for the next interface (``_take_parked``); False when it cannot be (closed, or its browser)."""
+    try:
+        page.evaluate(PARK_JS)
+    except Exception:  # noqa: BLE001 - closed meanwhile, or its browser gone
+        return False
+    browser = page.context.browser
+    old = _PARKED.pop(id(browser), None)
+    if old is not None:
+        _close_quietly(old[0])
+    _PARKED[id(browser)] = (page, page._mcit_url, page._mcit_viewport, page._mcit_dpr)
+    return True
+
+
+def _close_quietly(page) -> None:
+    try:
+        page.close()
+    except Exception:  # noqa: BLE001 - closed already, or its browser gone
+        pass
+
+
 def launch(playwright):
     """Debian's chromium in headless mode with the flags that work here (DESIGN.md)."""
     return playwright.chromium.launch(executable_path=CHROMIUM, args=ARGS)
@@ -579,17 +640,17 @@ class Interface:
         """A new page on the interface (``viewport``, default VIEWPORT; its 3D canvas drawn at ``dpr``), connected,
         fitted, with the software-WebGL notice closed."""
         before = set(self.server.clients)
-        page = shared_context(browser).new_page()
-        page.set_viewport_size(viewport or VIEWPORT)
+        viewport = viewport or VIEWPORT
+        page = _take_parked(browser, self.url, viewport, dpr)
+        if page is None:
+            page = shared_context(browser).new_page()
+            page.set_viewport_size(viewport)
+            page.on("console", lambda m: _refused(page, m.text))
+            page.on("pageerror", lambda e: _refused(page, str(e)))
+            page.goto(f"{self.url}/?fixedDpr={dpr:g}")
+        page._mcit_url, page._mcit_viewport, page._mcit_dpr = self.url, viewport, dpr
+        page._mcit_refusals = self.csp_refusals  # what its Content-Security-Policy refuses, told to this interface
         self.pages.append(page)
-        page.on(
-            "console", lambda m: self.csp_refusals.append(m.text[:300]) if "Content Security Policy" in m.text else None
-        )
-        page.on(
-            "pageerror",
-            lambda e: self.csp_refusals.append(str(e)[:300]) if "Content Security Policy" in str(e) else None,
-        )
-        page.goto(f"{self.url}/?fixedDpr={dpr:g}")
         panel = wait_for_panel(self.server, before)
         # the database drawn as it is now (its own thread; slow on a loaded machine): clicks that
         # select an object pick what is drawn
@@ -681,10 +742,16 @@ class Interface:
         png = page.screenshot(path=path)
         return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
 
-    def close_pages(self) -> None:
+    def close_pages(self, park: bool = True) -> None:
+        """Close the pages opened on this interface; the first still open is parked for the next (``_park``) unless
+        ``park`` is False (a page that showed planted markup goes on refusing it until it is closed)."""
+        kept = next((p for p in self.pages if park and hasattr(p, "_mcit_url") and not p.is_closed()), None)
+        if kept is not None and not _park(kept):
+            kept = None
         for page in self.pages:
             try:
-                page.close()
+                if page is not kept:
+                    page.close()
                 page.context.clear_cookies()
             except Exception:  # noqa: BLE001 - closed already, or its browser gone
                 pass

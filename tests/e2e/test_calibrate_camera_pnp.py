@@ -102,5 +102,4 @@ def test_calibrate_camera_by_pnp_from_5_points(browser, lens_interface, scene):
         f"{wf.result.rms_px:.2f} px; centre {1000 * np.linalg.norm(stored.center - true_cam.center):.1f} mm off"
     )
     assert err.max() < 1.5
-    page.close()
     assert report

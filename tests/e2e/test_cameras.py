@@ -75,7 +75,6 @@ def test_the_side_camera_is_shown_by_its_key_and_clicked_in(browser, two_cameras
     uv = side.project(V[top[:2]]).mean(axis=0)
     select_by_click(page, "parallelepiped", lambda: op.click(uv))
     assert page.panel.camera_view == "side"
-    page.close()
 
 
 def test_both_cameras_frozen_fitted_side_by_side_and_clicked_in(browser, two_cameras, scene):
@@ -139,7 +138,6 @@ def test_both_cameras_frozen_fitted_side_by_side_and_clicked_in(browser, two_cam
         what="the side image fitted alone",
         panel=panel,
     )
-    page.close()
 
 
 def test_calibrate_the_side_camera_by_clicks(browser, two_cameras, scene):
@@ -183,7 +181,6 @@ def test_calibrate_the_side_camera_by_clicks(browser, two_cameras, scene):
     said = [c for c in ui.site.changes_since(0) if c.who.startswith("browser-")]
     assert said and said[-1].what == "calibrated the camera side", said
     op.report("calibrate the side camera")
-    page.close()
 
 
 def _edges_seen(camera, model, T) -> list[int]:
@@ -275,4 +272,3 @@ def test_update_pose_from_edges_clicked_in_both_cameras(browser, two_cameras, sc
     assert deg < 1.0 and m < 0.003
     assert ui.db.history("parallelepiped")[-1].clicks["views"] == ["front"] * 3 + ["side"] * 3
     op.report("update pose from edges clicked in both cameras")
-    page.close()

@@ -107,4 +107,3 @@ def test_accept_while_another_program_locks_the_database(browser, quick_interfac
     assert entry.method == "tracking" and entry.client.startswith("browser-")
     page.get_by_text("is locked by another program").first.wait_for(state="hidden", timeout=60_000)
     op.report("track, Accept refused by a lock, Accept")
-    page.close()

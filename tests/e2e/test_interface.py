@@ -145,7 +145,6 @@ def test_page_shows_video_and_overlay_and_errors_write_nothing(browser, interfac
         return inside and abs(corners[1][0] - corners[0][0]) > 0.9 * width
 
     _wait(fitted, what="the view to fit the narrower window")
-    page.close()
 
 
 def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
@@ -237,7 +236,6 @@ def test_pose_update_by_clicks_changes_the_database(browser, interface, scene):
         what="the overlay to lie on the box in the video",
     )
     ui.screenshot(page, "/tmp/mcit-e2e-pose.png")
-    page.close()
 
 
 def test_two_browsers_share_the_database_and_keep_their_own_state(browser, interface, scene):
@@ -268,8 +266,6 @@ def test_two_browsers_share_the_database_and_keep_their_own_state(browser, inter
             lambda: np.mean([_drawn_along(ui, page, ui.screenshot(page), true[k], "any") for k in edges]) >= 0.6,
             what="every browser to draw the box where the other writer put it",
         )
-    a.close()
-    b.close()
 
 
 def test_the_pose_solvers_being_prepared_are_said_at_the_top_until_ready(browser, interface, monkeypatch):
@@ -292,4 +288,3 @@ def test_the_pose_solvers_being_prepared_are_said_at_the_top_until_ready(browser
     assert notice.first.bounding_box()["y"] < 200  # at the panel's top, seen without scrolling
     ready.set()
     notice.first.wait_for(state="hidden", timeout=60_000)
-    page.close()

@@ -177,6 +177,7 @@ def test_names_methods_operators_and_notes_with_markup_are_shown_as_text(browser
     time.sleep(1.0)
     click_control(page.get_by_role("button", name="Video", exact=True))
     _no_markup_ran(page, ui, canary, evil)
+    ui.close_pages(park=False)  # not kept for the next test: its page showed the planted markup
 
 
 def test_the_pages_policy_refuses_markup_that_escaping_would_have_missed(browser, interface, canary):
@@ -196,5 +197,5 @@ def test_the_pages_policy_refuses_markup_that_escaping_would_have_missed(browser
     assert canary.hits == [], f"markup ran or loaded despite the policy: {canary.hits}"
     said = " ".join(ui.csp_refusals)
     assert "inline event handler" in said and "img-src" in said  # <img onerror>, <svg onload>; the remote image
-    ui.close_pages()  # its later refusals (the page goes on refusing until it is closed) are expected too
+    ui.close_pages(park=False)  # its later refusals (the page goes on refusing until it is closed) are expected too
     ui.csp_refusals.clear()

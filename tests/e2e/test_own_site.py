@@ -68,6 +68,5 @@ def test_an_own_camera_only_site_is_served_and_its_object_updated_by_a_double_cl
         e = np.r_[ui.db.get("box").T_world_obj[:3, 3] - T_CAM_OBJ[:3, 3]]
         assert m < 0.002 and deg < 0.3
         assert np.all(np.abs(e) <= 3 * sd[:3])
-        page.close()
     finally:
         ui.close()

@@ -123,7 +123,6 @@ def test_the_robot_goes_to_targets_clicked_on_the_table_and_the_box_top(browser,
     lines = ui.robot_lines()
     assert any(x["moving"] for x in lines) and not lines[-1]["moving"], "the feed did not follow the motion"
     assert np.allclose(np.array(lines[-1]["T"])[:3, 3], _true_tool(ui)[:3, 3], atol=1e-3)
-    page.close()
 
 
 def test_a_robot_left_inside_the_table_s_margin_is_moved_clear_by_a_click_and_told(browser, robot_site):
@@ -140,7 +139,6 @@ def test_a_robot_left_inside_the_table_s_margin_is_moved_clear_by_a_click_and_to
     _said(page, "step=click", "Move robot's first step")
     told = "from table, inside the 10 mm kept from it: this motion may take it away but not nearer"
     _move_to(ui, page, op, np.array([0.2, -0.4, 0.0]), np.array([0.0, 0.0, 1.0]), told=told)
-    page.close()
 
 
 def test_a_path_into_the_parallelepiped_is_refused_naming_it_and_the_robot_stays(browser, robot_site):
@@ -163,7 +161,6 @@ def test_a_path_into_the_parallelepiped_is_refused_naming_it_and_the_robot_stays
     time.sleep(1.0)
     assert np.allclose(ui.site.robot.controller.state().q, q0)
     assert not any(x["moving"] for x in ui.robot_lines())
-    page.close()
 
 
 def test_stop_halts_the_robot_where_it_is(browser, robot_site):
@@ -182,7 +179,6 @@ def test_stop_halts_the_robot_where_it_is(browser, robot_site):
     time.sleep(0.5)
     assert np.allclose(ui.site.robot.controller.state().q, q), "the robot went on after Stop"
     assert not ui.site.robot.controller.state().moving
-    page.close()
 
 
 def _modelled_box_in_database(ui) -> None:
@@ -227,7 +223,6 @@ def test_pick_and_place_moves_the_modelled_box_and_the_database_follows(browser,
     assert np.linalg.norm(T_true[:3, 3] - place) < 0.006, "the box is not where the operator clicked"
     assert ui.db.history("unknown_box", limit=1)[-1].method == "robot"
     assert op.actions <= 6, op.report("pick and place")
-    page.close()
 
 
 def test_a_joint_that_does_not_reach_its_command_is_said_in_the_panel(browser, robot_site):
@@ -249,4 +244,3 @@ def test_a_joint_that_does_not_reach_its_command_is_said_in_the_panel(browser, r
         30.0,
         "the feed to carry the fault",
     )
-    page.close()

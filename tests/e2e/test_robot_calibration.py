@@ -137,7 +137,6 @@ def test_the_base_is_calibrated_from_edges_clicked_on_the_live_video(browser, tm
         assert drawn < 0.5, drawn
         assert not site.robot_base_nominal and site.db.latest_calibration("robot_base").method == "robot edges"
         wait_until(lambda: "not calibrated" not in page.panel.gui_title.content, 30.0, "the panel's warning gone")
-        page.close()
     finally:
         ui.close()
 
@@ -191,7 +190,6 @@ def test_the_camera_is_calibrated_from_the_robot_s_tool_tip(browser, tmp_path):
         )
         assert err.max() < 3.0, err.max()
         assert site.db.latest_calibration("camera").method == "robot dlt"
-        page.close()
     finally:
         ui.close()
 
@@ -226,6 +224,5 @@ def test_a_calibration_pose_an_object_blocks_is_refused_and_left_out_by_skip_pos
         _said(page, f"Pose 1 of {wf.tour.n} left out: Next pose (G) sends the robot to pose 2", "the pose left out")
         _at_pose(op, page, wf, 1, "click_tip")
         op.key("Escape")
-        page.close()
     finally:
         ui.close()

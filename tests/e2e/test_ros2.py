@@ -122,7 +122,6 @@ def test_the_video_from_ros2_is_worked_on_and_the_pose_goes_out_stamped_with_its
         print(f"PoseStamped {deg:.3f}° / {1000 * m:.2f} mm from the truth, stamp {peer.stamp_of(msg):.1f}")
         assert msg.header.frame_id == "world" and deg < 1.0 and m < 0.005
         assert projected_edges(ui.site.camera, obj.model, T).shape[0] == len(obj.model.edges)
-        page.close()
     finally:
         stop.set()
         ui.close()

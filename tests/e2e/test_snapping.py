@@ -50,4 +50,3 @@ def test_a_clicked_edge_is_snapped_shown_and_can_be_refused(browser, interface, 
     _wait(lambda: not wf.seg_snaps[0].applied, what="the refusal")
     assert np.array_equal(wf.segs[0], snap.raw) and len(wf.marks().raw_segments) == 0
     page.get_by_text("Snap refused", exact=False).first.wait_for(timeout=60_000)
-    page.close()

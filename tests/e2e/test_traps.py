@@ -81,7 +81,6 @@ def test_designate_on_an_old_frozen_frame_says_its_age(browser, fast_clock_inter
     age = float(said.split("this frame is ")[1].split(" s old")[0])
     assert OLD_FRAME_S <= age <= _newest_after(panel, wf.frame.stamp) + 1.0  # (said when the target was kept)
     assert not wf.message.startswith("The range finder agrees")  # no agreement with what the frame shows
-    page.close()
 
 
 def _seconds_back(page, value: str) -> None:
@@ -123,7 +122,6 @@ def test_seconds_back_counts_from_the_frame_on_screen_and_says_when_clamped(brow
     wait_until(lambda: "Cancel before freezing another frame" in panel.error, what="the refusal", panel=panel)
     wait_until(lambda: box.input_value() == "12", what="the box back at 12 s, the frame on screen's")
     assert panel.frozen is kept
-    page.close()
 
 
 def test_calibrate_turret_a_click_on_the_table_near_a_box_corner_is_the_table(browser, device_interface):
@@ -162,7 +160,6 @@ def test_calibrate_turret_a_click_on_the_table_near_a_box_corner_is_the_table(br
     wait_until(lambda: wf.pending_label, what="the picked point", panel=panel)
     assert wf.pending_label == "a point on table", wf.pending_label
     page.get_by_text("Target: a point on table", exact=False).first.wait_for(timeout=60_000)
-    page.close()
 
 
 def _refine_box(ui, page, scene, beside_px: float):
@@ -235,7 +232,6 @@ def test_a_snap_that_moved_a_click_onto_the_true_edge_is_not_weak(browser, inter
     asked = "" if wf.accepted else str(panel.warning)
     assert "snap" not in asked, asked
     assert page.get_by_text("snap moved", exact=False).count() == 0
-    page.close()
 
 
 def test_the_result_is_visible_at_1280x720_without_scrolling(browser, interface, scene):
@@ -255,7 +251,6 @@ def test_the_result_is_visible_at_1280x720_without_scrolling(browser, interface,
         return False
 
     wait_until(on_screen, 30, "the σ on screen without scrolling", panel=page.panel)
-    page.close()
 
 
 SWEEP_S, TURN_DEG_S = 1.5, 4.0  # the turning view: 6° one way in 1.5 s, then back
@@ -327,6 +322,5 @@ def test_a_pose_found_on_a_continuously_moving_video_is_not_said_to_be_moving(br
         wait_until(lambda: wf.accepted or panel.asking == "accept", what="the accept or its question", panel=panel)
         asked = "" if wf.accepted else str(panel.warning)
         assert "was moving" not in asked, asked
-        page.close()
     finally:
         ui.close()

@@ -80,7 +80,6 @@ def test_the_suggested_points_calibrate_the_turret_on_the_shipped_database(brows
         f"{after[0]:.2f}° {1000 * after[1]:.1f} mm"
     )
     assert after[0] < 3 * np.linalg.norm(sd_rot_deg) and after[1] < 3 * np.linalg.norm(sd_t_m)
-    page.close()
 
 
 def test_beams_at_the_moved_parallelepiped_are_left_out_and_said(browser, device_interface, scene):
@@ -120,4 +119,3 @@ def test_beams_at_the_moved_parallelepiped_are_left_out_and_said(browser, device
     assert wf.result is None and len(ui.db.calibrations("turret")) == n_cal
     assert box.version == site.object("parallelepiped").version  # nothing written
     op.report("Calibrate turret with the parallelepiped moved")
-    page.close()

@@ -34,7 +34,6 @@ def test_wheel_zooms_about_the_cursor(browser, interface):
         assert np.hypot(x1 - x0, y1 - y0) < 3.0, f"the point under the cursor moved from {(x0, y0)} to {(x1, y1)}"
         click_control(page.get_by_role("button", name="Fit view"))
         wait_until(lambda: abs(abs(float(cam.position[2])) - d0) < 0.02 * d0, what="the fit")
-    page.close()
 
 
 def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, interface):
@@ -72,7 +71,6 @@ def test_a_workflow_freezes_its_frame_and_live_view_refuses_clicks(browser, inte
     wait_until(lambda: wf.pending_X is not None, what="the corner picked on the frozen frame")
     page.keyboard.press("f")  # another frame cannot be frozen once clicked
     page.get_by_text("every click of a workflow uses one frame", exact=False).first.wait_for(timeout=60_000)
-    page.close()
 
 
 def test_a_frame_frozen_to_look_at_goes_back_to_live_by_l(browser, interface):
@@ -85,7 +83,6 @@ def test_a_frame_frozen_to_look_at_goes_back_to_live_by_l(browser, interface):
     page.get_by_role("button", name="Back to live (L)").wait_for(timeout=60_000)
     key_until(page, "l", lambda: panel.frozen is None, "back to the live video")
     page.get_by_text("Live video (no frame frozen)").first.wait_for(timeout=60_000)
-    page.close()
 
 
 def test_marks_keep_their_screen_size_when_zoomed(browser, interface):
@@ -104,7 +101,6 @@ def test_marks_keep_their_screen_size_when_zoomed(browser, interface):
         time.sleep(0.1)
     wait_until(lambda: abs(float(cam.position[2])) < 0.3 * d0, what="the zoom")
     wait_until(lambda: panel.viewport.marks_scale < 0.35, what="the marks redrawn smaller in image pixels")
-    page.close()
 
 
 def test_double_and_rapid_clicks_are_taken_in_order_or_refused_with_the_state_intact(browser, interface):
@@ -143,7 +139,6 @@ def test_double_and_rapid_clicks_are_taken_in_order_or_refused_with_the_state_in
     raw = [sn.raw if sn is not None else seg for sn, seg in zip(wf.seg_snaps[1:], wf.segs[1:])]
     assert np.allclose(np.array(raw), np.array(pts).reshape(4, 2, 2), atol=0.6)
     assert all(c.client != panel.session.client for c in ui.db.history())  # nothing written
-    page.close()
 
 
 def test_a_number_typed_in_a_box_gives_the_keys_back_on_enter_or_a_click_on_the_video(browser, interface):
@@ -168,4 +163,3 @@ def test_a_number_typed_in_a_box_gives_the_keys_back_on_enter_or_a_click_on_the_
     ui.click_pixel(page, [20.0, 20.0])  # a click on the video (nothing selected there): the box lets go
     page.keyboard.press("f")
     wait_until(lambda: panel.frozen is not second, what="Freeze by its key after a click on the video")
-    page.close()

@@ -251,7 +251,6 @@ def test_model_a_box_by_clicking_two_faces_and_scanning(browser, device_interfac
     )
     assert np.all(np.abs(derr) <= 3 * sig) and np.all(np.abs(derr) < 0.004)
     assert deg < 2.0 and dist < 0.005
-    page.close()
 
 
 def test_model_a_cylinder_by_clicking_its_silhouettes(browser, device_interface, scene):
@@ -314,4 +313,3 @@ def test_model_a_cylinder_by_clicking_its_silhouettes(browser, device_interface,
     assert abs(dr) < 0.004 and abs(dh) < 0.01 and axis < 0.006
     # the cylinder just modelled is selected (Update pose, Track … apply to it next)
     wait_until(lambda: page.panel.session.selected == rec.name, what="the new cylinder selected")
-    page.close()

@@ -104,7 +104,6 @@ def test_update_pose_by_auto_match(browser, interface, scene):
     print(f"written: {deg:.3f}° / {1000 * m:.2f} mm from the truth; weak: {weak or 'no'}")
     assert deg < 1.0 and m < 0.005
     op.report("update pose by auto match")
-    page.close()
 
 
 def test_track_pause_resume_accept(browser, interface, scene):
@@ -160,4 +159,3 @@ def test_track_pause_resume_accept(browser, interface, scene):
     print(f"track: from {d0:.2f}° / {1000 * m0:.1f} mm to {deg:.3f}° / {1000 * m:.2f} mm in {wf.frames} frames")
     assert deg < 1.0 and m < 0.005
     op.report("track")
-    page.close()

@@ -107,7 +107,6 @@ def test_update_pose_from_one_click(browser, interface, scene):
     )
     assert len(ui.db.history(BOX)) == n_changes and wf2.found is None
     op.press("Cancel")
-    page.close()
 
 
 def test_update_pose_from_one_click_and_one_edge(browser, interface, scene):
@@ -146,7 +145,6 @@ def test_update_pose_from_one_click_and_one_edge(browser, interface, scene):
     assert op.actions - _missed(op) <= 8, (
         text
     )  # select, Update pose, double click, 2 clicks, the model edge, Refine, Accept
-    page.close()
 
 
 def test_update_a_cylinder_from_one_double_click(browser, interface, scene):
@@ -172,7 +170,6 @@ def test_update_a_cylinder_from_one_double_click(browser, interface, scene):
     assert ui.db.history("cylinder_1")[-1].method == "search"
     text = op.report("update a cylinder from one double click")
     assert op.actions - _missed(op) <= 4, text  # select, Update pose, double click, Accept
-    page.close()
 
 
 def test_update_pose_by_a_double_click_on_the_selected_object(browser, interface, scene):
@@ -219,7 +216,6 @@ def test_update_pose_by_a_double_click_on_the_selected_object(browser, interface
     assert deg < 1.0 and m < 0.005
     text = op.report("update pose by a double click on the selected object")
     assert op.actions - missed <= 3, text  # select, double click, Accept
-    page.close()
 
 
 def _box_selected(ui, browser, scene):
@@ -272,7 +268,6 @@ def test_a_double_click_is_told_by_the_page_when_the_server_is_late(browser, int
     op.accept(wf)
     deg, m = pose_error(ui.db.get(BOX).T_world_obj, T_true)
     assert deg < 1.0 and m < 0.005
-    page.close()
 
 
 def test_a_click_while_find_searches_is_refused_and_the_found_poses_stay_acceptable(
@@ -309,7 +304,6 @@ def test_a_click_while_find_searches_is_refused_and_the_found_poses_stay_accepta
     op.accept(wf)
     deg, m = pose_error(ui.db.get(BOX).T_world_obj, T_true)
     assert deg < 1.0 and m < 0.005
-    page.close()
 
 
 def test_a_double_click_says_which_object_and_where(browser, interface, scene):
@@ -429,4 +423,3 @@ def test_a_double_click_says_which_object_and_where(browser, interface, scene):
         lambda: panel.session.workflow is not None and not panel.session.workflow.finished, what="Update pose started"
     )
     assert panel.session.workflow.object_name == BOX
-    page.close()

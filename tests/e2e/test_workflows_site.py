@@ -218,7 +218,6 @@ def test_calibrate_camera_by_clicks(browser, interface, scene):
     assert (
         frame["source"] == "live" and frame["index"] >= 0 and frame["index"] == wf.frame.index
     )  # (the panel shows live video again once accepted)
-    page.close()
     assert report
 
 
@@ -311,7 +310,6 @@ def test_calibrate_turret_by_clicks(browser, device_interface, scene):
     assert after[0] < before[0] / 2 and after[1] < before[1] / 2
     assert after[0] < 4 * np.linalg.norm(sd_rot_deg) and after[1] < 4 * np.linalg.norm(sd_t_m)
     assert np.allclose(site.T_world_turret, stored)
-    page.close()
 
 
 # ---------------------------------------------------------------------------------------------- 3
@@ -380,7 +378,6 @@ def test_designate_known_and_unknown_by_clicks(browser, device_interface, scene)
     assert "(closed at" not in panel.gui_title.content
     op.report()
     assert _db_state(ui.db) == before  # nothing written
-    page.close()
 
 
 # ---------------------------------------------------------------------------------------------- 4, 5
@@ -524,8 +521,6 @@ def test_two_operators_history_undo_and_a_conflict(browser, interface, scene):
     op_b.report()
     assert not wf_b.accepted and _db_state(ui.db) == after_a
     assert np.array_equal(ui.db.get("parallelepiped").T_world_obj, T_a)
-    a.close()
-    b.close()
 
 
 def page_has(page, text: str) -> bool:
@@ -636,7 +631,6 @@ def test_esc_while_designate_measures_stops_the_check_only(browser, scene, frame
         assert not wf.finished and len(wf.targets) == 1
         op.key("Escape")  # ... and the second press cancels
         wait_until(lambda: wf.finished, what="the cancel")
-        page.close()
     finally:
         ui.close()
         devices.close()
