@@ -412,9 +412,10 @@ class DesignateTarget(Workflow):
             )
         if self.targets:
             t = self.targets[-1]
+            where = "on something not in the database" if t.object == NOT_IN_DATABASE else f"on {t.object}"
             if t.warning and np.isfinite(t.frame_age_s):
                 head = (
-                    f"Target {len(self.targets)}: {self._copy_point(t)} m on {t.object} (in the Target (m) box to "
+                    f"Target {len(self.targets)}: {self._copy_point(t)} m {where} (in the Target (m) box to "
                     f"copy). {_sentence(t.warning)}"
                 )
             elif t.warning:
@@ -423,7 +424,7 @@ class DesignateTarget(Workflow):
                     f"the Target (m) box to copy). {_sentence(t.warning)}"
                 )
             else:
-                head = f"Target {len(self.targets)}: {t.text()} m on {t.object} (in the Target (m) box to copy)."
+                head = f"Target {len(self.targets)}: {t.text()} m {where} (in the Target (m) box to copy)."
             return Step(
                 "targets", f"{head} Click another point, or " + "{accept}.", frozenset({"clear", "accept", "cancel"})
             )

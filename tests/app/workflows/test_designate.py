@@ -121,6 +121,7 @@ def test_no_database_surface_but_the_range_finder_hits(device_site, fast_scene):
     assert min(_true_distance(fast_scene, b.name, t.X_world) for b in fast_scene.bodies) < 3 * t.sigma_m
     # the table says the same as the message (it said "range finder disagrees": with nothing to disagree with)
     assert wf.summary()["targets"][0]["check"] == "not in the database: the range finder's point"
+    assert " m on not in the database" not in wf.next_step  # (a new operator read "… m on not in the database")
 
 
 def test_a_device_fault_keeps_nothing(device_site, devices):
