@@ -468,9 +468,13 @@ class CalibrateTurret(Workflow):
             )[0]
             self.checks.append(check)
             if check.disagrees:  # said now; Solve leaves it out if it still disagrees through the solved pose
-                self.message += " ⚠ " + disagreement_text(
-                    [check], [self.labels[-1]], done="Solve leaves it out", aimed=self._aimed([len(self.pan) - 1])
-                ) + "."
+                self.message += (
+                    " ⚠ "
+                    + disagreement_text(
+                        [check], [self.labels[-1]], done="Solve leaves it out", aimed=self._aimed([len(self.pan) - 1])
+                    )
+                    + "."
+                )
             self._suggest()
             off = self._off_surface_m(Xm)
             if off > OFF_SURFACE_M:  # said now, not only when Solve leaves it out
