@@ -231,7 +231,7 @@ def _checked(intr: Intrinsics, image_size: tuple[int, int] | None) -> Intrinsics
 def _float(node: ET.Element | None, tag: str, where: str) -> float:
     child = None if node is None else node.find(tag)
     if child is None or child.text is None:
-        raise ValueError(f"{where}: missing <{tag}>")
+        raise ValueError(f"{where}: missing <{tag}>: give it (ViSP's camera file: <px>, <py>, <u0>, <v0>)")
     try:
         value = float(child.text.strip())
     except ValueError:
@@ -462,7 +462,9 @@ def _matrix(value: Any, where: str, shape: tuple[int, ...] | None = None) -> np.
             if rows is not None and cols is not None:
                 a = a.reshape(int(rows), int(cols))
         except (TypeError, ValueError):
-            raise ValueError(f"{where}: its data does not fill {rows}×{cols} numbers") from None
+            raise ValueError(
+                f"{where}: its data is not {rows}×{cols} numbers: give rows × cols numbers in 'data'"
+            ) from None
     else:
         if isinstance(value, str) and value.startswith("<array type"):
             raise ValueError(
@@ -611,7 +613,7 @@ def read_intrinsics(
     """
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"{path}: no such intrinsics file")
+        raise ValueError(f"{path}: no such intrinsics file: check the path (a ViSP .xml, an OpenCV or ROS .yaml/.yml)")
     try:
         return _checked(_read_intrinsics(path, camera_name, image_size), image_size)
     except OSError as exc:  # unreadable: permissions, a vanished mount

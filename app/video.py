@@ -329,7 +329,10 @@ class FolderSource(VideoSource):
         folder = Path(folder)
         files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if folder.is_dir() else []
         if not files:
-            raise VideoError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder")
+            raise VideoError(
+                f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder: give the folder of the video's "
+                "frames"
+            )
         if fps <= 0:
             raise VideoError(f"fps must be positive, got {fps}")
         self._files = files

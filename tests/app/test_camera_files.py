@@ -210,7 +210,11 @@ BAD = [
     ("cam.yaml", b"\xff\xfe\x00k: [1]", "not a text file"),
     ("cam.yaml", "image_width: 640\nimage_height: 480\n", "no camera matrix (looked for camera_matrix"),
     ("cam.yaml", "camera_matrix: {rows: 3, cols: 3}\n", "a matrix needs 'data'"),
-    ("cam.yaml", "camera_matrix: {rows: 3, cols: 3, data: [1, 2, 3]}\n", "does not fill 3×3 numbers"),
+    (
+        "cam.yaml",
+        "camera_matrix: {rows: 3, cols: 3, data: [1, 2, 3]}\n",
+        "is not 3×3 numbers: give rows × cols numbers",
+    ),
     ("cam.yaml", "K: [500, 0, 320, 0, 500, 240]\n", "9 numbers expected (3×3), got 6"),
     (
         "cam.yaml",
