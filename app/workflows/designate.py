@@ -179,8 +179,8 @@ class DesignateTarget(Workflow):
                 check=now or t.check,
                 frame_age_s=age,
                 warning=f"Warning: {old}{': ' + why if why else ''}: the target is where the "
-                f"database{' and the range finder' if t.rangefinder_X is not None else ''} put it now, on "
-                f"{t.object}, which may not be what this frame shows; look at the live video (L) or freeze a new "
+                f"database{' and the range finder' if t.rangefinder_X is not None else ''} put it now, "
+                f"{_on(t.object)}, which may not be what this frame shows; look at the live video (L) or freeze a new "
                 f"frame (F){'. ' + _sentence(t.warning) if t.warning else ''}",
             )
             message = _sentence(t.warning)
@@ -412,7 +412,7 @@ class DesignateTarget(Workflow):
             )
         if self.targets:
             t = self.targets[-1]
-            where = "on something not in the database" if t.object == NOT_IN_DATABASE else f"on {t.object}"
+            where = _on(t.object)
             if t.warning and np.isfinite(t.frame_age_s):
                 head = (
                     f"Target {len(self.targets)}: {self._copy_point(t)} m {where} (in the Target (m) box to "
@@ -466,6 +466,11 @@ class DesignateTarget(Workflow):
                     row["disagreement_mm"] = _mm(t.disagreement_m)
                 rows.append(row)
             return {"targets": rows}
+
+
+def _on(name: str) -> str:
+    """Where a target lies, as a sentence reads it ("on table"; not "on not in the database")."""
+    return "on something not in the database" if name == NOT_IN_DATABASE else f"on {name}"
 
 
 def _frame_age_s(wf: Workflow) -> float | None:
