@@ -13,7 +13,18 @@ from pathlib import Path
 
 import pytest
 
+from . import harness
 from .harness import CHROMIUM, FRAME_T_S, Interface, launch, site_frame
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Whether the running test failed, for the harness: a failed test's page is closed, not kept for the next."""
+    report = (yield).get_result()
+    if report.when == "setup":
+        harness.TEST_FAILED[0] = report.failed
+    elif report.when == "call":
+        harness.TEST_FAILED[0] = harness.TEST_FAILED[0] or report.failed
 
 
 @pytest.fixture(scope="session")

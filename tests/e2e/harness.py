@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import re
 import socket
+import sys
 import time
 import weakref
 
@@ -417,12 +418,12 @@ PARK_JS = """() => {
   for (const p of document.querySelectorAll("p")) p.dataset.mcitOld = "1";
 }"""
 TAKE_JS = '() => { delete document.hasFocus; window.dispatchEvent(new Event("focus")); }'
-_PARKED: dict = {}  # id(browser) → (page, url, viewport, dpr)
+TEST_FAILED = [False]  # the running test's setup or call failed (tests/e2e/conftest.py): its page is not parked
 
 
 def _take_parked(browser, url: str, viewport: dict, dpr: float):
     """The page parked on ``browser`` for this address, viewport and DPR, told to connect again; None if none."""
-    parked = _PARKED.pop(id(browser), None)
+    parked, browser._mcit_parked = getattr(browser, "_mcit_parked", None), None  # (page, url, viewport, dpr)
     if parked is None:
         return None
     page = parked[0]
@@ -434,16 +435,19 @@ def _take_parked(browser, url: str, viewport: dict, dpr: float):
 
 
 def _park(page) -> bool:
-    """Keep ``page`` for the next interface (``_take_parked``); False when it cannot be (closed, or its browser)."""
+    """Keep ``page`` for the next interface (``_take_parked``); False when it cannot be: closed, its browser gone, or
+    its test failing (a page left in a failure's state would carry it into the next test)."""
+    if TEST_FAILED[0] or sys.exc_info()[0] is not None:  # (an interface closed in a test's ``finally``)
+        return False
     try:
         page.evaluate(PARK_JS)
     except Exception:  # noqa: BLE001 - closed meanwhile, or its browser gone
         return False
     browser = page.context.browser
-    old = _PARKED.pop(id(browser), None)
+    old = getattr(browser, "_mcit_parked", None)
     if old is not None:
         _close_quietly(old[0])
-    _PARKED[id(browser)] = (page, page._mcit_url, page._mcit_viewport, page._mcit_dpr)
+    browser._mcit_parked = (page, page._mcit_url, page._mcit_viewport, page._mcit_dpr)
     return True
 
 
