@@ -202,6 +202,9 @@ def open_devices(
     if rangefinder_url is None:
         site = EmulatedSite(scene, clock=clock if clock is not None else scene_clock(scene), **(site_options or {}))
         rangefinder_url, turret_url = site.serve_inprocess() if transport == "inprocess" else site.serve_pty()
+        if transport == "inprocess":  # the drivers time their listening by the line's rate: the emulated line's
+            rangefinder_options = {"baudrate": site.rangefinder.baudrate} | (rangefinder_options or {})
+            turret_options = {"baudrate": site.turret.baudrate} | (turret_options or {})
     rf = turret = None
     try:
         rf = RangeFinder(rangefinder_url, **(rangefinder_options or {}))

@@ -264,7 +264,8 @@ def real_roots(coef, hc, hs):
     reverse = abs(coef[8]) < abs(coef[0])
     for k in range(9):
         c[k] = coef[8 - k] if reverse else coef[k]
-    if not _poly_roots(c, 8, wr, wi, work):
+    # the degree as a variable: a literal 8 would have numba compile _poly_roots and _hqr a second time (3 s)
+    if not _poly_roots(c, wr.shape[0], wr, wi, work):
         return 0
     for k in range(8):
         re, im = wr[k], wi[k]

@@ -193,6 +193,44 @@ def wait_for_steady_camera(panel, timeout_s: float = 20.0, steady_s: float | Non
     raise AssertionError("timed out waiting for the page's fitted camera to settle")
 
 
+# The 3D view's size on the page, as static/wheel.js tells it (the largest canvas, CSS pixels, rounded).
+VIEW_SIZE_JS = """() => {
+  let best = null;
+  for (const c of document.querySelectorAll("canvas")) {
+    const r = c.getBoundingClientRect();
+    if (r.width >= 200 && r.height >= 200 && (!best || r.width * r.height > best.width * best.height)) best = r;
+  }
+  return best ? [Math.round(best.width), Math.round(best.height)] : null;
+}"""
+
+
+def wait_for_fit_shown(page, panel, timeout_s: float = 30.0) -> None:
+    """Wait until the page shows the server's fit of its view: the view's size on the page now is the one it told,
+    viser's camera report has that size (times the page's DPR) and the fit's aspect, and the camera the page reports
+    stands where the last fit put it (the page sets it at once: equal to rounding). Clicks are then placed through
+    the camera the page shows. Keyed on the page, not on a time without change (wait_for_steady_camera: 0.75 s a
+    page); the size is read from the page, since the view narrows when the panel docks, after the page connects."""
+    vp, dpr = panel.viewport, _PAGE_DPRS.get(panel)
+
+    def shown(size) -> bool:
+        cam, fit, at = panel.client.camera, vp._fitted_at, vp._page_position
+        if size is None or vp.need_fit or vp.fit_pending or fit is None or at is None or vp.screen_size != size:
+            return False
+        if dpr is not None and max(abs(size[0] * dpr - cam.image_width), abs(size[1] * dpr - cam.image_height)) > 1.5:
+            return False
+        return vp.fitted_aspect == cam.aspect and float(np.linalg.norm(at - fit)) <= 1e-6 * max(
+            abs(float(fit[2])), 1e-9
+        )
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        size = page.evaluate(VIEW_SIZE_JS)
+        if shown(None if size is None else tuple(size)):
+            return
+        time.sleep(0.05)
+    raise AssertionError("timed out waiting for the page to show its fitted view")
+
+
 def wait_for_panel(server, before: set, timeout_s: float = 60.0):
     """The panel of the client that connected after ``before`` (a set of client ids), once fitted."""
     deadline = time.monotonic() + timeout_s
@@ -253,7 +291,16 @@ def workflow_shown(page, name: str):
         what=f"the {name} workflow's controls",
         panel=page.panel,
     )
-    return page.panel.session.workflow
+    wf = page.panel.session.workflow
+    # and the page shows them: it takes the server's messages at its animation frames (every FRAME_GAP_MS here), and
+    # a key pressed before the frame that takes the workflow's shortcuts (sent with its buttons) went nowhere: Esc
+    # pressed 0.2 s after Update pose was pressed again 8 s later (press_key)
+    shown = [
+        h.label for a, h in page.panel.workflow_controls.handles.items() if h.visible and wf.control(a).kind != "choice"
+    ]
+    if shown:
+        page.get_by_role("button", name=shown[0]).first.wait_for(state="visible", timeout=60_000)
+    return wf
 
 
 def select_by_click(page, name: str, click) -> int:
@@ -663,9 +710,9 @@ class Interface:
         # the page tells the view's size on the screen within a second of showing its panel: until then the server's
         # radii (a click's pick) are in the canvas's pixels, a quarter of the screen's at PAGE_DPR
         wait_until(lambda: panel.viewport.screen_size is not None, 30.0, "the page to tell its view's size")
-        wait_for_steady_camera(panel)  # clicks are placed through the camera the page reports: let the fit land
-        page.panel = panel
         _PAGE_DPRS[panel] = dpr
+        wait_for_fit_shown(page, panel)  # clicks are placed through the camera the page reports: let the fit land
+        page.panel = panel
         page.button_presses = count_button_presses(self.server.server, panel.client.client_id)
         return page
 

@@ -36,11 +36,12 @@ def exact_scene(scene, sigma_m: float = 0.0, speed_steps_s: float = 4000.0):
 
 @pytest.fixture
 def make_site(workcell):
-    """make_site(sigma_m=0, transport='inprocess', **EmulatedSite options) -> (site, rf_url, turret_url)."""
+    """make_site(sigma_m=0, transport='inprocess', speed_steps_s=4000, **EmulatedSite options) -> (site, rf_url,
+    turret_url)."""
     sites = []
 
-    def make(sigma_m: float = 0.0, transport: str = "inprocess", links=(None, None), **options):
-        site = EmulatedSite(exact_scene(workcell, sigma_m), **(FAST_SITE | options))
+    def make(sigma_m: float = 0.0, transport: str = "inprocess", links=(None, None), speed_steps_s=4000.0, **options):
+        site = EmulatedSite(exact_scene(workcell, sigma_m, speed_steps_s), **(FAST_SITE | options))
         sites.append(site)
         urls = site.serve_inprocess() if transport == "inprocess" else site.serve_pty(*links)
         return site, urls[0], urls[1]

@@ -105,7 +105,9 @@ def test_a_real_jump_is_confirmed_by_a_second_reading(rf_bench, workcell):
 
 @pytest.fixture
 def tu_bench(make_site, drivers):
-    site, rf_url, tu_url = make_site(turret_baud=9600)  # the real line's timing: a reply pushed behind arrives late
+    # the real line's timing: a reply pushed behind arrives late; a turret ten times as fast as the bench's others (the
+    # moves' length does not matter here: 6 s of the test was the turret moving)
+    site, rf_url, tu_url = make_site(turret_baud=9600, speed_steps_s=40000.0)
     _, tu = drivers(rf_url, tu_url)
     tu.speed_steps_s()
     return site, tu

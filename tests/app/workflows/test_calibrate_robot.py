@@ -31,6 +31,7 @@ def robot_site(scene, tmp_path):
     from app.render.live import LiveRenderer, LiveRenderError
 
     setup = open_robot(scene)
+    setup.controller.speed_scale = 1.0  # the joints' full speed: the tours' motions take half the time
     try:
         renderer = LiveRenderer(scene, scene.views[0].name)
     except LiveRenderError as exc:
