@@ -51,6 +51,19 @@ class WorkflowControls:
         # after viser had dropped the making (the workflow ended before the page took it), and the page logged
         # "Tried to update non-existent component" (a new operator's console).
         applies = _applies(wf, wf.current_step(), panel.busy)
+        # The shortcuts first: the page takes the server's messages in order, so a button it shows has its key live
+        # (a key pressed as the buttons appeared went nowhere when the page had taken a button but not yet its key).
+        for c in wf.controls:
+            if c.kind != "choice" and c.key is not None:
+                cmd = gui.add_command(
+                    f"{wf.title}: {c.label}",
+                    hotkey=c.key,
+                    description=c.hint or None,
+                    disabled=live_keys.get(c.key) != c.action,
+                )
+                cmd.on_trigger(on_key(panel, functools.partial(panel.press_event, c.action)))
+                self.commands.append(cmd)
+                self._command_of[c.action] = cmd
         with panel.gui_actions:
             for c in wf.controls:
                 if c.kind == "choice":
@@ -62,16 +75,6 @@ class WorkflowControls:
                     label, shown = button_label(c, panel.asking), c.action in applies
                     handle = gui.add_button(label, color=c.color, hint=c.hint or None, visible=shown)
                     handle.on_click(panel.guard(functools.partial(panel.press_event, c.action)))
-                    if c.key is not None:
-                        cmd = gui.add_command(
-                            f"{wf.title}: {c.label}",
-                            hotkey=c.key,
-                            description=c.hint or None,
-                            disabled=live_keys.get(c.key) != c.action,
-                        )
-                        cmd.on_trigger(on_key(panel, functools.partial(panel.press_event, c.action)))
-                        self.commands.append(cmd)
-                        self._command_of[c.action] = cmd
                 self.handles[c.action] = handle
 
     def foreign_keys(self, wf) -> None:

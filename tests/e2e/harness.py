@@ -293,7 +293,7 @@ def workflow_shown(page, name: str):
     )
     wf = page.panel.session.workflow
     # and the page shows them: it takes the server's messages at its animation frames (every FRAME_GAP_MS here), and
-    # a key pressed before the frame that takes the workflow's shortcuts (sent with its buttons) went nowhere: Esc
+    # a key pressed before the frame that takes the workflow's shortcuts (sent before its buttons) went nowhere: Esc
     # pressed 0.2 s after Update pose was pressed again 8 s later (press_key)
     shown = [
         h.label for a, h in page.panel.workflow_controls.handles.items() if h.visible and wf.control(a).kind != "choice"
@@ -319,6 +319,39 @@ def select_by_click(page, name: str, click) -> int:
     return 2
 
 
+def shortcut_shown(page, key: str, timeout_s: float = 60.0) -> None:
+    """Wait until the page shows a button the workflow whose control ``key`` presses shows now: the page takes a
+    workflow's shortcuts, made before its buttons, at its next animation frame (every FRAME_GAP_MS here), and a key
+    pressed before then went nowhere (pressed again REACH_S or 8 s later)."""
+    panel = getattr(page, "panel", None)
+    wf = None if panel is None else panel.session.workflow
+    if wf is None or wf.finished:
+        return
+    name = {" ": "space"}.get(key, key).lower()
+    if not any(c.key is not None and c.key.lower() == name for c in wf.controls):
+        return
+
+    def labels() -> set[str]:  # the workflow's buttons shown now (the step can change meanwhile)
+        handles = panel.workflow_controls.handles
+        return {handles[c.action].label for c in wf.controls if c.kind != "choice" and c.action in handles} & {
+            h.label for h in handles.values() if h.visible
+        }
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and not wf.finished:
+        if labels() & set(page.evaluate(SHOWN_BUTTONS_JS)):
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"the page never showed the buttons of {wf.title} ({sorted(labels())})")
+
+
+# The texts of the page's buttons that are shown.
+SHOWN_BUTTONS_JS = (
+    "() => Array.from(document.querySelectorAll('button')).filter((b) => b.offsetParent !== null)"
+    ".map((b) => b.innerText.trim())"
+)
+
+
 def key_until(page, key: str, predicate, what: str, panel=None) -> int:
     """Press ``key`` and wait for ``predicate()``. On a loaded machine a key can arrive before the page's
     shortcuts take it, and nothing happens, as an operator would see: it is pressed once more, as they
@@ -330,6 +363,7 @@ def key_until(page, key: str, predicate, what: str, panel=None) -> int:
     than after the whole wait (a turret test lost 6 s a run to it). A key that reached the server but was refused
     (a measurement's worker not yet ended: "a measurement is running") is pressed again after 6 s, as before."""
     panel = panel if panel is not None else getattr(page, "panel", None)
+    shortcut_shown(page, key)
     for attempt in (1, 2, 3):
         before = None if panel is None else panel.keys_received
         page.keyboard.press(key)
@@ -355,6 +389,7 @@ def press_key(page, key: str, timeout_s: float = 8.0) -> int:
     that reached the server is not pressed again (Escape's second press would throw the work away), so this
     is for keys that have a shortcut. Returns the number of presses (1 to 3)."""
     panel = page.panel
+    shortcut_shown(page, key)
     for attempt in (1, 2, 3):
         before = panel.keys_received
         page.keyboard.press(key)

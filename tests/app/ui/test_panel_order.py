@@ -193,3 +193,25 @@ def test_a_workflow_s_buttons_are_made_as_they_are_shown_not_hidden_then_shown(s
         controls.update(wf, wf.current_step(), panel.busy)
         shown = {a: (h.visible, getattr(h, "label", None)) for a, h in controls.handles.items()}
     assert made == shown and any(visible for visible, _ in made.values())
+
+
+def test_a_workflow_s_shortcuts_are_made_before_its_buttons(served_page, monkeypatch):
+    """The page takes the server's messages in order: with every shortcut of a workflow made before its first button,
+    a button the page shows has its key live (a key pressed as the buttons appeared went nowhere when the page had
+    taken a button but not yet the shortcut made after it)."""
+    served, page, panel = served_page
+    gui, made = panel.client.gui, []
+
+    def recorded(name):
+        make = getattr(gui, name)
+        return lambda *args, **kwargs: made.append(name) or make(*args, **kwargs)
+
+    for name in ("add_command", "add_button", "add_dropdown"):
+        monkeypatch.setattr(gui, name, recorded(name))
+    with panel.app.clients_lock:  # no redraw meanwhile
+        panel.session.select("parallelepiped")
+        wf = panel.session.start("update_pose")
+        panel.workflow_controls.rebuild(wf)
+    keyed = [c for c in wf.controls if c.key is not None and c.kind != "choice"]
+    first_button = made.index("add_button")
+    assert len(keyed) > 3 and made[:first_button].count("add_command") >= len(keyed), made
