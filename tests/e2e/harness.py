@@ -301,14 +301,7 @@ def workflow_shown(page, name: str):
         panel=page.panel,
     )
     wf = page.panel.session.workflow
-    # and the page shows them: it takes the server's messages at its animation frames (every FRAME_GAP_MS here), and
-    # a key pressed before the frame that takes the workflow's shortcuts (sent before its buttons) went nowhere: Esc
-    # pressed 0.2 s after Update pose was pressed again 8 s later (press_key)
-    shown = [
-        h.label for a, h in page.panel.workflow_controls.handles.items() if h.visible and wf.control(a).kind != "choice"
-    ]
-    if shown:
-        page.get_by_role("button", name=shown[0]).first.wait_for(state="visible", timeout=60_000)
+    buttons_shown(page, wf)  # and the page shows them, its shortcuts taken (Esc pressed before went nowhere)
     return wf
 
 
@@ -328,30 +321,35 @@ def select_by_click(page, name: str, click) -> int:
     return 2
 
 
-def shortcut_shown(page, key: str, timeout_s: float = 60.0) -> None:
-    """Wait until the page shows a button the workflow whose control ``key`` presses shows now: the page takes a
-    workflow's shortcuts, made before its buttons, at its next animation frame (every FRAME_GAP_MS here), and a key
-    pressed before then went nowhere (pressed again REACH_S or 8 s later)."""
-    panel = getattr(page, "panel", None)
-    wf = None if panel is None else panel.session.workflow
-    if wf is None or wf.finished:
-        return
-    name = {" ": "space"}.get(key, key).lower()
-    if not any(c.key is not None and c.key.lower() == name for c in wf.controls):
-        return
+def buttons_shown(page, wf, timeout_s: float = 60.0) -> None:
+    """Wait until the page shows a button that ``wf`` shows now (read again each time: its step can change meanwhile),
+    or ``wf`` has finished. The page takes the server's messages at its animation frames (every FRAME_GAP_MS here), a
+    workflow's shortcuts before its buttons: a key pressed before the page took them went nowhere (Esc pressed 0.2 s
+    after Update pose was pressed again 8 s later)."""
+    panel = page.panel
 
-    def labels() -> set[str]:  # the workflow's buttons shown now (the step can change meanwhile)
+    def labels() -> set[str]:
         handles = panel.workflow_controls.handles
-        return {handles[c.action].label for c in wf.controls if c.kind != "choice" and c.action in handles} & {
-            h.label for h in handles.values() if h.visible
-        }
+        shown = (handles.get(c.action) for c in wf.controls if c.kind != "choice")
+        return {h.label for h in shown if h is not None and h.visible}
 
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and not wf.finished:
-        if labels() & set(page.evaluate(SHOWN_BUTTONS_JS)):
+    while time.monotonic() < deadline:
+        now = labels()
+        if wf.finished or not now or now & set(page.evaluate(SHOWN_BUTTONS_JS)):
             return
         time.sleep(0.05)
     raise AssertionError(f"the page never showed the buttons of {wf.title} ({sorted(labels())})")
+
+
+def shortcut_shown(page, key: str) -> None:
+    """Before ``key`` is pressed: when it is a control's of the workflow under way, wait until the page shows that
+    workflow's buttons (``buttons_shown``)."""
+    panel = getattr(page, "panel", None)
+    wf = None if panel is None else panel.session.workflow
+    name = {" ": "space"}.get(key, key).lower()
+    if wf is not None and any(c.key is not None and c.key.lower() == name for c in wf.controls):
+        buttons_shown(page, wf)
 
 
 # The texts of the page's buttons that are shown.

@@ -33,6 +33,18 @@ def test_open_devices_emulates_both_when_no_url_is_given(workcell):
         serial.serial_for_url(url, timeout=0.1)
 
 
+def test_emulated_lines_tell_the_drivers_their_rate(workcell):
+    """The drivers time their listening by the line's rate (a second reply within one reply's line time): on an
+    emulated in-process line they take the emulator's (0: an instant line; a driver that took it for 19 200 baud
+    listened 10 ms after every shot); a rate given for a driver is kept."""
+    instant = dict(FAST_SITE, rangefinder_baud=0, turret_baud=0)
+    with open_devices(workcell, clock=lambda: 0.0, site_options=instant) as dev:
+        assert (dev.rangefinder._line.baudrate, dev.turret._line.baudrate) == (0, 0)
+    real = dict(FAST_SITE, rangefinder_baud=19200, turret_baud=9600)
+    with open_devices(workcell, clock=lambda: 0.0, site_options=real, turret_options={"baudrate": 4800}) as dev:
+        assert (dev.rangefinder._line.baudrate, dev.turret._line.baudrate) == (19200, 4800)
+
+
 def test_open_devices_on_real_paths_and_over_ptys(workcell, tmp_path):
     scene = exact_scene(workcell)
     with EmulatedSite(scene, **FAST_SITE) as site:
