@@ -190,12 +190,13 @@ def test_the_pages_policy_refuses_markup_that_escaping_would_have_missed(browser
     page = ui.open(browser)
     page.panel.client.gui.add_markdown(Md("\n\n".join(evil.values())))  # bypassing app.markup
     # (playwright takes the page's console events only while one of its calls runs)
-    wait_until(
-        lambda: page.wait_for_timeout(50) or len(ui.csp_refusals) >= 3, 30.0, "the policy's refusals"
-    )  # the two inline handlers at least
+    # the remote image and an inline script at least: which inline code reaches the policy, and its wording, depend
+    # on Chromium's version (150: the srcdoc frame's script alone, "Executing inline script"; earlier ones also the
+    # <img onerror> and <svg onload> handlers, "Refused to execute inline event handler")
+    wait_until(lambda: page.wait_for_timeout(50) or len(ui.csp_refusals) >= 2, 30.0, "the policy's refusals")
     page.wait_for_timeout(500)
     assert canary.hits == [], f"markup ran or loaded despite the policy: {canary.hits}"
     said = " ".join(ui.csp_refusals)
-    assert "inline event handler" in said and "img-src" in said  # <img onerror>, <svg onload>; the remote image
+    assert "inline" in said and "img-src" in said, ui.csp_refusals
     ui.close_pages(park=False)  # its later refusals (the page goes on refusing until it is closed) are expected too
     ui.csp_refusals.clear()
