@@ -258,6 +258,20 @@ class Viewport:
 
 def place_camera(cam, position: np.ndarray, look_at: np.ndarray) -> None:
     """Move a client's camera. The position first: viser moves the look-at point with it, and refuses a
-    look-at point equal to the position the camera has at that moment (whatever the page reported)."""
+    look-at point equal to the position the camera has at that moment (whatever the page reported).
+
+    Sent even when it equals the camera the page last reported: viser sends nothing then, yet a move sent before
+    and still on its way can take the page elsewhere (a page connecting again reported its old camera, equal to
+    the refit after its panel docked, and then showed the first fit, zoomed in: its clicks landed off the image)."""
+    position, look_at = np.asarray(position, float), np.asarray(look_at, float)
+    if np.allclose(position, cam.position):
+        cam.position = position + _NUDGE * (1.0 + np.abs(position))  # replaced by the next message at once
     cam.position = position
+    if np.allclose(look_at, cam.look_at):
+        cam.look_at = look_at + _NUDGE * (1.0 + np.abs(look_at))
     cam.look_at = look_at
+
+
+_NUDGE = (
+    1e-4  # relative: beyond viser's sameness test (numpy's allclose, 1e-5); about 0.04 video pixel, for one message
+)

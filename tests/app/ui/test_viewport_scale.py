@@ -37,3 +37,28 @@ def test_what_is_not_a_size_is_ignored(said):
     vp.on_canvas_size("640 480")
     vp.on_canvas_size(said)
     assert vp.screen_size == (640, 480)
+
+
+def test_a_camera_move_is_sent_even_where_the_page_last_reported_its_camera():
+    """viser sends nothing for a camera value equal to the page's last report; a move sent before and still on its way
+    may take the page elsewhere, so place_camera sends it all the same, ending on the asked values."""
+    from viser import CameraHandle
+
+    from app.ui.viewport import place_camera
+
+    sent = []
+    client = SimpleNamespace(_websock_connection=SimpleNamespace(queue_message=sent.append))
+    cam = CameraHandle(client)
+    reported = (np.array([2.5, 1.3, -2.8]), np.array([2.5, 1.3, 0.0]))  # the page's report
+    cam._state.position, cam._state.look_at = reported[0].copy(), reported[1].copy()
+    cam._state.up_direction, cam._state.update_timestamp = np.array([0.0, -1.0, 0.0]), 1.0
+    place_camera(cam, *reported)
+    positions = [m.position for m in sent if type(m).__name__ == "SetCameraPositionMessage"]
+    looks = [m.look_at for m in sent if type(m).__name__ == "SetCameraLookAtMessage"]
+    assert positions and looks, "nothing sent for a camera equal to the page's report"
+    assert np.allclose(positions[-1], reported[0], rtol=0, atol=1e-12)
+    assert np.allclose(looks[-1], reported[1], rtol=0, atol=1e-12)
+    assert np.allclose(cam.position, reported[0], rtol=0, atol=1e-12)
+    sent.clear()
+    place_camera(cam, reported[0] + [0.0, 0.0, 0.5], reported[1])  # a camera elsewhere: sent as it is, once
+    assert [type(m).__name__ for m in sent].count("SetCameraPositionMessage") == 1
