@@ -276,6 +276,27 @@ _CLEAR_JS = """(c, [x, y]) => {
 }"""
 
 
+_PROBE_JS = """(c, [x, y]) => {
+  const r = c.getBoundingClientRect(), e = document.elementFromPoint(r.left + x, r.top + y), t0 = performance.now();
+  return new Promise((done) => setTimeout(() => done({
+    at: e ? e.tagName + (e === c ? " (the canvas)" : "") : null, canvas: [r.left, r.top, r.width, r.height],
+    visibility: document.visibilityState, focus: document.hasFocus(), timer_ms: Math.round(performance.now() - t0),
+  }), 100));
+}"""
+
+
+def _click_probe(ui, page, uv) -> str:
+    """What the page shows at a click that did not reach the server (for the failure's message): the element at the
+    point, the canvas's box, the page's visibility and focus, how late a 100 ms timer fired, the camera's fit."""
+    try:
+        x, y = ui.screen_of(page, uv)
+        said = page.locator("canvas").nth(1).evaluate(_PROBE_JS, [x, y], timeout=10_000)
+        vp = page.panel.viewport
+        return f"{said}, click at {(round(x, 1), round(y, 1))}, fit pending {vp.fit_pending}, need fit {vp.need_fit}"
+    except Exception as exc:  # noqa: BLE001 - a page that does not answer is the answer
+        return f"no answer ({type(exc).__name__}: {str(exc)[:120]})"
+
+
 def close_webgl_notice(page) -> bool:
     """Close the "software WebGL" notification where it is shown (it covers the canvas's top-left corner, and
     stays until closed; absent on hardware WebGL). True when there was one."""
@@ -779,7 +800,10 @@ class Interface:
         panel = getattr(page, "panel", None)
         before = None if panel is None else panel.clicks_received
         if self._click(page, uv, double=False) and panel is not None:
-            wait_until(lambda: panel.clicks_received > before, 30.0, "the click to reach the server", panel=panel)
+            try:
+                wait_until(lambda: panel.clicks_received > before, 30.0, "the click to reach the server", panel=panel)
+            except AssertionError as exc:
+                raise AssertionError(f"{exc}; the page then: {_click_probe(self, page, uv)}") from None
 
     def double_click_pixel(self, page, uv):
         """A double click on video pixel uv (one gesture), then a wait until it reached the server: its first click
@@ -787,7 +811,10 @@ class Interface:
         panel = getattr(page, "panel", None)
         before = None if panel is None else panel.clicks_received
         if self._click(page, uv, double=True) and panel is not None:
-            wait_until(lambda: panel.clicks_received >= before + 2, 30.0, "the double click to reach the server")
+            try:
+                wait_until(lambda: panel.clicks_received >= before + 2, 30.0, "the double click to reach the server")
+            except AssertionError as exc:
+                raise AssertionError(f"{exc}; the page then: {_click_probe(self, page, uv)}") from None
 
     def _click(self, page, uv, double: bool) -> bool:
         """Click (or double-click) the canvas at video pixel uv; False where playwright's hit test kept finding the
