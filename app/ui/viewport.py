@@ -256,6 +256,11 @@ class Viewport:
             self._rect_cb = None
 
 
+# place_camera's step aside, relative: beyond viser's sameness test (numpy's allclose, 1e-5); about 0.04 video pixel
+# (PixelWorld.k: 0.01 viewer unit a pixel), for one message
+_NUDGE = 1e-4
+
+
 def place_camera(cam, position: np.ndarray, look_at: np.ndarray) -> None:
     """Move a client's camera. The position first: viser moves the look-at point with it, and refuses a
     look-at point equal to the position the camera has at that moment (whatever the page reported).
@@ -270,8 +275,3 @@ def place_camera(cam, position: np.ndarray, look_at: np.ndarray) -> None:
     if np.allclose(look_at, cam.look_at):
         cam.look_at = look_at + _NUDGE * (1.0 + np.abs(look_at))
     cam.look_at = look_at
-
-
-_NUDGE = (
-    1e-4  # relative: beyond viser's sameness test (numpy's allclose, 1e-5); about 0.04 video pixel, for one message
-)
