@@ -4,7 +4,8 @@ cursor — and which camera pixel a click's ray meets."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import threading
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import viser
@@ -14,9 +15,51 @@ from app.workflows import WorkflowError
 if TYPE_CHECKING:  # pragma: no cover
     from .client import ClientPanel
 
-__all__ = ["Viewport", "WHEEL_ZOOM_PER_DELTA"]
+__all__ = ["CameraNow", "Viewport", "WHEEL_ZOOM_PER_DELTA", "camera_now"]
 
 WHEEL_ZOOM_PER_DELTA = 0.0015  # a wheel notch (deltaY 100) zooms by 14 %
+
+
+class CameraNow(NamedTuple):
+    """A client's camera as one report of its page: viewer position, look-at point, orientation, vertical field of
+    view (rad), and the canvas's size in its own pixels."""
+
+    position: np.ndarray
+    look_at: np.ndarray
+    wxyz: np.ndarray
+    fov: float
+    image_width: int
+    image_height: int
+
+    @property
+    def aspect(self) -> float:
+        return self.image_width / self.image_height
+
+
+def camera_now(cam) -> CameraNow | None:
+    """``cam`` (a viser client's camera) read whole, or None before the page's first report. viser replaces the state
+    behind it at each of the page's reports, in its event loop, while the panel's callbacks read it property by
+    property in other threads: a position of one report with the look-at or orientation of the next is a camera the
+    page never had. Read until two readings agree."""
+    last = None
+    for _ in range(10):
+        try:
+            now = CameraNow(
+                np.array(cam.position, float),
+                np.array(cam.look_at, float),
+                np.array(cam.wxyz, float),
+                float(cam.fov),
+                int(cam.image_width),
+                int(cam.image_height),
+            )
+        except (AssertionError, TypeError):
+            return None
+        if now.image_height <= 0 or now.image_width <= 0:
+            return None
+        if last is not None and all(np.array_equal(a, b) for a, b in zip(now, last)):
+            return now
+        last = now
+    return last
 
 
 class Viewport:
@@ -31,6 +74,7 @@ class Viewport:
         self.fitted_aspect: float | None = None
         self.zoom_rect: tuple | None = None
         self.marks_scale = 1.0
+        self._moving = threading.Lock()  # held while the camera is read and moved (the wheel's thread, the redraw's)
         self.all_cameras = False  # the fit shows every camera's image side by side (Fit view pressed again)
         self._fitted_at: np.ndarray | None = None  # where the last fit put the browser's camera
         # The page has not yet reported its camera where the last fit put it: the camera the server holds is the fit's,
@@ -88,17 +132,14 @@ class Viewport:
     def pixel_at(self, screen_xy) -> np.ndarray | None:
         """The camera pixel under screen point (x, y) in 0..1 of the canvas (None: the page has not
         reported its camera yet); switches to the camera whose image it is on."""
-        try:
-            ray = self.screen_ray(self.client.camera, screen_xy)
-        except (AssertionError, ZeroDivisionError):
-            return None
-        return self.pixel_of_ray(*ray)
+        cam = camera_now(self.client.camera)
+        return None if cam is None else self.pixel_of_ray(*self.screen_ray(cam, screen_xy))
 
     def on_rect(self, event) -> None:
         """A left drag on the video zooms to the dragged rectangle (and never rotates the view)."""
-        if self.view != "video":
+        cam = camera_now(self.client.camera)
+        if self.view != "video" or cam is None:
             return
-        cam = self.client.camera
         corners = [
             self.pixel_world.pixel_from_ray(*self.screen_ray(cam, s)) for s in (event.screen_min, event.screen_max)
         ]
@@ -119,17 +160,24 @@ class Viewport:
             return  # not a wheel message (cleared, or typed): ignore
         if not (np.isfinite(sx) and np.isfinite(sy) and np.isfinite(dy)):
             return
-        cam = self.client.camera
-        try:
-            position, look_at = np.asarray(cam.position, float), np.asarray(cam.look_at, float)
-            R = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix()
-            t, aspect = np.tan(cam.fov / 2.0), cam.aspect
-        except (AssertionError, ZeroDivisionError):
-            return
+        with self._moving:  # one move at a time, each from the camera the last left (a fit, another notch)
+            if not self._zoom(sx, sy, dy):
+                return
+        self._fitted_at = None  # zoomed: Fit view fits the shown image first
+        self.fit_pending = False
+        self.panel.dirty = True
+
+    def _zoom(self, sx: float, sy: float, dy: float) -> bool:
+        cam = camera_now(self.client.camera)
+        if cam is None:
+            return False
+        position, look_at, aspect = cam.position, cam.look_at, cam.aspect
+        R = viser.transforms.SO3(cam.wxyz).as_matrix()
+        t = np.tan(cam.fov / 2.0)
         ray = R @ np.array([(2 * sx - 1) * t * aspect, (2 * sy - 1) * t, 1.0])
         if self.view == "video":  # the point of the image plane (z = 0) under the cursor
             if abs(ray[2]) < 1e-9:
-                return
+                return False
             X = position + (-position[2] / ray[2]) * ray
         else:  # the 3D world: the point under the cursor at the distance of the orbit's centre
             X = position + np.linalg.norm(look_at - position) * ray / np.linalg.norm(ray)
@@ -141,23 +189,21 @@ class Viewport:
             )
             dist = abs(float(position[2]))
             if not dist > 1e-9:  # a camera in the image's plane (a page can report one): nothing to zoom about
-                return
+                return False
             f = float(np.clip(f, 0.005 * fit / dist, 2.0 * fit / dist))
         with self.client.atomic():
-            place_camera(cam, X + f * (position - X), X + f * (look_at - X))
-        self._fitted_at = None  # zoomed: Fit view fits the shown image first
-        self.fit_pending = False
-        self.panel.dirty = True
+            place_camera(self.client.camera, X + f * (position - X), X + f * (look_at - X))
+        return True
 
     def on_camera(self, cam) -> None:
         """The page reported its camera (viser calls this for the page's reports only)."""
         self._page_position = np.asarray(cam.position, float).copy()
         if self.fit_pending and self._fitted_at is not None and self._page_at(self._fitted_at):
             self.fit_pending = False
-        try:
-            aspect = cam.aspect
-        except (AssertionError, ZeroDivisionError):
+        now = camera_now(cam)
+        if now is None:
             return
+        aspect = now.aspect
         if self.fitted_aspect is None or abs(aspect - self.fitted_aspect) > 1e-3:
             self.need_fit = True
             self.panel.app.wake()
@@ -169,13 +215,11 @@ class Viewport:
 
     def zoom_scale(self) -> float | None:
         """Image pixels per screen pixel now, relative to the fitted view (1 at fit, 0.1 at 10× zoom)."""
-        cam = self.client.camera
-        try:
-            dist = abs(float(cam.position[2]))  # the image plane is z = 0 in the pixel world
-            fov, aspect = cam.fov, cam.aspect
-        except (AssertionError, ZeroDivisionError, TypeError):
+        cam = camera_now(self.client.camera)
+        if cam is None:
             return None
-        fit = abs(float(self.pixel_world.fit_camera(aspect, fov)[0][2]))
+        dist = abs(float(cam.position[2]))  # the image plane is z = 0 in the pixel world
+        fit = abs(float(self.pixel_world.fit_camera(cam.aspect, cam.fov)[0][2]))
         return float(np.clip(dist / fit, 0.02, 4.0)) if fit > 0 else None
 
     def on_canvas_size(self, value: str) -> None:
@@ -191,13 +235,12 @@ class Viewport:
         """Video pixels per screen pixel (CSS pixel: the page's, whatever its pixel ratio) in this client's view now
         (1 when it is not known). viser reports the camera's image in the canvas's own pixels, the screen's times
         the page's pixel ratio; the page's own report of the view's size is used when it has come."""
-        try:
-            cam = self.client.camera
-            dist = abs(float(cam.position[2]))
-            visible = 2.0 * dist * np.tan(float(cam.fov) / 2.0) / self.pixel_world.k  # video px across the height
-            k = visible / float(cam.image_height if self.screen_size is None else self.screen_size[1])
-        except (AssertionError, ZeroDivisionError, TypeError, AttributeError, ValueError):
+        cam = camera_now(self.client.camera)
+        if cam is None:
             return 1.0
+        dist = abs(float(cam.position[2]))
+        visible = 2.0 * dist * np.tan(cam.fov / 2.0) / self.pixel_world.k  # video px across the height
+        k = visible / float(cam.image_height if self.screen_size is None else self.screen_size[1])
         return k if np.isfinite(k) and k > 0 else 1.0
 
     def update_marks_scale(self) -> float:
@@ -209,11 +252,14 @@ class Viewport:
     # ------------------------------------------------------------------ fit
     def fit(self) -> None:
         """Fit the browser's camera to the shown camera's image (or the dragged rectangle), or to the 3D world."""
-        cam = self.client.camera
-        try:
-            aspect, fov = cam.aspect, cam.fov
-        except (AssertionError, ZeroDivisionError):
+        with self._moving:
+            self._fit()
+
+    def _fit(self) -> None:
+        cam, now = self.client.camera, camera_now(self.client.camera)
+        if now is None:
             return  # the browser has not reported its camera yet
+        aspect, fov = now.aspect, now.fov
         self.need_fit = False
         self.fitted_aspect = aspect
         pw = self.pixel_world

@@ -121,8 +121,10 @@ def screen_of(server, panel, uv) -> tuple[float, float]:
     """Canvas position (x, y, CSS pixels) of video pixel uv in a client's view, from the camera it reports."""
     import viser
 
+    from app.ui.viewport import camera_now
+
     width, height = canvas_size(panel)
-    cam = panel.client.camera
+    cam = camera_now(panel.client.camera)  # one report of the page's, not parts of two
     X = server.views[panel.camera_view].pixel_world.to_world(np.asarray(uv, float))  # on the camera it shows
     R = viser.transforms.SO3(np.asarray(cam.wxyz)).as_matrix()
     p = R.T @ (X - np.asarray(cam.position))

@@ -8,12 +8,18 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from app.ui.viewport import Viewport
+from app.ui.viewport import Viewport, camera_now
 
 
 def _viewport(image_height: int) -> Viewport:
     camera = SimpleNamespace(
-        position=np.array([0.0, 0.0, -2.0]), fov=np.deg2rad(60.0), image_height=image_height, on_update=lambda cb: cb
+        position=np.array([0.0, 0.0, -2.0]),
+        look_at=np.zeros(3),
+        wxyz=np.array([1.0, 0.0, 0.0, 0.0]),
+        fov=np.deg2rad(60.0),
+        image_width=round(1.6 * image_height),
+        image_height=image_height,
+        on_update=lambda cb: cb,
     )
     client = SimpleNamespace(camera=camera, scene=SimpleNamespace(on_rect_select=lambda: lambda cb: cb))
     feed = SimpleNamespace(pixel_world=SimpleNamespace(k=0.01))
@@ -62,3 +68,37 @@ def test_a_camera_move_is_sent_even_where_the_page_last_reported_its_camera():
     sent.clear()
     place_camera(cam, reported[0] + [0.0, 0.0, 0.5], reported[1])  # a camera elsewhere: sent as it is, once
     assert [type(m).__name__ for m in sent].count("SetCameraPositionMessage") == 1
+
+
+class _ReportedMidRead:
+    """A viser camera whose page reports a new camera while it is being read: the state behind it is replaced whole
+    (viser's event loop) after the first read of its position."""
+
+    def __init__(self, states):
+        self.states, self.reads = list(states), 0
+
+    def __getattr__(self, name):
+        state = self.states[0]
+        if name == "position":
+            self.reads += 1
+            if self.reads == 1 and len(self.states) > 1:
+                self.states.pop(0)  # the next report lands between this read and the next
+        return state[name]
+
+
+def test_a_camera_is_read_as_one_report_of_the_page():
+    def report(x):
+        return dict(
+            position=np.array([x, 0.0, -2.0]),
+            look_at=np.array([x, 0.0, 0.0]),
+            wxyz=np.array([1.0, 0.0, 0.0, x]),
+            fov=0.5,
+            image_width=800,
+            image_height=500,
+        )
+
+    cam = camera_now(_ReportedMidRead([report(1.0), report(2.0)]))
+    # before: the first report's position with the next's look-at, a camera tilted by 27 degrees the page never had
+    assert cam.position[0] == cam.look_at[0] == cam.wxyz[3] == 2.0
+    assert cam.aspect == pytest.approx(1.6)
+    assert camera_now(SimpleNamespace(**{**report(0.0), "image_height": 0})) is None  # no view to read yet
