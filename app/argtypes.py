@@ -16,6 +16,8 @@ __all__ = [
     "angle_deg",
     "percent",
     "pixel_uv",
+    "frame_index",
+    "frame_total",
 ]
 
 MAX_FPS = 240.0  # the fastest rate a command replays, renders or writes at (frames per second)
@@ -55,6 +57,12 @@ coordinate_m = number(
 )
 angle_deg = number(
     float, lambda v: abs(v) <= 3600.0, kind="degrees (a number)", expected="a finite angle within ±3600 degrees"
+)
+frame_index = number(
+    int, lambda v: 0 <= v <= 10**9, kind="a frame number (a whole number)", expected="a frame number from 0"
+)
+frame_total = number(
+    int, lambda v: 1 <= v <= 10**9, kind="a number of frames (a whole number)", expected="at least 1 frame"
 )
 percent = number(int, lambda v: 1 <= v <= 100, kind="a whole number from 1 to 100", expected="1 to 100")
 

@@ -33,7 +33,7 @@ __all__ = ["add_track_parser"]
 
 
 def add_track_parser(sub) -> None:
-    from app.argtypes import frame_rate, number, pixel_uv
+    from app.argtypes import frame_index, frame_rate, frame_total, number, pixel_uv
 
     sigma_mm = number(float, lambda v: 0.0 <= v <= 1000.0, kind="millimetres (a number)", expected="0 to 1000 mm")
     lens_sigma = number(float, lambda v: 0.0 <= v <= 100.0, kind="a number", expected="0 to 100 (percent, pixels)")
@@ -93,8 +93,10 @@ def add_track_parser(sub) -> None:
         help="write poses as ViSP .pos (tx ty tz θux θuy θuz, as --pose reads them): PATH with %%d (e.g. "
         "poses/obj.%%04d.pos) gets one file per tracked frame, any other PATH the last tracked frame's pose",
     )
-    p.add_argument("--start", type=int, default=0, help="first frame to track (the initial pose is this frame's)")
-    p.add_argument("--frames", type=int, help="number of frames to track (default: to the end)")
+    p.add_argument(
+        "--start", type=frame_index, default=0, help="first frame to track, from 0 (the initial pose is this frame's)"
+    )
+    p.add_argument("--frames", type=frame_total, help="number of frames to track (default: to the end)")
     p.add_argument(
         "--fps", type=frame_rate, default=25.0, help="frame rate of the overlay video (above 0, at most 240)"
     )
@@ -186,8 +188,10 @@ def _setup(args):
             raise UsageError("give the camera: --intrinsics FILE (ViSP .xml / OpenCV .yml) or --scene DIR")
         from app.camera_io import read_intrinsics
 
-        _, first = next(iter_frames(source, args.start, 1))
-        h, w = first.shape[:2]
+        at = next(iter_frames(source, args.start, 1), None)
+        if at is None:
+            raise ValueError(_no_frame(source, args.start))
+        h, w = at[1].shape[:2]
         intr = read_intrinsics(args.intrinsics, camera_name=args.camera_name, image_size=(w, h))
         if intr.width is not None and (intr.width, intr.height) != (w, h):
             raise ValueError(
@@ -211,6 +215,16 @@ def _setup(args):
     if T is None:
         raise UsageError("give the initial pose: --pose FILE, --init-points/--init-clicks, or --scene with --body")
     return source, camera, model, T, lens
+
+
+def _no_frame(source, start: int) -> str:
+    """What to say when ``source`` has no frame ``start``."""
+    from app.vision.sequence import frame_count
+
+    n = frame_count(source)
+    if not n:
+        return f"{source}: no frame to track (it gives none): check the video or the folder"
+    return f"{source} has {n} frames (0–{n - 1}), none at --start {start}: give --start from 0 to {n - 1}"
 
 
 def _site_folder(path):
@@ -332,7 +346,7 @@ def _cmd_track(args) -> int:
             priors=priors,
         )
     if not frames:
-        raise ValueError(f"no frame to track in {source} from frame {args.start}")
+        raise ValueError(_no_frame(source, args.start))
     pos_written = _write_pos(args.pos_out, frames, camera) if args.pos_out else ""
     conf = np.array([f.confidence for f in frames if not f.lost] or [0.0])
     ms = np.array([f.track_ms for f in frames])

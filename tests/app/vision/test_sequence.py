@@ -99,3 +99,17 @@ def test_mcit_track_command(rendered, tmp_path, capsys):
     # missing pieces are one-line errors
     assert main(["track", str(d / "frames"), "--model", str(d / "box.cao"), "--intrinsics", str(d / "cam.xml")]) == 2
     assert "initial pose" in capsys.readouterr().err
+
+
+def test_a_start_past_the_last_frame_is_said_and_nothing_is_written(rendered, tmp_path, capsys):
+    d = rendered[0]
+    args = ["track", str(d / "frames"), "--model", str(d / "box.cao"), "--intrinsics", str(d / "cam.xml")]
+    args += ["--pose", str(d / "box.pos"), "--csv", str(tmp_path / "t.csv")]
+    assert main(args + ["--start", "9"]) == 1  # was exit 70, an internal error (StopIteration)
+    err = capsys.readouterr().err
+    assert "has 5 frames (0–4), none at --start 9: give --start from 0 to 4" in err and "Traceback" not in err
+    with pytest.raises(SystemExit) as refused:  # argparse's own one line
+        main(args + ["--start", "-2"])
+    assert refused.value.code == 2
+    assert "expected a frame number from 0" in capsys.readouterr().err
+    assert not (tmp_path / "t.csv").exists()
