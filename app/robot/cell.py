@@ -311,7 +311,7 @@ class RobotCell:
                 if check.ok:
                     dt = time.perf_counter() - t0
                     return MovePlan(path, True, "", T, T[:3, 3], -T[:3, 2], 0.0, warnings, dt, checked)
-                reason = reason or _collision_text(check, self.model.links, margins)
+                reason = reason or _collision_text(check, self.model.links, margins, targets=False)
         plan = self._refused(q0, T[:3, 3], -T[:3, 2], 0.0, t0, reason, warnings)
         plan.samples_checked = checked
         return plan
@@ -494,11 +494,13 @@ class RobotCell:
         self.controller.stop()
 
 
-def _collision_text(check, links, margins: dict) -> str:
-    """One line naming what the path would hit (an obstacle, or the robot's own link)."""
-    if check.other in links:
-        return f"the path would bring the robot's {check.link} into its own {check.other}: choose another target"
+def _collision_text(check, links, margins: dict, targets: bool = True) -> str:
+    """One line naming what the path would hit (an obstacle, or the robot's own link); ``targets``: the motion went
+    to a target the operator chose (else to a pose given them: a calibration's), which another target may spare."""
     what = check.other
+    advice = (": choose another target" + ("" if check.other in links else f", or move {what} first")) * targets
+    if check.other in links:
+        return f"the path would bring the robot's {check.link} into its own {check.other}{advice}"
     if getattr(check, "index", -1) == 0:  # where it stands now (touching: a start inside the margin may leave it)
         return (
             f"the database has the robot's {check.link} touching {what} where it stands: check {what}'s pose "
@@ -506,10 +508,10 @@ def _collision_text(check, links, margins: dict) -> str:
         )
     if check.distance_m > 0:
         return (
-            f"the path would pass the robot's {check.link} {1000 * check.distance_m:.0f} mm from {what}, inside the "
-            f"{1000 * margins.get(what, 0.0):.0f} mm kept from it: choose another target, or move {what} first"
+            f"the path would pass the robot's {check.link} {1000 * check.distance_m:.1f} mm from {what}, inside the "
+            f"{1000 * margins.get(what, 0.0):.0f} mm kept from it{advice}"
         )
-    return f"the path would hit {what} with the robot's {check.link}: choose another target, or move {what} first"
+    return f"the path would hit {what} with the robot's {check.link}{advice}"
 
 
 # ---------------------------------------------------------------------- pick and place

@@ -22,7 +22,7 @@ from app.workflows.base import MOTION_GAP_S, FrameRef
 if TYPE_CHECKING:  # pragma: no cover
     from .client import ClientPanel
 
-__all__ = ["FrozenFrames"]
+__all__ = ["FrozenFrames", "past_kept"]
 
 Z_FROZEN = -0.0005  # the frozen frame: in front of the live video, behind the overlays
 FROZEN_MAX_SIDE = 2048  # the frozen frame is upscaled (nearest neighbour) up to this many pixels a side
@@ -165,11 +165,7 @@ class FrozenFrames:
         frame, back_s = hit
         self.freeze(frame, "scrubbed" if back_s > 0 else "live")
         self._scrub_from, self.scrubbed_s = origin, float(seconds)
-        if back_s < float(seconds) - 0.25:  # beyond the kept frames (the scrubber's step is 0.5 s)
-            self.note = (
-                f"Seconds back {float(seconds):g} reaches past the frames kept: this is the oldest kept, "
-                f"{back_s:.1f} s before the frame you scrubbed from"
-            )
+        self.note = past_kept(float(seconds), back_s, feed.recent.seconds)
         self.panel.error = ""
 
     def follow(self, wf) -> bool:
@@ -272,4 +268,20 @@ def _add_image(scene, node: str, image: np.ndarray, pw) -> None:
         position=(float(cx), float(cy), Z_FROZEN),
         cast_shadow=False,
         receive_shadow=False,
+    )
+
+
+def past_kept(seconds: float, back_s: float, kept_s: float) -> str:
+    """What to say of a Seconds back ``seconds`` that froze a frame ``back_s`` before the frame scrubbed from, the
+    video's last ``kept_s`` seconds being kept ("" when it is the frame asked for; the scrubber's step is 0.5 s)."""
+    if back_s >= seconds - 0.25:
+        return ""
+    if back_s < 0.0:  # the frame scrubbed from has itself left the kept frames: the oldest kept is newer
+        return (
+            f"Seconds back {seconds:g}: the frame you scrubbed from is older than the video's last {kept_s:g} s, "
+            f"which are kept; this is the oldest kept, {-back_s:.1f} s after it"
+        )
+    return (
+        f"Seconds back {seconds:g} reaches past the frames kept: this is the oldest kept, "
+        f"{back_s:.1f} s before the frame you scrubbed from"
     )

@@ -270,6 +270,10 @@ def test_a_robot_touching_an_object_where_it_stands_is_told_to_check_the_databas
     assert "choose another target" not in here
     later = _collision_text(PathCheck(False, 7, "finger_left_link", "table", 0.009, 8), ("base_link",), margins)
     assert "choose another target, or move table first" in later
+    # to a calibration's pose (no target chosen): the fact alone, the workflow says Skip pose; and never "10 mm from
+    # table, inside the 10 mm kept" (a new operator's, rounded)
+    posed = _collision_text(PathCheck(False, 7, "finger_left_link", "table", 0.0096, 8), ("base_link",), margins, False)
+    assert posed == "the path would pass the robot's finger_left_link 9.6 mm from table, inside the 10 mm kept from it"
 
 
 def test_a_motion_stopped_before_the_frame_loop_looks_is_said_stopped_not_arrived(site):

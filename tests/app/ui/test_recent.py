@@ -77,3 +77,15 @@ def test_seconds_back_from_a_frame_on_screen_and_how_far_it_reached():
     assert frame.index < r.seconds_back(0.3).index  # the newest's 0.3 s back is a later frame
     oldest, reached = r.back_from(at, 30.0)
     assert oldest.index == kept[0].index and reached < 1.0  # clamped: far less than asked
+
+
+def test_seconds_back_past_the_kept_frames_is_said_never_as_a_negative_time():
+    from app.ui.frozen import past_kept
+
+    assert past_kept(4.0, 3.9, 12.0) == ""  # the frame asked for (the scrubber's step is 0.5 s)
+    said = past_kept(12.0, 9.5, 12.0)
+    assert "reaches past the frames kept" in said and "9.5 s before the frame you scrubbed from" in said
+    # frozen a minute before, its frame has left the kept 12 s: the oldest kept is 50.5 s after it (a new operator
+    # read "the oldest kept, -50.5 s before the frame you scrubbed from")
+    said = past_kept(10.0, -50.5, 12.0)
+    assert "-" not in said.replace("Seconds back", "") and "50.5 s after it" in said and "last 12 s" in said
