@@ -504,7 +504,10 @@ def search_pose(
         n_seeds = 48 if mode == "table" else 24
     seeds = _distinct(p, sc, np.where(step > 0, step, 1.0), n_seeds, per)
     if not len(seeds):
-        raise NoPoseFits(f"no pose of {the(name)} fits the image near your click: click on the object itself")
+        raise NoPoseFits(
+            f"no pose of {the(name)} fits the image near your click: try another spot on {the(name)}, where its "
+            "edges show"
+        )
     check(0.4, "refining the best poses")
     t1 = time.perf_counter()
     q, best = _descend(evaluate, p[seeds], step / 2.0, (6.0, TAU_FINE, TAU_FINE))
@@ -572,7 +575,8 @@ def search_pose(
     if not out:
         other = "another object" + (" or the table" if name != "table" else "")
         raise NoPoseFits(
-            f"no pose of {the(name)} fits the image near your click: click on {the(name)} itself (not on {other})"
+            f"no pose of {the(name)} fits the image near your click: try another spot on {the(name)}, where its "
+            f"edges show (a click on {other} finds none)"
         )
     if table is not None and out[0].mismatch > BESIDE_TRIGGER:
         # a click beside the object: poses under it can lie half on the object and half on the floor
