@@ -183,8 +183,10 @@ class FrozenFrames:
             wf.use_frame(None)
             self.unfreeze()
             return True
-        if not live and self.frame is None:
-            self.freeze(self.panel.feed.grabber.latest(), "live")
+        if not live and self.frame is None:  # the frame it stopped on (the video has moved on since)
+            mine = wf.stepped_on is not None and wf.view in ("", self.panel.camera_view)  # a frame of the camera shown
+            stopped = wf.stepped_on if mine else self.panel.feed.grabber.latest()
+            self.freeze(stopped, "live")
             return self.frame is not None
         return False
 

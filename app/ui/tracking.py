@@ -62,7 +62,7 @@ class TrackFeeder:
                     continue
                 last = frame.index
                 try:
-                    wf.step(frame=frame.image, t_s=frame.t_s, stamp=frame.stamp)
+                    wf.step(frame=frame.image, t_s=frame.t_s, stamp=frame.stamp, ref=frame)
                     self.steps += 1
                 except WorkflowError as exc:
                     if wf.following:  # a frame it cannot use (size, no video): stop following, say why

@@ -296,6 +296,7 @@ class Workflow:
     controls: ClassVar[tuple[Control, ...]] = (CANCEL,)  # what the panel shows, in order
     object_name: str | None = None  # the object the workflow is about (shown in its title), if any
     obj: Any = None  # a pose workflow's snapshot of that object (SiteObject) it started from
+    stepped_on: Any = None  # the live video's frame it last worked on (Track's): the frame frozen when it stops
     progress: float | None = None  # a measurement under way: 0..1 (the panel's progress bar), else None
     progress_text: str = ""
     snapping: ClassVar[bool] = False  # True: takes a ``snap`` option (clicks snapped to the image)

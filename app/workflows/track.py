@@ -137,9 +137,11 @@ class TrackObject(SnapMixin, Workflow):
     def follows_live(self) -> str:
         return f"{self.title} follows the live video: nothing to freeze (Pause it first)" if self.following else ""
 
-    def step(self, frame=None, t_s: float | None = None, stamp: float | None = None):
+    def step(self, frame=None, t_s: float | None = None, stamp: float | None = None, ref=None):
         """Follow the object into one frame: ``frame`` (an image of the camera's size, taken at ``stamp``, unix
-        seconds, when known) or the site's frame at ``t_s`` (default: the scene time now). Returns
+        seconds, when known) or the site's frame at ``t_s`` (default: the scene time now); ``ref``: the caller's
+        frame it is (kept as ``stepped_on`` with the step: lost or paused, the frame frozen is the one it stopped on,
+        not the newest). Returns
         ``app.vision.track.TrackResult``; when it is lost the result says so (and the message what to do).
 
         The tracking itself runs outside the workflow's lock (on a copy of the tracker), so that
@@ -170,6 +172,7 @@ class TrackObject(SnapMixin, Workflow):
                 return res
             self._generation += 1
             self.tracker = worker
+            self.stepped_on = ref
             self.frames += 1
             self.diagnostics = self.tracker.diagnostics
             self.confidence = float(res.confidence)

@@ -143,6 +143,9 @@ def test_track_pause_resume_accept(browser, interface, scene):
     op.key("Space")  # Pause (Space)
     wait_until(lambda: wf.paused, what="the pause")
     frames = wf.frames
+    # the frame it stopped on is the frame frozen, not the newest (lost at t = 17.20 s froze 17.60 s)
+    wait_until(lambda: page.panel.frozen is not None, what="the frame frozen at the pause", panel=page.panel)
+    assert page.panel.frozen.index == wf.stepped_on.index
     op.check()
     assert page.get_by_role("button", name="Resume").is_visible()
     op.press("Resume")

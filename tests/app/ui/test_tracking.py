@@ -62,6 +62,8 @@ def test_feeder_tracks_live_frames_then_notifies_once_when_lost_and_stops_with_t
         assert _wait(lambda: wf.lost)
         time.sleep(0.2)
         assert [n[0] for n in panel.notes] == ["Tracking lost"] and "Re-initialise" in panel.notes[0][1]
+        # the frame it was lost on is the one the panel freezes ("Lost at t = 17.20 s" froze 17.60 s: the newest)
+        assert wf.stepped_on.t_s == wf.t_lost and wf.stepped_on.index <= blank.latest().index
         steps = wf.frames
         time.sleep(0.2)
         assert wf.frames == steps  # a lost track is not fed
