@@ -146,6 +146,9 @@ class CalibrateTurret(Workflow):
         # why the suggestion: "" the best point within reach; a face's name: its beam narrows the aim at that
         # face, out of reach yet; "?": a point out of reach, aimed at anyway (nothing within reach helps)
         self.unlocks = ""
+        # why no point is suggested though σ is short of the target: no face left to aim at fixes what the beams
+        # leave free (an object that would has moved, or none is known), said in the step
+        self.stuck = ""
         self._unlock_tries = 0  # suggestions in a row that were to bring the same face into reach
         self.T_aim: np.ndarray | None = None  # the pose the turret aims with (``_estimate``)
         self._suggest()
@@ -168,6 +171,7 @@ class CalibrateTurret(Workflow):
         beams measured so far (``core.calibration.next_turret_point``). Sets ``T_aim``, ``suggestion``,
         ``sigma_now`` and ``sigma_next``."""
         self.suggestion = self.sigma_now = self.sigma_next = None
+        self.stuck = ""
         if not self.site.has_turret or not self.site.objects():
             return
         landed, _ = self._landed()
@@ -196,6 +200,7 @@ class CalibrateTurret(Workflow):
             on_aim = landed & (np.einsum("ij,ij->i", normals, self._aimed_normals()) > np.cos(np.radians(10.0)))
             missed = {self.labels[i] for i in np.flatnonzero(~on_aim) if on_aim[i + 1 :].sum() < 2}
             keep &= np.array([f"a suggested point on {nm}" not in missed for nm in c.names], bool)
+        gone: set = set()
         if moved.any():  # an object a beam found moved is not offered again (it was, after saying it moved)
             gone = set(self._aimed(np.flatnonzero(moved))) | {self.checks[i].object for i in np.flatnonzero(moved)}
             keep &= np.array([o not in gone for o in c.objects], bool)
@@ -207,8 +212,21 @@ class CalibrateTurret(Workflow):
         rows = turret_plane_rows(T, pan_c, tilt_c, rho_c, c.normals, spec)
         k = self._choose(c, ratio, rows, done, cov_aim, T)
         sd_k = np.sqrt(np.diag(np.linalg.inv(info + np.outer(rows[k], rows[k]))))
+        sigma_next = (float(np.degrees(sd_k[:3].max())), float(sd_k[3:].max()))
+        sd_all = np.sqrt(np.diag(np.linalg.inv(info + rows.T @ rows)))  # every point left measured
+        if _at_prior((float(np.degrees(sd_all[:3].max())), float(sd_all[3:].max()))):
+            # what the beams leave free no face left to aim at fixes (a new operator measured the table's same
+            # four spots 18 times over, σ staying at 500 mm, after the parallelepiped was found moved)
+            names = sorted(o for o in gone if o)
+            self.stuck = (
+                "; ".join(
+                    f"the {o} has moved: update its pose first (Update pose), then measure on it here" for o in names
+                )
+                or "model another object (Model object) for a face turned another way, then measure on it here"
+            )
+            return
         self.suggestion = (c.X[k].copy(), f"a suggested point on {c.names[k]}")
-        self.sigma_next = (float(np.degrees(sd_k[:3].max())), float(sd_k[3:].max()))
+        self.sigma_next = sigma_next
 
     def _choose(self, c: Candidates, ratio: np.ndarray, rows: np.ndarray, done: np.ndarray, cov_aim, T) -> int:
         """Which candidate to suggest (``_suggest``): the best within reach (``ratio`` ≤ 1), unless a point
@@ -299,6 +317,11 @@ class CalibrateTurret(Workflow):
             if len(self.pan) >= 6
             else ""
         )
+        if self.stuck and not reached:
+            return (
+                f"{now} No known face left to aim at fixes what the beams leave free: {self.stuck[0].upper()}"
+                f"{self.stuck[1:]}."
+            )
         if self.suggestion is None or reached:
             return now
         where = self.suggestion[1].split(" on ", 1)[1]

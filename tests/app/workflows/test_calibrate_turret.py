@@ -253,6 +253,11 @@ def test_beams_at_a_moved_object_are_left_out_and_said(fast_scene, db):
             wf.measure()
             told += "the parallelepiped has moved" in wf.message and "update its pose first" in wf.message
         assert told >= 3  # said as each was measured (a beam may miss the moved box: then it is off-surface)
+        # no point left to suggest fixes what the table leaves free: none is offered, and the step says why (a new
+        # operator was sent to the table's same four spots 18 times over, σ staying at 500 mm)
+        prompt = wf.current_step().prompt
+        assert wf.suggestion is None and "No known face left to aim at" in prompt, prompt
+        assert "The parallelepiped has moved: update its pose first (Update pose)" in prompt
         with pytest.raises(WorkflowError, match=r"the parallelepiped has moved.*: update its pose first") as e:
             wf.solve()
         assert "mm measured against" in str(e.value) and wf.result is None
