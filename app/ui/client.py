@@ -214,8 +214,12 @@ class ClientPanel:
         if self.feeder is not None:
             self.feeder.stop()
             self.feeder = None
-        if wf.follows_video:
-            self.feeder = TrackFeeder(self, wf, self.feed.grabber)
+        if (
+            wf.follows_video
+        ):  # from a frame the operator froze to look at (the video has moved on since), else the newest
+            shown = self.frozen_frames.frame if self.frozen_frames.looked_at else None
+            start = shown if shown is not None and shown.view in ("", self.camera_view) else None
+            self.feeder = TrackFeeder(self, wf, self.feed.grabber, self.feed.recent, start)
         self.frozen_frames.started(wf, frame)
 
     def reset_scrubber(self) -> None:

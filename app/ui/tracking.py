@@ -25,12 +25,19 @@ class TrackFeeder:
 
     panel : the client's panel (``notify``, ``dirty``, ``app.wake``). wf : a TrackObject.
     grabber : app.video.FrameGrabber.
+    recent : the frames kept of that video (``app.ui.recent.RecentFrames``), None: none. start : the frame whose
+    pose the workflow holds (image, t_s, index, stamp: a frame frozen when Track started, the database's pose right
+    there): tracked first, then the frames kept after it, in order, until the newest (also after a
+    re-initialisation's frame, ``wf.resume_index``); None: from the newest.
     """
 
-    def __init__(self, panel: Any, wf: Any, grabber: Any):
+    def __init__(self, panel: Any, wf: Any, grabber: Any, recent: Any = None, start: Any = None):
         self.panel = panel
         self.wf = wf
         self.grabber = grabber
+        self.recent = recent
+        self._first = start
+        self._catch_up: int | None = None  # the frames kept after this one are tracked next, in order (None: newest)
         self.steps = 0
         self._event = threading.Event()
         self._stop = threading.Event()
@@ -57,7 +64,9 @@ class TrackFeeder:
             while not self._stop.is_set() and not wf.finished:
                 self._event.wait(0.5)
                 self._event.clear()
-                frame = self.grabber.latest()
+                if wf.resume_index is not None:  # re-initialised on a frozen frame: on from there
+                    self._catch_up, wf.resume_index = wf.resume_index, None
+                frame = self._next()
                 if self._stop.is_set() or wf.finished or frame is None or frame.index == last or not wf.following:
                     continue
                 last = frame.index
@@ -86,6 +95,8 @@ class TrackFeeder:
                     lost_note = None
                 self.panel.dirty = True
                 self.panel.app.wake()
+                if self._catch_up is not None:
+                    self._event.set()  # frames kept are waiting: no need to wait for a new one
         except Exception as exc:  # noqa: BLE001 - say so, keep the server running
             log.exception("tracking %s failed", wf.object_name)
             self.panel.notify(
@@ -95,6 +106,21 @@ class TrackFeeder:
             self.grabber.remove_listener(self._on_frame)
             if lost_note is not None:  # the track is over (finished, or another workflow started): its news goes
                 _remove(lost_note)  # (a new operator had "Tracking lost" notes stacked 15 minutes on)
+
+    def _next(self) -> Any:
+        """The frame to track now: the start frame, then while catching up the oldest frame kept after the last
+        tracked (the frames kept are some 0.1 s apart), else the newest."""
+        if self._first is not None:
+            first, self._first = self._first, None
+            self._catch_up = first.index
+            return first
+        if self._catch_up is not None and self.recent is not None:
+            after = [f for f in self.recent.frames() if f.index > self._catch_up]
+            if after:
+                self._catch_up = after[0].index
+                return after[0]
+        self._catch_up = None
+        return self.grabber.latest()
 
 
 def _remove(note) -> None:

@@ -126,6 +126,9 @@ class TrackObject(SnapMixin, Workflow):
         self.pending: np.ndarray | None = None
         self.reinits: list[dict[str, Any]] = []
         self.stamp_good: float | None = None  # when the image of the last good pose was taken (unix seconds)
+        # the video frame (its index) whose pose the tracker holds after a re-initialisation on a frozen frame: the
+        # interface tracks on through the frames kept after it, not from the newest (the video moved on)
+        self.resume_index: int | None = None
         self.state = "tracking"
 
     # ------------------------------------------------------------------ tracking
@@ -301,9 +304,10 @@ class TrackObject(SnapMixin, Workflow):
                     "(Remove last), click another edge (4 or more, not all through one point)"
                 )
             T, edges = twin
+            at = self.frame  # the frozen frame the edges were clicked on (None: the site's frame now)
             self.reinits.append(
                 {
-                    "t_s": self.site.time_s(),
+                    "t_s": self.site.time_s() if at is None else float(at.t_s),
                     "segs_uv": np.array(self.segs).tolist(),
                     "edges": [int(e) for e in edges],
                     "rms_px": float(c.rms_px),
@@ -314,6 +318,7 @@ class TrackObject(SnapMixin, Workflow):
             self._generation += 1
             self.T_world_obj = T.copy()
             self.t_good = self.reinits[-1]["t_s"]
+            self.resume_index = None if at is None or at.index < 0 else int(at.index)
             self.segs, self.seg_snaps, self.pending = [], [], None
             self.lost = self.paused = False
             self.reason = ""

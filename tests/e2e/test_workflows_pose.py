@@ -19,7 +19,7 @@ import pytest
 from core.transforms import pose_error
 
 from .flows import Operator, projected_edges, visible_edges
-from .harness import select_by_click, wait_until
+from .harness import key_until, select_by_click, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -106,7 +106,7 @@ def test_update_pose_by_auto_match(browser, interface, scene):
     op.report("update pose by auto match")
 
 
-def test_track_pause_resume_accept(browser, interface, scene):
+def test_track_pause_resume_accept(browser, interface, scene, monkeypatch):
     ui = interface
     body = scene.body(BOX)
     T_true = body.pose_at(ui.frame_t_s)
@@ -128,9 +128,26 @@ def test_track_pause_resume_accept(browser, interface, scene):
     cam = ui.site.camera
 
     _select(op, page, obj, cam)
+    # a frame frozen to look at (F) before Track: the track starts on it, then follows the frames kept since (a new
+    # operator's track of a recording started on the newest frame, where the stored pose was not)
+    from app.workflows import TrackObject
+
+    firsts, step = [], TrackObject.step
+
+    def first_seen(self, *args, **kwargs):  # which video frame the track's first step is on
+        if not firsts:
+            firsts.append(kwargs.get("ref"))
+        return step(self, *args, **kwargs)
+
+    monkeypatch.setattr(TrackObject, "step", first_seen)
+    key_until(page, "f", lambda: page.panel.frozen is not None, "a frame frozen to look at")
+    looked_at = page.panel.frozen
+    wait_until(lambda: page.panel.feed.grabber.latest().index > looked_at.index, what="the video past the frozen frame")
     op.press("Track")
     wait_until(lambda: page.panel.session.workflow is not None, what="the workflow")
     wf = page.panel.session.workflow
+    wait_until(lambda: firsts, what="the first frame tracked")
+    assert firsts[0].index == looked_at.index, (firsts[0].index, looked_at.index)
     op.check()
     # the still frame comes again and again: the tracker converges on it, frame after frame
     wait_until(
