@@ -106,6 +106,10 @@ def explain(exc: BaseException) -> tuple[str, int]:
     if isinstance(exc, OSError) and exc.strerror:
         where = f"{exc.filename}: " if exc.filename else ""
         return _one_line(f"{where}{exc.strerror}; {os_error_advice(exc)}"), exit_status.FAILED
+    from app.db import NotFoundError  # here: the commands that never open a database start without it
+
+    if isinstance(exc, NotFoundError):  # a name the database does not hold: where the names are
+        return _one_line(f"{exc}; mcit db list names the objects"), exit_status.FAILED
     if isinstance(exc, (ValueError, OSError)) or type(exc).__module__.split(".")[0] == "app":
         return _one_line(str(exc) or type(exc).__name__), exit_status.FAILED  # mcit's own errors say what to do
     if isinstance(exc, MemoryError):

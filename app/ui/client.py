@@ -213,13 +213,8 @@ class ClientPanel:
         frozen frame if it takes one."""
         if self.feeder is not None:
             self.feeder.stop()
-            self.feeder = None
-        if (
-            wf.follows_video
-        ):  # from a frame the operator froze to look at (the video has moved on since), else the newest
-            shown = self.frozen_frames.frame if self.frozen_frames.looked_at else None
-            start = shown if shown is not None and shown.view in ("", self.camera_view) else None
-            self.feeder = TrackFeeder(self, wf, self.feed.grabber, self.feed.recent, start)
+        start = self.frozen_frames.looked_at_frame()  # Track's first frame (the video moved on since); None: newest
+        self.feeder = TrackFeeder(self, wf, self.feed.grabber, self.feed.recent, start) if wf.follows_video else None
         self.frozen_frames.started(wf, frame)
 
     def reset_scrubber(self) -> None:

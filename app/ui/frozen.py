@@ -50,6 +50,10 @@ class FrozenFrames:
         """A frame frozen to look at (no workflow) is on screen."""
         return self.frame is not None and self.by is None and not self.show_live
 
+    def looked_at_frame(self) -> FrameRef | None:
+        """The frame frozen to look at on screen, when it is the shown camera's."""
+        return self.frame if self.looked_at and self.frame.view in ("", self.panel.camera_view) else None
+
     def freeze(self, frame: Any, source: str) -> None:
         """Freeze ``frame`` (a grabbed frame of the shown camera) and the other cameras' of that moment."""
         panel = self.panel
@@ -184,8 +188,10 @@ class FrozenFrames:
             self.unfreeze()
             return True
         if not live and self.frame is None:  # the frame it stopped on (the video has moved on since)
-            mine = wf.stepped_on is not None and wf.view in ("", self.panel.camera_view)  # a frame of the camera shown
-            stopped = wf.stepped_on if mine else self.panel.feed.grabber.latest()
+            at = wf.stepped_on  # Track's last frame, when of the camera shown
+            stopped = (
+                at if at is not None and wf.view in ("", self.panel.camera_view) else self.panel.feed.grabber.latest()
+            )
             self.freeze(stopped, "live")
             return self.frame is not None
         return False

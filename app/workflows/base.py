@@ -283,12 +283,10 @@ def pick_radius_px(wf: Workflow) -> float:
 
 
 class Workflow:
-    """Base class: a state machine driven by explicit operator actions.
-
-    Subclasses set ``name`` (the id used by scripts and the UI), ``title``, ``actions`` (the public action method
-    names a script may call) and implement ``next_step``, ``marks`` and ``summary``. ``state`` is a short string;
-    ``finished`` is True once accepted or cancelled. Every action holds the workflow's lock (the UI's callbacks may
-    arrive on several threads)."""
+    """Base class: a state machine driven by explicit operator actions. Subclasses set ``name`` (the id used by
+    scripts and the UI), ``title``, ``actions`` (the public action method names a script may call) and implement
+    ``next_step``, ``marks`` and ``summary``. ``state`` is a short string; ``finished`` is True once accepted or
+    cancelled. Every action holds the workflow's lock (the UI's callbacks may arrive on several threads)."""
 
     name: ClassVar[str] = ""
     title: ClassVar[str] = ""
@@ -296,9 +294,9 @@ class Workflow:
     controls: ClassVar[tuple[Control, ...]] = (CANCEL,)  # what the panel shows, in order
     object_name: str | None = None  # the object the workflow is about (shown in its title), if any
     obj: Any = None  # a pose workflow's snapshot of that object (SiteObject) it started from
-    stepped_on: Any = None  # the live video's frame it last worked on (Track's): the frame frozen when it stops
     progress: float | None = None  # a measurement under way: 0..1 (the panel's progress bar), else None
     progress_text: str = ""
+    stepped_on: Any = None  # the video frame its last step was on (Track's): frozen when it stops following
     snapping: ClassVar[bool] = False  # True: takes a ``snap`` option (clicks snapped to the image)
     form: ClassVar[tuple[str, ...]] = ()  # the Start form's options it takes (shape, vertical, on_table)
     follows_video: ClassVar[bool] = False  # True: the interface feeds it the live video while it runs

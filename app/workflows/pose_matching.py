@@ -134,7 +134,7 @@ class AutoMatch:
         n = len(kept)
         return kept, (
             f"{n} way{'s' if n > 1 else ''} of pairing your edges with the model's "
-            f"edges fit{'' if n > 1 else 's'} ({res.total_s:.1f} s); the best is drawn, each clicked "
+            f"edges fit{'' if n > 1 else 's'}; the best is drawn, each clicked "
             "edge labelled with its model edge: Confirm match, or choose another candidate." + warning
         )
 

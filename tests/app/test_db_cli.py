@@ -101,7 +101,7 @@ def test_cli_errors_are_one_line_and_exit_1(tmp_path, capsys):
     code, _, err = _mcit(capsys, "db", "undo", "42", "--db", db)
     assert code == 1 and "no change #42" in err
     code, _, err = _mcit(capsys, "db", "show", "ghost", "--db", db)
-    assert code == 1 and "no object 'ghost'" in err
+    assert code == 1 and "no object 'ghost'" in err and "mcit db list names the objects" in err
     not_db = tmp_path / "notes.txt"
     not_db.write_text("hello\n" * 100)
     code, _, err = _mcit(capsys, "db", "list", "--db", str(not_db))
