@@ -861,14 +861,14 @@ class CalibrateTurret(Workflow):
                 "the point picked, and {solve} again ({remove_last} drops the pick).",
                 frozenset(base | {"accept", "measure"}),
             )
-        if self.pending_X is not None:
+        nxt = {"measure_next"} if self.suggestion is not None else set()
+        if self.pending_X is not None:  # (Measure next, G, still measures the circled point: a refused one kept)
             return Step(
                 "measure",
                 "{measure} " + f"{self.pending_label} (the turret aims through the beams' estimate so far, the "
                 "current calibration as its guide), or click another known point.",
-                frozenset(base | {"measure"}),
+                frozenset(base | {"measure"} | nxt),
             )
-        nxt = {"measure_next"} if self.suggestion is not None else set()
         if self.result is not None:
             return Step(
                 "review",

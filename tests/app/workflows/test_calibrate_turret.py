@@ -319,6 +319,8 @@ def test_the_suggested_points_calibrate_on_the_shipped_database(device_site, fas
         else:  # a click on the circled point, then Measure
             wf.click(site.camera.project(X[None])[0])
             assert wf.pending_label == label
+            # picked, Measure next (G) measures it all the same (a new operator's G "did not apply" after a refusal)
+            assert {"measure", "measure_next"} <= wf.current_step().enabled
             wf.measure()
         assert wf.labels[-1] == label
         if "within the" in wf.current_step().prompt:
