@@ -38,6 +38,7 @@ class TrackFeeder:
         self.recent = recent
         self._first = start
         self._catch_up: int | None = None  # the frames kept after this one are tracked next, in order (None: newest)
+        self._from_kept = False  # the last frame tracked was one of the frames kept
         self.steps = 0
         self._event = threading.Event()
         self._stop = threading.Event()
@@ -65,7 +66,7 @@ class TrackFeeder:
                 self._event.wait(0.5)
                 self._event.clear()
                 if wf.resume_index is not None:  # re-initialised on a frozen frame: on from there
-                    self._catch_up, wf.resume_index = wf.resume_index, None
+                    self._catch_up, self._from_kept, wf.resume_index = wf.resume_index, False, None
                 frame = self._next()
                 if self._stop.is_set() or wf.finished or frame is None or frame.index == last or not wf.following:
                     continue
@@ -109,15 +110,18 @@ class TrackFeeder:
 
     def _next(self) -> Any:
         """The frame to track now: the start frame, then while catching up the oldest frame kept after the last
-        tracked (the frames kept are some 0.1 s apart), else the newest."""
+        tracked (the frames kept are some 0.1 s apart), else the newest. A tracker slower than the frames kept are
+        dropped falls off them: it goes on from the newest (never tracking ever further behind the live video)."""
         if self._first is not None:
             first, self._first = self._first, None
             self._catch_up = first.index
             return first
         if self._catch_up is not None and self.recent is not None:
-            after = [f for f in self.recent.frames() if f.index > self._catch_up]
-            if after:
-                self._catch_up = after[0].index
+            kept = self.recent.frames()
+            after = [f for f in kept if f.index > self._catch_up]
+            behind = self._from_kept and all(f.index != self._catch_up for f in kept)  # the last tracked was dropped
+            if after and not behind:
+                self._catch_up, self._from_kept = after[0].index, True
                 return after[0]
         self._catch_up = None
         return self.grabber.latest()

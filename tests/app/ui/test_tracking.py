@@ -110,3 +110,22 @@ def test_track_started_on_a_frozen_frame_follows_the_frames_kept_since_it(video_
         assert runs[True][0], runs  # from the newest: lost at once
     finally:
         grabber.stop()
+
+
+def test_a_track_slower_than_the_frames_kept_goes_on_from_the_newest():
+    """Catching up, a tracker slower than the video falls off the frames kept (the oldest dropped before it reached
+    them): it goes on from the newest, never tracking further and further behind the live video."""
+    from types import SimpleNamespace
+
+    from app.video import Frame
+
+    img = np.zeros((4, 4, 3), np.uint8)
+    kept = [Frame(img, i, 0.1 * i) for i in range(10)]
+    newest = Frame(img, 99, 9.9)
+    grabber = SimpleNamespace(latest=lambda: newest)
+    feeder = TrackFeeder.__new__(TrackFeeder)  # its choice of frames alone (no thread)
+    feeder.recent, feeder.grabber = SimpleNamespace(frames=lambda: list(kept)), grabber
+    feeder._first, feeder._catch_up, feeder._from_kept = kept[0], None, False
+    assert [feeder._next().index for _ in range(3)] == [0, 1, 2]  # the start, then the frames kept after it
+    del kept[:5]  # the ring dropped frames 0-4 (the last tracked, 2, among them) before the tracker came back
+    assert feeder._next() is newest and feeder._next() is newest
