@@ -80,6 +80,7 @@ class Viewport:
         # The page has not yet reported its camera where the last fit put it: the camera the server holds is the fit's,
         # the page still shows the view before it (a click now lands through the old view).
         self.fit_pending = False
+        self._moved = False  # the operator moved the view since the last fit (the page's own controls, the wheel)
         self._page_position: np.ndarray | None = None  # the camera position the page last reported
         try:  # the page's report at its connection (viser connects a page at its first report): a page that connects
             # again already at the fit never reports it again, and its fit stayed pending
@@ -98,7 +99,7 @@ class Viewport:
     def request_fit(self, again: bool = True) -> None:
         """Fit the shown camera's image; ``again`` (Fit view pressed) with the view still where the last fit
         put it and several cameras: every camera's image side by side."""
-        unmoved = self._fitted_at is not None and self._page_at(self._fitted_at)  # as the page reports it back
+        unmoved = self._fitted_at is not None and not self._moved  # (not: the page has reported the fit back)
         self.all_cameras = again and unmoved and not self.all_cameras and len(self.panel.app.views) > 1
         self.zoom_rect = None
         self.need_fit = True
@@ -200,6 +201,8 @@ class Viewport:
         self._page_position = np.asarray(cam.position, float).copy()
         if self.fit_pending and self._fitted_at is not None and self._page_at(self._fitted_at):
             self.fit_pending = False
+        elif not self.fit_pending and self._fitted_at is not None and not self._page_at(self._fitted_at):
+            self._moved = True  # the page shows the fit no more: moved by its own controls
         now = camera_now(cam)
         if now is None:
             return
@@ -283,7 +286,7 @@ class Viewport:
             cam.up_direction = up
             place_camera(cam, position, look_at)
         self._fitted_at = np.asarray(position, float).copy()
-        self.fit_pending = not self._page_at(self._fitted_at)
+        self.fit_pending, self._moved = not self._page_at(self._fitted_at), False
         self.panel.dirty = True
 
     def _page_at(self, position: np.ndarray) -> bool:

@@ -102,3 +102,24 @@ def test_a_camera_is_read_as_one_report_of_the_page():
     assert cam.position[0] == cam.look_at[0] == cam.wxyz[3] == 2.0
     assert cam.aspect == pytest.approx(1.6)
     assert camera_now(SimpleNamespace(**{**report(0.0), "image_height": 0})) is None  # no view to read yet
+
+
+def test_fit_view_again_shows_every_camera_until_the_operator_moves_the_view():
+    """Fit view on a fitted view shows every camera's image, whether or not the page has yet reported the fit back
+    (a loaded CI run's page had not: Fit view fitted the one image again); once the page reports a camera away from
+    the fit, the operator moved it, and Fit view fits the shown image."""
+    vp = _viewport(image_height=500)
+    vp.panel.app = SimpleNamespace(views={"front": None, "side": None}, wake=lambda: None)
+    vp.panel.dirty = False
+    vp.panel.feed.pixel_world.fit_camera = lambda aspect, fov: (np.array([0.0, 0.0, -2.0]), np.zeros(3), None)
+    vp._fitted_at, vp.fit_pending, vp._moved, vp.fitted_aspect = np.array([0.0, 0.0, -2.0]), True, False, 1.6
+    vp._page_position = np.array([0.0, 0.0, -5.0])  # the page's last report: the camera before the fit
+    vp.request_fit(again=True)
+    assert vp.all_cameras  # the page has not reported the fit yet
+    vp.request_fit(again=True)
+    assert not vp.all_cameras  # again: the shown camera's alone
+    vp.fit_pending = False
+    vp.client.camera.position = np.array([0.3, 0.0, -1.0])  # the page's report: panned and zoomed by its controls
+    vp.on_camera(vp.client.camera)
+    vp.request_fit(again=True)
+    assert not vp.all_cameras
