@@ -498,7 +498,9 @@ def _collision_text(check, links, margins: dict, targets: bool = True) -> str:
     """One line naming what the path would hit (an obstacle, or the robot's own link); ``targets``: the motion went
     to a target the operator chose (else to a pose given them: a calibration's), which another target may spare."""
     what = check.other
-    advice = (": choose another target" + ("" if check.other in links else f", or move {what} first")) * targets
+    advice = ""
+    if targets:  # another target may spare it; an object, moved out of the way
+        advice = ": choose another target" + ("" if what in links else f", or move {what} first")
     if check.other in links:
         return f"the path would bring the robot's {check.link} into its own {check.other}{advice}"
     if getattr(check, "index", -1) == 0:  # where it stands now (touching: a start inside the margin may leave it)

@@ -205,15 +205,11 @@ class CalibrateTurret(Workflow):
             gone = set(self._aimed(np.flatnonzero(moved))) | {self.checks[i].object for i in np.flatnonzero(moved)}
             keep &= np.array([o not in gone for o in c.objects], bool)
         c = c.take(keep)
-        if not len(c.X):
-            return
-        ratio = room_ratio(c, landing_sd(T, cov_aim, c))  # ≤ 1: a beam aimed there lands on that face
-        pan_c, tilt_c, rho_c = aim(T, c.X)
-        rows = turret_plane_rows(T, pan_c, tilt_c, rho_c, c.normals, spec)
-        k = self._choose(c, ratio, rows, done, cov_aim, T)
-        sd_k = np.sqrt(np.diag(np.linalg.inv(info + np.outer(rows[k], rows[k]))))
-        sigma_next = (float(np.degrees(sd_k[:3].max())), float(sd_k[3:].max()))
-        sd_all = np.sqrt(np.diag(np.linalg.inv(info + rows.T @ rows)))  # every point left measured
+        rows = np.zeros((0, 6))
+        if len(c.X):
+            pan_c, tilt_c, rho_c = aim(T, c.X)
+            rows = turret_plane_rows(T, pan_c, tilt_c, rho_c, c.normals, spec)
+        sd_all = np.sqrt(np.diag(np.linalg.inv(info + rows.T @ rows)))  # every point left measured (none left: now)
         if _at_prior((float(np.degrees(sd_all[:3].max())), float(sd_all[3:].max()))):
             # what the beams leave free no face left to aim at fixes (a new operator measured the table's same
             # four spots 18 times over, σ staying at 500 mm, after the parallelepiped was found moved)
@@ -225,8 +221,13 @@ class CalibrateTurret(Workflow):
                 or "model another object (Model object) for a face turned another way, then measure on it here"
             )
             return
+        if not len(c.X):
+            return
+        ratio = room_ratio(c, landing_sd(T, cov_aim, c))  # ≤ 1: a beam aimed there lands on that face
+        k = self._choose(c, ratio, rows, done, cov_aim, T)
+        sd_k = np.sqrt(np.diag(np.linalg.inv(info + np.outer(rows[k], rows[k]))))
         self.suggestion = (c.X[k].copy(), f"a suggested point on {c.names[k]}")
-        self.sigma_next = sigma_next
+        self.sigma_next = (float(np.degrees(sd_k[:3].max())), float(sd_k[3:].max()))
 
     def _choose(self, c: Candidates, ratio: np.ndarray, rows: np.ndarray, done: np.ndarray, cov_aim, T) -> int:
         """Which candidate to suggest (``_suggest``): the best within reach (``ratio`` ≤ 1), unless a point
