@@ -789,8 +789,11 @@ class Interface:
         return screen_of(self.server, page.panel, uv)
 
     def on_canvas(self, page, uv) -> tuple[float, float]:
-        """Canvas position of video pixel uv; when it falls off the canvas (the page's camera was moving
-        when it was read, on a loaded machine), once the camera has settled."""
+        """Canvas position of video pixel uv, once the page shows the fit the server sent; when it falls off the
+        canvas (the page's camera was moving when it was read, on a loaded machine), once the camera has settled."""
+        viewport = page.panel.viewport
+        if viewport.need_fit or viewport.fit_pending:  # the page does not yet show the view the server holds
+            wait_for_steady_camera(page.panel)
         x, y = self.screen_of(page, uv)
         width, height = canvas_size(page.panel)
         if not (0 <= x < width and 0 <= y < height):
