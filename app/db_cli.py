@@ -352,11 +352,31 @@ def _cmd_show_calibration(args) -> int:
 
 def _cmd_undo(args) -> int:
     with _open(args) as db:
+        if not args.restore and not args.yes:
+            _refuse_discarding(db, args.change)
         c = db.restore(args.change) if args.restore else db.undo(args.change)
         what = c.object_name or f"calibration #{c.calibration_id}"
         state = "after" if args.restore else "before"
         print(f"change #{c.id}: {what} is back to its state {state} change #{args.change}")
     return 0
+
+
+def _refuse_discarding(db, change_id: int) -> None:
+    """A ValueError when undoing ``change_id`` would also discard later changes of its object (what the
+    interface's History asks before doing); nothing is written."""
+    entry = next((c for c in db.history(None, limit=100_000) if c.id == change_id), None)
+    if entry is None or entry.object_name is None:
+        return  # not a change, or a calibration's: the database says what it does with it
+    later = [c for c in db.history(entry.object_name, limit=100_000) if c.id > change_id]
+    if not later or (later[-1].method == "undo" and later[-1].undoes == change_id):
+        return  # nothing later, or undone already (the database says so)
+    last = later[-1]
+    n = len(later)
+    raise ValueError(
+        f"undoing change #{change_id} brings {entry.object_name} back to before it, so it also discards the {n} later "
+        f"change{'s' if n > 1 else ''} of it (the last #{last.id}, by {last.client} at {_when(last.time)}); "
+        "nothing was changed: add --yes to undo it all the same, or see them with mcit db history"
+    )
 
 
 def _run(func):
@@ -501,6 +521,9 @@ def add_db_parser(subparsers) -> argparse.ArgumentParser:
     )
     p.add_argument("change", type=int, help="the change's number (see `mcit db history`)")
     p.add_argument("--restore", action="store_true", help="go back to the state just after the change instead")
+    p.add_argument(
+        "--yes", action="store_true", help="undo even when later changes of the object are discarded with it"
+    )
     p.set_defaults(func=_run(_cmd_undo))
 
     from app.poses_cli import add_pose_parsers  # export-poses, feed: the poses out (argparse only)

@@ -114,6 +114,19 @@ def frame_count(source: str | Path, start: int = 0, count: int | None = None) ->
     return left if count is None else min(left, count)
 
 
+def source_fps(source: str | Path) -> float | None:
+    """The frame rate a video file states (None for an image folder, or a video that does not say)."""
+    source = Path(source)
+    if not source.is_file():
+        return None
+    cap = cv2.VideoCapture(str(source))
+    try:
+        fps = float(cap.get(cv2.CAP_PROP_FPS)) if cap.isOpened() else 0.0
+    finally:
+        cap.release()
+    return fps if np.isfinite(fps) and 0 < fps <= 1000 else None
+
+
 def _line(img: np.ndarray, seg: np.ndarray, color: tuple[int, int, int], thickness: int = 1) -> None:
     p = np.round(np.asarray(seg) * 16).astype(np.int64)
     cv2.line(img, (int(p[0, 0]), int(p[0, 1])), (int(p[1, 0]), int(p[1, 1])), color, thickness, cv2.LINE_AA, 4)
@@ -193,7 +206,7 @@ def track_sequence(
     count: int | None = None,
     video_out: str | Path | None = None,
     csv_out: str | Path | None = None,
-    fps_out: float = 25.0,
+    fps_out: float | None = None,
     stop_when_lost: bool = True,
     lens=None,
     progress: Callable[[int, int | None], None] | None = None,
@@ -206,7 +219,8 @@ def track_sequence(
     ----------
     source : a video file or a folder of images. camera : Camera of the frames' size.
     model : BRep. T_world_obj : array, shape (4, 4), the pose in frame ``start``.
-    start, count : the frames to track. video_out : write the overlay video there (.mp4/.avi).
+    start, count : the frames to track. video_out : write the overlay video there (.mp4/.avi), at ``fps_out``
+        frames a second (default: the source video's rate; 25 for an image folder or a video that does not say).
     csv_out : write one row per frame (index, confidence, lost, rms_px, samples, inliers, ms,
         tx ty tz θux θuy θuz of T_world_obj, then its σ: sx_m sy_m sz_m srx_rad sry_rad srz_rad, ``world_sigmas``).
     priors : the camera's and the model's priors joining each frame's σ (``EdgeTracker.priors``; default: the
@@ -251,7 +265,8 @@ def track_sequence(
             if video_out is not None:
                 img = draw_tracking(frame, camera, model, T, d, confidence=conf, lost=lost, label=f"frame {index}")
                 if writer is None:
-                    writer = _open_writer(Path(video_out), fps_out, img.shape[1], img.shape[0])
+                    fps = fps_out or source_fps(source) or 25.0
+                    writer = _open_writer(Path(video_out), fps, img.shape[1], img.shape[0])
                 writer.write(cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
             if progress is not None:
                 progress(len(out), total)

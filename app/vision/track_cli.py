@@ -98,7 +98,10 @@ def add_track_parser(sub) -> None:
     )
     p.add_argument("--frames", type=frame_total, help="number of frames to track (default: to the end)")
     p.add_argument(
-        "--fps", type=frame_rate, default=25.0, help="frame rate of the overlay video (above 0, at most 240)"
+        "--fps",
+        type=frame_rate,
+        help="frame rate of the overlay video (above 0, at most 240; default: the source video's, 25 for an image "
+        "folder)",
     )
     p.add_argument(
         "--search-px",

@@ -622,8 +622,9 @@ class CalibrateTurret(Workflow):
                 if int(used.sum()) <= 6
                 else ""
             )
+            of_all = f" of {len(used)}" if int(used.sum()) < len(used) else ""  # the panel counts every measurement
             self.message = (
-                f"RMS {1000 * np.sqrt(np.mean(dist**2)):.1f} mm to the surfaces over {int(used.sum())} "
+                f"RMS {1000 * np.sqrt(np.mean(dist**2)):.1f} mm to the surfaces over {int(used.sum())}{of_all} "
                 f"points{exact}{dropped}; {deg:.2f}° and {1000 * m:.1f} mm from the current calibration"
             )
             if moved_text:

@@ -394,7 +394,9 @@ class TrackObject(SnapMixin, Workflow):
             return Step("click_end", "Click the other end of that edge.", frozenset(base))
         n = len(self.segs)
         reinit = {"reinit"} if n >= 3 else set()
-        then = "then {reinit}" if reinit else "then Re-initialise"
+        # named before its button shows (the third edge brings it): said so, not looked for in vain
+        later = "Re-initialise (its button comes with the third edge)"
+        then = "then {reinit}" if reinit else f"then {later}"
         if self.lost:
             more = f" ({n} clicked)" if n else ""
             acc = {"accept"} if self.t_good is not None else set()
@@ -415,7 +417,7 @@ class TrackObject(SnapMixin, Workflow):
                 "paused",
                 "Paused: {resume}, "
                 + ("{accept} the tracked pose, " if acc else "")
-                + f"or click three or more edges and {'{reinit}' if reinit else 'Re-initialise'}.",
+                + f"or click three or more edges and {'{reinit}' if reinit else later}.",
                 frozenset(base | acc | reinit | {"resume"}),
             )
         if self.frames == 0:

@@ -77,6 +77,16 @@ def test_init_list_show_history_undo(tmp_path, capsys):
     code, out, _ = _mcit(capsys, "db", "undo", str(last), "--restore", "--db", db)
     with Database.open(db) as d:
         assert np.array_equal(d.get("parallelepiped").T_world_obj, change.T_world_obj)
+        n_changes = len(d.history(limit=100_000))
+    # undoing the pose change again would discard the two changes after it: asked for, nothing written
+    code, _, err = _mcit(capsys, "db", "undo", str(last), "--db", db)
+    assert code == 1 and "discards the 2 later changes" in err and "add --yes" in err and len(err.splitlines()) == 1
+    with Database.open(db) as d:
+        assert len(d.history(limit=100_000)) == n_changes
+    code, out, _ = _mcit(capsys, "db", "undo", str(last), "--yes", "--db", db)
+    assert code == 0 and f"before change #{last}" in out
+    with Database.open(db) as d:
+        assert np.array_equal(d.get("parallelepiped").T_world_obj, rec.T_world_obj)
 
 
 def test_a_malformed_model_writes_nothing(tmp_path, capsys):

@@ -66,9 +66,22 @@ def test_track_sequence_writes_the_overlay_video_and_poses(rendered, tmp_path):
     n = 0
     while cap.read()[0]:
         n += 1
-    assert n == 5
+    assert n == 5 and cap.get(cv2.CAP_PROP_FPS) == pytest.approx(25.0)  # an image folder states no rate
     rows = list(csv.DictReader(open(tmp_path / "p.csv")))
     assert len(rows) == 5 and float(rows[-1]["tx_m"]) == pytest.approx(truth[-1][0, 3], abs=2e-3)
+
+
+def test_the_overlay_video_plays_at_the_source_videos_rate(rendered, tmp_path):
+    d, cam, box, truth = rendered
+    video = tmp_path / "v.avi"
+    w = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (320, 240))
+    for _, f in iter_frames(d / "frames"):
+        w.write(cv2.cvtColor(f, cv2.COLOR_RGB2BGR))
+    w.release()
+    track_sequence(video, cam, box, truth[0], count=2, video_out=tmp_path / "o.avi")
+    assert cv2.VideoCapture(str(tmp_path / "o.avi")).get(cv2.CAP_PROP_FPS) == pytest.approx(10.0)
+    track_sequence(video, cam, box, truth[0], count=2, video_out=tmp_path / "p.avi", fps_out=30.0)
+    assert cv2.VideoCapture(str(tmp_path / "p.avi")).get(cv2.CAP_PROP_FPS) == pytest.approx(30.0)
 
 
 def test_mcit_track_command(rendered, tmp_path, capsys):
