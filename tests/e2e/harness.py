@@ -162,7 +162,18 @@ def panel_state(panel) -> str:
         f"step={getattr(step, 'name', None)} offers={sorted(getattr(step, 'enabled', ()))} "
         f"finished={getattr(wf, 'finished', None)} error={panel.error!r} warning={panel.warning!r} "
         f"message={getattr(wf, 'message', '')!r} selected={panel.session.selected!r} "
-        f"camera={panel.camera_view} clicks={panel.clicks_received} last click={_last_click(panel)}"
+        f"camera={panel.camera_view} clicks={panel.clicks_received} last click={_last_click(panel)} "
+        f"keys={panel.keys_received} view: {_view_state(panel.viewport)}"
+    )
+
+
+def _view_state(v) -> str:
+    """The viewport's fit state and the camera the page last reported against the last fit's."""
+    at = None if v._page_position is None else np.round(v._page_position, 3).tolist()
+    fit = None if v._fitted_at is None else np.round(v._fitted_at, 3).tolist()
+    return (
+        f"all_cameras={v.all_cameras} need_fit={v.need_fit} fit_pending={v.fit_pending} moved={v._moved} "
+        f"page at {at}, fitted at {fit}"
     )
 
 

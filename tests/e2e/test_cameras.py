@@ -95,6 +95,7 @@ def test_both_cameras_frozen_fitted_side_by_side_and_clicked_in(browser, two_cam
         lambda: all(frozen._sent.get(v) is not None for v in ("front", "side")), what="each camera's frozen image"
     )
     # the page opened fitted on the front camera's image: Fit view, the view unmoved, shows every camera's
+    wait_for_steady_camera(panel)  # (an operator presses it on the view the page shows, not one on its way)
     page.keyboard.press("h")
     every = ui.server.all_images
     wait_until(
