@@ -233,7 +233,7 @@ def test_a_rate_or_port_out_of_range_is_refused_by_the_parser(capsys, argv, says
         ("serve", "port", None),  # the default port, or the next free one (tests/app/test_cli_conventions.py)
         ("serve --port 0", "port", 0),  # any free port: viser binds port 0 and reports the one the system chose
         ("track video.mp4 --fps 60", "fps", 60.0),
-        ("track video.mp4", "fps", 25.0),
+        ("track video.mp4", "fps", None),  # the source video's rate
     ],
 )
 def test_rates_and_ports_in_range_are_kept(argv, name, value):
