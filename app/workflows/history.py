@@ -10,7 +10,7 @@ import time
 from typing import Any
 
 from .base import Control, Step, Workflow, WorkflowError
-from .site import _change_sentence, is_redo, method_words
+from .site import is_redo, method_words
 
 __all__ = ["History"]
 
@@ -79,7 +79,7 @@ class History(Workflow):
             except ValueError as exc:
                 raise WorkflowError(f"cannot {which} change {change_id}: {exc}") from None
             self.refresh()
-            said = _change_sentence(rec, self.site.undone(rec))  # "undid change #14 (box)", or a redo
+            said = self.site.change_sentence(rec)  # "undid change #14 (box)", or a redo
             self.message = f"{said[0].upper()}{said[1:]}, recorded as change #{rec.id} (it can be undone in turn)"
             return rec
 
@@ -166,7 +166,7 @@ class History(Workflow):
         return next((e for e in self.entries if int(e.id) == int(c.undoes)), None) or self.site.undone(c)
 
     def _sentence(self, c) -> str:
-        return _change_sentence(c, self._undone(c))
+        return self.site.change_sentence(c, self._undone(c))
 
     def summary(self) -> dict[str, Any]:
         with self.lock:

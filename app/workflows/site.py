@@ -136,14 +136,18 @@ def is_redo(rec: Any, undone: Any) -> bool:
     )
 
 
-def _change_sentence(rec: Any, undone: Any = None) -> str:
+def _change_sentence(rec: Any, undone: Any = None, first_camera: str | None = None) -> str:
     """What an ``app.db.ChangeRecord`` did, in one plain sentence (without who). ``undone``: the
     record an undo undid, when known: the undo of an undo is said as a redo of the change first
-    undone ("redid change #7 (undid undo #9)"; a new operator read "undid change #9" as a second undo)."""
+    undone ("redid change #7 (undid undo #9)"; a new operator read "undid change #9" as a second undo).
+    ``first_camera``: the name of the site's first camera (stored as plain "camera") when it has others."""
     name = rec.object_name or "an object"
     redo = is_redo(rec, undone)
     if rec.action == "calibration":
-        kind = (rec.after or {}).get("kind", "").replace("camera:", "camera ").replace("_", " ")  # "camera side"
+        kind = (rec.after or {}).get("kind", "")
+        if kind == "camera" and first_camera:
+            kind = f"camera:{first_camera}"  # beside "camera side", the front camera's is named too
+        kind = kind.replace("camera:", "camera ").replace("_", " ")  # "camera side"
         if redo:
             return f"redid change #{undone.undoes} ({kind} calibration; undid undo #{rec.undoes})"
         if rec.undoes is not None:
@@ -323,6 +327,12 @@ class Site:
     def views(self) -> tuple[str, ...]:
         """The names of the site's cameras (views), the first one's being ``camera``."""
         return self._views
+
+    def change_sentence(self, rec: Any, undone: Any = None) -> str:
+        """What change ``rec`` did, in one sentence (``_change_sentence``), the first camera named when there are
+        others; ``undone``: the record an undo undid (default: read from the database)."""
+        first = self._views[0] if len(self._views) > 1 else None
+        return _change_sentence(rec, self.undone(rec) if undone is None else undone, first)
 
     def view_name(self, view: str | None) -> str:
         """``view``, or the first view's name for None; ValueError for a camera the site does not have."""
@@ -762,7 +772,7 @@ class Site:
                     Change(
                         int(rec.id),
                         str(rec.client),
-                        _change_sentence(rec, self.undone(rec)),
+                        self.change_sentence(rec),
                         rec.object_name,
                         float(rec.time),
                     )

@@ -45,7 +45,7 @@ def test_every_write_through_the_site_is_announced_with_who_and_what(site, db):
         ("alice", "moved parallelepiped", "parallelepiped"),
         ("bob", "marked parallelepiped stale", "parallelepiped"),
         ("alice", "added box_1", "box_1"),
-        ("carol", "calibrated the camera", None),
+        ("carol", "calibrated the camera front", None),  # named beside the side camera (not plain "camera")
         (
             "bob",
             f"removed parallelepiped (undid change #{rec.id}, its addition)",
@@ -107,8 +107,11 @@ def test_undoing_a_calibration_is_announced_and_used(site, db):
     last = db.history()[-1]
     site.undo(last.id, client="alice")
     assert np.allclose(site.camera.C, C1)  # the calibration before the undone one is in use again
-    assert site.changes_since(last.id)[0].what == f"undid change #{last.id} (camera calibration)"
+    assert site.changes_since(last.id)[0].what == f"undid change #{last.id} (camera front calibration)"
     undo = db.history()[-1]
     site.undo(undo.id, client="alice")  # the undo undone: a redo of the calibration
     assert np.allclose(site.camera.C, cam0.C)
-    assert site.changes_since(undo.id)[0].what == f"redid change #{last.id} (camera calibration; undid undo #{undo.id})"
+    assert (
+        site.changes_since(undo.id)[0].what
+        == f"redid change #{last.id} (camera front calibration; undid undo #{undo.id})"
+    )
