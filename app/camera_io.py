@@ -291,12 +291,19 @@ def _pick_visp(
     return cameras[0]
 
 
+# what to do with an .xml camera file that does not parse
+_XML_ADVICE = (
+    "give the camera file ViSP or OpenCV wrote (vpXmlParserCamera's <root><camera>…, or cv::FileStorage's "
+    "<opencv_storage>), or fix the XML at the place named"
+)
+
+
 def _read_visp(path: Path, camera_name: str | None, image_size: tuple[int, int] | None = None) -> Intrinsics:
     where = str(path)
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
-        raise ValueError(f"{where}: not well-formed XML ({exc})") from None
+        raise ValueError(f"{where}: not well-formed XML ({exc}); {_XML_ADVICE}") from None
     cameras = [root] if root.tag == "camera" else root.findall("camera")
     if not cameras:
         raise ValueError(
@@ -656,7 +663,7 @@ def _read_intrinsics(path: Path, camera_name: str | None, image_size: tuple[int,
         try:
             root_tag = ET.parse(path).getroot().tag
         except ET.ParseError as exc:
-            raise ValueError(f"{path}: not well-formed XML ({exc})") from None
+            raise ValueError(f"{path}: not well-formed XML ({exc}); {_XML_ADVICE}") from None
         if root_tag == "opencv_storage":
             return _read_opencv(path, None, camera_name)
         return _read_visp(path, camera_name, image_size)
