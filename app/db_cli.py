@@ -364,16 +364,17 @@ def _cmd_undo(args) -> int:
 def _refuse_discarding(db, change_id: int) -> None:
     """A ValueError when undoing ``change_id`` would also discard later changes of its object (what the
     interface's History asks before doing); nothing is written."""
-    entry = next((c for c in db.history(None, limit=100_000) if c.id == change_id), None)
-    if entry is None or entry.object_name is None:
-        return  # not a change, or a calibration's: the database says what it does with it
-    later = [c for c in db.history(entry.object_name, limit=100_000) if c.id > change_id]
+    from app.db import NotFoundError
+
+    try:
+        later = db.later_changes(change_id)
+    except NotFoundError:
+        return  # the undo says there is no such change
     if not later or (later[-1].method == "undo" and later[-1].undoes == change_id):
         return  # nothing later, or undone already (the database says so)
-    last = later[-1]
-    n = len(later)
+    last, n = later[-1], len(later)
     raise ValueError(
-        f"undoing change #{change_id} brings {entry.object_name} back to before it, so it also discards the {n} later "
+        f"undoing change #{change_id} brings {last.object_name} back to before it, so it also discards the {n} later "
         f"change{'s' if n > 1 else ''} of it (the last #{last.id}, by {last.client} at {_when(last.time)}); "
         "nothing was changed: add --yes to undo it all the same, or see them with mcit db history"
     )

@@ -123,7 +123,9 @@ def pytest_xdist_make_scheduler(config, log):
     its share first (237 of 1,902 tests), so the browser tests' worker also held the 178 tests after them, run after
     the browser tests while the other worker, done with all the rest, waited (a quiet run: 393 s against 336 s of
     tests). The first handout is now as many tests as there are browser tests, and the tests after them go to the
-    worker that asks."""
+    worker that asks. Another ``--dist`` than load is left to xdist."""
+    if config.getvalue("dist") != "load":
+        return None
     from xdist.scheduler import LoadScheduling
 
     class BrowserTestsFirst(LoadScheduling):

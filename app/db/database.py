@@ -833,6 +833,14 @@ class Database:
             rows = conn.execute(q, args).fetchall()
         return [self._change_from_row(r) for r in reversed(rows)]
 
+    def later_changes(self, change_id: int) -> list[ChangeRecord]:
+        """The changes of change ``change_id``'s object made after it, oldest first (what undoing it discards too);
+        empty for a calibration's change. NotFoundError if there is no such change."""
+        entry = self.change(change_id)
+        if entry.object_id is None:
+            return []
+        return [c for c in self.history(entry.object_id) if c.id > entry.id]
+
     def history_since(self, change_id: int, *, limit: int | None = None) -> list[ChangeRecord]:
         """The changes after change ``change_id`` (every object and calibration), oldest first, at
         most ``limit`` of them (the oldest). A range on the history's primary key: cheap to ask

@@ -55,12 +55,13 @@ class ClickTimer:
             if np.linalg.norm(uv - told[1]) <= LATE_FIRST_CLICK_PX:
                 self.told = None
                 return None
+        # the last click can be this double click's first (a told double is placed where it was)
+        first_seen = (
+            last is not None
+            and at - last[0] <= LATE_FIRST_CLICK_S
+            and np.linalg.norm(uv - last[1]) <= LATE_FIRST_CLICK_PX
+        )
         if double:  # its first click is still awaited when none came before it at that point
-            first_seen = (
-                last is not None
-                and at - last[0] <= LATE_FIRST_CLICK_S
-                and np.linalg.norm(uv - last[1]) <= LATE_FIRST_CLICK_PX
-            )
             self.told = None if first_seen else (at, uv)
         if double is None:
             double = (
@@ -70,11 +71,7 @@ class ClickTimer:
             self.last = (at, uv, selected, frame)
             return Gesture(uv, False, selected, frame)
         self.last = None  # a third click is a click of its own
-        if (
-            last is not None
-            and at - last[0] <= LATE_FIRST_CLICK_S
-            and np.linalg.norm(uv - last[1]) <= LATE_FIRST_CLICK_PX
-        ):
+        if first_seen:
             # at its first click: placed by the page's own ray, where a told double's point goes through the camera
             # the server holds, which lags the page's or leads it (a fit sent and not yet shown)
             return Gesture(last[1], True, last[2], last[3])

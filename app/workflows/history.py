@@ -84,11 +84,14 @@ class History(Workflow):
             return rec
 
     def _later_changes(self, change_id: int) -> list:
-        """Changes of the same object made after ``change_id`` (an undo discards them too)."""
-        entry = next((c for c in self.site.db.history(None, limit=10_000) if c.id == int(change_id)), None)
-        if entry is None or entry.object_name is None:
+        """Changes of the same object made after ``change_id`` (an undo discards them too); none for an unknown
+        change (undoing it says so)."""
+        from app.db import NotFoundError
+
+        try:
+            return self.site.db.later_changes(int(change_id))
+        except NotFoundError:
             return []
-        return [c for c in self.site.db.history(entry.object_name, limit=10_000) if c.id > int(change_id)]
 
     def question(self, action: str, *args: Any) -> str:
         if action == "undo" and args:

@@ -271,6 +271,12 @@ def test_undo_and_restore_any_earlier_pose(db):
         db.undo(changes[0], expected_version=1)
     with pytest.raises(NotFoundError, match="no change #999"):
         db.undo(999)
+    # what undoing a change discards too: that object's later changes, none of another's
+    other = db.add_object("box2", "box", BRep.box(1, 1, 1), np.eye(4))
+    assert [c.id for c in db.later_changes(changes[1])] == [h.id for h in db.history("box1")[3:]]
+    assert db.later_changes(db.history(other)[-1].id) == []
+    with pytest.raises(NotFoundError):
+        db.later_changes(999)
 
 
 def test_undo_of_a_removal_refuses_a_taken_name(db):
@@ -314,6 +320,7 @@ def test_calibrations_and_their_undo(db):
     db.undo(change.id)
     assert np.array_equal(db.latest_calibration("camera").data["C"], C1)
     assert [c.kind for c in db.calibrations()] == ["camera", "camera", "turret", "camera"]
+    assert db.later_changes(change.id) == []  # a calibration's change: no object's
     with pytest.raises(ValueError, match="first camera calibration"):
         db.undo([h for h in db.history() if h.action == "calibration"][0].id)
     with pytest.raises(ValueError, match="3×4"):

@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 
 from core.transforms import pose_error
+from tests.app.workflows.test_snapping import line_distance  # distances of points to an edge's line
 
 from .harness import assert_prompt_controls, click_control, close_notifications, press, wait_until
 
@@ -122,14 +123,6 @@ def _face_sides_uv(cam, model, T, k, min_px: float = 12.0):
     return out
 
 
-def _line_distance(ab, p) -> float:
-    """Distance (px) of point p from the line through the segment ab (2, 2)."""
-    a, b = np.asarray(ab, float)
-    d = (b - a) / np.linalg.norm(b - a)
-    q = np.asarray(p, float) - a
-    return float(abs(q[0] * d[1] - q[1] * d[0]))
-
-
 def _rz(deg: float) -> np.ndarray:
     c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
     R = np.eye(4)
@@ -219,7 +212,7 @@ def test_model_a_box_by_clicking_two_faces_and_scanning(browser, device_interfac
         assert len(wf.faces) == i + 1 and len(wf.faces[-1]["segs"]) == len(sides) >= 3, page.panel.error
         for j, (seg, side) in enumerate(zip(wf.faces[-1]["segs"], sides)):  # each click on its side (else the patch
             # spills onto another surface and the face's plane comes out tilted: a loaded run failed so once)
-            off = [_line_distance(side, p) for p in np.reshape(seg, (2, 2))]
+            off = line_distance(np.reshape(seg, (2, 2)), side)
             assert max(off) < 4.0, f"face {i + 1}'s side {j + 1} taken {np.round(off, 1)} px off its edge: {seg}"
         op.check()
         assert "Measure face" in wf.next_step
