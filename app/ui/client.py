@@ -303,7 +303,7 @@ class ClientPanel:
         working = f"{c.label}: working…"
         self._performing = c.kind == "long"  # a measurement: Cancel stops it alone
         try:
-            result = wf.perform(c.action, *args)
+            result = self.session.act(wf, c.action, *args)  # (a Detour starts its workflow)
         except BaseException as exc:
             if wf.message == working:
                 wf.message = ""

@@ -106,6 +106,9 @@ class FrozenFrames:
         panel = self.panel
         if wf.follows_live():
             self.unfreeze()
+        elif self.frame is not None and self.by is not None and self.by is panel.session.waiting:
+            self.adopt(wf)  # a detour (Update pose of what Calibrate turret found moved): on the waiting one's frame
+            return
         elif self.looked_at:
             # a frame the operator froze (F, Seconds back) before starting, or double-clicked on: the workflow's
             # clicks use it (a new operator froze t = 3.4 s, started a workflow, and found the newest frozen)
@@ -183,6 +186,9 @@ class FrozenFrames:
                 return True
             return False
         live = bool(wf.follows_live())
+        if not live and self.frame is not None and self.by is not wf and self.by is not None and self.by.finished:
+            self.adopt(wf)  # back from a detour: the frame on screen is the workflow's that waited
+            return False
         if live and self.frame is not None:
             wf.use_frame(None)
             self.unfreeze()

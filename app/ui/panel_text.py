@@ -91,6 +91,9 @@ class PanelText:
         state = f" ({done}{at})" if wf.accepted else (f" (cancelled{at})" if wf.cancelled else "")
         subject = wf.object_name
         title = Md("**{}**{}").format(f"{wf.title}: {subject}" if subject else wf.title, state)
+        waiting = panel.session.waiting  # a detour's: Accept or Cancel goes back to it
+        if waiting is not None and waiting is not wf and not wf.finished:
+            title += Md(" · then back to **{}**, which waits with your work kept").format(waiting.title)
         if len(panel.app.views) > 1:  # which camera it works in, and which is shown
             title += Md(" · in camera **{}**").format(wf.view)
             if wf.view != panel.camera_view:

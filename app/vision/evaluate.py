@@ -29,7 +29,15 @@ from core.camera import Camera
 from .profiles import to_gray_f32
 from .track import sample_visible_edges
 
-__all__ = ["OrientedEdges", "EdgeDistance", "oriented_edges", "edge_distance", "sample_distances", "prepare_frame"]
+__all__ = [
+    "OrientedEdges",
+    "EdgeDistance",
+    "oriented_edges",
+    "edge_distance",
+    "outline_seen",
+    "sample_distances",
+    "prepare_frame",
+]
 
 _CACHE: OrderedDict = OrderedDict()  # the last few frames' OrientedEdges, by contents and options
 _CACHE_SIZE = 4
@@ -211,6 +219,15 @@ def edge_distance(
         return EdgeDistance(np.zeros(0), np.zeros((0, 2)), float("nan"), float("nan"), 0.0)
     d = sample_distances(oe, s, max_px)
     return EdgeDistance(d, s.uv, float(d.mean()), float(np.median(d)), float(np.mean(d < max_px)))
+
+
+def outline_seen(image: np.ndarray, camera: Camera, model: BRep, T_world_obj: np.ndarray, within_px: float = 1.5):
+    """The share of the model's visible outline at pose ``T_world_obj`` that lies within ``within_px`` of an
+    image edge of its orientation (``edge_distance``), or None when none of it is in view. A model drawn where
+    the image shows it scores most of it; one drawn where the object is not (moved, or a wrong pose that fits
+    the clicks) scores little."""
+    d = edge_distance(image, camera, model, T_world_obj, max_px=10.0)
+    return float(np.mean(d.distances_px <= within_px)) if len(d.distances_px) else None
 
 
 def sample_distances(oe: OrientedEdges, samples, max_px: float = 10.0) -> np.ndarray:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import re
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -37,6 +38,7 @@ __all__ = [
     "CANCEL",
     "KEY_TEXT",
     "AS_CLICK",
+    "Detour",
 ]
 
 # What a click picks (a model's corner or edge, the white robot's edge, a face's centre) lies within this many screen
@@ -161,6 +163,20 @@ class Control:
 CANCEL = Control("cancel", "Cancel", "escape", color="red", hint="Abandon this workflow: nothing is written")
 
 AS_CLICK = "click"  # Workflow.on_double_click: the second click is one more click
+
+
+@dataclass(frozen=True)
+class Detour:
+    """What an action returns to have another workflow run while its own waits with its work kept
+    (``Session.act``): ``workflow`` started with ``options``; once it is accepted or cancelled the waiting one
+    is back, and ``returned`` is called with the detour (the waiting one's method: it checks again what the
+    detour changed, and says so). Calibrate turret asks for Update pose of an object its beams or its frame
+    found moved: the turret's measurements stay."""
+
+    workflow: str
+    options: dict = field(default_factory=dict)
+    returned: Callable[[Any], None] | None = field(default=None, compare=False)
+
 
 _PLACEHOLDER = re.compile(r"\{([a-z_]+)\}")
 

@@ -17,8 +17,12 @@ until the pose stops moving). At least 6 points on faces of three orientations a
 is checked against the database (``beams.check_beams``, the check every workflow that uses beams
 makes): one that disagrees by more than 3σ at a known object — when measured, through the calibration
 in use, while most agree; or after the fit, through the solved pose — is left out and its object named
-as moved. A solve far from the beams' guided estimate is said and weak. ``accept()`` stores the
-calibration (one transaction) and every later aim uses it.
+as moved. An object the frozen frame shows away from where the database draws it (little of its outline on
+the image's edges) is not suggested either, before any beam is spent on it. For an object found moved,
+**Update its pose** runs Update pose on it (a ``Detour``) while this workflow waits with its measurements;
+once the pose is accepted the beams are checked again against it and its faces are offered again. A solve
+far from the beams' guided estimate is said and weak. ``accept()`` stores the calibration (one transaction)
+and every later aim uses it.
 """
 
 from __future__ import annotations
@@ -31,7 +35,19 @@ from core.calibration import calibrate_turret_planes, next_turret_point, turret_
 from core.rangefinder import aim, beam_point, beam_ray
 from core.transforms import log_so3, pose_error
 
-from .base import CANCEL, Cancelled, Control, Marks, Step, Workflow, WorkflowError, as_pixel, pick_radius_px, sigma_over
+from .base import (
+    CANCEL,
+    Cancelled,
+    Control,
+    Detour,
+    Marks,
+    Step,
+    Workflow,
+    WorkflowError,
+    as_pixel,
+    pick_radius_px,
+    sigma_over,
+)
 from .beams import BeamCheck, check_beams, disagreement_text
 from .turret_aims import (
     ROOM_SIGMAS,
@@ -55,6 +71,10 @@ PRIOR_SD = np.array([np.radians(10.0)] * 3 + [0.5] * 3)  # keeps the information
 AIM_PRIOR_SD = np.array([np.radians(1.0)] * 3 + [0.03] * 3)
 WANDER_CHI2 = 22.46  # χ²(6) at 99.9 %: a solve farther than this from the beams' guided estimate is doubtful
 MAX_REPEATS = 8  # a suggested point is offered until it has been measured this many times
+# Below this share of its outline on the frozen frame's edges (``outline_seen``) an object is taken to be away from
+# where the database draws it: on the live site's two cameras the moved parallelepiped scores 0.03–0.10, objects in
+# place 0.65–1.00.
+AWAY_SEEN = 0.25
 UNLOCK_GAIN = 0.8  # a point out of reach worth this fraction of the best one's worst σ or less is unlocked first
 UNLOCK_STEP = 0.9  # ... by a beam within reach that narrows the aim there by this factor at least, else aimed at
 
@@ -79,6 +99,7 @@ class CalibrateTurret(Workflow):
         "remove_last",
         "remove_measurement",
         "solve",
+        "update_moved",
         "accept",
         "cancel",
     )
@@ -100,6 +121,12 @@ class CalibrateTurret(Workflow):
             "R",
             color="blue",
             hint="The turret pose that puts every measured point on the known surfaces",
+        ),
+        Control(
+            "update_moved",
+            "Update its pose",
+            "U",
+            hint="Update the pose of the object found moved (Update pose); the measurements here are kept",
         ),
         Control("accept", "Accept", "enter", color="green", hint="Store the turret calibration"),
         Control("remove_last", "Remove last", "backspace", hint="Drop the picked point, or else the last measurement"),
@@ -149,6 +176,10 @@ class CalibrateTurret(Workflow):
         # why no point is suggested though σ is short of the target: no face left to aim at fixes what the beams
         # leave free (an object that would has moved, or none is known), said in the step
         self.stuck = ""
+        # the objects not offered because they look moved, each with why (the beams disagree; the frozen frame shows
+        # them away from their drawing): Update its pose (``update_moved``) updates the first
+        self.moved_why: dict[str, str] = {}
+        self._seen: dict = {}  # (frame image id, object, version) → its outline's share on the frame's edges
         self._unlock_tries = 0  # suggestions in a row that were to bring the same face into reach
         self.T_aim: np.ndarray | None = None  # the pose the turret aims with (``_estimate``)
         self._suggest()
@@ -171,7 +202,7 @@ class CalibrateTurret(Workflow):
         beams measured so far (``core.calibration.next_turret_point``). Sets ``T_aim``, ``suggestion``,
         ``sigma_now`` and ``sigma_next``."""
         self.suggestion = self.sigma_now = self.sigma_next = None
-        self.stuck = ""
+        self.stuck, self.moved_why = "", {}
         if not self.site.has_turret or not self.site.objects():
             return
         landed, _ = self._landed()
@@ -200,10 +231,16 @@ class CalibrateTurret(Workflow):
             on_aim = landed & (np.einsum("ij,ij->i", normals, self._aimed_normals()) > np.cos(np.radians(10.0)))
             missed = {self.labels[i] for i in np.flatnonzero(~on_aim) if on_aim[i + 1 :].sum() < 2}
             keep &= np.array([f"a suggested point on {nm}" not in missed for nm in c.names], bool)
-        gone: set = set()
-        if moved.any():  # an object a beam found moved is not offered again (it was, after saying it moved)
+        # an object a beam found moved is not offered again (it was, after saying it moved); nor one the frozen frame
+        # shows away from its drawing (no beam spent on it)
+        if moved.any():
             gone = set(self._aimed(np.flatnonzero(moved))) | {self.checks[i].object for i in np.flatnonzero(moved)}
-            keep &= np.array([o not in gone for o in c.objects], bool)
+            self.moved_why = {o: "the range finder disagrees with its database pose" for o in sorted(gone) if o}
+        for o, seen in self._away(set(c.objects) - set(self.moved_why)).items():
+            self.moved_why[o] = (
+                f"the frozen frame shows only {100 * seen:.0f} % of its outline where the database draws it"
+            )
+        keep &= np.array([o not in self.moved_why for o in c.objects], bool)
         c = c.take(keep)
         rows = np.zeros((0, 6))
         if len(c.X):
@@ -213,12 +250,10 @@ class CalibrateTurret(Workflow):
         if _at_prior((float(np.degrees(sd_all[:3].max())), float(sd_all[3:].max()))):
             # what the beams leave free no face left to aim at fixes (a new operator measured the table's same
             # four spots 18 times over, σ staying at 500 mm, after the parallelepiped was found moved)
-            names = sorted(o for o in gone if o)
             self.stuck = (
-                "; ".join(
-                    f"the {o} has moved: update its pose first (Update pose), then measure on it here" for o in names
-                )
-                or "model another object (Model object) for a face turned another way, then measure on it here"
+                self._moved_sentence()
+                if self.moved_why
+                else "model another object (Model object) for a face turned another way, then measure on it here"
             )
             return
         if not len(c.X):
@@ -262,6 +297,85 @@ class CalibrateTurret(Workflow):
             return int(idx[int(np.argmin(ratio_f))])
         self.unlocks = "?"  # nothing within reach helps: aim there anyway (a beam that lands elsewhere waits)
         return f
+
+    def _away(self, names: set) -> dict[str, float]:
+        """Of the objects ``names``, those the frozen frame (none frozen: the camera's frame now) shows away from
+        where the database draws them: name → the share of its outline on the frame's edges
+        (``app.vision.evaluate.outline_seen``, below AWAY_SEEN)."""
+        frame = self.frame_in(self.view)
+        image = frame.image if frame is not None else self.site.frame_at(None, self.view)
+        if image is None:
+            return {}
+        from app.vision.evaluate import outline_seen
+
+        out = {}
+        for name in sorted(names):
+            try:
+                obj = self.site.object(name)
+            except KeyError:  # gone from the database meanwhile
+                continue
+            key = (id(image), name, obj.version)
+            if key not in self._seen:
+                if len(self._seen) > 256:
+                    self._seen.clear()
+                self._seen[key] = outline_seen(image, self.camera, obj.model, obj.T_world_obj)
+            seen = self._seen[key]
+            if seen is not None and seen < AWAY_SEEN:
+                out[name] = seen
+        return out
+
+    def _moved_sentence(self) -> str:
+        """Which objects look moved and why, and what to do: "the parallelepiped has moved (…): {update_moved} …"."""
+        first, *others = sorted(self.moved_why)
+        text = f"the {first} has moved ({self.moved_why[first]}): " + "{update_moved} (your measurements here are kept)"
+        text += ", then measure on it here"
+        for o in others:
+            text += f"; the {o} too ({self.moved_why[o]})"
+        return text
+
+    def update_moved(self) -> Detour:
+        """Update pose of the first object found moved, while this workflow waits with its measurements
+        (``returned``)."""
+        with self.lock:
+            self._check_open()
+            if not self.moved_why:
+                raise WorkflowError("no known object is found moved: measure on, or Solve")
+            return Detour("update_pose", {"object_name": sorted(self.moved_why)[0]}, returned=self.returned)
+
+    def returned(self, detour: Workflow) -> None:
+        """Back from Update pose: each beam is checked again against the database (the object's pose may be new),
+        the suggestions made again, a solve of the old surfaces dropped."""
+        with self.lock:
+            if not self.finished:
+                if detour.accepted:
+                    self.result = None
+                    self.state = "measure" if self.pending_X is not None else "pick"
+                    if self.pan:
+                        self.checks = check_beams(
+                            self.site,
+                            self.site.T_world_turret,
+                            np.array(self.pan),
+                            np.array(self.tilt),
+                            np.array(self.range_m),
+                            self.site.calibration_covs[1],
+                        )
+                self._suggest()
+            name = getattr(detour, "object_name", None) or "object"
+            n = len(self.pan)
+            kept = f"your {n} measurement{'s' if n != 1 else ''} here {'are' if n != 1 else 'is'} kept"
+            self.message = (
+                f"Back in {self.title}: the {name}'s pose is updated; {kept}"
+                + (f", checked again against it ({sum(c.disagrees for c in self.checks)} disagree now)." if n else ".")
+                if detour.accepted
+                else f"Back in {self.title}: Update pose was cancelled; {kept}."
+            )
+
+    def use_frame(self, frame) -> None:
+        """Work on ``frame``: what it shows away from its drawing is not suggested (``_suggest`` again)."""
+        super().use_frame(frame)
+        with self.lock:
+            if not self.finished:
+                self._suggest()
 
     def _landed(self) -> tuple[np.ndarray, np.ndarray]:
         """Which beams landed within OFF_SURFACE_M of a known surface at the calibration in use (N,), and
@@ -323,6 +437,9 @@ class CalibrateTurret(Workflow):
                 f"{now} No known face left to aim at fixes what the beams leave free: {self.stuck[0].upper()}"
                 f"{self.stuck[1:]}."
             )
+        if self.moved_why and not reached:
+            sentence = self._moved_sentence()
+            now += f" Not offered: {sentence[0].upper()}{sentence[1:]}."
         if self.suggestion is None or reached:
             return now
         where = self.suggestion[1].split(" on ", 1)[1]
@@ -849,6 +966,8 @@ class CalibrateTurret(Workflow):
             base |= {"measurement", "remove_measurement"}
         if n >= 6:
             base.add("solve")
+        if self.moved_why:
+            base.add("update_moved")
         if self.site.devices is None:
             return Step(
                 "no_devices",

@@ -620,15 +620,10 @@ def unseen_outline(image, camera, model, T: np.ndarray) -> str:
     suspect. The clicks can fit a wrong pose exactly — edges assigned as in a mirror, 4 edges for 6
     unknowns — while its drawing misses the object (a new operator: RMS 0.45 px, the box 40 px off).
     "" without a frame."""
-    from app.vision.evaluate import edge_distance
+    from app.vision.evaluate import outline_seen
 
-    if image is None:
-        return ""
-    d = edge_distance(image, camera, model, T, max_px=10.0)
-    if not len(d.distances_px):
-        return ""
-    seen = float(np.mean(d.distances_px <= 1.5))
-    if seen >= MIN_OUTLINE_SEEN:
+    seen = None if image is None else outline_seen(image, camera, model, T)
+    if seen is None or seen >= MIN_OUTLINE_SEEN:
         return ""
     return (
         f"only {100 * seen:.0f} % of the refined pose's outline lies on the image's edges, though the clicks fit: "

@@ -11,6 +11,8 @@ script. Both start workflows by name and call their actions::
 The interface sends the operator's intents and the session decides what they mean: ``click`` and
 ``double_click`` (a click in a named camera: the workflow's, or a selection; a double click with no
 workflow under way starts Update pose on the object and finds its pose from that point), ``start``.
+An action may return a ``Detour`` (``act``): the workflow it names runs while the asking one waits
+(``waiting``) with its work kept, and is back once the detour is accepted or cancelled (``Detour.returned``).
 
 A script action is ``{"workflow": name, "action": name, **arguments}``: ``run_action`` starts the
 workflow when it is not the current one (an action named "start" passes its arguments to it).
@@ -24,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .base import AS_CLICK, Workflow, WorkflowError
+from .base import AS_CLICK, Detour, Workflow, WorkflowError
 from .site import Site
 
 __all__ = ["WORKFLOWS", "register", "Session"]
@@ -45,11 +47,30 @@ class Session:
         self.site = site
         self.client = client
         self.selected: str | None = None
-        self.workflow: Workflow | None = None
+        self._workflow: Workflow | None = None
+        self.waiting: Workflow | None = None  # set aside while a detour it asked for runs (``act``)
+        self._returned: Callable[[Workflow], None] | None = None  # the waiting one's ``Detour.returned``
         self.snap = True  # snap clicks to the image (the panel's "Snap clicks"); passed to workflows that snap
         self.lock = threading.RLock()
         # called with each workflow started and the frame it is to work on (None: the interface's choice)
         self.on_start: Callable[[Workflow, Any], None] | None = None
+
+    @property
+    def workflow(self) -> Workflow | None:
+        """The workflow under way (or the last one, finished); a detour accepted or cancelled gives the workflow
+        that waited on it back (``Detour.returned`` told)."""
+        wf = self._workflow
+        if wf is not None and wf.finished and self.waiting is not None:
+            with self.lock:
+                if self._workflow is wf and self.waiting is not None:
+                    back, self.waiting = self.waiting, None
+                    self._workflow = back
+                    returned, self._returned = self._returned, None
+                    if returned is not None:
+                        returned(wf)
+                    else:
+                        back.message = f"Back in {back.title} ({wf.state} in {wf.title}): your work here is kept."
+        return self._workflow
 
     def select(self, name: str | None) -> None:
         """Select an object by name (None clears); WorkflowError if there is no such object."""
@@ -61,11 +82,14 @@ class Session:
                     raise WorkflowError(str(exc.args[0])) from None
             self.selected = name
 
-    def start(self, name: str, frame: Any = None, form: dict | None = None, **options: Any) -> Workflow:
-        """Start workflow ``name`` (cancelling an unfinished one); options go to its constructor, with those of
-        the Start ``form`` it takes (``Workflow.form``); ``frame`` (the frame shown when the operator asked)
-        goes to ``on_start``. A model object of a polyhedral shape (wedge, pyramid) is its own workflow,
-        faces identified and sides assigned to edges."""
+    def start(
+        self, name: str, frame: Any = None, form: dict | None = None, *, detour: bool = False, **options: Any
+    ) -> Workflow:
+        """Start workflow ``name`` (cancelling an unfinished one, and one waiting on it; ``detour``: the one under
+        way waits instead, ``act``); options go to its constructor, with those of the Start ``form`` it takes
+        (``Workflow.form``); ``frame`` (the frame shown when the operator asked) goes to ``on_start``. A model
+        object of a polyhedral shape (wedge, pyramid) is its own workflow, faces identified and sides assigned to
+        edges."""
         form = form or {}
         if name == "model_object" and (form.get("shape") or options.get("shape")) in ("wedge", "pyramid"):
             name = "model_polyhedron"
@@ -79,19 +103,27 @@ class Session:
         if why:  # the panel does not offer it; a script or a key might still ask
             raise WorkflowError(f"{cls.title}: {why}")
         with self.lock:
-            if self.workflow is not None and not self.workflow.finished:
-                self.workflow.cancel()
+            current = self.workflow
+            if detour and self.waiting is not None:
+                raise WorkflowError(f"{cls.title}: finish {current.title} first (it is itself a detour)")
             if "object_name" in getattr(cls, "options", ()) and "object_name" not in options:
                 if self.selected is None:
                     raise WorkflowError(f"{cls.title}: select an object first")
                 options["object_name"] = self.selected
             if cls.snapping and "snap" not in options:
                 options["snap"] = self.snap
+            if not detour:
+                self.cancel()
             try:
-                self.workflow = cls(self.site, client=self.client, **options)
+                wf = cls(self.site, client=self.client, **options)
             except TypeError as exc:
                 raise WorkflowError(f"{cls.title}: bad options {sorted(options)}: {exc}") from None
-            wf = self.workflow
+            if detour and current is not None and not current.finished:
+                self.waiting = current
+                wf.message = f"{current.title} waits with your work kept: Accept or Cancel here goes back to it."
+                if current.frame is not None:  # on the frame the waiting one found the object moved in
+                    wf.use_frame(current.frame)
+            self._workflow = wf
         if self.on_start is not None:
             self.on_start(wf, frame)
         return wf
@@ -177,17 +209,30 @@ class Session:
             wf.set_snap(self.snap)
 
     def perform(self, action: str, **kwargs: Any) -> Any:
-        """Call an action of the current workflow by name."""
+        """Call an action of the current workflow by name (``act``)."""
         wf = self.workflow
         if wf is None:
             raise WorkflowError(f"no workflow is under way; start one before {action!r}")
-        return wf.perform(action, **kwargs)
+        return self.act(wf, action, **kwargs)
+
+    def act(self, wf: Workflow, action: str, *args: Any, **kwargs: Any) -> Any:
+        """``wf.perform(action, ...)``; a ``Detour`` it returns starts that workflow on the same frame while
+        ``wf`` waits (returned: the detour)."""
+        out = wf.perform(action, *args, **kwargs)
+        if isinstance(out, Detour):
+            with self.lock:
+                self._returned = out.returned
+                return self.start(out.workflow, detour=True, **{"view": wf.view, **out.options})
+        return out
 
     def cancel(self) -> None:
-        """Cancel the workflow under way, if any."""
-        wf = self.workflow
-        if wf is not None and not wf.finished:
-            wf.cancel()
+        """Cancel the workflow under way and one waiting on it, if any."""
+        with self.lock:
+            waiting, self.waiting = self.waiting, None
+            wf = self._workflow
+        for w in (wf, waiting):
+            if w is not None and not w.finished:
+                w.cancel()
 
     def run_action(self, step: dict[str, Any]) -> Any:
         """Replay one recorded action ``{"workflow", "action", **arguments}`` (extra keys such as

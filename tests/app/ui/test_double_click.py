@@ -88,7 +88,7 @@ def _session(wf):
     from app.workflows.session import Session
 
     s = Session.__new__(Session)
-    s.workflow, s.selected, s.on_start = wf, None, None
+    s._workflow, s.waiting, s.selected, s.on_start = wf, None, None, None
     return s
 
 

@@ -257,7 +257,10 @@ def test_beams_at_a_moved_object_are_left_out_and_said(fast_scene, db):
         # operator was sent to the table's same four spots 18 times over, σ staying at 500 mm)
         prompt = wf.current_step().prompt
         assert wf.suggestion is None and "No known face left to aim at" in prompt, prompt
-        assert "The parallelepiped has moved: update its pose first (Update pose)" in prompt
+        assert (
+            "The parallelepiped has moved (the range finder disagrees with its database pose): {update_moved}" in prompt
+        )
+        assert "update_moved" in wf.current_step().enabled
         with pytest.raises(WorkflowError, match=r"the parallelepiped has moved.*: update its pose first") as e:
             wf.solve()
         assert "mm measured against" in str(e.value) and wf.result is None
@@ -404,5 +407,62 @@ def test_a_solve_that_wanders_from_the_beams_guided_estimate_is_said(fast_scene,
         assert deg > 3 and m > 0.1  # the wrong fit this test is about
         assert re.search(r"the solve lies \d+\.\d° and \d+ mm from where the same beams put the turret", wf.message)
         assert any("fix the pose too loosely" in w for w in wf.weaknesses())
+    finally:
+        devs.close()
+
+
+def test_an_object_found_moved_is_updated_in_a_detour_with_the_measurements_kept(fast_scene, db):
+    """The video (16 s) shows the parallelepiped moved, the database has it where it was: the frame alone says so
+    (its faces are not suggested, no beam spent on them); Update its pose runs Update pose on it while the turret's
+    measurements wait; once accepted they are checked against its new pose and its faces are offered again.
+    A cancelled detour keeps them too."""
+    from app.devices import open_devices
+    from app.workflows import Session, Site
+    from app.workflows.base import FrameRef
+
+    from .conftest import FAST_DEVICES
+
+    devs = open_devices(fast_scene, clock=lambda: 16.0, site_options=FAST_DEVICES)
+    try:
+        site = Site(fast_scene, db, devices=devs, clock=lambda: 16.0)
+        session = Session(site, client="alice")
+        wf = session.start("calibrate_turret", shots=1)
+        wf.use_frame(FrameRef(site.frame_at(16.0), 16.0))
+        assert list(wf.moved_why) == ["parallelepiped"] and "outline" in wf.moved_why["parallelepiped"]
+        # the table alone cannot fix the pose: nothing is suggested, and the step says to update the box first
+        prompt = wf.current_step().prompt
+        assert wf.suggestion is None and "No known face left to aim at" in prompt, prompt
+        assert "The parallelepiped has moved (the frozen frame shows only " in prompt and "{update_moved}" in prompt
+        assert "update_moved" in wf.current_step().enabled
+        T = site.object("table").T_world_obj
+        for x, y in ((0.35, 0.55), (-0.3, -0.4), (0.3, -0.5)):  # measured meanwhile: kept through the detour
+            wf.choose_point(T[:3, :3] @ [x, y, 0.04] + T[:3, 3], f"table {x} {y}")
+            wf.measure()
+        # a cancelled detour: back with the measurements
+        up = session.perform("update_moved")
+        assert up.name == "update_pose" and up.object_name == "parallelepiped" and session.waiting is wf
+        assert up.frame is wf.frame and "Calibrate turret waits with your work kept" in up.message
+        up.cancel()
+        assert session.workflow is wf and session.waiting is None and not wf.finished and len(wf.pan) == 3
+        assert wf.message.startswith("Back in Calibrate turret: Update pose was cancelled; your 3 measurements")
+        # the detour accepted: the pose found from one click where the frame shows the box
+        up = session.perform("update_moved")
+        T_true = fast_scene.body("parallelepiped").pose_at(16.0)
+        up.click(site.camera.project_obj(T_true, up.obj.model.vertices).mean(axis=0))
+        up.find()
+        up.accept()
+        assert pose_error(site.object("parallelepiped").T_world_obj, T_true)[1] < 0.005
+        assert session.workflow is wf and len(wf.pan) == 3 and not wf.moved_why
+        assert wf.message.startswith("Back in Calibrate turret: the parallelepiped's pose is updated; your 3")
+        assert "update_moved" not in wf.current_step().enabled
+        for _ in range(40):  # the suggestions now use the box too, and reach the σ aimed for
+            if wf.suggestion is None or "aimed for" in wf.current_step().prompt:
+                break
+            wf.measure_next()
+        assert any("parallelepiped" in lab for lab in wf.labels)
+        cal = wf.solve()
+        assert np.sqrt(np.diag(cal.cov)[3:]).max() <= 0.005
+        deg, m = pose_error(wf.T_solved, fast_scene.turret.T_world_turret)
+        assert m < 0.01 and deg < 0.5, (deg, m)
     finally:
         devs.close()
