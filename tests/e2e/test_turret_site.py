@@ -170,8 +170,8 @@ def test_the_moved_parallelepiped_is_updated_on_the_way_and_the_turret_calibrate
     op.double_click(site.camera.project_obj(T_box, up.obj.model.vertices).mean(axis=0))
     wait_until(lambda: up.found is not None, timeout_s=60, what="the found poses", panel=page.panel)
     op.accept(up)
-    deg, m = pose_error(site.object(BOX).T_world_obj, T_box)
-    assert deg < 1.0 and m < 0.005, (deg, m)
+    box_deg, box_m = pose_error(site.object(BOX).T_world_obj, T_box)
+    assert box_deg < 1.0 and box_m < 0.005, (box_deg, box_m)
     back = workflow_shown(page, "calibrate_turret")
     assert back is wf and len(wf.pan) == 1 and not wf.moved_why
     page.get_by_text(
@@ -184,7 +184,8 @@ def test_the_moved_parallelepiped_is_updated_on_the_way_and_the_turret_calibrate
     stored = np.asarray(ui.db.calibrations("turret")[-1].data["T_world_turret"], float)
     after = pose_error(stored, T_true)
     op.report(
-        f"Calibrate turret with the box updated on the way, {len(wf.pan)} measured: σ {sd_rot_deg.max():.2f}°, "
+        f"Calibrate turret with the box updated on the way ({box_deg:.2f}°, {1000 * box_m:.1f} mm from the truth), "
+        f"{len(wf.pan)} measured: σ {sd_rot_deg.max():.2f}°, "
         f"{1000 * sd_t_m.max():.1f} mm; error after {after[0]:.2f}° {1000 * after[1]:.1f} mm"
     )
     assert after[0] < 3 * np.linalg.norm(sd_rot_deg) and after[1] < 3 * np.linalg.norm(sd_t_m)
