@@ -190,7 +190,10 @@ class CalibrateTurret(Workflow):
         calibration in use change."""
         objects = self.site.objects()
         T = self.site.T_world_turret
-        key = (tuple((o.name, o.version) for o in objects), T.tobytes(), self.view)
+        robot = self.site.robot  # where it stands hides faces (a beam at the table behind the arm lands on the arm)
+        state = None if robot is None else (robot.last_state() or robot.state())
+        q = () if state is None else tuple(np.round(state.q, 3))
+        key = (tuple((o.name, o.version) for o in objects), T.tobytes(), self.view, q)
         if self._cand_cache is None or self._cand_cache[0] != key:
             self._cand_cache = (key, face_candidates(self.site, self.camera, T))
         return self._cand_cache[1]
@@ -345,6 +348,8 @@ class CalibrateTurret(Workflow):
     def returned(self, detour: Workflow) -> None:
         """Back from Update pose: each beam is checked again against the database (the object's pose may be new),
         the suggestions made again, a solve of the old surfaces dropped."""
+        name = getattr(detour, "object_name", None) or "object"
+        gone: list[str] = []
         with self.lock:
             if not self.finished:
                 if detour.accepted:
@@ -359,16 +364,34 @@ class CalibrateTurret(Workflow):
                             np.array(self.range_m),
                             self.site.calibration_covs[1],
                         )
+                    gone = self._measured_while_moving(name)
                 self._suggest()
-            name = getattr(detour, "object_name", None) or "object"
             n = len(self.pan)
             kept = f"your {n} measurement{'s' if n != 1 else ''} here {'are' if n != 1 else 'is'} kept"
-            self.message = (
-                f"Back in {self.title}: the {name}'s pose is updated; {kept}"
-                + (f", checked again against it ({sum(c.disagrees for c in self.checks)} disagree now)." if n else ".")
-                if detour.accepted
-                else f"Back in {self.title}: Update pose was cancelled; {kept}."
+            if not detour.accepted:
+                self.message = f"Back in {self.title}: Update pose was cancelled; {kept}."
+                return
+            self.message = f"Back in {self.title}: the {name}'s pose is updated; {kept}" + (
+                f", checked again against it ({sum(c.disagrees for c in self.checks)} disagree now)." if n else "."
             )
+            if gone:
+                self.message += (
+                    f" Deleted: {', '.join(gone)} — on the {name}, they disagree with its new pose too (measured while "
+                    "it was still moving); measure on it again."
+                )
+
+    def _measured_while_moving(self, name: str) -> list[str]:
+        """Delete the measurements at object ``name`` that disagree with the database after its pose was updated
+        (a beam measured while it slid, which the frozen frame's check against the live video missed: they kept it
+        counted as moved, and a new operator had to find and delete them by hand); their labels."""
+        bad = [
+            i for i, c in enumerate(self.checks) if c.disagrees and (c.object == name or self._aimed([i])[0] == name)
+        ]
+        out = [f"{i + 1} {self.labels[i]}" for i in bad]
+        for i in reversed(bad):
+            for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels, self.checks):
+                lst.pop(i)
+        return out
 
     def use_frame(self, frame) -> None:
         """Work on ``frame``: what it shows away from its drawing is not suggested (``_suggest`` again)."""
@@ -644,9 +667,9 @@ class CalibrateTurret(Workflow):
                 raise WorkflowError(f"there is no measurement {i + 1}: {len(self.pan)} were made")
             for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels, self.checks):
                 lst.pop(i)
-            self.result = None
+            solved, self.result = self.result is not None, None
             self.state = "measure" if self.pending_X is not None else "pick"
-            self.message = f"Measurement {i + 1} deleted: {len(self.pan)} left. Solve again."
+            self.message = f"Measurement {i + 1} deleted: {len(self.pan)} left." + (" Solve again." if solved else "")
             self._suggest()
 
     def remove_last(self) -> None:
@@ -727,6 +750,7 @@ class CalibrateTurret(Workflow):
             dist = dist[used]
             self.result = cal
             self.T_solved = T
+            self.T_before = self.site.T_world_turret  # the calibration in use when solved (Result's change from it)
             self.surface_residuals_m = dist
             self.moved_text = moved_text
             deg, m = pose_error(T, self.site.T_world_turret)
@@ -1047,7 +1071,9 @@ class CalibrateTurret(Workflow):
             cam = self.camera
             m = Marks()
             X, names = self._candidates()
-            centres = np.array([x for x, nm in zip(X, names) if nm.endswith("centre")]).reshape(-1, 3)
+            centres = np.array(  # (not on an object found moved: where the database draws it, nothing stands)
+                [x for x, nm in zip(X, names) if nm.endswith("centre") and nm.split(" face ")[0] not in self.moved_why]
+            ).reshape(-1, 3)
             centres = centres[cam.depth(centres) > 0] if len(centres) else centres
             m.targets = cam.project(centres) if len(centres) else np.zeros((0, 2))
             if self.pending_X is not None:
@@ -1074,7 +1100,7 @@ class CalibrateTurret(Workflow):
                 sd_rot_deg, sd_t_m = self._sigmas()
                 out["sd_rot_deg"] = [float(v) for v in sd_rot_deg]
                 out["sd_t_mm"] = [float(1000 * v) for v in sd_t_m]
-                deg, m = pose_error(self.T_solved, self.site.T_world_turret)
+                deg, m = pose_error(self.T_solved, self.T_before)
                 out["change"] = {"deg": float(deg), "mm": float(1000 * m)}
                 labels = [lab for lab, u in zip(self.labels, self.used) if u]
                 ranges = [r for r, u in zip(self.range_m, self.used) if u]

@@ -3,7 +3,8 @@ aimed a beam may land.
 
 ``face_candidates``: a grid over each planar face of a known object that both the camera and the
 turret face, inside the image and seen by both (the first database surface on the camera's ray and on
-the turret's beam), each with its room to the face's edges along the face's two axes.
+the turret's beam, and the site's robot, where it stands, not in the way), each with its room to the
+face's edges along the face's two axes.
 
 ``landing_sd``: the σ, along those axes, of where a beam aimed at a candidate lands when the turret
 pose it is aimed with is off by δ ~ N(0, C) (δ in the turret frame, ``T · exp(δ)``): to first order the
@@ -81,8 +82,14 @@ def face_candidates(site, camera, T_world_turret: np.ndarray) -> Candidates:
         inside &= camera.depth(X) > 0
         owners = np.array([r[6] for r in rows], dtype=object)
         mesh, owner = site.surfaces()
+        robot = _robot_mesh(site)
         for o in (camera.center, origin):
             inside &= _first_is(mesh, owner, o, X, owners)
+            if robot is not None:  # a beam at the table behind the arm lands on the arm
+                d = X - o
+                dist = np.linalg.norm(d, axis=1)
+                _, t = _first_hits(robot, o, d / dist[:, None])
+                inside &= ~(t < dist - 0.005)
         rows = [r for r, keep in zip(rows, inside) if keep]
     if not rows:
         z = np.zeros((0, 3))
@@ -188,11 +195,35 @@ def _first_is(mesh, owner, origin: np.ndarray, X: np.ndarray, names: np.ndarray)
         return np.zeros(len(X), bool)
     d = X - origin
     dist = np.linalg.norm(d, axis=1)
-    d = d / dist[:, None]
-    tri = mesh.ray.intersects_first(np.broadcast_to(origin, X.shape), d)
+    tri, t = _first_hits(mesh, origin, d / dist[:, None])
     ok = tri >= 0
     out = np.zeros(len(X), bool)
-    n = mesh.face_normals[tri[ok]]
-    t = np.einsum("ij,ij->i", n, mesh.triangles[tri[ok], 0] - origin) / np.einsum("ij,ij->i", n, d[ok])
-    out[ok] = (np.asarray(owner)[tri[ok]] == names[ok]) & (np.abs(t - dist[ok]) < 0.005)
+    out[ok] = (np.asarray(owner)[tri[ok]] == names[ok]) & (np.abs(t[ok] - dist[ok]) < 0.005)
     return out
+
+
+def _first_hits(mesh, origin: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The first triangle of ``mesh`` on each ray from ``origin`` along the unit directions d (M, 3) (−1: none)
+    and how far along it lies (inf: none)."""
+    tri = mesh.ray.intersects_first(np.broadcast_to(origin, d.shape), d)
+    ok = tri >= 0
+    t = np.full(len(d), np.inf)
+    n = mesh.face_normals[tri[ok]]
+    t[ok] = np.einsum("ij,ij->i", n, mesh.triangles[tri[ok], 0] - origin) / np.einsum("ij,ij->i", n, d[ok])
+    return tri, t
+
+
+def _robot_mesh(site):
+    """The site's robot where it stands, as one triangle mesh (None: no robot)."""
+    cell = getattr(site, "robot", None)
+    if cell is None:
+        return None
+    import trimesh
+
+    Vs, Fs, offset = [], [], 0
+    for _, brep, T in cell.link_breps():
+        V, F = brep.triangles()
+        Vs.append(V @ T[:3, :3].T + T[:3, 3])
+        Fs.append(F + offset)
+        offset += len(V)
+    return trimesh.Trimesh(np.vstack(Vs), np.vstack(Fs), process=False) if Vs else None

@@ -422,7 +422,8 @@ def test_an_object_found_moved_is_updated_in_a_detour_with_the_measurements_kept
 
     from .conftest import FAST_DEVICES
 
-    devs = open_devices(fast_scene, clock=lambda: 16.0, site_options=FAST_DEVICES)
+    clock = {"t": 16.0}
+    devs = open_devices(fast_scene, clock=lambda: clock["t"], site_options=FAST_DEVICES)
     try:
         site = Site(fast_scene, db, devices=devs, clock=lambda: 16.0)
         session = Session(site, client="alice")
@@ -438,22 +439,29 @@ def test_an_object_found_moved_is_updated_in_a_detour_with_the_measurements_kept
         for x, y in ((0.35, 0.55), (-0.3, -0.4), (0.3, -0.5)):  # measured meanwhile: kept through the detour
             wf.choose_point(T[:3, :3] @ [x, y, 0.04] + T[:3, 3], f"table {x} {y}")
             wf.measure()
+        # and one at the box where the frame shows it, measured while it was still on its way there (13.5 s)
+        T_true = fast_scene.body("parallelepiped").pose_at(16.0)
+        clock["t"] = 13.5
+        wf.choose_point(T_true[:3, :3] @ [0.0, 0.0, 0.066] + T_true[:3, 3], "box top, moving")
+        wf.measure()
+        clock["t"] = 16.0
         # a cancelled detour: back with the measurements
         up = session.perform("update_moved")
         assert up.name == "update_pose" and up.object_name == "parallelepiped" and session.waiting is wf
         assert up.frame is wf.frame and "Calibrate turret waits with your work kept" in up.message
         up.cancel()
-        assert session.workflow is wf and session.waiting is None and not wf.finished and len(wf.pan) == 3
-        assert wf.message.startswith("Back in Calibrate turret: Update pose was cancelled; your 3 measurements")
+        assert session.workflow is wf and session.waiting is None and not wf.finished and len(wf.pan) == 4
+        assert wf.message.startswith("Back in Calibrate turret: Update pose was cancelled; your 4 measurements")
         # the detour accepted: the pose found from one click where the frame shows the box
         up = session.perform("update_moved")
-        T_true = fast_scene.body("parallelepiped").pose_at(16.0)
         up.click(site.camera.project_obj(T_true, up.obj.model.vertices).mean(axis=0))
         up.find()
         up.accept()
         assert pose_error(site.object("parallelepiped").T_world_obj, T_true)[1] < 0.005
-        assert session.workflow is wf and len(wf.pan) == 3 and not wf.moved_why
+        # the beam measured while the box moved disagrees with its new pose too: deleted, and said
+        assert session.workflow is wf and len(wf.pan) == 3 and not wf.moved_why, wf.message
         assert wf.message.startswith("Back in Calibrate turret: the parallelepiped's pose is updated; your 3")
+        assert "Deleted: 4 box top, moving — on the parallelepiped, they disagree with its new pose" in wf.message
         assert "update_moved" not in wf.current_step().enabled
         for _ in range(40):  # the suggestions now use the box too, and reach the σ aimed for
             if wf.suggestion is None or "aimed for" in wf.current_step().prompt:
@@ -464,5 +472,55 @@ def test_an_object_found_moved_is_updated_in_a_detour_with_the_measurements_kept
         assert np.sqrt(np.diag(cal.cov)[3:]).max() <= 0.005
         deg, m = pose_error(wf.T_solved, fast_scene.turret.T_world_turret)
         assert m < 0.01 and deg < 0.5, (deg, m)
+        change = wf.summary()["change"]  # from the calibration in use when solved: still so once accepted
+        wf.accept()
+        assert wf.summary()["change"] == change and change["mm"] > 1.0, change
     finally:
         devs.close()
+
+
+def test_a_measurement_deleted_before_any_solve_does_not_say_solve_again(device_site):
+    wf = CalibrateTurret(device_site, shots=1)
+    T = device_site.object("table").T_world_obj
+    for x, y in ((0.35, 0.55), (-0.3, -0.4)):
+        wf.choose_point(T[:3, :3] @ [x, y, 0.04] + T[:3, 3], f"table {x} {y}")
+        wf.measure()
+    wf.remove_measurement(0)
+    assert wf.message == "Measurement 1 deleted: 1 left."
+
+
+def test_no_point_is_suggested_where_the_robot_stands_in_the_beams_way(scene, db):
+    """A new operator's Measure next aimed at the table behind the arm, and the beam landed on the arm (1711 mm
+    against 1948): the candidates leave out the points the robot, where it stands, hides from the turret or the
+    camera — at home, 7 of the table top's."""
+    import trimesh
+
+    from app.robot.setup import open_robot
+    from app.workflows import Site
+    from app.workflows.turret_aims import face_candidates
+
+    robot = open_robot(scene)
+    try:
+        with_robot = Site(scene, db, robot=robot.cell, frames=None)
+        c = face_candidates(with_robot, with_robot.camera, with_robot.T_world_turret)
+        c0 = face_candidates(Site(scene, db, frames=None), with_robot.camera, with_robot.T_world_turret)
+        parts = [(brep.triangles(), T) for _, brep, T in robot.cell.link_breps()]
+        Vs, Fs, off = [], [], 0
+        for (V, F), T in parts:
+            Vs.append(V @ T[:3, :3].T + T[:3, 3])
+            Fs.append(F + off)
+            off += len(V)
+        arm = trimesh.Trimesh(np.vstack(Vs), np.vstack(Fs), process=False)
+        for k, origin in enumerate((with_robot.T_world_turret[:3, 3], with_robot.camera.center)):
+            d = c0.X - origin
+            dist = np.linalg.norm(d, axis=1)
+            hits, rays, _ = arm.ray.intersects_location(np.broadcast_to(origin, d.shape), d / dist[:, None])
+            blocked = np.zeros(len(d), bool)
+            blocked[rays[np.linalg.norm(hits - origin, axis=1) < dist[rays] - 0.005]] = True
+            kept = np.array([any(np.allclose(x, y) for y in c.X) for x in c0.X])
+            assert not (kept & blocked).any()  # no point offered behind the arm
+            if k == 0:  # the turret's beams: those the arm stops are the ones left out
+                assert blocked.sum() >= 5, blocked.sum()
+        assert len(c.X) == len(c0.X) - 7
+    finally:
+        robot.close()
