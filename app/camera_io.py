@@ -298,6 +298,13 @@ _XML_ADVICE = (
 )
 
 
+# what to do with a .yaml/.yml/.json camera file that does not read as one
+_YAML_ADVICE = (
+    "give the calibration file OpenCV (cv::FileStorage: camera_matrix, image_width, image_height) or ROS "
+    "(camera_info: camera_matrix or K, width, height) wrote"
+)
+
+
 def _read_visp(path: Path, camera_name: str | None, image_size: tuple[int, int] | None = None) -> Intrinsics:
     where = str(path)
     try:
@@ -438,7 +445,9 @@ def _yaml_tree(path: Path) -> dict:
         mark = getattr(exc, "problem_mark", None)
         at = f"line {mark.line + 1}: " if mark is not None else ""
         what = getattr(exc, "problem", None) or str(exc)
-        raise ValueError(f"{where}: not valid YAML ({at}{' '.join(str(what).split())})") from None
+        raise ValueError(
+            f"{where}: not valid YAML ({at}{' '.join(str(what).split())}); {_YAML_ADVICE}, or fix the YAML there"
+        ) from None
     if not docs or not isinstance(docs[0], dict) or not docs[0]:
         raise ValueError(f"{where}: holds no named values; expected a camera matrix and the image size")
     return docs[0]
@@ -521,7 +530,8 @@ def _pick_map(tree: dict, where: str, camera_name: str | None) -> tuple[dict, st
     if not cams:
         keys = ", ".join(_OPENCV_K_KEYS)
         raise ValueError(
-            f"{where}: no camera matrix (looked for {keys}, in any case; found {', '.join(map(str, tree))})"
+            f"{where}: no camera matrix (looked for {keys}, in any case; found {', '.join(map(str, tree))}); "
+            f"{_YAML_ADVICE}"
         )
 
     def name_of(key, m):

@@ -63,20 +63,22 @@ FAR_TIMES_SIZE = 1000  # a pose this many times the model's size from the camera
 def _check_distance(pose_path, name: str, model, T_cam_obj, T_world_obj, camera) -> None:
     """ValueError when the pose puts the object more than FAR_TIMES_SIZE times its size from the camera (a pose in
     millimetres read as metres: 0.5 m becomes 500 m, and the object a dot). The distance from the pose in the camera
-    frame, else from the camera's centre when the site has a camera; no check without either."""
+    frame, else from the camera's centre when the site has a camera, else from the world's origin (a database with
+    no camera: the site's world is the size of a work cell)."""
     import numpy as np
 
+    where = "the camera"
     if T_cam_obj is not None:
         far = float(np.linalg.norm(np.asarray(T_cam_obj)[:3, 3]))
     elif camera is not None:
         far = float(np.linalg.norm(np.asarray(T_world_obj)[:3, 3] - camera.center))
     else:
-        return
+        far, where = float(np.linalg.norm(np.asarray(T_world_obj)[:3, 3])), "the world's origin"
     lo, hi = model.bounds()
     size = float(np.max(hi - lo))
     if size > 0 and far > FAR_TIMES_SIZE * size:
         raise ValueError(
-            f"{pose_path}: the pose puts {name!r} {far:.4g} m from the camera, {far / size:,.0f} times its size "
+            f"{pose_path}: the pose puts {name!r} {far:.4g} m from {where}, {far / size:,.0f} times its size "
             f"({1000 * size:.4g} mm): is the pose in millimetres? mcit reads metres; write it in metres"
         )
 

@@ -205,10 +205,12 @@ def test_real_visp_files_with_a_name(shared_data):
 _K9 = "camera_matrix: {rows: 3, cols: 3, data: [500, 0, 320, 0, 500, 240, 0, 0, 1]}\n"
 BAD = [
     ("cam.yaml", "a: [1, 2\nb: }{", "not valid YAML (line 2: "),
+    ("cam.yaml", "a: [1, 2\nb: }{", "; give the calibration file OpenCV (cv::FileStorage"),  # and what to do
     ("cam.yml", "%YAML:1.0\na: [1, 2\nb: }{", "OpenCV cannot parse it (line 3"),  # OpenCV's dialect: its reader
     ("cam.yaml", "k: '<array type: double[9]>'\n", "echoed without its arrays"),
     ("cam.yaml", b"\xff\xfe\x00k: [1]", "not a text file"),
     ("cam.yaml", "image_width: 640\nimage_height: 480\n", "no camera matrix (looked for camera_matrix"),
+    ("cam.yaml", "foo: 1\n", "found foo); give the calibration file OpenCV"),
     ("cam.yaml", "camera_matrix: {rows: 3, cols: 3}\n", "a matrix needs 'data'"),
     (
         "cam.yaml",

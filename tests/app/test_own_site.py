@@ -330,6 +330,13 @@ def test_bad_input_is_one_line_naming_the_file_and_writes_nothing(files, capsys)
     with Database.open(site / "site.sqlite", readonly=True) as db:
         assert db.objects() == [] and len(db.history()) == 1  # the camera's calibration alone
     assert not (files / "other.sqlite").exists()
+    # a world-frame pose into a database with no camera: checked against the world's size (a helper's file in mm
+    # placed the object 507 m away without a word)
+    bare = files / "bare.sqlite"
+    argv = ["db", "import", box, "--db", str(bare), "--pose", str(files / "mm.pos"), "--pose-frame", "world"]
+    assert main(argv) == 1
+    _one_line_error(capsys, "mm.pos", "from the world's origin", "millimetres")
+    assert not bare.exists() or Database.open(bare, readonly=True).objects() == []
     assert main(["db", "list", "--site", str(files / "busy")]) == 1
     _one_line_error(capsys, "busy", "not a site folder")
     # serve
