@@ -110,6 +110,7 @@ class TrackObject(SnapMixin, Workflow):
         self.confidence: float | None = None
         self.rms_px = float("nan")
         self.diagnostics = None
+        self.diagnostics_good = None  # the last good frame's (what Accept writes is that frame's)
         self.frames = 0
         self.t_first: float | None = None
         self.t_last: float | None = None
@@ -201,6 +202,7 @@ class TrackObject(SnapMixin, Workflow):
                 self.T_world_obj = res.T_world_obj.copy()
                 self.cov = None if self.diagnostics.cov is None else self.diagnostics.cov.copy()
                 self.rms_px = float(self.diagnostics.rms_px)
+                self.diagnostics_good = self.diagnostics
                 self.state = "tracking"
             return res
 
@@ -348,7 +350,7 @@ class TrackObject(SnapMixin, Workflow):
             if self.lost:
                 measurements.update(lost_at_s=self.t_lost, lost_reason=self.reason)
             residuals = {"confidence": self.confidence_good, "rms_px": self.rms_px}
-            d = self.diagnostics
+            d = self.diagnostics_good  # the written pose's frame's, not a lost frame's after it
             if d is not None:
                 residuals.update(n_samples=int(d.n_samples), n_inliers=int(d.n_inliers))
             T, cov = self.T_world_obj.copy(), None if self.cov is None else self.cov.copy()

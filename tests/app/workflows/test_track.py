@@ -107,6 +107,7 @@ def test_a_track_lost_after_good_frames_can_accept_its_last_good_pose_when_asked
     wf = TrackObject(site, object_name="parallelepiped")
     T_good, _, lost = wf.step()
     assert not lost and wf.weaknesses() == []
+    good = wf.diagnostics
     wf.step(frame=np.full((256, 512, 3), 60, np.uint8), t_s=12.0)  # then a blank frame: lost
     assert wf.lost and "Accept" in wf.next_step and "Lost at t" in wf.message  # the reason and choices: the step's
     step = wf.current_step()
@@ -118,6 +119,9 @@ def test_a_track_lost_after_good_frames_can_accept_its_last_good_pose_when_asked
     change = db.history("parallelepiped")[-1]
     assert change.measurements["t_last_s"] == 11.5 and change.measurements["lost_at_s"] == 12.0
     assert "last good pose, at t = 11.50 s" in wf.message
+    # the residuals are the written pose's frame's, not the lost frame's after it (a new user's history had both)
+    assert wf.diagnostics is not good and change.residuals["n_inliers"] == good.n_inliers
+    assert change.residuals["n_samples"] == good.n_samples and change.residuals["rms_px"] == good.rms_px
 
 
 def test_pause_resume_restart_and_clicks_only_when_stopped(video_site):
