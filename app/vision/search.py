@@ -573,10 +573,17 @@ def search_pose(
         T = min((c.T_world_obj @ S for S in syms), key=lambda U: pose_error(U, T_old)[0])
         out.append(_replace_T(c, T))
     if not out:
-        other = "another object" + (" or the table" if name != "table" else "")
+        # (a new user's click on the cube itself, 15° and 52 mm from its database pose with no table under it, read
+        # the old "a click on another object or the table finds none" as blame for clicking elsewhere)
+        reach = (
+            f"; with no table under it, the search turns it at most {max_turn_deg:g}° from its database pose and "
+            "looks near it: farther, click its edges instead"
+            if mode == "free"
+            else ""
+        )
         raise NoPoseFits(
             f"no pose of {the(name)} fits the image near your click: try another spot on {the(name)}, where its "
-            f"edges show (a click on {other} finds none)"
+            f"edges show{reach}"
         )
     if table is not None and out[0].mismatch > BESIDE_TRIGGER:
         # a click beside the object: poses under it can lie half on the object and half on the floor

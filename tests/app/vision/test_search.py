@@ -67,6 +67,16 @@ def test_a_small_move_is_found_without_the_table_hint(scene):
     assert deg < 1.0 and m < 0.005, (deg, m)
 
 
+def test_a_turn_beyond_the_free_searchs_reach_is_refused_saying_its_reach(scene):
+    """No table: the 55° move is beyond the free search's 30° reach. The click is on the box: the refusal says the
+    reach and what to do instead, not that the click was elsewhere (a new user read that on their cube)."""
+    box = scene.body("parallelepiped")
+    image, t = frame(scene, 16.5)
+    uv = centre_pixel(scene, box, box.pose_at(t))
+    with pytest.raises(NoPoseFits, match="with no table under it, the search turns it at most 30° .*click its edges"):
+        search_pose(scene.camera, box.model, box.pose_at(0.0), uv, image, table=None, name="parallelepiped")
+
+
 @pytest.mark.parametrize("where", ["table", "unknown_box", "unknown_cylinder"])
 def test_a_click_on_nothing_or_on_another_object_finds_no_pose(scene, table, where):
     box = scene.body("parallelepiped")
