@@ -175,8 +175,9 @@ def _clicking_step(wf, base: set, where: str, first: bool) -> Step | None:
         return Step(
             "match",
             f"Assignment {(wf.chosen or 0) + 1} of {len(wf.match.matches)} shown (1→e{e0}: clicked edge 1 is "
-            f"model edge {e0}): " + "{confirm_match}, choose another {choose_candidate}, or {remove_last} to assign "
-            "by hand.",
+            f"model edge {e0}): " + "{confirm_match}, choose another {choose_candidate}, or {remove_last} to drop "
+            "them and click more edges (to assign by hand instead: Cancel, start again and click each edge's model "
+            "edge after it).",
             frozenset(base | {"confirm_match", "choose_candidate"}),
         )
     if c.waiting_for_edge():
