@@ -284,3 +284,27 @@ def test_a_motion_stopped_before_the_frame_loop_looks_is_said_stopped_not_arrive
     site.robot.stop()  # the controller halted: the workflow has not heard of it yet
     assert wf.tick()  # the frame loop notices the motion has ended
     assert wf.message.startswith("Stopped: the tool is") and wf.arrival["tool_from_goal_mm"] > 1.0, wf.message
+
+
+def test_a_pick_and_place_refused_at_its_first_lift_is_carried_higher(site, scene, monkeypatch):
+    """A new operator's box_1 (9.35 × 9.14 × 13.96 cm) beside the modelled cylinder: put down at (0.25, -0.386) it
+    was carried 9.7 mm past the cylinder, inside the 10 mm kept, and refused; lifted higher it passes over (3 more
+    of 46 places on an 8 × 8 grid of the table planned)."""
+    import app.robot.cell as cell_module
+    from core.brep import BRep
+
+    b, c = scene.body("unknown_box"), scene.body("unknown_cylinder")
+    site.db.add_object("box_1", "box", BRep.box(0.0935, 0.0914, 0.1396), b.T_world_obj, status="modelled")
+    site.db.add_object("cylinder_1", "cylinder", c.model, c.T_world_obj, status="modelled")
+    session = Session(site)
+    session.select("box_1")
+    wf = session.start("pick_place")
+    uv = site.camera.project(np.array([[0.25, -0.386, 0.0]]))[0]
+    monkeypatch.setattr(cell_module, "LIFTS_M", cell_module.LIFTS_M[:1])
+    wf.click(uv)
+    assert not wf.plan.ok and "inside the 10 mm kept" in wf.plan.reason, wf.plan.reason
+    monkeypatch.undo()
+    wf.click(uv)
+    assert wf.plan.ok, wf.message
+    tool_z = [site.robot.tool_pose(q)[2, 3] for q in wf.plan.path]
+    assert max(tool_z) > site.robot.tool_pose(wf.plan.q_grasp)[2, 3] + cell_module.LIFTS_M[0] + 0.05
