@@ -94,7 +94,10 @@ def add_track_parser(sub) -> None:
         "poses/obj.%%04d.pos) gets one file per tracked frame, any other PATH the last tracked frame's pose",
     )
     p.add_argument(
-        "--start", type=frame_index, default=0, help="first frame to track, from 0 (the initial pose is this frame's)"
+        "--start",
+        type=frame_index,
+        help="first frame to track, from 0 (the initial pose is this frame's); default 0, or with --scene SITE "
+        "--body NAME the frame its database pose was found on, where its history says",
     )
     p.add_argument("--frames", type=frame_total, help="number of frames to track (default: to the end)")
     p.add_argument(
@@ -148,6 +151,7 @@ def _setup(args):
 
     model = load_model(args.model) if args.model else None
     T = None
+    args.start_said = ""
     lens = None
     source = args.source
     args.camera_cov = None
@@ -172,19 +176,27 @@ def _setup(args):
                 cal = db.latest_calibration("camera") if cal_id is not None else None
                 if cal is not None and cal.data.get("cov") is not None:
                     args.camera_cov = np.asarray(cal.data["cov"], float)
+        from_db = False
         if args.body:
             try:
-                body_model, T, args.body_model_sigma_m = _body(scene, site, args.body)
+                body_model, T, args.body_model_sigma_m, from_db = _body(scene, site, args.body)
             except KeyError as exc:  # an operator's typo: one line, not an internal error
                 raise ValueError(f"--body: {exc.args[0]}") from None
             model = model or body_model
         if source is None and site is not None:
             source = site.video  # a site folder's video (mcit site new)
+        if args.start is None and args.body and from_db and not args.pose:
+            # the database's pose is that frame's (a new user's pose from frame 217 was tracked from frame 0: lost)
+            found = _pose_frame(site, args.body, source)
+            if found is not None:
+                args.start, args.start_said = found
         if source is None:
             if scene.video_path is None:
                 raise ValueError(f"scene {scene.name!r} has no video: give a video file or frame folder")
             source = str(scene.video_path)
-    else:
+    if args.start is None:
+        args.start = 0
+    if not args.scene:
         if source is None:
             raise UsageError("give a video file or a folder of frames (or --scene with a video)")
         if not args.intrinsics:
@@ -237,12 +249,35 @@ def _site_folder(path):
     return open_site(path) if (Path(path) / SITE_FILE).is_file() else None
 
 
+def _pose_frame(site, name: str, source) -> tuple[int, str] | None:
+    """(the frame index, how it is known) of the frame the site database's pose of ``name`` was found on, from its
+    last change: the frame the clicks were made on, or a track's last good frame (its time at the site's frame
+    rate); None when the history does not say."""
+    from app.db import Database
+    from app.vision.sequence import source_fps
+
+    with Database.open(site.db_path, readonly=True) as db:
+        changes = db.history(name, limit=1)
+    if not changes:
+        return None
+    ch = changes[-1]
+    frame = (ch.clicks or {}).get("frame") if isinstance(ch.clicks, dict) else None
+    if isinstance(frame, dict) and int(frame.get("index", -1)) >= 0:
+        return int(frame["index"]), f"frame {int(frame['index'])}, where change {ch.id} found the pose"
+    t = (ch.measurements or {}).get("t_last_s") if isinstance(ch.measurements, dict) else None
+    if t is None:
+        return None
+    fps = site.fps or source_fps(source) or 10.0
+    k = int(round(float(t) * fps))
+    return k, f"frame {k}, the last tracked by change {ch.id} (t = {float(t):.2f} s at {fps:g} frames/s)"
+
+
 def _body(scene, site, name: str):
-    """(model, T_world_obj, the model's stated σ in metres or None for the default) of ``name``: the scene's body,
-    else the site folder's database object; KeyError saying where it looked."""
+    """(model, T_world_obj, the model's stated σ in metres or None for the default, whether from the database) of
+    ``name``: the scene's body, else the site folder's database object; KeyError saying where it looked."""
     try:
         body = scene.body(name)
-        return body.model, body.T_world_obj, None
+        return body.model, body.T_world_obj, None, False
     except KeyError:
         pass
     if site is not None and site.db_path.is_file():
@@ -254,7 +289,7 @@ def _body(scene, site, name: str):
             except NotFoundError:
                 rec = None
             if rec is not None:
-                return rec.model, rec.T_world_obj, rec.model_sigma_m
+                return rec.model, rec.T_world_obj, rec.model_sigma_m, True
             names = [o.name for o in db.objects()]
         raise KeyError(
             f"site {site.root.name} has no object named {name!r} (its database's: {', '.join(names) or 'none'}); "
@@ -360,6 +395,8 @@ def _cmd_track(args) -> int:
         f"({1e3 / np.mean(ms):.0f} frames/s)"
     )
     print(f"overlay video: {args.out}" + (f"; poses: {args.csv}" if args.csv else "") + pos_written)
+    if args.start_said:
+        print(f"started from {args.start_said} (--start chooses another)")
     if lost:
         f = lost[0]
         print(

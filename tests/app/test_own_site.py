@@ -145,6 +145,31 @@ def test_three_commands_make_a_camera_only_site_that_serves(files, capsys):
     assert main(["track", "--scene", str(site), "--body", "nosuch", "--out", str(files / "t.mp4")]) == 1
     err = capsys.readouterr().err
     assert "site site has no object named 'nosuch' (its database's: box, box2); import it first" in err
+    # a pose found on frame 1 (Update pose's history says which): tracked from there, not from frame 0 (a new user's
+    # pose found on frame 217 was tracked from frame 0 and lost at once)
+    with Database.open(site / "site.sqlite") as db:
+        rec = db.get("box2")
+        frame = {"t_s": 0.1, "index": 1, "source": "live"}
+        db.update_pose("box2", rec.T_world_obj, expected_version=rec.version, method="search", clicks={"frame": frame})
+        change = db.history("box2")[-1].id
+    argv = ["track", "--scene", str(site), "--body", "box2", "--out", str(files / "t.mp4"), "--csv", str(csv)]
+    assert main(argv + ["--quiet"]) == 0
+    assert (
+        f"started from frame 1, where change {change} found the pose (--start chooses another)"
+        in capsys.readouterr().out
+    )
+    rows = csv.read_text().splitlines()
+    assert len(rows) == 2 and rows[1].split(",")[0] == "1"  # frame 1 alone
+    assert main(argv + ["--quiet", "--start", "0"]) == 0 and len(csv.read_text().splitlines()) == 3
+    with Database.open(site / "site.sqlite") as db:  # a track's last good frame, by its time at the folder's rate
+        rec = db.get("box2")
+        db.update_pose("box2", rec.T_world_obj, expected_version=rec.version, method="tracking",
+                       measurements={"frames": 3, "t_first_s": 0.0, "t_last_s": 0.1})  # fmt: skip
+        change = db.history("box2")[-1].id
+    capsys.readouterr()
+    assert main(argv + ["--quiet"]) == 0
+    said = f"started from frame 1, the last tracked by change {change} (t = 0.10 s at 10 frames/s)"
+    assert said in capsys.readouterr().out
 
 
 def test_the_panel_says_what_a_camera_only_site_cannot_do(files):
