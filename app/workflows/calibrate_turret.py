@@ -75,6 +75,11 @@ MAX_REPEATS = 8  # a suggested point is offered until it has been measured this 
 # where the database draws it: on the live site's two cameras the moved parallelepiped scores 0.03–0.10, objects in
 # place 0.65–1.00.
 AWAY_SEEN = 0.25
+# At or above this share an object is where the database draws it: a beam at it that disagrees met something not in
+# the database in front of it (a new operator's beam at the table by the robot's foot was read as "the table has
+# moved", and the same point offered again after each Remove last, some 60 times)
+IN_PLACE_SEEN = 0.5
+BLOCKED_M = 0.05  # no point is offered this near one whose beam met something not in the database
 UNLOCK_GAIN = 0.8  # a point out of reach worth this fraction of the best one's worst σ or less is unlocked first
 UNLOCK_STEP = 0.9  # ... by a beam within reach that narrows the aim there by this factor at least, else aimed at
 
@@ -180,6 +185,7 @@ class CalibrateTurret(Workflow):
         # them away from their drawing): Update its pose (``update_moved``) updates the first
         self.moved_why: dict[str, str] = {}
         self._seen: dict = {}  # (frame image id, object, version) → its outline's share on the frame's edges
+        self.blocked: list[np.ndarray] = []  # targets whose beam met something not in the database (kept: BLOCKED_M)
         self._unlock_tries = 0  # suggestions in a row that were to bring the same face into reach
         self.T_aim: np.ndarray | None = None  # the pose the turret aims with (``_estimate``)
         self._suggest()
@@ -237,13 +243,25 @@ class CalibrateTurret(Workflow):
         # an object a beam found moved is not offered again (it was, after saying it moved); nor one the frozen frame
         # shows away from its drawing (no beam spent on it)
         if moved.any():
-            gone = set(self._aimed(np.flatnonzero(moved))) | {self.checks[i].object for i in np.flatnonzero(moved)}
-            self.moved_why = {o: "the range finder disagrees with its database pose" for o in sorted(gone) if o}
-        for o, seen in self._away(set(c.objects) - set(self.moved_why)).items():
-            self.moved_why[o] = (
-                f"the frozen frame shows only {100 * seen:.0f} % of its outline where the database draws it"
-            )
+            idx = np.flatnonzero(moved)
+            gone = set(self._aimed(idx)) | {self.checks[i].object for i in idx}
+            shares = self._outline_shares(gone - {""})
+            in_place = {o for o, seen in shares.items() if seen is not None and seen >= IN_PLACE_SEEN}
+            self.moved_why = {
+                o: "the range finder disagrees with its database pose" for o in sorted(gone - in_place) if o
+            }
+            for i, o in zip(idx, self._aimed(idx)):  # in place: something stood in front of it there
+                if (o in in_place or self.checks[i].object in in_place) and not self._near_blocked(self.targets[i]):
+                    self.blocked.append(np.asarray(self.targets[i], float))
+        for o, seen in self._outline_shares(set(c.objects) - set(self.moved_why)).items():
+            if seen is not None and seen < AWAY_SEEN:
+                self.moved_why[o] = (
+                    f"the frozen frame shows only {100 * seen:.0f} % of its outline where the database draws it"
+                )
         keep &= np.array([o not in self.moved_why for o in c.objects], bool)
+        if self.blocked and len(c.X):
+            B = np.array(self.blocked)
+            keep &= np.linalg.norm(c.X[:, None, :] - B[None], axis=2).min(axis=1) > BLOCKED_M
         c = c.take(keep)
         rows = np.zeros((0, 6))
         if len(c.X):
@@ -301,10 +319,13 @@ class CalibrateTurret(Workflow):
         self.unlocks = "?"  # nothing within reach helps: aim there anyway (a beam that lands elsewhere waits)
         return f
 
-    def _away(self, names: set) -> dict[str, float]:
-        """Of the objects ``names``, those the frozen frame (none frozen: the camera's frame now) shows away from
-        where the database draws them: name → the share of its outline on the frame's edges
-        (``app.vision.evaluate.outline_seen``, below AWAY_SEEN)."""
+    def _near_blocked(self, X) -> bool:
+        return any(np.linalg.norm(np.asarray(X, float) - b) <= 0.01 for b in self.blocked)
+
+    def _outline_shares(self, names: set) -> dict[str, float | None]:
+        """Of the objects ``names``, the share of each one's outline the frozen frame (none frozen: the camera's frame
+        now) shows where the database draws it (``app.vision.evaluate.outline_seen``; None: not in view); {} without
+        a frame."""
         frame = self.frame_in(self.view)
         image = frame.image if frame is not None else self.site.frame_at(None, self.view)
         if image is None:
@@ -322,9 +343,7 @@ class CalibrateTurret(Workflow):
                 if len(self._seen) > 256:
                     self._seen.clear()
                 self._seen[key] = outline_seen(image, self.camera, obj.model, obj.T_world_obj)
-            seen = self._seen[key]
-            if seen is not None and seen < AWAY_SEEN:
-                out[name] = seen
+            out[name] = self._seen[key]
         return out
 
     def _moved_sentence(self) -> str:
@@ -463,6 +482,12 @@ class CalibrateTurret(Workflow):
         if self.moved_why and not reached:
             sentence = self._moved_sentence()
             now += f" Not offered: {sentence[0].upper()}{sentence[1:]}."
+        if self.blocked and not reached:
+            n = len(self.blocked)
+            now += (
+                f" Not offered near {'the point' if n == 1 else f'{n} points'} where the range finder met something "
+                "not in the database in front of a known face."
+            )
         if self.suggestion is None or reached:
             return now
         where = self.suggestion[1].split(" on ", 1)[1]
@@ -1002,8 +1027,10 @@ class CalibrateTurret(Workflow):
         if self.pending_X is not None and self.result is not None:  # solved, and a point picked since: both apply
             return Step(
                 "review",
-                f"Solved: {self.solve_text}. " + "{accept} to use it; or {measure} " + f"{self.pending_label}, "
-                "the point picked, and {solve} again ({remove_last} drops the pick).",
+                f"Solved: {self.solve_text}. "
+                + "{accept} to use it; or {measure} the point picked "
+                + f"({self.pending_label}) and "
+                + "{solve} again ({remove_last} drops the pick).",
                 frozenset(base | {"accept", "measure"}),
             )
         nxt = {"measure_next"} if self.suggestion is not None else set()
@@ -1093,7 +1120,7 @@ class CalibrateTurret(Workflow):
     def summary(self) -> dict[str, Any]:
         with self.lock:
             out: dict[str, Any] = {"measurements": len(self.pan)}
-            if self.sigma_now is not None:
+            if self.sigma_now is not None and not _at_prior(self.sigma_now):  # (at the prior: not fixed yet, said)
                 out["sigma_predicted"] = {"deg": self.sigma_now[0], "mm": 1000 * self.sigma_now[1]}
             if self.result is not None:
                 out["rms_mm"] = float(1000 * np.sqrt(np.mean(self.surface_residuals_m**2)))
