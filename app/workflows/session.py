@@ -221,8 +221,16 @@ class Session:
         out = wf.perform(action, *args, **kwargs)
         if isinstance(out, Detour):
             with self.lock:
+                if self.waiting is not None:
+                    raise WorkflowError(f"finish {self._workflow.title} first: {self.waiting.title} waits on it")
                 self._returned = out.returned
+            try:  # (outside the lock: ``start`` calls the interface's ``on_start``)
                 return self.start(out.workflow, detour=True, **{"view": wf.view, **out.options})
+            except BaseException:
+                with self.lock:
+                    if self.waiting is None:
+                        self._returned = None
+                raise
         return out
 
     def cancel(self) -> None:

@@ -449,6 +449,9 @@ def test_an_object_found_moved_is_updated_in_a_detour_with_the_measurements_kept
         up = session.perform("update_moved")
         assert up.name == "update_pose" and up.object_name == "parallelepiped" and session.waiting is wf
         assert up.frame is wf.frame and "Calibrate turret waits with your work kept" in up.message
+        with pytest.raises(WorkflowError, match="finish Update pose first: Calibrate turret waits on it"):
+            session.act(wf, "update_moved")  # one detour at a time
+        assert session.workflow is up and session.waiting is wf
         up.cancel()
         assert session.workflow is wf and session.waiting is None and not wf.finished and len(wf.pan) == 4
         assert wf.message.startswith("Back in Calibrate turret: Update pose was cancelled; your 4 measurements")
