@@ -36,6 +36,8 @@ import numpy as np
 
 log = logging.getLogger("mcit.video")
 
+FOLDER_FPS = 10.0  # the rate an image folder or a still is read at when none is given (serve and track alike)
+
 __all__ = [
     "Frame",
     "VideoError",
@@ -324,7 +326,7 @@ class CaptureSource(VideoSource):
 class FolderSource(VideoSource):
     """The images of a folder in name order, played at ``fps`` and looped (decoded lazily)."""
 
-    def __init__(self, folder: str | Path, fps: float = 10.0):
+    def __init__(self, folder: str | Path, fps: float = FOLDER_FPS):
         super().__init__()
         folder = Path(folder)
         files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if folder.is_dir() else []
@@ -373,7 +375,7 @@ class FolderSource(VideoSource):
 class StillSource(VideoSource):
     """One image repeated at ``fps``: an image file, or an array (e.g. a frame rendered from the scene)."""
 
-    def __init__(self, image: np.ndarray | str | Path, fps: float = 10.0, description: str | None = None):
+    def __init__(self, image: np.ndarray | str | Path, fps: float = FOLDER_FPS, description: str | None = None):
         super().__init__()
         if isinstance(image, (str, Path)):
             import cv2
@@ -411,10 +413,10 @@ def open_video(spec: int | str | Path, fps: float | None = None) -> VideoSource:
         return CaptureSource(text, fps)
     path = Path(text).expanduser()
     if path.is_dir():
-        return FolderSource(path, fps or 10.0)
+        return FolderSource(path, fps or FOLDER_FPS)
     if path.is_file():
         if path.suffix.lower() in IMAGE_SUFFIXES:
-            return StillSource(path, fps or 10.0)
+            return StillSource(path, fps or FOLDER_FPS)
         return CaptureSource(path, fps)
     raise VideoError(
         f"video source {text!r} not found: give a camera index (0), a video file, an image folder, "

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from app.overlay import project_wireframe
+from app.video import FOLDER_FPS
 from core.brep import BRep
 from core.camera import Camera
 from core.pose.uncertainty import Priors
@@ -220,7 +221,8 @@ def track_sequence(
     source : a video file or a folder of images. camera : Camera of the frames' size.
     model : BRep. T_world_obj : array, shape (4, 4), the pose in frame ``start``.
     start, count : the frames to track. video_out : write the overlay video there (.mp4/.avi), at ``fps_out``
-        frames a second (default: the source video's rate; 25 for an image folder or a video that does not say).
+        frames a second (default: the source video's rate; ``app.video.FOLDER_FPS``, 10, for an image folder or a
+        video that does not say, as ``mcit serve`` reads them).
     csv_out : write one row per frame (index, confidence, lost, rms_px, samples, inliers, ms,
         tx ty tz θux θuy θuz of T_world_obj, then its σ: sx_m sy_m sz_m srx_rad sry_rad srz_rad, ``world_sigmas``).
     priors : the camera's and the model's priors joining each frame's σ (``EdgeTracker.priors``; default: the
@@ -265,7 +267,7 @@ def track_sequence(
             if video_out is not None:
                 img = draw_tracking(frame, camera, model, T, d, confidence=conf, lost=lost, label=f"frame {index}")
                 if writer is None:
-                    fps = fps_out or source_fps(source) or 25.0
+                    fps = fps_out or source_fps(source) or FOLDER_FPS
                     writer = _open_writer(Path(video_out), fps, img.shape[1], img.shape[0])
                 writer.write(cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
             if progress is not None:

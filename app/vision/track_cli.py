@@ -103,8 +103,8 @@ def add_track_parser(sub) -> None:
     p.add_argument(
         "--fps",
         type=frame_rate,
-        help="frame rate of the overlay video (above 0, at most 240; default: the source video's, 25 for an image "
-        "folder)",
+        help="frame rate of the overlay video (above 0, at most 240; default: the source video's, 10 for an image "
+        "folder as mcit serve reads it, or a site folder's rate)",
     )
     p.add_argument(
         "--search-px",
@@ -185,6 +185,8 @@ def _setup(args):
             model = model or body_model
         if source is None and site is not None:
             source = site.video  # a site folder's video (mcit site new)
+        if site is not None and args.fps is None and site.fps:
+            args.fps = site.fps  # the overlay video at the rate the site is served at
         if args.start is None and args.body and from_db and not args.pose:
             # the database's pose is that frame's (a new user's pose from frame 217 was tracked from frame 0: lost)
             found = _pose_frame(site, args.body, source)
@@ -254,6 +256,7 @@ def _pose_frame(site, name: str, source) -> tuple[int, str] | None:
     last change: the frame the clicks were made on, or a track's last good frame (its time at the site's frame
     rate); None when the history does not say."""
     from app.db import Database
+    from app.video import FOLDER_FPS
     from app.vision.sequence import source_fps
 
     with Database.open(site.db_path, readonly=True) as db:
@@ -267,7 +270,7 @@ def _pose_frame(site, name: str, source) -> tuple[int, str] | None:
     t = (ch.measurements or {}).get("t_last_s") if isinstance(ch.measurements, dict) else None
     if t is None:
         return None
-    fps = site.fps or source_fps(source) or 10.0
+    fps = site.fps or source_fps(source) or FOLDER_FPS
     k = int(round(float(t) * fps))
     return k, f"frame {k}, the last tracked by change {ch.id} (t = {float(t):.2f} s at {fps:g} frames/s)"
 
