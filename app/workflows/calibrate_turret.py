@@ -185,6 +185,8 @@ class CalibrateTurret(Workflow):
         # them away from their drawing): Update its pose (``update_moved``) updates the first
         self.moved_why: dict[str, str] = {}
         self._seen: dict = {}  # (frame image id, object, version) → its outline's share on the frame's edges
+        # objects the frozen frame shows in place while a beam finds no surface where it shows them: moved since
+        self.moved_since: set[str] = set()
         self.blocked: list[np.ndarray] = []  # targets whose beam met something not in the database (kept: BLOCKED_M)
         self._unlock_tries = 0  # suggestions in a row that were to bring the same face into reach
         self.T_aim: np.ndarray | None = None  # the pose the turret aims with (``_estimate``)
@@ -211,7 +213,7 @@ class CalibrateTurret(Workflow):
         beams measured so far (``core.calibration.next_turret_point``). Sets ``T_aim``, ``suggestion``,
         ``sigma_now`` and ``sigma_next``."""
         self.suggestion = self.sigma_now = self.sigma_next = None
-        self.stuck, self.moved_why = "", {}
+        self.stuck, self.moved_why, self.moved_since = "", {}, set()
         if not self.site.has_turret or not self.site.objects():
             return
         landed, _ = self._landed()
@@ -250,8 +252,14 @@ class CalibrateTurret(Workflow):
             self.moved_why = {
                 o: "the range finder disagrees with its database pose" for o in sorted(gone - in_place) if o
             }
-            for i, o in zip(idx, self._aimed(idx)):  # in place: something stood in front of it there
-                if (o in in_place or self.checks[i].object in in_place) and not self._near_blocked(self.targets[i]):
+            for i, o in zip(idx, self._aimed(idx)):
+                o = o if o in in_place else self.checks[i].object
+                if o not in in_place:
+                    continue
+                if self.checks[i].farther:  # no surface where the frame shows it: it moved since the frame
+                    self.moved_why[o] = "the range finder finds no surface where the frame shows it"
+                    self.moved_since.add(o)
+                elif not self._near_blocked(self.targets[i]):  # nearer: something stood in front of it there
                     self.blocked.append(np.asarray(self.targets[i], float))
         for o, seen in self._outline_shares(set(c.objects) - set(self.moved_why)).items():
             if seen is not None and seen < AWAY_SEEN:
@@ -346,23 +354,40 @@ class CalibrateTurret(Workflow):
             out[name] = self._seen[key]
         return out
 
+    def _to_update(self) -> list[str]:
+        """The objects found moved that Update its pose can help: not one the frozen frame shows in place (Update
+        pose there finds the same: it has moved since the frame)."""
+        return [o for o in sorted(self.moved_why) if o not in self.moved_since]
+
     def _moved_sentence(self) -> str:
         """Which objects look moved and why, and what to do: "the parallelepiped has moved (…): {update_moved} …"."""
-        first, *others = sorted(self.moved_why)
-        text = f"the {first} has moved ({self.moved_why[first]}): " + "{update_moved} (your measurements here are kept)"
-        text += ", then measure on it here"
-        for o in others:
-            text += f"; the {o} too ({self.moved_why[o]})"
-        return text
+        update = self._to_update()
+        parts = []
+        for o in sorted(self.moved_why):
+            if o not in update:  # (a new operator was offered Update its pose again on the frame it came from)
+                parts.append(
+                    f"the {o} has moved since this frame, which shows it where the database has it "
+                    f"({self.moved_why[o]}): measure on it once the video there looks as frozen, or Cancel and start "
+                    "again on a newer frame"
+                )
+            elif o == update[0]:
+                parts.append(
+                    f"the {o} has moved ({self.moved_why[o]}): "
+                    + "{update_moved} (your measurements here are kept), then measure on it here"
+                )
+            else:
+                parts.append(f"the {o} too ({self.moved_why[o]})")
+        return "; ".join(parts)
 
     def update_moved(self) -> Detour:
         """Update pose of the first object found moved, while this workflow waits with its measurements
         (``returned``)."""
         with self.lock:
             self._check_open()
-            if not self.moved_why:
-                raise WorkflowError("no known object is found moved: measure on, or Solve")
-            return Detour("update_pose", {"object_name": sorted(self.moved_why)[0]}, returned=self.returned)
+            update = self._to_update()
+            if not update:
+                raise WorkflowError("no known object is found moved that Update pose on this frame can help")
+            return Detour("update_pose", {"object_name": update[0]}, returned=self.returned)
 
     def returned(self, detour: Workflow) -> None:
         """Back from Update pose: each beam is checked again against the database (the object's pose may be new),
@@ -1015,7 +1040,7 @@ class CalibrateTurret(Workflow):
             base |= {"measurement", "remove_measurement"}
         if n >= 6:
             base.add("solve")
-        if self.moved_why:
+        if self._to_update():
             base.add("update_moved")
         if self.site.devices is None:
             return Step(

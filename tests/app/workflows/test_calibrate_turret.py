@@ -466,6 +466,19 @@ def test_an_object_found_moved_is_updated_in_a_detour_with_the_measurements_kept
         assert wf.message.startswith("Back in Calibrate turret: the parallelepiped's pose is updated; your 3")
         assert "Deleted: 4 box top, moving — on the parallelepiped, they disagree with its new pose" in wf.message
         assert "update_moved" not in wf.current_step().enabled
+        # the box gone again (the devices at 0 s): its beam finds no surface where the frame shows it, where Update pose
+        # would find the same pose: not offered again, and said what to do instead
+        clock["t"] = 0.0
+        wf.choose_point(T_true[:3, :3] @ [0.0, 0.0, 0.066] + T_true[:3, 3], "box top, gone again")
+        wf.measure()
+        clock["t"] = 16.0
+        assert "parallelepiped" in wf.moved_why and "update_moved" not in wf.current_step().enabled, (
+            wf.message,
+            wf.checks[-1],
+        )
+        assert "has moved since this frame, which shows it where the database has it" in wf.next_step, wf.next_step
+        wf.remove_last()
+        assert not wf.moved_why
         for _ in range(40):  # the suggestions now use the box too, and reach the σ aimed for
             if wf.suggestion is None or "aimed for" in wf.current_step().prompt:
                 break
