@@ -184,7 +184,8 @@ class CalibrateTurret(Workflow):
         # the objects not offered because they look moved, each with why (the beams disagree; the frozen frame shows
         # them away from their drawing): Update its pose (``update_moved``) updates the first
         self.moved_why: dict[str, str] = {}
-        self._seen: dict = {}  # (frame image id, object, version) → its outline's share on the frame's edges
+        self._seen: dict = {}  # (object, version) → its outline's share on the edges of the frame ``_seen_on``
+        self._seen_on = None
         # objects the frozen frame shows in place while a beam finds no surface where it shows them: moved since
         self.moved_since: set[str] = set()
         self.blocked: list[np.ndarray] = []  # targets whose beam met something not in the database (kept: BLOCKED_M)
@@ -246,13 +247,14 @@ class CalibrateTurret(Workflow):
         # shows away from its drawing (no beam spent on it)
         if moved.any():
             idx = np.flatnonzero(moved)
-            gone = set(self._aimed(idx)) | {self.checks[i].object for i in idx}
+            aimed = self._aimed(idx)
+            gone = set(aimed) | {self.checks[i].object for i in idx}
             shares = self._outline_shares(gone - {""})
             in_place = {o for o, seen in shares.items() if seen is not None and seen >= IN_PLACE_SEEN}
             self.moved_why = {
                 o: "the range finder disagrees with its database pose" for o in sorted(gone - in_place) if o
             }
-            for i, o in zip(idx, self._aimed(idx)):
+            for i, o in zip(idx, aimed):
                 o = o if o in in_place else self.checks[i].object
                 if o not in in_place:
                     continue
@@ -340,16 +342,16 @@ class CalibrateTurret(Workflow):
             return {}
         from app.vision.evaluate import outline_seen
 
+        if image is not self._seen_on:  # another frame: the shares are its own (the image is held: its id not reused)
+            self._seen, self._seen_on = {}, image
         out = {}
         for name in sorted(names):
             try:
                 obj = self.site.object(name)
             except KeyError:  # gone from the database meanwhile
                 continue
-            key = (id(image), name, obj.version)
+            key = (name, obj.version)
             if key not in self._seen:
-                if len(self._seen) > 256:
-                    self._seen.clear()
                 self._seen[key] = outline_seen(image, self.camera, obj.model, obj.T_world_obj)
             out[name] = self._seen[key]
         return out
@@ -428,9 +430,8 @@ class CalibrateTurret(Workflow):
         """Delete the measurements at object ``name`` that disagree with the database after its pose was updated
         (a beam measured while it slid, which the frozen frame's check against the live video missed: they kept it
         counted as moved, and a new operator had to find and delete them by hand); their labels."""
-        bad = [
-            i for i, c in enumerate(self.checks) if c.disagrees and (c.object == name or self._aimed([i])[0] == name)
-        ]
+        aimed = self._aimed(range(len(self.checks)))
+        bad = [i for i, c in enumerate(self.checks) if c.disagrees and name in (c.object, aimed[i])]
         out = [f"{i + 1} {self.labels[i]}" for i in bad]
         for i in reversed(bad):
             for lst in (self.pan, self.tilt, self.range_m, self.targets, self.labels, self.checks):

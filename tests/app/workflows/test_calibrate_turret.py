@@ -509,24 +509,16 @@ def test_no_point_is_suggested_where_the_robot_stands_in_the_beams_way(scene, db
     """A new operator's Measure next aimed at the table behind the arm, and the beam landed on the arm (1711 mm
     against 1948): the candidates leave out the points the robot, where it stands, hides from the turret or the
     camera — at home, 7 of the table top's."""
-    import trimesh
-
     from app.robot.setup import open_robot
     from app.workflows import Site
-    from app.workflows.turret_aims import face_candidates
+    from app.workflows.turret_aims import _robot_mesh, face_candidates
 
     robot = open_robot(scene)
     try:
         with_robot = Site(scene, db, robot=robot.cell, frames=None)
         c = face_candidates(with_robot, with_robot.camera, with_robot.T_world_turret)
         c0 = face_candidates(Site(scene, db, frames=None), with_robot.camera, with_robot.T_world_turret)
-        parts = [(brep.triangles(), T) for _, brep, T in robot.cell.link_breps()]
-        Vs, Fs, off = [], [], 0
-        for (V, F), T in parts:
-            Vs.append(V @ T[:3, :3].T + T[:3, 3])
-            Fs.append(F + off)
-            off += len(V)
-        arm = trimesh.Trimesh(np.vstack(Vs), np.vstack(Fs), process=False)
+        arm = _robot_mesh(with_robot)  # the arm as it stands; the rays below are trimesh's own, not the module's
         for k, origin in enumerate((with_robot.T_world_turret[:3, 3], with_robot.camera.center)):
             d = c0.X - origin
             dist = np.linalg.norm(d, axis=1)
